@@ -1,0 +1,18 @@
+#pragma once
+// Subcommands of the `sonoshape` command. Each registers its options on the CLI11 app and
+// returns the callback that runs it (exit code 0 on success).
+#include <functional>
+
+namespace CLI {
+class App;
+}
+
+namespace sonoshape::apps {
+
+using CommandRunner = std::function<int()>;
+
+CommandRunner add_reconstruct_command(CLI::App& app);
+CommandRunner add_slice_command(CLI::App& app);
+CommandRunner add_evaluate_command(CLI::App& app);
+
+}  // namespace sonoshape::apps

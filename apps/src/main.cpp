@@ -1,0 +1,50 @@
+// The `sonoshape` command: parses options and dispatches to one subcommand.
+#include <CLI/CLI.hpp>
+
+#include <exception>
+#include <iostream>
+
+#include "commands.hpp"
+#include "sonoshape/core/log.hpp"
+
+int main(int argc, char** argv) {
+  CLI::App app{"sonoshape: reconstruction of 3D surfaces from arbitrary cross-sections"};
+  app.require_subcommand(1);
+  bool verbose = false;
+  bool quiet = false;
+  app.add_flag("-v,--verbose", verbose, "Print progress details on stderr");
+  app.add_flag("-q,--quiet", quiet, "Print errors only");
+
+  struct Entry {
+    CLI::App* sub;
+    sonoshape::apps::CommandRunner run;
+  };
+  std::vector<Entry> commands;
+  auto add = [&](const char* name, const char* help, auto adder) {
+    CLI::App* sub = app.add_subcommand(name, help);
+    commands.push_back({sub, adder(*sub)});
+  };
+  add("reconstruct", "Reconstruct closed surfaces from a slice set (.slices.json or .csl)",
+      sonoshape::apps::add_reconstruct_command);
+  add("slice", "Cut closed meshes with planes into a slice set (ground truth for tests)",
+      sonoshape::apps::add_slice_command);
+  add("evaluate", "Score reconstructed meshes against ground-truth meshes",
+      sonoshape::apps::add_evaluate_command);
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  }
+  sonoshape::set_log_level(quiet     ? sonoshape::LogLevel::kQuiet
+                           : verbose ? sonoshape::LogLevel::kDebug
+                                     : sonoshape::LogLevel::kInfo);
+  try {
+    for (const Entry& c : commands)
+      if (c.sub->parsed()) return c.run();
+  } catch (const std::exception& e) {
+    std::cerr << "error: " << e.what() << '\n';
+    return 1;
+  }
+  return 1;
+}

@@ -1,0 +1,17 @@
+# sonoshape_target_defaults(<target>): warnings (errors with SONOSHAPE_WERROR) for our own code.
+function(sonoshape_target_defaults target)
+  target_compile_options(${target} PRIVATE -Wall -Wextra -Wpedantic)
+  if(SONOSHAPE_WERROR)
+    target_compile_options(${target} PRIVATE -Werror)
+  endif()
+endfunction()
+
+# sonoshape_add_test(<name> SOURCES ... LIBS ...): one GoogleTest executable registered with ctest.
+function(sonoshape_add_test name)
+  cmake_parse_arguments(ARG "" "" "SOURCES;LIBS;LABELS" ${ARGN})
+  add_executable(${name} ${ARG_SOURCES})
+  target_link_libraries(${name} PRIVATE ${ARG_LIBS} GTest::gtest GTest::gtest_main)
+  target_compile_definitions(${name} PRIVATE SONOSHAPE_DATA_DIR="${SONOSHAPE_DATA_DIR}")
+  sonoshape_target_defaults(${name})
+  gtest_discover_tests(${name} DISCOVERY_TIMEOUT 60 PROPERTIES LABELS "${ARG_LABELS}")
+endfunction()

@@ -1,0 +1,89 @@
+#include "sonoshape/core/mesh.hpp"
+
+#include <algorithm>
+#include <limits>
+#include <unordered_map>
+#include <unordered_set>
+
+namespace sonoshape {
+
+Box3 TriangleMesh::bounds() const {
+  Box3 box{Vec3::Constant(std::numeric_limits<double>::infinity()),
+           Vec3::Constant(-std::numeric_limits<double>::infinity())};
+  for (const Vec3& p : vertices) {
+    box.min = box.min.cwiseMin(p);
+    box.max = box.max.cwiseMax(p);
+  }
+  return box;
+}
+
+namespace {
+std::uint64_t edge_key(std::uint32_t a, std::uint32_t b) {
+  return (static_cast<std::uint64_t>(a) << 32) | b;
+}
+}  // namespace
+
+MeshHealth check_mesh_health(const TriangleMesh& mesh) {
+  MeshHealth health;
+  // Directed edge counts: a closed oriented manifold uses each directed edge exactly once and
+  // its reverse exactly once.
+  std::unordered_map<std::uint64_t, int> directed;
+  directed.reserve(mesh.triangles.size() * 3);
+  for (const auto& t : mesh.triangles) {
+    if (t[0] == t[1] || t[1] == t[2] || t[0] == t[2]) {
+      ++health.degenerate_triangles;
+      continue;
+    }
+    for (int k = 0; k < 3; ++k) ++directed[edge_key(t[k], t[(k + 1) % 3])];
+  }
+  for (const auto& [key, count] : directed) {
+    const auto a = static_cast<std::uint32_t>(key >> 32);
+    const auto b = static_cast<std::uint32_t>(key & 0xffffffffu);
+    const auto reverse = directed.find(edge_key(b, a));
+    const int reverse_count = reverse == directed.end() ? 0 : reverse->second;
+    if (a < b || reverse_count == 0) {  // visit each undirected edge once
+      const int total = count + reverse_count;
+      if (total == 1) ++health.boundary_edges;
+      else if (total > 2) ++health.non_manifold_edges;
+      else if (count == 2 || reverse_count == 2) ++health.misoriented_edges;
+    }
+  }
+  // Vertex fans: the triangles around a manifold vertex form a single cycle. Count the
+  // connected components of each vertex's link (edges opposite the vertex).
+  std::vector<std::vector<std::pair<std::uint32_t, std::uint32_t>>> link(mesh.vertices.size());
+  for (const auto& t : mesh.triangles) {
+    if (t[0] == t[1] || t[1] == t[2] || t[0] == t[2]) continue;
+    for (int k = 0; k < 3; ++k) link[t[k]].push_back({t[(k + 1) % 3], t[(k + 2) % 3]});
+  }
+  for (const auto& edges : link) {
+    if (edges.empty()) continue;
+    // Union-find over the link's vertices.
+    std::unordered_map<std::uint32_t, std::uint32_t> parent;
+    auto find = [&](std::uint32_t x) {
+      while (parent[x] != x) x = parent[x] = parent[parent[x]];
+      return x;
+    };
+    for (const auto& [a, b] : edges) {
+      parent.try_emplace(a, a);
+      parent.try_emplace(b, b);
+    }
+    for (const auto& [a, b] : edges) parent[find(a)] = find(b);
+    std::unordered_set<std::uint32_t> roots;
+    for (const auto& [x, p] : parent) roots.insert(find(x));
+    if (roots.size() > 1) ++health.non_manifold_vertices;
+  }
+  return health;
+}
+
+double signed_volume(const TriangleMesh& mesh) {
+  double six_volume = 0.0;
+  for (const auto& t : mesh.triangles) {
+    const Vec3& a = mesh.vertices[t[0]];
+    const Vec3& b = mesh.vertices[t[1]];
+    const Vec3& c = mesh.vertices[t[2]];
+    six_volume += a.dot(b.cross(c));
+  }
+  return six_volume / 6.0;
+}
+
+}  // namespace sonoshape

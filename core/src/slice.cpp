@@ -1,0 +1,55 @@
+#include "sonoshape/core/slice.hpp"
+
+#include <algorithm>
+#include <limits>
+#include <set>
+
+namespace sonoshape {
+
+std::vector<int> SliceSet::material_ids() const {
+  std::set<int> ids;
+  for (const LabelInfo& l : labels) ids.insert(l.id);
+  for (const LabeledSlice& s : slices)
+    for (const Region& r : s.regions)
+      if (r.label >= 1) ids.insert(r.label);
+  return {ids.begin(), ids.end()};
+}
+
+std::string SliceSet::label_name(int id) const {
+  for (const LabelInfo& l : labels)
+    if (l.id == id && !l.name.empty()) return l.name;
+  return "label_" + std::to_string(id);
+}
+
+Box3 SliceSet::effective_bounds() const {
+  if (bounds) return *bounds;
+  Box3 box{Vec3::Constant(std::numeric_limits<double>::infinity()),
+           Vec3::Constant(-std::numeric_limits<double>::infinity())};
+  bool any = false;
+  for (const LabeledSlice& s : slices) {
+    auto add_ring = [&](const Ring2& ring) {
+      for (const Vec2& p : ring) {
+        const Vec3 w = s.to_world(p);
+        box.min = box.min.cwiseMin(w);
+        box.max = box.max.cwiseMax(w);
+        any = true;
+      }
+    };
+    for (const Region& r : s.regions) {
+      add_ring(r.outer);
+      for (const Ring2& h : r.holes) add_ring(h);
+    }
+  }
+  if (!any) return Box3{Vec3::Constant(-1.0), Vec3::Constant(1.0)};
+  // A set of parallel slices has a flat box: give it the thickness of its largest side first.
+  const double largest_side = box.size().maxCoeff();
+  for (int k = 0; k < 3; ++k) {
+    if (box.max[k] - box.min[k] < 1e-9 * std::max(1.0, largest_side)) {
+      box.min[k] -= 0.5 * largest_side;
+      box.max[k] += 0.5 * largest_side;
+    }
+  }
+  return box.padded(0.1 * box.diagonal());
+}
+
+}  // namespace sonoshape

@@ -1,0 +1,36 @@
+#pragma once
+// Accuracy of a reconstruction against ground truth meshes, beside the closest-point baseline.
+#include <map>
+#include <optional>
+#include <vector>
+
+#include "sonoshape/core/mesh.hpp"
+#include "sonoshape/core/slice.hpp"
+
+namespace sonoshape::sim {
+
+/// Per-label scores. Distances are in % of the evaluation box diagonal.
+struct LabelScore {
+  int label = 1;
+  double iou = 0.0;                    ///< volumetric IoU of the reconstruction vs truth
+  double baseline_iou = 0.0;           ///< same for the closest-point baseline (needs slices)
+  double mean_surface_distance = 0.0;  ///< symmetric mean, % of diagonal
+  double hausdorff_distance = 0.0;     ///< symmetric max, % of diagonal
+  double contour_mean = 0.0;           ///< input contour points to output surface, mean, %
+  double contour_max = 0.0;            ///< same, max, %
+  MeshHealth health;
+};
+
+struct EvaluationOptions {
+  int grid_resolution = 128;     ///< IoU samples per axis of the box
+  int surface_samples = 20000;   ///< points sampled per surface for distances
+  double contour_step_fraction = 0.002;  ///< contour sampling step, fraction of diagonal
+};
+
+/// Scores every label present in `truth`. `slices` (optional) enables the baseline and contour
+/// fidelity; `box` is the evaluation box (usually the slice set's bounds).
+std::vector<LabelScore> evaluate(const MeshSet& reconstruction, const MeshSet& truth,
+                                 const SliceSet* slices, const Box3& box,
+                                 const EvaluationOptions& options = {});
+
+}  // namespace sonoshape::sim

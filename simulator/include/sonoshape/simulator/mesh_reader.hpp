@@ -1,0 +1,17 @@
+#pragma once
+// Loading closed triangle meshes (OBJ, PLY ascii/binary, OFF) as ground truth.
+#include <filesystem>
+
+#include "sonoshape/core/mesh.hpp"
+#include "sonoshape/core/status.hpp"
+
+namespace sonoshape::sim {
+
+/// Reads a triangle mesh (polygons are fan-triangulated). Fails with file and reason on
+/// unreadable files, unsupported formats and out-of-range indices.
+Result<TriangleMesh> read_mesh(const std::filesystem::path& path);
+
+/// Makes a closed mesh outward-oriented (reverses every triangle when its volume is negative).
+void orient_outward(TriangleMesh& mesh);
+
+}  // namespace sonoshape::sim
