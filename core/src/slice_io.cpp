@@ -1,1 +1,1011 @@
-// placeholder: implemented in progress
+// Slice-set JSON (docs/formats/slices.md), the validation shared by every reader, and the
+// exact-predicate polygon checks behind it.
+#include "sonoshape/core/slice_io.hpp"
+
+#include <CGAL/Boolean_set_operations_2.h>
+#include <CGAL/Exact_predicates_exact_constructions_kernel.h>
+#include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
+#include <CGAL/Polygon_2.h>
+#include <CGAL/Polygon_2_algorithms.h>
+#include <CGAL/Polygon_with_holes_2.h>
+
+#include <algorithm>
+#include <array>
+#include <cctype>
+#include <cerrno>
+#include <charconv>
+#include <climits>
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <iterator>
+#include <limits>
+#include <nlohmann/json.hpp>
+#include <set>
+#include <sstream>
+
+#include "slice_io_internal.hpp"
+#include "sonoshape/core/log.hpp"
+
+namespace sonoshape {
+namespace detail {
+
+// ---------------------------------------------------------------------------------------------
+// Small shared helpers
+
+std::string SliceNaming::slice(std::size_t slice) const { return "slice " + std::to_string(slice); }
+
+std::string SliceNaming::region(std::size_t /*slice*/, std::size_t region, int label) const {
+  return "region " + std::to_string(region) + " (label " + label_text(label) + ")";
+}
+
+std::string SliceNaming::outer(std::size_t slice, std::size_t region, int label) const {
+  return this->slice(slice) + ", " + this->region(slice, region, label) + ", outer ring";
+}
+
+std::string SliceNaming::hole(std::size_t slice, std::size_t region, int label,
+                              std::size_t hole) const {
+  return this->slice(slice) + ", " + this->region(slice, region, label) + ", hole " +
+         std::to_string(hole);
+}
+
+std::string label_text(int label) {
+  return label == kUnknownLabel ? std::string("unknown") : std::to_string(label);
+}
+
+double ring_size(const Ring2& ring) {
+  if (ring.size() < 2) return 0.0;
+  Vec2 lo = ring.front();
+  Vec2 hi = ring.front();
+  for (const Vec2& p : ring) {
+    lo = lo.cwiseMin(p);
+    hi = hi.cwiseMax(p);
+  }
+  return (hi - lo).norm();
+}
+
+std::size_t drop_repeated_points(Ring2& ring) {
+  // Non-finite rings are left for the validation to report, point by point.
+  if (ring.size() < 2 ||
+      !std::all_of(ring.begin(), ring.end(), [](const Vec2& p) { return p.allFinite(); }))
+    return 0;
+  const double tol = kRepeatedPointRelTol * ring_size(ring);
+  Ring2 kept;
+  kept.reserve(ring.size());
+  for (const Vec2& p : ring)
+    if (kept.empty() || (p - kept.back()).norm() > tol) kept.push_back(p);
+  while (kept.size() > 1 && (kept.back() - kept.front()).norm() <= tol) kept.pop_back();
+  const std::size_t dropped = ring.size() - kept.size();
+  ring = std::move(kept);
+  return dropped;
+}
+
+std::string format_double(double value) {
+  std::array<char, 64> buffer{};
+  const auto [end, ec] = std::to_chars(buffer.data(), buffer.data() + buffer.size(), value);
+  if (ec != std::errc()) return "0";
+  return std::string(buffer.data(), end);
+}
+
+Result<std::string> read_text_file(const std::filesystem::path& path) {
+  std::error_code ec;
+  if (!std::filesystem::exists(path, ec))
+    return Status::error("cannot read " + path.string() + ": no such file; check the path");
+  if (std::filesystem::is_directory(path, ec))
+    return Status::error("cannot read " + path.string() + ": it is a directory, not a file");
+  std::ifstream in(path, std::ios::binary);
+  if (!in)
+    return Status::error("cannot read " + path.string() + ": " + std::strerror(errno) +
+                         "; check the file's permissions");
+  std::ostringstream text;
+  text << in.rdbuf();
+  if (in.bad()) return Status::error("cannot read " + path.string() + ": read error");
+  return text.str();
+}
+
+Status write_text_file(const std::filesystem::path& path, const std::string& text) {
+  std::ofstream out(path, std::ios::binary | std::ios::trunc);
+  if (!out)
+    return Status::error("cannot write " + path.string() + ": " + std::strerror(errno) +
+                         "; check that the folder exists and is writable");
+  out << text;
+  out.flush();
+  if (!out) return Status::error("cannot write " + path.string() + ": write failed (disk full?)");
+  return Status::ok();
+}
+
+// ---------------------------------------------------------------------------------------------
+// Polygon checks (exact predicates)
+
+namespace {
+
+using IK = CGAL::Exact_predicates_inexact_constructions_kernel;
+using EK = CGAL::Exact_predicates_exact_constructions_kernel;
+using ExactPolygon = CGAL::Polygon_2<EK>;
+using ExactPolygonWithHoles = CGAL::Polygon_with_holes_2<EK>;
+
+std::vector<IK::Point_2> to_points(const Ring2& ring) {
+  std::vector<IK::Point_2> points;
+  points.reserve(ring.size());
+  for (const Vec2& p : ring) points.emplace_back(p.x(), p.y());
+  return points;
+}
+
+// Closed 2D box of one ring, for cheap rejection before the exact tests.
+struct Box2 {
+  Vec2 lo;
+  Vec2 hi;
+  // Interiors overlap: boxes that merely touch cannot hold overlapping polygons.
+  bool interiors_overlap(const Box2& other) const {
+    return lo.x() < other.hi.x() && other.lo.x() < hi.x() && lo.y() < other.hi.y() &&
+           other.lo.y() < hi.y();
+  }
+};
+
+Box2 box_of(const Ring2& ring) {
+  Box2 box{ring.front(), ring.front()};
+  for (const Vec2& p : ring) {
+    box.lo = box.lo.cwiseMin(p);
+    box.hi = box.hi.cwiseMax(p);
+  }
+  return box;
+}
+
+// Finds two edges of a non-simple ring that intersect other than at their shared corner.
+// Edge k runs from point k to point k+1. A sweep over x keeps it near-linear for real contours.
+std::optional<std::pair<std::size_t, std::size_t>> find_crossing_edges(
+    const std::vector<IK::Point_2>& pts) {
+  const std::size_t n = pts.size();
+  std::vector<IK::Segment_2> edges;
+  edges.reserve(n);
+  for (std::size_t k = 0; k < n; ++k) edges.emplace_back(pts[k], pts[(k + 1) % n]);
+  std::vector<std::size_t> order(n);
+  for (std::size_t k = 0; k < n; ++k) order[k] = k;
+  auto min_x = [&](std::size_t k) {
+    return std::min(edges[k].source().x(), edges[k].target().x());
+  };
+  auto max_x = [&](std::size_t k) {
+    return std::max(edges[k].source().x(), edges[k].target().x());
+  };
+  std::sort(order.begin(), order.end(),
+            [&](std::size_t a, std::size_t b) { return min_x(a) < min_x(b); });
+  for (std::size_t oi = 0; oi < n; ++oi) {
+    const std::size_t i = order[oi];
+    for (std::size_t oj = oi + 1; oj < n && min_x(order[oj]) <= max_x(i); ++oj) {
+      const std::size_t j = order[oj];
+      const bool i_then_j = j == (i + 1) % n;
+      const bool j_then_i = i == (j + 1) % n;
+      bool bad = false;
+      if (i_then_j || j_then_i) {
+        // Adjacent edges a->b->c overlap only when they fold back along one line.
+        const std::size_t first = i_then_j ? i : j;
+        const IK::Point_2& a = pts[first];
+        const IK::Point_2& b = pts[(first + 1) % n];
+        const IK::Point_2& c = pts[(first + 2) % n];
+        bad = CGAL::collinear(a, b, c) && !CGAL::collinear_are_ordered_along_line(a, b, c);
+      } else {
+        bad = CGAL::do_intersect(edges[i], edges[j]);
+      }
+      if (bad) return std::make_pair(std::min(i, j), std::max(i, j));
+    }
+  }
+  return std::nullopt;
+}
+
+}  // namespace
+
+std::string ring_problem(const Ring2& ring) {
+  for (std::size_t k = 0; k < ring.size(); ++k)
+    if (!ring[k].allFinite())
+      return "point " + std::to_string(k) + " is not a finite number; write finite coordinates";
+  std::set<std::pair<double, double>> distinct;
+  for (const Vec2& p : ring) distinct.insert({p.x(), p.y()});
+  if (distinct.size() < 3)
+    return "polygon has fewer than 3 distinct points (" + std::to_string(distinct.size()) +
+           "); a region needs at least 3 corners, remove it or complete it";
+  const std::vector<IK::Point_2> pts = to_points(ring);
+  std::size_t second = 1;
+  while (second < pts.size() && pts[second] == pts[0]) ++second;
+  bool all_collinear = true;
+  for (std::size_t k = second + 1; k < pts.size() && all_collinear; ++k)
+    all_collinear = CGAL::collinear(pts[0], pts[second], pts[k]);
+  if (all_collinear)
+    return "polygon has zero area (all its points lie on one line); remove it or fix its points";
+  if (!CGAL::is_simple_2(pts.begin(), pts.end(), IK())) {
+    const auto edges = find_crossing_edges(pts);
+    const std::string which = edges ? " (edges " + std::to_string(edges->first) + " and " +
+                                          std::to_string(edges->second) + " cross)"
+                                    : "";
+    return "polygon self-intersects" + which +
+           "; fix the contour or split it into separate regions";
+  }
+  const double size = ring_size(ring);
+  if (std::abs(signed_area(ring)) <= 1e-12 * size * size)
+    return "polygon has zero area; remove it or fix its points";
+  return {};
+}
+
+namespace {
+
+ExactPolygon to_exact(const Ring2& ring, CGAL::Orientation wanted) {
+  ExactPolygon polygon;
+  for (const Vec2& p : ring) polygon.push_back(EK::Point_2(p.x(), p.y()));
+  if (polygon.orientation() != wanted) polygon.reverse_orientation();
+  return polygon;
+}
+
+bool exact_inside(const ExactPolygon& inner_ccw, const ExactPolygon& outer_ccw) {
+  std::vector<ExactPolygonWithHoles> rest;
+  CGAL::difference(inner_ccw, outer_ccw, std::back_inserter(rest));
+  return rest.empty();
+}
+
+// The boundary of a region as exact-predicate points and segments, for the cheap overlap tests.
+using Segments = std::vector<IK::Segment_2>;
+using Points = std::vector<IK::Point_2>;
+
+struct RegionRings {
+  Points outer;
+  std::vector<Points> holes;
+  Segments segments;  // outer and holes together
+};
+
+void add_segments(const Points& ring, Segments& out) {
+  for (std::size_t k = 0; k < ring.size(); ++k)
+    out.emplace_back(ring[k], ring[(k + 1) % ring.size()]);
+}
+
+Segments segments_of(const Points& ring) {
+  Segments out;
+  add_segments(ring, out);
+  return out;
+}
+
+// Whether a segment of `a` meets a segment of `b` (exact predicates; a sweep over x).
+bool boundaries_meet(const Segments& a, const Segments& b) {
+  struct Item {
+    double lo_x, hi_x, lo_y, hi_y;
+    const IK::Segment_2* segment;
+    bool from_a;
+  };
+  std::vector<Item> items;
+  items.reserve(a.size() + b.size());
+  auto add = [&](const Segments& segments, bool from_a) {
+    for (const IK::Segment_2& s : segments) {
+      const CGAL::Bbox_2 box = s.bbox();
+      items.push_back({box.xmin(), box.xmax(), box.ymin(), box.ymax(), &s, from_a});
+    }
+  };
+  add(a, true);
+  add(b, false);
+  std::sort(items.begin(), items.end(),
+            [](const Item& p, const Item& q) { return p.lo_x < q.lo_x; });
+  for (std::size_t i = 0; i < items.size(); ++i)
+    for (std::size_t j = i + 1; j < items.size() && items[j].lo_x <= items[i].hi_x; ++j)
+      if (items[i].from_a != items[j].from_a && items[j].lo_y <= items[i].hi_y &&
+          items[i].lo_y <= items[j].hi_y &&
+          CGAL::do_intersect(*items[i].segment, *items[j].segment))
+        return true;
+  return false;
+}
+
+bool strictly_inside(const IK::Point_2& p, const Points& ring) {
+  return CGAL::bounded_side_2(ring.begin(), ring.end(), p, IK()) == CGAL::ON_BOUNDED_SIDE;
+}
+
+bool in_interior(const IK::Point_2& p, const RegionRings& region) {
+  if (!strictly_inside(p, region.outer)) return false;
+  return std::none_of(region.holes.begin(), region.holes.end(),
+                      [&](const Points& hole) { return strictly_inside(p, hole); });
+}
+
+// Interiors of two regions whose boundaries do not meet overlap exactly when a boundary curve of
+// one lies inside the other; each curve lies wholly inside or outside, so one vertex tells.
+bool disjoint_boundaries_overlap(const RegionRings& a, const RegionRings& b) {
+  auto any_ring_inside = [](const RegionRings& x, const RegionRings& y) {
+    if (in_interior(x.outer.front(), y)) return true;
+    return std::any_of(x.holes.begin(), x.holes.end(),
+                       [&](const Points& hole) { return in_interior(hole.front(), y); });
+  };
+  return any_ring_inside(a, b) || any_ring_inside(b, a);
+}
+
+ExactPolygonWithHoles to_exact(const Ring2& outer, const std::vector<Ring2>& holes) {
+  std::vector<ExactPolygon> holes_cw;
+  for (const Ring2& hole : holes) holes_cw.push_back(to_exact(hole, CGAL::CLOCKWISE));
+  return ExactPolygonWithHoles(to_exact(outer, CGAL::COUNTERCLOCKWISE), holes_cw.begin(),
+                               holes_cw.end());
+}
+
+std::string join_ids(const std::set<int>& ids) {
+  std::string text;
+  for (int id : ids) text += (text.empty() ? "" : ", ") + std::to_string(id);
+  return text;
+}
+
+std::string vec_text(const Vec3& v) {
+  return "(" + format_double(v.x()) + ", " + format_double(v.y()) + ", " + format_double(v.z()) +
+         ")";
+}
+
+// Same point set in world coordinates, up to `tol`, whatever the order or the slice basis.
+bool same_world_points(const LabeledSlice& sa, const Ring2& a, const LabeledSlice& sb,
+                       const Ring2& b, double tol) {
+  if (a.size() != b.size()) return false;
+  std::vector<Vec3> wb;
+  wb.reserve(b.size());
+  for (const Vec2& p : b) wb.push_back(sb.to_world(p));
+  std::vector<bool> used(wb.size(), false);
+  for (const Vec2& p : a) {
+    const Vec3 w = sa.to_world(p);
+    bool found = false;
+    for (std::size_t k = 0; k < wb.size() && !found; ++k) {
+      if (!used[k] && (wb[k] - w).norm() <= tol) used[k] = found = true;
+    }
+    if (!found) return false;
+  }
+  return true;
+}
+
+// Empty when both coincident slices hold the same content; else the difference, in words.
+std::string content_difference(const LabeledSlice& a, const LabeledSlice& b, double tol) {
+  if (a.fov.has_value() != b.fov.has_value()) return "only one of them has a fov";
+  if (a.fov && !same_world_points(a, *a.fov, b, *b.fov, tol)) return "their fov differ";
+  if (a.regions.size() != b.regions.size())
+    return std::to_string(a.regions.size()) + " regions against " +
+           std::to_string(b.regions.size());
+  std::vector<bool> used(b.regions.size(), false);
+  for (const Region& ra : a.regions) {
+    bool found = false;
+    for (std::size_t k = 0; k < b.regions.size() && !found; ++k) {
+      const Region& rb = b.regions[k];
+      if (used[k] || rb.label != ra.label || rb.holes.size() != ra.holes.size() ||
+          !same_world_points(a, ra.outer, b, rb.outer, tol))
+        continue;
+      std::vector<bool> hole_used(rb.holes.size(), false);
+      bool holes_match = true;
+      for (const Ring2& ha : ra.holes) {
+        bool hole_found = false;
+        for (std::size_t h = 0; h < rb.holes.size() && !hole_found; ++h)
+          if (!hole_used[h] && same_world_points(a, ha, b, rb.holes[h], tol))
+            hole_used[h] = hole_found = true;
+        holes_match = holes_match && hole_found;
+      }
+      if (holes_match) used[k] = found = true;
+    }
+    if (!found)
+      return "a region of label " + label_text(ra.label) + " has no identical counterpart";
+  }
+  return {};
+}
+
+// Does the plane of `slice` cross the box (closed, grown by `tol`)?
+bool plane_meets_box(const LabeledSlice& slice, const Box3& box, double tol) {
+  const Vec3 n = slice.normal().normalized();
+  double lo = std::numeric_limits<double>::infinity();
+  double hi = -lo;
+  for (int corner = 0; corner < 8; ++corner) {
+    const Vec3 p((corner & 1) ? box.max.x() : box.min.x(), (corner & 2) ? box.max.y() : box.min.y(),
+                 (corner & 4) ? box.max.z() : box.min.z());
+    const double d = n.dot(p - slice.origin_mm);
+    lo = std::min(lo, d);
+    hi = std::max(hi, d);
+  }
+  return lo <= tol && hi >= -tol;
+}
+
+constexpr std::size_t kMaxReportedErrors = 20;
+
+}  // namespace
+
+bool ring_inside_ring(const Ring2& inner, const Ring2& outer) {
+  const std::vector<IK::Point_2> outer_pts = to_points(outer);
+  for (const Vec2& p : inner) {
+    const CGAL::Bounded_side side =
+        CGAL::bounded_side_2(outer_pts.begin(), outer_pts.end(), IK::Point_2(p.x(), p.y()), IK());
+    if (side == CGAL::ON_BOUNDED_SIDE) return true;
+    if (side == CGAL::ON_UNBOUNDED_SIDE) return false;
+  }
+  return std::abs(signed_area(inner)) <= std::abs(signed_area(outer));
+}
+
+Status validate_slice_set_named(const SliceSet& set, const std::string& source_name,
+                                const SliceNaming& naming, SlicePairs* identical) {
+  std::vector<std::string> errors;
+  auto fail = [&](const std::string& where, const std::string& what) {
+    errors.push_back(source_name + ": " + where + ": " + what);
+  };
+
+  std::set<int> declared;
+  for (const LabelInfo& label : set.labels) {
+    if (label.id < 1)
+      fail("labels", "id " + std::to_string(label.id) +
+                         " is not a positive integer; material ids start at 1 (0 is the outside)");
+    else if (!declared.insert(label.id).second)
+      fail("labels",
+           "id " + std::to_string(label.id) + " is declared twice; give each material one entry");
+  }
+
+  bool bounds_ok = false;
+  if (set.bounds) {
+    const Box3& b = *set.bounds;
+    if (!b.min.allFinite() || !b.max.allFinite()) {
+      fail("bounds", "min and max must be finite numbers");
+    } else {
+      bounds_ok = true;
+      for (int k = 0; k < 3; ++k) {
+        if (b.min[k] >= b.max[k]) {
+          fail("bounds", "min[" + std::to_string(k) + "] = " + format_double(b.min[k]) +
+                             " is not below max[" + std::to_string(k) + "] = " +
+                             format_double(b.max[k]) + "; give a box with min < max on every axis");
+          bounds_ok = false;
+        }
+      }
+    }
+  }
+
+  std::vector<bool> basis_ok(set.slices.size(), false);
+  for (std::size_t i = 0; i < set.slices.size(); ++i) {
+    const LabeledSlice& s = set.slices[i];
+    const std::string where = naming.slice(i);
+    if (!s.origin_mm.allFinite() || !s.u.allFinite() || !s.v.allFinite()) {
+      fail(where, "origin, u and v must be finite numbers");
+    } else {
+      const double u_len = s.u.norm();
+      const double v_len = s.v.norm();
+      const double u_dot_v = s.u.dot(s.v);
+      const std::string hint =
+          "; write unit orthogonal vectors, or add \"normalize\": true at the top level of the "
+          "file to let the reader normalise them";
+      if (std::abs(u_len - 1.0) > kBasisTol)
+        fail(where, "u is not unit length (|u| = " + format_double(u_len) + ")" + hint);
+      else if (std::abs(v_len - 1.0) > kBasisTol)
+        fail(where, "v is not unit length (|v| = " + format_double(v_len) + ")" + hint);
+      else if (std::abs(u_dot_v) > kBasisTol)
+        fail(where, "u and v are not orthogonal (u.v = " + format_double(u_dot_v) + ")" + hint);
+      else
+        basis_ok[i] = true;
+    }
+    if (s.timestamp_s && !std::isfinite(*s.timestamp_s))
+      fail(where, "timestamp is not a finite number");
+
+    if (s.fov) {
+      Ring2 fov = *s.fov;
+      drop_repeated_points(fov);
+      const std::string problem = ring_problem(fov);
+      if (!problem.empty()) fail(where + ", fov", problem);
+    }
+
+    // Per region: label, rings, holes. Cleaned exact polygons feed the overlap test.
+    bool regions_ok = true;
+    struct CleanRegion {
+      Ring2 outer;
+      std::vector<Ring2> holes;
+    };
+    std::vector<CleanRegion> cleaned(s.regions.size());
+    std::vector<RegionRings> region_rings(s.regions.size());
+    std::vector<Box2> boxes(s.regions.size());
+    for (std::size_t j = 0; j < s.regions.size(); ++j) {
+      const Region& r = s.regions[j];
+      const std::string region_where = where + ", " + naming.region(i, j, r.label);
+      if (r.label == kOutsideLabel) {
+        fail(region_where,
+             "label 0 is the outside (the null material), which needs no region; remove the "
+             "region or give it a material id");
+      } else if (r.label < kOutsideLabel && r.label != kUnknownLabel) {
+        fail(region_where, "label " + std::to_string(r.label) +
+                               " is neither \"unknown\" nor a positive material id");
+      } else if (r.label > 0 && !declared.empty() && !declared.count(r.label)) {
+        fail(region_where, "label " + std::to_string(r.label) +
+                               " is not declared in \"labels\" (declared: " + join_ids(declared) +
+                               "); declare it or use a declared id");
+      }
+
+      Ring2 outer = r.outer;
+      drop_repeated_points(outer);
+      std::string problem = ring_problem(outer);
+      if (!problem.empty()) {
+        fail(naming.outer(i, j, r.label), problem);
+        regions_ok = false;
+        continue;
+      }
+      std::vector<Ring2> holes;
+      bool holes_ok = true;
+      for (std::size_t k = 0; k < r.holes.size(); ++k) {
+        Ring2 hole = r.holes[k];
+        drop_repeated_points(hole);
+        problem = ring_problem(hole);
+        if (!problem.empty()) {
+          fail(naming.hole(i, j, r.label, k), problem);
+          holes_ok = false;
+        }
+        holes.push_back(std::move(hole));
+      }
+      if (!holes_ok) {
+        regions_ok = false;
+        continue;
+      }
+      // Exact Boolean operations only where boundaries meet; disjoint ones need point tests.
+      RegionRings& rings = region_rings[j];
+      rings.outer = to_points(outer);
+      add_segments(rings.outer, rings.segments);
+      std::vector<Segments> hole_segments;
+      for (const Ring2& hole : holes) {
+        rings.holes.push_back(to_points(hole));
+        hole_segments.push_back(segments_of(rings.holes.back()));
+        add_segments(rings.holes.back(), rings.segments);
+      }
+      const Segments outer_segments = segments_of(rings.outer);
+      for (std::size_t k = 0; k < holes.size(); ++k) {
+        const bool inside = boundaries_meet(hole_segments[k], outer_segments)
+                                ? exact_inside(to_exact(holes[k], CGAL::COUNTERCLOCKWISE),
+                                               to_exact(outer, CGAL::COUNTERCLOCKWISE))
+                                : strictly_inside(rings.holes[k].front(), rings.outer);
+        if (!inside) {
+          fail(naming.hole(i, j, r.label, k),
+               "hole is not inside the region's outer ring; a hole must lie within its polygon "
+               "(touching the boundary is fine), fix it or make it a separate region");
+          holes_ok = false;
+        }
+      }
+      std::vector<Box2> hole_boxes;
+      for (const Ring2& hole : holes) hole_boxes.push_back(box_of(hole));
+      for (std::size_t a = 0; a < holes.size(); ++a)
+        for (std::size_t b = a + 1; b < holes.size(); ++b) {
+          if (!hole_boxes[a].interiors_overlap(hole_boxes[b])) continue;
+          const bool overlap = boundaries_meet(hole_segments[a], hole_segments[b])
+                                   ? CGAL::do_intersect(to_exact(holes[a], CGAL::COUNTERCLOCKWISE),
+                                                        to_exact(holes[b], CGAL::COUNTERCLOCKWISE))
+                                   : strictly_inside(rings.holes[a].front(), rings.holes[b]) ||
+                                         strictly_inside(rings.holes[b].front(), rings.holes[a]);
+          if (overlap) {
+            fail(naming.hole(i, j, r.label, a),
+                 "overlaps hole " + std::to_string(b) +
+                     " of the same region; merge the two holes into one");
+            holes_ok = false;
+          }
+        }
+      if (!holes_ok) {
+        regions_ok = false;
+        continue;
+      }
+      cleaned[j] = {std::move(outer), std::move(holes)};
+      boxes[j] = box_of(cleaned[j].outer);
+    }
+
+    if (regions_ok) {
+      for (std::size_t a = 0; a < s.regions.size(); ++a)
+        for (std::size_t b = a + 1; b < s.regions.size(); ++b) {
+          if (!boxes[a].interiors_overlap(boxes[b])) continue;
+          const bool overlap =
+              boundaries_meet(region_rings[a].segments, region_rings[b].segments)
+                  ? CGAL::do_intersect(to_exact(cleaned[a].outer, cleaned[a].holes),
+                                       to_exact(cleaned[b].outer, cleaned[b].holes))
+                  : disjoint_boundaries_overlap(region_rings[a], region_rings[b]);
+          if (overlap)
+            fail(where, naming.region(i, a, s.regions[a].label) + " and " +
+                            naming.region(i, b, s.regions[b].label) +
+                            " overlap; regions of one slice may share edges or sit in each "
+                            "other's holes but not share area, fix the contours or cut one out "
+                            "of the other with a hole");
+        }
+    }
+
+    if (bounds_ok && basis_ok[i] && s.origin_mm.allFinite()) {
+      const Box3& box = *set.bounds;
+      const double tol = 1e-9 * box.diagonal();
+      bool outside = !plane_meets_box(s, box, tol);
+      if (!outside && !s.regions.empty()) {
+        // Box of the region vertices in world coordinates: when it misses the bounds, so does
+        // every region (a conservative test: it never rejects a slice that reaches the box).
+        Box3 seen{Vec3::Constant(std::numeric_limits<double>::infinity()),
+                  Vec3::Constant(-std::numeric_limits<double>::infinity())};
+        for (const Region& r : s.regions)
+          for (const Vec2& p : r.outer) {
+            const Vec3 w = s.to_world(p);
+            seen.min = seen.min.cwiseMin(w);
+            seen.max = seen.max.cwiseMax(w);
+          }
+        outside = ((seen.max.array() < box.min.array() - tol).any() ||
+                   (seen.min.array() > box.max.array() + tol).any());
+      }
+      if (outside)
+        fail(where, "the slice lies entirely outside bounds (min " + vec_text(box.min) + ", max " +
+                        vec_text(box.max) + "); check its origin and the units, or enlarge bounds");
+    }
+  }
+
+  // Coincident slices: only once every slice is sound, since the test needs finite planes.
+  if (errors.empty() && set.slices.size() > 1) {
+    const double scale = std::max(1.0, set.effective_bounds().diagonal());
+    const double offset_tol = kCoincidentTol * scale;
+    std::vector<Vec3> normals;
+    for (const LabeledSlice& s : set.slices) normals.push_back(s.normal().normalized());
+    for (std::size_t i = 0; i < set.slices.size(); ++i) {
+      for (std::size_t j = i + 1; j < set.slices.size(); ++j) {
+        if (std::abs(normals[i].dot(normals[j])) < 1.0 - kCoincidentTol) continue;
+        if (std::abs(normals[i].dot(set.slices[j].origin_mm - set.slices[i].origin_mm)) >
+            offset_tol)
+          continue;
+        const std::string difference = content_difference(set.slices[i], set.slices[j], offset_tol);
+        if (difference.empty()) {
+          if (identical) identical->emplace_back(i, j);
+        } else {
+          fail(naming.slice(i) + " and " + naming.slice(j),
+               "they lie in the same plane but their contents disagree (" + difference +
+                   "); remove one of them or put all regions of that plane into one slice");
+        }
+      }
+    }
+  }
+
+  if (errors.empty()) return Status::ok();
+  std::string message;
+  for (std::size_t k = 0; k < errors.size() && k < kMaxReportedErrors; ++k)
+    message += (k ? "\n" : "") + errors[k];
+  if (errors.size() > kMaxReportedErrors)
+    message += "\n... and " + std::to_string(errors.size() - kMaxReportedErrors) + " more problems";
+  return Status::error(message);
+}
+
+void merge_identical_slices(SliceSet& set, const SlicePairs& identical,
+                            const std::string& source_name, const SliceNaming& naming) {
+  if (identical.empty()) return;
+  std::set<std::size_t> dropped;
+  for (const auto& [kept, later] : identical) {
+    if (dropped.count(kept) || !dropped.insert(later).second) continue;
+    log_warning(source_name + ": " + naming.slice(later) + " lies in the same plane as " +
+                naming.slice(kept) + " with identical contents; merged (dropped " +
+                naming.slice(later) + ")");
+  }
+  std::vector<LabeledSlice> slices;
+  for (std::size_t i = 0; i < set.slices.size(); ++i)
+    if (!dropped.count(i)) slices.push_back(std::move(set.slices[i]));
+  set.slices = std::move(slices);
+}
+
+}  // namespace detail
+
+Status validate_slice_set(const SliceSet& set, const std::string& source_name) {
+  return detail::validate_slice_set_named(set, source_name, detail::SliceNaming(), nullptr);
+}
+
+// ---------------------------------------------------------------------------------------------
+// JSON
+
+namespace {
+
+using nlohmann::json;
+
+// Thrown inside the parser only; parse_slice_set_json turns it into a Status.
+struct JsonProblem {
+  std::string where;
+  std::string what;
+};
+
+[[noreturn]] void fail_at(const std::string& where, const std::string& what) {
+  throw JsonProblem{where, what};
+}
+
+std::string short_dump(const json& j) {
+  std::string text = j.dump();
+  if (text.size() > 40) text = text.substr(0, 37) + "...";
+  return text;
+}
+
+double read_number(const json& j, const std::string& where) {
+  if (!j.is_number()) {
+    const bool looks_special = j.is_string() || j.is_null();
+    fail_at(where, "expected a number, got " + short_dump(j) +
+                       (looks_special ? " (NaN and infinity are not allowed; write a finite number)"
+                                      : ""));
+  }
+  const double value = j.get<double>();
+  if (!std::isfinite(value)) fail_at(where, "number is not finite; write a finite number");
+  return value;
+}
+
+Vec3 read_vec3(const json& j, const std::string& where) {
+  if (!j.is_array() || j.size() != 3) fail_at(where, "expected [x, y, z], got " + short_dump(j));
+  return Vec3(read_number(j[0], where), read_number(j[1], where), read_number(j[2], where));
+}
+
+Ring2 read_ring(const json& j, const std::string& where) {
+  if (!j.is_array()) fail_at(where, "expected an array of [x, y] points, got " + short_dump(j));
+  Ring2 ring;
+  ring.reserve(j.size());
+  for (std::size_t k = 0; k < j.size(); ++k) {
+    const std::string point_where = where + ", point " + std::to_string(k);
+    const json& p = j[k];
+    if (!p.is_array() || p.size() != 2)
+      fail_at(point_where, "expected [x, y], got " + short_dump(p));
+    ring.emplace_back(read_number(p[0], point_where), read_number(p[1], point_where));
+  }
+  return ring;
+}
+
+void warn_unknown_keys(const json& object, std::initializer_list<const char*> known,
+                       const std::string& source_name, const std::string& where) {
+  for (const auto& item : object.items()) {
+    const bool is_known =
+        std::any_of(known.begin(), known.end(), [&](const char* k) { return item.key() == k; });
+    if (!is_known)
+      log_warning(source_name + ": " + where + ": ignoring unknown key \"" + item.key() + "\"");
+  }
+}
+
+// Drops repeated consecutive points with a warning naming the ring.
+void clean_ring(Ring2& ring, const std::string& source_name, const std::string& where) {
+  const std::size_t dropped = detail::drop_repeated_points(ring);
+  if (dropped)
+    log_warning(source_name + ": " + where + ": dropped " + std::to_string(dropped) +
+                " repeated consecutive point" + (dropped > 1 ? "s" : ""));
+}
+
+int read_label(const json& j, const std::string& where) {
+  if (j.is_string() && j.get<std::string>() == "unknown") return kUnknownLabel;
+  if (j.is_number_integer()) {
+    const auto value = j.get<long long>();
+    if (value >= 1 && value <= INT_MAX) return static_cast<int>(value);
+  }
+  fail_at(where, "label " + short_dump(j) +
+                     " is neither \"unknown\" nor a positive integer id (0 is the outside and "
+                     "needs no region)");
+}
+
+SliceSet parse_document(const json& doc, const std::string& source_name) {
+  if (!doc.is_object())
+    fail_at("document",
+            "not a slice set: expected a JSON object with \"format\": "
+            "\"sonoshape-slices\"");
+  const auto format = doc.find("format");
+  if (format == doc.end() || !format->is_string() || *format != "sonoshape-slices")
+    fail_at("format", std::string("\"format\" is ") +
+                          (format == doc.end() ? "missing" : short_dump(*format)) +
+                          ", not \"sonoshape-slices\"; this is not a sonoshape slice-set file "
+                          "(contour files need the .csl extension)");
+  const auto version = doc.find("version");
+  if (version == doc.end()) fail_at("version", "\"version\" is missing; write \"version\": 1");
+  if (!version->is_number_integer() || version->get<long long>() != 1)
+    fail_at("version",
+            "unknown version " + short_dump(*version) +
+                "; this sonoshape reads version 1, a newer file needs a newer sonoshape");
+  warn_unknown_keys(doc, {"format", "version", "units", "labels", "bounds", "slices", "normalize"},
+                    source_name, "top level");
+
+  SliceSet set;
+  if (const auto units = doc.find("units"); units != doc.end()) {
+    if (!units->is_string()) fail_at("units", "expected a string such as \"mm\"");
+    set.units = units->get<std::string>();
+  }
+  bool normalize = false;
+  if (const auto n = doc.find("normalize"); n != doc.end()) {
+    if (!n->is_boolean()) fail_at("normalize", "expected true or false");
+    normalize = n->get<bool>();
+  }
+
+  if (const auto labels = doc.find("labels"); labels != doc.end()) {
+    if (!labels->is_array()) fail_at("labels", "expected an array of {\"id\", \"name\"} objects");
+    for (std::size_t k = 0; k < labels->size(); ++k) {
+      const json& entry = (*labels)[k];
+      const std::string where = "labels, entry " + std::to_string(k);
+      if (!entry.is_object()) fail_at(where, "expected {\"id\": <int>, \"name\": <text>}");
+      LabelInfo info;
+      const auto id = entry.find("id");
+      if (id == entry.end() || !id->is_number_integer() || id->get<long long>() < 1 ||
+          id->get<long long>() > INT_MAX)
+        fail_at(where, "\"id\" must be a positive integer (material ids start at 1)");
+      info.id = static_cast<int>(id->get<long long>());
+      if (const auto name = entry.find("name"); name != entry.end()) {
+        if (!name->is_string()) fail_at(where, "\"name\" must be a string");
+        info.name = name->get<std::string>();
+      }
+      set.labels.push_back(std::move(info));
+    }
+  }
+
+  if (const auto bounds = doc.find("bounds"); bounds != doc.end()) {
+    if (!bounds->is_object() || !bounds->contains("min") || !bounds->contains("max"))
+      fail_at("bounds", "expected {\"min\": [x, y, z], \"max\": [x, y, z]}");
+    set.bounds = Box3{read_vec3((*bounds)["min"], "bounds, min"),
+                      read_vec3((*bounds)["max"], "bounds, max")};
+  }
+
+  const auto slices = doc.find("slices");
+  if (slices == doc.end() || !slices->is_array())
+    fail_at("slices", "\"slices\" must be an array of slice objects");
+  const detail::SliceNaming naming;
+  for (std::size_t i = 0; i < slices->size(); ++i) {
+    const json& js = (*slices)[i];
+    const std::string where = naming.slice(i);
+    if (!js.is_object()) fail_at(where, "expected a slice object");
+    warn_unknown_keys(js, {"origin", "u", "v", "timestamp", "fov", "regions"}, source_name, where);
+    for (const char* key : {"origin", "u", "v"})
+      if (!js.contains(key)) fail_at(where, std::string("\"") + key + "\" is missing");
+    LabeledSlice s;
+    s.origin_mm = read_vec3(js["origin"], where + ", origin");
+    s.u = read_vec3(js["u"], where + ", u");
+    s.v = read_vec3(js["v"], where + ", v");
+    if (normalize) {
+      // Gram-Schmidt: keep u's direction, make v orthogonal to it.
+      const double u_len = s.u.norm();
+      const Vec3 v_ortho = u_len > 0.0 ? Vec3(s.v - s.v.dot(s.u / u_len) * (s.u / u_len)) : s.v;
+      if (u_len <= 1e-12 || v_ortho.norm() <= 1e-6 * s.v.norm() || s.v.norm() <= 1e-12)
+        fail_at(where,
+                "u and v do not span a plane (one is zero or they are parallel); fix the "
+                "direction vectors");
+      s.u /= u_len;
+      s.v = v_ortho.normalized();
+    }
+    if (const auto t = js.find("timestamp"); t != js.end() && !t->is_null())
+      s.timestamp_s = read_number(*t, where + ", timestamp");
+    if (const auto fov = js.find("fov"); fov != js.end() && !fov->is_null()) {
+      Ring2 ring = read_ring(*fov, where + ", fov");
+      clean_ring(ring, source_name, where + ", fov");
+      s.fov = std::move(ring);
+    }
+    if (const auto regions = js.find("regions"); regions != js.end()) {
+      if (!regions->is_array()) fail_at(where, "\"regions\" must be an array of region objects");
+      for (std::size_t j = 0; j < regions->size(); ++j) {
+        const json& jr = (*regions)[j];
+        const std::string region_where = where + ", region " + std::to_string(j);
+        if (!jr.is_object()) fail_at(region_where, "expected a region object");
+        if (!jr.contains("label")) fail_at(region_where, "\"label\" is missing");
+        if (!jr.contains("polygon")) fail_at(region_where, "\"polygon\" is missing");
+        Region r;
+        r.label = read_label(jr["label"], region_where);
+        warn_unknown_keys(jr, {"label", "polygon", "holes"}, source_name, region_where);
+        r.outer = read_ring(jr["polygon"], naming.outer(i, j, r.label));
+        clean_ring(r.outer, source_name, naming.outer(i, j, r.label));
+        if (const auto holes = jr.find("holes"); holes != jr.end()) {
+          if (!holes->is_array()) fail_at(region_where, "\"holes\" must be an array of polygons");
+          for (std::size_t k = 0; k < holes->size(); ++k) {
+            const std::string hole_where = naming.hole(i, j, r.label, k);
+            Ring2 hole = read_ring((*holes)[k], hole_where);
+            clean_ring(hole, source_name, hole_where);
+            r.holes.push_back(std::move(hole));
+          }
+        }
+        s.regions.push_back(std::move(r));
+      }
+    }
+    set.slices.push_back(std::move(s));
+  }
+  return set;
+}
+
+// JSON text writer: slices one per block, points inline, numbers in shortest round-trip form.
+void write_point_list(std::string& out, const Ring2& ring) {
+  out += '[';
+  for (std::size_t k = 0; k < ring.size(); ++k) {
+    out += (k ? ", [" : "[") + detail::format_double(ring[k].x()) + ", " +
+           detail::format_double(ring[k].y()) + "]";
+  }
+  out += ']';
+}
+
+std::string vec3_json(const Vec3& v) {
+  return "[" + detail::format_double(v.x()) + ", " + detail::format_double(v.y()) + ", " +
+         detail::format_double(v.z()) + "]";
+}
+
+bool all_finite(const SliceSet& set) {
+  auto ring_ok = [](const Ring2& ring) {
+    return std::all_of(ring.begin(), ring.end(), [](const Vec2& p) { return p.allFinite(); });
+  };
+  if (set.bounds && (!set.bounds->min.allFinite() || !set.bounds->max.allFinite())) return false;
+  for (const LabeledSlice& s : set.slices) {
+    if (!s.origin_mm.allFinite() || !s.u.allFinite() || !s.v.allFinite()) return false;
+    if (s.timestamp_s && !std::isfinite(*s.timestamp_s)) return false;
+    if (s.fov && !ring_ok(*s.fov)) return false;
+    for (const Region& r : s.regions) {
+      if (!ring_ok(r.outer)) return false;
+      if (!std::all_of(r.holes.begin(), r.holes.end(), ring_ok)) return false;
+    }
+  }
+  return true;
+}
+
+std::string lower_extension(const std::filesystem::path& path) {
+  std::string ext = path.extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  return ext;
+}
+
+}  // namespace
+
+Result<SliceSet> parse_slice_set_json(const std::string& text, const std::string& source_name) {
+  json doc;
+  try {
+    doc = json::parse(text);
+  } catch (const json::exception& e) {  // parse_error, or out_of_range for a number overflow
+    std::string what = e.what();
+    if (const auto bracket = what.find("] ");
+        what.rfind("[json.exception", 0) == 0 && bracket != std::string::npos)
+      what = what.substr(bracket + 2);
+    return Status::error(source_name + ": not valid JSON (" + what +
+                         "); a slice set is a JSON document, see docs/formats/slices.md");
+  }
+  SliceSet set;
+  try {
+    set = parse_document(doc, source_name);
+  } catch (const JsonProblem& p) {
+    return Status::error(source_name + ": " + p.where + ": " + p.what);
+  } catch (const json::exception& e) {
+    return Status::error(source_name + ": malformed slice set (" + std::string(e.what()) + ")");
+  }
+  const detail::SliceNaming naming;
+  detail::SlicePairs identical;
+  if (Status status = detail::validate_slice_set_named(set, source_name, naming, &identical);
+      !status)
+    return status;
+  detail::merge_identical_slices(set, identical, source_name, naming);
+  return set;
+}
+
+Status write_slice_set_json(const SliceSet& set, const std::filesystem::path& path) {
+  if (!all_finite(set))
+    return Status::error("cannot write " + path.string() +
+                         ": the slice set holds NaN or infinite numbers, which JSON cannot hold");
+  std::string out;
+  out += "{\n  \"format\": \"sonoshape-slices\",\n  \"version\": 1,\n";
+  out += "  \"units\": " + json(set.units).dump() + ",\n";
+  if (!set.labels.empty()) {
+    out += "  \"labels\": [";
+    for (std::size_t k = 0; k < set.labels.size(); ++k)
+      out += std::string(k ? ", " : "") + "{\"id\": " + std::to_string(set.labels[k].id) +
+             ", \"name\": " + json(set.labels[k].name).dump() + "}";
+    out += "],\n";
+  }
+  if (set.bounds)
+    out += "  \"bounds\": {\"min\": " + vec3_json(set.bounds->min) +
+           ", \"max\": " + vec3_json(set.bounds->max) + "},\n";
+  out += "  \"slices\": [";
+  for (std::size_t i = 0; i < set.slices.size(); ++i) {
+    const LabeledSlice& s = set.slices[i];
+    out += i ? ",\n    {" : "\n    {";
+    out += "\"origin\": " + vec3_json(s.origin_mm) + ", \"u\": " + vec3_json(s.u) +
+           ", \"v\": " + vec3_json(s.v);
+    if (s.timestamp_s) out += ", \"timestamp\": " + detail::format_double(*s.timestamp_s);
+    if (s.fov) {
+      out += ",\n     \"fov\": ";
+      write_point_list(out, *s.fov);
+    }
+    out += ",\n     \"regions\": [";
+    for (std::size_t j = 0; j < s.regions.size(); ++j) {
+      const Region& r = s.regions[j];
+      out += j ? ",\n       {" : "\n       {";
+      out += "\"label\": " +
+             (r.label == kUnknownLabel ? std::string("\"unknown\"") : std::to_string(r.label));
+      out += ", \"polygon\": ";
+      write_point_list(out, r.outer);
+      if (!r.holes.empty()) {
+        out += ", \"holes\": [";
+        for (std::size_t k = 0; k < r.holes.size(); ++k) {
+          if (k) out += ", ";
+          write_point_list(out, r.holes[k]);
+        }
+        out += ']';
+      }
+      out += '}';
+    }
+    out += s.regions.empty() ? "]}" : "\n     ]}";
+  }
+  out += set.slices.empty() ? "]\n}\n" : "\n  ]\n}\n";
+  return detail::write_text_file(path, out);
+}
+
+Result<SliceSet> read_slice_set(const std::filesystem::path& path) {
+  Result<std::string> text = detail::read_text_file(path);
+  if (!text) return text.status();
+  if (lower_extension(path) == ".csl") return parse_csl(*text, path.string());
+  return parse_slice_set_json(*text, path.string());
+}
+
+Status write_slice_set(const SliceSet& set, const std::filesystem::path& path) {
+  if (lower_extension(path) == ".csl") return write_csl(set, path);
+  return write_slice_set_json(set, path);
+}
+
+}  // namespace sonoshape

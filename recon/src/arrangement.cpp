@@ -1,1 +1,355 @@
-// placeholder: implemented in progress
+#include "arrangement.hpp"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+#include <string>
+
+#include "sonoshape/core/errors.hpp"
+
+namespace sonoshape::recon {
+namespace {
+
+using Point3 = ExactKernel::Point_3;
+using Plane3 = ExactKernel::Plane_3;
+
+constexpr std::int8_t kUnknownSign = 2;
+
+std::uint64_t pair_key(int a, int b) {
+  if (a > b) std::swap(a, b);
+  return (static_cast<std::uint64_t>(static_cast<std::uint32_t>(a)) << 32) |
+         static_cast<std::uint32_t>(b);
+}
+
+Vec3 to_vec3(const Point3& p) {
+  return Vec3(CGAL::to_double(p.x()), CGAL::to_double(p.y()), CGAL::to_double(p.z()));
+}
+
+}  // namespace
+
+Arrangement::Arrangement(const Box3& box) : box_(box) {
+  if (!((box.max.array() > box.min.array()).all()))
+    throw GeometryError("reconstruction box is empty or inverted: min must be below max on every axis");
+  // Six box planes, normals pointing inwards: plane 2k bounds axis k from below, 2k+1 from above.
+  for (int axis = 0; axis < 3; ++axis) {
+    for (int upper = 0; upper < 2; ++upper) {
+      Vec3 n = Vec3::Zero();
+      n[axis] = upper ? -1.0 : 1.0;
+      const double d = upper ? box.max[axis] : -box.min[axis];
+      planes_.push_back({n, d, -1, Plane3(n.x(), n.y(), n.z(), d)});
+    }
+  }
+  // Corner c has coordinate bit k set when it sits at the box maximum along axis k.
+  for (int c = 0; c < 8; ++c) {
+    add_vertex(Point3((c & 1) ? box.max.x() : box.min.x(), (c & 2) ? box.max.y() : box.min.y(),
+                      (c & 4) ? box.max.z() : box.min.z()));
+  }
+  cells_.push_back({});
+  for (int axis = 0; axis < 3; ++axis) {
+    for (int upper = 0; upper < 2; ++upper) {
+      const int i = (axis + 1) % 3, j = (axis + 2) % 3;
+      // (0,0), (1,0), (1,1), (0,1) in axes (i, j) turns counter-clockwise about +e_axis.
+      const std::array<std::array<int, 2>, 4> square{{{0, 0}, {1, 0}, {1, 1}, {0, 1}}};
+      ArrangementFace face;
+      face.plane = 2 * axis + upper;
+      for (const auto& ij : square)
+        face.vertices.push_back((upper << axis) | (ij[0] << i) | (ij[1] << j));
+      if (upper) std::reverse(face.vertices.begin(), face.vertices.end());  // normal is -e_axis
+      for (std::size_t e = 0; e < 4; ++e) {
+        const int a = face.vertices[e], b = face.vertices[(e + 1) % 4];
+        // The other box plane through both corners: the axis along which they agree (not `axis`).
+        int other = -1;
+        for (int k = 0; k < 3; ++k)
+          if (k != axis && ((a >> k) & 1) == ((b >> k) & 1)) other = 2 * k + ((a >> k) & 1);
+        face.edge_planes.push_back(other);
+      }
+      face.cell_positive = 0;
+      cells_[0].faces.push_back(static_cast<int>(faces_.size()));
+      faces_.push_back(std::move(face));
+    }
+  }
+  cell_bounds_.push_back(box);
+  bsp_.push_back({-1, -1, -1, 0});
+  leaf_of_cell_.push_back(0);
+}
+
+int Arrangement::add_vertex(const Point3& p) {
+  vertices_.push_back(p);
+  vertex_approx_.push_back(to_vec3(p));
+  sign_cache_.push_back(kUnknownSign);
+  return static_cast<int>(vertices_.size()) - 1;
+}
+
+int Arrangement::side(int plane_id, int vertex_id) const {
+  const CGAL::Oriented_side s =
+      planes_[static_cast<std::size_t>(plane_id)].exact.oriented_side(
+                          vertices_[static_cast<std::size_t>(vertex_id)]);
+  return s == CGAL::ON_POSITIVE_SIDE ? 1 : (s == CGAL::ON_NEGATIVE_SIDE ? -1 : 0);
+}
+
+int Arrangement::plane_side(const Plane3& plane, int vertex_id) {
+  std::int8_t& cached = sign_cache_[static_cast<std::size_t>(vertex_id)];
+  if (cached == kUnknownSign) {
+    const CGAL::Oriented_side s =
+        plane.oriented_side(vertices_[static_cast<std::size_t>(vertex_id)]);
+    cached = s == CGAL::ON_POSITIVE_SIDE ? 1 : (s == CGAL::ON_NEGATIVE_SIDE ? -1 : 0);
+    touched_vertices_.push_back(vertex_id);
+  }
+  return cached;
+}
+
+int Arrangement::edge_vertex(int a, int b, int face_plane, int edge_plane, int new_plane) {
+  const auto [it, inserted] = edge_vertex_cache_.try_emplace(pair_key(a, b), -1);
+  if (!inserted) return it->second;
+  // The edge lies exactly on its face's plane and its edge plane, so the crossing point is the
+  // exact intersection of three input planes: a construction of depth one, cheap to make exact.
+  const auto result =
+      CGAL::intersection(planes_[static_cast<std::size_t>(face_plane)].exact,
+                         planes_[static_cast<std::size_t>(edge_plane)].exact,
+                         planes_[static_cast<std::size_t>(new_plane)].exact);
+  const Point3* point = result ? boost::get<Point3>(&*result) : nullptr;
+  if (point == nullptr)
+    throw GeometryError("arrangement: planes " + std::to_string(face_plane) + ", " +
+                        std::to_string(edge_plane) + ", " + std::to_string(new_plane) +
+                        " do not meet in one point where an edge crosses the new plane");
+  const int id = add_vertex(*point);
+  sign_cache_[static_cast<std::size_t>(id)] = 0;
+  touched_vertices_.push_back(id);
+  it->second = id;
+  return id;
+}
+
+Arrangement::FaceSplit Arrangement::split_face(int face_id, int new_plane) {
+  const auto cached = face_split_cache_.find(face_id);
+  if (cached != face_split_cache_.end()) return cached->second;
+
+  const ArrangementFace old = faces_[static_cast<std::size_t>(face_id)];
+  const Plane3& q = planes_[static_cast<std::size_t>(new_plane)].exact;
+  const std::size_t n = old.vertices.size();
+  ArrangementFace pos, neg;
+  pos.plane = neg.plane = old.plane;
+  pos.cell_positive = neg.cell_positive = old.cell_positive;
+  pos.cell_negative = neg.cell_negative = old.cell_negative;
+  FaceSplit split;
+  // Each kept vertex is pushed with the plane of the edge leaving it in the new polygon. The part
+  // on a side leaves that side at a crossing point and re-enters at another: the edge between
+  // them is the chord on the new plane.
+  for (std::size_t i = 0; i < n; ++i) {
+    const int vi = old.vertices[i], vj = old.vertices[(i + 1) % n];
+    const int si = plane_side(q, vi), sj = plane_side(q, vj);
+    const int edge_plane = old.edge_planes[i];
+    int crossing = -1;
+    if ((si > 0 && sj < 0) || (si < 0 && sj > 0))
+      crossing = edge_vertex(vi, vj, old.plane, edge_plane, new_plane);
+    // Positive part.
+    if (si >= 0) {
+      pos.vertices.push_back(vi);
+      pos.edge_planes.push_back(si == 0 && sj < 0 ? new_plane : edge_plane);
+      if (si > 0 && sj < 0) {
+        pos.vertices.push_back(crossing);
+        pos.edge_planes.push_back(new_plane);
+      }
+    } else if (sj > 0) {
+      pos.vertices.push_back(crossing);
+      pos.edge_planes.push_back(edge_plane);
+    }
+    // Negative part: the same with the sides swapped.
+    if (si <= 0) {
+      neg.vertices.push_back(vi);
+      neg.edge_planes.push_back(si == 0 && sj > 0 ? new_plane : edge_plane);
+      if (si < 0 && sj > 0) {
+        neg.vertices.push_back(crossing);
+        neg.edge_planes.push_back(new_plane);
+      }
+    } else if (sj < 0) {
+      neg.vertices.push_back(crossing);
+      neg.edge_planes.push_back(edge_plane);
+    }
+  }
+  for (std::size_t k = 0; k < pos.vertices.size(); ++k) {
+    if (pos.edge_planes[k] == new_plane) {
+      split.chord_from = pos.vertices[k];
+      split.chord_to = pos.vertices[(k + 1) % pos.vertices.size()];
+    }
+  }
+  if (split.chord_from < 0 || pos.vertices.size() < 3 || neg.vertices.size() < 3)
+    throw GeometryError("arrangement: inconsistent split of face " + std::to_string(face_id));
+  split.negative = face_id;
+  split.positive = static_cast<int>(faces_.size());
+  faces_[static_cast<std::size_t>(face_id)] = std::move(neg);
+  faces_.push_back(std::move(pos));
+  face_split_cache_.emplace(face_id, split);
+  return split;
+}
+
+void Arrangement::split_cell(int cell_id, int new_plane, std::vector<int>& changed) {
+  const int cell_pos = static_cast<int>(cells_.size());
+  const int cell_neg = cell_id;
+  const int new_face = static_cast<int>(faces_.size());
+  faces_.push_back({});
+  faces_.back().plane = new_plane;
+  faces_.back().cell_positive = cell_pos;
+  faces_.back().cell_negative = cell_neg;
+  const std::vector<int> old_faces = cells_[static_cast<std::size_t>(cell_id)].faces;
+  cells_.push_back({});
+  const Plane3& q = planes_[static_cast<std::size_t>(new_plane)].exact;
+
+  std::vector<int> pos_faces, neg_faces;
+  struct DirectedEdge {
+    int from, to, plane;
+  };
+  std::vector<DirectedEdge> section;  // boundary of the new face, counter-clockwise about q
+  auto move_face = [&](int f, int to_cell) {
+    ArrangementFace& face = faces_[static_cast<std::size_t>(f)];
+    if (face.cell_positive == cell_id) face.cell_positive = to_cell;
+    else if (face.cell_negative == cell_id) face.cell_negative = to_cell;
+  };
+  for (const int f : old_faces) {
+    // sigma: +1 when this cell lies on the positive side of face f's plane. The face's stored
+    // order is then clockwise seen from outside the cell, which flips the chord's direction.
+    const int sigma = faces_[static_cast<std::size_t>(f)].cell_positive == cell_id ? 1 : -1;
+    // A face already split for the neighbouring cell now holds only its negative part.
+    const bool already_split = face_split_cache_.count(f) > 0;
+    bool has_pos = already_split, has_neg = already_split;
+    for (const int v : faces_[static_cast<std::size_t>(f)].vertices) {
+      if (already_split) break;
+      const int s = plane_side(q, v);
+      has_pos |= s > 0;
+      has_neg |= s < 0;
+    }
+    const int face_plane = faces_[static_cast<std::size_t>(f)].plane;
+    if (has_pos && has_neg) {
+      const FaceSplit split = split_face(f, new_plane);
+      move_face(split.positive, cell_pos);
+      pos_faces.push_back(split.positive);
+      neg_faces.push_back(split.negative);
+      if (sigma < 0) section.push_back({split.chord_from, split.chord_to, face_plane});
+      else section.push_back({split.chord_to, split.chord_from, face_plane});
+    } else if (has_pos || has_neg) {
+      move_face(f, has_pos ? cell_pos : cell_neg);
+      (has_pos ? pos_faces : neg_faces).push_back(f);
+      // An edge of this face lying on the new plane bounds the new face too.
+      const std::vector<int>& vs = faces_[static_cast<std::size_t>(f)].vertices;
+      for (std::size_t i = 0; i < vs.size(); ++i) {
+        const int a = vs[i], b = vs[(i + 1) % vs.size()];
+        if (plane_side(q, a) != 0 || plane_side(q, b) != 0) continue;
+        const bool forward = has_pos ? sigma < 0 : sigma > 0;
+        section.push_back(forward ? DirectedEdge{a, b, face_plane} : DirectedEdge{b, a, face_plane});
+      }
+    } else {
+      throw GeometryError("arrangement: a face of a crossed cell lies on the new plane");
+    }
+  }
+  // Chain the section's edges (each boundary edge may come from two faces) into one cycle.
+  std::unordered_map<int, std::pair<int, int>> next;  // from -> (to, plane)
+  for (const DirectedEdge& e : section) {
+    const auto [it, inserted] = next.try_emplace(e.from, e.to, e.plane);
+    if (!inserted && it->second.first != e.to)
+      throw GeometryError("arrangement: cross-section of cell " + std::to_string(cell_id) +
+                          " is not a simple cycle");
+  }
+  ArrangementFace& section_face = faces_[static_cast<std::size_t>(new_face)];
+  int v = next.begin()->first;
+  for (std::size_t k = 0; k < next.size(); ++k) {
+    const auto it = next.find(v);
+    if (it == next.end())
+      throw GeometryError("arrangement: open cross-section of cell " + std::to_string(cell_id));
+    section_face.vertices.push_back(v);
+    section_face.edge_planes.push_back(it->second.second);
+    v = it->second.first;
+  }
+  if (v != section_face.vertices.front() || section_face.vertices.size() < 3)
+    throw GeometryError("arrangement: cross-section of cell " + std::to_string(cell_id) +
+                        " does not close");
+
+  pos_faces.push_back(new_face);
+  neg_faces.push_back(new_face);
+  cells_[static_cast<std::size_t>(cell_pos)].faces = std::move(pos_faces);
+  cells_[static_cast<std::size_t>(cell_neg)].faces = std::move(neg_faces);
+
+  // Bounds and point location.
+  cell_bounds_.push_back({});
+  for (const int c : {cell_neg, cell_pos}) {
+    Box3 b{Vec3::Constant(std::numeric_limits<double>::infinity()),
+           Vec3::Constant(-std::numeric_limits<double>::infinity())};
+    for (const int f : cells_[static_cast<std::size_t>(c)].faces)
+      for (const int vid : faces_[static_cast<std::size_t>(f)].vertices) {
+        b.min = b.min.cwiseMin(vertex(vid));
+        b.max = b.max.cwiseMax(vertex(vid));
+      }
+    cell_bounds_[static_cast<std::size_t>(c)] = b;
+  }
+  const int leaf = leaf_of_cell_[static_cast<std::size_t>(cell_id)];
+  const int neg_leaf = static_cast<int>(bsp_.size());
+  bsp_.push_back({-1, -1, -1, cell_neg});
+  bsp_.push_back({-1, -1, -1, cell_pos});
+  bsp_[static_cast<std::size_t>(leaf)] = {new_plane, neg_leaf, neg_leaf + 1, -1};
+  leaf_of_cell_[static_cast<std::size_t>(cell_neg)] = neg_leaf;
+  leaf_of_cell_.push_back(neg_leaf + 1);
+  changed.push_back(cell_neg);
+  changed.push_back(cell_pos);
+}
+
+std::vector<int> Arrangement::insert_plane(const Vec3& normal, double offset, int slice) {
+  if (!(normal.allFinite() && std::isfinite(offset)) || normal.norm() == 0.0)
+    throw GeometryError("arrangement: plane of slice " + std::to_string(slice) +
+                        " has no valid normal");
+  const Plane3 exact(normal.x(), normal.y(), normal.z(), offset);
+  for (std::size_t p = 0; p < planes_.size(); ++p) {
+    if (exact == planes_[p].exact || exact == planes_[p].exact.opposite()) {
+      throw GeometryError(
+          "arrangement: the plane of slice " + std::to_string(slice) + " coincides with " +
+          (planes_[p].slice >= 0 ? "the plane of slice " + std::to_string(planes_[p].slice)
+                                 : std::string("a face of the reconstruction box")));
+    }
+  }
+  const int plane_id = static_cast<int>(planes_.size());
+  planes_.push_back({normal, offset, slice, exact});
+
+  edge_vertex_cache_.clear();
+  face_split_cache_.clear();
+  std::vector<int> changed;
+  // Quick rejection with the double bounds of each cell; the tolerance covers the rounding of
+  // the vertex approximations, everything closer is decided by the exact predicate.
+  const double scale = normal.cwiseAbs().dot(box_.max.cwiseAbs().cwiseMax(box_.min.cwiseAbs())) +
+                       std::abs(offset);
+  const double tolerance = 1e-9 * scale;
+  const std::size_t cells_before = cells_.size();
+  for (std::size_t c = 0; c < cells_before; ++c) {
+    const Box3& b = cell_bounds_[c];
+    const Vec3 center = 0.5 * (b.min + b.max);
+    const double reach = 0.5 * normal.cwiseAbs().dot(b.max - b.min);
+    const double center_value = normal.dot(center) + offset;
+    if (center_value - reach > tolerance || center_value + reach < -tolerance) continue;
+    bool has_pos = false, has_neg = false;
+    for (const int f : cells_[c].faces) {
+      // A face split for an earlier neighbour keeps only its negative part under its old id.
+      if (face_split_cache_.count(f) > 0) {
+        has_pos = has_neg = true;
+        break;
+      }
+      for (const int v : faces_[static_cast<std::size_t>(f)].vertices) {
+        const int s = plane_side(exact, v);
+        has_pos |= s > 0;
+        has_neg |= s < 0;
+      }
+    }
+    if (has_pos && has_neg) split_cell(static_cast<int>(c), plane_id, changed);
+  }
+  for (const int v : touched_vertices_) sign_cache_[static_cast<std::size_t>(v)] = kUnknownSign;
+  touched_vertices_.clear();
+  return changed;
+}
+
+int Arrangement::locate(const Vec3& p) const {
+  int node = 0;
+  while (bsp_[static_cast<std::size_t>(node)].plane >= 0) {
+    const BspNode& n = bsp_[static_cast<std::size_t>(node)];
+    const ArrangementPlane& plane = planes_[static_cast<std::size_t>(n.plane)];
+    node = plane.normal.dot(p) + plane.offset >= 0.0 ? n.positive : n.negative;
+  }
+  return bsp_[static_cast<std::size_t>(node)].cell;
+}
+
+}  // namespace sonoshape::recon

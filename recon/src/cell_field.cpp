@@ -1,1 +1,221 @@
-// placeholder: implemented in progress
+#include "cell_field.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "mean_value.hpp"
+#include "sonoshape/core/errors.hpp"
+
+namespace sonoshape::recon {
+
+std::vector<PreparedSlice> prepare_slices(const SliceSet& set,
+                                          const std::vector<int>& material_ids) {
+  std::vector<PreparedSlice> out;
+  out.reserve(set.slices.size());
+  for (std::size_t s = 0; s < set.slices.size(); ++s) {
+    const LabeledSlice& slice = set.slices[s];
+    PreparedSlice p;
+    p.origin = slice.origin_mm;
+    p.u = slice.u;
+    p.v = slice.v;
+    p.unit_normal = slice.u.cross(slice.v).normalized();
+    p.rings_by_material.resize(material_ids.size() + 1);
+    for (const Region& region : slice.regions) {
+      if (region.label == kUnknownLabel || slice.fov)
+        throw UnsupportedInput("slice " + std::to_string(s) +
+                               ": unknown regions and fields of view are not supported yet");
+      const auto it = std::find(material_ids.begin(), material_ids.end(), region.label);
+      if (it == material_ids.end())
+        throw GeometryError("slice " + std::to_string(s) + ": label " +
+                            std::to_string(region.label) + " is not a material of the set");
+      auto& rings = p.rings_by_material[static_cast<std::size_t>(it - material_ids.begin()) + 1];
+      Ring2 outer = region.outer;
+      if (signed_area(outer) < 0.0) std::reverse(outer.begin(), outer.end());
+      rings.push_back(std::move(outer));
+      for (Ring2 hole : region.holes) {
+        if (signed_area(hole) > 0.0) std::reverse(hole.begin(), hole.end());
+        rings.push_back(std::move(hole));
+      }
+    }
+    out.push_back(std::move(p));
+  }
+  return out;
+}
+
+Ring2 clip_ring_to_convex(const Ring2& ring, const std::vector<Eigen::Vector3d>& half_planes) {
+  Ring2 current = ring;
+  Ring2 next;
+  for (const Eigen::Vector3d& h : half_planes) {
+    if (current.empty()) break;
+    next.clear();
+    const std::size_t n = current.size();
+    for (std::size_t i = 0; i < n; ++i) {
+      const Vec2& a = current[i];
+      const Vec2& b = current[(i + 1) % n];
+      const double va = h.x() * a.x() + h.y() * a.y() + h.z();
+      const double vb = h.x() * b.x() + h.y() * b.y() + h.z();
+      if (va >= 0.0) next.push_back(a);
+      if ((va >= 0.0) != (vb >= 0.0)) {
+        const double t = va / (va - vb);
+        next.push_back(a + t * (b - a));
+      }
+    }
+    std::swap(current, next);
+  }
+  if (current.size() < 3) current.clear();
+  return current;
+}
+
+CellField::CellField(const Arrangement& arrangement, const std::vector<PreparedSlice>& slices,
+                     int material_count)
+    : arrangement_(arrangement), material_count_(material_count) {
+  on_face_height_ = 1e-12 * arrangement.box().diagonal();
+  frames_.resize(arrangement.plane_count());
+  for (std::size_t p = 0; p < arrangement.plane_count(); ++p) {
+    const ArrangementPlane& plane = arrangement.plane(static_cast<int>(p));
+    PlaneFrame& frame = frames_[p];
+    if (plane.slice >= 0) {
+      const PreparedSlice& s = slices[static_cast<std::size_t>(plane.slice)];
+      frame = {s.origin, s.u, s.v, s.unit_normal};
+    } else {
+      // Box faces: plane 2k has normal +e_k, 2k+1 has -e_k; (u, v) turn about the normal.
+      const int axis = static_cast<int>(p) / 2;
+      const bool upper = p % 2 == 1;
+      Vec3 e1 = Vec3::Unit((axis + 1) % 3), e2 = Vec3::Unit((axis + 2) % 3);
+      if (upper) std::swap(e1, e2);
+      frame.origin = upper ? arrangement.box().max : arrangement.box().min;
+      frame.u = e1;
+      frame.v = e2;
+      frame.unit_normal = e1.cross(e2);
+    }
+  }
+  images_.resize(arrangement.face_count());
+  for (std::size_t f = 0; f < arrangement.face_count(); ++f)
+    build_face_image(static_cast<int>(f), slices);
+}
+
+void CellField::build_face_image(int face_id, const std::vector<PreparedSlice>& slices) {
+  const ArrangementFace& face = arrangement_.face(face_id);
+  const ArrangementPlane& plane = arrangement_.plane(face.plane);
+  FaceImage& image = images_[static_cast<std::size_t>(face_id)];
+  image.frame = face.plane;
+  const PlaneFrame& frame = frames_[static_cast<std::size_t>(face.plane)];
+  Ring2 polygon;
+  polygon.reserve(face.vertices.size());
+  for (const int v : face.vertices) {
+    const Vec3 d = arrangement_.vertex(v) - frame.origin;
+    polygon.emplace_back(d.dot(frame.u), d.dot(frame.v));
+  }
+  image.polygon_begin = static_cast<std::uint32_t>(points_.size());
+  image.polygon_count = static_cast<std::uint32_t>(polygon.size());
+  points_.insert(points_.end(), polygon.begin(), polygon.end());
+  if (plane.slice < 0) return;  // box faces are outside
+
+  // The face as half-planes a*x + b*y + c >= 0 in the slice's (u, v) coordinates, one per
+  // distinct edge plane. The side is decided by CGAL's exact predicate on a face vertex off the
+  // edge plane, so thin faces never get a flipped half-plane.
+  std::vector<Eigen::Vector3d> half_planes;
+  std::vector<int> seen;
+  for (std::size_t i = 0; i < face.vertices.size(); ++i) {
+    const int edge_plane_id = face.edge_planes[i];
+    if (std::find(seen.begin(), seen.end(), edge_plane_id) != seen.end()) continue;
+    seen.push_back(edge_plane_id);
+    int side = 0;
+    for (std::size_t k = 0; k < face.vertices.size() && side == 0; ++k)
+      side = arrangement_.side(edge_plane_id, face.vertices[k]);
+    if (side == 0) continue;  // cannot happen for a face of positive area
+    const ArrangementPlane& e = arrangement_.plane(edge_plane_id);
+    Eigen::Vector3d h(e.normal.dot(frame.u), e.normal.dot(frame.v),
+                      e.normal.dot(frame.origin) + e.offset);
+    half_planes.push_back(side * h);
+  }
+  Vec2 lo = polygon[0], hi = polygon[0];
+  for (const Vec2& p : polygon) {
+    lo = lo.cwiseMin(p);
+    hi = hi.cwiseMax(p);
+  }
+  const double margin = 1e-9 * (hi - lo).norm();
+  const PreparedSlice& slice = slices[static_cast<std::size_t>(plane.slice)];
+  for (std::size_t m = 1; m < slice.rings_by_material.size(); ++m) {
+    for (const Ring2& ring : slice.rings_by_material[m]) {
+      Vec2 rlo = ring[0], rhi = ring[0];
+      for (const Vec2& p : ring) {
+        rlo = rlo.cwiseMin(p);
+        rhi = rhi.cwiseMax(p);
+      }
+      if ((rlo.array() > hi.array() + margin).any() || (rhi.array() < lo.array() - margin).any())
+        continue;
+      Ring2 clipped = clip_ring_to_convex(ring, half_planes);
+      if (clipped.empty()) continue;
+      image.parts.push_back({static_cast<int>(m), static_cast<std::uint32_t>(points_.size()),
+                             static_cast<std::uint32_t>(clipped.size())});
+      points_.insert(points_.end(), clipped.begin(), clipped.end());
+    }
+  }
+}
+
+std::size_t CellField::cell_edge_count(int cell) const {
+  std::size_t count = 0;
+  for (const int f : arrangement_.cell(cell).faces) {
+    const FaceImage& image = images_[static_cast<std::size_t>(f)];
+    count += image.polygon_count;
+    for (const FaceImage::Part& part : image.parts) count += part.count;
+  }
+  return count;
+}
+
+int CellField::evaluate(const Vec3& p, double* out) const {
+  const int n = function_count();
+  const Box3& box = arrangement_.box();
+  if (!((p.array() > box.min.array()).all() && (p.array() < box.max.array()).all())) {
+    out[0] = 1.0;
+    for (int l = 1; l < n; ++l) out[l] = -1.0;
+    return -1;
+  }
+  const int cell = arrangement_.locate(p);
+  // w[l] accumulates the mean-value weight of label l's parts of the faces; w[0] the total.
+  constexpr int kMaxStack = 16;
+  double stack_weights[kMaxStack];
+  std::vector<double> heap_weights;
+  double* w = stack_weights;
+  if (n > kMaxStack) {
+    heap_weights.resize(static_cast<std::size_t>(n));
+    w = heap_weights.data();
+  }
+  std::fill(w, w + n, 0.0);
+  for (const int f : arrangement_.cell(cell).faces) {
+    const FaceImage& image = images_[static_cast<std::size_t>(f)];
+    const PlaneFrame& frame = frames_[static_cast<std::size_t>(image.frame)];
+    const Vec3 d = p - frame.origin;
+    const double height = std::abs(d.dot(frame.unit_normal));
+    const Vec2 foot(d.dot(frame.u), d.dot(frame.v));
+    if (height <= on_face_height_) {
+      // On the face itself the field is the face's own indicator.
+      // w[m] counts the winding of material m's rings (outer +1, holes -1).
+      for (const FaceImage::Part& part : image.parts)
+        w[part.material] += winding_number(points_.data() + part.begin, part.count, foot);
+      int label = 0;
+      for (int l = 1; l < n; ++l)
+        if (w[l] > 0.5) label = l;
+      for (int l = 0; l < n; ++l) out[l] = l == label ? 1.0 : -1.0;
+      return cell;
+    }
+    const double inv_height = 1.0 / height;
+    w[0] += projected_angle(points_.data() + image.polygon_begin, image.polygon_count, foot,
+                            height) * inv_height;
+    for (const FaceImage::Part& part : image.parts)
+      w[part.material] +=
+          projected_angle(points_.data() + part.begin, part.count, foot, height) * inv_height;
+  }
+  const double total = w[0];
+  double materials = 0.0;
+  for (int l = 1; l < n; ++l) {
+    materials += w[l];
+    out[l] = 2.0 * w[l] / total - 1.0;
+  }
+  out[0] = 2.0 * (total - materials) / total - 1.0;
+  return cell;
+}
+
+}  // namespace sonoshape::recon

@@ -1,1 +1,136 @@
-// placeholder: implemented in progress
+#include "mesher.hpp"
+
+#include <algorithm>
+#include <array>
+#include <unordered_map>
+
+namespace sonoshape::recon {
+namespace {
+
+// Cube corner c has offset (c & 1, (c >> 1) & 1, (c >> 2) & 1).
+Vec3 corner_offset(int c) { return Vec3(c & 1, (c >> 1) & 1, (c >> 2) & 1); }
+
+struct Triangle {
+  std::array<std::array<int, 2>, 3> edges;  // each vertex on the edge between two cube corners
+};
+
+// Kuhn tetrahedra: the paths 0 -> e_a -> e_a + e_b -> 7 over the permutations (a, b, c).
+std::array<std::array<int, 4>, 6> kuhn_tetrahedra() {
+  std::array<std::array<int, 4>, 6> tets{};
+  const std::array<std::array<int, 3>, 6> perms{
+      {{0, 1, 2}, {0, 2, 1}, {1, 0, 2}, {1, 2, 0}, {2, 0, 1}, {2, 1, 0}}};
+  for (std::size_t t = 0; t < 6; ++t) {
+    const int a = 1 << perms[t][0], b = 1 << perms[t][1];
+    tets[t] = {0, a, a | b, 7};
+  }
+  return tets;
+}
+
+// Triangles per (tetrahedron, inside mask), oriented so that their normal points from the
+// inside corners to the outside ones. The orientation is decided once, on midpoints of the edges
+// in cube coordinates, where every quantity is exact.
+struct CaseTable {
+  std::array<std::array<std::vector<Triangle>, 16>, 6> cases;
+  CaseTable() {
+    const auto tets = kuhn_tetrahedra();
+    for (std::size_t t = 0; t < 6; ++t) {
+      for (int mask = 1; mask < 15; ++mask) {
+        std::vector<int> in, out;
+        for (int v = 0; v < 4; ++v) ((mask >> v) & 1 ? in : out).push_back(tets[t][static_cast<std::size_t>(v)]);
+        std::vector<Triangle> tris;
+        if (in.size() == 1) {
+          tris.push_back({{{{in[0], out[0]}, {in[0], out[1]}, {in[0], out[2]}}}});
+        } else if (in.size() == 3) {
+          tris.push_back({{{{in[0], out[0]}, {in[1], out[0]}, {in[2], out[0]}}}});
+        } else {
+          // Quad in order around: (i0,o0) (i0,o1) (i1,o1) (i1,o0).
+          tris.push_back({{{{in[0], out[0]}, {in[0], out[1]}, {in[1], out[1]}}}});
+          tris.push_back({{{{in[0], out[0]}, {in[1], out[1]}, {in[1], out[0]}}}});
+        }
+        Vec3 in_center = Vec3::Zero(), out_center = Vec3::Zero();
+        for (int c : in) in_center += corner_offset(c) / static_cast<double>(in.size());
+        for (int c : out) out_center += corner_offset(c) / static_cast<double>(out.size());
+        for (Triangle& tri : tris) {
+          std::array<Vec3, 3> p;
+          for (int k = 0; k < 3; ++k)
+            p[static_cast<std::size_t>(k)] = 0.5 * (corner_offset(tri.edges[static_cast<std::size_t>(k)][0]) +
+                                                    corner_offset(tri.edges[static_cast<std::size_t>(k)][1]));
+          const Vec3 normal = (p[1] - p[0]).cross(p[2] - p[0]);
+          if (normal.dot(out_center - in_center) < 0.0) std::swap(tri.edges[1], tri.edges[2]);
+        }
+        cases[t][static_cast<std::size_t>(mask)] = std::move(tris);
+      }
+    }
+  }
+};
+
+struct EdgeKeyHash {
+  std::size_t operator()(const std::pair<std::uint64_t, std::uint64_t>& k) const {
+    return std::hash<std::uint64_t>()(k.first * 0x9E3779B97F4A7C15ull ^ k.second);
+  }
+};
+
+}  // namespace
+
+std::vector<TriangleMesh> extract_label_surfaces(const SampledField& field) {
+  static const CaseTable table;
+  static const auto tets = kuhn_tetrahedra();
+  const int fc = field.function_count;
+  std::vector<TriangleMesh> meshes(static_cast<std::size_t>(std::max(0, fc - 1)));
+  for (int material = 1; material < fc; ++material) {
+    TriangleMesh& mesh = meshes[static_cast<std::size_t>(material - 1)];
+    std::unordered_map<std::pair<std::uint64_t, std::uint64_t>, std::uint32_t, EdgeKeyHash> vertex_of_edge;
+    // g = f_m - max_{k != m} f_k: positive inside the label's region.
+    auto g = [&](const double* row) {
+      double other = -std::numeric_limits<double>::infinity();
+      for (int l = 0; l < fc; ++l)
+        if (l != material) other = std::max(other, row[l]);
+      return row[material] - other;
+    };
+    for (const std::uint64_t cell : field.surface_cells) {
+      int i, j, k;
+      grid_unkey(cell, i, j, k);
+      std::array<std::uint64_t, 8> keys;
+      std::array<bool, 8> inside;
+      bool any_in = false, any_out = false;
+      for (int c = 0; c < 8; ++c) {
+        keys[static_cast<std::size_t>(c)] = grid_key(i + (c & 1), j + ((c >> 1) & 1), k + ((c >> 2) & 1));
+        inside[static_cast<std::size_t>(c)] = field.label(keys[static_cast<std::size_t>(c)]) == material;
+        any_in |= inside[static_cast<std::size_t>(c)];
+        any_out |= !inside[static_cast<std::size_t>(c)];
+      }
+      if (!any_in || !any_out) continue;
+      for (std::size_t t = 0; t < 6; ++t) {
+        int mask = 0;
+        for (int v = 0; v < 4; ++v)
+          if (inside[static_cast<std::size_t>(tets[t][static_cast<std::size_t>(v)])]) mask |= 1 << v;
+        for (const Triangle& tri : table.cases[t][static_cast<std::size_t>(mask)]) {
+          std::array<std::uint32_t, 3> ids;
+          for (int e = 0; e < 3; ++e) {
+            const int ca = tri.edges[static_cast<std::size_t>(e)][0];  // inside corner
+            const int cb = tri.edges[static_cast<std::size_t>(e)][1];  // outside corner
+            const std::uint64_t ka = keys[static_cast<std::size_t>(ca)], kb = keys[static_cast<std::size_t>(cb)];
+            const auto edge = ka < kb ? std::make_pair(ka, kb) : std::make_pair(kb, ka);
+            const auto [it, inserted] = vertex_of_edge.try_emplace(edge, static_cast<std::uint32_t>(mesh.vertices.size()));
+            if (inserted) {
+              const double ga = std::max(0.0, g(field.at(ka)));
+              const double gb = std::min(0.0, g(field.at(kb)));
+              const double t_param = ga - gb > 0.0 ? ga / (ga - gb) : 0.5;
+              int ai, aj, ak, bi, bj, bk;
+              grid_unkey(ka, ai, aj, ak);
+              grid_unkey(kb, bi, bj, bk);
+              const Vec3 pa = field.grid.position(ai, aj, ak);
+              const Vec3 pb = field.grid.position(bi, bj, bk);
+              mesh.vertices.push_back(pa + t_param * (pb - pa));
+            }
+            ids[static_cast<std::size_t>(e)] = it->second;
+          }
+          mesh.triangles.push_back(ids);
+        }
+      }
+    }
+  }
+  return meshes;
+}
+
+}  // namespace sonoshape::recon

@@ -1,1 +1,327 @@
-// placeholder: implemented in progress
+#include "octree_field.hpp"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <unordered_set>
+
+#include "sonoshape/core/log.hpp"
+
+namespace sonoshape::recon {
+namespace {
+
+constexpr std::array<std::array<int, 3>, 6> kFaceNeighbours{
+    {{-1, 0, 0}, {1, 0, 0}, {0, -1, 0}, {0, 1, 0}, {0, 0, -1}, {0, 0, 1}}};
+
+class Sampler {
+ public:
+  Sampler(SampledField& field, const BatchEvaluator& evaluate)
+      : field_(field), evaluate_(evaluate) {}
+
+  /// Queues a vertex for evaluation unless it has a value or is queued.
+  void request(int i, int j, int k) {
+    const std::uint64_t key = grid_key(i, j, k);
+    if (field_.index.count(key) || !pending_keys_.insert(key).second) return;
+    pending_.push_back(key);
+  }
+  /// Evaluates every queued vertex in one parallel batch.
+  void flush() {
+    if (pending_.empty()) return;
+    std::vector<Vec3> points;
+    points.reserve(pending_.size());
+    for (const std::uint64_t key : pending_) {
+      int i, j, k;
+      grid_unkey(key, i, j, k);
+      points.push_back(field_.grid.position(i, j, k));
+    }
+    const std::size_t fc = static_cast<std::size_t>(field_.function_count);
+    const std::size_t first_row = field_.values.size() / fc;
+    field_.values.resize(field_.values.size() + points.size() * fc);
+    evaluate_(points, field_.values.data() + first_row * fc);
+    for (std::size_t n = 0; n < pending_.size(); ++n)
+      field_.index.emplace(pending_[n], static_cast<std::uint32_t>(first_row + n));
+    field_.evaluations += pending_.size();
+    pending_.clear();
+    pending_keys_.clear();
+  }
+
+ private:
+  SampledField& field_;
+  const BatchEvaluator& evaluate_;
+  std::vector<std::uint64_t> pending_;
+  std::unordered_set<std::uint64_t> pending_keys_;
+};
+
+// Corner labels of the cell whose min corner is (i, j, k) with side `step`: true if not uniform.
+bool cell_mixed(const SampledField& f, int i, int j, int k, int step) {
+  const int first = f.label(grid_key(i, j, k));
+  for (int c = 1; c < 8; ++c)
+    if (f.label(grid_key(i + (c & 1) * step, j + ((c >> 1) & 1) * step,
+                         k + ((c >> 2) & 1) * step)) != first)
+      return true;
+  return false;
+}
+
+// The face of the finest cell (i, j, k) towards neighbour direction d: mixed corner labels?
+bool face_mixed(const SampledField& f, int i, int j, int k, const std::array<int, 3>& d) {
+  int axis = d[0] != 0 ? 0 : (d[1] != 0 ? 1 : 2);
+  std::array<int, 3> base{i, j, k};
+  if (d[static_cast<std::size_t>(axis)] > 0) base[static_cast<std::size_t>(axis)] += 1;
+  const int a1 = (axis + 1) % 3, a2 = (axis + 2) % 3;
+  int first = -1;
+  for (int c = 0; c < 4; ++c) {
+    std::array<int, 3> p = base;
+    p[static_cast<std::size_t>(a1)] += c & 1;
+    p[static_cast<std::size_t>(a2)] += (c >> 1) & 1;
+    const int l = f.label(grid_key(p[0], p[1], p[2]));
+    if (first < 0) first = l;
+    else if (l != first) return true;
+  }
+  return false;
+}
+
+// Keeps the mixed cells among `seeds` and adds, until closed, every finest cell across a face with
+// mixed corners: otherwise the surface would end at that face. Result in field.surface_cells.
+void close_band(SampledField& field, Sampler& sampler, std::vector<std::uint64_t> seeds,
+                int resolution) {
+  for (const std::uint64_t key : seeds) {
+    int i, j, k;
+    grid_unkey(key, i, j, k);
+    for (int corner = 0; corner < 8; ++corner)
+      sampler.request(i + (corner & 1), j + ((corner >> 1) & 1), k + ((corner >> 2) & 1));
+  }
+  sampler.flush();
+  field.surface_cells.clear();
+  std::unordered_set<std::uint64_t> in_band(seeds.begin(), seeds.end());
+  std::vector<std::uint64_t> frontier;
+  for (const std::uint64_t key : seeds) {
+    int i, j, k;
+    grid_unkey(key, i, j, k);
+    if (cell_mixed(field, i, j, k, 1)) frontier.push_back(key);
+  }
+  field.surface_cells = frontier;
+  while (!frontier.empty()) {
+    std::vector<std::uint64_t> candidates;
+    for (const std::uint64_t key : frontier) {
+      int i, j, k;
+      grid_unkey(key, i, j, k);
+      for (const auto& d : kFaceNeighbours) {
+        const int ni = i + d[0], nj = j + d[1], nk = k + d[2];
+        if (ni < 0 || nj < 0 || nk < 0 || ni >= resolution || nj >= resolution || nk >= resolution)
+          continue;
+        const std::uint64_t nkey = grid_key(ni, nj, nk);
+        if (in_band.count(nkey) || !face_mixed(field, i, j, k, d)) continue;
+        in_band.insert(nkey);
+        candidates.push_back(nkey);
+        for (int corner = 0; corner < 8; ++corner)
+          sampler.request(ni + (corner & 1), nj + ((corner >> 1) & 1), nk + ((corner >> 2) & 1));
+      }
+    }
+    sampler.flush();
+    frontier.clear();
+    for (const std::uint64_t key : candidates) {
+      int i, j, k;
+      grid_unkey(key, i, j, k);
+      if (cell_mixed(field, i, j, k, 1)) {
+        field.surface_cells.push_back(key);
+        frontier.push_back(key);
+      }
+    }
+  }
+  std::sort(field.surface_cells.begin(), field.surface_cells.end());
+}
+
+}  // namespace
+
+int SampledField::label(std::uint64_t key) const {
+  const double* row = at(key);
+  int best = 0;
+  for (int l = 1; l < function_count; ++l)
+    if (row[l] > row[best]) best = l;
+  return best;
+}
+
+int default_depth(const Box3& box) {
+  const double cells = box.size().maxCoeff() * 128.0 / box.diagonal();
+  return std::clamp(static_cast<int>(std::lround(std::log2(cells))), 1, 12);
+}
+
+SampledField sample_field(const Box3& box, int function_count, const BatchEvaluator& evaluate,
+                          const std::vector<Vec3>& contour_points,
+                          const std::vector<std::pair<Vec3, Vec3>>& contour_segments,
+                          const OctreeOptions& options) {
+  SampledField field;
+  field.function_count = function_count;
+  const int depth = options.max_depth;
+  const int resolution = 1 << depth;
+  field.grid.depth = depth;
+  field.grid.cell_size = box.size().maxCoeff() / resolution;
+  field.grid.origin = box.min;
+  const Grid& grid = field.grid;
+  Sampler sampler(field, evaluate);
+
+  auto fine_index = [&](const Vec3& p) {
+    const Vec3 q = (p - grid.origin) / grid.cell_size;
+    return std::array<int, 3>{std::clamp(static_cast<int>(std::floor(q.x())), 0, resolution - 1),
+                              std::clamp(static_cast<int>(std::floor(q.y())), 0, resolution - 1),
+                              std::clamp(static_cast<int>(std::floor(q.z())), 0, resolution - 1)};
+  };
+  // Cells holding contour vertices, per level (key of the cell's index at that level).
+  const int start = std::min(options.start_depth, depth);
+  std::vector<std::unordered_set<std::uint64_t>> contour_cells(static_cast<std::size_t>(depth + 1));
+  for (const Vec3& p : contour_points) {
+    const auto idx = fine_index(p);
+    for (int level = start; level <= depth; ++level) {
+      const int shift = depth - level;
+      contour_cells[static_cast<std::size_t>(level)].insert(
+          grid_key(idx[0] >> shift, idx[1] >> shift, idx[2] >> shift));
+    }
+  }
+
+  // Coarse-to-fine refinement. Cells are given by their min corner in finest units.
+  std::vector<std::array<int, 3>> cells;
+  {
+    const int step = 1 << (depth - start);
+    for (int i = 0; i < resolution; i += step)
+      for (int j = 0; j < resolution; j += step)
+        for (int k = 0; k < resolution; k += step) cells.push_back({i, j, k});
+  }
+  for (int level = start;; ++level) {
+    const int step = 1 << (depth - level);
+    for (const auto& c : cells)
+      for (int corner = 0; corner < 8; ++corner)
+        sampler.request(c[0] + (corner & 1) * step, c[1] + ((corner >> 1) & 1) * step,
+                        c[2] + ((corner >> 2) & 1) * step);
+    sampler.flush();
+    std::vector<std::array<int, 3>> refined;
+    for (const auto& c : cells) {
+      const bool mixed = cell_mixed(field, c[0], c[1], c[2], step);
+      if (level == depth) {
+        if (mixed) field.surface_cells.push_back(grid_key(c[0], c[1], c[2]));
+        continue;
+      }
+      const bool has_contour = contour_cells[static_cast<std::size_t>(level)].count(
+                                   grid_key(c[0] / step, c[1] / step, c[2] / step)) > 0;
+      if (!mixed && !has_contour) continue;
+      const int half = step / 2;
+      for (int child = 0; child < 8; ++child)
+        refined.push_back({c[0] + (child & 1) * half, c[1] + ((child >> 1) & 1) * half,
+                           c[2] + ((child >> 2) & 1) * half});
+    }
+    if (level == depth) break;
+    cells = std::move(refined);
+  }
+
+  close_band(field, sampler, field.surface_cells, resolution);
+
+  if (options.smoothing_iterations <= 0) return field;
+  Stopwatch smoothing_clock;
+  // Smoothing nodes: corners of surface cells. The bi-Laplacian stencil reaches two steps out.
+  std::vector<std::uint64_t> nodes;
+  {
+    std::unordered_set<std::uint64_t> node_set;
+    for (const std::uint64_t key : field.surface_cells) {
+      int i, j, k;
+      grid_unkey(key, i, j, k);
+      for (int corner = 0; corner < 8; ++corner)
+        node_set.insert(grid_key(i + (corner & 1), j + ((corner >> 1) & 1), k + ((corner >> 2) & 1)));
+    }
+    nodes.assign(node_set.begin(), node_set.end());
+    std::sort(nodes.begin(), nodes.end());
+  }
+  for (const std::uint64_t key : nodes) {
+    int i, j, k;
+    grid_unkey(key, i, j, k);
+    for (int di = -2; di <= 2; ++di)
+      for (int dj = -2; dj <= 2; ++dj)
+        for (int dk = -2; dk <= 2; ++dk)
+          if (std::abs(di) + std::abs(dj) + std::abs(dk) <= 2) sampler.request(i + di, j + dj, k + dk);
+  }
+  sampler.flush();
+  // Nodes of the cells the input contours pass through keep their interpolated values, so the
+  // surface still passes through the contours (Section 4.6).
+  std::unordered_set<std::uint64_t> fixed;
+  for (const auto& [a, b] : contour_segments) {
+    const int steps = std::max(1, static_cast<int>(std::ceil((b - a).norm() / (0.5 * grid.cell_size))));
+    for (int s = 0; s <= steps; ++s) {
+      const auto idx = fine_index(a + (b - a) * (static_cast<double>(s) / steps));
+      for (int corner = 0; corner < 8; ++corner)
+        fixed.insert(grid_key(idx[0] + (corner & 1), idx[1] + ((corner >> 1) & 1),
+                              idx[2] + ((corner >> 2) & 1)));
+    }
+  }
+  // Laplacian domain: the nodes and their six neighbours.
+  std::vector<std::uint64_t> laplacian_nodes;
+  {
+    std::unordered_set<std::uint64_t> set(nodes.begin(), nodes.end());
+    for (const std::uint64_t key : nodes) {
+      int i, j, k;
+      grid_unkey(key, i, j, k);
+      for (const auto& d : kFaceNeighbours) set.insert(grid_key(i + d[0], j + d[1], k + d[2]));
+    }
+    laplacian_nodes.assign(set.begin(), set.end());
+  }
+  const int fc = function_count;
+  std::unordered_map<std::uint64_t, std::size_t> lap_row;
+  lap_row.reserve(laplacian_nodes.size());
+  for (std::size_t n = 0; n < laplacian_nodes.size(); ++n) lap_row.emplace(laplacian_nodes[n], n);
+  std::vector<double> laplacian(laplacian_nodes.size() * static_cast<std::size_t>(fc));
+  std::vector<double> update(nodes.size() * static_cast<std::size_t>(fc));
+  // Damped Jacobi on the bi-Laplacian (7-point Laplacian squared: diagonal 42); the damping
+  // keeps the highest grid frequencies stable.
+  constexpr double kDamping = 0.5 / 42.0;
+  for (int iteration = 0; iteration < options.smoothing_iterations; ++iteration) {
+    for (std::size_t n = 0; n < laplacian_nodes.size(); ++n) {
+      int i, j, k;
+      grid_unkey(laplacian_nodes[n], i, j, k);
+      const double* center = field.at(laplacian_nodes[n]);
+      double* out = laplacian.data() + n * static_cast<std::size_t>(fc);
+      for (int l = 0; l < fc; ++l) out[l] = -6.0 * center[l];
+      for (const auto& d : kFaceNeighbours) {
+        const double* nb = field.at(grid_key(i + d[0], j + d[1], k + d[2]));
+        for (int l = 0; l < fc; ++l) out[l] += nb[l];
+      }
+    }
+    for (std::size_t n = 0; n < nodes.size(); ++n) {
+      int i, j, k;
+      grid_unkey(nodes[n], i, j, k);
+      const double* center = laplacian.data() + lap_row.at(nodes[n]) * static_cast<std::size_t>(fc);
+      double* out = update.data() + n * static_cast<std::size_t>(fc);
+      for (int l = 0; l < fc; ++l) out[l] = -6.0 * center[l];
+      for (const auto& d : kFaceNeighbours) {
+        const double* nb =
+            laplacian.data() + lap_row.at(grid_key(i + d[0], j + d[1], k + d[2])) * static_cast<std::size_t>(fc);
+        for (int l = 0; l < fc; ++l) out[l] += nb[l];
+      }
+    }
+    for (std::size_t n = 0; n < nodes.size(); ++n) {
+      if (fixed.count(nodes[n])) continue;
+      double* value = field.values.data() + static_cast<std::size_t>(field.index.at(nodes[n])) * static_cast<std::size_t>(fc);
+      const double* bilaplacian = update.data() + n * static_cast<std::size_t>(fc);
+      for (int l = 0; l < fc; ++l) value[l] -= kDamping * bilaplacian[l];
+    }
+  }
+  // Smoothing may move labels at the nodes: every cell touching a smoothed node is a seed of
+  // the new, again closed, band.
+  std::vector<std::uint64_t> seeds;
+  {
+    std::unordered_set<std::uint64_t> seed_set;
+    for (const std::uint64_t key : nodes) {
+      int i, j, k;
+      grid_unkey(key, i, j, k);
+      for (int corner = 0; corner < 8; ++corner) {
+        const int ci = i - (corner & 1), cj = j - ((corner >> 1) & 1), ck = k - ((corner >> 2) & 1);
+        if (ci < 0 || cj < 0 || ck < 0 || ci >= resolution || cj >= resolution || ck >= resolution)
+          continue;
+        seed_set.insert(grid_key(ci, cj, ck));
+      }
+    }
+    seeds.assign(seed_set.begin(), seed_set.end());
+    std::sort(seeds.begin(), seeds.end());
+  }
+  close_band(field, sampler, std::move(seeds), resolution);
+  field.smoothing_seconds = smoothing_clock.seconds();
+  return field;
+}
+
+}  // namespace sonoshape::recon

@@ -1,6 +1,7 @@
 #pragma once
 // Basic geometric value types shared by every module (Eigen, double precision, millimetres).
 #include <Eigen/Core>
+#include <Eigen/Geometry>
 #include <vector>
 
 namespace sonoshape {

@@ -1,0 +1,73 @@
+#pragma once
+// Internal helpers shared by the slice-set readers (slice_io.cpp, csl_io.cpp). No CGAL types here:
+// the exact-predicate work lives in slice_io.cpp.
+#include <cstddef>
+#include <filesystem>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "sonoshape/core/slice.hpp"
+#include "sonoshape/core/status.hpp"
+
+namespace sonoshape::detail {
+
+/// Two points of a ring closer than this fraction of the ring's size count as the same point.
+constexpr double kRepeatedPointRelTol = 1e-9;
+/// u and v must be unit and orthogonal to this tolerance.
+constexpr double kBasisTol = 1e-6;
+/// Coincident slices: normals parallel to 1e-9, offsets equal to 1e-9 of the set's size.
+constexpr double kCoincidentTol = 1e-9;
+
+/// How messages name slices, regions and rings. The JSON reader uses the defaults ("slice 3,
+/// region 1 (label 2), hole 0"); the .csl reader names planes and components instead, so a user
+/// can find the line to fix.
+class SliceNaming {
+ public:
+  virtual ~SliceNaming() = default;
+  virtual std::string slice(std::size_t slice) const;
+  virtual std::string region(std::size_t slice, std::size_t region, int label) const;
+  virtual std::string outer(std::size_t slice, std::size_t region, int label) const;
+  virtual std::string hole(std::size_t slice, std::size_t region, int label,
+                           std::size_t hole) const;
+};
+
+/// "unknown" or the id as text.
+std::string label_text(int label);
+
+/// Bounding-box diagonal of a ring (0 for fewer than 2 points).
+double ring_size(const Ring2& ring);
+
+/// Drops consecutive repeated points (closer than kRepeatedPointRelTol * ring size), including a
+/// last point that repeats the first. Returns how many points were dropped.
+std::size_t drop_repeated_points(Ring2& ring);
+
+/// Empty when `ring` (free of repeated consecutive points) is a usable polygon: finite, at least 3
+/// distinct points, simple (exact predicates), non-zero area. Otherwise what is wrong and the fix.
+std::string ring_problem(const Ring2& ring);
+
+/// True when `inner` lies inside the closed region bounded by `outer` (exact predicates). Meant
+/// for rings that do not cross each other: it decides by the first vertex of `inner` that is not
+/// on the boundary of `outer`; when every vertex is on it, by the areas.
+bool ring_inside_ring(const Ring2& inner, const Ring2& outer);
+
+/// Pairs (earlier, later) of coincident slices whose contents are identical.
+using SlicePairs = std::vector<std::pair<std::size_t, std::size_t>>;
+
+/// validate_slice_set with the naming of the caller's format. Identical coincident slices are not
+/// an error: they are returned in `identical` (when non-null) for the reader to merge.
+Status validate_slice_set_named(const SliceSet& set, const std::string& source_name,
+                                const SliceNaming& naming, SlicePairs* identical);
+
+/// Drops the later slice of each identical pair, with a warning naming both.
+void merge_identical_slices(SliceSet& set, const SlicePairs& identical,
+                            const std::string& source_name, const SliceNaming& naming);
+
+/// Whole-file helpers: read text (errors name the path) and write text.
+Result<std::string> read_text_file(const std::filesystem::path& path);
+Status write_text_file(const std::filesystem::path& path, const std::string& text);
+
+/// Shortest decimal text that reads back as the same double.
+std::string format_double(double value);
+
+}  // namespace sonoshape::detail

@@ -1,0 +1,34 @@
+#pragma once
+// Offline reconstruction of closed surfaces from labelled cross-sections (Bermano, Vaxman &
+// Gotsman 2011): arrangement of the slice planes, mean-value interpolation of each label's
+// indicator inside every convex cell, argmax over labels, octree sampling with bi-Laplacian
+// smoothing, and one closed manifold mesh per material.
+#include <cstddef>
+#include <map>
+
+#include "sonoshape/core/mesh.hpp"
+#include "sonoshape/core/slice.hpp"
+
+namespace sonoshape::recon {
+
+struct ReconstructionOptions {
+  int max_depth = -1;             ///< octree depth; -1: finest cells about 1/128 of the diagonal
+  int smoothing_iterations = 8;   ///< bi-Laplacian smoothing iterations (0: off)
+  int threads = 0;                ///< evaluation threads; 0: all cores
+};
+
+/// Per-stage wall time in seconds and counts of one reconstruction.
+struct ReconstructionStats {
+  double arrangement_s = 0, face_images_s = 0, field_s = 0, smoothing_s = 0, mesh_s = 0, total_s = 0;
+  std::size_t slices = 0, cells = 0, faces = 0, field_evaluations = 0;
+  int depth = 0;
+  std::map<int, std::size_t> triangles;  ///< per material label
+};
+
+/// Reconstructs one closed, manifold, outward-oriented mesh per material of `slices`.
+/// Throws UnsupportedInput for unknown regions / fields of view (not supported yet) and
+/// GeometryError for inputs the engine cannot use (coincident slices that disagree, ...).
+MeshSet reconstruct(const SliceSet& slices, const ReconstructionOptions& options = {},
+                    ReconstructionStats* stats = nullptr);
+
+}  // namespace sonoshape::recon

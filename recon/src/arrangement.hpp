@@ -1,0 +1,112 @@
+#pragma once
+// The 3D arrangement of the slice planes inside the reconstruction box (Bermano et al. 2011,
+// Section 4.1), built by splitting convex cells plane by plane, which is also how the online
+// engine adds one more plane.
+//
+// Robustness: every vertex is the exact intersection of three input planes (CGAL Epeck lazy
+// exact construction of depth one), and every side-of-plane decision is CGAL's exact predicate,
+// so near-parallel planes, three planes through a line, four through a point and planes through
+// existing vertices all give a consistent cell complex. Doubles are used only after the
+// combinatorics is fixed (evaluation, face images).
+#include <CGAL/Exact_predicates_exact_constructions_kernel.h>
+
+#include <cstdint>
+#include <unordered_map>
+#include <vector>
+
+#include "sonoshape/core/geometry.hpp"
+
+namespace sonoshape::recon {
+
+using ExactKernel = CGAL::Exact_predicates_exact_constructions_kernel;
+
+/// A plane n.x + d = 0 with its origin: a slice (slice >= 0) or a face of the box (slice = -1,
+/// normal pointing into the box).
+struct ArrangementPlane {
+  Vec3 normal;         ///< as given (not necessarily unit); exact input of the predicates
+  double offset = 0;   ///< d
+  int slice = -1;      ///< slice index, or -1 for a box face
+  ExactKernel::Plane_3 exact;
+  double signed_distance(const Vec3& p) const { return (normal.dot(p) + offset) / normal.norm(); }
+};
+
+/// A convex polygon on one plane. Vertices are counter-clockwise seen from the side the plane's
+/// normal points to; edge i (vertex i -> i+1) also lies on plane `edge_planes[i]`.
+struct ArrangementFace {
+  int plane = -1;
+  std::vector<int> vertices;
+  std::vector<int> edge_planes;
+  int cell_positive = -1;  ///< the cell on the side the normal points to (-1: outside the box)
+  int cell_negative = -1;
+};
+
+/// A convex cell: the faces bounding it.
+struct ArrangementCell {
+  std::vector<int> faces;
+};
+
+class Arrangement {
+ public:
+  /// The box as one cell with six faces. Throws GeometryError for an empty box.
+  explicit Arrangement(const Box3& box);
+
+  /// Adds the plane n.x + d = 0 (exact doubles) carrying `slice`, splitting every cell it crosses.
+  /// Returns the ids of the cells created or changed (both halves of every split cell). A plane
+  /// that misses the interior of the box changes nothing. Throws GeometryError if the plane
+  /// coincides with a plane already inserted.
+  std::vector<int> insert_plane(const Vec3& normal, double offset, int slice);
+
+  /// The cell containing p (p inside the box; points on a plane may go to either side).
+  int locate(const Vec3& p) const;
+
+  const Box3& box() const { return box_; }
+  std::size_t cell_count() const { return cells_.size(); }
+  std::size_t face_count() const { return faces_.size(); }
+  std::size_t vertex_count() const { return vertices_.size(); }
+  std::size_t plane_count() const { return planes_.size(); }
+  const ArrangementCell& cell(int id) const { return cells_[static_cast<std::size_t>(id)]; }
+  const ArrangementFace& face(int id) const { return faces_[static_cast<std::size_t>(id)]; }
+  const ArrangementPlane& plane(int id) const { return planes_[static_cast<std::size_t>(id)]; }
+  /// Double approximation of a vertex (rounded from the exact point).
+  const Vec3& vertex(int id) const { return vertex_approx_[static_cast<std::size_t>(id)]; }
+  const ExactKernel::Point_3& exact_vertex(int id) const {
+    return vertices_[static_cast<std::size_t>(id)];
+  }
+  /// Exact side of a vertex w.r.t. a plane: -1, 0 or +1.
+  int side(int plane_id, int vertex_id) const;
+
+ private:
+  struct FaceSplit {
+    int positive = -1;  // face id of the part on the positive side
+    int negative = -1;  // face id of the part on the negative side (reuses the old id)
+    int chord_from = -1, chord_to = -1;  // the chord on the new plane, in the stored order
+  };
+  struct BspNode {
+    int plane = -1;  // -1: leaf
+    int negative = -1, positive = -1;
+    int cell = -1;
+  };
+  int add_vertex(const ExactKernel::Point_3& p);
+  int plane_side(const ExactKernel::Plane_3& plane, int vertex_id);
+  int edge_vertex(int a, int b, int face_plane, int edge_plane, int new_plane);
+  FaceSplit split_face(int face_id, int new_plane);
+  void split_cell(int cell_id, int new_plane, std::vector<int>& changed);
+
+  Box3 box_;
+  std::vector<ArrangementPlane> planes_;
+  std::vector<ExactKernel::Point_3> vertices_;
+  std::vector<Vec3> vertex_approx_;
+  std::vector<ArrangementFace> faces_;
+  std::vector<ArrangementCell> cells_;
+  std::vector<Box3> cell_bounds_;  // double bounds of each cell's vertices, for quick rejection
+  std::vector<BspNode> bsp_;
+  std::vector<int> leaf_of_cell_;
+
+  // Per-insertion scratch state.
+  std::vector<std::int8_t> sign_cache_;  // 2: not computed
+  std::vector<int> touched_vertices_;
+  std::unordered_map<std::uint64_t, int> edge_vertex_cache_;
+  std::unordered_map<int, FaceSplit> face_split_cache_;
+};
+
+}  // namespace sonoshape::recon

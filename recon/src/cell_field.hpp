@@ -1,0 +1,73 @@
+#pragma once
+// The mean-value field of every label inside the cells of the arrangement (Bermano et al. 2011,
+// Sections 4.2-4.4 and 6): face images (each slice's labelled regions clipped to each of its
+// faces) and the CPU reference evaluator.
+#include <cstdint>
+#include <vector>
+
+#include "arrangement.hpp"
+#include "sonoshape/core/slice.hpp"
+
+namespace sonoshape::recon {
+
+/// A slice prepared for the engine: its frame and, per material index (1..K), the rings of its
+/// regions, outer rings counter-clockwise and holes clockwise in (u, v).
+struct PreparedSlice {
+  Vec3 origin;
+  Vec3 u, v;
+  Vec3 unit_normal;
+  std::vector<std::vector<Ring2>> rings_by_material;  ///< index 0 unused (outside)
+};
+
+/// Converts the slices: material ids -> dense indices 1..K (`material_ids[k-1]` is the id of k).
+std::vector<PreparedSlice> prepare_slices(const SliceSet& set, const std::vector<int>& material_ids);
+
+/// A 2D frame of a plane: point -> ((p - origin).u, (p - origin).v), height |(p - origin).n|.
+struct PlaneFrame {
+  Vec3 origin, u, v, unit_normal;
+};
+
+/// One face's image: its polygon and, per material, the oriented rings of the material inside it.
+struct FaceImage {
+  int frame = -1;
+  std::uint32_t polygon_begin = 0, polygon_count = 0;  ///< in points (counter-clockwise)
+  struct Part {
+    int material = 0;
+    std::uint32_t begin = 0, count = 0;  ///< one ring in points
+  };
+  std::vector<Part> parts;
+};
+
+/// Clips a closed ring to the convex region { p : a_i.p + c_i >= 0 for all i } (Sutherland-
+/// Hodgman). The result may contain degenerate back-and-forth edges along the clip lines; these
+/// cancel in every boundary integral, which is all the field needs. Empty if nothing is inside.
+Ring2 clip_ring_to_convex(const Ring2& ring, const std::vector<Eigen::Vector3d>& half_planes);
+
+/// Field of all labels over the arrangement. evaluate() is thread-safe (read-only).
+class CellField {
+ public:
+  CellField(const Arrangement& arrangement, const std::vector<PreparedSlice>& slices,
+            int material_count);
+
+  /// Number of functions: materials + 1 (index 0 is the outside).
+  int function_count() const { return material_count_ + 1; }
+  /// f_l(p) for l = 0..K into `out` (function_count() doubles), each in [-1, 1]; outside the
+  /// box (and on it) the outside label holds. Returns the cell used (-1 outside the box).
+  int evaluate(const Vec3& p, double* out) const;
+  /// Total number of boundary edges the faces of `cell` carry (the cost of one evaluation).
+  std::size_t cell_edge_count(int cell) const;
+  const FaceImage& face_image(int face) const { return images_[static_cast<std::size_t>(face)]; }
+  const std::vector<Vec2>& points() const { return points_; }
+
+ private:
+  void build_face_image(int face_id, const std::vector<PreparedSlice>& slices);
+
+  const Arrangement& arrangement_;
+  int material_count_;
+  double on_face_height_;  // below this height a point is on the face
+  std::vector<PlaneFrame> frames_;  // one per arrangement plane
+  std::vector<Vec2> points_;
+  std::vector<FaceImage> images_;
+};
+
+}  // namespace sonoshape::recon

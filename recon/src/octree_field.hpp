@@ -1,0 +1,75 @@
+#pragma once
+// Adaptive sampling of the label functions on an octree (Bermano et al. 2011, Section 4.6):
+// coarse-to-fine refinement where the label changes or contour vertices lie, a closed band of
+// finest-level cells around every label boundary, and bi-Laplacian smoothing that keeps the
+// values next to the input contours.
+#include <cstdint>
+#include <functional>
+#include <unordered_map>
+#include <vector>
+
+#include "sonoshape/core/geometry.hpp"
+
+namespace sonoshape::recon {
+
+/// Finest-level grid: vertex (i, j, k) sits at origin + cell_size * (i, j, k).
+struct Grid {
+  Vec3 origin = Vec3::Zero();
+  double cell_size = 1.0;
+  int depth = 6;  ///< resolution = 2^depth cells per axis of the root cube
+  Vec3 position(int i, int j, int k) const { return origin + cell_size * Vec3(i, j, k); }
+};
+
+/// Packs grid indices (each in [-2^20, 2^20)) into one key.
+inline std::uint64_t grid_key(int i, int j, int k) {
+  constexpr std::int64_t kBias = 1 << 20;
+  return (static_cast<std::uint64_t>(i + kBias) << 42) | (static_cast<std::uint64_t>(j + kBias) << 21) |
+         static_cast<std::uint64_t>(k + kBias);
+}
+inline void grid_unkey(std::uint64_t key, int& i, int& j, int& k) {
+  constexpr std::int64_t kBias = 1 << 20;
+  i = static_cast<int>(static_cast<std::int64_t>(key >> 42) - kBias);
+  j = static_cast<int>(static_cast<std::int64_t>((key >> 21) & 0x1fffff) - kBias);
+  k = static_cast<int>(static_cast<std::int64_t>(key & 0x1fffff) - kBias);
+}
+
+/// Evaluates `count` points into `values` (count * function_count doubles), in parallel.
+using BatchEvaluator = std::function<void(const std::vector<Vec3>& points, double* values)>;
+
+struct OctreeOptions {
+  int max_depth = 6;
+  int start_depth = 3;
+  int smoothing_iterations = 8;
+};
+
+/// The sampled field: values of every function at the evaluated grid vertices.
+struct SampledField {
+  Grid grid;
+  int function_count = 2;
+  std::unordered_map<std::uint64_t, std::uint32_t> index;  ///< vertex key -> row in values
+  std::vector<double> values;                               ///< row-major, function_count each
+  std::vector<std::uint64_t> surface_cells;  ///< finest cells (key of their min corner) with
+                                             ///< corners of different labels; closed under
+                                             ///< face adjacency
+  std::size_t evaluations = 0;
+  double smoothing_seconds = 0.0;
+
+  const double* at(std::uint64_t key) const {
+    return values.data() + static_cast<std::size_t>(index.at(key)) * static_cast<std::size_t>(function_count);
+  }
+  /// Argmax label of a row (the lowest index wins ties).
+  int label(std::uint64_t key) const;
+};
+
+/// Samples the field over `box` (everything outside it is the outside label). `contour_points`
+/// (world, mm) refine the octree and fix the smoothing next to the contours; contour_segments
+/// (pairs of points) mark the cells whose corners keep their interpolated values.
+SampledField sample_field(const Box3& box, int function_count, const BatchEvaluator& evaluate,
+                          const std::vector<Vec3>& contour_points,
+                          const std::vector<std::pair<Vec3, Vec3>>& contour_segments,
+                          const OctreeOptions& options);
+
+/// The default octree depth: finest cells about 1/128 of the box diagonal.
+int default_depth(const Box3& box);
+
+}  // namespace sonoshape::recon
