@@ -73,6 +73,7 @@ CommandRunner add_reconstruct_command(CLI::App& app) {
       j["faces"] = stats.faces;
       j["field_evaluations"] = stats.field_evaluations;
       j["depth"] = stats.depth;
+      j["snapped_vertices"] = stats.snapped_vertices;
       nlohmann::json triangles = nlohmann::json::object();
       for (const auto& [label, count] : stats.triangles) triangles[std::to_string(label)] = count;
       j["triangles"] = triangles;

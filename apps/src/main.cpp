@@ -10,6 +10,7 @@
 int main(int argc, char** argv) {
   CLI::App app{"sonoshape: reconstruction of 3D surfaces from arbitrary cross-sections"};
   app.require_subcommand(1);
+  app.fallthrough();  // global flags may follow the subcommand
   bool verbose = false;
   bool quiet = false;
   app.add_flag("-v,--verbose", verbose, "Print progress details on stderr");

@@ -131,6 +131,10 @@ void close_band(SampledField& field, Sampler& sampler, std::vector<std::uint64_t
   std::sort(field.surface_cells.begin(), field.surface_cells.end());
 }
 
+void smooth(SampledField& field, Sampler& sampler,
+            const std::vector<std::pair<Vec3, Vec3>>& contour_segments, int iterations);
+void snap_thin_regions(SampledField& field, Sampler& sampler, const std::vector<RegionSample>& samples);
+
 }  // namespace
 
 int SampledField::label(std::uint64_t key) const {
@@ -141,22 +145,30 @@ int SampledField::label(std::uint64_t key) const {
   return best;
 }
 
+Grid make_grid(const Box3& box, int depth) {
+  Grid grid;
+  grid.depth = depth;
+  grid.cell_size = box.size().maxCoeff() / (1 << depth);
+  grid.origin = box.min;
+  return grid;
+}
+
 int default_depth(const Box3& box) {
+  // Smallest depth whose finest cells are at most 1/128 of the diagonal.
   const double cells = box.size().maxCoeff() * 128.0 / box.diagonal();
-  return std::clamp(static_cast<int>(std::lround(std::log2(cells))), 1, 12);
+  return std::clamp(static_cast<int>(std::ceil(std::log2(cells) - 1e-9)), 1, 11);
 }
 
 SampledField sample_field(const Box3& box, int function_count, const BatchEvaluator& evaluate,
                           const std::vector<Vec3>& contour_points,
                           const std::vector<std::pair<Vec3, Vec3>>& contour_segments,
+                          const std::vector<RegionSample>& region_samples,
                           const OctreeOptions& options) {
   SampledField field;
   field.function_count = function_count;
   const int depth = options.max_depth;
   const int resolution = 1 << depth;
-  field.grid.depth = depth;
-  field.grid.cell_size = box.size().maxCoeff() / resolution;
-  field.grid.origin = box.min;
+  field.grid = make_grid(box, depth);
   const Grid& grid = field.grid;
   Sampler sampler(field, evaluate);
 
@@ -214,7 +226,24 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
 
   close_band(field, sampler, field.surface_cells, resolution);
 
-  if (options.smoothing_iterations <= 0) return field;
+  if (options.smoothing_iterations > 0) smooth(field, sampler, contour_segments, options.smoothing_iterations);
+  snap_thin_regions(field, sampler, region_samples);
+  return field;
+}
+
+namespace {
+
+void smooth(SampledField& field, Sampler& sampler,
+            const std::vector<std::pair<Vec3, Vec3>>& contour_segments, int iterations) {
+  const Grid& grid = field.grid;
+  const int resolution = 1 << grid.depth;
+  const int function_count = field.function_count;
+  auto fine_index = [&](const Vec3& p) {
+    const Vec3 q = (p - grid.origin) / grid.cell_size;
+    return std::array<int, 3>{std::clamp(static_cast<int>(std::floor(q.x())), 0, resolution - 1),
+                              std::clamp(static_cast<int>(std::floor(q.y())), 0, resolution - 1),
+                              std::clamp(static_cast<int>(std::floor(q.z())), 0, resolution - 1)};
+  };
   Stopwatch smoothing_clock;
   // Smoothing nodes: corners of surface cells. The bi-Laplacian stencil reaches two steps out.
   std::vector<std::uint64_t> nodes;
@@ -261,44 +290,63 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
     }
     laplacian_nodes.assign(set.begin(), set.end());
   }
-  const int fc = function_count;
-  std::unordered_map<std::uint64_t, std::size_t> lap_row;
-  lap_row.reserve(laplacian_nodes.size());
-  for (std::size_t n = 0; n < laplacian_nodes.size(); ++n) lap_row.emplace(laplacian_nodes[n], n);
-  std::vector<double> laplacian(laplacian_nodes.size() * static_cast<std::size_t>(fc));
-  std::vector<double> update(nodes.size() * static_cast<std::size_t>(fc));
+  // Row indices resolved once, so the iterations are plain array sweeps.
+  const std::size_t fc = static_cast<std::size_t>(function_count);
+  std::unordered_map<std::uint64_t, std::uint32_t> lap_index;
+  lap_index.reserve(laplacian_nodes.size());
+  for (std::size_t n = 0; n < laplacian_nodes.size(); ++n)
+    lap_index.emplace(laplacian_nodes[n], static_cast<std::uint32_t>(n));
+  std::vector<std::uint32_t> lap_value_rows(laplacian_nodes.size() * 7);  // centre, 6 neighbours
+  for (std::size_t n = 0; n < laplacian_nodes.size(); ++n) {
+    int i, j, k;
+    grid_unkey(laplacian_nodes[n], i, j, k);
+    lap_value_rows[n * 7] = field.index.at(laplacian_nodes[n]);
+    for (std::size_t d = 0; d < 6; ++d)
+      lap_value_rows[n * 7 + 1 + d] =
+          field.index.at(grid_key(i + kFaceNeighbours[d][0], j + kFaceNeighbours[d][1], k + kFaceNeighbours[d][2]));
+  }
+  std::vector<std::uint32_t> node_lap_rows(nodes.size() * 7);  // centre, 6 neighbours
+  std::vector<std::uint32_t> node_value_rows(nodes.size());
+  std::vector<char> node_fixed(nodes.size());
+  for (std::size_t n = 0; n < nodes.size(); ++n) {
+    int i, j, k;
+    grid_unkey(nodes[n], i, j, k);
+    node_value_rows[n] = field.index.at(nodes[n]);
+    node_fixed[n] = fixed.count(nodes[n]) > 0;
+    node_lap_rows[n * 7] = lap_index.at(nodes[n]);
+    for (std::size_t d = 0; d < 6; ++d)
+      node_lap_rows[n * 7 + 1 + d] =
+          lap_index.at(grid_key(i + kFaceNeighbours[d][0], j + kFaceNeighbours[d][1], k + kFaceNeighbours[d][2]));
+  }
+  std::vector<double> laplacian(laplacian_nodes.size() * fc);
+  std::vector<double> update(nodes.size() * fc);
   // Damped Jacobi on the bi-Laplacian (7-point Laplacian squared: diagonal 42); the damping
   // keeps the highest grid frequencies stable.
   constexpr double kDamping = 0.5 / 42.0;
-  for (int iteration = 0; iteration < options.smoothing_iterations; ++iteration) {
+  double* values = field.values.data();
+  for (int iteration = 0; iteration < iterations; ++iteration) {
     for (std::size_t n = 0; n < laplacian_nodes.size(); ++n) {
-      int i, j, k;
-      grid_unkey(laplacian_nodes[n], i, j, k);
-      const double* center = field.at(laplacian_nodes[n]);
-      double* out = laplacian.data() + n * static_cast<std::size_t>(fc);
-      for (int l = 0; l < fc; ++l) out[l] = -6.0 * center[l];
-      for (const auto& d : kFaceNeighbours) {
-        const double* nb = field.at(grid_key(i + d[0], j + d[1], k + d[2]));
-        for (int l = 0; l < fc; ++l) out[l] += nb[l];
+      const std::uint32_t* rows = &lap_value_rows[n * 7];
+      double* out = &laplacian[n * fc];
+      for (std::size_t l = 0; l < fc; ++l) {
+        double sum = -6.0 * values[rows[0] * fc + l];
+        for (int d = 1; d <= 6; ++d) sum += values[rows[d] * fc + l];
+        out[l] = sum;
       }
     }
     for (std::size_t n = 0; n < nodes.size(); ++n) {
-      int i, j, k;
-      grid_unkey(nodes[n], i, j, k);
-      const double* center = laplacian.data() + lap_row.at(nodes[n]) * static_cast<std::size_t>(fc);
-      double* out = update.data() + n * static_cast<std::size_t>(fc);
-      for (int l = 0; l < fc; ++l) out[l] = -6.0 * center[l];
-      for (const auto& d : kFaceNeighbours) {
-        const double* nb =
-            laplacian.data() + lap_row.at(grid_key(i + d[0], j + d[1], k + d[2])) * static_cast<std::size_t>(fc);
-        for (int l = 0; l < fc; ++l) out[l] += nb[l];
+      const std::uint32_t* rows = &node_lap_rows[n * 7];
+      double* out = &update[n * fc];
+      for (std::size_t l = 0; l < fc; ++l) {
+        double sum = -6.0 * laplacian[rows[0] * fc + l];
+        for (int d = 1; d <= 6; ++d) sum += laplacian[rows[d] * fc + l];
+        out[l] = sum;
       }
     }
     for (std::size_t n = 0; n < nodes.size(); ++n) {
-      if (fixed.count(nodes[n])) continue;
-      double* value = field.values.data() + static_cast<std::size_t>(field.index.at(nodes[n])) * static_cast<std::size_t>(fc);
-      const double* bilaplacian = update.data() + n * static_cast<std::size_t>(fc);
-      for (int l = 0; l < fc; ++l) value[l] -= kDamping * bilaplacian[l];
+      if (node_fixed[n]) continue;
+      double* value = values + node_value_rows[n] * fc;
+      for (std::size_t l = 0; l < fc; ++l) value[l] -= kDamping * update[n * fc + l];
     }
   }
   // Smoothing may move labels at the nodes: every cell touching a smoothed node is a seed of
@@ -321,7 +369,42 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
   }
   close_band(field, sampler, std::move(seeds), resolution);
   field.smoothing_seconds = smoothing_clock.seconds();
-  return field;
 }
 
+void snap_thin_regions(SampledField& field, Sampler& sampler,
+                       const std::vector<RegionSample>& samples) {
+  // A region narrower than the finest cells may have no grid vertex of its label, and would
+  // vanish from the mesh; its nearest grid vertices take the slice's own value (as on the face).
+  const Grid& grid = field.grid;
+  const int resolution = 1 << grid.depth;
+  std::vector<std::pair<std::uint64_t, int>> targets;
+  for (const RegionSample& sample : samples) {
+    const Vec3 q = (sample.position - grid.origin) / grid.cell_size;
+    const int i = static_cast<int>(std::lround(q.x())), j = static_cast<int>(std::lround(q.y())),
+              k = static_cast<int>(std::lround(q.z()));
+    if (i <= 0 || j <= 0 || k <= 0 || i >= resolution || j >= resolution || k >= resolution) continue;
+    sampler.request(i, j, k);
+    targets.emplace_back(grid_key(i, j, k), sample.function);
+  }
+  sampler.flush();
+  std::vector<std::uint64_t> seeds;
+  const std::size_t fc = static_cast<std::size_t>(field.function_count);
+  for (const auto& [key, function] : targets) {
+    if (field.label(key) == function) continue;
+    double* row = field.values.data() + static_cast<std::size_t>(field.index.at(key)) * fc;
+    for (std::size_t l = 0; l < fc; ++l) row[l] = static_cast<int>(l) == function ? 1.0 : -1.0;
+    ++field.snapped_vertices;
+    int i, j, k;
+    grid_unkey(key, i, j, k);
+    for (int corner = 0; corner < 8; ++corner)
+      seeds.push_back(grid_key(i - (corner & 1), j - ((corner >> 1) & 1), k - ((corner >> 2) & 1)));
+  }
+  if (seeds.empty()) return;
+  seeds.insert(seeds.end(), field.surface_cells.begin(), field.surface_cells.end());
+  std::sort(seeds.begin(), seeds.end());
+  seeds.erase(std::unique(seeds.begin(), seeds.end()), seeds.end());
+  close_band(field, sampler, std::move(seeds), resolution);
+}
+
+}  // namespace
 }  // namespace sonoshape::recon

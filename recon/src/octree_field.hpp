@@ -52,6 +52,7 @@ struct SampledField {
                                              ///< corners of different labels; closed under
                                              ///< face adjacency
   std::size_t evaluations = 0;
+  std::size_t snapped_vertices = 0;  ///< grid vertices set to a thin region's label
   double smoothing_seconds = 0.0;
 
   const double* at(std::uint64_t key) const {
@@ -61,15 +62,27 @@ struct SampledField {
   int label(std::uint64_t key) const;
 };
 
+/// A point of a slice region (world, mm) and its function index: the grid vertex nearest to it
+/// must carry that label, or a region thinner than the finest cells would vanish from the mesh.
+struct RegionSample {
+  Vec3 position;
+  int function = 1;
+};
+
+/// The finest grid of an octree of `depth` levels over `box`.
+Grid make_grid(const Box3& box, int depth);
+
 /// Samples the field over `box` (everything outside it is the outside label). `contour_points`
 /// (world, mm) refine the octree and fix the smoothing next to the contours; contour_segments
-/// (pairs of points) mark the cells whose corners keep their interpolated values.
+/// (pairs of points) mark the cells whose corners keep their interpolated values;
+/// `region_samples` snap thin regions to their nearest grid vertices after smoothing.
 SampledField sample_field(const Box3& box, int function_count, const BatchEvaluator& evaluate,
                           const std::vector<Vec3>& contour_points,
                           const std::vector<std::pair<Vec3, Vec3>>& contour_segments,
+                          const std::vector<RegionSample>& region_samples,
                           const OctreeOptions& options);
 
-/// The default octree depth: finest cells about 1/128 of the box diagonal.
+/// The default octree depth: the coarsest whose finest cells are at most 1/128 of the box diagonal.
 int default_depth(const Box3& box);
 
 }  // namespace sonoshape::recon

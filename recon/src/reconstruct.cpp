@@ -4,7 +4,11 @@
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
+#include <algorithm>
+#include <optional>
+
 #include "arrangement.hpp"
+#include "mean_value.hpp"
 #include "cell_field.hpp"
 #include "mesher.hpp"
 #include "octree_field.hpp"
@@ -12,6 +16,73 @@
 #include "sonoshape/core/log.hpp"
 
 namespace sonoshape::recon {
+namespace {
+
+// A point inside a simple ring: the middle of the widest interval the ring cuts from the
+// horizontal line through the middle of its bounding box.
+std::optional<Vec2> interior_point(const Ring2& ring) {
+  double lo = ring[0].y(), hi = ring[0].y();
+  for (const Vec2& p : ring) {
+    lo = std::min(lo, p.y());
+    hi = std::max(hi, p.y());
+  }
+  const double y = lo + (hi - lo) * 0.5004321;  // off-centre: rarely through a vertex
+  std::vector<double> xs;
+  for (std::size_t i = 0; i < ring.size(); ++i) {
+    const Vec2& a = ring[i];
+    const Vec2& b = ring[(i + 1) % ring.size()];
+    if ((a.y() <= y) != (b.y() <= y)) xs.push_back(a.x() + (y - a.y()) / (b.y() - a.y()) * (b.x() - a.x()));
+  }
+  std::sort(xs.begin(), xs.end());
+  std::optional<Vec2> best;
+  double best_width = 0.0;
+  for (std::size_t i = 0; i + 1 < xs.size(); i += 2) {
+    if (xs[i + 1] - xs[i] > best_width) {
+      best_width = xs[i + 1] - xs[i];
+      best = Vec2(0.5 * (xs[i] + xs[i + 1]), y);
+    }
+  }
+  return best;
+}
+
+// Points of every region too thin for grid cells of `cell_size`: its interior point and a
+// lattice of half the cell size over it (see snap_thin_regions).
+std::vector<RegionSample> thin_region_samples(const std::vector<PreparedSlice>& slices, double cell_size) {
+  std::vector<RegionSample> samples;
+  for (const PreparedSlice& slice : slices) {
+    for (std::size_t m = 1; m < slice.rings_by_material.size(); ++m) {
+      const std::vector<Ring2>& rings = slice.rings_by_material[m];
+      auto inside = [&](const Vec2& p) {
+        int winding = 0;
+        for (const Ring2& r : rings) winding += winding_number(r.data(), r.size(), p);
+        return winding > 0;
+      };
+      auto add = [&](const Vec2& p) {
+        samples.push_back({slice.origin + p.x() * slice.u + p.y() * slice.v, static_cast<int>(m)});
+      };
+      for (const Ring2& ring : rings) {
+        const double area = signed_area(ring);
+        if (area <= 0.0) continue;  // holes
+        double perimeter = 0.0;
+        Vec2 lo = ring[0], hi = ring[0];
+        for (std::size_t i = 0; i < ring.size(); ++i) {
+          perimeter += (ring[(i + 1) % ring.size()] - ring[i]).norm();
+          lo = lo.cwiseMin(ring[i]);
+          hi = hi.cwiseMax(ring[i]);
+        }
+        if (2.0 * area / perimeter >= 2.0 * cell_size) continue;  // wide enough for the grid
+        if (const auto p = interior_point(ring); p && inside(*p)) add(*p);
+        const double step = 0.5 * cell_size;
+        for (double x = lo.x() + 0.5 * step; x < hi.x(); x += step)
+          for (double y = lo.y() + 0.5 * step; y < hi.y(); y += step)
+            if (inside(Vec2(x, y))) add(Vec2(x, y));
+      }
+    }
+  }
+  return samples;
+}
+
+}  // namespace
 
 MeshSet reconstruct(const SliceSet& set, const ReconstructionOptions& options,
                     ReconstructionStats* stats_out) {
@@ -66,9 +137,11 @@ MeshSet reconstruct(const SliceSet& set, const ReconstructionOptions& options,
   OctreeOptions octree;
   octree.max_depth = options.max_depth > 0 ? options.max_depth : default_depth(box);
   octree.smoothing_iterations = options.smoothing_iterations;
+  const std::vector<RegionSample> samples =
+      thin_region_samples(slices, make_grid(box, octree.max_depth).cell_size);
   clock.reset();
   const SampledField sampled =
-      sample_field(box, fc, evaluate, contour_points, contour_segments, octree);
+      sample_field(box, fc, evaluate, contour_points, contour_segments, samples, octree);
   stats.smoothing_s = sampled.smoothing_seconds;
   stats.field_s = clock.seconds() - stats.smoothing_s;
 
@@ -86,6 +159,7 @@ MeshSet reconstruct(const SliceSet& set, const ReconstructionOptions& options,
   stats.cells = arrangement.cell_count();
   stats.faces = arrangement.face_count();
   stats.field_evaluations = sampled.evaluations;
+  stats.snapped_vertices = sampled.snapped_vertices;
   stats.depth = octree.max_depth;
   stats.total_s = total_clock.seconds();
   if (stats_out) *stats_out = stats;

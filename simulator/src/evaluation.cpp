@@ -1,1 +1,489 @@
-// placeholder: implemented in progress
+#include "sonoshape/simulator/evaluation.hpp"
+
+#include <CGAL/AABB_traits.h>
+#include <CGAL/AABB_tree.h>
+#include <CGAL/AABB_triangle_primitive.h>
+#include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
+#include <CGAL/Simple_cartesian.h>
+#include <tbb/blocked_range.h>
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <memory>
+#include <numbers>
+#include <random>
+
+#include "sonoshape/core/errors.hpp"
+#include "sonoshape/core/log.hpp"
+
+namespace sonoshape::sim {
+namespace {
+
+using Epick = CGAL::Exact_predicates_inexact_constructions_kernel;
+using Point2 = Epick::Point_2;
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+constexpr std::uint64_t kSampleSeed = 0x5eed5a3d1e5ULL;
+
+// ---- The sample grid --------------------------------------------------------------------
+
+// Cell centres of an n^3 grid over the box. Columns are shifted in x and y by a tiny irrational
+// fraction of a cell so that they do not run exactly through mesh vertices or edges placed on
+// a grid of the same box (marching-cubes output, axis-aligned test shapes).
+struct SampleGrid {
+  int n = 0;
+  Vec3 first;  // position of sample (0, 0, 0)
+  Vec3 step;
+
+  SampleGrid(const Box3& box, int resolution) : n(resolution) {
+    step = box.size() / resolution;
+    first = box.min + 0.5 * step;
+    first.x() += (std::numbers::sqrt2 - 1.0) * 1e-5 * step.x();
+    first.y() += (std::numbers::pi - 3.0) * 1e-5 * step.y();
+  }
+  std::size_t columns() const { return static_cast<std::size_t>(n) * n; }
+  std::size_t size() const { return columns() * n; }
+  // Samples are stored column by column: index = column * n + iz, column = iy * n + ix.
+  double x(int ix) const { return first.x() + ix * step.x(); }
+  double y(int iy) const { return first.y() + iy * step.y(); }
+  double z(int iz) const { return first.z() + iz * step.z(); }
+};
+
+// Inside/outside of every grid sample for a closed mesh, by crossing parity along z columns.
+// Each triangle is binned into the columns its xy box covers; the point-in-triangle test uses
+// exact orientations with each edge evaluated in one canonical direction (lower vertex index
+// first, zero counted as positive), so a column through a shared edge hits exactly one of two
+// triangles that the surface crosses there and never falls through a crack.
+std::vector<std::uint8_t> classify(const TriangleMesh& mesh, const SampleGrid& grid) {
+  const int n = grid.n;
+  std::vector<std::uint8_t> inside(grid.size(), 0);
+  if (mesh.empty()) return inside;
+
+  auto column_range = [&](double lo, double hi, double first, double step, int& i0, int& i1) {
+    // Clamped as doubles first: a mesh far outside the box must not overflow the cast.
+    i0 = static_cast<int>(std::clamp(std::ceil((lo - first) / step), 0.0, double(n)));
+    i1 = static_cast<int>(std::clamp(std::floor((hi - first) / step), -1.0, double(n - 1)));
+  };
+  // Two passes (count, then fill) give a compact column -> triangles table.
+  std::vector<std::uint32_t> count(grid.columns() + 1, 0);
+  struct Span {
+    int x0, x1, y0, y1;
+  };
+  std::vector<Span> spans(mesh.triangles.size());
+  for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
+    const auto& tri = mesh.triangles[t];
+    const Vec3& a = mesh.vertices[tri[0]];
+    const Vec3& b = mesh.vertices[tri[1]];
+    const Vec3& c = mesh.vertices[tri[2]];
+    Span& s = spans[t];
+    column_range(std::min({a.x(), b.x(), c.x()}), std::max({a.x(), b.x(), c.x()}), grid.first.x(),
+                 grid.step.x(), s.x0, s.x1);
+    column_range(std::min({a.y(), b.y(), c.y()}), std::max({a.y(), b.y(), c.y()}), grid.first.y(),
+                 grid.step.y(), s.y0, s.y1);
+    for (int iy = s.y0; iy <= s.y1; ++iy)
+      for (int ix = s.x0; ix <= s.x1; ++ix) ++count[static_cast<std::size_t>(iy) * n + ix + 1];
+  }
+  for (std::size_t c = 0; c < grid.columns(); ++c) count[c + 1] += count[c];
+  std::vector<std::uint32_t> bucket(count.back());
+  {
+    std::vector<std::uint32_t> cursor(count.begin(), count.end() - 1);
+    for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
+      const Span& s = spans[t];
+      for (int iy = s.y0; iy <= s.y1; ++iy)
+        for (int ix = s.x0; ix <= s.x1; ++ix)
+          bucket[cursor[static_cast<std::size_t>(iy) * n + ix]++] = static_cast<std::uint32_t>(t);
+    }
+  }
+
+  std::vector<Point2> projected;
+  projected.reserve(mesh.vertices.size());
+  for (const Vec3& p : mesh.vertices) projected.emplace_back(p.x(), p.y());
+  std::vector<CGAL::Orientation> winding(mesh.triangles.size());
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, mesh.triangles.size()), [&](const auto& r) {
+    for (std::size_t t = r.begin(); t != r.end(); ++t) {
+      const auto& tri = mesh.triangles[t];
+      winding[t] = CGAL::orientation(projected[tri[0]], projected[tri[1]], projected[tri[2]]);
+    }
+  });
+
+  tbb::enumerable_thread_specific<std::vector<double>> hits_per_thread;
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, grid.columns()), [&](const auto& range) {
+    std::vector<double>& hits = hits_per_thread.local();
+    for (std::size_t column = range.begin(); column != range.end(); ++column) {
+      const int ix = static_cast<int>(column % n);
+      const int iy = static_cast<int>(column / n);
+      const Point2 q(grid.x(ix), grid.y(iy));
+      hits.clear();
+      for (std::uint32_t k = count[column]; k < count[column + 1]; ++k) {
+        const auto& tri = mesh.triangles[bucket[k]];
+        const CGAL::Orientation turn = winding[bucket[k]];
+        if (turn == CGAL::COLLINEAR) continue;  // seen edge-on: no area to cross
+        bool hit = true;
+        for (int e = 0; e < 3 && hit; ++e) {
+          const std::uint32_t a = tri[e];
+          const std::uint32_t b = tri[(e + 1) % 3];
+          CGAL::Orientation side =
+              CGAL::orientation(projected[std::min(a, b)], projected[std::max(a, b)], q);
+          if (side == CGAL::COLLINEAR) side = CGAL::LEFT_TURN;
+          if (a > b) side = -side;
+          hit = side == turn;
+        }
+        if (!hit) continue;
+        // Height of the triangle's plane above q, from barycentric coordinates.
+        const Vec3& a = mesh.vertices[tri[0]];
+        const Vec3& b = mesh.vertices[tri[1]];
+        const Vec3& c = mesh.vertices[tri[2]];
+        const double qx = q.x(), qy = q.y();
+        const double area = (b.x() - a.x()) * (c.y() - a.y()) - (b.y() - a.y()) * (c.x() - a.x());
+        const double wb = ((qx - a.x()) * (c.y() - a.y()) - (qy - a.y()) * (c.x() - a.x())) / area;
+        const double wc = ((b.x() - a.x()) * (qy - a.y()) - (b.y() - a.y()) * (qx - a.x())) / area;
+        hits.push_back(a.z() + wb * (b.z() - a.z()) + wc * (c.z() - a.z()));
+      }
+      if (hits.empty()) continue;
+      std::sort(hits.begin(), hits.end());
+      std::size_t below = 0;
+      std::uint8_t* out = inside.data() + column * n;
+      for (int iz = 0; iz < n; ++iz) {
+        const double z = grid.z(iz);
+        while (below < hits.size() && hits[below] < z) ++below;
+        out[iz] = static_cast<std::uint8_t>(below % 2);
+      }
+    }
+  });
+  return inside;
+}
+
+double iou_of(const std::vector<std::uint8_t>& a, const std::vector<std::uint8_t>& b) {
+  std::size_t both = 0, either = 0;
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    both += a[i] & b[i];
+    either += a[i] | b[i];
+  }
+  return either == 0 ? 1.0 : static_cast<double>(both) / static_cast<double>(either);
+}
+
+// ---- Closest-point baseline ------------------------------------------------------------
+
+// Point-in-region queries on one slice: region edges bucketed into horizontal rows; a
+// horizontal ray to +a counts crossings per region (outer ring and holes together, so the
+// parity is odd exactly inside the region).
+class SliceRegions {
+ public:
+  explicit SliceRegions(const LabeledSlice& slice) : slice_(&slice) {
+    normal_ = slice.normal().normalized();
+    double lo = std::numeric_limits<double>::infinity();
+    double hi = -lo;
+    struct RawEdge {
+      Point2 low, high;
+      int region;
+    };
+    std::vector<RawEdge> raw;
+    for (std::size_t r = 0; r < slice.regions.size(); ++r) {
+      const Region& region = slice.regions[r];
+      labels_.push_back(region.label >= 1 ? region.label : kOutsideLabel);
+      auto add_ring = [&](const Ring2& ring) {
+        for (std::size_t i = 0; i < ring.size(); ++i) {
+          Vec2 p = ring[i], q = ring[(i + 1) % ring.size()];
+          if (p.y() == q.y()) continue;  // horizontal edges never cross a horizontal ray
+          if (p.y() > q.y()) std::swap(p, q);
+          raw.push_back({Point2(p.x(), p.y()), Point2(q.x(), q.y()), static_cast<int>(r)});
+          lo = std::min(lo, p.y());
+          hi = std::max(hi, q.y());
+        }
+      };
+      add_ring(region.outer);
+      for (const Ring2& hole : region.holes) add_ring(hole);
+    }
+    if (raw.empty()) return;
+    rows_ = std::clamp(static_cast<int>(raw.size() / 2), 1, 4096);
+    row_first_ = lo;
+    row_height_ = std::max((hi - lo) / rows_, std::numeric_limits<double>::min());
+    std::vector<std::uint32_t> count(rows_ + 1, 0);
+    for (const RawEdge& e : raw)
+      for (int r = row_of(e.low.y()); r <= row_of(e.high.y()); ++r) ++count[r + 1];
+    for (int r = 0; r < rows_; ++r) count[r + 1] += count[r];
+    row_start_ = count;
+    edges_.resize(count.back());
+    for (const RawEdge& e : raw)
+      for (int r = row_of(e.low.y()); r <= row_of(e.high.y()); ++r)
+        edges_[count[r]++] = Edge{e.low, e.high, e.region};
+  }
+
+  double distance(const Vec3& p) const { return std::abs((p - slice_->origin_mm).dot(normal_)); }
+
+  /// Label at the projection of `p` (kOutsideLabel outside every material region).
+  int label_at(const Vec3& p, std::vector<int>& crossed) const {
+    if (edges_.empty()) return kOutsideLabel;
+    const Vec2 a = slice_->to_plane(p);
+    const double row_position = (a.y() - row_first_) / row_height_;
+    if (row_position < 0.0 || row_position >= rows_ + 1.0) return kOutsideLabel;
+    const int row = std::min(static_cast<int>(row_position), rows_ - 1);
+    const Point2 q(a.x(), a.y());
+    crossed.clear();
+    for (std::uint32_t k = row_start_[row]; k < row_start_[row + 1]; ++k) {
+      const Edge& e = edges_[k];
+      // Half-open in y so a ray through a vertex counts it once.
+      if (q.y() < e.low.y() || q.y() >= e.high.y()) continue;
+      if (CGAL::orientation(e.low, e.high, q) == CGAL::LEFT_TURN) crossed.push_back(e.region);
+    }
+    std::sort(crossed.begin(), crossed.end());
+    for (std::size_t i = 0; i < crossed.size();) {
+      std::size_t j = i;
+      while (j < crossed.size() && crossed[j] == crossed[i]) ++j;
+      if ((j - i) % 2 == 1) return labels_[crossed[i]];
+      i = j;
+    }
+    return kOutsideLabel;
+  }
+
+ private:
+  struct Edge {
+    Point2 low, high;
+    int region;
+  };
+  int row_of(double y) const {
+    return std::clamp(static_cast<int>((y - row_first_) / row_height_), 0, rows_ - 1);
+  }
+
+  const LabeledSlice* slice_;
+  Vec3 normal_;
+  std::vector<int> labels_;
+  int rows_ = 0;
+  double row_first_ = 0.0;
+  double row_height_ = 1.0;
+  std::vector<std::uint32_t> row_start_;
+  std::vector<Edge> edges_;
+};
+
+// Label of every grid sample under the closest-point baseline.
+std::vector<int> baseline_labels(const SliceSet& slices, const SampleGrid& grid) {
+  std::vector<int> labels(grid.size(), kOutsideLabel);
+  if (slices.slices.empty()) return labels;
+  std::vector<SliceRegions> index;
+  index.reserve(slices.slices.size());
+  for (const LabeledSlice& s : slices.slices) index.emplace_back(s);
+  const int n = grid.n;
+  tbb::enumerable_thread_specific<std::vector<int>> crossed_per_thread;
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, grid.columns()), [&](const auto& range) {
+    std::vector<int>& crossed = crossed_per_thread.local();
+    for (std::size_t column = range.begin(); column != range.end(); ++column) {
+      const double x = grid.x(static_cast<int>(column % n));
+      const double y = grid.y(static_cast<int>(column / n));
+      for (int iz = 0; iz < n; ++iz) {
+        const Vec3 p(x, y, grid.z(iz));
+        std::size_t nearest = 0;
+        double best = std::numeric_limits<double>::infinity();
+        for (std::size_t s = 0; s < index.size(); ++s) {
+          const double d = index[s].distance(p);
+          if (d < best) {
+            best = d;
+            nearest = s;
+          }
+        }
+        labels[column * n + iz] = index[nearest].label_at(p, crossed);
+      }
+    }
+  });
+  return labels;
+}
+
+// ---- Surface distances --------------------------------------------------------------------
+
+using Simple = CGAL::Simple_cartesian<double>;
+using Triangle3 = Simple::Triangle_3;
+using TrianglePrimitive =
+    CGAL::AABB_triangle_primitive<Simple, std::vector<Triangle3>::const_iterator>;
+using Tree = CGAL::AABB_tree<CGAL::AABB_traits<Simple, TrianglePrimitive>>;
+
+// Closest-point queries on a mesh; built once, then queried from many threads.
+class SurfaceDistance {
+ public:
+  explicit SurfaceDistance(const TriangleMesh& mesh) {
+    for (const auto& t : mesh.triangles) {
+      const Vec3& a = mesh.vertices[t[0]];
+      const Vec3& b = mesh.vertices[t[1]];
+      const Vec3& c = mesh.vertices[t[2]];
+      if ((b - a).cross(c - a).squaredNorm() == 0.0) continue;  // no area: nothing to be near
+      triangles_.emplace_back(Simple::Point_3(a.x(), a.y(), a.z()),
+                              Simple::Point_3(b.x(), b.y(), b.z()),
+                              Simple::Point_3(c.x(), c.y(), c.z()));
+    }
+    if (triangles_.empty()) return;
+    tree_ = std::make_unique<Tree>(triangles_.begin(), triangles_.end());
+    tree_->build();
+    // Built here, before any parallel query, because building lazily is not thread-safe.
+    tree_->accelerate_distance_queries();
+  }
+  bool empty() const { return !tree_; }
+  double operator()(const Vec3& p) const {
+    return std::sqrt(tree_->squared_distance(Simple::Point_3(p.x(), p.y(), p.z())));
+  }
+
+ private:
+  std::vector<Triangle3> triangles_;
+  std::unique_ptr<Tree> tree_;
+};
+
+// Area-weighted uniform samples on a mesh surface (deterministic).
+std::vector<Vec3> sample_surface(const TriangleMesh& mesh, int count, std::uint64_t seed) {
+  std::vector<double> cumulative;
+  cumulative.reserve(mesh.triangles.size());
+  double total = 0.0;
+  for (const auto& t : mesh.triangles) {
+    const Vec3& a = mesh.vertices[t[0]];
+    total += 0.5 * (mesh.vertices[t[1]] - a).cross(mesh.vertices[t[2]] - a).norm();
+    cumulative.push_back(total);
+  }
+  std::vector<Vec3> samples;
+  if (total <= 0.0 || count <= 0) return samples;
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  samples.reserve(count);
+  for (int i = 0; i < count; ++i) {
+    const double r = unit(rng) * total;
+    const std::size_t t = std::min<std::size_t>(
+        std::upper_bound(cumulative.begin(), cumulative.end(), r) - cumulative.begin(),
+        cumulative.size() - 1);
+    const auto& tri = mesh.triangles[t];
+    // sqrt warps the unit square onto the triangle uniformly.
+    const double s = std::sqrt(unit(rng));
+    const double w = unit(rng);
+    samples.push_back((1.0 - s) * mesh.vertices[tri[0]] + s * (1.0 - w) * mesh.vertices[tri[1]] +
+                      s * w * mesh.vertices[tri[2]]);
+  }
+  return samples;
+}
+
+struct DistanceStats {
+  double sum = 0.0;
+  double max = 0.0;
+  std::size_t count = 0;
+};
+
+DistanceStats distances(const std::vector<Vec3>& points, const SurfaceDistance& surface) {
+  std::vector<double> d(points.size());
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, points.size()), [&](const auto& range) {
+    for (std::size_t i = range.begin(); i != range.end(); ++i) d[i] = surface(points[i]);
+  });
+  DistanceStats stats;
+  for (double x : d) {
+    stats.sum += x;
+    stats.max = std::max(stats.max, x);
+  }
+  stats.count = d.size();
+  return stats;
+}
+
+// Points along every contour of `label` in the slices, vertices included, in world coordinates.
+std::vector<Vec3> contour_points(const SliceSet& slices, int label, double step_mm) {
+  std::vector<Vec3> points;
+  for (const LabeledSlice& s : slices.slices)
+    for (const Region& region : s.regions) {
+      if (region.label != label) continue;
+      auto add_ring = [&](const Ring2& ring) {
+        for (std::size_t i = 0; i < ring.size(); ++i) {
+          const Vec2& a = ring[i];
+          const Vec2& b = ring[(i + 1) % ring.size()];
+          const int pieces = std::max(1, static_cast<int>(std::ceil((b - a).norm() / step_mm)));
+          for (int k = 0; k < pieces; ++k)
+            points.push_back(s.to_world(a + (static_cast<double>(k) / pieces) * (b - a)));
+        }
+      };
+      add_ring(region.outer);
+      for (const Ring2& hole : region.holes) add_ring(hole);
+    }
+  return points;
+}
+
+const TriangleMesh* find_mesh(const MeshSet& set, int label) {
+  for (const auto& e : set.meshes)
+    if (e.label == label) return &e.mesh;
+  return nullptr;
+}
+
+}  // namespace
+
+std::vector<LabelScore> evaluate(const MeshSet& reconstruction, const MeshSet& truth,
+                                 const SliceSet* slices, const Box3& box,
+                                 const EvaluationOptions& options) {
+  if (options.grid_resolution < 1)
+    throw GeometryError("evaluate: grid_resolution must be at least 1");
+  if (!box.size().allFinite() || (box.size().array() <= 0.0).any())
+    throw GeometryError("evaluate: the evaluation box must have a positive size on every axis");
+  const double diagonal = box.diagonal();
+  const double to_percent = 100.0 / diagonal;
+  const SampleGrid grid(box, options.grid_resolution);
+
+  std::vector<int> baseline;
+  if (slices != nullptr) baseline = baseline_labels(*slices, grid);
+
+  for (const auto& e : reconstruction.meshes)
+    if (find_mesh(truth, e.label) == nullptr)
+      log_warning("evaluate: the reconstruction has label " + std::to_string(e.label) +
+                  ", which the ground truth lacks; it is not scored");
+
+  std::vector<LabelScore> scores;
+  for (const auto& entry : truth.meshes) {
+    LabelScore score;
+    score.label = entry.label;
+    const std::vector<std::uint8_t> truth_inside = classify(entry.mesh, grid);
+    if (slices != nullptr) {
+      std::vector<std::uint8_t> baseline_inside(grid.size());
+      for (std::size_t i = 0; i < baseline.size(); ++i)
+        baseline_inside[i] = baseline[i] == entry.label;
+      score.baseline_iou = iou_of(baseline_inside, truth_inside);
+    } else {
+      score.baseline_iou = kNaN;
+    }
+
+    const TriangleMesh* recon = find_mesh(reconstruction, entry.label);
+    if (recon == nullptr || recon->empty()) {
+      log_warning("evaluate: the reconstruction has no mesh for label " +
+                  std::to_string(entry.label) + "; its IoU is 0");
+      score.reconstructed = false;
+      score.iou = 0.0;
+      score.mean_surface_distance = score.hausdorff_distance = kNaN;
+      score.contour_mean = score.contour_max = kNaN;
+      if (recon != nullptr) score.health = check_mesh_health(*recon);
+      scores.push_back(score);
+      continue;
+    }
+    score.health = check_mesh_health(*recon);
+    score.iou = iou_of(classify(*recon, grid), truth_inside);
+
+    const SurfaceDistance to_recon(*recon);
+    const SurfaceDistance to_truth(entry.mesh);
+    const std::uint64_t seed = kSampleSeed + static_cast<std::uint64_t>(entry.label);
+    const std::vector<Vec3> truth_samples =
+        sample_surface(entry.mesh, options.surface_samples, seed);
+    const std::vector<Vec3> recon_samples =
+        sample_surface(*recon, options.surface_samples, seed + 7919);
+    if (to_recon.empty() || to_truth.empty() || truth_samples.empty() || recon_samples.empty()) {
+      score.mean_surface_distance = score.hausdorff_distance = kNaN;
+    } else {
+      const DistanceStats forward = distances(truth_samples, to_recon);
+      const DistanceStats backward = distances(recon_samples, to_truth);
+      score.mean_surface_distance =
+          0.5 * (forward.sum / forward.count + backward.sum / backward.count) * to_percent;
+      score.hausdorff_distance = std::max(forward.max, backward.max) * to_percent;
+    }
+
+    score.contour_mean = score.contour_max = kNaN;
+    if (slices != nullptr && !to_recon.empty()) {
+      const std::vector<Vec3> points =
+          contour_points(*slices, entry.label, options.contour_step_fraction * diagonal);
+      if (!points.empty()) {
+        const DistanceStats contour = distances(points, to_recon);
+        score.contour_mean = contour.sum / contour.count * to_percent;
+        score.contour_max = contour.max * to_percent;
+      }
+    }
+    scores.push_back(score);
+  }
+  return scores;
+}
+
+}  // namespace sonoshape::sim

@@ -21,6 +21,7 @@ struct ReconstructionOptions {
 struct ReconstructionStats {
   double arrangement_s = 0, face_images_s = 0, field_s = 0, smoothing_s = 0, mesh_s = 0, total_s = 0;
   std::size_t slices = 0, cells = 0, faces = 0, field_evaluations = 0;
+  std::size_t snapped_vertices = 0;  ///< grid vertices given a thin region's label
   int depth = 0;
   std::map<int, std::size_t> triangles;  ///< per material label
 };

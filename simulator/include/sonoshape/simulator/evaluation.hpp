@@ -9,9 +9,12 @@
 
 namespace sonoshape::sim {
 
-/// Per-label scores. Distances are in % of the evaluation box diagonal.
+/// Per-label scores. Distances are in % of the evaluation box diagonal. A score that cannot be
+/// computed (no slices given, label missing from the reconstruction, no contour of the label)
+/// is NaN.
 struct LabelScore {
   int label = 1;
+  bool reconstructed = true;           ///< false: the reconstruction has no mesh for the label
   double iou = 0.0;                    ///< volumetric IoU of the reconstruction vs truth
   double baseline_iou = 0.0;           ///< same for the closest-point baseline (needs slices)
   double mean_surface_distance = 0.0;  ///< symmetric mean, % of diagonal
@@ -22,13 +25,17 @@ struct LabelScore {
 };
 
 struct EvaluationOptions {
-  int grid_resolution = 128;     ///< IoU samples per axis of the box
+  int grid_resolution = 200;     ///< IoU samples per axis of the box (fine enough that the
+                                 ///< sampling error stays well below the IoU differences)
   int surface_samples = 20000;   ///< points sampled per surface for distances
   double contour_step_fraction = 0.002;  ///< contour sampling step, fraction of diagonal
 };
 
 /// Scores every label present in `truth`. `slices` (optional) enables the baseline and contour
-/// fidelity; `box` is the evaluation box (usually the slice set's bounds).
+/// fidelity; `box` is the evaluation box (usually the slice set's bounds). IoU samples the cell
+/// centres of a grid_resolution^3 grid over `box` (inside = odd number of surface crossings
+/// along z, so meshes need not be oriented). Throws GeometryError for an empty box or a
+/// resolution below 1.
 std::vector<LabelScore> evaluate(const MeshSet& reconstruction, const MeshSet& truth,
                                  const SliceSet* slices, const Box3& box,
                                  const EvaluationOptions& options = {});

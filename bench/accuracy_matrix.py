@@ -1,0 +1,112 @@
+#!/usr/bin/env python3
+"""Accuracy and per-stage timing of offline reconstruction on slice sets cut from data/models.
+
+For every model and plane family (and for two-label pairs) this runs
+  sonoshape slice -> sonoshape reconstruct --stats -> sonoshape evaluate --json
+and prints two Markdown tables: accuracy against the ground-truth mesh beside the closest-point
+baseline, and per-stage seconds like Table II of Bermano et al. (2011).
+
+Usage: bench/accuracy_matrix.py [--binary build/apps/sonoshape] [--work out/bench] [--quick]
+"""
+import argparse
+import json
+import os
+import subprocess
+import sys
+
+MODELS = ["spot", "cow", "homer", "horse", "cheburashka", "fandisk", "rocker-arm"]
+EXT = {"horse": "ply"}
+FAMILIES = [("parallel", 20), ("orthogonal", 30), ("random", 40), ("random", 30)]
+PAIRS = [("spot", "homer"), ("cheburashka", "fandisk"), ("horse", "rocker-arm"), ("cow", "spot")]
+
+
+def run(cmd):
+    result = subprocess.run(cmd, capture_output=True, text=True)
+    if result.returncode != 0:
+        sys.stderr.write(" ".join(cmd) + "\n" + result.stderr)
+        raise SystemExit(1)
+    return result
+
+
+def model_path(root, name):
+    return os.path.join(root, "data", "models", f"{name}.{EXT.get(name, 'obj')}")
+
+
+def one_case(args, root, name, meshes, family, count, extra_recon):
+    case_dir = os.path.join(args.work, name)
+    os.makedirs(case_dir, exist_ok=True)
+    slices = os.path.join(case_dir, "slices.json")
+    truth = os.path.join(case_dir, "truth")
+    slice_cmd = [args.binary, "slice", "--planes", family, "--count", str(count), "--seed", "1",
+                 "--size-mm", "150", "-o", slices, "--truth", truth, "--skip-invalid", "-q"]
+    for label, model in meshes:
+        slice_cmd += ["--mesh", f"{label}:{model_path(root, model)}:{model}"]
+    run(slice_cmd)
+    out = os.path.join(case_dir, "recon")
+    stats_path = os.path.join(case_dir, "stats.json")
+    run([args.binary, "reconstruct", slices, "-o", out, "--stats", stats_path, "-q"] + extra_recon)
+    eval_path = os.path.join(case_dir, "eval.json")
+    eval_cmd = [args.binary, "evaluate", "--recon", out, "--slices", slices, "--json", eval_path, "-q"]
+    for label, model in meshes:
+        eval_cmd += ["--truth", f"{label}:{truth}/label_{label}.ply"]
+    run(eval_cmd)
+    with open(stats_path) as f:
+        stats = json.load(f)
+    with open(eval_path) as f:
+        scores = json.load(f)
+    with open(slices) as f:
+        stats["slices_kept"] = len(json.load(f)["slices"])
+    return stats, scores
+
+
+def main():
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--binary", default=os.path.join(root, "build", "apps", "sonoshape"))
+    parser.add_argument("--work", default=os.path.join(root, "out", "bench"))
+    parser.add_argument("--quick", action="store_true", help="one family per model")
+    args = parser.parse_args()
+
+    cases = []
+    for model in MODELS:
+        for family, count in (FAMILIES[2:3] if args.quick else FAMILIES[:3]):
+            cases.append((f"{model}-{family}-{count}", [(1, model)], family, count))
+    for a, b in PAIRS:
+        for family, count in [("orthogonal", 30), ("random", 30)]:
+            cases.append((f"{a}+{b}-{family}-{count}", [(1, a), (2, b)], family, count))
+
+    accuracy = ["| set | slices | label | IoU | baseline IoU | mean dist % | Hausdorff % | contour mean % | contour max % | closed manifold oriented |",
+                "|---|---|---|---|---|---|---|---|---|---|"]
+    timing = ["| set | slices | cells | arrangement s | face images s | field s | smoothing s | mesh s | total s | evaluations | triangles | peak RSS MB |",
+              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    failures = []
+    for name, meshes, family, count in cases:
+        stats, scores = one_case(args, root, name, meshes, family, count, [])
+        for s in scores["labels"]:
+            ok = s["health"]["closed_manifold_oriented"]
+            beats = s["iou"] > s["baseline_iou"]
+            fidelity = s["contour_mean_percent"] <= 0.5 and s["contour_max_percent"] <= 2.0
+            if not (ok and beats and fidelity):
+                failures.append(f"{name} label {s['label']}")
+            accuracy.append(
+                f"| {name} | {stats['slices_kept']} | {s['label']} {s['name']} | {s['iou']:.4f} | "
+                f"{s['baseline_iou']:.4f} | {s['mean_surface_distance_percent']:.3f} | "
+                f"{s['hausdorff_distance_percent']:.2f} | {s['contour_mean_percent']:.3f} | "
+                f"{s['contour_max_percent']:.3f} | {'yes' if ok else 'NO'} |")
+        tri = sum(stats["triangles"].values())
+        timing.append(
+            f"| {name} | {stats['slices']} | {stats['cells']} | {stats['arrangement_s']:.3f} | "
+            f"{stats['face_images_s']:.3f} | {stats['field_s']:.3f} | {stats['smoothing_s']:.3f} | "
+            f"{stats['mesh_s']:.3f} | {stats['total_s']:.3f} | {stats['field_evaluations']} | {tri} | "
+            f"{stats['peak_rss_mb']:.0f} |")
+        sys.stderr.write(f"{name}: done\n")
+    print("### Accuracy\n")
+    print("\n".join(accuracy))
+    print("\n### Per-stage seconds (Table II)\n")
+    print("\n".join(timing))
+    print(f"\nSets failing a goal (closed/oriented, IoU above baseline, contour mean <= 0.5 %, max <= 2 %): "
+          f"{', '.join(failures) if failures else 'none'}")
+
+
+if __name__ == "__main__":
+    main()
