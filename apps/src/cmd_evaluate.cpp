@@ -168,19 +168,13 @@ int run_evaluate(const EvaluateOptions& options) {
   MeshSet truth;
   std::map<int, std::string> names;
   for (const std::string& text : options.truth) {
-    const auto spec = parse_mesh_spec(text, "--truth");
-    if (!spec) {
-      std::cerr << "error: " << spec.message() << '\n';
-      return 1;
-    }
-    auto mesh = sim::read_mesh(spec->path);
+    auto mesh = load_mesh_spec(text, "--truth");
     if (!mesh) {
       std::cerr << "error: " << mesh.message() << '\n';
       return 1;
     }
-    sim::orient_outward(*mesh);
-    names.try_emplace(spec->label, spec->name);
-    add_mesh(truth, spec->label, spec->name, std::move(*mesh));
+    names.try_emplace(mesh->label, mesh->name);
+    add_mesh(truth, mesh->label, mesh->name, std::move(mesh->mesh));
   }
 
   std::optional<SliceSet> slices;

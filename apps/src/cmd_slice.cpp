@@ -83,18 +83,12 @@ void place(std::vector<sim::LabeledMesh>& meshes, double size_mm, bool row) {
 int run_slice(const SliceOptions& options) {
   std::vector<sim::LabeledMesh> meshes;
   for (const std::string& text : options.meshes) {
-    const auto spec = parse_mesh_spec(text, "--mesh");
-    if (!spec) {
-      std::cerr << "error: " << spec.message() << '\n';
-      return 1;
-    }
-    auto mesh = sim::read_mesh(spec->path);
+    auto mesh = load_mesh_spec(text, "--mesh");
     if (!mesh) {
       std::cerr << "error: " << mesh.message() << '\n';
       return 1;
     }
-    sim::orient_outward(*mesh);
-    meshes.push_back({spec->label, spec->name, std::move(*mesh)});
+    meshes.push_back(std::move(*mesh));
   }
   const bool row = options.layout.empty() ? (meshes.size() > 1 && options.size_mm > 0.0)
                                           : options.layout == "row";

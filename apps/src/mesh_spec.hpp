@@ -1,10 +1,12 @@
 #pragma once
-// The LABEL:PATH[:NAME] mesh arguments of `sonoshape slice` and `sonoshape evaluate`.
+// The LABEL:PATH[:NAME] mesh arguments of `sonoshape slice`, `evaluate` and `simulate`.
 #include <charconv>
 #include <filesystem>
 #include <string>
 
 #include "sonoshape/core/status.hpp"
+#include "sonoshape/simulator/mesh_reader.hpp"
+#include "sonoshape/simulator/mesh_slicer.hpp"
 
 namespace sonoshape::apps {
 
@@ -37,6 +39,16 @@ inline Result<MeshSpec> parse_mesh_spec(const std::string& text, const std::stri
   spec.path = rest;
   if (spec.name.empty()) spec.name = spec.path.stem().string();
   return spec;
+}
+
+/// Parses the argument and reads its mesh, oriented outwards.
+inline Result<sim::LabeledMesh> load_mesh_spec(const std::string& text, const std::string& option) {
+  const auto spec = parse_mesh_spec(text, option);
+  if (!spec) return spec.status();
+  auto mesh = sim::read_mesh(spec->path);
+  if (!mesh) return mesh.status();
+  sim::orient_outward(*mesh);
+  return sim::LabeledMesh{spec->label, spec->name, std::move(*mesh)};
 }
 
 }  // namespace sonoshape::apps

@@ -38,6 +38,16 @@ std::vector<PreparedSlice> prepare_slices(const SliceSet& set,
         rings.push_back(std::move(hole));
       }
     }
+    p.ring_bounds.resize(p.rings_by_material.size());
+    for (std::size_t m = 0; m < p.rings_by_material.size(); ++m)
+      for (const Ring2& ring : p.rings_by_material[m]) {
+        Vec2 lo = ring[0], hi = ring[0];
+        for (const Vec2& q : ring) {
+          lo = lo.cwiseMin(q);
+          hi = hi.cwiseMax(q);
+        }
+        p.ring_bounds[m].emplace_back(lo, hi);
+      }
     out.push_back(std::move(p));
   }
   return out;
@@ -69,7 +79,7 @@ Ring2 clip_ring_to_convex(const Ring2& ring, const std::vector<Eigen::Vector3d>&
 
 CellField::CellField(const Arrangement& arrangement, const std::vector<PreparedSlice>& slices,
                      int material_count)
-    : arrangement_(arrangement), material_count_(material_count) {
+    : arrangement_(arrangement), slices_(slices), material_count_(material_count) {
   on_face_height_ = 1e-12 * arrangement.box().diagonal();
   frames_.resize(arrangement.plane_count());
   for (std::size_t p = 0; p < arrangement.plane_count(); ++p) {
@@ -138,12 +148,9 @@ void CellField::build_face_image(int face_id, const std::vector<PreparedSlice>& 
   const double margin = 1e-9 * (hi - lo).norm();
   const PreparedSlice& slice = slices[static_cast<std::size_t>(plane.slice)];
   for (std::size_t m = 1; m < slice.rings_by_material.size(); ++m) {
-    for (const Ring2& ring : slice.rings_by_material[m]) {
-      Vec2 rlo = ring[0], rhi = ring[0];
-      for (const Vec2& p : ring) {
-        rlo = rlo.cwiseMin(p);
-        rhi = rhi.cwiseMax(p);
-      }
+    for (std::size_t r = 0; r < slice.rings_by_material[m].size(); ++r) {
+      const Ring2& ring = slice.rings_by_material[m][r];
+      const auto& [rlo, rhi] = slice.ring_bounds[m][r];
       if ((rlo.array() > hi.array() + margin).any() || (rhi.array() < lo.array() - margin).any())
         continue;
       Ring2 clipped = clip_ring_to_convex(ring, half_planes);
@@ -191,13 +198,20 @@ int CellField::evaluate(const Vec3& p, double* out) const {
     const double height = std::abs(d.dot(frame.unit_normal));
     const Vec2 foot(d.dot(frame.u), d.dot(frame.v));
     if (height <= on_face_height_) {
-      // On the face itself the field is the face's own indicator.
-      // w[m] counts the winding of material m's rings (outer +1, holes -1).
-      for (const FaceImage::Part& part : image.parts)
-        w[part.material] += winding_number(points_.data() + part.begin, part.count, foot);
+      // On the face itself the field is the face's own indicator. The slice's whole rings
+      // decide, not the face's clipped parts: a foot on the line between two faces then gets
+      // the same label from both, whatever the rounding of the clip.
       int label = 0;
-      for (int l = 1; l < n; ++l)
-        if (w[l] > 0.5) label = l;
+      const int slice = arrangement_.plane(image.frame).slice;
+      if (slice >= 0) {
+        const PreparedSlice& s = slices_[static_cast<std::size_t>(slice)];
+        for (std::size_t m = 1; m < s.rings_by_material.size(); ++m) {
+          int winding = 0;
+          for (const Ring2& ring : s.rings_by_material[m])
+            winding += winding_number(ring.data(), ring.size(), foot);
+          if (winding > 0) label = static_cast<int>(m);
+        }
+      }
       for (int l = 0; l < n; ++l) out[l] = l == label ? 1.0 : -1.0;
       return cell;
     }

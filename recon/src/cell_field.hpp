@@ -17,6 +17,7 @@ struct PreparedSlice {
   Vec3 u, v;
   Vec3 unit_normal;
   std::vector<std::vector<Ring2>> rings_by_material;  ///< index 0 unused (outside)
+  std::vector<std::vector<std::pair<Vec2, Vec2>>> ring_bounds;  ///< (min, max) of each ring
 };
 
 /// Converts the slices: material ids -> dense indices 1..K (`material_ids[k-1]` is the id of k).
@@ -63,6 +64,7 @@ class CellField {
   void build_face_image(int face_id, const std::vector<PreparedSlice>& slices);
 
   const Arrangement& arrangement_;
+  std::vector<PreparedSlice> slices_;
   int material_count_;
   double on_face_height_;  // below this height a point is on the face
   std::vector<PlaneFrame> frames_;  // one per arrangement plane

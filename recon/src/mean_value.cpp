@@ -47,3 +47,97 @@ int winding_number(const Vec2* points, std::size_t count, const Vec2& p) {
 }
 
 }  // namespace sonoshape::recon
+
+namespace sonoshape::recon {
+
+bool triangle_weights(const Vec2& a, const Vec2& b, const Vec2& c, const Vec2& foot, double height,
+                      double weights[3]) {
+  const Vec2 corners[3] = {a, b, c};
+  const double twice_area = (b - a).x() * (c - a).y() - (b - a).y() * (c - a).x();
+  if (twice_area == 0.0 || !(height > 0.0)) return false;
+  // Traverse counter-clockwise so outward normals are (d.y, -d.x) / L.
+  const int order[3] = {0, twice_area > 0 ? 1 : 2, twice_area > 0 ? 2 : 1};
+  Vec2 ring[3];
+  for (int k = 0; k < 3; ++k) ring[k] = corners[order[k]];
+  const double projected = projected_angle(ring, 3, foot, height);  // 2 h I
+  const double h2 = height * height;
+  Vec2 moment = Vec2::Zero();  // M
+  for (int k = 0; k < 3; ++k) {
+    const Vec2 p = ring[k] - foot;
+    const Vec2 q_end = ring[(k + 1) % 3] - foot;
+    const Vec2 d = q_end - p;
+    const double length = d.norm();
+    const double cross = (p.x() * q_end.y() - p.y() * q_end.x()) / length;
+    const double s_a = p.dot(d) / length, s_b = q_end.dot(d) / length;
+    const double q2 = cross * cross + h2;
+    const double q = std::sqrt(q2);
+    const double angle = std::atan2(q * length, q2 + s_a * s_b);
+    const Vec2 normal(d.y() / length, -d.x() / length);
+    moment += (-height / (2.0 * q) * angle) * normal;
+  }
+  // Barycentric coordinate of corner i: lambda_i(y) = cross(e_i, y - start_i) / twice_area with
+  // e_i the opposite edge; its gradient is perp(e_i) / twice_area.
+  for (int i = 0; i < 3; ++i) {
+    const Vec2& p1 = corners[(i + 1) % 3];
+    const Vec2& p2 = corners[(i + 2) % 3];
+    const Vec2 e = p2 - p1;
+    const Vec2 gradient = Vec2(-e.y(), e.x()) / twice_area;
+    const double lambda_at_foot = gradient.dot(foot - p1);
+    weights[i] = lambda_at_foot * projected / height + 2.0 * gradient.dot(moment);
+  }
+  return true;
+}
+
+void ju_triangle_weights(const Vec3& x, const Vec3& p0, const Vec3& p1, const Vec3& p2,
+                         double weights[3]) {
+  const Vec3 p[3] = {p0, p1, p2};
+  double d[3];
+  Vec3 u[3];
+  for (int i = 0; i < 3; ++i) {
+    d[i] = (p[i] - x).norm();
+    u[i] = (p[i] - x) / d[i];
+  }
+  double theta[3];
+  for (int i = 0; i < 3; ++i) {
+    const double l = (u[(i + 1) % 3] - u[(i + 2) % 3]).norm();
+    theta[i] = 2.0 * std::asin(std::min(1.0, l / 2.0));
+  }
+  const double h = 0.5 * (theta[0] + theta[1] + theta[2]);
+  const double pi = 3.14159265358979323846;
+  if (pi - h < 1e-12) {  // x on the triangle: 2D barycentric weights (scale irrelevant there)
+    for (int i = 0; i < 3; ++i) weights[i] = std::sin(theta[i]) * d[(i + 2) % 3] * d[(i + 1) % 3];
+    return;
+  }
+  double c[3], s[3];
+  const double sign = u[0].dot(u[1].cross(u[2])) >= 0.0 ? 1.0 : -1.0;
+  for (int i = 0; i < 3; ++i) {
+    c[i] = 2.0 * std::sin(h) * std::sin(h - theta[i]) /
+               (std::sin(theta[(i + 1) % 3]) * std::sin(theta[(i + 2) % 3])) - 1.0;
+    s[i] = sign * std::sqrt(std::max(0.0, 1.0 - c[i] * c[i]));
+  }
+  for (int i = 0; i < 3; ++i) {
+    const int ip = (i + 1) % 3, im = (i + 2) % 3;
+    // Ju et al.'s weights are the integrals of lambda_i / r over the spherical triangle; doubled
+    // to the units of triangle_weights.
+    weights[i] = 2.0 * (theta[i] - c[ip] * theta[im] - c[im] * theta[ip]) /
+                 (d[i] * std::sin(theta[ip]) * s[im]);
+  }
+}
+
+double edge_weight_2d(const Vec2& a_world, const Vec2& b_world, const Vec2& p) {
+  const Vec2 a = a_world - p, b = b_world - p;
+  const Vec2 d = b - a;
+  const double length = d.norm();
+  if (length == 0.0) return 0.0;
+  const double c = (a.x() * b.y() - a.y() * b.x()) / length;
+  if (c == 0.0) return 0.0;
+  const double s_a = a.dot(d) / length, s_b = b.dot(d) / length;
+  const double r_a = std::sqrt(s_a * s_a + c * c), r_b = std::sqrt(s_b * s_b + c * c);
+  // (1/c) (s_b / r_b - s_a / r_a); when p's foot on the edge line is outside the edge the two
+  // terms nearly cancel, so use the equivalent c (s_b^2 - s_a^2) / ((s_b r_a + s_a r_b) r_a r_b).
+  if (s_a * s_b > 0.0)
+    return c * (s_b * s_b - s_a * s_a) / ((s_b * r_a + s_a * r_b) * r_a * r_b);
+  return (s_b / r_b - s_a / r_a) / c;
+}
+
+}  // namespace sonoshape::recon

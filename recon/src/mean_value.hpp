@@ -28,3 +28,27 @@ double projected_angle(const Vec2* points, std::size_t count, const Vec2& foot, 
 int winding_number(const Vec2* points, std::size_t count, const Vec2& p);
 
 }  // namespace sonoshape::recon
+
+namespace sonoshape::recon {
+
+/// Mean-value weights of the corners of a planar triangle (Ju, Schaefer & Warren 2005) seen from
+/// (foot, height): w_i = 2 * integral over the triangle of lambda_i(y) / |x - y| d(omega), with
+/// lambda_i the barycentric coordinates, in the units of projected_angle / height. Computed by
+/// Stokes like the polygons: with I the triangle's integral and
+/// M = integral of (y - foot) h / |x - y|^4 dA = sum over edges of -h / (2 q) * angle * n_edge,
+/// w_i = 2 (lambda_i(foot) I + grad(lambda_i) . M), exact on and near the triangle's plane where
+/// the spherical form of Ju et al. loses precision. Returns false for a degenerate triangle.
+bool triangle_weights(const Vec2& a, const Vec2& b, const Vec2& c, const Vec2& foot, double height,
+                      double weights[3]);
+
+/// The same weights by the spherical formula of Ju et al. (2005), for a point x and a triangle
+/// in 3D (the reference the tests compare against).
+void ju_triangle_weights(const Vec3& x, const Vec3& p0, const Vec3& p1, const Vec3& p2,
+                         double weights[3]);
+
+/// 2D mean-value weight of the edge a -> b seen from p inside a planar domain: the integral of
+/// 1 / |p - y| over the directions d(theta) in which p sees the edge (signed: positive when the
+/// edge turns counter-clockwise around p).
+double edge_weight_2d(const Vec2& a, const Vec2& b, const Vec2& p);
+
+}  // namespace sonoshape::recon
