@@ -74,6 +74,9 @@ CommandRunner add_reconstruct_command(CLI::App& app) {
       j["field_evaluations"] = stats.field_evaluations;
       j["depth"] = stats.depth;
       j["snapped_vertices"] = stats.snapped_vertices;
+      j["completion_s"] = stats.completion_s;
+      j["unknown_triangles"] = stats.unknown_triangles;
+      j["cell_groups"] = stats.cell_groups;
       nlohmann::json triangles = nlohmann::json::object();
       for (const auto& [label, count] : stats.triangles) triangles[std::to_string(label)] = count;
       j["triangles"] = triangles;

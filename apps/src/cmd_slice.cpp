@@ -15,6 +15,7 @@
 #include "sonoshape/publish/mesh_writer.hpp"
 #include "sonoshape/simulator/mesh_reader.hpp"
 #include "sonoshape/simulator/mesh_slicer.hpp"
+#include "sonoshape/simulator/unknowns.hpp"
 #include "sonoshape/simulator/plane_generator.hpp"
 
 namespace sonoshape::apps {
@@ -35,6 +36,8 @@ struct SliceOptions {
   std::string layout;    // "", "asis" or "row"
   std::filesystem::path truth_dir;
   bool skip_invalid = false;
+  double unknown_fraction = 0.0;
+  std::string fov = "none";
 };
 
 Box3 empty_box() {
@@ -126,6 +129,17 @@ int run_slice(const SliceOptions& options) {
     if (slice.regions.empty()) ++empty;
     set.slices.push_back(std::move(slice));
   }
+  if (options.unknown_fraction > 0.0 || options.fov != "none") {
+    sim::UnknownOptions unknowns;
+    unknowns.fraction = options.unknown_fraction;
+    unknowns.fov = sim::parse_fov_shape(options.fov);
+    unknowns.seed = options.seed + 1;
+    sim::add_unknowns(set, unknowns);
+    if (const Status valid = validate_slice_set(set, options.output.string()); !valid) {
+      std::cerr << "error: the unknown regions made an invalid slice set: " << valid.message() << '\n';
+      return 1;
+    }
+  }
   if (const Status written = write_slice_set(set, options.output); !written) {
     std::cerr << "error: " << written.message() << '\n';
     return 1;
@@ -197,6 +211,15 @@ CommandRunner add_slice_command(CLI::App& app) {
   app.add_flag("--skip-invalid", options->skip_invalid,
                "Drop slices whose polygons are invalid (self-intersecting input meshes) instead "
                "of failing");
+  app.add_option("--unknown", options->unknown_fraction,
+                 "Share of slices that get a random unknown blob over a contour (0-1)")
+      ->check(CLI::Range(0.0, 1.0))
+      ->capture_default_str();
+  app.add_option("--fov", options->fov,
+                 "Field of view of every slice: sector (60 deg fan, 80 mm deep) or rect "
+                 "(60 x 80 mm); outside it is unknown")
+      ->check(CLI::IsMember({"none", "sector", "rect"}))
+      ->capture_default_str();
   return [options] { return run_slice(*options); };
 }
 

@@ -10,7 +10,7 @@
 namespace sonoshape::recon {
 
 std::vector<PreparedSlice> prepare_slices(const SliceSet& set,
-                                          const std::vector<int>& material_ids) {
+                                          const std::vector<int>& material_ids, const Box3& box) {
   std::vector<PreparedSlice> out;
   out.reserve(set.slices.size());
   for (std::size_t s = 0; s < set.slices.size(); ++s) {
@@ -21,10 +21,18 @@ std::vector<PreparedSlice> prepare_slices(const SliceSet& set,
     p.v = slice.v;
     p.unit_normal = slice.u.cross(slice.v).normalized();
     p.rings_by_material.resize(material_ids.size() + 1);
+    const bool has_unknown =
+        slice.fov || std::any_of(slice.regions.begin(), slice.regions.end(),
+                                 [](const Region& r) { return r.label == kUnknownLabel; });
+    if (has_unknown) {
+      // Known materials inside the fov and outside unknown regions, and the unknown set.
+      SlicePartition partition =
+          partition_slice(slice, material_ids, plane_box_polygon(p.origin, p.u, p.v, box));
+      p.rings_by_material = std::move(partition.materials);
+      p.unknown = std::move(partition.unknown);
+    }
     for (const Region& region : slice.regions) {
-      if (region.label == kUnknownLabel || slice.fov)
-        throw UnsupportedInput("slice " + std::to_string(s) +
-                               ": unknown regions and fields of view are not supported yet");
+      if (has_unknown) break;
       const auto it = std::find(material_ids.begin(), material_ids.end(), region.label);
       if (it == material_ids.end())
         throw GeometryError("slice " + std::to_string(s) + ": label " +
@@ -77,6 +85,28 @@ Ring2 clip_ring_to_convex(const Ring2& ring, const std::vector<Eigen::Vector3d>&
   return current;
 }
 
+namespace {
+
+bool in_triangle(const Vec2 (&c)[3], const Vec2& p) {
+  for (int k = 0; k < 3; ++k) {
+    const Vec2& a = c[k];
+    const Vec2& b = c[(k + 1) % 3];
+    if ((b.x() - a.x()) * (p.y() - a.y()) - (b.y() - a.y()) * (p.x() - a.x()) < 0.0) return false;
+  }
+  return true;
+}
+
+void barycentric(const Vec2 (&c)[3], const Vec2& p, double (&out)[3]) {
+  const double area = (c[1] - c[0]).x() * (c[2] - c[0]).y() - (c[1] - c[0]).y() * (c[2] - c[0]).x();
+  for (int k = 0; k < 3; ++k) {
+    const Vec2& a = c[(k + 1) % 3];
+    const Vec2& b = c[(k + 2) % 3];
+    out[k] = ((b - a).x() * (p - a).y() - (b - a).y() * (p - a).x()) / area;
+  }
+}
+
+}  // namespace
+
 CellField::CellField(const Arrangement& arrangement, const std::vector<PreparedSlice>& slices,
                      int material_count)
     : arrangement_(arrangement), slices_(slices), material_count_(material_count) {
@@ -103,6 +133,7 @@ CellField::CellField(const Arrangement& arrangement, const std::vector<PreparedS
   images_.resize(arrangement.face_count());
   for (std::size_t f = 0; f < arrangement.face_count(); ++f)
     build_face_image(static_cast<int>(f), slices);
+  build_unknown_images();
 }
 
 void CellField::build_face_image(int face_id, const std::vector<PreparedSlice>& slices) {
@@ -174,6 +205,7 @@ std::size_t CellField::cell_edge_count(int cell) const {
 
 int CellField::evaluate(const Vec3& p, double* out) const {
   const int n = function_count();
+  const std::size_t fc = static_cast<std::size_t>(n);
   const Box3& box = arrangement_.box();
   if (!((p.array() > box.min.array()).all() && (p.array() < box.max.array()).all())) {
     out[0] = 1.0;
@@ -181,16 +213,18 @@ int CellField::evaluate(const Vec3& p, double* out) const {
     return -1;
   }
   const int cell = arrangement_.locate(p);
-  // w[l] accumulates the mean-value weight of label l's parts of the faces; w[0] the total.
+  // w[l] accumulates the mean-value weight of label l: its known parts of the faces plus its
+  // share of the completed unknown triangles; w[0] only the completed share of the outside.
   constexpr int kMaxStack = 16;
   double stack_weights[kMaxStack];
   std::vector<double> heap_weights;
   double* w = stack_weights;
   if (n > kMaxStack) {
-    heap_weights.resize(static_cast<std::size_t>(n));
+    heap_weights.resize(fc);
     w = heap_weights.data();
   }
   std::fill(w, w + n, 0.0);
+  double total = 0.0, known_materials = 0.0, unknown_total = 0.0;
   for (const int f : arrangement_.cell(cell).faces) {
     const FaceImage& image = images_[static_cast<std::size_t>(f)];
     const PlaneFrame& frame = frames_[static_cast<std::size_t>(image.frame)];
@@ -198,9 +232,19 @@ int CellField::evaluate(const Vec3& p, double* out) const {
     const double height = std::abs(d.dot(frame.unit_normal));
     const Vec2 foot(d.dot(frame.u), d.dot(frame.v));
     if (height <= on_face_height_) {
-      // On the face itself the field is the face's own indicator. The slice's whole rings
-      // decide, not the face's clipped parts: a foot on the line between two faces then gets
-      // the same label from both, whatever the rounding of the clip.
+      // On the face itself the field is the face's own data: the completed values inside an
+      // unknown triangle, else the slice's label. The slice's whole rings decide, not the
+      // face's clipped parts: a foot on the line between two faces then gets the same label
+      // from both, whatever the rounding of the clip.
+      for (std::uint32_t t = image.triangle_begin; t < image.triangle_begin + image.triangle_count; ++t) {
+        const UnknownTriangle& tri = triangles_[t];
+        if (!in_triangle(tri.corners, foot)) continue;
+        double bary[3];
+        barycentric(tri.corners, foot, bary);
+        for (int l = 0; l < n; ++l)
+          out[l] = bary[0] * corner_value(t, 0, l) + bary[1] * corner_value(t, 1, l) + bary[2] * corner_value(t, 2, l);
+        return cell;
+      }
       int label = 0;
       const int slice = arrangement_.plane(image.frame).slice;
       if (slice >= 0) {
@@ -216,19 +260,29 @@ int CellField::evaluate(const Vec3& p, double* out) const {
       return cell;
     }
     const double inv_height = 1.0 / height;
-    w[0] += projected_angle(points_.data() + image.polygon_begin, image.polygon_count, foot,
-                            height) * inv_height;
-    for (const FaceImage::Part& part : image.parts)
-      w[part.material] +=
+    total += projected_angle(points_.data() + image.polygon_begin, image.polygon_count, foot,
+                             height) * inv_height;
+    for (const FaceImage::Part& part : image.parts) {
+      const double weight =
           projected_angle(points_.data() + part.begin, part.count, foot, height) * inv_height;
+      w[part.material] += weight;
+      known_materials += weight;
+    }
+    for (std::uint32_t t = image.triangle_begin; t < image.triangle_begin + image.triangle_count; ++t) {
+      const UnknownTriangle& tri = triangles_[t];
+      double corner_weights[3];
+      if (!triangle_weights(tri.corners[0], tri.corners[1], tri.corners[2], foot, height, corner_weights))
+        continue;
+      for (int k = 0; k < 3; ++k) {
+        const double weight = corner_weights[k];  // units of P / h, like the faces
+        unknown_total += weight;
+        const double* values = &corner_values_[(t * 3 + static_cast<std::size_t>(k)) * fc];
+        for (int l = 0; l < n; ++l) w[l] += 0.5 * weight * (1.0 + values[l]);
+      }
+    }
   }
-  const double total = w[0];
-  double materials = 0.0;
-  for (int l = 1; l < n; ++l) {
-    materials += w[l];
-    out[l] = 2.0 * w[l] / total - 1.0;
-  }
-  out[0] = 2.0 * (total - materials) / total - 1.0;
+  for (int l = 1; l < n; ++l) out[l] = 2.0 * w[l] / total - 1.0;
+  out[0] = 2.0 * (total - known_materials - unknown_total + w[0]) / total - 1.0;
   return cell;
 }
 

@@ -7,6 +7,7 @@
 
 #include "arrangement.hpp"
 #include "sonoshape/core/slice.hpp"
+#include "unknown_regions.hpp"
 
 namespace sonoshape::recon {
 
@@ -18,10 +19,13 @@ struct PreparedSlice {
   Vec3 unit_normal;
   std::vector<std::vector<Ring2>> rings_by_material;  ///< index 0 unused (outside)
   std::vector<std::vector<std::pair<Vec2, Vec2>>> ring_bounds;  ///< (min, max) of each ring
+  std::vector<UnknownComponent> unknown;  ///< unknown set (regions and outside the fov)
 };
 
 /// Converts the slices: material ids -> dense indices 1..K (`material_ids[k-1]` is the id of k).
-std::vector<PreparedSlice> prepare_slices(const SliceSet& set, const std::vector<int>& material_ids);
+/// Slices with unknown regions or a field of view are partitioned inside `box`.
+std::vector<PreparedSlice> prepare_slices(const SliceSet& set, const std::vector<int>& material_ids,
+                                          const Box3& box);
 
 /// A 2D frame of a plane: point -> ((p - origin).u, (p - origin).v), height |(p - origin).n|.
 struct PlaneFrame {
@@ -37,6 +41,13 @@ struct FaceImage {
     std::uint32_t begin = 0, count = 0;  ///< one ring in points
   };
   std::vector<Part> parts;
+  std::uint32_t triangle_begin = 0, triangle_count = 0;  ///< completed unknown triangles
+};
+
+/// A triangle of a face's unknown part; its corners carry completed values of every function.
+struct UnknownTriangle {
+  Vec2 corners[3];
+  int component = -1;  ///< the slice's unknown component it lies in
 };
 
 /// Clips a closed ring to the convex region { p : a_i.p + c_i >= 0 for all i } (Sutherland-
@@ -57,11 +68,27 @@ class CellField {
   int evaluate(const Vec3& p, double* out) const;
   /// Total number of boundary edges the faces of `cell` carry (the cost of one evaluation).
   std::size_t cell_edge_count(int cell) const;
+  /// Unknown-region statistics: triangles, cell groups, completion seconds.
+  std::size_t unknown_triangle_count() const { return triangles_.size(); }
+  std::size_t group_count() const { return group_count_; }
+  double completion_seconds() const { return completion_seconds_; }
+  /// Completed value of function l at corner k of unknown triangle t.
+  double corner_value(std::size_t t, int k, int l) const {
+    return corner_values_[(t * 3 + static_cast<std::size_t>(k)) * static_cast<std::size_t>(function_count()) +
+                          static_cast<std::size_t>(l)];
+  }
+  const std::vector<UnknownTriangle>& unknown_triangles() const { return triangles_; }
   const FaceImage& face_image(int face) const { return images_[static_cast<std::size_t>(face)]; }
   const std::vector<Vec2>& points() const { return points_; }
 
  private:
   void build_face_image(int face_id, const std::vector<PreparedSlice>& slices);
+  void build_unknown_images();
+  void triangulate_unknown(int slice, std::vector<std::vector<UnknownTriangle>>& per_face) const;
+  void complete_unknown();
+  // Known weights of face f seen from p (units of projected_angle / height): the face's total,
+  // each material's known part and the unknown part's total. False when p is on f's plane.
+  bool known_weights(int face, const Vec3& p, double& total, double* materials, double& unknown) const;
 
   const Arrangement& arrangement_;
   std::vector<PreparedSlice> slices_;
@@ -70,6 +97,10 @@ class CellField {
   std::vector<PlaneFrame> frames_;  // one per arrangement plane
   std::vector<Vec2> points_;
   std::vector<FaceImage> images_;
+  std::vector<UnknownTriangle> triangles_;
+  std::vector<double> corner_values_;  // 3 corners x function_count() per triangle
+  std::size_t group_count_ = 0;
+  double completion_seconds_ = 0.0;
 };
 
 }  // namespace sonoshape::recon

@@ -93,7 +93,7 @@ MeshSet reconstruct(const SliceSet& set, const ReconstructionOptions& options,
   const Box3 box = set.effective_bounds();
 
   Stopwatch clock;
-  const std::vector<PreparedSlice> slices = prepare_slices(set, material_ids);
+  const std::vector<PreparedSlice> slices = prepare_slices(set, material_ids, box);
   Arrangement arrangement(box);
   {
     Progress progress("arrangement", slices.size());
@@ -109,6 +109,9 @@ MeshSet reconstruct(const SliceSet& set, const ReconstructionOptions& options,
   clock.reset();
   const CellField field(arrangement, slices, material_count);
   stats.face_images_s = clock.seconds();
+  stats.completion_s = field.completion_seconds();
+  stats.unknown_triangles = field.unknown_triangle_count();
+  stats.cell_groups = field.group_count();
 
   // Contour vertices refine the octree; contour segments fix the smoothing next to them.
   std::vector<Vec3> contour_points;

@@ -24,7 +24,7 @@ constexpr double kSize = 4.0;  // box side
 class BuiltField {
  public:
   BuiltField(const SliceSet& set, const Box3& box)
-      : ids_(set.material_ids()), slices_(prepare_slices(set, ids_)), arrangement_(box) {
+      : ids_(set.material_ids()), slices_(prepare_slices(set, ids_, box)), arrangement_(box) {
     for (std::size_t s = 0; s < slices_.size(); ++s) {
       const Vec3 normal = slices_[s].u.cross(slices_[s].v);
       arrangement_.insert_plane(normal, -normal.dot(slices_[s].origin), static_cast<int>(s));
@@ -461,7 +461,7 @@ TEST(FieldLabels, PrepareSlicesOrientsRingsAndMapsIds) {
   r.holes = {{Vec2(0.5, 0.5), Vec2(1.5, 0.5), Vec2(1.5, 1.5), Vec2(0.5, 1.5)}};  // ccw
   s.regions.push_back(r);
   set.slices.push_back(s);
-  const std::vector<PreparedSlice> prepared = prepare_slices(set, {3, 7});
+  const std::vector<PreparedSlice> prepared = prepare_slices(set, {3, 7}, kBox);
   ASSERT_EQ(prepared.size(), 1u);
   ASSERT_EQ(prepared[0].rings_by_material.size(), 3u);
   EXPECT_TRUE(prepared[0].rings_by_material[1].empty());
@@ -469,9 +469,16 @@ TEST(FieldLabels, PrepareSlicesOrientsRingsAndMapsIds) {
   EXPECT_GT(signed_area(prepared[0].rings_by_material[2][0]), 0.0);
   EXPECT_LT(signed_area(prepared[0].rings_by_material[2][1]), 0.0);
   EXPECT_TRUE(prepared[0].unit_normal.isApprox(Vec3::UnitZ()));
-  EXPECT_THROW(prepare_slices(set, {3}), GeometryError);  // 7 is not a material
+  EXPECT_THROW(prepare_slices(set, {3}, kBox), GeometryError);  // 7 is not a material
+  // An unknown region becomes the slice's unknown set: no material left, one component whose
+  // hole borders the outside.
   set.slices[0].regions[0].label = kUnknownLabel;
-  EXPECT_THROW(prepare_slices(set, {3, 7}), UnsupportedInput);
+  const std::vector<PreparedSlice> unknown = prepare_slices(set, {3, 7}, kBox);
+  EXPECT_TRUE(unknown[0].rings_by_material[2].empty());
+  ASSERT_EQ(unknown[0].unknown.size(), 1u);
+  ASSERT_EQ(unknown[0].unknown[0].rings.size(), 2u);
+  for (const auto& labels : unknown[0].unknown[0].edge_labels)
+    for (int label : labels) EXPECT_EQ(label, 0);
 }
 
 // ---------------------------------------------------------------------------------------------

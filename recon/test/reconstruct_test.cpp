@@ -71,10 +71,24 @@ TEST(Reconstruct, SphereFromOrthogonalSlicesIsClosedAndClose) {
   EXPECT_GT(stats.field_evaluations, 1000u);
 }
 
-TEST(Reconstruct, UnknownRegionsAreRefusedForNow) {
-  SliceSet set = sphere_set(10.0);
-  set.slices[0].regions.push_back({kUnknownLabel, circle(Vec2(0, 0), 1.0, 8), {}});
-  EXPECT_THROW(reconstruct(set), UnsupportedInput);
+TEST(Reconstruct, UnknownPatchInsideTheSphereCompletesToInside) {
+  const double r = 40.0;
+  SliceSet set = sphere_set(r);
+  // Replace the disc of slice 1 (z = -0.1 r) by a disc with an unknown hole in its middle.
+  Region& disc = set.slices[1].regions[0];
+  const Ring2 patch = circle(Vec2(0, 0), 0.4 * r, 24);
+  disc.holes.push_back(patch);
+  set.slices[1].regions.push_back({kUnknownLabel, patch, {}});
+  ReconstructionStats stats;
+  const MeshSet meshes = reconstruct(set, {}, &stats);
+  const TriangleMesh& mesh = meshes.meshes[0].mesh;
+  EXPECT_TRUE(check_mesh_health(mesh).closed_manifold_oriented());
+  const double volume = signed_volume(mesh);
+  EXPECT_NEAR(volume / (4.0 / 3.0 * std::numbers::pi * r * r * r), 1.0, 0.15);
+  // One closed surface: no cavity at the patch (a cavity would add a second, inner shell whose
+  // vertices lie near the centre).
+  for (const Vec3& p : mesh.vertices) EXPECT_GT(p.norm(), 0.6 * r);
+  EXPECT_GT(stats.unknown_triangles, 0u);
 }
 
 }  // namespace

@@ -377,19 +377,44 @@ DistanceStats distances(const std::vector<Vec3>& points, const SurfaceDistance& 
   return stats;
 }
 
+double distance_to_ring(const Ring2& ring, const Vec2& p) {
+  double best = std::numeric_limits<double>::infinity();
+  for (std::size_t i = 0; i < ring.size(); ++i) {
+    const Vec2& a = ring[i];
+    const Vec2 d = ring[(i + 1) % ring.size()] - a;
+    const double t = std::clamp((p - a).dot(d) / std::max(d.squaredNorm(), 1e-300), 0.0, 1.0);
+    best = std::min(best, (a + t * d - p).norm());
+  }
+  return best;
+}
+
 // Points along every contour of `label` in the slices, vertices included, in world coordinates.
+// Boundaries with unknown regions and the field of view are not contours of the object and are
+// left out.
 std::vector<Vec3> contour_points(const SliceSet& slices, int label, double step_mm) {
   std::vector<Vec3> points;
   for (const LabeledSlice& s : slices.slices)
     for (const Region& region : s.regions) {
       if (region.label != label) continue;
+      std::vector<const Ring2*> not_contours;
+      if (s.fov) not_contours.push_back(&*s.fov);
+      for (const Region& r : s.regions)
+        if (r.label == kUnknownLabel) {
+          not_contours.push_back(&r.outer);
+          for (const Ring2& h : r.holes) not_contours.push_back(&h);
+        }
       auto add_ring = [&](const Ring2& ring) {
         for (std::size_t i = 0; i < ring.size(); ++i) {
           const Vec2& a = ring[i];
           const Vec2& b = ring[(i + 1) % ring.size()];
           const int pieces = std::max(1, static_cast<int>(std::ceil((b - a).norm() / step_mm)));
-          for (int k = 0; k < pieces; ++k)
-            points.push_back(s.to_world(a + (static_cast<double>(k) / pieces) * (b - a)));
+          for (int k = 0; k < pieces; ++k) {
+            const Vec2 p = a + (static_cast<double>(k) / pieces) * (b - a);
+            bool on_unknown = false;
+            for (const Ring2* other : not_contours)
+              on_unknown |= distance_to_ring(*other, p) <= 1e-6 * step_mm;
+            if (!on_unknown) points.push_back(s.to_world(p));
+          }
         }
       };
       add_ring(region.outer);

@@ -22,13 +22,15 @@ struct ReconstructionStats {
   double arrangement_s = 0, face_images_s = 0, field_s = 0, smoothing_s = 0, mesh_s = 0, total_s = 0;
   std::size_t slices = 0, cells = 0, faces = 0, field_evaluations = 0;
   std::size_t snapped_vertices = 0;  ///< grid vertices given a thin region's label
+  std::size_t unknown_triangles = 0, cell_groups = 0;  ///< unknown-region completion
+  double completion_s = 0;  ///< part of face_images_s spent completing unknown regions
   int depth = 0;
   std::map<int, std::size_t> triangles;  ///< per material label
 };
 
 /// Reconstructs one closed, manifold, outward-oriented mesh per material of `slices`.
-/// Throws UnsupportedInput for unknown regions / fields of view (not supported yet) and
-/// GeometryError for inputs the engine cannot use (coincident slices that disagree, ...).
+/// Unknown regions and fields of view are completed from the known data (Section 5).
+/// Throws GeometryError for inputs the engine cannot use (coincident slices that disagree, ...).
 MeshSet reconstruct(const SliceSet& slices, const ReconstructionOptions& options = {},
                     ReconstructionStats* stats = nullptr);
 

@@ -1,0 +1,170 @@
+#include "sonoshape/simulator/unknowns.hpp"
+
+#include <CGAL/Boolean_set_operations_2.h>
+#include <CGAL/Exact_predicates_exact_constructions_kernel.h>
+#include <CGAL/Polygon_set_2.h>
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+#include <random>
+#include <stdexcept>
+
+namespace sonoshape::sim {
+namespace {
+
+using Kernel = CGAL::Exact_predicates_exact_constructions_kernel;
+using Polygon = CGAL::Polygon_2<Kernel>;
+using PolygonWithHoles = CGAL::Polygon_with_holes_2<Kernel>;
+using PolygonSet = CGAL::Polygon_set_2<Kernel>;
+
+Polygon to_polygon(const Ring2& ring, bool counter_clockwise) {
+  Polygon p;
+  for (const Vec2& q : ring) p.push_back(Kernel::Point_2(q.x(), q.y()));
+  if (p.is_counterclockwise_oriented() != counter_clockwise) p.reverse_orientation();
+  return p;
+}
+
+Ring2 to_ring(const Polygon& polygon) {
+  Ring2 ring;
+  for (auto it = polygon.vertices_begin(); it != polygon.vertices_end(); ++it)
+    ring.emplace_back(CGAL::to_double(it->x()), CGAL::to_double(it->y()));
+  return ring;
+}
+
+PolygonSet to_set(const Region& region) {
+  PolygonWithHoles pwh(to_polygon(region.outer, true));
+  for (const Ring2& h : region.holes) pwh.add_hole(to_polygon(h, false));
+  PolygonSet set;
+  set.insert(pwh);
+  return set;
+}
+
+std::vector<Region> to_regions(const PolygonSet& set, int label) {
+  std::vector<PolygonWithHoles> parts;
+  set.polygons_with_holes(std::back_inserter(parts));
+  std::vector<Region> regions;
+  for (const PolygonWithHoles& part : parts) {
+    Region r;
+    r.label = label;
+    r.outer = to_ring(part.outer_boundary());
+    for (auto h = part.holes_begin(); h != part.holes_end(); ++h) r.holes.push_back(to_ring(*h));
+    regions.push_back(std::move(r));
+  }
+  return regions;
+}
+
+// Clips (or cuts away) `shape` from every material region of the slice.
+void apply_to_materials(LabeledSlice& slice, const Polygon& shape, bool keep_inside) {
+  std::vector<Region> out;
+  for (const Region& region : slice.regions) {
+    if (region.label == kUnknownLabel) {
+      out.push_back(region);
+      continue;
+    }
+    PolygonSet set = to_set(region);
+    if (keep_inside) set.intersection(shape);
+    else set.difference(shape);
+    for (Region& r : to_regions(set, region.label)) out.push_back(std::move(r));
+  }
+  slice.regions = std::move(out);
+}
+
+// Inserts into `ring` every vertex of `others` that lies on one of its edges, so that two
+// polygons meeting along that edge share it vertex for vertex after rounding.
+void insert_touching_vertices(Ring2& ring, const std::vector<Region>& others, double tolerance) {
+  std::vector<Vec2> candidates;
+  for (const Region& r : others) {
+    if (r.label == kUnknownLabel) continue;
+    candidates.insert(candidates.end(), r.outer.begin(), r.outer.end());
+    for (const Ring2& h : r.holes) candidates.insert(candidates.end(), h.begin(), h.end());
+  }
+  Ring2 out;
+  for (std::size_t i = 0; i < ring.size(); ++i) {
+    const Vec2& a = ring[i];
+    const Vec2& b = ring[(i + 1) % ring.size()];
+    out.push_back(a);
+    std::vector<std::pair<double, Vec2>> on_edge;
+    const Vec2 d = b - a;
+    const double length2 = d.squaredNorm();
+    for (const Vec2& c : candidates) {
+      if (c == a || c == b) continue;
+      const double t = (c - a).dot(d) / length2;
+      if (t <= 0.0 || t >= 1.0) continue;
+      if ((a + t * d - c).norm() <= tolerance) on_edge.emplace_back(t, c);
+    }
+    std::sort(on_edge.begin(), on_edge.end(), [](const auto& x, const auto& y) { return x.first < y.first; });
+    for (const auto& [t, c] : on_edge)
+      if (out.back() != c) out.push_back(c);
+  }
+  ring = std::move(out);
+}
+
+}  // namespace
+
+FovShape parse_fov_shape(const std::string& name) {
+  if (name == "none") return FovShape::kNone;
+  if (name == "sector") return FovShape::kSector;
+  if (name == "rect") return FovShape::kRect;
+  throw std::invalid_argument("unknown field of view '" + name + "' (expected none, sector or rect)");
+}
+
+void add_unknowns(SliceSet& set, const UnknownOptions& options) {
+  std::mt19937_64 rng(options.seed);
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  const Box3 bounds = set.effective_bounds();
+  const double diagonal = bounds.diagonal();
+  for (LabeledSlice& slice : set.slices) {
+    // Where the material of this slice is (or the box centre when there is none).
+    Vec2 target = slice.to_plane(0.5 * (bounds.min + bounds.max));
+    std::vector<Vec2> contour;
+    for (const Region& r : slice.regions)
+      if (r.label != kUnknownLabel) contour.insert(contour.end(), r.outer.begin(), r.outer.end());
+    if (!contour.empty()) {
+      Vec2 sum = Vec2::Zero();
+      for (const Vec2& p : contour) sum += p;
+      target = sum / static_cast<double>(contour.size());
+    }
+    if (options.fov != FovShape::kNone) {
+      const double angle = 2.0 * std::numbers::pi * unit(rng);
+      const Vec2 axis(std::cos(angle), std::sin(angle));
+      const Vec2 side(-axis.y(), axis.x());
+      const double depth = options.fov_depth_mm;
+      const Vec2 apex = target - 0.5 * depth * axis;
+      Ring2 fov;
+      if (options.fov == FovShape::kSector) {
+        fov.push_back(apex);
+        const double half = 0.5 * options.fan_angle_deg * std::numbers::pi / 180.0;
+        for (int k = 0; k <= 16; ++k) {
+          const double a = -half + 2.0 * half * k / 16.0;
+          fov.push_back(apex + depth * (std::cos(a) * axis + std::sin(a) * side));
+        }
+      } else {
+        const double w = 0.5 * options.rect_width_mm;
+        fov = {apex - w * side, apex - w * side + depth * axis, apex + w * side + depth * axis, apex + w * side};
+      }
+      if (signed_area(fov) < 0.0) std::reverse(fov.begin(), fov.end());
+      apply_to_materials(slice, to_polygon(fov, true), true);
+      slice.fov = fov;
+    }
+    if (unit(rng) >= options.fraction) continue;
+    // A blob over a random contour vertex (inside the fov when there is one).
+    std::vector<Vec2> candidates;
+    for (const Region& r : slice.regions)
+      if (r.label != kUnknownLabel) candidates.insert(candidates.end(), r.outer.begin(), r.outer.end());
+    if (candidates.empty()) continue;
+    const Vec2 center = candidates[static_cast<std::size_t>(unit(rng) * candidates.size()) % candidates.size()];
+    const double radius = (0.04 + 0.04 * unit(rng)) * diagonal;
+    Ring2 blob;
+    for (int k = 0; k < 16; ++k) {
+      const double a = 2.0 * std::numbers::pi * (k + 0.3 * unit(rng)) / 16.0;
+      const double r = radius * (0.7 + 0.6 * unit(rng));
+      blob.push_back(center + r * Vec2(std::cos(a), std::sin(a)));
+    }
+    apply_to_materials(slice, to_polygon(blob, true), false);
+    insert_touching_vertices(blob, slice.regions, 1e-9 * diagonal);
+    slice.regions.push_back({kUnknownLabel, blob, {}});
+  }
+}
+
+}  // namespace sonoshape::sim
