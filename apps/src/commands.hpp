@@ -14,5 +14,6 @@ using CommandRunner = std::function<int()>;
 CommandRunner add_reconstruct_command(CLI::App& app);
 CommandRunner add_slice_command(CLI::App& app);
 CommandRunner add_evaluate_command(CLI::App& app);
+CommandRunner add_simulate_command(CLI::App& app);
 
 }  // namespace sonoshape::apps

@@ -31,6 +31,8 @@ int main(int argc, char** argv) {
       sonoshape::apps::add_slice_command);
   add("evaluate", "Score reconstructed meshes against ground-truth meshes",
       sonoshape::apps::add_evaluate_command);
+  add("simulate", "Simulate a tracked freehand ultrasound sweep of a virtual patient (.igs.mha)",
+      sonoshape::apps::add_simulate_command);
 
   try {
     app.parse(argc, argv);

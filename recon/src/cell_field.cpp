@@ -191,6 +191,16 @@ void CellField::build_face_image(int face_id, const std::vector<PreparedSlice>& 
       points_.insert(points_.end(), clipped.begin(), clipped.end());
     }
   }
+  // The unknown set as clipped rings too: the completion needs only its integral (a few edges)
+  // where the triangles would cost many.
+  for (const UnknownComponent& component : slice.unknown)
+    for (const Ring2& ring : component.rings) {
+      Ring2 clipped = clip_ring_to_convex(ring, half_planes);
+      if (clipped.empty()) continue;
+      image.unknown_parts.push_back({0, static_cast<std::uint32_t>(points_.size()),
+                                     static_cast<std::uint32_t>(clipped.size())});
+      points_.insert(points_.end(), clipped.begin(), clipped.end());
+    }
 }
 
 std::size_t CellField::cell_edge_count(int cell) const {

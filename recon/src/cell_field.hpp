@@ -41,6 +41,7 @@ struct FaceImage {
     std::uint32_t begin = 0, count = 0;  ///< one ring in points
   };
   std::vector<Part> parts;
+  std::vector<Part> unknown_parts;  ///< the unknown set clipped to the face (material unused)
   std::uint32_t triangle_begin = 0, triangle_count = 0;  ///< completed unknown triangles
 };
 

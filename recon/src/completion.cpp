@@ -1,12 +1,18 @@
 // Completion of unknown regions (Bermano et al. 2011, Section 5): triangulation of the unknown
 // part of every face, cell groups, and the values at the triangle corners.
 #include <CGAL/Constrained_Delaunay_triangulation_2.h>
+#include <CGAL/Delaunay_mesh_face_base_2.h>
+#include <CGAL/Delaunay_mesh_size_criteria_2.h>
+#include <CGAL/Delaunay_mesh_vertex_base_2.h>
+#include <CGAL/Delaunay_mesher_2.h>
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
 
 #include <algorithm>
 #include <map>
 #include <numeric>
 #include <unordered_set>
+
+#include <tbb/parallel_for.h>
 
 #include "cell_field.hpp"
 #include "mean_value.hpp"
@@ -16,18 +22,24 @@ namespace sonoshape::recon {
 namespace {
 
 using Kernel = CGAL::Exact_predicates_inexact_constructions_kernel;
-using Vb = CGAL::Triangulation_vertex_base_2<Kernel>;
-using Fb = CGAL::Constrained_triangulation_face_base_2<Kernel>;
+using Vb = CGAL::Delaunay_mesh_vertex_base_2<Kernel>;
+using Fb = CGAL::Delaunay_mesh_face_base_2<Kernel>;
 using Tds = CGAL::Triangulation_data_structure_2<Vb, Fb>;
 // Exact_predicates_tag: constraints that cross (unknown boundaries and face edges) are split at
 // their intersection points.
 using Cdt = CGAL::Constrained_Delaunay_triangulation_2<Kernel, Tds, CGAL::Exact_predicates_tag>;
+using MeshCriteria = CGAL::Delaunay_mesh_size_criteria_2<Cdt>;
+
+// Largest edge of the unknown triangles, as a fraction of the box diagonal: the completed values
+// live at the corners and are interpolated linearly, so the triangles must be small enough to
+// follow the completion across the region, not only along its boundary.
+constexpr double kUnknownTriangleSize = 0.06;
 
 // The completion reads the known faces of the cells within this many group-adjacency steps of a
 // triangle's face. With fields of view every slice has unknown parts and groups grow to the whole
 // arrangement; the nearby faces carry the weight (it falls off with distance), and the bound
 // keeps completion linear in the number of triangles.
-constexpr int kGroupHops = 2;
+constexpr int kGroupHops = 1;
 
 int find_root(std::vector<int>& parent, int x) {
   while (parent[static_cast<std::size_t>(x)] != x) {
@@ -63,6 +75,15 @@ void CellField::triangulate_unknown(int slice,
         hi = hi.cwiseMax(a);
         if (a != b) cdt.insert_constraint(Kernel::Point_2(a.x(), a.y()), Kernel::Point_2(b.x(), b.y()));
       }
+  // Interior points (conforming Delaunay refinement of the unknown set and the areas it encloses).
+  // Seeds inside the holes of the unknown set keep the known areas it encloses unrefined.
+  std::vector<Kernel::Point_2> known_seeds;
+  for (const UnknownComponent& component : s.unknown)
+    for (std::size_t r = 1; r < component.rings.size(); ++r)
+      if (const auto p = interior_point(component.rings[r])) known_seeds.emplace_back(p->x(), p->y());
+  CGAL::refine_Delaunay_mesh_2(cdt, known_seeds.begin(), known_seeds.end(),
+                               MeshCriteria(0.125, kUnknownTriangleSize * arrangement_.box().diagonal()),
+                               false);
   // The faces of this slice, as constraints too, so that every triangle lies in one face.
   struct SliceFace {
     int id;
@@ -121,8 +142,8 @@ bool CellField::known_weights(int face, const Vec3& p, double& total, double* ma
   for (const FaceImage::Part& part : image.parts)
     materials[part.material] += projected_angle(points_.data() + part.begin, part.count, foot, height) * inv_height;
   unknown = 0.0;
-  for (std::uint32_t t = image.triangle_begin; t < image.triangle_begin + image.triangle_count; ++t)
-    unknown += projected_angle(triangles_[t].corners, 3, foot, height) * inv_height;
+  for (const FaceImage::Part& part : image.unknown_parts)
+    unknown += projected_angle(points_.data() + part.begin, part.count, foot, height) * inv_height;
   return true;
 }
 
@@ -163,10 +184,14 @@ void CellField::complete_unknown() {
     if (images_[f].triangle_count > 0) roots.insert(find_root(parent, arrangement_.face(static_cast<int>(f)).cell_positive));
   group_count_ = roots.size();
 
-  std::vector<double> n3(fc), n2(fc);
-  for (std::size_t f = 0; f < images_.size(); ++f) {
+  std::vector<std::size_t> faces_with_triangles;
+  for (std::size_t f = 0; f < images_.size(); ++f)
+    if (images_[f].triangle_count > 0) faces_with_triangles.push_back(f);
+  // Faces complete independently (each writes only its own triangles' corners).
+  tbb::parallel_for(std::size_t{0}, faces_with_triangles.size(), [&](std::size_t index) {
+    const std::size_t f = faces_with_triangles[index];
+    std::vector<double> n3(fc), n2(fc);
     const FaceImage& image = images_[f];
-    if (image.triangle_count == 0) continue;
     const ArrangementFace& face = arrangement_.face(static_cast<int>(f));
     const int slice = arrangement_.plane(face.plane).slice;
     const PreparedSlice& s = slices_[static_cast<std::size_t>(slice)];
@@ -238,7 +263,7 @@ void CellField::complete_unknown() {
           out[l] = denominator > 0.0 ? 2.0 * (n3w[l] + n2[l]) / denominator - 1.0 : (l == 0 ? 1.0 : -1.0);
       }
     }
-  }
+  });
 }
 
 }  // namespace sonoshape::recon

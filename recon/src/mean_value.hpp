@@ -23,6 +23,9 @@ namespace sonoshape::recon {
 /// exact to rounding for every h > 0 (no quadrature); for h = 0 it returns 0 (use the winding).
 double projected_angle(const Vec2* points, std::size_t count, const Vec2& foot, double height);
 
+/// The plain edge sum behind projected_angle (no treatment of cancellation; for tests).
+double projected_angle_plain(const Vec2* points, std::size_t count, const Vec2& foot, double height);
+
 /// Winding number of `p` around the closed ring (0 for outside, +1 / -1 inside CCW / CW rings).
 /// Points on the ring count as inside (the caller tests boundaries separately when it matters).
 int winding_number(const Vec2* points, std::size_t count, const Vec2& p);

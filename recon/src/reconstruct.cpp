@@ -18,33 +18,6 @@
 namespace sonoshape::recon {
 namespace {
 
-// A point inside a simple ring: the middle of the widest interval the ring cuts from the
-// horizontal line through the middle of its bounding box.
-std::optional<Vec2> interior_point(const Ring2& ring) {
-  double lo = ring[0].y(), hi = ring[0].y();
-  for (const Vec2& p : ring) {
-    lo = std::min(lo, p.y());
-    hi = std::max(hi, p.y());
-  }
-  const double y = lo + (hi - lo) * 0.5004321;  // off-centre: rarely through a vertex
-  std::vector<double> xs;
-  for (std::size_t i = 0; i < ring.size(); ++i) {
-    const Vec2& a = ring[i];
-    const Vec2& b = ring[(i + 1) % ring.size()];
-    if ((a.y() <= y) != (b.y() <= y)) xs.push_back(a.x() + (y - a.y()) / (b.y() - a.y()) * (b.x() - a.x()));
-  }
-  std::sort(xs.begin(), xs.end());
-  std::optional<Vec2> best;
-  double best_width = 0.0;
-  for (std::size_t i = 0; i + 1 < xs.size(); i += 2) {
-    if (xs[i + 1] - xs[i] > best_width) {
-      best_width = xs[i + 1] - xs[i];
-      best = Vec2(0.5 * (xs[i] + xs[i + 1]), y);
-    }
-  }
-  return best;
-}
-
 // Points of every region too thin for grid cells of `cell_size`: its interior point and a
 // lattice of half the cell size over it (see snap_thin_regions).
 std::vector<RegionSample> thin_region_samples(const std::vector<PreparedSlice>& slices, double cell_size) {

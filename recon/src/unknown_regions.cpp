@@ -6,6 +6,7 @@
 #include <CGAL/Polygon_with_holes_2.h>
 
 #include <algorithm>
+#include <optional>
 
 #include "cell_field.hpp"
 #include "mean_value.hpp"
@@ -64,6 +65,32 @@ PolygonSet region_set(const Region& region) {
 }
 
 }  // namespace
+
+std::optional<Vec2> interior_point(const Ring2& ring) {
+  double lo = ring[0].y(), hi = ring[0].y();
+  for (const Vec2& p : ring) {
+    lo = std::min(lo, p.y());
+    hi = std::max(hi, p.y());
+  }
+  const double y = lo + (hi - lo) * 0.5004321;  // off-centre: rarely through a vertex
+  std::vector<double> xs;
+  for (std::size_t i = 0; i < ring.size(); ++i) {
+    const Vec2& a = ring[i];
+    const Vec2& b = ring[(i + 1) % ring.size()];
+    if ((a.y() <= y) != (b.y() <= y)) xs.push_back(a.x() + (y - a.y()) / (b.y() - a.y()) * (b.x() - a.x()));
+  }
+  std::sort(xs.begin(), xs.end());
+  std::optional<Vec2> best;
+  double best_width = 0.0;
+  for (std::size_t i = 0; i + 1 < xs.size(); i += 2) {
+    if (xs[i + 1] - xs[i] > best_width) {
+      best_width = xs[i + 1] - xs[i];
+      best = Vec2(0.5 * (xs[i] + xs[i + 1]), y);
+    }
+  }
+  return best;
+}
+
 
 Ring2 plane_box_polygon(const Vec3& origin, const Vec3& u, const Vec3& v, const Box3& box) {
   // A square covering the box's projection, clipped by the six box faces.

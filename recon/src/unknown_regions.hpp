@@ -3,6 +3,7 @@
 // the box is partitioned into known materials, known outside and the unknown set (unknown regions
 // and everything outside the field of view). The unknown set is later triangulated per face and
 // completed from the known data around it.
+#include <optional>
 #include <vector>
 
 #include "sonoshape/core/slice.hpp"
@@ -29,6 +30,10 @@ struct SlicePartition {
 /// gives the dense index 1..K of a material id.
 SlicePartition partition_slice(const LabeledSlice& slice, const std::vector<int>& material_ids,
                                const Ring2& plane_in_box);
+
+/// A point inside a simple ring (the middle of the widest interval the ring cuts from the
+/// horizontal line through the middle of its bounding box), if the ring has an interior.
+std::optional<Vec2> interior_point(const Ring2& ring);
 
 /// The polygon where the plane (origin, u, v) meets the box, counter-clockwise in (u, v); empty
 /// if the plane misses the box's interior.

@@ -1,0 +1,98 @@
+#include "sonoshape/acquisition/plus_config.hpp"
+
+#include <Eigen/LU>
+#include <pugixml.hpp>
+#include <sstream>
+
+#include "sonoshape/acquisition/sequence_file.hpp"
+
+namespace sonoshape::acq {
+
+Result<Eigen::Matrix4d> PlusConfig::transform(const std::string& from,
+                                              const std::string& to) const {
+  for (const PlusTransform& t : transforms)
+    if (t.from == from && t.to == to) return t.matrix;
+  for (const PlusTransform& t : transforms)
+    if (t.from == to && t.to == from) {
+      Eigen::Matrix4d inverse;
+      bool invertible = false;
+      t.matrix.computeInverseWithCheck(inverse, invertible);
+      if (!invertible)
+        return Status::error("PLUS configuration: " + to + "To" + from + " is singular, so " +
+                             from + "To" + to + " cannot be derived");
+      return inverse;
+    }
+  std::string known;
+  for (const PlusTransform& t : transforms)
+    known += (known.empty() ? "" : ", ") + t.from + "To" + t.to;
+  return Status::error("PLUS configuration has no " + from + "To" + to +
+                       " transform (it defines: " + (known.empty() ? "none" : known) +
+                       "); add <Transform From=\"" + from + "\" To=\"" + to +
+                       "\" Matrix=\"...\"/> to <CoordinateDefinitions>");
+}
+
+Result<PlusConfig> read_plus_config(const std::filesystem::path& path) {
+  const std::string where = "PLUS configuration " + path.string();
+  pugi::xml_document doc;
+  const pugi::xml_parse_result parsed = doc.load_file(path.c_str());
+  if (!parsed)
+    return Status::error(where + ": " + parsed.description() + " at byte " +
+                         std::to_string(parsed.offset) +
+                         "; check that the file exists and is well-formed XML");
+  const pugi::xml_node root = doc.child("PlusConfiguration");
+  if (!root)
+    return Status::error(where +
+                         ": no <PlusConfiguration> root element; is this a PLUS "
+                         "device-set configuration file?");
+  PlusConfig config;
+  int index = 0;
+  for (const pugi::xml_node node : root.child("CoordinateDefinitions").children("Transform")) {
+    const std::string element = where + ": <Transform> #" + std::to_string(index++);
+    PlusTransform t;
+    t.from = node.attribute("From").as_string();
+    t.to = node.attribute("To").as_string();
+    if (t.from.empty() || t.to.empty())
+      return Status::error(element + " needs both From and To attributes");
+    const auto matrix = parse_matrix(node.attribute("Matrix").as_string());
+    if (!matrix)
+      return Status::error(element + " (" + t.from + "To" + t.to +
+                           "): Matrix must be 16 numbers, a row-major 4x4");
+    t.matrix = *matrix;
+    if (const pugi::xml_attribute error = node.attribute("Error")) t.error = error.as_double();
+    t.date = node.attribute("Date").as_string();
+    config.transforms.push_back(std::move(t));
+  }
+  return config;
+}
+
+Result<Eigen::Matrix4d> read_image_to_probe(const std::filesystem::path& path) {
+  auto config = read_plus_config(path);
+  if (!config) return config.status();
+  auto matrix = config->transform("Image", "Probe");
+  if (!matrix) return Status::error(path.string() + ": " + matrix.message());
+  return matrix;
+}
+
+Status write_plus_config(const PlusConfig& config, const std::filesystem::path& path,
+                         const std::string& description) {
+  pugi::xml_document doc;
+  pugi::xml_node root = doc.append_child("PlusConfiguration");
+  root.append_attribute("version") = "2.1";
+  if (!description.empty())
+    root.append_child(pugi::node_comment).set_value((" " + description + " ").c_str());
+  pugi::xml_node defs = root.append_child("CoordinateDefinitions");
+  for (const PlusTransform& t : config.transforms) {
+    pugi::xml_node node = defs.append_child("Transform");
+    node.append_attribute("From") = t.from.c_str();
+    node.append_attribute("To") = t.to.c_str();
+    node.append_attribute("Matrix") = format_matrix(t.matrix).c_str();
+    if (t.error) node.append_attribute("Error") = *t.error;
+    if (!t.date.empty()) node.append_attribute("Date") = t.date.c_str();
+  }
+  if (!doc.save_file(path.c_str(), "  "))
+    return Status::error("cannot write PLUS configuration " + path.string() +
+                         "; check that the directory exists and is writable");
+  return Status::ok();
+}
+
+}  // namespace sonoshape::acq

@@ -1,0 +1,459 @@
+#include "sonoshape/acquisition/sequence_file.hpp"
+
+#include <zlib.h>
+
+#include <algorithm>
+#include <array>
+#include <charconv>
+#include <cmath>
+#include <fstream>
+#include <limits>
+#include <map>
+#include <sstream>
+#include <stdexcept>
+
+namespace sonoshape::acq {
+namespace {
+
+constexpr std::string_view kFramePrefix = "Seq_Frame";
+constexpr std::string_view kTransformSuffix = "Transform";
+constexpr std::string_view kStatusSuffix = "TransformStatus";
+
+// Header fields whose values follow from the pixel data; the writer recomputes them.
+constexpr std::array<std::string_view, 8> kLayoutKeys = {
+    "ObjectType",         "NDims",   "BinaryData", "BinaryDataByteOrderMSB", "CompressedData",
+    "CompressedDataSize", "DimSize", "ElementType"};
+
+bool is_layout_key(std::string_view key) {
+  return key == "ElementDataFile" ||
+         std::find(kLayoutKeys.begin(), kLayoutKeys.end(), key) != kLayoutKeys.end();
+}
+
+std::string_view trim(std::string_view s) {
+  const auto first = s.find_first_not_of(" \t\r\n");
+  if (first == std::string_view::npos) return {};
+  const auto last = s.find_last_not_of(" \t\r\n");
+  return s.substr(first, last - first + 1);
+}
+
+bool ends_with(std::string_view s, std::string_view suffix) {
+  return s.size() >= suffix.size() && s.substr(s.size() - suffix.size()) == suffix;
+}
+
+std::vector<std::string_view> split_words(std::string_view s) {
+  std::vector<std::string_view> words;
+  std::size_t i = 0;
+  while (i < s.size()) {
+    while (i < s.size() && (s[i] == ' ' || s[i] == '\t')) ++i;
+    const std::size_t start = i;
+    while (i < s.size() && s[i] != ' ' && s[i] != '\t') ++i;
+    if (i > start) words.push_back(s.substr(start, i - start));
+  }
+  return words;
+}
+
+template <typename T>
+std::optional<T> parse_number(std::string_view s) {
+  s = trim(s);
+  if (!s.empty() && s.front() == '+') s.remove_prefix(1);
+  T value{};
+  const auto [end, ec] = std::from_chars(s.data(), s.data() + s.size(), value);
+  if (ec != std::errc() || end != s.data() + s.size() || s.empty()) return std::nullopt;
+  if constexpr (std::is_floating_point_v<T>)
+    if (!std::isfinite(value)) return std::nullopt;
+  return value;
+}
+
+std::string format_number(double value) {
+  std::array<char, 32> buffer{};
+  const auto [end, ec] = std::to_chars(buffer.data(), buffer.data() + buffer.size(), value);
+  if (ec != std::errc()) return "nan";
+  return std::string(buffer.data(), end);
+}
+
+bool is_true(std::string_view value) {
+  const std::string_view v = trim(value);
+  return v == "True" || v == "true" || v == "TRUE" || v == "1";
+}
+
+// "Seq_Frame0012_ProbeToTrackerTransform" -> (12, "ProbeToTrackerTransform").
+std::optional<std::pair<std::size_t, std::string>> split_frame_key(std::string_view key) {
+  if (key.substr(0, kFramePrefix.size()) != kFramePrefix) return std::nullopt;
+  const std::string_view rest = key.substr(kFramePrefix.size());
+  const std::size_t underscore = rest.find('_');
+  if (underscore == 0 || underscore == std::string_view::npos || underscore + 1 == rest.size())
+    return std::nullopt;
+  const auto index = parse_number<std::size_t>(rest.substr(0, underscore));
+  if (!index) return std::nullopt;
+  return std::make_pair(*index, std::string(rest.substr(underscore + 1)));
+}
+
+std::string frame_key(std::size_t k, std::string_view name) {
+  std::array<char, 24> digits{};
+  std::snprintf(digits.data(), digits.size(), "%04zu", k);
+  return std::string(kFramePrefix) + digits.data() + "_" + std::string(name);
+}
+
+Status fail(const std::filesystem::path& path, const std::string& what, const std::string& fix) {
+  return Status::error("sequence file " + path.string() + ": " + what + (fix.empty() ? "" : "; ") +
+                       fix);
+}
+
+}  // namespace
+
+std::optional<std::string> find_field(const FieldList& fields, std::string_view key) {
+  for (const auto& [k, v] : fields)
+    if (k == key) return v;
+  return std::nullopt;
+}
+
+void set_field(FieldList& fields, std::string_view key, std::string value) {
+  for (auto& [k, v] : fields)
+    if (k == key) {
+      v = std::move(value);
+      return;
+    }
+  fields.emplace_back(std::string(key), std::move(value));
+}
+
+std::string format_matrix(const Eigen::Matrix4d& matrix) {
+  std::string text;
+  for (int r = 0; r < 4; ++r)
+    for (int c = 0; c < 4; ++c) {
+      if (!text.empty()) text += ' ';
+      text += format_number(matrix(r, c));
+    }
+  return text;
+}
+
+std::optional<Eigen::Matrix4d> parse_matrix(std::string_view text) {
+  const auto words = split_words(text);
+  if (words.size() != 16) return std::nullopt;
+  Eigen::Matrix4d m;
+  for (int i = 0; i < 16; ++i) {
+    const auto value = parse_number<double>(words[static_cast<std::size_t>(i)]);
+    if (!value) return std::nullopt;
+    m(i / 4, i % 4) = *value;
+  }
+  return m;
+}
+
+void SequenceFile::add_frame(GreyImage image, FieldList frame_fields) {
+  if (image.width <= 0 || image.height <= 0 ||
+      image.pixels.size() != static_cast<std::size_t>(image.width) * image.height)
+    throw std::invalid_argument("SequenceFile::add_frame: empty or inconsistent image");
+  if (images_.empty()) {
+    width_ = image.width;
+    height_ = image.height;
+  } else if (image.width != width_ || image.height != height_) {
+    throw std::invalid_argument("SequenceFile::add_frame: frame " + std::to_string(images_.size()) +
+                                " is " + std::to_string(image.width) + "x" +
+                                std::to_string(image.height) + ", the sequence is " +
+                                std::to_string(width_) + "x" + std::to_string(height_));
+  }
+  images_.push_back(std::move(image));
+  frame_fields_.push_back(std::move(frame_fields));
+}
+
+std::optional<double> SequenceFile::timestamp_s(std::size_t k) const {
+  const auto text = frame_field(k, "Timestamp");
+  if (!text) return std::nullopt;
+  return parse_number<double>(*text);
+}
+
+Frame SequenceFile::frame(std::size_t k) const {
+  Frame f;
+  f.image = image(k);
+  f.timestamp_s = timestamp_s(k).value_or(0.0);
+  f.index = static_cast<std::int64_t>(k);
+  return f;
+}
+
+Result<Eigen::Matrix4d> SequenceFile::transform(std::string_view name, std::size_t k) const {
+  const std::string key = std::string(name) + std::string(kTransformSuffix);
+  if (k >= frame_count())
+    return Status::error("sequence file: frame " + std::to_string(k) + " does not exist (" +
+                         std::to_string(frame_count()) + " frames)");
+  const auto text = frame_field(k, key);
+  if (!text) {
+    std::string known;
+    for (const auto& n : transform_names()) known += (known.empty() ? "" : ", ") + n;
+    return Status::error("sequence file: frame " + std::to_string(k) + " has no " + key +
+                         " field (transforms in the file: " + (known.empty() ? "none" : known) +
+                         ")");
+  }
+  const auto matrix = parse_matrix(*text);
+  if (!matrix)
+    return Status::error("sequence file: frame " + std::to_string(k) + " field " + key +
+                         " is not 16 numbers (row-major 4x4): '" + *text + "'");
+  return *matrix;
+}
+
+TrackingStatus SequenceFile::transform_status(std::string_view name, std::size_t k) const {
+  const auto status = frame_field(k, std::string(name) + std::string(kStatusSuffix));
+  if (status) return trim(*status) == "OK" ? TrackingStatus::kValid : TrackingStatus::kInvalid;
+  return transform(name, k) ? TrackingStatus::kValid : TrackingStatus::kInvalid;
+}
+
+void SequenceFile::set_transform(std::string_view name, std::size_t k,
+                                 const Eigen::Matrix4d& matrix, TrackingStatus status) {
+  set_frame_field(k, std::string(name) + std::string(kTransformSuffix), format_matrix(matrix));
+  set_frame_field(k, std::string(name) + std::string(kStatusSuffix),
+                  status == TrackingStatus::kValid ? "OK" : "INVALID");
+}
+
+std::vector<std::string> SequenceFile::transform_names() const {
+  std::vector<std::string> names;
+  for (const FieldList& fields : frame_fields_)
+    for (const auto& [key, value] : fields) {
+      if (!ends_with(key, kTransformSuffix)) continue;
+      std::string name = key.substr(0, key.size() - kTransformSuffix.size());
+      if (std::find(names.begin(), names.end(), name) == names.end())
+        names.push_back(std::move(name));
+    }
+  return names;
+}
+
+Result<SequenceFile> read_sequence_file(const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return fail(path, "cannot open it", "check the path and that the file is readable");
+  std::string data((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  if (in.bad()) return fail(path, "read error", "check the disk and the file");
+
+  SequenceFile file;
+  std::map<std::size_t, FieldList> frame_fields;
+  std::size_t pos = 0;
+  std::size_t line_number = 0;
+  bool found_data_file = false;
+  while (pos < data.size()) {
+    const std::size_t eol = data.find('\n', pos);
+    const std::size_t end = eol == std::string::npos ? data.size() : eol;
+    const std::string_view line = trim(std::string_view(data).substr(pos, end - pos));
+    pos = eol == std::string::npos ? data.size() : eol + 1;
+    ++line_number;
+    if (line.empty()) continue;
+    const std::string where = "header line " + std::to_string(line_number);
+    const std::size_t eq = line.find('=');
+    if (eq == std::string_view::npos) {
+      return fail(path, where + " '" + std::string(line.substr(0, 60)) + "' is not 'Key = value'",
+                  "is this a MetaImage (.mha) file? The header must end with "
+                  "'ElementDataFile = LOCAL'");
+    }
+    const std::string key(trim(line.substr(0, eq)));
+    std::string value(trim(line.substr(eq + 1)));
+    if (key.empty()) return fail(path, where + " has no key before '='", "");
+    if (const auto frame_key = split_frame_key(key)) {
+      set_field(frame_fields[frame_key->first], frame_key->second, std::move(value));
+      continue;
+    }
+    set_field(file.fields_, key, value);
+    if (key == "ElementDataFile") {
+      found_data_file = true;
+      if (value != "LOCAL")
+        return fail(path, "ElementDataFile = " + value + " (pixels in a separate file)",
+                    "only 'ElementDataFile = LOCAL' (pixels after the header, as PLUS writes "
+                    ".igs.mha/.seq.mha) is supported; merge it into one .mha");
+      break;
+    }
+  }
+  if (!found_data_file)
+    return fail(path, "the header has no 'ElementDataFile = LOCAL' line",
+                "the file is truncated or not a MetaImage sequence");
+
+  const auto ndims = parse_number<int>(file.field("NDims").value_or(""));
+  if (!ndims || (*ndims != 2 && *ndims != 3))
+    return fail(path, "NDims is '" + file.field("NDims").value_or("missing") + "'",
+                "a tracked-frame sequence has 'NDims = 3' (or 2 for one frame)");
+  const auto dim_text = file.field("DimSize");
+  if (!dim_text) return fail(path, "DimSize is missing", "add 'DimSize = W H N'");
+  const auto dim_words = split_words(*dim_text);
+  std::array<long long, 3> dims{0, 0, 1};
+  bool dims_ok = dim_words.size() == static_cast<std::size_t>(*ndims);
+  for (std::size_t i = 0; dims_ok && i < dim_words.size(); ++i) {
+    const auto v = parse_number<long long>(dim_words[i]);
+    dims_ok = v && *v >= 0 && *v <= std::numeric_limits<int>::max();
+    if (dims_ok) dims[i] = *v;
+  }
+  if (!dims_ok || dims[0] <= 0 || dims[1] <= 0)
+    return fail(path,
+                "DimSize = '" + *dim_text + "' is not " + std::to_string(*ndims) +
+                    " non-negative integers with W, H > 0",
+                "write it as 'DimSize = W H N' (width, height, frames)");
+  const std::string element_type = file.field("ElementType").value_or("missing");
+  if (element_type != "MET_UCHAR")
+    return fail(path, "ElementType = " + element_type + " is not supported",
+                "only 8-bit grey frames (MET_UCHAR) are; convert the sequence with PLUS "
+                "EditSequenceFile or another tool");
+  if (const auto channels = file.field("ElementNumberOfChannels"); channels && *channels != "1")
+    return fail(path, "ElementNumberOfChannels = " + *channels + " is not supported",
+                "only single-channel (grey) frames are");
+
+  const std::size_t w = static_cast<std::size_t>(dims[0]);
+  const std::size_t h = static_cast<std::size_t>(dims[1]);
+  const std::size_t n = static_cast<std::size_t>(dims[2]);
+  if (!frame_fields.empty() && frame_fields.rbegin()->first >= n)
+    return fail(path,
+                "per-frame field of frame " + std::to_string(frame_fields.rbegin()->first) +
+                    " but DimSize says " + std::to_string(n) + " frames",
+                "fix DimSize or remove the fields of the missing frames");
+  const std::size_t frame_bytes = w * h;
+  const std::size_t total = frame_bytes * n;
+  std::vector<std::uint8_t> pixels(total);
+  const std::size_t available = data.size() - pos;
+  const bool compressed = is_true(file.field("CompressedData").value_or("False"));
+  if (compressed) {
+    std::size_t compressed_size = available;
+    if (const auto text = file.field("CompressedDataSize")) {
+      const auto size = parse_number<std::size_t>(*text);
+      if (!size) return fail(path, "CompressedDataSize = '" + *text + "' is not a byte count", "");
+      if (*size > available)
+        return fail(path,
+                    "CompressedDataSize is " + std::to_string(*size) + " bytes but only " +
+                        std::to_string(available) + " follow the header",
+                    "the file is truncated; copy it again");
+      compressed_size = *size;
+    }
+    z_stream stream{};
+    if (inflateInit(&stream) != Z_OK) return fail(path, "zlib inflateInit failed", "");
+    // One spare output byte tells "exactly DimSize" from "more than DimSize".
+    pixels.resize(total + 1);
+    stream.next_in = reinterpret_cast<Bytef*>(data.data() + pos);
+    stream.next_out = pixels.data();
+    std::size_t in_left = compressed_size, out_left = pixels.size();
+    constexpr std::size_t kChunk = 1u << 30;  // zlib counts in uInt: feed large buffers in pieces
+    int rc = Z_OK;
+    for (;;) {
+      if (stream.avail_in == 0 && in_left > 0) {
+        stream.avail_in = static_cast<uInt>(std::min(in_left, kChunk));
+        in_left -= stream.avail_in;
+      }
+      if (stream.avail_out == 0 && out_left > 0) {
+        stream.avail_out = static_cast<uInt>(std::min(out_left, kChunk));
+        out_left -= stream.avail_out;
+      }
+      rc = inflate(&stream, Z_NO_FLUSH);
+      if (rc == Z_OK) continue;
+      if (rc == Z_BUF_ERROR &&
+          ((stream.avail_in == 0 && in_left == 0) || (stream.avail_out == 0 && out_left == 0)))
+        break;
+      if (rc != Z_BUF_ERROR) break;
+    }
+    const std::size_t produced = stream.total_out;
+    inflateEnd(&stream);
+    pixels.resize(total);
+    if (rc != Z_STREAM_END && rc != Z_BUF_ERROR)
+      return fail(path,
+                  "the compressed pixel data is corrupt (zlib error " + std::to_string(rc) +
+                      " in frame " + std::to_string(produced / frame_bytes) + ")",
+                  "the file is damaged; copy it again");
+    if (produced > total)
+      return fail(path, "the pixel data holds more than DimSize (" + *dim_text + ") describes",
+                  "DimSize is wrong");
+    if (produced < total)
+      return fail(path,
+                  "the pixel data decompresses to " + std::to_string(produced) +
+                      " bytes, DimSize needs " + std::to_string(total) + " (frame " +
+                      std::to_string(produced / frame_bytes) + " is incomplete)",
+                  "the file is truncated or DimSize is wrong");
+  } else {
+    if (available < total)
+      return fail(path,
+                  "the raw pixel data has " + std::to_string(available) + " bytes, DimSize needs " +
+                      std::to_string(total) + " (frame " + std::to_string(available / frame_bytes) +
+                      " is incomplete)",
+                  "the file is truncated or DimSize is wrong");
+    std::copy_n(reinterpret_cast<const std::uint8_t*>(data.data() + pos), total, pixels.begin());
+  }
+
+  file.width_ = static_cast<int>(w);
+  file.height_ = static_cast<int>(h);
+  file.images_.reserve(n);
+  file.frame_fields_.resize(n);
+  for (std::size_t k = 0; k < n; ++k) {
+    GreyImage image;
+    image.width = file.width_;
+    image.height = file.height_;
+    const auto first = pixels.begin() + static_cast<std::ptrdiff_t>(k * frame_bytes);
+    image.pixels.assign(first, first + static_cast<std::ptrdiff_t>(frame_bytes));
+    file.images_.push_back(std::move(image));
+  }
+  for (auto& [k, fields] : frame_fields) file.frame_fields_[k] = std::move(fields);
+  return file;
+}
+
+Status write_sequence_file(const SequenceFile& file, const std::filesystem::path& path,
+                           const SequenceWriteOptions& options) {
+  if (file.frame_count() == 0)
+    return fail(path, "no frames to write", "a MetaImage sequence needs at least one frame");
+  const std::size_t frame_bytes = static_cast<std::size_t>(file.width()) * file.height();
+
+  std::vector<std::uint8_t> compressed;
+  if (options.compress) {
+    z_stream stream{};
+    if (deflateInit(&stream, std::clamp(options.compression_level, 1, 9)) != Z_OK)
+      return fail(path, "zlib deflateInit failed", "");
+    compressed.resize(deflateBound(&stream, static_cast<uLong>(frame_bytes * file.frame_count())));
+    stream.next_out = compressed.data();
+    stream.avail_out = static_cast<uInt>(
+        std::min<std::size_t>(compressed.size(), std::numeric_limits<uInt>::max()));
+    for (std::size_t k = 0; k < file.frame_count(); ++k) {
+      stream.next_in = const_cast<Bytef*>(file.image(k).pixels.data());
+      stream.avail_in = static_cast<uInt>(frame_bytes);
+      const bool last = k + 1 == file.frame_count();
+      const int rc = deflate(&stream, last ? Z_FINISH : Z_NO_FLUSH);
+      if ((last && rc != Z_STREAM_END) || (!last && rc != Z_OK)) {
+        deflateEnd(&stream);
+        return fail(path, "zlib deflate failed on frame " + std::to_string(k), "");
+      }
+    }
+    compressed.resize(stream.total_out);
+    deflateEnd(&stream);
+  }
+
+  std::map<std::string, std::string> layout;
+  layout["ObjectType"] = file.field("ObjectType").value_or("Image");
+  layout["NDims"] = "3";
+  layout["BinaryData"] = "True";
+  layout["BinaryDataByteOrderMSB"] = "False";
+  layout["CompressedData"] = options.compress ? "True" : "False";
+  if (options.compress) layout["CompressedDataSize"] = std::to_string(compressed.size());
+  layout["DimSize"] = std::to_string(file.width()) + " " + std::to_string(file.height()) + " " +
+                      std::to_string(file.frame_count());
+  layout["ElementType"] = "MET_UCHAR";
+
+  std::ostringstream header;
+  for (std::string_view key : kLayoutKeys)
+    if (!file.field(key) && layout.count(std::string(key)))
+      header << key << " = " << layout[std::string(key)] << '\n';
+  for (const auto& [key, value] : file.fields()) {
+    if (key == "ElementDataFile") continue;
+    if (is_layout_key(key)) {
+      if (layout.count(key)) header << key << " = " << layout[key] << '\n';
+      continue;
+    }
+    header << key << " = " << value << '\n';
+  }
+  for (std::size_t k = 0; k < file.frame_count(); ++k)
+    for (const auto& [name, value] : file.frame_fields(k))
+      header << frame_key(k, name) << " = " << value << '\n';
+  header << "ElementDataFile = LOCAL\n";
+
+  std::ofstream out(path, std::ios::binary | std::ios::trunc);
+  if (!out)
+    return fail(path, "cannot create it", "check that the directory exists and is writable");
+  const std::string text = header.str();
+  out.write(text.data(), static_cast<std::streamsize>(text.size()));
+  if (options.compress) {
+    out.write(reinterpret_cast<const char*>(compressed.data()),
+              static_cast<std::streamsize>(compressed.size()));
+  } else {
+    for (std::size_t k = 0; k < file.frame_count(); ++k)
+      out.write(reinterpret_cast<const char*>(file.image(k).pixels.data()),
+                static_cast<std::streamsize>(frame_bytes));
+  }
+  out.close();
+  if (!out) return fail(path, "write error", "check the free disk space");
+  return Status::ok();
+}
+
+}  // namespace sonoshape::acq

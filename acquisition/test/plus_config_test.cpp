@@ -1,0 +1,75 @@
+#include "sonoshape/acquisition/plus_config.hpp"
+
+#include <gtest/gtest.h>
+
+#include <Eigen/LU>
+#include <filesystem>
+#include <fstream>
+
+namespace sonoshape::acq {
+namespace {
+
+const std::filesystem::path kRealConfig =
+    std::filesystem::path(SONOSHAPE_DATA_DIR) / "plus" /
+    "PlusDeviceSet_SpinePhantomFreehandReconstructionOnly.xml";
+
+TEST(PlusConfig, RealConfigurationGivesImageToProbe) {
+  const auto image_to_probe = read_image_to_probe(kRealConfig);
+  ASSERT_TRUE(image_to_probe) << image_to_probe.message();
+  EXPECT_DOUBLE_EQ((*image_to_probe)(0, 0), -0.00157821);
+  EXPECT_DOUBLE_EQ((*image_to_probe)(0, 3), 15.3978);
+  EXPECT_DOUBLE_EQ((*image_to_probe)(1, 3), 49.5705);
+  EXPECT_DOUBLE_EQ((*image_to_probe)(2, 3), -8.63446);
+  // About 0.085 mm per pixel: the calibration includes the pixel spacing.
+  const double spacing_mm = image_to_probe->block<3, 1>(0, 0).norm();
+  EXPECT_NEAR(spacing_mm, 0.085, 0.002);
+
+  const auto config = read_plus_config(kRealConfig);
+  ASSERT_TRUE(config);
+  ASSERT_EQ(config->transforms.size(), 2u);
+  EXPECT_EQ(config->transforms[1].from, "Phantom");
+  EXPECT_NEAR(*config->transforms[0].error, 1.68149, 1e-12);
+  const auto reference_to_phantom = config->transform("Reference", "Phantom");
+  ASSERT_TRUE(reference_to_phantom);
+  EXPECT_TRUE((*reference_to_phantom * *config->transform("Phantom", "Reference"))
+                  .isApprox(Eigen::Matrix4d::Identity(), 1e-12));
+  const auto missing = config->transform("Stylus", "Probe");
+  ASSERT_FALSE(missing);
+  EXPECT_NE(missing.message().find("ImageToProbe"), std::string::npos) << missing.message();
+}
+
+TEST(PlusConfig, WrittenConfigurationReadsBack) {
+  PlusConfig config;
+  Eigen::Matrix4d m = Eigen::Matrix4d::Identity();
+  m.block<3, 3>(0, 0) *= 0.123456789012345;
+  m(0, 3) = -31.25;
+  config.transforms.push_back({"Image", "Probe", m, 0.5, "today"});
+  const auto path = std::filesystem::temp_directory_path() / "sonoshape_plus_config_test.xml";
+  ASSERT_TRUE(write_plus_config(config, path, "simulated probe"));
+  const auto reread = read_image_to_probe(path);
+  ASSERT_TRUE(reread) << reread.message();
+  EXPECT_EQ(*reread, m);
+}
+
+TEST(PlusConfig, BrokenFilesGiveClearErrors) {
+  const auto path = std::filesystem::temp_directory_path() / "sonoshape_plus_config_bad.xml";
+  {
+    std::ofstream(path) << "<PlusConfiguration><CoordinateDefinitions>"
+                           "<Transform From=\"Image\" To=\"Probe\" Matrix=\"1 2 3\"/>"
+                           "</CoordinateDefinitions></PlusConfiguration>";
+  }
+  auto result = read_plus_config(path);
+  ASSERT_FALSE(result);
+  EXPECT_NE(result.message().find("16 numbers"), std::string::npos) << result.message();
+  { std::ofstream(path) << "<PlusConfiguration><unclosed></PlusConfiguration>"; }
+  result = read_plus_config(path);
+  ASSERT_FALSE(result);
+  EXPECT_NE(result.message().find("at byte"), std::string::npos) << result.message();
+  { std::ofstream(path) << "<Other/>"; }
+  result = read_plus_config(path);
+  ASSERT_FALSE(result);
+  EXPECT_NE(result.message().find("PlusConfiguration"), std::string::npos) << result.message();
+}
+
+}  // namespace
+}  // namespace sonoshape::acq

@@ -1,0 +1,383 @@
+// Unknown regions (Section 5): triangle mean-value weights, completion and its guarantees.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <functional>
+#include <numbers>
+#include <random>
+#include <set>
+
+#include "cell_field.hpp"
+#include "mean_value.hpp"
+#include "sonoshape/recon/reconstruct.hpp"
+
+namespace sonoshape::recon {
+namespace {
+
+// ---------------------------------------------------------------------------------------------
+// Reference for the corner weights: polar coordinates around the foot point. Each edge a -> b of
+// the triangle spans a signed fan (foot, a, b); along direction phi the ray meets the edge's line
+// at R(phi), and the radial integrals of lambda(y) h / r^4 are closed forms:
+//   int_0^R h rho / (rho^2 + h^2)^2 drho   = R^2 / (2 h (R^2 + h^2)),
+//   int_0^R h rho^2 / (rho^2 + h^2)^2 drho = (atan(R / h) - h R / (R^2 + h^2)) / 2,
+// so only the angle is integrated numerically (adaptive Simpson to 1e-14).
+
+double adaptive_simpson(const std::function<double(double)>& f, double a, double b, double fa,
+                        double fm, double fb, double whole, double tolerance, int depth) {
+  const double m = 0.5 * (a + b);
+  const double lm = 0.5 * (a + m), rm = 0.5 * (m + b);
+  const double flm = f(lm), frm = f(rm);
+  const double left = (m - a) / 6.0 * (fa + 4.0 * flm + fm);
+  const double right = (b - m) / 6.0 * (fm + 4.0 * frm + fb);
+  if (depth <= 0 || std::abs(left + right - whole) <= 15.0 * tolerance)
+    return left + right + (left + right - whole) / 15.0;
+  return adaptive_simpson(f, a, m, fa, flm, fm, left, 0.5 * tolerance, depth - 1) +
+         adaptive_simpson(f, m, b, fm, frm, fb, right, 0.5 * tolerance, depth - 1);
+}
+
+double integrate(const std::function<double(double)>& f, double a, double b, double tolerance) {
+  const double fa = f(a), fb = f(b), fm = f(0.5 * (a + b));
+  const double whole = (b - a) / 6.0 * (fa + 4.0 * fm + fb);
+  return adaptive_simpson(f, a, b, fa, fm, fb, whole, tolerance * std::max(1.0, std::abs(whole)), 30);
+}
+
+// For a foot outside the triangle the signed fans cancel; there the reference is an adaptive
+// degree-5 (7-point) quadrature over recursively split triangles, exact enough while the foot
+// stays a few heights away from the triangle.
+void triangle_rule(const Vec2 (&t)[3], const Vec2 (&corner)[3], const Vec2& foot, double h,
+                   double (&out)[3]) {
+  static const double kA = 0.059715871789770, kB = 0.470142064105115, kC = 0.797426985353087,
+                      kD = 0.101286507323456, kW0 = 0.225, kW1 = 0.132394152788506, kW2 = 0.125939180544827;
+  const double bary[7][3] = {{1.0 / 3, 1.0 / 3, 1.0 / 3}, {kA, kB, kB}, {kB, kA, kB}, {kB, kB, kA},
+                             {kC, kD, kD}, {kD, kC, kD}, {kD, kD, kC}};
+  const double weight[7] = {kW0, kW1, kW1, kW1, kW2, kW2, kW2};
+  const double area = 0.5 * std::abs((t[1] - t[0]).x() * (t[2] - t[0]).y() - (t[1] - t[0]).y() * (t[2] - t[0]).x());
+  const double big_area = (corner[1] - corner[0]).x() * (corner[2] - corner[0]).y() -
+                          (corner[1] - corner[0]).y() * (corner[2] - corner[0]).x();
+  out[0] = out[1] = out[2] = 0.0;
+  for (int q = 0; q < 7; ++q) {
+    const Vec2 y = bary[q][0] * t[0] + bary[q][1] * t[1] + bary[q][2] * t[2];
+    const double r2 = (y - foot).squaredNorm() + h * h;
+    const double f = weight[q] * area * 2.0 * h / (r2 * r2);
+    for (int i = 0; i < 3; ++i) {
+      const Vec2& p1 = corner[(i + 1) % 3];
+      const Vec2 e = corner[(i + 2) % 3] - p1;
+      out[i] += f * (Vec2(-e.y(), e.x()).dot(y - p1) / big_area);
+    }
+  }
+}
+
+void adaptive_triangle(const Vec2 (&t)[3], const Vec2 (&corner)[3], const Vec2& foot, double h,
+                       const double (&whole)[3], int depth, double (&out)[3]) {
+  const Vec2 m01 = 0.5 * (t[0] + t[1]), m12 = 0.5 * (t[1] + t[2]), m20 = 0.5 * (t[2] + t[0]);
+  const Vec2 kids[4][3] = {{t[0], m01, m20}, {m01, t[1], m12}, {m20, m12, t[2]}, {m01, m12, m20}};
+  double parts[4][3], sum[3] = {0, 0, 0};
+  for (int k = 0; k < 4; ++k) {
+    triangle_rule(kids[k], corner, foot, h, parts[k]);
+    for (int i = 0; i < 3; ++i) sum[i] += parts[k][i];
+  }
+  double change = 0.0, size = 0.0;
+  for (int i = 0; i < 3; ++i) {
+    change = std::max(change, std::abs(sum[i] - whole[i]));
+    size = std::max(size, std::abs(sum[i]));
+  }
+  if (depth == 0 || change <= 1e-13 * size) {
+    for (int i = 0; i < 3; ++i) out[i] = sum[i];
+    return;
+  }
+  out[0] = out[1] = out[2] = 0.0;
+  for (int k = 0; k < 4; ++k) {
+    double part[3];
+    adaptive_triangle(kids[k], corner, foot, h, parts[k], depth - 1, part);
+    for (int i = 0; i < 3; ++i) out[i] += part[i];
+  }
+}
+
+bool foot_inside(const Vec2 (&t)[3], const Vec2& foot) {
+  double sign = 0.0;
+  for (int k = 0; k < 3; ++k) {
+    const Vec2 a = t[k] - foot, b = t[(k + 1) % 3] - foot;
+    const double c = a.x() * b.y() - a.y() * b.x();
+    if (sign == 0.0) sign = c;
+    else if (sign * c < 0.0) return false;
+  }
+  return true;
+}
+
+void reference_weights(const Vec2 (&t)[3], const Vec2& foot, double h, double (&w)[3]) {
+  if (!foot_inside(t, foot)) {
+    double whole[3];
+    triangle_rule(t, t, foot, h, whole);
+    adaptive_triangle(t, t, foot, h, whole, 9, w);
+    return;
+  }
+  const double twice_area = (t[1] - t[0]).x() * (t[2] - t[0]).y() - (t[1] - t[0]).y() * (t[2] - t[0]).x();
+  for (int i = 0; i < 3; ++i) {
+    const Vec2& p1 = t[(i + 1) % 3];
+    const Vec2 e = t[(i + 2) % 3] - p1;
+    const Vec2 gradient = Vec2(-e.y(), e.x()) / twice_area;
+    const double lambda0 = gradient.dot(foot - p1);
+    double sum = 0.0;
+    for (int k = 0; k < 3; ++k) {
+      const Vec2 a = t[k] - foot, b = t[(k + 1) % 3] - foot;
+      const double cross = a.x() * b.y() - a.y() * b.x();
+      if (cross == 0.0) continue;
+      const Vec2 d = b - a;
+      const double phi_a = std::atan2(a.y(), a.x());
+      double phi_b = std::atan2(b.y(), b.x());
+      // Sweep the short way from a to b (the fan's angle is below pi).
+      if (cross > 0 && phi_b < phi_a) phi_b += 2.0 * std::numbers::pi;
+      if (cross < 0 && phi_b > phi_a) phi_b -= 2.0 * std::numbers::pi;
+      const auto radial = [&](double phi) {
+        const Vec2 dir(std::cos(phi), std::sin(phi));
+        // foot + R dir on the line a + s d: R = cross(a, d) / cross(dir, d).
+        const double r = (a.x() * d.y() - a.y() * d.x()) / (dir.x() * d.y() - dir.y() * d.x());
+        const double r2 = r * r, h2 = h * h;
+        const double constant_part = r2 / (2.0 * h * (r2 + h2));
+        const double linear_part = 0.5 * (std::atan(r / h) - h * r / (r2 + h2));
+        return lambda0 * constant_part + gradient.dot(dir) * linear_part;
+      };
+      sum += integrate(radial, phi_a, phi_b, 1e-15);
+    }
+    // The fans of a clockwise triangle add up to minus its integral.
+    w[i] = 2.0 * sum * (twice_area > 0 ? 1.0 : -1.0);  // the units of triangle_weights
+  }
+}
+
+TEST(TriangleWeights, AgreeWithQuadratureAndJu) {
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> coord(-1.0, 1.0);
+  double worst_reference = 0.0, worst_ju = 0.0;
+  for (int trial = 0; trial < 60; ++trial) {
+    Vec2 t[3] = {Vec2(coord(rng), coord(rng)), Vec2(coord(rng), coord(rng)), Vec2(coord(rng), coord(rng))};
+    const double area = 0.5 * std::abs((t[1] - t[0]).x() * (t[2] - t[0]).y() - (t[1] - t[0]).y() * (t[2] - t[0]).x());
+    if (area < 0.05) continue;
+    const Vec2 foot(1.5 * coord(rng), 1.5 * coord(rng));
+    for (const double h : {2.0, 0.3, 1e-2, 1e-4, 1e-7}) {
+      double w[3], ref[3], ju[3];
+      ASSERT_TRUE(triangle_weights(t[0], t[1], t[2], foot, h, w));
+      reference_weights(t, foot, h, ref);
+      const double scale = std::abs(ref[0]) + std::abs(ref[1]) + std::abs(ref[2]);
+      for (int i = 0; i < 3; ++i) {
+        EXPECT_LE(std::abs(w[i] - ref[i]), 1e-6 * scale) << "trial " << trial << " h " << h;
+        worst_reference = std::max(worst_reference, std::abs(w[i] - ref[i]) / scale);
+      }
+      // Ju et al.'s spherical formula: the same weights, accurate away from the plane.
+      if (h >= 1e-2) {
+        const Vec3 x(foot.x(), foot.y(), h);
+        ju_triangle_weights(x, Vec3(t[0].x(), t[0].y(), 0), Vec3(t[1].x(), t[1].y(), 0),
+                            Vec3(t[2].x(), t[2].y(), 0), ju);
+        for (int i = 0; i < 3; ++i) {
+          EXPECT_LE(std::abs(ju[i] - ref[i]), 1e-6 * scale) << "trial " << trial << " h " << h;
+          worst_ju = std::max(worst_ju, std::abs(ju[i] - ref[i]) / scale);
+        }
+      }
+    }
+  }
+  RecordProperty("worst_relative_error_closed_form", std::to_string(worst_reference));
+  RecordProperty("worst_relative_error_ju", std::to_string(worst_ju));
+}
+
+TEST(TriangleWeights, SumToThePolygonIntegralAndReproduceLinearFunctions) {
+  const Vec2 a(0.1, -0.2), b(1.3, 0.1), c(0.4, 0.9);
+  const Vec2 ring[3] = {a, b, c};
+  for (const Vec2& foot : {Vec2(0.5, 0.2), Vec2(2.0, -1.0), Vec2(0.1, -0.2)}) {
+    for (const double h : {1.0, 1e-3, 1e-9}) {
+      double w[3];
+      ASSERT_TRUE(triangle_weights(a, b, c, foot, h, w));
+      const double total = projected_angle(ring, 3, foot, h) / h;
+      EXPECT_NEAR(w[0] + w[1] + w[2], total, 1e-9 * std::abs(total) + 1e-12);
+    }
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Completion.
+
+Ring2 square(double half, const Vec2& center = Vec2::Zero()) {
+  return {center + Vec2(-half, -half), center + Vec2(half, -half), center + Vec2(half, half),
+          center + Vec2(-half, half)};
+}
+
+LabeledSlice axis_slice(int axis, double offset) {
+  LabeledSlice s;
+  s.origin_mm = Vec3::Zero();
+  s.origin_mm[axis] = offset;
+  s.u = Vec3::Unit((axis + 1) % 3);
+  s.v = Vec3::Unit((axis + 2) % 3);
+  return s;
+}
+
+TEST(Completion, GroupWithOneKnownLabelCompletesToIt) {
+  // Two cells [-1,0] x [-1,1]^2 and [0,1] x [-1,1]^2 bounded by slices only, every slice fully
+  // label 1, and an unknown patch on x = 0 between them: the group is these two cells.
+  SliceSet set;
+  set.bounds = Box3{Vec3::Constant(-3.0), Vec3::Constant(3.0)};
+  for (const double x : {-1.0, 0.0, 1.0}) {
+    LabeledSlice s = axis_slice(0, x);
+    Region r{1, square(2.9), {}};
+    if (x == 0.0) r.holes.push_back(square(0.4, Vec2(0.1, -0.2)));
+    s.regions.push_back(r);
+    if (x == 0.0) s.regions.push_back({kUnknownLabel, square(0.4, Vec2(0.1, -0.2)), {}});
+    set.slices.push_back(s);
+  }
+  for (const int axis : {1, 2})
+    for (const double o : {-1.0, 1.0}) {
+      LabeledSlice s = axis_slice(axis, o);
+      s.regions.push_back({1, square(2.9), {}});
+      set.slices.push_back(s);
+    }
+  const Box3 box = *set.bounds;
+  const std::vector<int> ids{1};
+  const std::vector<PreparedSlice> slices = prepare_slices(set, ids, box);
+  Arrangement arrangement(box);
+  for (std::size_t s = 0; s < slices.size(); ++s) {
+    const Vec3 n = slices[s].u.cross(slices[s].v);
+    arrangement.insert_plane(n, -n.dot(slices[s].origin), static_cast<int>(s));
+  }
+  const CellField field(arrangement, slices, 1);
+  ASSERT_GT(field.unknown_triangle_count(), 0u);
+  for (std::size_t t = 0; t < field.unknown_triangle_count(); ++t)
+    for (int k = 0; k < 3; ++k) EXPECT_NEAR(field.corner_value(t, k, 1), 1.0, 1e-9);
+  std::mt19937_64 rng(3);
+  std::uniform_real_distribution<double> coord(-0.99, 0.99);
+  for (int i = 0; i < 200; ++i) {
+    double f[2];
+    field.evaluate(Vec3(coord(rng), coord(rng), coord(rng)), f);
+    EXPECT_NEAR(f[1], 1.0, 1e-9);
+    EXPECT_NEAR(f[0], -1.0, 1e-9);
+  }
+}
+
+// Number of connected components of a mesh (through shared vertices).
+int component_count(const TriangleMesh& mesh) {
+  std::vector<int> parent(mesh.vertices.size());
+  for (std::size_t i = 0; i < parent.size(); ++i) parent[i] = static_cast<int>(i);
+  std::function<int(int)> find = [&](int x) { return parent[x] == x ? x : parent[x] = find(parent[x]); };
+  for (const auto& t : mesh.triangles) {
+    parent[find(static_cast<int>(t[0]))] = find(static_cast<int>(t[1]));
+    parent[find(static_cast<int>(t[1]))] = find(static_cast<int>(t[2]));
+  }
+  std::set<int> roots;
+  for (const auto& t : mesh.triangles) roots.insert(find(static_cast<int>(t[0])));
+  return static_cast<int>(roots.size());
+}
+
+Ring2 circle(const Vec2& c, double r, int n) {
+  Ring2 ring;
+  for (int i = 0; i < n; ++i) {
+    const double t = 2.0 * std::numbers::pi * i / n;
+    ring.push_back(c + r * Vec2(std::cos(t), std::sin(t)));
+  }
+  return ring;
+}
+
+TEST(Completion, TwoCylindersWithANoisyMiddleSliceStaySeparate) {
+  // The paper's Figure 10: slices z = -15, 0, 15 with two discs each (radius 10, 14 apart); on
+  // the middle one an unknown blob covers the gap and the inner 5 mm of both discs.
+  const double radius = 10.0;
+  const Vec2 left(-17.0, 0.0), right(17.0, 0.0);
+  auto arc = [&](const Vec2& c, double from_deg, double to_deg) {
+    Ring2 ring;
+    for (int k = 0; k <= 48; ++k) {
+      const double t = (from_deg + (to_deg - from_deg) * k / 48.0) * std::numbers::pi / 180.0;
+      ring.push_back(c + radius * Vec2(std::cos(t), std::sin(t)));
+    }
+    return ring;
+  };
+  // The parts of the discs left of x = -12 and right of x = 12 (60 degrees from the centres).
+  const Ring2 left_part = arc(left, 60.0, 300.0), right_part = arc(right, -120.0, 120.0);
+  // The blob shares the chords' end points with the disc parts.
+  const Ring2 blob{Vec2(-12, -10), Vec2(12, -10), right_part.front(), right_part.back(),
+                   Vec2(12, 10), Vec2(-12, 10), left_part.front(), left_part.back()};
+  SliceSet set;
+  set.bounds = Box3{Vec3(-40, -25, -30), Vec3(40, 25, 30)};
+  for (const double z : {-15.0, 0.0, 15.0}) {
+    LabeledSlice s = axis_slice(2, z);
+    if (z == 0.0) {
+      s.regions.push_back({1, left_part, {}});
+      s.regions.push_back({1, right_part, {}});
+      s.regions.push_back({kUnknownLabel, blob, {}});
+    } else {
+      s.regions.push_back({1, circle(left, radius, 64), {}});
+      s.regions.push_back({1, circle(right, radius, 64), {}});
+    }
+    set.slices.push_back(s);
+  }
+  ReconstructionOptions options;
+  options.max_depth = 6;
+  const MeshSet meshes = reconstruct(set, options);
+  const TriangleMesh& mesh = meshes.meshes[0].mesh;
+  EXPECT_TRUE(check_mesh_health(mesh).closed_manifold_oriented());
+  EXPECT_EQ(component_count(mesh), 2);
+  // Each cylinder passes through the middle slice: the surface reaches above and below it on
+  // both sides.
+  double top = -1e9, bottom = 1e9;
+  for (const Vec3& p : mesh.vertices) {
+    top = std::max(top, p.z());
+    bottom = std::min(bottom, p.z());
+  }
+  EXPECT_GT(top, 15.0);
+  EXPECT_LT(bottom, -15.0);
+}
+
+TEST(Completion, SmallSectorFieldsOfViewGiveClosedManifoldMeshes) {
+  // A ball cut by 12 slices, each seeing a 60 degree, 80 mm fan aimed at it.
+  const double r = 50.0;
+  SliceSet set;
+  set.bounds = Box3{Vec3::Constant(-70.0), Vec3::Constant(70.0)};
+  std::mt19937_64 rng(5);
+  std::normal_distribution<double> gauss;
+  for (int i = 0; i < 12; ++i) {
+    Vec3 n(gauss(rng), gauss(rng), gauss(rng));
+    n.normalize();
+    const Vec3 u = n.unitOrthogonal();
+    const Vec3 v = n.cross(u);
+    LabeledSlice s;
+    s.origin_mm = n * (0.6 * r * (2.0 * (i % 5) / 4.0 - 1.0));
+    s.u = u;
+    s.v = v;
+    const double d = n.dot(s.origin_mm);
+    const Vec2 c = s.to_plane(n * d);
+    s.regions.push_back({1, circle(c, std::sqrt(r * r - d * d), 96), {}});
+    const double angle = 2.0 * std::numbers::pi * i / 12.0;
+    const Vec2 axis(std::cos(angle), std::sin(angle));
+    const Vec2 apex = c - 40.0 * axis;
+    Ring2 fan{apex};
+    for (int k = 0; k <= 12; ++k) {
+      const double a = angle + (-30.0 + 5.0 * k) * std::numbers::pi / 180.0;
+      fan.push_back(apex + 80.0 * Vec2(std::cos(a), std::sin(a)));
+    }
+    s.fov = fan;
+    set.slices.push_back(s);
+  }
+  ReconstructionStats stats;
+  ReconstructionOptions options;
+  options.max_depth = 5;  // a coarse grid keeps the test quick; closure does not depend on it
+  const MeshSet meshes = reconstruct(set, options, &stats);
+  const TriangleMesh& mesh = meshes.meshes[0].mesh;
+  ASSERT_FALSE(mesh.empty());
+  EXPECT_TRUE(check_mesh_health(mesh).closed_manifold_oriented());
+  EXPECT_GT(stats.unknown_triangles, 0u);
+  EXPECT_GT(signed_volume(mesh), 0.0);
+}
+
+TEST(Completion, UnknownPatchInOpenOutsideCompletesToOutside) {
+  const double r = 30.0;
+  SliceSet set;
+  set.bounds = Box3{Vec3::Constant(-60.0), Vec3::Constant(60.0)};
+  for (const double z : {-15.0, 0.0, 15.0}) {
+    LabeledSlice s = axis_slice(2, z);
+    s.regions.push_back({1, circle(Vec2::Zero(), std::sqrt(r * r - z * z), 64), {}});
+    if (z == 0.0) s.regions.push_back({kUnknownLabel, square(6.0, Vec2(45.0, 0.0)), {}});
+    set.slices.push_back(s);
+  }
+  const MeshSet meshes = reconstruct(set);
+  const TriangleMesh& mesh = meshes.meshes[0].mesh;
+  EXPECT_TRUE(check_mesh_health(mesh).closed_manifold_oriented());
+  EXPECT_EQ(component_count(mesh), 1);
+  for (const Vec3& p : mesh.vertices) EXPECT_LT(p.x(), 38.0);  // nothing grew at the patch
+}
+
+}  // namespace
+}  // namespace sonoshape::recon

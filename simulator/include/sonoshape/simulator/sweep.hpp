@@ -1,0 +1,56 @@
+#pragma once
+// A whole simulated acquisition as PLUS sequence files: the B-mode sweep (with the probe
+// calibration, sector geometry and per-label grey levels in its header, so a segmenter needs
+// nothing else) and the ground-truth label frames.
+//
+// Header fields written (global, besides the MetaImage layout):
+//   UltrasoundImageOrientation = MFA, UltrasoundImageType = BRIGHTNESS, ElementSpacing = 1 1 1
+//   ImageToProbeTransform = 16 numbers (pixels -> probe mm, PLUS ImageToProbe)
+//   SonoshapeProbeType = linear | convex, SonoshapeProbeDepthMm, SonoshapeProbeWidthMm,
+//   SonoshapeProbeFanAngleDeg, SonoshapeProbeRadiusMm, SonoshapeProbeFrequencyMhz,
+//   SonoshapePixelSpacingMm  (the sector: rebuild it with probe_from_fields)
+//   SonoshapeLabels = 1:name 2:name ...; SonoshapeLabelEchogenicity = 0:e0 1:e1 ...
+//   SonoshapeLabelGreyMean / SonoshapeLabelGreyStd = 0:m0 1:m1 ... (measured on the known
+//   pixels of the whole sweep; 0 is the background)
+//   SonoshapeUnknownLabel = 255, SonoshapeShadowThresholdDb, SonoshapeSeed, SonoshapeTrajectory,
+//   SonoshapeFrameRateHz, SonoshapeTracker{RateHz,LatencySec,PositionNoiseMm,AngleNoiseDeg}
+// Per frame: Timestamp, ImageStatus = OK, ProbeToTrackerTransform(+Status) as tracked (noise,
+// latency, INVALID), ReferenceToTrackerTransform = identity (the phantom is the tracker's
+// reference), TrueProbeToReferenceTransform (the exact pose, for evaluation only).
+#include <cstdint>
+#include <functional>
+#include <vector>
+
+#include "sonoshape/acquisition/sequence_file.hpp"
+#include "sonoshape/core/slice.hpp"
+#include "sonoshape/core/status.hpp"
+#include "sonoshape/simulator/bmode.hpp"
+#include "sonoshape/simulator/trajectory.hpp"
+
+namespace sonoshape::sim {
+
+/// The simulated sweep and its ground truth.
+struct SimulatedSweep {
+  acq::SequenceFile bmode;  ///< B-mode frames with the fields above
+  acq::SequenceFile truth;  ///< label frames (0 background, ids, 255 unknown), same frame fields
+  std::vector<LabeledSlice> slices;  ///< exact cut per frame (true pose), fov = the sector
+  double mean_shadow_fraction = 0.0;
+};
+
+/// Called with the number of frames done (from the calling thread).
+using SweepProgress = std::function<void(std::size_t done)>;
+
+/// Renders every frame of `acquisition` at its true pose (speckle seeded by seed and frame
+/// index, so the result does not depend on threading) and records the tracked poses. Frames run
+/// in parallel (TBB).
+SimulatedSweep simulate_sweep(const BModeSimulator& simulator,
+                              const SimulatedAcquisition& acquisition, std::uint64_t seed,
+                              const SweepProgress& progress = {});
+
+/// The probe fields of the header list above.
+acq::FieldList probe_fields(const Probe& probe);
+/// Rebuilds the probe from a header written by simulate_sweep; fails naming the missing or
+/// invalid field.
+Result<Probe> probe_from_fields(const acq::FieldList& fields);
+
+}  // namespace sonoshape::sim
