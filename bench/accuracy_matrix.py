@@ -32,13 +32,14 @@ def model_path(root, name):
     return os.path.join(root, "data", "models", f"{name}.{EXT.get(name, 'obj')}")
 
 
-def one_case(args, root, name, meshes, family, count, extra_recon):
+def one_case(args, root, name, meshes, family, count, extra_recon, extra_slice=()):
     case_dir = os.path.join(args.work, name)
     os.makedirs(case_dir, exist_ok=True)
     slices = os.path.join(case_dir, "slices.json")
     truth = os.path.join(case_dir, "truth")
     slice_cmd = [args.binary, "slice", "--planes", family, "--count", str(count), "--seed", "1",
                  "--size-mm", "150", "-o", slices, "--truth", truth, "--skip-invalid", "-q"]
+    slice_cmd += list(extra_slice)
     for label, model in meshes:
         slice_cmd += ["--mesh", f"{label}:{model_path(root, model)}:{model}"]
     run(slice_cmd)
@@ -65,7 +66,12 @@ def main():
     parser.add_argument("--binary", default=os.path.join(root, "build", "apps", "sonoshape"))
     parser.add_argument("--work", default=os.path.join(root, "out", "bench"))
     parser.add_argument("--quick", action="store_true", help="one family per model")
+    parser.add_argument("--unknowns", action="store_true",
+                        help="unknown blobs (40%% of slices) and sector fields of view instead")
     args = parser.parse_args()
+    if args.unknowns:
+        unknown_tables(args, root)
+        return
 
     cases = []
     for model in MODELS:
@@ -106,6 +112,31 @@ def main():
     print("\n".join(timing))
     print(f"\nSets failing a goal (closed/oriented, IoU above baseline, contour mean <= 0.5 %, max <= 2 %): "
           f"{', '.join(failures) if failures else 'none'}")
+
+
+def unknown_tables(args, root):
+    """Each model, 30 random planes: without unknowns, with blobs on 40 % of the slices, with
+    60-degree 80 mm sector fields of view on every slice."""
+    variants = [("known", []), ("blobs 40%", ["--unknown", "0.4"]), ("fov sector", ["--fov", "sector"])]
+    rows = ["| model | set | IoU | baseline IoU | IoU - known IoU | contour max % | closed manifold oriented | "
+            "total s | completion s (share) | unknown triangles | groups |",
+            "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for model in MODELS:
+        known_iou = None
+        for label, extra in variants:
+            name = f"{model}-random-30-{label.split()[0]}"
+            stats, scores = one_case(args, root, name, [(1, model)], "random", 30, [], extra)
+            s = scores["labels"][0]
+            if known_iou is None:
+                known_iou = s["iou"]
+            share = stats["completion_s"] / stats["total_s"] if stats["total_s"] > 0 else 0.0
+            rows.append(
+                f"| {model} | {label} | {s['iou']:.4f} | {s['baseline_iou']:.4f} | {s['iou'] - known_iou:+.4f} | "
+                f"{s['contour_max_percent']:.3f} | {'yes' if s['health']['closed_manifold_oriented'] else 'NO'} | "
+                f"{stats['total_s']:.2f} | {stats['completion_s']:.2f} ({100 * share:.0f}%) | "
+                f"{stats['unknown_triangles']} | {stats['cell_groups']} |")
+            sys.stderr.write(f"{name}: done\n")
+    print("\n".join(rows))
 
 
 if __name__ == "__main__":
