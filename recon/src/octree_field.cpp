@@ -39,7 +39,7 @@ class Sampler {
     field_.values.resize(field_.values.size() + points.size() * fc);
     evaluate_(points, field_.values.data() + first_row * fc);
     for (std::size_t n = 0; n < pending_.size(); ++n)
-      field_.index.emplace(pending_[n], static_cast<std::uint32_t>(first_row + n));
+      field_.index.insert(pending_[n], static_cast<std::uint32_t>(first_row + n));
     field_.evaluations += pending_.size();
     pending_.clear();
     pending_keys_.clear();
@@ -292,10 +292,10 @@ void smooth(SampledField& field, Sampler& sampler,
   }
   // Row indices resolved once, so the iterations are plain array sweeps.
   const std::size_t fc = static_cast<std::size_t>(function_count);
-  std::unordered_map<std::uint64_t, std::uint32_t> lap_index;
+  GridIndex lap_index;
   lap_index.reserve(laplacian_nodes.size());
   for (std::size_t n = 0; n < laplacian_nodes.size(); ++n)
-    lap_index.emplace(laplacian_nodes[n], static_cast<std::uint32_t>(n));
+    lap_index.insert(laplacian_nodes[n], static_cast<std::uint32_t>(n));
   std::vector<std::uint32_t> lap_value_rows(laplacian_nodes.size() * 7);  // centre, 6 neighbours
   for (std::size_t n = 0; n < laplacian_nodes.size(); ++n) {
     int i, j, k;

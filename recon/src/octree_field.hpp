@@ -8,6 +8,7 @@
 #include <unordered_map>
 #include <vector>
 
+#include "grid_index.hpp"
 #include "sonoshape/core/geometry.hpp"
 
 namespace sonoshape::recon {
@@ -46,7 +47,7 @@ struct OctreeOptions {
 struct SampledField {
   Grid grid;
   int function_count = 2;
-  std::unordered_map<std::uint64_t, std::uint32_t> index;  ///< vertex key -> row in values
+  GridIndex index;  ///< vertex key -> row in values
   std::vector<double> values;                               ///< row-major, function_count each
   std::vector<std::uint64_t> surface_cells;  ///< finest cells (key of their min corner) with
                                              ///< corners of different labels; closed under
