@@ -30,10 +30,13 @@ using Tds = CGAL::Triangulation_data_structure_2<Vb, Fb>;
 using Cdt = CGAL::Constrained_Delaunay_triangulation_2<Kernel, Tds, CGAL::Exact_predicates_tag>;
 using MeshCriteria = CGAL::Delaunay_mesh_size_criteria_2<Cdt>;
 
-// Largest edge of the unknown triangles, as a fraction of the box diagonal: the completed values
-// live at the corners and are interpolated linearly, so the triangles must be small enough to
-// follow the completion across the region, not only along its boundary.
-constexpr double kUnknownTriangleSize = 0.06;
+// Largest edge of the unknown triangles: the completed values live at the corners and are
+// interpolated linearly, so the triangles must be small enough to follow the completion across
+// the region, not only along its boundary: an eighth of the side of the slice's unknown area,
+// between these fractions of the box diagonal (large unknown areas, such as everything outside a
+// field of view, get coarser triangles, which keeps the field's cost bounded).
+constexpr double kUnknownTriangleFraction = 0.125;
+constexpr double kUnknownTriangleMin = 0.03, kUnknownTriangleMax = 0.12;
 
 // The completion reads the known faces of the cells within this many group-adjacency steps of a
 // triangle's face. With fields of view every slice has unknown parts and groups grow to the whole
@@ -81,9 +84,15 @@ void CellField::triangulate_unknown(int slice,
   for (const UnknownComponent& component : s.unknown)
     for (std::size_t r = 1; r < component.rings.size(); ++r)
       if (const auto p = interior_point(component.rings[r])) known_seeds.emplace_back(p->x(), p->y());
+  double unknown_area = 0.0;
+  for (const UnknownComponent& component : s.unknown)
+    for (const Ring2& ring : component.rings) unknown_area += signed_area(ring);
+  const double diagonal = arrangement_.box().diagonal();
+  const double triangle_size =
+      std::clamp(kUnknownTriangleFraction * std::sqrt(std::max(unknown_area, 0.0)),
+                 kUnknownTriangleMin * diagonal, kUnknownTriangleMax * diagonal);
   CGAL::refine_Delaunay_mesh_2(cdt, known_seeds.begin(), known_seeds.end(),
-                               MeshCriteria(0.125, kUnknownTriangleSize * arrangement_.box().diagonal()),
-                               false);
+                               MeshCriteria(0.125, triangle_size), false);
   // The faces of this slice, as constraints too, so that every triangle lies in one face.
   struct SliceFace {
     int id;
