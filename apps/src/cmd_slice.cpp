@@ -37,6 +37,7 @@ struct SliceOptions {
   std::filesystem::path truth_dir;
   bool skip_invalid = false;
   double unknown_fraction = 0.0;
+  double unknown_radius = 0.03;
   std::string fov = "none";
 };
 
@@ -132,6 +133,7 @@ int run_slice(const SliceOptions& options) {
   if (options.unknown_fraction > 0.0 || options.fov != "none") {
     sim::UnknownOptions unknowns;
     unknowns.fraction = options.unknown_fraction;
+    unknowns.blob_radius = options.unknown_radius;
     unknowns.fov = sim::parse_fov_shape(options.fov);
     unknowns.seed = options.seed + 1;
     sim::add_unknowns(set, unknowns);
@@ -214,6 +216,10 @@ CommandRunner add_slice_command(CLI::App& app) {
   app.add_option("--unknown", options->unknown_fraction,
                  "Share of slices that get a random unknown blob over a contour (0-1)")
       ->check(CLI::Range(0.0, 1.0))
+      ->capture_default_str();
+  app.add_option("--unknown-radius", options->unknown_radius,
+                 "Mean radius of the unknown blobs, as a fraction of the box diagonal")
+      ->check(CLI::Range(0.001, 0.5))
       ->capture_default_str();
   app.add_option("--fov", options->fov,
                  "Field of view of every slice: sector (60 deg fan, 80 mm deep) or rect "

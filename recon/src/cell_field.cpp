@@ -201,6 +201,10 @@ void CellField::build_face_image(int face_id, const std::vector<PreparedSlice>& 
                                      static_cast<std::uint32_t>(clipped.size())});
       points_.insert(points_.end(), clipped.begin(), clipped.end());
     }
+  double unknown_area = 0.0;
+  for (const FaceImage::Part& part : image.unknown_parts)
+    unknown_area += signed_area(Ring2(points_.begin() + part.begin, points_.begin() + part.begin + part.count));
+  image.fully_unknown = unknown_area >= (1.0 - 1e-9) * std::abs(signed_area(polygon));
 }
 
 std::size_t CellField::cell_edge_count(int cell) const {

@@ -42,6 +42,7 @@ struct FaceImage {
   };
   std::vector<Part> parts;
   std::vector<Part> unknown_parts;  ///< the unknown set clipped to the face (material unused)
+  bool fully_unknown = false;        ///< no known data on the face at all
   std::uint32_t triangle_begin = 0, triangle_count = 0;  ///< completed unknown triangles
 };
 

@@ -219,7 +219,9 @@ void CellField::complete_unknown() {
     std::vector<int> local_faces;
     for (const int c : cells)
       for (const int g : arrangement_.cell(c).faces)
-        if (arrangement_.face(g).plane != face.plane) local_faces.push_back(g);
+        // Faces without known data add nothing to the 3D part.
+        if (arrangement_.face(g).plane != face.plane && !images_[static_cast<std::size_t>(g)].fully_unknown)
+          local_faces.push_back(g);
     std::sort(local_faces.begin(), local_faces.end());
     local_faces.erase(std::unique(local_faces.begin(), local_faces.end()), local_faces.end());
 

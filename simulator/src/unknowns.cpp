@@ -154,7 +154,7 @@ void add_unknowns(SliceSet& set, const UnknownOptions& options) {
       if (r.label != kUnknownLabel) candidates.insert(candidates.end(), r.outer.begin(), r.outer.end());
     if (candidates.empty()) continue;
     const Vec2 center = candidates[static_cast<std::size_t>(unit(rng) * candidates.size()) % candidates.size()];
-    const double radius = (0.04 + 0.04 * unit(rng)) * diagonal;
+    const double radius = options.blob_radius * (0.67 + 0.66 * unit(rng)) * diagonal;
     Ring2 blob;
     for (int k = 0; k < 16; ++k) {
       const double a = 2.0 * std::numbers::pi * (k + 0.3 * unit(rng)) / 16.0;

@@ -16,6 +16,7 @@ FovShape parse_fov_shape(const std::string& name);
 
 struct UnknownOptions {
   double fraction = 0.0;          ///< share of slices that get an unknown blob over a contour
+  double blob_radius = 0.03;      ///< mean blob radius, fraction of the bounds' diagonal
   FovShape fov = FovShape::kNone;
   double fov_depth_mm = 80.0;     ///< sector radius / rectangle depth
   double fan_angle_deg = 60.0;    ///< sector opening
