@@ -1,5 +1,7 @@
 // `.csl` contour files: reading real-world quirks, the errors, writing, and a JSON round trip.
 #include <gtest/gtest.h>
+
+#include "sonoshape/testing/temp_dir.hpp"
 #include <unistd.h>
 
 #include <atomic>
@@ -11,30 +13,9 @@
 namespace sonoshape {
 namespace {
 
-::testing::AssertionResult contains(const std::string& text, const std::string& part) {
-  if (text.find(part) != std::string::npos) return ::testing::AssertionSuccess();
-  return ::testing::AssertionFailure() << "\"" << part << "\" not found in:\n" << text;
-}
+using sonoshape::testing::contains;
 
-class TempDir {
- public:
-  TempDir() {
-    static std::atomic<int> counter{0};
-    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-    path_ = std::filesystem::temp_directory_path() /
-            ("sonoshape_csl_io_" + std::to_string(::getpid()) + "_" + info->name() + "_" +
-             std::to_string(counter++));
-    std::filesystem::create_directories(path_);
-  }
-  ~TempDir() {
-    std::error_code ec;
-    std::filesystem::remove_all(path_, ec);
-  }
-  const std::filesystem::path& path() const { return path_; }
-
- private:
-  std::filesystem::path path_;
-};
+using sonoshape::testing::TempDir;
 
 Result<SliceSet> parse(const std::string& text) { return parse_csl(text, "t.csl"); }
 

@@ -2,6 +2,8 @@
 #include "sonoshape/core/slice_io.hpp"
 
 #include <gtest/gtest.h>
+
+#include "sonoshape/testing/temp_dir.hpp"
 #include <unistd.h>
 
 #include <atomic>
@@ -12,32 +14,9 @@
 namespace sonoshape {
 namespace {
 
-// gmock is not linked: a plain substring assertion with a readable failure.
-::testing::AssertionResult contains(const std::string& text, const std::string& part) {
-  if (text.find(part) != std::string::npos) return ::testing::AssertionSuccess();
-  return ::testing::AssertionFailure() << "\"" << part << "\" not found in:\n" << text;
-}
+using sonoshape::testing::contains;
 
-// A fresh directory under the system temp dir, removed at the end of the test.
-class TempDir {
- public:
-  TempDir() {
-    static std::atomic<int> counter{0};
-    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-    path_ = std::filesystem::temp_directory_path() /
-            ("sonoshape_slice_io_" + std::to_string(::getpid()) + "_" + info->name() + "_" +
-             std::to_string(counter++));
-    std::filesystem::create_directories(path_);
-  }
-  ~TempDir() {
-    std::error_code ec;
-    std::filesystem::remove_all(path_, ec);
-  }
-  const std::filesystem::path& path() const { return path_; }
-
- private:
-  std::filesystem::path path_;
-};
+using sonoshape::testing::TempDir;
 
 // The example of slices.md.
 const char* kSpecExample = R"({

@@ -2,6 +2,8 @@
 #include "sonoshape/publish/mesh_writer.hpp"
 
 #include <gtest/gtest.h>
+
+#include "sonoshape/testing/temp_dir.hpp"
 #include <unistd.h>
 
 #include <atomic>
@@ -14,25 +16,7 @@
 namespace sonoshape::publish {
 namespace {
 
-class TempDir {
- public:
-  TempDir() {
-    static std::atomic<int> counter{0};
-    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-    path_ = std::filesystem::temp_directory_path() /
-            ("sonoshape_mesh_writer_" + std::to_string(::getpid()) + "_" + info->name() + "_" +
-             std::to_string(counter++));
-    std::filesystem::create_directories(path_);
-  }
-  ~TempDir() {
-    std::error_code ec;
-    std::filesystem::remove_all(path_, ec);
-  }
-  const std::filesystem::path& path() const { return path_; }
-
- private:
-  std::filesystem::path path_;
-};
+using sonoshape::testing::TempDir;
 
 std::string read_bytes(const std::filesystem::path& path) {
   std::ifstream in(path, std::ios::binary);
