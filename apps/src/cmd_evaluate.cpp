@@ -72,8 +72,10 @@ Result<MeshSet> read_reconstruction(const fs::path& path) {
                            " holds no label_<id>.ply/.obj/.off mesh");
     std::sort(files.begin(), files.end());
     for (const auto& [label, file] : files) {
-      auto mesh = sim::read_mesh(file);
+      auto mesh = sim::read_mesh(file, /*allow_empty=*/true);
       if (!mesh) return mesh.status();
+      // A material that vanished is written empty; it scores as not reconstructed.
+      if (mesh->empty()) continue;
       add_mesh(set, label, "label_" + std::to_string(label), std::move(*mesh));
     }
     return set;

@@ -15,5 +15,6 @@ CommandRunner add_reconstruct_command(CLI::App& app);
 CommandRunner add_slice_command(CLI::App& app);
 CommandRunner add_evaluate_command(CLI::App& app);
 CommandRunner add_simulate_command(CLI::App& app);
+CommandRunner add_segment_command(CLI::App& app);
 
 }  // namespace sonoshape::apps

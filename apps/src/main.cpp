@@ -33,6 +33,8 @@ int main(int argc, char** argv) {
       sonoshape::apps::add_evaluate_command);
   add("simulate", "Simulate a tracked freehand ultrasound sweep of a virtual patient (.igs.mha)",
       sonoshape::apps::add_simulate_command);
+  add("segment", "Segment a tracked sweep (.igs.mha) into a slice set (one slice per frame)",
+      sonoshape::apps::add_segment_command);
 
   try {
     app.parse(argc, argv);

@@ -411,7 +411,7 @@ TriangleMesh parse_ply(std::string_view text) {
 
 }  // namespace
 
-Result<TriangleMesh> read_mesh(const std::filesystem::path& path) {
+Result<TriangleMesh> read_mesh(const std::filesystem::path& path, bool allow_empty) {
   std::ifstream in(path, std::ios::binary);
   if (!in)
     return Status::error("cannot open mesh file " + path.string() +
@@ -434,7 +434,7 @@ Result<TriangleMesh> read_mesh(const std::filesystem::path& path) {
   } catch (const ParseError& e) {
     return Status::error("mesh file " + path.string() + ": " + e.message);
   }
-  if (mesh.triangles.empty())
+  if (mesh.triangles.empty() && !allow_empty)
     return Status::error("mesh file " + path.string() + ": no faces (a closed mesh is needed)");
   return mesh;
 }

@@ -8,8 +8,9 @@
 namespace sonoshape::sim {
 
 /// Reads a triangle mesh (polygons are fan-triangulated). Fails with file and reason on
-/// unreadable files, unsupported formats and out-of-range indices.
-Result<TriangleMesh> read_mesh(const std::filesystem::path& path);
+/// unreadable files, unsupported formats and out-of-range indices, and on files without faces
+/// unless `allow_empty` (a reconstruction writes an empty mesh for a material that vanished).
+Result<TriangleMesh> read_mesh(const std::filesystem::path& path, bool allow_empty = false);
 
 /// Makes a closed mesh outward-oriented (reverses every triangle when its volume is negative).
 void orient_outward(TriangleMesh& mesh);

@@ -1,0 +1,120 @@
+// `sonoshape segment`: a tracked sweep (PLUS sequence file) -> slice set, one slice per frame
+// with a valid pose: label map by segmentation/, polygons in the reference frame, fov = sector.
+#include <CLI/CLI.hpp>
+#include <filesystem>
+#include <iostream>
+#include <memory>
+#include <optional>
+#include <sstream>
+
+#include "commands.hpp"
+#include "sonoshape/acquisition/sequence_file.hpp"
+#include "sonoshape/core/log.hpp"
+#include "sonoshape/core/slice_io.hpp"
+#include "sonoshape/segmentation/sweep.hpp"
+
+namespace sonoshape::apps {
+namespace {
+
+struct SegmentOptions {
+  std::filesystem::path input;
+  std::filesystem::path config;
+  std::filesystem::path calibration;
+  int every = 1;
+  std::filesystem::path output = "slices.json";
+};
+
+int run_segment(const SegmentOptions& options) {
+  Stopwatch clock;
+  const auto file = acq::read_sequence_file(options.input);
+  if (!file) {
+    std::cerr << "error: " << file.message() << '\n';
+    return 1;
+  }
+  auto optional_path = [](const std::filesystem::path& p) {
+    return p.empty() ? std::nullopt : std::optional<std::filesystem::path>(p);
+  };
+  const auto setup = seg::prepare_sweep(*file, options.input, optional_path(options.config),
+                                        optional_path(options.calibration));
+  if (!setup) {
+    std::cerr << "error: " << setup.message() << '\n';
+    return 1;
+  }
+  std::ostringstream models;
+  models << "background " << setup->config.background.grey_mean;
+  for (const auto& m : setup->config.materials)
+    models << ", " << m.label << ":" << m.name << " " << m.grey_mean;
+  log_info("segment: models from " + setup->models_from + " (grey means: " + models.str() +
+           "); calibration from " + setup->calibration_from + "; sector from " +
+           setup->sector_from);
+
+  const std::size_t considered =
+      (file->frame_count() + static_cast<std::size_t>(options.every) - 1) /
+      static_cast<std::size_t>(options.every);
+  seg::SweepSegmentation result;
+  {
+    Progress progress("segment", considered);
+    result = seg::segment_sweep(*file, *setup, options.every,
+                                [&](std::size_t done) { progress.update(done); });
+  }
+  if (result.slices.slices.empty()) {
+    std::cerr << "error: no frame of " << options.input.string()
+              << " gave a slice (frames with INVALID pose: " << result.invalid_pose
+              << ", failed: " << result.failed << "); nothing written\n";
+    return 1;
+  }
+  if (const Status valid = validate_slice_set(result.slices, options.output.string()); !valid) {
+    std::cerr << "error: the segmented slices are not a valid slice set (a bug; please report "
+                 "it with the input):\n"
+              << valid.message() << '\n';
+    return 1;
+  }
+  std::error_code ec;
+  if (!options.output.parent_path().empty())
+    std::filesystem::create_directories(options.output.parent_path(), ec);
+  if (const Status written = write_slice_set(result.slices, options.output); !written) {
+    std::cerr << "error: " << written.message() << '\n';
+    return 1;
+  }
+  std::size_t regions = 0, unknown = 0;
+  for (const LabeledSlice& s : result.slices.slices)
+    for (const Region& r : s.regions) (r.label == kUnknownLabel ? unknown : regions) += 1;
+  std::ostringstream summary;
+  summary << "segment: " << result.slices.slices.size() << " slices from " << result.frames
+          << " frames (every " << options.every << ": " << result.considered << " considered, "
+          << result.invalid_pose << " skipped for INVALID pose, " << result.coincident
+          << " coinciding with an earlier plane, " << result.failed << " failed); " << regions
+          << " material regions, " << unknown << " unknown regions, "
+          << static_cast<int>(100.0 * result.unknown_fraction + 0.5)
+          << "% of the sector unknown on average; " << clock.seconds() << " s -> "
+          << options.output.string();
+  log_info(summary.str());
+  return 0;
+}
+
+}  // namespace
+
+CommandRunner add_segment_command(CLI::App& app) {
+  auto options = std::make_shared<SegmentOptions>();
+  app.add_option("sweep", options->input, "Tracked sweep: PLUS sequence file (.igs.mha, .seq.mha)")
+      ->required()
+      ->check(CLI::ExistingFile);
+  app.add_option("--config", options->config,
+                 "Segmentation config JSON (label grey models, filters, sector; see "
+                 "docs/segmentation.md). Default: the models `sonoshape simulate` writes in the "
+                 "header, else a two-class split of the data")
+      ->check(CLI::ExistingFile);
+  app.add_option("--calibration", options->calibration,
+                 "ImageToProbe calibration: PLUS device-set XML or JSON {\"ImageToProbe\": [16 "
+                 "numbers]}. Default: the header's ImageToProbeTransform, else <name>.plus.xml "
+                 "next to the sweep")
+      ->check(CLI::ExistingFile);
+  app.add_option("--every", options->every, "Keep every K-th frame (from the first)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  app.add_option("-o,--output", options->output, "Slice set to write (.slices.json / .json)")
+      ->capture_default_str();
+  return [options] { return run_segment(*options); };
+}
+
+}  // namespace sonoshape::apps

@@ -1,0 +1,98 @@
+#pragma once
+// What the segmenter knows about the materials of an image: one grey-level model per label, and
+// the parameters of filtering, shadow detection, morphology and simplification (all lengths in
+// mm, so one configuration serves images of any pixel spacing). The JSON form is documented in
+// docs/segmentation.md.
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "sonoshape/core/geometry.hpp"
+#include "sonoshape/core/image.hpp"
+#include "sonoshape/core/status.hpp"
+
+namespace sonoshape::seg {
+
+/// Grey-level model of one label: the mean and spread of its B-mode grey (0..255) over the
+/// known pixels of typical frames (what the simulator writes as SonoshapeLabelGreyMean/Std).
+struct LabelModel {
+  int label = 1;  ///< material id 1..254; 0 for the background (the outside material)
+  std::string name;
+  double grey_mean = 128.0;
+  double grey_std = 25.0;
+};
+
+/// Where the image sector (the part of the frame the probe sees) comes from.
+enum class SectorSource {
+  kDefault,  ///< the sequence header's probe (simulated sweeps), else kAuto
+  kAuto,     ///< pixels that carry signal in some frame (largest component, filled)
+  kFull,     ///< the whole image
+  kPolygon,  ///< SegmentationConfig::sector_polygon_px
+};
+
+/// Segmentation parameters. Defaults suit the simulator's frames; lengths are in mm.
+struct SegmentationConfig {
+  LabelModel background{0, "background", 120.0, 28.0};
+  std::vector<LabelModel> materials;  ///< ids >= 1, distinct; empty: see auto_two_class
+
+  /// Speckle reduction: median filter (pixels, odd, >= 1) then Gaussian of this sigma (mm).
+  int median_px = 5;
+  double smoothing_mm = 0.8;
+  /// Window (Gaussian sigma, mm) of the local mean and standard deviation behind confidence.
+  double confidence_window_mm = 1.0;
+  /// A pixel is dark when its grey is at most shadow_grey; where more than shadow_fraction of
+  /// the pixels in the confidence window are dark, there is no signal (shadow, lost signal):
+  /// unknown. Speckle of any tissue keeps a large spread in log-compressed grey, so even dark
+  /// tissue rarely passes. Negative shadow_grey: derived from the darkest label (see
+  /// effective_shadow_grey).
+  double shadow_grey = -1.0;
+  double shadow_fraction = 0.85;
+  /// Unknown areas grow by this margin (mm): their edges are where confidence is lowest.
+  double shadow_margin_mm = 1.5;
+  /// Beyond this depth (mm along the beam) nothing is trusted; 0: no limit.
+  double max_depth_mm = 0.0;
+  /// Removes the residual depth trend of the grey (attenuation not undone by time-gain
+  /// compensation), fitted per frame as a line in depth.
+  bool depth_compensation = true;
+  /// Morphological opening radius (mm) of every label's mask: thinner bits are re-labelled from
+  /// their neighbours.
+  double opening_mm = 0.6;
+  /// Connected components smaller than this (mm^2) are re-labelled from their surroundings.
+  double min_region_mm2 = 5.0;
+  /// Polygon simplification tolerance (mm, approxPolyDP); reduced per slice where the
+  /// simplified polygons would not be valid.
+  double simplify_mm = 0.3;
+
+  SectorSource sector = SectorSource::kDefault;
+  Ring2 sector_polygon_px;  ///< kPolygon: the sector in pixel coordinates (column, row)
+  /// kAuto: a pixel carries signal when its median-filtered grey exceeds this in some frame.
+  double sector_signal_grey = 6.0;
+
+  /// The shadow grey in effect: shadow_grey, or 40% of the darkest label's mean, in [6, 50].
+  double effective_shadow_grey() const;
+  /// Checks ranges and label ids; the message names the field and the fix.
+  Status validate() const;
+};
+
+/// Parses the JSON form (docs/segmentation.md); `source_name` names the input in messages.
+/// Unknown keys are errors (a misspelt key must not be silently ignored).
+Result<SegmentationConfig> parse_segmentation_config(const std::string& json_text,
+                                                     const std::string& source_name);
+/// Reads a JSON configuration file.
+Result<SegmentationConfig> read_segmentation_config(const std::filesystem::path& path);
+/// The JSON form of a configuration (round trips through parse_segmentation_config).
+std::string to_json(const SegmentationConfig& config);
+
+/// Learns the grey models of every label of a labelled example: `labels` holds 0 for the
+/// background, material ids, and kLabelPixelUnknown (ignored). Sizes must match (throws
+/// std::invalid_argument otherwise). Other parameters are copied from `base`.
+SegmentationConfig learn_label_models(const GreyImage& image, const LabelImage& labels,
+                                      const SegmentationConfig& base = {});
+
+/// A two-class model for data nobody has labelled: the grey levels of `samples` (any pixels of
+/// the sector) split in two by k-means; the darker class is the background and the brighter
+/// one material 1 ("echogenic"). Used when neither a configuration nor the header gives models.
+SegmentationConfig auto_two_class(const std::vector<std::uint8_t>& samples,
+                                  const SegmentationConfig& base = {});
+
+}  // namespace sonoshape::seg

@@ -1,0 +1,49 @@
+#pragma once
+// Label map -> polygons with holes in mm -> LabeledSlice in the reference frame.
+#include <Eigen/Core>
+#include <vector>
+
+#include "sonoshape/core/image.hpp"
+#include "sonoshape/core/slice.hpp"
+#include "sonoshape/core/status.hpp"
+
+namespace sonoshape::seg {
+
+/// The plane of an image in the reference frame and the map from pixels to its (u, v) mm.
+struct ImagePlane {
+  Vec3 origin_mm = Vec3::Zero();  ///< the probe origin projected onto the image plane
+  Vec3 u = Vec3::UnitX();         ///< along increasing columns
+  Vec3 v = Vec3::UnitY();         ///< orthogonal to u, towards increasing rows
+  /// Pixel (column i, row j) -> plane (a, b) mm: [a b]^T = pixel_to_plane * [i j 1]^T.
+  Eigen::Matrix<double, 2, 3> pixel_to_plane = Eigen::Matrix<double, 2, 3>::Zero();
+
+  Vec2 to_plane(double i, double j) const { return pixel_to_plane * Eigen::Vector3d(i, j, 1.0); }
+  /// mm per pixel, geometric mean of the two directions.
+  double spacing_mm() const;
+};
+
+/// The image plane of T_reference_image = T_reference_probe * T_probe_image (pixels -> mm,
+/// PLUS ImageToReference; may include scale and a small shear, as real calibrations do): u and
+/// v are the orthonormalised images of the pixel axes. `probe_origin_mm` (the probe's origin in
+/// the reference frame) is projected onto the plane to become its origin, so that a calibration
+/// without shear gives plane coordinates equal to the probe's (x, y) mm. Throws GeometryError
+/// when the pixel axes are degenerate.
+ImagePlane image_plane(const Eigen::Matrix4d& T_reference_image, const Vec3& probe_origin_mm);
+
+/// The regions of a label map: for every material id and for unknown pixels inside `sector`
+/// (pixels outside it are left to the slice's fov), contours from cv::findContours with
+/// RETR_CCOMP (outer rings and holes), simplified with approxPolyDP by `tolerance_mm` (0: the
+/// exact pixel-centre outlines), mapped into the plane. Components of fewer than 3 contour points
+/// are dropped.
+std::vector<Region> label_map_regions(const LabelImage& labels, const ImageU8& sector,
+                                      const ImagePlane& plane, double tolerance_mm);
+
+/// A LabeledSlice of a segmented frame: the plane, the fov (`sector_px` mapped into the plane),
+/// and the regions simplified by `tolerance_mm` where that gives a valid slice, else by halved
+/// tolerances down to the exact outlines. Fails (with validate_slice_set's message) only when
+/// even the exact outlines are invalid.
+Result<LabeledSlice> make_slice(const LabelImage& labels, const ImageU8& sector,
+                                const Ring2& sector_px, const ImagePlane& plane,
+                                double tolerance_mm);
+
+}  // namespace sonoshape::seg

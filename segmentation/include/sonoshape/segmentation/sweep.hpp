@@ -1,0 +1,80 @@
+#pragma once
+// A whole tracked sweep (PLUS sequence file) -> slice set: the setup (label models, sector,
+// calibration) from a configuration, the header `sonoshape simulate` writes, or the data, then
+// one slice per frame with a valid pose.
+#include <Eigen/Core>
+#include <cstddef>
+#include <filesystem>
+#include <functional>
+#include <optional>
+#include <string>
+
+#include "sonoshape/acquisition/sequence_file.hpp"
+#include "sonoshape/core/slice.hpp"
+#include "sonoshape/core/status.hpp"
+#include "sonoshape/segmentation/config.hpp"
+#include "sonoshape/segmentation/segmenter.hpp"
+
+namespace sonoshape::seg {
+
+/// Everything segment_sweep needs besides the frames.
+struct SweepSetup {
+  SegmentationConfig config;
+  ImageGeometry geometry;
+  Eigen::Matrix4d T_probe_image = Eigen::Matrix4d::Identity();  ///< PLUS ImageToProbe
+  std::string models_from;       ///< "config", "header", "two-class k-means"
+  std::string calibration_from;  ///< where T_probe_image came from
+  std::string sector_from;       ///< "header probe", "auto", "full", "config polygon"
+};
+
+/// The sector, its outline and the beam depth of a simulated sweep, rebuilt from the probe
+/// fields `sonoshape simulate` writes in the header (SonoshapeProbeType, ...); fails naming the
+/// missing or invalid field.
+Result<ImageGeometry> geometry_from_header(const acq::FieldList& fields);
+
+/// Reads the calibration ImageToProbe from a PLUS device-set XML (<Transform From="Image"
+/// To="Probe">) or a JSON file ({"ImageToProbe": [16 numbers, row-major]}).
+Result<Eigen::Matrix4d> read_calibration(const std::filesystem::path& path);
+
+/// Resolves the setup of a sweep read from `sequence_path`:
+/// - models: `config_path` when given (its materials; when it has none, the header's), else the
+///   header's SonoshapeLabelGreyMean/Std, else auto_two_class on the frames;
+/// - calibration: `calibration_path`, else the header's ImageToProbeTransform, else the
+///   sidecar `<name>.plus.xml` next to the file; fails saying how to give one;
+/// - sector: the config's choice; by default the header's probe, else found from the frames.
+Result<SweepSetup> prepare_sweep(const acq::SequenceFile& file,
+                                 const std::filesystem::path& sequence_path,
+                                 const std::optional<std::filesystem::path>& config_path,
+                                 const std::optional<std::filesystem::path>& calibration_path);
+/// The same from an in-memory configuration (no file), for tests and tools; `config` replaces
+/// the defaults but its empty materials are still taken from the header.
+Result<SweepSetup> prepare_sweep(const acq::SequenceFile& file,
+                                 const std::filesystem::path& sequence_path,
+                                 const std::optional<SegmentationConfig>& config,
+                                 const std::optional<Eigen::Matrix4d>& T_probe_image);
+
+/// The pose of frame k: ReferenceToTracker^-1 * ProbeToTracker (ProbeToTracker alone when the
+/// file has no ReferenceToTracker); none when a status is not OK or a transform is unreadable.
+std::optional<Eigen::Matrix4d> reference_from_probe(const acq::SequenceFile& file, std::size_t k);
+
+/// What segment_sweep did.
+struct SweepSegmentation {
+  SliceSet slices;
+  std::size_t frames = 0;         ///< frames in the file
+  std::size_t considered = 0;     ///< frames kept by `every`
+  std::size_t invalid_pose = 0;   ///< skipped: INVALID or unreadable pose
+  std::size_t coincident = 0;     ///< skipped: same plane as the previous slice
+  std::size_t failed = 0;         ///< skipped: no valid polygons (see the log)
+  double unknown_fraction = 0.0;  ///< mean share of the sector left unknown
+};
+
+/// Called with the number of considered frames done.
+using SweepProgress = std::function<void(std::size_t done)>;
+
+/// Segments every `every`-th frame (from frame 0) of `file` into one slice each (in the
+/// reference frame, fov = the sector, timestamp from the file). Throws std::invalid_argument
+/// when `every` < 1 or the frames do not match the setup's geometry.
+SweepSegmentation segment_sweep(const acq::SequenceFile& file, const SweepSetup& setup,
+                                int every = 1, const SweepProgress& progress = {});
+
+}  // namespace sonoshape::seg

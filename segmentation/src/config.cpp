@@ -1,0 +1,322 @@
+#include "sonoshape/segmentation/config.hpp"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <opencv2/core.hpp>
+#include <set>
+#include <sstream>
+#include <stdexcept>
+
+namespace sonoshape::seg {
+namespace {
+
+using nlohmann::json;
+
+constexpr const char* kFormat = "sonoshape-segmentation";
+constexpr int kVersion = 1;
+
+// Thrown inside the parser only; parse_segmentation_config turns it into a Status.
+struct ConfigProblem {
+  std::string where;
+  std::string what;
+};
+
+double number_at(const json& j, const std::string& where) {
+  if (!j.is_number()) throw ConfigProblem{where, "expected a number, got " + j.dump()};
+  const double value = j.get<double>();
+  if (!std::isfinite(value)) throw ConfigProblem{where, "not a finite number"};
+  return value;
+}
+
+LabelModel read_model(const json& j, const std::string& where, bool is_background) {
+  if (!j.is_object()) throw ConfigProblem{where, "expected an object"};
+  LabelModel model;
+  model.label = 0;
+  for (const auto& [key, value] : j.items()) {
+    if (key == "id" && !is_background) {
+      if (!value.is_number_integer()) throw ConfigProblem{where + ".id", "expected an integer"};
+      model.label = value.get<int>();
+    } else if (key == "name") {
+      if (!value.is_string()) throw ConfigProblem{where + ".name", "expected a string"};
+      model.name = value.get<std::string>();
+    } else if (key == "grey_mean") {
+      model.grey_mean = number_at(value, where + ".grey_mean");
+    } else if (key == "grey_std") {
+      model.grey_std = number_at(value, where + ".grey_std");
+    } else {
+      throw ConfigProblem{where, "unknown key '" + key + "' (known: " +
+                                     (is_background ? "" : "id, ") + "name, grey_mean, grey_std)"};
+    }
+  }
+  if (!is_background && !j.contains("id")) throw ConfigProblem{where, "missing 'id'"};
+  if (!j.contains("grey_mean")) throw ConfigProblem{where, "missing 'grey_mean'"};
+  if (is_background && model.name.empty()) model.name = "background";
+  return model;
+}
+
+json model_json(const LabelModel& m, bool with_id) {
+  json j;
+  if (with_id) j["id"] = m.label;
+  j["name"] = m.name;
+  j["grey_mean"] = m.grey_mean;
+  j["grey_std"] = m.grey_std;
+  return j;
+}
+
+}  // namespace
+
+double SegmentationConfig::effective_shadow_grey() const {
+  if (shadow_grey >= 0.0) return shadow_grey;
+  double darkest = background.grey_mean;
+  for (const LabelModel& m : materials) darkest = std::min(darkest, m.grey_mean);
+  return std::clamp(0.4 * darkest, 6.0, 50.0);
+}
+
+Status SegmentationConfig::validate() const {
+  std::set<int> ids;
+  for (const LabelModel& m : materials) {
+    if (m.label < 1 || m.label > kMaxPixelLabel)
+      return Status::error("segmentation config: material id " + std::to_string(m.label) +
+                           " is outside 1.." + std::to_string(kMaxPixelLabel) +
+                           " (0 is the background, give it as \"background\")");
+    if (!ids.insert(m.label).second)
+      return Status::error("segmentation config: material id " + std::to_string(m.label) +
+                           " is given twice; give each label one model");
+  }
+  for (const LabelModel* m : [&] {
+         std::vector<const LabelModel*> all{&background};
+         for (const LabelModel& x : materials) all.push_back(&x);
+         return all;
+       }())
+    if (!(m->grey_std > 0.0) || m->grey_mean < 0.0 || m->grey_mean > 255.0)
+      return Status::error("segmentation config: label " + std::to_string(m->label) +
+                           " needs grey_mean in 0..255 and grey_std > 0");
+  if (median_px < 1 || median_px % 2 == 0 || median_px > 31)
+    return Status::error("segmentation config: median_px must be odd, 1..31 (got " +
+                         std::to_string(median_px) + ")");
+  for (const auto& [name, value] : std::array<std::pair<const char*, double>, 8>{
+           {{"smoothing_mm", smoothing_mm},
+            {"confidence_window_mm", confidence_window_mm},
+            {"shadow_fraction", shadow_fraction},
+            {"shadow_margin_mm", shadow_margin_mm},
+            {"max_depth_mm", max_depth_mm},
+            {"opening_mm", opening_mm},
+            {"min_region_mm2", min_region_mm2},
+            {"simplify_mm", simplify_mm}}})
+    if (!(value >= 0.0) || !std::isfinite(value))
+      return Status::error(std::string("segmentation config: ") + name +
+                           " must be a finite number >= 0");
+  if (shadow_fraction > 1.0)
+    return Status::error("segmentation config: shadow_fraction must be in 0..1");
+  if (!(confidence_window_mm > 0.0))
+    return Status::error("segmentation config: confidence_window_mm must be > 0");
+  if (sector == SectorSource::kPolygon && sector_polygon_px.size() < 3)
+    return Status::error("segmentation config: a sector polygon needs at least 3 points");
+  return Status::ok();
+}
+
+Result<SegmentationConfig> parse_segmentation_config(const std::string& json_text,
+                                                     const std::string& source_name) {
+  json doc;
+  try {
+    doc = json::parse(json_text);
+  } catch (const json::parse_error& e) {
+    return Status::error(source_name + ": not valid JSON (" + e.what() + ")");
+  }
+  SegmentationConfig config;
+  try {
+    if (!doc.is_object()) throw ConfigProblem{"top level", "expected an object"};
+    if (doc.value("format", std::string()) != kFormat)
+      throw ConfigProblem{"format", std::string("must be \"") + kFormat + "\""};
+    if (doc.value("version", 0) != kVersion)
+      throw ConfigProblem{"version", "must be " + std::to_string(kVersion)};
+    for (const auto& [key, value] : doc.items()) {
+      if (key == "format" || key == "version") continue;
+      if (key == "background") {
+        config.background = read_model(value, key, true);
+      } else if (key == "labels") {
+        if (!value.is_array()) throw ConfigProblem{key, "expected an array of label models"};
+        for (std::size_t k = 0; k < value.size(); ++k)
+          config.materials.push_back(
+              read_model(value[k], "labels[" + std::to_string(k) + "]", false));
+      } else if (key == "median_px") {
+        if (!value.is_number_integer()) throw ConfigProblem{key, "expected an integer"};
+        config.median_px = value.get<int>();
+      } else if (key == "depth_compensation") {
+        if (!value.is_boolean()) throw ConfigProblem{key, "expected true or false"};
+        config.depth_compensation = value.get<bool>();
+      } else if (key == "sector") {
+        if (value.is_string()) {
+          const std::string s = value.get<std::string>();
+          if (s == "auto")
+            config.sector = SectorSource::kAuto;
+          else if (s == "full")
+            config.sector = SectorSource::kFull;
+          else if (s == "default")
+            config.sector = SectorSource::kDefault;
+          else
+            throw ConfigProblem{key, "expected \"default\", \"auto\", \"full\" or a polygon"};
+        } else if (value.is_array()) {
+          config.sector = SectorSource::kPolygon;
+          for (std::size_t k = 0; k < value.size(); ++k) {
+            const std::string where = "sector[" + std::to_string(k) + "]";
+            if (!value[k].is_array() || value[k].size() != 2)
+              throw ConfigProblem{where, "expected [column, row]"};
+            config.sector_polygon_px.emplace_back(number_at(value[k][0], where),
+                                                  number_at(value[k][1], where));
+          }
+        } else {
+          throw ConfigProblem{key, "expected a string or a polygon [[column, row], ...]"};
+        }
+      } else {
+        double* target = key == "smoothing_mm"           ? &config.smoothing_mm
+                         : key == "confidence_window_mm" ? &config.confidence_window_mm
+                         : key == "shadow_grey"          ? &config.shadow_grey
+                         : key == "shadow_fraction"      ? &config.shadow_fraction
+                         : key == "shadow_margin_mm"     ? &config.shadow_margin_mm
+                         : key == "max_depth_mm"         ? &config.max_depth_mm
+                         : key == "opening_mm"           ? &config.opening_mm
+                         : key == "min_region_mm2"       ? &config.min_region_mm2
+                         : key == "simplify_mm"          ? &config.simplify_mm
+                         : key == "sector_signal_grey"   ? &config.sector_signal_grey
+                                                         : nullptr;
+        if (!target)
+          throw ConfigProblem{key, "unknown key; see docs/segmentation.md for the fields"};
+        *target = number_at(value, key);
+      }
+    }
+  } catch (const ConfigProblem& p) {
+    return Status::error(source_name + ": " + p.where + ": " + p.what);
+  }
+  if (Status valid = config.validate(); !valid)
+    return Status::error(source_name + ": " + valid.message());
+  return config;
+}
+
+Result<SegmentationConfig> read_segmentation_config(const std::filesystem::path& path) {
+  std::ifstream in(path);
+  if (!in)
+    return Status::error("cannot read the segmentation config " + path.string() +
+                         ": check the path");
+  std::ostringstream text;
+  text << in.rdbuf();
+  return parse_segmentation_config(text.str(), path.string());
+}
+
+std::string to_json(const SegmentationConfig& c) {
+  json doc;
+  doc["format"] = kFormat;
+  doc["version"] = kVersion;
+  doc["background"] = model_json(c.background, false);
+  doc["labels"] = json::array();
+  for (const LabelModel& m : c.materials) doc["labels"].push_back(model_json(m, true));
+  doc["median_px"] = c.median_px;
+  doc["smoothing_mm"] = c.smoothing_mm;
+  doc["confidence_window_mm"] = c.confidence_window_mm;
+  doc["shadow_grey"] = c.shadow_grey;
+  doc["shadow_fraction"] = c.shadow_fraction;
+  doc["shadow_margin_mm"] = c.shadow_margin_mm;
+  doc["max_depth_mm"] = c.max_depth_mm;
+  doc["depth_compensation"] = c.depth_compensation;
+  doc["opening_mm"] = c.opening_mm;
+  doc["min_region_mm2"] = c.min_region_mm2;
+  doc["simplify_mm"] = c.simplify_mm;
+  doc["sector_signal_grey"] = c.sector_signal_grey;
+  switch (c.sector) {
+    case SectorSource::kDefault:
+      doc["sector"] = "default";
+      break;
+    case SectorSource::kAuto:
+      doc["sector"] = "auto";
+      break;
+    case SectorSource::kFull:
+      doc["sector"] = "full";
+      break;
+    case SectorSource::kPolygon: {
+      json ring = json::array();
+      for (const Vec2& p : c.sector_polygon_px) ring.push_back({p.x(), p.y()});
+      doc["sector"] = ring;
+      break;
+    }
+  }
+  return doc.dump(2);
+}
+
+SegmentationConfig learn_label_models(const GreyImage& image, const LabelImage& labels,
+                                      const SegmentationConfig& base) {
+  if (image.width != labels.width || image.height != labels.height ||
+      image.pixels.size() != labels.pixels.size())
+    throw std::invalid_argument("learn_label_models: image and label map differ in size");
+  std::array<double, 256> sum{}, sum_sq{}, count{};
+  for (std::size_t p = 0; p < image.pixels.size(); ++p) {
+    const std::uint8_t l = labels.pixels[p];
+    if (l == kLabelPixelUnknown) continue;
+    const double g = image.pixels[p];
+    sum[l] += g;
+    sum_sq[l] += g * g;
+    count[l] += 1.0;
+  }
+  SegmentationConfig config = base;
+  config.materials.clear();
+  for (int l = 0; l <= kMaxPixelLabel; ++l) {
+    const auto k = static_cast<std::size_t>(l);
+    if (count[k] == 0.0) continue;
+    LabelModel m;
+    m.label = l;
+    m.grey_mean = sum[k] / count[k];
+    m.grey_std =
+        std::max(1.0, std::sqrt(std::max(0.0, sum_sq[k] / count[k] - m.grey_mean * m.grey_mean)));
+    if (l == 0) {
+      m.name = "background";
+      config.background = m;
+    } else {
+      // Keep names the base configuration gives.
+      m.name = "label_" + std::to_string(l);
+      for (const LabelModel& b : base.materials)
+        if (b.label == l && !b.name.empty()) m.name = b.name;
+      config.materials.push_back(m);
+    }
+  }
+  return config;
+}
+
+SegmentationConfig auto_two_class(const std::vector<std::uint8_t>& samples,
+                                  const SegmentationConfig& base) {
+  SegmentationConfig config = base;
+  config.materials.clear();
+  if (samples.size() < 2) {
+    config.materials.push_back({1, "echogenic", 200.0, 25.0});
+    return config;
+  }
+  cv::Mat data(static_cast<int>(samples.size()), 1, CV_32F);
+  for (std::size_t k = 0; k < samples.size(); ++k) data.at<float>(static_cast<int>(k)) = samples[k];
+  cv::Mat assignment, centres;
+  cv::setRNGSeed(1);  // k-means++ seeding: deterministic runs
+  cv::kmeans(data, 2, assignment,
+             cv::TermCriteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 50, 0.1), 3,
+             cv::KMEANS_PP_CENTERS, centres);
+  std::array<double, 2> sum{}, sum_sq{}, count{};
+  for (int k = 0; k < data.rows; ++k) {
+    const auto c = static_cast<std::size_t>(assignment.at<int>(k));
+    const double g = data.at<float>(k);
+    sum[c] += g;
+    sum_sq[c] += g * g;
+    count[c] += 1.0;
+  }
+  std::array<LabelModel, 2> models;
+  for (std::size_t c = 0; c < 2; ++c) {
+    const double n = std::max(count[c], 1.0);
+    models[c].grey_mean = sum[c] / n;
+    models[c].grey_std = std::max(
+        1.0, std::sqrt(std::max(0.0, sum_sq[c] / n - models[c].grey_mean * models[c].grey_mean)));
+  }
+  if (models[0].grey_mean > models[1].grey_mean) std::swap(models[0], models[1]);
+  config.background = {0, "background", models[0].grey_mean, models[0].grey_std};
+  config.materials.push_back({1, "echogenic", models[1].grey_mean, models[1].grey_std});
+  return config;
+}
+
+}  // namespace sonoshape::seg

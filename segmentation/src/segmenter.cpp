@@ -1,0 +1,507 @@
+#include "sonoshape/segmentation/segmenter.hpp"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+#include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
+#include <stdexcept>
+
+namespace sonoshape::seg {
+namespace {
+
+// Depth bins (mm) of the initial trend estimate, and the fewest pixels a bin needs to count.
+constexpr double kDepthBinMm = 2.0;
+constexpr int kMinBinPixels = 30;
+// Refinements of the depth trend from the classified pixels (an EM-like alternation).
+constexpr int kTrendIterations = 2;
+// A residual trend steeper than this (grey per mm) is not attenuation but a bad fit.
+constexpr double kMaxSlopeGreyPerMm = 3.0;
+// Passes of the undecided-pixel fill and of the diagonal-contact repair before giving up.
+constexpr int kMaxFillPasses = 200;
+constexpr int kMaxRepairPasses = 20;
+constexpr std::uint8_t kUndecided = 1;
+// A class this much brighter (grey) than every other is a strong reflector (see segment_frame).
+constexpr double kReflectorGapGrey = 60.0;
+
+cv::Mat wrap(const ImageU8& image) {
+  return cv::Mat(image.height, image.width, CV_8U, const_cast<std::uint8_t*>(image.pixels.data()));
+}
+
+ImageU8 to_image(const cv::Mat& mat) {
+  ImageU8 out(mat.cols, mat.rows);
+  for (int j = 0; j < mat.rows; ++j)
+    std::copy(mat.ptr<std::uint8_t>(j), mat.ptr<std::uint8_t>(j) + mat.cols,
+              out.pixels.begin() + static_cast<std::ptrdiff_t>(j) * mat.cols);
+  return out;
+}
+
+cv::Mat disk(double radius_px) {
+  const int r = std::max(0, static_cast<int>(std::lround(radius_px)));
+  return cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * r + 1, 2 * r + 1));
+}
+
+// Depth below the sector's first row in each column, when the geometry gives none.
+std::vector<float> column_depth(const ImageU8& sector, double spacing_mm) {
+  std::vector<float> depth(sector.pixels.size(), 0.0f);
+  for (int i = 0; i < sector.width; ++i) {
+    int top = -1;
+    for (int j = 0; j < sector.height; ++j) {
+      if (top < 0 && sector.at(i, j)) top = j;
+      depth[static_cast<std::size_t>(j) * sector.width + i] =
+          static_cast<float>(top < 0 ? 0.0 : (j - top) * spacing_mm);
+    }
+  }
+  return depth;
+}
+
+// Mean of `src` over a Gaussian window restricted to the mask (normalised convolution), so
+// the black outside the sector does not darken its edges.
+class MaskedBlur {
+ public:
+  MaskedBlur(const cv::Mat& mask01, double sigma_px) : mask_(mask01), sigma_(sigma_px) {
+    cv::GaussianBlur(mask_, weight_, cv::Size(0, 0), sigma_);
+    cv::max(weight_, 1e-4, weight_);
+  }
+  cv::Mat operator()(const cv::Mat& src) const {
+    cv::Mat num;
+    cv::GaussianBlur(src.mul(mask_), num, cv::Size(0, 0), sigma_);
+    return num / weight_;
+  }
+
+ private:
+  cv::Mat mask_, weight_;
+  double sigma_;
+};
+
+// Least-squares line y = a + b x with weights.
+struct Line {
+  double a = 0.0, b = 0.0;
+};
+struct LineFit {
+  double sw = 0, sx = 0, sy = 0, sxx = 0, sxy = 0;
+  void add(double x, double y, double w = 1.0) {
+    sw += w;
+    sx += w * x;
+    sy += w * y;
+    sxx += w * x * x;
+    sxy += w * x * y;
+  }
+  Line solve() const {
+    Line line;
+    if (sw <= 0.0) return line;
+    const double det = sw * sxx - sx * sx;
+    if (std::abs(det) < 1e-9 * std::max(1.0, sw * sxx)) {
+      line.a = sy / sw;
+      return line;
+    }
+    line.b = std::clamp((sw * sxy - sx * sy) / det, -kMaxSlopeGreyPerMm, kMaxSlopeGreyPerMm);
+    line.a = (sy - line.b * sx) / sw;
+    return line;
+  }
+};
+
+// Re-labels undecided pixels (flag set) from their decided 8-neighbours in the sector, by
+// majority, growing inwards; what stays undecided becomes unknown.
+void fill_undecided(cv::Mat& map, cv::Mat& undecided, const cv::Mat& sector) {
+  const int w = map.cols, h = map.rows;
+  std::vector<int> todo;
+  for (int j = 0; j < h; ++j)
+    for (int i = 0; i < w; ++i)
+      if (undecided.at<std::uint8_t>(j, i)) todo.push_back(j * w + i);
+  std::vector<std::pair<int, std::uint8_t>> assigned;
+  for (int pass = 0; pass < kMaxFillPasses && !todo.empty(); ++pass) {
+    assigned.clear();
+    std::vector<int> still;
+    for (const int p : todo) {
+      const int i = p % w, j = p / w;
+      std::array<std::uint8_t, 8> values{};
+      std::array<int, 8> counts{};
+      int distinct = 0;
+      for (int dj = -1; dj <= 1; ++dj)
+        for (int di = -1; di <= 1; ++di) {
+          const int x = i + di, y = j + dj;
+          if ((di == 0 && dj == 0) || x < 0 || y < 0 || x >= w || y >= h) continue;
+          if (!sector.at<std::uint8_t>(y, x) || undecided.at<std::uint8_t>(y, x)) continue;
+          const std::uint8_t v = map.at<std::uint8_t>(y, x);
+          int k = 0;
+          while (k < distinct && values[static_cast<std::size_t>(k)] != v) ++k;
+          if (k == distinct) values[static_cast<std::size_t>(distinct++)] = v;
+          ++counts[static_cast<std::size_t>(k)];
+        }
+      if (distinct == 0) {
+        still.push_back(p);
+        continue;
+      }
+      std::size_t best = 0;
+      for (std::size_t k = 1; k < static_cast<std::size_t>(distinct); ++k)
+        if (counts[k] > counts[best]) best = k;
+      assigned.emplace_back(p, values[best]);
+    }
+    for (const auto& [p, v] : assigned) {
+      map.at<std::uint8_t>(p / w, p % w) = v;
+      undecided.at<std::uint8_t>(p / w, p % w) = 0;
+    }
+    todo.swap(still);
+    if (assigned.empty()) break;
+  }
+  for (const int p : todo) {
+    map.at<std::uint8_t>(p / w, p % w) = kLabelPixelUnknown;
+    undecided.at<std::uint8_t>(p / w, p % w) = 0;
+  }
+}
+
+// Values present among the sector's pixels.
+std::vector<std::uint8_t> present_values(const cv::Mat& map, const cv::Mat& sector) {
+  std::array<bool, 256> seen{};
+  for (int j = 0; j < map.rows; ++j)
+    for (int i = 0; i < map.cols; ++i)
+      if (sector.at<std::uint8_t>(j, i)) seen[map.at<std::uint8_t>(j, i)] = true;
+  std::vector<std::uint8_t> values;
+  for (int v = 0; v < 256; ++v)
+    if (seen[static_cast<std::size_t>(v)]) values.push_back(static_cast<std::uint8_t>(v));
+  return values;
+}
+
+// Opening of every label's mask: the thin parts it removes are re-labelled by their neighbours
+// (for the background this closes the materials, and the other way round).
+void open_labels(cv::Mat& map, const cv::Mat& sector, double radius_px) {
+  if (radius_px < 0.5) return;
+  const cv::Mat kernel = disk(radius_px);
+  cv::Mat undecided(map.size(), CV_8U, cv::Scalar(0));
+  for (const std::uint8_t v : present_values(map, sector)) {
+    cv::Mat mask = (map == v) & sector, opened;
+    cv::morphologyEx(mask, opened, cv::MORPH_OPEN, kernel);
+    undecided.setTo(kUndecided, mask & ~opened);
+  }
+  fill_undecided(map, undecided, sector);
+}
+
+// Components of any label smaller than min_px are re-labelled from their surroundings.
+void remove_small_components(cv::Mat& map, const cv::Mat& sector, double min_px) {
+  if (min_px < 1.0) return;
+  cv::Mat undecided(map.size(), CV_8U, cv::Scalar(0));
+  for (const std::uint8_t v : present_values(map, sector)) {
+    const cv::Mat mask = (map == v) & sector;
+    cv::Mat components, stats, centroids;
+    const int n = cv::connectedComponentsWithStats(mask, components, stats, centroids, 8, CV_32S);
+    std::vector<bool> small(static_cast<std::size_t>(n), false);
+    bool any = false;
+    for (int c = 1; c < n; ++c)
+      if (stats.at<int>(c, cv::CC_STAT_AREA) < min_px)
+        any = small[static_cast<std::size_t>(c)] = true;
+    if (!any) continue;
+    for (int j = 0; j < map.rows; ++j)
+      for (int i = 0; i < map.cols; ++i)
+        if (small[static_cast<std::size_t>(components.at<int>(j, i))])
+          undecided.at<std::uint8_t>(j, i) = kUndecided;
+  }
+  fill_undecided(map, undecided, sector);
+}
+
+// Removes diagonal-only contacts: where a label holds exactly one diagonal of a 2x2 block, its
+// outline would pass through that corner twice (not a simple polygon) and cross the outline of
+// the label on the other diagonal. The block's other diagonal gets a pixel of the label.
+void repair_diagonal_contacts(cv::Mat& map, const cv::Mat& sector) {
+  constexpr int kOutside = 256;
+  auto value = [&](int i, int j) {
+    return sector.at<std::uint8_t>(j, i) ? static_cast<int>(map.at<std::uint8_t>(j, i)) : kOutside;
+  };
+  auto settable = [&](int i, int j) { return sector.at<std::uint8_t>(j, i) != 0; };
+  for (int pass = 0; pass < kMaxRepairPasses; ++pass) {
+    bool changed = false;
+    for (int j = 0; j + 1 < map.rows; ++j)
+      for (int i = 0; i + 1 < map.cols; ++i) {
+        const int a = value(i, j), b = value(i + 1, j), c = value(i, j + 1),
+                  d = value(i + 1, j + 1);
+        // The diagonal (i, j)-(i+1, j+1) ...
+        if (a == d && a != kOutside && b != a && c != a) {
+          if (settable(i + 1, j))
+            map.at<std::uint8_t>(j, i + 1) = static_cast<std::uint8_t>(a);
+          else if (settable(i, j + 1))
+            map.at<std::uint8_t>(j + 1, i) = static_cast<std::uint8_t>(a);
+          else
+            map.at<std::uint8_t>(j, i) = kLabelPixelUnknown;
+          changed = true;
+        } else if (b == c && b != kOutside && a != b && d != b) {  // ... and the other one.
+          if (settable(i, j))
+            map.at<std::uint8_t>(j, i) = static_cast<std::uint8_t>(b);
+          else if (settable(i + 1, j + 1))
+            map.at<std::uint8_t>(j + 1, i + 1) = static_cast<std::uint8_t>(b);
+          else
+            map.at<std::uint8_t>(j, i + 1) = kLabelPixelUnknown;
+          changed = true;
+        }
+      }
+    if (!changed) return;
+  }
+}
+
+}  // namespace
+
+void ImageGeometry::check() const {
+  const auto n = static_cast<std::size_t>(width_px) * static_cast<std::size_t>(height_px);
+  if (width_px <= 0 || height_px <= 0 || sector.width != width_px || sector.height != height_px ||
+      sector.pixels.size() != n)
+    throw std::invalid_argument("ImageGeometry: the sector mask does not match the image size");
+  if (!depth_mm.empty() && depth_mm.size() != n)
+    throw std::invalid_argument("ImageGeometry: depth_mm does not match the image size");
+  if (!(spacing_mm > 0.0) || !std::isfinite(spacing_mm))
+    throw std::invalid_argument("ImageGeometry: the pixel spacing must be positive");
+}
+
+ImageGeometry full_image_geometry(int width_px, int height_px, double spacing_mm) {
+  ImageGeometry g;
+  g.width_px = width_px;
+  g.height_px = height_px;
+  g.sector = ImageU8(width_px, height_px, 255);
+  // Pixel centres are integers, so the image covers [-0.5, size - 0.5].
+  g.sector_px = {{-0.5, -0.5},
+                 {width_px - 0.5, -0.5},
+                 {width_px - 0.5, height_px - 0.5},
+                 {-0.5, height_px - 0.5}};
+  g.spacing_mm = spacing_mm;
+  g.depth_mm = column_depth(g.sector, spacing_mm);
+  return g;
+}
+
+ImageGeometry polygon_geometry(int width_px, int height_px, double spacing_mm,
+                               const Ring2& sector_px) {
+  if (sector_px.size() < 3)
+    throw std::invalid_argument("polygon_geometry: the sector needs at least 3 points");
+  ImageGeometry g;
+  g.width_px = width_px;
+  g.height_px = height_px;
+  cv::Mat mask(height_px, width_px, CV_8U, cv::Scalar(0));
+  constexpr int kShift = 4;  // sub-pixel vertices for fillPoly
+  std::vector<cv::Point> points;
+  for (const Vec2& p : sector_px)
+    points.emplace_back(static_cast<int>(std::lround(p.x() * (1 << kShift))),
+                        static_cast<int>(std::lround(p.y() * (1 << kShift))));
+  cv::fillPoly(mask, std::vector<std::vector<cv::Point>>{points}, cv::Scalar(255), cv::LINE_8,
+               kShift);
+  g.sector = to_image(mask);
+  g.sector_px = sector_px;
+  g.spacing_mm = spacing_mm;
+  g.depth_mm = column_depth(g.sector, spacing_mm);
+  return g;
+}
+
+ImageGeometry auto_geometry(const std::vector<const GreyImage*>& frames, double spacing_mm,
+                            double signal_grey) {
+  if (frames.empty() || frames.front()->empty())
+    throw std::invalid_argument("auto_geometry: no frames");
+  const int w = frames.front()->width, h = frames.front()->height;
+  cv::Mat peak(h, w, CV_8U, cv::Scalar(0)), filtered;
+  for (const GreyImage* frame : frames) {
+    if (frame->width != w || frame->height != h)
+      throw std::invalid_argument("auto_geometry: frames differ in size");
+    cv::medianBlur(wrap(*frame), filtered, 5);
+    cv::max(peak, filtered, peak);
+  }
+  cv::Mat signal = peak > signal_grey;
+  cv::morphologyEx(signal, signal, cv::MORPH_CLOSE, disk(3.0));
+  std::vector<std::vector<cv::Point>> contours;
+  cv::findContours(signal, contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_SIMPLE);
+  std::size_t best = contours.size();
+  double best_area = 0.0;
+  for (std::size_t k = 0; k < contours.size(); ++k) {
+    const double area = cv::contourArea(contours[k]);
+    if (area > best_area) {
+      best_area = area;
+      best = k;
+    }
+  }
+  if (best == contours.size() || best_area < 0.01 * w * h)
+    return full_image_geometry(w, h, spacing_mm);
+  std::vector<cv::Point> outline;
+  cv::approxPolyDP(contours[best], outline, 1.0, true);
+  Ring2 ring;
+  for (const cv::Point& p : outline) ring.emplace_back(p.x, p.y);
+  ImageGeometry g;
+  g.width_px = w;
+  g.height_px = h;
+  cv::Mat mask(h, w, CV_8U, cv::Scalar(0));
+  cv::drawContours(mask, contours, static_cast<int>(best), cv::Scalar(255), cv::FILLED);
+  g.sector = to_image(mask);
+  g.sector_px = ring;
+  g.spacing_mm = spacing_mm;
+  g.depth_mm = column_depth(g.sector, spacing_mm);
+  return g;
+}
+
+Segmentation segment_frame(const GreyImage& image, const ImageGeometry& geometry,
+                           const SegmentationConfig& config) {
+  geometry.check();
+  if (image.width != geometry.width_px || image.height != geometry.height_px ||
+      image.pixels.size() != geometry.sector.pixels.size())
+    throw std::invalid_argument("segment_frame: the image is " + std::to_string(image.width) + "x" +
+                                std::to_string(image.height) + ", the geometry " +
+                                std::to_string(geometry.width_px) + "x" +
+                                std::to_string(geometry.height_px));
+  if (const Status valid = config.validate(); !valid) throw std::invalid_argument(valid.message());
+  const int w = image.width, h = image.height;
+  const double px_mm = geometry.spacing_mm;
+  const cv::Mat grey = wrap(image);
+  const cv::Mat sector = wrap(geometry.sector) > 0;
+  cv::Mat mask01;
+  sector.convertTo(mask01, CV_32F, 1.0 / 255.0);
+  const std::vector<float> depth_values =
+      geometry.depth_mm.empty() ? column_depth(geometry.sector, px_mm) : geometry.depth_mm;
+  const cv::Mat depth(h, w, CV_32F, const_cast<float*>(depth_values.data()));
+
+  // Speckle reduction: the median removes speckle's bright and dark outliers without blurring
+  // edges; the Gaussian then averages over several speckle cells.
+  cv::Mat median, smoothed;
+  if (config.median_px > 1)
+    cv::medianBlur(grey, median, config.median_px);
+  else
+    median = grey;
+  median.convertTo(smoothed, CV_32F);
+  if (config.smoothing_mm > 0.0)
+    smoothed = MaskedBlur(mask01, config.smoothing_mm / px_mm)(smoothed);
+
+  // Confidence from local statistics of the raw grey: where nearly every pixel of the window is
+  // dark there is no echo (shadow, lost signal). Speckle of log-compressed tissue keeps a large
+  // spread at any echogenicity, so dark tissue leaves bright pixels in the window; a fraction
+  // is robust where a local mean or variance is not (a few bright pixels at the window's edge
+  // would dominate them).
+  const double shadow_grey = config.effective_shadow_grey();
+  const cv::Mat dark_mask = grey <= shadow_grey;
+  cv::Mat dark;
+  dark_mask.convertTo(dark, CV_32F, 1.0 / 255.0);
+  const cv::Mat dark_fraction = MaskedBlur(mask01, config.confidence_window_mm / px_mm)(dark);
+  cv::Mat low = (dark_fraction > config.shadow_fraction) & sector;
+  // With an anechoic material (a cyst reads as black as a shadow) only dark areas that reach
+  // the far end of the sector are shadows: a shadow runs down its beams to the bottom.
+  const bool anechoic_material =
+      std::any_of(config.materials.begin(), config.materials.end(),
+                  [&](const LabelModel& m) { return m.grey_mean < shadow_grey; });
+  if (anechoic_material) {
+    cv::Mat components;
+    const int n = cv::connectedComponents(low, components, 8, CV_32S);
+    std::vector<bool> reaches_far_end(static_cast<std::size_t>(n), false);
+    for (int j = 0; j < h; ++j)
+      for (int i = 0; i < w; ++i) {
+        const bool far = j + 1 == h || !sector.at<std::uint8_t>(j + 1, i);
+        if (far && sector.at<std::uint8_t>(j, i))
+          reaches_far_end[static_cast<std::size_t>(components.at<int>(j, i))] = true;
+      }
+    for (int j = 0; j < h; ++j)
+      for (int i = 0; i < w; ++i) {
+        const int c = components.at<int>(j, i);
+        if (c > 0 && !reaches_far_end[static_cast<std::size_t>(c)]) low.at<std::uint8_t>(j, i) = 0;
+      }
+  }
+  if (config.max_depth_mm > 0.0) low |= (depth > config.max_depth_mm) & sector;
+  if (config.shadow_margin_mm > 0.0) cv::dilate(low, low, disk(config.shadow_margin_mm / px_mm));
+  low &= sector;
+
+  // Classes: background then materials, each with its grey mean.
+  struct Class {
+    std::uint8_t value;
+    double mean;
+  };
+  std::vector<Class> classes{{kLabelPixelOutside, config.background.grey_mean}};
+  for (const LabelModel& m : config.materials)
+    classes.push_back({static_cast<std::uint8_t>(m.label), m.grey_mean});
+  std::array<double, 256> class_mean{};
+  for (const Class& c : classes) class_mean[c.value] = c.mean;
+
+  // Strong reflectors (bone surfaces) are thin bright bands that the Gaussian smears into the
+  // grey of bright tissue; where the brightest class stands far above the others, the median
+  // (which keeps bands thicker than half its window and removes speckle) decides for it.
+  std::vector<Class> by_mean = classes;
+  std::sort(by_mean.begin(), by_mean.end(),
+            [](const Class& x, const Class& y) { return x.mean > y.mean; });
+  const bool reflector_class =
+      by_mean.size() > 1 && by_mean[0].mean - by_mean[1].mean > kReflectorGapGrey;
+  const double reflector_grey = reflector_class ? 0.5 * (by_mean[0].mean + by_mean[1].mean) : 1e9;
+  cv::Mat median_f;
+  median.convertTo(median_f, CV_32F);
+
+  auto classify = [&](double g) {
+    std::size_t best = 0;
+    for (std::size_t k = 1; k < classes.size(); ++k)
+      if (std::abs(g - classes[k].mean) < std::abs(g - classes[best].mean)) best = k;
+    return classes[best].value;
+  };
+
+  // Residual depth trend (grey = class mean + a + b * depth): first from per-depth medians
+  // (mostly background), then refined from all classified pixels against their class means.
+  Line trend;
+  cv::Mat map(h, w, CV_8U, cv::Scalar(kLabelPixelUnknown));
+  auto classify_all = [&] {
+    for (int j = 0; j < h; ++j) {
+      const float* s = smoothed.ptr<float>(j);
+      const float* d = depth.ptr<float>(j);
+      const std::uint8_t* in = sector.ptr<std::uint8_t>(j);
+      const std::uint8_t* dark = low.ptr<std::uint8_t>(j);
+      const float* m = median_f.ptr<float>(j);
+      std::uint8_t* out = map.ptr<std::uint8_t>(j);
+      for (int i = 0; i < w; ++i) {
+        const double offset = trend.a + trend.b * d[i];
+        out[i] = (!in[i] || dark[i])               ? kLabelPixelUnknown
+                 : m[i] - offset >= reflector_grey ? by_mean[0].value
+                                                   : classify(s[i] - offset);
+      }
+    }
+  };
+  if (config.depth_compensation) {
+    std::vector<std::vector<float>> bins;
+    for (int j = 0; j < h; ++j)
+      for (int i = 0; i < w; ++i) {
+        if (!sector.at<std::uint8_t>(j, i) || low.at<std::uint8_t>(j, i)) continue;
+        const auto bin =
+            static_cast<std::size_t>(std::max(0.0f, depth.at<float>(j, i)) / kDepthBinMm);
+        if (bin >= bins.size()) bins.resize(bin + 1);
+        bins[bin].push_back(smoothed.at<float>(j, i));
+      }
+    LineFit fit;
+    for (std::size_t b = 0; b < bins.size(); ++b) {
+      auto& v = bins[b];
+      if (static_cast<int>(v.size()) < kMinBinPixels) continue;
+      std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
+      fit.add((static_cast<double>(b) + 0.5) * kDepthBinMm,
+              v[v.size() / 2] - config.background.grey_mean, static_cast<double>(v.size()));
+    }
+    trend = fit.solve();
+    for (int iteration = 0; iteration < kTrendIterations; ++iteration) {
+      classify_all();
+      LineFit residuals;
+      for (int j = 0; j < h; j += 2)  // every other row and column: plenty of samples
+        for (int i = 0; i < w; i += 2) {
+          const std::uint8_t l = map.at<std::uint8_t>(j, i);
+          if (l == kLabelPixelUnknown) continue;
+          residuals.add(depth.at<float>(j, i), smoothed.at<float>(j, i) - class_mean[l]);
+        }
+      trend = residuals.solve();
+    }
+  }
+  classify_all();
+
+  // Morphological cleaning on the label map (every label from the same map, so regions cannot
+  // overlap), then no diagonal-only contacts so that every outline is a simple polygon.
+  open_labels(map, sector, config.opening_mm / px_mm);
+  remove_small_components(map, sector, config.min_region_mm2 / (px_mm * px_mm));
+  repair_diagonal_contacts(map, sector);
+  map.setTo(kLabelPixelUnknown, ~sector);
+
+  Segmentation result;
+  result.labels = to_image(map);
+  cv::Mat compensated = smoothed - (trend.a + trend.b * depth);
+  compensated.setTo(0.0, ~sector);
+  cv::Mat compensated_u8;
+  compensated.convertTo(compensated_u8, CV_8U);  // saturates to 0..255
+  result.smoothed = to_image(compensated_u8);
+  result.low_confidence = to_image(low);
+  result.depth_slope_grey_per_mm = trend.b;
+  for (int j = 0; j < h; ++j)
+    for (int i = 0; i < w; ++i)
+      if (sector.at<std::uint8_t>(j, i) && map.at<std::uint8_t>(j, i) == kLabelPixelUnknown)
+        ++result.unknown_in_sector_px;
+  return result;
+}
+
+}  // namespace sonoshape::seg

@@ -1,0 +1,345 @@
+#include "sonoshape/segmentation/sweep.hpp"
+
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <fstream>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
+#include <sstream>
+#include <stdexcept>
+
+#include "sonoshape/acquisition/plus_config.hpp"
+#include "sonoshape/core/errors.hpp"
+#include "sonoshape/core/log.hpp"
+#include "sonoshape/segmentation/contours.hpp"
+#include "sonoshape/simulator/sweep.hpp"
+
+namespace sonoshape::seg {
+namespace {
+
+// Frames sampled for an automatic sector and for the two-class model (every frame would cost
+// time and add nothing).
+constexpr std::size_t kMaxSampledFrames = 32;
+// Pixel stride of the samples of the two-class model.
+constexpr int kSampleStridePx = 3;
+// Planes closer than this (mm, and in normal direction) are one plane for the slice set.
+constexpr double kCoincidentMm = 1e-6;
+
+// "1:70.5 2:171" -> {1: 70.5, 2: 171}; names keep their text.
+std::map<int, std::string> parse_items(const std::string& text) {
+  std::map<int, std::string> items;
+  std::istringstream in(text);
+  std::string item;
+  while (in >> item) {
+    const std::size_t colon = item.find(':');
+    if (colon == std::string::npos) continue;
+    int key = 0;
+    const auto [end, ec] = std::from_chars(item.data(), item.data() + colon, key);
+    if (ec != std::errc() || end != item.data() + colon) continue;
+    items[key] = item.substr(colon + 1);
+  }
+  return items;
+}
+
+std::optional<double> to_number(const std::string& text) {
+  double value = 0.0;
+  const auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), value);
+  if (ec != std::errc() || end != text.data() + text.size() || !std::isfinite(value))
+    return std::nullopt;
+  return value;
+}
+
+// The label models the simulator writes in the header; none when it has none.
+std::optional<std::pair<LabelModel, std::vector<LabelModel>>> header_models(
+    const acq::SequenceFile& file) {
+  const auto means = file.field("SonoshapeLabelGreyMean");
+  const auto stds = file.field("SonoshapeLabelGreyStd");
+  if (!means || !stds) return std::nullopt;
+  const auto mean_items = parse_items(*means);
+  const auto std_items = parse_items(*stds);
+  const auto names = parse_items(file.field("SonoshapeLabels").value_or(""));
+  LabelModel background{0, "background", 120.0, 28.0};
+  std::vector<LabelModel> materials;
+  bool have_background = false;
+  for (const auto& [label, text] : mean_items) {
+    const auto mean = to_number(text);
+    const auto it = std_items.find(label);
+    const auto spread = it == std_items.end() ? std::nullopt : to_number(it->second);
+    if (!mean || !spread || label < 0 || label > kMaxPixelLabel) continue;
+    LabelModel m{label, "", *mean, std::max(*spread, 1.0)};
+    if (label == 0) {
+      m.name = "background";
+      background = m;
+      have_background = true;
+    } else {
+      const auto name = names.find(label);
+      m.name = name != names.end() ? name->second : "label_" + std::to_string(label);
+      materials.push_back(m);
+    }
+  }
+  if (!have_background || materials.empty()) return std::nullopt;
+  return std::make_pair(background, materials);
+}
+
+std::filesystem::path sidecar_path(const std::filesystem::path& sequence) {
+  std::string name = sequence.filename().string();
+  for (const std::string ext : {".igs.mha", ".seq.mha", ".mha"})
+    if (name.size() > ext.size() && name.ends_with(ext)) {
+      name.resize(name.size() - ext.size());
+      break;
+    }
+  return sequence.parent_path() / (name + ".plus.xml");
+}
+
+double calibration_spacing_mm(const Eigen::Matrix4d& T_probe_image) {
+  return std::sqrt(T_probe_image.block<3, 1>(0, 0).norm() * T_probe_image.block<3, 1>(0, 1).norm());
+}
+
+// The sector of a simulated sweep from its probe.
+ImageGeometry probe_geometry(const sim::Probe& probe) {
+  ImageGeometry g;
+  g.width_px = probe.width_px();
+  g.height_px = probe.height_px();
+  g.sector = probe.sector_mask();
+  for (const Vec2& p : probe.sector_ring_mm(128)) g.sector_px.push_back(probe.mm_to_pixel(p));
+  g.spacing_mm = probe.spacing_mm();
+  g.depth_mm.resize(g.sector.pixels.size());
+  for (int j = 0; j < g.height_px; ++j)
+    for (int i = 0; i < g.width_px; ++i) {
+      const Vec2 beam = probe.mm_to_beam(probe.pixel_to_mm(i, j));
+      g.depth_mm[static_cast<std::size_t>(j) * g.width_px + i] =
+          static_cast<float>(std::max(0.0, probe.sample_depth_mm(beam.y())));
+    }
+  return g;
+}
+
+std::vector<const GreyImage*> sampled_frames(const acq::SequenceFile& file) {
+  std::vector<const GreyImage*> frames;
+  const std::size_t n = file.frame_count();
+  const std::size_t step = std::max<std::size_t>(1, n / kMaxSampledFrames);
+  for (std::size_t k = 0; k < n; k += step) frames.push_back(&file.image(k));
+  return frames;
+}
+
+}  // namespace
+
+Result<ImageGeometry> geometry_from_header(const acq::FieldList& fields) {
+  auto probe = sim::probe_from_fields(fields);
+  if (!probe) return probe.status();
+  return probe_geometry(*probe);
+}
+
+Result<Eigen::Matrix4d> read_calibration(const std::filesystem::path& path) {
+  std::string ext = path.extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char c) { return std::tolower(c); });
+  if (ext == ".xml") return acq::read_image_to_probe(path);
+  if (ext != ".json")
+    return Status::error("calibration " + path.string() +
+                         ": give a PLUS device-set .xml (Transform From=\"Image\" To=\"Probe\") or "
+                         "a .json {\"ImageToProbe\": [16 numbers, row-major]}");
+  std::ifstream in(path);
+  if (!in)
+    return Status::error("cannot read the calibration " + path.string() + ": check the path");
+  nlohmann::json doc;
+  try {
+    in >> doc;
+  } catch (const nlohmann::json::exception& e) {
+    return Status::error("calibration " + path.string() + ": not valid JSON (" + e.what() + ")");
+  }
+  const auto it = doc.find("ImageToProbe");
+  if (it == doc.end() || !it->is_array() || it->size() != 16)
+    return Status::error("calibration " + path.string() +
+                         ": expected {\"ImageToProbe\": [16 numbers, row-major]} (pixels to mm)");
+  Eigen::Matrix4d m;
+  for (int k = 0; k < 16; ++k) {
+    const auto& x = (*it)[static_cast<std::size_t>(k)];
+    if (!x.is_number() || !std::isfinite(x.get<double>()))
+      return Status::error("calibration " + path.string() + ": ImageToProbe[" + std::to_string(k) +
+                           "] is not a finite number");
+    m(k / 4, k % 4) = x.get<double>();
+  }
+  return m;
+}
+
+Result<SweepSetup> prepare_sweep(const acq::SequenceFile& file,
+                                 const std::filesystem::path& sequence_path,
+                                 const std::optional<std::filesystem::path>& config_path,
+                                 const std::optional<std::filesystem::path>& calibration_path) {
+  std::optional<SegmentationConfig> config;
+  if (config_path) {
+    auto read = read_segmentation_config(*config_path);
+    if (!read) return read.status();
+    config = std::move(*read);
+  }
+  std::optional<Eigen::Matrix4d> calibration;
+  if (calibration_path) {
+    auto read = read_calibration(*calibration_path);
+    if (!read) return read.status();
+    calibration = *read;
+  }
+  auto setup = prepare_sweep(file, sequence_path, config, calibration);
+  if (setup && config_path) setup->models_from += " (" + config_path->string() + ")";
+  if (setup && calibration_path) setup->calibration_from = calibration_path->string();
+  return setup;
+}
+
+Result<SweepSetup> prepare_sweep(const acq::SequenceFile& file,
+                                 const std::filesystem::path& sequence_path,
+                                 const std::optional<SegmentationConfig>& config,
+                                 const std::optional<Eigen::Matrix4d>& T_probe_image) {
+  if (file.frame_count() == 0)
+    return Status::error(sequence_path.string() + ": the sequence has no frames");
+  SweepSetup setup;
+  setup.config = config.value_or(SegmentationConfig{});
+  setup.models_from = config ? "config" : "defaults";
+
+  // Calibration: given, in the header, or in the sidecar PLUS configuration.
+  if (T_probe_image) {
+    setup.T_probe_image = *T_probe_image;
+    setup.calibration_from = "given";
+  } else if (const auto text = file.field("ImageToProbeTransform");
+             text && acq::parse_matrix(*text)) {
+    setup.T_probe_image = *acq::parse_matrix(*text);
+    setup.calibration_from = "header ImageToProbeTransform";
+  } else if (const auto sidecar = sidecar_path(sequence_path); std::filesystem::exists(sidecar)) {
+    auto read = acq::read_image_to_probe(sidecar);
+    if (!read) return read.status();
+    setup.T_probe_image = *read;
+    setup.calibration_from = sidecar.string();
+  } else {
+    return Status::error(sequence_path.string() +
+                         ": no calibration (no ImageToProbeTransform in the header and no " +
+                         sidecar.string() +
+                         "); give one with --calibration PLUS.xml or a JSON {\"ImageToProbe\": "
+                         "[16 numbers]}");
+  }
+  const double spacing_mm = calibration_spacing_mm(setup.T_probe_image);
+  if (!(spacing_mm > 0.0) || !std::isfinite(spacing_mm))
+    return Status::error(setup.calibration_from + ": the ImageToProbe calibration is degenerate");
+
+  // Sector.
+  const int w = file.width(), h = file.height();
+  SectorSource source = setup.config.sector;
+  if (source == SectorSource::kDefault) {
+    if (file.field("SonoshapeProbeType")) {
+      auto probe = sim::probe_from_fields(file.fields());
+      if (!probe) return probe.status();
+      if (probe->width_px() != w || probe->height_px() != h)
+        return Status::error(sequence_path.string() + ": the header's probe image is " +
+                             std::to_string(probe->width_px()) + "x" +
+                             std::to_string(probe->height_px()) + " but the frames are " +
+                             std::to_string(w) + "x" + std::to_string(h));
+      setup.geometry = probe_geometry(*probe);
+      setup.sector_from = "header probe (" + sim::to_string(probe->type()) + ")";
+    } else {
+      source = SectorSource::kAuto;
+    }
+  }
+  if (source == SectorSource::kAuto) {
+    setup.geometry =
+        auto_geometry(sampled_frames(file), spacing_mm, setup.config.sector_signal_grey);
+    setup.sector_from = "auto (pixels with signal)";
+  } else if (source == SectorSource::kFull) {
+    setup.geometry = full_image_geometry(w, h, spacing_mm);
+    setup.sector_from = "full image";
+  } else if (source == SectorSource::kPolygon) {
+    setup.geometry = polygon_geometry(w, h, spacing_mm, setup.config.sector_polygon_px);
+    setup.sector_from = "config polygon";
+  }
+
+  // Label models: the config's, the header's, or two classes found in the data.
+  if (setup.config.materials.empty()) {
+    if (const auto models = header_models(file)) {
+      setup.config.background = models->first;
+      setup.config.materials = models->second;
+      setup.models_from = "header (SonoshapeLabelGreyMean/Std)";
+    } else {
+      std::vector<std::uint8_t> samples;
+      cv::Mat filtered;
+      for (const GreyImage* frame : sampled_frames(file)) {
+        const cv::Mat image(frame->height, frame->width, CV_8U,
+                            const_cast<std::uint8_t*>(frame->pixels.data()));
+        cv::medianBlur(image, filtered, setup.config.median_px);
+        for (int j = 0; j < h; j += kSampleStridePx)
+          for (int i = 0; i < w; i += kSampleStridePx)
+            if (setup.geometry.sector.at(i, j)) samples.push_back(filtered.at<std::uint8_t>(j, i));
+      }
+      setup.config = auto_two_class(samples, setup.config);
+      setup.models_from = "two-class k-means on the frames";
+    }
+  }
+  if (const Status valid = setup.config.validate(); !valid) return valid;
+  return setup;
+}
+
+std::optional<Eigen::Matrix4d> reference_from_probe(const acq::SequenceFile& file, std::size_t k) {
+  if (file.transform_status("ProbeToTracker", k) != TrackingStatus::kValid) return std::nullopt;
+  const auto probe = file.transform("ProbeToTracker", k);
+  if (!probe) return std::nullopt;
+  const auto names = file.transform_names();
+  if (std::find(names.begin(), names.end(), "ReferenceToTracker") == names.end()) return *probe;
+  if (file.transform_status("ReferenceToTracker", k) != TrackingStatus::kValid) return std::nullopt;
+  const auto reference = file.transform("ReferenceToTracker", k);
+  if (!reference) return std::nullopt;
+  return Eigen::Matrix4d(reference->inverse() * *probe);
+}
+
+SweepSegmentation segment_sweep(const acq::SequenceFile& file, const SweepSetup& setup, int every,
+                                const SweepProgress& progress) {
+  if (every < 1) throw std::invalid_argument("segment_sweep: every must be >= 1");
+  if (file.frame_count() &&
+      (file.width() != setup.geometry.width_px || file.height() != setup.geometry.height_px))
+    throw std::invalid_argument("segment_sweep: the frames do not match the setup's geometry");
+  SweepSegmentation out;
+  out.frames = file.frame_count();
+  for (const LabelModel& m : setup.config.materials) out.slices.labels.push_back({m.label, m.name});
+  std::size_t sector_px = 0;
+  for (const std::uint8_t v : setup.geometry.sector.pixels) sector_px += v ? 1 : 0;
+  double unknown_sum = 0.0;
+  std::size_t segmented = 0;
+  for (std::size_t k = 0; k < file.frame_count(); k += static_cast<std::size_t>(every)) {
+    ++out.considered;
+    const auto pose = reference_from_probe(file, k);
+    if (!pose) {
+      ++out.invalid_pose;
+      if (progress) progress(out.considered);
+      continue;
+    }
+    const Segmentation segmentation = segment_frame(file.image(k), setup.geometry, setup.config);
+    unknown_sum += sector_px ? static_cast<double>(segmentation.unknown_in_sector_px) /
+                                   static_cast<double>(sector_px)
+                             : 0.0;
+    ++segmented;
+    const ImagePlane plane = image_plane(*pose * setup.T_probe_image, pose->block<3, 1>(0, 3));
+    auto slice = make_slice(segmentation.labels, setup.geometry.sector, setup.geometry.sector_px,
+                            plane, setup.config.simplify_mm);
+    if (!slice) {
+      ++out.failed;
+      log_warning("segment: frame " + std::to_string(k) + " skipped: " + slice.message());
+      if (progress) progress(out.considered);
+      continue;
+    }
+    slice->timestamp_s = file.timestamp_s(k);
+    // A frozen probe repeats its plane; the slice-set format allows one slice per plane.
+    const Vec3 n = slice->normal();
+    const bool coincident =
+        std::any_of(out.slices.slices.begin(), out.slices.slices.end(), [&](const LabeledSlice& s) {
+          return std::abs(std::abs(s.normal().dot(n)) - 1.0) < 1e-12 &&
+                 std::abs(n.dot(slice->origin_mm - s.origin_mm)) < kCoincidentMm;
+        });
+    if (coincident) {
+      ++out.coincident;
+    } else {
+      out.slices.slices.push_back(std::move(*slice));
+    }
+    if (progress) progress(out.considered);
+  }
+  out.unknown_fraction = segmented ? unknown_sum / static_cast<double>(segmented) : 0.0;
+  return out;
+}
+
+}  // namespace sonoshape::seg

@@ -1,0 +1,107 @@
+// Whole sweeps: a simulated one segmented from its header alone, and the real PLUS sweep.
+#include "sonoshape/segmentation/sweep.hpp"
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+
+#include "sonoshape/acquisition/sequence_file.hpp"
+#include "sonoshape/core/slice_io.hpp"
+#include "sonoshape/simulator/bmode.hpp"
+#include "sonoshape/simulator/phantom.hpp"
+#include "sonoshape/simulator/sweep.hpp"
+#include "sonoshape/simulator/trajectory.hpp"
+
+namespace sonoshape::seg {
+namespace {
+
+const std::filesystem::path kData = SONOSHAPE_DATA_DIR;
+
+TEST(SegmentSweep, SimulatedSweepFromItsHeaderAlone) {
+  sim::Phantom phantom;
+  Eigen::Affine3d place = Eigen::Affine3d::Identity();
+  place.translation() = Vec3(-5, 25, 0);
+  phantom.add(1, "organ", sim::make_sphere(12.0), place);
+  place.translation() = Vec3(12, 15, 0);
+  phantom.add(2, "lesion", sim::make_sphere(5.0), place);
+  const sim::Probe probe(sim::linear_probe_geometry(160, 160));
+  const sim::BModeSimulator simulator(phantom, probe);
+  sim::TrajectoryOptions motion;
+  motion.duration_s = 0.45;
+  motion.sweep_length_mm = 8.0;
+  sim::TrackerOptions tracker;
+  tracker.invalid_probability = 0.05;
+  tracker.seed = 4;
+  const auto acquisition = sim::acquire(sim::Trajectory(motion), tracker, 10, 20.0);
+  const sim::SimulatedSweep sweep = sim::simulate_sweep(simulator, acquisition, 3);
+
+  const auto setup =
+      prepare_sweep(sweep.bmode, "memory.igs.mha", std::optional<SegmentationConfig>{},
+                    std::optional<Eigen::Matrix4d>{});
+  ASSERT_TRUE(setup) << setup.message();
+  EXPECT_EQ(setup->config.materials.size(), 2u);
+  EXPECT_EQ(setup->calibration_from, "header ImageToProbeTransform");
+  std::size_t done = 0;
+  const SweepSegmentation result =
+      segment_sweep(sweep.bmode, *setup, 1, [&](std::size_t n) { done = n; });
+  EXPECT_EQ(done, 10u);
+  std::size_t invalid = 0;
+  for (const Pose& p : acquisition.tracked_poses) invalid += p.status == TrackingStatus::kInvalid;
+  EXPECT_EQ(result.invalid_pose, invalid);
+  EXPECT_EQ(result.slices.slices.size() + result.invalid_pose + result.coincident + result.failed,
+            10u);
+  EXPECT_EQ(result.failed, 0u);
+  ASSERT_GT(result.slices.slices.size(), 0u);
+  EXPECT_TRUE(validate_slice_set(result.slices, "sweep"))
+      << validate_slice_set(result.slices, "sweep").message();
+  // Every slice sees the organ: a label-1 region whose world points lie near the sphere.
+  for (const LabeledSlice& s : result.slices.slices) {
+    bool organ = false;
+    for (const Region& r : s.regions) organ |= r.label == 1;
+    EXPECT_TRUE(organ);
+    EXPECT_TRUE(s.timestamp_s);
+  }
+
+  // --every keeps every K-th frame.
+  const SweepSegmentation every3 = segment_sweep(sweep.bmode, *setup, 3);
+  EXPECT_EQ(every3.considered, 4u);
+}
+
+TEST(SegmentSweep, RealPlusSweepRunsThrough) {
+  const auto file = acq::read_sequence_file(kData / "plus" / "SpinePhantomFreehand.igs.mha");
+  ASSERT_TRUE(file) << file.message();
+  const auto xml = kData / "plus" / "PlusDeviceSet_SpinePhantomFreehandReconstructionOnly.xml";
+  // Without a calibration it fails with a message that says how to give one.
+  const auto missing =
+      prepare_sweep(*file, kData / "plus" / "SpinePhantomFreehand.igs.mha",
+                    std::optional<std::filesystem::path>{}, std::optional<std::filesystem::path>{});
+  ASSERT_FALSE(missing);
+  EXPECT_NE(missing.message().find("--calibration"), std::string::npos);
+
+  const auto setup = prepare_sweep(*file, kData / "plus" / "SpinePhantomFreehand.igs.mha",
+                                   std::optional<std::filesystem::path>{}, xml);
+  ASSERT_TRUE(setup) << setup.message();
+  EXPECT_NEAR(setup->geometry.spacing_mm, 0.085, 0.005);
+  const SweepSegmentation result = segment_sweep(*file, *setup, 5);
+  EXPECT_EQ(result.considered, 5u);
+  EXPECT_EQ(result.failed, 0u);
+  EXPECT_GT(result.slices.slices.size(), 0u);
+  EXPECT_TRUE(validate_slice_set(result.slices, "plus"))
+      << validate_slice_set(result.slices, "plus").message();
+}
+
+TEST(SegmentSweep, CalibrationFromJson) {
+  const auto path = std::filesystem::temp_directory_path() / "sonoshape_seg_calibration.json";
+  {
+    std::ofstream out(path);
+    out << R"({"ImageToProbe": [0.2, 0, 0, -20, 0, 0.2, 0, 0, 0, 0, 0.2, 0, 0, 0, 0, 1]})";
+  }
+  const auto m = read_calibration(path);
+  ASSERT_TRUE(m) << m.message();
+  EXPECT_DOUBLE_EQ((*m)(0, 3), -20.0);
+  EXPECT_FALSE(read_calibration(path.parent_path() / "nope.txt"));
+}
+
+}  // namespace
+}  // namespace sonoshape::seg
