@@ -9,6 +9,7 @@
 
 #include "sonoshape/acquisition/plus_config.hpp"
 #include "sonoshape/acquisition/sequence_file.hpp"
+#include "sonoshape/core/slice_io.hpp"
 
 namespace {
 
@@ -102,6 +103,38 @@ TEST_F(SimulateCommand, UserPhantomAndBadArguments) {
       run("simulate --tissue 1:granite -o " + (dir_ / "x.igs.mha").string(), dir_ / "log_tissue");
   EXPECT_EQ(bad_tissue.exit_code, 1);
   EXPECT_NE(bad_tissue.output.find("granite"), std::string::npos) << bad_tissue.output;
+}
+
+}  // namespace
+
+namespace {
+
+// simulate -> segment -> reconstruct: the offline path from a virtual patient to meshes.
+TEST_F(SimulateCommand, SegmentTurnsASimulatedSweepIntoAValidSliceSet) {
+  const auto simulated = run("simulate --frames 16 --width-px 256 --height-px 256 --seed 7 -o " +
+                                 (dir_ / "s.igs.mha").string(),
+                             dir_ / "log_sim");
+  ASSERT_EQ(simulated.exit_code, 0) << simulated.output;
+  const auto segmented =
+      run("segment " + (dir_ / "s.igs.mha").string() + " -o " + (dir_ / "s.slices.json").string(),
+          dir_ / "log_seg");
+  ASSERT_EQ(segmented.exit_code, 0) << segmented.output;
+  // The reader validates every rule of the format (simple polygons, no overlaps, labels).
+  const auto slices = sonoshape::read_slice_set(dir_ / "s.slices.json");
+  ASSERT_TRUE(slices) << slices.message();
+  ASSERT_GE(slices->slices.size(), 12u);  // a few frames may have an INVALID pose
+  std::size_t materials = 0, unknowns = 0;
+  for (const auto& s : slices->slices) {
+    EXPECT_TRUE(s.fov.has_value());  // the image sector
+    for (const auto& r : s.regions) (r.label == sonoshape::kUnknownLabel ? unknowns : materials)++;
+  }
+  EXPECT_GT(materials, 0u);
+  EXPECT_GT(unknowns, 0u);  // the rib's shadow
+  const auto reconstructed = run("reconstruct " + (dir_ / "s.slices.json").string() +
+                                     " --depth 5 -o " + (dir_ / "out").string(),
+                                 dir_ / "log_recon");
+  ASSERT_EQ(reconstructed.exit_code, 0) << reconstructed.output;
+  EXPECT_TRUE(fs::exists(dir_ / "out" / "label_1.ply"));
 }
 
 }  // namespace
