@@ -297,6 +297,10 @@ int CellField::evaluate(const Vec3& p, double* out) const {
   }
   for (int l = 1; l < n; ++l) out[l] = 2.0 * w[l] / total - 1.0;
   out[0] = 2.0 * (total - known_materials - unknown_total + w[0]) / total - 1.0;
+  for (int l = 0; l < n; ++l)
+    if (!std::isfinite(out[l]))
+      throw GeometryError("field: non-finite value in cell " + std::to_string(cell) +
+                          " (a degenerate face or triangle); please report the input");
   return cell;
 }
 

@@ -130,8 +130,13 @@ void CellField::triangulate_unknown(int slice,
       if (winding > 0) triangle.component = static_cast<int>(c);
     }
     if (triangle.component < 0) continue;
-    if (signed_area(Ring2{triangle.corners[0], triangle.corners[1], triangle.corners[2]}) < 0.0)
-      std::swap(triangle.corners[1], triangle.corners[2]);  // counter-clockwise, like the faces
+    const double area = signed_area(Ring2{triangle.corners[0], triangle.corners[1], triangle.corners[2]});
+    // Slivers from constraint intersections rounded onto each other cover nothing.
+    const double longest_sq = std::max({(triangle.corners[1] - triangle.corners[0]).squaredNorm(),
+                                        (triangle.corners[2] - triangle.corners[1]).squaredNorm(),
+                                        (triangle.corners[0] - triangle.corners[2]).squaredNorm()});
+    if (!(std::abs(area) > 1e-12 * longest_sq)) continue;
+    if (area < 0.0) std::swap(triangle.corners[1], triangle.corners[2]);  // counter-clockwise
     for (const SliceFace& face : faces) {
       if ((centroid.array() < face.lo.array()).any() || (centroid.array() > face.hi.array()).any()) continue;
       const FaceImage& image = images_[static_cast<std::size_t>(face.id)];

@@ -1,5 +1,6 @@
 #include "mean_value.hpp"
 
+#include <algorithm>
 #include <cmath>
 
 namespace sonoshape::recon {
@@ -102,7 +103,10 @@ bool triangle_weights(const Vec2& a, const Vec2& b, const Vec2& c, const Vec2& f
                       double weights[3]) {
   const Vec2 corners[3] = {a, b, c};
   const double twice_area = (b - a).x() * (c - a).y() - (b - a).y() * (c - a).x();
-  if (twice_area == 0.0 || !(height > 0.0)) return false;
+  // Slivers (two corners rounded onto each other) carry no area but would blow up the
+  // barycentric gradients: they contribute nothing.
+  const double longest_sq = std::max({(b - a).squaredNorm(), (c - b).squaredNorm(), (a - c).squaredNorm()});
+  if (!(std::abs(twice_area) > 1e-12 * longest_sq) || !(height > 0.0)) return false;
   // Traverse counter-clockwise so outward normals are (d.y, -d.x) / L.
   const int order[3] = {0, twice_area > 0 ? 1 : 2, twice_area > 0 ? 2 : 1};
   Vec2 ring[3];

@@ -381,3 +381,20 @@ TEST(Completion, UnknownPatchInOpenOutsideCompletesToOutside) {
 
 }  // namespace
 }  // namespace sonoshape::recon
+
+namespace sonoshape::recon {
+namespace {
+
+// Found on a segmented sweep: a constraint intersection rounded onto a vertex left a sliver
+// triangle whose barycentric gradients overflowed into NaN and spread through smoothing.
+TEST(TriangleWeights, SliversContributeNothing) {
+  double w[3] = {0, 0, 0};
+  const Vec2 a(2.80039, -52.9038), b(2.80039 + 1e-15, -52.9038), c(-40.9279, 16.1452);
+  EXPECT_FALSE(triangle_weights(a, b, c, Vec2(10.0, 3.0), 8.0, w));
+  EXPECT_FALSE(triangle_weights(a, a, c, Vec2(10.0, 3.0), 8.0, w));
+  ASSERT_TRUE(triangle_weights(a, Vec2(3.5, -50.0), c, Vec2(10.0, 3.0), 8.0, w));
+  for (const double x : w) EXPECT_TRUE(std::isfinite(x));
+}
+
+}  // namespace
+}  // namespace sonoshape::recon
