@@ -58,7 +58,7 @@ struct SegmentationConfig {
   /// their neighbours.
   double opening_mm = 0.6;
   /// Connected components smaller than this (mm^2) are re-labelled from their surroundings.
-  double min_region_mm2 = 5.0;
+  double min_region_mm2 = 25.0;  // speckle grains misread as tissue stay below a 5 x 5 mm patch
   /// Polygon simplification tolerance (mm, approxPolyDP); reduced per slice where the
   /// simplified polygons would not be valid.
   double simplify_mm = 0.3;
