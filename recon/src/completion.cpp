@@ -135,7 +135,9 @@ void CellField::triangulate_unknown(int slice,
     const double longest_sq = std::max({(triangle.corners[1] - triangle.corners[0]).squaredNorm(),
                                         (triangle.corners[2] - triangle.corners[1]).squaredNorm(),
                                         (triangle.corners[0] - triangle.corners[2]).squaredNorm()});
-    if (!(std::abs(area) > 1e-12 * longest_sq)) continue;
+    const double box_diagonal = arrangement_.box().diagonal();
+    if (!(std::abs(area) > 1e-12 * longest_sq) || std::abs(area) < 1e-14 * box_diagonal * box_diagonal)
+      continue;
     if (area < 0.0) std::swap(triangle.corners[1], triangle.corners[2]);  // counter-clockwise
     for (const SliceFace& face : faces) {
       if ((centroid.array() < face.lo.array()).any() || (centroid.array() > face.hi.array()).any()) continue;

@@ -105,8 +105,11 @@ bool triangle_weights(const Vec2& a, const Vec2& b, const Vec2& c, const Vec2& f
   const double twice_area = (b - a).x() * (c - a).y() - (b - a).y() * (c - a).x();
   // Slivers (two corners rounded onto each other) carry no area but would blow up the
   // barycentric gradients: they contribute nothing.
+  // (and so do triangles tiny against their distance to the point: their gradients overflow too).
   const double longest_sq = std::max({(b - a).squaredNorm(), (c - b).squaredNorm(), (a - c).squaredNorm()});
-  if (!(std::abs(twice_area) > 1e-12 * longest_sq) || !(height > 0.0)) return false;
+  const double reach_sq = (foot - a).squaredNorm() + height * height;
+  if (!(std::abs(twice_area) > 1e-12 * std::max(longest_sq, 1e-12 * reach_sq)) || !(height > 0.0))
+    return false;
   // Traverse counter-clockwise so outward normals are (d.y, -d.x) / L.
   const int order[3] = {0, twice_area > 0 ? 1 : 2, twice_area > 0 ? 2 : 1};
   Vec2 ring[3];
@@ -137,7 +140,7 @@ bool triangle_weights(const Vec2& a, const Vec2& b, const Vec2& c, const Vec2& f
     const double lambda_at_foot = gradient.dot(foot - p1);
     weights[i] = lambda_at_foot * projected / height + 2.0 * gradient.dot(moment);
   }
-  return true;
+  return std::isfinite(weights[0]) && std::isfinite(weights[1]) && std::isfinite(weights[2]);
 }
 
 void ju_triangle_weights(const Vec3& x, const Vec3& p0, const Vec3& p1, const Vec3& p2,

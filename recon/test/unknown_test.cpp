@@ -392,6 +392,11 @@ TEST(TriangleWeights, SliversContributeNothing) {
   const Vec2 a(2.80039, -52.9038), b(2.80039 + 1e-15, -52.9038), c(-40.9279, 16.1452);
   EXPECT_FALSE(triangle_weights(a, b, c, Vec2(10.0, 3.0), 8.0, w));
   EXPECT_FALSE(triangle_weights(a, a, c, Vec2(10.0, 3.0), 8.0, w));
+  // A whole triangle within 1e-14 mm, seen from 40 mm (found on a sector fov set).
+  EXPECT_FALSE(triangle_weights(Vec2(42.545796336203757, 1.0883589852497786),
+                                Vec2(42.545796336203757, 1.088358985249781),
+                                Vec2(42.545796336203772, 1.0883589852497959),
+                                Vec2(38.650125921168197, 17.435219456682546), 15.711425339673877, w));
   ASSERT_TRUE(triangle_weights(a, Vec2(3.5, -50.0), c, Vec2(10.0, 3.0), 8.0, w));
   for (const double x : w) EXPECT_TRUE(std::isfinite(x));
 }
