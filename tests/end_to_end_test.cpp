@@ -1,6 +1,8 @@
 // The `sonoshape` command end to end: slice a bundled model, reconstruct, evaluate.
 #include <gtest/gtest.h>
 
+#include "sonoshape/testing/command.hpp"
+
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -12,22 +14,11 @@ namespace {
 
 namespace fs = std::filesystem;
 
-struct CommandResult {
-  int exit_code = -1;
-  std::string output;  // stdout and stderr together
-};
-
-CommandResult run(const std::string& arguments) {
-  const fs::path log = fs::temp_directory_path() / ("sonoshape_e2e_" + std::to_string(::testing::UnitTest::GetInstance()->random_seed()) + ".log");
-  const std::string command = std::string(SONOSHAPE_BINARY) + " " + arguments + " > " + log.string() + " 2>&1";
-  const int status = std::system(command.c_str());
-  CommandResult result;
-  result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  std::ifstream in(log);
-  std::stringstream text;
-  text << in.rdbuf();
-  result.output = text.str();
-  return result;
+// Each test's command output goes to one log file in the temp directory.
+sonoshape::testing::CommandResult run(const std::string& arguments) {
+  const fs::path log = fs::temp_directory_path() /
+                       ("sonoshape_e2e_" + std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()) + ".log");
+  return sonoshape::testing::run_command(SONOSHAPE_BINARY, arguments, log);
 }
 
 class EndToEnd : public ::testing::Test {

@@ -1,6 +1,8 @@
 // `sonoshape simulate` end to end: the built-in demo and a user phantom, written and read back.
 #include <gtest/gtest.h>
 
+#include "sonoshape/testing/command.hpp"
+
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -15,22 +17,8 @@ namespace {
 
 namespace fs = std::filesystem;
 
-struct CommandResult {
-  int exit_code = -1;
-  std::string output;
-};
-
-CommandResult run(const std::string& arguments, const fs::path& log) {
-  const std::string command =
-      std::string(SONOSHAPE_BINARY) + " " + arguments + " > " + log.string() + " 2>&1";
-  const int status = std::system(command.c_str());
-  CommandResult result;
-  result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  std::ifstream in(log);
-  std::stringstream text;
-  text << in.rdbuf();
-  result.output = text.str();
-  return result;
+sonoshape::testing::CommandResult run(const std::string& arguments, const fs::path& log) {
+  return sonoshape::testing::run_command(SONOSHAPE_BINARY, arguments, log);
 }
 
 std::string bytes(const fs::path& path) {
