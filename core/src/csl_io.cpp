@@ -442,12 +442,7 @@ Result<SliceSet> parse_csl(const std::string& text, const std::string& source_na
   } catch (const CslProblem& problem) {
     return Status::error(source_name + ": " + problem.what);
   }
-  detail::SlicePairs identical;
-  if (Status status = detail::validate_slice_set_named(set, source_name, naming, &identical);
-      !status)
-    return status;
-  detail::merge_identical_slices(set, identical, source_name, naming);
-  return set;
+  return detail::finish_parsed_set(std::move(set), source_name, naming);
 }
 
 Status write_csl(const SliceSet& set, const std::filesystem::path& path) {

@@ -664,6 +664,15 @@ void merge_identical_slices(SliceSet& set, const SlicePairs& identical,
   set.slices = std::move(slices);
 }
 
+Result<SliceSet> finish_parsed_set(SliceSet set, const std::string& source_name,
+                                   const SliceNaming& naming) {
+  SlicePairs identical;
+  if (Status status = validate_slice_set_named(set, source_name, naming, &identical); !status)
+    return status;
+  merge_identical_slices(set, identical, source_name, naming);
+  return set;
+}
+
 }  // namespace detail
 
 Status validate_slice_set(const SliceSet& set, const std::string& source_name) {
@@ -935,13 +944,7 @@ Result<SliceSet> parse_slice_set_json(const std::string& text, const std::string
   } catch (const json::exception& e) {
     return Status::error(source_name + ": malformed slice set (" + std::string(e.what()) + ")");
   }
-  const detail::SliceNaming naming;
-  detail::SlicePairs identical;
-  if (Status status = detail::validate_slice_set_named(set, source_name, naming, &identical);
-      !status)
-    return status;
-  detail::merge_identical_slices(set, identical, source_name, naming);
-  return set;
+  return detail::finish_parsed_set(std::move(set), source_name, detail::SliceNaming{});
 }
 
 Status write_slice_set_json(const SliceSet& set, const std::filesystem::path& path) {

@@ -63,6 +63,10 @@ Status validate_slice_set_named(const SliceSet& set, const std::string& source_n
 void merge_identical_slices(SliceSet& set, const SlicePairs& identical,
                             const std::string& source_name, const SliceNaming& naming);
 
+/// The common end of both readers: validates a parsed set and merges slices given twice.
+Result<SliceSet> finish_parsed_set(SliceSet set, const std::string& source_name,
+                                   const SliceNaming& naming);
+
 /// Whole-file helpers: read text (errors name the path) and write text.
 Result<std::string> read_text_file(const std::filesystem::path& path);
 Status write_text_file(const std::filesystem::path& path, const std::string& text);

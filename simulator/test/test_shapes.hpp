@@ -4,37 +4,16 @@
 #include <numbers>
 
 #include "sonoshape/core/mesh.hpp"
+#include "sonoshape/simulator/phantom.hpp"
 
 namespace sonoshape::sim::test {
 
-/// Outward UV sphere: `segments` around z, `rings` from pole to pole (even `rings` puts a vertex
-/// ring on the equator z = centre.z).
+/// Outward UV sphere (sim::make_sphere) moved to `centre`: `segments` around z, `rings` from
+/// pole to pole (even `rings` puts a vertex ring on the equator z = centre.z).
 inline TriangleMesh uv_sphere(double radius, const Vec3& centre = Vec3::Zero(), int segments = 256,
                               int rings = 128) {
-  TriangleMesh mesh;
-  mesh.vertices.push_back(centre + Vec3(0, 0, radius));  // north pole
-  for (int r = 1; r < rings; ++r) {
-    const double theta = std::numbers::pi * r / rings;
-    for (int s = 0; s < segments; ++s) {
-      const double phi = 2.0 * std::numbers::pi * s / segments;
-      mesh.vertices.push_back(centre + radius * Vec3(std::sin(theta) * std::cos(phi),
-                                                     std::sin(theta) * std::sin(phi),
-                                                     std::cos(theta)));
-    }
-  }
-  mesh.vertices.push_back(centre + Vec3(0, 0, -radius));  // south pole
-  const auto south = static_cast<std::uint32_t>(mesh.vertices.size() - 1);
-  auto at = [&](int r, int s) {
-    return static_cast<std::uint32_t>(1 + (r - 1) * segments + (s % segments));
-  };
-  for (int s = 0; s < segments; ++s) mesh.triangles.push_back({0, at(1, s), at(1, s + 1)});
-  for (int r = 1; r + 1 < rings; ++r)
-    for (int s = 0; s < segments; ++s) {
-      mesh.triangles.push_back({at(r, s), at(r + 1, s), at(r + 1, s + 1)});
-      mesh.triangles.push_back({at(r, s), at(r + 1, s + 1), at(r, s + 1)});
-    }
-  for (int s = 0; s < segments; ++s)
-    mesh.triangles.push_back({at(rings - 1, s), south, at(rings - 1, s + 1)});
+  TriangleMesh mesh = make_sphere(radius, segments, rings);
+  for (Vec3& p : mesh.vertices) p += centre;
   return mesh;
 }
 
