@@ -1,7 +1,12 @@
-// `sonoshape reconstruct INPUT -o OUT`: offline reconstruction of a slice set.
+// `sonoshape reconstruct INPUT -o OUT [--online]`: reconstruction of a slice set, at once or
+// slice by slice through the online engine (recon::Reconstructor).
 #include <CLI/CLI.hpp>
 
+#include <algorithm>
+#include <filesystem>
 #include <fstream>
+#include <iomanip>
+#include <sstream>
 #include <iostream>
 #include <memory>
 #include <nlohmann/json.hpp>
@@ -11,13 +16,118 @@
 #include "sonoshape/core/slice_io.hpp"
 #include "sonoshape/publish/mesh_writer.hpp"
 #include "sonoshape/recon/reconstruct.hpp"
+#include "sonoshape/recon/reconstructor.hpp"
 
 namespace sonoshape::apps {
+namespace {
+
+nlohmann::json stats_json(const recon::ReconstructionStats& stats) {
+  nlohmann::json j;
+  j["arrangement_s"] = stats.arrangement_s;
+  j["face_images_s"] = stats.face_images_s;
+  j["field_s"] = stats.field_s;
+  j["smoothing_s"] = stats.smoothing_s;
+  j["mesh_s"] = stats.mesh_s;
+  j["total_s"] = stats.total_s;
+  j["slices"] = stats.slices;
+  j["cells"] = stats.cells;
+  j["faces"] = stats.faces;
+  j["field_evaluations"] = stats.field_evaluations;
+  j["depth"] = stats.depth;
+  j["snapped_vertices"] = stats.snapped_vertices;
+  j["completion_s"] = stats.completion_s;
+  j["unknown_triangles"] = stats.unknown_triangles;
+  j["cell_groups"] = stats.cell_groups;
+  nlohmann::json triangles = nlohmann::json::object();
+  for (const auto& [label, count] : stats.triangles) triangles[std::to_string(label)] = count;
+  j["triangles"] = triangles;
+  return j;
+}
+
+int write_json(const nlohmann::json& j, const std::string& path) {
+  std::ofstream out(path);
+  out << j.dump(2) << '\n';
+  if (!out) {
+    std::cerr << "error: cannot write stats to " << path
+              << ": check the directory exists and is writable\n";
+    return 2;
+  }
+  return 0;
+}
+
+// Feeds the slices one by one (file order, or by timestamp) to the online engine; writes the
+// meshes every `emit_every` slices (OUT/step_NNNN/) and at the end (OUT).
+int run_online(const SliceSet& set, const std::string& output, const std::string& stats_path,
+               const recon::ReconstructionOptions& engine, int emit_every, bool by_timestamp) {
+  std::vector<std::size_t> order(set.slices.size());
+  for (std::size_t k = 0; k < order.size(); ++k) order[k] = k;
+  if (by_timestamp) {
+    for (std::size_t k = 0; k < set.slices.size(); ++k)
+      if (!set.slices[k].timestamp_s) {
+        std::cerr << "error: --order timestamp: slice " << k
+                  << " has no timestamp; give every slice a \"timestamp\" or use --order file\n";
+        return 2;
+      }
+    std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
+      return *set.slices[a].timestamp_s < *set.slices[b].timestamp_s;
+    });
+  }
+  recon::ReconstructorOptions setup;
+  setup.engine = engine;
+  // The whole file's box from the start: no rebuild when a later slice reaches further.
+  setup.bounds = set.effective_bounds();
+  for (const int id : set.material_ids()) setup.labels.push_back({id, set.label_name(id)});
+  recon::Reconstructor reconstructor(setup);
+  nlohmann::json steps = nlohmann::json::array();
+  Progress progress("online reconstruction", order.size());
+  for (std::size_t step = 0; step < order.size(); ++step) {
+    reconstructor.add_slice(set.slices[order[step]]);
+    const recon::UpdateStats update = reconstructor.update();
+    nlohmann::json j = stats_json(update.step);
+    j["step"] = step + 1;
+    j["slice"] = order[step];
+    j["cells_changed"] = update.cells_changed;
+    j["full_rebuild"] = update.full_rebuild;
+    j["peak_rss_mb"] = peak_rss_mb();
+    steps.push_back(std::move(j));
+    progress.update(step + 1);
+    if (emit_every > 0 && (step + 1) % static_cast<std::size_t>(emit_every) == 0) {
+      std::ostringstream name;
+      name << "step_" << std::setw(4) << std::setfill('0') << step + 1;
+      const auto written = publish::write_mesh_set(reconstructor.mesh(),
+                                                   std::filesystem::path(output) / name.str());
+      if (!written) {
+        std::cerr << "error: " << written.message() << '\n';
+        return 2;
+      }
+    }
+  }
+  const auto written = publish::write_mesh_set(reconstructor.mesh(), output);
+  if (!written) {
+    std::cerr << "error: " << written.message() << '\n';
+    return 2;
+  }
+  for (const auto& path : *written) log_info("wrote " + path.string());
+  const recon::ReconstructionStats& totals = reconstructor.totals();
+  log_info("reconstructed " + std::to_string(totals.slices) + " slices online, " +
+           std::to_string(totals.cells) + " cells, " + std::to_string(totals.field_evaluations) +
+           " field evaluations in " + std::to_string(totals.total_s) + " s");
+  if (stats_path.empty()) return 0;
+  nlohmann::json j = stats_json(totals);
+  j["peak_rss_mb"] = peak_rss_mb();
+  j["steps"] = std::move(steps);
+  return write_json(j, stats_path);
+}
+
+}  // namespace
 
 CommandRunner add_reconstruct_command(CLI::App& app) {
   struct Options {
     std::string input, output, stats_path;
     recon::ReconstructionOptions engine;
+    bool online = false;
+    int emit_every = 0;
+    std::string order = "file";
   };
   auto opt = std::make_shared<Options>();
   app.add_option("input", opt->input, "Slice set: .slices.json (see docs/formats/slices.md) or .csl")
@@ -36,7 +146,16 @@ CommandRunner add_reconstruct_command(CLI::App& app) {
   app.add_option("--threads", opt->engine.threads, "Evaluation threads (0: all cores)")
       ->check(CLI::Range(0, 1024))
       ->capture_default_str();
-  app.add_option("--stats", opt->stats_path, "Write per-stage seconds and counts as JSON");
+  app.add_option("--stats", opt->stats_path, "Write per-stage seconds and counts as JSON (with "
+                 "--online: totals and one entry per step)");
+  app.add_flag("--online", opt->online,
+               "Feed the slices one by one to the online engine (an update per slice)");
+  app.add_option("--emit-every", opt->emit_every,
+                 "With --online: also write the meshes after every K slices to OUT/step_NNNN/")
+      ->check(CLI::Range(1, 1000000));
+  app.add_option("--order", opt->order, "With --online: feed in file order or by timestamp")
+      ->check(CLI::IsMember({"file", "timestamp"}))
+      ->capture_default_str();
 
   return [opt]() -> int {
     const Result<SliceSet> slices = read_slice_set(opt->input);
@@ -44,6 +163,13 @@ CommandRunner add_reconstruct_command(CLI::App& app) {
       std::cerr << "error: " << slices.message() << '\n';
       return 2;
     }
+    if (opt->emit_every > 0 && !opt->online) {
+      std::cerr << "error: --emit-every needs --online\n";
+      return 2;
+    }
+    if (opt->online)
+      return run_online(*slices, opt->output, opt->stats_path, opt->engine, opt->emit_every,
+                        opt->order == "timestamp");
     recon::ReconstructionStats stats;
     const MeshSet meshes = recon::reconstruct(*slices, opt->engine, &stats);
     const auto written = publish::write_mesh_set(meshes, opt->output);
@@ -61,33 +187,9 @@ CommandRunner add_reconstruct_command(CLI::App& app) {
              std::to_string(stats.cells) + " cells, " + std::to_string(stats.field_evaluations) +
              " field evaluations in " + std::to_string(stats.total_s) + " s");
     if (!opt->stats_path.empty()) {
-      nlohmann::json j;
-      j["arrangement_s"] = stats.arrangement_s;
-      j["face_images_s"] = stats.face_images_s;
-      j["field_s"] = stats.field_s;
-      j["smoothing_s"] = stats.smoothing_s;
-      j["mesh_s"] = stats.mesh_s;
-      j["total_s"] = stats.total_s;
-      j["slices"] = stats.slices;
-      j["cells"] = stats.cells;
-      j["faces"] = stats.faces;
-      j["field_evaluations"] = stats.field_evaluations;
-      j["depth"] = stats.depth;
-      j["snapped_vertices"] = stats.snapped_vertices;
-      j["completion_s"] = stats.completion_s;
-      j["unknown_triangles"] = stats.unknown_triangles;
-      j["cell_groups"] = stats.cell_groups;
-      nlohmann::json triangles = nlohmann::json::object();
-      for (const auto& [label, count] : stats.triangles) triangles[std::to_string(label)] = count;
-      j["triangles"] = triangles;
+      nlohmann::json j = stats_json(stats);
       j["peak_rss_mb"] = peak_rss_mb();
-      std::ofstream out(opt->stats_path);
-      out << j.dump(2) << '\n';
-      if (!out) {
-        std::cerr << "error: cannot write stats to " << opt->stats_path
-                  << ": check the directory exists and is writable\n";
-        return 2;
-      }
+      return write_json(j, opt->stats_path);
     }
     return 0;
   };

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <limits>
 
 #include "mean_value.hpp"
@@ -9,12 +10,9 @@
 
 namespace sonoshape::recon {
 
-std::vector<PreparedSlice> prepare_slices(const SliceSet& set,
-                                          const std::vector<int>& material_ids, const Box3& box) {
-  std::vector<PreparedSlice> out;
-  out.reserve(set.slices.size());
-  for (std::size_t s = 0; s < set.slices.size(); ++s) {
-    const LabeledSlice& slice = set.slices[s];
+PreparedSlice prepare_slice(const LabeledSlice& slice, std::size_t s,
+                            const std::vector<int>& material_ids, const Box3& box) {
+  {
     PreparedSlice p;
     p.origin = slice.origin_mm;
     p.u = slice.u;
@@ -56,8 +54,16 @@ std::vector<PreparedSlice> prepare_slices(const SliceSet& set,
         }
         p.ring_bounds[m].emplace_back(lo, hi);
       }
-    out.push_back(std::move(p));
+    return p;
   }
+}
+
+std::vector<PreparedSlice> prepare_slices(const SliceSet& set,
+                                          const std::vector<int>& material_ids, const Box3& box) {
+  std::vector<PreparedSlice> out;
+  out.reserve(set.slices.size());
+  for (std::size_t s = 0; s < set.slices.size(); ++s)
+    out.push_back(prepare_slice(set.slices[s], s, material_ids, box));
   return out;
 }
 
@@ -107,16 +113,28 @@ void barycentric(const Vec2 (&c)[3], const Vec2& p, double (&out)[3]) {
 
 }  // namespace
 
+CellField::CellField(const Arrangement& arrangement, int material_count)
+    : arrangement_(arrangement), material_count_(material_count) {
+  on_face_height_ = 1e-12 * arrangement.box().diagonal();
+}
+
 CellField::CellField(const Arrangement& arrangement, const std::vector<PreparedSlice>& slices,
                      int material_count)
-    : arrangement_(arrangement), slices_(slices), material_count_(material_count) {
-  on_face_height_ = 1e-12 * arrangement.box().diagonal();
-  frames_.resize(arrangement.plane_count());
-  for (std::size_t p = 0; p < arrangement.plane_count(); ++p) {
-    const ArrangementPlane& plane = arrangement.plane(static_cast<int>(p));
-    PlaneFrame& frame = frames_[p];
+    : CellField(arrangement, material_count) {
+  slices_ = slices;
+  std::vector<int> all_cells(arrangement.cell_count());
+  for (std::size_t c = 0; c < all_cells.size(); ++c) all_cells[c] = static_cast<int>(c);
+  refresh(all_cells);
+}
+
+void CellField::add_slice(PreparedSlice slice) { slices_.push_back(std::move(slice)); }
+
+void CellField::update_frames() {
+  for (std::size_t p = frames_.size(); p < arrangement_.plane_count(); ++p) {
+    const ArrangementPlane& plane = arrangement_.plane(static_cast<int>(p));
+    PlaneFrame frame;
     if (plane.slice >= 0) {
-      const PreparedSlice& s = slices[static_cast<std::size_t>(plane.slice)];
+      const PreparedSlice& s = slices_.at(static_cast<std::size_t>(plane.slice));
       frame = {s.origin, s.u, s.v, s.unit_normal};
     } else {
       // Box faces: plane 2k has normal +e_k, 2k+1 has -e_k; (u, v) turn about the normal.
@@ -124,19 +142,115 @@ CellField::CellField(const Arrangement& arrangement, const std::vector<PreparedS
       const bool upper = p % 2 == 1;
       Vec3 e1 = Vec3::Unit((axis + 1) % 3), e2 = Vec3::Unit((axis + 2) % 3);
       if (upper) std::swap(e1, e2);
-      frame.origin = upper ? arrangement.box().max : arrangement.box().min;
+      frame.origin = upper ? arrangement_.box().max : arrangement_.box().min;
       frame.u = e1;
       frame.v = e2;
       frame.unit_normal = e1.cross(e2);
     }
+    frames_.push_back(frame);
   }
-  images_.resize(arrangement.face_count());
-  for (std::size_t f = 0; f < arrangement.face_count(); ++f)
-    build_face_image(static_cast<int>(f), slices);
-  build_unknown_images();
 }
 
-void CellField::build_face_image(int face_id, const std::vector<PreparedSlice>& slices) {
+std::vector<int> CellField::refresh(const std::vector<int>& changed_cells) {
+  update_frames();
+  const std::size_t old_face_count = images_.size();
+  images_.resize(arrangement_.face_count());
+  std::vector<char> rebuilt(images_.size(), 0);
+  for (std::size_t f = old_face_count; f < images_.size(); ++f) rebuilt[f] = 1;
+  for (const int c : changed_cells)
+    for (const int f : arrangement_.cell(c).faces) rebuilt[static_cast<std::size_t>(f)] = 1;
+  for (std::size_t f = 0; f < images_.size(); ++f)
+    if (rebuilt[f]) {
+      images_[f] = FaceImage{};
+      build_face_image(static_cast<int>(f));
+    }
+
+  std::vector<int> completion_changed;
+  bool any_unknown = false;
+  for (const PreparedSlice& s : slices_) any_unknown |= !s.unknown.empty();
+  if (any_unknown) {
+    // The completion is redone as a whole; the cells on both sides of a face whose completed
+    // triangles changed must be evaluated again (an unchanged face of a split cell counts too:
+    // its other cell is not in `changed_cells`).
+    std::vector<std::uint64_t> old_hashes = completion_hashes();
+    old_hashes.resize(images_.size(), 0);
+    triangles_.clear();
+    corner_values_.clear();
+    for (FaceImage& image : images_) image.triangle_begin = image.triangle_count = 0;
+    build_unknown_images();
+    const std::vector<std::uint64_t> new_hashes = completion_hashes();
+    for (std::size_t f = 0; f < old_face_count; ++f) {
+      if (old_hashes[f] == new_hashes[f]) continue;
+      const ArrangementFace& face = arrangement_.face(static_cast<int>(f));
+      if (face.cell_positive >= 0) completion_changed.push_back(face.cell_positive);
+      if (face.cell_negative >= 0) completion_changed.push_back(face.cell_negative);
+    }
+    std::sort(completion_changed.begin(), completion_changed.end());
+    completion_changed.erase(std::unique(completion_changed.begin(), completion_changed.end()),
+                             completion_changed.end());
+  }
+  compact_points();
+  return completion_changed;
+}
+
+std::vector<std::uint64_t> CellField::completion_hashes() const {
+  const std::size_t fc = static_cast<std::size_t>(function_count());
+  auto mix = [](std::uint64_t h, double x) {
+    std::uint64_t bits;
+    std::memcpy(&bits, &x, sizeof bits);
+    h ^= bits + 0x9e3779b97f4a7c15ULL + (h << 6) + (h >> 2);
+    return h;
+  };
+  std::vector<std::uint64_t> hashes(images_.size(), 0);
+  for (std::size_t f = 0; f < images_.size(); ++f) {
+    const FaceImage& image = images_[f];
+    std::uint64_t sum = 0;
+    for (std::uint32_t t = image.triangle_begin; t < image.triangle_begin + image.triangle_count; ++t) {
+      const UnknownTriangle& triangle = triangles_[t];
+      // Start at the lowest corner so that the hash does not depend on the corner rotation.
+      int first = 0;
+      for (int k = 1; k < 3; ++k)
+        if (std::make_pair(triangle.corners[k].x(), triangle.corners[k].y()) <
+            std::make_pair(triangle.corners[first].x(), triangle.corners[first].y()))
+          first = k;
+      std::uint64_t h = 1469598103934665603ULL;
+      for (int n = 0; n < 3; ++n) {
+        const int k = (first + n) % 3;
+        h = mix(mix(h, triangle.corners[k].x()), triangle.corners[k].y());
+        for (std::size_t l = 0; l < fc; ++l) h = mix(h, corner_value(t, k, static_cast<int>(l)));
+      }
+      sum += h;  // order-independent over the face's triangles
+    }
+    hashes[f] = sum + image.triangle_count;
+  }
+  return hashes;
+}
+
+void CellField::compact_points() {
+  std::size_t live = 0;
+  for (const FaceImage& image : images_) {
+    live += image.polygon_count;
+    for (const FaceImage::Part& part : image.parts) live += part.count;
+    for (const FaceImage::Part& part : image.unknown_parts) live += part.count;
+  }
+  // Rebuilt images leave their old points behind; copy the live ones once they are the minority.
+  if (points_.size() < 2 * live + 4096) return;
+  std::vector<Vec2> compacted;
+  compacted.reserve(live);
+  auto move_range = [&](std::uint32_t& begin, std::uint32_t count) {
+    const std::uint32_t new_begin = static_cast<std::uint32_t>(compacted.size());
+    compacted.insert(compacted.end(), points_.begin() + begin, points_.begin() + begin + count);
+    begin = new_begin;
+  };
+  for (FaceImage& image : images_) {
+    move_range(image.polygon_begin, image.polygon_count);
+    for (FaceImage::Part& part : image.parts) move_range(part.begin, part.count);
+    for (FaceImage::Part& part : image.unknown_parts) move_range(part.begin, part.count);
+  }
+  points_ = std::move(compacted);
+}
+
+void CellField::build_face_image(int face_id) {
   const ArrangementFace& face = arrangement_.face(face_id);
   const ArrangementPlane& plane = arrangement_.plane(face.plane);
   FaceImage& image = images_[static_cast<std::size_t>(face_id)];
@@ -162,11 +276,22 @@ void CellField::build_face_image(int face_id, const std::vector<PreparedSlice>& 
     const int edge_plane_id = face.edge_planes[i];
     if (std::find(seen.begin(), seen.end(), edge_plane_id) != seen.end()) continue;
     seen.push_back(edge_plane_id);
-    int side = 0;
+    // Ask the exact predicate about the vertex farthest from the edge plane: its interval
+    // filter decides at once, where vertices on the plane would need exact arithmetic.
+    const ArrangementPlane& e = arrangement_.plane(edge_plane_id);
+    std::size_t farthest = 0;
+    double farthest_distance = -1.0;
+    for (std::size_t k = 0; k < face.vertices.size(); ++k) {
+      const double distance = std::abs(e.normal.dot(arrangement_.vertex(face.vertices[k])) + e.offset);
+      if (distance > farthest_distance) {
+        farthest_distance = distance;
+        farthest = k;
+      }
+    }
+    int side = arrangement_.side(edge_plane_id, face.vertices[farthest]);
     for (std::size_t k = 0; k < face.vertices.size() && side == 0; ++k)
       side = arrangement_.side(edge_plane_id, face.vertices[k]);
     if (side == 0) continue;  // cannot happen for a face of positive area
-    const ArrangementPlane& e = arrangement_.plane(edge_plane_id);
     Eigen::Vector3d h(e.normal.dot(frame.u), e.normal.dot(frame.v),
                       e.normal.dot(frame.origin) + e.offset);
     half_planes.push_back(side * h);
@@ -177,30 +302,48 @@ void CellField::build_face_image(int face_id, const std::vector<PreparedSlice>& 
     hi = hi.cwiseMax(p);
   }
   const double margin = 1e-9 * (hi - lo).norm();
-  const PreparedSlice& slice = slices[static_cast<std::size_t>(plane.slice)];
+  Vec2 centre = Vec2::Zero();
+  for (const Vec2& q : polygon) centre += q;
+  centre /= static_cast<double>(polygon.size());
+  // The part of one ring inside the face. Most faces lie wholly inside or outside a ring: when no
+  // ring edge comes near the face's box, the part is the face itself (in the ring's orientation)
+  // or nothing, which spares clipping the whole ring (most of the face-image time at 100 slices).
+  auto add_part = [&](const Ring2& ring, int material, std::vector<FaceImage::Part>& parts) {
+    bool edge_near = false;
+    for (std::size_t i = 0; i < ring.size() && !edge_near; ++i) {
+      const Vec2& a = ring[i];
+      const Vec2& b = ring[i + 1 < ring.size() ? i + 1 : 0];
+      edge_near = std::max(a.x(), b.x()) >= lo.x() - margin && std::min(a.x(), b.x()) <= hi.x() + margin &&
+                  std::max(a.y(), b.y()) >= lo.y() - margin && std::min(a.y(), b.y()) <= hi.y() + margin;
+    }
+    if (!edge_near) {
+      const int winding = winding_number(ring.data(), ring.size(), centre);
+      if (winding == 0) return;
+      parts.push_back({material, static_cast<std::uint32_t>(points_.size()),
+                       static_cast<std::uint32_t>(polygon.size())});
+      if (winding < 0) points_.insert(points_.end(), polygon.rbegin(), polygon.rend());  // a hole
+      else points_.insert(points_.end(), polygon.begin(), polygon.end());
+      return;
+    }
+    const Ring2 clipped = clip_ring_to_convex(ring, half_planes);
+    if (clipped.empty()) return;
+    parts.push_back({material, static_cast<std::uint32_t>(points_.size()),
+                     static_cast<std::uint32_t>(clipped.size())});
+    points_.insert(points_.end(), clipped.begin(), clipped.end());
+  };
+  const PreparedSlice& slice = slices_[static_cast<std::size_t>(plane.slice)];
   for (std::size_t m = 1; m < slice.rings_by_material.size(); ++m) {
     for (std::size_t r = 0; r < slice.rings_by_material[m].size(); ++r) {
-      const Ring2& ring = slice.rings_by_material[m][r];
       const auto& [rlo, rhi] = slice.ring_bounds[m][r];
       if ((rlo.array() > hi.array() + margin).any() || (rhi.array() < lo.array() - margin).any())
         continue;
-      Ring2 clipped = clip_ring_to_convex(ring, half_planes);
-      if (clipped.empty()) continue;
-      image.parts.push_back({static_cast<int>(m), static_cast<std::uint32_t>(points_.size()),
-                             static_cast<std::uint32_t>(clipped.size())});
-      points_.insert(points_.end(), clipped.begin(), clipped.end());
+      add_part(slice.rings_by_material[m][r], static_cast<int>(m), image.parts);
     }
   }
   // The unknown set as clipped rings too: the completion needs only its integral (a few edges)
   // where the triangles would cost many.
   for (const UnknownComponent& component : slice.unknown)
-    for (const Ring2& ring : component.rings) {
-      Ring2 clipped = clip_ring_to_convex(ring, half_planes);
-      if (clipped.empty()) continue;
-      image.unknown_parts.push_back({0, static_cast<std::uint32_t>(points_.size()),
-                                     static_cast<std::uint32_t>(clipped.size())});
-      points_.insert(points_.end(), clipped.begin(), clipped.end());
-    }
+    for (const Ring2& ring : component.rings) add_part(ring, 0, image.unknown_parts);
   double unknown_area = 0.0;
   for (const FaceImage::Part& part : image.unknown_parts)
     unknown_area += signed_area(Ring2(points_.begin() + part.begin, points_.begin() + part.begin + part.count));

@@ -26,6 +26,9 @@ struct PreparedSlice {
 /// Slices with unknown regions or a field of view are partitioned inside `box`.
 std::vector<PreparedSlice> prepare_slices(const SliceSet& set, const std::vector<int>& material_ids,
                                           const Box3& box);
+/// One slice of prepare_slices; `index` names it in errors.
+PreparedSlice prepare_slice(const LabeledSlice& slice, std::size_t index,
+                            const std::vector<int>& material_ids, const Box3& box);
 
 /// A 2D frame of a plane: point -> ((p - origin).u, (p - origin).v), height |(p - origin).n|.
 struct PlaneFrame {
@@ -60,8 +63,20 @@ Ring2 clip_ring_to_convex(const Ring2& ring, const std::vector<Eigen::Vector3d>&
 /// Field of all labels over the arrangement. evaluate() is thread-safe (read-only).
 class CellField {
  public:
+  /// The field of `slices` over `arrangement` (whose planes refer to them by index): every face
+  /// image and the completion of the unknown regions.
   CellField(const Arrangement& arrangement, const std::vector<PreparedSlice>& slices,
             int material_count);
+  /// An empty field over `arrangement`; slices come with add_slice() and refresh().
+  CellField(const Arrangement& arrangement, int material_count);
+
+  /// Appends a slice: its index is the number of slices before the call.
+  void add_slice(PreparedSlice slice);
+  /// Brings the images up to date after planes were inserted into the arrangement (online
+  /// engine): rebuilds the images of every face of `changed_cells` (created or split cells,
+  /// which hold every new or split face) and redoes the completion of the unknown regions.
+  /// Returns the other cells whose faces' completed values changed: their field changed too.
+  std::vector<int> refresh(const std::vector<int>& changed_cells);
 
   /// Number of functions: materials + 1 (index 0 is the outside).
   int function_count() const { return material_count_ + 1; }
@@ -82,9 +97,14 @@ class CellField {
   const std::vector<UnknownTriangle>& unknown_triangles() const { return triangles_; }
   const FaceImage& face_image(int face) const { return images_[static_cast<std::size_t>(face)]; }
   const std::vector<Vec2>& points() const { return points_; }
+  const std::vector<PreparedSlice>& slices() const { return slices_; }
 
  private:
-  void build_face_image(int face_id, const std::vector<PreparedSlice>& slices);
+  void build_face_image(int face_id);
+  void update_frames();
+  void compact_points();
+  // Order-independent hash of each face's completed triangles and corner values.
+  std::vector<std::uint64_t> completion_hashes() const;
   void build_unknown_images();
   void triangulate_unknown(int slice, std::vector<std::vector<UnknownTriangle>>& per_face) const;
   void complete_unknown();

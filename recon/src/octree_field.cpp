@@ -37,9 +37,10 @@ class Sampler {
     const std::size_t fc = static_cast<std::size_t>(field_.function_count);
     const std::size_t first_row = field_.values.size() / fc;
     field_.values.resize(field_.values.size() + points.size() * fc);
-    evaluate_(points, field_.values.data() + first_row * fc);
+    evaluate_(pending_, points, field_.values.data() + first_row * fc);
     for (std::size_t n = 0; n < pending_.size(); ++n)
       field_.index.insert(pending_[n], static_cast<std::uint32_t>(first_row + n));
+    field_.keys.insert(field_.keys.end(), pending_.begin(), pending_.end());
     field_.evaluations += pending_.size();
     pending_.clear();
     pending_keys_.clear();

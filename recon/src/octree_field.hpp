@@ -34,8 +34,10 @@ inline void grid_unkey(std::uint64_t key, int& i, int& j, int& k) {
   k = static_cast<int>(static_cast<std::int64_t>(key & 0x1fffff) - kBias);
 }
 
-/// Evaluates `count` points into `values` (count * function_count doubles), in parallel.
-using BatchEvaluator = std::function<void(const std::vector<Vec3>& points, double* values)>;
+/// Evaluates grid vertices (their keys and world positions) into `values` (count *
+/// function_count doubles), in parallel. The keys let an online engine reuse cached values.
+using BatchEvaluator = std::function<void(const std::vector<std::uint64_t>& keys,
+                                          const std::vector<Vec3>& points, double* values)>;
 
 struct OctreeOptions {
   int max_depth = 6;
@@ -49,6 +51,7 @@ struct SampledField {
   int function_count = 2;
   GridIndex index;  ///< vertex key -> row in values
   std::vector<double> values;                               ///< row-major, function_count each
+  std::vector<std::uint64_t> keys;  ///< vertex key of each row
   std::vector<std::uint64_t> surface_cells;  ///< finest cells (key of their min corner) with
                                              ///< corners of different labels; closed under
                                              ///< face adjacency

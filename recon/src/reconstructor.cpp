@@ -1,0 +1,471 @@
+#include "sonoshape/recon/reconstructor.hpp"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <cmath>
+#include <set>
+#include <stdexcept>
+
+#include "arrangement.hpp"
+#include "cell_field.hpp"
+#include "grid_index.hpp"
+#include "mean_value.hpp"
+#include "mesher.hpp"
+#include "octree_field.hpp"
+#include "sonoshape/core/errors.hpp"
+#include "sonoshape/core/log.hpp"
+#include "sonoshape/core/slice_io.hpp"
+
+namespace sonoshape::recon {
+namespace {
+
+// Two slice planes closer than this (relative, as the slice-set validation) are the same plane.
+constexpr double kCoincidentTolerance = 1e-9;
+
+// Points of every region too thin for grid cells of `cell_size`: its interior point and a
+// lattice of half the cell size over it (see snap_thin_regions).
+std::vector<RegionSample> thin_region_samples(const std::vector<PreparedSlice>& slices, double cell_size) {
+  std::vector<RegionSample> samples;
+  for (const PreparedSlice& slice : slices) {
+    for (std::size_t m = 1; m < slice.rings_by_material.size(); ++m) {
+      const std::vector<Ring2>& rings = slice.rings_by_material[m];
+      auto inside = [&](const Vec2& p) {
+        int winding = 0;
+        for (const Ring2& r : rings) winding += winding_number(r.data(), r.size(), p);
+        return winding > 0;
+      };
+      auto add = [&](const Vec2& p) {
+        samples.push_back({slice.origin + p.x() * slice.u + p.y() * slice.v, static_cast<int>(m)});
+      };
+      for (const Ring2& ring : rings) {
+        const double area = signed_area(ring);
+        if (area <= 0.0) continue;  // holes
+        double perimeter = 0.0;
+        Vec2 lo = ring[0], hi = ring[0];
+        for (std::size_t i = 0; i < ring.size(); ++i) {
+          perimeter += (ring[(i + 1) % ring.size()] - ring[i]).norm();
+          lo = lo.cwiseMin(ring[i]);
+          hi = hi.cwiseMax(ring[i]);
+        }
+        if (2.0 * area / perimeter >= 2.0 * cell_size) continue;  // wide enough for the grid
+        if (const auto p = interior_point(ring); p && inside(*p)) add(*p);
+        const double step = 0.5 * cell_size;
+        for (double x = lo.x() + 0.5 * step; x < hi.x(); x += step)
+          for (double y = lo.y() + 0.5 * step; y < hi.y(); y += step)
+            if (inside(Vec2(x, y))) add(Vec2(x, y));
+      }
+    }
+  }
+  return samples;
+}
+
+bool same_slice(const LabeledSlice& a, const LabeledSlice& b) {
+  if (a.origin_mm != b.origin_mm || a.u != b.u || a.v != b.v || a.fov != b.fov ||
+      a.regions.size() != b.regions.size())
+    return false;
+  for (std::size_t r = 0; r < a.regions.size(); ++r)
+    if (a.regions[r].label != b.regions[r].label || a.regions[r].outer != b.regions[r].outer ||
+        a.regions[r].holes != b.regions[r].holes)
+      return false;
+  return true;
+}
+
+bool same_plane(const LabeledSlice& a, const LabeledSlice& b, double scale) {
+  const Vec3 na = a.normal().normalized(), nb = b.normal().normalized();
+  return std::abs(na.dot(nb)) >= 1.0 - kCoincidentTolerance &&
+         std::abs(na.dot(b.origin_mm - a.origin_mm)) <= kCoincidentTolerance * scale;
+}
+
+// Field values at grid vertices that stay valid while the cell they were evaluated in is
+// unchanged: the field inside a cell depends only on that cell's faces and their images.
+class ValueCache {
+ public:
+  explicit ValueCache(int function_count) : function_count_(static_cast<std::size_t>(function_count)) {}
+  std::size_t function_count() const { return function_count_; }
+  /// The cached row of `key` if its cell has not changed since it was evaluated.
+  const double* find(std::uint64_t key, const std::vector<std::uint32_t>& cell_generation) const {
+    const std::uint32_t row = index_.find(key);
+    if (row == GridIndex::kNone) return nullptr;
+    const int cell = cells_[row];
+    if (cell >= 0 && generations_[row] < cell_generation[static_cast<std::size_t>(cell)]) return nullptr;
+    return values_.data() + row * function_count_;
+  }
+  void store(std::uint64_t key, int cell, std::uint32_t generation, const double* values) {
+    std::uint32_t row = index_.find(key);
+    if (row == GridIndex::kNone) {
+      row = static_cast<std::uint32_t>(cells_.size());
+      index_.insert(key, row);
+      cells_.push_back(cell);
+      generations_.push_back(generation);
+      values_.resize(values_.size() + function_count_);
+    }
+    cells_[row] = cell;
+    generations_[row] = generation;
+    std::copy(values, values + function_count_, values_.data() + row * function_count_);
+  }
+  std::size_t size() const { return cells_.size(); }
+
+ private:
+  std::size_t function_count_;
+  GridIndex index_;
+  std::vector<int> cells_;
+  std::vector<std::uint32_t> generations_;
+  std::vector<double> values_;
+};
+
+}  // namespace
+
+struct Reconstructor::State {
+  struct Entry {
+    int id = -1;
+    LabeledSlice slice;
+    bool duplicate = false;  // identical to an earlier slice: not inserted
+  };
+
+  ReconstructorOptions options;
+  int next_id = 0;
+  std::vector<Entry> entries;        // in the reconstruction, insertion order
+  std::vector<Entry> pending_adds;   // queued for the next update
+  std::vector<int> pending_removes;  // ids of entries to drop at the next update
+
+  // Engine state for `entries`.
+  bool built = false;
+  Box3 box;
+  int depth = 0;
+  std::vector<int> material_ids;
+  std::unique_ptr<Arrangement> arrangement;
+  std::unique_ptr<CellField> field;
+  std::unique_ptr<ValueCache> cache;
+  std::vector<std::uint32_t> cell_generation;  // update count at which each cell last changed
+  std::uint32_t generation = 0;
+  SampledField sampled;
+  MeshSet mesh;
+  ReconstructionStats totals;
+
+  SliceSet slice_set_of(const std::vector<Entry>& list) const {
+    SliceSet set;
+    set.labels = options.labels;
+    set.bounds = options.bounds;
+    for (const Entry& e : list) set.slices.push_back(e.slice);
+    return set;
+  }
+
+  std::vector<int> materials_of(const std::vector<Entry>& list) const {
+    std::set<int> ids;
+    for (const LabelInfo& l : options.labels) ids.insert(l.id);
+    for (const Entry& e : list)
+      for (const Region& r : e.slice.regions)
+        if (r.label != kUnknownLabel) ids.insert(r.label);
+    return {ids.begin(), ids.end()};
+  }
+
+  std::string label_name(int id) const {
+    for (const LabelInfo& l : options.labels)
+      if (l.id == id && !l.name.empty()) return l.name;
+    return "label_" + std::to_string(id);
+  }
+
+  // Inserts one entry's plane (prepared against the current box and materials); returns the
+  // cells it created or split.
+  std::vector<int> insert(const Entry& entry) {
+    const std::size_t index = field->slices().size();
+    PreparedSlice prepared = prepare_slice(entry.slice, index, material_ids, box);
+    const Vec3 normal = prepared.u.cross(prepared.v);
+    const double offset = -normal.dot(prepared.origin);
+    field->add_slice(std::move(prepared));
+    return arrangement->insert_plane(normal, offset, static_cast<int>(index));
+  }
+
+  // Rebuilds everything for `list` (first update, removals, a grown box, a new material).
+  void rebuild(const std::vector<Entry>& list, ReconstructionStats& stats) {
+    const SliceSet set = slice_set_of(list);
+    box = set.effective_bounds();
+    material_ids = materials_of(list);
+    depth = options.engine.max_depth > 0 ? options.engine.max_depth : default_depth(box);
+    Stopwatch clock;
+    arrangement = std::make_unique<Arrangement>(box);
+    field = std::make_unique<CellField>(*arrangement, static_cast<int>(material_ids.size()));
+    {
+      Progress progress("arrangement", list.size());
+      std::size_t done = 0;
+      for (const Entry& e : list) {
+        if (!e.duplicate) insert(e);
+        progress.update(++done);
+      }
+    }
+    stats.arrangement_s += clock.seconds();
+    clock.reset();
+    std::vector<int> all_cells(arrangement->cell_count());
+    for (std::size_t c = 0; c < all_cells.size(); ++c) all_cells[c] = static_cast<int>(c);
+    field->refresh(all_cells);
+    stats.face_images_s += clock.seconds();
+    cache = std::make_unique<ValueCache>(field->function_count());
+    ++generation;
+    cell_generation.assign(arrangement->cell_count(), generation);
+    built = true;
+  }
+};
+
+Reconstructor::Reconstructor(ReconstructorOptions options) : state_(std::make_unique<State>()) {
+  state_->options = std::move(options);
+}
+Reconstructor::~Reconstructor() = default;
+Reconstructor::Reconstructor(Reconstructor&&) noexcept = default;
+Reconstructor& Reconstructor::operator=(Reconstructor&&) noexcept = default;
+
+int Reconstructor::add_slice(LabeledSlice slice) {
+  State& s = *state_;
+  SliceSet single;
+  single.slices.push_back(slice);
+  if (const Status valid = validate_slice_set(single, "added slice"); !valid)
+    throw std::invalid_argument(valid.message());
+  State::Entry entry{s.next_id, std::move(slice), false};
+  const double scale =
+      std::max(1.0, s.options.bounds ? s.options.bounds->diagonal() : single.effective_bounds().diagonal());
+  auto check = [&](const State::Entry& other) {
+    if (other.duplicate || !same_plane(other.slice, entry.slice, scale)) return;
+    if (same_slice(other.slice, entry.slice)) {
+      entry.duplicate = true;
+      return;
+    }
+    throw std::invalid_argument("added slice lies in the plane of slice " + std::to_string(other.id) +
+                                " but its content differs; remove that slice first or merge both "
+                                "into one slice");
+  };
+  for (const State::Entry& e : s.entries)
+    if (std::find(s.pending_removes.begin(), s.pending_removes.end(), e.id) == s.pending_removes.end())
+      check(e);
+  for (const State::Entry& e : s.pending_adds) check(e);
+  s.pending_adds.push_back(std::move(entry));
+  return s.next_id++;
+}
+
+bool Reconstructor::remove_slice(int id) {
+  State& s = *state_;
+  const auto pending = std::find_if(s.pending_adds.begin(), s.pending_adds.end(),
+                                    [&](const State::Entry& e) { return e.id == id; });
+  if (pending != s.pending_adds.end()) {
+    s.pending_adds.erase(pending);
+    return true;
+  }
+  const bool present = std::any_of(s.entries.begin(), s.entries.end(),
+                                   [&](const State::Entry& e) { return e.id == id; });
+  if (!present || std::find(s.pending_removes.begin(), s.pending_removes.end(), id) != s.pending_removes.end())
+    return false;
+  s.pending_removes.push_back(id);
+  return true;
+}
+
+UpdateStats Reconstructor::update() {
+  State& s = *state_;
+  UpdateStats out;
+  if (s.built && s.pending_adds.empty() && s.pending_removes.empty()) {
+    out.step = s.totals;
+    out.step.arrangement_s = out.step.face_images_s = out.step.field_s = out.step.smoothing_s =
+        out.step.mesh_s = out.step.total_s = out.step.completion_s = 0.0;
+    out.step.field_evaluations = 0;
+    return out;
+  }
+  Stopwatch total_clock;
+  ReconstructionStats& stats = out.step;
+
+  std::vector<State::Entry> next;
+  for (const State::Entry& e : s.entries)
+    if (std::find(s.pending_removes.begin(), s.pending_removes.end(), e.id) == s.pending_removes.end())
+      next.push_back(e);
+  out.slices_removed = s.entries.size() - next.size();
+  out.slices_added = s.pending_adds.size();
+  for (const State::Entry& e : s.pending_adds) next.push_back(e);
+  // A removed slice may have hidden a duplicate: the first of identical slices is the one in.
+  for (std::size_t i = 0; i < next.size(); ++i) {
+    next[i].duplicate = false;
+    for (std::size_t j = 0; j < i && !next[i].duplicate; ++j)
+      next[i].duplicate = !next[j].duplicate && same_slice(next[j].slice, next[i].slice);
+  }
+
+  const std::vector<State::Entry> previous = s.entries;
+  try {
+    const SliceSet next_set = s.slice_set_of(next);
+    const bool full = !s.built || out.slices_removed > 0 || s.materials_of(next) != s.material_ids ||
+                      next_set.effective_bounds().min != s.box.min ||
+                      next_set.effective_bounds().max != s.box.max;
+    std::vector<int> changed_cells;
+    if (full) {
+      s.rebuild(next, stats);
+      out.full_rebuild = true;
+      out.cells_changed = s.arrangement->cell_count();
+    } else {
+      Stopwatch clock;
+      std::vector<int> changed;
+      for (std::size_t k = s.entries.size(); k < next.size(); ++k) {
+        if (next[k].duplicate) continue;
+        const std::vector<int> cells = s.insert(next[k]);
+        changed.insert(changed.end(), cells.begin(), cells.end());
+      }
+      std::sort(changed.begin(), changed.end());
+      changed.erase(std::unique(changed.begin(), changed.end()), changed.end());
+      stats.arrangement_s = clock.seconds();
+      clock.reset();
+      const std::vector<int> completion_changed = s.field->refresh(changed);
+      stats.face_images_s = clock.seconds();
+      ++s.generation;
+      s.cell_generation.resize(s.arrangement->cell_count(), s.generation);
+      std::vector<char> marked(s.arrangement->cell_count(), 0);
+      for (const std::vector<int>* list : std::initializer_list<const std::vector<int>*>{&changed, &completion_changed})
+        for (const int c : *list)
+          if (!marked[static_cast<std::size_t>(c)]) {
+            marked[static_cast<std::size_t>(c)] = 1;
+            s.cell_generation[static_cast<std::size_t>(c)] = s.generation;
+            ++out.cells_changed;
+          }
+    }
+    stats.completion_s = s.field->completion_seconds();
+    stats.unknown_triangles = s.field->unknown_triangle_count();
+    stats.cell_groups = s.field->group_count();
+    s.entries = std::move(next);
+  } catch (...) {
+    // Back to the state before this update: the queued changes are dropped.
+    s.pending_adds.clear();
+    s.pending_removes.clear();
+    s.built = false;
+    if (!previous.empty() || s.options.bounds) {
+      ReconstructionStats ignored;
+      s.rebuild(previous, ignored);
+    }
+    s.entries = previous;
+    throw;
+  }
+  s.pending_adds.clear();
+  s.pending_removes.clear();
+
+  // Contour vertices refine the octree; contour segments fix the smoothing next to them.
+  const std::vector<PreparedSlice>& slices = s.field->slices();
+  std::vector<Vec3> contour_points;
+  std::vector<std::pair<Vec3, Vec3>> contour_segments;
+  for (const PreparedSlice& slice : slices)
+    for (const auto& rings : slice.rings_by_material)
+      for (const Ring2& ring : rings)
+        for (std::size_t i = 0; i < ring.size(); ++i) {
+          const Vec3 a = slice.origin + ring[i].x() * slice.u + ring[i].y() * slice.v;
+          const Vec2& q = ring[(i + 1) % ring.size()];
+          contour_points.push_back(a);
+          contour_segments.emplace_back(a, slice.origin + q.x() * slice.u + q.y() * slice.v);
+        }
+
+  tbb::task_arena arena(s.options.engine.threads > 0 ? s.options.engine.threads
+                                                     : tbb::task_arena::automatic);
+  const CellField& field = *s.field;
+  ValueCache& cache = *s.cache;
+  const std::size_t fc = static_cast<std::size_t>(field.function_count());
+  std::size_t evaluations = 0;
+  // Cached values where the cell is unchanged; the others are evaluated in parallel and cached.
+  const BatchEvaluator evaluate = [&](const std::vector<std::uint64_t>& keys,
+                                      const std::vector<Vec3>& points, double* values) {
+    std::vector<std::size_t> missing;
+    for (std::size_t n = 0; n < keys.size(); ++n) {
+      if (const double* row = cache.find(keys[n], s.cell_generation))
+        std::copy(row, row + fc, values + n * fc);
+      else
+        missing.push_back(n);
+    }
+    std::vector<int> cells(missing.size());
+    arena.execute([&] {
+      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, missing.size(), 64),
+                        [&](const tbb::blocked_range<std::size_t>& r) {
+                          for (std::size_t m = r.begin(); m < r.end(); ++m)
+                            cells[m] = field.evaluate(points[missing[m]], values + missing[m] * fc);
+                        });
+    });
+    for (std::size_t m = 0; m < missing.size(); ++m)
+      cache.store(keys[missing[m]], cells[m], s.generation, values + missing[m] * fc);
+    evaluations += missing.size();
+  };
+  OctreeOptions octree;
+  octree.max_depth = s.depth;
+  octree.smoothing_iterations = s.options.engine.smoothing_iterations;
+  const std::vector<RegionSample> samples =
+      thin_region_samples(slices, make_grid(s.box, octree.max_depth).cell_size);
+  Stopwatch clock;
+  s.sampled = sample_field(s.box, field.function_count(), evaluate, contour_points,
+                           contour_segments, samples, octree);
+  stats.smoothing_s = s.sampled.smoothing_seconds;
+  stats.field_s = clock.seconds() - stats.smoothing_s;
+
+  clock.reset();
+  std::vector<TriangleMesh> meshes = extract_label_surfaces(s.sampled);
+  s.mesh = MeshSet{};
+  for (std::size_t m = 1; m <= s.material_ids.size(); ++m) {
+    const int id = s.material_ids[m - 1];
+    s.mesh.meshes.push_back({id, s.label_name(id), std::move(meshes[m - 1])});
+    stats.triangles[id] = s.mesh.meshes.back().mesh.triangles.size();
+  }
+  stats.mesh_s = clock.seconds();
+
+  stats.slices = s.entries.size();
+  stats.cells = s.arrangement->cell_count();
+  stats.faces = s.arrangement->face_count();
+  stats.field_evaluations = evaluations;
+  stats.snapped_vertices = s.sampled.snapped_vertices;
+  stats.depth = s.depth;
+  stats.total_s = total_clock.seconds();
+
+  ReconstructionStats& totals = s.totals;
+  totals.arrangement_s += stats.arrangement_s;
+  totals.face_images_s += stats.face_images_s;
+  totals.field_s += stats.field_s;
+  totals.smoothing_s += stats.smoothing_s;
+  totals.mesh_s += stats.mesh_s;
+  totals.total_s += stats.total_s;
+  totals.completion_s += stats.completion_s;
+  totals.field_evaluations += stats.field_evaluations;
+  totals.slices = stats.slices;
+  totals.cells = stats.cells;
+  totals.faces = stats.faces;
+  totals.snapped_vertices = stats.snapped_vertices;
+  totals.unknown_triangles = stats.unknown_triangles;
+  totals.cell_groups = stats.cell_groups;
+  totals.depth = stats.depth;
+  totals.triangles = stats.triangles;
+  return out;
+}
+
+const MeshSet& Reconstructor::mesh() const { return state_->mesh; }
+
+std::vector<int> Reconstructor::slice_ids() const {
+  std::vector<int> ids;
+  for (const State::Entry& e : state_->entries) ids.push_back(e.id);
+  return ids;
+}
+
+SliceSet Reconstructor::slice_set() const {
+  SliceSet set = state_->slice_set_of(state_->entries);
+  if (state_->built) set.bounds = state_->box;
+  return set;
+}
+
+std::size_t Reconstructor::slice_count() const { return state_->entries.size(); }
+
+const ReconstructionStats& Reconstructor::totals() const { return state_->totals; }
+
+std::vector<std::pair<Vec3, std::vector<double>>> Reconstructor::sampled_field() const {
+  const SampledField& f = state_->sampled;
+  const std::size_t fc = static_cast<std::size_t>(f.function_count);
+  std::vector<std::size_t> rows(f.keys.size());
+  for (std::size_t r = 0; r < rows.size(); ++r) rows[r] = r;
+  std::sort(rows.begin(), rows.end(), [&](std::size_t a, std::size_t b) { return f.keys[a] < f.keys[b]; });
+  std::vector<std::pair<Vec3, std::vector<double>>> out;
+  out.reserve(rows.size());
+  for (const std::size_t r : rows) {
+    int i, j, k;
+    grid_unkey(f.keys[r], i, j, k);
+    out.emplace_back(f.grid.position(i, j, k),
+                     std::vector<double>(f.values.begin() + static_cast<std::ptrdiff_t>(r * fc),
+                                         f.values.begin() + static_cast<std::ptrdiff_t>((r + 1) * fc)));
+  }
+  return out;
+}
+
+}  // namespace sonoshape::recon
