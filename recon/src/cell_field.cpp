@@ -233,21 +233,43 @@ void CellField::compact_points() {
     for (const FaceImage::Part& part : image.parts) live += part.count;
     for (const FaceImage::Part& part : image.unknown_parts) live += part.count;
   }
-  // Rebuilt images leave their old points behind; copy the live ones once they are the minority.
+  // Rebuilt images leave their old points and trees behind; copy the live ones once they are
+  // the minority.
   if (points_.size() < 2 * live + 4096) return;
   std::vector<Vec2> compacted;
   compacted.reserve(live);
+  std::vector<ChainNode> compacted_trees;
   auto move_range = [&](std::uint32_t& begin, std::uint32_t count) {
     const std::uint32_t new_begin = static_cast<std::uint32_t>(compacted.size());
     compacted.insert(compacted.end(), points_.begin() + begin, points_.begin() + begin + count);
     begin = new_begin;
   };
+  auto move_part = [&](FaceImage::Part& part) {
+    move_range(part.begin, part.count);
+    if (part.tree_count == 0) return;
+    const std::int64_t shift = static_cast<std::int64_t>(compacted_trees.size()) - part.tree_root;
+    for (std::uint32_t n = part.tree_root; n < part.tree_root + part.tree_count; ++n) {
+      ChainNode node = tree_nodes_[n];
+      if (node.left >= 0) node.left = static_cast<std::int32_t>(node.left + shift);
+      if (node.right >= 0) node.right = static_cast<std::int32_t>(node.right + shift);
+      compacted_trees.push_back(node);
+    }
+    part.tree_root = static_cast<std::uint32_t>(part.tree_root + shift);
+  };
   for (FaceImage& image : images_) {
     move_range(image.polygon_begin, image.polygon_count);
-    for (FaceImage::Part& part : image.parts) move_range(part.begin, part.count);
-    for (FaceImage::Part& part : image.unknown_parts) move_range(part.begin, part.count);
+    for (FaceImage::Part& part : image.parts) move_part(part);
+    for (FaceImage::Part& part : image.unknown_parts) move_part(part);
   }
   points_ = std::move(compacted);
+  tree_nodes_ = std::move(compacted_trees);
+}
+
+void CellField::add_tree(FaceImage::Part& part) {
+  if (part.count < kChainTreeMinEdges) return;
+  const std::size_t before = tree_nodes_.size();
+  part.tree_root = build_chain_tree(points_.data() + part.begin, part.count, tree_nodes_);
+  part.tree_count = static_cast<std::uint32_t>(tree_nodes_.size() - before);
 }
 
 void CellField::build_face_image(int face_id) {
@@ -344,6 +366,8 @@ void CellField::build_face_image(int face_id) {
   // where the triangles would cost many.
   for (const UnknownComponent& component : slice.unknown)
     for (const Ring2& ring : component.rings) add_part(ring, 0, image.unknown_parts);
+  for (FaceImage::Part& part : image.parts) add_tree(part);
+  for (FaceImage::Part& part : image.unknown_parts) add_tree(part);
   double unknown_area = 0.0;
   for (const FaceImage::Part& part : image.unknown_parts)
     unknown_area += signed_area(Ring2(points_.begin() + part.begin, points_.begin() + part.begin + part.count));
@@ -420,8 +444,7 @@ int CellField::evaluate(const Vec3& p, double* out) const {
     total += projected_angle(points_.data() + image.polygon_begin, image.polygon_count, foot,
                              height) * inv_height;
     for (const FaceImage::Part& part : image.parts) {
-      const double weight =
-          projected_angle(points_.data() + part.begin, part.count, foot, height) * inv_height;
+      const double weight = part_angle(part, foot, height) * inv_height;
       w[part.material] += weight;
       known_materials += weight;
     }

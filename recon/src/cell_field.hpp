@@ -6,6 +6,8 @@
 #include <vector>
 
 #include "arrangement.hpp"
+#include "chain_tree.hpp"
+#include "mean_value.hpp"
 #include "sonoshape/core/slice.hpp"
 #include "unknown_regions.hpp"
 
@@ -42,6 +44,7 @@ struct FaceImage {
   struct Part {
     int material = 0;
     std::uint32_t begin = 0, count = 0;  ///< one ring in points
+    std::uint32_t tree_root = 0, tree_count = 0;  ///< far-field tree in tree_nodes (count 0: none)
   };
   std::vector<Part> parts;
   std::vector<Part> unknown_parts;  ///< the unknown set clipped to the face (material unused)
@@ -101,6 +104,14 @@ class CellField {
 
  private:
   void build_face_image(int face_id);
+  // Gives a long part its far-field tree.
+  void add_tree(FaceImage::Part& part);
+  // projected_angle of a part, through its tree when it has one.
+  double part_angle(const FaceImage::Part& part, const Vec2& foot, double height) const {
+    if (part.tree_count == 0) return projected_angle(points_.data() + part.begin, part.count, foot, height);
+    return projected_angle_tree(points_.data() + part.begin, part.count, tree_nodes_.data(),
+                                part.tree_root, foot, height);
+  }
   void update_frames();
   void compact_points();
   // Order-independent hash of each face's completed triangles and corner values.
@@ -118,6 +129,7 @@ class CellField {
   double on_face_height_;  // below this height a point is on the face
   std::vector<PlaneFrame> frames_;  // one per arrangement plane
   std::vector<Vec2> points_;
+  std::vector<ChainNode> tree_nodes_;  // far-field trees of the long parts
   std::vector<FaceImage> images_;
   std::vector<UnknownTriangle> triangles_;
   std::vector<double> corner_values_;  // 3 corners x function_count() per triangle

@@ -160,10 +160,10 @@ bool CellField::known_weights(int face, const Vec3& p, double& total, double* ma
   const double inv_height = 1.0 / height;
   total = projected_angle(points_.data() + image.polygon_begin, image.polygon_count, foot, height) * inv_height;
   for (const FaceImage::Part& part : image.parts)
-    materials[part.material] += projected_angle(points_.data() + part.begin, part.count, foot, height) * inv_height;
+    materials[part.material] += part_angle(part, foot, height) * inv_height;
   unknown = 0.0;
   for (const FaceImage::Part& part : image.unknown_parts)
-    unknown += projected_angle(points_.data() + part.begin, part.count, foot, height) * inv_height;
+    unknown += part_angle(part, foot, height) * inv_height;
   return true;
 }
 

@@ -4,6 +4,7 @@
 // The sparse octree field looks keys up millions of times per reconstruction (refinement, band
 // closure, smoothing stencils, meshing); std::unordered_map's node allocations and pointer chasing
 // made those lookups the largest cost after the field itself.
+#include <algorithm>
 #include <cstdint>
 #include <stdexcept>
 #include <vector>
@@ -34,6 +35,12 @@ class GridIndex {
     const std::uint32_t row = find(key);
     if (row == kNone) throw std::out_of_range("GridIndex: grid vertex has no value");
     return row;
+  }
+  /// Removes every key, keeping the capacity.
+  void clear() {
+    if (size_ == 0) return;
+    std::fill(keys_.begin(), keys_.end(), kEmptyKey);
+    size_ = 0;
   }
   /// Inserts unless present; returns whether it inserted.
   bool insert(std::uint64_t key, std::uint32_t value) {

@@ -7,10 +7,11 @@ namespace sonoshape::recon {
 
 namespace {
 
-// The same sum split as 2 pi * winding + sum of (c/q phi(q) - sign(c) phi(|c|)): the second part
-// is O(h^2) per edge and computed without cancellation, so a foot outside the ring at small
-// height keeps its relative accuracy. The winding part is rounded to its exact value, which is
-// only valid when no edge passes exactly through the foot (then the plain sum is kept).
+// The same sum split as 2 pi * winding + sum of (c/q phi(q) - sign(c) phi(|c|)) (see
+// edge_projected_angle_split): the second part is O(h^2) per edge and computed without
+// cancellation, so a foot outside the ring at small height keeps its relative accuracy. The
+// winding part is rounded to its exact value, which is only valid when no edge passes exactly
+// through the foot (then the plain sum is kept).
 double projected_angle_split(const Vec2* points, std::size_t count, const Vec2& foot, double height,
                              double plain) {
   const double h2 = height * height;
@@ -18,31 +19,10 @@ double projected_angle_split(const Vec2* points, std::size_t count, const Vec2& 
   Vec2 a = points[count - 1] - foot;
   for (std::size_t i = 0; i < count; ++i) {
     const Vec2 b = points[i] - foot;
-    const Vec2 d = b - a;
-    const double length_sq = d.squaredNorm();
-    if (length_sq > 0.0) {
-      const double length = std::sqrt(length_sq);
-      const double c = (a.x() * b.y() - a.y() * b.x()) / length;
-      if (c == 0.0) return plain;
-      const double s_a = a.dot(d) / length, s_b = b.dot(d) / length;
-      const double abs_c = std::abs(c), sign = c > 0.0 ? 1.0 : -1.0;
-      const double q = std::sqrt(c * c + h2);
-      const double phi_c = std::atan2(abs_c * length, c * c + s_a * s_b);
-      const double phi_q = std::atan2(q * length, q * q + s_a * s_b);
-      // phi(q) - phi(|c|) = [atan(s_b/q) - atan(s_b/|c|)] - [atan(s_a/q) - atan(s_a/|c|)], and
-      // atan(s/q) - atan(s/|c|) = atan2(-s h^2 / (q + |c|), q |c| + s^2).
-      const double shrink = h2 / (q + abs_c);
-      const double phi_difference = std::atan2(-s_b * shrink, q * abs_c + s_b * s_b) -
-                                    std::atan2(-s_a * shrink, q * abs_c + s_a * s_a);
-      planar += sign * phi_c;
-      remainder += sign * (-shrink / q * phi_q + phi_difference);
-    }
+    if (!edge_projected_angle_split(a, b, h2, planar, remainder)) return plain;
     a = b;
   }
-  const double two_pi = 6.283185307179586476925286766559;
-  // Only a foot outside gains: inside, the winding part and the remainder cancel instead.
-  if (std::round(planar / two_pi) != 0.0) return plain;
-  return remainder;
+  return split_result(planar, remainder, plain);
 }
 
 }  // namespace
@@ -51,7 +31,7 @@ double projected_angle(const Vec2* points, std::size_t count, const Vec2& foot, 
   if (count < 2 || !(height > 0.0)) return 0.0;
   const double plain = projected_angle_plain(points, count, foot, height);
   // Small results come from a foot outside the ring, where the plain sum cancels.
-  return std::abs(plain) < 1e-2 ? projected_angle_split(points, count, foot, height, plain) : plain;
+  return std::abs(plain) < kSplitBelow ? projected_angle_split(points, count, foot, height, plain) : plain;
 }
 
 double projected_angle_plain(const Vec2* points, std::size_t count, const Vec2& foot, double height) {
@@ -60,19 +40,7 @@ double projected_angle_plain(const Vec2* points, std::size_t count, const Vec2& 
   Vec2 a = points[count - 1] - foot;
   for (std::size_t i = 0; i < count; ++i) {
     const Vec2 b = points[i] - foot;
-    const Vec2 d = b - a;
-    const double length_sq = d.squaredNorm();
-    if (length_sq > 0.0) {
-      const double length = std::sqrt(length_sq);
-      const double c = (a.x() * b.y() - a.y() * b.x()) / length;
-      if (c != 0.0) {
-        const double s_a = a.dot(d) / length;
-        const double s_b = b.dot(d) / length;
-        const double q2 = c * c + h2;
-        const double q = std::sqrt(q2);
-        sum += (c / q) * std::atan2(q * length, q2 + s_a * s_b);
-      }
-    }
+    sum += edge_projected_angle(a, b, h2);
     a = b;
   }
   return sum;

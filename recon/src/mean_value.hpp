@@ -11,6 +11,7 @@
 // where s_a, s_b are the positions of a and b along the edge direction, and the bracket equals
 // atan2(q L, q^2 + s_a s_b) without cancellation. Counter-clockwise rings add, clockwise rings
 // (holes) subtract, so any set of oriented rings integrates to the region they bound.
+#include <cmath>
 #include <cstddef>
 
 #include "sonoshape/core/geometry.hpp"
@@ -25,6 +26,58 @@ double projected_angle(const Vec2* points, std::size_t count, const Vec2& foot, 
 
 /// The plain edge sum behind projected_angle (no treatment of cancellation; for tests).
 double projected_angle_plain(const Vec2* points, std::size_t count, const Vec2& foot, double height);
+
+/// projected_angle takes the cancellation-free split form below this magnitude of the plain sum.
+constexpr double kSplitBelow = 1e-2;
+
+/// The term of one edge a -> b (coordinates relative to the foot) in projected_angle_plain;
+/// h2 = height^2.
+inline double edge_projected_angle(const Vec2& a, const Vec2& b, double h2) {
+  const Vec2 d = b - a;
+  const double length_sq = d.squaredNorm();
+  if (!(length_sq > 0.0)) return 0.0;
+  const double length = std::sqrt(length_sq);
+  const double c = (a.x() * b.y() - a.y() * b.x()) / length;
+  if (c == 0.0) return 0.0;
+  const double s_a = a.dot(d) / length;
+  const double s_b = b.dot(d) / length;
+  const double q2 = c * c + h2;
+  const double q = std::sqrt(q2);
+  return (c / q) * std::atan2(q * length, q2 + s_a * s_b);
+}
+
+/// The same term split into its planar angle (added to `planar`) and an O(h^2) remainder
+/// computed without cancellation (added to `remainder`). Returns false when the edge's line
+/// passes exactly through the foot (the split is then invalid: keep the plain sum).
+inline bool edge_projected_angle_split(const Vec2& a, const Vec2& b, double h2, double& planar,
+                                       double& remainder) {
+  const Vec2 d = b - a;
+  const double length_sq = d.squaredNorm();
+  if (!(length_sq > 0.0)) return true;
+  const double length = std::sqrt(length_sq);
+  const double c = (a.x() * b.y() - a.y() * b.x()) / length;
+  if (c == 0.0) return false;
+  const double s_a = a.dot(d) / length, s_b = b.dot(d) / length;
+  const double abs_c = std::abs(c), sign = c > 0.0 ? 1.0 : -1.0;
+  const double q = std::sqrt(c * c + h2);
+  const double phi_c = std::atan2(abs_c * length, c * c + s_a * s_b);
+  const double phi_q = std::atan2(q * length, q * q + s_a * s_b);
+  // phi(q) - phi(|c|) = [atan(s_b/q) - atan(s_b/|c|)] - [atan(s_a/q) - atan(s_a/|c|)], and
+  // atan(s/q) - atan(s/|c|) = atan2(-s h^2 / (q + |c|), q |c| + s^2).
+  const double shrink = h2 / (q + abs_c);
+  const double phi_difference = std::atan2(-s_b * shrink, q * abs_c + s_b * s_b) -
+                                std::atan2(-s_a * shrink, q * abs_c + s_a * s_a);
+  planar += sign * phi_c;
+  remainder += sign * (-shrink / q * phi_q + phi_difference);
+  return true;
+}
+
+/// The split sum's value: the remainder when the planar angles add up to no winding (a foot
+/// outside), else the plain sum (inside, the winding part and the remainder cancel instead).
+inline double split_result(double planar, double remainder, double plain) {
+  const double two_pi = 6.283185307179586476925286766559;
+  return std::round(planar / two_pi) != 0.0 ? plain : remainder;
+}
 
 /// Winding number of `p` around the closed ring (0 for outside, +1 / -1 inside CCW / CW rings).
 /// Points on the ring count as inside (the caller tests boundaries separately when it matters).

@@ -5,6 +5,10 @@
 #include <cmath>
 #include <unordered_set>
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
+
 #include "sonoshape/core/log.hpp"
 
 namespace sonoshape::recon {
@@ -21,7 +25,7 @@ class Sampler {
   /// Queues a vertex for evaluation unless it has a value or is queued.
   void request(int i, int j, int k) {
     const std::uint64_t key = grid_key(i, j, k);
-    if (field_.index.count(key) || !pending_keys_.insert(key).second) return;
+    if (field_.index.count(key) || !pending_keys_.insert(key, 0)) return;
     pending_.push_back(key);
   }
   /// Evaluates every queued vertex in one parallel batch.
@@ -50,8 +54,27 @@ class Sampler {
   SampledField& field_;
   const BatchEvaluator& evaluate_;
   std::vector<std::uint64_t> pending_;
-  std::unordered_set<std::uint64_t> pending_keys_;
+  GridIndex pending_keys_;  // the keys of pending_, for de-duplication
 };
+
+// Sorts and de-duplicates keys: the sets of the octree stages are built in bulk, then queried,
+// where std::unordered_set's node allocations cost more than the whole smoothing arithmetic.
+void sort_unique(std::vector<std::uint64_t>& keys) {
+  tbb::parallel_sort(keys.begin(), keys.end());
+  keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
+}
+// Runs body(n) for n in [0, count) on the calling arena's threads; each n writes only its own rows.
+template <typename Body>
+void for_rows(std::size_t count, const Body& body) {
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 1024),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      for (std::size_t n = r.begin(); n < r.end(); ++n) body(n);
+                    });
+}
+
+bool contains(const std::vector<std::uint64_t>& sorted, std::uint64_t key) {
+  return std::binary_search(sorted.begin(), sorted.end(), key);
+}
 
 // Corner labels of the cell whose min corner is (i, j, k) with side `step`: true if not uniform.
 bool cell_mixed(const SampledField& f, int i, int j, int k, int step) {
@@ -93,7 +116,9 @@ void close_band(SampledField& field, Sampler& sampler, std::vector<std::uint64_t
   }
   sampler.flush();
   field.surface_cells.clear();
-  std::unordered_set<std::uint64_t> in_band(seeds.begin(), seeds.end());
+  GridIndex in_band;
+  in_band.reserve(seeds.size());
+  for (const std::uint64_t key : seeds) in_band.insert(key, 0);
   std::vector<std::uint64_t> frontier;
   for (const std::uint64_t key : seeds) {
     int i, j, k;
@@ -112,7 +137,7 @@ void close_band(SampledField& field, Sampler& sampler, std::vector<std::uint64_t
           continue;
         const std::uint64_t nkey = grid_key(ni, nj, nk);
         if (in_band.count(nkey) || !face_mixed(field, i, j, k, d)) continue;
-        in_band.insert(nkey);
+        in_band.insert(nkey, 0);
         candidates.push_back(nkey);
         for (int corner = 0; corner < 8; ++corner)
           sampler.request(ni + (corner & 1), nj + ((corner >> 1) & 1), nk + ((corner >> 2) & 1));
@@ -181,15 +206,16 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
   };
   // Cells holding contour vertices, per level (key of the cell's index at that level).
   const int start = std::min(options.start_depth, depth);
-  std::vector<std::unordered_set<std::uint64_t>> contour_cells(static_cast<std::size_t>(depth + 1));
+  std::vector<std::vector<std::uint64_t>> contour_cells(static_cast<std::size_t>(depth + 1));
   for (const Vec3& p : contour_points) {
     const auto idx = fine_index(p);
     for (int level = start; level <= depth; ++level) {
       const int shift = depth - level;
-      contour_cells[static_cast<std::size_t>(level)].insert(
+      contour_cells[static_cast<std::size_t>(level)].push_back(
           grid_key(idx[0] >> shift, idx[1] >> shift, idx[2] >> shift));
     }
   }
+  for (auto& cells : contour_cells) sort_unique(cells);
 
   // Coarse-to-fine refinement. Cells are given by their min corner in finest units.
   std::vector<std::array<int, 3>> cells;
@@ -207,14 +233,19 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
                         c[2] + ((corner >> 2) & 1) * step);
     sampler.flush();
     std::vector<std::array<int, 3>> refined;
-    for (const auto& c : cells) {
-      const bool mixed = cell_mixed(field, c[0], c[1], c[2], step);
+    std::vector<char> cell_is_mixed(cells.size());
+    for_rows(cells.size(), [&](std::size_t n) {
+      cell_is_mixed[n] = cell_mixed(field, cells[n][0], cells[n][1], cells[n][2], step);
+    });
+    for (std::size_t n = 0; n < cells.size(); ++n) {
+      const auto& c = cells[n];
+      const bool mixed = cell_is_mixed[n] != 0;
       if (level == depth) {
         if (mixed) field.surface_cells.push_back(grid_key(c[0], c[1], c[2]));
         continue;
       }
-      const bool has_contour = contour_cells[static_cast<std::size_t>(level)].count(
-                                   grid_key(c[0] / step, c[1] / step, c[2] / step)) > 0;
+      const bool has_contour = contains(contour_cells[static_cast<std::size_t>(level)],
+                                        grid_key(c[0] / step, c[1] / step, c[2] / step));
       if (!mixed && !has_contour) continue;
       const int half = step / 2;
       for (int child = 0; child < 8; ++child)
@@ -248,17 +279,14 @@ void smooth(SampledField& field, Sampler& sampler,
   Stopwatch smoothing_clock;
   // Smoothing nodes: corners of surface cells. The bi-Laplacian stencil reaches two steps out.
   std::vector<std::uint64_t> nodes;
-  {
-    std::unordered_set<std::uint64_t> node_set;
-    for (const std::uint64_t key : field.surface_cells) {
-      int i, j, k;
-      grid_unkey(key, i, j, k);
-      for (int corner = 0; corner < 8; ++corner)
-        node_set.insert(grid_key(i + (corner & 1), j + ((corner >> 1) & 1), k + ((corner >> 2) & 1)));
-    }
-    nodes.assign(node_set.begin(), node_set.end());
-    std::sort(nodes.begin(), nodes.end());
+  nodes.reserve(field.surface_cells.size() * 8);
+  for (const std::uint64_t key : field.surface_cells) {
+    int i, j, k;
+    grid_unkey(key, i, j, k);
+    for (int corner = 0; corner < 8; ++corner)
+      nodes.push_back(grid_key(i + (corner & 1), j + ((corner >> 1) & 1), k + ((corner >> 2) & 1)));
   }
+  sort_unique(nodes);
   for (const std::uint64_t key : nodes) {
     int i, j, k;
     grid_unkey(key, i, j, k);
@@ -270,27 +298,26 @@ void smooth(SampledField& field, Sampler& sampler,
   sampler.flush();
   // Nodes of the cells the input contours pass through keep their interpolated values, so the
   // surface still passes through the contours (Section 4.6).
-  std::unordered_set<std::uint64_t> fixed;
+  std::vector<std::uint64_t> fixed;
   for (const auto& [a, b] : contour_segments) {
     const int steps = std::max(1, static_cast<int>(std::ceil((b - a).norm() / (0.5 * grid.cell_size))));
     for (int s = 0; s <= steps; ++s) {
       const auto idx = fine_index(a + (b - a) * (static_cast<double>(s) / steps));
       for (int corner = 0; corner < 8; ++corner)
-        fixed.insert(grid_key(idx[0] + (corner & 1), idx[1] + ((corner >> 1) & 1),
-                              idx[2] + ((corner >> 2) & 1)));
+        fixed.push_back(grid_key(idx[0] + (corner & 1), idx[1] + ((corner >> 1) & 1),
+                                 idx[2] + ((corner >> 2) & 1)));
     }
   }
+  sort_unique(fixed);
   // Laplacian domain: the nodes and their six neighbours.
-  std::vector<std::uint64_t> laplacian_nodes;
-  {
-    std::unordered_set<std::uint64_t> set(nodes.begin(), nodes.end());
-    for (const std::uint64_t key : nodes) {
-      int i, j, k;
-      grid_unkey(key, i, j, k);
-      for (const auto& d : kFaceNeighbours) set.insert(grid_key(i + d[0], j + d[1], k + d[2]));
-    }
-    laplacian_nodes.assign(set.begin(), set.end());
+  std::vector<std::uint64_t> laplacian_nodes(nodes);
+  laplacian_nodes.reserve(nodes.size() * 7);
+  for (const std::uint64_t key : nodes) {
+    int i, j, k;
+    grid_unkey(key, i, j, k);
+    for (const auto& d : kFaceNeighbours) laplacian_nodes.push_back(grid_key(i + d[0], j + d[1], k + d[2]));
   }
+  sort_unique(laplacian_nodes);
   // Row indices resolved once, so the iterations are plain array sweeps.
   const std::size_t fc = static_cast<std::size_t>(function_count);
   GridIndex lap_index;
@@ -298,27 +325,27 @@ void smooth(SampledField& field, Sampler& sampler,
   for (std::size_t n = 0; n < laplacian_nodes.size(); ++n)
     lap_index.insert(laplacian_nodes[n], static_cast<std::uint32_t>(n));
   std::vector<std::uint32_t> lap_value_rows(laplacian_nodes.size() * 7);  // centre, 6 neighbours
-  for (std::size_t n = 0; n < laplacian_nodes.size(); ++n) {
+  for_rows(laplacian_nodes.size(), [&](std::size_t n) {
     int i, j, k;
     grid_unkey(laplacian_nodes[n], i, j, k);
     lap_value_rows[n * 7] = field.index.at(laplacian_nodes[n]);
     for (std::size_t d = 0; d < 6; ++d)
       lap_value_rows[n * 7 + 1 + d] =
           field.index.at(grid_key(i + kFaceNeighbours[d][0], j + kFaceNeighbours[d][1], k + kFaceNeighbours[d][2]));
-  }
+  });
   std::vector<std::uint32_t> node_lap_rows(nodes.size() * 7);  // centre, 6 neighbours
   std::vector<std::uint32_t> node_value_rows(nodes.size());
   std::vector<char> node_fixed(nodes.size());
-  for (std::size_t n = 0; n < nodes.size(); ++n) {
+  for_rows(nodes.size(), [&](std::size_t n) {
     int i, j, k;
     grid_unkey(nodes[n], i, j, k);
     node_value_rows[n] = field.index.at(nodes[n]);
-    node_fixed[n] = fixed.count(nodes[n]) > 0;
+    node_fixed[n] = contains(fixed, nodes[n]);
     node_lap_rows[n * 7] = lap_index.at(nodes[n]);
     for (std::size_t d = 0; d < 6; ++d)
       node_lap_rows[n * 7 + 1 + d] =
           lap_index.at(grid_key(i + kFaceNeighbours[d][0], j + kFaceNeighbours[d][1], k + kFaceNeighbours[d][2]));
-  }
+  });
   std::vector<double> laplacian(laplacian_nodes.size() * fc);
   std::vector<double> update(nodes.size() * fc);
   // Damped Jacobi on the bi-Laplacian (7-point Laplacian squared: diagonal 42); the damping
@@ -326,7 +353,7 @@ void smooth(SampledField& field, Sampler& sampler,
   constexpr double kDamping = 0.5 / 42.0;
   double* values = field.values.data();
   for (int iteration = 0; iteration < iterations; ++iteration) {
-    for (std::size_t n = 0; n < laplacian_nodes.size(); ++n) {
+    for_rows(laplacian_nodes.size(), [&](std::size_t n) {
       const std::uint32_t* rows = &lap_value_rows[n * 7];
       double* out = &laplacian[n * fc];
       for (std::size_t l = 0; l < fc; ++l) {
@@ -334,8 +361,8 @@ void smooth(SampledField& field, Sampler& sampler,
         for (int d = 1; d <= 6; ++d) sum += values[rows[d] * fc + l];
         out[l] = sum;
       }
-    }
-    for (std::size_t n = 0; n < nodes.size(); ++n) {
+    });
+    for_rows(nodes.size(), [&](std::size_t n) {
       const std::uint32_t* rows = &node_lap_rows[n * 7];
       double* out = &update[n * fc];
       for (std::size_t l = 0; l < fc; ++l) {
@@ -343,31 +370,28 @@ void smooth(SampledField& field, Sampler& sampler,
         for (int d = 1; d <= 6; ++d) sum += laplacian[rows[d] * fc + l];
         out[l] = sum;
       }
-    }
-    for (std::size_t n = 0; n < nodes.size(); ++n) {
-      if (node_fixed[n]) continue;
+    });
+    for_rows(nodes.size(), [&](std::size_t n) {
+      if (node_fixed[n]) return;
       double* value = values + node_value_rows[n] * fc;
       for (std::size_t l = 0; l < fc; ++l) value[l] -= kDamping * update[n * fc + l];
-    }
+    });
   }
   // Smoothing may move labels at the nodes: every cell touching a smoothed node is a seed of
   // the new, again closed, band.
   std::vector<std::uint64_t> seeds;
-  {
-    std::unordered_set<std::uint64_t> seed_set;
-    for (const std::uint64_t key : nodes) {
-      int i, j, k;
-      grid_unkey(key, i, j, k);
-      for (int corner = 0; corner < 8; ++corner) {
-        const int ci = i - (corner & 1), cj = j - ((corner >> 1) & 1), ck = k - ((corner >> 2) & 1);
-        if (ci < 0 || cj < 0 || ck < 0 || ci >= resolution || cj >= resolution || ck >= resolution)
-          continue;
-        seed_set.insert(grid_key(ci, cj, ck));
-      }
+  seeds.reserve(nodes.size() * 8);
+  for (const std::uint64_t key : nodes) {
+    int i, j, k;
+    grid_unkey(key, i, j, k);
+    for (int corner = 0; corner < 8; ++corner) {
+      const int ci = i - (corner & 1), cj = j - ((corner >> 1) & 1), ck = k - ((corner >> 2) & 1);
+      if (ci < 0 || cj < 0 || ck < 0 || ci >= resolution || cj >= resolution || ck >= resolution)
+        continue;
+      seeds.push_back(grid_key(ci, cj, ck));
     }
-    seeds.assign(seed_set.begin(), seed_set.end());
-    std::sort(seeds.begin(), seeds.end());
   }
+  sort_unique(seeds);
   close_band(field, sampler, std::move(seeds), resolution);
   field.smoothing_seconds = smoothing_clock.seconds();
 }

@@ -389,8 +389,11 @@ UpdateStats Reconstructor::update() {
   const std::vector<RegionSample> samples =
       thin_region_samples(slices, make_grid(s.box, octree.max_depth).cell_size);
   Stopwatch clock;
-  s.sampled = sample_field(s.box, field.function_count(), evaluate, contour_points,
-                           contour_segments, samples, octree);
+  // In the arena: the octree's parallel loops use the same threads as the evaluation.
+  arena.execute([&] {
+    s.sampled = sample_field(s.box, field.function_count(), evaluate, contour_points,
+                             contour_segments, samples, octree);
+  });
   stats.smoothing_s = s.sampled.smoothing_seconds;
   stats.field_s = clock.seconds() - stats.smoothing_s;
 
