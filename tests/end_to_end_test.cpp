@@ -120,4 +120,33 @@ TEST_F(EndToEnd, BundledExampleReconstructs) {
   expect_goals(nlohmann::json::parse(eval_file));
 }
 
+TEST_F(EndToEnd, OnlineReconstructionEmitsStepsAndEqualsOffline) {
+  const std::string example = std::string(SONOSHAPE_DATA_DIR) + "/examples/two_labels.slices.json";
+  auto r = run("reconstruct " + example + " -o " + path("online") + " --depth 5 --online --emit-every 3 --stats " +
+               path("online.json"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  r = run("reconstruct " + example + " -o " + path("offline") + " --depth 5");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  std::ifstream stats_file(path("online.json"));
+  const nlohmann::json stats = nlohmann::json::parse(stats_file);
+  const std::size_t slices = stats["slices"].get<std::size_t>();
+  ASSERT_EQ(stats["steps"].size(), slices);
+  for (const auto& step : stats["steps"])
+    for (const char* key : {"slice", "arrangement_s", "field_s", "smoothing_s", "mesh_s", "total_s",
+                            "cells_changed", "field_evaluations"})
+      EXPECT_TRUE(step.contains(key)) << key;
+  EXPECT_TRUE(fs::exists(path("online/step_0003/label_1.ply")));
+  EXPECT_FALSE(fs::exists(path("online/step_0001")));
+  // The online engine ends with the same meshes as the one-shot reconstruction.
+  for (const char* label : {"label_1.ply", "label_2.ply"}) {
+    std::ifstream a(path("online/") + label, std::ios::binary), b(path("offline/") + label, std::ios::binary);
+    const std::string bytes_a((std::istreambuf_iterator<char>(a)), {}), bytes_b((std::istreambuf_iterator<char>(b)), {});
+    EXPECT_FALSE(bytes_a.empty());
+    EXPECT_EQ(bytes_a == bytes_b, true) << label;
+  }
+  r = run("reconstruct " + example + " -o " + path("x") + " --emit-every 2");
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_NE(r.output.find("--online"), std::string::npos) << r.output;
+}
+
 }  // namespace
