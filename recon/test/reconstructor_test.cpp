@@ -121,7 +121,9 @@ TEST_P(RandomSequences, EqualTheOneShotReconstructionAfterEveryUpdate) {
     for (int a = 0; a < additions; ++a) ids.push_back(online.add_slice(random_slice(rng, scenario.two_labels, scenario.fov)));
     const UpdateStats stats = online.update();
     EXPECT_EQ(online.slice_ids(), ids);
-    if (step > 0 && stats.slices_removed == 0) EXPECT_FALSE(stats.full_rebuild) << "step " << step;
+    if (step > 0 && stats.slices_removed == 0) {
+      EXPECT_FALSE(stats.full_rebuild) << "step " << step;
+    }
     const auto offline = one_shot(online.slice_set(), options);
     SCOPED_TRACE("step " + std::to_string(step));
     expect_same_field(online, *offline);
