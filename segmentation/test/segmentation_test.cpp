@@ -79,6 +79,7 @@ ImageGeometry scene_geometry(const sim::Probe& probe) {
 
 struct Scores {
   std::map<int, double> dice;   // per label value (0 background) over pixels known in both
+  std::map<int, double> truth_known_pixels;  // per label: pixels the truth shows (not shadowed)
   double shadow_covered = 1.0;  // share of the truth's shadow the segmentation calls unknown
   double known_lost = 0.0;      // share of the truth's known pixels called unknown
 };
@@ -104,8 +105,10 @@ Scores score(const LabelImage& truth, const LabelImage& sector_labels, const Lab
     if (s == t) both[t] += 1;
   }
   Scores scores;
-  for (const auto& [label, n] : in_truth)
+  for (const auto& [label, n] : in_truth) {
     scores.dice[label] = 2.0 * both[label] / (n + in_seg[label]);
+    scores.truth_known_pixels[label] = n;
+  }
   scores.shadow_covered = shadow > 0 ? shadow_unknown / shadow : 1.0;
   scores.known_lost = known > 0 ? known_unknown / known : 0.0;
   return scores;
@@ -134,9 +137,22 @@ TEST_P(SegmentSimulated, MatchesGroundTruthAndTheCut) {
     std::cout << (convex ? "convex" : "linear") << " label " << label << " Dice " << dice << '\n';
   std::cout << "shadow covered " << s.shadow_covered << ", known lost " << s.known_lost
             << ", depth slope " << seg.depth_slope_grey_per_mm << " grey/mm\n";
-  EXPECT_GE(s.dice.at(0), 0.9);
-  EXPECT_GE(s.dice.at(1), 0.9);
-  EXPECT_GE(s.dice.at(2), 0.9);
+  // Every label the truth shows over at least the segmenter's smallest region is scored. The rib
+  // (label 3) shows only the sub-millimetre crescent of its top surface: its inside lies in its
+  // own shadow, which is unknown, as a careful segmenter must call it.
+  const double pixel_mm2 = geometry.spacing_mm * geometry.spacing_mm;
+  int scored = 0;
+  for (const auto& [label, dice] : s.dice) {
+    const double visible_mm2 = s.truth_known_pixels.at(label) * pixel_mm2;
+    if (visible_mm2 < config.min_region_mm2) {
+      std::cout << "label " << label << " not scored: " << visible_mm2 << " mm2 visible, below "
+                << config.min_region_mm2 << " mm2\n";
+      continue;
+    }
+    EXPECT_GE(dice, 0.9) << "label " << label << " (" << visible_mm2 << " mm2 visible)";
+    ++scored;
+  }
+  EXPECT_GE(scored, 3);  // background and both balls
   EXPECT_GE(s.shadow_covered, 0.9);
   EXPECT_LE(s.known_lost, 0.1);
 
