@@ -16,5 +16,7 @@ CommandRunner add_slice_command(CLI::App& app);
 CommandRunner add_evaluate_command(CLI::App& app);
 CommandRunner add_simulate_command(CLI::App& app);
 CommandRunner add_segment_command(CLI::App& app);
+CommandRunner add_scan_command(CLI::App& app);
+CommandRunner add_listen_command(CLI::App& app);
 
 }  // namespace sonoshape::apps

@@ -35,6 +35,10 @@ int main(int argc, char** argv) {
       sonoshape::apps::add_simulate_command);
   add("segment", "Segment a tracked sweep (.igs.mha) into a slice set (one slice per frame)",
       sonoshape::apps::add_segment_command);
+  add("scan", "Live scan: frames and poses from a source, reconstructed as they come",
+      sonoshape::apps::add_scan_command);
+  add("listen", "Receive a live mesh stream, check it against the format and record it",
+      sonoshape::apps::add_listen_command);
 
   try {
     app.parse(argc, argv);

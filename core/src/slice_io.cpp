@@ -734,10 +734,12 @@ Ring2 read_ring(const json& j, const std::string& where) {
 }
 
 void warn_unknown_keys(const json& object, std::initializer_list<const char*> known,
-                       const std::string& source_name, const std::string& where) {
+                       const std::string& source_name, const std::string& where,
+                       const std::vector<std::string>& also_known = {}) {
   for (const auto& item : object.items()) {
     const bool is_known =
-        std::any_of(known.begin(), known.end(), [&](const char* k) { return item.key() == k; });
+        std::any_of(known.begin(), known.end(), [&](const char* k) { return item.key() == k; }) ||
+        std::find(also_known.begin(), also_known.end(), item.key()) != also_known.end();
     if (!is_known)
       log_warning(source_name + ": " + where + ": ignoring unknown key \"" + item.key() + "\"");
   }
@@ -760,6 +762,66 @@ int read_label(const json& j, const std::string& where) {
   fail_at(where, "label " + short_dump(j) +
                      " is neither \"unknown\" nor a positive integer id (0 is the outside and "
                      "needs no region)");
+}
+
+// One element of "slices"; `i` names it in messages. Keys in `also_known` pass without a warning.
+LabeledSlice parse_slice_object(const json& js, std::size_t i, bool normalize,
+                                const std::string& source_name, const detail::SliceNaming& naming,
+                                const std::vector<std::string>& also_known = {}) {
+  const std::string where = naming.slice(i);
+  if (!js.is_object()) fail_at(where, "expected a slice object");
+  warn_unknown_keys(js, {"origin", "u", "v", "timestamp", "fov", "regions"}, source_name, where,
+                    also_known);
+  for (const char* key : {"origin", "u", "v"})
+    if (!js.contains(key)) fail_at(where, std::string("\"") + key + "\" is missing");
+  LabeledSlice s;
+  s.origin_mm = read_vec3(js["origin"], where + ", origin");
+  s.u = read_vec3(js["u"], where + ", u");
+  s.v = read_vec3(js["v"], where + ", v");
+  if (normalize) {
+    // Gram-Schmidt: keep u's direction, make v orthogonal to it.
+    const double u_len = s.u.norm();
+    const Vec3 v_ortho = u_len > 0.0 ? Vec3(s.v - s.v.dot(s.u / u_len) * (s.u / u_len)) : s.v;
+    if (u_len <= 1e-12 || v_ortho.norm() <= 1e-6 * s.v.norm() || s.v.norm() <= 1e-12)
+      fail_at(where,
+              "u and v do not span a plane (one is zero or they are parallel); fix the "
+              "direction vectors");
+    s.u /= u_len;
+    s.v = v_ortho.normalized();
+  }
+  if (const auto t = js.find("timestamp"); t != js.end() && !t->is_null())
+    s.timestamp_s = read_number(*t, where + ", timestamp");
+  if (const auto fov = js.find("fov"); fov != js.end() && !fov->is_null()) {
+    Ring2 ring = read_ring(*fov, where + ", fov");
+    clean_ring(ring, source_name, where + ", fov");
+    s.fov = std::move(ring);
+  }
+  if (const auto regions = js.find("regions"); regions != js.end()) {
+    if (!regions->is_array()) fail_at(where, "\"regions\" must be an array of region objects");
+    for (std::size_t j = 0; j < regions->size(); ++j) {
+      const json& jr = (*regions)[j];
+      const std::string region_where = where + ", region " + std::to_string(j);
+      if (!jr.is_object()) fail_at(region_where, "expected a region object");
+      if (!jr.contains("label")) fail_at(region_where, "\"label\" is missing");
+      if (!jr.contains("polygon")) fail_at(region_where, "\"polygon\" is missing");
+      Region r;
+      r.label = read_label(jr["label"], region_where);
+      warn_unknown_keys(jr, {"label", "polygon", "holes"}, source_name, region_where);
+      r.outer = read_ring(jr["polygon"], naming.outer(i, j, r.label));
+      clean_ring(r.outer, source_name, naming.outer(i, j, r.label));
+      if (const auto holes = jr.find("holes"); holes != jr.end()) {
+        if (!holes->is_array()) fail_at(region_where, "\"holes\" must be an array of polygons");
+        for (std::size_t k = 0; k < holes->size(); ++k) {
+          const std::string hole_where = naming.hole(i, j, r.label, k);
+          Ring2 hole = read_ring((*holes)[k], hole_where);
+          clean_ring(hole, source_name, hole_where);
+          r.holes.push_back(std::move(hole));
+        }
+      }
+      s.regions.push_back(std::move(r));
+    }
+  }
+  return s;
 }
 
 SliceSet parse_document(const json& doc, const std::string& source_name) {
@@ -824,62 +886,8 @@ SliceSet parse_document(const json& doc, const std::string& source_name) {
   if (slices == doc.end() || !slices->is_array())
     fail_at("slices", "\"slices\" must be an array of slice objects");
   const detail::SliceNaming naming;
-  for (std::size_t i = 0; i < slices->size(); ++i) {
-    const json& js = (*slices)[i];
-    const std::string where = naming.slice(i);
-    if (!js.is_object()) fail_at(where, "expected a slice object");
-    warn_unknown_keys(js, {"origin", "u", "v", "timestamp", "fov", "regions"}, source_name, where);
-    for (const char* key : {"origin", "u", "v"})
-      if (!js.contains(key)) fail_at(where, std::string("\"") + key + "\" is missing");
-    LabeledSlice s;
-    s.origin_mm = read_vec3(js["origin"], where + ", origin");
-    s.u = read_vec3(js["u"], where + ", u");
-    s.v = read_vec3(js["v"], where + ", v");
-    if (normalize) {
-      // Gram-Schmidt: keep u's direction, make v orthogonal to it.
-      const double u_len = s.u.norm();
-      const Vec3 v_ortho = u_len > 0.0 ? Vec3(s.v - s.v.dot(s.u / u_len) * (s.u / u_len)) : s.v;
-      if (u_len <= 1e-12 || v_ortho.norm() <= 1e-6 * s.v.norm() || s.v.norm() <= 1e-12)
-        fail_at(where,
-                "u and v do not span a plane (one is zero or they are parallel); fix the "
-                "direction vectors");
-      s.u /= u_len;
-      s.v = v_ortho.normalized();
-    }
-    if (const auto t = js.find("timestamp"); t != js.end() && !t->is_null())
-      s.timestamp_s = read_number(*t, where + ", timestamp");
-    if (const auto fov = js.find("fov"); fov != js.end() && !fov->is_null()) {
-      Ring2 ring = read_ring(*fov, where + ", fov");
-      clean_ring(ring, source_name, where + ", fov");
-      s.fov = std::move(ring);
-    }
-    if (const auto regions = js.find("regions"); regions != js.end()) {
-      if (!regions->is_array()) fail_at(where, "\"regions\" must be an array of region objects");
-      for (std::size_t j = 0; j < regions->size(); ++j) {
-        const json& jr = (*regions)[j];
-        const std::string region_where = where + ", region " + std::to_string(j);
-        if (!jr.is_object()) fail_at(region_where, "expected a region object");
-        if (!jr.contains("label")) fail_at(region_where, "\"label\" is missing");
-        if (!jr.contains("polygon")) fail_at(region_where, "\"polygon\" is missing");
-        Region r;
-        r.label = read_label(jr["label"], region_where);
-        warn_unknown_keys(jr, {"label", "polygon", "holes"}, source_name, region_where);
-        r.outer = read_ring(jr["polygon"], naming.outer(i, j, r.label));
-        clean_ring(r.outer, source_name, naming.outer(i, j, r.label));
-        if (const auto holes = jr.find("holes"); holes != jr.end()) {
-          if (!holes->is_array()) fail_at(region_where, "\"holes\" must be an array of polygons");
-          for (std::size_t k = 0; k < holes->size(); ++k) {
-            const std::string hole_where = naming.hole(i, j, r.label, k);
-            Ring2 hole = read_ring((*holes)[k], hole_where);
-            clean_ring(hole, source_name, hole_where);
-            r.holes.push_back(std::move(hole));
-          }
-        }
-        s.regions.push_back(std::move(r));
-      }
-    }
-    set.slices.push_back(std::move(s));
-  }
+  for (std::size_t i = 0; i < slices->size(); ++i)
+    set.slices.push_back(parse_slice_object((*slices)[i], i, normalize, source_name, naming));
   return set;
 }
 
@@ -896,6 +904,39 @@ void write_point_list(std::string& out, const Ring2& ring) {
 std::string vec3_json(const Vec3& v) {
   return "[" + detail::format_double(v.x()) + ", " + detail::format_double(v.y()) + ", " +
          detail::format_double(v.z()) + "]";
+}
+
+// One slice object. The file form breaks lines before fov, regions and each region; one_line
+// keeps it on a single line (messages, JSON lines).
+void append_slice_object(std::string& out, const LabeledSlice& s, bool one_line) {
+  const char* field_break = one_line ? ", " : ",\n     ";
+  out += "{\"origin\": " + vec3_json(s.origin_mm) + ", \"u\": " + vec3_json(s.u) +
+         ", \"v\": " + vec3_json(s.v);
+  if (s.timestamp_s) out += ", \"timestamp\": " + detail::format_double(*s.timestamp_s);
+  if (s.fov) {
+    out += std::string(field_break) + "\"fov\": ";
+    write_point_list(out, *s.fov);
+  }
+  out += std::string(field_break) + "\"regions\": [";
+  for (std::size_t j = 0; j < s.regions.size(); ++j) {
+    const Region& r = s.regions[j];
+    if (j) out += ',';
+    out += one_line ? (j ? " {" : "{") : "\n       {";
+    out += "\"label\": " +
+           (r.label == kUnknownLabel ? std::string("\"unknown\"") : std::to_string(r.label));
+    out += ", \"polygon\": ";
+    write_point_list(out, r.outer);
+    if (!r.holes.empty()) {
+      out += ", \"holes\": [";
+      for (std::size_t k = 0; k < r.holes.size(); ++k) {
+        if (k) out += ", ";
+        write_point_list(out, r.holes[k]);
+      }
+      out += ']';
+    }
+    out += '}';
+  }
+  out += (s.regions.empty() || one_line) ? "]}" : "\n     ]}";
 }
 
 bool all_finite(const SliceSet& set) {
@@ -966,37 +1007,45 @@ Status write_slice_set_json(const SliceSet& set, const std::filesystem::path& pa
            ", \"max\": " + vec3_json(set.bounds->max) + "},\n";
   out += "  \"slices\": [";
   for (std::size_t i = 0; i < set.slices.size(); ++i) {
-    const LabeledSlice& s = set.slices[i];
-    out += i ? ",\n    {" : "\n    {";
-    out += "\"origin\": " + vec3_json(s.origin_mm) + ", \"u\": " + vec3_json(s.u) +
-           ", \"v\": " + vec3_json(s.v);
-    if (s.timestamp_s) out += ", \"timestamp\": " + detail::format_double(*s.timestamp_s);
-    if (s.fov) {
-      out += ",\n     \"fov\": ";
-      write_point_list(out, *s.fov);
-    }
-    out += ",\n     \"regions\": [";
-    for (std::size_t j = 0; j < s.regions.size(); ++j) {
-      const Region& r = s.regions[j];
-      out += j ? ",\n       {" : "\n       {";
-      out += "\"label\": " +
-             (r.label == kUnknownLabel ? std::string("\"unknown\"") : std::to_string(r.label));
-      out += ", \"polygon\": ";
-      write_point_list(out, r.outer);
-      if (!r.holes.empty()) {
-        out += ", \"holes\": [";
-        for (std::size_t k = 0; k < r.holes.size(); ++k) {
-          if (k) out += ", ";
-          write_point_list(out, r.holes[k]);
-        }
-        out += ']';
-      }
-      out += '}';
-    }
-    out += s.regions.empty() ? "]}" : "\n     ]}";
+    out += i ? ",\n    " : "\n    ";
+    append_slice_object(out, set.slices[i], /*one_line=*/false);
   }
   out += set.slices.empty() ? "]\n}\n" : "\n  ]\n}\n";
   return detail::write_text_file(path, out);
+}
+
+Result<std::string> write_slice_json(const LabeledSlice& slice) {
+  if (!all_finite(SliceSet{"mm", {}, std::nullopt, {slice}}))
+    return Status::error("cannot write the slice as JSON: it holds NaN or infinite numbers");
+  std::string out;
+  append_slice_object(out, slice, /*one_line=*/true);
+  return out;
+}
+
+Result<LabeledSlice> parse_slice_json(const std::string& text, const std::string& source_name,
+                                      const std::vector<std::string>& also_known) {
+  // A lone slice has no index worth naming: "slice, region 1 (label 2)".
+  struct LoneSliceNaming : detail::SliceNaming {
+    std::string slice(std::size_t /*slice*/) const override { return "slice"; }
+  };
+  const LoneSliceNaming naming;
+  json doc;
+  try {
+    doc = json::parse(text);
+  } catch (const json::exception& e) {
+    return Status::error(source_name + ": not valid JSON (" + std::string(e.what()) + ")");
+  }
+  SliceSet set;
+  try {
+    set.slices.push_back(parse_slice_object(doc, 0, false, source_name, naming, also_known));
+  } catch (const JsonProblem& p) {
+    return Status::error(source_name + ": " + p.where + ": " + p.what);
+  } catch (const json::exception& e) {
+    return Status::error(source_name + ": malformed slice (" + std::string(e.what()) + ")");
+  }
+  if (Status status = detail::validate_slice_set_named(set, source_name, naming, nullptr); !status)
+    return status;
+  return std::move(set.slices.front());
 }
 
 Result<SliceSet> read_slice_set(const std::filesystem::path& path) {

@@ -41,6 +41,8 @@ constexpr double kUnknownTriangleMin = 0.03, kUnknownTriangleMax = 0.12;
 // the short edges of segmented contours do not spawn rings of refinement (0.125, CGAL's
 // default for 20.7 degrees, made ten times more triangles on segmented sweeps).
 constexpr double kUnknownTriangleShape = 0.01;
+// Refinement points allowed per point the size criterion alone would need (see the loop).
+constexpr double kRefinementBudget = 8.0;
 
 // The completion reads the known faces of the cells within this many group-adjacency steps of a
 // triangle's face. With fields of view every slice has unknown parts and groups grow to the whole
@@ -95,8 +97,27 @@ void CellField::triangulate_unknown(int slice,
   const double triangle_size =
       std::clamp(kUnknownTriangleFraction * std::sqrt(std::max(unknown_area, 0.0)),
                  kUnknownTriangleMin * diagonal, kUnknownTriangleMax * diagonal);
-  CGAL::refine_Delaunay_mesh_2(cdt, known_seeds.begin(), known_seeds.end(),
-                               MeshCriteria(kUnknownTriangleShape, triangle_size), false);
+  // Delaunay refinement is only guaranteed to end for input angles of 60 degrees and more;
+  // segmented contours and sector outlines have far sharper ones (the real PLUS sweep made it
+  // insert points forever), so the refinement runs step by step under a budget of many times
+  // the points the size criterion asks for.
+  CGAL::Delaunay_mesher_2<Cdt, MeshCriteria> mesher(cdt, MeshCriteria(kUnknownTriangleShape, triangle_size));
+  mesher.set_seeds(known_seeds.begin(), known_seeds.end(), false);
+  mesher.init();
+  const std::size_t budget =
+      static_cast<std::size_t>(kRefinementBudget * (std::max(unknown_area, 0.0) / (triangle_size * triangle_size) +
+                                                    static_cast<double>(cdt.number_of_vertices()))) +
+      1000;
+  const std::size_t start_vertices = cdt.number_of_vertices();
+  while (!mesher.is_refinement_done()) {
+    if (cdt.number_of_vertices() - start_vertices > budget) {
+      log_warning("completion: slice " + std::to_string(slice) +
+                  ": the refinement of its unknown region stopped at " + std::to_string(budget) +
+                  " points (very sharp angles in its outline); the completion is coarser there");
+      break;
+    }
+    mesher.try_one_step_refine_mesh();
+  }
   // The faces of this slice, as constraints too, so that every triangle lies in one face.
   struct SliceFace {
     int id;

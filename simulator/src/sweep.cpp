@@ -9,6 +9,7 @@
 #include <sstream>
 
 #include "sonoshape/core/errors.hpp"
+#include "sonoshape/simulator/sim_source.hpp"
 
 namespace sonoshape::sim {
 namespace {
@@ -130,9 +131,8 @@ SimulatedSweep simulate_sweep(const BModeSimulator& simulator,
   for (std::size_t first = 0; first < n; first += kChunkFrames) {
     const std::size_t last = std::min(n, first + kChunkFrames);
     tbb::parallel_for(first, last, [&](std::size_t k) {
-      // Decorrelated per-frame seeds, independent of the order frames run in.
-      const std::uint64_t frame_seed = seed * 0x9E3779B97F4A7C15ull + k * 0xBF58476D1CE4E5B9ull;
-      frames[k] = simulator.render(acquisition.true_poses[k], frame_seed);
+      // Seeds independent of the order frames run in (shared with SimFrameSource).
+      frames[k] = simulator.render(acquisition.true_poses[k], frame_seed(seed, k));
       const SimulatedFrame& f = frames[k];
       for (std::size_t p = 0; p < f.truth.pixels.size(); ++p) {
         const std::uint8_t l = f.truth.pixels[p];

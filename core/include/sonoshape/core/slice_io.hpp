@@ -3,6 +3,7 @@
 // contour-slice format of the literature (docs/formats/csl.md).
 #include <filesystem>
 #include <string>
+#include <vector>
 
 #include "sonoshape/core/slice.hpp"
 #include "sonoshape/core/status.hpp"
@@ -25,6 +26,18 @@ Status write_slice_set_json(const SliceSet& set, const std::filesystem::path& pa
 Status write_csl(const SliceSet& set, const std::filesystem::path& path);
 /// Writes by extension: `.csl` or JSON.
 Status write_slice_set(const SliceSet& set, const std::filesystem::path& path);
+
+/// One slice object of the JSON format (an element of "slices") on a single line, numbers in
+/// shortest round-trip form: what messages and JSON-lines logs embed. Fails for NaN or infinite
+/// numbers, which JSON cannot hold.
+Result<std::string> write_slice_json(const LabeledSlice& slice);
+
+/// Parses one slice object (what write_slice_json writes) and checks it by the per-slice rules of
+/// slices.md (unit orthogonal u and v, usable rings, no overlapping regions; any positive label).
+/// Keys listed in `also_known` pass without a warning: formats that embed a slice add their own.
+/// Errors start with `source_name`.
+Result<LabeledSlice> parse_slice_json(const std::string& text, const std::string& source_name,
+                                      const std::vector<std::string>& also_known = {});
 
 /// Checks a slice set against every rule of slices.md (geometry, labels, overlaps, bounds).
 Status validate_slice_set(const SliceSet& set, const std::string& source_name);

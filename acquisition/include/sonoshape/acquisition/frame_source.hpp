@@ -1,0 +1,49 @@
+#pragma once
+// FrameSource: the interface of every image source (design.md data path), and the replay of a
+// PLUS sequence file. Hardware backends (v4l2, OpenIGTLink) derive from it too.
+#include <filesystem>
+#include <memory>
+#include <string>
+
+#include "sonoshape/acquisition/sequence_file.hpp"
+#include "sonoshape/acquisition/stream_source.hpp"
+#include "sonoshape/core/frame.hpp"
+
+namespace sonoshape::acq {
+
+/// A stream of ultrasound frames (timestamps on the frame source's clock, indices from 0).
+/// See StreamSource for the threading and lifetime rules.
+class FrameSource : public StreamSource<Frame> {
+ protected:
+  double timestamp_s(const Frame& frame) const override { return frame.timestamp_s; }
+};
+
+/// Replays the frames of a PLUS sequence file in file order: `Frame::timestamp_s` is the
+/// frame's `Timestamp` field (0 when absent), `Frame::index` its position in the file. Frames
+/// whose `ImageStatus` is present and not OK are skipped (counted as lost). Plays in real time
+/// or as fast as possible (SourceOptions::playback).
+class ReplayFrameSource final : public FrameSource {
+ public:
+  /// Replays `file`, shared with the pose replay of the same file; `name` names it in messages
+  /// (usually the path).
+  ReplayFrameSource(std::shared_ptr<const SequenceFile> file, std::string name);
+  ~ReplayFrameSource() override;
+
+  std::string describe() const override { return "replay:" + name_; }
+
+ protected:
+  Status open() override;
+  Result<Polled> poll(Frame& frame) override;
+  bool is_playback() const override { return true; }
+
+ private:
+  std::shared_ptr<const SequenceFile> file_;
+  std::string name_;
+  std::size_t next_ = 0;
+};
+
+/// The device time of the first frame of a file (its first valid `Timestamp`, else 0): the
+/// device origin for real-time playback of the file.
+double first_timestamp_s(const SequenceFile& file);
+
+}  // namespace sonoshape::acq

@@ -1,0 +1,70 @@
+#pragma once
+// Outputs of a scan: a ScanSink receives slices, meshes and status reports (the ZeroMQ
+// publisher, the file writer, tests). Calls into sinks are serialised by the pipeline (never
+// two at once) but may come from different pipeline threads; a sink should return quickly.
+#include <cstddef>
+#include <filesystem>
+#include <string>
+
+#include "sonoshape/core/mesh.hpp"
+#include "sonoshape/core/slice.hpp"
+#include "sonoshape/core/status.hpp"
+#include "sonoshape/scan/report.hpp"
+
+namespace sonoshape::scan {
+
+/// What came with a mesh update.
+struct MeshUpdateInfo {
+  std::size_t slices = 0;            ///< slices the meshes were built from
+  double timestamp_s = 0.0;          ///< frame time (device clock) of the newest slice included
+  recon::ReconstructionStats stats;  ///< per-stage seconds of this update
+  double update_ms = 0.0;            ///< wall time of the update
+};
+
+/// Receives what a scan produces. Every call may fail (a full disk, a network error): the
+/// pipeline logs the message and goes on.
+class ScanSink {
+ public:
+  virtual ~ScanSink() = default;
+  /// A slice just joined the reconstruction; `index` counts the scan's slices from 0.
+  virtual Status on_slice(const LabeledSlice& slice, std::size_t index) = 0;
+  /// The meshes after an update (one per material; a material may vanish).
+  virtual Status on_meshes(const MeshSet& meshes, const MeshUpdateInfo& info) = 0;
+  /// A status report: after every update, when a source ends or fails, and at the end.
+  virtual Status on_status(const ScanStatus& status) = 0;
+  /// The scan is over: the final meshes, the slices they came from, and the summary. Called
+  /// once, after everything else, also when the scan was interrupted.
+  virtual Status on_finish(const MeshSet& meshes, const SliceSet& slices,
+                           const ScanSummary& summary) = 0;
+};
+
+/// Writes the meshes to a directory (`label_<id>.ply`, publish::write_mesh_set) every
+/// `save_every` slices and at the end, with the slices (`slices.json`) and the summary
+/// (`scan.json`) at the end. Files are written under a temporary name and renamed, so a reader
+/// never sees half a mesh.
+class FileSink final : public ScanSink {
+ public:
+  /// Writes into `directory` (created when needed); `save_every` = 0: at the end only.
+  FileSink(std::filesystem::path directory, std::size_t save_every = 0);
+
+  Status on_slice(const LabeledSlice& slice, std::size_t index) override;
+  Status on_meshes(const MeshSet& meshes, const MeshUpdateInfo& info) override;
+  Status on_status(const ScanStatus& status) override;
+  Status on_finish(const MeshSet& meshes, const SliceSet& slices,
+                   const ScanSummary& summary) override;
+
+  /// How many times meshes were written (intermediate and final).
+  std::size_t saves() const { return saves_; }
+
+ private:
+  Status write_meshes(const MeshSet& meshes);
+  std::filesystem::path directory_;
+  std::size_t save_every_;
+  std::size_t saved_at_slices_ = 0;
+  std::size_t saves_ = 0;
+};
+
+/// The JSON form of a summary (what `scan.json` holds), for tools and tests.
+std::string summary_json(const ScanSummary& summary);
+
+}  // namespace sonoshape::scan

@@ -1,0 +1,43 @@
+#pragma once
+// The scan's sources chosen by a string (design.md, "Devices"): `sim:PHANTOM_SPEC` (a simulated
+// probe and tracker) or `replay:FILE.igs.mha` (a PLUS sequence file: frames, poses, statuses).
+// Hardware backends add their prefix here without changing the pipeline.
+#include <filesystem>
+#include <optional>
+#include <string>
+
+#include "sonoshape/core/status.hpp"
+#include "sonoshape/scan/pipeline.hpp"
+#include "sonoshape/scan/sim_scenario.hpp"
+
+namespace sonoshape::scan {
+
+/// What to open.
+struct SourceRequest {
+  /// "sim:", "sim:default", "sim:1:liver.obj:liver,2:kidney.obj", "replay:sweep.igs.mha".
+  std::string spec;
+  /// ImageToProbe from a PLUS device-set XML or JSON (seg::read_calibration). Default: sim:
+  /// the simulated probe's exact calibration; replay: the file's header, else the sidecar
+  /// <name>.plus.xml.
+  std::optional<std::filesystem::path> calibration;
+  /// Segmentation configuration JSON (docs/segmentation.md). Default: sim: label models
+  /// learnt from a few rendered frames and their ground truth (a preset of the simulated
+  /// probe); replay: the file's header models, else a two-class split of its frames.
+  std::optional<std::filesystem::path> segmentation;
+  /// The reconstruction box; default: sim: the phantom's box padded by 10 % of its diagonal;
+  /// replay: none (grown from the slices).
+  std::optional<Box3> bounds;
+
+  // sim: only.
+  SimScenarioOptions sim;
+  double sim_duration_s = 20.0;  ///< length of the simulated sweep (s)
+  double sim_fail_after_s = -1;  ///< fault injection: the probe vanishes at this time (< 0: never)
+  std::filesystem::path models_dir;  ///< bundled models of the built-in demo phantom
+};
+
+/// Opens the sources of `request` and prepares the setup. Fails with a message that names the
+/// problem and the fix: unknown prefix, unreadable file or meshes, missing calibration, invalid
+/// segmentation configuration.
+Result<ScanSource> open_scan_source(const SourceRequest& request);
+
+}  // namespace sonoshape::scan

@@ -1,0 +1,60 @@
+#pragma once
+// The two heavy stages of the scan pipeline behind small interfaces: segmentation (tracked
+// frame -> slice) and reconstruction (slices -> meshes), so that the pipeline can be tested
+// with fakes and the engines swapped without touching the threads.
+#include <memory>
+
+#include "sonoshape/core/frame.hpp"
+#include "sonoshape/core/mesh.hpp"
+#include "sonoshape/core/slice.hpp"
+#include "sonoshape/core/status.hpp"
+#include "sonoshape/recon/reconstructor.hpp"
+#include "sonoshape/scan/setup.hpp"
+
+namespace sonoshape::scan {
+
+/// Tracked frame -> labelled slice. Called from the pipeline's segmentation thread only.
+class SegmentationStage {
+ public:
+  virtual ~SegmentationStage() = default;
+  /// The slice of `frame` in the reference frame (fov = the sector, timestamp = the frame's),
+  /// or why there is none. May throw; the pipeline counts that as a failed frame.
+  virtual Result<LabeledSlice> segment(const TrackedFrame& frame) = 0;
+};
+
+/// The segmentation of segmentation/ (seg::segment_frame + seg::make_slice), as
+/// `sonoshape segment` does it frame by frame.
+class SegmenterStage final : public SegmentationStage {
+ public:
+  /// Throws std::invalid_argument for a setup whose configuration or geometry is invalid.
+  explicit SegmenterStage(ScanSetup setup);
+  /// Fails for frames whose size differs from the setup's geometry.
+  Result<LabeledSlice> segment(const TrackedFrame& frame) override;
+
+ private:
+  ScanSetup setup_;
+};
+
+/// Slices -> meshes, incrementally. Called from the pipeline's reconstruction thread only.
+class ReconstructionStage {
+ public:
+  virtual ~ReconstructionStage() = default;
+  /// Queues a slice for the next update() and returns its id. Throws (std::invalid_argument)
+  /// for a slice it refuses; the state is then unchanged.
+  virtual int add_slice(LabeledSlice slice) = 0;
+  /// Applies the queued slices and refreshes the meshes. Throws when the update fails; the
+  /// queued slices are then dropped and the previous meshes kept.
+  virtual recon::UpdateStats update() = 0;
+  /// The meshes of the last update().
+  virtual const MeshSet& meshes() const = 0;
+  /// The slices of the last update() (with labels and box).
+  virtual SliceSet slice_set() const = 0;
+  /// Slices in the reconstruction after the last update().
+  virtual std::size_t slice_count() const = 0;
+};
+
+/// recon::Reconstructor as a reconstruction stage.
+std::unique_ptr<ReconstructionStage> make_reconstructor_stage(
+    const recon::ReconstructorOptions& options);
+
+}  // namespace sonoshape::scan

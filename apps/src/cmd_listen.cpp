@@ -1,0 +1,288 @@
+// `sonoshape listen`: subscribes to a live mesh stream, checks every message against
+// docs/formats/mesh-stream.md, and records what it receives: the newest mesh of every label as
+// PLY, every header as a JSON line, and a summary (counts, invalid messages, seq gaps).
+#include <CLI/CLI.hpp>
+#include <algorithm>
+#include <chrono>
+#include <csignal>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <map>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <thread>
+
+#include "commands.hpp"
+#include "sonoshape/core/log.hpp"
+#include "sonoshape/publish/mesh_writer.hpp"
+#include "sonoshape/publish/subscriber.hpp"
+
+namespace sonoshape::apps {
+namespace {
+
+using nlohmann::ordered_json;
+
+// How often the loop looks at the clock and the signal flag while no message comes.
+constexpr std::chrono::milliseconds kPollInterval{100};
+// How long to wait for the publisher and its snapshot with --snapshot.
+constexpr int kSnapshotTimeoutMs = 5000;
+
+volatile std::sig_atomic_t g_stop_signal = 0;
+
+extern "C" void on_stop_signal(int signal) { g_stop_signal = signal; }
+
+struct ListenOptions {
+  std::string endpoint;
+  std::filesystem::path output;
+  std::string snapshot;
+  double duration_s = 0.0;  // 0: no limit
+  std::uint64_t count = 0;  // 0: no limit
+  int slow_ms = 0;
+  bool until_idle = false;
+};
+
+// What the summary reports.
+struct Tally {
+  std::uint64_t messages = 0;
+  std::uint64_t invalid = 0;
+  std::uint64_t seq_gaps = 0;
+  std::uint64_t missed = 0;  // messages the gaps skipped
+  std::uint64_t write_errors = 0;
+  std::uint64_t slices = 0;
+  std::uint64_t statuses = 0;
+  std::optional<std::uint64_t> first_seq;
+  std::optional<std::uint64_t> last_seq;
+  std::optional<std::uint64_t> snapshot_seq;
+  std::string scan;
+  std::vector<std::string> scans;
+  std::map<int, std::uint64_t> meshes;
+  std::optional<std::string> last_state;
+  std::string stopped_by = "signal";
+};
+
+// Replaces a file only once the new one is complete: a viewer of DIR never reads half a mesh.
+Status write_mesh_atomically(const TriangleMesh& mesh, const std::filesystem::path& path) {
+  const std::filesystem::path partial =
+      path.parent_path() / (path.stem().string() + ".part" + path.extension().string());
+  if (Status written = publish::write_mesh(mesh, partial); !written) return written;
+  std::error_code ec;
+  std::filesystem::rename(partial, path, ec);
+  if (ec) return Status::error("cannot replace " + path.string() + ": " + ec.message());
+  return Status::ok();
+}
+
+template <typename T>
+ordered_json optional_json(const std::optional<T>& value) {
+  return value ? ordered_json(*value) : ordered_json(nullptr);
+}
+
+Status write_summary(const ListenOptions& options, const Tally& tally, double duration_s) {
+  ordered_json summary;
+  summary["endpoint"] = options.endpoint;
+  summary["snapshot_endpoint"] =
+      options.snapshot.empty() ? ordered_json(nullptr) : ordered_json(options.snapshot);
+  summary["scan"] = tally.scan.empty() ? ordered_json(nullptr) : ordered_json(tally.scan);
+  summary["scans"] = tally.scans;
+  summary["messages"] = tally.messages;
+  summary["invalid"] = tally.invalid;
+  summary["seq_gaps"] = tally.seq_gaps;
+  summary["missed"] = tally.missed;
+  summary["first_seq"] = optional_json(tally.first_seq);
+  summary["last_seq"] = optional_json(tally.last_seq);
+  summary["snapshot_seq"] = optional_json(tally.snapshot_seq);
+  ordered_json meshes = ordered_json::object();
+  for (const auto& [label, count] : tally.meshes) meshes[std::to_string(label)] = count;
+  summary["meshes"] = meshes;
+  summary["slices"] = tally.slices;
+  summary["statuses"] = tally.statuses;
+  summary["last_state"] = optional_json(tally.last_state);
+  summary["write_errors"] = tally.write_errors;
+  summary["duration_s"] = duration_s;
+  summary["stopped_by"] = tally.stopped_by;
+  const std::filesystem::path path = options.output / "summary.json";
+  std::ofstream out(path, std::ios::trunc);
+  out << summary.dump(2) << '\n';
+  out.flush();
+  if (!out) return Status::error("cannot write " + path.string() + "; check the folder");
+  return Status::ok();
+}
+
+int run_listen(const ListenOptions& options) {
+  std::error_code ec;
+  std::filesystem::create_directories(options.output, ec);
+  if (ec) {
+    std::cerr << "error: cannot create " << options.output.string() << ": " << ec.message() << '\n';
+    return 1;
+  }
+  const std::filesystem::path log_path = options.output / "log.jsonl";
+  std::ofstream log_file(log_path, std::ios::trunc);
+  if (!log_file) {
+    std::cerr << "error: cannot write " << log_path.string() << "; check the folder\n";
+    return 1;
+  }
+  g_stop_signal = 0;
+  std::signal(SIGINT, on_stop_signal);
+  std::signal(SIGTERM, on_stop_signal);
+
+  publish::SubscriberOptions subscriber_options;
+  subscriber_options.endpoint = options.endpoint;
+  subscriber_options.snapshot_endpoint = options.snapshot;
+  subscriber_options.snapshot_timeout_ms = kSnapshotTimeoutMs;
+  auto subscriber = publish::MeshSubscriber::connect(subscriber_options);
+  if (!subscriber) {
+    if (g_stop_signal) {
+      // Stopped while waiting for the snapshot: nothing received, an empty summary.
+      const Status written = write_summary(options, Tally{}, 0.0);
+      return written ? 0 : 1;
+    }
+    std::cerr << "error: " << subscriber.message() << '\n';
+    return 1;
+  }
+  log_info("listen: subscribed to " + options.endpoint +
+           (options.snapshot.empty() ? "" : " (snapshot from " + options.snapshot + ")") +
+           "; writing to " + options.output.string());
+
+  const Stopwatch clock;
+  Tally tally;
+  // Messages before the snapshot's `end` are the snapshot: newest state, not a seq run.
+  bool in_snapshot = !options.snapshot.empty();
+  // The seq the next live message should carry; 0 until known (seqs start at 1).
+  std::uint64_t expected_seq = 0;
+  while (true) {
+    if (g_stop_signal) {
+      tally.stopped_by = "signal";
+      break;
+    }
+    auto wait = kPollInterval;
+    if (options.duration_s > 0.0) {
+      const double left_s = options.duration_s - clock.seconds();
+      if (left_s <= 0.0) {
+        tally.stopped_by = "duration";
+        break;
+      }
+      wait = std::min(wait, std::chrono::milliseconds(static_cast<long>(left_s * 1000.0) + 1));
+    }
+    auto received = subscriber->receive(wait);
+    if (received && !*received) continue;  // nothing in this interval
+    ++tally.messages;
+    bool stop = false;
+    if (!received) {
+      ++tally.invalid;
+      log_warning("listen: invalid message: " + received.message());
+    } else {
+      const publish::StreamMessage& message = **received;
+      const bool is_end = std::holds_alternative<publish::SnapshotEnd>(message.body);
+      if (!tally.first_seq) tally.first_seq = message.seq;
+      tally.last_seq = std::max(tally.last_seq.value_or(0), message.seq);
+      if (!message.scan.empty() && message.scan != tally.scan) {
+        if (!tally.scan.empty())
+          log_info("listen: new scan " + message.scan + " (its seq starts afresh)");
+        tally.scan = message.scan;
+        tally.scans.push_back(message.scan);
+        expected_seq = 0;
+      }
+      if (is_end) {
+        in_snapshot = false;
+        tally.snapshot_seq = message.seq;
+        expected_seq = message.seq + 1;
+      } else if (!in_snapshot) {
+        if (expected_seq && message.seq > expected_seq) {
+          ++tally.seq_gaps;
+          tally.missed += message.seq - expected_seq;
+          log_info("listen: seq gap: expected " + std::to_string(expected_seq) + ", got " +
+                   std::to_string(message.seq) + " (" + std::to_string(message.seq - expected_seq) +
+                   " messages missed)");
+        } else if (expected_seq && message.seq < expected_seq) {
+          // One PUB socket delivers in order: a seq that does not grow breaks the format.
+          ++tally.invalid;
+          log_warning("listen: invalid message: " + message.topic() + " seq " +
+                      std::to_string(message.seq) + " after seq " +
+                      std::to_string(expected_seq - 1) + "; seq must grow by one per message");
+        }
+        expected_seq = std::max(expected_seq, message.seq + 1);
+      }
+
+      if (const auto* mesh = std::get_if<publish::MeshUpdate>(&message.body)) {
+        ++tally.meshes[mesh->label];
+        const auto path = options.output / ("label_" + std::to_string(mesh->label) + ".ply");
+        if (Status written = write_mesh_atomically(mesh->mesh, path); !written) {
+          ++tally.write_errors;
+          std::cerr << "error: " << written.message() << '\n';
+        }
+      } else if (std::holds_alternative<publish::SliceUpdate>(message.body)) {
+        ++tally.slices;
+      } else if (const auto* status = std::get_if<publish::StatusReport>(&message.body)) {
+        ++tally.statuses;
+        tally.last_state = std::string(publish::to_string(status->state));
+        if (status->state == publish::ScanState::kError)
+          log_warning("listen: the scan reports an error: " + status->message);
+        // A snapshot's status is the past: only a live one ends the listen.
+        if (options.until_idle && !in_snapshot && status->state != publish::ScanState::kScanning) {
+          tally.stopped_by = tally.last_state.value();
+          stop = true;
+        }
+      }
+      if (!is_end) {
+        // One line per header (binary frames left out), tagged with its topic and arrival time.
+        ordered_json line;
+        line["topic"] = message.topic();
+        line["received_s"] = clock.seconds();
+        if (in_snapshot) line["snapshot"] = true;
+        const ordered_json header = ordered_json::parse(subscriber->last_frames()[1]);
+        for (const auto& [key, value] : header.items()) line[key] = value;
+        log_file << line.dump(-1, ' ', false, ordered_json::error_handler_t::replace) << '\n';
+        log_file.flush();
+      }
+    }
+    if (options.slow_ms > 0)
+      std::this_thread::sleep_for(std::chrono::milliseconds(options.slow_ms));
+    if (options.count > 0 && tally.messages >= options.count) {
+      tally.stopped_by = "count";
+      break;
+    }
+    if (stop) break;
+  }
+
+  const double duration_s = clock.seconds();
+  if (Status written = write_summary(options, tally, duration_s); !written) {
+    std::cerr << "error: " << written.message() << '\n';
+    return 1;
+  }
+  log_info("listen: " + std::to_string(tally.messages) + " messages (" +
+           std::to_string(tally.invalid) + " invalid, " + std::to_string(tally.seq_gaps) +
+           " seq gaps, " + std::to_string(tally.missed) + " missed) in " +
+           std::to_string(duration_s) + " s, stopped by " + tally.stopped_by + " -> " +
+           (options.output / "summary.json").string());
+  return tally.invalid > 0 || tally.write_errors > 0 ? 1 : 0;
+}
+
+}  // namespace
+
+CommandRunner add_listen_command(CLI::App& app) {
+  auto options = std::make_shared<ListenOptions>();
+  app.add_option("endpoint", options->endpoint,
+                 "PUB endpoint of the mesh stream, e.g. tcp://127.0.0.1:5556")
+      ->required();
+  app.add_option("-o,--output", options->output,
+                 "Folder for label_<id>.ply (newest mesh per label), log.jsonl (every header) "
+                 "and summary.json")
+      ->required();
+  app.add_option("--snapshot", options->snapshot,
+                 "Snapshot endpoint (usually the PUB port + 1): join a running scan with its "
+                 "current meshes and status");
+  app.add_option("--duration", options->duration_s, "Stop after S seconds")
+      ->check(CLI::PositiveNumber);
+  app.add_option("--count", options->count,
+                 "Stop after N messages (snapshot and invalid ones included)")
+      ->check(CLI::PositiveNumber);
+  app.add_option("--slow-ms", options->slow_ms,
+                 "Sleep MS after every message (emulates a slow subscriber)")
+      ->check(CLI::NonNegativeNumber);
+  app.add_flag("--until-idle", options->until_idle,
+               "Stop at the first live status whose state is idle or error");
+  return [options] { return run_listen(*options); };
+}
+
+}  // namespace sonoshape::apps

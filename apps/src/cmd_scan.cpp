@@ -1,0 +1,329 @@
+// `sonoshape scan`: the live pipeline. Frames and poses from a source (sim:, replay:), time
+// sync, keyframes, segmentation and online reconstruction on their own threads, meshes to
+// --out (and, once wired, to the ZeroMQ stream). Prints a live status line and a summary.
+#include <unistd.h>
+
+#include <CLI/CLI.hpp>
+#include <atomic>
+#include <csignal>
+#include <cstdio>
+#include <filesystem>
+#include <iomanip>
+#include <iostream>
+#include <memory>
+#include <optional>
+#include <sstream>
+
+#include "commands.hpp"
+#include "sim_options.hpp"
+#include "sonoshape/core/log.hpp"
+#include "sonoshape/scan/pipeline.hpp"
+#include "sonoshape/scan/publish_sink.hpp"
+#include "sonoshape/scan/sink.hpp"
+#include "sonoshape/scan/sources.hpp"
+
+namespace sonoshape::apps {
+namespace {
+
+struct ScanCommandOptions {
+  std::string source;
+  std::filesystem::path calibration;
+  std::filesystem::path segmentation;
+  std::filesystem::path out;
+  std::size_t save_every = 0;
+  double duration_s = 0.0;
+  bool real_time = false;
+  bool fast = false;
+  double speed = 1.0;
+  std::size_t max_slices = 0;
+  std::string publish;
+  std::string snapshot;
+  std::optional<double> tracker_latency_ms;
+  double max_pose_gap_ms = 100.0;
+  double max_extrapolation_ms = 0.0;
+  double pose_wait_ms = 500.0;
+  double keyframe_angle_deg = tracking::KeyframeOptions{}.min_angle_deg;
+  double keyframe_distance_mm = tracking::KeyframeOptions{}.min_distance_mm;
+  std::size_t segmentation_queue = scan::ScanOptions{}.segmentation_queue;
+  std::size_t reconstruction_queue = scan::ScanOptions{}.reconstruction_queue;
+  int depth = -1;
+  int smoothing = 8;
+  std::vector<double> bounds;
+  // sim: only
+  scan::SimScenarioOptions sim;
+  double sweep_s = 20.0;
+  double fail_after_s = -1.0;
+};
+
+// Set by the SIGINT handler, read by the main loop (a lock-free atomic is signal-safe).
+std::atomic<int> g_interrupts{0};
+
+extern "C" void on_interrupt(int) {
+  if (g_interrupts.fetch_add(1) >= 1) {
+    // Second Ctrl-C: the user insists. Only async-signal-safe calls here.
+    const char message[] = "\nscan: interrupted twice, exiting without writing meshes\n";
+    [[maybe_unused]] const auto written = ::write(STDERR_FILENO, message, sizeof(message) - 1);
+    std::_Exit(130);
+  }
+}
+
+std::string milliseconds(double seconds) {
+  std::ostringstream out;
+  out << std::fixed << std::setprecision(0) << 1e3 * seconds;
+  return out.str();
+}
+
+std::string status_line(const scan::ScanCounters& c) {
+  std::ostringstream out;
+  out << "scan: frames " << c.frames_received << " in, " << c.dropped.total() << " dropped; "
+      << c.slices << " slices (" << c.keyframes_skipped << " near-duplicates skipped); last update "
+      << std::fixed << std::setprecision(0) << c.last_update_ms << " ms, latency "
+      << milliseconds(c.last_latency_s) << " ms";
+  return out.str();
+}
+
+std::string summary_text(const scan::ScanSummary& s) {
+  const scan::ScanCounters& c = s.counters;
+  const scan::DropCounts& d = c.dropped;
+  std::ostringstream out;
+  out << "scan summary (" << scan::to_string(s.stop_reason) << ", " << std::fixed
+      << std::setprecision(1) << s.duration_s << " s):\n"
+      << "  frames received " << c.frames_received << ", dropped " << d.total() << " (source "
+      << d.source << ", pose missing " << d.pose_missing << ", pose invalid " << d.pose_invalid
+      << ", pose gap " << d.pose_gap << ", pose extrapolation " << d.pose_extrapolation
+      << ", segmentation behind " << d.segmentation_behind << ", segmentation failed "
+      << d.segmentation_failed << ", reconstruction behind " << d.reconstruction_behind
+      << ", refused by the reconstruction " << d.reconstruction_rejected << ")\n"
+      << "  slices " << c.slices << ", near-duplicate keyframes skipped " << c.keyframes_skipped
+      << ", updates " << c.updates << "\n"
+      << "  frame-to-mesh latency p50 " << milliseconds(s.latency.p50_s) << " ms, p95 "
+      << milliseconds(s.latency.p95_s) << " ms, max " << milliseconds(s.latency.max_s)
+      << " ms; update median " << std::setprecision(0) << s.update_ms_median << " ms, max "
+      << s.update_ms_max << " ms\n"
+      << "  " << s.frame_source << "\n  " << s.pose_source;
+  for (const std::string& e : s.errors) out << "\n  error: " << e;
+  return out.str();
+}
+
+// Installs the SIGINT handler for the lifetime of a scan and restores the previous one.
+class InterruptGuard {
+ public:
+  InterruptGuard() {
+    g_interrupts.store(0);
+    previous_ = std::signal(SIGINT, on_interrupt);
+  }
+  ~InterruptGuard() { std::signal(SIGINT, previous_); }
+  InterruptGuard(const InterruptGuard&) = delete;
+  InterruptGuard& operator=(const InterruptGuard&) = delete;
+
+ private:
+  void (*previous_)(int) = SIG_DFL;
+};
+
+int run_scan(const ScanCommandOptions& options) {
+  // From the start: a Ctrl-C while the source opens stops the scan as soon as it starts.
+  const InterruptGuard interrupts;
+  scan::SourceRequest request;
+  request.spec = options.source;
+  if (!options.calibration.empty()) request.calibration = options.calibration;
+  if (!options.segmentation.empty()) request.segmentation = options.segmentation;
+  if (!options.bounds.empty()) {
+    if (options.bounds.size() != 6) {
+      std::cerr << "error: --bounds takes 6 numbers: xmin ymin zmin xmax ymax zmax (mm)\n";
+      return 1;
+    }
+    request.bounds = Box3{Vec3(options.bounds[0], options.bounds[1], options.bounds[2]),
+                          Vec3(options.bounds[3], options.bounds[4], options.bounds[5])};
+    if (!(request.bounds->size().array() > 0.0).all()) {
+      std::cerr << "error: --bounds: every max must exceed its min\n";
+      return 1;
+    }
+  }
+  request.sim = options.sim;
+  request.sim_duration_s = options.sweep_s;
+  request.sim_fail_after_s = options.fail_after_s;
+  request.models_dir = std::filesystem::path(SONOSHAPE_DATA_DIR) / "models";
+  auto source = scan::open_scan_source(request);
+  if (!source) {
+    std::cerr << "error: " << source.message() << '\n';
+    return 1;
+  }
+  log_info("scan: " + source->description);
+
+  scan::ScanOptions scan_options;
+  scan_options.sync.tracker_latency_s = options.tracker_latency_ms
+                                            ? 1e-3 * *options.tracker_latency_ms
+                                            : source->tracker_latency_s.value_or(0.0);
+  scan_options.sync.max_gap_s = 1e-3 * options.max_pose_gap_ms;
+  scan_options.sync.max_extrapolation_s = 1e-3 * options.max_extrapolation_ms;
+  scan_options.keyframes.min_angle_deg = options.keyframe_angle_deg;
+  scan_options.keyframes.min_distance_mm = options.keyframe_distance_mm;
+  scan_options.real_time = !options.fast;
+  // Played fast, nothing needs dropping: every stage waits for the next (deterministic).
+  scan_options.drop_when_behind = !options.fast;
+  scan_options.speed = options.speed;
+  scan_options.pose_wait_s = 1e-3 * options.pose_wait_ms;
+  scan_options.duration_s = options.duration_s;
+  scan_options.max_slices = options.max_slices;
+  scan_options.segmentation_queue = options.segmentation_queue;
+  scan_options.reconstruction_queue = options.reconstruction_queue;
+
+  recon::ReconstructorOptions engine;
+  engine.engine.max_depth = options.depth;
+  engine.engine.smoothing_iterations = options.smoothing;
+  engine.bounds = source->setup.bounds;
+  engine.labels = source->setup.labels;
+
+  std::unique_ptr<scan::SegmentationStage> segmentation;
+  try {
+    segmentation = std::make_unique<scan::SegmenterStage>(source->setup);
+  } catch (const std::exception& e) {
+    std::cerr << "error: " << e.what() << '\n';
+    return 1;
+  }
+  scan::ScanPipeline pipeline(std::move(*source), std::move(segmentation),
+                              scan::make_reconstructor_stage(engine), scan_options);
+  if (!options.out.empty())
+    pipeline.add_sink(std::make_shared<scan::FileSink>(options.out, options.save_every));
+  if (!options.publish.empty()) {
+    auto sink = scan::PublishSink::bind(options.publish, options.snapshot);
+    if (!sink) {
+      std::cerr << "error: " << sink.message() << '\n';
+      return 1;
+    }
+    log_info("scan: publishing scan " + (*sink)->scan_id() + " on " + (*sink)->endpoint() +
+             " (snapshot " + (*sink)->snapshot_endpoint() + ")");
+    pipeline.add_sink(*sink);
+  }
+
+  if (Status started = pipeline.start(); !started) {
+    std::cerr << "error: " << started.message() << '\n';
+    return 1;
+  }
+  const bool live_line = log_level() >= LogLevel::kInfo && ::isatty(STDERR_FILENO);
+  const bool periodic_line = log_level() >= LogLevel::kInfo && !live_line;
+  bool stop_sent = false;
+  Stopwatch since_line;
+  // The first check does not wait: a Ctrl-C before the start stops the scan at once.
+  while (!pipeline.wait_for(stop_sent || g_interrupts.load() == 0 ? 0.25 : 0.0)) {
+    if (g_interrupts.load() > 0 && !stop_sent) {
+      stop_sent = true;
+      std::cerr << (live_line ? "\n" : "")
+                << "scan: interrupted, finishing (Ctrl-C again to quit without saving)\n";
+      pipeline.request_stop();
+    }
+    if (live_line) {
+      std::cerr << '\r' << status_line(pipeline.counters()) << "\033[K" << std::flush;
+    } else if (periodic_line && since_line.seconds() >= 2.0) {
+      since_line.reset();
+      std::cerr << status_line(pipeline.counters()) << '\n';
+    }
+  }
+  if (live_line) std::cerr << '\r' << status_line(pipeline.counters()) << "\033[K\n";
+  const scan::ScanSummary summary = pipeline.finish();
+  log_info(summary_text(summary));
+  if (!options.out.empty())
+    log_info("scan: meshes, slices.json and scan.json in " + options.out.string());
+  return 0;
+}
+
+}  // namespace
+
+CommandRunner add_scan_command(CLI::App& app) {
+  auto options = std::make_shared<ScanCommandOptions>();
+  options->sim.frame_rate_hz = 30.0;
+  options->sim.width_px = 256;
+  options->sim.height_px = 256;
+  app.add_option("--source", options->source,
+                 "Where frames and poses come from: sim:PHANTOM_SPEC (sim:default, or "
+                 "LABEL:PATH[:NAME] meshes separated by commas) or replay:FILE.igs.mha")
+      ->required();
+  app.add_option("--calibration", options->calibration,
+                 "ImageToProbe calibration: PLUS device-set XML or JSON {\"ImageToProbe\": [16 "
+                 "numbers]}. Default: sim: the simulated probe's; replay: the header's, else "
+                 "<name>.plus.xml next to the file")
+      ->check(CLI::ExistingFile);
+  app.add_option("--segmentation", options->segmentation,
+                 "Segmentation config JSON (docs/segmentation.md). Default: sim: models learnt "
+                 "from simulated frames; replay: the header's, else a two-class split")
+      ->check(CLI::ExistingFile);
+  app.add_option("-o,--out", options->out,
+                 "Directory for the meshes (label_<id>.ply), slices.json and scan.json, written "
+                 "at the end (also after Ctrl-C or a failing source)");
+  app.add_option("--save-every", options->save_every,
+                 "Also write the meshes to --out every N slices (0: at the end only)")
+      ->capture_default_str();
+  app.add_option("--duration", options->duration_s, "Stop after this many seconds (0: no limit)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  auto* realtime = app.add_flag("--realtime", options->real_time,
+                                "Play recorded and simulated sources at their frame rate; frames "
+                                "the pipeline cannot take are dropped (default)");
+  auto* fast = app.add_flag("--fast", options->fast,
+                            "Play recorded and simulated sources as fast as the pipeline goes; "
+                            "nothing is dropped for being late");
+  realtime->excludes(fast);
+  app.add_option("--speed", options->speed, "Real-time factor of --realtime playback")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  app.add_option("--max-slices", options->max_slices,
+                 "Stop once this many keyframes are chosen (0: no limit)")
+      ->capture_default_str();
+  app.add_option("--publish", options->publish,
+                 "ZeroMQ PUB endpoint of the live mesh stream (docs/formats/mesh-stream.md), "
+                 "e.g. tcp://127.0.0.1:5556");
+  app.add_option("--snapshot", options->snapshot,
+                 "Snapshot endpoint for late joiners (default: the --publish port + 1)");
+  app.add_option("--tracker-latency-ms", options->tracker_latency_ms,
+                 "How late the tracker's timestamps are relative to the frames (ms). Default: "
+                 "the source's (sim: the simulated latency; replay: 0)");
+  app.add_option("--max-pose-gap-ms", options->max_pose_gap_ms,
+                 "Tracker samples further apart than this do not interpolate a pose (ms)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  app.add_option("--max-extrapolation-ms", options->max_extrapolation_ms,
+                 "How far beyond the tracker samples a pose may be extrapolated (ms)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  app.add_option("--pose-wait-ms", options->pose_wait_ms,
+                 "How long a frame waits for the tracker sample after it (ms)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  app.add_option("--keyframe-angle-deg", options->keyframe_angle_deg,
+                 "A frame is a new slice when its plane turns by at least this much...")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  app.add_option("--keyframe-distance-mm", options->keyframe_distance_mm,
+                 "...or an image corner moves at least this far out of every slice's plane")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  app.add_option("--segmentation-queue", options->segmentation_queue,
+                 "Keyframes waiting for segmentation")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  app.add_option("--reconstruction-queue", options->reconstruction_queue,
+                 "Slices waiting for the reconstruction")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  app.add_option("--depth", options->depth,
+                 "Octree depth of the reconstruction (-1: finest cells about 1/128 of the box)")
+      ->capture_default_str();
+  app.add_option("--smoothing", options->smoothing, "Bi-Laplacian smoothing iterations")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  app.add_option("--bounds", options->bounds,
+                 "Scan volume xmin ymin zmin xmax ymax zmax (mm, reference frame). Default: "
+                 "sim: the phantom's box + 10%; replay: grown from the slices")
+      ->expected(6);
+
+  CLI::Option_group* sim = app.add_option_group("Simulated source (sim:)");
+  add_sim_scenario_options(*sim, options->sim, false);
+  sim->add_option("--sweep-s", options->sweep_s, "Length of the simulated sweep (s)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  sim->add_option("--sim-fail-after-s", options->fail_after_s,
+                  "Fault injection: the simulated probe vanishes after this many seconds");
+  return [options] { return run_scan(*options); };
+}
+
+}  // namespace sonoshape::apps

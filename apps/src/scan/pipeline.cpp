@@ -1,0 +1,535 @@
+#include "sonoshape/scan/pipeline.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <stdexcept>
+#include <utility>
+
+#include "sonoshape/core/errors.hpp"
+#include "sonoshape/core/log.hpp"
+
+namespace sonoshape::scan {
+
+// A keyframe on its way to segmentation: the frame, when it arrived, and its selector key
+// (withdrawn when the frame is dropped or fails, so a later frame can replace it).
+struct ScanPipeline::Candidate {
+  TrackedFrame frame;
+  double received_s = 0.0;
+  int key = 0;
+};
+
+// A segmented keyframe on its way to the reconstruction.
+struct ScanPipeline::SliceItem {
+  LabeledSlice slice;
+  double received_s = 0.0;
+  int key = 0;
+  std::int64_t frame_index = 0;
+};
+
+namespace {
+
+// How long a stage waits on its input before it looks at its stop conditions again.
+constexpr double kPollS = 0.05;
+
+template <typename T>
+std::string source_state(const acq::StreamSource<T>& s) {
+  const std::string message = s.message();
+  return std::string(acq::to_string(s.state())) + (message.empty() ? "" : ": " + message);
+}
+
+double median(std::vector<double> values) {
+  if (values.empty()) return 0.0;
+  const std::size_t mid = values.size() / 2;
+  std::nth_element(values.begin(), values.begin() + static_cast<std::ptrdiff_t>(mid), values.end());
+  double m = values[mid];
+  if (values.size() % 2 == 0) {
+    const double below =
+        *std::max_element(values.begin(), values.begin() + static_cast<std::ptrdiff_t>(mid));
+    m = 0.5 * (m + below);
+  }
+  return m;
+}
+
+}  // namespace
+
+ScanPipeline::ScanPipeline(ScanSource source, std::unique_ptr<SegmentationStage> segmentation,
+                           std::unique_ptr<ReconstructionStage> reconstruction,
+                           const ScanOptions& options)
+    : source_(std::move(source)),
+      segmentation_(std::move(segmentation)),
+      reconstruction_(std::move(reconstruction)),
+      options_(options),
+      poses_(options.sync),
+      selector_(options.keyframes) {
+  if (!source_.frames || !source_.poses)
+    throw std::invalid_argument("ScanPipeline: a frame source and a pose source are needed");
+  if (!segmentation_ || !reconstruction_)
+    throw std::invalid_argument(
+        "ScanPipeline: a segmentation and a reconstruction stage are needed");
+  if (options.frame_buffer == 0 || options.pose_buffer == 0 || options.segmentation_queue == 0 ||
+      options.reconstruction_queue == 0)
+    throw std::invalid_argument("ScanPipeline: buffer and queue sizes must be at least 1");
+  if (!(options.pose_wait_s >= 0.0) || !(options.duration_s >= 0.0) || !(options.speed > 0.0))
+    throw std::invalid_argument(
+        "ScanPipeline: pose_wait_s and duration_s must be >= 0 and speed positive");
+  corners_px_ = keyframe_corners(source_.setup);
+  to_segmentation_ =
+      std::make_unique<BoundedQueue<std::unique_ptr<Candidate>>>(options.segmentation_queue);
+  to_reconstruction_ =
+      std::make_unique<BoundedQueue<std::unique_ptr<SliceItem>>>(options.reconstruction_queue);
+}
+
+ScanPipeline::~ScanPipeline() {
+  try {
+    request_stop();
+    finish();
+  } catch (const std::exception& e) {
+    log_warning(std::string("scan: finishing failed: ") + e.what());
+  }
+}
+
+void ScanPipeline::add_sink(std::shared_ptr<ScanSink> sink) {
+  if (!sink) return;
+  std::lock_guard lock(sink_mutex_);
+  sinks_.push_back(std::move(sink));
+}
+
+Status ScanPipeline::start() {
+  {
+    std::lock_guard lock(state_mutex_);
+    if (started_) return Status::error("scan: already started");
+    start_s_ = acq::monotonic_s();
+  }
+  acq::SourceOptions frame_options;
+  frame_options.buffer_capacity = options_.frame_buffer;
+  frame_options.wait_when_full = !options_.drop_when_behind;
+  frame_options.playback.real_time = options_.real_time;
+  frame_options.playback.speed = options_.speed;
+  frame_options.playback.device_origin_s = source_.device_origin_s;
+  // One origin for both streams keeps frames and tracker samples aligned in playback.
+  frame_options.playback.monotonic_origin_s = start_s_;
+  acq::SourceOptions pose_options = frame_options;
+  pose_options.buffer_capacity = options_.pose_buffer;
+  if (Status started = source_.frames->start(frame_options); !started) return started;
+  if (Status started = source_.poses->start(pose_options); !started) {
+    source_.frames->stop();
+    return started;
+  }
+  {
+    std::lock_guard lock(state_mutex_);
+    started_ = true;
+    acquiring_ = true;
+    stages_running_ = 3;
+  }
+  reconstruction_thread_ = std::thread([this] { reconstruction_loop(); });
+  segmentation_thread_ = std::thread([this] { segmentation_loop(); });
+  acquisition_thread_ = std::thread([this] { acquisition_loop(); });
+  return Status::ok();
+}
+
+void ScanPipeline::request_stop() { stop_requested_.store(true); }
+
+bool ScanPipeline::wait_for(double timeout_s) {
+  std::unique_lock lock(state_mutex_);
+  return done_cv_.wait_for(lock, std::chrono::duration<double>(std::max(0.0, timeout_s)),
+                           [&] { return started_ && stages_running_ == 0; });
+}
+
+ScanCounters ScanPipeline::counters() const {
+  std::lock_guard lock(state_mutex_);
+  return counters_;
+}
+
+MeshSet ScanPipeline::meshes() const {
+  std::lock_guard lock(state_mutex_);
+  return meshes_;
+}
+
+template <typename F>
+void ScanPipeline::each_sink(const char* what, F&& call) {
+  std::lock_guard lock(sink_mutex_);
+  for (const auto& sink : sinks_) {
+    try {
+      if (const Status status = call(*sink); !status)
+        log_warning(std::string("scan output (") + what + "): " + status.message());
+    } catch (const std::exception& e) {
+      // A broken output must not take the scan down with it.
+      log_warning(std::string("scan output (") + what + ") threw: " + e.what());
+    }
+  }
+}
+
+void ScanPipeline::report(ScanState state, const std::string& message) {
+  ScanStatus status;
+  {
+    std::lock_guard lock(state_mutex_);
+    if (state == ScanState::kError) errors_.push_back(message);
+    status.state = state;
+    status.message = message;
+    status.counters = counters_;
+    status.last_update = last_update_;
+  }
+  if (state == ScanState::kError)
+    log_warning("scan: " + message);
+  else
+    log_info("scan: " + message);
+  each_sink("status", [&](ScanSink& sink) { return sink.on_status(status); });
+}
+
+void ScanPipeline::withdraw(int key) {
+  std::lock_guard lock(selector_mutex_);
+  selector_.withdraw(key);
+}
+
+void ScanPipeline::stage_done() {
+  std::lock_guard lock(state_mutex_);
+  if (--stages_running_ == 0) {
+    end_s_ = acq::monotonic_s();
+    done_cv_.notify_all();
+  }
+}
+
+tracking::SyncedPose ScanPipeline::synchronise(const Frame& frame) {
+  const double t = frame.timestamp_s;
+  const double deadline_s = acq::monotonic_s() + options_.pose_wait_s;
+  // Interpolation needs the tracker sample after the frame's time: wait for it, a little.
+  while (poses_.latest_frame_time_s() < t) {
+    if (source_.poses->finished()) {
+      if (!pose_source_reported_ && source_.poses->state() == acq::SourceState::kFailed) {
+        pose_source_reported_ = true;
+        report(ScanState::kError,
+               "pose source " + source_.poses->describe() + " failed (" + source_.poses->message() +
+                   "); frames get no pose from now on and are dropped; the meshes so far are kept");
+      }
+      break;
+    }
+    if (stop_requested_.load()) break;
+    const double remaining_s = deadline_s - acq::monotonic_s();
+    if (remaining_s <= 0.0) break;
+    if (auto sample = source_.poses->next(std::min(remaining_s, kPollS))) poses_.add(sample->item);
+  }
+  tracking::SyncedPose synced = poses_.pose_at(t);
+  poses_.discard_before(t);
+  return synced;
+}
+
+void ScanPipeline::acquisition_loop() {
+  StopReason reason = StopReason::kSourceEnded;
+  bool degenerate_reported = false;
+  try {
+    while (true) {
+      if (stop_requested_.load()) {
+        reason = StopReason::kStopRequested;
+        break;
+      }
+      if (options_.duration_s > 0.0 && acq::monotonic_s() - start_s_ >= options_.duration_s) {
+        reason = StopReason::kDuration;
+        break;
+      }
+      if (options_.max_slices > 0) {
+        std::lock_guard lock(selector_mutex_);
+        if (selector_.accepted() >= options_.max_slices) {
+          reason = StopReason::kMaxSlices;
+          break;
+        }
+      }
+      auto received = source_.frames->next(kPollS);
+      if (!received) {
+        if (source_.frames->finished()) {
+          reason = source_.frames->state() == acq::SourceState::kFailed ? StopReason::kSourceFailed
+                                                                        : StopReason::kSourceEnded;
+          break;
+        }
+        continue;
+      }
+      {
+        std::lock_guard lock(state_mutex_);
+        ++counters_.frames_received;
+        counters_.dropped.source = source_.frames->dropped();
+      }
+      const tracking::SyncedPose synced = synchronise(received->item);
+      if (!synced.ok()) {
+        std::lock_guard lock(state_mutex_);
+        DropCounts& d = counters_.dropped;
+        switch (synced.failure) {
+          case tracking::SyncFailure::kMissing:
+            ++d.pose_missing;
+            break;
+          case tracking::SyncFailure::kInvalid:
+            ++d.pose_invalid;
+            break;
+          case tracking::SyncFailure::kGap:
+            ++d.pose_gap;
+            break;
+          case tracking::SyncFailure::kExtrapolation:
+          case tracking::SyncFailure::kNone:
+            ++d.pose_extrapolation;
+            break;
+        }
+        continue;
+      }
+      auto candidate = std::make_unique<Candidate>(
+          Candidate{TrackedFrame{std::move(received->item), synced.pose.T_reference_probe,
+                                 TrackingStatus::kValid},
+                    received->received_s, 0});
+      // Keyframe choice before segmentation: near-duplicates cost nothing downstream.
+      tracking::FramePlane plane;
+      try {
+        plane = tracking::frame_plane(
+            candidate->frame.T_reference_probe.matrix() * source_.setup.T_probe_image, corners_px_);
+      } catch (const GeometryError& e) {
+        {
+          std::lock_guard lock(state_mutex_);
+          ++counters_.dropped.segmentation_failed;
+        }
+        if (!degenerate_reported) {
+          degenerate_reported = true;
+          report(ScanState::kError,
+                 std::string("degenerate image plane (check the calibration): ") + e.what());
+        }
+        continue;
+      }
+      std::optional<int> key;
+      {
+        std::lock_guard lock(selector_mutex_);
+        key = selector_.offer(plane);
+      }
+      if (!key) {
+        std::lock_guard lock(state_mutex_);
+        ++counters_.keyframes_skipped;
+        continue;
+      }
+      candidate->key = *key;
+      if (options_.drop_when_behind) {
+        std::optional<std::unique_ptr<Candidate>> evicted;
+        if (!to_segmentation_->push_drop_oldest(std::move(candidate), &evicted)) {
+          withdraw(*key);
+        } else if (evicted) {
+          withdraw((*evicted)->key);
+          std::lock_guard lock(state_mutex_);
+          ++counters_.dropped.segmentation_behind;
+        }
+      } else if (!to_segmentation_->push_wait(std::move(candidate))) {
+        withdraw(*key);
+      }
+    }
+  } catch (const std::exception& e) {
+    // Nothing may escape a thread: report, and end acquisition as a failed source would.
+    reason = StopReason::kSourceFailed;
+    report(ScanState::kError, std::string("acquisition failed: ") + e.what());
+  }
+  source_.frames->stop();
+  source_.poses->stop();
+  std::size_t slices = 0;
+  {
+    std::lock_guard lock(state_mutex_);
+    counters_.dropped.source = source_.frames->dropped();
+    if (!stop_reason_) stop_reason_ = reason;
+    acquiring_ = false;
+    slices = counters_.slices;
+  }
+  to_segmentation_->close();
+  if (reason == StopReason::kSourceFailed && source_.frames->state() == acq::SourceState::kFailed) {
+    report(ScanState::kError, "frame source " + source_.frames->describe() + " failed (" +
+                                  source_.frames->message() + "); the scan goes on with the " +
+                                  std::to_string(slices) +
+                                  " slices it has and the frames already queued");
+  } else {
+    // Still "scanning": idle promises final meshes, and the queued frames are not in yet.
+    report(ScanState::kScanning, std::string("acquisition over (") + to_string(reason) +
+                                     "); finishing the queued frames");
+  }
+  stage_done();
+}
+
+void ScanPipeline::segmentation_loop() {
+  try {
+    while (true) {
+      auto popped = to_segmentation_->pop(kPollS);
+      if (!popped) {
+        if (to_segmentation_->drained()) break;
+        continue;
+      }
+      const std::unique_ptr<Candidate> candidate = std::move(*popped);
+      const auto segmented = [&]() -> Result<LabeledSlice> {
+        try {
+          return segmentation_->segment(candidate->frame);
+        } catch (const std::exception& e) {
+          return Status::error(std::string("segmentation threw: ") + e.what());
+        }
+      }();
+      if (!segmented) {
+        withdraw(candidate->key);
+        {
+          std::lock_guard lock(state_mutex_);
+          ++counters_.dropped.segmentation_failed;
+        }
+        log_debug("scan: frame " + std::to_string(candidate->frame.frame.index) +
+                  " gave no slice: " + segmented.message());
+        continue;
+      }
+      auto item = std::make_unique<SliceItem>(SliceItem{
+          *segmented, candidate->received_s, candidate->key, candidate->frame.frame.index});
+      const int key = item->key;
+      if (options_.drop_when_behind) {
+        std::optional<std::unique_ptr<SliceItem>> evicted;
+        if (!to_reconstruction_->push_drop_oldest(std::move(item), &evicted)) {
+          withdraw(key);
+        } else if (evicted) {
+          withdraw((*evicted)->key);
+          std::lock_guard lock(state_mutex_);
+          ++counters_.dropped.reconstruction_behind;
+        }
+      } else if (!to_reconstruction_->push_wait(std::move(item))) {
+        withdraw(key);
+      }
+    }
+  } catch (const std::exception& e) {
+    report(ScanState::kError, std::string("segmentation stage failed: ") + e.what());
+  }
+  // Close even after a failure: the reconstruction must not wait forever.
+  to_segmentation_->close();
+  to_reconstruction_->close();
+  stage_done();
+}
+
+void ScanPipeline::reconstruction_loop() {
+  std::size_t slice_index = 0;
+  try {
+    while (true) {
+      auto first = to_reconstruction_->pop(kPollS);
+      if (!first) {
+        if (to_reconstruction_->drained()) break;
+        continue;
+      }
+      // Everything queued goes into one update: a slow update batches slices, it loses none.
+      std::vector<std::unique_ptr<SliceItem>> batch;
+      batch.push_back(std::move(*first));
+      for (auto& item : to_reconstruction_->pop_all()) batch.push_back(std::move(item));
+      std::vector<const SliceItem*> added;
+      for (const auto& item : batch) {
+        try {
+          reconstruction_->add_slice(item->slice);
+          added.push_back(item.get());
+        } catch (const std::exception& e) {
+          withdraw(item->key);
+          {
+            std::lock_guard lock(state_mutex_);
+            ++counters_.dropped.reconstruction_rejected;
+          }
+          log_warning("scan: the slice of frame " + std::to_string(item->frame_index) +
+                      " was refused by the reconstruction: " + e.what());
+        }
+      }
+      if (added.empty()) continue;
+      const double update_start_s = acq::monotonic_s();
+      recon::UpdateStats stats;
+      try {
+        stats = reconstruction_->update();
+      } catch (const std::exception& e) {
+        for (const SliceItem* item : added) withdraw(item->key);
+        {
+          std::lock_guard lock(state_mutex_);
+          counters_.dropped.reconstruction_rejected += added.size();
+        }
+        report(ScanState::kError, "reconstruction update failed (" + std::string(e.what()) +
+                                      "); its " + std::to_string(added.size()) +
+                                      " new slices were dropped and the meshes so far kept");
+        continue;
+      }
+      const double ready_s = acq::monotonic_s();
+      if (log_level() >= LogLevel::kDebug) {
+        const recon::ReconstructionStats& st = stats.step;
+        log_debug("scan: update +" + std::to_string(added.size()) + " slices -> " +
+                  std::to_string(reconstruction_->slice_count()) + " in " +
+                  std::to_string(ready_s - update_start_s) + " s" +
+                  (stats.full_rebuild ? " (full rebuild)" : "") + ": cells " +
+                  std::to_string(st.cells) + ", changed " + std::to_string(stats.cells_changed) +
+                  "; arrangement " + std::to_string(st.arrangement_s) + " s, face images " +
+                  std::to_string(st.face_images_s) + " s (completion " +
+                  std::to_string(st.completion_s) + " s), field " + std::to_string(st.field_s) +
+                  " s, smoothing " + std::to_string(st.smoothing_s) + " s, mesh " +
+                  std::to_string(st.mesh_s) + " s");
+      }
+      MeshUpdateInfo info;
+      ScanStatus status;
+      {
+        std::lock_guard lock(state_mutex_);
+        ScanCounters& c = counters_;
+        c.slices = reconstruction_->slice_count();
+        ++c.updates;
+        c.last_update_ms = 1e3 * (ready_s - update_start_s);
+        for (const SliceItem* item : added) latencies_s_.push_back(ready_s - item->received_s);
+        c.last_latency_s = ready_s - added.back()->received_s;
+        c.last_slice_timestamp_s = added.back()->slice.timestamp_s.value_or(0.0);
+        update_ms_.push_back(c.last_update_ms);
+        last_update_ = stats.step;
+        meshes_ = reconstruction_->meshes();
+        info.slices = c.slices;
+        info.timestamp_s = c.last_slice_timestamp_s;
+        info.stats = stats.step;
+        info.update_ms = c.last_update_ms;
+        // Idle (final meshes) is reported once, by finish(), after the last update.
+        status.state = ScanState::kScanning;
+        status.counters = c;
+        status.last_update = last_update_;
+      }
+      each_sink("slice", [&](ScanSink& sink) {
+        Status result;
+        for (std::size_t k = 0; k < added.size() && result; ++k)
+          result = sink.on_slice(added[k]->slice, slice_index + k);
+        return result;
+      });
+      slice_index += added.size();
+      each_sink("meshes",
+                [&](ScanSink& sink) { return sink.on_meshes(reconstruction_->meshes(), info); });
+      each_sink("status", [&](ScanSink& sink) { return sink.on_status(status); });
+    }
+  } catch (const std::exception& e) {
+    report(ScanState::kError, std::string("reconstruction stage failed: ") + e.what());
+    // Let the upstream stages finish instead of waiting on a full queue forever.
+    to_reconstruction_->close();
+    while (to_reconstruction_->try_pop()) {
+    }
+  }
+  stage_done();
+}
+
+ScanSummary ScanPipeline::finish() {
+  {
+    std::lock_guard lock(state_mutex_);
+    if (summary_) return *summary_;
+    if (!started_) {
+      summary_ = ScanSummary{};
+      summary_->stop_reason = StopReason::kStopRequested;
+      return *summary_;
+    }
+  }
+  for (std::thread* t : {&acquisition_thread_, &segmentation_thread_, &reconstruction_thread_})
+    if (t->joinable()) t->join();
+
+  ScanSummary summary;
+  {
+    std::lock_guard lock(state_mutex_);
+    summary.counters = counters_;
+    summary.stop_reason = stop_reason_.value_or(StopReason::kSourceEnded);
+    summary.errors = errors_;
+    summary.latency = latency_stats(latencies_s_);
+    summary.update_ms_median = median(update_ms_);
+    summary.update_ms_max =
+        update_ms_.empty() ? 0.0 : *std::max_element(update_ms_.begin(), update_ms_.end());
+    summary.duration_s = end_s_ - start_s_;
+  }
+  summary.frame_source = source_.frames->describe() + ": " + source_state(*source_.frames);
+  summary.pose_source = source_.poses->describe() + ": " + source_state(*source_.poses);
+  report(ScanState::kIdle, "scan finished (" + std::string(to_string(summary.stop_reason)) +
+                               "): " + std::to_string(summary.counters.slices) + " slices");
+  const SliceSet slices = reconstruction_->slice_set();
+  const MeshSet& meshes = reconstruction_->meshes();
+  each_sink("finish", [&](ScanSink& sink) { return sink.on_finish(meshes, slices, summary); });
+  std::lock_guard lock(state_mutex_);
+  summary_ = summary;
+  return summary;
+}
+
+}  // namespace sonoshape::scan

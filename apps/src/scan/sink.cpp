@@ -1,0 +1,117 @@
+#include "sonoshape/scan/sink.hpp"
+
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <system_error>
+#include <utility>
+
+#include "sonoshape/core/slice_io.hpp"
+#include "sonoshape/publish/mesh_writer.hpp"
+
+namespace sonoshape::scan {
+namespace {
+
+namespace fs = std::filesystem;
+
+// Moves a finished file over its final name: readers see the old file or the new one, never
+// half of one (rename is atomic within a file system).
+Status move_into_place(const fs::path& from, const fs::path& to) {
+  std::error_code ec;
+  fs::rename(from, to, ec);
+  if (ec)
+    return Status::error("cannot move " + from.string() + " to " + to.string() + ": " +
+                         ec.message());
+  return Status::ok();
+}
+
+Status ensure_directory(const fs::path& directory) {
+  std::error_code ec;
+  fs::create_directories(directory, ec);
+  if (ec || !fs::is_directory(directory))
+    return Status::error("cannot create the output directory " + directory.string() + ": " +
+                         (ec ? ec.message() : std::string("a file of that name exists")) +
+                         "; choose another --out");
+  return Status::ok();
+}
+
+nlohmann::json counters_json(const ScanCounters& c) {
+  const DropCounts& d = c.dropped;
+  return {{"frames_received", c.frames_received},
+          {"frames_dropped", d.total()},
+          {"dropped",
+           {{"source", d.source},
+            {"pose_missing", d.pose_missing},
+            {"pose_invalid", d.pose_invalid},
+            {"pose_gap", d.pose_gap},
+            {"pose_extrapolation", d.pose_extrapolation},
+            {"segmentation_behind", d.segmentation_behind},
+            {"segmentation_failed", d.segmentation_failed},
+            {"reconstruction_behind", d.reconstruction_behind},
+            {"reconstruction_rejected", d.reconstruction_rejected}}},
+          {"keyframes_skipped", c.keyframes_skipped},
+          {"slices", c.slices},
+          {"updates", c.updates},
+          {"last_update_ms", c.last_update_ms}};
+}
+
+}  // namespace
+
+std::string summary_json(const ScanSummary& summary) {
+  nlohmann::json doc = counters_json(summary.counters);
+  doc["stop_reason"] = to_string(summary.stop_reason);
+  doc["frame_source"] = summary.frame_source;
+  doc["pose_source"] = summary.pose_source;
+  doc["errors"] = summary.errors;
+  doc["latency_s"] = {{"count", summary.latency.count},
+                      {"p50", summary.latency.p50_s},
+                      {"p95", summary.latency.p95_s},
+                      {"max", summary.latency.max_s}};
+  doc["update_ms"] = {{"median", summary.update_ms_median}, {"max", summary.update_ms_max}};
+  doc["duration_s"] = summary.duration_s;
+  return doc.dump(2);
+}
+
+FileSink::FileSink(fs::path directory, std::size_t save_every)
+    : directory_(std::move(directory)), save_every_(save_every) {}
+
+Status FileSink::on_slice(const LabeledSlice&, std::size_t) { return Status::ok(); }
+
+Status FileSink::on_status(const ScanStatus&) { return Status::ok(); }
+
+Status FileSink::write_meshes(const MeshSet& meshes) {
+  if (Status made = ensure_directory(directory_); !made) return made;
+  for (const MeshSet::Entry& entry : meshes.meshes) {
+    const std::string name = "label_" + std::to_string(entry.label) + ".ply";
+    const fs::path partial = directory_ / (".partial-" + name);
+    if (Status written = publish::write_mesh(entry.mesh, partial); !written) return written;
+    if (Status moved = move_into_place(partial, directory_ / name); !moved) return moved;
+  }
+  ++saves_;
+  return Status::ok();
+}
+
+Status FileSink::on_meshes(const MeshSet& meshes, const MeshUpdateInfo& info) {
+  if (save_every_ == 0 || info.slices < saved_at_slices_ + save_every_) return Status::ok();
+  saved_at_slices_ = info.slices - info.slices % save_every_;
+  return write_meshes(meshes);
+}
+
+Status FileSink::on_finish(const MeshSet& meshes, const SliceSet& slices,
+                           const ScanSummary& summary) {
+  if (Status written = write_meshes(meshes); !written) return written;
+  if (!slices.slices.empty()) {
+    const fs::path partial = directory_ / ".partial-slices.json";
+    if (Status written = write_slice_set_json(slices, partial); !written) return written;
+    if (Status moved = move_into_place(partial, directory_ / "slices.json"); !moved) return moved;
+  }
+  const fs::path partial = directory_ / ".partial-scan.json";
+  {
+    std::ofstream out(partial, std::ios::trunc);
+    out << summary_json(summary) << '\n';
+    if (!out)
+      return Status::error("cannot write " + partial.string() + " (disk full? not writable?)");
+  }
+  return move_into_place(partial, directory_ / "scan.json");
+}
+
+}  // namespace sonoshape::scan

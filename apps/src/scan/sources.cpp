@@ -1,0 +1,184 @@
+#include "sonoshape/scan/sources.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+
+#include "sonoshape/acquisition/frame_source.hpp"
+#include "sonoshape/acquisition/sequence_file.hpp"
+#include "sonoshape/core/errors.hpp"
+#include "sonoshape/segmentation/sweep.hpp"
+#include "sonoshape/simulator/bmode.hpp"
+#include "sonoshape/simulator/sim_source.hpp"
+#include "sonoshape/simulator/sweep.hpp"
+#include "sonoshape/tracking/pose_source.hpp"
+
+namespace sonoshape::scan {
+namespace {
+
+// Frames rendered (with their ground truth) to learn the simulated probe's grey-level models:
+// spread over the sweep so that every organ is seen.
+constexpr int kModelFrames = 6;
+
+Result<ScanSource> open_replay(const SourceRequest& request, const std::string& path_text) {
+  if (path_text.empty())
+    return Status::error("--source replay: needs a file, e.g. replay:sweep.igs.mha");
+  const std::filesystem::path path(path_text);
+  auto file = acq::read_sequence_file(path);
+  if (!file) return file.status();
+  auto shared = std::make_shared<const acq::SequenceFile>(std::move(*file));
+  auto prepared = seg::prepare_sweep(*shared, path, request.segmentation, request.calibration);
+  if (!prepared) return prepared.status();
+
+  ScanSource source;
+  ScanSetup& setup = source.setup;
+  setup.T_probe_image = prepared->T_probe_image;
+  setup.segmentation = prepared->config;
+  setup.geometry = prepared->geometry;
+  for (const seg::LabelModel& m : setup.segmentation.materials)
+    setup.labels.push_back({m.label, m.name});
+  setup.bounds = request.bounds;
+  setup.calibration_from = prepared->calibration_from;
+  setup.models_from = prepared->models_from;
+  setup.sector_from = prepared->sector_from;
+  source.frames = std::make_unique<acq::ReplayFrameSource>(shared, path.string());
+  source.poses = std::make_unique<tracking::ReplayPoseSource>(shared, path.string());
+  source.device_origin_s = acq::first_timestamp_s(*shared);
+  // PLUS stores the tracker already interpolated at each frame's time.
+  source.tracker_latency_s = 0.0;
+  std::ostringstream text;
+  text << "replay of " << path.string() << ": " << shared->frame_count() << " frames of "
+       << shared->width() << "x" << shared->height() << "; calibration from "
+       << setup.calibration_from << "; models from " << setup.models_from << "; sector from "
+       << setup.sector_from;
+  source.description = text.str();
+  return source;
+}
+
+// Label models of the simulated probe, learnt from a few frames and their ground truth (what a
+// preset of a real probe holds). Names come from the phantom.
+seg::SegmentationConfig learn_sim_models(const sim::BModeSimulator& simulator,
+                                         const sim::Trajectory& trajectory,
+                                         const seg::SegmentationConfig& base, std::uint64_t seed) {
+  const sim::Probe& probe = simulator.probe();
+  const int w = probe.width_px(), h = probe.height_px();
+  GreyImage grey(w, h * kModelFrames);
+  LabelImage truth(w, h * kModelFrames);
+  for (int k = 0; k < kModelFrames; ++k) {
+    const double t_s = trajectory.duration_s() * (k + 0.5) / kModelFrames;
+    // Seeds apart from the scan's frames: the models must not have seen the frames they read.
+    const sim::SimulatedFrame frame =
+        simulator.render(trajectory.T_reference_probe(t_s),
+                         sim::frame_seed(seed ^ 0x5EEDull, static_cast<std::size_t>(k)));
+    std::copy(frame.bmode.pixels.begin(), frame.bmode.pixels.end(),
+              grey.pixels.begin() + static_cast<std::ptrdiff_t>(k) * w * h);
+    std::copy(frame.truth.pixels.begin(), frame.truth.pixels.end(),
+              truth.pixels.begin() + static_cast<std::ptrdiff_t>(k) * w * h);
+  }
+  return seg::learn_label_models(grey, truth, base);
+}
+
+Result<ScanSource> open_sim(const SourceRequest& request, const std::string& phantom_spec) {
+  SimScenarioOptions options = request.sim;
+  options.phantoms = parse_phantom_spec(phantom_spec);
+  if (!(request.sim_duration_s > 0.0) || !(options.frame_rate_hz > 0.0))
+    return Status::error("sim: the sweep duration and the frame rate must be positive");
+  const int frame_count =
+      static_cast<int>(std::floor(request.sim_duration_s * options.frame_rate_hz)) + 1;
+  const double duration_s = std::max(frame_count - 1, 1) / options.frame_rate_hz;
+  auto scenario = make_sim_scenario(options, duration_s, request.models_dir);
+  if (!scenario) return scenario.status();
+
+  ScanSource source;
+  ScanSetup& setup = source.setup;
+  std::shared_ptr<const sim::BModeSimulator> simulator;
+  try {
+    simulator =
+        std::make_shared<const sim::BModeSimulator>(scenario->phantom, sim::Probe(scenario->probe));
+  } catch (const GeometryError& e) {
+    return Status::error(std::string("sim: ") + e.what());
+  }
+  const sim::Probe& probe = simulator->probe();
+  const sim::Trajectory trajectory(scenario->motion);
+
+  // Calibration: the simulated probe's own, unless the user gives one (to study a bad one).
+  setup.T_probe_image = probe.T_probe_image().matrix();
+  setup.calibration_from = "the simulated probe";
+  if (request.calibration) {
+    auto read = seg::read_calibration(*request.calibration);
+    if (!read) return read.status();
+    setup.T_probe_image = *read;
+    setup.calibration_from = request.calibration->string();
+  }
+  auto geometry = seg::geometry_from_header(sim::probe_fields(probe));
+  if (!geometry) return geometry.status();
+  setup.geometry = std::move(*geometry);
+  setup.sector_from = "the simulated probe (" + sim::to_string(probe.type()) + ")";
+
+  seg::SegmentationConfig base;
+  setup.models_from = "learnt from " + std::to_string(kModelFrames) + " simulated frames";
+  if (request.segmentation) {
+    auto read = seg::read_segmentation_config(*request.segmentation);
+    if (!read) return read.status();
+    base = std::move(*read);
+    setup.models_from = request.segmentation->string();
+  }
+  if (base.materials.empty()) {
+    for (const auto& m : scenario->phantom.meshes)
+      if (std::none_of(base.materials.begin(), base.materials.end(),
+                       [&](const seg::LabelModel& b) { return b.label == m.label; }))
+        base.materials.push_back({m.label, m.name, 128.0, 25.0});
+    base = learn_sim_models(*simulator, trajectory, base, options.seed);
+    if (request.segmentation) setup.models_from += " (models learnt from simulated frames)";
+  }
+  if (const Status valid = base.validate(); !valid) return valid;
+  setup.segmentation = std::move(base);
+  for (const int label : scenario->phantom.labels()) {
+    std::string name;
+    for (const auto& m : scenario->phantom.meshes)
+      if (m.label == label) name = m.name;
+    setup.labels.push_back({label, name});
+  }
+  const Box3 box = scenario->phantom.bounds();
+  setup.bounds = request.bounds ? *request.bounds : box.padded(0.1 * box.diagonal());
+
+  sim::SimFrameOptions frame_options;
+  frame_options.frame_rate_hz = options.frame_rate_hz;
+  frame_options.frame_count = frame_count;
+  frame_options.seed = options.seed;
+  if (request.sim_fail_after_s >= 0.0)
+    frame_options.fail_after_frames =
+        static_cast<long>(std::floor(request.sim_fail_after_s * options.frame_rate_hz));
+  const std::string name = "sim:" + (phantom_spec.empty() ? std::string("default") : phantom_spec);
+  source.frames = std::make_unique<sim::SimFrameSource>(simulator, trajectory, frame_options, name);
+  // The tracker samples the whole sweep (and a margin for its latency), as sim::acquire does.
+  const double margin_s = 1.0 + std::abs(scenario->tracker.latency_s);
+  source.poses = std::make_unique<tracking::RecordedPoseSource>(
+      sim::track(trajectory, scenario->tracker, -margin_s, duration_s + margin_s),
+      name + " (tracker)");
+  source.device_origin_s = 0.0;
+  source.tracker_latency_s = scenario->tracker.latency_s;
+  std::ostringstream text;
+  text << "simulated " << sim::to_string(probe.type()) << " probe " << probe.width_px() << "x"
+       << probe.height_px() << " at " << options.frame_rate_hz << " fps, " << options.trajectory
+       << " of " << duration_s << " s (" << frame_count << " frames), "
+       << scenario->phantom.labels().size() << " labels, tracker " << scenario->tracker.rate_hz
+       << " Hz; models " << setup.models_from;
+  source.description = text.str();
+  return source;
+}
+
+}  // namespace
+
+Result<ScanSource> open_scan_source(const SourceRequest& request) {
+  const std::size_t colon = request.spec.find(':');
+  const std::string prefix = request.spec.substr(0, colon);
+  const std::string rest = colon == std::string::npos ? "" : request.spec.substr(colon + 1);
+  if (prefix == "sim") return open_sim(request, rest);
+  if (prefix == "replay") return open_replay(request, rest);
+  return Status::error("--source '" + request.spec +
+                       "': unknown source; use sim:PHANTOM_SPEC (e.g. sim:default) or "
+                       "replay:FILE.igs.mha");
+}
+
+}  // namespace sonoshape::scan

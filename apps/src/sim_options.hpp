@@ -1,0 +1,76 @@
+#pragma once
+// The command-line options of a simulated scan, shared by `sonoshape simulate` and the `sim:`
+// source of `sonoshape scan` (same names, same meaning).
+#include <CLI/CLI.hpp>
+
+#include "sonoshape/scan/sim_scenario.hpp"
+
+namespace sonoshape::apps {
+
+/// Registers the options of `options` on `app` (an app or an option group). `with_phantom`:
+/// also --phantom (scan takes the phantom from its sim:PHANTOM_SPEC instead).
+inline void add_sim_scenario_options(CLI::App& app, scan::SimScenarioOptions& options,
+                                     bool with_phantom) {
+  if (with_phantom)
+    app.add_option("--phantom", options.phantoms,
+                   "Closed organ mesh, LABEL:PATH[:NAME] (.obj, .ply, .off); repeat for more "
+                   "(organs may nest). Default: spot and cheburashka from data/models with a rib");
+  app.add_option("--phantom-size-mm", options.size_mm,
+                 "Scale the phantom (one common scale) so its box diagonal is this many mm")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  app.add_option("--tissue", options.tissues,
+                 "Tissue of a label, LABEL:PRESET (hypoechoic, hyperechoic, isoechoic, cyst, "
+                 "bone; label 0 = background); default: odd labels dark, even bright");
+  app.add_option("--probe", options.probe, "Probe geometry")
+      ->check(CLI::IsMember({"linear", "convex"}))
+      ->capture_default_str();
+  app.add_option("--trajectory", options.trajectory,
+                 "Freehand motion: sweep (slide), fan (tilt across), rock (tilt in plane), "
+                 "rotate (about the beam)")
+      ->check(CLI::IsMember({"sweep", "fan", "rock", "rotate"}))
+      ->capture_default_str();
+  app.add_option("--speed", options.speed, "Speed profile of the hand")
+      ->check(CLI::IsMember({"constant", "smooth", "irregular"}))
+      ->capture_default_str();
+  app.add_option("--frame-rate", options.frame_rate_hz, "Frames per second")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  app.add_option("--width-px", options.width_px, "Image width")
+      ->check(CLI::Range(16, 4096))
+      ->capture_default_str();
+  app.add_option("--height-px", options.height_px, "Image height")
+      ->check(CLI::Range(16, 4096))
+      ->capture_default_str();
+  app.add_option("--seed", options.seed, "Seed of the hand, tracker and speckle")
+      ->capture_default_str();
+  app.add_option("--sweep-length-mm", options.sweep_length_mm,
+                 "Travel of a sweep (default: the phantom's length + 20 mm)")
+      ->check(CLI::PositiveNumber);
+  app.add_option("--sweep-angle-deg", options.sweep_angle_deg,
+                 "Total angle of fan / rock / rotate (default 60 / 30 / 180)")
+      ->check(CLI::PositiveNumber);
+  app.add_option("--tracker-rate", options.tracker_rate_hz, "Tracker samples per second")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  app.add_option("--latency-ms", options.latency_ms,
+                 "Simulated tracker latency relative to the frames (ms)")
+      ->capture_default_str();
+  app.add_option("--position-noise-mm", options.position_noise_mm,
+                 "Tracker position noise, sigma per axis")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  app.add_option("--angle-noise-deg", options.angle_noise_deg,
+                 "Tracker angle noise, sigma per axis")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  app.add_option("--drop", options.drop_probability, "Share of tracker samples lost")
+      ->check(CLI::Range(0.0, 0.9))
+      ->capture_default_str();
+  app.add_option("--invalid", options.invalid_probability,
+                 "Chance per tracker sample that an INVALID burst starts")
+      ->check(CLI::Range(0.0, 1.0))
+      ->capture_default_str();
+}
+
+}  // namespace sonoshape::apps

@@ -1,0 +1,126 @@
+#!/usr/bin/env python3
+"""Online reconstruction benchmark (issue: online engine): the paper's Table II for online
+additions, the median update time, the ratio to a full rebuild, memory, and how the time per
+slice grows up to 150 slices (table and PNG plot).
+
+For every model in MODELS it cuts a random set (100 planes) and a sweep-like set (150 planes),
+feeds each to `sonoshape reconstruct --online --stats` (one update per slice, default depth), and
+reconstructs the first N slices of each set offline (the same box) for N in CHECKPOINTS.
+
+Usage: python3 bench/online_table.py [--bin build/apps/sonoshape] [--models horse,spot]
+       [--plot docs/images/online_update_times.png]
+Prints Markdown tables on stdout (paste into docs/benchmarks.md); needs python3-matplotlib for
+the plot (skipped with a note when it is missing).
+"""
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+
+MODELS = {"horse": "horse.ply", "spot": "spot.obj", "cheburashka": "cheburashka.obj"}
+FAMILIES = {"random": 100, "sweep": 150}
+CHECKPOINTS = [5, 10, 40, 100, 150]
+STAGES = ["arrangement_s", "face_images_s", "field_s", "smoothing_s", "mesh_s", "total_s"]
+
+
+def run(args):
+    result = subprocess.run(args, capture_output=True, text=True)
+    if result.returncode != 0:
+        sys.exit("failed: " + " ".join(args) + "\n" + result.stdout + result.stderr)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--bin", default="build/apps/sonoshape")
+    parser.add_argument("--models", default=",".join(MODELS))
+    parser.add_argument("--work", default="out/bench/online")
+    parser.add_argument("--plot", default="docs/images/online_update_times.png")
+    options = parser.parse_args()
+    os.makedirs(options.work, exist_ok=True)
+    table_rows, summary_rows, growth = [], [], {}
+    for model in options.models.split(","):
+        for family, count in FAMILIES.items():
+            name = f"{model}_{family}{count}"
+            slices = os.path.join(options.work, name + ".slices.json")
+            run([options.bin, "slice", "--mesh", f"1:data/models/{MODELS[model]}:{model}", "--planes", family,
+                 "--count", str(count), "--seed", "1", "--size-mm", "150", "-o", slices, "-q"])
+            stats_path = os.path.join(options.work, name + ".online.json")
+            run([options.bin, "reconstruct", slices, "-o", os.path.join(options.work, name + "_online"),
+                 "--online", "--stats", stats_path, "-q"])
+            online = json.load(open(stats_path))
+            steps = online["steps"]
+            growth[name] = [s["total_s"] for s in steps]
+            data = json.load(open(slices))
+            ratios = []
+            for n in CHECKPOINTS:
+                if n > len(steps):
+                    continue
+                prefix = dict(data, slices=data["slices"][:n])  # same bounds: the same box
+                prefix_path = os.path.join(options.work, f"{name}_first{n}.slices.json")
+                json.dump(prefix, open(prefix_path, "w"))
+                offline_path = os.path.join(options.work, f"{name}_first{n}.offline.json")
+                run([options.bin, "reconstruct", prefix_path, "-o", os.path.join(options.work, f"{name}_first{n}"),
+                     "--stats", offline_path, "-q"])
+                offline = json.load(open(offline_path))
+                step = steps[n - 1]
+                ratio = step["total_s"] / offline["total_s"]
+                ratios.append(ratio)
+                table_rows.append(
+                    f"| {name} | {n} | " + " | ".join(f"{step[k]:.3f}" for k in STAGES) +
+                    f" | {step['cells_changed']} / {step['cells']} | {step['field_evaluations']} | "
+                    f"{offline['total_s']:.3f} | {ratio:.2f} |")
+            later = [s["total_s"] for s in steps if s["step"] >= 10]
+            rss_100 = steps[min(100, len(steps)) - 1]["peak_rss_mb"]
+            summary_rows.append(
+                f"| {name} | {len(steps)} | {1000 * statistics.median(later):.0f} | "
+                f"{1000 * statistics.quantiles(later, n=10)[8]:.0f} | {1000 * max(later):.0f} | "
+                f"{statistics.median(ratios):.2f} | {rss_100:.0f} | {online['total_s']:.1f} |")
+
+    print("### Online additions (Table II of the paper, online)\n")
+    print("| set | slice | arrangement s | face images s | field s | smoothing s | mesh s | update total s "
+          "| cells changed / cells | field evaluations | full rebuild s | update / rebuild |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    print("\n".join(table_rows))
+    print("\n### Update time per set (slices 10 and later)\n")
+    print("| set | slices | median update ms | 90th percentile ms | max ms | median update / rebuild "
+          "(checkpoints) | peak RSS after 100 slices MB | all updates s |")
+    print("|---|---|---|---|---|---|---|---|")
+    print("\n".join(summary_rows))
+    print("\n### Time per slice against the slice count (mean of each block of 10 slices, ms)\n")
+    names = list(growth)
+    print("| slices | " + " | ".join(names) + " |")
+    print("|---|" + "---|" * len(names))
+    longest = max(len(v) for v in growth.values())
+    for start in range(0, longest, 10):
+        cells = []
+        for n in names:
+            block = growth[n][start:start + 10]
+            cells.append(f"{1000 * statistics.mean(block):.0f}" if block else "")
+        print(f"| {start + 1}-{start + 10} | " + " | ".join(cells) + " |")
+    try:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        print("\n(plot skipped: install python3-matplotlib)", file=sys.stderr)
+        return
+    figure, axis = plt.subplots(figsize=(8, 4.5), dpi=110)
+    for n in names:
+        axis.plot(range(1, len(growth[n]) + 1), [1000 * t for t in growth[n]], label=n, linewidth=1)
+    axis.axhline(250, color="grey", linestyle="--", linewidth=0.8, label="250 ms target")
+    axis.set_xlabel("slices in the reconstruction")
+    axis.set_ylabel("update time (ms)")
+    axis.set_yscale("log")
+    axis.set_title("sonoshape online update per added slice (2 cores, default depth)")
+    axis.legend(fontsize=8, ncol=2)
+    axis.grid(True, which="both", linewidth=0.3)
+    figure.tight_layout()
+    os.makedirs(os.path.dirname(options.plot), exist_ok=True)
+    figure.savefig(options.plot)
+    print(f"\nplot: {options.plot}", file=sys.stderr)
+
+
+if __name__ == "__main__":
+    main()

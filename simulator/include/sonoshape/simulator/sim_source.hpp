@@ -1,0 +1,54 @@
+#pragma once
+// The simulated probe as a live frame source (`sonoshape scan --source sim:...`): frames are
+// rendered on demand at the trajectory's true pose, at the probe's frame rate in real time or
+// as fast as they render. Its tracker is a tracking::RecordedPoseSource playing sim::track().
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include "sonoshape/acquisition/frame_source.hpp"
+#include "sonoshape/simulator/bmode.hpp"
+#include "sonoshape/simulator/trajectory.hpp"
+
+namespace sonoshape::sim {
+
+/// What the simulated probe delivers.
+struct SimFrameOptions {
+  double frame_rate_hz = 30.0;  ///< frame k has timestamp k / frame_rate_hz (s)
+  int frame_count = 600;        ///< frames of the whole sweep
+  std::uint64_t seed = 1;       ///< speckle seed (frame k as in simulate_sweep with this seed)
+  /// Fault injection: poll() fails with "probe vanished" once this many frames were delivered
+  /// (< 0: never), as when a cable is pulled mid-scan.
+  long fail_after_frames = -1;
+};
+
+/// A simulated probe. In real-time playback a frame that could not be rendered in time is
+/// skipped (counted by dropped()), as a real probe's frames are lost when nobody takes them.
+class SimFrameSource final : public acq::FrameSource {
+ public:
+  /// Throws std::invalid_argument for a null simulator, a non-positive frame rate or no frames.
+  SimFrameSource(std::shared_ptr<const BModeSimulator> simulator, Trajectory trajectory,
+                 const SimFrameOptions& options, std::string name = "sim");
+  ~SimFrameSource() override;
+
+  std::string describe() const override { return name_; }
+  const SimFrameOptions& options() const { return options_; }
+
+ protected:
+  Status open() override;
+  Result<acq::Polled> poll(Frame& frame) override;
+  bool is_playback() const override { return true; }
+
+ private:
+  std::shared_ptr<const BModeSimulator> simulator_;
+  Trajectory trajectory_;
+  SimFrameOptions options_;
+  std::string name_;
+  long next_ = 0;
+  long delivered_ = 0;
+};
+
+/// The speckle seed of frame k of a sweep simulated with `seed` (as simulate_sweep uses it).
+std::uint64_t frame_seed(std::uint64_t seed, std::size_t k);
+
+}  // namespace sonoshape::sim

@@ -1,0 +1,62 @@
+#include "sonoshape/simulator/sim_source.hpp"
+
+#include <cmath>
+#include <stdexcept>
+#include <utility>
+
+namespace sonoshape::sim {
+
+std::uint64_t frame_seed(std::uint64_t seed, std::size_t k) {
+  // Decorrelated per-frame seeds, independent of the order frames are rendered in.
+  return seed * 0x9E3779B97F4A7C15ull + k * 0xBF58476D1CE4E5B9ull;
+}
+
+SimFrameSource::SimFrameSource(std::shared_ptr<const BModeSimulator> simulator,
+                               Trajectory trajectory, const SimFrameOptions& options,
+                               std::string name)
+    : simulator_(std::move(simulator)),
+      trajectory_(std::move(trajectory)),
+      options_(options),
+      name_(std::move(name)) {
+  if (!simulator_) throw std::invalid_argument("SimFrameSource: no simulator");
+  if (!(options.frame_rate_hz > 0.0) || options.frame_count < 1)
+    throw std::invalid_argument("SimFrameSource: need a positive frame rate and frames");
+}
+
+SimFrameSource::~SimFrameSource() { stop(); }
+
+Status SimFrameSource::open() {
+  next_ = 0;
+  delivered_ = 0;
+  return Status::ok();
+}
+
+Result<acq::Polled> SimFrameSource::poll(Frame& frame) {
+  if (options_.fail_after_frames >= 0 && delivered_ >= options_.fail_after_frames)
+    return Status::error(name_ + ": probe vanished after " + std::to_string(delivered_) +
+                         " frames (simulated fault; check the probe's cable)");
+  // In real time, the probe has moved on while we rendered: take the frame due now.
+  if (const auto now_s = playback_now_s()) {
+    const long due = static_cast<long>(std::floor(*now_s * options_.frame_rate_hz));
+    if (due > next_) {
+      const long last = options_.frame_count - 1;
+      const long skip_to = std::min(due, last);
+      if (skip_to > next_) {
+        count_lost(static_cast<std::size_t>(skip_to - next_));
+        next_ = skip_to;
+      }
+    }
+  }
+  if (next_ >= options_.frame_count) return acq::Polled::kEnd;
+  const long k = next_++;
+  const double t_s = static_cast<double>(k) / options_.frame_rate_hz;
+  SimulatedFrame rendered = simulator_->render(
+      trajectory_.T_reference_probe(t_s), frame_seed(options_.seed, static_cast<std::size_t>(k)));
+  frame.image = std::move(rendered.bmode);
+  frame.timestamp_s = t_s;
+  frame.index = k;
+  ++delivered_;
+  return acq::Polled::kItem;
+}
+
+}  // namespace sonoshape::sim

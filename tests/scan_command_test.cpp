@@ -1,0 +1,211 @@
+// `sonoshape scan` end to end: a small simulated sweep played fast, the summary and the files in
+// --out, bad sources, and Ctrl-C in the middle of a real-time scan (meshes still written).
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <string>
+#include <thread>
+
+#include "sonoshape/core/slice_io.hpp"
+#include "sonoshape/simulator/mesh_reader.hpp"
+#include "sonoshape/testing/command.hpp"
+#include "sonoshape/testing/temp_dir.hpp"
+
+namespace {
+
+namespace fs = std::filesystem;
+using sonoshape::testing::contains;
+
+// A small, quick simulated scan (160 x 160 px, 5 fps, coarse reconstruction).
+const std::string kSmallSim =
+    "scan --source sim:default --width-px 160 --height-px 160 --frame-rate 5 --depth 5 ";
+
+nlohmann::json read_json(const fs::path& path) {
+  std::ifstream in(path);
+  return nlohmann::json::parse(in);
+}
+
+TEST(ScanCommand, FastSimulatedScanWritesMeshesSlicesAndSummary) {
+  sonoshape::testing::TempDir dir;
+  const auto result = sonoshape::testing::run_command(
+      SONOSHAPE_BINARY,
+      kSmallSim + "--sweep-s 2 --fast --save-every 4 --publish tcp://127.0.0.1:5599 -o " +
+          (dir.path() / "out").string(),
+      dir.path() / "log");
+  ASSERT_EQ(result.exit_code, 0) << result.output;
+  EXPECT_TRUE(contains(result.output, "scan summary (source ended"));
+  EXPECT_TRUE(contains(result.output, "frames received 11"));
+  EXPECT_TRUE(contains(result.output, "latency p50"));
+  EXPECT_TRUE(contains(result.output, "publishing scan"));
+  for (const char* name : {"label_1.ply", "label_2.ply", "slices.json", "scan.json"})
+    EXPECT_TRUE(fs::exists(dir.path() / "out" / name)) << name;
+  const auto summary = read_json(dir.path() / "out" / "scan.json");
+  EXPECT_EQ(summary["frames_received"], 11);
+  EXPECT_EQ(summary["frames_dropped"],
+            summary["dropped"]["pose_invalid"].get<int>() +
+                summary["dropped"]["pose_gap"].get<int>() +
+                summary["dropped"]["pose_extrapolation"].get<int>() +
+                summary["dropped"]["pose_missing"].get<int>() +
+                summary["dropped"]["segmentation_failed"].get<int>() +
+                summary["dropped"]["reconstruction_rejected"].get<int>());
+  EXPECT_EQ(summary["stop_reason"], "source ended");
+  const auto slices = sonoshape::read_slice_set(dir.path() / "out" / "slices.json");
+  ASSERT_TRUE(slices) << slices.message();
+  EXPECT_EQ(slices->slices.size(), summary["slices"].get<std::size_t>());
+  EXPECT_GT(slices->slices.size(), 5u);
+}
+
+TEST(ScanCommand, BadSourcesSayWhatToDo) {
+  sonoshape::testing::TempDir dir;
+  const auto unknown =
+      sonoshape::testing::run_command(SONOSHAPE_BINARY, "scan --source tcp:x", dir.path() / "a");
+  EXPECT_EQ(unknown.exit_code, 1);
+  EXPECT_TRUE(contains(unknown.output, "replay:FILE.igs.mha"));
+  const auto missing = sonoshape::testing::run_command(
+      SONOSHAPE_BINARY, "scan --source replay:" + (dir.path() / "none.igs.mha").string(),
+      dir.path() / "b");
+  EXPECT_EQ(missing.exit_code, 1);
+  EXPECT_TRUE(contains(missing.output, "none.igs.mha"));
+}
+
+TEST(ScanCommand, InterruptStopsCleanlyAndWritesTheMeshes) {
+  sonoshape::testing::TempDir dir;
+  const fs::path out = dir.path() / "out";
+  const fs::path log = dir.path() / "log";
+  const std::string command = std::string(SONOSHAPE_BINARY) + " " + kSmallSim +
+                              "--sweep-s 60 --realtime -o " + out.string() + " > " + log.string() +
+                              " 2>&1";
+  const pid_t pid = fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    // exec replaces the shell: the signal goes to sonoshape itself.
+    execl("/bin/sh", "sh", "-c", ("exec " + command).c_str(), static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  // Wait until the scan runs (its first status line), then let it work a little.
+  auto log_text = [&] {
+    std::ifstream in(log);
+    std::stringstream text;
+    text << in.rdbuf();
+    return text.str();
+  };
+  for (int k = 0; k < 200 && log_text().find("scan: frames") == std::string::npos; ++k)
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));
+  ASSERT_EQ(kill(pid, SIGINT), 0);
+  int status = 0;
+  ASSERT_EQ(waitpid(pid, &status, 0), pid);
+  const std::string text = log_text();
+  ASSERT_TRUE(WIFEXITED(status)) << text;
+  EXPECT_EQ(WEXITSTATUS(status), 0) << text;
+  EXPECT_TRUE(contains(text, "interrupted, finishing"));
+  EXPECT_TRUE(contains(text, "stop requested"));
+  ASSERT_TRUE(fs::exists(out / "scan.json")) << text;
+  EXPECT_EQ(read_json(out / "scan.json")["stop_reason"], "stop requested");
+  EXPECT_TRUE(fs::exists(out / "slices.json")) << text;
+}
+
+// Starts `command` (run through sh, exec'd so that signals reach it) with its output in `log`.
+pid_t spawn(const std::string& command, const fs::path& log) {
+  const std::string line = "exec " + command + " > " + log.string() + " 2>&1";
+  const pid_t pid = fork();
+  if (pid == 0) {
+    execl("/bin/sh", "sh", "-c", line.c_str(), static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  return pid;
+}
+
+// Waits for `pid` up to `timeout_s` (then SIGTERM, and wait); returns its exit code (-1: killed).
+int wait_exit(pid_t pid, double timeout_s) {
+  int status = 0;
+  const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
+  while (waitpid(pid, &status, WNOHANG) == 0) {
+    if (std::chrono::steady_clock::now() > end) {
+      kill(pid, SIGTERM);
+      waitpid(pid, &status, 0);
+      break;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+std::string file_text(const fs::path& path) {
+  std::ifstream in(path);
+  std::stringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+
+// The live stream end to end: `sonoshape scan --publish` with `sonoshape listen` processes that
+// keep up, join late, are slow, or die mid-scan.
+TEST(ScanCommand, PublishesToListenersThatKeepUpJoinLateAreSlowOrDie) {
+  sonoshape::testing::TempDir dir;
+  const std::string pub = "tcp://127.0.0.1:5631", snapshot = "tcp://127.0.0.1:5632";
+  const std::string bin = SONOSHAPE_BINARY;
+  const fs::path out = dir.path() / "out";
+  const pid_t scan = spawn(bin + " " + kSmallSim + "--sweep-s 4 --realtime --publish " + pub +
+                               " --snapshot " + snapshot + " -o " + out.string(),
+                           dir.path() / "scan.log");
+  for (int k = 0; k < 400 && !contains(file_text(dir.path() / "scan.log"), "publishing scan"); ++k)
+    std::this_thread::sleep_for(std::chrono::milliseconds(25));
+  ASSERT_TRUE(contains(file_text(dir.path() / "scan.log"), "publishing scan")) << file_text(dir.path() / "scan.log");
+  auto listen = [&](const std::string& name, const std::string& extra) {
+    return spawn(bin + " listen " + pub + " -o " + (dir.path() / name).string() + " " + extra,
+                 dir.path() / (name + ".log"));
+  };
+  const pid_t keeps_up = listen("keeps_up", "--snapshot " + snapshot + " --until-idle --duration 120");
+  const pid_t slow = listen("slow", "--slow-ms 250 --until-idle --duration 120");
+  const pid_t dies = listen("dies", "--duration 120");
+  std::this_thread::sleep_for(std::chrono::milliseconds(1500));
+  kill(dies, SIGKILL);  // a subscriber that dies changes nothing
+  waitpid(dies, nullptr, 0);
+  const pid_t late = listen("late", "--snapshot " + snapshot + " --until-idle --duration 120");
+
+  ASSERT_EQ(wait_exit(scan, 120.0), 0) << file_text(dir.path() / "scan.log");
+  EXPECT_EQ(wait_exit(keeps_up, 20.0), 0) << file_text(dir.path() / "keeps_up.log");
+  EXPECT_EQ(wait_exit(late, 20.0), 0) << file_text(dir.path() / "late.log");
+  wait_exit(slow, 5.0);  // it may still be working through its queue: stopped with SIGTERM
+
+  const auto scan_summary = read_json(out / "scan.json");
+  EXPECT_EQ(scan_summary["stop_reason"], "source ended");
+  for (const char* name : {"keeps_up", "late"}) {
+    SCOPED_TRACE(name);
+    const auto summary = read_json(dir.path() / name / "summary.json");
+    EXPECT_EQ(summary["invalid"], 0);  // every message passed the format check
+    EXPECT_EQ(summary["seq_gaps"], 0);
+    EXPECT_EQ(summary["last_state"], "idle");
+    EXPECT_TRUE(summary["meshes"].contains("1") && summary["meshes"].contains("2")) << summary.dump();
+    // The meshes received equal those written to --out (float32 on the wire).
+    for (const char* label : {"label_1.ply", "label_2.ply"}) {
+      const auto received = sonoshape::sim::read_mesh(dir.path() / name / label);
+      const auto written = sonoshape::sim::read_mesh(out / label);
+      ASSERT_TRUE(received && written) << label;
+      ASSERT_EQ(received->vertices.size(), written->vertices.size()) << label;
+      EXPECT_EQ(received->triangles, written->triangles) << label;
+      double worst = 0.0;
+      for (std::size_t v = 0; v < written->vertices.size(); ++v)
+        worst = std::max(worst, (received->vertices[v] - written->vertices[v]).norm());
+      EXPECT_LT(worst, 1e-3) << label;
+    }
+  }
+  const auto late_summary = read_json(dir.path() / "late" / "summary.json");
+  EXPECT_FALSE(late_summary["snapshot_seq"].is_null());  // the snapshot gave it the state
+  const auto slow_summary = read_json(dir.path() / "slow" / "summary.json");
+  EXPECT_EQ(slow_summary["invalid"], 0);
+  EXPECT_GT(slow_summary["messages"].get<int>(), 0);
+  // Not slowed down: a 4 s sweep played in real time ends in about that (engine time included).
+  EXPECT_LT(scan_summary["duration_s"].get<double>(), 60.0);
+  std::cout << "scan " << scan_summary["duration_s"] << " s, slow subscriber: "
+            << slow_summary["messages"] << " messages, " << slow_summary["missed"] << " missed\n";
+}
+
+}  // namespace

@@ -1,0 +1,83 @@
+#pragma once
+// PoseSource: the interface of every tracker (design.md data path), a player of recorded
+// samples (simulated trackers, tests) and the replay of the poses of a PLUS sequence file.
+// Hardware backends (trakSTAR, OpenIGTLink) derive from PoseSource too.
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "sonoshape/acquisition/sequence_file.hpp"
+#include "sonoshape/acquisition/stream_source.hpp"
+#include "sonoshape/core/frame.hpp"
+
+namespace sonoshape::tracking {
+
+/// A stream of tracker samples, T_reference_probe with status, in time order on the tracker's
+/// clock. See acq::StreamSource for the threading and lifetime rules.
+class PoseSource : public acq::StreamSource<Pose> {
+ protected:
+  double timestamp_s(const Pose& pose) const override { return pose.timestamp_s; }
+};
+
+/// Plays a list of samples (time order) as a tracker would: the simulated tracker of a `sim:`
+/// source, and tests. Optionally fails after `fail_after` samples (a tracker unplugged).
+class RecordedPoseSource final : public PoseSource {
+ public:
+  /// `name` names the source in messages; `fail_after` (< 0: never) makes poll() fail with
+  /// "tracker vanished" once that many samples were delivered.
+  RecordedPoseSource(std::vector<Pose> samples, std::string name, long fail_after = -1);
+  ~RecordedPoseSource() override;
+
+  std::string describe() const override { return name_; }
+
+ protected:
+  Status open() override;
+  Result<acq::Polled> poll(Pose& pose) override;
+  bool is_playback() const override { return true; }
+
+ private:
+  std::vector<Pose> samples_;
+  std::string name_;
+  long fail_after_;
+  std::size_t next_ = 0;
+};
+
+/// The probe poses of a PLUS sequence file, one sample per frame at the frame's `Timestamp`:
+/// T_reference_probe = ReferenceToTracker^-1 * ProbeToTracker (ProbeToTracker alone when the
+/// file has no ReferenceToTracker: the tracker is the reference). A sample is kInvalid when a
+/// transform's status is not OK or a transform is missing or unreadable. PLUS already
+/// interpolated the tracker at each frame's time, so replay with tracker_latency_s = 0.
+class ReplayPoseSource final : public PoseSource {
+ public:
+  /// Replays `file` (shared with the frame replay); `name` names it in messages.
+  ReplayPoseSource(std::shared_ptr<const acq::SequenceFile> file, std::string name,
+                   std::string probe_transform = "ProbeToTracker",
+                   std::string reference_transform = "ReferenceToTracker");
+  ~ReplayPoseSource() override;
+
+  std::string describe() const override { return "replay:" + name_ + " (poses)"; }
+
+ protected:
+  Status open() override;
+  Result<acq::Polled> poll(Pose& pose) override;
+  bool is_playback() const override { return true; }
+
+ private:
+  std::shared_ptr<const acq::SequenceFile> file_;
+  std::string name_;
+  std::string probe_;
+  std::string reference_;
+  bool has_reference_ = false;
+  std::size_t next_ = 0;
+};
+
+/// The pose sample of frame k of a sequence file as ReplayPoseSource delivers it.
+Pose replay_pose(const acq::SequenceFile& file, std::size_t k,
+                 const std::string& probe_transform = "ProbeToTracker",
+                 const std::string& reference_transform = "ReferenceToTracker");
+
+/// The nearest rigid transform to a 4x4 matrix (rotation projected by SVD, translation kept):
+/// tracker files store rotations with rounding errors, and slerp needs exact rotations.
+Eigen::Isometry3d nearest_rigid(const Eigen::Matrix4d& matrix);
+
+}  // namespace sonoshape::tracking
