@@ -163,7 +163,7 @@ TEST(ScanCommand, PublishesToListenersThatKeepUpJoinLateAreSlowOrDie) {
                  dir.path() / (name + ".log"));
   };
   const pid_t keeps_up = listen("keeps_up", "--snapshot " + snapshot + " --until-idle --duration 120");
-  const pid_t slow = listen("slow", "--slow-ms 250 --until-idle --duration 120");
+  const pid_t slow = listen("slow", "--slow-ms 250 --receive-hwm 4 --until-idle --duration 120");
   const pid_t dies = listen("dies", "--duration 120");
   std::this_thread::sleep_for(std::chrono::milliseconds(1500));
   kill(dies, SIGKILL);  // a subscriber that dies changes nothing

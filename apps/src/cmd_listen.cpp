@@ -41,6 +41,9 @@ struct ListenOptions {
   std::uint64_t count = 0;  // 0: no limit
   int slow_ms = 0;
   bool until_idle = false;
+  // A recorder wants every message: a deep receive queue lets ZeroMQ's I/O thread drain the
+  // publisher's small per-subscriber queue even while this process is briefly starved of CPU.
+  int receive_hwm = 1000;
 };
 
 // What the summary reports.
@@ -130,6 +133,7 @@ int run_listen(const ListenOptions& options) {
   subscriber_options.endpoint = options.endpoint;
   subscriber_options.snapshot_endpoint = options.snapshot;
   subscriber_options.snapshot_timeout_ms = kSnapshotTimeoutMs;
+  subscriber_options.receive_hwm = options.receive_hwm;
   auto subscriber = publish::MeshSubscriber::connect(subscriber_options);
   if (!subscriber) {
     if (g_stop_signal) {
@@ -280,6 +284,11 @@ CommandRunner add_listen_command(CLI::App& app) {
   app.add_option("--slow-ms", options->slow_ms,
                  "Sleep MS after every message (emulates a slow subscriber)")
       ->check(CLI::NonNegativeNumber);
+  app.add_option("--receive-hwm", options->receive_hwm,
+                 "Messages queued on this side before newer ones are dropped (a viewer that only "
+                 "wants the latest state uses a small one)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
   app.add_flag("--until-idle", options->until_idle,
                "Stop at the first live status whose state is idle or error");
   return [options] { return run_listen(*options); };
