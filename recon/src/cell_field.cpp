@@ -7,6 +7,7 @@
 
 #include "mean_value.hpp"
 #include "sonoshape/core/errors.hpp"
+#include "sonoshape/core/log.hpp"
 
 namespace sonoshape::recon {
 
@@ -176,8 +177,12 @@ std::vector<int> CellField::refresh(const std::vector<int>& changed_cells) {
     old_hashes.resize(images_.size(), 0);
     triangles_.clear();
     corner_values_.clear();
-    for (FaceImage& image : images_) image.triangle_begin = image.triangle_count = 0;
+    triangle_nodes_.clear();
+    triangle_moments_.clear();
+    for (FaceImage& image : images_)
+      image.triangle_begin = image.triangle_count = image.triangle_tree_root = image.triangle_tree_count = 0;
     build_unknown_images();
+    build_triangle_trees();
     const std::vector<std::uint64_t> new_hashes = completion_hashes();
     for (std::size_t f = 0; f < old_face_count; ++f) {
       if (old_hashes[f] == new_hashes[f]) continue;
@@ -191,6 +196,20 @@ std::vector<int> CellField::refresh(const std::vector<int>& changed_cells) {
   }
   compact_points();
   return completion_changed;
+}
+
+void CellField::build_triangle_trees() {
+  Stopwatch clock;
+  const std::size_t fc = static_cast<std::size_t>(function_count());
+  for (FaceImage& image : images_) {
+    if (image.triangle_count < kTriangleTreeMinTriangles) continue;
+    const std::size_t before = triangle_nodes_.size();
+    image.triangle_tree_root = build_triangle_tree(
+        triangles_.data() + image.triangle_begin, corner_values_.data() + image.triangle_begin * 3 * fc,
+        image.triangle_count, function_count(), triangle_nodes_, triangle_moments_);
+    image.triangle_tree_count = static_cast<std::uint32_t>(triangle_nodes_.size() - before);
+  }
+  completion_seconds_ += clock.seconds();
 }
 
 std::vector<std::uint64_t> CellField::completion_hashes() const {
@@ -397,13 +416,14 @@ int CellField::evaluate(const Vec3& p, double* out) const {
   // w[l] accumulates the mean-value weight of label l: its known parts of the faces plus its
   // share of the completed unknown triangles; w[0] only the completed share of the outside.
   constexpr int kMaxStack = 16;
-  double stack_weights[kMaxStack];
+  double stack_weights[2 * kMaxStack];
   std::vector<double> heap_weights;
   double* w = stack_weights;
   if (n > kMaxStack) {
-    heap_weights.resize(fc);
+    heap_weights.resize(2 * fc);
     w = heap_weights.data();
   }
+  double* face_w = w + n;  // one face's triangle sums
   std::fill(w, w + n, 0.0);
   double total = 0.0, known_materials = 0.0, unknown_total = 0.0;
   for (const int f : arrangement_.cell(cell).faces) {
@@ -448,18 +468,26 @@ int CellField::evaluate(const Vec3& p, double* out) const {
       w[part.material] += weight;
       known_materials += weight;
     }
-    for (std::uint32_t t = image.triangle_begin; t < image.triangle_begin + image.triangle_count; ++t) {
-      const UnknownTriangle& tri = triangles_[t];
-      double corner_weights[3];
-      if (!triangle_weights(tri.corners[0], tri.corners[1], tri.corners[2], foot, height, corner_weights))
-        continue;
-      for (int k = 0; k < 3; ++k) {
-        const double weight = corner_weights[k];  // units of P / h, like the faces
-        unknown_total += weight;
-        const double* values = &corner_values_[(t * 3 + static_cast<std::size_t>(k)) * fc];
-        for (int l = 0; l < n; ++l) w[l] += 0.5 * weight * (1.0 + values[l]);
-      }
-    }
+    if (image.triangle_count == 0) continue;
+    const UnknownTriangle* triangles = triangles_.data() + image.triangle_begin;
+    const double* values = corner_values_.data() + image.triangle_begin * 3 * fc;
+    double face_unknown = 0.0;
+    std::fill(face_w, face_w + n, 0.0);
+    if (image.triangle_tree_count > 0)
+      add_triangle_weights_tree(triangles, values, n, triangle_nodes_.data(), triangle_moments_.data(),
+                                image.triangle_tree_root, foot, height, face_unknown, face_w);
+    else
+      add_triangle_weights(triangles, values, image.triangle_count, n, foot, height, face_unknown, face_w);
+    if (!(face_unknown > 0.0)) continue;
+    // The unknown part's weight comes from its boundary, exactly like `total`; the triangles only
+    // split it among the functions. The far-field error of the tree then enters through these
+    // shares alone, and a completion that is one label everywhere stays exactly that label.
+    double exact_unknown = 0.0;
+    for (const FaceImage::Part& part : image.unknown_parts)
+      exact_unknown += part_angle(part, foot, height) * inv_height;
+    const double scale = exact_unknown / face_unknown;
+    unknown_total += exact_unknown;
+    for (int l = 0; l < n; ++l) w[l] += scale * face_w[l];
   }
   for (int l = 1; l < n; ++l) out[l] = 2.0 * w[l] / total - 1.0;
   out[0] = 2.0 * (total - known_materials - unknown_total + w[0]) / total - 1.0;

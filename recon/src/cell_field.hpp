@@ -9,6 +9,7 @@
 #include "chain_tree.hpp"
 #include "mean_value.hpp"
 #include "sonoshape/core/slice.hpp"
+#include "triangle_tree.hpp"
 #include "unknown_regions.hpp"
 
 namespace sonoshape::recon {
@@ -50,12 +51,8 @@ struct FaceImage {
   std::vector<Part> unknown_parts;  ///< the unknown set clipped to the face (material unused)
   bool fully_unknown = false;        ///< no known data on the face at all
   std::uint32_t triangle_begin = 0, triangle_count = 0;  ///< completed unknown triangles
-};
-
-/// A triangle of a face's unknown part; its corners carry completed values of every function.
-struct UnknownTriangle {
-  Vec2 corners[3];
-  int component = -1;  ///< the slice's unknown component it lies in
+  /// Far-field tree of the triangles in triangle_nodes (count 0: none, summed directly).
+  std::uint32_t triangle_tree_root = 0, triangle_tree_count = 0;
 };
 
 /// Clips a closed ring to the convex region { p : a_i.p + c_i >= 0 for all i } (Sutherland-
@@ -117,6 +114,8 @@ class CellField {
   // Order-independent hash of each face's completed triangles and corner values.
   std::vector<std::uint64_t> completion_hashes() const;
   void build_unknown_images();
+  // Gives the faces with many completed triangles their far-field trees (reorders the triangles).
+  void build_triangle_trees();
   void triangulate_unknown(int slice, std::vector<std::vector<UnknownTriangle>>& per_face) const;
   void complete_unknown();
   // Known weights of face f seen from p (units of projected_angle / height): the face's total,
@@ -133,6 +132,8 @@ class CellField {
   std::vector<FaceImage> images_;
   std::vector<UnknownTriangle> triangles_;
   std::vector<double> corner_values_;  // 3 corners x function_count() per triangle
+  std::vector<TriangleNode> triangle_nodes_;  // far-field trees of the faces' triangles
+  std::vector<double> triangle_moments_;      // triangle_moment_stride() per node
   std::size_t group_count_ = 0;
   double completion_seconds_ = 0.0;
 };
