@@ -106,7 +106,6 @@ class ValueCache {
     generations_[row] = generation;
     std::copy(values, values + function_count_, values_.data() + row * function_count_);
   }
-  std::size_t size() const { return cells_.size(); }
 
  private:
   std::size_t function_count_;
@@ -288,10 +287,9 @@ UpdateStats Reconstructor::update() {
 
   const std::vector<State::Entry> previous = s.entries;
   try {
-    const SliceSet next_set = s.slice_set_of(next);
+    const Box3 next_box = s.slice_set_of(next).effective_bounds();
     const bool full = !s.built || out.slices_removed > 0 || s.materials_of(next) != s.material_ids ||
-                      next_set.effective_bounds().min != s.box.min ||
-                      next_set.effective_bounds().max != s.box.max;
+                      next_box.min != s.box.min || next_box.max != s.box.max;
     std::vector<int> changed_cells;
     if (full) {
       s.rebuild(next, stats);

@@ -6,7 +6,6 @@ namespace sonoshape::scan {
 
 struct PublishSink::Impl {
   publish::MeshPublisher publisher;
-  std::size_t last_mesh_slices = 0;
 };
 
 namespace {
@@ -38,7 +37,7 @@ Result<std::shared_ptr<PublishSink>> PublishSink::bind(const std::string& endpoi
   options.snapshot_endpoint = snapshot_endpoint;
   Result<publish::MeshPublisher> publisher = publish::MeshPublisher::bind(options);
   if (!publisher) return publisher.status();
-  auto impl = std::make_unique<Impl>(Impl{std::move(*publisher), 0});
+  auto impl = std::make_unique<Impl>(Impl{std::move(*publisher)});
   return std::shared_ptr<PublishSink>(new PublishSink(std::move(impl)));
 }
 
@@ -50,7 +49,6 @@ Status PublishSink::on_slice(const LabeledSlice& slice, std::size_t index) {
 }
 
 Status PublishSink::on_meshes(const MeshSet& meshes, const MeshUpdateInfo& info) {
-  impl_->last_mesh_slices = info.slices;
   return impl_->publisher.publish_meshes(meshes, info.timestamp_s, info.slices);
 }
 
