@@ -1,10 +1,6 @@
 // Completion of unknown regions (Bermano et al. 2011, Section 5): triangulation of the unknown
 // part of every face, cell groups, and the values at the triangle corners.
 #include <CGAL/Constrained_Delaunay_triangulation_2.h>
-#include <CGAL/Delaunay_mesh_face_base_2.h>
-#include <CGAL/Delaunay_mesh_size_criteria_2.h>
-#include <CGAL/Delaunay_mesh_vertex_base_2.h>
-#include <CGAL/Delaunay_mesher_2.h>
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
 
 #include <algorithm>
@@ -22,13 +18,12 @@ namespace sonoshape::recon {
 namespace {
 
 using Kernel = CGAL::Exact_predicates_inexact_constructions_kernel;
-using Vb = CGAL::Delaunay_mesh_vertex_base_2<Kernel>;
-using Fb = CGAL::Delaunay_mesh_face_base_2<Kernel>;
+using Vb = CGAL::Triangulation_vertex_base_2<Kernel>;
+using Fb = CGAL::Constrained_triangulation_face_base_2<Kernel>;
 using Tds = CGAL::Triangulation_data_structure_2<Vb, Fb>;
 // Exact_predicates_tag: constraints that cross (unknown boundaries and face edges) are split at
 // their intersection points.
 using Cdt = CGAL::Constrained_Delaunay_triangulation_2<Kernel, Tds, CGAL::Exact_predicates_tag>;
-using MeshCriteria = CGAL::Delaunay_mesh_size_criteria_2<Cdt>;
 
 // Largest edge of the unknown triangles: the completed values live at the corners and are
 // interpolated linearly, so the triangles must be small enough to follow the completion across
@@ -37,12 +32,8 @@ using MeshCriteria = CGAL::Delaunay_mesh_size_criteria_2<Cdt>;
 // field of view, get coarser triangles, which keeps the field's cost bounded).
 constexpr double kUnknownTriangleFraction = 0.125;
 constexpr double kUnknownTriangleMin = 0.03, kUnknownTriangleMax = 0.12;
-// CGAL's shape bound b (smallest angle asin(sqrt(b))): 0.01 allows angles down to 5.7 degrees, so
-// the short edges of segmented contours do not spawn rings of refinement (0.125, CGAL's
-// default for 20.7 degrees, made ten times more triangles on segmented sweeps).
-constexpr double kUnknownTriangleShape = 0.01;
-// Refinement points allowed per point the size criterion alone would need (see the loop).
-constexpr double kRefinementBudget = 8.0;
+// Lattice points closer than this many triangle sizes to the unknown boundary are left out.
+constexpr double kLatticeClearance = 0.5;
 
 // The completion reads the known faces of the cells within this many group-adjacency steps of a
 // triangle's face. With fields of view every slice has unknown parts and groups grow to the whole
@@ -72,24 +63,6 @@ bool in_convex_ccw(const Vec2* polygon, std::size_t count, const Vec2& p) {
 void CellField::triangulate_unknown(int slice,
                                     std::vector<std::vector<UnknownTriangle>>& per_face) const {
   const PreparedSlice& s = slices_[static_cast<std::size_t>(slice)];
-  Cdt cdt;
-  Vec2 lo = Vec2::Constant(std::numeric_limits<double>::infinity());
-  Vec2 hi = -lo;
-  for (const UnknownComponent& component : s.unknown)
-    for (const Ring2& ring : component.rings)
-      for (std::size_t i = 0; i < ring.size(); ++i) {
-        const Vec2& a = ring[i];
-        const Vec2& b = ring[(i + 1) % ring.size()];
-        lo = lo.cwiseMin(a);
-        hi = hi.cwiseMax(a);
-        if (a != b) cdt.insert_constraint(Kernel::Point_2(a.x(), a.y()), Kernel::Point_2(b.x(), b.y()));
-      }
-  // Interior points (conforming Delaunay refinement of the unknown set and the areas it encloses).
-  // Seeds inside the holes of the unknown set keep the known areas it encloses unrefined.
-  std::vector<Kernel::Point_2> known_seeds;
-  for (const UnknownComponent& component : s.unknown)
-    for (std::size_t r = 1; r < component.rings.size(); ++r)
-      if (const auto p = interior_point(component.rings[r])) known_seeds.emplace_back(p->x(), p->y());
   double unknown_area = 0.0;
   for (const UnknownComponent& component : s.unknown)
     for (const Ring2& ring : component.rings) unknown_area += signed_area(ring);
@@ -97,27 +70,78 @@ void CellField::triangulate_unknown(int slice,
   const double triangle_size =
       std::clamp(kUnknownTriangleFraction * std::sqrt(std::max(unknown_area, 0.0)),
                  kUnknownTriangleMin * diagonal, kUnknownTriangleMax * diagonal);
-  // Delaunay refinement is only guaranteed to end for input angles of 60 degrees and more;
-  // segmented contours and sector outlines have far sharper ones (the real PLUS sweep made it
-  // insert points forever), so the refinement runs step by step under a budget of many times
-  // the points the size criterion asks for.
-  CGAL::Delaunay_mesher_2<Cdt, MeshCriteria> mesher(cdt, MeshCriteria(kUnknownTriangleShape, triangle_size));
-  mesher.set_seeds(known_seeds.begin(), known_seeds.end(), false);
-  mesher.init();
-  const std::size_t budget =
-      static_cast<std::size_t>(kRefinementBudget * (std::max(unknown_area, 0.0) / (triangle_size * triangle_size) +
-                                                    static_cast<double>(cdt.number_of_vertices()))) +
-      1000;
-  const std::size_t start_vertices = cdt.number_of_vertices();
-  while (!mesher.is_refinement_done()) {
-    if (cdt.number_of_vertices() - start_vertices > budget) {
-      log_warning("completion: slice " + std::to_string(slice) +
-                  ": the refinement of its unknown region stopped at " + std::to_string(budget) +
-                  " points (very sharp angles in its outline); the completion is coarser there");
-      break;
-    }
-    mesher.try_one_step_refine_mesh();
+
+  // Why not CGAL::Delaunay_mesher_2: its refinement is only guaranteed to end for input angles of
+  // 60 degrees and more, and with inexact constructions it crashed (Refine_edges_with_clusters)
+  // on the real PLUS sweep, whose segmented outlines have near-touching vertices and hairline
+  // spikes. The completion only needs corners spread over the region at about triangle_size, not
+  // well-shaped triangles, so the boundary edges are split to that length and a triangular
+  // lattice of that spacing fills the inside, kept away from the boundary; a plain constrained
+  // Delaunay triangulation of these points (exact predicates, no refinement) always ends.
+  Cdt cdt;
+  Vec2 lo = Vec2::Constant(std::numeric_limits<double>::infinity());
+  Vec2 hi = -lo;
+  std::vector<std::pair<Vec2, Vec2>> boundary;  // the split boundary edges, for the clearance test
+  for (const UnknownComponent& component : s.unknown)
+    for (const Ring2& ring : component.rings)
+      for (std::size_t i = 0; i < ring.size(); ++i) {
+        const Vec2& a = ring[i];
+        const Vec2& b = ring[(i + 1) % ring.size()];
+        lo = lo.cwiseMin(a);
+        hi = hi.cwiseMax(a);
+        if (a == b) continue;
+        const int pieces = std::max(1, static_cast<int>(std::ceil((b - a).norm() / triangle_size)));
+        Vec2 previous = a;
+        for (int k = 1; k <= pieces; ++k) {
+          const Vec2 next = k == pieces ? b : Vec2(a + (b - a) * (static_cast<double>(k) / pieces));
+          cdt.insert_constraint(Kernel::Point_2(previous.x(), previous.y()), Kernel::Point_2(next.x(), next.y()));
+          boundary.emplace_back(previous, next);
+          previous = next;
+        }
+      }
+  if (boundary.empty()) return;
+  // Lattice points inside the unknown set, at least kLatticeClearance * triangle_size from its
+  // boundary (closer ones would only make slivers along it). Boundary edges are bucketed by
+  // lattice row so each point tests the few edges near it.
+  const double row_step = triangle_size * std::sqrt(3.0) / 2.0;
+  const double clearance = kLatticeClearance * triangle_size;
+  const int rows = static_cast<int>(std::floor((hi.y() - lo.y()) / row_step)) + 1;
+  std::vector<std::vector<std::size_t>> edges_near_row(static_cast<std::size_t>(rows));
+  for (std::size_t e = 0; e < boundary.size(); ++e) {
+    const double y0 = std::min(boundary[e].first.y(), boundary[e].second.y()) - clearance;
+    const double y1 = std::max(boundary[e].first.y(), boundary[e].second.y()) + clearance;
+    const int r0 = std::max(0, static_cast<int>(std::ceil((y0 - lo.y()) / row_step)));
+    const int r1 = std::min(rows - 1, static_cast<int>(std::floor((y1 - lo.y()) / row_step)));
+    for (int r = r0; r <= r1; ++r) edges_near_row[static_cast<std::size_t>(r)].push_back(e);
   }
+  const auto clear_of_boundary = [&](const Vec2& p, const std::vector<std::size_t>& edges) {
+    for (const std::size_t e : edges) {
+      const Vec2& a = boundary[e].first;
+      const Vec2 ab = boundary[e].second - a;
+      const double t = std::clamp((p - a).dot(ab) / ab.squaredNorm(), 0.0, 1.0);
+      if ((a + t * ab - p).squaredNorm() < clearance * clearance) return false;
+    }
+    return true;
+  };
+  std::vector<Kernel::Point_2> lattice;
+  for (int r = 0; r < rows; ++r) {
+    const double y = lo.y() + r * row_step;
+    const double x_offset = (r % 2) * 0.5 * triangle_size;
+    for (double x = lo.x() + x_offset; x <= hi.x(); x += triangle_size) {
+      const Vec2 p(x, y);
+      bool inside = false;
+      for (const UnknownComponent& component : s.unknown) {
+        int winding = 0;
+        for (const Ring2& ring : component.rings) winding += winding_number(ring.data(), ring.size(), p);
+        if (winding > 0) {
+          inside = true;
+          break;
+        }
+      }
+      if (inside && clear_of_boundary(p, edges_near_row[static_cast<std::size_t>(r)])) lattice.emplace_back(x, y);
+    }
+  }
+  cdt.insert(lattice.begin(), lattice.end());
   // The faces of this slice, as constraints too, so that every triangle lies in one face.
   struct SliceFace {
     int id;
