@@ -38,6 +38,7 @@ nlohmann::json stats_json(const recon::ReconstructionStats& stats) {
   j["completion_s"] = stats.completion_s;
   j["unknown_triangles"] = stats.unknown_triangles;
   j["cell_groups"] = stats.cell_groups;
+  j["completed_slices"] = stats.completed_slices;
   nlohmann::json triangles = nlohmann::json::object();
   for (const auto& [label, count] : stats.triangles) triangles[std::to_string(label)] = count;
   j["triangles"] = triangles;

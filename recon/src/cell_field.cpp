@@ -160,10 +160,12 @@ std::vector<int> CellField::refresh(const std::vector<int>& changed_cells) {
   for (std::size_t f = old_face_count; f < images_.size(); ++f) rebuilt[f] = 1;
   for (const int c : changed_cells)
     for (const int f : arrangement_.cell(c).faces) rebuilt[static_cast<std::size_t>(f)] = 1;
+  image_generations_.resize(images_.size(), 0);
   for (std::size_t f = 0; f < images_.size(); ++f)
     if (rebuilt[f]) {
       images_[f] = FaceImage{};
       build_face_image(static_cast<int>(f));
+      image_generations_[f] = ++last_image_generation_;
     }
 
   std::vector<int> completion_changed;

@@ -3,6 +3,8 @@
 // Sections 4.2-4.4 and 6): face images (each slice's labelled regions clipped to each of its
 // faces) and the CPU reference evaluator.
 #include <cstdint>
+#include <map>
+#include <tuple>
 #include <vector>
 
 #include "arrangement.hpp"
@@ -89,6 +91,8 @@ class CellField {
   std::size_t unknown_triangle_count() const { return triangles_.size(); }
   std::size_t group_count() const { return group_count_; }
   double completion_seconds() const { return completion_seconds_; }
+  /// Slices whose unknown regions the last refresh triangulated and completed again.
+  std::size_t recompleted_slice_count() const { return recompleted_slices_; }
   /// Completed value of function l at corner k of unknown triangle t.
   double corner_value(std::size_t t, int k, int l) const {
     return corner_values_[(t * 3 + static_cast<std::size_t>(k)) * static_cast<std::size_t>(function_count()) +
@@ -100,6 +104,13 @@ class CellField {
   const std::vector<PreparedSlice>& slices() const { return slices_; }
 
  private:
+  // The unknown triangles and completed values of one slice, and what they were computed from.
+  struct SliceCompletion {
+    std::vector<std::pair<int, std::uint64_t>> inputs;  // (face, image generation) read
+    std::vector<int> faces;                              // faces that got triangles
+    std::vector<std::vector<UnknownTriangle>> triangles;  // per entry of faces
+    std::vector<std::vector<double>> values;             // 3 x function_count() per triangle
+  };
   void build_face_image(int face_id);
   // Gives a long part its far-field tree.
   void add_tree(FaceImage::Part& part);
@@ -116,8 +127,17 @@ class CellField {
   void build_unknown_images();
   // Gives the faces with many completed triangles their far-field trees (reorders the triangles).
   void build_triangle_trees();
-  void triangulate_unknown(int slice, std::vector<std::vector<UnknownTriangle>>& per_face) const;
-  void complete_unknown();
+  // Triangulates the unknown set of a slice, one list per face, and completes the corners of
+  // every triangle (values: 3 x function_count() per triangle); `local_faces` are the known
+  // faces each face's completion reads.
+  void triangulate_unknown(int slice, const std::vector<int>& slice_faces,
+                           const std::vector<std::vector<int>>& local_faces, SliceCompletion& out) const;
+  // Formula 7 at the three corners of `triangle` on face `face_id` into out (3 x
+  // function_count()); part_3d caches the 3D part per (face, corner).
+  void complete_corners(const PreparedSlice& s, const UnknownTriangle& triangle, int face_id,
+                        const std::vector<int>& local_faces,
+                        std::map<std::tuple<int, double, double>, std::vector<double>>& part_3d,
+                        double* out) const;
   // Known weights of face f seen from p (units of projected_angle / height): the face's total,
   // each material's known part and the unknown part's total. False when p is on f's plane.
   bool known_weights(int face, const Vec3& p, double& total, double* materials, double& unknown) const;
@@ -136,6 +156,12 @@ class CellField {
   std::vector<double> triangle_moments_;      // triangle_moment_stride() per node
   std::size_t group_count_ = 0;
   double completion_seconds_ = 0.0;
+  // When each face image was last built: a slice's completion is redone only when an image it
+  // reads (its own faces and their local faces) was rebuilt since.
+  std::vector<std::uint64_t> image_generations_;
+  std::uint64_t last_image_generation_ = 0;
+  std::vector<SliceCompletion> slice_completions_;  // per slice
+  std::size_t recompleted_slices_ = 0;
 };
 
 }  // namespace sonoshape::recon

@@ -25,15 +25,19 @@ using Tds = CGAL::Triangulation_data_structure_2<Vb, Fb>;
 // their intersection points.
 using Cdt = CGAL::Constrained_Delaunay_triangulation_2<Kernel, Tds, CGAL::Exact_predicates_tag>;
 
-// Largest edge of the unknown triangles: the completed values live at the corners and are
-// interpolated linearly, so the triangles must be small enough to follow the completion across
-// the region, not only along its boundary: an eighth of the side of the slice's unknown area,
-// between these fractions of the box diagonal (large unknown areas, such as everything outside a
-// field of view, get coarser triangles, which keeps the field's cost bounded).
+// Spacing of the first triangulation of the unknown set: the completed values live at the
+// corners and are interpolated linearly, so corners must spread across the region, not only
+// along its boundary: an eighth of the side of the slice's unknown area, between these fractions
+// of the box diagonal. Where the completed labels change the triangles are refined further.
 constexpr double kUnknownTriangleFraction = 0.125;
 constexpr double kUnknownTriangleMin = 0.03, kUnknownTriangleMax = 0.12;
 // Lattice points closer than this many triangle sizes to the unknown boundary are left out.
 constexpr double kLatticeClearance = 0.5;
+// Triangles whose corners complete to different labels are split down to this longest edge
+// (fraction of the box diagonal; the octree's finest cells are at most 1/128 of it), in at most
+// this many rounds.
+constexpr double kRefinedTriangleMin = 0.015;
+constexpr int kMaxRefinementRounds = 8;
 
 // The completion reads the known faces of the cells within this many group-adjacency steps of a
 // triangle's face. With fields of view every slice has unknown parts and groups grow to the whole
@@ -60,9 +64,11 @@ bool in_convex_ccw(const Vec2* polygon, std::size_t count, const Vec2& p) {
 
 }  // namespace
 
-void CellField::triangulate_unknown(int slice,
-                                    std::vector<std::vector<UnknownTriangle>>& per_face) const {
+void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_faces,
+                                    const std::vector<std::vector<int>>& local_faces,
+                                    SliceCompletion& out) const {
   const PreparedSlice& s = slices_[static_cast<std::size_t>(slice)];
+  const std::size_t fc = static_cast<std::size_t>(function_count());
   double unknown_area = 0.0;
   for (const UnknownComponent& component : s.unknown)
     for (const Ring2& ring : component.rings) unknown_area += signed_area(ring);
@@ -74,10 +80,11 @@ void CellField::triangulate_unknown(int slice,
   // Why not CGAL::Delaunay_mesher_2: its refinement is only guaranteed to end for input angles of
   // 60 degrees and more, and with inexact constructions it crashed (Refine_edges_with_clusters)
   // on the real PLUS sweep, whose segmented outlines have near-touching vertices and hairline
-  // spikes. The completion only needs corners spread over the region at about triangle_size, not
-  // well-shaped triangles, so the boundary edges are split to that length and a triangular
-  // lattice of that spacing fills the inside, kept away from the boundary; a plain constrained
-  // Delaunay triangulation of these points (exact predicates, no refinement) always ends.
+  // spikes. The completion needs corners spread over the region, dense where the completed labels
+  // change, not well-shaped triangles: the boundary edges are split to triangle_size, a
+  // triangular lattice of that spacing fills the inside, and triangles whose corners complete to
+  // different labels are split at their centroids (below). Plain constrained Delaunay insertions
+  // with exact predicates always end.
   Cdt cdt;
   Vec2 lo = Vec2::Constant(std::numeric_limits<double>::infinity());
   Vec2 hi = -lo;
@@ -123,35 +130,35 @@ void CellField::triangulate_unknown(int slice,
     }
     return true;
   };
+  const auto component_of = [&](const Vec2& p) {
+    for (std::size_t c = 0; c < s.unknown.size(); ++c) {
+      int winding = 0;
+      for (const Ring2& ring : s.unknown[c].rings) winding += winding_number(ring.data(), ring.size(), p);
+      if (winding > 0) return static_cast<int>(c);
+    }
+    return -1;
+  };
   std::vector<Kernel::Point_2> lattice;
   for (int r = 0; r < rows; ++r) {
     const double y = lo.y() + r * row_step;
     const double x_offset = (r % 2) * 0.5 * triangle_size;
     for (double x = lo.x() + x_offset; x <= hi.x(); x += triangle_size) {
       const Vec2 p(x, y);
-      bool inside = false;
-      for (const UnknownComponent& component : s.unknown) {
-        int winding = 0;
-        for (const Ring2& ring : component.rings) winding += winding_number(ring.data(), ring.size(), p);
-        if (winding > 0) {
-          inside = true;
-          break;
-        }
-      }
-      if (inside && clear_of_boundary(p, edges_near_row[static_cast<std::size_t>(r)])) lattice.emplace_back(x, y);
+      if (component_of(p) >= 0 && clear_of_boundary(p, edges_near_row[static_cast<std::size_t>(r)]))
+        lattice.emplace_back(x, y);
     }
   }
   cdt.insert(lattice.begin(), lattice.end());
+
   // The faces of this slice, as constraints too, so that every triangle lies in one face.
   struct SliceFace {
     int id;
     Vec2 lo, hi;
   };
   std::vector<SliceFace> faces;
-  for (std::size_t f = 0; f < images_.size(); ++f) {
-    const FaceImage& image = images_[f];
-    if (arrangement_.plane(image.frame).slice != slice) continue;
-    SliceFace face{static_cast<int>(f), points_[image.polygon_begin], points_[image.polygon_begin]};
+  for (const int f : slice_faces) {
+    const FaceImage& image = images_[static_cast<std::size_t>(f)];
+    SliceFace face{f, points_[image.polygon_begin], points_[image.polygon_begin]};
     for (std::uint32_t k = 0; k < image.polygon_count; ++k) {
       face.lo = face.lo.cwiseMin(points_[image.polygon_begin + k]);
       face.hi = face.hi.cwiseMax(points_[image.polygon_begin + k]);
@@ -164,33 +171,139 @@ void CellField::triangulate_unknown(int slice,
       if (a != b) cdt.insert_constraint(Kernel::Point_2(a.x(), a.y()), Kernel::Point_2(b.x(), b.y()));
     }
   }
-  for (auto it = cdt.finite_faces_begin(); it != cdt.finite_faces_end(); ++it) {
-    UnknownTriangle triangle;
-    for (int k = 0; k < 3; ++k)
-      triangle.corners[k] = Vec2(it->vertex(k)->point().x(), it->vertex(k)->point().y());
-    const Vec2 centroid = (triangle.corners[0] + triangle.corners[1] + triangle.corners[2]) / 3.0;
-    for (std::size_t c = 0; c < s.unknown.size() && triangle.component < 0; ++c) {
-      int winding = 0;
-      for (const Ring2& ring : s.unknown[c].rings) winding += winding_number(ring.data(), ring.size(), centroid);
-      if (winding > 0) triangle.component = static_cast<int>(c);
-    }
-    if (triangle.component < 0) continue;
-    const double area = signed_area(Ring2{triangle.corners[0], triangle.corners[1], triangle.corners[2]});
-    // Slivers from constraint intersections rounded onto each other cover nothing.
-    const double longest_sq = std::max({(triangle.corners[1] - triangle.corners[0]).squaredNorm(),
-                                        (triangle.corners[2] - triangle.corners[1]).squaredNorm(),
-                                        (triangle.corners[0] - triangle.corners[2]).squaredNorm()});
-    const double box_diagonal = arrangement_.box().diagonal();
-    if (!(std::abs(area) > 1e-12 * longest_sq) || std::abs(area) < 1e-14 * box_diagonal * box_diagonal)
-      continue;
-    if (area < 0.0) std::swap(triangle.corners[1], triangle.corners[2]);  // counter-clockwise
+  const auto face_of = [&](const Vec2& p) {
     for (const SliceFace& face : faces) {
-      if ((centroid.array() < face.lo.array()).any() || (centroid.array() > face.hi.array()).any()) continue;
+      if ((p.array() < face.lo.array()).any() || (p.array() > face.hi.array()).any()) continue;
       const FaceImage& image = images_[static_cast<std::size_t>(face.id)];
-      if (!in_convex_ccw(points_.data() + image.polygon_begin, image.polygon_count, centroid)) continue;
-      per_face[static_cast<std::size_t>(face.id)].push_back(triangle);
-      break;
+      if (in_convex_ccw(points_.data() + image.polygon_begin, image.polygon_count, p)) return face.id;
     }
+    return -1;
+  };
+
+  // Completed values of the corners of every unknown triangle, refined where they disagree.
+  // The 3D part of a corner (formula 7 (a)) depends on its point and face only and is kept
+  // across rounds; the 2D part is read just inside each triangle's corner.
+  struct Completed {
+    UnknownTriangle triangle;
+    int face = -1;
+    std::vector<double> values;  // 3 corners x fc
+  };
+  std::map<std::tuple<int, double, double>, std::vector<double>> part_3d;  // (face, x, y) -> N3, W3
+  std::map<std::array<double, 6>, Completed> done;  // by corner coordinates
+  const double refined_min = kRefinedTriangleMin * diagonal;
+  for (int round = 0;; ++round) {
+    std::map<std::array<double, 6>, Completed> current;
+    std::vector<Kernel::Point_2> splits;
+    for (auto it = cdt.finite_faces_begin(); it != cdt.finite_faces_end(); ++it) {
+      Completed entry;
+      UnknownTriangle& triangle = entry.triangle;
+      for (int k = 0; k < 3; ++k)
+        triangle.corners[k] = Vec2(it->vertex(k)->point().x(), it->vertex(k)->point().y());
+      const double area = signed_area(Ring2{triangle.corners[0], triangle.corners[1], triangle.corners[2]});
+      // Slivers from constraint intersections rounded onto each other cover nothing.
+      const double longest_sq = std::max({(triangle.corners[1] - triangle.corners[0]).squaredNorm(),
+                                          (triangle.corners[2] - triangle.corners[1]).squaredNorm(),
+                                          (triangle.corners[0] - triangle.corners[2]).squaredNorm()});
+      if (!(std::abs(area) > 1e-12 * longest_sq) || std::abs(area) < 1e-14 * diagonal * diagonal) continue;
+      if (area < 0.0) std::swap(triangle.corners[1], triangle.corners[2]);  // counter-clockwise
+      const std::array<double, 6> key{triangle.corners[0].x(), triangle.corners[0].y(), triangle.corners[1].x(),
+                                      triangle.corners[1].y(), triangle.corners[2].x(), triangle.corners[2].y()};
+      if (auto found = done.find(key); found != done.end()) {
+        current.emplace(key, std::move(found->second));
+      } else {
+        const Vec2 centroid = (triangle.corners[0] + triangle.corners[1] + triangle.corners[2]) / 3.0;
+        triangle.component = component_of(centroid);
+        if (triangle.component < 0) continue;
+        entry.face = face_of(centroid);
+        if (entry.face < 0) continue;
+        entry.values.resize(3 * fc);
+        complete_corners(s, triangle, entry.face, local_faces[static_cast<std::size_t>(entry.face)], part_3d,
+                         entry.values.data());
+        current.emplace(key, std::move(entry));
+      }
+      // A triangle whose corners complete to different labels holds part of the surface: split
+      // it until it is as fine as the octree that will sample the field.
+      const Completed& c = current.at(key);
+      if (longest_sq <= refined_min * refined_min) continue;
+      int first_label = -1;
+      bool mixed = false;
+      for (int k = 0; k < 3 && !mixed; ++k) {
+        const double* v = c.values.data() + static_cast<std::size_t>(k) * fc;
+        const int label = static_cast<int>(std::max_element(v, v + fc) - v);
+        if (first_label < 0) first_label = label;
+        mixed = label != first_label;
+      }
+      if (mixed) {
+        const Vec2 centroid = (triangle.corners[0] + triangle.corners[1] + triangle.corners[2]) / 3.0;
+        splits.emplace_back(centroid.x(), centroid.y());
+      }
+    }
+    done = std::move(current);
+    if (splits.empty() || round == kMaxRefinementRounds) break;
+    cdt.insert(splits.begin(), splits.end());
+  }
+  std::map<int, std::size_t> entry_of_face;
+  for (auto& [key, entry] : done) {
+    auto [it, inserted] = entry_of_face.try_emplace(entry.face, out.faces.size());
+    if (inserted) {
+      out.faces.push_back(entry.face);
+      out.triangles.emplace_back();
+      out.values.emplace_back();
+    }
+    out.triangles[it->second].push_back(entry.triangle);
+    out.values[it->second].insert(out.values[it->second].end(), entry.values.begin(), entry.values.end());
+  }
+}
+
+void CellField::complete_corners(const PreparedSlice& s, const UnknownTriangle& triangle, int face_id,
+                                 const std::vector<int>& local_faces,
+                                 std::map<std::tuple<int, double, double>, std::vector<double>>& part_3d,
+                                 double* out) const {
+  const std::size_t fc = static_cast<std::size_t>(function_count());
+  std::vector<double> n2(fc);
+  const Vec2 centroid = (triangle.corners[0] + triangle.corners[1] + triangle.corners[2]) / 3.0;
+  const UnknownComponent& component = s.unknown[static_cast<std::size_t>(triangle.component)];
+  for (int k = 0; k < 3; ++k) {
+    const Vec2& corner = triangle.corners[k];
+    // (a) 3D mean-value interpolant of the known faces around, at the corner itself.
+    auto [it, inserted] = part_3d.try_emplace({face_id, corner.x(), corner.y()});
+    if (inserted) {
+      std::vector<double>& n3w = it->second;
+      n3w.assign(fc + 1, 0.0);
+      const Vec3 x = s.origin + corner.x() * s.u + corner.y() * s.v;
+      for (const int g : local_faces) {
+        double total = 0.0, unknown = 0.0;
+        std::fill(n2.begin(), n2.end(), 0.0);  // scratch for the materials of face g
+        if (!known_weights(g, x, total, n2.data(), unknown)) continue;
+        double materials = 0.0;
+        for (std::size_t l = 1; l < fc; ++l) {
+          n3w[l] += 0.5 * n2[l];
+          materials += n2[l];
+        }
+        n3w[0] += 0.5 * (total - materials - unknown);
+        n3w[fc] += 0.5 * (total - unknown);
+      }
+    }
+    const std::vector<double>& n3w = it->second;
+    // (b) 2D mean-value interpolant of the unknown component in its slice, from the known
+    // labels across its boundary; read just inside the triangle's corner, so that a corner
+    // on the boundary takes the limit from its own side (Section 5.1).
+    const Vec2 p = corner + 1e-4 * (centroid - corner);
+    std::fill(n2.begin(), n2.end(), 0.0);
+    double w2 = 0.0;
+    for (std::size_t r = 0; r < component.rings.size(); ++r) {
+      const Ring2& ring = component.rings[r];
+      for (std::size_t i = 0; i < ring.size(); ++i) {
+        const double w = edge_weight_2d(ring[i], ring[(i + 1) % ring.size()], p);
+        n2[static_cast<std::size_t>(component.edge_labels[r][i])] += w;
+        w2 += w;
+      }
+    }
+    // Formula 7: the normalised blend of both.
+    const double denominator = n3w[fc] + w2;
+    double* value = out + static_cast<std::size_t>(k) * fc;
+    for (std::size_t l = 0; l < fc; ++l)
+      value[l] = denominator > 0.0 ? 2.0 * (n3w[l] + n2[l]) / denominator - 1.0 : (l == 0 ? 1.0 : -1.0);
   }
 }
 
@@ -213,31 +326,17 @@ bool CellField::known_weights(int face, const Vec3& p, double& total, double* ma
 }
 
 void CellField::build_unknown_images() {
-  bool any = false;
-  for (const PreparedSlice& s : slices_) any |= !s.unknown.empty();
-  if (!any) return;
-  Stopwatch clock;
-  std::vector<std::vector<UnknownTriangle>> per_face(images_.size());
+  std::vector<int> slices_with_unknown;
   for (std::size_t s = 0; s < slices_.size(); ++s)
-    if (!slices_[s].unknown.empty()) triangulate_unknown(static_cast<int>(s), per_face);
-  for (std::size_t f = 0; f < per_face.size(); ++f) {
-    images_[f].triangle_begin = static_cast<std::uint32_t>(triangles_.size());
-    images_[f].triangle_count = static_cast<std::uint32_t>(per_face[f].size());
-    triangles_.insert(triangles_.end(), per_face[f].begin(), per_face[f].end());
-  }
-  complete_unknown();
-  completion_seconds_ = clock.seconds();
-}
-
-void CellField::complete_unknown() {
-  const std::size_t fc = static_cast<std::size_t>(function_count());
-  corner_values_.assign(triangles_.size() * 3 * fc, 0.0);
-  // Cell groups: cells joined through faces that hold unknown triangles.
+    if (!slices_[s].unknown.empty()) slices_with_unknown.push_back(static_cast<int>(s));
+  if (slices_with_unknown.empty()) return;
+  Stopwatch clock;
+  // Cell groups: cells joined through faces that hold unknown regions.
   std::vector<int> parent(arrangement_.cell_count());
   std::iota(parent.begin(), parent.end(), 0);
   std::vector<std::vector<int>> unknown_neighbours(arrangement_.cell_count());
   for (std::size_t f = 0; f < images_.size(); ++f) {
-    if (images_[f].triangle_count == 0) continue;
+    if (images_[f].unknown_parts.empty()) continue;
     const ArrangementFace& face = arrangement_.face(static_cast<int>(f));
     if (face.cell_positive < 0 || face.cell_negative < 0) continue;
     parent[static_cast<std::size_t>(find_root(parent, face.cell_positive))] = find_root(parent, face.cell_negative);
@@ -246,22 +345,17 @@ void CellField::complete_unknown() {
   }
   std::unordered_set<int> roots;
   for (std::size_t f = 0; f < images_.size(); ++f)
-    if (images_[f].triangle_count > 0) roots.insert(find_root(parent, arrangement_.face(static_cast<int>(f)).cell_positive));
+    if (!images_[f].unknown_parts.empty())
+      roots.insert(find_root(parent, arrangement_.face(static_cast<int>(f)).cell_positive));
   group_count_ = roots.size();
-
-  std::vector<std::size_t> faces_with_triangles;
-  for (std::size_t f = 0; f < images_.size(); ++f)
-    if (images_[f].triangle_count > 0) faces_with_triangles.push_back(f);
-  // Faces complete independently (each writes only its own triangles' corners).
-  tbb::parallel_for(std::size_t{0}, faces_with_triangles.size(), [&](std::size_t index) {
-    const std::size_t f = faces_with_triangles[index];
-    std::vector<double> n3(fc), n2(fc);
-    const FaceImage& image = images_[f];
+  // The known faces each face's corners read: those of the cells within kGroupHops group steps.
+  std::vector<std::vector<int>> local_faces(images_.size());
+  for (std::size_t f = 0; f < images_.size(); ++f) {
+    if (images_[f].unknown_parts.empty()) continue;
     const ArrangementFace& face = arrangement_.face(static_cast<int>(f));
-    const int slice = arrangement_.plane(face.plane).slice;
-    const PreparedSlice& s = slices_[static_cast<std::size_t>(slice)];
-    // The known faces near this face within its group (breadth-first over group adjacency).
-    std::vector<int> cells{face.cell_positive, face.cell_negative};
+    std::vector<int> cells;
+    for (const int c : {face.cell_positive, face.cell_negative})
+      if (c >= 0) cells.push_back(c);
     std::unordered_set<int> seen(cells.begin(), cells.end());
     std::vector<int> frontier = cells;
     for (int hop = 0; hop < kGroupHops; ++hop) {
@@ -272,65 +366,56 @@ void CellField::complete_unknown() {
       cells.insert(cells.end(), next.begin(), next.end());
       frontier = std::move(next);
     }
-    std::vector<int> local_faces;
+    std::vector<int>& faces = local_faces[f];
     for (const int c : cells)
       for (const int g : arrangement_.cell(c).faces)
         // Faces without known data add nothing to the 3D part.
         if (arrangement_.face(g).plane != face.plane && !images_[static_cast<std::size_t>(g)].fully_unknown)
-          local_faces.push_back(g);
-    std::sort(local_faces.begin(), local_faces.end());
-    local_faces.erase(std::unique(local_faces.begin(), local_faces.end()), local_faces.end());
-
-    std::map<std::pair<double, double>, std::vector<double>> part_3d;  // per corner point: N3, W3
-    for (std::uint32_t t = image.triangle_begin; t < image.triangle_begin + image.triangle_count; ++t) {
-      const UnknownTriangle& triangle = triangles_[t];
-      const Vec2 centroid = (triangle.corners[0] + triangle.corners[1] + triangle.corners[2]) / 3.0;
-      const UnknownComponent& component = s.unknown[static_cast<std::size_t>(triangle.component)];
-      for (int k = 0; k < 3; ++k) {
-        const Vec2& corner = triangle.corners[k];
-        // (a) 3D mean-value interpolant of the known faces around, at the corner itself.
-        auto [it, inserted] = part_3d.try_emplace({corner.x(), corner.y()});
-        if (inserted) {
-          std::vector<double>& n3w = it->second;
-          n3w.assign(fc + 1, 0.0);
-          const Vec3 x = s.origin + corner.x() * s.u + corner.y() * s.v;
-          std::fill(n3.begin(), n3.end(), 0.0);
-          for (const int g : local_faces) {
-            double total = 0.0, unknown = 0.0;
-            std::fill(n2.begin(), n2.end(), 0.0);  // scratch for the materials of face g
-            if (!known_weights(g, x, total, n2.data(), unknown)) continue;
-            double materials = 0.0;
-            for (std::size_t l = 1; l < fc; ++l) {
-              n3w[l] += 0.5 * n2[l];
-              materials += n2[l];
-            }
-            n3w[0] += 0.5 * (total - materials - unknown);
-            n3w[fc] += 0.5 * (total - unknown);
-          }
-        }
-        const std::vector<double>& n3w = it->second;
-        // (b) 2D mean-value interpolant of the unknown component in its slice, from the known
-        // labels across its boundary; read just inside the triangle's corner, so that a corner
-        // on the boundary takes the limit from its own side (Section 5.1).
-        const Vec2 p = corner + 1e-4 * (centroid - corner);
-        std::fill(n2.begin(), n2.end(), 0.0);
-        double w2 = 0.0;
-        for (std::size_t r = 0; r < component.rings.size(); ++r) {
-          const Ring2& ring = component.rings[r];
-          for (std::size_t i = 0; i < ring.size(); ++i) {
-            const double w = edge_weight_2d(ring[i], ring[(i + 1) % ring.size()], p);
-            n2[static_cast<std::size_t>(component.edge_labels[r][i])] += w;
-            w2 += w;
-          }
-        }
-        // Formula 7: the normalised blend of both.
-        const double denominator = n3w[fc] + w2;
-        double* out = &corner_values_[(t * 3 + static_cast<std::size_t>(k)) * fc];
-        for (std::size_t l = 0; l < fc; ++l)
-          out[l] = denominator > 0.0 ? 2.0 * (n3w[l] + n2[l]) / denominator - 1.0 : (l == 0 ? 1.0 : -1.0);
-      }
+          faces.push_back(g);
+    std::sort(faces.begin(), faces.end());
+    faces.erase(std::unique(faces.begin(), faces.end()), faces.end());
+  }
+  // A slice's triangles and values depend only on the images of its faces with unknown parts
+  // and of their local faces: slices none of whose inputs were rebuilt keep their completion
+  // (the online engine's zone rarely reaches most slices).
+  std::vector<std::vector<int>> slice_faces(slices_.size());
+  for (std::size_t f = 0; f < images_.size(); ++f)
+    if (!images_[f].unknown_parts.empty())
+      slice_faces[static_cast<std::size_t>(arrangement_.plane(images_[f].frame).slice)].push_back(static_cast<int>(f));
+  slice_completions_.resize(slices_.size());
+  std::vector<int> stale;
+  std::vector<std::vector<std::pair<int, std::uint64_t>>> inputs(slices_.size());
+  for (const int slice : slices_with_unknown) {
+    std::vector<std::pair<int, std::uint64_t>>& read = inputs[static_cast<std::size_t>(slice)];
+    for (const int f : slice_faces[static_cast<std::size_t>(slice)]) {
+      read.emplace_back(f, image_generations_[static_cast<std::size_t>(f)]);
+      for (const int g : local_faces[static_cast<std::size_t>(f)])
+        read.emplace_back(g, image_generations_[static_cast<std::size_t>(g)]);
     }
+    std::sort(read.begin(), read.end());
+    read.erase(std::unique(read.begin(), read.end()), read.end());
+    if (read != slice_completions_[static_cast<std::size_t>(slice)].inputs || read.empty()) stale.push_back(slice);
+  }
+  // Slices triangulate and complete independently (each writes only its own entry).
+  tbb::parallel_for(std::size_t{0}, stale.size(), [&](std::size_t index) {
+    const std::size_t slice = static_cast<std::size_t>(stale[index]);
+    SliceCompletion& completion = slice_completions_[slice];
+    completion = SliceCompletion{};
+    completion.inputs = std::move(inputs[slice]);
+    triangulate_unknown(static_cast<int>(slice), slice_faces[slice], local_faces, completion);
   });
+  for (const int slice : slices_with_unknown) {
+    const SliceCompletion& completion = slice_completions_[static_cast<std::size_t>(slice)];
+    for (std::size_t i = 0; i < completion.faces.size(); ++i) {
+      FaceImage& image = images_[static_cast<std::size_t>(completion.faces[i])];
+      image.triangle_begin = static_cast<std::uint32_t>(triangles_.size());
+      image.triangle_count = static_cast<std::uint32_t>(completion.triangles[i].size());
+      triangles_.insert(triangles_.end(), completion.triangles[i].begin(), completion.triangles[i].end());
+      corner_values_.insert(corner_values_.end(), completion.values[i].begin(), completion.values[i].end());
+    }
+  }
+  completion_seconds_ = clock.seconds();
+  recompleted_slices_ = stale.size();
 }
 
 }  // namespace sonoshape::recon

@@ -5,8 +5,6 @@
 
 namespace sonoshape::recon {
 
-namespace {
-
 // The same sum split as 2 pi * winding + sum of (c/q phi(q) - sign(c) phi(|c|)) (see
 // edge_projected_angle_split): the second part is O(h^2) per edge and computed without
 // cancellation, so a foot outside the ring at small height keeps its relative accuracy. The
@@ -24,8 +22,6 @@ double projected_angle_split(const Vec2* points, std::size_t count, const Vec2& 
   }
   return split_result(planar, remainder, plain);
 }
-
-}  // namespace
 
 double projected_angle(const Vec2* points, std::size_t count, const Vec2& foot, double height) {
   if (count < 2 || !(height > 0.0)) return 0.0;
@@ -82,9 +78,9 @@ bool triangle_weights(const Vec2& a, const Vec2& b, const Vec2& c, const Vec2& f
   const int order[3] = {0, twice_area > 0 ? 1 : 2, twice_area > 0 ? 2 : 1};
   Vec2 ring[3];
   for (int k = 0; k < 3; ++k) ring[k] = corners[order[k]];
-  const double projected = projected_angle(ring, 3, foot, height);  // 2 h I
   const double h2 = height * height;
   Vec2 moment = Vec2::Zero();  // M
+  double projected = 0.0;      // 2 h I, from the same edge angles as M
   for (int k = 0; k < 3; ++k) {
     const Vec2 p = ring[k] - foot;
     const Vec2 q_end = ring[(k + 1) % 3] - foot;
@@ -95,9 +91,16 @@ bool triangle_weights(const Vec2& a, const Vec2& b, const Vec2& c, const Vec2& f
     const double q2 = cross * cross + h2;
     const double q = std::sqrt(q2);
     const double angle = std::atan2(q * length, q2 + s_a * s_b);
+    if (cross != 0.0) projected += (cross / q) * angle;
     const Vec2 normal(d.y() / length, -d.x() / length);
     moment += (-height / (2.0 * q) * angle) * normal;
   }
+  // A foot outside the triangle at a height small against the triangle makes the edge terms of I
+  // cancel (their sum is O(h) while each is O(1)); the split form keeps I's relative accuracy
+  // there. Higher up, the terms are at most about size / height times their sum (far away
+  // much less): the plain sum holds.
+  if (std::abs(projected) < kSplitBelow && height * height < kSplitHeightRatio * kSplitHeightRatio * longest_sq)
+    projected = projected_angle_split(ring, 3, foot, height, projected);
   // Barycentric coordinate of corner i: lambda_i(y) = cross(e_i, y - start_i) / twice_area with
   // e_i the opposite edge; its gradient is perp(e_i) / twice_area.
   for (int i = 0; i < 3; ++i) {

@@ -29,6 +29,13 @@ double projected_angle_plain(const Vec2* points, std::size_t count, const Vec2& 
 
 /// projected_angle takes the cancellation-free split form below this magnitude of the plain sum.
 constexpr double kSplitBelow = 1e-2;
+/// triangle_weights takes it only below this height relative to the triangle's longest edge.
+constexpr double kSplitHeightRatio = 1e-2;
+
+/// projected_angle in its cancellation-free split form (`plain`: the plain sum, kept when the
+/// split does not apply).
+double projected_angle_split(const Vec2* points, std::size_t count, const Vec2& foot, double height,
+                             double plain);
 
 /// The term of one edge a -> b (coordinates relative to the foot) in projected_angle_plain;
 /// h2 = height^2.

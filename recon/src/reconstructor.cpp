@@ -323,6 +323,7 @@ UpdateStats Reconstructor::update() {
     stats.completion_s = s.field->completion_seconds();
     stats.unknown_triangles = s.field->unknown_triangle_count();
     stats.cell_groups = s.field->group_count();
+    stats.completed_slices = s.field->recompleted_slice_count();
     s.entries = std::move(next);
   } catch (...) {
     // Back to the state before this update: the queued changes are dropped.
@@ -428,6 +429,7 @@ UpdateStats Reconstructor::update() {
   totals.snapped_vertices = stats.snapped_vertices;
   totals.unknown_triangles = stats.unknown_triangles;
   totals.cell_groups = stats.cell_groups;
+  totals.completed_slices += stats.completed_slices;
   totals.depth = stats.depth;
   totals.triangles = stats.triangles;
   return out;

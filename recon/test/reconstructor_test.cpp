@@ -154,6 +154,45 @@ TEST(Reconstructor, UpdatesOnlyTheZoneOfTheNewPlane) {
   EXPECT_LT(next.step.field_evaluations, first.step.field_evaluations / 2);
 }
 
+// A slice of a sweep: the plane z = height tilted a little about x, with the sector fov.
+LabeledSlice sweep_slice(double height) {
+  const double tilt = 0.05;
+  LabeledSlice s;
+  s.u = Vec3(1, 0, 0);
+  s.v = Vec3(0, std::cos(tilt), std::sin(tilt));
+  s.origin_mm = Vec3(0, 0, height);
+  const double d = s.normal().normalized().dot(Vec3(-10, 0, 0) - s.origin_mm);
+  s.regions.push_back({1, circle(s.to_plane(Vec3(-10, 0, 0) - d * s.normal().normalized()),
+                                 std::sqrt(225.0 - d * d), 48), {}});
+  Ring2 fan{Vec2(0, 45)};
+  for (int k = 0; k <= 8; ++k) {
+    const double t = (-35.0 + 70.0 * k / 8.0) * std::numbers::pi / 180.0;
+    fan.emplace_back(85.0 * std::sin(t), 45.0 - 85.0 * std::cos(t));
+  }
+  std::reverse(fan.begin(), fan.end());
+  s.fov = fan;
+  return s;
+}
+
+TEST(Reconstructor, RecompletesOnlyTheSlicesNearTheNewPlane) {
+  ReconstructorOptions options;
+  options.bounds = kBox;
+  options.engine.max_depth = 5;
+  Reconstructor online(options);
+  for (int k = 0; k < 9; ++k) online.add_slice(sweep_slice(-12.0 + 3.0 * k));
+  const UpdateStats first = online.update();
+  EXPECT_EQ(first.step.completed_slices, 9u);
+  // The next slice of the sweep splits the top slab, whose lower face (slice 8) is rebuilt.
+  // Completion reads the faces of the cells within one group step of a face, so slices 6, 7
+  // and 8 read that face: they and the new slice complete again, the other five do not.
+  online.add_slice(sweep_slice(15.0));
+  const UpdateStats next = online.update();
+  EXPECT_FALSE(next.full_rebuild);
+  EXPECT_EQ(next.step.completed_slices, 4u);
+  SliceSet all = online.slice_set();
+  expect_same_field(online, *one_shot(all, options));
+}
+
 TEST(Reconstructor, QueriesAndUndo) {
   std::mt19937 rng(8);
   ReconstructorOptions options;

@@ -23,6 +23,7 @@ struct ReconstructionStats {
   std::size_t slices = 0, cells = 0, faces = 0, field_evaluations = 0;
   std::size_t snapped_vertices = 0;  ///< grid vertices given a thin region's label
   std::size_t unknown_triangles = 0, cell_groups = 0;  ///< unknown-region completion
+  std::size_t completed_slices = 0;  ///< slices whose unknown regions were (re)completed
   double completion_s = 0;  ///< part of face_images_s spent completing unknown regions
   int depth = 0;
   std::map<int, std::size_t> triangles;  ///< per material label
