@@ -39,6 +39,7 @@ struct SliceOptions {
   double unknown_fraction = 0.0;
   double unknown_radius = 0.03;
   std::string fov = "none";
+  std::string fov_aim = "centre";
 };
 
 Box3 empty_box() {
@@ -135,6 +136,7 @@ int run_slice(const SliceOptions& options) {
     unknowns.fraction = options.unknown_fraction;
     unknowns.blob_radius = options.unknown_radius;
     unknowns.fov = sim::parse_fov_shape(options.fov);
+    unknowns.fov_covers_material = options.fov_aim == "cover";
     unknowns.seed = options.seed + 1;
     sim::add_unknowns(set, unknowns);
     if (const Status valid = validate_slice_set(set, options.output.string()); !valid) {
@@ -225,6 +227,12 @@ CommandRunner add_slice_command(CLI::App& app) {
                  "Field of view of every slice: sector (60 deg fan, 80 mm deep) or rect "
                  "(60 x 80 mm); outside it is unknown")
       ->check(CLI::IsMember({"none", "sector", "rect"}))
+      ->capture_default_str();
+  app.add_option("--fov-aim", options->fov_aim,
+                 "centre: the fov (fixed size) looks at the slice's material from a random side, "
+                 "its centre at half depth; cover: the fov is sized to contain the material's "
+                 "bounding circle, as a sonographer aims the probe and sets the depth")
+      ->check(CLI::IsMember({"centre", "cover"}))
       ->capture_default_str();
   return [options] { return run_slice(*options); };
 }

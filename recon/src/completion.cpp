@@ -34,9 +34,9 @@ constexpr double kUnknownTriangleMin = 0.03, kUnknownTriangleMax = 0.12;
 // Lattice points closer than this many triangle sizes to the unknown boundary are left out.
 constexpr double kLatticeClearance = 0.5;
 // Triangles whose corners complete to different labels are split down to this longest edge
-// (fraction of the box diagonal; the octree's finest cells are at most 1/128 of it), in at most
-// this many rounds.
-constexpr double kRefinedTriangleMin = 0.015;
+// (fraction of the box diagonal: about 2.5 of the octree's finest cells, which are at most
+// 1/128 of it), in at most this many rounds.
+constexpr double kRefinedTriangleMin = 0.02;
 constexpr int kMaxRefinementRounds = 8;
 
 // The completion reads the known faces of the cells within this many group-adjacency steps of a

@@ -90,7 +90,7 @@ bool triangle_weights(const Vec2& a, const Vec2& b, const Vec2& c, const Vec2& f
     const double s_a = p.dot(d) / length, s_b = q_end.dot(d) / length;
     const double q2 = cross * cross + h2;
     const double q = std::sqrt(q2);
-    const double angle = std::atan2(q * length, q2 + s_a * s_b);
+    const double angle = fast_atan2(q * length, q2 + s_a * s_b);
     if (cross != 0.0) projected += (cross / q) * angle;
     const Vec2 normal(d.y() / length, -d.x() / length);
     moment += (-height / (2.0 * q) * angle) * normal;

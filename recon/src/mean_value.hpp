@@ -14,6 +14,7 @@
 #include <cmath>
 #include <cstddef>
 
+#include "atan2.hpp"
 #include "sonoshape/core/geometry.hpp"
 
 namespace sonoshape::recon {
@@ -50,7 +51,7 @@ inline double edge_projected_angle(const Vec2& a, const Vec2& b, double h2) {
   const double s_b = b.dot(d) / length;
   const double q2 = c * c + h2;
   const double q = std::sqrt(q2);
-  return (c / q) * std::atan2(q * length, q2 + s_a * s_b);
+  return (c / q) * fast_atan2(q * length, q2 + s_a * s_b);
 }
 
 /// The same term split into its planar angle (added to `planar`) and an O(h^2) remainder
@@ -67,13 +68,13 @@ inline bool edge_projected_angle_split(const Vec2& a, const Vec2& b, double h2, 
   const double s_a = a.dot(d) / length, s_b = b.dot(d) / length;
   const double abs_c = std::abs(c), sign = c > 0.0 ? 1.0 : -1.0;
   const double q = std::sqrt(c * c + h2);
-  const double phi_c = std::atan2(abs_c * length, c * c + s_a * s_b);
-  const double phi_q = std::atan2(q * length, q * q + s_a * s_b);
+  const double phi_c = fast_atan2(abs_c * length, c * c + s_a * s_b);
+  const double phi_q = fast_atan2(q * length, q * q + s_a * s_b);
   // phi(q) - phi(|c|) = [atan(s_b/q) - atan(s_b/|c|)] - [atan(s_a/q) - atan(s_a/|c|)], and
   // atan(s/q) - atan(s/|c|) = atan2(-s h^2 / (q + |c|), q |c| + s^2).
   const double shrink = h2 / (q + abs_c);
-  const double phi_difference = std::atan2(-s_b * shrink, q * abs_c + s_b * s_b) -
-                                std::atan2(-s_a * shrink, q * abs_c + s_a * s_a);
+  const double phi_difference = fast_atan2(-s_b * shrink, q * abs_c + s_b * s_b) -
+                                fast_atan2(-s_a * shrink, q * abs_c + s_a * s_a);
   planar += sign * phi_c;
   remainder += sign * (-shrink / q * phi_q + phi_difference);
   return true;

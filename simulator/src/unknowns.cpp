@@ -129,18 +129,40 @@ void add_unknowns(SliceSet& set, const UnknownOptions& options) {
       const double angle = 2.0 * std::numbers::pi * unit(rng);
       const Vec2 axis(std::cos(angle), std::sin(angle));
       const Vec2 side(-axis.y(), axis.x());
-      const double depth = options.fov_depth_mm;
-      const Vec2 apex = target - 0.5 * depth * axis;
+      const double half = 0.5 * options.fan_angle_deg * std::numbers::pi / 180.0;
+      double depth = options.fov_depth_mm;
+      Vec2 apex = target - 0.5 * depth * axis;
+      double rect_width = options.rect_width_mm;
+      if (options.fov_covers_material) {
+        // The material's bounding box centre and the radius around it that holds every contour
+        // point (a tenth of the box diagonal on slices without material), 10 % margin.
+        Vec2 lo = target, hi = target;
+        for (const Vec2& p : contour) {
+          lo = lo.cwiseMin(p);
+          hi = hi.cwiseMax(p);
+        }
+        const Vec2 centre = 0.5 * (lo + hi);
+        double radius = contour.empty() ? 0.1 * diagonal : 0.0;
+        for (const Vec2& p : contour) radius = std::max(radius, (p - centre).norm());
+        radius *= 1.1;
+        if (options.fov == FovShape::kSector) {
+          const double apex_distance = radius / std::sin(half);  // the fan's sides touch the circle
+          apex = centre - apex_distance * axis;
+          depth = apex_distance + radius;
+        } else {
+          apex = centre - radius * axis;
+          depth = rect_width = 2.0 * radius;
+        }
+      }
       Ring2 fov;
       if (options.fov == FovShape::kSector) {
         fov.push_back(apex);
-        const double half = 0.5 * options.fan_angle_deg * std::numbers::pi / 180.0;
         for (int k = 0; k <= 16; ++k) {
           const double a = -half + 2.0 * half * k / 16.0;
           fov.push_back(apex + depth * (std::cos(a) * axis + std::sin(a) * side));
         }
       } else {
-        const double w = 0.5 * options.rect_width_mm;
+        const double w = 0.5 * rect_width;
         fov = {apex - w * side, apex - w * side + depth * axis, apex + w * side + depth * axis, apex + w * side};
       }
       if (signed_area(fov) < 0.0) std::reverse(fov.begin(), fov.end());
