@@ -156,6 +156,39 @@ std::vector<std::uint8_t> classify(const TriangleMesh& mesh, const SampleGrid& g
   return inside;
 }
 
+// 6-connected components of the inside samples of an n^3 grid (index (ix + iy n) n + iz).
+int component_count(const std::vector<std::uint8_t>& inside, int n) {
+  const std::size_t size = inside.size();
+  const std::size_t un = static_cast<std::size_t>(n);
+  std::vector<std::uint8_t> seen(size, 0);
+  std::vector<std::size_t> stack;
+  int components = 0;
+  for (std::size_t start = 0; start < size; ++start) {
+    if (!inside[start] || seen[start]) continue;
+    ++components;
+    seen[start] = 1;
+    stack.push_back(start);
+    while (!stack.empty()) {
+      const std::size_t i = stack.back();
+      stack.pop_back();
+      const std::size_t iz = i % un, ix = (i / un) % un, iy = i / (un * un);
+      auto visit = [&](std::size_t j) {
+        if (inside[j] && !seen[j]) {
+          seen[j] = 1;
+          stack.push_back(j);
+        }
+      };
+      if (iz > 0) visit(i - 1);
+      if (iz + 1 < un) visit(i + 1);
+      if (ix > 0) visit(i - un);
+      if (ix + 1 < un) visit(i + un);
+      if (iy > 0) visit(i - un * un);
+      if (iy + 1 < un) visit(i + un * un);
+    }
+  }
+  return components;
+}
+
 double iou_of(const std::vector<std::uint8_t>& a, const std::vector<std::uint8_t>& b) {
   std::size_t both = 0, either = 0;
   for (std::size_t i = 0; i < a.size(); ++i) {
@@ -455,11 +488,13 @@ std::vector<LabelScore> evaluate(const MeshSet& reconstruction, const MeshSet& t
     LabelScore score;
     score.label = entry.label;
     const std::vector<std::uint8_t> truth_inside = classify(entry.mesh, grid);
+    score.truth_components = component_count(truth_inside, grid.n);
     if (slices != nullptr) {
       std::vector<std::uint8_t> baseline_inside(grid.size());
       for (std::size_t i = 0; i < baseline.size(); ++i)
         baseline_inside[i] = baseline[i] == entry.label;
       score.baseline_iou = iou_of(baseline_inside, truth_inside);
+      score.baseline_components = component_count(baseline_inside, grid.n);
     } else {
       score.baseline_iou = kNaN;
     }
@@ -477,7 +512,9 @@ std::vector<LabelScore> evaluate(const MeshSet& reconstruction, const MeshSet& t
       continue;
     }
     score.health = check_mesh_health(*recon);
-    score.iou = iou_of(classify(*recon, grid), truth_inside);
+    const std::vector<std::uint8_t> recon_inside = classify(*recon, grid);
+    score.iou = iou_of(recon_inside, truth_inside);
+    score.components = component_count(recon_inside, grid.n);
 
     const SurfaceDistance to_recon(*recon);
     const SurfaceDistance to_truth(entry.mesh);

@@ -156,6 +156,28 @@ TEST(Evaluation, BaselineRespectsHolesAndLabels) {
   EXPECT_DOUBLE_EQ(scores[0].iou, 1.0);
 }
 
+TEST(Evaluation, CountsConnectedParts) {
+  // Two spheres apart are two parts for the reconstruction, the truth and the baseline.
+  TriangleMesh two = test::uv_sphere(0.5, Vec3(-0.8, 0, 0), 48, 24);
+  const TriangleMesh right = test::uv_sphere(0.5, Vec3(0.8, 0, 0), 48, 24);
+  const std::uint32_t offset = static_cast<std::uint32_t>(two.vertices.size());
+  two.vertices.insert(two.vertices.end(), right.vertices.begin(), right.vertices.end());
+  for (auto t : right.triangles) two.triangles.push_back({t[0] + offset, t[1] + offset, t[2] + offset});
+  const SliceSet slices = slice_at({{1, "", two}}, {-0.25, 0.0, 0.25});
+  EvaluationOptions options;
+  options.grid_resolution = 48;
+  options.surface_samples = 200;
+  const auto scores = evaluate(one_label(two), one_label(two), &slices, kBox, options);
+  EXPECT_EQ(scores[0].components, 2);
+  EXPECT_EQ(scores[0].truth_components, 2);
+  EXPECT_EQ(scores[0].baseline_components, 2);
+  // One sphere: one part; no slices, no baseline.
+  const TriangleMesh one = test::uv_sphere(1.0, Vec3::Zero(), 48, 24);
+  const auto single = evaluate(one_label(one), one_label(one), nullptr, kBox, options);
+  EXPECT_EQ(single[0].components, 1);
+  EXPECT_EQ(single[0].baseline_components, -1);
+}
+
 TEST(Evaluation, RejectsEmptyBox) {
   const MeshSet set = one_label(test::cube());
   EXPECT_THROW(evaluate(set, set, nullptr, Box3{}, {}), GeometryError);

@@ -21,6 +21,9 @@ struct LabelScore {
   double hausdorff_distance = 0.0;     ///< symmetric max, % of diagonal
   double contour_mean = 0.0;           ///< input contour points to output surface, mean, %
   double contour_max = 0.0;            ///< same, max, %
+  /// 6-connected components of the inside samples of the IoU grid: reconstruction, baseline
+  /// (-1 without slices) and truth (shows a method joining or splitting parts).
+  int components = 0, baseline_components = -1, truth_components = 0;
   MeshHealth health;
 };
 
