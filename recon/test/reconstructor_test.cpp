@@ -25,6 +25,17 @@ Ring2 circle(const Vec2& center, double radius, int n) {
   return ring;
 }
 
+// A 70 degree, 85 mm fan with its apex 45 mm from the centre of the plane's disc.
+Ring2 sector_fan() {
+  Ring2 fan{Vec2(0, 45)};
+  for (int k = 0; k <= 8; ++k) {
+    const double t = (-35.0 + 70.0 * k / 8.0) * std::numbers::pi / 180.0;
+    fan.emplace_back(85.0 * std::sin(t), 45.0 - 85.0 * std::cos(t));
+  }
+  std::reverse(fan.begin(), fan.end());
+  return fan;
+}
+
 // A random plane through the ball of radius 0.8 r cutting a sphere (label 1) and, when
 // `two_labels`, a smaller sphere (label 2) beside it; optionally an ultrasound-like sector fov.
 LabeledSlice random_slice(std::mt19937& rng, bool two_labels, bool fov) {
@@ -44,16 +55,7 @@ LabeledSlice random_slice(std::mt19937& rng, bool two_labels, bool fov) {
   };
   add_sphere(Vec3(-10, 0, 0), 0.5 * kRadius, 1);
   if (two_labels) add_sphere(Vec3(16, 4, 2), 0.3 * kRadius, 2);
-  if (fov) {
-    // A 70 degree fan with its apex 45 mm from the centre of the plane's disc.
-    Ring2 fan{Vec2(0, 45)};
-    for (int k = 0; k <= 8; ++k) {
-      const double t = (-35.0 + 70.0 * k / 8.0) * std::numbers::pi / 180.0;
-      fan.emplace_back(85.0 * std::sin(t), 45.0 - 85.0 * std::cos(t));
-    }
-    std::reverse(fan.begin(), fan.end());
-    s.fov = fan;
-  }
+  if (fov) s.fov = sector_fan();
   return s;
 }
 
@@ -164,13 +166,7 @@ LabeledSlice sweep_slice(double height) {
   const double d = s.normal().normalized().dot(Vec3(-10, 0, 0) - s.origin_mm);
   s.regions.push_back({1, circle(s.to_plane(Vec3(-10, 0, 0) - d * s.normal().normalized()),
                                  std::sqrt(225.0 - d * d), 48), {}});
-  Ring2 fan{Vec2(0, 45)};
-  for (int k = 0; k <= 8; ++k) {
-    const double t = (-35.0 + 70.0 * k / 8.0) * std::numbers::pi / 180.0;
-    fan.emplace_back(85.0 * std::sin(t), 45.0 - 85.0 * std::cos(t));
-  }
-  std::reverse(fan.begin(), fan.end());
-  s.fov = fan;
+  s.fov = sector_fan();
   return s;
 }
 
