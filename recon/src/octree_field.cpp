@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <iterator>
 #include <unordered_set>
 
 #include <tbb/blocked_range.h>
@@ -157,8 +158,8 @@ void close_band(SampledField& field, Sampler& sampler, std::vector<std::uint64_t
   std::sort(field.surface_cells.begin(), field.surface_cells.end());
 }
 
-void smooth(SampledField& field, Sampler& sampler,
-            const std::vector<std::pair<Vec3, Vec3>>& contour_segments, int iterations);
+void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64_t>& fixed,
+            int iterations);
 void snap_thin_regions(SampledField& field, Sampler& sampler, const std::vector<RegionSample>& samples);
 
 }  // namespace
@@ -185,37 +186,63 @@ int default_depth(const Box3& box) {
   return std::clamp(static_cast<int>(std::ceil(std::log2(cells) - 1e-9)), 1, 11);
 }
 
-SampledField sample_field(const Box3& box, int function_count, const BatchEvaluator& evaluate,
-                          const std::vector<Vec3>& contour_points,
-                          const std::vector<std::pair<Vec3, Vec3>>& contour_segments,
-                          const std::vector<RegionSample>& region_samples,
-                          const OctreeOptions& options) {
-  SampledField field;
-  field.function_count = function_count;
+ContourKeys contour_keys(const Grid& grid, const OctreeOptions& options,
+                         const std::vector<std::pair<Vec3, Vec3>>& segments) {
   const int depth = options.max_depth;
   const int resolution = 1 << depth;
-  field.grid = make_grid(box, depth);
-  const Grid& grid = field.grid;
-  Sampler sampler(field, evaluate);
-
   auto fine_index = [&](const Vec3& p) {
     const Vec3 q = (p - grid.origin) / grid.cell_size;
     return std::array<int, 3>{std::clamp(static_cast<int>(std::floor(q.x())), 0, resolution - 1),
                               std::clamp(static_cast<int>(std::floor(q.y())), 0, resolution - 1),
                               std::clamp(static_cast<int>(std::floor(q.z())), 0, resolution - 1)};
   };
-  // Cells holding contour vertices, per level (key of the cell's index at that level).
+  ContourKeys keys;
+  keys.cells_by_level.resize(static_cast<std::size_t>(depth + 1));
   const int start = std::min(options.start_depth, depth);
-  std::vector<std::vector<std::uint64_t>> contour_cells(static_cast<std::size_t>(depth + 1));
-  for (const Vec3& p : contour_points) {
-    const auto idx = fine_index(p);
+  for (const auto& [a, b] : segments) {
+    const auto idx = fine_index(a);
     for (int level = start; level <= depth; ++level) {
       const int shift = depth - level;
-      contour_cells[static_cast<std::size_t>(level)].push_back(
+      keys.cells_by_level[static_cast<std::size_t>(level)].push_back(
           grid_key(idx[0] >> shift, idx[1] >> shift, idx[2] >> shift));
     }
+    // Samples at half a cell find every cell the segment crosses.
+    const int steps = std::max(1, static_cast<int>(std::ceil((b - a).norm() / (0.5 * grid.cell_size))));
+    for (int s = 0; s <= steps; ++s) {
+      const auto cell = fine_index(a + (b - a) * (static_cast<double>(s) / steps));
+      for (int corner = 0; corner < 8; ++corner)
+        keys.fixed_vertices.push_back(grid_key(cell[0] + (corner & 1), cell[1] + ((corner >> 1) & 1),
+                                               cell[2] + ((corner >> 2) & 1)));
+    }
   }
-  for (auto& cells : contour_cells) sort_unique(cells);
+  for (auto& cells : keys.cells_by_level) sort_unique(cells);
+  sort_unique(keys.fixed_vertices);
+  return keys;
+}
+
+void merge_contour_keys(ContourKeys& keys, const ContourKeys& more) {
+  auto merge = [](std::vector<std::uint64_t>& into, const std::vector<std::uint64_t>& add) {
+    std::vector<std::uint64_t> merged;
+    merged.reserve(into.size() + add.size());
+    std::set_union(into.begin(), into.end(), add.begin(), add.end(), std::back_inserter(merged));
+    into = std::move(merged);
+  };
+  keys.cells_by_level.resize(std::max(keys.cells_by_level.size(), more.cells_by_level.size()));
+  for (std::size_t level = 0; level < more.cells_by_level.size(); ++level)
+    merge(keys.cells_by_level[level], more.cells_by_level[level]);
+  merge(keys.fixed_vertices, more.fixed_vertices);
+}
+
+SampledField sample_field(const Box3& box, int function_count, const BatchEvaluator& evaluate,
+                          const ContourKeys& contours, const std::vector<RegionSample>& region_samples,
+                          const OctreeOptions& options) {
+  SampledField field;
+  field.function_count = function_count;
+  const int depth = options.max_depth;
+  const int resolution = 1 << depth;
+  field.grid = make_grid(box, depth);
+  Sampler sampler(field, evaluate);
+  const int start = std::min(options.start_depth, depth);
 
   // Coarse-to-fine refinement. Cells are given by their min corner in finest units.
   std::vector<std::array<int, 3>> cells;
@@ -244,7 +271,9 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
         if (mixed) field.surface_cells.push_back(grid_key(c[0], c[1], c[2]));
         continue;
       }
-      const bool has_contour = contains(contour_cells[static_cast<std::size_t>(level)],
+      const auto contour_level = static_cast<std::size_t>(level);
+      const bool has_contour = contour_level < contours.cells_by_level.size() &&
+                               contains(contours.cells_by_level[contour_level],
                                         grid_key(c[0] / step, c[1] / step, c[2] / step));
       if (!mixed && !has_contour) continue;
       const int half = step / 2;
@@ -258,24 +287,18 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
 
   close_band(field, sampler, field.surface_cells, resolution);
 
-  if (options.smoothing_iterations > 0) smooth(field, sampler, contour_segments, options.smoothing_iterations);
+  if (options.smoothing_iterations > 0)
+    smooth(field, sampler, contours.fixed_vertices, options.smoothing_iterations);
   snap_thin_regions(field, sampler, region_samples);
   return field;
 }
 
 namespace {
 
-void smooth(SampledField& field, Sampler& sampler,
-            const std::vector<std::pair<Vec3, Vec3>>& contour_segments, int iterations) {
-  const Grid& grid = field.grid;
-  const int resolution = 1 << grid.depth;
+void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64_t>& fixed,
+            int iterations) {
+  const int resolution = 1 << field.grid.depth;
   const int function_count = field.function_count;
-  auto fine_index = [&](const Vec3& p) {
-    const Vec3 q = (p - grid.origin) / grid.cell_size;
-    return std::array<int, 3>{std::clamp(static_cast<int>(std::floor(q.x())), 0, resolution - 1),
-                              std::clamp(static_cast<int>(std::floor(q.y())), 0, resolution - 1),
-                              std::clamp(static_cast<int>(std::floor(q.z())), 0, resolution - 1)};
-  };
   Stopwatch smoothing_clock;
   // Smoothing nodes: corners of surface cells. The bi-Laplacian stencil reaches two steps out.
   std::vector<std::uint64_t> nodes;
@@ -296,19 +319,6 @@ void smooth(SampledField& field, Sampler& sampler,
           if (std::abs(di) + std::abs(dj) + std::abs(dk) <= 2) sampler.request(i + di, j + dj, k + dk);
   }
   sampler.flush();
-  // Nodes of the cells the input contours pass through keep their interpolated values, so the
-  // surface still passes through the contours (Section 4.6).
-  std::vector<std::uint64_t> fixed;
-  for (const auto& [a, b] : contour_segments) {
-    const int steps = std::max(1, static_cast<int>(std::ceil((b - a).norm() / (0.5 * grid.cell_size))));
-    for (int s = 0; s <= steps; ++s) {
-      const auto idx = fine_index(a + (b - a) * (static_cast<double>(s) / steps));
-      for (int corner = 0; corner < 8; ++corner)
-        fixed.push_back(grid_key(idx[0] + (corner & 1), idx[1] + ((corner >> 1) & 1),
-                                 idx[2] + ((corner >> 2) & 1)));
-    }
-  }
-  sort_unique(fixed);
   // Laplacian domain: the nodes and their six neighbours.
   std::vector<std::uint64_t> laplacian_nodes(nodes);
   laplacian_nodes.reserve(nodes.size() * 7);
@@ -340,7 +350,7 @@ void smooth(SampledField& field, Sampler& sampler,
     int i, j, k;
     grid_unkey(nodes[n], i, j, k);
     node_value_rows[n] = field.index.at(nodes[n]);
-    node_fixed[n] = contains(fixed, nodes[n]);
+    node_fixed[n] = contains(fixed, nodes[n]);  // next to a contour (Section 4.6)
     node_lap_rows[n * 7] = lap_index.at(nodes[n]);
     for (std::size_t d = 0; d < 6; ++d)
       node_lap_rows[n * 7 + 1 + d] =
