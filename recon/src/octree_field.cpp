@@ -21,7 +21,7 @@ constexpr std::array<std::array<int, 3>, 6> kFaceNeighbours{
 class Sampler {
  public:
   Sampler(SampledField& field, const BatchEvaluator& evaluate)
-      : field_(field), evaluate_(evaluate) {}
+      : field_(field), evaluate_(evaluate), pending_keys_(1 << field.grid.depth) {}
 
   /// Queues a vertex for evaluation unless it has a value or is queued.
   void request(int i, int j, int k) {
@@ -105,10 +105,13 @@ bool face_mixed(const SampledField& f, int i, int j, int k, const std::array<int
   return false;
 }
 
-// Keeps the mixed cells among `seeds` and adds, until closed, every finest cell across a face with
-// mixed corners: otherwise the surface would end at that face. Result in field.surface_cells.
-void close_band(SampledField& field, Sampler& sampler, std::vector<std::uint64_t> seeds,
-                int resolution) {
+// Keeps the mixed cells among `seeds` (unique) and adds, until closed, every finest cell across
+// a face with mixed corners: otherwise the surface would end at that face. `closed` is a band
+// that was closed before values changed at corners of seeds only: its other cells keep their
+// corners and faces, so they are kept where mixed but need not be expanded again. Result in
+// field.surface_cells.
+void close_band(SampledField& field, Sampler& sampler, const std::vector<std::uint64_t>& seeds,
+                int resolution, const std::vector<std::uint64_t>& closed = {}) {
   for (const std::uint64_t key : seeds) {
     int i, j, k;
     grid_unkey(key, i, j, k);
@@ -116,17 +119,19 @@ void close_band(SampledField& field, Sampler& sampler, std::vector<std::uint64_t
       sampler.request(i + (corner & 1), j + ((corner >> 1) & 1), k + ((corner >> 2) & 1));
   }
   sampler.flush();
-  field.surface_cells.clear();
-  GridIndex in_band;
-  in_band.reserve(seeds.size());
+  GridIndex in_band(resolution);
   for (const std::uint64_t key : seeds) in_band.insert(key, 0);
-  std::vector<std::uint64_t> frontier;
-  for (const std::uint64_t key : seeds) {
+  auto mixed = [&](std::uint64_t key) {
     int i, j, k;
     grid_unkey(key, i, j, k);
-    if (cell_mixed(field, i, j, k, 1)) frontier.push_back(key);
-  }
-  field.surface_cells = frontier;
+    return cell_mixed(field, i, j, k, 1);
+  };
+  std::vector<std::uint64_t> frontier;
+  for (const std::uint64_t key : seeds)
+    if (mixed(key)) frontier.push_back(key);
+  std::vector<std::uint64_t> band = frontier;
+  for (const std::uint64_t key : closed)
+    if (in_band.insert(key, 0) && mixed(key)) band.push_back(key);
   while (!frontier.empty()) {
     std::vector<std::uint64_t> candidates;
     for (const std::uint64_t key : frontier) {
@@ -150,12 +155,13 @@ void close_band(SampledField& field, Sampler& sampler, std::vector<std::uint64_t
       int i, j, k;
       grid_unkey(key, i, j, k);
       if (cell_mixed(field, i, j, k, 1)) {
-        field.surface_cells.push_back(key);
+        band.push_back(key);
         frontier.push_back(key);
       }
     }
   }
-  std::sort(field.surface_cells.begin(), field.surface_cells.end());
+  std::sort(band.begin(), band.end());
+  field.surface_cells = std::move(band);
 }
 
 void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64_t>& fixed,
@@ -241,6 +247,7 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
   const int depth = options.max_depth;
   const int resolution = 1 << depth;
   field.grid = make_grid(box, depth);
+  field.index = GridIndex(resolution);
   Sampler sampler(field, evaluate);
   const int start = std::min(options.start_depth, depth);
 
@@ -300,7 +307,7 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
   const int resolution = 1 << field.grid.depth;
   const int function_count = field.function_count;
   Stopwatch smoothing_clock;
-  // Smoothing nodes: corners of surface cells. The bi-Laplacian stencil reaches two steps out.
+  // Smoothing nodes: corners of surface cells.
   std::vector<std::uint64_t> nodes;
   nodes.reserve(field.surface_cells.size() * 8);
   for (const std::uint64_t key : field.surface_cells) {
@@ -310,30 +317,30 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
       nodes.push_back(grid_key(i + (corner & 1), j + ((corner >> 1) & 1), k + ((corner >> 2) & 1)));
   }
   sort_unique(nodes);
+  // Laplacian domain: the nodes and their six neighbours, numbered as they come (the sweeps do
+  // not depend on the order).
+  GridIndex lap_index(resolution);
+  std::vector<std::uint64_t> laplacian_nodes;
+  laplacian_nodes.reserve(nodes.size() * 2);
+  auto add_laplacian_node = [&](std::uint64_t key) {
+    if (lap_index.insert(key, static_cast<std::uint32_t>(laplacian_nodes.size()))) laplacian_nodes.push_back(key);
+  };
   for (const std::uint64_t key : nodes) {
     int i, j, k;
     grid_unkey(key, i, j, k);
-    for (int di = -2; di <= 2; ++di)
-      for (int dj = -2; dj <= 2; ++dj)
-        for (int dk = -2; dk <= 2; ++dk)
-          if (std::abs(di) + std::abs(dj) + std::abs(dk) <= 2) sampler.request(i + di, j + dj, k + dk);
+    add_laplacian_node(key);
+    for (const auto& d : kFaceNeighbours) add_laplacian_node(grid_key(i + d[0], j + d[1], k + d[2]));
+  }
+  // The Laplacian nodes and their neighbours: every vertex the bi-Laplacian of a node reads.
+  for (const std::uint64_t key : laplacian_nodes) {
+    int i, j, k;
+    grid_unkey(key, i, j, k);
+    sampler.request(i, j, k);
+    for (const auto& d : kFaceNeighbours) sampler.request(i + d[0], j + d[1], k + d[2]);
   }
   sampler.flush();
-  // Laplacian domain: the nodes and their six neighbours.
-  std::vector<std::uint64_t> laplacian_nodes(nodes);
-  laplacian_nodes.reserve(nodes.size() * 7);
-  for (const std::uint64_t key : nodes) {
-    int i, j, k;
-    grid_unkey(key, i, j, k);
-    for (const auto& d : kFaceNeighbours) laplacian_nodes.push_back(grid_key(i + d[0], j + d[1], k + d[2]));
-  }
-  sort_unique(laplacian_nodes);
   // Row indices resolved once, so the iterations are plain array sweeps.
   const std::size_t fc = static_cast<std::size_t>(function_count);
-  GridIndex lap_index;
-  lap_index.reserve(laplacian_nodes.size());
-  for (std::size_t n = 0; n < laplacian_nodes.size(); ++n)
-    lap_index.insert(laplacian_nodes[n], static_cast<std::uint32_t>(n));
   std::vector<std::uint32_t> lap_value_rows(laplacian_nodes.size() * 7);  // centre, 6 neighbours
   for_rows(laplacian_nodes.size(), [&](std::size_t n) {
     int i, j, k;
@@ -402,7 +409,7 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
     }
   }
   sort_unique(seeds);
-  close_band(field, sampler, std::move(seeds), resolution);
+  close_band(field, sampler, seeds, resolution);
   field.smoothing_seconds = smoothing_clock.seconds();
 }
 
@@ -435,10 +442,8 @@ void snap_thin_regions(SampledField& field, Sampler& sampler,
       seeds.push_back(grid_key(i - (corner & 1), j - ((corner >> 1) & 1), k - ((corner >> 2) & 1)));
   }
   if (seeds.empty()) return;
-  seeds.insert(seeds.end(), field.surface_cells.begin(), field.surface_cells.end());
-  std::sort(seeds.begin(), seeds.end());
-  seeds.erase(std::unique(seeds.begin(), seeds.end()), seeds.end());
-  close_band(field, sampler, std::move(seeds), resolution);
+  sort_unique(seeds);
+  close_band(field, sampler, seeds, resolution, field.surface_cells);
 }
 
 }  // namespace

@@ -93,7 +93,8 @@ bool same_plane(const LabeledSlice& a, const LabeledSlice& b, double scale) {
 // unchanged: the field inside a cell depends only on that cell's faces and their images.
 class ValueCache {
  public:
-  explicit ValueCache(int function_count) : function_count_(static_cast<std::size_t>(function_count)) {}
+  ValueCache(int function_count, int resolution)
+      : function_count_(static_cast<std::size_t>(function_count)), index_(resolution) {}
   std::size_t function_count() const { return function_count_; }
   /// The cached row of `key` if its cell has not changed since it was evaluated.
   const double* find(std::uint64_t key, const std::vector<std::uint32_t>& cell_generation) const {
@@ -217,7 +218,7 @@ struct Reconstructor::State {
     for (std::size_t c = 0; c < all_cells.size(); ++c) all_cells[c] = static_cast<int>(c);
     field->refresh(all_cells);
     stats.face_images_s += clock.seconds();
-    cache = std::make_unique<ValueCache>(field->function_count());
+    cache = std::make_unique<ValueCache>(field->function_count(), 1 << depth);
     octree = OctreeOptions{};
     octree.max_depth = depth;
     octree.smoothing_iterations = options.engine.smoothing_iterations;
