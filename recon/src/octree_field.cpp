@@ -105,29 +105,32 @@ bool face_mixed(const SampledField& f, int i, int j, int k, const std::array<int
   return false;
 }
 
-// Keeps the mixed cells among `seeds` (unique) and adds, until closed, every finest cell across
+// Keeps the mixed cells among `seeds` (they may repeat) and adds, until closed, every finest cell across
 // a face with mixed corners: otherwise the surface would end at that face. `closed` is a band
 // that was closed before values changed at corners of seeds only: its other cells keep their
 // corners and faces, so they are kept where mixed but need not be expanded again. Result in
 // field.surface_cells.
 void close_band(SampledField& field, Sampler& sampler, const std::vector<std::uint64_t>& seeds,
                 int resolution, const std::vector<std::uint64_t>& closed = {}) {
-  for (const std::uint64_t key : seeds) {
+  GridIndex in_band(resolution);
+  std::vector<std::uint64_t> unique_seeds;
+  unique_seeds.reserve(seeds.size());
+  for (const std::uint64_t key : seeds)
+    if (in_band.insert(key, 0)) unique_seeds.push_back(key);
+  for (const std::uint64_t key : unique_seeds) {
     int i, j, k;
     grid_unkey(key, i, j, k);
     for (int corner = 0; corner < 8; ++corner)
       sampler.request(i + (corner & 1), j + ((corner >> 1) & 1), k + ((corner >> 2) & 1));
   }
   sampler.flush();
-  GridIndex in_band(resolution);
-  for (const std::uint64_t key : seeds) in_band.insert(key, 0);
   auto mixed = [&](std::uint64_t key) {
     int i, j, k;
     grid_unkey(key, i, j, k);
     return cell_mixed(field, i, j, k, 1);
   };
   std::vector<std::uint64_t> frontier;
-  for (const std::uint64_t key : seeds)
+  for (const std::uint64_t key : unique_seeds)
     if (mixed(key)) frontier.push_back(key);
   std::vector<std::uint64_t> band = frontier;
   for (const std::uint64_t key : closed)
@@ -408,7 +411,6 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
       seeds.push_back(grid_key(ci, cj, ck));
     }
   }
-  sort_unique(seeds);
   close_band(field, sampler, seeds, resolution);
   field.smoothing_seconds = smoothing_clock.seconds();
 }
@@ -442,7 +444,6 @@ void snap_thin_regions(SampledField& field, Sampler& sampler,
       seeds.push_back(grid_key(i - (corner & 1), j - ((corner >> 1) & 1), k - ((corner >> 2) & 1)));
   }
   if (seeds.empty()) return;
-  sort_unique(seeds);
   close_band(field, sampler, seeds, resolution, field.surface_cells);
 }
 
