@@ -109,10 +109,10 @@ bool face_mixed(const SampledField& f, int i, int j, int k, const std::array<int
 // a face with mixed corners: otherwise the surface would end at that face. `closed` is a band
 // that was closed before values changed at corners of seeds only: its other cells keep their
 // corners and faces, so they are kept where mixed but need not be expanded again. Result in
-// field.surface_cells.
+// field.surface_cells. `in_band` is scratch space (a direct table is costly to allocate).
 void close_band(SampledField& field, Sampler& sampler, const std::vector<std::uint64_t>& seeds,
-                int resolution, const std::vector<std::uint64_t>& closed = {}) {
-  GridIndex in_band(resolution);
+                GridIndex& in_band, int resolution, const std::vector<std::uint64_t>& closed = {}) {
+  in_band.clear();
   std::vector<std::uint64_t> unique_seeds;
   unique_seeds.reserve(seeds.size());
   for (const std::uint64_t key : seeds)
@@ -168,8 +168,9 @@ void close_band(SampledField& field, Sampler& sampler, const std::vector<std::ui
 }
 
 void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64_t>& fixed,
-            int iterations);
-void snap_thin_regions(SampledField& field, Sampler& sampler, const std::vector<RegionSample>& samples);
+            int iterations, GridIndex& scratch);
+void snap_thin_regions(SampledField& field, Sampler& sampler, const std::vector<RegionSample>& samples,
+                       GridIndex& scratch);
 
 }  // namespace
 
@@ -295,18 +296,19 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
     cells = std::move(refined);
   }
 
-  close_band(field, sampler, field.surface_cells, resolution);
+  GridIndex scratch(resolution);
+  close_band(field, sampler, field.surface_cells, scratch, resolution);
 
   if (options.smoothing_iterations > 0)
-    smooth(field, sampler, contours.fixed_vertices, options.smoothing_iterations);
-  snap_thin_regions(field, sampler, region_samples);
+    smooth(field, sampler, contours.fixed_vertices, options.smoothing_iterations, scratch);
+  snap_thin_regions(field, sampler, region_samples, scratch);
   return field;
 }
 
 namespace {
 
 void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64_t>& fixed,
-            int iterations) {
+            int iterations, GridIndex& scratch) {
   const int resolution = 1 << field.grid.depth;
   const int function_count = field.function_count;
   Stopwatch smoothing_clock;
@@ -322,7 +324,8 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
   sort_unique(nodes);
   // Laplacian domain: the nodes and their six neighbours, numbered as they come (the sweeps do
   // not depend on the order).
-  GridIndex lap_index(resolution);
+  GridIndex& lap_index = scratch;
+  lap_index.clear();
   std::vector<std::uint64_t> laplacian_nodes;
   laplacian_nodes.reserve(nodes.size() * 2);
   auto add_laplacian_node = [&](std::uint64_t key) {
@@ -411,12 +414,12 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
       seeds.push_back(grid_key(ci, cj, ck));
     }
   }
-  close_band(field, sampler, seeds, resolution);
+  close_band(field, sampler, seeds, scratch, resolution);  // lap_index is done with
   field.smoothing_seconds = smoothing_clock.seconds();
 }
 
-void snap_thin_regions(SampledField& field, Sampler& sampler,
-                       const std::vector<RegionSample>& samples) {
+void snap_thin_regions(SampledField& field, Sampler& sampler, const std::vector<RegionSample>& samples,
+                       GridIndex& scratch) {
   // A region narrower than the finest cells may have no grid vertex of its label, and would
   // vanish from the mesh; its nearest grid vertices take the slice's own value (as on the face).
   const Grid& grid = field.grid;
@@ -444,7 +447,7 @@ void snap_thin_regions(SampledField& field, Sampler& sampler,
       seeds.push_back(grid_key(i - (corner & 1), j - ((corner >> 1) & 1), k - ((corner >> 2) & 1)));
   }
   if (seeds.empty()) return;
-  close_band(field, sampler, seeds, resolution, field.surface_cells);
+  close_band(field, sampler, seeds, scratch, resolution, field.surface_cells);
 }
 
 }  // namespace
