@@ -2,7 +2,7 @@
 
 #include <algorithm>
 #include <array>
-#include <unordered_map>
+#include <limits>
 
 namespace sonoshape::recon {
 namespace {
@@ -64,12 +64,6 @@ struct CaseTable {
   }
 };
 
-struct EdgeKeyHash {
-  std::size_t operator()(const std::pair<std::uint64_t, std::uint64_t>& k) const {
-    return std::hash<std::uint64_t>()(k.first * 0x9E3779B97F4A7C15ull ^ k.second);
-  }
-};
-
 }  // namespace
 
 std::vector<TriangleMesh> extract_label_surfaces(const SampledField& field) {
@@ -79,7 +73,11 @@ std::vector<TriangleMesh> extract_label_surfaces(const SampledField& field) {
   std::vector<TriangleMesh> meshes(static_cast<std::size_t>(std::max(0, fc - 1)));
   for (int material = 1; material < fc; ++material) {
     TriangleMesh& mesh = meshes[static_cast<std::size_t>(material - 1)];
-    std::unordered_map<std::pair<std::uint64_t, std::uint64_t>, std::uint32_t, EdgeKeyHash> vertex_of_edge;
+    // Mesh vertex per tetrahedron edge. The Kuhn tetrahedra are monotone paths through the cube,
+    // so every edge joins a grid vertex to one at an offset in {0,1}^3: (row of the lower vertex,
+    // offset) indexes a flat table.
+    constexpr std::uint32_t kNoVertex = 0xffffffffu;
+    std::vector<std::uint32_t> vertex_of_edge(field.keys.size() * 8, kNoVertex);
     // g = f_m - max_{k != m} f_k: positive inside the label's region.
     auto g = [&](const double* row) {
       double other = -std::numeric_limits<double>::infinity();
@@ -110,9 +108,11 @@ std::vector<TriangleMesh> extract_label_surfaces(const SampledField& field) {
             const int ca = tri.edges[static_cast<std::size_t>(e)][0];  // inside corner
             const int cb = tri.edges[static_cast<std::size_t>(e)][1];  // outside corner
             const std::uint64_t ka = keys[static_cast<std::size_t>(ca)], kb = keys[static_cast<std::size_t>(cb)];
-            const auto edge = ka < kb ? std::make_pair(ka, kb) : std::make_pair(kb, ka);
-            const auto [it, inserted] = vertex_of_edge.try_emplace(edge, static_cast<std::uint32_t>(mesh.vertices.size()));
-            if (inserted) {
+            std::uint32_t& vertex =
+                vertex_of_edge[static_cast<std::size_t>(field.index.at(keys[static_cast<std::size_t>(ca & cb)])) * 8 +
+                               static_cast<std::size_t>(ca ^ cb)];
+            if (vertex == kNoVertex) {
+              vertex = static_cast<std::uint32_t>(mesh.vertices.size());
               const double ga = std::max(0.0, g(field.at(ka)));
               const double gb = std::min(0.0, g(field.at(kb)));
               const double t_param = ga - gb > 0.0 ? ga / (ga - gb) : 0.5;
@@ -123,7 +123,7 @@ std::vector<TriangleMesh> extract_label_surfaces(const SampledField& field) {
               const Vec3 pb = field.grid.position(bi, bj, bk);
               mesh.vertices.push_back(pa + t_param * (pb - pa));
             }
-            ids[static_cast<std::size_t>(e)] = it->second;
+            ids[static_cast<std::size_t>(e)] = vertex;
           }
           mesh.triangles.push_back(ids);
         }

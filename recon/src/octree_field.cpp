@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <iterator>
 #include <unordered_set>
 
 #include <tbb/blocked_range.h>
@@ -20,7 +21,7 @@ constexpr std::array<std::array<int, 3>, 6> kFaceNeighbours{
 class Sampler {
  public:
   Sampler(SampledField& field, const BatchEvaluator& evaluate)
-      : field_(field), evaluate_(evaluate) {}
+      : field_(field), evaluate_(evaluate), pending_keys_(1 << field.grid.depth) {}
 
   /// Queues a vertex for evaluation unless it has a value or is queued.
   void request(int i, int j, int k) {
@@ -104,28 +105,36 @@ bool face_mixed(const SampledField& f, int i, int j, int k, const std::array<int
   return false;
 }
 
-// Keeps the mixed cells among `seeds` and adds, until closed, every finest cell across a face with
-// mixed corners: otherwise the surface would end at that face. Result in field.surface_cells.
-void close_band(SampledField& field, Sampler& sampler, std::vector<std::uint64_t> seeds,
-                int resolution) {
-  for (const std::uint64_t key : seeds) {
+// Keeps the mixed cells among `seeds` (they may repeat) and adds, until closed, every finest cell across
+// a face with mixed corners: otherwise the surface would end at that face. `closed` is a band
+// that was closed before values changed at corners of seeds only: its other cells keep their
+// corners and faces, so they are kept where mixed but need not be expanded again. Result in
+// field.surface_cells. `in_band` is scratch space (a direct table is costly to allocate).
+void close_band(SampledField& field, Sampler& sampler, const std::vector<std::uint64_t>& seeds,
+                GridIndex& in_band, int resolution, const std::vector<std::uint64_t>& closed = {}) {
+  in_band.clear();
+  std::vector<std::uint64_t> unique_seeds;
+  unique_seeds.reserve(seeds.size());
+  for (const std::uint64_t key : seeds)
+    if (in_band.insert(key, 0)) unique_seeds.push_back(key);
+  for (const std::uint64_t key : unique_seeds) {
     int i, j, k;
     grid_unkey(key, i, j, k);
     for (int corner = 0; corner < 8; ++corner)
       sampler.request(i + (corner & 1), j + ((corner >> 1) & 1), k + ((corner >> 2) & 1));
   }
   sampler.flush();
-  field.surface_cells.clear();
-  GridIndex in_band;
-  in_band.reserve(seeds.size());
-  for (const std::uint64_t key : seeds) in_band.insert(key, 0);
-  std::vector<std::uint64_t> frontier;
-  for (const std::uint64_t key : seeds) {
+  auto mixed = [&](std::uint64_t key) {
     int i, j, k;
     grid_unkey(key, i, j, k);
-    if (cell_mixed(field, i, j, k, 1)) frontier.push_back(key);
-  }
-  field.surface_cells = frontier;
+    return cell_mixed(field, i, j, k, 1);
+  };
+  std::vector<std::uint64_t> frontier;
+  for (const std::uint64_t key : unique_seeds)
+    if (mixed(key)) frontier.push_back(key);
+  std::vector<std::uint64_t> band = frontier;
+  for (const std::uint64_t key : closed)
+    if (in_band.insert(key, 0) && mixed(key)) band.push_back(key);
   while (!frontier.empty()) {
     std::vector<std::uint64_t> candidates;
     for (const std::uint64_t key : frontier) {
@@ -149,17 +158,19 @@ void close_band(SampledField& field, Sampler& sampler, std::vector<std::uint64_t
       int i, j, k;
       grid_unkey(key, i, j, k);
       if (cell_mixed(field, i, j, k, 1)) {
-        field.surface_cells.push_back(key);
+        band.push_back(key);
         frontier.push_back(key);
       }
     }
   }
-  std::sort(field.surface_cells.begin(), field.surface_cells.end());
+  std::sort(band.begin(), band.end());
+  field.surface_cells = std::move(band);
 }
 
-void smooth(SampledField& field, Sampler& sampler,
-            const std::vector<std::pair<Vec3, Vec3>>& contour_segments, int iterations);
-void snap_thin_regions(SampledField& field, Sampler& sampler, const std::vector<RegionSample>& samples);
+void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64_t>& fixed,
+            int iterations, GridIndex& scratch);
+void snap_thin_regions(SampledField& field, Sampler& sampler, const std::vector<RegionSample>& samples,
+                       GridIndex& scratch);
 
 }  // namespace
 
@@ -185,37 +196,64 @@ int default_depth(const Box3& box) {
   return std::clamp(static_cast<int>(std::ceil(std::log2(cells) - 1e-9)), 1, 11);
 }
 
-SampledField sample_field(const Box3& box, int function_count, const BatchEvaluator& evaluate,
-                          const std::vector<Vec3>& contour_points,
-                          const std::vector<std::pair<Vec3, Vec3>>& contour_segments,
-                          const std::vector<RegionSample>& region_samples,
-                          const OctreeOptions& options) {
-  SampledField field;
-  field.function_count = function_count;
+ContourKeys contour_keys(const Grid& grid, const OctreeOptions& options,
+                         const std::vector<std::pair<Vec3, Vec3>>& segments) {
   const int depth = options.max_depth;
   const int resolution = 1 << depth;
-  field.grid = make_grid(box, depth);
-  const Grid& grid = field.grid;
-  Sampler sampler(field, evaluate);
-
   auto fine_index = [&](const Vec3& p) {
     const Vec3 q = (p - grid.origin) / grid.cell_size;
     return std::array<int, 3>{std::clamp(static_cast<int>(std::floor(q.x())), 0, resolution - 1),
                               std::clamp(static_cast<int>(std::floor(q.y())), 0, resolution - 1),
                               std::clamp(static_cast<int>(std::floor(q.z())), 0, resolution - 1)};
   };
-  // Cells holding contour vertices, per level (key of the cell's index at that level).
+  ContourKeys keys;
+  keys.cells_by_level.resize(static_cast<std::size_t>(depth + 1));
   const int start = std::min(options.start_depth, depth);
-  std::vector<std::vector<std::uint64_t>> contour_cells(static_cast<std::size_t>(depth + 1));
-  for (const Vec3& p : contour_points) {
-    const auto idx = fine_index(p);
+  for (const auto& [a, b] : segments) {
+    const auto idx = fine_index(a);
     for (int level = start; level <= depth; ++level) {
       const int shift = depth - level;
-      contour_cells[static_cast<std::size_t>(level)].push_back(
+      keys.cells_by_level[static_cast<std::size_t>(level)].push_back(
           grid_key(idx[0] >> shift, idx[1] >> shift, idx[2] >> shift));
     }
+    // Samples at half a cell find every cell the segment crosses.
+    const int steps = std::max(1, static_cast<int>(std::ceil((b - a).norm() / (0.5 * grid.cell_size))));
+    for (int s = 0; s <= steps; ++s) {
+      const auto cell = fine_index(a + (b - a) * (static_cast<double>(s) / steps));
+      for (int corner = 0; corner < 8; ++corner)
+        keys.fixed_vertices.push_back(grid_key(cell[0] + (corner & 1), cell[1] + ((corner >> 1) & 1),
+                                               cell[2] + ((corner >> 2) & 1)));
+    }
   }
-  for (auto& cells : contour_cells) sort_unique(cells);
+  for (auto& cells : keys.cells_by_level) sort_unique(cells);
+  sort_unique(keys.fixed_vertices);
+  return keys;
+}
+
+void merge_contour_keys(ContourKeys& keys, const ContourKeys& more) {
+  auto merge = [](std::vector<std::uint64_t>& into, const std::vector<std::uint64_t>& add) {
+    std::vector<std::uint64_t> merged;
+    merged.reserve(into.size() + add.size());
+    std::set_union(into.begin(), into.end(), add.begin(), add.end(), std::back_inserter(merged));
+    into = std::move(merged);
+  };
+  keys.cells_by_level.resize(std::max(keys.cells_by_level.size(), more.cells_by_level.size()));
+  for (std::size_t level = 0; level < more.cells_by_level.size(); ++level)
+    merge(keys.cells_by_level[level], more.cells_by_level[level]);
+  merge(keys.fixed_vertices, more.fixed_vertices);
+}
+
+SampledField sample_field(const Box3& box, int function_count, const BatchEvaluator& evaluate,
+                          const ContourKeys& contours, const std::vector<RegionSample>& region_samples,
+                          const OctreeOptions& options) {
+  SampledField field;
+  field.function_count = function_count;
+  const int depth = options.max_depth;
+  const int resolution = 1 << depth;
+  field.grid = make_grid(box, depth);
+  field.index = GridIndex(resolution);
+  Sampler sampler(field, evaluate);
+  const int start = std::min(options.start_depth, depth);
 
   // Coarse-to-fine refinement. Cells are given by their min corner in finest units.
   std::vector<std::array<int, 3>> cells;
@@ -244,7 +282,9 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
         if (mixed) field.surface_cells.push_back(grid_key(c[0], c[1], c[2]));
         continue;
       }
-      const bool has_contour = contains(contour_cells[static_cast<std::size_t>(level)],
+      const auto contour_level = static_cast<std::size_t>(level);
+      const bool has_contour = contour_level < contours.cells_by_level.size() &&
+                               contains(contours.cells_by_level[contour_level],
                                         grid_key(c[0] / step, c[1] / step, c[2] / step));
       if (!mixed && !has_contour) continue;
       const int half = step / 2;
@@ -256,28 +296,23 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
     cells = std::move(refined);
   }
 
-  close_band(field, sampler, field.surface_cells, resolution);
+  GridIndex scratch(resolution);
+  close_band(field, sampler, field.surface_cells, scratch, resolution);
 
-  if (options.smoothing_iterations > 0) smooth(field, sampler, contour_segments, options.smoothing_iterations);
-  snap_thin_regions(field, sampler, region_samples);
+  if (options.smoothing_iterations > 0)
+    smooth(field, sampler, contours.fixed_vertices, options.smoothing_iterations, scratch);
+  snap_thin_regions(field, sampler, region_samples, scratch);
   return field;
 }
 
 namespace {
 
-void smooth(SampledField& field, Sampler& sampler,
-            const std::vector<std::pair<Vec3, Vec3>>& contour_segments, int iterations) {
-  const Grid& grid = field.grid;
-  const int resolution = 1 << grid.depth;
+void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64_t>& fixed,
+            int iterations, GridIndex& scratch) {
+  const int resolution = 1 << field.grid.depth;
   const int function_count = field.function_count;
-  auto fine_index = [&](const Vec3& p) {
-    const Vec3 q = (p - grid.origin) / grid.cell_size;
-    return std::array<int, 3>{std::clamp(static_cast<int>(std::floor(q.x())), 0, resolution - 1),
-                              std::clamp(static_cast<int>(std::floor(q.y())), 0, resolution - 1),
-                              std::clamp(static_cast<int>(std::floor(q.z())), 0, resolution - 1)};
-  };
   Stopwatch smoothing_clock;
-  // Smoothing nodes: corners of surface cells. The bi-Laplacian stencil reaches two steps out.
+  // Smoothing nodes: corners of surface cells.
   std::vector<std::uint64_t> nodes;
   nodes.reserve(field.surface_cells.size() * 8);
   for (const std::uint64_t key : field.surface_cells) {
@@ -287,43 +322,31 @@ void smooth(SampledField& field, Sampler& sampler,
       nodes.push_back(grid_key(i + (corner & 1), j + ((corner >> 1) & 1), k + ((corner >> 2) & 1)));
   }
   sort_unique(nodes);
+  // Laplacian domain: the nodes and their six neighbours, numbered as they come (the sweeps do
+  // not depend on the order).
+  GridIndex& lap_index = scratch;
+  lap_index.clear();
+  std::vector<std::uint64_t> laplacian_nodes;
+  laplacian_nodes.reserve(nodes.size() * 2);
+  auto add_laplacian_node = [&](std::uint64_t key) {
+    if (lap_index.insert(key, static_cast<std::uint32_t>(laplacian_nodes.size()))) laplacian_nodes.push_back(key);
+  };
   for (const std::uint64_t key : nodes) {
     int i, j, k;
     grid_unkey(key, i, j, k);
-    for (int di = -2; di <= 2; ++di)
-      for (int dj = -2; dj <= 2; ++dj)
-        for (int dk = -2; dk <= 2; ++dk)
-          if (std::abs(di) + std::abs(dj) + std::abs(dk) <= 2) sampler.request(i + di, j + dj, k + dk);
+    add_laplacian_node(key);
+    for (const auto& d : kFaceNeighbours) add_laplacian_node(grid_key(i + d[0], j + d[1], k + d[2]));
+  }
+  // The Laplacian nodes and their neighbours: every vertex the bi-Laplacian of a node reads.
+  for (const std::uint64_t key : laplacian_nodes) {
+    int i, j, k;
+    grid_unkey(key, i, j, k);
+    sampler.request(i, j, k);
+    for (const auto& d : kFaceNeighbours) sampler.request(i + d[0], j + d[1], k + d[2]);
   }
   sampler.flush();
-  // Nodes of the cells the input contours pass through keep their interpolated values, so the
-  // surface still passes through the contours (Section 4.6).
-  std::vector<std::uint64_t> fixed;
-  for (const auto& [a, b] : contour_segments) {
-    const int steps = std::max(1, static_cast<int>(std::ceil((b - a).norm() / (0.5 * grid.cell_size))));
-    for (int s = 0; s <= steps; ++s) {
-      const auto idx = fine_index(a + (b - a) * (static_cast<double>(s) / steps));
-      for (int corner = 0; corner < 8; ++corner)
-        fixed.push_back(grid_key(idx[0] + (corner & 1), idx[1] + ((corner >> 1) & 1),
-                                 idx[2] + ((corner >> 2) & 1)));
-    }
-  }
-  sort_unique(fixed);
-  // Laplacian domain: the nodes and their six neighbours.
-  std::vector<std::uint64_t> laplacian_nodes(nodes);
-  laplacian_nodes.reserve(nodes.size() * 7);
-  for (const std::uint64_t key : nodes) {
-    int i, j, k;
-    grid_unkey(key, i, j, k);
-    for (const auto& d : kFaceNeighbours) laplacian_nodes.push_back(grid_key(i + d[0], j + d[1], k + d[2]));
-  }
-  sort_unique(laplacian_nodes);
   // Row indices resolved once, so the iterations are plain array sweeps.
   const std::size_t fc = static_cast<std::size_t>(function_count);
-  GridIndex lap_index;
-  lap_index.reserve(laplacian_nodes.size());
-  for (std::size_t n = 0; n < laplacian_nodes.size(); ++n)
-    lap_index.insert(laplacian_nodes[n], static_cast<std::uint32_t>(n));
   std::vector<std::uint32_t> lap_value_rows(laplacian_nodes.size() * 7);  // centre, 6 neighbours
   for_rows(laplacian_nodes.size(), [&](std::size_t n) {
     int i, j, k;
@@ -340,7 +363,7 @@ void smooth(SampledField& field, Sampler& sampler,
     int i, j, k;
     grid_unkey(nodes[n], i, j, k);
     node_value_rows[n] = field.index.at(nodes[n]);
-    node_fixed[n] = contains(fixed, nodes[n]);
+    node_fixed[n] = contains(fixed, nodes[n]);  // next to a contour (Section 4.6)
     node_lap_rows[n * 7] = lap_index.at(nodes[n]);
     for (std::size_t d = 0; d < 6; ++d)
       node_lap_rows[n * 7 + 1 + d] =
@@ -391,13 +414,12 @@ void smooth(SampledField& field, Sampler& sampler,
       seeds.push_back(grid_key(ci, cj, ck));
     }
   }
-  sort_unique(seeds);
-  close_band(field, sampler, std::move(seeds), resolution);
+  close_band(field, sampler, seeds, scratch, resolution);  // lap_index is done with
   field.smoothing_seconds = smoothing_clock.seconds();
 }
 
-void snap_thin_regions(SampledField& field, Sampler& sampler,
-                       const std::vector<RegionSample>& samples) {
+void snap_thin_regions(SampledField& field, Sampler& sampler, const std::vector<RegionSample>& samples,
+                       GridIndex& scratch) {
   // A region narrower than the finest cells may have no grid vertex of its label, and would
   // vanish from the mesh; its nearest grid vertices take the slice's own value (as on the face).
   const Grid& grid = field.grid;
@@ -425,10 +447,7 @@ void snap_thin_regions(SampledField& field, Sampler& sampler,
       seeds.push_back(grid_key(i - (corner & 1), j - ((corner >> 1) & 1), k - ((corner >> 2) & 1)));
   }
   if (seeds.empty()) return;
-  seeds.insert(seeds.end(), field.surface_cells.begin(), field.surface_cells.end());
-  std::sort(seeds.begin(), seeds.end());
-  seeds.erase(std::unique(seeds.begin(), seeds.end()), seeds.end());
-  close_band(field, sampler, std::move(seeds), resolution);
+  close_band(field, sampler, seeds, scratch, resolution, field.surface_cells);
 }
 
 }  // namespace

@@ -76,14 +76,30 @@ struct RegionSample {
 /// The finest grid of an octree of `depth` levels over `box`.
 Grid make_grid(const Box3& box, int depth);
 
-/// Samples the field over `box` (everything outside it is the outside label). `contour_points`
-/// (world, mm) refine the octree and fix the smoothing next to the contours; contour_segments
-/// (pairs of points) mark the cells whose corners keep their interpolated values;
-/// `region_samples` snap thin regions to their nearest grid vertices after smoothing.
+/// Where the input contours lie on one grid. It depends on each slice alone, so an online engine
+/// computes it for the new slices only and merges it into what it has (the field does not).
+struct ContourKeys {
+  /// Per level (index = level, from the start depth up): keys of the cells, at that level's
+  /// indices, holding a contour vertex; they are refined. Sorted, unique.
+  std::vector<std::vector<std::uint64_t>> cells_by_level;
+  /// Corners of the finest cells the contour segments pass through: they keep their
+  /// interpolated values in the smoothing (Section 4.6). Sorted, unique.
+  std::vector<std::uint64_t> fixed_vertices;
+};
+
+/// The contour keys of `segments` (pairs of consecutive contour vertices, world mm; the first
+/// point of each is a contour vertex) on the finest grid of `options` over `grid`.
+ContourKeys contour_keys(const Grid& grid, const OctreeOptions& options,
+                         const std::vector<std::pair<Vec3, Vec3>>& segments);
+
+/// Adds `more` to `keys` (both sorted, unique; the result too).
+void merge_contour_keys(ContourKeys& keys, const ContourKeys& more);
+
+/// Samples the field over `box` (everything outside it is the outside label). `contours` refine
+/// the octree and fix the smoothing next to the contours (see ContourKeys); `region_samples`
+/// snap thin regions to their nearest grid vertices after smoothing.
 SampledField sample_field(const Box3& box, int function_count, const BatchEvaluator& evaluate,
-                          const std::vector<Vec3>& contour_points,
-                          const std::vector<std::pair<Vec3, Vec3>>& contour_segments,
-                          const std::vector<RegionSample>& region_samples,
+                          const ContourKeys& contours, const std::vector<RegionSample>& region_samples,
                           const OctreeOptions& options);
 
 /// The default octree depth: the coarsest whose finest cells are at most 1/128 of the box diagonal.

@@ -25,41 +25,51 @@ namespace {
 // Two slice planes closer than this (relative, as the slice-set validation) are the same plane.
 constexpr double kCoincidentTolerance = 1e-9;
 
-// Points of every region too thin for grid cells of `cell_size`: its interior point and a
-// lattice of half the cell size over it (see snap_thin_regions).
-std::vector<RegionSample> thin_region_samples(const std::vector<PreparedSlice>& slices, double cell_size) {
-  std::vector<RegionSample> samples;
-  for (const PreparedSlice& slice : slices) {
-    for (std::size_t m = 1; m < slice.rings_by_material.size(); ++m) {
-      const std::vector<Ring2>& rings = slice.rings_by_material[m];
-      auto inside = [&](const Vec2& p) {
-        int winding = 0;
-        for (const Ring2& r : rings) winding += winding_number(r.data(), r.size(), p);
-        return winding > 0;
-      };
-      auto add = [&](const Vec2& p) {
-        samples.push_back({slice.origin + p.x() * slice.u + p.y() * slice.v, static_cast<int>(m)});
-      };
-      for (const Ring2& ring : rings) {
-        const double area = signed_area(ring);
-        if (area <= 0.0) continue;  // holes
-        double perimeter = 0.0;
-        Vec2 lo = ring[0], hi = ring[0];
-        for (std::size_t i = 0; i < ring.size(); ++i) {
-          perimeter += (ring[(i + 1) % ring.size()] - ring[i]).norm();
-          lo = lo.cwiseMin(ring[i]);
-          hi = hi.cwiseMax(ring[i]);
-        }
-        if (2.0 * area / perimeter >= 2.0 * cell_size) continue;  // wide enough for the grid
-        if (const auto p = interior_point(ring); p && inside(*p)) add(*p);
-        const double step = 0.5 * cell_size;
-        for (double x = lo.x() + 0.5 * step; x < hi.x(); x += step)
-          for (double y = lo.y() + 0.5 * step; y < hi.y(); y += step)
-            if (inside(Vec2(x, y))) add(Vec2(x, y));
+// Appends the points of every region of `slice` too thin for grid cells of `cell_size`: its
+// interior point and a lattice of half the cell size over it (see snap_thin_regions).
+void add_thin_region_samples(const PreparedSlice& slice, double cell_size, std::vector<RegionSample>& samples) {
+  for (std::size_t m = 1; m < slice.rings_by_material.size(); ++m) {
+    const std::vector<Ring2>& rings = slice.rings_by_material[m];
+    auto inside = [&](const Vec2& p) {
+      int winding = 0;
+      for (const Ring2& r : rings) winding += winding_number(r.data(), r.size(), p);
+      return winding > 0;
+    };
+    auto add = [&](const Vec2& p) {
+      samples.push_back({slice.origin + p.x() * slice.u + p.y() * slice.v, static_cast<int>(m)});
+    };
+    for (const Ring2& ring : rings) {
+      const double area = signed_area(ring);
+      if (area <= 0.0) continue;  // holes
+      double perimeter = 0.0;
+      Vec2 lo = ring[0], hi = ring[0];
+      for (std::size_t i = 0; i < ring.size(); ++i) {
+        perimeter += (ring[(i + 1) % ring.size()] - ring[i]).norm();
+        lo = lo.cwiseMin(ring[i]);
+        hi = hi.cwiseMax(ring[i]);
       }
+      if (2.0 * area / perimeter >= 2.0 * cell_size) continue;  // wide enough for the grid
+      if (const auto p = interior_point(ring); p && inside(*p)) add(*p);
+      const double step = 0.5 * cell_size;
+      for (double x = lo.x() + 0.5 * step; x < hi.x(); x += step)
+        for (double y = lo.y() + 0.5 * step; y < hi.y(); y += step)
+          if (inside(Vec2(x, y))) add(Vec2(x, y));
     }
   }
-  return samples;
+}
+
+// The contour segments of a slice (world mm), ring by ring.
+std::vector<std::pair<Vec3, Vec3>> contour_segments(const PreparedSlice& slice) {
+  std::vector<std::pair<Vec3, Vec3>> segments;
+  for (const auto& rings : slice.rings_by_material)
+    for (const Ring2& ring : rings)
+      for (std::size_t i = 0; i < ring.size(); ++i) {
+        const Vec2& p = ring[i];
+        const Vec2& q = ring[(i + 1) % ring.size()];
+        segments.emplace_back(slice.origin + p.x() * slice.u + p.y() * slice.v,
+                              slice.origin + q.x() * slice.u + q.y() * slice.v);
+      }
+  return segments;
 }
 
 bool same_slice(const LabeledSlice& a, const LabeledSlice& b) {
@@ -83,7 +93,8 @@ bool same_plane(const LabeledSlice& a, const LabeledSlice& b, double scale) {
 // unchanged: the field inside a cell depends only on that cell's faces and their images.
 class ValueCache {
  public:
-  explicit ValueCache(int function_count) : function_count_(static_cast<std::size_t>(function_count)) {}
+  ValueCache(int function_count, int resolution)
+      : function_count_(static_cast<std::size_t>(function_count)), index_(resolution) {}
   std::size_t function_count() const { return function_count_; }
   /// The cached row of `key` if its cell has not changed since it was evaluated.
   const double* find(std::uint64_t key, const std::vector<std::uint32_t>& cell_generation) const {
@@ -140,6 +151,12 @@ struct Reconstructor::State {
   std::unique_ptr<ValueCache> cache;
   std::vector<std::uint32_t> cell_generation;  // update count at which each cell last changed
   std::uint32_t generation = 0;
+  // What the slices alone decide on the grid, for field->slices()[0, contour_slices): merged
+  // per update for the new slices only.
+  OctreeOptions octree;
+  ContourKeys contours;
+  std::vector<RegionSample> region_samples;
+  std::size_t contour_slices = 0;
   SampledField sampled;
   MeshSet mesh;
   ReconstructionStats totals;
@@ -201,7 +218,13 @@ struct Reconstructor::State {
     for (std::size_t c = 0; c < all_cells.size(); ++c) all_cells[c] = static_cast<int>(c);
     field->refresh(all_cells);
     stats.face_images_s += clock.seconds();
-    cache = std::make_unique<ValueCache>(field->function_count());
+    cache = std::make_unique<ValueCache>(field->function_count(), 1 << depth);
+    octree = OctreeOptions{};
+    octree.max_depth = depth;
+    octree.smoothing_iterations = options.engine.smoothing_iterations;
+    contours = ContourKeys{};
+    region_samples.clear();
+    contour_slices = 0;
     ++generation;
     cell_generation.assign(arrangement->cell_count(), generation);
     built = true;
@@ -342,17 +365,12 @@ UpdateStats Reconstructor::update() {
 
   // Contour vertices refine the octree; contour segments fix the smoothing next to them.
   const std::vector<PreparedSlice>& slices = s.field->slices();
-  std::vector<Vec3> contour_points;
-  std::vector<std::pair<Vec3, Vec3>> contour_segments;
-  for (const PreparedSlice& slice : slices)
-    for (const auto& rings : slice.rings_by_material)
-      for (const Ring2& ring : rings)
-        for (std::size_t i = 0; i < ring.size(); ++i) {
-          const Vec3 a = slice.origin + ring[i].x() * slice.u + ring[i].y() * slice.v;
-          const Vec2& q = ring[(i + 1) % ring.size()];
-          contour_points.push_back(a);
-          contour_segments.emplace_back(a, slice.origin + q.x() * slice.u + q.y() * slice.v);
-        }
+  const Grid grid = make_grid(s.box, s.octree.max_depth);
+  for (; s.contour_slices < slices.size(); ++s.contour_slices) {
+    const PreparedSlice& slice = slices[s.contour_slices];
+    merge_contour_keys(s.contours, contour_keys(grid, s.octree, contour_segments(slice)));
+    add_thin_region_samples(slice, grid.cell_size, s.region_samples);
+  }
 
   tbb::task_arena arena(s.options.engine.threads > 0 ? s.options.engine.threads
                                                      : tbb::task_arena::automatic);
@@ -382,16 +400,11 @@ UpdateStats Reconstructor::update() {
       cache.store(keys[missing[m]], cells[m], s.generation, values + missing[m] * fc);
     evaluations += missing.size();
   };
-  OctreeOptions octree;
-  octree.max_depth = s.depth;
-  octree.smoothing_iterations = s.options.engine.smoothing_iterations;
-  const std::vector<RegionSample> samples =
-      thin_region_samples(slices, make_grid(s.box, octree.max_depth).cell_size);
   Stopwatch clock;
   // In the arena: the octree's parallel loops use the same threads as the evaluation.
   arena.execute([&] {
-    s.sampled = sample_field(s.box, field.function_count(), evaluate, contour_points,
-                             contour_segments, samples, octree);
+    s.sampled = sample_field(s.box, field.function_count(), evaluate, s.contours, s.region_samples,
+                             s.octree);
   });
   stats.smoothing_s = s.sampled.smoothing_seconds;
   stats.field_s = clock.seconds() - stats.smoothing_s;
