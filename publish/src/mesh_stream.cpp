@@ -405,18 +405,6 @@ StatusReport decode_status(const json& header) {
 
 }  // namespace
 
-std::string_view to_string(ScanState state) {
-  switch (state) {
-    case ScanState::kScanning:
-      return "scanning";
-    case ScanState::kIdle:
-      return "idle";
-    case ScanState::kError:
-      return "error";
-  }
-  return "error";
-}
-
 std::string StreamMessage::topic() const {
   struct {
     std::string operator()(const MeshUpdate& m) const {

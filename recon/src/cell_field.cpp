@@ -395,16 +395,6 @@ void CellField::build_face_image(int face_id) {
   image.fully_unknown = unknown_area >= (1.0 - 1e-9) * std::abs(signed_area(polygon));
 }
 
-std::size_t CellField::cell_edge_count(int cell) const {
-  std::size_t count = 0;
-  for (const int f : arrangement_.cell(cell).faces) {
-    const FaceImage& image = images_[static_cast<std::size_t>(f)];
-    count += image.polygon_count;
-    for (const FaceImage::Part& part : image.parts) count += part.count;
-  }
-  return count;
-}
-
 int CellField::evaluate(const Vec3& p, double* out) const {
   const int n = function_count();
   const std::size_t fc = static_cast<std::size_t>(n);

@@ -85,8 +85,6 @@ class CellField {
   /// f_l(p) for l = 0..K into `out` (function_count() doubles), each in [-1, 1]; outside the
   /// box (and on it) the outside label holds. Returns the cell used (-1 outside the box).
   int evaluate(const Vec3& p, double* out) const;
-  /// Total number of boundary edges the faces of `cell` carry (the cost of one evaluation).
-  std::size_t cell_edge_count(int cell) const;
   /// Unknown-region statistics: triangles, cell groups, completion seconds.
   std::size_t unknown_triangle_count() const { return triangles_.size(); }
   std::size_t group_count() const { return group_count_; }

@@ -21,9 +21,7 @@ publish::StatusReport report_of(const ScanStatus& status) {
   report.smoothing_ms = 1e3 * status.last_update.smoothing_s;
   report.mesh_ms = 1e3 * status.last_update.mesh_s;
   report.total_ms = 1e3 * status.last_update.total_s;
-  report.state = status.state == ScanState::kScanning
-                     ? publish::ScanState::kScanning
-                     : (status.state == ScanState::kIdle ? publish::ScanState::kIdle : publish::ScanState::kError);
+  report.state = status.state;
   report.message = status.message;
   return report;
 }

@@ -5,18 +5,6 @@
 
 namespace sonoshape::scan {
 
-const char* to_string(ScanState state) {
-  switch (state) {
-    case ScanState::kScanning:
-      return "scanning";
-    case ScanState::kIdle:
-      return "idle";
-    case ScanState::kError:
-      return "error";
-  }
-  return "unknown";
-}
-
 const char* to_string(StopReason reason) {
   switch (reason) {
     case StopReason::kSourceEnded:

@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "sonoshape/core/scan_state.hpp"
 #include "sonoshape/recon/reconstruct.hpp"
 
 namespace sonoshape::scan {
@@ -44,14 +45,8 @@ struct ScanCounters {
 };
 
 /// What a status report says about the scan (mesh-stream.md `state`).
-enum class ScanState {
-  kScanning,  ///< frames are coming in
-  kIdle,      ///< no source is delivering (ended); the meshes are final
-  kError,     ///< something failed (see the message); the scan goes on with what it has
-};
-
-/// "scanning", "idle", "error".
-const char* to_string(ScanState state);
+using sonoshape::ScanState;
+using sonoshape::to_string;
 
 /// A status report for sinks (the `status` message of the mesh stream).
 struct ScanStatus {

@@ -11,6 +11,7 @@
 
 #include "sonoshape/core/geometry.hpp"
 #include "sonoshape/core/mesh.hpp"
+#include "sonoshape/core/scan_state.hpp"
 #include "sonoshape/core/slice.hpp"
 #include "sonoshape/core/status.hpp"
 
@@ -35,11 +36,9 @@ constexpr std::string_view kSnapshotRequest = "snapshot";
 /// One multipart message: frame 0 the topic, frame 1 the JSON header, then binary frames.
 using Frames = std::vector<std::string>;
 
-/// What the scan is doing, as a status message says it.
-enum class ScanState { kScanning, kIdle, kError };
-
-/// "scanning", "idle" or "error".
-std::string_view to_string(ScanState state);
+/// What the scan is doing, as a status message says it (one enum with the scan pipeline).
+using sonoshape::ScanState;
+using sonoshape::to_string;
 
 /// Body of a `mesh.<label>` message: the whole current surface of one material.
 struct MeshUpdate {
