@@ -79,7 +79,6 @@ std::vector<Vec3> f32_to_vec3s(const std::string& bytes) {
 // ---------------------------------------------------------------------------------------------
 // Encoding
 
-std::string state_text(ScanState state) { return std::string(to_string(state)); }
 
 ordered_json vec3_json(const Vec3& v) { return ordered_json::array({v.x(), v.y(), v.z()}); }
 
@@ -182,7 +181,7 @@ Result<Frames> encode_status(const StreamMessage& message, const StatusReport& s
   header["smoothing_ms"] = status.smoothing_ms;
   header["mesh_ms"] = status.mesh_ms;
   header["total_ms"] = status.total_ms;
-  header["state"] = state_text(status.state);
+  header["state"] = std::string(to_string(status.state));
   if (!status.message.empty()) header["message"] = status.message;
   return Frames{std::string(kStatusTopic), header.dump()};
 }

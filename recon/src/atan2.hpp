@@ -1,10 +1,10 @@
 #pragma once
 // atan2 for the mean-value integrals, which spend most of their time in it (one call per edge
-// per evaluation). Why not std::atan2: glibc's is correctly rounded and pays for it (about
-// 25 ns a call here); this one is the rational approximation of the Cephes library (S. L.
-// Moshier, "Methods and Programs for Mathematical Functions", 1989; the same coefficients Go's
-// math.Atan uses), within 1 ulp of std::atan2 (atan2_test.cpp), inlined and about 1.6 times
-// faster.
+// per evaluation). Why not std::atan2: glibc's is correctly rounded and pays for it; this one is
+// the rational approximation of the Cephes library (S. L. Moshier, "Methods and Programs for
+// Mathematical Functions", 1989; the same coefficients Go's math.Atan uses), within 1 ulp of
+// std::atan2 (atan2_test.cpp) and inlined: 21 ns against 7 ns a call on this project's machine
+// (build/bench/sonoshape_atan2_bench).
 #include <cmath>
 
 namespace sonoshape::recon {
