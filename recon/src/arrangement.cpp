@@ -342,6 +342,13 @@ std::vector<int> Arrangement::insert_plane(const Vec3& normal, double offset, in
   return changed;
 }
 
+std::vector<int> Arrangement::faces_split_by_last_plane() const {
+  std::vector<int> faces;
+  faces.reserve(face_split_cache_.size());
+  for (const auto& entry : face_split_cache_) faces.push_back(entry.first);
+  return faces;
+}
+
 int Arrangement::locate(const Vec3& p) const {
   int node = 0;
   while (bsp_[static_cast<std::size_t>(node)].plane >= 0) {

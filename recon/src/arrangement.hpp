@@ -55,6 +55,9 @@ class Arrangement {
   /// that misses the interior of the box changes nothing. Throws GeometryError if the plane
   /// coincides with a plane already inserted.
   std::vector<int> insert_plane(const Vec3& normal, double offset, int slice);
+  /// The faces the last insert_plane split, by their old ids (each keeps its negative part
+  /// under that id; the positive parts are new faces). Every other face kept its polygon.
+  std::vector<int> faces_split_by_last_plane() const;
 
   /// The cell containing p (p inside the box; points on a plane may go to either side).
   int locate(const Vec3& p) const;

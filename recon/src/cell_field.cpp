@@ -123,9 +123,7 @@ CellField::CellField(const Arrangement& arrangement, const std::vector<PreparedS
                      int material_count)
     : CellField(arrangement, material_count) {
   slices_ = slices;
-  std::vector<int> all_cells(arrangement.cell_count());
-  for (std::size_t c = 0; c < all_cells.size(); ++c) all_cells[c] = static_cast<int>(c);
-  refresh(all_cells);
+  refresh({});  // every face is new
 }
 
 void CellField::add_slice(PreparedSlice slice) { slices_.push_back(std::move(slice)); }
@@ -152,14 +150,13 @@ void CellField::update_frames() {
   }
 }
 
-std::vector<int> CellField::refresh(const std::vector<int>& changed_cells) {
+std::vector<int> CellField::refresh(const std::vector<int>& split_faces) {
   update_frames();
   const std::size_t old_face_count = images_.size();
   images_.resize(arrangement_.face_count());
   std::vector<char> rebuilt(images_.size(), 0);
   for (std::size_t f = old_face_count; f < images_.size(); ++f) rebuilt[f] = 1;
-  for (const int c : changed_cells)
-    for (const int f : arrangement_.cell(c).faces) rebuilt[static_cast<std::size_t>(f)] = 1;
+  for (const int f : split_faces) rebuilt[static_cast<std::size_t>(f)] = 1;
   image_generations_.resize(images_.size(), 0);
   for (std::size_t f = 0; f < images_.size(); ++f)
     if (rebuilt[f]) {

@@ -75,10 +75,12 @@ class CellField {
   /// Appends a slice: its index is the number of slices before the call.
   void add_slice(PreparedSlice slice);
   /// Brings the images up to date after planes were inserted into the arrangement (online
-  /// engine): rebuilds the images of every face of `changed_cells` (created or split cells,
-  /// which hold every new or split face) and redoes the completion of the unknown regions.
-  /// Returns the other cells whose faces' completed values changed: their field changed too.
-  std::vector<int> refresh(const std::vector<int>& changed_cells);
+  /// engine): builds the images of the faces created since the last refresh, rebuilds those of
+  /// `split_faces` (older faces whose polygon the new planes cut; an image depends on its face's
+  /// polygon and slice only, so the other faces keep theirs) and redoes the completion of the
+  /// unknown regions. Returns the cells whose faces' completed values changed: their field
+  /// changed too.
+  std::vector<int> refresh(const std::vector<int>& split_faces);
 
   /// Number of functions: materials + 1 (index 0 is the outside).
   int function_count() const { return material_count_ + 1; }

@@ -22,10 +22,20 @@ class GridIndex {
   /// Direct table for the vertices of a grid of `resolution` cells per axis (stencils included,
   /// see kDirectPadding) when it has at most kMaxDirectSlots slots.
   explicit GridIndex(int resolution) : GridIndex() {
-    const std::size_t side = static_cast<std::size_t>(resolution) + 1 + 2 * kDirectPadding;
-    if (side * side * side > kMaxDirectSlots) return;
-    direct_side_ = side;
-    direct_.assign(side * side * side, kNone);
+    direct_side_ = direct_side_for(resolution);
+    direct_.assign(direct_side_ * direct_side_ * direct_side_, kNone);
+  }
+
+  /// Empties the index for a grid of `resolution` cells per axis, keeping its tables when they
+  /// were made for that resolution (a new direct table costs a 9 MiB allocation and fill at the
+  /// default depth: more than an online update's octree passes).
+  void reset(int resolution) {
+    const std::size_t side = direct_side_for(resolution);
+    if (side == direct_side_ && direct_.size() == side * side * side && !keys_.empty()) {
+      clear();
+      return;
+    }
+    *this = GridIndex(resolution);
   }
 
   std::size_t size() const { return size_; }
@@ -88,6 +98,11 @@ class GridIndex {
   // 16 MiB of rows: depth 7 (the default) fits, depth 8 would take 70 MiB per table.
   static constexpr std::size_t kMaxDirectSlots = std::size_t{1} << 22;
 
+  // The side of the direct table for a grid of `resolution` cells per axis; 0: too large for one.
+  static std::size_t direct_side_for(int resolution) {
+    const std::size_t side = static_cast<std::size_t>(resolution) + 1 + 2 * kDirectPadding;
+    return side * side * side > kMaxDirectSlots ? 0 : side;
+  }
   // The slot of `key` in the direct table, or kNoSlot when there is none (no table, or the
   // vertex lies outside it). Keys are grid_key()'s: 21 bits per axis, biased by 2^20.
   std::size_t direct_slot(std::uint64_t key) const {

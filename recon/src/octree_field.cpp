@@ -20,8 +20,11 @@ constexpr std::array<std::array<int, 3>, 6> kFaceNeighbours{
 
 class Sampler {
  public:
-  Sampler(SampledField& field, const BatchEvaluator& evaluate)
-      : field_(field), evaluate_(evaluate), pending_keys_(1 << field.grid.depth) {}
+  /// `pending_keys` is scratch space, emptied here.
+  Sampler(SampledField& field, const BatchEvaluator& evaluate, GridIndex& pending_keys)
+      : field_(field), evaluate_(evaluate), pending_keys_(pending_keys) {
+    pending_keys_.reset(1 << field.grid.depth);
+  }
 
   /// Queues a vertex for evaluation unless it has a value or is queued.
   void request(int i, int j, int k) {
@@ -55,7 +58,7 @@ class Sampler {
   SampledField& field_;
   const BatchEvaluator& evaluate_;
   std::vector<std::uint64_t> pending_;
-  GridIndex pending_keys_;  // the keys of pending_, for de-duplication
+  GridIndex& pending_keys_;  // the keys of pending_, for de-duplication
 };
 
 // Sorts and de-duplicates keys: the sets of the octree stages are built in bulk, then queried,
@@ -246,13 +249,21 @@ void merge_contour_keys(ContourKeys& keys, const ContourKeys& more) {
 SampledField sample_field(const Box3& box, int function_count, const BatchEvaluator& evaluate,
                           const ContourKeys& contours, const std::vector<RegionSample>& region_samples,
                           const OctreeOptions& options) {
+  OctreeWorkspace workspace;
+  return sample_field(box, function_count, evaluate, contours, region_samples, options, workspace);
+}
+
+SampledField sample_field(const Box3& box, int function_count, const BatchEvaluator& evaluate,
+                          const ContourKeys& contours, const std::vector<RegionSample>& region_samples,
+                          const OctreeOptions& options, OctreeWorkspace& workspace) {
   SampledField field;
   field.function_count = function_count;
   const int depth = options.max_depth;
   const int resolution = 1 << depth;
   field.grid = make_grid(box, depth);
-  field.index = GridIndex(resolution);
-  Sampler sampler(field, evaluate);
+  field.index = std::move(workspace.field_index);
+  field.index.reset(resolution);
+  Sampler sampler(field, evaluate, workspace.pending);
   const int start = std::min(options.start_depth, depth);
 
   // Coarse-to-fine refinement. Cells are given by their min corner in finest units.
@@ -296,7 +307,8 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
     cells = std::move(refined);
   }
 
-  GridIndex scratch(resolution);
+  GridIndex& scratch = workspace.scratch;
+  scratch.reset(resolution);
   close_band(field, sampler, field.surface_cells, scratch, resolution);
 
   if (options.smoothing_iterations > 0)

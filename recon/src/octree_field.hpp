@@ -95,9 +95,21 @@ ContourKeys contour_keys(const Grid& grid, const OctreeOptions& options,
 /// Adds `more` to `keys` (both sorted, unique; the result too).
 void merge_contour_keys(ContourKeys& keys, const ContourKeys& more);
 
+/// The lookup tables sample_field fills at every call. At the default depth each is a direct
+/// table of 9 MiB whose allocation and fill cost more than an online update's octree passes: an
+/// online engine keeps one workspace across updates (one-shot calls make their own).
+struct OctreeWorkspace {
+  GridIndex pending;  ///< vertices queued for evaluation
+  GridIndex scratch;  ///< band closure and smoothing
+  GridIndex field_index;  ///< a previous SampledField::index, reused for the next field
+};
+
 /// Samples the field over `box` (everything outside it is the outside label). `contours` refine
 /// the octree and fix the smoothing next to the contours (see ContourKeys); `region_samples`
 /// snap thin regions to their nearest grid vertices after smoothing.
+SampledField sample_field(const Box3& box, int function_count, const BatchEvaluator& evaluate,
+                          const ContourKeys& contours, const std::vector<RegionSample>& region_samples,
+                          const OctreeOptions& options, OctreeWorkspace& workspace);
 SampledField sample_field(const Box3& box, int function_count, const BatchEvaluator& evaluate,
                           const ContourKeys& contours, const std::vector<RegionSample>& region_samples,
                           const OctreeOptions& options);

@@ -158,6 +158,7 @@ struct Reconstructor::State {
   std::vector<RegionSample> region_samples;
   std::size_t contour_slices = 0;
   SampledField sampled;
+  OctreeWorkspace octree_workspace;  // kept across updates (see OctreeWorkspace)
   MeshSet mesh;
   ReconstructionStats totals;
 
@@ -185,14 +186,17 @@ struct Reconstructor::State {
   }
 
   // Inserts one entry's plane (prepared against the current box and materials); returns the
-  // cells it created or split.
-  std::vector<int> insert(const Entry& entry) {
+  // cells it created or split and adds the older faces it split to `split_faces`.
+  std::vector<int> insert(const Entry& entry, std::vector<int>& split_faces) {
     const std::size_t index = field->slices().size();
     PreparedSlice prepared = prepare_slice(entry.slice, index, material_ids, box);
     const Vec3 normal = prepared.u.cross(prepared.v);
     const double offset = -normal.dot(prepared.origin);
     field->add_slice(std::move(prepared));
-    return arrangement->insert_plane(normal, offset, static_cast<int>(index));
+    std::vector<int> cells = arrangement->insert_plane(normal, offset, static_cast<int>(index));
+    const std::vector<int> split = arrangement->faces_split_by_last_plane();
+    split_faces.insert(split_faces.end(), split.begin(), split.end());
+    return cells;
   }
 
   // Rebuilds everything for `list` (first update, removals, a grown box, a new material).
@@ -207,16 +211,15 @@ struct Reconstructor::State {
     {
       Progress progress("arrangement", list.size());
       std::size_t done = 0;
+      std::vector<int> split_faces;  // all faces are new to the field below
       for (const Entry& e : list) {
-        if (!e.duplicate) insert(e);
+        if (!e.duplicate) insert(e, split_faces);
         progress.update(++done);
       }
     }
     stats.arrangement_s += clock.seconds();
     clock.reset();
-    std::vector<int> all_cells(arrangement->cell_count());
-    for (std::size_t c = 0; c < all_cells.size(); ++c) all_cells[c] = static_cast<int>(c);
-    field->refresh(all_cells);
+    field->refresh({});
     stats.face_images_s += clock.seconds();
     cache = std::make_unique<ValueCache>(field->function_count(), 1 << depth);
     octree = OctreeOptions{};
@@ -320,17 +323,19 @@ UpdateStats Reconstructor::update() {
       out.cells_changed = s.arrangement->cell_count();
     } else {
       Stopwatch clock;
-      std::vector<int> changed;
+      std::vector<int> changed, split_faces;
       for (std::size_t k = s.entries.size(); k < next.size(); ++k) {
         if (next[k].duplicate) continue;
-        const std::vector<int> cells = s.insert(next[k]);
+        const std::vector<int> cells = s.insert(next[k], split_faces);
         changed.insert(changed.end(), cells.begin(), cells.end());
       }
       std::sort(changed.begin(), changed.end());
       changed.erase(std::unique(changed.begin(), changed.end()), changed.end());
       stats.arrangement_s = clock.seconds();
       clock.reset();
-      const std::vector<int> completion_changed = s.field->refresh(changed);
+      std::sort(split_faces.begin(), split_faces.end());
+      split_faces.erase(std::unique(split_faces.begin(), split_faces.end()), split_faces.end());
+      const std::vector<int> completion_changed = s.field->refresh(split_faces);
       stats.face_images_s = clock.seconds();
       ++s.generation;
       s.cell_generation.resize(s.arrangement->cell_count(), s.generation);
@@ -402,9 +407,10 @@ UpdateStats Reconstructor::update() {
   };
   Stopwatch clock;
   // In the arena: the octree's parallel loops use the same threads as the evaluation.
+  s.octree_workspace.field_index = std::move(s.sampled.index);
   arena.execute([&] {
     s.sampled = sample_field(s.box, field.function_count(), evaluate, s.contours, s.region_samples,
-                             s.octree);
+                             s.octree, s.octree_workspace);
   });
   stats.smoothing_s = s.sampled.smoothing_seconds;
   stats.field_s = clock.seconds() - stats.smoothing_s;

@@ -1,6 +1,7 @@
 // The arrangement must stay a consistent cell complex on generic and degenerate planes.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <map>
 #include <random>
 
@@ -90,6 +91,27 @@ TEST(Arrangement, RandomPlanesGiveClosedCellsFillingTheBox) {
       const ArrangementFace& face = arr.face(f);
       const double s = arr.plane(face.plane).signed_distance(p);
       EXPECT_GE(face.cell_positive == c ? s : -s, -1e-12);
+    }
+  }
+}
+
+TEST(Arrangement, ReportsTheFacesANewPlaneSplits) {
+  // The online engine rebuilds the images of these faces only: every other older face must keep
+  // its polygon (vertex ids and plane).
+  std::mt19937_64 rng(11);
+  std::normal_distribution<double> gauss;
+  std::uniform_real_distribution<double> uniform(-0.8, 0.8);
+  Arrangement arr(kBox);
+  for (int i = 0; i < 10; ++i) {
+    std::vector<std::vector<int>> before;
+    for (std::size_t f = 0; f < arr.face_count(); ++f) before.push_back(arr.face(static_cast<int>(f)).vertices);
+    const Vec3 n(gauss(rng), gauss(rng), gauss(rng));
+    arr.insert_plane(n, -n.dot(Vec3(uniform(rng), uniform(rng), uniform(rng))), i);
+    const std::vector<int> split = arr.faces_split_by_last_plane();
+    if (i > 0) EXPECT_FALSE(split.empty());
+    for (std::size_t f = 0; f < before.size(); ++f) {
+      const bool listed = std::find(split.begin(), split.end(), static_cast<int>(f)) != split.end();
+      EXPECT_EQ(listed, arr.face(static_cast<int>(f)).vertices != before[f]) << "plane " << i << ", face " << f;
     }
   }
 }
