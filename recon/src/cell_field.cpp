@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstring>
 #include <limits>
 
 #include "mean_value.hpp"
@@ -169,22 +168,21 @@ std::vector<int> CellField::refresh(const std::vector<int>& split_faces) {
   bool any_unknown = false;
   for (const PreparedSlice& s : slices_) any_unknown |= !s.unknown.empty();
   if (any_unknown) {
-    // The completion is redone as a whole; the cells on both sides of a face whose completed
-    // triangles changed must be evaluated again (an unchanged face of a split cell counts too:
-    // its other cell is not in `changed_cells`).
-    std::vector<std::uint64_t> old_hashes = completion_hashes();
+    // Slices whose inputs changed are completed again (build_unknown_images); the cells on both
+    // sides of a face whose completed triangles changed must be evaluated again (an unchanged
+    // face of a split cell counts too: its other cell is not in the arrangement's zone).
+    std::vector<std::uint64_t> old_hashes = std::move(face_completion_hashes_);
     old_hashes.resize(images_.size(), 0);
     triangles_.clear();
     corner_values_.clear();
-    triangle_nodes_.clear();
-    triangle_moments_.clear();
-    for (FaceImage& image : images_)
-      image.triangle_begin = image.triangle_count = image.triangle_tree_root = image.triangle_tree_count = 0;
+    for (FaceImage& image : images_) {
+      image.triangle_begin = image.triangle_count = 0;
+      image.triangle_tree = nullptr;
+      image.triangle_tree_moments = nullptr;
+    }
     build_unknown_images();
-    build_triangle_trees();
-    const std::vector<std::uint64_t> new_hashes = completion_hashes();
     for (std::size_t f = 0; f < old_face_count; ++f) {
-      if (old_hashes[f] == new_hashes[f]) continue;
+      if (old_hashes[f] == face_completion_hashes_[f]) continue;
       const ArrangementFace& face = arrangement_.face(static_cast<int>(f));
       if (face.cell_positive >= 0) completion_changed.push_back(face.cell_positive);
       if (face.cell_negative >= 0) completion_changed.push_back(face.cell_negative);
@@ -195,53 +193,6 @@ std::vector<int> CellField::refresh(const std::vector<int>& split_faces) {
   }
   compact_points();
   return completion_changed;
-}
-
-void CellField::build_triangle_trees() {
-  Stopwatch clock;
-  const std::size_t fc = static_cast<std::size_t>(function_count());
-  for (FaceImage& image : images_) {
-    if (image.triangle_count < kTriangleTreeMinTriangles) continue;
-    const std::size_t before = triangle_nodes_.size();
-    image.triangle_tree_root = build_triangle_tree(
-        triangles_.data() + image.triangle_begin, corner_values_.data() + image.triangle_begin * 3 * fc,
-        image.triangle_count, function_count(), triangle_nodes_, triangle_moments_);
-    image.triangle_tree_count = static_cast<std::uint32_t>(triangle_nodes_.size() - before);
-  }
-  completion_seconds_ += clock.seconds();
-}
-
-std::vector<std::uint64_t> CellField::completion_hashes() const {
-  const std::size_t fc = static_cast<std::size_t>(function_count());
-  auto mix = [](std::uint64_t h, double x) {
-    std::uint64_t bits;
-    std::memcpy(&bits, &x, sizeof bits);
-    h ^= bits + 0x9e3779b97f4a7c15ULL + (h << 6) + (h >> 2);
-    return h;
-  };
-  std::vector<std::uint64_t> hashes(images_.size(), 0);
-  for (std::size_t f = 0; f < images_.size(); ++f) {
-    const FaceImage& image = images_[f];
-    std::uint64_t sum = 0;
-    for (std::uint32_t t = image.triangle_begin; t < image.triangle_begin + image.triangle_count; ++t) {
-      const UnknownTriangle& triangle = triangles_[t];
-      // Start at the lowest corner so that the hash does not depend on the corner rotation.
-      int first = 0;
-      for (int k = 1; k < 3; ++k)
-        if (std::make_pair(triangle.corners[k].x(), triangle.corners[k].y()) <
-            std::make_pair(triangle.corners[first].x(), triangle.corners[first].y()))
-          first = k;
-      std::uint64_t h = 1469598103934665603ULL;
-      for (int n = 0; n < 3; ++n) {
-        const int k = (first + n) % 3;
-        h = mix(mix(h, triangle.corners[k].x()), triangle.corners[k].y());
-        for (std::size_t l = 0; l < fc; ++l) h = mix(h, corner_value(t, k, static_cast<int>(l)));
-      }
-      sum += h;  // order-independent over the face's triangles
-    }
-    hashes[f] = sum + image.triangle_count;
-  }
-  return hashes;
 }
 
 void CellField::compact_points() {
@@ -462,9 +413,9 @@ int CellField::evaluate(const Vec3& p, double* out) const {
     const double* values = corner_values_.data() + image.triangle_begin * 3 * fc;
     double face_unknown = 0.0;
     std::fill(face_w, face_w + n, 0.0);
-    if (image.triangle_tree_count > 0)
-      add_triangle_weights_tree(triangles, values, n, triangle_nodes_.data(), triangle_moments_.data(),
-                                image.triangle_tree_root, foot, height, face_unknown, face_w);
+    if (image.triangle_tree != nullptr)
+      add_triangle_weights_tree(triangles, values, n, image.triangle_tree, image.triangle_tree_moments, 0,
+                                foot, height, face_unknown, face_w);
     else
       add_triangle_weights(triangles, values, image.triangle_count, n, foot, height, face_unknown, face_w);
     if (!(face_unknown > 0.0)) continue;

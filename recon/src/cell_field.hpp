@@ -53,8 +53,10 @@ struct FaceImage {
   std::vector<Part> unknown_parts;  ///< the unknown set clipped to the face (material unused)
   bool fully_unknown = false;        ///< no known data on the face at all
   std::uint32_t triangle_begin = 0, triangle_count = 0;  ///< completed unknown triangles
-  /// Far-field tree of the triangles in triangle_nodes (count 0: none, summed directly).
-  std::uint32_t triangle_tree_root = 0, triangle_tree_count = 0;
+  /// Far-field tree of the triangles (root first) and its moments, held by the slice's
+  /// completion (null: none, summed directly).
+  const TriangleNode* triangle_tree = nullptr;
+  const double* triangle_tree_moments = nullptr;
 };
 
 /// Clips a closed ring to the convex region { p : a_i.p + c_i >= 0 for all i } (Sutherland-
@@ -110,6 +112,12 @@ class CellField {
     std::vector<int> faces;                              // faces that got triangles
     std::vector<std::vector<UnknownTriangle>> triangles;  // per entry of faces
     std::vector<std::vector<double>> values;             // 3 x function_count() per triangle
+    // Per entry of faces: the far-field tree of its triangles (empty: too few for one; the
+    // triangles and values are in its order) and an order-independent hash of the triangles
+    // and values, which tells a refresh whose completion changed.
+    std::vector<std::vector<TriangleNode>> tree_nodes;
+    std::vector<std::vector<double>> tree_moments;
+    std::vector<std::uint64_t> hashes;
   };
   void build_face_image(int face_id);
   // Gives a long part its far-field tree.
@@ -122,11 +130,9 @@ class CellField {
   }
   void update_frames();
   void compact_points();
-  // Order-independent hash of each face's completed triangles and corner values.
-  std::vector<std::uint64_t> completion_hashes() const;
+  // Completes the stale slices (with their trees and hashes, see SliceCompletion) and gathers
+  // every slice's triangles into the face images; face_completion_hashes_ follows.
   void build_unknown_images();
-  // Gives the faces with many completed triangles their far-field trees (reorders the triangles).
-  void build_triangle_trees();
   // Triangulates the unknown set of a slice, one list per face, and completes the corners of
   // every triangle (values: 3 x function_count() per triangle); `local_faces` are the known
   // faces each face's completion reads.
@@ -152,8 +158,7 @@ class CellField {
   std::vector<FaceImage> images_;
   std::vector<UnknownTriangle> triangles_;
   std::vector<double> corner_values_;  // 3 corners x function_count() per triangle
-  std::vector<TriangleNode> triangle_nodes_;  // far-field trees of the faces' triangles
-  std::vector<double> triangle_moments_;      // triangle_moment_stride() per node
+  std::vector<std::uint64_t> face_completion_hashes_;  // per face (0: no triangles)
   std::size_t group_count_ = 0;
   double completion_seconds_ = 0.0;
   // When each face image was last built: a slice's completion is redone only when an image it

@@ -4,6 +4,7 @@
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
 
 #include <algorithm>
+#include <cstring>
 #include <map>
 #include <numeric>
 #include <unordered_set>
@@ -51,6 +52,36 @@ int find_root(std::vector<int>& parent, int x) {
     x = parent[static_cast<std::size_t>(x)];
   }
   return x;
+}
+
+// Order-independent hash of one face's completed triangles and their corner values: equal
+// completions give equal hashes whatever the order of the triangles and of their corners.
+std::uint64_t completion_hash(const std::vector<UnknownTriangle>& triangles, const std::vector<double>& values,
+                              std::size_t function_count) {
+  auto mix = [](std::uint64_t h, double x) {
+    std::uint64_t bits;
+    std::memcpy(&bits, &x, sizeof bits);
+    h ^= bits + 0x9e3779b97f4a7c15ULL + (h << 6) + (h >> 2);
+    return h;
+  };
+  std::uint64_t sum = 0;
+  for (std::size_t t = 0; t < triangles.size(); ++t) {
+    const UnknownTriangle& triangle = triangles[t];
+    // Start at the lowest corner so that the hash does not depend on the corner rotation.
+    int first = 0;
+    for (int k = 1; k < 3; ++k)
+      if (std::make_pair(triangle.corners[k].x(), triangle.corners[k].y()) <
+          std::make_pair(triangle.corners[first].x(), triangle.corners[first].y()))
+        first = k;
+    std::uint64_t h = 1469598103934665603ULL;
+    for (int n = 0; n < 3; ++n) {
+      const std::size_t k = static_cast<std::size_t>((first + n) % 3);
+      h = mix(mix(h, triangle.corners[k].x()), triangle.corners[k].y());
+      for (std::size_t l = 0; l < function_count; ++l) h = mix(h, values[(t * 3 + k) * function_count + l]);
+    }
+    sum += h;
+  }
+  return sum + triangles.size();
 }
 
 bool in_convex_ccw(const Vec2* polygon, std::size_t count, const Vec2& p) {
@@ -335,7 +366,9 @@ void CellField::build_unknown_images() {
   std::vector<int> slices_with_unknown;
   for (std::size_t s = 0; s < slices_.size(); ++s)
     if (!slices_[s].unknown.empty()) slices_with_unknown.push_back(static_cast<int>(s));
+  face_completion_hashes_.assign(images_.size(), 0);
   if (slices_with_unknown.empty()) return;
+  const std::size_t fc = static_cast<std::size_t>(function_count());
   Stopwatch clock;
   // Cell groups: cells joined through faces that hold unknown regions.
   std::vector<int> parent(arrangement_.cell_count());
@@ -409,6 +442,18 @@ void CellField::build_unknown_images() {
     completion = SliceCompletion{};
     completion.inputs = std::move(inputs[slice]);
     triangulate_unknown(static_cast<int>(slice), slice_faces[slice], local_faces, completion);
+    // Far-field trees (they reorder the triangles) and hashes, kept with the completion: a slice
+    // that is not completed again keeps them too.
+    const std::size_t face_count = completion.faces.size();
+    completion.tree_nodes.resize(face_count);
+    completion.tree_moments.resize(face_count);
+    for (std::size_t i = 0; i < face_count; ++i) {
+      if (completion.triangles[i].size() >= kTriangleTreeMinTriangles)
+        build_triangle_tree(completion.triangles[i].data(), completion.values[i].data(),
+                            completion.triangles[i].size(), function_count(), completion.tree_nodes[i],
+                            completion.tree_moments[i]);
+      completion.hashes.push_back(completion_hash(completion.triangles[i], completion.values[i], fc));
+    }
   });
   for (const int slice : slices_with_unknown) {
     const SliceCompletion& completion = slice_completions_[static_cast<std::size_t>(slice)];
@@ -418,6 +463,11 @@ void CellField::build_unknown_images() {
       image.triangle_count = static_cast<std::uint32_t>(completion.triangles[i].size());
       triangles_.insert(triangles_.end(), completion.triangles[i].begin(), completion.triangles[i].end());
       corner_values_.insert(corner_values_.end(), completion.values[i].begin(), completion.values[i].end());
+      if (!completion.tree_nodes[i].empty()) {
+        image.triangle_tree = completion.tree_nodes[i].data();
+        image.triangle_tree_moments = completion.tree_moments[i].data();
+      }
+      face_completion_hashes_[static_cast<std::size_t>(completion.faces[i])] = completion.hashes[i];
     }
   }
   completion_seconds_ = clock.seconds();
