@@ -3,7 +3,8 @@
 additions, the median update time, the ratio to a full rebuild, memory, and how the time per
 slice grows up to 150 slices (table and PNG plot).
 
-For every model in MODELS it cuts a random set (100 planes) and a sweep-like set (150 planes),
+For every model in MODELS it cuts a random set (100 planes), a sweep-like set (150 planes) and a
+sweep of 100 planes whose every slice has a 60-degree sector field of view (the rest unknown),
 feeds each to `sonoshape reconstruct --online --stats` (one update per slice, default depth), and
 reconstructs the first N slices of each set offline (the same box) for N in CHECKPOINTS.
 
@@ -20,7 +21,11 @@ import subprocess
 import sys
 
 MODELS = {"horse": "horse.ply", "spot": "spot.obj", "cheburashka": "cheburashka.obj"}
-FAMILIES = {"random": 100, "sweep": 150}
+# name suffix -> (planes, count, extra `slice` arguments). The sector sweep is the bedside case:
+# every frame sees only its 60-degree sector (aimed to cover the organ); the rest of each plane is
+# unknown and completed (issue: unknown regions).
+FAMILIES = {"random100": ("random", 100, []), "sweep150": ("sweep", 150, []),
+            "sweep100_sector": ("sweep", 100, ["--fov", "sector", "--fov-aim", "cover"])}
 CHECKPOINTS = [5, 10, 40, 100, 150]
 RATIO_EVERY = 5  # the update / rebuild ratio is also sampled at slices 10, 15, 20, ...
 STAGES = ["arrangement_s", "face_images_s", "field_s", "smoothing_s", "mesh_s", "total_s"]
@@ -42,11 +47,11 @@ def main():
     os.makedirs(options.work, exist_ok=True)
     table_rows, summary_rows, growth = [], [], {}
     for model in options.models.split(","):
-        for family, count in FAMILIES.items():
-            name = f"{model}_{family}{count}"
+        for suffix, (family, count, extra) in FAMILIES.items():
+            name = f"{model}_{suffix}"
             slices = os.path.join(options.work, name + ".slices.json")
             run([options.bin, "slice", "--mesh", f"1:data/models/{MODELS[model]}:{model}", "--planes", family,
-                 "--count", str(count), "--seed", "1", "--size-mm", "150", "-o", slices, "-q"])
+                 "--count", str(count), "--seed", "1", "--size-mm", "150", "-o", slices, "-q"] + extra)
             stats_path = os.path.join(options.work, name + ".online.json")
             run([options.bin, "reconstruct", slices, "-o", os.path.join(options.work, name + "_online"),
                  "--online", "--stats", stats_path, "-q"])
