@@ -51,7 +51,7 @@ def main():
             name = f"{model}_{suffix}"
             slices = os.path.join(options.work, name + ".slices.json")
             run([options.bin, "slice", "--mesh", f"1:data/models/{MODELS[model]}:{model}", "--planes", family,
-                 "--count", str(count), "--seed", "1", "--size-mm", "150", "-o", slices, "-q"] + extra)
+                 "--count", str(count), "--seed", "1", "--size-mm", "150", "-o", slices, "--skip-invalid", "-q"] + extra)
             stats_path = os.path.join(options.work, name + ".online.json")
             run([options.bin, "reconstruct", slices, "-o", os.path.join(options.work, name + "_online"),
                  "--online", "--stats", stats_path, "-q"])
