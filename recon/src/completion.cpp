@@ -272,16 +272,16 @@ void CellField::complete_corners(const PreparedSlice& s, const UnknownTriangle& 
       n3w.assign(fc + 1, 0.0);
       const Vec3 x = s.origin + corner.x() * s.u + corner.y() * s.v;
       for (const int g : local_faces) {
-        double total = 0.0, unknown = 0.0;
+        double known = 0.0;
         std::fill(n2.begin(), n2.end(), 0.0);  // scratch for the materials of face g
-        if (!known_weights(g, x, total, n2.data(), unknown)) continue;
+        if (!known_weights(g, x, known, n2.data())) continue;
         double materials = 0.0;
         for (std::size_t l = 1; l < fc; ++l) {
           n3w[l] += 0.5 * n2[l];
           materials += n2[l];
         }
-        n3w[0] += 0.5 * (total - materials - unknown);
-        n3w[fc] += 0.5 * (total - unknown);
+        n3w[0] += 0.5 * (known - materials);  // the known outside
+        n3w[fc] += 0.5 * known;
       }
     }
     const std::vector<double>& n3w = it->second;
@@ -307,8 +307,7 @@ void CellField::complete_corners(const PreparedSlice& s, const UnknownTriangle& 
   }
 }
 
-bool CellField::known_weights(int face, const Vec3& p, double& total, double* materials,
-                              double& unknown) const {
+bool CellField::known_weights(int face, const Vec3& p, double& known, double* materials) const {
   const FaceImage& image = images_[static_cast<std::size_t>(face)];
   const PlaneFrame& frame = frames_[static_cast<std::size_t>(image.frame)];
   const Vec3 d = p - frame.origin;
@@ -324,10 +323,27 @@ bool CellField::known_weights(int face, const Vec3& p, double& total, double* ma
     if (part.tree_count == 0) return projected_angle_plain(points_.data() + part.begin, part.count, foot, height);
     return part_angle(part, foot, height);
   };
-  total = projected_angle_plain(points_.data() + image.polygon_begin, image.polygon_count, foot, height) * inv_height;
-  for (const FaceImage::Part& part : image.parts) materials[part.material] += angle(part) * inv_height;
-  unknown = 0.0;
-  for (const FaceImage::Part& part : image.unknown_parts) unknown += angle(part) * inv_height;
+  // Parts that are the face polygon itself (a face wholly inside a ring: with fields of view,
+  // most faces are wholly inside the unknown set's outer ring, and those inside the fov inside
+  // its hole too) take the polygon's sum, computed once: known = polygon - unknown parts.
+  int known_polygons = 1;
+  known = 0.0;
+  for (const FaceImage::Part& part : image.unknown_parts) {
+    if (part.polygon_copy != 0) known_polygons -= part.polygon_copy;
+    else known -= angle(part);
+  }
+  double polygon = 0.0;
+  bool polygon_done = false;
+  const auto polygon_angle = [&] {
+    if (!polygon_done)
+      polygon = projected_angle_plain(points_.data() + image.polygon_begin, image.polygon_count, foot, height);
+    polygon_done = true;
+    return polygon;
+  };
+  if (known_polygons != 0) known += known_polygons * polygon_angle();
+  known *= inv_height;
+  for (const FaceImage::Part& part : image.parts)
+    materials[part.material] += (part.polygon_copy != 0 ? part.polygon_copy * polygon_angle() : angle(part)) * inv_height;
   return true;
 }
 
