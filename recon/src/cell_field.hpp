@@ -133,12 +133,12 @@ class CellField {
   // faces each face's completion reads.
   void triangulate_unknown(int slice, const std::vector<int>& slice_faces,
                            const std::vector<std::vector<int>>& local_faces, SliceCompletion& out) const;
+  // The parts of formula 7 computed so far at the corners of one slice (completion.cpp).
+  struct CornerCache;
   // Formula 7 at the three corners of `triangle` on face `face_id` into out (3 x
-  // function_count()); part_3d caches the 3D part per (face, corner).
+  // function_count()); `cache` keeps each corner's parts for the other triangles around it.
   void complete_corners(const PreparedSlice& s, const UnknownTriangle& triangle, int face_id,
-                        const std::vector<int>& local_faces,
-                        std::map<std::tuple<int, double, double>, std::vector<double>>& part_3d,
-                        double* out) const;
+                        const std::vector<int>& local_faces, CornerCache& cache, double* out) const;
   // Known weights of face f seen from p (units of projected_angle / height): the known part of
   // the face (the face minus its unknown parts) and each material's part (added to materials).
   // False when p is on f's plane.

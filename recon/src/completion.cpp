@@ -5,7 +5,9 @@
 
 #include <algorithm>
 #include <map>
+#include <cstring>
 #include <numeric>
+#include <unordered_map>
 #include <unordered_set>
 
 #include <tbb/parallel_for.h>
@@ -45,6 +47,10 @@ constexpr int kMaxRefinementRounds = 8;
 // keeps completion linear in the number of triangles.
 constexpr int kGroupHops = 1;
 
+// A corner within this distance of an unknown-boundary edge, relative to the edge's length, is on
+// the boundary (constraint intersections and splits land there only to rounding).
+constexpr double kOnBoundaryTolerance = 1e-9;
+
 int find_root(std::vector<int>& parent, int x) {
   while (parent[static_cast<std::size_t>(x)] != x) {
     parent[static_cast<std::size_t>(x)] = parent[static_cast<std::size_t>(parent[static_cast<std::size_t>(x)])];
@@ -52,6 +58,24 @@ int find_root(std::vector<int>& parent, int x) {
   }
   return x;
 }
+
+// Hash of a few doubles (exact values: the caches below key points by their coordinates).
+struct DoublesHash {
+  template <std::size_t N>
+  std::size_t operator()(const std::array<double, N>& values) const {
+    std::uint64_t h = 0x9e3779b97f4a7c15ull;
+    for (const double value : values) {
+      std::uint64_t bits;
+      const double normalised = value + 0.0;  // -0 and +0 compare equal
+      std::memcpy(&bits, &normalised, sizeof bits);
+      h ^= bits + 0x9e3779b97f4a7c15ull + (h << 6) + (h >> 2);
+    }
+    // splitmix64 finaliser
+    h = (h ^ (h >> 30)) * 0xbf58476d1ce4e5b9ull;
+    h = (h ^ (h >> 27)) * 0x94d049bb133111ebull;
+    return static_cast<std::size_t>(h ^ (h >> 31));
+  }
+};
 
 bool in_convex_ccw(const Vec2* polygon, std::size_t count, const Vec2& p) {
   for (std::size_t i = 0; i < count; ++i) {
@@ -63,6 +87,22 @@ bool in_convex_ccw(const Vec2* polygon, std::size_t count, const Vec2& p) {
 }
 
 }  // namespace
+
+// What the corners of one slice's triangles have completed to so far: a corner keeps its parts
+// across the refinement rounds and between the triangles around it.
+struct CellField::CornerCache {
+  // (face or component, x, y) -> offset in `values` of function_count() + 1 doubles: the
+  // numerators of every function, then the denominator.
+  using Key = std::array<double, 3>;
+  // Formula 7 (a), by (face, corner): the 3D part depends on the corner's face (the known faces
+  // it reads), not on the triangle.
+  std::unordered_map<Key, std::size_t, DoublesHash> part_3d;
+  // Formula 7 (b), by (component, corner) for corners inside the unknown set; kOnBoundary for
+  // corners on its boundary, which take the limit from each triangle's side instead.
+  std::unordered_map<Key, std::size_t, DoublesHash> part_2d;
+  std::vector<double> values;
+  static constexpr std::size_t kOnBoundary = static_cast<std::size_t>(-1);
+};
 
 void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_faces,
                                     const std::vector<std::vector<int>>& local_faces,
@@ -171,8 +211,22 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
       if (a != b) cdt.insert_constraint(Kernel::Point_2(a.x(), a.y()), Kernel::Point_2(b.x(), b.y()));
     }
   }
+  // A slice holds hundreds of faces: a uniform grid over the unknown set's box lists the faces
+  // whose boxes reach each cell (in the order of `faces`, so the first face containing a point
+  // is the same as by a scan).
+  const int grid_side = std::max(1, static_cast<int>(std::ceil(std::sqrt(static_cast<double>(faces.size())))));
+  const Vec2 grid_cell = ((hi - lo) / grid_side).cwiseMax(Vec2::Constant(1e-300));
+  const auto grid_index = [&](const Vec2& p, int axis) {
+    return std::clamp(static_cast<int>(std::floor((p[axis] - lo[axis]) / grid_cell[axis])), 0, grid_side - 1);
+  };
+  std::vector<std::vector<int>> faces_in_cell(static_cast<std::size_t>(grid_side * grid_side));
+  for (std::size_t i = 0; i < faces.size(); ++i)
+    for (int gy = grid_index(faces[i].lo, 1); gy <= grid_index(faces[i].hi, 1); ++gy)
+      for (int gx = grid_index(faces[i].lo, 0); gx <= grid_index(faces[i].hi, 0); ++gx)
+        faces_in_cell[static_cast<std::size_t>(gy * grid_side + gx)].push_back(static_cast<int>(i));
   const auto face_of = [&](const Vec2& p) {
-    for (const SliceFace& face : faces) {
+    for (const int i : faces_in_cell[static_cast<std::size_t>(grid_index(p, 1) * grid_side + grid_index(p, 0))]) {
+      const SliceFace& face = faces[static_cast<std::size_t>(i)];
       if ((p.array() < face.lo.array()).any() || (p.array() > face.hi.array()).any()) continue;
       const FaceImage& image = images_[static_cast<std::size_t>(face.id)];
       if (in_convex_ccw(points_.data() + image.polygon_begin, image.polygon_count, p)) return face.id;
@@ -181,18 +235,18 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
   };
 
   // Completed values of the corners of every unknown triangle, refined where they disagree.
-  // The 3D part of a corner (formula 7 (a)) depends on its point and face only and is kept
-  // across rounds; the 2D part is read just inside each triangle's corner.
   struct Completed {
     UnknownTriangle triangle;
     int face = -1;
     std::vector<double> values;  // 3 corners x fc
   };
-  std::map<std::tuple<int, double, double>, std::vector<double>> part_3d;  // (face, x, y) -> N3, W3
-  std::map<std::array<double, 6>, Completed> done;  // by corner coordinates
+  using TriangleKey = std::array<double, 6>;  // corner coordinates
+  CornerCache cache;
+  std::unordered_map<TriangleKey, Completed, DoublesHash> done;
   const double refined_min = kRefinedTriangleMin * diagonal;
   for (int round = 0;; ++round) {
-    std::map<std::array<double, 6>, Completed> current;
+    std::unordered_map<TriangleKey, Completed, DoublesHash> current;
+    current.reserve(done.size() + done.size() / 2);
     std::vector<Kernel::Point_2> splits;
     for (auto it = cdt.finite_faces_begin(); it != cdt.finite_faces_end(); ++it) {
       Completed entry;
@@ -206,7 +260,7 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
                                           (triangle.corners[0] - triangle.corners[2]).squaredNorm()});
       if (!(std::abs(area) > 1e-12 * longest_sq) || std::abs(area) < 1e-14 * diagonal * diagonal) continue;
       if (area < 0.0) std::swap(triangle.corners[1], triangle.corners[2]);  // counter-clockwise
-      const std::array<double, 6> key{triangle.corners[0].x(), triangle.corners[0].y(), triangle.corners[1].x(),
+      const TriangleKey key{triangle.corners[0].x(), triangle.corners[0].y(), triangle.corners[1].x(),
                                       triangle.corners[1].y(), triangle.corners[2].x(), triangle.corners[2].y()};
       if (auto found = done.find(key); found != done.end()) {
         current.emplace(key, std::move(found->second));
@@ -217,7 +271,7 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
         entry.face = face_of(centroid);
         if (entry.face < 0) continue;
         entry.values.resize(3 * fc);
-        complete_corners(s, triangle, entry.face, local_faces[static_cast<std::size_t>(entry.face)], part_3d,
+        complete_corners(s, triangle, entry.face, local_faces[static_cast<std::size_t>(entry.face)], cache,
                          entry.values.data());
         current.emplace(key, std::move(entry));
       }
@@ -242,8 +296,14 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
     if (splits.empty() || round == kMaxRefinementRounds) break;
     cdt.insert(splits.begin(), splits.end());
   }
+  // In the order of the corner coordinates, so that the output does not depend on hashing.
+  std::vector<std::pair<TriangleKey, Completed*>> ordered;
+  ordered.reserve(done.size());
+  for (auto& [key, entry] : done) ordered.emplace_back(key, &entry);
+  std::sort(ordered.begin(), ordered.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
   std::map<int, std::size_t> entry_of_face;
-  for (auto& [key, entry] : done) {
+  for (auto& [key, entry_pointer] : ordered) {
+    Completed& entry = *entry_pointer;
     auto [it, inserted] = entry_of_face.try_emplace(entry.face, out.faces.size());
     if (inserted) {
       out.faces.push_back(entry.face);
@@ -256,51 +316,84 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
 }
 
 void CellField::complete_corners(const PreparedSlice& s, const UnknownTriangle& triangle, int face_id,
-                                 const std::vector<int>& local_faces,
-                                 std::map<std::tuple<int, double, double>, std::vector<double>>& part_3d,
-                                 double* out) const {
+                                 const std::vector<int>& local_faces, CornerCache& cache, double* out) const {
   const std::size_t fc = static_cast<std::size_t>(function_count());
-  std::vector<double> n2(fc);
+  std::vector<double> scratch(fc);
   const Vec2 centroid = (triangle.corners[0] + triangle.corners[1] + triangle.corners[2]) / 3.0;
   const UnknownComponent& component = s.unknown[static_cast<std::size_t>(triangle.component)];
+  // (b) the 2D mean-value interpolant of the unknown component in its slice, from the known
+  // labels across its boundary, at p; false (and nothing added) when p is on the boundary.
+  const auto add_part_2d = [&](const Vec2& p, bool stop_on_boundary, double* n2) {
+    for (std::size_t r = 0; r < component.rings.size(); ++r) {
+      const Ring2& ring = component.rings[r];
+      for (std::size_t i = 0; i < ring.size(); ++i) {
+        const Vec2& a = ring[i];
+        const Vec2& b = ring[(i + 1) % ring.size()];
+        if (stop_on_boundary) {
+          // On the edge (to rounding): its weight is singular there.
+          const Vec2 ab = b - a, ap = p - a;
+          const double length_sq = ab.squaredNorm();
+          const double cross = ab.x() * ap.y() - ab.y() * ap.x();
+          const double along = ab.dot(ap);
+          if (std::abs(cross) <= kOnBoundaryTolerance * length_sq && along >= -kOnBoundaryTolerance * length_sq &&
+              along <= (1.0 + kOnBoundaryTolerance) * length_sq)
+            return false;
+        }
+        const double w = edge_weight_2d(a, b, p);
+        n2[static_cast<std::size_t>(component.edge_labels[r][i])] += w;
+        n2[fc] += w;
+      }
+    }
+    return true;
+  };
   for (int k = 0; k < 3; ++k) {
     const Vec2& corner = triangle.corners[k];
     // (a) 3D mean-value interpolant of the known faces around, at the corner itself.
-    auto [it, inserted] = part_3d.try_emplace({face_id, corner.x(), corner.y()});
+    auto [it, inserted] = cache.part_3d.try_emplace({static_cast<double>(face_id), corner.x(), corner.y()},
+                                                    cache.values.size());
     if (inserted) {
-      std::vector<double>& n3w = it->second;
-      n3w.assign(fc + 1, 0.0);
+      cache.values.resize(cache.values.size() + fc + 1, 0.0);
+      double* n3w = cache.values.data() + it->second;
       const Vec3 x = s.origin + corner.x() * s.u + corner.y() * s.v;
       for (const int g : local_faces) {
         double known = 0.0;
-        std::fill(n2.begin(), n2.end(), 0.0);  // scratch for the materials of face g
-        if (!known_weights(g, x, known, n2.data())) continue;
+        std::fill(scratch.begin(), scratch.end(), 0.0);  // the materials of face g
+        if (!known_weights(g, x, known, scratch.data())) continue;
         double materials = 0.0;
         for (std::size_t l = 1; l < fc; ++l) {
-          n3w[l] += 0.5 * n2[l];
-          materials += n2[l];
+          n3w[l] += 0.5 * scratch[l];
+          materials += scratch[l];
         }
         n3w[0] += 0.5 * (known - materials);  // the known outside
         n3w[fc] += 0.5 * known;
       }
     }
-    const std::vector<double>& n3w = it->second;
-    // (b) 2D mean-value interpolant of the unknown component in its slice, from the known
-    // labels across its boundary; read just inside the triangle's corner, so that a corner
-    // on the boundary takes the limit from its own side (Section 5.1).
-    const Vec2 p = corner + 1e-4 * (centroid - corner);
-    std::fill(n2.begin(), n2.end(), 0.0);
-    double w2 = 0.0;
-    for (std::size_t r = 0; r < component.rings.size(); ++r) {
-      const Ring2& ring = component.rings[r];
-      for (std::size_t i = 0; i < ring.size(); ++i) {
-        const double w = edge_weight_2d(ring[i], ring[(i + 1) % ring.size()], p);
-        n2[static_cast<std::size_t>(component.edge_labels[r][i])] += w;
-        w2 += w;
+    const std::size_t at_3d = it->second;
+    // (b) at the corner itself when it lies inside the unknown set (the interpolant is smooth
+    // there, and the triangles around the corner share it); on the boundary it is read just
+    // inside the triangle's corner, so that the corner takes the limit from its own side
+    // (Section 5.1).
+    auto [it_2d, inserted_2d] = cache.part_2d.try_emplace(
+        {static_cast<double>(triangle.component), corner.x(), corner.y()}, cache.values.size());
+    if (inserted_2d) {
+      cache.values.resize(cache.values.size() + fc + 1, 0.0);
+      if (!add_part_2d(corner, true, cache.values.data() + it_2d->second)) {
+        cache.values.resize(it_2d->second);
+        it_2d->second = CornerCache::kOnBoundary;
       }
     }
+    std::vector<double> inside;
+    const double* n2 = nullptr;
+    if (it_2d->second != CornerCache::kOnBoundary) {
+      n2 = cache.values.data() + it_2d->second;
+    } else {
+      inside.assign(fc + 1, 0.0);
+      add_part_2d(corner + 1e-4 * (centroid - corner), false, inside.data());
+      n2 = inside.data();
+    }
     // Formula 7: the normalised blend of both.
-    const double denominator = n3w[fc] + w2;
+    const double* n3w = cache.values.data() + at_3d;
+    const double denominator = n3w[fc] + n2[fc];
     double* value = out + static_cast<std::size_t>(k) * fc;
     for (std::size_t l = 0; l < fc; ++l)
       value[l] = denominator > 0.0 ? 2.0 * (n3w[l] + n2[l]) / denominator - 1.0 : (l == 0 ? 1.0 : -1.0);
