@@ -5,6 +5,8 @@
 #include <cstring>
 #include <limits>
 
+#include <tbb/parallel_for.h>
+
 #include "mean_value.hpp"
 #include "sonoshape/core/errors.hpp"
 #include "sonoshape/core/log.hpp"
@@ -203,14 +205,28 @@ std::vector<int> CellField::refresh(const std::vector<int>& changed_cells) {
 void CellField::build_triangle_trees() {
   Stopwatch clock;
   const std::size_t fc = static_cast<std::size_t>(function_count());
-  for (FaceImage& image : images_) {
+  const std::size_t stride = triangle_moment_stride(function_count());
+  // The faces' trees are independent (each reorders only its own triangles): their places in
+  // the node array are known beforehand, so they are built in parallel straight into it.
+  std::vector<int> faces;
+  std::vector<std::uint32_t> first_node;
+  std::size_t node_count = 0;
+  for (std::size_t f = 0; f < images_.size(); ++f) {
+    FaceImage& image = images_[f];
     if (image.triangle_count < kTriangleTreeMinTriangles) continue;
-    const std::size_t before = triangle_nodes_.size();
-    image.triangle_tree_root = build_triangle_tree(
-        triangles_.data() + image.triangle_begin, corner_values_.data() + image.triangle_begin * 3 * fc,
-        image.triangle_count, function_count(), triangle_nodes_, triangle_moments_);
-    image.triangle_tree_count = static_cast<std::uint32_t>(triangle_nodes_.size() - before);
+    faces.push_back(static_cast<int>(f));
+    first_node.push_back(static_cast<std::uint32_t>(node_count));
+    image.triangle_tree_count = static_cast<std::uint32_t>(triangle_tree_node_count(image.triangle_count));
+    node_count += image.triangle_tree_count;
   }
+  triangle_nodes_.assign(node_count, TriangleNode{});
+  triangle_moments_.assign(node_count * stride, 0.0);
+  tbb::parallel_for(std::size_t{0}, faces.size(), [&](std::size_t i) {
+    FaceImage& image = images_[static_cast<std::size_t>(faces[i])];
+    image.triangle_tree_root = build_triangle_tree_at(
+        triangles_.data() + image.triangle_begin, corner_values_.data() + image.triangle_begin * 3 * fc,
+        image.triangle_count, function_count(), triangle_nodes_.data(), triangle_moments_.data(), first_node[i]);
+  });
   completion_seconds_ += clock.seconds();
 }
 
