@@ -311,7 +311,7 @@ void CellField::build_face_image(int face_id) {
       const int winding = winding_number(ring.data(), ring.size(), centre);
       if (winding == 0) return;
       parts.push_back({material, static_cast<std::uint32_t>(points_.size()),
-                       static_cast<std::uint32_t>(polygon.size())});
+                       static_cast<std::uint32_t>(polygon.size()), 0, 0, winding < 0 ? -1 : 1});
       if (winding < 0) points_.insert(points_.end(), polygon.rbegin(), polygon.rend());  // a hole
       else points_.insert(points_.end(), polygon.begin(), polygon.end());
       return;

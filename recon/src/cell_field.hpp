@@ -48,6 +48,9 @@ struct FaceImage {
     int material = 0;
     std::uint32_t begin = 0, count = 0;  ///< one ring in points
     std::uint32_t tree_root = 0, tree_count = 0;  ///< far-field tree in tree_nodes (count 0: none)
+    /// +1 / -1: the ring is the face polygon itself (reversed for -1, a hole around the face),
+    /// so its integral is +/- the polygon's; 0: a clipped ring.
+    int polygon_copy = 0;
   };
   std::vector<Part> parts;
   std::vector<Part> unknown_parts;  ///< the unknown set clipped to the face (material unused)
@@ -138,15 +141,16 @@ class CellField {
   // faces each face's completion reads.
   void triangulate_unknown(int slice, const std::vector<int>& slice_faces,
                            const std::vector<std::vector<int>>& local_faces, SliceCompletion& out) const;
+  // The parts of formula 7 computed so far at the corners of one slice (completion.cpp).
+  struct CornerCache;
   // Formula 7 at the three corners of `triangle` on face `face_id` into out (3 x
-  // function_count()); part_3d caches the 3D part per (face, corner).
+  // function_count()); `cache` keeps each corner's parts for the other triangles around it.
   void complete_corners(const PreparedSlice& s, const UnknownTriangle& triangle, int face_id,
-                        const std::vector<int>& local_faces,
-                        std::map<std::tuple<int, double, double>, std::vector<double>>& part_3d,
-                        double* out) const;
-  // Known weights of face f seen from p (units of projected_angle / height): the face's total,
-  // each material's known part and the unknown part's total. False when p is on f's plane.
-  bool known_weights(int face, const Vec3& p, double& total, double* materials, double& unknown) const;
+                        const std::vector<int>& local_faces, CornerCache& cache, double* out) const;
+  // Known weights of face f seen from p (units of projected_angle / height): the known part of
+  // the face (the face minus its unknown parts) and each material's part (added to materials).
+  // False when p is on f's plane.
+  bool known_weights(int face, const Vec3& p, double& known, double* materials) const;
 
   const Arrangement& arrangement_;
   std::vector<PreparedSlice> slices_;

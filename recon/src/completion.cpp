@@ -7,6 +7,8 @@
 #include <cstring>
 #include <map>
 #include <numeric>
+#include <set>
+#include <unordered_map>
 #include <unordered_set>
 
 #include <tbb/parallel_for.h>
@@ -34,10 +36,10 @@ constexpr double kUnknownTriangleFraction = 0.125;
 constexpr double kUnknownTriangleMin = 0.03, kUnknownTriangleMax = 0.12;
 // Lattice points closer than this many triangle sizes to the unknown boundary are left out.
 constexpr double kLatticeClearance = 0.5;
-// Triangles whose corners complete to different labels are split down to this longest edge
-// (fraction of the box diagonal: about 2.5 of the octree's finest cells, which are at most
-// 1/128 of it), in at most this many rounds.
-constexpr double kRefinedTriangleMin = 0.02;
+// Triangles whose corners complete to different labels are split (at the midpoint of their
+// longest edge) down to this longest edge (fraction of the box diagonal: about 2 of the octree's
+// finest cells, which are at most 1/128 of it), in at most this many rounds.
+constexpr double kRefinedTriangleMin = 0.015;
 constexpr int kMaxRefinementRounds = 8;
 
 // The completion reads the known faces of the cells within this many group-adjacency steps of a
@@ -45,6 +47,10 @@ constexpr int kMaxRefinementRounds = 8;
 // arrangement; the nearby faces carry the weight (it falls off with distance), and the bound
 // keeps completion linear in the number of triangles.
 constexpr int kGroupHops = 1;
+
+// A corner within this distance of an unknown-boundary edge, relative to the edge's length, is on
+// the boundary (constraint intersections and splits land there only to rounding).
+constexpr double kOnBoundaryTolerance = 1e-9;
 
 int find_root(std::vector<int>& parent, int x) {
   while (parent[static_cast<std::size_t>(x)] != x) {
@@ -84,6 +90,24 @@ std::uint64_t completion_hash(const std::vector<UnknownTriangle>& triangles, con
   return sum + triangles.size();
 }
 
+// Hash of a few doubles (exact values: the caches below key points by their coordinates).
+struct DoublesHash {
+  template <std::size_t N>
+  std::size_t operator()(const std::array<double, N>& values) const {
+    std::uint64_t h = 0x9e3779b97f4a7c15ull;
+    for (const double value : values) {
+      std::uint64_t bits;
+      const double normalised = value + 0.0;  // -0 and +0 compare equal
+      std::memcpy(&bits, &normalised, sizeof bits);
+      h ^= bits + 0x9e3779b97f4a7c15ull + (h << 6) + (h >> 2);
+    }
+    // splitmix64 finaliser
+    h = (h ^ (h >> 30)) * 0xbf58476d1ce4e5b9ull;
+    h = (h ^ (h >> 27)) * 0x94d049bb133111ebull;
+    return static_cast<std::size_t>(h ^ (h >> 31));
+  }
+};
+
 bool in_convex_ccw(const Vec2* polygon, std::size_t count, const Vec2& p) {
   for (std::size_t i = 0; i < count; ++i) {
     const Vec2& a = polygon[i];
@@ -94,6 +118,22 @@ bool in_convex_ccw(const Vec2* polygon, std::size_t count, const Vec2& p) {
 }
 
 }  // namespace
+
+// What the corners of one slice's triangles have completed to so far: a corner keeps its parts
+// across the refinement rounds and between the triangles around it.
+struct CellField::CornerCache {
+  // (face or component, x, y) -> offset in `values` of function_count() + 1 doubles: the
+  // numerators of every function, then the denominator.
+  using Key = std::array<double, 3>;
+  // Formula 7 (a), by (face, corner): the 3D part depends on the corner's face (the known faces
+  // it reads), not on the triangle.
+  std::unordered_map<Key, std::size_t, DoublesHash> part_3d;
+  // Formula 7 (b), by (component, corner) for corners inside the unknown set; kOnBoundary for
+  // corners on its boundary, which take the limit from each triangle's side instead.
+  std::unordered_map<Key, std::size_t, DoublesHash> part_2d;
+  std::vector<double> values;
+  static constexpr std::size_t kOnBoundary = static_cast<std::size_t>(-1);
+};
 
 void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_faces,
                                     const std::vector<std::vector<int>>& local_faces,
@@ -114,8 +154,8 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
   // spikes. The completion needs corners spread over the region, dense where the completed labels
   // change, not well-shaped triangles: the boundary edges are split to triangle_size, a
   // triangular lattice of that spacing fills the inside, and triangles whose corners complete to
-  // different labels are split at their centroids (below). Plain constrained Delaunay insertions
-  // with exact predicates always end.
+  // different labels are split at the midpoints of their longest edges (below). Plain constrained
+  // Delaunay insertions with exact predicates always end.
   Cdt cdt;
   Vec2 lo = Vec2::Constant(std::numeric_limits<double>::infinity());
   Vec2 hi = -lo;
@@ -202,8 +242,22 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
       if (a != b) cdt.insert_constraint(Kernel::Point_2(a.x(), a.y()), Kernel::Point_2(b.x(), b.y()));
     }
   }
+  // A slice holds hundreds of faces: a uniform grid over the unknown set's box lists the faces
+  // whose boxes reach each cell (in the order of `faces`, so the first face containing a point
+  // is the same as by a scan).
+  const int grid_side = std::max(1, static_cast<int>(std::ceil(std::sqrt(static_cast<double>(faces.size())))));
+  const Vec2 grid_cell = ((hi - lo) / grid_side).cwiseMax(Vec2::Constant(1e-300));
+  const auto grid_index = [&](const Vec2& p, int axis) {
+    return std::clamp(static_cast<int>(std::floor((p[axis] - lo[axis]) / grid_cell[axis])), 0, grid_side - 1);
+  };
+  std::vector<std::vector<int>> faces_in_cell(static_cast<std::size_t>(grid_side * grid_side));
+  for (std::size_t i = 0; i < faces.size(); ++i)
+    for (int gy = grid_index(faces[i].lo, 1); gy <= grid_index(faces[i].hi, 1); ++gy)
+      for (int gx = grid_index(faces[i].lo, 0); gx <= grid_index(faces[i].hi, 0); ++gx)
+        faces_in_cell[static_cast<std::size_t>(gy * grid_side + gx)].push_back(static_cast<int>(i));
   const auto face_of = [&](const Vec2& p) {
-    for (const SliceFace& face : faces) {
+    for (const int i : faces_in_cell[static_cast<std::size_t>(grid_index(p, 1) * grid_side + grid_index(p, 0))]) {
+      const SliceFace& face = faces[static_cast<std::size_t>(i)];
       if ((p.array() < face.lo.array()).any() || (p.array() > face.hi.array()).any()) continue;
       const FaceImage& image = images_[static_cast<std::size_t>(face.id)];
       if (in_convex_ccw(points_.data() + image.polygon_begin, image.polygon_count, p)) return face.id;
@@ -212,19 +266,20 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
   };
 
   // Completed values of the corners of every unknown triangle, refined where they disagree.
-  // The 3D part of a corner (formula 7 (a)) depends on its point and face only and is kept
-  // across rounds; the 2D part is read just inside each triangle's corner.
   struct Completed {
     UnknownTriangle triangle;
     int face = -1;
     std::vector<double> values;  // 3 corners x fc
   };
-  std::map<std::tuple<int, double, double>, std::vector<double>> part_3d;  // (face, x, y) -> N3, W3
-  std::map<std::array<double, 6>, Completed> done;  // by corner coordinates
+  using TriangleKey = std::array<double, 6>;  // corner coordinates
+  CornerCache cache;
+  std::unordered_map<TriangleKey, Completed, DoublesHash> done;
   const double refined_min = kRefinedTriangleMin * diagonal;
   for (int round = 0;; ++round) {
-    std::map<std::array<double, 6>, Completed> current;
-    std::vector<Kernel::Point_2> splits;
+    std::unordered_map<TriangleKey, Completed, DoublesHash> current;
+    current.reserve(done.size() + done.size() / 2);
+    // Longest edges of the triangles to split, by their end vertices.
+    std::vector<std::pair<Cdt::Vertex_handle, Cdt::Vertex_handle>> splits;
     for (auto it = cdt.finite_faces_begin(); it != cdt.finite_faces_end(); ++it) {
       Completed entry;
       UnknownTriangle& triangle = entry.triangle;
@@ -237,7 +292,7 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
                                           (triangle.corners[0] - triangle.corners[2]).squaredNorm()});
       if (!(std::abs(area) > 1e-12 * longest_sq) || std::abs(area) < 1e-14 * diagonal * diagonal) continue;
       if (area < 0.0) std::swap(triangle.corners[1], triangle.corners[2]);  // counter-clockwise
-      const std::array<double, 6> key{triangle.corners[0].x(), triangle.corners[0].y(), triangle.corners[1].x(),
+      const TriangleKey key{triangle.corners[0].x(), triangle.corners[0].y(), triangle.corners[1].x(),
                                       triangle.corners[1].y(), triangle.corners[2].x(), triangle.corners[2].y()};
       if (auto found = done.find(key); found != done.end()) {
         current.emplace(key, std::move(found->second));
@@ -248,12 +303,15 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
         entry.face = face_of(centroid);
         if (entry.face < 0) continue;
         entry.values.resize(3 * fc);
-        complete_corners(s, triangle, entry.face, local_faces[static_cast<std::size_t>(entry.face)], part_3d,
+        complete_corners(s, triangle, entry.face, local_faces[static_cast<std::size_t>(entry.face)], cache,
                          entry.values.data());
         current.emplace(key, std::move(entry));
       }
       // A triangle whose corners complete to different labels holds part of the surface: split
-      // it until it is as fine as the octree that will sample the field.
+      // it until it is as fine as the octree that will sample the field. At the midpoint of its
+      // longest edge, not at its centroid: that edge is often a face edge (a constraint), which
+      // centroid splits never shorten, so they went on adding points beside it for every round
+      // (twice the triangles on the 80 mm sector sets, for no better IoU).
       const Completed& c = current.at(key);
       if (longest_sq <= refined_min * refined_min) continue;
       int first_label = -1;
@@ -265,16 +323,46 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
         mixed = label != first_label;
       }
       if (mixed) {
-        const Vec2 centroid = (triangle.corners[0] + triangle.corners[1] + triangle.corners[2]) / 3.0;
-        splits.emplace_back(centroid.x(), centroid.y());
+        int longest = 0;
+        double longest_edge_sq = -1.0;
+        for (int k = 0; k < 3; ++k) {
+          const double length_sq =
+              CGAL::squared_distance(it->vertex(Cdt::cw(k))->point(), it->vertex(Cdt::ccw(k))->point());
+          if (length_sq > longest_edge_sq) {
+            longest_edge_sq = length_sq;
+            longest = k;
+          }
+        }
+        splits.emplace_back(it->vertex(Cdt::cw(longest)), it->vertex(Cdt::ccw(longest)));
       }
     }
     done = std::move(current);
     if (splits.empty() || round == kMaxRefinementRounds) break;
-    cdt.insert(splits.begin(), splits.end());
+    std::set<std::array<double, 4>> split_edges;
+    for (const auto& [a, b] : splits) {
+      const Kernel::Point_2& pa = a->point();
+      const Kernel::Point_2& pb = b->point();
+      // Both triangles along an edge may ask for its split.
+      std::array<double, 4> key{pa.x(), pa.y(), pb.x(), pb.y()};
+      if (std::make_pair(pb.x(), pb.y()) < std::make_pair(pa.x(), pa.y())) key = {pb.x(), pb.y(), pa.x(), pa.y()};
+      if (!split_edges.insert(key).second) continue;
+      const Kernel::Point_2 middle(0.5 * (pa.x() + pb.x()), 0.5 * (pa.y() + pb.y()));
+      Cdt::Face_handle face;
+      int index = 0;
+      // On the edge itself (a constraint is split there), even where rounding puts the midpoint
+      // a hair off its line.
+      if (cdt.is_edge(a, b, face, index)) cdt.insert(middle, Cdt::EDGE, face, index);
+      else cdt.insert(middle);
+    }
   }
+  // In the order of the corner coordinates, so that the output does not depend on hashing.
+  std::vector<std::pair<TriangleKey, Completed*>> ordered;
+  ordered.reserve(done.size());
+  for (auto& [key, entry] : done) ordered.emplace_back(key, &entry);
+  std::sort(ordered.begin(), ordered.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
   std::map<int, std::size_t> entry_of_face;
-  for (auto& [key, entry] : done) {
+  for (auto& [key, entry_pointer] : ordered) {
+    Completed& entry = *entry_pointer;
     auto [it, inserted] = entry_of_face.try_emplace(entry.face, out.faces.size());
     if (inserted) {
       out.faces.push_back(entry.face);
@@ -287,59 +375,91 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
 }
 
 void CellField::complete_corners(const PreparedSlice& s, const UnknownTriangle& triangle, int face_id,
-                                 const std::vector<int>& local_faces,
-                                 std::map<std::tuple<int, double, double>, std::vector<double>>& part_3d,
-                                 double* out) const {
+                                 const std::vector<int>& local_faces, CornerCache& cache, double* out) const {
   const std::size_t fc = static_cast<std::size_t>(function_count());
-  std::vector<double> n2(fc);
+  std::vector<double> scratch(fc);
   const Vec2 centroid = (triangle.corners[0] + triangle.corners[1] + triangle.corners[2]) / 3.0;
   const UnknownComponent& component = s.unknown[static_cast<std::size_t>(triangle.component)];
-  for (int k = 0; k < 3; ++k) {
-    const Vec2& corner = triangle.corners[k];
-    // (a) 3D mean-value interpolant of the known faces around, at the corner itself.
-    auto [it, inserted] = part_3d.try_emplace({face_id, corner.x(), corner.y()});
-    if (inserted) {
-      std::vector<double>& n3w = it->second;
-      n3w.assign(fc + 1, 0.0);
-      const Vec3 x = s.origin + corner.x() * s.u + corner.y() * s.v;
-      for (const int g : local_faces) {
-        double total = 0.0, unknown = 0.0;
-        std::fill(n2.begin(), n2.end(), 0.0);  // scratch for the materials of face g
-        if (!known_weights(g, x, total, n2.data(), unknown)) continue;
-        double materials = 0.0;
-        for (std::size_t l = 1; l < fc; ++l) {
-          n3w[l] += 0.5 * n2[l];
-          materials += n2[l];
-        }
-        n3w[0] += 0.5 * (total - materials - unknown);
-        n3w[fc] += 0.5 * (total - unknown);
-      }
-    }
-    const std::vector<double>& n3w = it->second;
-    // (b) 2D mean-value interpolant of the unknown component in its slice, from the known
-    // labels across its boundary; read just inside the triangle's corner, so that a corner
-    // on the boundary takes the limit from its own side (Section 5.1).
-    const Vec2 p = corner + 1e-4 * (centroid - corner);
-    std::fill(n2.begin(), n2.end(), 0.0);
-    double w2 = 0.0;
+  // (b) the 2D mean-value interpolant of the unknown component in its slice, from the known
+  // labels across its boundary, at p; false (and nothing added) when p is on the boundary.
+  const auto add_part_2d = [&](const Vec2& p, bool stop_on_boundary, double* n2) {
     for (std::size_t r = 0; r < component.rings.size(); ++r) {
       const Ring2& ring = component.rings[r];
       for (std::size_t i = 0; i < ring.size(); ++i) {
-        const double w = edge_weight_2d(ring[i], ring[(i + 1) % ring.size()], p);
+        const Vec2& a = ring[i];
+        const Vec2& b = ring[(i + 1) % ring.size()];
+        if (stop_on_boundary) {
+          // On the edge (to rounding): its weight is singular there.
+          const Vec2 ab = b - a, ap = p - a;
+          const double length_sq = ab.squaredNorm();
+          const double cross = ab.x() * ap.y() - ab.y() * ap.x();
+          const double along = ab.dot(ap);
+          if (std::abs(cross) <= kOnBoundaryTolerance * length_sq && along >= -kOnBoundaryTolerance * length_sq &&
+              along <= (1.0 + kOnBoundaryTolerance) * length_sq)
+            return false;
+        }
+        const double w = edge_weight_2d(a, b, p);
         n2[static_cast<std::size_t>(component.edge_labels[r][i])] += w;
-        w2 += w;
+        n2[fc] += w;
       }
     }
+    return true;
+  };
+  for (int k = 0; k < 3; ++k) {
+    const Vec2& corner = triangle.corners[k];
+    // (a) 3D mean-value interpolant of the known faces around, at the corner itself.
+    auto [it, inserted] = cache.part_3d.try_emplace({static_cast<double>(face_id), corner.x(), corner.y()},
+                                                    cache.values.size());
+    if (inserted) {
+      cache.values.resize(cache.values.size() + fc + 1, 0.0);
+      double* n3w = cache.values.data() + it->second;
+      const Vec3 x = s.origin + corner.x() * s.u + corner.y() * s.v;
+      for (const int g : local_faces) {
+        double known = 0.0;
+        std::fill(scratch.begin(), scratch.end(), 0.0);  // the materials of face g
+        if (!known_weights(g, x, known, scratch.data())) continue;
+        double materials = 0.0;
+        for (std::size_t l = 1; l < fc; ++l) {
+          n3w[l] += 0.5 * scratch[l];
+          materials += scratch[l];
+        }
+        n3w[0] += 0.5 * (known - materials);  // the known outside
+        n3w[fc] += 0.5 * known;
+      }
+    }
+    const std::size_t at_3d = it->second;
+    // (b) at the corner itself when it lies inside the unknown set (the interpolant is smooth
+    // there, and the triangles around the corner share it); on the boundary it is read just
+    // inside the triangle's corner, so that the corner takes the limit from its own side
+    // (Section 5.1).
+    auto [it_2d, inserted_2d] = cache.part_2d.try_emplace(
+        {static_cast<double>(triangle.component), corner.x(), corner.y()}, cache.values.size());
+    if (inserted_2d) {
+      cache.values.resize(cache.values.size() + fc + 1, 0.0);
+      if (!add_part_2d(corner, true, cache.values.data() + it_2d->second)) {
+        cache.values.resize(it_2d->second);
+        it_2d->second = CornerCache::kOnBoundary;
+      }
+    }
+    std::vector<double> inside;
+    const double* n2 = nullptr;
+    if (it_2d->second != CornerCache::kOnBoundary) {
+      n2 = cache.values.data() + it_2d->second;
+    } else {
+      inside.assign(fc + 1, 0.0);
+      add_part_2d(corner + 1e-4 * (centroid - corner), false, inside.data());
+      n2 = inside.data();
+    }
     // Formula 7: the normalised blend of both.
-    const double denominator = n3w[fc] + w2;
+    const double* n3w = cache.values.data() + at_3d;
+    const double denominator = n3w[fc] + n2[fc];
     double* value = out + static_cast<std::size_t>(k) * fc;
     for (std::size_t l = 0; l < fc; ++l)
       value[l] = denominator > 0.0 ? 2.0 * (n3w[l] + n2[l]) / denominator - 1.0 : (l == 0 ? 1.0 : -1.0);
   }
 }
 
-bool CellField::known_weights(int face, const Vec3& p, double& total, double* materials,
-                              double& unknown) const {
+bool CellField::known_weights(int face, const Vec3& p, double& known, double* materials) const {
   const FaceImage& image = images_[static_cast<std::size_t>(face)];
   const PlaneFrame& frame = frames_[static_cast<std::size_t>(image.frame)];
   const Vec3 d = p - frame.origin;
@@ -355,10 +475,27 @@ bool CellField::known_weights(int face, const Vec3& p, double& total, double* ma
     if (part.tree_count == 0) return projected_angle_plain(points_.data() + part.begin, part.count, foot, height);
     return part_angle(part, foot, height);
   };
-  total = projected_angle_plain(points_.data() + image.polygon_begin, image.polygon_count, foot, height) * inv_height;
-  for (const FaceImage::Part& part : image.parts) materials[part.material] += angle(part) * inv_height;
-  unknown = 0.0;
-  for (const FaceImage::Part& part : image.unknown_parts) unknown += angle(part) * inv_height;
+  // Parts that are the face polygon itself (a face wholly inside a ring: with fields of view,
+  // most faces are wholly inside the unknown set's outer ring, and those inside the fov inside
+  // its hole too) take the polygon's sum, computed once: known = polygon - unknown parts.
+  int known_polygons = 1;
+  known = 0.0;
+  for (const FaceImage::Part& part : image.unknown_parts) {
+    if (part.polygon_copy != 0) known_polygons -= part.polygon_copy;
+    else known -= angle(part);
+  }
+  double polygon = 0.0;
+  bool polygon_done = false;
+  const auto polygon_angle = [&] {
+    if (!polygon_done)
+      polygon = projected_angle_plain(points_.data() + image.polygon_begin, image.polygon_count, foot, height);
+    polygon_done = true;
+    return polygon;
+  };
+  if (known_polygons != 0) known += known_polygons * polygon_angle();
+  known *= inv_height;
+  for (const FaceImage::Part& part : image.parts)
+    materials[part.material] += (part.polygon_copy != 0 ? part.polygon_copy * polygon_angle() : angle(part)) * inv_height;
   return true;
 }
 
@@ -388,22 +525,22 @@ void CellField::build_unknown_images() {
       roots.insert(find_root(parent, arrangement_.face(static_cast<int>(f)).cell_positive));
   group_count_ = roots.size();
   // The known faces each face's corners read: those of the cells within kGroupHops group steps.
+  // (In parallel: with fields of view every face has unknown parts, and this walk over the cells
+  // around each of them was a serial tenth of the completion.)
   std::vector<std::vector<int>> local_faces(images_.size());
-  for (std::size_t f = 0; f < images_.size(); ++f) {
-    if (images_[f].unknown_parts.empty()) continue;
+  tbb::parallel_for(std::size_t{0}, images_.size(), [&](std::size_t f) {
+    if (images_[f].unknown_parts.empty()) return;
     const ArrangementFace& face = arrangement_.face(static_cast<int>(f));
-    std::vector<int> cells;
+    std::vector<int> cells;  // a few dozen: a linear search is the fastest set
     for (const int c : {face.cell_positive, face.cell_negative})
       if (c >= 0) cells.push_back(c);
-    std::unordered_set<int> seen(cells.begin(), cells.end());
-    std::vector<int> frontier = cells;
+    std::size_t frontier_begin = 0;
     for (int hop = 0; hop < kGroupHops; ++hop) {
-      std::vector<int> next;
-      for (const int c : frontier)
-        for (const int n : unknown_neighbours[static_cast<std::size_t>(c)])
-          if (seen.insert(n).second) next.push_back(n);
-      cells.insert(cells.end(), next.begin(), next.end());
-      frontier = std::move(next);
+      const std::size_t frontier_end = cells.size();
+      for (std::size_t i = frontier_begin; i < frontier_end; ++i)
+        for (const int n : unknown_neighbours[static_cast<std::size_t>(cells[i])])
+          if (std::find(cells.begin(), cells.end(), n) == cells.end()) cells.push_back(n);
+      frontier_begin = frontier_end;
     }
     std::vector<int>& faces = local_faces[f];
     for (const int c : cells)
@@ -413,7 +550,7 @@ void CellField::build_unknown_images() {
           faces.push_back(g);
     std::sort(faces.begin(), faces.end());
     faces.erase(std::unique(faces.begin(), faces.end()), faces.end());
-  }
+  });
   // A slice's triangles and values depend only on the images of its faces with unknown parts
   // and of their local faces: slices none of whose inputs were rebuilt keep their completion
   // (the online engine's zone rarely reaches most slices).
@@ -422,19 +559,23 @@ void CellField::build_unknown_images() {
     if (!images_[f].unknown_parts.empty())
       slice_faces[static_cast<std::size_t>(arrangement_.plane(images_[f].frame).slice)].push_back(static_cast<int>(f));
   slice_completions_.resize(slices_.size());
-  std::vector<int> stale;
   std::vector<std::vector<std::pair<int, std::uint64_t>>> inputs(slices_.size());
-  for (const int slice : slices_with_unknown) {
-    std::vector<std::pair<int, std::uint64_t>>& read = inputs[static_cast<std::size_t>(slice)];
-    for (const int f : slice_faces[static_cast<std::size_t>(slice)]) {
+  std::vector<char> is_stale(slices_.size(), 0);
+  tbb::parallel_for(std::size_t{0}, slices_with_unknown.size(), [&](std::size_t index) {
+    const std::size_t slice = static_cast<std::size_t>(slices_with_unknown[index]);
+    std::vector<std::pair<int, std::uint64_t>>& read = inputs[slice];
+    for (const int f : slice_faces[slice]) {
       read.emplace_back(f, image_generations_[static_cast<std::size_t>(f)]);
       for (const int g : local_faces[static_cast<std::size_t>(f)])
         read.emplace_back(g, image_generations_[static_cast<std::size_t>(g)]);
     }
     std::sort(read.begin(), read.end());
     read.erase(std::unique(read.begin(), read.end()), read.end());
-    if (read != slice_completions_[static_cast<std::size_t>(slice)].inputs || read.empty()) stale.push_back(slice);
-  }
+    is_stale[slice] = read != slice_completions_[slice].inputs || read.empty();
+  });
+  std::vector<int> stale;
+  for (const int slice : slices_with_unknown)
+    if (is_stale[static_cast<std::size_t>(slice)]) stale.push_back(slice);
   // Slices triangulate and complete independently (each writes only its own entry).
   tbb::parallel_for(std::size_t{0}, stale.size(), [&](std::size_t index) {
     const std::size_t slice = static_cast<std::size_t>(stale[index]);

@@ -271,8 +271,9 @@ struct Builder {
   std::size_t stride;
   std::vector<TriangleKey> keys;
   std::vector<std::uint32_t> order;  // position -> triangle on entry
-  std::vector<TriangleNode>& nodes;
-  std::vector<double>& moments;
+  TriangleNode* nodes;  // room for triangle_tree_node_count nodes from `next` on
+  double* moments;      // the nodes' moments (stride each), zero on entry
+  std::uint32_t next;   // index of the next node
 
   bool less(int axis, std::uint32_t a, std::uint32_t b) const {
     const TriangleKey& ka = keys[a];
@@ -283,9 +284,7 @@ struct Builder {
   }
 
   std::uint32_t build(std::uint32_t first, std::uint32_t last) {
-    const std::uint32_t index = static_cast<std::uint32_t>(nodes.size());
-    nodes.emplace_back();
-    moments.resize(nodes.size() * stride, 0.0);
+    const std::uint32_t index = next++;
     TriangleNode node;
     node.first = first;
     node.last = last;
@@ -371,18 +370,23 @@ void add_triangle_moments(const Vec2 (&corners)[3], const double (&density)[3], 
   add_linear_moments(z, uniform, density, out);
 }
 
-std::uint32_t build_triangle_tree(UnknownTriangle* triangles, double* corner_values, std::size_t count,
-                                  int function_count, std::vector<TriangleNode>& nodes,
-                                  std::vector<double>& moments) {
+std::size_t triangle_tree_node_count(std::size_t count) {
+  // The split rule of Builder::build.
+  if (count <= kLeafTriangles) return 1;
+  return 1 + triangle_tree_node_count(count / 2) + triangle_tree_node_count(count - count / 2);
+}
+
+std::uint32_t build_triangle_tree_at(UnknownTriangle* triangles, double* corner_values, std::size_t count,
+                                     int function_count, TriangleNode* nodes, double* moments,
+                                     std::uint32_t first) {
   const std::size_t fc = static_cast<std::size_t>(function_count);
-  Builder builder{triangles, corner_values, fc, triangle_moment_stride(function_count), {}, {}, nodes, moments};
+  Builder builder{triangles, corner_values, fc, triangle_moment_stride(function_count), {}, {}, nodes, moments, first};
   builder.keys.reserve(count);
   builder.order.resize(count);
   for (std::size_t i = 0; i < count; ++i) {
     builder.keys.push_back(triangle_key(triangles[i]));
     builder.order[i] = static_cast<std::uint32_t>(i);
   }
-  moments.resize(nodes.size() * builder.stride, 0.0);
   const std::uint32_t root = builder.build(0, static_cast<std::uint32_t>(count));
   // Lay the triangles and their values out in the tree's order.
   const std::vector<UnknownTriangle> old_triangles(triangles, triangles + count);
@@ -393,6 +397,17 @@ std::uint32_t build_triangle_tree(UnknownTriangle* triangles, double* corner_val
                 corner_values + i * 3 * fc);
   }
   return root;
+}
+
+std::uint32_t build_triangle_tree(UnknownTriangle* triangles, double* corner_values, std::size_t count,
+                                  int function_count, std::vector<TriangleNode>& nodes,
+                                  std::vector<double>& moments) {
+  const std::size_t first = nodes.size();
+  const std::size_t stride = triangle_moment_stride(function_count);
+  nodes.resize(first + triangle_tree_node_count(count));
+  moments.resize(nodes.size() * stride, 0.0);
+  return build_triangle_tree_at(triangles, corner_values, count, function_count, nodes.data(), moments.data(),
+                                static_cast<std::uint32_t>(first));
 }
 
 void add_triangle_weights(const UnknownTriangle* triangles, const double* corner_values,
