@@ -445,15 +445,8 @@ bool CellField::known_weights(int face, const Vec3& p, double& known, double* ma
     if (part.tree_count == 0) return projected_angle_plain(points_.data() + part.begin, part.count, foot, height);
     return part_angle(part, foot, height);
   };
-  // Parts that are the face polygon itself (a face wholly inside a ring: with fields of view,
-  // most faces are wholly inside the unknown set's outer ring, and those inside the fov inside
-  // its hole too) take the polygon's sum, computed once: known = polygon - unknown parts.
-  int known_polygons = 1;
-  known = 0.0;
-  for (const FaceImage::Part& part : image.unknown_parts) {
-    if (part.polygon_copy != 0) known_polygons -= part.polygon_copy;
-    else known -= angle(part);
-  }
+  // Parts that are the face polygon itself (a face wholly inside a ring: most faces) take the
+  // polygon's sum, computed once.
   double polygon = 0.0;
   bool polygon_done = false;
   const auto polygon_angle = [&] {
@@ -462,10 +455,17 @@ bool CellField::known_weights(int face, const Vec3& p, double& known, double* ma
     polygon_done = true;
     return polygon;
   };
-  if (known_polygons != 0) known += known_polygons * polygon_angle();
+  const auto copy_or_angle = [&](const FaceImage::Part& part) {
+    return part.polygon_copy != 0 ? part.polygon_copy * polygon_angle() : angle(part);
+  };
+  known = 0.0;
+  if (image.known_clipped) {
+    for (const FaceImage::Part& part : image.known_parts) known += copy_or_angle(part);
+  } else {
+    known = polygon_angle();
+  }
   known *= inv_height;
-  for (const FaceImage::Part& part : image.parts)
-    materials[part.material] += (part.polygon_copy != 0 ? part.polygon_copy * polygon_angle() : angle(part)) * inv_height;
+  for (const FaceImage::Part& part : image.parts) materials[part.material] += copy_or_angle(part) * inv_height;
   return true;
 }
 
