@@ -197,6 +197,9 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
     Vec2 lo, hi;
   };
   std::vector<SliceFace> faces;
+  // Neighbouring faces share most edges: each is inserted once (a second insertion of the same
+  // constraint changes nothing but costs its walk through the triangulation).
+  std::unordered_set<std::array<double, 4>, DoublesHash> face_edges;
   for (const int f : slice_faces) {
     const FaceImage& image = images_[static_cast<std::size_t>(f)];
     SliceFace face{f, points_[image.polygon_begin], points_[image.polygon_begin]};
@@ -209,7 +212,12 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
     for (std::uint32_t k = 0; k < image.polygon_count; ++k) {
       const Vec2& a = points_[image.polygon_begin + k];
       const Vec2& b = points_[image.polygon_begin + (k + 1) % image.polygon_count];
-      if (a != b) cdt.insert_constraint(Kernel::Point_2(a.x(), a.y()), Kernel::Point_2(b.x(), b.y()));
+      if (a == b) continue;
+      const bool forward = a.x() < b.x() || (a.x() == b.x() && a.y() < b.y());
+      const std::array<double, 4> key = forward ? std::array<double, 4>{a.x(), a.y(), b.x(), b.y()}
+                                                : std::array<double, 4>{b.x(), b.y(), a.x(), a.y()};
+      if (face_edges.insert(key).second)
+        cdt.insert_constraint(Kernel::Point_2(a.x(), a.y()), Kernel::Point_2(b.x(), b.y()));
     }
   }
   // A slice holds hundreds of faces: a uniform grid over the unknown set's box lists the faces
