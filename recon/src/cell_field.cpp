@@ -28,6 +28,7 @@ PreparedSlice prepare_slice(const LabeledSlice& slice, std::size_t s,
           partition_slice(slice, material_ids, plane_box_polygon(p.origin, p.u, p.v, box));
       p.rings_by_material = std::move(partition.materials);
       p.unknown = std::move(partition.unknown);
+      if (!p.unknown.empty()) p.known = std::move(partition.known);
     }
     for (const Region& region : slice.regions) {
       if (has_unknown) break;
@@ -201,6 +202,7 @@ void CellField::compact_points() {
     live += image.polygon_count;
     for (const FaceImage::Part& part : image.parts) live += part.count;
     for (const FaceImage::Part& part : image.unknown_parts) live += part.count;
+    for (const FaceImage::Part& part : image.known_parts) live += part.count;
   }
   // Rebuilt images leave their old points and trees behind; copy the live ones once they are
   // the minority.
@@ -229,6 +231,7 @@ void CellField::compact_points() {
     move_range(image.polygon_begin, image.polygon_count);
     for (FaceImage::Part& part : image.parts) move_part(part);
     for (FaceImage::Part& part : image.unknown_parts) move_part(part);
+    for (FaceImage::Part& part : image.known_parts) move_part(part);
   }
   points_ = std::move(compacted);
   tree_nodes_ = std::move(compacted_trees);
@@ -335,8 +338,16 @@ void CellField::build_face_image(int face_id) {
   // where the triangles would cost many.
   for (const UnknownComponent& component : slice.unknown)
     for (const Ring2& ring : component.rings) add_part(ring, 0, image.unknown_parts);
+  // And the known set: the completion reads the known part of faces crossed by the unknown
+  // boundary, which as the face minus its unknown part would cost both their edges (the edges
+  // along the face's boundary cancel).
+  if (!slice.unknown.empty()) {
+    image.known_clipped = true;
+    for (const Ring2& ring : slice.known) add_part(ring, 0, image.known_parts);
+  }
   for (FaceImage::Part& part : image.parts) add_tree(part);
   for (FaceImage::Part& part : image.unknown_parts) add_tree(part);
+  for (FaceImage::Part& part : image.known_parts) add_tree(part);
   double unknown_area = 0.0;
   for (const FaceImage::Part& part : image.unknown_parts)
     unknown_area += signed_area(Ring2(points_.begin() + part.begin, points_.begin() + part.begin + part.count));

@@ -25,6 +25,7 @@ struct PreparedSlice {
   std::vector<std::vector<Ring2>> rings_by_material;  ///< index 0 unused (outside)
   std::vector<std::vector<std::pair<Vec2, Vec2>>> ring_bounds;  ///< (min, max) of each ring
   std::vector<UnknownComponent> unknown;  ///< unknown set (regions and outside the fov)
+  std::vector<Ring2> known;  ///< the known set when `unknown` is not empty (SlicePartition::known)
 };
 
 /// Converts the slices: material ids -> dense indices 1..K (`material_ids[k-1]` is the id of k).
@@ -54,6 +55,10 @@ struct FaceImage {
   };
   std::vector<Part> parts;
   std::vector<Part> unknown_parts;  ///< the unknown set clipped to the face (material unused)
+  /// The known set clipped to the face (material unused), for the completion's 3D part, when the
+  /// slice has an unknown set (known_clipped); otherwise the whole face is known.
+  std::vector<Part> known_parts;
+  bool known_clipped = false;
   bool fully_unknown = false;        ///< no known data on the face at all
   std::uint32_t triangle_begin = 0, triangle_count = 0;  ///< completed unknown triangles
   /// Far-field tree of the triangles (root first) and its moments, held by the slice's
@@ -148,8 +153,7 @@ class CellField {
   void complete_corners(const PreparedSlice& s, const UnknownTriangle& triangle, int face_id,
                         const std::vector<int>& local_faces, CornerCache& cache, double* out) const;
   // Known weights of face f seen from p (units of projected_angle / height): the known part of
-  // the face (the face minus its unknown parts) and each material's part (added to materials).
-  // False when p is on f's plane.
+  // the face and each material's part (added to materials). False when p is on f's plane.
   bool known_weights(int face, const Vec3& p, double& known, double* materials) const;
 
   const Arrangement& arrangement_;

@@ -2,6 +2,7 @@
 // part of every face, cell groups, and the values at the triangle corners.
 #include <CGAL/Constrained_Delaunay_triangulation_2.h>
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
+#include <CGAL/Triangulation_face_base_with_info_2.h>
 
 #include <algorithm>
 #include <cstring>
@@ -22,7 +23,12 @@ namespace {
 
 using Kernel = CGAL::Exact_predicates_inexact_constructions_kernel;
 using Vb = CGAL::Triangulation_vertex_base_2<Kernel>;
-using Fb = CGAL::Constrained_triangulation_face_base_2<Kernel>;
+// Each triangle knows its entry among the completed triangles (-1: not completed yet).
+struct FaceInfo {
+  int entry = -1;
+};
+using Fb = CGAL::Constrained_triangulation_face_base_2<
+    Kernel, CGAL::Triangulation_face_base_with_info_2<FaceInfo, Kernel>>;
 using Tds = CGAL::Triangulation_data_structure_2<Vb, Fb>;
 // Exact_predicates_tag: constraints that cross (unknown boundaries and face edges) are split at
 // their intersection points.
@@ -227,6 +233,9 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
     Vec2 lo, hi;
   };
   std::vector<SliceFace> faces;
+  // Neighbouring faces share most edges: each is inserted once (a second insertion of the same
+  // constraint changes nothing but costs its walk through the triangulation).
+  std::unordered_set<std::array<double, 4>, DoublesHash> face_edges;
   for (const int f : slice_faces) {
     const FaceImage& image = images_[static_cast<std::size_t>(f)];
     SliceFace face{f, points_[image.polygon_begin], points_[image.polygon_begin]};
@@ -239,7 +248,12 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
     for (std::uint32_t k = 0; k < image.polygon_count; ++k) {
       const Vec2& a = points_[image.polygon_begin + k];
       const Vec2& b = points_[image.polygon_begin + (k + 1) % image.polygon_count];
-      if (a != b) cdt.insert_constraint(Kernel::Point_2(a.x(), a.y()), Kernel::Point_2(b.x(), b.y()));
+      if (a == b) continue;
+      const bool forward = a.x() < b.x() || (a.x() == b.x() && a.y() < b.y());
+      const std::array<double, 4> key = forward ? std::array<double, 4>{a.x(), a.y(), b.x(), b.y()}
+                                                : std::array<double, 4>{b.x(), b.y(), a.x(), a.y()};
+      if (face_edges.insert(key).second)
+        cdt.insert_constraint(Kernel::Point_2(a.x(), a.y()), Kernel::Point_2(b.x(), b.y()));
     }
   }
   // A slice holds hundreds of faces: a uniform grid over the unknown set's box lists the faces
@@ -267,52 +281,61 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
 
   // Completed values of the corners of every unknown triangle, refined where they disagree.
   struct Completed {
+    Cdt::Vertex_handle vertices[3];  // the triangle's (a face that a flip reused has others)
+    bool skipped = false;            // a sliver, or outside the unknown set or the faces
     UnknownTriangle triangle;
     int face = -1;
     std::vector<double> values;  // 3 corners x fc
   };
-  using TriangleKey = std::array<double, 6>;  // corner coordinates
   CornerCache cache;
-  std::unordered_map<TriangleKey, Completed, DoublesHash> done;
+  std::vector<Completed> entries;
   const double refined_min = kRefinedTriangleMin * diagonal;
   for (int round = 0;; ++round) {
-    std::unordered_map<TriangleKey, Completed, DoublesHash> current;
-    current.reserve(done.size() + done.size() / 2);
     // Longest edges of the triangles to split, by their end vertices.
     std::vector<std::pair<Cdt::Vertex_handle, Cdt::Vertex_handle>> splits;
     for (auto it = cdt.finite_faces_begin(); it != cdt.finite_faces_end(); ++it) {
-      Completed entry;
-      UnknownTriangle& triangle = entry.triangle;
-      for (int k = 0; k < 3; ++k)
-        triangle.corners[k] = Vec2(it->vertex(k)->point().x(), it->vertex(k)->point().y());
-      const double area = signed_area(Ring2{triangle.corners[0], triangle.corners[1], triangle.corners[2]});
-      // Slivers from constraint intersections rounded onto each other cover nothing.
+      int& index = it->info().entry;
+      if (index >= 0) {
+        const Completed& known = entries[static_cast<std::size_t>(index)];
+        for (const Cdt::Vertex_handle& v : known.vertices)
+          if (v != it->vertex(0) && v != it->vertex(1) && v != it->vertex(2)) index = -1;
+      }
+      if (index < 0) {
+        index = static_cast<int>(entries.size());
+        Completed& entry = entries.emplace_back();
+        for (int k = 0; k < 3; ++k) entry.vertices[k] = it->vertex(k);
+        UnknownTriangle& triangle = entry.triangle;
+        for (int k = 0; k < 3; ++k)
+          triangle.corners[k] = Vec2(it->vertex(k)->point().x(), it->vertex(k)->point().y());
+        const double area = signed_area(Ring2{triangle.corners[0], triangle.corners[1], triangle.corners[2]});
+        // Slivers from constraint intersections rounded onto each other cover nothing.
+        const double longest_sq = std::max({(triangle.corners[1] - triangle.corners[0]).squaredNorm(),
+                                            (triangle.corners[2] - triangle.corners[1]).squaredNorm(),
+                                            (triangle.corners[0] - triangle.corners[2]).squaredNorm()});
+        entry.skipped = !(std::abs(area) > 1e-12 * longest_sq) || std::abs(area) < 1e-14 * diagonal * diagonal;
+        if (area < 0.0) std::swap(triangle.corners[1], triangle.corners[2]);  // counter-clockwise
+        const Vec2 centroid = (triangle.corners[0] + triangle.corners[1] + triangle.corners[2]) / 3.0;
+        if (!entry.skipped) triangle.component = component_of(centroid);
+        entry.skipped = entry.skipped || triangle.component < 0;
+        if (!entry.skipped) entry.face = face_of(centroid);
+        entry.skipped = entry.skipped || entry.face < 0;
+        if (!entry.skipped) {
+          entry.values.resize(3 * fc);
+          complete_corners(s, triangle, entry.face, local_faces[static_cast<std::size_t>(entry.face)], cache,
+                           entry.values.data());
+        }
+      }
+      const Completed& c = entries[static_cast<std::size_t>(index)];
+      if (c.skipped) continue;
+      const UnknownTriangle& triangle = c.triangle;
       const double longest_sq = std::max({(triangle.corners[1] - triangle.corners[0]).squaredNorm(),
                                           (triangle.corners[2] - triangle.corners[1]).squaredNorm(),
                                           (triangle.corners[0] - triangle.corners[2]).squaredNorm()});
-      if (!(std::abs(area) > 1e-12 * longest_sq) || std::abs(area) < 1e-14 * diagonal * diagonal) continue;
-      if (area < 0.0) std::swap(triangle.corners[1], triangle.corners[2]);  // counter-clockwise
-      const TriangleKey key{triangle.corners[0].x(), triangle.corners[0].y(), triangle.corners[1].x(),
-                                      triangle.corners[1].y(), triangle.corners[2].x(), triangle.corners[2].y()};
-      if (auto found = done.find(key); found != done.end()) {
-        current.emplace(key, std::move(found->second));
-      } else {
-        const Vec2 centroid = (triangle.corners[0] + triangle.corners[1] + triangle.corners[2]) / 3.0;
-        triangle.component = component_of(centroid);
-        if (triangle.component < 0) continue;
-        entry.face = face_of(centroid);
-        if (entry.face < 0) continue;
-        entry.values.resize(3 * fc);
-        complete_corners(s, triangle, entry.face, local_faces[static_cast<std::size_t>(entry.face)], cache,
-                         entry.values.data());
-        current.emplace(key, std::move(entry));
-      }
       // A triangle whose corners complete to different labels holds part of the surface: split
       // it until it is as fine as the octree that will sample the field. At the midpoint of its
       // longest edge, not at its centroid: that edge is often a face edge (a constraint), which
       // centroid splits never shorten, so they went on adding points beside it for every round
       // (twice the triangles on the 80 mm sector sets, for no better IoU).
-      const Completed& c = current.at(key);
       if (longest_sq <= refined_min * refined_min) continue;
       int first_label = -1;
       bool mixed = false;
@@ -336,7 +359,6 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
         splits.emplace_back(it->vertex(Cdt::cw(longest)), it->vertex(Cdt::ccw(longest)));
       }
     }
-    done = std::move(current);
     if (splits.empty() || round == kMaxRefinementRounds) break;
     std::set<std::array<double, 4>> split_edges;
     for (const auto& [a, b] : splits) {
@@ -355,10 +377,17 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
       else cdt.insert(middle);
     }
   }
-  // In the order of the corner coordinates, so that the output does not depend on hashing.
+  // The final triangles, in the order of their corner coordinates (not the triangulation's).
+  using TriangleKey = std::array<double, 6>;
   std::vector<std::pair<TriangleKey, Completed*>> ordered;
-  ordered.reserve(done.size());
-  for (auto& [key, entry] : done) ordered.emplace_back(key, &entry);
+  for (auto it = cdt.finite_faces_begin(); it != cdt.finite_faces_end(); ++it) {
+    Completed& entry = entries[static_cast<std::size_t>(it->info().entry)];
+    if (entry.skipped) continue;
+    const Vec2* corners = entry.triangle.corners;
+    ordered.emplace_back(TriangleKey{corners[0].x(), corners[0].y(), corners[1].x(), corners[1].y(), corners[2].x(),
+                                     corners[2].y()},
+                         &entry);
+  }
   std::sort(ordered.begin(), ordered.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
   std::map<int, std::size_t> entry_of_face;
   for (auto& [key, entry_pointer] : ordered) {
@@ -475,15 +504,8 @@ bool CellField::known_weights(int face, const Vec3& p, double& known, double* ma
     if (part.tree_count == 0) return projected_angle_plain(points_.data() + part.begin, part.count, foot, height);
     return part_angle(part, foot, height);
   };
-  // Parts that are the face polygon itself (a face wholly inside a ring: with fields of view,
-  // most faces are wholly inside the unknown set's outer ring, and those inside the fov inside
-  // its hole too) take the polygon's sum, computed once: known = polygon - unknown parts.
-  int known_polygons = 1;
-  known = 0.0;
-  for (const FaceImage::Part& part : image.unknown_parts) {
-    if (part.polygon_copy != 0) known_polygons -= part.polygon_copy;
-    else known -= angle(part);
-  }
+  // Parts that are the face polygon itself (a face wholly inside a ring: most faces) take the
+  // polygon's sum, computed once.
   double polygon = 0.0;
   bool polygon_done = false;
   const auto polygon_angle = [&] {
@@ -492,10 +514,17 @@ bool CellField::known_weights(int face, const Vec3& p, double& known, double* ma
     polygon_done = true;
     return polygon;
   };
-  if (known_polygons != 0) known += known_polygons * polygon_angle();
+  const auto copy_or_angle = [&](const FaceImage::Part& part) {
+    return part.polygon_copy != 0 ? part.polygon_copy * polygon_angle() : angle(part);
+  };
+  known = 0.0;
+  if (image.known_clipped) {
+    for (const FaceImage::Part& part : image.known_parts) known += copy_or_angle(part);
+  } else {
+    known = polygon_angle();
+  }
   known *= inv_height;
-  for (const FaceImage::Part& part : image.parts)
-    materials[part.material] += (part.polygon_copy != 0 ? part.polygon_copy * polygon_angle() : angle(part)) * inv_height;
+  for (const FaceImage::Part& part : image.parts) materials[part.material] += copy_or_angle(part) * inv_height;
   return true;
 }
 

@@ -140,6 +140,10 @@ SlicePartition partition_slice(const LabeledSlice& slice, const std::vector<int>
     out.materials[m] = to_rings(material_sets[m]);
   }
 
+  PolygonSet known = box_set;
+  known.difference(unknown);
+  out.known = to_rings(known);
+
   // Unknown components and the known label across each of their edges.
   std::vector<PolygonWithHoles> parts;
   unknown.polygons_with_holes(std::back_inserter(parts));

@@ -23,6 +23,9 @@ struct UnknownComponent {
 struct SlicePartition {
   std::vector<std::vector<Ring2>> materials;
   std::vector<UnknownComponent> unknown;
+  /// The known set (materials and the known outside): plane_in_box minus the unknown set, outer
+  /// rings counter-clockwise and holes clockwise.
+  std::vector<Ring2> known;
 };
 
 /// Partitions `slice` inside `plane_in_box` (the convex polygon where the slice's plane meets the
