@@ -3,8 +3,6 @@
 // Sections 4.2-4.4 and 6): face images (each slice's labelled regions clipped to each of its
 // faces) and the CPU reference evaluator.
 #include <cstdint>
-#include <map>
-#include <tuple>
 #include <vector>
 
 #include "arrangement.hpp"

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <stdexcept>
 
 #include "mean_value.hpp"
 
@@ -359,6 +360,13 @@ void add_exact(const UnknownTriangle& triangle, const double* values, int functi
   }
 }
 
+// Number of nodes Builder::build makes for `count` triangles (its split rule), so that the node
+// and moment arrays are sized once.
+std::size_t triangle_tree_node_count(std::size_t count) {
+  if (count <= kLeafTriangles) return 1;
+  return 1 + triangle_tree_node_count(count / 2) + triangle_tree_node_count(count - count / 2);
+}
+
 }  // namespace
 
 void add_triangle_moments(const Vec2 (&corners)[3], const double (&density)[3], const Vec2& centre,
@@ -370,17 +378,16 @@ void add_triangle_moments(const Vec2 (&corners)[3], const double (&density)[3], 
   add_linear_moments(z, uniform, density, out);
 }
 
-std::size_t triangle_tree_node_count(std::size_t count) {
-  // The split rule of Builder::build.
-  if (count <= kLeafTriangles) return 1;
-  return 1 + triangle_tree_node_count(count / 2) + triangle_tree_node_count(count - count / 2);
-}
-
-std::uint32_t build_triangle_tree_at(UnknownTriangle* triangles, double* corner_values, std::size_t count,
-                                     int function_count, TriangleNode* nodes, double* moments,
-                                     std::uint32_t first) {
+std::uint32_t build_triangle_tree(UnknownTriangle* triangles, double* corner_values, std::size_t count,
+                                  int function_count, std::vector<TriangleNode>& nodes,
+                                  std::vector<double>& moments) {
   const std::size_t fc = static_cast<std::size_t>(function_count);
-  Builder builder{triangles, corner_values, fc, triangle_moment_stride(function_count), {}, {}, nodes, moments, first};
+  const std::size_t stride = triangle_moment_stride(function_count);
+  const std::size_t first = nodes.size();
+  nodes.resize(first + triangle_tree_node_count(count));
+  moments.resize(nodes.size() * stride, 0.0);
+  Builder builder{triangles, corner_values, fc, stride, {}, {}, nodes.data(), moments.data(),
+                  static_cast<std::uint32_t>(first)};
   builder.keys.reserve(count);
   builder.order.resize(count);
   for (std::size_t i = 0; i < count; ++i) {
@@ -388,6 +395,8 @@ std::uint32_t build_triangle_tree_at(UnknownTriangle* triangles, double* corner_
     builder.order[i] = static_cast<std::uint32_t>(i);
   }
   const std::uint32_t root = builder.build(0, static_cast<std::uint32_t>(count));
+  if (builder.next != nodes.size())
+    throw std::logic_error("triangle tree: triangle_tree_node_count disagrees with Builder::build");
   // Lay the triangles and their values out in the tree's order.
   const std::vector<UnknownTriangle> old_triangles(triangles, triangles + count);
   const std::vector<double> old_values(corner_values, corner_values + count * 3 * fc);
@@ -397,17 +406,6 @@ std::uint32_t build_triangle_tree_at(UnknownTriangle* triangles, double* corner_
                 corner_values + i * 3 * fc);
   }
   return root;
-}
-
-std::uint32_t build_triangle_tree(UnknownTriangle* triangles, double* corner_values, std::size_t count,
-                                  int function_count, std::vector<TriangleNode>& nodes,
-                                  std::vector<double>& moments) {
-  const std::size_t first = nodes.size();
-  const std::size_t stride = triangle_moment_stride(function_count);
-  nodes.resize(first + triangle_tree_node_count(count));
-  moments.resize(nodes.size() * stride, 0.0);
-  return build_triangle_tree_at(triangles, corner_values, count, function_count, nodes.data(), moments.data(),
-                                static_cast<std::uint32_t>(first));
 }
 
 void add_triangle_weights(const UnknownTriangle* triangles, const double* corner_values,

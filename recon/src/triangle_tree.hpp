@@ -75,17 +75,6 @@ std::uint32_t build_triangle_tree(UnknownTriangle* triangles, double* corner_val
                                   int function_count, std::vector<TriangleNode>& nodes,
                                   std::vector<double>& moments);
 
-/// Number of nodes build_triangle_tree appends for `count` triangles.
-std::size_t triangle_tree_node_count(std::size_t count);
-
-/// build_triangle_tree into preallocated arrays: the nodes go to nodes[first ..
-/// first + triangle_tree_node_count(count)), their moments to the same indices times the stride
-/// of `moments`, which must be zero there. Trees of different faces can so be built in parallel
-/// into one array. Returns the root's index (`first`).
-std::uint32_t build_triangle_tree_at(UnknownTriangle* triangles, double* corner_values, std::size_t count,
-                                     int function_count, TriangleNode* nodes, double* moments,
-                                     std::uint32_t first);
-
 /// The exact sums over `count` triangles seen from (foot, height): unknown_total += sum of w_k,
 /// w[l] += sum of 0.5 w_k (1 + v_kl) (units of projected_angle / height).
 void add_triangle_weights(const UnknownTriangle* triangles, const double* corner_values,

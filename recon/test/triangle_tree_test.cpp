@@ -221,51 +221,5 @@ TEST(TriangleTree, LayoutDependsOnlyOnTheSetOfTriangles) {
   }
 }
 
-// CellField builds the trees of all faces in parallel into one array (build_triangle_tree_at):
-// the node count must be what the build uses, and the result what appending gives.
-TEST(TriangleTree, InPlaceBuildMatchesTheAppendingBuild) {
-  constexpr int kFunctions = 2;
-  std::mt19937 rng(12);
-  Mesh first = square_mesh(kFunctions, rng), second = square_mesh(kFunctions, rng);
-  second.triangles.resize(37);  // an odd count: unequal halves
-  second.values.resize(37 * 3 * kFunctions);
-  for (const std::size_t count : std::vector<std::size_t>{1, 4, 5, 37, first.triangles.size()}) {
-    std::vector<TriangleNode> nodes;
-    std::vector<double> moments;
-    Mesh copy = first;
-    build_triangle_tree(copy.triangles.data(), copy.values.data(), count, kFunctions, nodes, moments);
-    EXPECT_EQ(nodes.size(), triangle_tree_node_count(count));
-  }
-  // Appending: the second tree after the first.
-  Mesh a1 = first, a2 = second;
-  std::vector<TriangleNode> nodes;
-  std::vector<double> moments;
-  build_triangle_tree(a1.triangles.data(), a1.values.data(), a1.triangles.size(), kFunctions, nodes, moments);
-  const std::uint32_t root2 =
-      build_triangle_tree(a2.triangles.data(), a2.values.data(), a2.triangles.size(), kFunctions, nodes, moments);
-  // In place, the second tree built first.
-  Mesh b1 = first, b2 = second;
-  const std::size_t n1 = triangle_tree_node_count(b1.triangles.size());
-  const std::size_t stride = triangle_moment_stride(kFunctions);
-  std::vector<TriangleNode> nodes_in_place(n1 + triangle_tree_node_count(b2.triangles.size()));
-  std::vector<double> moments_in_place(nodes_in_place.size() * stride, 0.0);
-  EXPECT_EQ(build_triangle_tree_at(b2.triangles.data(), b2.values.data(), b2.triangles.size(), kFunctions,
-                                   nodes_in_place.data(), moments_in_place.data(), static_cast<std::uint32_t>(n1)),
-            root2);
-  EXPECT_EQ(build_triangle_tree_at(b1.triangles.data(), b1.values.data(), b1.triangles.size(), kFunctions,
-                                   nodes_in_place.data(), moments_in_place.data(), 0),
-            0u);
-  ASSERT_EQ(nodes.size(), nodes_in_place.size());
-  for (std::size_t n = 0; n < nodes.size(); ++n) {
-    EXPECT_EQ(nodes[n].centre, nodes_in_place[n].centre);
-    EXPECT_EQ(nodes[n].left, nodes_in_place[n].left);
-    EXPECT_EQ(nodes[n].right, nodes_in_place[n].right);
-    EXPECT_EQ(nodes[n].first, nodes_in_place[n].first);
-  }
-  EXPECT_EQ(moments, moments_in_place);
-  for (std::size_t t = 0; t < a2.triangles.size(); ++t)
-    EXPECT_EQ(a2.triangles[t].corners[0], b2.triangles[t].corners[0]);
-}
-
 }  // namespace
 }  // namespace sonoshape::recon
