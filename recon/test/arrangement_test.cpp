@@ -69,16 +69,24 @@ TEST(Arrangement, BoxAloneIsOneCell) {
   expect_consistent(arr, kBox);
 }
 
-TEST(Arrangement, RandomPlanesGiveClosedCellsFillingTheBox) {
-  std::mt19937_64 rng(7);
-  std::normal_distribution<double> gauss;
-  std::uniform_real_distribution<double> uniform(-0.8, 0.8);
-  Arrangement arr(kBox);
-  for (int i = 0; i < 12; ++i) {
+// Planes with random normals through random points well inside kBox.
+struct RandomPlanes {
+  explicit RandomPlanes(unsigned seed) : rng(seed) {}
+  void insert_next(Arrangement& arr, int slice) {
     const Vec3 n(gauss(rng), gauss(rng), gauss(rng));
     const Vec3 p(uniform(rng), uniform(rng), uniform(rng));
-    arr.insert_plane(n, -n.dot(p), i);
+    arr.insert_plane(n, -n.dot(p), slice);
   }
+  std::mt19937_64 rng;
+  std::normal_distribution<double> gauss;
+  std::uniform_real_distribution<double> uniform{-0.8, 0.8};
+};
+
+TEST(Arrangement, RandomPlanesGiveClosedCellsFillingTheBox) {
+  RandomPlanes planes(7);
+  std::mt19937_64& rng = planes.rng;
+  Arrangement arr(kBox);
+  for (int i = 0; i < 12; ++i) planes.insert_next(arr, i);
   EXPECT_GT(arr.cell_count(), 100u);
   expect_consistent(arr, kBox);
   // Point location agrees with the exact cell sides.
@@ -98,15 +106,12 @@ TEST(Arrangement, RandomPlanesGiveClosedCellsFillingTheBox) {
 TEST(Arrangement, ReportsTheFacesANewPlaneSplits) {
   // The online engine rebuilds the images of these faces only: every other older face must keep
   // its polygon (vertex ids and plane).
-  std::mt19937_64 rng(11);
-  std::normal_distribution<double> gauss;
-  std::uniform_real_distribution<double> uniform(-0.8, 0.8);
+  RandomPlanes planes(11);
   Arrangement arr(kBox);
   for (int i = 0; i < 10; ++i) {
     std::vector<std::vector<int>> before;
     for (std::size_t f = 0; f < arr.face_count(); ++f) before.push_back(arr.face(static_cast<int>(f)).vertices);
-    const Vec3 n(gauss(rng), gauss(rng), gauss(rng));
-    arr.insert_plane(n, -n.dot(Vec3(uniform(rng), uniform(rng), uniform(rng))), i);
+    planes.insert_next(arr, i);
     const std::vector<int> split = arr.faces_split_by_last_plane();
     EXPECT_FALSE(split.empty());  // the plane passes through the box's interior
     for (std::size_t f = 0; f < before.size(); ++f) {
