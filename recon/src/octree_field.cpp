@@ -2,12 +2,14 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cmath>
 #include <iterator>
 #include <unordered_set>
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_sort.h>
 
 #include "sonoshape/core/log.hpp"
@@ -18,19 +20,50 @@ namespace {
 constexpr std::array<std::array<int, 3>, 6> kFaceNeighbours{
     {{-1, 0, 0}, {1, 0, 0}, {0, -1, 0}, {0, 1, 0}, {0, 0, -1}, {0, 0, 1}}};
 
+void sort_unique(std::vector<std::uint64_t>& keys);
+
 class Sampler {
  public:
-  /// `pending_keys` is scratch space, emptied here.
-  Sampler(SampledField& field, const BatchEvaluator& evaluate, GridIndex& pending_keys)
-      : field_(field), evaluate_(evaluate), pending_keys_(pending_keys) {
+  /// `pending_keys` is scratch space, emptied here; `valid` says per row of `field` whether its
+  /// value is current (rows kept from an earlier pass may not be).
+  Sampler(SampledField& field, const BatchEvaluator& evaluate, GridIndex& pending_keys, std::vector<char> valid)
+      : field_(field), evaluate_(evaluate), pending_keys_(pending_keys), valid_(std::move(valid)) {
     pending_keys_.reset(1 << field.grid.depth);
   }
 
+  /// Whether `key` has a current value; if so its row counts as read in this pass. Safe to call
+  /// from several threads between flushes.
+  bool has_value(std::uint64_t key) const {
+    const std::uint32_t row = field_.index.find(key);
+    if (row == GridIndex::kNone || !valid_[row]) return false;
+    std::atomic_ref<std::uint32_t>(field_.row_pass[row]).store(field_.pass, std::memory_order_relaxed);
+    return true;
+  }
   /// Queues a vertex for evaluation unless it has a value or is queued.
   void request(int i, int j, int k) {
     const std::uint64_t key = grid_key(i, j, k);
-    if (field_.index.count(key) || !pending_keys_.insert(key, 0)) return;
+    if (has_value(key) || !pending_keys_.insert(key, 0)) return;
     pending_.push_back(key);
+  }
+  /// Queues the vertices that generate(n, request) requests for n in [0, count), in parallel: in
+  /// an online update nearly all of them have values already, and the serial look-ups of those
+  /// (hundreds of thousands per pass) were most of the octree passes' time. Queued in key order.
+  template <typename Generate>
+  void request_each(std::size_t count, const Generate& generate) {
+    tbb::enumerable_thread_specific<std::vector<std::uint64_t>> missing;
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 512), [&](const tbb::blocked_range<std::size_t>& r) {
+      std::vector<std::uint64_t>& local = missing.local();
+      const auto request_one = [&](int i, int j, int k) {
+        const std::uint64_t key = grid_key(i, j, k);
+        if (!has_value(key)) local.push_back(key);
+      };
+      for (std::size_t n = r.begin(); n < r.end(); ++n) generate(n, request_one);
+    });
+    std::vector<std::uint64_t> keys;
+    for (const std::vector<std::uint64_t>& local : missing) keys.insert(keys.end(), local.begin(), local.end());
+    sort_unique(keys);
+    for (const std::uint64_t key : keys)
+      if (pending_keys_.insert(key, 0)) pending_.push_back(key);
   }
   /// Evaluates every queued vertex in one parallel batch.
   void flush() {
@@ -43,12 +76,22 @@ class Sampler {
       points.push_back(field_.grid.position(i, j, k));
     }
     const std::size_t fc = static_cast<std::size_t>(field_.function_count);
-    const std::size_t first_row = field_.values.size() / fc;
-    field_.values.resize(field_.values.size() + points.size() * fc);
-    evaluate_(pending_, points, field_.values.data() + first_row * fc);
-    for (std::size_t n = 0; n < pending_.size(); ++n)
-      field_.index.insert(pending_[n], static_cast<std::uint32_t>(first_row + n));
-    field_.keys.insert(field_.keys.end(), pending_.begin(), pending_.end());
+    std::vector<double> evaluated(pending_.size() * fc);
+    evaluate_(pending_, points, evaluated.data());
+    for (std::size_t n = 0; n < pending_.size(); ++n) {
+      std::uint32_t row = field_.index.find(pending_[n]);
+      if (row == GridIndex::kNone) {  // a new row (else a kept row whose value was out of date)
+        row = static_cast<std::uint32_t>(field_.keys.size());
+        field_.index.insert(pending_[n], row);
+        field_.keys.push_back(pending_[n]);
+        field_.values.resize(field_.values.size() + fc);
+        field_.row_pass.push_back(field_.pass);
+        valid_.push_back(1);
+      }
+      std::copy_n(evaluated.data() + n * fc, fc, field_.values.data() + row * fc);
+      field_.row_pass[row] = field_.pass;
+      valid_[row] = 1;
+    }
     field_.evaluations += pending_.size();
     pending_.clear();
     pending_keys_.clear();
@@ -59,6 +102,7 @@ class Sampler {
   const BatchEvaluator& evaluate_;
   std::vector<std::uint64_t> pending_;
   GridIndex& pending_keys_;  // the keys of pending_, for de-duplication
+  std::vector<char> valid_;   // per row of the field
 };
 
 // Sorts and de-duplicates keys: the sets of the octree stages are built in bulk, then queried,
@@ -120,51 +164,66 @@ void close_band(SampledField& field, Sampler& sampler, const std::vector<std::ui
   unique_seeds.reserve(seeds.size());
   for (const std::uint64_t key : seeds)
     if (in_band.insert(key, 0)) unique_seeds.push_back(key);
-  for (const std::uint64_t key : unique_seeds) {
-    int i, j, k;
-    grid_unkey(key, i, j, k);
-    for (int corner = 0; corner < 8; ++corner)
-      sampler.request(i + (corner & 1), j + ((corner >> 1) & 1), k + ((corner >> 2) & 1));
-  }
-  sampler.flush();
-  auto mixed = [&](std::uint64_t key) {
-    int i, j, k;
-    grid_unkey(key, i, j, k);
-    return cell_mixed(field, i, j, k, 1);
-  };
-  std::vector<std::uint64_t> frontier;
-  for (const std::uint64_t key : unique_seeds)
-    if (mixed(key)) frontier.push_back(key);
-  std::vector<std::uint64_t> band = frontier;
-  for (const std::uint64_t key : closed)
-    if (in_band.insert(key, 0) && mixed(key)) band.push_back(key);
-  while (!frontier.empty()) {
-    std::vector<std::uint64_t> candidates;
-    for (const std::uint64_t key : frontier) {
+  const auto request_corners = [&](const std::vector<std::uint64_t>& cells) {
+    sampler.request_each(cells.size(), [&](std::size_t n, const auto& request) {
       int i, j, k;
-      grid_unkey(key, i, j, k);
-      for (const auto& d : kFaceNeighbours) {
-        const int ni = i + d[0], nj = j + d[1], nk = k + d[2];
+      grid_unkey(cells[n], i, j, k);
+      for (int corner = 0; corner < 8; ++corner) request(i + (corner & 1), j + ((corner >> 1) & 1), k + ((corner >> 2) & 1));
+    });
+    sampler.flush();
+  };
+  // The mixed cells of `cells`, in their order (the tests run in parallel).
+  const auto mixed_of = [&](const std::vector<std::uint64_t>& cells) {
+    std::vector<char> is_mixed(cells.size());
+    for_rows(cells.size(), [&](std::size_t n) {
+      int i, j, k;
+      grid_unkey(cells[n], i, j, k);
+      is_mixed[n] = cell_mixed(field, i, j, k, 1);
+    });
+    std::vector<std::uint64_t> kept;
+    for (std::size_t n = 0; n < cells.size(); ++n)
+      if (is_mixed[n]) kept.push_back(cells[n]);
+    return kept;
+  };
+  request_corners(unique_seeds);
+  std::vector<std::uint64_t> frontier = mixed_of(unique_seeds);
+  std::vector<std::uint64_t> band = frontier;
+  std::vector<std::uint64_t> closed_new;
+  for (const std::uint64_t key : closed)
+    if (in_band.insert(key, 0)) closed_new.push_back(key);
+  const std::vector<std::uint64_t> closed_mixed = mixed_of(closed_new);
+  band.insert(band.end(), closed_mixed.begin(), closed_mixed.end());
+  while (!frontier.empty()) {
+    // Per frontier cell, the neighbours across its mixed faces that are not in the band yet (a
+    // bit per direction), in parallel; then added in order.
+    std::vector<std::uint8_t> across(frontier.size());
+    for_rows(frontier.size(), [&](std::size_t n) {
+      int i, j, k;
+      grid_unkey(frontier[n], i, j, k);
+      std::uint8_t bits = 0;
+      for (std::size_t d = 0; d < kFaceNeighbours.size(); ++d) {
+        const int ni = i + kFaceNeighbours[d][0], nj = j + kFaceNeighbours[d][1], nk = k + kFaceNeighbours[d][2];
         if (ni < 0 || nj < 0 || nk < 0 || ni >= resolution || nj >= resolution || nk >= resolution)
           continue;
-        const std::uint64_t nkey = grid_key(ni, nj, nk);
-        if (in_band.count(nkey) || !face_mixed(field, i, j, k, d)) continue;
-        in_band.insert(nkey, 0);
-        candidates.push_back(nkey);
-        for (int corner = 0; corner < 8; ++corner)
-          sampler.request(ni + (corner & 1), nj + ((corner >> 1) & 1), nk + ((corner >> 2) & 1));
+        if (!in_band.count(grid_key(ni, nj, nk)) && face_mixed(field, i, j, k, kFaceNeighbours[d]))
+          bits = static_cast<std::uint8_t>(bits | (1u << d));
       }
-    }
-    sampler.flush();
-    frontier.clear();
-    for (const std::uint64_t key : candidates) {
+      across[n] = bits;
+    });
+    std::vector<std::uint64_t> candidates;
+    for (std::size_t n = 0; n < frontier.size(); ++n) {
+      if (across[n] == 0) continue;
       int i, j, k;
-      grid_unkey(key, i, j, k);
-      if (cell_mixed(field, i, j, k, 1)) {
-        band.push_back(key);
-        frontier.push_back(key);
+      grid_unkey(frontier[n], i, j, k);
+      for (std::size_t d = 0; d < kFaceNeighbours.size(); ++d) {
+        if (!((across[n] >> d) & 1u)) continue;
+        const std::uint64_t nkey = grid_key(i + kFaceNeighbours[d][0], j + kFaceNeighbours[d][1], k + kFaceNeighbours[d][2]);
+        if (in_band.insert(nkey, 0)) candidates.push_back(nkey);
       }
     }
+    request_corners(candidates);
+    frontier = mixed_of(candidates);
+    band.insert(band.end(), frontier.begin(), frontier.end());
   }
   std::sort(band.begin(), band.end());
   field.surface_cells = std::move(band);
@@ -256,14 +315,37 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
 SampledField sample_field(const Box3& box, int function_count, const BatchEvaluator& evaluate,
                           const ContourKeys& contours, const std::vector<RegionSample>& region_samples,
                           const OctreeOptions& options, OctreeWorkspace& workspace) {
-  SampledField field;
-  field.function_count = function_count;
   const int depth = options.max_depth;
   const int resolution = 1 << depth;
-  field.grid = make_grid(box, depth);
-  field.index = std::move(workspace.field_index);
-  field.index.reset(resolution);
-  Sampler sampler(field, evaluate, workspace.pending);
+  const Grid grid = make_grid(box, depth);
+  SampledField field;
+  SampledField& previous = workspace.previous;
+  std::vector<char> valid;
+  if (!workspace.previous_valid.empty() && workspace.previous_valid.size() == previous.keys.size() &&
+      previous.function_count == function_count && previous.grid.depth == grid.depth &&
+      previous.grid.origin == grid.origin && previous.grid.cell_size == grid.cell_size) {
+    // Keep it: its rows go back to their values before the smoothing and the snap (latest
+    // change first), and its out-of-date rows are evaluated again when read.
+    field = std::move(previous);
+    const std::size_t fc = static_cast<std::size_t>(function_count);
+    for (std::size_t n = field.changed_rows.size(); n-- > 0;)
+      std::copy_n(field.changed_values.data() + n * fc, fc, field.values.data() + field.changed_rows[n] * fc);
+    field.changed_rows.clear();
+    field.changed_values.clear();
+    field.surface_cells.clear();
+    field.evaluations = field.snapped_vertices = 0;
+    field.smoothing_seconds = 0.0;
+    ++field.pass;
+    valid = std::move(workspace.previous_valid);
+  } else {
+    field.index = std::move(previous.index);
+    field.index.reset(resolution);
+    field.function_count = function_count;
+    field.grid = grid;
+  }
+  previous = SampledField{};
+  workspace.previous_valid.clear();
+  Sampler sampler(field, evaluate, workspace.pending, std::move(valid));
   const int start = std::min(options.start_depth, depth);
 
   // Coarse-to-fine refinement. Cells are given by their min corner in finest units.
@@ -276,28 +358,30 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
   }
   for (int level = start;; ++level) {
     const int step = 1 << (depth - level);
-    for (const auto& c : cells)
+    sampler.request_each(cells.size(), [&](std::size_t n, const auto& request) {
+      const auto& c = cells[n];
       for (int corner = 0; corner < 8; ++corner)
-        sampler.request(c[0] + (corner & 1) * step, c[1] + ((corner >> 1) & 1) * step,
-                        c[2] + ((corner >> 2) & 1) * step);
+        request(c[0] + (corner & 1) * step, c[1] + ((corner >> 1) & 1) * step, c[2] + ((corner >> 2) & 1) * step);
+    });
     sampler.flush();
     std::vector<std::array<int, 3>> refined;
-    std::vector<char> cell_is_mixed(cells.size());
+    // Mixed cells, and above the finest level cells holding contour vertices: split further.
+    std::vector<char> cell_is_split(cells.size());
+    const auto contour_level = static_cast<std::size_t>(level);
+    const bool contours_here = level < depth && contour_level < contours.cells_by_level.size();
     for_rows(cells.size(), [&](std::size_t n) {
-      cell_is_mixed[n] = cell_mixed(field, cells[n][0], cells[n][1], cells[n][2], step);
+      const auto& c = cells[n];
+      cell_is_split[n] = cell_mixed(field, c[0], c[1], c[2], step) ||
+                         (contours_here && contains(contours.cells_by_level[contour_level],
+                                                    grid_key(c[0] / step, c[1] / step, c[2] / step)));
     });
     for (std::size_t n = 0; n < cells.size(); ++n) {
       const auto& c = cells[n];
-      const bool mixed = cell_is_mixed[n] != 0;
       if (level == depth) {
-        if (mixed) field.surface_cells.push_back(grid_key(c[0], c[1], c[2]));
+        if (cell_is_split[n]) field.surface_cells.push_back(grid_key(c[0], c[1], c[2]));
         continue;
       }
-      const auto contour_level = static_cast<std::size_t>(level);
-      const bool has_contour = contour_level < contours.cells_by_level.size() &&
-                               contains(contours.cells_by_level[contour_level],
-                                        grid_key(c[0] / step, c[1] / step, c[2] / step));
-      if (!mixed && !has_contour) continue;
+      if (!cell_is_split[n]) continue;
       const int half = step / 2;
       for (int child = 0; child < 8; ++child)
         refined.push_back({c[0] + (child & 1) * half, c[1] + ((child >> 1) & 1) * half,
@@ -350,12 +434,12 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
     for (const auto& d : kFaceNeighbours) add_laplacian_node(grid_key(i + d[0], j + d[1], k + d[2]));
   }
   // The Laplacian nodes and their neighbours: every vertex the bi-Laplacian of a node reads.
-  for (const std::uint64_t key : laplacian_nodes) {
+  sampler.request_each(laplacian_nodes.size(), [&](std::size_t n, const auto& request) {
     int i, j, k;
-    grid_unkey(key, i, j, k);
-    sampler.request(i, j, k);
-    for (const auto& d : kFaceNeighbours) sampler.request(i + d[0], j + d[1], k + d[2]);
-  }
+    grid_unkey(laplacian_nodes[n], i, j, k);
+    request(i, j, k);
+    for (const auto& d : kFaceNeighbours) request(i + d[0], j + d[1], k + d[2]);
+  });
   sampler.flush();
   // Row indices resolved once, so the iterations are plain array sweeps.
   const std::size_t fc = static_cast<std::size_t>(function_count);
@@ -387,6 +471,12 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
   // keeps the highest grid frequencies stable.
   constexpr double kDamping = 0.5 / 42.0;
   double* values = field.values.data();
+  for (std::size_t n = 0; n < nodes.size(); ++n) {
+    if (node_fixed[n]) continue;
+    field.changed_rows.push_back(node_value_rows[n]);
+    field.changed_values.insert(field.changed_values.end(), values + node_value_rows[n] * fc,
+                                values + (node_value_rows[n] + 1) * fc);
+  }
   for (int iteration = 0; iteration < iterations; ++iteration) {
     for_rows(laplacian_nodes.size(), [&](std::size_t n) {
       const std::uint32_t* rows = &lap_value_rows[n * 7];
@@ -450,7 +540,10 @@ void snap_thin_regions(SampledField& field, Sampler& sampler, const std::vector<
   const std::size_t fc = static_cast<std::size_t>(field.function_count);
   for (const auto& [key, function] : targets) {
     if (field.label(key) == function) continue;
-    double* row = field.values.data() + static_cast<std::size_t>(field.index.at(key)) * fc;
+    const std::uint32_t row_index = field.index.at(key);
+    double* row = field.values.data() + static_cast<std::size_t>(row_index) * fc;
+    field.changed_rows.push_back(row_index);
+    field.changed_values.insert(field.changed_values.end(), row, row + fc);
     for (std::size_t l = 0; l < fc; ++l) row[l] = static_cast<int>(l) == function ? 1.0 : -1.0;
     ++field.snapped_vertices;
     int i, j, k;

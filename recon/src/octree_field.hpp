@@ -58,6 +58,14 @@ struct SampledField {
   std::size_t evaluations = 0;
   std::size_t snapped_vertices = 0;  ///< grid vertices set to a thin region's label
   double smoothing_seconds = 0.0;
+  /// Per row, the sample_field pass that last read it: a field kept across passes (see
+  /// OctreeWorkspace::previous) also holds rows that only earlier passes read.
+  std::vector<std::uint32_t> row_pass;
+  std::uint32_t pass = 0;
+  /// Rows the smoothing and the thin-region snap changed in place, with their values before (in
+  /// the order saved): a later pass that keeps this field puts them back first.
+  std::vector<std::uint32_t> changed_rows;
+  std::vector<double> changed_values;
 
   const double* at(std::uint64_t key) const {
     return values.data() + static_cast<std::size_t>(index.at(key)) * static_cast<std::size_t>(function_count);
@@ -101,7 +109,13 @@ void merge_contour_keys(ContourKeys& keys, const ContourKeys& more);
 struct OctreeWorkspace {
   GridIndex pending;  ///< vertices queued for evaluation
   GridIndex scratch;  ///< band closure and smoothing
-  GridIndex field_index;  ///< a previous SampledField::index, reused for the next field
+  /// The field of a previous call on the same grid, and per row of it whether its value is still
+  /// the field's (an online engine knows which cells changed). Its valid rows are read instead of
+  /// evaluated again, and its tables are reused; an empty `previous_valid` keeps only the tables.
+  /// An online update of a few changed cells spent most of its octree passes copying the
+  /// unchanged rows from its cache into a fresh field.
+  SampledField previous;
+  std::vector<char> previous_valid;
 };
 
 /// Samples the field over `box` (everything outside it is the outside label). `contours` refine

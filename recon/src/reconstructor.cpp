@@ -158,6 +158,7 @@ struct Reconstructor::State {
   std::vector<RegionSample> region_samples;
   std::size_t contour_slices = 0;
   SampledField sampled;
+  bool sampled_from_cache = false;  // `sampled` holds values of `cache` (false after a rebuild)
   OctreeWorkspace octree_workspace;  // kept across updates (see OctreeWorkspace)
   MeshSet mesh;
   ReconstructionStats totals;
@@ -222,6 +223,7 @@ struct Reconstructor::State {
     field->refresh({});
     stats.face_images_s += clock.seconds();
     cache = std::make_unique<ValueCache>(field->function_count(), 1 << depth);
+    sampled_from_cache = false;
     octree = OctreeOptions{};
     octree.max_depth = depth;
     octree.smoothing_iterations = options.engine.smoothing_iterations;
@@ -386,13 +388,21 @@ UpdateStats Reconstructor::update() {
   // Cached values where the cell is unchanged; the others are evaluated in parallel and cached.
   const BatchEvaluator evaluate = [&](const std::vector<std::uint64_t>& keys,
                                       const std::vector<Vec3>& points, double* values) {
+    // The look-ups too run in parallel: an online update reads most of the field from the cache.
+    std::vector<char> found(keys.size());
+    arena.execute([&] {
+      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, keys.size(), 1024),
+                        [&](const tbb::blocked_range<std::size_t>& r) {
+                          for (std::size_t n = r.begin(); n < r.end(); ++n)
+                            if (const double* row = cache.find(keys[n], s.cell_generation)) {
+                              std::copy(row, row + fc, values + n * fc);
+                              found[n] = 1;
+                            }
+                        });
+    });
     std::vector<std::size_t> missing;
-    for (std::size_t n = 0; n < keys.size(); ++n) {
-      if (const double* row = cache.find(keys[n], s.cell_generation))
-        std::copy(row, row + fc, values + n * fc);
-      else
-        missing.push_back(n);
-    }
+    for (std::size_t n = 0; n < keys.size(); ++n)
+      if (!found[n]) missing.push_back(n);
     std::vector<int> cells(missing.size());
     arena.execute([&] {
       tbb::parallel_for(tbb::blocked_range<std::size_t>(0, missing.size(), 64),
@@ -407,11 +417,24 @@ UpdateStats Reconstructor::update() {
   };
   Stopwatch clock;
   // In the arena: the octree's parallel loops use the same threads as the evaluation.
-  s.octree_workspace.field_index = std::move(s.sampled.index);
+  // The last field is kept: its rows whose cells did not change still hold their values.
+  if (s.sampled_from_cache) {
+    std::vector<char>& valid = s.octree_workspace.previous_valid;
+    valid.assign(s.sampled.keys.size(), 0);
+    arena.execute([&] {
+      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, valid.size(), 4096),
+                        [&](const tbb::blocked_range<std::size_t>& r) {
+                          for (std::size_t n = r.begin(); n < r.end(); ++n)
+                            valid[n] = cache.find(s.sampled.keys[n], s.cell_generation) != nullptr;
+                        });
+    });
+  }
+  s.octree_workspace.previous = std::move(s.sampled);
   arena.execute([&] {
     s.sampled = sample_field(s.box, field.function_count(), evaluate, s.contours, s.region_samples,
                              s.octree, s.octree_workspace);
   });
+  s.sampled_from_cache = true;
   stats.smoothing_s = s.sampled.smoothing_seconds;
   stats.field_s = clock.seconds() - stats.smoothing_s;
 
@@ -475,8 +498,9 @@ const ReconstructionStats& Reconstructor::totals() const { return state_->totals
 std::vector<std::pair<Vec3, std::vector<double>>> Reconstructor::sampled_field() const {
   const SampledField& f = state_->sampled;
   const std::size_t fc = static_cast<std::size_t>(f.function_count);
-  std::vector<std::size_t> rows(f.keys.size());
-  for (std::size_t r = 0; r < rows.size(); ++r) rows[r] = r;
+  std::vector<std::size_t> rows;  // those the last update read (the field keeps older ones)
+  for (std::size_t r = 0; r < f.keys.size(); ++r)
+    if (f.row_pass[r] == f.pass) rows.push_back(r);
   std::sort(rows.begin(), rows.end(), [&](std::size_t a, std::size_t b) { return f.keys[a] < f.keys[b]; });
   std::vector<std::pair<Vec3, std::vector<double>>> out;
   out.reserve(rows.size());
