@@ -471,6 +471,8 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
   // keeps the highest grid frequencies stable.
   constexpr double kDamping = 0.5 / 42.0;
   double* values = field.values.data();
+  std::vector<int> label_before(nodes.size());
+  for_rows(nodes.size(), [&](std::size_t n) { label_before[n] = field.label(nodes[n]); });
   for (std::size_t n = 0; n < nodes.size(); ++n) {
     if (node_fixed[n]) continue;
     field.changed_rows.push_back(node_value_rows[n]);
@@ -502,13 +504,17 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
       for (std::size_t l = 0; l < fc; ++l) value[l] -= kDamping * update[n * fc + l];
     });
   }
-  // Smoothing may move labels at the nodes: every cell touching a smoothed node is a seed of
-  // the new, again closed, band.
+  // Smoothing may move labels at the nodes. The band was closed before, and its cells whose
+  // corners kept their labels keep their faces: only the cells around the nodes whose label
+  // changed are seeds of the new, again closed, band (the rest of the old band is kept where
+  // still mixed). Seeding every cell around every node, as before, cost more than the sweeps.
+  std::vector<char> label_changed(nodes.size());
+  for_rows(nodes.size(), [&](std::size_t n) { label_changed[n] = field.label(nodes[n]) != label_before[n]; });
   std::vector<std::uint64_t> seeds;
-  seeds.reserve(nodes.size() * 8);
-  for (const std::uint64_t key : nodes) {
+  for (std::size_t n = 0; n < nodes.size(); ++n) {
+    if (!label_changed[n]) continue;
     int i, j, k;
-    grid_unkey(key, i, j, k);
+    grid_unkey(nodes[n], i, j, k);
     for (int corner = 0; corner < 8; ++corner) {
       const int ci = i - (corner & 1), cj = j - ((corner >> 1) & 1), ck = k - ((corner >> 2) & 1);
       if (ci < 0 || cj < 0 || ck < 0 || ci >= resolution || cj >= resolution || ck >= resolution)
@@ -516,7 +522,7 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
       seeds.push_back(grid_key(ci, cj, ck));
     }
   }
-  close_band(field, sampler, seeds, scratch, resolution);  // lap_index is done with
+  close_band(field, sampler, seeds, scratch, resolution, field.surface_cells);  // lap_index is done with
   field.smoothing_seconds = smoothing_clock.seconds();
 }
 
