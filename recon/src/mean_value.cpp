@@ -82,18 +82,22 @@ bool triangle_weights(const Vec2& a, const Vec2& b, const Vec2& c, const Vec2& f
   Vec2 moment = Vec2::Zero();  // M
   double projected = 0.0;      // 2 h I, from the same edge angles as M
   for (int k = 0; k < 3; ++k) {
+    // The edge term of mean_value.hpp with c = cross / L, q = sqrt(Q) / L for
+    // Q = cross^2 + h^2 L^2, and atan2's arguments scaled by L^2 (as edge_projected_angle):
+    // one square root and one division per edge (the field with unknown regions spends half
+    // its time here).
     const Vec2 p = ring[k] - foot;
     const Vec2 q_end = ring[(k + 1) % 3] - foot;
     const Vec2 d = q_end - p;
-    const double length = d.norm();
-    const double cross = (p.x() * q_end.y() - p.y() * q_end.x()) / length;
-    const double s_a = p.dot(d) / length, s_b = q_end.dot(d) / length;
-    const double q2 = cross * cross + h2;
-    const double q = std::sqrt(q2);
-    const double angle = fast_atan2(q * length, q2 + s_a * s_b);
-    if (cross != 0.0) projected += (cross / q) * angle;
-    const Vec2 normal(d.y() / length, -d.x() / length);
-    moment += (-height / (2.0 * q) * angle) * normal;
+    const double length_sq = d.squaredNorm();
+    const double cross = p.x() * q_end.y() - p.y() * q_end.x();  // c L
+    const double big_q = cross * cross + h2 * length_sq;
+    const double q_length = std::sqrt(big_q);                    // q L
+    const double angle = fast_atan2(q_length * length_sq, big_q + p.dot(d) * q_end.dot(d));
+    const double angle_over_q_length = angle / q_length;
+    projected += cross * angle_over_q_length;                    // (c / q) angle
+    // -h / (2 q) angle times the outward unit normal (d.y, -d.x) / L.
+    moment += (-0.5 * height * angle_over_q_length) * Vec2(d.y(), -d.x());
   }
   // A foot outside the triangle at a height small against the triangle makes the edge terms of I
   // cancel (their sum is O(h) while each is O(1)); the split form keeps I's relative accuracy
@@ -103,13 +107,14 @@ bool triangle_weights(const Vec2& a, const Vec2& b, const Vec2& c, const Vec2& f
     projected = projected_angle_split(ring, 3, foot, height, projected);
   // Barycentric coordinate of corner i: lambda_i(y) = cross(e_i, y - start_i) / twice_area with
   // e_i the opposite edge; its gradient is perp(e_i) / twice_area.
+  const double inverse_area = 1.0 / twice_area, projected_over_height = projected / height;
   for (int i = 0; i < 3; ++i) {
     const Vec2& p1 = corners[(i + 1) % 3];
     const Vec2& p2 = corners[(i + 2) % 3];
     const Vec2 e = p2 - p1;
-    const Vec2 gradient = Vec2(-e.y(), e.x()) / twice_area;
+    const Vec2 gradient = Vec2(-e.y(), e.x()) * inverse_area;
     const double lambda_at_foot = gradient.dot(foot - p1);
-    weights[i] = lambda_at_foot * projected / height + 2.0 * gradient.dot(moment);
+    weights[i] = lambda_at_foot * projected_over_height + 2.0 * gradient.dot(moment);
   }
   return std::isfinite(weights[0]) && std::isfinite(weights[1]) && std::isfinite(weights[2]);
 }
