@@ -1,5 +1,5 @@
-// The octree's bookkeeping: the grid-vertex index (direct table and hash) and the contour keys an
-// online engine merges slice by slice.
+// The octree's bookkeeping: the grid-vertex index (direct table and hash), the contour keys an
+// online engine merges slice by slice, and the field it keeps from one update to the next.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -123,6 +123,56 @@ TEST(Octree, BandStaysClosedAfterSnappingThinRegions) {
   EXPECT_GT(sheet_cells, 0u);
   // The speck's cells on the far side from the snapped vertex come only from the expansion.
   EXPECT_TRUE(std::binary_search(field.surface_cells.begin(), field.surface_cells.end(), grid_key(4, 26, 9)));
+}
+
+// The online engine keeps the last field and marks the rows whose cells changed: sampling again
+// from it must give exactly the field sampled afresh (the same vertices, values, band and snaps),
+// with fewer evaluations. The change moves the sphere where x > 2; the sheet is snapped in both.
+TEST(Octree, AKeptFieldSampledAgainEqualsAFreshField) {
+  const Box3 box{Vec3::Constant(-10.0), Vec3::Constant(10.0)};
+  OctreeOptions options;
+  options.max_depth = 5;
+  const auto evaluator = [](double shift) {
+    return BatchEvaluator([shift](const std::vector<std::uint64_t>&, const std::vector<Vec3>& points, double* values) {
+      for (std::size_t n = 0; n < points.size(); ++n) {
+        const Vec3& p = points[n];
+        const Vec3 centre(0.0, p.x() > 2.0 ? shift : 0.0, -2.0);
+        values[3 * n] = 0.0;
+        values[3 * n + 1] = 6.0 - (p - centre).norm();
+        values[3 * n + 2] = std::abs(p.x()) < 6 && std::abs(p.y()) < 6 ? 0.2 - std::abs(p.z() - 5.3) : -1.0;
+      }
+    });
+  };
+  std::vector<RegionSample> samples;
+  for (double x = -5.5; x <= 5.5; x += 0.3)
+    for (double y = -5.5; y <= 5.5; y += 0.3) samples.push_back({Vec3(x, y, 5.3), 2});
+  OctreeWorkspace workspace;
+  SampledField kept = sample_field(box, 3, evaluator(0.0), ContourKeys{}, samples, options, workspace);
+  std::vector<char> valid(kept.keys.size());
+  for (std::size_t r = 0; r < valid.size(); ++r) {
+    int i, j, k;
+    grid_unkey(kept.keys[r], i, j, k);
+    valid[r] = !(kept.grid.position(i, j, k).x() > 2.0);
+  }
+  workspace.previous = std::move(kept);
+  workspace.previous_valid = std::move(valid);
+  const SampledField again = sample_field(box, 3, evaluator(1.5), ContourKeys{}, samples, options, workspace);
+  const SampledField fresh = sample_field(box, 3, evaluator(1.5), ContourKeys{}, samples, options);
+  EXPECT_LT(again.evaluations, fresh.evaluations / 2);
+  EXPECT_EQ(again.surface_cells, fresh.surface_cells);
+  EXPECT_EQ(again.snapped_vertices, fresh.snapped_vertices);
+  ASSERT_GT(fresh.snapped_vertices, 0u);
+  // The rows this pass read, against all rows of the fresh field.
+  std::size_t read = 0;
+  for (std::size_t r = 0; r < again.keys.size(); ++r) {
+    if (again.row_pass[r] != again.pass) continue;
+    ++read;
+    ASSERT_NE(fresh.index.find(again.keys[r]), GridIndex::kNone) << "a row the fresh field does not have";
+    const double* a = again.values.data() + r * 3;
+    const double* b = fresh.at(again.keys[r]);
+    for (int l = 0; l < 3; ++l) ASSERT_EQ(a[l], b[l]) << "row " << r << " function " << l;
+  }
+  EXPECT_EQ(read, fresh.keys.size());
 }
 
 }  // namespace
