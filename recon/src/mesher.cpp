@@ -2,7 +2,11 @@
 
 #include <algorithm>
 #include <array>
+#include <cstdint>
 #include <limits>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
 
 namespace sonoshape::recon {
 namespace {
@@ -71,13 +75,33 @@ std::vector<TriangleMesh> extract_label_surfaces(const SampledField& field) {
   static const auto tets = kuhn_tetrahedra();
   const int fc = field.function_count;
   std::vector<TriangleMesh> meshes(static_cast<std::size_t>(std::max(0, fc - 1)));
+  // The rows and labels of every band cell's corners, looked up once and in parallel (the
+  // look-ups were most of the mesher's time; what follows must stay serial for its vertex order).
+  const std::vector<std::uint64_t>& cells = field.surface_cells;
+  std::vector<std::uint32_t> corner_rows(cells.size() * 8);
+  std::vector<std::int8_t> corner_labels(cells.size() * 8);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cells.size(), 1024),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      for (std::size_t n = r.begin(); n < r.end(); ++n) {
+                        int i, j, k;
+                        grid_unkey(cells[n], i, j, k);
+                        for (int c = 0; c < 8; ++c) {
+                          const std::uint64_t key = grid_key(i + (c & 1), j + ((c >> 1) & 1), k + ((c >> 2) & 1));
+                          corner_rows[n * 8 + static_cast<std::size_t>(c)] = field.index.at(key);
+                          corner_labels[n * 8 + static_cast<std::size_t>(c)] = static_cast<std::int8_t>(field.label(key));
+                        }
+                      }
+                    });
+  // Mesh vertex per tetrahedron edge. The Kuhn tetrahedra are monotone paths through the cube,
+  // so every edge joins a grid vertex to one at an offset in {0,1}^3: (row of the lower vertex,
+  // offset) indexes a flat table, emptied between materials by the entries set.
+  constexpr std::uint32_t kNoVertex = 0xffffffffu;
+  std::vector<std::uint32_t> vertex_of_edge(field.keys.size() * 8, kNoVertex);
+  std::vector<std::size_t> edges_set;
   for (int material = 1; material < fc; ++material) {
     TriangleMesh& mesh = meshes[static_cast<std::size_t>(material - 1)];
-    // Mesh vertex per tetrahedron edge. The Kuhn tetrahedra are monotone paths through the cube,
-    // so every edge joins a grid vertex to one at an offset in {0,1}^3: (row of the lower vertex,
-    // offset) indexes a flat table.
-    constexpr std::uint32_t kNoVertex = 0xffffffffu;
-    std::vector<std::uint32_t> vertex_of_edge(field.keys.size() * 8, kNoVertex);
+    for (const std::size_t e : edges_set) vertex_of_edge[e] = kNoVertex;
+    edges_set.clear();
     // g = f_m - max_{k != m} f_k: positive inside the label's region.
     auto g = [&](const double* row) {
       double other = -std::numeric_limits<double>::infinity();
@@ -85,19 +109,18 @@ std::vector<TriangleMesh> extract_label_surfaces(const SampledField& field) {
         if (l != material) other = std::max(other, row[l]);
       return row[material] - other;
     };
-    for (const std::uint64_t cell : field.surface_cells) {
-      int i, j, k;
-      grid_unkey(cell, i, j, k);
-      std::array<std::uint64_t, 8> keys;
+    for (std::size_t n = 0; n < cells.size(); ++n) {
       std::array<bool, 8> inside;
       bool any_in = false, any_out = false;
-      for (int c = 0; c < 8; ++c) {
-        keys[static_cast<std::size_t>(c)] = grid_key(i + (c & 1), j + ((c >> 1) & 1), k + ((c >> 2) & 1));
-        inside[static_cast<std::size_t>(c)] = field.label(keys[static_cast<std::size_t>(c)]) == material;
-        any_in |= inside[static_cast<std::size_t>(c)];
-        any_out |= !inside[static_cast<std::size_t>(c)];
+      for (std::size_t c = 0; c < 8; ++c) {
+        inside[c] = corner_labels[n * 8 + c] == material;
+        any_in |= inside[c];
+        any_out |= !inside[c];
       }
       if (!any_in || !any_out) continue;
+      int i, j, k;
+      grid_unkey(cells[n], i, j, k);
+      const std::uint32_t* rows = &corner_rows[n * 8];
       for (std::size_t t = 0; t < 6; ++t) {
         int mask = 0;
         for (int v = 0; v < 4; ++v)
@@ -107,20 +130,17 @@ std::vector<TriangleMesh> extract_label_surfaces(const SampledField& field) {
           for (int e = 0; e < 3; ++e) {
             const int ca = tri.edges[static_cast<std::size_t>(e)][0];  // inside corner
             const int cb = tri.edges[static_cast<std::size_t>(e)][1];  // outside corner
-            const std::uint64_t ka = keys[static_cast<std::size_t>(ca)], kb = keys[static_cast<std::size_t>(cb)];
-            std::uint32_t& vertex =
-                vertex_of_edge[static_cast<std::size_t>(field.index.at(keys[static_cast<std::size_t>(ca & cb)])) * 8 +
-                               static_cast<std::size_t>(ca ^ cb)];
+            const std::size_t edge = static_cast<std::size_t>(rows[ca & cb]) * 8 + static_cast<std::size_t>(ca ^ cb);
+            std::uint32_t& vertex = vertex_of_edge[edge];
             if (vertex == kNoVertex) {
               vertex = static_cast<std::uint32_t>(mesh.vertices.size());
-              const double ga = std::max(0.0, g(field.at(ka)));
-              const double gb = std::min(0.0, g(field.at(kb)));
+              edges_set.push_back(edge);
+              const std::size_t stride = static_cast<std::size_t>(fc);
+              const double ga = std::max(0.0, g(field.values.data() + rows[ca] * stride));
+              const double gb = std::min(0.0, g(field.values.data() + rows[cb] * stride));
               const double t_param = ga - gb > 0.0 ? ga / (ga - gb) : 0.5;
-              int ai, aj, ak, bi, bj, bk;
-              grid_unkey(ka, ai, aj, ak);
-              grid_unkey(kb, bi, bj, bk);
-              const Vec3 pa = field.grid.position(ai, aj, ak);
-              const Vec3 pb = field.grid.position(bi, bj, bk);
+              const Vec3 pa = field.grid.position(i + (ca & 1), j + ((ca >> 1) & 1), k + ((ca >> 2) & 1));
+              const Vec3 pb = field.grid.position(i + (cb & 1), j + ((cb >> 1) & 1), k + ((cb >> 2) & 1));
               mesh.vertices.push_back(pa + t_param * (pb - pa));
             }
             ids[static_cast<std::size_t>(e)] = vertex;
