@@ -12,6 +12,7 @@
 #include <unordered_map>
 #include <unordered_set>
 
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 
 #include "cell_field.hpp"
@@ -557,6 +558,10 @@ void CellField::build_unknown_images() {
   // (In parallel: with fields of view every face has unknown parts, and this walk over the cells
   // around each of them was a serial tenth of the completion.)
   std::vector<std::vector<int>> local_faces(images_.size());
+  // Per thread, the last face (or slice) that collected each face: duplicates are dropped as they
+  // come instead of sorting lists of a hundred faces with many repeats.
+  tbb::enumerable_thread_specific<std::vector<std::size_t>> collected_by(
+      [&] { return std::vector<std::size_t>(images_.size(), static_cast<std::size_t>(-1)); });
   tbb::parallel_for(std::size_t{0}, images_.size(), [&](std::size_t f) {
     if (images_[f].unknown_parts.empty()) return;
     const ArrangementFace& face = arrangement_.face(static_cast<int>(f));
@@ -572,13 +577,17 @@ void CellField::build_unknown_images() {
       frontier_begin = frontier_end;
     }
     std::vector<int>& faces = local_faces[f];
+    std::vector<std::size_t>& collected = collected_by.local();
     for (const int c : cells)
-      for (const int g : arrangement_.cell(c).faces)
+      for (const int g : arrangement_.cell(c).faces) {
+        std::size_t& by = collected[static_cast<std::size_t>(g)];
+        if (by == f) continue;
+        by = f;
         // Faces without known data add nothing to the 3D part.
         if (arrangement_.face(g).plane != face.plane && !images_[static_cast<std::size_t>(g)].fully_unknown)
           faces.push_back(g);
+      }
     std::sort(faces.begin(), faces.end());
-    faces.erase(std::unique(faces.begin(), faces.end()), faces.end());
   });
   // A slice's triangles and values depend only on the images of its faces with unknown parts
   // and of their local faces: slices none of whose inputs were rebuilt keep their completion
@@ -593,13 +602,19 @@ void CellField::build_unknown_images() {
   tbb::parallel_for(std::size_t{0}, slices_with_unknown.size(), [&](std::size_t index) {
     const std::size_t slice = static_cast<std::size_t>(slices_with_unknown[index]);
     std::vector<std::pair<int, std::uint64_t>>& read = inputs[slice];
+    std::vector<std::size_t>& collected = collected_by.local();
+    const std::size_t mark = images_.size() + slice;  // no face index: a stamp of its own
+    const auto add = [&](int g) {
+      std::size_t& by = collected[static_cast<std::size_t>(g)];
+      if (by == mark) return;
+      by = mark;
+      read.emplace_back(g, image_generations_[static_cast<std::size_t>(g)]);
+    };
     for (const int f : slice_faces[slice]) {
-      read.emplace_back(f, image_generations_[static_cast<std::size_t>(f)]);
-      for (const int g : local_faces[static_cast<std::size_t>(f)])
-        read.emplace_back(g, image_generations_[static_cast<std::size_t>(g)]);
+      add(f);
+      for (const int g : local_faces[static_cast<std::size_t>(f)]) add(g);
     }
     std::sort(read.begin(), read.end());
-    read.erase(std::unique(read.begin(), read.end()), read.end());
     is_stale[slice] = read != slice_completions_[slice].inputs || read.empty();
   });
   std::vector<int> stale;
