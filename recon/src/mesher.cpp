@@ -79,7 +79,7 @@ std::vector<TriangleMesh> extract_label_surfaces(const SampledField& field) {
   // look-ups were most of the mesher's time; what follows must stay serial for its vertex order).
   const std::vector<std::uint64_t>& cells = field.surface_cells;
   std::vector<std::uint32_t> corner_rows(cells.size() * 8);
-  std::vector<std::int8_t> corner_labels(cells.size() * 8);
+  std::vector<std::uint16_t> corner_labels(cells.size() * 8);  // labels are function indices
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cells.size(), 1024),
                     [&](const tbb::blocked_range<std::size_t>& r) {
                       for (std::size_t n = r.begin(); n < r.end(); ++n) {
@@ -88,13 +88,13 @@ std::vector<TriangleMesh> extract_label_surfaces(const SampledField& field) {
                         for (int c = 0; c < 8; ++c) {
                           const std::uint64_t key = grid_key(i + (c & 1), j + ((c >> 1) & 1), k + ((c >> 2) & 1));
                           corner_rows[n * 8 + static_cast<std::size_t>(c)] = field.index.at(key);
-                          corner_labels[n * 8 + static_cast<std::size_t>(c)] = static_cast<std::int8_t>(field.label(key));
+                          corner_labels[n * 8 + static_cast<std::size_t>(c)] = static_cast<std::uint16_t>(field.label(key));
                         }
                       }
                     });
   // Mesh vertex per tetrahedron edge. The Kuhn tetrahedra are monotone paths through the cube,
   // so every edge joins a grid vertex to one at an offset in {0,1}^3: (row of the lower vertex,
-  // offset) indexes a flat table, emptied between materials by the entries set.
+  // offset) indexes a flat table; `edges_set` lists its entries, to empty it between materials.
   constexpr std::uint32_t kNoVertex = 0xffffffffu;
   std::vector<std::uint32_t> vertex_of_edge(field.keys.size() * 8, kNoVertex);
   std::vector<std::size_t> edges_set;
@@ -113,7 +113,7 @@ std::vector<TriangleMesh> extract_label_surfaces(const SampledField& field) {
       std::array<bool, 8> inside;
       bool any_in = false, any_out = false;
       for (std::size_t c = 0; c < 8; ++c) {
-        inside[c] = corner_labels[n * 8 + c] == material;
+        inside[c] = corner_labels[n * 8 + c] == static_cast<std::uint16_t>(material);
         any_in |= inside[c];
         any_out |= !inside[c];
       }
