@@ -82,19 +82,14 @@ bool triangle_weights(const Vec2& a, const Vec2& b, const Vec2& c, const Vec2& f
   Vec2 moment = Vec2::Zero();  // M
   double projected = 0.0;      // 2 h I, from the same edge angles as M
   for (int k = 0; k < 3; ++k) {
-    // The edge term of mean_value.hpp with c = cross / L, q = sqrt(Q) / L for
-    // Q = cross^2 + h^2 L^2, and atan2's arguments scaled by L^2 (as edge_projected_angle):
-    // one square root and one division per edge (the field with unknown regions spends half
-    // its time here).
+    // The edge term of mean_value.hpp through edge_angle: one square root and one division per
+    // edge (the field with unknown regions spends half its time here).
     const Vec2 p = ring[k] - foot;
     const Vec2 q_end = ring[(k + 1) % 3] - foot;
     const Vec2 d = q_end - p;
-    const double length_sq = d.squaredNorm();
     const double cross = p.x() * q_end.y() - p.y() * q_end.x();  // c L
-    const double big_q = cross * cross + h2 * length_sq;
-    const double q_length = std::sqrt(big_q);                    // q L
-    const double angle = fast_atan2(q_length * length_sq, big_q + p.dot(d) * q_end.dot(d));
-    const double angle_over_q_length = angle / q_length;
+    const EdgeAngle edge = edge_angle(p, q_end, d, cross, d.squaredNorm(), h2);
+    const double angle_over_q_length = edge.angle / edge.q_length;
     projected += cross * angle_over_q_length;                    // (c / q) angle
     // -h / (2 q) angle times the outward unit normal (d.y, -d.x) / L.
     moment += (-0.5 * height * angle_over_q_length) * Vec2(d.y(), -d.x());

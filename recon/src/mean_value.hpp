@@ -40,17 +40,29 @@ double projected_angle_split(const Vec2* points, std::size_t count, const Vec2& 
 
 /// The term of one edge a -> b (coordinates relative to the foot) in projected_angle_plain;
 /// h2 = height^2.
+/// The angle of the edge a -> b (coordinates relative to the foot, d = b - a, cross = c L,
+/// length_sq = L^2 > 0): atan2(q L, q^2 + s_a s_b) with both arguments scaled by L^2, and q L.
+/// With Q = (q L)^2 = cross^2 + h^2 L^2 it takes one square root (the completion and the field
+/// spend most of their time here).
+struct EdgeAngle {
+  double angle;
+  double q_length;
+};
+inline EdgeAngle edge_angle(const Vec2& a, const Vec2& b, const Vec2& d, double cross, double length_sq,
+                            double h2) {
+  const double big_q = cross * cross + h2 * length_sq;
+  const double q_length = std::sqrt(big_q);
+  return {fast_atan2(q_length * length_sq, big_q + a.dot(d) * b.dot(d)), q_length};
+}
+
 inline double edge_projected_angle(const Vec2& a, const Vec2& b, double h2) {
-  // (c / q) atan2(q L, q^2 + s_a s_b) with both arguments of atan2 scaled by L^2 and
-  // Q = (q L)^2 = cross^2 + h^2 L^2: one square root and one division instead of two and four
-  // (the completion and the field spend most of their time here).
+  // (c / q) angle = (cross / (q L)) angle: one division.
   const Vec2 d = b - a;
   const double length_sq = d.squaredNorm();
   const double cross = a.x() * b.y() - a.y() * b.x();  // c L
   if (cross == 0.0 || !(length_sq > 0.0)) return 0.0;
-  const double big_q = cross * cross + h2 * length_sq;
-  const double q_length = std::sqrt(big_q);
-  return (cross / q_length) * fast_atan2(q_length * length_sq, big_q + a.dot(d) * b.dot(d));
+  const EdgeAngle edge = edge_angle(a, b, d, cross, length_sq, h2);
+  return (cross / edge.q_length) * edge.angle;
 }
 
 /// The same term split into its planar angle (added to `planar`) and an O(h^2) remainder

@@ -89,41 +89,35 @@ bool same_plane(const LabeledSlice& a, const LabeledSlice& b, double scale) {
          std::abs(na.dot(b.origin_mm - a.origin_mm)) <= kCoincidentTolerance * scale;
 }
 
-// Field values at grid vertices that stay valid while the cell they were evaluated in is
-// unchanged: the field inside a cell depends only on that cell's faces and their images.
-class ValueCache {
+// Where and when each grid vertex was last evaluated: its value stays valid while that cell is
+// unchanged (the field inside a cell depends only on that cell's faces and their images). The
+// values themselves live in the sampled field, which is kept from one update to the next.
+class EvaluationStamps {
  public:
-  ValueCache(int function_count, int resolution)
-      : function_count_(static_cast<std::size_t>(function_count)), index_(resolution) {}
-  std::size_t function_count() const { return function_count_; }
-  /// The cached row of `key` if its cell has not changed since it was evaluated.
-  const double* find(std::uint64_t key, const std::vector<std::uint32_t>& cell_generation) const {
+  explicit EvaluationStamps(int resolution) : index_(resolution) {}
+  /// Whether `key` was evaluated in a cell that has not changed since.
+  bool current(std::uint64_t key, const std::vector<std::uint32_t>& cell_generation) const {
     const std::uint32_t row = index_.find(key);
-    if (row == GridIndex::kNone) return nullptr;
+    if (row == GridIndex::kNone) return false;
     const int cell = cells_[row];
-    if (cell >= 0 && generations_[row] < cell_generation[static_cast<std::size_t>(cell)]) return nullptr;
-    return values_.data() + row * function_count_;
+    return cell < 0 || generations_[row] >= cell_generation[static_cast<std::size_t>(cell)];
   }
-  void store(std::uint64_t key, int cell, std::uint32_t generation, const double* values) {
+  void store(std::uint64_t key, int cell, std::uint32_t generation) {
     std::uint32_t row = index_.find(key);
     if (row == GridIndex::kNone) {
       row = static_cast<std::uint32_t>(cells_.size());
       index_.insert(key, row);
       cells_.push_back(cell);
       generations_.push_back(generation);
-      values_.resize(values_.size() + function_count_);
     }
     cells_[row] = cell;
     generations_[row] = generation;
-    std::copy(values, values + function_count_, values_.data() + row * function_count_);
   }
 
  private:
-  std::size_t function_count_;
   GridIndex index_;
   std::vector<int> cells_;
   std::vector<std::uint32_t> generations_;
-  std::vector<double> values_;
 };
 
 }  // namespace
@@ -148,7 +142,7 @@ struct Reconstructor::State {
   std::vector<int> material_ids;
   std::unique_ptr<Arrangement> arrangement;
   std::unique_ptr<CellField> field;
-  std::unique_ptr<ValueCache> cache;
+  std::unique_ptr<EvaluationStamps> stamps;
   std::vector<std::uint32_t> cell_generation;  // update count at which each cell last changed
   std::uint32_t generation = 0;
   // What the slices alone decide on the grid, for field->slices()[0, contour_slices): merged
@@ -158,7 +152,7 @@ struct Reconstructor::State {
   std::vector<RegionSample> region_samples;
   std::size_t contour_slices = 0;
   SampledField sampled;
-  bool sampled_from_cache = false;  // `sampled` holds values of `cache` (false after a rebuild)
+  bool sampled_is_stamped = false;  // `sampled` is what `stamps` describe (false after a rebuild)
   OctreeWorkspace octree_workspace;  // kept across updates (see OctreeWorkspace)
   MeshSet mesh;
   ReconstructionStats totals;
@@ -222,8 +216,8 @@ struct Reconstructor::State {
     clock.reset();
     field->refresh({});
     stats.face_images_s += clock.seconds();
-    cache = std::make_unique<ValueCache>(field->function_count(), 1 << depth);
-    sampled_from_cache = false;
+    stamps = std::make_unique<EvaluationStamps>(1 << depth);
+    sampled_is_stamped = false;
     octree = OctreeOptions{};
     octree.max_depth = depth;
     octree.smoothing_iterations = options.engine.smoothing_iterations;
@@ -382,50 +376,35 @@ UpdateStats Reconstructor::update() {
   tbb::task_arena arena(s.options.engine.threads > 0 ? s.options.engine.threads
                                                      : tbb::task_arena::automatic);
   const CellField& field = *s.field;
-  ValueCache& cache = *s.cache;
+  EvaluationStamps& stamps = *s.stamps;
   const std::size_t fc = static_cast<std::size_t>(field.function_count());
   std::size_t evaluations = 0;
-  // Cached values where the cell is unchanged; the others are evaluated in parallel and cached.
+  // The octree asks only for vertices the kept field has no valid value for: all are evaluated
+  // (in parallel) and stamped with their cell.
   const BatchEvaluator evaluate = [&](const std::vector<std::uint64_t>& keys,
                                       const std::vector<Vec3>& points, double* values) {
-    // The look-ups too run in parallel: an online update reads most of the field from the cache.
-    std::vector<char> found(keys.size());
+    std::vector<int> cells(keys.size());
     arena.execute([&] {
-      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, keys.size(), 1024),
+      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, keys.size(), 64),
                         [&](const tbb::blocked_range<std::size_t>& r) {
                           for (std::size_t n = r.begin(); n < r.end(); ++n)
-                            if (const double* row = cache.find(keys[n], s.cell_generation)) {
-                              std::copy(row, row + fc, values + n * fc);
-                              found[n] = 1;
-                            }
+                            cells[n] = field.evaluate(points[n], values + n * fc);
                         });
     });
-    std::vector<std::size_t> missing;
-    for (std::size_t n = 0; n < keys.size(); ++n)
-      if (!found[n]) missing.push_back(n);
-    std::vector<int> cells(missing.size());
-    arena.execute([&] {
-      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, missing.size(), 64),
-                        [&](const tbb::blocked_range<std::size_t>& r) {
-                          for (std::size_t m = r.begin(); m < r.end(); ++m)
-                            cells[m] = field.evaluate(points[missing[m]], values + missing[m] * fc);
-                        });
-    });
-    for (std::size_t m = 0; m < missing.size(); ++m)
-      cache.store(keys[missing[m]], cells[m], s.generation, values + missing[m] * fc);
-    evaluations += missing.size();
+    for (std::size_t n = 0; n < keys.size(); ++n) stamps.store(keys[n], cells[n], s.generation);
+    evaluations += keys.size();
   };
   Stopwatch clock;
   // In the arena: the octree's parallel loops use the same threads as the evaluation.
   // The last field is kept: its rows whose cells did not change still hold their values.
-  if (s.sampled_from_cache) {
+  if (s.sampled_is_stamped) {
     std::vector<char>& valid = s.octree_workspace.previous_valid;
     valid.assign(s.sampled.keys.size(), 0);
     arena.execute([&] {
       tbb::parallel_for(tbb::blocked_range<std::size_t>(0, valid.size(), 4096),
                         [&](const tbb::blocked_range<std::size_t>& r) {
                           for (std::size_t n = r.begin(); n < r.end(); ++n)
-                            valid[n] = cache.find(s.sampled.keys[n], s.cell_generation) != nullptr;
+                            valid[n] = stamps.current(s.sampled.keys[n], s.cell_generation);
                         });
     });
   }
@@ -434,7 +413,7 @@ UpdateStats Reconstructor::update() {
     s.sampled = sample_field(s.box, field.function_count(), evaluate, s.contours, s.region_samples,
                              s.octree, s.octree_workspace);
   });
-  s.sampled_from_cache = true;
+  s.sampled_is_stamped = true;
   stats.smoothing_s = s.sampled.smoothing_seconds;
   stats.field_s = clock.seconds() - stats.smoothing_s;
 
