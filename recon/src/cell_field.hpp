@@ -144,12 +144,12 @@ class CellField {
   // faces each face's completion reads.
   void triangulate_unknown(int slice, const std::vector<int>& slice_faces,
                            const std::vector<std::vector<int>>& local_faces, SliceCompletion& out) const;
-  // The parts of formula 7 computed so far at the corners of one slice (completion.cpp).
+  // The parts of formula 7 at the corners of one slice (completion.cpp).
   struct CornerCache;
-  // Formula 7 at the three corners of `triangle` on face `face_id` into out (3 x
-  // function_count()); `cache` keeps each corner's parts for the other triangles around it.
-  void complete_corners(const PreparedSlice& s, const UnknownTriangle& triangle, int face_id,
-                        const std::vector<int>& local_faces, CornerCache& cache, double* out) const;
+  // Computes the parts of formula 7 that `cache` lists for this refinement round of slice s, in
+  // parallel; `corner_faces[j]`: the known faces the j-th 3D part reads.
+  void complete_round(const PreparedSlice& s, const std::vector<std::vector<int>>& corner_faces,
+                      CornerCache& cache) const;
   // Known weights of face f seen from p (units of projected_angle / height): the known part of
   // the face and each material's part (added to materials). False when p is on f's plane.
   bool known_weights(int face, const Vec3& p, double& known, double* materials) const;

@@ -12,7 +12,7 @@
 #include <unordered_map>
 #include <unordered_set>
 
-#include <tbb/enumerable_thread_specific.h>
+#include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
 #include "cell_field.hpp"
@@ -49,8 +49,8 @@ constexpr double kLatticeClearance = 0.5;
 constexpr double kRefinedTriangleMin = 0.015;
 constexpr int kMaxRefinementRounds = 8;
 
-// The completion reads the known faces of the cells within this many group-adjacency steps of a
-// triangle's face. With fields of view every slice has unknown parts and groups grow to the whole
+// The completion reads the known faces of the cells within this many group-adjacency steps of the
+// faces around a corner. With fields of view every slice has unknown parts and groups grow to the whole
 // arrangement; the nearby faces carry the weight (it falls off with distance), and the bound
 // keeps completion linear in the number of triangles.
 constexpr int kGroupHops = 1;
@@ -115,6 +115,35 @@ struct DoublesHash {
   }
 };
 
+// Per-thread marks over the faces, to drop repeats from lists of faces as they are collected
+// (instead of sorting lists full of repeats). Kept by each thread for the process: allocating
+// and touching a mark per face for every call cost more than the collecting. Task bodies that
+// use them must not wait on nested parallel work (the thread could start another body).
+class FaceMarks {
+ public:
+  // Starts a new list over `face_count` faces.
+  static FaceMarks& start(std::size_t face_count) {
+    thread_local FaceMarks marks;
+    if (marks.mark_.size() < face_count) marks.mark_.resize(face_count, 0);
+    if (++marks.current_ == 0) {  // wrapped: clear the old marks
+      std::fill(marks.mark_.begin(), marks.mark_.end(), 0);
+      marks.current_ = 1;
+    }
+    return marks;
+  }
+  // True the first time `face` is seen in this list.
+  bool insert(int face) {
+    std::uint32_t& mark = mark_[static_cast<std::size_t>(face)];
+    if (mark == current_) return false;
+    mark = current_;
+    return true;
+  }
+
+ private:
+  std::vector<std::uint32_t> mark_;
+  std::uint32_t current_ = 0;
+};
+
 bool in_convex_ccw(const Vec2* polygon, std::size_t count, const Vec2& p) {
   for (std::size_t i = 0; i < count; ++i) {
     const Vec2& a = polygon[i];
@@ -124,22 +153,75 @@ bool in_convex_ccw(const Vec2* polygon, std::size_t count, const Vec2& p) {
   return true;
 }
 
+// The 2D mean-value interpolant of an unknown component in its slice (formula 7 (b)) at p, from
+// the known labels across its boundary, added to n2 (function_count numerators, then the
+// denominator). With stop_on_boundary, false (and n2 partly written) when p is on the boundary,
+// where the edge weights are singular.
+bool add_part_2d(const UnknownComponent& component, std::size_t function_count, const Vec2& p, bool stop_on_boundary,
+                 double* n2) {
+  for (std::size_t r = 0; r < component.rings.size(); ++r) {
+    const Ring2& ring = component.rings[r];
+    for (std::size_t i = 0; i < ring.size(); ++i) {
+      const Vec2& a = ring[i];
+      const Vec2& b = ring[(i + 1) % ring.size()];
+      if (stop_on_boundary) {
+        // On the edge (to rounding).
+        const Vec2 ab = b - a, ap = p - a;
+        const double length_sq = ab.squaredNorm();
+        const double cross = ab.x() * ap.y() - ab.y() * ap.x();
+        const double along = ab.dot(ap);
+        if (std::abs(cross) <= kOnBoundaryTolerance * length_sq && along >= -kOnBoundaryTolerance * length_sq &&
+            along <= (1.0 + kOnBoundaryTolerance) * length_sq)
+          return false;
+      }
+      const double w = edge_weight_2d(a, b, p);
+      n2[static_cast<std::size_t>(component.edge_labels[r][i])] += w;
+      n2[function_count] += w;
+    }
+  }
+  return true;
+}
+
 }  // namespace
 
-// What the corners of one slice's triangles have completed to so far: a corner keeps its parts
-// across the refinement rounds and between the triangles around it.
+// The parts of formula 7 at the corners of one slice's triangles. A corner keeps its parts across
+// the refinement rounds and between the triangles around it. Each round first lists the parts
+// its new triangles need (serially: the keys decide which are new), then computes them all in
+// parallel: the slices alone are too few and too unequal to keep both cores busy.
 struct CellField::CornerCache {
-  // (face or component, x, y) -> offset in `values` of function_count() + 1 doubles: the
-  // numerators of every function, then the denominator.
+  // (component or -1, x, y) -> slot: function_count + 1 doubles at slot * (function_count + 1)
+  // in `values`, the numerators of every function, then the denominator.
   using Key = std::array<double, 3>;
-  // Formula 7 (a), by (face, corner): the 3D part depends on the corner's face (the known faces
-  // it reads), not on the triangle.
+  explicit CornerCache(std::size_t function_count) : stride(function_count + 1) {}
+  // Formula 7 (a), by corner (-1, x, y): one 3D part per point of the slice, read from the known
+  // faces around all the faces its triangles lie in.
   std::unordered_map<Key, std::size_t, DoublesHash> part_3d;
-  // Formula 7 (b), by (component, corner) for corners inside the unknown set; kOnBoundary for
-  // corners on its boundary, which take the limit from each triangle's side instead.
+  // Formula 7 (b), by (component, corner); on_boundary marks corners on the unknown set's
+  // boundary, which take the limit from each triangle's side instead (Section 5.1).
   std::unordered_map<Key, std::size_t, DoublesHash> part_2d;
+  std::size_t stride;
   std::vector<double> values;
-  static constexpr std::size_t kOnBoundary = static_cast<std::size_t>(-1);
+  std::vector<std::uint8_t> on_boundary;  // per slot
+  // The parts listed this round: (component or -1, corner, slot).
+  struct Job {
+    int owner;
+    Vec2 corner;
+    std::size_t slot;
+  };
+  std::vector<Job> jobs_3d, jobs_2d;
+
+  // The slot of (owner, corner) in `parts`, listing a job when it is new.
+  std::size_t slot(std::unordered_map<Key, std::size_t, DoublesHash>& parts, std::vector<Job>& jobs, int owner,
+                   const Vec2& corner) {
+    const std::size_t next = on_boundary.size();
+    auto [it, inserted] = parts.try_emplace({static_cast<double>(owner), corner.x(), corner.y()}, next);
+    if (inserted) {
+      on_boundary.push_back(0);
+      jobs.push_back({owner, corner, next});
+    }
+    return it->second;
+  }
+  double* at(std::size_t slot) { return values.data() + slot * stride; }
 };
 
 void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_faces,
@@ -164,6 +246,20 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
   // different labels are split at the midpoints of their longest edges (below). Plain constrained
   // Delaunay insertions with exact predicates always end.
   Cdt cdt;
+  // Constraints are inserted through their end vertices, each located from the last one (a
+  // ring's or a face's next edge starts where the last ended): Cdt::insert_constraint(point,
+  // point) walks to its first point from an arbitrary face, and those walks across the slice
+  // were a sixth of the completion. The triangulation is the same: the points go in, in the
+  // same order.
+  Cdt::Vertex_handle last_vertex;
+  const auto insert_constraint = [&](const Vec2& a, const Vec2& b) {
+    const Cdt::Vertex_handle va = last_vertex == Cdt::Vertex_handle()
+                                      ? cdt.insert(Kernel::Point_2(a.x(), a.y()))
+                                      : cdt.insert(Kernel::Point_2(a.x(), a.y()), last_vertex->face());
+    const Cdt::Vertex_handle vb = cdt.insert(Kernel::Point_2(b.x(), b.y()), va->face());
+    cdt.insert_constraint(va, vb);
+    last_vertex = vb;
+  };
   Vec2 lo = Vec2::Constant(std::numeric_limits<double>::infinity());
   Vec2 hi = -lo;
   std::vector<std::pair<Vec2, Vec2>> boundary;  // the split boundary edges, for the clearance test
@@ -179,7 +275,7 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
         Vec2 previous = a;
         for (int k = 1; k <= pieces; ++k) {
           const Vec2 next = k == pieces ? b : Vec2(a + (b - a) * (static_cast<double>(k) / pieces));
-          cdt.insert_constraint(Kernel::Point_2(previous.x(), previous.y()), Kernel::Point_2(next.x(), next.y()));
+          insert_constraint(previous, next);
           boundary.emplace_back(previous, next);
           previous = next;
         }
@@ -254,7 +350,7 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
       const std::array<double, 4> key = forward ? std::array<double, 4>{a.x(), a.y(), b.x(), b.y()}
                                                 : std::array<double, 4>{b.x(), b.y(), a.x(), a.y()};
       if (face_edges.insert(key).second)
-        cdt.insert_constraint(Kernel::Point_2(a.x(), a.y()), Kernel::Point_2(b.x(), b.y()));
+        insert_constraint(a, b);
     }
   }
   // A slice holds hundreds of faces: a uniform grid over the unknown set's box lists the faces
@@ -286,14 +382,21 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
     bool skipped = false;            // a sliver, or outside the unknown set or the faces
     UnknownTriangle triangle;
     int face = -1;
-    std::vector<double> values;  // 3 corners x fc
+    std::size_t slots_3d[3], slots_2d[3];  // its corners' parts in the cache
+    std::vector<double> values;            // 3 corners x fc
   };
-  CornerCache cache;
+  CornerCache cache(fc);
   std::vector<Completed> entries;
+  // Room for the refinement rounds too: moving the entries as the vector grows, into fresh pages,
+  // was a tenth of the completion.
+  entries.reserve(2 * cdt.number_of_faces());
   const double refined_min = kRefinedTriangleMin * diagonal;
   for (int round = 0;; ++round) {
-    // Longest edges of the triangles to split, by their end vertices.
-    std::vector<std::pair<Cdt::Vertex_handle, Cdt::Vertex_handle>> splits;
+    // The triangles new in this round (a flip may also have reused a face for new corners).
+    std::vector<std::size_t> fresh;
+    std::vector<Cdt::Vertex_handle> job_vertices;  // of each 3D part listed this round
+    cache.jobs_3d.clear();
+    cache.jobs_2d.clear();
     for (auto it = cdt.finite_faces_begin(); it != cdt.finite_faces_end(); ++it) {
       int& index = it->info().entry;
       if (index >= 0) {
@@ -301,32 +404,86 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
         for (const Cdt::Vertex_handle& v : known.vertices)
           if (v != it->vertex(0) && v != it->vertex(1) && v != it->vertex(2)) index = -1;
       }
-      if (index < 0) {
-        index = static_cast<int>(entries.size());
-        Completed& entry = entries.emplace_back();
-        for (int k = 0; k < 3; ++k) entry.vertices[k] = it->vertex(k);
-        UnknownTriangle& triangle = entry.triangle;
-        for (int k = 0; k < 3; ++k)
-          triangle.corners[k] = Vec2(it->vertex(k)->point().x(), it->vertex(k)->point().y());
-        const double area = signed_area(Ring2{triangle.corners[0], triangle.corners[1], triangle.corners[2]});
-        // Slivers from constraint intersections rounded onto each other cover nothing.
-        const double longest_sq = std::max({(triangle.corners[1] - triangle.corners[0]).squaredNorm(),
-                                            (triangle.corners[2] - triangle.corners[1]).squaredNorm(),
-                                            (triangle.corners[0] - triangle.corners[2]).squaredNorm()});
-        entry.skipped = !(std::abs(area) > 1e-12 * longest_sq) || std::abs(area) < 1e-14 * diagonal * diagonal;
-        if (area < 0.0) std::swap(triangle.corners[1], triangle.corners[2]);  // counter-clockwise
-        const Vec2 centroid = (triangle.corners[0] + triangle.corners[1] + triangle.corners[2]) / 3.0;
-        if (!entry.skipped) triangle.component = component_of(centroid);
-        entry.skipped = entry.skipped || triangle.component < 0;
-        if (!entry.skipped) entry.face = face_of(centroid);
-        entry.skipped = entry.skipped || entry.face < 0;
-        if (!entry.skipped) {
-          entry.values.resize(3 * fc);
-          complete_corners(s, triangle, entry.face, local_faces[static_cast<std::size_t>(entry.face)], cache,
-                           entry.values.data());
-        }
+      if (index >= 0) continue;
+      index = static_cast<int>(entries.size());
+      Completed& entry = entries.emplace_back();
+      for (int k = 0; k < 3; ++k) entry.vertices[k] = it->vertex(k);
+      UnknownTriangle& triangle = entry.triangle;
+      for (int k = 0; k < 3; ++k)
+        triangle.corners[k] = Vec2(it->vertex(k)->point().x(), it->vertex(k)->point().y());
+      const double area = signed_area(Ring2{triangle.corners[0], triangle.corners[1], triangle.corners[2]});
+      // Slivers from constraint intersections rounded onto each other cover nothing.
+      const double longest_sq = std::max({(triangle.corners[1] - triangle.corners[0]).squaredNorm(),
+                                          (triangle.corners[2] - triangle.corners[1]).squaredNorm(),
+                                          (triangle.corners[0] - triangle.corners[2]).squaredNorm()});
+      entry.skipped = !(std::abs(area) > 1e-12 * longest_sq) || std::abs(area) < 1e-14 * diagonal * diagonal;
+      if (area < 0.0) {  // counter-clockwise
+        std::swap(triangle.corners[1], triangle.corners[2]);
+        std::swap(entry.vertices[1], entry.vertices[2]);
       }
-      const Completed& c = entries[static_cast<std::size_t>(index)];
+      const Vec2 centroid = (triangle.corners[0] + triangle.corners[1] + triangle.corners[2]) / 3.0;
+      if (!entry.skipped) triangle.component = component_of(centroid);
+      entry.skipped = entry.skipped || triangle.component < 0;
+      if (!entry.skipped) entry.face = face_of(centroid);
+      entry.skipped = entry.skipped || entry.face < 0;
+      if (entry.skipped) continue;
+      for (int k = 0; k < 3; ++k) {
+        const std::size_t jobs = cache.jobs_3d.size();
+        entry.slots_3d[k] = cache.slot(cache.part_3d, cache.jobs_3d, -1, triangle.corners[k]);
+        if (cache.jobs_3d.size() != jobs) job_vertices.push_back(entry.vertices[k]);
+        entry.slots_2d[k] = cache.slot(cache.part_2d, cache.jobs_2d, triangle.component, triangle.corners[k]);
+      }
+      fresh.push_back(static_cast<std::size_t>(index));
+    }
+    // The known faces each new corner reads: those of the faces of all unknown triangles around
+    // it (a corner shared by several faces of the slice gets one 3D part, from the cells of all
+    // of them: they are all in one group).
+    std::vector<std::vector<int>> corner_faces(job_vertices.size());
+    tbb::parallel_for(std::size_t{0}, job_vertices.size(), [&](std::size_t j) {
+      std::vector<int> faces_around;
+      Cdt::Face_circulator around = cdt.incident_faces(job_vertices[j]), done = around;
+      do {
+        if (cdt.is_infinite(around)) continue;
+        const Completed& e = entries[static_cast<std::size_t>(around->info().entry)];
+        if (!e.skipped && std::find(faces_around.begin(), faces_around.end(), e.face) == faces_around.end())
+          faces_around.push_back(e.face);
+      } while (++around != done);
+      std::vector<int>& faces = corner_faces[j];
+      FaceMarks& collected = FaceMarks::start(images_.size());
+      for (const int f : faces_around)
+        for (const int g : local_faces[static_cast<std::size_t>(f)])
+          if (collected.insert(g)) faces.push_back(g);
+      std::sort(faces.begin(), faces.end());  // the order of the sums: the same for every thread
+    });
+    complete_round(s, corner_faces, cache);
+    // Formula 7 at the new triangles' corners: the normalised blend of both parts.
+    tbb::parallel_for(std::size_t{0}, fresh.size(), [&](std::size_t i) {
+      Completed& entry = entries[fresh[i]];
+      entry.values.resize(3 * fc);
+      const Vec2* corners = entry.triangle.corners;
+      const Vec2 centroid = (corners[0] + corners[1] + corners[2]) / 3.0;
+      std::vector<double> inside;
+      for (int k = 0; k < 3; ++k) {
+        const double* n3w = cache.at(entry.slots_3d[k]);
+        const double* n2 = cache.at(entry.slots_2d[k]);
+        if (cache.on_boundary[entry.slots_2d[k]] != 0) {
+          // On the boundary (b) is read just inside the triangle's corner, so that the corner
+          // takes the limit from its own side (Section 5.1).
+          inside.assign(fc + 1, 0.0);
+          add_part_2d(s.unknown[static_cast<std::size_t>(entry.triangle.component)], fc,
+                      corners[k] + 1e-4 * (centroid - corners[k]), false, inside.data());
+          n2 = inside.data();
+        }
+        const double denominator = n3w[fc] + n2[fc];
+        double* value = entry.values.data() + static_cast<std::size_t>(k) * fc;
+        for (std::size_t l = 0; l < fc; ++l)
+          value[l] = denominator > 0.0 ? 2.0 * (n3w[l] + n2[l]) / denominator - 1.0 : (l == 0 ? 1.0 : -1.0);
+      }
+    });
+    // Longest edges of the triangles to split, by their end vertices.
+    std::vector<std::pair<Cdt::Vertex_handle, Cdt::Vertex_handle>> splits;
+    for (auto it = cdt.finite_faces_begin(); it != cdt.finite_faces_end(); ++it) {
+      const Completed& c = entries[static_cast<std::size_t>(it->info().entry)];
       if (c.skipped) continue;
       const UnknownTriangle& triangle = c.triangle;
       const double longest_sq = std::max({(triangle.corners[1] - triangle.corners[0]).squaredNorm(),
@@ -404,89 +561,42 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
   }
 }
 
-void CellField::complete_corners(const PreparedSlice& s, const UnknownTriangle& triangle, int face_id,
-                                 const std::vector<int>& local_faces, CornerCache& cache, double* out) const {
+void CellField::complete_round(const PreparedSlice& s, const std::vector<std::vector<int>>& corner_faces,
+                               CornerCache& cache) const {
   const std::size_t fc = static_cast<std::size_t>(function_count());
-  std::vector<double> scratch(fc);
-  const Vec2 centroid = (triangle.corners[0] + triangle.corners[1] + triangle.corners[2]) / 3.0;
-  const UnknownComponent& component = s.unknown[static_cast<std::size_t>(triangle.component)];
-  // (b) the 2D mean-value interpolant of the unknown component in its slice, from the known
-  // labels across its boundary, at p; false (and nothing added) when p is on the boundary.
-  const auto add_part_2d = [&](const Vec2& p, bool stop_on_boundary, double* n2) {
-    for (std::size_t r = 0; r < component.rings.size(); ++r) {
-      const Ring2& ring = component.rings[r];
-      for (std::size_t i = 0; i < ring.size(); ++i) {
-        const Vec2& a = ring[i];
-        const Vec2& b = ring[(i + 1) % ring.size()];
-        if (stop_on_boundary) {
-          // On the edge (to rounding): its weight is singular there.
-          const Vec2 ab = b - a, ap = p - a;
-          const double length_sq = ab.squaredNorm();
-          const double cross = ab.x() * ap.y() - ab.y() * ap.x();
-          const double along = ab.dot(ap);
-          if (std::abs(cross) <= kOnBoundaryTolerance * length_sq && along >= -kOnBoundaryTolerance * length_sq &&
-              along <= (1.0 + kOnBoundaryTolerance) * length_sq)
-            return false;
-        }
-        const double w = edge_weight_2d(a, b, p);
-        n2[static_cast<std::size_t>(component.edge_labels[r][i])] += w;
-        n2[fc] += w;
-      }
+  cache.values.resize(cache.on_boundary.size() * cache.stride, 0.0);
+  // (a) the 3D mean-value interpolant of the known faces around, at the corner itself.
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cache.jobs_3d.size()),
+                    [&](const tbb::blocked_range<std::size_t>& range) {
+                      std::vector<double> materials(fc);  // of one face
+                      for (std::size_t j = range.begin(); j != range.end(); ++j) {
+                        const CornerCache::Job& job = cache.jobs_3d[j];
+                        double* n3w = cache.at(job.slot);
+                        const Vec3 x = s.origin + job.corner.x() * s.u + job.corner.y() * s.v;
+                        for (const int g : corner_faces[j]) {
+                          double known = 0.0;
+                          std::fill(materials.begin(), materials.end(), 0.0);
+                          if (!known_weights(g, x, known, materials.data())) continue;
+                          double material_sum = 0.0;
+                          for (std::size_t l = 1; l < fc; ++l) {
+                            n3w[l] += 0.5 * materials[l];
+                            material_sum += materials[l];
+                          }
+                          n3w[0] += 0.5 * (known - material_sum);  // the known outside
+                          n3w[fc] += 0.5 * known;
+                        }
+                      }
+                    });
+  // (b) at the corner itself when it lies inside the unknown set (the interpolant is smooth
+  // there, and the triangles around the corner share it).
+  tbb::parallel_for(std::size_t{0}, cache.jobs_2d.size(), [&](std::size_t j) {
+    const CornerCache::Job& job = cache.jobs_2d[j];
+    double* n2 = cache.at(job.slot);
+    if (!add_part_2d(s.unknown[static_cast<std::size_t>(job.owner)], fc, job.corner, true, n2)) {
+      std::fill(n2, n2 + cache.stride, 0.0);
+      cache.on_boundary[job.slot] = 1;
     }
-    return true;
-  };
-  for (int k = 0; k < 3; ++k) {
-    const Vec2& corner = triangle.corners[k];
-    // (a) 3D mean-value interpolant of the known faces around, at the corner itself.
-    auto [it, inserted] = cache.part_3d.try_emplace({static_cast<double>(face_id), corner.x(), corner.y()},
-                                                    cache.values.size());
-    if (inserted) {
-      cache.values.resize(cache.values.size() + fc + 1, 0.0);
-      double* n3w = cache.values.data() + it->second;
-      const Vec3 x = s.origin + corner.x() * s.u + corner.y() * s.v;
-      for (const int g : local_faces) {
-        double known = 0.0;
-        std::fill(scratch.begin(), scratch.end(), 0.0);  // the materials of face g
-        if (!known_weights(g, x, known, scratch.data())) continue;
-        double materials = 0.0;
-        for (std::size_t l = 1; l < fc; ++l) {
-          n3w[l] += 0.5 * scratch[l];
-          materials += scratch[l];
-        }
-        n3w[0] += 0.5 * (known - materials);  // the known outside
-        n3w[fc] += 0.5 * known;
-      }
-    }
-    const std::size_t at_3d = it->second;
-    // (b) at the corner itself when it lies inside the unknown set (the interpolant is smooth
-    // there, and the triangles around the corner share it); on the boundary it is read just
-    // inside the triangle's corner, so that the corner takes the limit from its own side
-    // (Section 5.1).
-    auto [it_2d, inserted_2d] = cache.part_2d.try_emplace(
-        {static_cast<double>(triangle.component), corner.x(), corner.y()}, cache.values.size());
-    if (inserted_2d) {
-      cache.values.resize(cache.values.size() + fc + 1, 0.0);
-      if (!add_part_2d(corner, true, cache.values.data() + it_2d->second)) {
-        cache.values.resize(it_2d->second);
-        it_2d->second = CornerCache::kOnBoundary;
-      }
-    }
-    std::vector<double> inside;
-    const double* n2 = nullptr;
-    if (it_2d->second != CornerCache::kOnBoundary) {
-      n2 = cache.values.data() + it_2d->second;
-    } else {
-      inside.assign(fc + 1, 0.0);
-      add_part_2d(corner + 1e-4 * (centroid - corner), false, inside.data());
-      n2 = inside.data();
-    }
-    // Formula 7: the normalised blend of both.
-    const double* n3w = cache.values.data() + at_3d;
-    const double denominator = n3w[fc] + n2[fc];
-    double* value = out + static_cast<std::size_t>(k) * fc;
-    for (std::size_t l = 0; l < fc; ++l)
-      value[l] = denominator > 0.0 ? 2.0 * (n3w[l] + n2[l]) / denominator - 1.0 : (l == 0 ? 1.0 : -1.0);
-  }
+  });
 }
 
 bool CellField::known_weights(int face, const Vec3& p, double& known, double* materials) const {
@@ -554,14 +664,17 @@ void CellField::build_unknown_images() {
     if (!images_[f].unknown_parts.empty())
       roots.insert(find_root(parent, arrangement_.face(static_cast<int>(f)).cell_positive));
   group_count_ = roots.size();
-  // The known faces each face's corners read: those of the cells within kGroupHops group steps.
-  // (In parallel: with fields of view every face has unknown parts, and this walk over the cells
+  // The known faces around each face: those of the cells within kGroupHops group steps (a corner
+  // reads those of all the faces around it). (In parallel: with fields of view every face has unknown parts, and this walk over the cells
   // around each of them was a serial tenth of the completion.)
   std::vector<std::vector<int>> local_faces(images_.size());
-  // Per thread, the last face (or slice) that collected each face: duplicates are dropped as they
-  // come instead of sorting lists of a hundred faces with many repeats.
-  tbb::enumerable_thread_specific<std::vector<std::size_t>> collected_by(
-      [&] { return std::vector<std::size_t>(images_.size(), static_cast<std::size_t>(-1)); });
+  // Each face's plane, or -1 for faces without known data (they add nothing to the 3D part): the
+  // walk below reads it for a hundred faces per face, and from the images and the arrangement's
+  // faces (large records, scattered) those reads missed the cache.
+  std::vector<int> known_plane(images_.size());
+  tbb::parallel_for(std::size_t{0}, images_.size(), [&](std::size_t g) {
+    known_plane[g] = images_[g].fully_unknown ? -1 : arrangement_.face(static_cast<int>(g)).plane;
+  });
   tbb::parallel_for(std::size_t{0}, images_.size(), [&](std::size_t f) {
     if (images_[f].unknown_parts.empty()) return;
     const ArrangementFace& face = arrangement_.face(static_cast<int>(f));
@@ -577,15 +690,12 @@ void CellField::build_unknown_images() {
       frontier_begin = frontier_end;
     }
     std::vector<int>& faces = local_faces[f];
-    std::vector<std::size_t>& collected = collected_by.local();
+    FaceMarks& collected = FaceMarks::start(images_.size());
     for (const int c : cells)
       for (const int g : arrangement_.cell(c).faces) {
-        std::size_t& by = collected[static_cast<std::size_t>(g)];
-        if (by == f) continue;
-        by = f;
-        // Faces without known data add nothing to the 3D part.
-        if (arrangement_.face(g).plane != face.plane && !images_[static_cast<std::size_t>(g)].fully_unknown)
-          faces.push_back(g);
+        if (!collected.insert(g)) continue;
+        const int plane = known_plane[static_cast<std::size_t>(g)];
+        if (plane >= 0 && plane != face.plane) faces.push_back(g);
       }
     std::sort(faces.begin(), faces.end());
   });
@@ -602,12 +712,9 @@ void CellField::build_unknown_images() {
   tbb::parallel_for(std::size_t{0}, slices_with_unknown.size(), [&](std::size_t index) {
     const std::size_t slice = static_cast<std::size_t>(slices_with_unknown[index]);
     std::vector<std::pair<int, std::uint64_t>>& read = inputs[slice];
-    std::vector<std::size_t>& collected = collected_by.local();
-    const std::size_t mark = images_.size() + slice;  // no face index: a stamp of its own
+    FaceMarks& collected = FaceMarks::start(images_.size());
     const auto add = [&](int g) {
-      std::size_t& by = collected[static_cast<std::size_t>(g)];
-      if (by == mark) return;
-      by = mark;
+      if (!collected.insert(g)) return;
       read.emplace_back(g, image_generations_[static_cast<std::size_t>(g)]);
     };
     for (const int f : slice_faces[slice]) {

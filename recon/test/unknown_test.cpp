@@ -458,6 +458,10 @@ TEST(Completion, InnerCornersAgreeAndMixedTrianglesAreFine) {
   const CellField& field = *c.field;
   const double finest = 0.015 * c.arrangement.box().diagonal();
   int shared = 0, mixed = 0, coarse = 0;
+  // A corner point has one value on its slice, whichever of the slice's faces its triangles lie
+  // in (the 3D part reads the faces around all of them): the completion is continuous across
+  // face edges, except on the unknown boundary, where each triangle takes its own side's limit.
+  std::map<std::array<double, 3>, std::array<double, 2>> value_at;  // (plane, x, y)
   for (int f = 0; f < static_cast<int>(c.arrangement.face_count()); ++f) {
     const FaceImage& image = field.face_image(f);
     if (image.triangle_count == 0) continue;
@@ -474,7 +478,7 @@ TEST(Completion, InnerCornersAgreeAndMixedTrianglesAreFine) {
           }
       return false;
     };
-    std::map<std::pair<double, double>, std::array<double, 2>> value_at;
+    const double plane = c.arrangement.face(f).plane;
     for (std::size_t t = image.triangle_begin; t < image.triangle_begin + image.triangle_count; ++t) {
       const UnknownTriangle& triangle = field.unknown_triangles()[t];
       int labels[3];
@@ -483,7 +487,7 @@ TEST(Completion, InnerCornersAgreeAndMixedTrianglesAreFine) {
         const std::array<double, 2> v{field.corner_value(t, k, 0), field.corner_value(t, k, 1)};
         labels[k] = v[1] > v[0] ? 1 : 0;
         if (on_boundary(p)) continue;
-        const auto [it, inserted] = value_at.try_emplace({p.x(), p.y()}, v);
+        const auto [it, inserted] = value_at.try_emplace({plane, p.x(), p.y()}, v);
         if (inserted) continue;
         EXPECT_EQ(it->second, v) << "face " << f << " corner " << p.transpose();
         ++shared;
