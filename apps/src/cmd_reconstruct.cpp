@@ -144,7 +144,8 @@ CommandRunner add_reconstruct_command(CLI::App& app) {
                  "Bi-Laplacian smoothing iterations (0 turns smoothing off)")
       ->check(CLI::Range(0, 1000))
       ->capture_default_str();
-  app.add_option("--threads", opt->engine.threads, "Evaluation threads (0: all cores)")
+  app.add_option("--threads", opt->engine.threads,
+                 "Threads for every stage of the reconstruction (0: all cores)")
       ->check(CLI::Range(0, 1024))
       ->capture_default_str();
   app.add_option("--stats", opt->stats_path, "Write per-stage seconds and counts as JSON (with "

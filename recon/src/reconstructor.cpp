@@ -307,47 +307,54 @@ UpdateStats Reconstructor::update() {
       next[i].duplicate = !next[j].duplicate && same_slice(next[j].slice, next[i].slice);
   }
 
+  // Every stage runs in one arena of engine.threads threads: the arrangement, the face images
+  // and the completion as well as the evaluation, the octree and the mesher.
+  tbb::task_arena arena(s.options.engine.threads > 0 ? s.options.engine.threads
+                                                     : tbb::task_arena::automatic);
   const std::vector<State::Entry> previous = s.entries;
   try {
-    const Box3 next_box = s.slice_set_of(next).effective_bounds();
-    const bool full = !s.built || out.slices_removed > 0 || s.materials_of(next) != s.material_ids ||
-                      next_box.min != s.box.min || next_box.max != s.box.max;
-    std::vector<int> changed_cells;
-    if (full) {
-      s.rebuild(next, stats);
-      out.full_rebuild = true;
-      out.cells_changed = s.arrangement->cell_count();
-    } else {
-      Stopwatch clock;
-      std::vector<int> changed, split_faces;
-      for (std::size_t k = s.entries.size(); k < next.size(); ++k) {
-        if (next[k].duplicate) continue;
-        const std::vector<int> cells = s.insert(next[k], split_faces);
-        changed.insert(changed.end(), cells.begin(), cells.end());
+    arena.execute([&] {
+      const Box3 next_box = s.slice_set_of(next).effective_bounds();
+      const bool full = !s.built || out.slices_removed > 0 || s.materials_of(next) != s.material_ids ||
+                        next_box.min != s.box.min || next_box.max != s.box.max;
+      std::vector<int> changed_cells;
+      if (full) {
+        s.rebuild(next, stats);
+        out.full_rebuild = true;
+        out.cells_changed = s.arrangement->cell_count();
+      } else {
+        Stopwatch clock;
+        std::vector<int> changed, split_faces;
+        for (std::size_t k = s.entries.size(); k < next.size(); ++k) {
+          if (next[k].duplicate) continue;
+          const std::vector<int> cells = s.insert(next[k], split_faces);
+          changed.insert(changed.end(), cells.begin(), cells.end());
+        }
+        std::sort(changed.begin(), changed.end());
+        changed.erase(std::unique(changed.begin(), changed.end()), changed.end());
+        stats.arrangement_s = clock.seconds();
+        clock.reset();
+        std::sort(split_faces.begin(), split_faces.end());
+        split_faces.erase(std::unique(split_faces.begin(), split_faces.end()), split_faces.end());
+        const std::vector<int> completion_changed = s.field->refresh(split_faces);
+        stats.face_images_s = clock.seconds();
+        ++s.generation;
+        s.cell_generation.resize(s.arrangement->cell_count(), s.generation);
+        std::vector<char> marked(s.arrangement->cell_count(), 0);
+        for (const std::vector<int>* list :
+             std::initializer_list<const std::vector<int>*>{&changed, &completion_changed})
+          for (const int c : *list)
+            if (!marked[static_cast<std::size_t>(c)]) {
+              marked[static_cast<std::size_t>(c)] = 1;
+              s.cell_generation[static_cast<std::size_t>(c)] = s.generation;
+              ++out.cells_changed;
+            }
       }
-      std::sort(changed.begin(), changed.end());
-      changed.erase(std::unique(changed.begin(), changed.end()), changed.end());
-      stats.arrangement_s = clock.seconds();
-      clock.reset();
-      std::sort(split_faces.begin(), split_faces.end());
-      split_faces.erase(std::unique(split_faces.begin(), split_faces.end()), split_faces.end());
-      const std::vector<int> completion_changed = s.field->refresh(split_faces);
-      stats.face_images_s = clock.seconds();
-      ++s.generation;
-      s.cell_generation.resize(s.arrangement->cell_count(), s.generation);
-      std::vector<char> marked(s.arrangement->cell_count(), 0);
-      for (const std::vector<int>* list : std::initializer_list<const std::vector<int>*>{&changed, &completion_changed})
-        for (const int c : *list)
-          if (!marked[static_cast<std::size_t>(c)]) {
-            marked[static_cast<std::size_t>(c)] = 1;
-            s.cell_generation[static_cast<std::size_t>(c)] = s.generation;
-            ++out.cells_changed;
-          }
-    }
-    stats.completion_s = s.field->completion_seconds();
-    stats.unknown_triangles = s.field->unknown_triangle_count();
-    stats.cell_groups = s.field->group_count();
-    stats.completed_slices = s.field->recompleted_slice_count();
+      stats.completion_s = s.field->completion_seconds();
+      stats.unknown_triangles = s.field->unknown_triangle_count();
+      stats.cell_groups = s.field->group_count();
+      stats.completed_slices = s.field->recompleted_slice_count();
+    });
     s.entries = std::move(next);
   } catch (...) {
     // Back to the state before this update: the queued changes are dropped.
@@ -356,7 +363,7 @@ UpdateStats Reconstructor::update() {
     s.built = false;
     if (!previous.empty() || s.options.bounds) {
       ReconstructionStats ignored;
-      s.rebuild(previous, ignored);
+      arena.execute([&] { s.rebuild(previous, ignored); });
     }
     s.entries = previous;
     throw;
@@ -373,8 +380,6 @@ UpdateStats Reconstructor::update() {
     add_thin_region_samples(slice, grid.cell_size, s.region_samples);
   }
 
-  tbb::task_arena arena(s.options.engine.threads > 0 ? s.options.engine.threads
-                                                     : tbb::task_arena::automatic);
   const CellField& field = *s.field;
   EvaluationStamps& stamps = *s.stamps;
   const std::size_t fc = static_cast<std::size_t>(field.function_count());
@@ -418,7 +423,8 @@ UpdateStats Reconstructor::update() {
   stats.field_s = clock.seconds() - stats.smoothing_s;
 
   clock.reset();
-  std::vector<TriangleMesh> meshes = extract_label_surfaces(s.sampled);
+  std::vector<TriangleMesh> meshes;
+  arena.execute([&] { meshes = extract_label_surfaces(s.sampled); });
   s.mesh = MeshSet{};
   for (std::size_t m = 1; m <= s.material_ids.size(); ++m) {
     const int id = s.material_ids[m - 1];

@@ -14,7 +14,7 @@ namespace sonoshape::recon {
 struct ReconstructionOptions {
   int max_depth = -1;             ///< octree depth; -1: finest cells about 1/128 of the diagonal
   int smoothing_iterations = 8;   ///< bi-Laplacian smoothing iterations (0: off)
-  int threads = 0;                ///< evaluation threads; 0: all cores
+  int threads = 0;                ///< threads for every stage; 0: all cores
 };
 
 /// Per-stage wall time in seconds and counts of one reconstruction.
