@@ -412,8 +412,8 @@ int CellField::evaluate(const Vec3& p, double* out) const {
       return cell;
     }
     const double inv_height = 1.0 / height;
-    total += projected_angle(points_.data() + image.polygon_begin, image.polygon_count, foot,
-                             height) * inv_height;
+    total += projected_angle_plain(points_.data() + image.polygon_begin, image.polygon_count, foot,
+                                   height) * inv_height;  // see part_angle
     for (const FaceImage::Part& part : image.parts) {
       const double weight = part_angle(part, foot, height) * inv_height;
       w[part.material] += weight;

@@ -103,6 +103,24 @@ std::uint32_t build_chain_tree(const Vec2* points, std::size_t count, std::vecto
 
 double projected_angle_tree(const Vec2* points, std::size_t count, const ChainNode* nodes,
                             std::uint32_t root, const Vec2& foot, double height) {
+  const double plain = projected_angle_tree_plain(points, count, nodes, root, foot, height);
+  if (std::abs(plain) >= kSplitBelow || count < 2 || !(height > 0.0)) return plain;
+  // A foot outside the ring: the same sum in the cancellation-free split (mean_value.cpp).
+  const double h2 = height * height;
+  double planar = 0.0, remainder = 0.0;
+  const bool split = visit(
+      points, count, nodes, root, foot, h2,
+      [&](const ChainNode& node, const Vec2& d, double s) {
+        remainder += region_term(node, d, s, h2);
+        return edge_projected_angle_split(points[node.first % count] - foot,
+                                          points[node.last % count] - foot, h2, planar, remainder);
+      },
+      [&](const Vec2& a, const Vec2& b) { return edge_projected_angle_split(a, b, h2, planar, remainder); });
+  return split ? split_result(planar, remainder, plain) : plain;
+}
+
+double projected_angle_tree_plain(const Vec2* points, std::size_t count, const ChainNode* nodes,
+                                  std::uint32_t root, const Vec2& foot, double height) {
   if (count < 2 || !(height > 0.0)) return 0.0;
   const double h2 = height * height;
   double plain = 0.0;
@@ -117,18 +135,7 @@ double projected_angle_tree(const Vec2* points, std::size_t count, const ChainNo
           plain += edge_projected_angle(a, b, h2);
           return true;
         });
-  if (std::abs(plain) >= kSplitBelow) return plain;
-  // A foot outside the ring: the same sum in the cancellation-free split (mean_value.cpp).
-  double planar = 0.0, remainder = 0.0;
-  const bool split = visit(
-      points, count, nodes, root, foot, h2,
-      [&](const ChainNode& node, const Vec2& d, double s) {
-        remainder += region_term(node, d, s, h2);
-        return edge_projected_angle_split(points[node.first % count] - foot,
-                                          points[node.last % count] - foot, h2, planar, remainder);
-      },
-      [&](const Vec2& a, const Vec2& b) { return edge_projected_angle_split(a, b, h2, planar, remainder); });
-  return split ? split_result(planar, remainder, plain) : plain;
+  return plain;
 }
 
 }  // namespace sonoshape::recon

@@ -45,4 +45,9 @@ std::uint32_t build_chain_tree(const Vec2* points, std::size_t count, std::vecto
 double projected_angle_tree(const Vec2* points, std::size_t count, const ChainNode* nodes,
                             std::uint32_t root, const Vec2& foot, double height);
 
+/// The same without the cancellation-free split for feet outside the ring (the plain edge sums,
+/// as projected_angle_plain): for sums whose absolute accuracy suffices.
+double projected_angle_tree_plain(const Vec2* points, std::size_t count, const ChainNode* nodes,
+                                  std::uint32_t root, const Vec2& foot, double height);
+
 }  // namespace sonoshape::recon
