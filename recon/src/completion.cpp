@@ -116,9 +116,9 @@ struct DoublesHash {
 };
 
 // Per-thread marks over the faces, to drop repeats from lists of faces as they are collected
-// (instead of sorting lists full of repeats). Kept by each thread for the process: allocating
-// and touching a mark per face for every call cost more than the collecting. Task bodies that
-// use them must not wait on nested parallel work (the thread could start another body).
+// (instead of sorting lists full of repeats). Each thread keeps its marks for the process rather
+// than allocating a mark per face for every completion. Task bodies that use them must not wait
+// on nested parallel work (the thread could start another body meanwhile).
 class FaceMarks {
  public:
   // Starts a new list over `face_count` faces.
@@ -186,8 +186,8 @@ bool add_part_2d(const UnknownComponent& component, std::size_t function_count, 
 
 // The parts of formula 7 at the corners of one slice's triangles. A corner keeps its parts across
 // the refinement rounds and between the triangles around it. Each round first lists the parts
-// its new triangles need (serially: the keys decide which are new), then computes them all in
-// parallel: the slices alone are too few and too unequal to keep both cores busy.
+// its new triangles need (serially: the keys decide which are new), then computes them in
+// parallel.
 struct CellField::CornerCache {
   // (component or -1, x, y) -> slot: function_count + 1 doubles at slot * (function_count + 1)
   // in `values`, the numerators of every function, then the denominator.
@@ -247,10 +247,9 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
   // Delaunay insertions with exact predicates always end.
   Cdt cdt;
   // Constraints are inserted through their end vertices, each located from the last one (a
-  // ring's or a face's next edge starts where the last ended): Cdt::insert_constraint(point,
-  // point) walks to its first point from an arbitrary face, and those walks across the slice
-  // were a sixth of the completion. The triangulation is the same: the points go in, in the
-  // same order.
+  // ring's or a face's next edge starts where the last ended), where
+  // Cdt::insert_constraint(point, point) walks to its first point from an arbitrary face. The
+  // triangulation is the same: the points go in, in the same order.
   Cdt::Vertex_handle last_vertex;
   const auto insert_constraint = [&](const Vec2& a, const Vec2& b) {
     const Cdt::Vertex_handle va = last_vertex == Cdt::Vertex_handle()
@@ -665,12 +664,13 @@ void CellField::build_unknown_images() {
       roots.insert(find_root(parent, arrangement_.face(static_cast<int>(f)).cell_positive));
   group_count_ = roots.size();
   // The known faces around each face: those of the cells within kGroupHops group steps (a corner
-  // reads those of all the faces around it). (In parallel: with fields of view every face has unknown parts, and this walk over the cells
-  // around each of them was a serial tenth of the completion.)
+  // reads those of all the faces around it). In parallel: with fields of view every face has
+  // unknown parts, and this walk over the cells around each of them was a serial tenth of the
+  // completion.
   std::vector<std::vector<int>> local_faces(images_.size());
   // Each face's plane, or -1 for faces without known data (they add nothing to the 3D part): the
-  // walk below reads it for a hundred faces per face, and from the images and the arrangement's
-  // faces (large records, scattered) those reads missed the cache.
+  // walk below reads it for a hundred faces per face, from this compact array rather than from
+  // the images' and the arrangement's large records.
   std::vector<int> known_plane(images_.size());
   tbb::parallel_for(std::size_t{0}, images_.size(), [&](std::size_t g) {
     known_plane[g] = images_[g].fully_unknown ? -1 : arrangement_.face(static_cast<int>(g)).plane;
