@@ -138,6 +138,32 @@ INSTANTIATE_TEST_SUITE_P(Reconstructor, RandomSequences,
                                            Scenario{"sector_fov", true, true, 13}),
                          [](const auto& info) { return std::string(info.param.name); });
 
+// `threads` bounds every stage (one arena), and the result does not depend on it: the parallel
+// loops (the completion's rounds among them) write disjoint entries and sum in a fixed order.
+TEST(Reconstructor, OneThreadGivesTheMeshesOfAllThreads) {
+  std::mt19937 rng(31);
+  SliceSet set;
+  for (int n = 0; n < 6; ++n) set.slices.push_back(random_slice(rng, true, true));
+  ReconstructorOptions options;
+  options.bounds = kBox;
+  options.engine.max_depth = 5;
+  options.labels = {{1, "big"}, {2, "small"}};
+  options.engine.threads = 1;
+  const auto one = one_shot(set, options);
+  options.engine.threads = 0;
+  const auto all = one_shot(set, options);
+  ASSERT_EQ(one->mesh().meshes.size(), all->mesh().meshes.size());
+  std::size_t triangles = 0;
+  for (std::size_t m = 0; m < one->mesh().meshes.size(); ++m) {
+    const TriangleMesh& a = one->mesh().meshes[m].mesh;
+    const TriangleMesh& b = all->mesh().meshes[m].mesh;
+    EXPECT_EQ(a.vertices, b.vertices) << "label " << one->mesh().meshes[m].label;
+    EXPECT_EQ(a.triangles, b.triangles) << "label " << one->mesh().meshes[m].label;
+    triangles += a.triangles.size();
+  }
+  EXPECT_GT(triangles, 100u);
+}
+
 // Regions thinner than the finest cells are snapped to grid vertices after the smoothing and the
 // band is closed again from the snapped cells only; online and one-shot must still agree.
 TEST(Reconstructor, ThinRegionsSnapAlikeOnlineAndOneShot) {
