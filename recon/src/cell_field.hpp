@@ -132,7 +132,7 @@ class CellField {
   // field and the completion add these into sums over a cell's faces, of order 1 / height of the
   // nearest face, and divide by their total: an absolute error of rounding in each term is all
   // they need. The split form that keeps a small term's relative accuracy (a foot outside the
-  // part at small height) took an eighth of a sector sweep's evaluations.
+  // part at small height) cost about a tenth of a sector sweep's update time.
   double part_angle(const FaceImage::Part& part, const Vec2& foot, double height) const {
     if (part.tree_count == 0) {
       if (part.count < 2 || !(height > 0.0)) return 0.0;
