@@ -147,8 +147,8 @@ class CellField {
   // every slice's triangles into the face images; face_completion_hashes_ follows.
   void build_unknown_images();
   // Triangulates the unknown set of a slice, one list per face, and completes the corners of
-  // every triangle (values: 3 x function_count() per triangle); `local_faces` are the known
-  // faces each face's completion reads.
+  // every triangle (values: 3 x function_count() per triangle); `local_faces[f]`: the known
+  // faces around face f (a corner reads those of all the faces it lies on).
   void triangulate_unknown(int slice, const std::vector<int>& slice_faces,
                            const std::vector<std::vector<int>>& local_faces, SliceCompletion& out) const;
   // The parts of formula 7 at the corners of one slice (completion.cpp).

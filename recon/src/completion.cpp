@@ -697,7 +697,7 @@ void CellField::build_unknown_images() {
         const int plane = known_plane[static_cast<std::size_t>(g)];
         if (plane >= 0 && plane != face.plane) faces.push_back(g);
       }
-    std::sort(faces.begin(), faces.end());
+    // Unsorted: the corners' unions and the slices' input lists are sorted where they are built.
   });
   // A slice's triangles and values depend only on the images of its faces with unknown parts
   // and of their local faces: slices none of whose inputs were rebuilt keep their completion
