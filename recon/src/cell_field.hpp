@@ -3,6 +3,7 @@
 // Sections 4.2-4.4 and 6): face images (each slice's labelled regions clipped to each of its
 // faces) and the CPU reference evaluator.
 #include <cstdint>
+#include <span>
 #include <vector>
 
 #include "arrangement.hpp"
@@ -155,7 +156,7 @@ class CellField {
   struct CornerCache;
   // Computes the parts of formula 7 that `cache` lists for this refinement round of slice s, in
   // parallel; `corner_faces[j]`: the known faces the j-th 3D part reads.
-  void complete_round(const PreparedSlice& s, const std::vector<std::vector<int>>& corner_faces,
+  void complete_round(const PreparedSlice& s, const std::vector<std::span<const int>>& corner_faces,
                       CornerCache& cache) const;
   // Known weights of face f seen from p (units of projected_angle / height): the known part of
   // the face and each material's part (added to materials). False when p is on f's plane.

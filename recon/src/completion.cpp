@@ -3,12 +3,14 @@
 #include <CGAL/Constrained_Delaunay_triangulation_2.h>
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
 #include <CGAL/Triangulation_face_base_with_info_2.h>
+#include <CGAL/Triangulation_vertex_base_with_info_2.h>
 
 #include <algorithm>
 #include <cstring>
 #include <map>
 #include <numeric>
 #include <set>
+#include <span>
 #include <unordered_map>
 #include <unordered_set>
 
@@ -23,7 +25,14 @@ namespace sonoshape::recon {
 namespace {
 
 using Kernel = CGAL::Exact_predicates_inexact_constructions_kernel;
-using Vb = CGAL::Triangulation_vertex_base_2<Kernel>;
+// Each point knows its slots in the completion's corner cache (-1: none yet), so that the
+// corners of new triangles find their parts without hashing their coordinates.
+struct VertexInfo {
+  std::int64_t slot_3d = -1;
+  int component = -1;  // of slot_2d (a point where two unknown components touch has two)
+  std::int64_t slot_2d = -1;
+};
+using Vb = CGAL::Triangulation_vertex_base_with_info_2<VertexInfo, Kernel>;
 // Each triangle knows its entry among the completed triangles (-1: not completed yet).
 struct FaceInfo {
   int entry = -1;
@@ -189,15 +198,16 @@ bool add_part_2d(const UnknownComponent& component, std::size_t function_count, 
 // its new triangles need (serially: the keys decide which are new), then computes them in
 // parallel.
 struct CellField::CornerCache {
-  // (component or -1, x, y) -> slot: function_count + 1 doubles at slot * (function_count + 1)
-  // in `values`, the numerators of every function, then the denominator.
+  // Slots: function_count + 1 doubles at slot * (function_count + 1) in `values`, the numerators
+  // of every function, then the denominator. Formula 7 (a) has one slot per point of the slice,
+  // read from the known faces around all the faces its triangles lie in; (b) one per point and
+  // unknown component. The triangulation's points hold their slots (VertexInfo); on_boundary
+  // marks corners on the unknown set's boundary, which take the limit from each triangle's side
+  // instead (Section 5.1).
   using Key = std::array<double, 3>;
   explicit CornerCache(std::size_t function_count) : stride(function_count + 1) {}
-  // Formula 7 (a), by corner (-1, x, y): one 3D part per point of the slice, read from the known
-  // faces around all the faces its triangles lie in.
-  std::unordered_map<Key, std::size_t, DoublesHash> part_3d;
-  // Formula 7 (b), by (component, corner); on_boundary marks corners on the unknown set's
-  // boundary, which take the limit from each triangle's side instead (Section 5.1).
+  // The (b) slots of points that two unknown components share, by (component, x, y): their
+  // points hold the first component's.
   std::unordered_map<Key, std::size_t, DoublesHash> part_2d;
   std::size_t stride;
   std::vector<double> values;
@@ -210,15 +220,18 @@ struct CellField::CornerCache {
   };
   std::vector<Job> jobs_3d, jobs_2d;
 
+  // A new slot for (owner, corner), listed as a job.
+  std::size_t add(std::vector<Job>& jobs, int owner, const Vec2& corner) {
+    const std::size_t next = on_boundary.size();
+    on_boundary.push_back(0);
+    jobs.push_back({owner, corner, next});
+    return next;
+  }
   // The slot of (owner, corner) in `parts`, listing a job when it is new.
   std::size_t slot(std::unordered_map<Key, std::size_t, DoublesHash>& parts, std::vector<Job>& jobs, int owner,
                    const Vec2& corner) {
-    const std::size_t next = on_boundary.size();
-    auto [it, inserted] = parts.try_emplace({static_cast<double>(owner), corner.x(), corner.y()}, next);
-    if (inserted) {
-      on_boundary.push_back(0);
-      jobs.push_back({owner, corner, next});
-    }
+    auto [it, inserted] = parts.try_emplace({static_cast<double>(owner), corner.x(), corner.y()}, on_boundary.size());
+    if (inserted) add(jobs, owner, corner);
     return it->second;
   }
   double* at(std::size_t slot) { return values.data() + slot * stride; }
@@ -370,22 +383,32 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
       const SliceFace& face = faces[static_cast<std::size_t>(i)];
       if ((p.array() < face.lo.array()).any() || (p.array() > face.hi.array()).any()) continue;
       const FaceImage& image = images_[static_cast<std::size_t>(face.id)];
-      if (in_convex_ccw(points_.data() + image.polygon_begin, image.polygon_count, p)) return face.id;
+      if (in_convex_ccw(points_.data() + image.polygon_begin, image.polygon_count, p)) return i;
     }
     return -1;
   };
+  // Each face's local faces in the order of the sums (the same for every thread), once per face:
+  // most corners lie inside one face and read these as they are.
+  std::vector<std::vector<int>> sorted_local_faces(faces.size());
+  tbb::parallel_for(std::size_t{0}, faces.size(), [&](std::size_t i) {
+    sorted_local_faces[i] = local_faces[static_cast<std::size_t>(faces[i].id)];
+    std::sort(sorted_local_faces[i].begin(), sorted_local_faces[i].end());
+  });
 
   // Completed values of the corners of every unknown triangle, refined where they disagree.
   struct Completed {
     Cdt::Vertex_handle vertices[3];  // the triangle's (a face that a flip reused has others)
     bool skipped = false;            // a sliver, or outside the unknown set or the faces
     UnknownTriangle triangle;
-    int face = -1;
+    int face_index = -1;                   // in `faces`
     std::size_t slots_3d[3], slots_2d[3];  // its corners' parts in the cache
-    std::vector<double> values;            // 3 corners x fc
   };
   CornerCache cache(fc);
   std::vector<Completed> entries;
+  // The corner values of entry i (3 corners x fc) at i * 3 * fc: one array rather than one
+  // allocation per triangle.
+  std::vector<double> entry_values;
+  const auto values_of = [&](std::size_t entry) { return entry_values.data() + entry * 3 * fc; };
   // Room for the refinement rounds too: moving the entries as the vector grows, into fresh pages,
   // was a tenth of the completion.
   entries.reserve(2 * cdt.number_of_faces());
@@ -423,42 +446,62 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
       const Vec2 centroid = (triangle.corners[0] + triangle.corners[1] + triangle.corners[2]) / 3.0;
       if (!entry.skipped) triangle.component = component_of(centroid);
       entry.skipped = entry.skipped || triangle.component < 0;
-      if (!entry.skipped) entry.face = face_of(centroid);
-      entry.skipped = entry.skipped || entry.face < 0;
+      if (!entry.skipped) entry.face_index = face_of(centroid);
+      entry.skipped = entry.skipped || entry.face_index < 0;
       if (entry.skipped) continue;
       for (int k = 0; k < 3; ++k) {
-        const std::size_t jobs = cache.jobs_3d.size();
-        entry.slots_3d[k] = cache.slot(cache.part_3d, cache.jobs_3d, -1, triangle.corners[k]);
-        if (cache.jobs_3d.size() != jobs) job_vertices.push_back(entry.vertices[k]);
-        entry.slots_2d[k] = cache.slot(cache.part_2d, cache.jobs_2d, triangle.component, triangle.corners[k]);
+        VertexInfo& point = entry.vertices[k]->info();
+        if (point.slot_3d < 0) {
+          point.slot_3d = static_cast<std::int64_t>(cache.add(cache.jobs_3d, -1, triangle.corners[k]));
+          job_vertices.push_back(entry.vertices[k]);
+        }
+        entry.slots_3d[k] = static_cast<std::size_t>(point.slot_3d);
+        if (point.component < 0) {
+          point.component = triangle.component;
+          point.slot_2d = static_cast<std::int64_t>(cache.add(cache.jobs_2d, triangle.component, triangle.corners[k]));
+        }
+        entry.slots_2d[k] = point.component == triangle.component
+                                ? static_cast<std::size_t>(point.slot_2d)
+                                : cache.slot(cache.part_2d, cache.jobs_2d, triangle.component, triangle.corners[k]);
       }
       fresh.push_back(static_cast<std::size_t>(index));
     }
     // The known faces each new corner reads: those of the faces of all unknown triangles around
     // it (a corner shared by several faces of the slice gets one 3D part, from the cells of all
     // of them: they are all in one group).
-    std::vector<std::vector<int>> corner_faces(job_vertices.size());
+    std::vector<std::span<const int>> corner_faces(job_vertices.size());
+    std::vector<std::vector<int>> merged_faces(job_vertices.size());  // of corners on several faces
     tbb::parallel_for(std::size_t{0}, job_vertices.size(), [&](std::size_t j) {
-      std::vector<int> faces_around;
+      std::vector<int> faces_around;  // indices in `faces`
       Cdt::Face_circulator around = cdt.incident_faces(job_vertices[j]), done = around;
       do {
         if (cdt.is_infinite(around)) continue;
         const Completed& e = entries[static_cast<std::size_t>(around->info().entry)];
-        if (!e.skipped && std::find(faces_around.begin(), faces_around.end(), e.face) == faces_around.end())
-          faces_around.push_back(e.face);
+        if (!e.skipped && std::find(faces_around.begin(), faces_around.end(), e.face_index) == faces_around.end())
+          faces_around.push_back(e.face_index);
       } while (++around != done);
-      std::vector<int>& faces = corner_faces[j];
-      FaceMarks& collected = FaceMarks::start(images_.size());
-      for (const int f : faces_around)
-        for (const int g : local_faces[static_cast<std::size_t>(f)])
-          if (collected.insert(g)) faces.push_back(g);
-      std::sort(faces.begin(), faces.end());  // the order of the sums: the same for every thread
+      if (faces_around.size() == 1) {
+        corner_faces[j] = sorted_local_faces[static_cast<std::size_t>(faces_around[0])];
+        return;
+      }
+      // The sorted union of sorted lists, merged one list at a time.
+      std::vector<int>& faces_read = merged_faces[j];
+      std::vector<int> merged;
+      faces_read = sorted_local_faces[static_cast<std::size_t>(faces_around[0])];
+      for (std::size_t k = 1; k < faces_around.size(); ++k) {
+        const std::vector<int>& next = sorted_local_faces[static_cast<std::size_t>(faces_around[k])];
+        merged.clear();
+        std::set_union(faces_read.begin(), faces_read.end(), next.begin(), next.end(), std::back_inserter(merged));
+        faces_read.swap(merged);
+      }
+      corner_faces[j] = faces_read;
     });
     complete_round(s, corner_faces, cache);
+    entry_values.resize(entries.size() * 3 * fc);
     // Formula 7 at the new triangles' corners: the normalised blend of both parts.
     tbb::parallel_for(std::size_t{0}, fresh.size(), [&](std::size_t i) {
       Completed& entry = entries[fresh[i]];
-      entry.values.resize(3 * fc);
+      double* const entry_corner_values = values_of(fresh[i]);
       const Vec2* corners = entry.triangle.corners;
       const Vec2 centroid = (corners[0] + corners[1] + corners[2]) / 3.0;
       std::vector<double> inside;
@@ -474,7 +517,7 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
           n2 = inside.data();
         }
         const double denominator = n3w[fc] + n2[fc];
-        double* value = entry.values.data() + static_cast<std::size_t>(k) * fc;
+        double* value = entry_corner_values + static_cast<std::size_t>(k) * fc;
         for (std::size_t l = 0; l < fc; ++l)
           value[l] = denominator > 0.0 ? 2.0 * (n3w[l] + n2[l]) / denominator - 1.0 : (l == 0 ? 1.0 : -1.0);
       }
@@ -482,7 +525,8 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
     // Longest edges of the triangles to split, by their end vertices.
     std::vector<std::pair<Cdt::Vertex_handle, Cdt::Vertex_handle>> splits;
     for (auto it = cdt.finite_faces_begin(); it != cdt.finite_faces_end(); ++it) {
-      const Completed& c = entries[static_cast<std::size_t>(it->info().entry)];
+      const std::size_t entry_index = static_cast<std::size_t>(it->info().entry);
+      const Completed& c = entries[entry_index];
       if (c.skipped) continue;
       const UnknownTriangle& triangle = c.triangle;
       const double longest_sq = std::max({(triangle.corners[1] - triangle.corners[0]).squaredNorm(),
@@ -497,7 +541,7 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
       int first_label = -1;
       bool mixed = false;
       for (int k = 0; k < 3 && !mixed; ++k) {
-        const double* v = c.values.data() + static_cast<std::size_t>(k) * fc;
+        const double* v = values_of(entry_index) + static_cast<std::size_t>(k) * fc;
         const int label = static_cast<int>(std::max_element(v, v + fc) - v);
         if (first_label < 0) first_label = label;
         mixed = label != first_label;
@@ -536,31 +580,33 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
   }
   // The final triangles, in the order of their corner coordinates (not the triangulation's).
   using TriangleKey = std::array<double, 6>;
-  std::vector<std::pair<TriangleKey, Completed*>> ordered;
+  std::vector<std::pair<TriangleKey, std::size_t>> ordered;  // (corners, entry)
   for (auto it = cdt.finite_faces_begin(); it != cdt.finite_faces_end(); ++it) {
-    Completed& entry = entries[static_cast<std::size_t>(it->info().entry)];
+    const std::size_t entry_index = static_cast<std::size_t>(it->info().entry);
+    const Completed& entry = entries[entry_index];
     if (entry.skipped) continue;
     const Vec2* corners = entry.triangle.corners;
     ordered.emplace_back(TriangleKey{corners[0].x(), corners[0].y(), corners[1].x(), corners[1].y(), corners[2].x(),
                                      corners[2].y()},
-                         &entry);
+                         entry_index);
   }
   std::sort(ordered.begin(), ordered.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
-  std::map<int, std::size_t> entry_of_face;
-  for (auto& [key, entry_pointer] : ordered) {
-    Completed& entry = *entry_pointer;
-    auto [it, inserted] = entry_of_face.try_emplace(entry.face, out.faces.size());
+  std::map<int, std::size_t> entry_of_face;  // face index -> position in out
+  for (const auto& [key, entry_index] : ordered) {
+    const Completed& entry = entries[entry_index];
+    auto [it, inserted] = entry_of_face.try_emplace(entry.face_index, out.faces.size());
     if (inserted) {
-      out.faces.push_back(entry.face);
+      out.faces.push_back(faces[static_cast<std::size_t>(entry.face_index)].id);
       out.triangles.emplace_back();
       out.values.emplace_back();
     }
     out.triangles[it->second].push_back(entry.triangle);
-    out.values[it->second].insert(out.values[it->second].end(), entry.values.begin(), entry.values.end());
+    const double* corner_values = values_of(entry_index);
+    out.values[it->second].insert(out.values[it->second].end(), corner_values, corner_values + 3 * fc);
   }
 }
 
-void CellField::complete_round(const PreparedSlice& s, const std::vector<std::vector<int>>& corner_faces,
+void CellField::complete_round(const PreparedSlice& s, const std::vector<std::span<const int>>& corner_faces,
                                CornerCache& cache) const {
   const std::size_t fc = static_cast<std::size_t>(function_count());
   cache.values.resize(cache.on_boundary.size() * cache.stride, 0.0);
