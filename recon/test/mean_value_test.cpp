@@ -377,6 +377,40 @@ TEST(MeanValueKnown, ZeroHeightAndDegenerateRingsGiveZero) {
   EXPECT_NEAR(angle(sliver, Vec2(0.7, 0.2), 0.3), 0.0, 1e-16);
 }
 
+// projected_angle_plain may sum several edges at a time (SIMD lanes, chosen at run time): it must
+// be the sum of edge_projected_angle over the ring's edges, up to the order of the additions, for
+// rings of every length (lane tails, more edges than one pass holds), repeated points, feet on a
+// vertex or on an edge's line, and any height.
+TEST(MeanValueAlgebra, PlainSumIsTheSumOfItsEdgeTerms) {
+  std::mt19937 random(17);
+  std::uniform_real_distribution<double> coordinate(-2.0, 2.0);
+  for (const std::size_t count : {1u, 2u, 3u, 4u, 5u, 7u, 8u, 9u, 63u, 64u, 65u, 129u, 200u}) {
+    for (int trial = 0; trial < 20; ++trial) {
+      Ring2 ring;
+      for (std::size_t i = 0; i < count; ++i) {
+        if (i > 0 && trial % 3 == 0 && i % 4 == 0) ring.push_back(ring.back());  // a zero-length edge
+        else ring.emplace_back(coordinate(random), coordinate(random));
+      }
+      Vec2 foot(coordinate(random), coordinate(random));
+      if (trial % 5 == 1) foot = ring[count / 2];                          // on a vertex
+      if (trial % 5 == 2 && count > 1) foot = 0.25 * ring[0] + 0.75 * ring[1];  // on an edge's line
+      const double height = trial % 4 == 0 ? 1e-7 : std::abs(coordinate(random)) + 1e-3;
+      double sum = 0.0, magnitude = 0.0;
+      Vec2 a = ring.back() - foot;
+      for (std::size_t i = 0; i < ring.size(); ++i) {
+        const Vec2 b = ring[i] - foot;
+        const double term = edge_projected_angle(a, b, height * height);
+        sum += term;
+        magnitude += std::abs(term);
+        a = b;
+      }
+      const double plain = projected_angle_plain(ring.data(), ring.size(), foot, height);
+      EXPECT_NEAR(plain, sum, 1e-15 * static_cast<double>(ring.size()) * magnitude)
+          << ring.size() << " points, trial " << trial;
+    }
+  }
+}
+
 // ---------------------------------------------------------------------------------------------
 // Limits h -> 0: the projected angle tends to the angle the region subtends at the foot.
 
