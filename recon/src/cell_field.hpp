@@ -149,7 +149,7 @@ class CellField {
   void build_unknown_images();
   // Triangulates the unknown set of a slice, one list per face, and completes the corners of
   // every triangle (values: 3 x function_count() per triangle); `local_faces[f]`: the known
-  // faces around face f (a corner reads those of all the faces it lies on).
+  // faces around face f, sorted (a corner reads those of all the faces it lies on).
   void triangulate_unknown(int slice, const std::vector<int>& slice_faces,
                            const std::vector<std::vector<int>>& local_faces, SliceCompletion& out) const;
   // The parts of formula 7 at the corners of one slice (completion.cpp).
@@ -161,6 +161,8 @@ class CellField {
   // Known weights of face f seen from p (units of projected_angle / height): the known part of
   // the face and each material's part (added to materials). False when p is on f's plane.
   bool known_weights(int face, const Vec3& p, double& known, double* materials) const;
+  // Prefetches the records of the faces after faces[i] that known_weights will read.
+  void prefetch_known_reads(std::span<const int> faces, std::size_t i) const;
 
   const Arrangement& arrangement_;
   std::vector<PreparedSlice> slices_;
