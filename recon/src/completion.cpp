@@ -743,12 +743,20 @@ void CellField::build_unknown_images() {
   tbb::parallel_for(std::size_t{0}, images_.size(), [&](std::size_t g) {
     known_plane[g] = images_[g].fully_unknown ? -1 : arrangement_.face(static_cast<int>(g)).plane;
   });
-  tbb::parallel_for(std::size_t{0}, images_.size(), [&](std::size_t f) {
-    if (images_[f].unknown_parts.empty()) return;
+  // The known faces of the cells within kGroupHops steps of each cell next to an unknown part
+  // (sorted); a face's local faces are then those of its two cells, merged. Walking from each
+  // cell rather than from each face walks about a fifth as often (a cell has about ten faces).
+  std::vector<char> next_to_unknown(arrangement_.cell_count(), 0);
+  for (std::size_t f = 0; f < images_.size(); ++f) {
+    if (images_[f].unknown_parts.empty()) continue;
     const ArrangementFace& face = arrangement_.face(static_cast<int>(f));
-    std::vector<int> cells;  // a few dozen: a linear search is the fastest set
     for (const int c : {face.cell_positive, face.cell_negative})
-      if (c >= 0) cells.push_back(c);
+      if (c >= 0) next_to_unknown[static_cast<std::size_t>(c)] = 1;
+  }
+  std::vector<std::vector<int>> cell_known_faces(arrangement_.cell_count());
+  tbb::parallel_for(std::size_t{0}, cell_known_faces.size(), [&](std::size_t start) {
+    if (!next_to_unknown[start]) return;
+    std::vector<int> cells{static_cast<int>(start)};  // a few dozen: a linear search is the fastest set
     std::size_t frontier_begin = 0;
     for (int hop = 0; hop < kGroupHops; ++hop) {
       const std::size_t frontier_end = cells.size();
@@ -757,17 +765,34 @@ void CellField::build_unknown_images() {
           if (std::find(cells.begin(), cells.end(), n) == cells.end()) cells.push_back(n);
       frontier_begin = frontier_end;
     }
-    std::vector<int>& faces = local_faces[f];
+    std::vector<int>& faces = cell_known_faces[start];
     FaceMarks& collected = FaceMarks::start(images_.size());
     for (const int c : cells)
-      for (const int g : arrangement_.cell(c).faces) {
-        if (!collected.insert(g)) continue;
-        const int plane = known_plane[static_cast<std::size_t>(g)];
-        if (plane >= 0 && plane != face.plane) faces.push_back(g);
-      }
-    // Sorted: the order of the corners' sums (the same for every thread), and corners on several
-    // faces merge these lists.
+      for (const int g : arrangement_.cell(c).faces)
+        if (collected.insert(g) && known_plane[static_cast<std::size_t>(g)] >= 0) faces.push_back(g);
     std::sort(faces.begin(), faces.end());
+  });
+  tbb::parallel_for(std::size_t{0}, images_.size(), [&](std::size_t f) {
+    if (images_[f].unknown_parts.empty()) return;
+    const ArrangementFace& face = arrangement_.face(static_cast<int>(f));
+    static const std::vector<int> kNone;
+    const auto known_faces_of = [&](int c) -> const std::vector<int>& {
+      return c >= 0 ? cell_known_faces[static_cast<std::size_t>(c)] : kNone;
+    };
+    const std::vector<int>& a = known_faces_of(face.cell_positive);
+    const std::vector<int>& b = known_faces_of(face.cell_negative);
+    // Sorted: the order of the corners' sums (the same for every thread), and corners on several
+    // faces merge these lists. The faces of the face's own plane are left out.
+    std::vector<int>& faces = local_faces[f];
+    faces.reserve(a.size() + b.size());
+    std::size_t i = 0, j = 0;
+    while (i < a.size() || j < b.size()) {
+      int g;
+      if (j == b.size() || (i < a.size() && a[i] < b[j])) g = a[i++];
+      else if (i == a.size() || b[j] < a[i]) g = b[j++];
+      else g = (++i, b[j++]);  // in both
+      if (known_plane[static_cast<std::size_t>(g)] != face.plane) faces.push_back(g);
+    }
   });
   // A slice's triangles and values depend only on the images of its faces with unknown parts
   // and of their local faces: slices none of whose inputs were rebuilt keep their completion

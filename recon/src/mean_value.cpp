@@ -57,16 +57,11 @@ double projected_angle_plain_scalar(const Vec2* points, std::size_t count, const
 // order of the additions differs. Chosen at run time (not every x86-64 has AVX2).
 __attribute__((target("avx2"))) __m256d atan_small_avx2(__m256d x) {
   const __m256d z = _mm256_mul_pd(x, x);
-  __m256d p = _mm256_set1_pd(-8.750608600031904122785e-01);
-  p = _mm256_add_pd(_mm256_mul_pd(p, z), _mm256_set1_pd(-1.615753718733365076637e+01));
-  p = _mm256_add_pd(_mm256_mul_pd(p, z), _mm256_set1_pd(-7.500855792314704667340e+01));
-  p = _mm256_add_pd(_mm256_mul_pd(p, z), _mm256_set1_pd(-1.228866684490136173410e+02));
-  p = _mm256_add_pd(_mm256_mul_pd(p, z), _mm256_set1_pd(-6.485021904942025371773e+01));
-  __m256d q = _mm256_add_pd(z, _mm256_set1_pd(2.485846490142306297962e+01));
-  q = _mm256_add_pd(_mm256_mul_pd(q, z), _mm256_set1_pd(1.650270098316988542046e+02));
-  q = _mm256_add_pd(_mm256_mul_pd(q, z), _mm256_set1_pd(4.328810604912902668951e+02));
-  q = _mm256_add_pd(_mm256_mul_pd(q, z), _mm256_set1_pd(4.853903996359136964868e+02));
-  q = _mm256_add_pd(_mm256_mul_pd(q, z), _mm256_set1_pd(1.945506571482613964425e+02));
+  using atan_detail::kAtanP, atan_detail::kAtanQ;
+  __m256d p = _mm256_set1_pd(kAtanP[0]);
+  for (int k = 1; k < 5; ++k) p = _mm256_add_pd(_mm256_mul_pd(p, z), _mm256_set1_pd(kAtanP[k]));
+  __m256d q = _mm256_add_pd(z, _mm256_set1_pd(kAtanQ[0]));
+  for (int k = 1; k < 5; ++k) q = _mm256_add_pd(_mm256_mul_pd(q, z), _mm256_set1_pd(kAtanQ[k]));
   return _mm256_add_pd(x, _mm256_mul_pd(x, _mm256_div_pd(_mm256_mul_pd(z, p), q)));
 }
 
@@ -81,13 +76,13 @@ __attribute__((target("avx2"))) __m256d atan2_nonnegative_y_avx2(__m256d y, __m2
   // ax = 0 with ay <= ax: fast_atan2 returns 0 there without dividing.
   const __m256d flat_zero = _mm256_cmp_pd(denominator, zero, _CMP_EQ_OQ);
   const __m256d t = _mm256_blendv_pd(_mm256_div_pd(numerator, denominator), zero, flat_zero);
-  const __m256d large = _mm256_cmp_pd(t, _mm256_set1_pd(0.66), _CMP_GT_OQ);
+  const __m256d large = _mm256_cmp_pd(t, _mm256_set1_pd(atan_detail::kAtanReduceAbove), _CMP_GT_OQ);
   const __m256d reduced = _mm256_div_pd(_mm256_sub_pd(t, one), _mm256_add_pd(t, one));
   const __m256d small_angle = atan_small_avx2(_mm256_blendv_pd(t, reduced, large));
   const __m256d unit_angle = _mm256_blendv_pd(
       small_angle,
-      _mm256_add_pd(_mm256_set1_pd(0.78539816339744830962),
-                    _mm256_add_pd(small_angle, _mm256_set1_pd(3.061616997868382943065e-17))),
+      _mm256_add_pd(_mm256_set1_pd(atan_detail::kAtanQuarterPi),
+                    _mm256_add_pd(small_angle, _mm256_set1_pd(atan_detail::kAtanQuarterPiLow))),
       large);
   __m256d angle = _mm256_blendv_pd(unit_angle, _mm256_sub_pd(_mm256_set1_pd(1.57079632679489661923), unit_angle),
                                    steep);
