@@ -718,9 +718,12 @@ void CellField::build_unknown_images() {
   std::vector<int> parent(arrangement_.cell_count());
   std::iota(parent.begin(), parent.end(), 0);
   std::vector<std::vector<int>> unknown_neighbours(arrangement_.cell_count());
+  std::vector<char> next_to_unknown(arrangement_.cell_count(), 0);  // a cell with a face with unknown parts
   for (std::size_t f = 0; f < images_.size(); ++f) {
     if (images_[f].unknown_parts.empty()) continue;
     const ArrangementFace& face = arrangement_.face(static_cast<int>(f));
+    for (const int c : {face.cell_positive, face.cell_negative})
+      if (c >= 0) next_to_unknown[static_cast<std::size_t>(c)] = 1;
     if (face.cell_positive < 0 || face.cell_negative < 0) continue;
     parent[static_cast<std::size_t>(find_root(parent, face.cell_positive))] = find_root(parent, face.cell_negative);
     unknown_neighbours[static_cast<std::size_t>(face.cell_positive)].push_back(face.cell_negative);
@@ -746,13 +749,6 @@ void CellField::build_unknown_images() {
   // The known faces of the cells within kGroupHops steps of each cell next to an unknown part
   // (sorted); a face's local faces are then those of its two cells, merged. Walking from each
   // cell rather than from each face walks about a fifth as often (a cell has about ten faces).
-  std::vector<char> next_to_unknown(arrangement_.cell_count(), 0);
-  for (std::size_t f = 0; f < images_.size(); ++f) {
-    if (images_[f].unknown_parts.empty()) continue;
-    const ArrangementFace& face = arrangement_.face(static_cast<int>(f));
-    for (const int c : {face.cell_positive, face.cell_negative})
-      if (c >= 0) next_to_unknown[static_cast<std::size_t>(c)] = 1;
-  }
   std::vector<std::vector<int>> cell_known_faces(arrangement_.cell_count());
   tbb::parallel_for(std::size_t{0}, cell_known_faces.size(), [&](std::size_t start) {
     if (!next_to_unknown[start]) return;
