@@ -195,8 +195,8 @@ bool add_part_2d(const UnknownComponent& component, std::size_t function_count, 
 
 // The parts of formula 7 at the corners of one slice's triangles. A corner keeps its parts across
 // the refinement rounds and between the triangles around it. Each round first lists the parts
-// its new triangles need (serially: the keys decide which are new), then computes them in
-// parallel.
+// its new triangles need (serially: the points' slots decide which are new), then computes them
+// in parallel.
 struct CellField::CornerCache {
   // Slots: function_count + 1 doubles at slot * (function_count + 1) in `values`, the numerators
   // of every function, then the denominator. Formula 7 (a) has one slot per point of the slice,
@@ -649,7 +649,7 @@ void CellField::prefetch_known_reads(std::span<const int> faces, std::size_t i) 
   // scattered over the arrays of all faces, one record leading to the next (image, frame, parts,
   // points). So the image of the face read four steps ahead is fetched, then two steps ahead what
   // it points to, then one step ahead its parts' points (-10 % of the completion on the homer
-  // 80 mm sector set, medians of twelve interleaved pairs of runs).
+  // 80 mm sector set: bench/compare_runs.sh, twelve pairs of runs without and with).
   if (i + 4 < faces.size()) __builtin_prefetch(&images_[static_cast<std::size_t>(faces[i + 4])]);
   if (i + 2 < faces.size()) {
     const FaceImage& ahead = images_[static_cast<std::size_t>(faces[i + 2])];
@@ -678,10 +678,6 @@ bool CellField::known_weights(int face, const Vec3& p, double& known, double* ma
   // the absolute accuracy of the plain sum suffices; the split form that keeps small angles'
   // relative accuracy (feet outside a face, most of the faces read here) would cost three times
   // as many atan2.
-  const auto angle = [&](const FaceImage::Part& part) {
-    if (part.tree_count == 0) return projected_angle_plain(points_.data() + part.begin, part.count, foot, height);
-    return part_angle(part, foot, height);
-  };
   // Parts that are the face polygon itself (a face wholly inside a ring: most faces) take the
   // polygon's sum, computed once.
   double polygon = 0.0;
@@ -693,7 +689,7 @@ bool CellField::known_weights(int face, const Vec3& p, double& known, double* ma
     return polygon;
   };
   const auto copy_or_angle = [&](const FaceImage::Part& part) {
-    return part.polygon_copy != 0 ? part.polygon_copy * polygon_angle() : angle(part);
+    return part.polygon_copy != 0 ? part.polygon_copy * polygon_angle() : part_angle(part, foot, height);
   };
   known = 0.0;
   if (image.known_clipped) {
