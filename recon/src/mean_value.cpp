@@ -55,7 +55,7 @@ double projected_angle_plain_scalar(const Vec2* points, std::size_t count, const
 // edge_projected_angle and fast_atan2 in the same order (both branches computed, the scalar
 // code's one selected; no FMA), so every edge term is the scalar one to the bit and only the
 // order of the additions differs. Chosen at run time (not every x86-64 has AVX2).
-__attribute__((target("avx2"))) __m256d atan_small_avx2(__m256d x) {
+inline __attribute__((target("avx2"), always_inline)) __m256d atan_small_avx2(__m256d x) {
   const __m256d z = _mm256_mul_pd(x, x);
   using atan_detail::kAtanP, atan_detail::kAtanQ;
   __m256d p = _mm256_set1_pd(kAtanP[0]);
@@ -66,7 +66,7 @@ __attribute__((target("avx2"))) __m256d atan_small_avx2(__m256d x) {
 }
 
 // fast_atan2(y, x) for y >= 0 (y = +0 included), lane by lane.
-__attribute__((target("avx2"))) __m256d atan2_nonnegative_y_avx2(__m256d y, __m256d x) {
+inline __attribute__((target("avx2"), always_inline)) __m256d atan2_nonnegative_y_avx2(__m256d y, __m256d x) {
   const __m256d sign_bit = _mm256_set1_pd(-0.0);
   const __m256d ax = _mm256_andnot_pd(sign_bit, x);
   const __m256d steep = _mm256_cmp_pd(y, ax, _CMP_GT_OQ);  // ay > ax: the pi/2 - atan(ax/ay) branch
@@ -142,6 +142,130 @@ __attribute__((target("avx2"))) double projected_angle_plain_avx2(const Vec2* po
 const bool kHaveAvx2 = __builtin_cpu_supports("avx2");
 #endif
 
+// What triangle_weights computes of one triangle before and after its edge terms (its edge
+// terms themselves are computed four triangles at a time below).
+struct TrianglePrologue {
+  bool valid;
+  double twice_area, longest_sq;
+  Vec2 ring[3];  // counter-clockwise
+};
+TrianglePrologue triangle_prologue(const Vec2* corners, const Vec2& foot, double height) {
+  const Vec2& a = corners[0];
+  const Vec2& b = corners[1];
+  const Vec2& c = corners[2];
+  TrianglePrologue out;
+  out.twice_area = (b - a).x() * (c - a).y() - (b - a).y() * (c - a).x();
+  // Slivers (two corners rounded onto each other) carry no area but would blow up the
+  // barycentric gradients: they contribute nothing.
+  // (and so do triangles tiny against their distance to the point: their gradients overflow too).
+  out.longest_sq = std::max({(b - a).squaredNorm(), (c - b).squaredNorm(), (a - c).squaredNorm()});
+  const double reach_sq = (foot - a).squaredNorm() + height * height;
+  out.valid = std::abs(out.twice_area) > 1e-12 * std::max(out.longest_sq, 1e-12 * reach_sq) && height > 0.0;
+  // Traverse counter-clockwise so outward normals are (d.y, -d.x) / L.
+  const int order[3] = {0, out.twice_area > 0 ? 1 : 2, out.twice_area > 0 ? 2 : 1};
+  for (int k = 0; k < 3; ++k) out.ring[k] = corners[order[k]];
+  return out;
+}
+
+// The weights from the edge sums I (`projected`, 2 h I) and M (`moment`).
+bool triangle_epilogue(const Vec2* corners, const TrianglePrologue& t, const Vec2& foot, double height,
+                       double projected, const Vec2& moment, double weights[3]) {
+  // A foot outside the triangle at a height small against the triangle makes the edge terms of I
+  // cancel (their sum is O(h) while each is O(1)); the split form keeps I's relative accuracy
+  // there. Higher up, the terms are at most about size / height times their sum (far away
+  // much less): the plain sum holds.
+  if (std::abs(projected) < kSplitBelow && height * height < kSplitHeightRatio * kSplitHeightRatio * t.longest_sq)
+    projected = projected_angle_split(t.ring, 3, foot, height, projected);
+  // Barycentric coordinate of corner i: lambda_i(y) = cross(e_i, y - start_i) / twice_area with
+  // e_i the opposite edge; its gradient is perp(e_i) / twice_area.
+  const double inverse_area = 1.0 / t.twice_area, projected_over_height = projected / height;
+  for (int i = 0; i < 3; ++i) {
+    const Vec2& p1 = corners[(i + 1) % 3];
+    const Vec2& p2 = corners[(i + 2) % 3];
+    const Vec2 e = p2 - p1;
+    const Vec2 gradient = Vec2(-e.y(), e.x()) * inverse_area;
+    const double lambda_at_foot = gradient.dot(foot - p1);
+    weights[i] = lambda_at_foot * projected_over_height + 2.0 * gradient.dot(moment);
+  }
+  return std::isfinite(weights[0]) && std::isfinite(weights[1]) && std::isfinite(weights[2]);
+}
+
+#ifdef SONOSHAPE_AVX2_KERNEL
+// triangle_weights of four triangles, one per lane: each lane does triangle_weights' operations
+// on its triangle in the same order (the edge term as in projected_angle_plain_avx2, no FMA), so
+// every weight is the scalar one to the bit; the rare split form is computed lane by lane. The
+// field of a slice with a field of view spent a quarter of its time in these weights one
+// triangle at a time.
+__attribute__((target("avx2"))) void triangle_weights4_avx2(const Vec2* const corners[4], std::size_t count,
+                                                            const Vec2& foot, double height,
+                                                            double weights[4][3], bool ok[4]) {
+  TrianglePrologue triangles[4];
+  alignas(32) double ring_x[3][4], ring_y[3][4], corner_x[3][4], corner_y[3][4], twice_area[4];
+  for (std::size_t t = 0; t < 4; ++t) {  // lanes past `count` repeat the last triangle
+    const Vec2* c = corners[std::min(t, count - 1)];
+    triangles[t] = triangle_prologue(c, foot, height);
+    twice_area[t] = triangles[t].twice_area;
+    for (int k = 0; k < 3; ++k) {
+      const Vec2 p = triangles[t].ring[k] - foot;
+      ring_x[k][t] = p.x();
+      ring_y[k][t] = p.y();
+      corner_x[k][t] = c[k].x();
+      corner_y[k][t] = c[k].y();
+    }
+  }
+  const __m256d sign_bit = _mm256_set1_pd(-0.0);
+  const __m256d h2 = _mm256_set1_pd(height * height);
+  const __m256d minus_half_height = _mm256_set1_pd(-0.5 * height);
+  __m256d sum = _mm256_setzero_pd(), moment_x = _mm256_setzero_pd(), moment_y = _mm256_setzero_pd();
+  for (int k = 0; k < 3; ++k) {
+    const __m256d ax = _mm256_load_pd(ring_x[k]), ay = _mm256_load_pd(ring_y[k]);
+    const __m256d bx = _mm256_load_pd(ring_x[(k + 1) % 3]), by = _mm256_load_pd(ring_y[(k + 1) % 3]);
+    const __m256d dx = _mm256_sub_pd(bx, ax), dy = _mm256_sub_pd(by, ay);
+    const __m256d cross = _mm256_sub_pd(_mm256_mul_pd(ax, by), _mm256_mul_pd(ay, bx));
+    const __m256d length_sq = _mm256_add_pd(_mm256_mul_pd(dx, dx), _mm256_mul_pd(dy, dy));
+    const __m256d big_q = _mm256_add_pd(_mm256_mul_pd(cross, cross), _mm256_mul_pd(h2, length_sq));
+    const __m256d q_length = _mm256_sqrt_pd(big_q);
+    const __m256d a_dot_d = _mm256_add_pd(_mm256_mul_pd(ax, dx), _mm256_mul_pd(ay, dy));
+    const __m256d b_dot_d = _mm256_add_pd(_mm256_mul_pd(bx, dx), _mm256_mul_pd(by, dy));
+    const __m256d angle = atan2_nonnegative_y_avx2(_mm256_mul_pd(q_length, length_sq),
+                                                   _mm256_add_pd(big_q, _mm256_mul_pd(a_dot_d, b_dot_d)));
+    const __m256d angle_over_q_length = _mm256_div_pd(angle, q_length);
+    sum = _mm256_add_pd(sum, _mm256_mul_pd(cross, angle_over_q_length));
+    const __m256d scale = _mm256_mul_pd(minus_half_height, angle_over_q_length);
+    moment_x = _mm256_add_pd(moment_x, _mm256_mul_pd(scale, dy));
+    moment_y = _mm256_add_pd(moment_y, _mm256_mul_pd(scale, _mm256_xor_pd(dx, sign_bit)));  // -dx
+  }
+  // The split form where triangle_epilogue takes it (rare), lane by lane.
+  alignas(32) double projected[4];
+  _mm256_store_pd(projected, sum);
+  for (std::size_t t = 0; t < count; ++t)
+    if (triangles[t].valid && std::abs(projected[t]) < kSplitBelow &&
+        height * height < kSplitHeightRatio * kSplitHeightRatio * triangles[t].longest_sq)
+      projected[t] = projected_angle_split(triangles[t].ring, 3, foot, height, projected[t]);
+  const __m256d inverse_area = _mm256_div_pd(_mm256_set1_pd(1.0), _mm256_load_pd(twice_area));
+  const __m256d projected_over_height = _mm256_div_pd(_mm256_load_pd(projected), _mm256_set1_pd(height));
+  const __m256d foot_x = _mm256_set1_pd(foot.x()), foot_y = _mm256_set1_pd(foot.y()), two = _mm256_set1_pd(2.0);
+  alignas(32) double lane_weights[3][4];
+  for (int i = 0; i < 3; ++i) {
+    const __m256d p1x = _mm256_load_pd(corner_x[(i + 1) % 3]), p1y = _mm256_load_pd(corner_y[(i + 1) % 3]);
+    const __m256d ex = _mm256_sub_pd(_mm256_load_pd(corner_x[(i + 2) % 3]), p1x);
+    const __m256d ey = _mm256_sub_pd(_mm256_load_pd(corner_y[(i + 2) % 3]), p1y);
+    const __m256d gx = _mm256_mul_pd(_mm256_xor_pd(ey, sign_bit), inverse_area);  // (-e.y, e.x) / 2A
+    const __m256d gy = _mm256_mul_pd(ex, inverse_area);
+    const __m256d lambda_at_foot = _mm256_add_pd(_mm256_mul_pd(gx, _mm256_sub_pd(foot_x, p1x)),
+                                                 _mm256_mul_pd(gy, _mm256_sub_pd(foot_y, p1y)));
+    const __m256d gradient_dot_moment = _mm256_add_pd(_mm256_mul_pd(gx, moment_x), _mm256_mul_pd(gy, moment_y));
+    _mm256_store_pd(lane_weights[i], _mm256_add_pd(_mm256_mul_pd(lambda_at_foot, projected_over_height),
+                                                   _mm256_mul_pd(two, gradient_dot_moment)));
+  }
+  for (std::size_t t = 0; t < count; ++t) {
+    for (int i = 0; i < 3; ++i) weights[t][i] = lane_weights[i][t];
+    ok[t] = triangles[t].valid && std::isfinite(weights[t][0]) && std::isfinite(weights[t][1]) &&
+            std::isfinite(weights[t][2]);
+  }
+}
+#endif
+
 }  // namespace
 
 double projected_angle_plain(const Vec2* points, std::size_t count, const Vec2& foot, double height) {
@@ -175,26 +299,16 @@ namespace sonoshape::recon {
 bool triangle_weights(const Vec2& a, const Vec2& b, const Vec2& c, const Vec2& foot, double height,
                       double weights[3]) {
   const Vec2 corners[3] = {a, b, c};
-  const double twice_area = (b - a).x() * (c - a).y() - (b - a).y() * (c - a).x();
-  // Slivers (two corners rounded onto each other) carry no area but would blow up the
-  // barycentric gradients: they contribute nothing.
-  // (and so do triangles tiny against their distance to the point: their gradients overflow too).
-  const double longest_sq = std::max({(b - a).squaredNorm(), (c - b).squaredNorm(), (a - c).squaredNorm()});
-  const double reach_sq = (foot - a).squaredNorm() + height * height;
-  if (!(std::abs(twice_area) > 1e-12 * std::max(longest_sq, 1e-12 * reach_sq)) || !(height > 0.0))
-    return false;
-  // Traverse counter-clockwise so outward normals are (d.y, -d.x) / L.
-  const int order[3] = {0, twice_area > 0 ? 1 : 2, twice_area > 0 ? 2 : 1};
-  Vec2 ring[3];
-  for (int k = 0; k < 3; ++k) ring[k] = corners[order[k]];
+  const TrianglePrologue t = triangle_prologue(corners, foot, height);
+  if (!t.valid) return false;
   const double h2 = height * height;
   Vec2 moment = Vec2::Zero();  // M
   double projected = 0.0;      // 2 h I, from the same edge angles as M
   for (int k = 0; k < 3; ++k) {
     // The edge term of mean_value.hpp through edge_angle: one square root and one division per
-    // edge (the field with unknown regions spends half its time here).
-    const Vec2 p = ring[k] - foot;
-    const Vec2 q_end = ring[(k + 1) % 3] - foot;
+    // edge.
+    const Vec2 p = t.ring[k] - foot;
+    const Vec2 q_end = t.ring[(k + 1) % 3] - foot;
     const Vec2 d = q_end - p;
     const double cross = p.x() * q_end.y() - p.y() * q_end.x();  // c L
     const EdgeAngle edge = edge_angle(p, q_end, d, cross, d.squaredNorm(), h2);
@@ -203,24 +317,16 @@ bool triangle_weights(const Vec2& a, const Vec2& b, const Vec2& c, const Vec2& f
     // -h / (2 q) angle times the outward unit normal (d.y, -d.x) / L.
     moment += (-0.5 * height * angle_over_q_length) * Vec2(d.y(), -d.x());
   }
-  // A foot outside the triangle at a height small against the triangle makes the edge terms of I
-  // cancel (their sum is O(h) while each is O(1)); the split form keeps I's relative accuracy
-  // there. Higher up, the terms are at most about size / height times their sum (far away
-  // much less): the plain sum holds.
-  if (std::abs(projected) < kSplitBelow && height * height < kSplitHeightRatio * kSplitHeightRatio * longest_sq)
-    projected = projected_angle_split(ring, 3, foot, height, projected);
-  // Barycentric coordinate of corner i: lambda_i(y) = cross(e_i, y - start_i) / twice_area with
-  // e_i the opposite edge; its gradient is perp(e_i) / twice_area.
-  const double inverse_area = 1.0 / twice_area, projected_over_height = projected / height;
-  for (int i = 0; i < 3; ++i) {
-    const Vec2& p1 = corners[(i + 1) % 3];
-    const Vec2& p2 = corners[(i + 2) % 3];
-    const Vec2 e = p2 - p1;
-    const Vec2 gradient = Vec2(-e.y(), e.x()) * inverse_area;
-    const double lambda_at_foot = gradient.dot(foot - p1);
-    weights[i] = lambda_at_foot * projected_over_height + 2.0 * gradient.dot(moment);
-  }
-  return std::isfinite(weights[0]) && std::isfinite(weights[1]) && std::isfinite(weights[2]);
+  return triangle_epilogue(corners, t, foot, height, projected, moment, weights);
+}
+
+void triangle_weights4(const Vec2* const corners[4], std::size_t count, const Vec2& foot, double height,
+                       double weights[4][3], bool ok[4]) {
+#ifdef SONOSHAPE_AVX2_KERNEL
+  if (kHaveAvx2 && count > 1) return triangle_weights4_avx2(corners, count, foot, height, weights, ok);
+#endif
+  for (std::size_t t = 0; t < count; ++t)
+    ok[t] = triangle_weights(corners[t][0], corners[t][1], corners[t][2], foot, height, weights[t]);
 }
 
 void ju_triangle_weights(const Vec3& x, const Vec3& p0, const Vec3& p1, const Vec3& p2,

@@ -411,6 +411,44 @@ TEST(MeanValueAlgebra, PlainSumIsTheSumOfItsEdgeTerms) {
   }
 }
 
+// triangle_weights4 (four triangles in AVX2 lanes) gives triangle_weights' weights to the bit:
+// ordinary triangles, slivers, both orientations, feet on a corner or an edge, and heights small
+// enough for the split form.
+TEST(MeanValueAlgebra, FourTrianglesAtOnceGiveEachTrianglesWeights) {
+  std::mt19937 random(23);
+  std::uniform_real_distribution<double> coordinate(-2.0, 2.0);
+  int compared = 0;
+  for (int trial = 0; trial < 400; ++trial) {
+    std::array<std::array<Vec2, 3>, 4> triangles;
+    for (std::size_t t = 0; t < 4; ++t) {
+      for (Vec2& corner : triangles[t]) corner = Vec2(coordinate(random), coordinate(random));
+      if ((trial + t) % 7 == 0) triangles[t][2] = triangles[t][1];                          // a sliver
+      if ((trial + t) % 11 == 0) triangles[t][2] = 0.5 * (triangles[t][0] + triangles[t][1]);  // flat
+    }
+    Vec2 foot(coordinate(random), coordinate(random));
+    if (trial % 5 == 1) foot = triangles[0][1];                                // on a corner
+    if (trial % 5 == 2) foot = 0.25 * triangles[1][0] + 0.75 * triangles[1][2];  // on an edge
+    const double height = trial % 4 == 0 ? 1e-7 : (trial % 4 == 1 ? 1e-3 : std::abs(coordinate(random)) + 1e-3);
+    const std::size_t count = 1 + static_cast<std::size_t>(trial % 4);
+    const Vec2* corners[4];
+    for (std::size_t t = 0; t < 4; ++t) corners[t] = triangles[t].data();
+    double weights[4][3];
+    bool ok[4];
+    triangle_weights4(corners, count, foot, height, weights, ok);
+    for (std::size_t t = 0; t < count; ++t) {
+      double expected[3];
+      const bool expected_ok =
+          triangle_weights(triangles[t][0], triangles[t][1], triangles[t][2], foot, height, expected);
+      ASSERT_EQ(ok[t], expected_ok) << "trial " << trial << ", triangle " << t;
+      if (!expected_ok) continue;
+      ++compared;
+      for (int k = 0; k < 3; ++k)
+        EXPECT_EQ(weights[t][k], expected[k]) << "trial " << trial << ", triangle " << t << ", corner " << k;
+    }
+  }
+  EXPECT_GT(compared, 600);
+}
+
 // ---------------------------------------------------------------------------------------------
 // Limits h -> 0: the projected angle tends to the angle the region subtends at the foot.
 
