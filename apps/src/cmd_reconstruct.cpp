@@ -36,6 +36,7 @@ nlohmann::json stats_json(const recon::ReconstructionStats& stats) {
   j["depth"] = stats.depth;
   j["snapped_vertices"] = stats.snapped_vertices;
   j["completion_s"] = stats.completion_s;
+  j["evaluation_s"] = stats.evaluation_s;
   j["unknown_triangles"] = stats.unknown_triangles;
   j["cell_groups"] = stats.cell_groups;
   j["completed_slices"] = stats.completed_slices;

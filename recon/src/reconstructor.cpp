@@ -286,7 +286,7 @@ UpdateStats Reconstructor::update() {
   if (s.built && s.pending_adds.empty() && s.pending_removes.empty()) {
     out.step = s.totals;
     out.step.arrangement_s = out.step.face_images_s = out.step.field_s = out.step.smoothing_s =
-        out.step.mesh_s = out.step.total_s = out.step.completion_s = 0.0;
+        out.step.mesh_s = out.step.total_s = out.step.completion_s = out.step.evaluation_s = 0.0;
     out.step.field_evaluations = 0;
     return out;
   }
@@ -384,10 +384,12 @@ UpdateStats Reconstructor::update() {
   EvaluationStamps& stamps = *s.stamps;
   const std::size_t fc = static_cast<std::size_t>(field.function_count());
   std::size_t evaluations = 0;
+  double evaluation_seconds = 0.0;
   // The octree asks only for vertices the kept field has no valid value for: all are evaluated
   // (in parallel) and stamped with their cell.
   const BatchEvaluator evaluate = [&](const std::vector<std::uint64_t>& keys,
                                       const std::vector<Vec3>& points, double* values) {
+    const Stopwatch evaluation_clock;
     std::vector<int> cells(keys.size());
     arena.execute([&] {
       tbb::parallel_for(tbb::blocked_range<std::size_t>(0, keys.size(), 64),
@@ -398,6 +400,7 @@ UpdateStats Reconstructor::update() {
     });
     for (std::size_t n = 0; n < keys.size(); ++n) stamps.store(keys[n], cells[n], s.generation);
     evaluations += keys.size();
+    evaluation_seconds += evaluation_clock.seconds();
   };
   Stopwatch clock;
   // In the arena: the octree's parallel loops use the same threads as the evaluation.
@@ -437,6 +440,7 @@ UpdateStats Reconstructor::update() {
   stats.cells = s.arrangement->cell_count();
   stats.faces = s.arrangement->face_count();
   stats.field_evaluations = evaluations;
+  stats.evaluation_s = evaluation_seconds;
   stats.snapped_vertices = s.sampled.snapped_vertices;
   stats.depth = s.depth;
   stats.total_s = total_clock.seconds();
@@ -449,6 +453,7 @@ UpdateStats Reconstructor::update() {
   totals.mesh_s += stats.mesh_s;
   totals.total_s += stats.total_s;
   totals.completion_s += stats.completion_s;
+  totals.evaluation_s += stats.evaluation_s;
   totals.field_evaluations += stats.field_evaluations;
   totals.slices = stats.slices;
   totals.cells = stats.cells;

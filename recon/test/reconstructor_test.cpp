@@ -126,6 +126,10 @@ TEST_P(RandomSequences, EqualTheOneShotReconstructionAfterEveryUpdate) {
     if (step > 0 && stats.slices_removed == 0) {
       EXPECT_FALSE(stats.full_rebuild) << "step " << step;
     }
+    // The evaluations' seconds are part of the field and smoothing stages, and there are some
+    // whenever vertices were evaluated.
+    EXPECT_EQ(stats.step.evaluation_s > 0.0, stats.step.field_evaluations > 0) << "step " << step;
+    EXPECT_LE(stats.step.evaluation_s, stats.step.field_s + stats.step.smoothing_s) << "step " << step;
     const auto offline = one_shot(online.slice_set(), options);
     SCOPED_TRACE("step " + std::to_string(step));
     expect_same_field(online, *offline);

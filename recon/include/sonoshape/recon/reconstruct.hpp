@@ -25,6 +25,9 @@ struct ReconstructionStats {
   std::size_t unknown_triangles = 0, cell_groups = 0;  ///< unknown-region completion
   std::size_t completed_slices = 0;  ///< slices whose unknown regions were (re)completed
   double completion_s = 0;  ///< part of face_images_s spent completing unknown regions
+  /// Part of field_s and smoothing_s spent evaluating the field at grid vertices (the rest: the
+  /// octree, band and smoothing passes).
+  double evaluation_s = 0;
   int depth = 0;
   std::map<int, std::size_t> triangles;  ///< per material label
 };
