@@ -31,21 +31,23 @@ class Sampler {
     pending_keys_.reset(1 << field.grid.depth);
   }
 
-  /// Whether `key` has a current value; if so its row counts as read in this pass. Safe to call
-  /// from several threads between flushes.
-  bool has_value(std::uint64_t key) const {
+  /// The row of `key` if it has a current value (the row then counts as read in this pass), else
+  /// GridIndex::kNone. Safe to call from several threads between flushes.
+  std::uint32_t valid_row(std::uint64_t key) const {
     const std::uint32_t row = field_.index.find(key);
-    if (row == GridIndex::kNone || !valid_[row]) return false;
+    if (row == GridIndex::kNone || !valid_[row]) return GridIndex::kNone;
     std::atomic_ref<std::uint32_t>(field_.row_pass[row]).store(field_.pass, std::memory_order_relaxed);
-    return true;
+    return row;
   }
+  bool has_value(std::uint64_t key) const { return valid_row(key) != GridIndex::kNone; }
   /// Queues a vertex for evaluation unless it has a value or is queued.
   void request(int i, int j, int k) {
     const std::uint64_t key = grid_key(i, j, k);
     if (has_value(key) || !pending_keys_.insert(key, 0)) return;
     pending_.push_back(key);
   }
-  /// Queues the vertices that generate(n, request) requests for n in [0, count), in parallel: in
+  /// Queues the vertices that generate(n, request) requests for n in [0, count), in parallel (each
+  /// request returns the vertex's row, or GridIndex::kNone when it was queued): in
   /// an online update nearly all of them have values already, and the serial look-ups of those
   /// (hundreds of thousands per pass) were most of the octree passes' time. Queued in key order.
   template <typename Generate>
@@ -53,9 +55,12 @@ class Sampler {
     tbb::enumerable_thread_specific<std::vector<std::uint64_t>> missing;
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 512), [&](const tbb::blocked_range<std::size_t>& r) {
       std::vector<std::uint64_t>& local = missing.local();
+      // Returns the vertex's row, or GridIndex::kNone when it is queued for evaluation.
       const auto request_one = [&](int i, int j, int k) {
         const std::uint64_t key = grid_key(i, j, k);
-        if (!has_value(key)) local.push_back(key);
+        const std::uint32_t row = valid_row(key);
+        if (row == GridIndex::kNone) local.push_back(key);
+        return row;
       };
       for (std::size_t n = r.begin(); n < r.end(); ++n) generate(n, request_one);
     });
@@ -124,6 +129,15 @@ bool contains(const std::vector<std::uint64_t>& sorted, std::uint64_t key) {
   return std::binary_search(sorted.begin(), sorted.end(), key);
 }
 
+// The argmax label of a row of values (the lowest index wins ties), as SampledField::label.
+int row_label(const SampledField& f, std::uint32_t row) {
+  const double* values = f.values.data() + static_cast<std::size_t>(row) * static_cast<std::size_t>(f.function_count);
+  int best = 0;
+  for (int l = 1; l < f.function_count; ++l)
+    if (values[l] > values[best]) best = l;
+  return best;
+}
+
 // Corner labels of the cell whose min corner is (i, j, k) with side `step`: true if not uniform.
 bool cell_mixed(const SampledField& f, int i, int j, int k, int step) {
   const int first = f.label(grid_key(i, j, k));
@@ -164,15 +178,38 @@ void close_band(SampledField& field, Sampler& sampler, const std::vector<std::ui
   unique_seeds.reserve(seeds.size());
   for (const std::uint64_t key : seeds)
     if (in_band.insert(key, 0)) unique_seeds.push_back(key);
-  const auto request_corners = [&](const std::vector<std::uint64_t>& cells) {
+  // The mixed cells of `cells`, in their order, their corners evaluated first where they have no
+  // value (the tests run in parallel, from the rows the request pass found).
+  const auto requested_mixed_of = [&](const std::vector<std::uint64_t>& cells) {
+    std::vector<std::array<std::uint32_t, 8>> corner_rows(cells.size());
     sampler.request_each(cells.size(), [&](std::size_t n, const auto& request) {
       int i, j, k;
       grid_unkey(cells[n], i, j, k);
-      for (int corner = 0; corner < 8; ++corner) request(i + (corner & 1), j + ((corner >> 1) & 1), k + ((corner >> 2) & 1));
+      for (int corner = 0; corner < 8; ++corner)
+        corner_rows[n][static_cast<std::size_t>(corner)] =
+            request(i + (corner & 1), j + ((corner >> 1) & 1), k + ((corner >> 2) & 1));
     });
     sampler.flush();
+    std::vector<char> is_mixed(cells.size());
+    for_rows(cells.size(), [&](std::size_t n) {
+      int i, j, k;
+      grid_unkey(cells[n], i, j, k);
+      std::array<std::uint32_t, 8>& rows = corner_rows[n];
+      for (int corner = 0; corner < 8; ++corner)
+        if (rows[static_cast<std::size_t>(corner)] == GridIndex::kNone)
+          rows[static_cast<std::size_t>(corner)] =
+              field.index.at(grid_key(i + (corner & 1), j + ((corner >> 1) & 1), k + ((corner >> 2) & 1)));
+      const int first = row_label(field, rows[0]);
+      bool mixed = false;
+      for (std::size_t corner = 1; corner < 8 && !mixed; ++corner) mixed = row_label(field, rows[corner]) != first;
+      is_mixed[n] = mixed;
+    });
+    std::vector<std::uint64_t> kept;
+    for (std::size_t n = 0; n < cells.size(); ++n)
+      if (is_mixed[n]) kept.push_back(cells[n]);
+    return kept;
   };
-  // The mixed cells of `cells`, in their order (the tests run in parallel).
+  // The mixed cells of `cells` whose corners all have values.
   const auto mixed_of = [&](const std::vector<std::uint64_t>& cells) {
     std::vector<char> is_mixed(cells.size());
     for_rows(cells.size(), [&](std::size_t n) {
@@ -185,8 +222,7 @@ void close_band(SampledField& field, Sampler& sampler, const std::vector<std::ui
       if (is_mixed[n]) kept.push_back(cells[n]);
     return kept;
   };
-  request_corners(unique_seeds);
-  std::vector<std::uint64_t> frontier = mixed_of(unique_seeds);
+  std::vector<std::uint64_t> frontier = requested_mixed_of(unique_seeds);
   std::vector<std::uint64_t> band = frontier;
   std::vector<std::uint64_t> closed_new;
   for (const std::uint64_t key : closed)
@@ -221,8 +257,7 @@ void close_band(SampledField& field, Sampler& sampler, const std::vector<std::ui
         if (in_band.insert(nkey, 0)) candidates.push_back(nkey);
       }
     }
-    request_corners(candidates);
-    frontier = mixed_of(candidates);
+    frontier = requested_mixed_of(candidates);
     band.insert(band.end(), frontier.begin(), frontier.end());
   }
   std::sort(band.begin(), band.end());
@@ -358,10 +393,15 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
   }
   for (int level = start;; ++level) {
     const int step = 1 << (depth - level);
+    // The corners' rows as the request pass finds them (kNone: evaluated in the flush below): an
+    // online update has nearly all of them, and the mixed test then reads the rows instead of
+    // looking every corner up a second time.
+    std::vector<std::array<std::uint32_t, 8>> corner_rows(cells.size());
     sampler.request_each(cells.size(), [&](std::size_t n, const auto& request) {
       const auto& c = cells[n];
       for (int corner = 0; corner < 8; ++corner)
-        request(c[0] + (corner & 1) * step, c[1] + ((corner >> 1) & 1) * step, c[2] + ((corner >> 2) & 1) * step);
+        corner_rows[n][static_cast<std::size_t>(corner)] =
+            request(c[0] + (corner & 1) * step, c[1] + ((corner >> 1) & 1) * step, c[2] + ((corner >> 2) & 1) * step);
     });
     sampler.flush();
     std::vector<std::array<int, 3>> refined;
@@ -371,9 +411,16 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
     const bool contours_here = level < depth && contour_level < contours.cells_by_level.size();
     for_rows(cells.size(), [&](std::size_t n) {
       const auto& c = cells[n];
-      cell_is_split[n] = cell_mixed(field, c[0], c[1], c[2], step) ||
-                         (contours_here && contains(contours.cells_by_level[contour_level],
-                                                    grid_key(c[0] / step, c[1] / step, c[2] / step)));
+      std::array<std::uint32_t, 8>& rows = corner_rows[n];
+      for (int corner = 0; corner < 8; ++corner)
+        if (rows[static_cast<std::size_t>(corner)] == GridIndex::kNone)
+          rows[static_cast<std::size_t>(corner)] = field.index.at(grid_key(
+              c[0] + (corner & 1) * step, c[1] + ((corner >> 1) & 1) * step, c[2] + ((corner >> 2) & 1) * step));
+      const int first = row_label(field, rows[0]);
+      bool mixed = false;
+      for (std::size_t corner = 1; corner < 8 && !mixed; ++corner) mixed = row_label(field, rows[corner]) != first;
+      cell_is_split[n] = mixed || (contours_here && contains(contours.cells_by_level[contour_level],
+                                                             grid_key(c[0] / step, c[1] / step, c[2] / step)));
     });
     for (std::size_t n = 0; n < cells.size(); ++n) {
       const auto& c = cells[n];
