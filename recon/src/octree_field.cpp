@@ -4,6 +4,7 @@
 #include <array>
 #include <atomic>
 #include <cmath>
+#include <initializer_list>
 #include <iterator>
 #include <unordered_set>
 
@@ -124,6 +125,26 @@ void for_rows(std::size_t count, const Body& body) {
                       for (std::size_t n = r.begin(); n < r.end(); ++n) body(n);
                     });
 }
+
+// The union of `sorted` (sorted, unique keys) with its copies shifted by each of `shifts`,
+// sorted and unique. A grid key is linear in (i, j, k) (grid_key), so a shifted copy of a sorted
+// list is sorted: merging copies builds the corner and neighbour sets of the smoothing in linear
+// time, where sorting eight or seven keys per element was a tenth of an online update's passes.
+std::vector<std::uint64_t> union_of_shifts(const std::vector<std::uint64_t>& sorted,
+                                           std::initializer_list<std::int64_t> shifts) {
+  std::vector<std::uint64_t> result = sorted, shifted, merged;
+  for (const std::int64_t shift : shifts) {
+    shifted.resize(sorted.size());
+    std::transform(sorted.begin(), sorted.end(), shifted.begin(),
+                   [shift](std::uint64_t key) { return key + static_cast<std::uint64_t>(shift); });
+    merged.clear();
+    merged.reserve(result.size() + shifted.size());
+    std::set_union(result.begin(), result.end(), shifted.begin(), shifted.end(), std::back_inserter(merged));
+    result.swap(merged);
+  }
+  return result;
+}
+constexpr std::int64_t kKeyStepK = 1, kKeyStepJ = std::int64_t{1} << 21, kKeyStepI = std::int64_t{1} << 42;
 
 bool contains(const std::vector<std::uint64_t>& sorted, std::uint64_t key) {
   return std::binary_search(sorted.begin(), sorted.end(), key);
@@ -455,31 +476,17 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
   const int resolution = 1 << field.grid.depth;
   const int function_count = field.function_count;
   Stopwatch smoothing_clock;
-  // Smoothing nodes: corners of surface cells.
-  std::vector<std::uint64_t> nodes;
-  nodes.reserve(field.surface_cells.size() * 8);
-  for (const std::uint64_t key : field.surface_cells) {
-    int i, j, k;
-    grid_unkey(key, i, j, k);
-    for (int corner = 0; corner < 8; ++corner)
-      nodes.push_back(grid_key(i + (corner & 1), j + ((corner >> 1) & 1), k + ((corner >> 2) & 1)));
-  }
-  sort_unique(nodes);
-  // Laplacian domain: the nodes and their six neighbours, numbered as they come (the sweeps do
-  // not depend on the order).
+  // Smoothing nodes: corners of surface cells (the band is sorted), sorted.
+  const std::vector<std::uint64_t> nodes =
+      union_of_shifts(union_of_shifts(union_of_shifts(field.surface_cells, {kKeyStepK}), {kKeyStepJ}), {kKeyStepI});
+  // Laplacian domain: the nodes and their six neighbours, sorted (the sweeps do not depend on
+  // the order).
+  const std::vector<std::uint64_t> laplacian_nodes =
+      union_of_shifts(nodes, {-kKeyStepK, kKeyStepK, -kKeyStepJ, kKeyStepJ, -kKeyStepI, kKeyStepI});
   GridIndex& lap_index = scratch;
   lap_index.clear();
-  std::vector<std::uint64_t> laplacian_nodes;
-  laplacian_nodes.reserve(nodes.size() * 2);
-  auto add_laplacian_node = [&](std::uint64_t key) {
-    if (lap_index.insert(key, static_cast<std::uint32_t>(laplacian_nodes.size()))) laplacian_nodes.push_back(key);
-  };
-  for (const std::uint64_t key : nodes) {
-    int i, j, k;
-    grid_unkey(key, i, j, k);
-    add_laplacian_node(key);
-    for (const auto& d : kFaceNeighbours) add_laplacian_node(grid_key(i + d[0], j + d[1], k + d[2]));
-  }
+  for (std::size_t n = 0; n < laplacian_nodes.size(); ++n)
+    lap_index.insert(laplacian_nodes[n], static_cast<std::uint32_t>(n));
   // The Laplacian nodes and their neighbours: every vertex the bi-Laplacian of a node reads.
   sampler.request_each(laplacian_nodes.size(), [&](std::size_t n, const auto& request) {
     int i, j, k;
