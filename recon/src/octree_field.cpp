@@ -487,34 +487,43 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
   lap_index.clear();
   for (std::size_t n = 0; n < laplacian_nodes.size(); ++n)
     lap_index.insert(laplacian_nodes[n], static_cast<std::uint32_t>(n));
-  // The Laplacian nodes and their neighbours: every vertex the bi-Laplacian of a node reads.
+  // The Laplacian nodes and their neighbours: every vertex the bi-Laplacian of a node reads. Row
+  // indices are resolved once (as the request pass finds them; those evaluated in the flush
+  // after it), so the iterations are plain array sweeps.
+  const std::size_t fc = static_cast<std::size_t>(function_count);
+  std::vector<std::uint32_t> lap_value_rows(laplacian_nodes.size() * 7);  // centre, 6 neighbours
   sampler.request_each(laplacian_nodes.size(), [&](std::size_t n, const auto& request) {
     int i, j, k;
     grid_unkey(laplacian_nodes[n], i, j, k);
-    request(i, j, k);
-    for (const auto& d : kFaceNeighbours) request(i + d[0], j + d[1], k + d[2]);
+    lap_value_rows[n * 7] = request(i, j, k);
+    for (std::size_t d = 0; d < 6; ++d)
+      lap_value_rows[n * 7 + 1 + d] =
+          request(i + kFaceNeighbours[d][0], j + kFaceNeighbours[d][1], k + kFaceNeighbours[d][2]);
   });
   sampler.flush();
-  // Row indices resolved once, so the iterations are plain array sweeps.
-  const std::size_t fc = static_cast<std::size_t>(function_count);
-  std::vector<std::uint32_t> lap_value_rows(laplacian_nodes.size() * 7);  // centre, 6 neighbours
   for_rows(laplacian_nodes.size(), [&](std::size_t n) {
     int i, j, k;
     grid_unkey(laplacian_nodes[n], i, j, k);
-    lap_value_rows[n * 7] = field.index.at(laplacian_nodes[n]);
+    if (lap_value_rows[n * 7] == GridIndex::kNone) lap_value_rows[n * 7] = field.index.at(laplacian_nodes[n]);
     for (std::size_t d = 0; d < 6; ++d)
-      lap_value_rows[n * 7 + 1 + d] =
-          field.index.at(grid_key(i + kFaceNeighbours[d][0], j + kFaceNeighbours[d][1], k + kFaceNeighbours[d][2]));
+      if (lap_value_rows[n * 7 + 1 + d] == GridIndex::kNone)
+        lap_value_rows[n * 7 + 1 + d] =
+            field.index.at(grid_key(i + kFaceNeighbours[d][0], j + kFaceNeighbours[d][1], k + kFaceNeighbours[d][2]));
   });
+  // Nodes next to a contour keep their values (Section 4.6): both lists are sorted.
+  std::vector<char> node_fixed(nodes.size(), 0);
+  for (std::size_t n = 0, f = 0; n < nodes.size() && f < fixed.size();) {
+    if (nodes[n] < fixed[f]) ++n;
+    else if (fixed[f] < nodes[n]) ++f;
+    else node_fixed[n++] = 1;
+  }
   std::vector<std::uint32_t> node_lap_rows(nodes.size() * 7);  // centre, 6 neighbours
   std::vector<std::uint32_t> node_value_rows(nodes.size());
-  std::vector<char> node_fixed(nodes.size());
   for_rows(nodes.size(), [&](std::size_t n) {
     int i, j, k;
     grid_unkey(nodes[n], i, j, k);
-    node_value_rows[n] = field.index.at(nodes[n]);
-    node_fixed[n] = contains(fixed, nodes[n]);  // next to a contour (Section 4.6)
     node_lap_rows[n * 7] = lap_index.at(nodes[n]);
+    node_value_rows[n] = lap_value_rows[static_cast<std::size_t>(node_lap_rows[n * 7]) * 7];
     for (std::size_t d = 0; d < 6; ++d)
       node_lap_rows[n * 7 + 1 + d] =
           lap_index.at(grid_key(i + kFaceNeighbours[d][0], j + kFaceNeighbours[d][1], k + kFaceNeighbours[d][2]));
@@ -526,7 +535,7 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
   constexpr double kDamping = 0.5 / 42.0;
   double* values = field.values.data();
   std::vector<int> label_before(nodes.size());
-  for_rows(nodes.size(), [&](std::size_t n) { label_before[n] = field.label(nodes[n]); });
+  for_rows(nodes.size(), [&](std::size_t n) { label_before[n] = row_label(field, node_value_rows[n]); });
   for (std::size_t n = 0; n < nodes.size(); ++n) {
     if (node_fixed[n]) continue;
     field.changed_rows.push_back(node_value_rows[n]);
@@ -563,7 +572,7 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
   // changed are seeds of the new, again closed, band (the rest of the old band is kept where
   // still mixed). Seeding every cell around every node, as before, cost more than the sweeps.
   std::vector<char> label_changed(nodes.size());
-  for_rows(nodes.size(), [&](std::size_t n) { label_changed[n] = field.label(nodes[n]) != label_before[n]; });
+  for_rows(nodes.size(), [&](std::size_t n) { label_changed[n] = row_label(field, node_value_rows[n]) != label_before[n]; });
   std::vector<std::uint64_t> seeds;
   for (std::size_t n = 0; n < nodes.size(); ++n) {
     if (!label_changed[n]) continue;
