@@ -91,6 +91,28 @@ inline __attribute__((target("avx2"), always_inline)) __m256d atan2_nonnegative_
   return angle;
 }
 
+// edge_angle (mean_value.hpp) of four edges a -> b (coordinates relative to the foot), lane by
+// lane, with the edge's d = b - a, cross (c L) and L^2 that its callers use too.
+struct EdgeAngleLanes {
+  __m256d dx, dy, cross, length_sq, angle, q_length;
+};
+inline __attribute__((target("avx2"), always_inline)) EdgeAngleLanes edge_angle_avx2(__m256d ax, __m256d ay,
+                                                                                     __m256d bx, __m256d by,
+                                                                                     __m256d h2) {
+  EdgeAngleLanes e;
+  e.dx = _mm256_sub_pd(bx, ax);
+  e.dy = _mm256_sub_pd(by, ay);
+  e.length_sq = _mm256_add_pd(_mm256_mul_pd(e.dx, e.dx), _mm256_mul_pd(e.dy, e.dy));
+  e.cross = _mm256_sub_pd(_mm256_mul_pd(ax, by), _mm256_mul_pd(ay, bx));
+  const __m256d big_q = _mm256_add_pd(_mm256_mul_pd(e.cross, e.cross), _mm256_mul_pd(h2, e.length_sq));
+  e.q_length = _mm256_sqrt_pd(big_q);
+  const __m256d a_dot_d = _mm256_add_pd(_mm256_mul_pd(ax, e.dx), _mm256_mul_pd(ay, e.dy));
+  const __m256d b_dot_d = _mm256_add_pd(_mm256_mul_pd(bx, e.dx), _mm256_mul_pd(by, e.dy));
+  e.angle = atan2_nonnegative_y_avx2(_mm256_mul_pd(e.q_length, e.length_sq),
+                                     _mm256_add_pd(big_q, _mm256_mul_pd(a_dot_d, b_dot_d)));
+  return e;
+}
+
 __attribute__((target("avx2"))) double projected_angle_plain_avx2(const Vec2* points, std::size_t count,
                                                                   const Vec2& foot, double height) {
   constexpr std::size_t kChunk = 64;  // edges per pass through the lane arrays
@@ -116,21 +138,12 @@ __attribute__((target("avx2"))) double projected_angle_plain_avx2(const Vec2* po
       ys[k] = ys[edges];
     }
     for (std::size_t k = 0; k < padded; k += 4) {
-      const __m256d ax = _mm256_loadu_pd(xs + k), ay = _mm256_loadu_pd(ys + k);
-      const __m256d bx = _mm256_loadu_pd(xs + k + 1), by = _mm256_loadu_pd(ys + k + 1);
-      const __m256d dx = _mm256_sub_pd(bx, ax), dy = _mm256_sub_pd(by, ay);
-      const __m256d length_sq = _mm256_add_pd(_mm256_mul_pd(dx, dx), _mm256_mul_pd(dy, dy));
-      const __m256d cross = _mm256_sub_pd(_mm256_mul_pd(ax, by), _mm256_mul_pd(ay, bx));
-      const __m256d big_q = _mm256_add_pd(_mm256_mul_pd(cross, cross), _mm256_mul_pd(h2, length_sq));
-      const __m256d q_length = _mm256_sqrt_pd(big_q);
-      const __m256d a_dot_d = _mm256_add_pd(_mm256_mul_pd(ax, dx), _mm256_mul_pd(ay, dy));
-      const __m256d b_dot_d = _mm256_add_pd(_mm256_mul_pd(bx, dx), _mm256_mul_pd(by, dy));
-      const __m256d angle = atan2_nonnegative_y_avx2(_mm256_mul_pd(q_length, length_sq),
-                                                     _mm256_add_pd(big_q, _mm256_mul_pd(a_dot_d, b_dot_d)));
-      const __m256d term = _mm256_mul_pd(_mm256_div_pd(cross, q_length), angle);
+      const EdgeAngleLanes e = edge_angle_avx2(_mm256_loadu_pd(xs + k), _mm256_loadu_pd(ys + k),
+                                               _mm256_loadu_pd(xs + k + 1), _mm256_loadu_pd(ys + k + 1), h2);
+      const __m256d term = _mm256_mul_pd(_mm256_div_pd(e.cross, e.q_length), e.angle);
       // edge_projected_angle's early exit: cross == 0 or a zero (or NaN) length.
-      const __m256d skip = _mm256_or_pd(_mm256_cmp_pd(cross, zero, _CMP_EQ_OQ),
-                                        _mm256_cmp_pd(length_sq, zero, _CMP_NGT_UQ));
+      const __m256d skip = _mm256_or_pd(_mm256_cmp_pd(e.cross, zero, _CMP_EQ_OQ),
+                                        _mm256_cmp_pd(e.length_sq, zero, _CMP_NGT_UQ));
       sums = _mm256_add_pd(sums, _mm256_blendv_pd(term, zero, skip));
     }
   }
@@ -218,22 +231,14 @@ __attribute__((target("avx2"))) void triangle_weights4_avx2(const Vec2* const co
   const __m256d minus_half_height = _mm256_set1_pd(-0.5 * height);
   __m256d sum = _mm256_setzero_pd(), moment_x = _mm256_setzero_pd(), moment_y = _mm256_setzero_pd();
   for (int k = 0; k < 3; ++k) {
-    const __m256d ax = _mm256_load_pd(ring_x[k]), ay = _mm256_load_pd(ring_y[k]);
-    const __m256d bx = _mm256_load_pd(ring_x[(k + 1) % 3]), by = _mm256_load_pd(ring_y[(k + 1) % 3]);
-    const __m256d dx = _mm256_sub_pd(bx, ax), dy = _mm256_sub_pd(by, ay);
-    const __m256d cross = _mm256_sub_pd(_mm256_mul_pd(ax, by), _mm256_mul_pd(ay, bx));
-    const __m256d length_sq = _mm256_add_pd(_mm256_mul_pd(dx, dx), _mm256_mul_pd(dy, dy));
-    const __m256d big_q = _mm256_add_pd(_mm256_mul_pd(cross, cross), _mm256_mul_pd(h2, length_sq));
-    const __m256d q_length = _mm256_sqrt_pd(big_q);
-    const __m256d a_dot_d = _mm256_add_pd(_mm256_mul_pd(ax, dx), _mm256_mul_pd(ay, dy));
-    const __m256d b_dot_d = _mm256_add_pd(_mm256_mul_pd(bx, dx), _mm256_mul_pd(by, dy));
-    const __m256d angle = atan2_nonnegative_y_avx2(_mm256_mul_pd(q_length, length_sq),
-                                                   _mm256_add_pd(big_q, _mm256_mul_pd(a_dot_d, b_dot_d)));
-    const __m256d angle_over_q_length = _mm256_div_pd(angle, q_length);
-    sum = _mm256_add_pd(sum, _mm256_mul_pd(cross, angle_over_q_length));
+    const EdgeAngleLanes e =
+        edge_angle_avx2(_mm256_load_pd(ring_x[k]), _mm256_load_pd(ring_y[k]), _mm256_load_pd(ring_x[(k + 1) % 3]),
+                        _mm256_load_pd(ring_y[(k + 1) % 3]), h2);
+    const __m256d angle_over_q_length = _mm256_div_pd(e.angle, e.q_length);
+    sum = _mm256_add_pd(sum, _mm256_mul_pd(e.cross, angle_over_q_length));
     const __m256d scale = _mm256_mul_pd(minus_half_height, angle_over_q_length);
-    moment_x = _mm256_add_pd(moment_x, _mm256_mul_pd(scale, dy));
-    moment_y = _mm256_add_pd(moment_y, _mm256_mul_pd(scale, _mm256_xor_pd(dx, sign_bit)));  // -dx
+    moment_x = _mm256_add_pd(moment_x, _mm256_mul_pd(scale, e.dy));
+    moment_y = _mm256_add_pd(moment_y, _mm256_mul_pd(scale, _mm256_xor_pd(e.dx, sign_bit)));  // -dx
   }
   // The split form where triangle_epilogue takes it (rare), lane by lane.
   alignas(32) double projected[4];

@@ -159,6 +159,21 @@ int row_label(const SampledField& f, std::uint32_t row) {
   return best;
 }
 
+// The cell whose min corner is (i, j, k) with side `step`, from its corners' rows as a request
+// pass found them: fills those it left at GridIndex::kNone (evaluated since), and tells whether
+// the corners' labels differ. The mixed tests of the refinement and the band closure read these
+// rows instead of looking every corner up a second time.
+bool corners_mixed(const SampledField& f, std::array<std::uint32_t, 8>& rows, int i, int j, int k, int step) {
+  for (int corner = 0; corner < 8; ++corner)
+    if (rows[static_cast<std::size_t>(corner)] == GridIndex::kNone)
+      rows[static_cast<std::size_t>(corner)] = f.index.at(
+          grid_key(i + (corner & 1) * step, j + ((corner >> 1) & 1) * step, k + ((corner >> 2) & 1) * step));
+  const int first = row_label(f, rows[0]);
+  for (std::size_t corner = 1; corner < 8; ++corner)
+    if (row_label(f, rows[corner]) != first) return true;
+  return false;
+}
+
 // Corner labels of the cell whose min corner is (i, j, k) with side `step`: true if not uniform.
 bool cell_mixed(const SampledField& f, int i, int j, int k, int step) {
   const int first = f.label(grid_key(i, j, k));
@@ -200,7 +215,7 @@ void close_band(SampledField& field, Sampler& sampler, const std::vector<std::ui
   for (const std::uint64_t key : seeds)
     if (in_band.insert(key, 0)) unique_seeds.push_back(key);
   // The mixed cells of `cells`, in their order, their corners evaluated first where they have no
-  // value (the tests run in parallel, from the rows the request pass found).
+  // value (the tests run in parallel).
   const auto requested_mixed_of = [&](const std::vector<std::uint64_t>& cells) {
     std::vector<std::array<std::uint32_t, 8>> corner_rows(cells.size());
     sampler.request_each(cells.size(), [&](std::size_t n, const auto& request) {
@@ -215,15 +230,7 @@ void close_band(SampledField& field, Sampler& sampler, const std::vector<std::ui
     for_rows(cells.size(), [&](std::size_t n) {
       int i, j, k;
       grid_unkey(cells[n], i, j, k);
-      std::array<std::uint32_t, 8>& rows = corner_rows[n];
-      for (int corner = 0; corner < 8; ++corner)
-        if (rows[static_cast<std::size_t>(corner)] == GridIndex::kNone)
-          rows[static_cast<std::size_t>(corner)] =
-              field.index.at(grid_key(i + (corner & 1), j + ((corner >> 1) & 1), k + ((corner >> 2) & 1)));
-      const int first = row_label(field, rows[0]);
-      bool mixed = false;
-      for (std::size_t corner = 1; corner < 8 && !mixed; ++corner) mixed = row_label(field, rows[corner]) != first;
-      is_mixed[n] = mixed;
+      is_mixed[n] = corners_mixed(field, corner_rows[n], i, j, k, 1);
     });
     std::vector<std::uint64_t> kept;
     for (std::size_t n = 0; n < cells.size(); ++n)
@@ -414,9 +421,7 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
   }
   for (int level = start;; ++level) {
     const int step = 1 << (depth - level);
-    // The corners' rows as the request pass finds them (kNone: evaluated in the flush below): an
-    // online update has nearly all of them, and the mixed test then reads the rows instead of
-    // looking every corner up a second time.
+    // The corners' rows as the request pass finds them (see corners_mixed).
     std::vector<std::array<std::uint32_t, 8>> corner_rows(cells.size());
     sampler.request_each(cells.size(), [&](std::size_t n, const auto& request) {
       const auto& c = cells[n];
@@ -432,16 +437,9 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
     const bool contours_here = level < depth && contour_level < contours.cells_by_level.size();
     for_rows(cells.size(), [&](std::size_t n) {
       const auto& c = cells[n];
-      std::array<std::uint32_t, 8>& rows = corner_rows[n];
-      for (int corner = 0; corner < 8; ++corner)
-        if (rows[static_cast<std::size_t>(corner)] == GridIndex::kNone)
-          rows[static_cast<std::size_t>(corner)] = field.index.at(grid_key(
-              c[0] + (corner & 1) * step, c[1] + ((corner >> 1) & 1) * step, c[2] + ((corner >> 2) & 1) * step));
-      const int first = row_label(field, rows[0]);
-      bool mixed = false;
-      for (std::size_t corner = 1; corner < 8 && !mixed; ++corner) mixed = row_label(field, rows[corner]) != first;
-      cell_is_split[n] = mixed || (contours_here && contains(contours.cells_by_level[contour_level],
-                                                             grid_key(c[0] / step, c[1] / step, c[2] / step)));
+      cell_is_split[n] = corners_mixed(field, corner_rows[n], c[0], c[1], c[2], step) ||
+                         (contours_here && contains(contours.cells_by_level[contour_level],
+                                                    grid_key(c[0] / step, c[1] / step, c[2] / step)));
     });
     for (std::size_t n = 0; n < cells.size(); ++n) {
       const auto& c = cells[n];
