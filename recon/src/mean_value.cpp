@@ -180,15 +180,18 @@ TrianglePrologue triangle_prologue(const Vec2* corners, const Vec2& foot, double
   return out;
 }
 
+// A foot outside the triangle at a height small against the triangle makes the edge terms of I
+// cancel (their sum is O(h) while each is O(1)); the split form keeps I's relative accuracy
+// there. Higher up, the terms are at most about size / height times their sum (far away much
+// less): the plain sum holds.
+bool takes_split_form(const TrianglePrologue& t, double projected, double height) {
+  return std::abs(projected) < kSplitBelow && height * height < kSplitHeightRatio * kSplitHeightRatio * t.longest_sq;
+}
+
 // The weights from the edge sums I (`projected`, 2 h I) and M (`moment`).
 bool triangle_epilogue(const Vec2* corners, const TrianglePrologue& t, const Vec2& foot, double height,
                        double projected, const Vec2& moment, double weights[3]) {
-  // A foot outside the triangle at a height small against the triangle makes the edge terms of I
-  // cancel (their sum is O(h) while each is O(1)); the split form keeps I's relative accuracy
-  // there. Higher up, the terms are at most about size / height times their sum (far away
-  // much less): the plain sum holds.
-  if (std::abs(projected) < kSplitBelow && height * height < kSplitHeightRatio * kSplitHeightRatio * t.longest_sq)
-    projected = projected_angle_split(t.ring, 3, foot, height, projected);
+  if (takes_split_form(t, projected, height)) projected = projected_angle_split(t.ring, 3, foot, height, projected);
   // Barycentric coordinate of corner i: lambda_i(y) = cross(e_i, y - start_i) / twice_area with
   // e_i the opposite edge; its gradient is perp(e_i) / twice_area.
   const double inverse_area = 1.0 / t.twice_area, projected_over_height = projected / height;
@@ -244,8 +247,7 @@ __attribute__((target("avx2"))) void triangle_weights4_avx2(const Vec2* const co
   alignas(32) double projected[4];
   _mm256_store_pd(projected, sum);
   for (std::size_t t = 0; t < count; ++t)
-    if (triangles[t].valid && std::abs(projected[t]) < kSplitBelow &&
-        height * height < kSplitHeightRatio * kSplitHeightRatio * triangles[t].longest_sq)
+    if (triangles[t].valid && takes_split_form(triangles[t], projected[t], height))
       projected[t] = projected_angle_split(triangles[t].ring, 3, foot, height, projected[t]);
   const __m256d inverse_area = _mm256_div_pd(_mm256_set1_pd(1.0), _mm256_load_pd(twice_area));
   const __m256d projected_over_height = _mm256_div_pd(_mm256_load_pd(projected), _mm256_set1_pd(height));
