@@ -174,16 +174,6 @@ bool corners_mixed(const SampledField& f, std::array<std::uint32_t, 8>& rows, in
   return false;
 }
 
-// Corner labels of the cell whose min corner is (i, j, k) with side `step`: true if not uniform.
-bool cell_mixed(const SampledField& f, int i, int j, int k, int step) {
-  const int first = f.label(grid_key(i, j, k));
-  for (int c = 1; c < 8; ++c)
-    if (f.label(grid_key(i + (c & 1) * step, j + ((c >> 1) & 1) * step,
-                         k + ((c >> 2) & 1) * step)) != first)
-      return true;
-  return false;
-}
-
 // The face of the finest cell (i, j, k) towards neighbour direction d: mixed corner labels?
 bool face_mixed(const SampledField& f, int i, int j, int k, const std::array<int, 3>& d) {
   int axis = d[0] != 0 ? 0 : (d[1] != 0 ? 1 : 2);
@@ -202,12 +192,14 @@ bool face_mixed(const SampledField& f, int i, int j, int k, const std::array<int
   return false;
 }
 
-// Keeps the mixed cells among `seeds` (they may repeat) and adds, until closed, every finest cell across
-// a face with mixed corners: otherwise the surface would end at that face. `closed` is a band
-// that was closed before values changed at corners of seeds only: its other cells keep their
-// corners and faces, so they are kept where mixed but need not be expanded again. Result in
-// field.surface_cells. `in_band` is scratch space (a direct table is costly to allocate).
-void close_band(SampledField& field, Sampler& sampler, const std::vector<std::uint64_t>& seeds,
+// Keeps the mixed cells among `seeds` (they may repeat; `seeds_mixed`: all are mixed, with
+// current corner values, as the refinement's finest cells) and adds, until closed, every finest
+// cell across a face with mixed corners: otherwise the surface would end at that face. `closed`
+// is a band that was closed before labels changed at corners of seeds only: its other cells kept
+// their corner labels, so they are still mixed (every band cell is) and their faces need not be
+// expanded again. Result in field.surface_cells. `in_band` is scratch space (a direct table is
+// costly to allocate).
+void close_band(SampledField& field, Sampler& sampler, const std::vector<std::uint64_t>& seeds, bool seeds_mixed,
                 GridIndex& in_band, int resolution, const std::vector<std::uint64_t>& closed = {}) {
   in_band.clear();
   std::vector<std::uint64_t> unique_seeds;
@@ -237,26 +229,10 @@ void close_band(SampledField& field, Sampler& sampler, const std::vector<std::ui
       if (is_mixed[n]) kept.push_back(cells[n]);
     return kept;
   };
-  // The mixed cells of `cells` whose corners all have values.
-  const auto mixed_of = [&](const std::vector<std::uint64_t>& cells) {
-    std::vector<char> is_mixed(cells.size());
-    for_rows(cells.size(), [&](std::size_t n) {
-      int i, j, k;
-      grid_unkey(cells[n], i, j, k);
-      is_mixed[n] = cell_mixed(field, i, j, k, 1);
-    });
-    std::vector<std::uint64_t> kept;
-    for (std::size_t n = 0; n < cells.size(); ++n)
-      if (is_mixed[n]) kept.push_back(cells[n]);
-    return kept;
-  };
-  std::vector<std::uint64_t> frontier = requested_mixed_of(unique_seeds);
+  std::vector<std::uint64_t> frontier = seeds_mixed ? unique_seeds : requested_mixed_of(unique_seeds);
   std::vector<std::uint64_t> band = frontier;
-  std::vector<std::uint64_t> closed_new;
   for (const std::uint64_t key : closed)
-    if (in_band.insert(key, 0)) closed_new.push_back(key);
-  const std::vector<std::uint64_t> closed_mixed = mixed_of(closed_new);
-  band.insert(band.end(), closed_mixed.begin(), closed_mixed.end());
+    if (in_band.insert(key, 0)) band.push_back(key);
   while (!frontier.empty()) {
     // Per frontier cell, the neighbours across its mixed faces that are not in the band yet (a
     // bit per direction), in parallel; then added in order.
@@ -459,7 +435,7 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
 
   GridIndex& scratch = workspace.scratch;
   scratch.reset(resolution);
-  close_band(field, sampler, field.surface_cells, scratch, resolution);
+  close_band(field, sampler, field.surface_cells, /*seeds_mixed=*/true, scratch, resolution);
 
   if (options.smoothing_iterations > 0)
     smooth(field, sampler, contours.fixed_vertices, options.smoothing_iterations, scratch);
@@ -583,7 +559,7 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
       seeds.push_back(grid_key(ci, cj, ck));
     }
   }
-  close_band(field, sampler, seeds, scratch, resolution, field.surface_cells);  // lap_index is done with
+  close_band(field, sampler, seeds, false, scratch, resolution, field.surface_cells);  // lap_index is done with
   field.smoothing_seconds = smoothing_clock.seconds();
 }
 
@@ -619,7 +595,7 @@ void snap_thin_regions(SampledField& field, Sampler& sampler, const std::vector<
       seeds.push_back(grid_key(i - (corner & 1), j - ((corner >> 1) & 1), k - ((corner >> 2) & 1)));
   }
   if (seeds.empty()) return;
-  close_band(field, sampler, seeds, scratch, resolution, field.surface_cells);
+  close_band(field, sampler, seeds, false, scratch, resolution, field.surface_cells);
 }
 
 }  // namespace
