@@ -129,7 +129,7 @@ void for_rows(std::size_t count, const Body& body) {
 // The union of `sorted` (sorted, unique keys) with its copies shifted by each of `shifts`,
 // sorted and unique. A grid key is linear in (i, j, k) (grid_key), so a shifted copy of a sorted
 // list is sorted: merging copies builds the corner and neighbour sets of the smoothing in linear
-// time, where sorting eight or seven keys per element was a tenth of an online update's passes.
+// time instead of sorting eight or seven keys per element.
 std::vector<std::uint64_t> union_of_shifts(const std::vector<std::uint64_t>& sorted,
                                            std::initializer_list<std::int64_t> shifts) {
   std::vector<std::uint64_t> result = sorted, shifted, merged;
