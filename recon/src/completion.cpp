@@ -410,20 +410,26 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
   // was a tenth of the completion.
   entries.reserve(2 * cdt.number_of_faces());
   const double refined_min = kRefinedTriangleMin * diagonal;
+  // The points the last round inserted: every triangle an insertion makes has the new point as a
+  // corner, so the triangles new in a round are among those around these points (walking every
+  // triangle of the slice in every round was a twentieth of the completion).
+  std::vector<Cdt::Vertex_handle> inserted;
   for (int round = 0;; ++round) {
-    // The triangles new in this round (a flip may also have reused a face for new corners).
+    // The triangles new in this round (a flip may also have reused a face for new corners), and
+    // their faces in the triangulation.
     std::vector<std::size_t> fresh;
+    std::vector<Cdt::Face_handle> fresh_faces;
     std::vector<Cdt::Vertex_handle> job_vertices;  // of each 3D part listed this round
     cache.jobs_3d.clear();
     cache.jobs_2d.clear();
-    for (auto it = cdt.finite_faces_begin(); it != cdt.finite_faces_end(); ++it) {
+    const auto list_if_new = [&](const Cdt::Face_handle& it) {
       int& index = it->info().entry;
       if (index >= 0) {
         const Completed& known = entries[static_cast<std::size_t>(index)];
         for (const Cdt::Vertex_handle& v : known.vertices)
           if (v != it->vertex(0) && v != it->vertex(1) && v != it->vertex(2)) index = -1;
       }
-      if (index >= 0) continue;
+      if (index >= 0) return;
       index = static_cast<int>(entries.size());
       Completed& entry = entries.emplace_back();
       for (int k = 0; k < 3; ++k) entry.vertices[k] = it->vertex(k);
@@ -445,7 +451,7 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
       entry.skipped = entry.skipped || triangle.component < 0;
       if (!entry.skipped) entry.face_index = face_of(centroid);
       entry.skipped = entry.skipped || entry.face_index < 0;
-      if (entry.skipped) continue;
+      if (entry.skipped) return;
       for (int k = 0; k < 3; ++k) {
         VertexInfo& point = entry.vertices[k]->info();
         if (point.slot_3d < 0) {
@@ -462,6 +468,26 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
                                 : cache.slot(cache.part_2d, cache.jobs_2d, triangle.component, triangle.corners[k]);
       }
       fresh.push_back(static_cast<std::size_t>(index));
+      fresh_faces.push_back(it);
+    };
+    if (round == 0) {
+      for (auto it = cdt.finite_faces_begin(); it != cdt.finite_faces_end(); ++it) list_if_new(it);
+    } else {
+      for (const Cdt::Vertex_handle& v : inserted) {
+        Cdt::Face_circulator around = cdt.incident_faces(v), done = around;
+        do {
+          if (!cdt.is_infinite(around)) list_if_new(around);
+        } while (++around != done);
+      }
+      // In the triangulation's own order, which the splits below are inserted in (the order the
+      // walk over every triangle had): the same triangulation.
+      const auto& container = cdt.tds().faces();
+      std::vector<std::pair<std::size_t, Cdt::Face_handle>> ordered;
+      ordered.reserve(fresh_faces.size());
+      for (const Cdt::Face_handle& f : fresh_faces) ordered.emplace_back(container.index(f), f);
+      std::sort(ordered.begin(), ordered.end(),
+                [](const auto& a, const auto& b) { return a.first < b.first; });
+      for (std::size_t i = 0; i < ordered.size(); ++i) fresh_faces[i] = ordered[i].second;
     }
     // The known faces each new corner reads: those of the faces of all unknown triangles around
     // it (a corner shared by several faces of the slice gets one 3D part, from the cells of all
@@ -519,9 +545,11 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
           value[l] = denominator > 0.0 ? 2.0 * (n3w[l] + n2[l]) / denominator - 1.0 : (l == 0 ? 1.0 : -1.0);
       }
     });
-    // Longest edges of the triangles to split, by their end vertices.
+    // Longest edges of the triangles to split, by their end vertices. Only new triangles can
+    // need a split: a triangle whose corners disagreed had its longest edge split last round,
+    // which removed it.
     std::vector<std::pair<Cdt::Vertex_handle, Cdt::Vertex_handle>> splits;
-    for (auto it = cdt.finite_faces_begin(); it != cdt.finite_faces_end(); ++it) {
+    for (const Cdt::Face_handle& it : fresh_faces) {
       const std::size_t entry_index = static_cast<std::size_t>(it->info().entry);
       const Completed& c = entries[entry_index];
       if (c.skipped) continue;
@@ -559,6 +587,7 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
     }
     if (splits.empty() || round == kMaxRefinementRounds) break;
     std::set<std::array<double, 4>> split_edges;
+    inserted.clear();
     for (const auto& [a, b] : splits) {
       const Kernel::Point_2& pa = a->point();
       const Kernel::Point_2& pb = b->point();
@@ -571,8 +600,8 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
       int index = 0;
       // On the edge itself (a constraint is split there), even where rounding puts the midpoint
       // a hair off its line.
-      if (cdt.is_edge(a, b, face, index)) cdt.insert(middle, Cdt::EDGE, face, index);
-      else cdt.insert(middle);
+      if (cdt.is_edge(a, b, face, index)) inserted.push_back(cdt.insert(middle, Cdt::EDGE, face, index));
+      else inserted.push_back(cdt.insert(middle));
     }
   }
   // The final triangles, in the order of their corner coordinates (not the triangulation's).
