@@ -263,12 +263,21 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
   // ring's or a face's next edge starts where the last ended), where
   // Cdt::insert_constraint(point, point) walks to its first point from an arbitrary face. The
   // triangulation is the same: the points go in, in the same order.
+  // A point met again (most are the ends of several edges) takes its vertex from a map rather
+  // than being located again: locating a point that is a vertex already runs into degenerate
+  // orientation tests, which the exact predicates answer slowly.
   Cdt::Vertex_handle last_vertex;
+  std::unordered_map<std::array<double, 2>, Cdt::Vertex_handle, DoublesHash> vertex_at;
+  const auto vertex = [&](const Vec2& p, const Cdt::Vertex_handle& near) {
+    auto [it, is_new] = vertex_at.try_emplace({p.x(), p.y()});
+    if (is_new)
+      it->second = near == Cdt::Vertex_handle() ? cdt.insert(Kernel::Point_2(p.x(), p.y()))
+                                                : cdt.insert(Kernel::Point_2(p.x(), p.y()), near->face());
+    return it->second;
+  };
   const auto insert_constraint = [&](const Vec2& a, const Vec2& b) {
-    const Cdt::Vertex_handle va = last_vertex == Cdt::Vertex_handle()
-                                      ? cdt.insert(Kernel::Point_2(a.x(), a.y()))
-                                      : cdt.insert(Kernel::Point_2(a.x(), a.y()), last_vertex->face());
-    const Cdt::Vertex_handle vb = cdt.insert(Kernel::Point_2(b.x(), b.y()), va->face());
+    const Cdt::Vertex_handle va = vertex(a, last_vertex);
+    const Cdt::Vertex_handle vb = vertex(b, va);
     cdt.insert_constraint(va, vb);
     last_vertex = vb;
   };
