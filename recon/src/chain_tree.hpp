@@ -6,10 +6,13 @@
 // the point. A chain of consecutive edges a_0 -> ... -> a_m contributes exactly its chord
 // a_0 -> a_m plus the integral of the kernel K(y) = 2 h^2 / (|y - foot|^2 + h^2)^2 over the
 // signed region between chain and chord (Stokes on the closed loop). Far from the chain, that
-// region integral is replaced by its Taylor expansion to second order about the chain's centre,
-// from the region's area, first and second moments (precomputed): one atan2 for the chord and a
-// few products instead of one atan2 per edge, with a relative error of order (radius / distance)^3
-// on the region term. Near the chain, its two halves are visited (a binary tree over the edges).
+// region integral is replaced by its Taylor expansion to fourth order about the chain's centre,
+// from the region's area and its moments up to the fourth (precomputed): one atan2 for the chord
+// and a few dozen products instead of one atan2 per edge, with a relative error of order
+// (radius / distance)^5 on the region term. Near the chain, its two halves are visited (a binary
+// tree over the edges). The fourth order lets a node be used whole from 0.3 of its distance
+// instead of 0.1 with the second order at the same accuracy (chain_tree_test): a field evaluation
+// visits about half as many nodes and sums exactly about half as many edges.
 //
 // This is the classic Barnes-Hut trade (a hierarchy with an opening criterion) applied to the
 // boundary form of the integral; written here because no library evaluates this kernel.
@@ -30,6 +33,8 @@ struct ChainNode {
   double area = 0;                       ///< signed area between chain and chord
   double m1x = 0, m1y = 0;               ///< first moments about `centre`
   double m2xx = 0, m2xy = 0, m2yy = 0;   ///< second moments about `centre`
+  double m3[4] = {};  ///< third moments about `centre`: x^3, x^2 y, x y^2, y^3
+  double m4[5] = {};  ///< fourth moments about `centre`: x^4, x^3 y, x^2 y^2, x y^3, y^4
 };
 
 /// Rings with at least this many edges get a tree; shorter ones are summed directly.
@@ -40,7 +45,7 @@ constexpr std::size_t kChainTreeMinEdges = 32;
 std::uint32_t build_chain_tree(const Vec2* points, std::size_t count, std::vector<ChainNode>& nodes);
 
 /// projected_angle (mean_value.hpp) of the ring through its tree `root`: exact edge terms near
-/// the point, chords plus second-order region terms where the node's bounding circle is seen
+/// the point, chords plus fourth-order region terms where the node's bounding circle is seen
 /// under a small angle.
 double projected_angle_tree(const Vec2* points, std::size_t count, const ChainNode* nodes,
                             std::uint32_t root, const Vec2& foot, double height);

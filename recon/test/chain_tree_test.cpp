@@ -62,5 +62,32 @@ TEST(ChainTree, RegionMomentsAreExactForAWholeRing) {
   EXPECT_NEAR(nodes[0].m2xy, 0.0, 1e-12);
 }
 
+TEST(ChainTree, HighMomentsMatchQuadrature) {
+  // The third and fourth moments of a triangle about its box centre, against a midpoint rule on
+  // a fine grid (error of order the cell size at the boundary).
+  const Ring2 triangle{Vec2(0, 0), Vec2(3, 0), Vec2(0, 2)};
+  std::vector<ChainNode> nodes;
+  build_chain_tree(triangle.data(), triangle.size(), nodes);
+  const Vec2 centre(1.5, 1.0);
+  ASSERT_NEAR((nodes[0].centre - centre).norm(), 0.0, 1e-12);
+  constexpr int kCells = 2000;
+  double m3[4] = {}, m4[5] = {};
+  const double cell = 3.0 / kCells;
+  for (int i = 0; i < kCells; ++i)
+    for (int j = 0; j < kCells; ++j) {
+      const double x = (i + 0.5) * cell, y = (j + 0.5) * cell;
+      if (x / 3.0 + y / 2.0 > 1.0) continue;
+      const double u = x - centre.x(), v = y - centre.y(), area = cell * cell;
+      const double us[5] = {1, u, u * u, u * u * u, u * u * u * u};
+      const double vs[5] = {1, v, v * v, v * v * v, v * v * v * v};
+      for (int k = 0; k < 4; ++k) m3[k] += us[3 - k] * vs[k] * area;
+      for (int k = 0; k < 5; ++k) m4[k] += us[4 - k] * vs[k] * area;
+    }
+  for (int k = 0; k < 4; ++k) EXPECT_NEAR(nodes[0].m3[k], m3[k], 2e-3) << "x^" << 3 - k << " y^" << k;
+  for (int k = 0; k < 5; ++k) EXPECT_NEAR(nodes[0].m4[k], m4[k], 3e-3) << "x^" << 4 - k << " y^" << k;
+  // Not all zero (a symmetric shape would test little).
+  EXPECT_GT(std::abs(m3[0]) + std::abs(m3[3]), 0.1);
+}
+
 }  // namespace
 }  // namespace sonoshape::recon
