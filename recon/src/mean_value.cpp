@@ -113,6 +113,18 @@ inline __attribute__((target("avx2"), always_inline)) EdgeAngleLanes edge_angle_
   return e;
 }
 
+// edge_projected_angle of four edges, lane by lane (0 where it exits early: cross == 0 or a
+// zero or NaN length).
+inline __attribute__((target("avx2"), always_inline)) __m256d edge_terms_avx2(__m256d ax, __m256d ay, __m256d bx,
+                                                                              __m256d by, __m256d h2) {
+  const __m256d zero = _mm256_setzero_pd();
+  const EdgeAngleLanes e = edge_angle_avx2(ax, ay, bx, by, h2);
+  const __m256d term = _mm256_mul_pd(_mm256_div_pd(e.cross, e.q_length), e.angle);
+  const __m256d skip = _mm256_or_pd(_mm256_cmp_pd(e.cross, zero, _CMP_EQ_OQ),
+                                    _mm256_cmp_pd(e.length_sq, zero, _CMP_NGT_UQ));
+  return _mm256_blendv_pd(term, zero, skip);
+}
+
 __attribute__((target("avx2"))) double projected_angle_plain_avx2(const Vec2* points, std::size_t count,
                                                                   const Vec2& foot, double height) {
   constexpr std::size_t kChunk = 64;  // edges per pass through the lane arrays
@@ -137,15 +149,35 @@ __attribute__((target("avx2"))) double projected_angle_plain_avx2(const Vec2* po
       xs[k] = xs[edges];
       ys[k] = ys[edges];
     }
-    for (std::size_t k = 0; k < padded; k += 4) {
-      const EdgeAngleLanes e = edge_angle_avx2(_mm256_loadu_pd(xs + k), _mm256_loadu_pd(ys + k),
-                                               _mm256_loadu_pd(xs + k + 1), _mm256_loadu_pd(ys + k + 1), h2);
-      const __m256d term = _mm256_mul_pd(_mm256_div_pd(e.cross, e.q_length), e.angle);
-      // edge_projected_angle's early exit: cross == 0 or a zero (or NaN) length.
-      const __m256d skip = _mm256_or_pd(_mm256_cmp_pd(e.cross, zero, _CMP_EQ_OQ),
-                                        _mm256_cmp_pd(e.length_sq, zero, _CMP_NGT_UQ));
-      sums = _mm256_add_pd(sums, _mm256_blendv_pd(term, zero, skip));
+    for (std::size_t k = 0; k < padded; k += 4)
+      sums = _mm256_add_pd(sums, edge_terms_avx2(_mm256_loadu_pd(xs + k), _mm256_loadu_pd(ys + k),
+                                                 _mm256_loadu_pd(xs + k + 1), _mm256_loadu_pd(ys + k + 1), h2));
+  }
+  alignas(32) double lanes[4];
+  _mm256_store_pd(lanes, sums);
+  return (lanes[0] + lanes[1]) + (lanes[2] + lanes[3]);
+}
+
+__attribute__((target("avx2"))) double edge_projected_angle_sum_avx2(const double* ax, const double* ay,
+                                                                     const double* bx, const double* by,
+                                                                     std::size_t count, double height_sq) {
+  const __m256d h2 = _mm256_set1_pd(height_sq);
+  __m256d sums = _mm256_setzero_pd();
+  std::size_t i = 0;
+  for (; i + 4 <= count; i += 4)
+    sums = _mm256_add_pd(sums, edge_terms_avx2(_mm256_loadu_pd(ax + i), _mm256_loadu_pd(ay + i),
+                                               _mm256_loadu_pd(bx + i), _mm256_loadu_pd(by + i), h2));
+  if (i < count) {
+    // The last edges, padded with zero-length edges (which add nothing).
+    alignas(32) double tail[4][4] = {};
+    for (std::size_t k = 0; i + k < count; ++k) {
+      tail[0][k] = ax[i + k];
+      tail[1][k] = ay[i + k];
+      tail[2][k] = bx[i + k];
+      tail[3][k] = by[i + k];
     }
+    sums = _mm256_add_pd(sums, edge_terms_avx2(_mm256_load_pd(tail[0]), _mm256_load_pd(tail[1]),
+                                               _mm256_load_pd(tail[2]), _mm256_load_pd(tail[3]), h2));
   }
   alignas(32) double lanes[4];
   _mm256_store_pd(lanes, sums);
@@ -280,6 +312,16 @@ double projected_angle_plain(const Vec2* points, std::size_t count, const Vec2& 
   if (kHaveAvx2) return projected_angle_plain_avx2(points, count, foot, height);
 #endif
   return projected_angle_plain_scalar(points, count, foot, height);
+}
+
+double edge_projected_angle_sum(const double* ax, const double* ay, const double* bx, const double* by,
+                                std::size_t count, double h2) {
+#ifdef SONOSHAPE_AVX2_KERNEL
+  if (kHaveAvx2) return edge_projected_angle_sum_avx2(ax, ay, bx, by, count, h2);
+#endif
+  double sum = 0.0;
+  for (std::size_t i = 0; i < count; ++i) sum += edge_projected_angle(Vec2(ax[i], ay[i]), Vec2(bx[i], by[i]), h2);
+  return sum;
 }
 
 int winding_number(const Vec2* points, std::size_t count, const Vec2& p) {
