@@ -6,9 +6,11 @@ slice grows up to 150 slices (table and PNG plot).
 For every model in MODELS it cuts a random set (100 planes), a sweep-like set (150 planes) and a
 sweep of 100 planes whose every slice has a 60-degree sector field of view (the rest unknown),
 feeds each to `sonoshape reconstruct --online --stats` (one update per slice, default depth), and
-reconstructs the first N slices of each set offline (the same box) for N in CHECKPOINTS.
+reconstructs the first N slices of each set offline (the same box) for N in CHECKPOINTS. Every
+online sequence and every rebuild runs --repeats times (default 3) and the tables take the
+median of each timing.
 
-Usage: python3 bench/online_table.py [--bin build/apps/sonoshape] [--models horse,spot]
+Usage: python3 bench/online_table.py [--bin build/apps/sonoshape] [--models horse,spot] [--repeats 3]
        [--plot docs/images/online_update_times.png]
 Prints Markdown tables on stdout (paste into docs/benchmarks.md); needs python3-matplotlib for
 the plot (skipped with a note when it is missing).
@@ -29,6 +31,17 @@ FAMILIES = {"random100": ("random", 100, []), "sweep150": ("sweep", 150, []),
 CHECKPOINTS = [5, 10, 40, 100, 150]
 RATIO_EVERY = 5  # the update / rebuild ratio is also sampled at slices 10, 15, 20, ...
 STAGES = ["arrangement_s", "face_images_s", "field_s", "smoothing_s", "mesh_s", "total_s"]
+# Timing fields of the stats that --repeats takes the median of.
+TIMES = STAGES + ["evaluation_s", "completion_s"]
+
+
+def median_stats(runs):
+    """The first run's stats with every timing field replaced by its median over the runs."""
+    merged = dict(runs[0])
+    for key in TIMES:
+        if key in merged:
+            merged[key] = statistics.median(r[key] for r in runs)
+    return merged
 
 
 def run(args):
@@ -43,20 +56,26 @@ def main():
     parser.add_argument("--models", default=",".join(MODELS))
     parser.add_argument("--work", default="out/bench/online")
     parser.add_argument("--plot", default="docs/images/online_update_times.png")
+    parser.add_argument("--repeats", type=int, default=3,
+                        help="runs of every online sequence and rebuild; timings are their medians "
+                             "(single runs on a busy 2-core machine move a ratio by up to 0.1)")
     options = parser.parse_args()
     os.makedirs(options.work, exist_ok=True)
-    table_rows, summary_rows, growth = [], [], {}
+    table_rows, summary_rows, split_rows, growth = [], [], [], {}
     for model in options.models.split(","):
         for suffix, (family, count, extra) in FAMILIES.items():
             name = f"{model}_{suffix}"
             slices = os.path.join(options.work, name + ".slices.json")
             run([options.bin, "slice", "--mesh", f"1:data/models/{MODELS[model]}:{model}", "--planes", family,
                  "--count", str(count), "--seed", "1", "--size-mm", "150", "-o", slices, "--skip-invalid", "-q"] + extra)
-            stats_path = os.path.join(options.work, name + ".online.json")
-            run([options.bin, "reconstruct", slices, "-o", os.path.join(options.work, name + "_online"),
-                 "--online", "--stats", stats_path, "-q"])
-            online = json.load(open(stats_path))
-            steps = online["steps"]
+            online_runs = []
+            for repeat in range(options.repeats):
+                stats_path = os.path.join(options.work, f"{name}.online{repeat}.json")
+                run([options.bin, "reconstruct", slices, "-o", os.path.join(options.work, name + "_online"),
+                     "--online", "--stats", stats_path, "-q"])
+                online_runs.append(json.load(open(stats_path)))
+            online = median_stats(online_runs)
+            steps = [median_stats([r["steps"][i] for r in online_runs]) for i in range(len(online_runs[0]["steps"]))]
             growth[name] = [s["total_s"] for s in steps]
             data = json.load(open(slices))
 
@@ -65,10 +84,13 @@ def main():
                 prefix = dict(data, slices=data["slices"][:n])  # same bounds: the same box
                 prefix_path = os.path.join(options.work, f"{name}_first{n}.slices.json")
                 json.dump(prefix, open(prefix_path, "w"))
-                offline_path = os.path.join(options.work, f"{name}_first{n}.offline.json")
-                run([options.bin, "reconstruct", prefix_path, "-o", os.path.join(options.work, f"{name}_first{n}"),
-                     "--stats", offline_path, "-q"])
-                return json.load(open(offline_path))
+                runs = []
+                for repeat in range(options.repeats):
+                    offline_path = os.path.join(options.work, f"{name}_first{n}.offline{repeat}.json")
+                    run([options.bin, "reconstruct", prefix_path, "-o", os.path.join(options.work, f"{name}_first{n}"),
+                         "--stats", offline_path, "-q"])
+                    runs.append(json.load(open(offline_path)))
+                return median_stats(runs)
 
             rebuilds = {}
             ratios = []
@@ -84,9 +106,10 @@ def main():
                     f" | {step['cells_changed']} / {step['cells']} | {step['field_evaluations']} | "
                     f"{offline['total_s']:.3f} | {ratio:.2f} |")
             # The update at every RATIO_EVERY-th slice from 10 on against a rebuild of as many slices.
-            # The evaluation share is the floor of the time ratio: an update must evaluate again
-            # every sampled vertex in the cells its plane split (their field changed).
+            # The evaluation share is the zone itself: an update must evaluate again every sampled
+            # vertex in the cells its plane split (their field changed).
             sampled, evaluation_shares, evaluation_time_shares = [], [], []
+            pass_shares, pass_ratios = [], []
             for n in range(10, len(steps) + 1, RATIO_EVERY):
                 offline = rebuilds.get(n) or rebuild(n)
                 sampled.append(steps[n - 1]["total_s"] / offline["total_s"])
@@ -94,6 +117,12 @@ def main():
                 # The update's own evaluation seconds against the whole rebuild: its ratio if the
                 # octree, smoothing and mesh passes (global, see docs/engine.md) cost nothing.
                 evaluation_time_shares.append(steps[n - 1]["evaluation_s"] / offline["total_s"])
+                # The rest of the update's field, smoothing and mesh time: the octree, smoothing and
+                # mesh passes, against the whole rebuild and against the rebuild's own passes.
+                def passes(stats):
+                    return stats["total_s"] - stats["evaluation_s"] - stats["arrangement_s"] - stats["face_images_s"]
+                pass_shares.append(passes(steps[n - 1]) / offline["total_s"])
+                pass_ratios.append(passes(steps[n - 1]) / passes(offline))
             later = [s["total_s"] for s in steps if s["step"] >= 10]
             rss_100 = steps[min(100, len(steps)) - 1]["peak_rss_mb"]
             summary_rows.append(
@@ -104,6 +133,9 @@ def main():
                 f"{statistics.median(evaluation_shares):.2f} ({sum(r < 0.2 for r in evaluation_shares)} of "
                 f"{len(evaluation_shares)} under 0.2) | {statistics.median(evaluation_time_shares):.2f} | "
                 f"{rss_100:.0f} | {online['total_s']:.1f} |")
+            split_rows.append(
+                f"| {name} | {statistics.median(sampled):.2f} | {statistics.median(evaluation_time_shares):.2f} | "
+                f"{statistics.median(pass_shares):.2f} | {statistics.median(pass_ratios):.2f} |")
 
     print("### Online additions (Table II of the paper, online)\n")
     print("| set | slice | arrangement s | face images s | field s | smoothing s | mesh s | update total s "
@@ -117,6 +149,11 @@ def main():
           "peak RSS after 100 slices MB | all updates s |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     print("\n".join(summary_rows))
+    print("\n### Where an update's time goes, against a rebuild (every 5th slice from 10, medians)\n")
+    print("| set | update / rebuild | update evaluations s / rebuild s | update passes s / rebuild s | "
+          "update passes s / rebuild passes s |")
+    print("|---|---|---|---|---|")
+    print("\n".join(split_rows))
     print("\n### Time per slice against the slice count (mean of each block of 10 slices, ms)\n")
     names = list(growth)
     print("| slices | " + " | ".join(names) + " |")

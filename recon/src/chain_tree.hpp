@@ -10,9 +10,9 @@
 // from the region's area and its moments up to the fourth (precomputed): one atan2 for the chord
 // and a few dozen products instead of one atan2 per edge, with a relative error of order
 // (radius / distance)^5 on the region term. Near the chain, its two halves are visited (a binary
-// tree over the edges). The fourth order lets a node be used whole from 0.3 of its distance
-// instead of 0.1 with the second order at the same accuracy (chain_tree_test): a field evaluation
-// visits about half as many nodes and sums exactly about half as many edges.
+// tree over the edges). The fourth order lets a node be used whole from 0.2 of its distance
+// instead of 0.1 with the second order, at a smaller error (chain_tree_test): fewer nodes are
+// opened and fewer edges summed exactly (timings in docs/engine.md §3).
 //
 // This is the classic Barnes-Hut trade (a hierarchy with an opening criterion) applied to the
 // boundary form of the integral; written here because no library evaluates this kernel.
