@@ -359,4 +359,19 @@ int Arrangement::locate(const Vec3& p) const {
   return bsp_[static_cast<std::size_t>(node)].cell;
 }
 
+int Arrangement::locate(const Vec3& p, int guess) const {
+  if (guess < 0 || static_cast<std::size_t>(guess) >= cells_.size()) return locate(p);
+  // Inside the convex cell, farther from each of its faces' planes than rounding can move a
+  // side-of-plane test (1e-9 of the box diagonal, against errors of about 1e-16 of it). Every
+  // plane on the tree's path to the cell has the whole cell on one side, so it is at least as far
+  // from p as the cell's boundary: the walk would take the same side at every node.
+  const double margin = 1e-9 * box_.diagonal();
+  for (const int f : cells_[static_cast<std::size_t>(guess)].faces) {
+    const ArrangementFace& face = faces_[static_cast<std::size_t>(f)];
+    const double side = planes_[static_cast<std::size_t>(face.plane)].signed_distance(p);
+    if (face.cell_positive == guess ? !(side > margin) : !(side < -margin)) return locate(p);
+  }
+  return guess;
+}
+
 }  // namespace sonoshape::recon

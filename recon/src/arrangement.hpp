@@ -61,6 +61,11 @@ class Arrangement {
 
   /// The cell containing p (p inside the box; points on a plane may go to either side).
   int locate(const Vec3& p) const;
+  /// locate(p) from a guess (a cell index of this or any arrangement, or -1): the guess when p
+  /// lies inside that cell clear of its faces' planes, where the walk down the tree would end in
+  /// the same cell, and the walk's answer otherwise. Planes inserted in sweep order make the tree
+  /// as deep as the number of planes; most evaluations are in the cell of the one before.
+  int locate(const Vec3& p, int guess) const;
 
   const Box3& box() const { return box_; }
   std::size_t cell_count() const { return cells_.size(); }

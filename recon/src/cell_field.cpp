@@ -363,7 +363,9 @@ int CellField::evaluate(const Vec3& p, double* out) const {
     for (int l = 1; l < n; ++l) out[l] = -1.0;
     return -1;
   }
-  const int cell = arrangement_.locate(p);
+  // Evaluations come in runs of nearby points: the last cell this thread found is the first guess.
+  thread_local int last_cell = -1;
+  const int cell = last_cell = arrangement_.locate(p, last_cell);
   // w[l] accumulates the mean-value weight of label l: its known parts of the faces plus its
   // share of the completed unknown triangles; w[0] only the completed share of the outside.
   constexpr int kMaxStack = 16;

@@ -103,6 +103,42 @@ TEST(Arrangement, RandomPlanesGiveClosedCellsFillingTheBox) {
   }
 }
 
+TEST(Arrangement, LocateFromAGuessAgreesWithTheTree) {
+  // Random planes, then axis-aligned ones through a grid of points (points on planes, on their
+  // lines and at their crossings), then a sweep of nearly parallel ones (a deep tree).
+  RandomPlanes planes(11);
+  std::mt19937_64& rng = planes.rng;
+  Arrangement arr(kBox);
+  int slice = 0;
+  for (int i = 0; i < 6; ++i) planes.insert_next(arr, slice++);
+  for (const double x : {-0.5, 0.0, 0.5}) arr.insert_plane(Vec3(1, 0, 0), -x, slice++);
+  for (const double y : {-1.0, 0.0}) arr.insert_plane(Vec3(0, 1, 0), -y, slice++);
+  for (int i = 0; i < 8; ++i) arr.insert_plane(Vec3(0.01 * i, 0.02, 1), -(-1.2 + 0.3 * i), slice++);
+  std::vector<Vec3> points;
+  std::uniform_real_distribution<double> inside(0.0, 1.0);
+  for (int k = 0; k < 300; ++k)
+    points.push_back(kBox.min + (kBox.max - kBox.min).cwiseProduct(Vec3(inside(rng), inside(rng), inside(rng))));
+  for (const double x : {-0.5, 0.0, 0.5, 0.25})
+    for (const double y : {-1.0, 0.0, -0.5})
+      for (const double z : {-1.2, -0.9, 0.0, 0.3, 0.7}) points.emplace_back(x, y, z);
+  std::uniform_int_distribution<int> any_cell(-1, static_cast<int>(arr.cell_count()));
+  int guessed = 0;
+  for (const Vec3& p : points) {
+    const int expected = arr.locate(p);
+    EXPECT_EQ(arr.locate(p, expected), expected);
+    for (int k = 0; k < 20; ++k) EXPECT_EQ(arr.locate(p, any_cell(rng)), expected);
+    // Points on a plane: the guess across the plane must not be taken.
+    for (const int f : arr.cell(expected).faces) {
+      const ArrangementFace& face = arr.face(f);
+      const int across = face.cell_positive == expected ? face.cell_negative : face.cell_positive;
+      if (across < 0) continue;
+      EXPECT_EQ(arr.locate(p, across), expected);
+      ++guessed;
+    }
+  }
+  EXPECT_GT(guessed, 1000);
+}
+
 TEST(Arrangement, ReportsTheFacesANewPlaneSplits) {
   // The online engine rebuilds the images of these faces only: every other older face must keep
   // its polygon (vertex ids and plane).
