@@ -119,7 +119,8 @@ constexpr auto kBinomial = make_binomials();
 // the inner sum first (Z_ij for i < j is conj(Z_ji)). The arrays are laid out so that the
 // innermost loops run over contiguous doubles with a broadcast factor (the compiler vectorises
 // them; every element sees the same operations in the same order as a plain double loop).
-// Building the trees was a fifth of the completion on the 80 mm sector sets.
+// Building the trees is up to a fifth of the completion on the 80 mm sector sets (rocker-arm's,
+// by timers not committed).
 __attribute__((target_clones("avx2", "default"))) void add_translated(const double* in, std::size_t densities,
                                                                      const Vec2& shift, double* out) {
   constexpr int kSide = kOrder + 1;
@@ -218,7 +219,7 @@ void kernel_coefficients(const Vec2& d, double s, int degree, double* out) {
 // is (1 / 2i) times the contour integral of z^a conj(z)^(b+1) / (b + 1) dz, a polynomial of degree
 // a + b + 1 along each edge (integrated exactly by kGauss points). Stored transposed, re[b][a] and
 // im[b][a] for a >= b, so that the loop over a runs over contiguous doubles (vectorised; these
-// moments were half of the trees' building time).
+// moments were half of the trees' building time in `perf record` of a loop building trees).
 constexpr int kUniformSide = kOrder + 2;
 struct UniformMoments {
   alignas(32) double re[kUniformSide][kUniformSide];
