@@ -259,13 +259,12 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
   // different labels are split at the midpoints of their longest edges (below). Plain constrained
   // Delaunay insertions with exact predicates always end.
   Cdt cdt;
-  // Constraints are inserted through their end vertices, each located from the last one (a
-  // ring's or a face's next edge starts where the last ended), where
-  // Cdt::insert_constraint(point, point) walks to its first point from an arbitrary face. The
-  // triangulation is the same: the points go in, in the same order.
-  // A point met again (most are the ends of several edges) takes its vertex from a map rather
-  // than being located again: locating a point that is a vertex already runs into degenerate
-  // orientation tests, which the exact predicates answer slowly.
+  // Constraints are inserted through their end vertices, each new one located from the last
+  // vertex (a ring's or a face's next edge starts where the last ended) rather than walked to
+  // from an arbitrary face, as Cdt::insert_constraint(point, point) does; a point met again (most
+  // are the ends of several edges) takes its vertex from a map, since locating a point that is a
+  // vertex already runs into degenerate orientation tests that the exact predicates answer
+  // slowly. The triangulation is the same: the points go in, in the same order.
   Cdt::Vertex_handle last_vertex;
   std::unordered_map<std::array<double, 2>, Cdt::Vertex_handle, DoublesHash> vertex_at;
   const auto vertex = [&](const Vec2& p, const Cdt::Vertex_handle& near) {
@@ -425,9 +424,8 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
   // sector set, by timers not committed).
   std::vector<Cdt::Vertex_handle> inserted;
   for (int round = 0;; ++round) {
-    // The triangles new in this round (a flip may also have reused a face for new corners), and
-    // their faces in the triangulation.
-    std::vector<std::size_t> fresh;
+    // The triangles new in this round (a flip may also have reused a face for new corners); each
+    // holds its entry until the splits below change the triangulation.
     std::vector<Cdt::Face_handle> fresh_faces;
     std::vector<Cdt::Vertex_handle> job_vertices;  // of each 3D part listed this round
     cache.jobs_3d.clear();
@@ -477,7 +475,6 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
                                 ? static_cast<std::size_t>(point.slot_2d)
                                 : cache.slot(cache.part_2d, cache.jobs_2d, triangle.component, triangle.corners[k]);
       }
-      fresh.push_back(static_cast<std::size_t>(index));
       fresh_faces.push_back(it);
     };
     if (round == 0) {
@@ -532,9 +529,10 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
     complete_round(s, corner_faces, cache);
     entry_values.resize(entries.size() * 3 * fc);
     // Formula 7 at the new triangles' corners: the normalised blend of both parts.
-    tbb::parallel_for(std::size_t{0}, fresh.size(), [&](std::size_t i) {
-      Completed& entry = entries[fresh[i]];
-      double* const entry_corner_values = values_of(fresh[i]);
+    tbb::parallel_for(std::size_t{0}, fresh_faces.size(), [&](std::size_t i) {
+      const std::size_t entry_index = static_cast<std::size_t>(fresh_faces[i]->info().entry);
+      Completed& entry = entries[entry_index];
+      double* const entry_corner_values = values_of(entry_index);
       const Vec2* corners = entry.triangle.corners;
       const Vec2 centroid = (corners[0] + corners[1] + corners[2]) / 3.0;
       std::vector<double> inside;
