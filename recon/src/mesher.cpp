@@ -8,6 +8,8 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include "sorted_keys.hpp"
+
 namespace sonoshape::recon {
 namespace {
 
@@ -74,34 +76,84 @@ std::vector<TriangleMesh> extract_label_surfaces(const SampledField& field) {
   static const CaseTable table;
   static const auto tets = kuhn_tetrahedra();
   const int fc = field.function_count;
+  const std::size_t stride = static_cast<std::size_t>(fc);
   std::vector<TriangleMesh> meshes(static_cast<std::size_t>(std::max(0, fc - 1)));
-  // The rows and labels of every band cell's corners, looked up once and in parallel (the
-  // look-ups were most of the mesher's time; what follows must stay serial for its vertex order).
+  // The band's corners (sorted keys), their rows and labels, each looked up once; the cells
+  // find their corners among them by walking the sorted lists (the look-ups of every cell's
+  // eight corners were most of the mesher's time). Corners numbered in key order also keep the
+  // edge table below small and its accesses near each other, as the cells are in key order too.
   const std::vector<std::uint64_t>& cells = field.surface_cells;
-  std::vector<std::uint32_t> corner_rows(cells.size() * 8);
-  std::vector<std::uint16_t> corner_labels(cells.size() * 8);  // labels are function indices
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cells.size(), 1024),
+  const std::vector<std::uint64_t> corners =
+      union_of_shifts(union_of_shifts(union_of_shifts(cells, {kKeyStepK}), {kKeyStepJ}), {kKeyStepI});
+  std::vector<std::uint32_t> corner_rows(corners.size());
+  std::vector<std::uint16_t> corner_labels(corners.size());  // labels are function indices
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, corners.size(), 1024),
                     [&](const tbb::blocked_range<std::size_t>& r) {
                       for (std::size_t n = r.begin(); n < r.end(); ++n) {
-                        int i, j, k;
-                        grid_unkey(cells[n], i, j, k);
-                        for (int c = 0; c < 8; ++c) {
-                          const std::uint64_t key = grid_key(i + (c & 1), j + ((c >> 1) & 1), k + ((c >> 2) & 1));
-                          corner_rows[n * 8 + static_cast<std::size_t>(c)] = field.index.at(key);
-                          corner_labels[n * 8 + static_cast<std::size_t>(c)] = static_cast<std::uint16_t>(field.label(key));
-                        }
+                        const std::uint32_t row = field.index.at(corners[n]);
+                        const double* values = field.values.data() + row * stride;
+                        int best = 0;  // the argmax, lowest index on ties (SampledField::label)
+                        for (int l = 1; l < fc; ++l)
+                          if (values[l] > values[best]) best = l;
+                        corner_rows[n] = row;
+                        corner_labels[n] = static_cast<std::uint16_t>(best);
                       }
                     });
+  // Per cell, its cube corner c (offset (c & 1, (c >> 1) & 1, (c >> 2) & 1)) in `corners`.
+  std::vector<std::uint32_t> cell_corners(cells.size() * 8);
+  for (std::size_t c = 0; c < 8; ++c) {
+    const std::int64_t shift = static_cast<std::int64_t>(c & 1) * kKeyStepI +
+                               static_cast<std::int64_t>((c >> 1) & 1) * kKeyStepJ +
+                               static_cast<std::int64_t>((c >> 2) & 1) * kKeyStepK;
+    const std::vector<std::uint32_t> positions = neighbour_positions(cells, shift, corners);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cells.size(), 4096),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t n = r.begin(); n < r.end(); ++n) cell_corners[n * 8 + c] = positions[n];
+                      });
+  }
+  // Per material, the triangles of each cell are listed in parallel, in chunks of cells of a
+  // fixed size, and numbered in one serial pass in cell order: the vertex order (and so the
+  // mesh) is that of a serial walk over the band, whatever the thread count. A triangle is its
+  // cell and, per vertex, the cube corners of its edge (inside, outside), 3 bits each.
+  struct CellTriangle {
+    std::uint32_t cell;
+    std::uint32_t corners;  // vertex e: inside corner at bits 6e, outside corner at bits 6e + 3
+  };
+  constexpr std::size_t kChunk = 1024;
+  const std::size_t chunk_count = (cells.size() + kChunk - 1) / kChunk;
+  std::vector<std::vector<CellTriangle>> chunk_triangles(chunk_count);
   // Mesh vertex per tetrahedron edge. The Kuhn tetrahedra are monotone paths through the cube,
-  // so every edge joins a grid vertex to one at an offset in {0,1}^3: (row of the lower vertex,
-  // offset) indexes a flat table; `edges_set` lists its entries, to empty it between materials.
+  // so every edge joins a grid vertex to one at an offset in {0,1}^3: (lower corner, offset)
+  // indexes a flat table.
   constexpr std::uint32_t kNoVertex = 0xffffffffu;
-  std::vector<std::uint32_t> vertex_of_edge(field.keys.size() * 8, kNoVertex);
-  std::vector<std::size_t> edges_set;
+  std::vector<std::uint32_t> vertex_of_edge(corners.size() * 8);
   for (int material = 1; material < fc; ++material) {
     TriangleMesh& mesh = meshes[static_cast<std::size_t>(material - 1)];
-    for (const std::size_t e : edges_set) vertex_of_edge[e] = kNoVertex;
-    edges_set.clear();
+    std::fill(vertex_of_edge.begin(), vertex_of_edge.end(), kNoVertex);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunk_count, 1), [&](const tbb::blocked_range<std::size_t>& r) {
+      for (std::size_t chunk = r.begin(); chunk < r.end(); ++chunk) {
+        std::vector<CellTriangle>& out = chunk_triangles[chunk];
+        out.clear();
+        for (std::size_t n = chunk * kChunk; n < std::min(cells.size(), (chunk + 1) * kChunk); ++n) {
+          int inside = 0;  // bit per cube corner
+          for (int c = 0; c < 8; ++c)
+            if (corner_labels[cell_corners[n * 8 + static_cast<std::size_t>(c)]] == static_cast<std::uint16_t>(material))
+              inside |= 1 << c;
+          if (inside == 0 || inside == 0xff) continue;
+          for (std::size_t t = 0; t < 6; ++t) {
+            int mask = 0;
+            for (int v = 0; v < 4; ++v)
+              if ((inside >> tets[t][static_cast<std::size_t>(v)]) & 1) mask |= 1 << v;
+            for (const Triangle& tri : table.cases[t][static_cast<std::size_t>(mask)]) {
+              std::uint32_t corners = 0;
+              for (std::size_t e = 0; e < 3; ++e)
+                corners |= static_cast<std::uint32_t>(tri.edges[e][0] | (tri.edges[e][1] << 3)) << (6 * e);
+              out.push_back({static_cast<std::uint32_t>(n), corners});
+            }
+          }
+        }
+      }
+    });
     // g = f_m - max_{k != m} f_k: positive inside the label's region.
     auto g = [&](const double* row) {
       double other = -std::numeric_limits<double>::infinity();
@@ -109,46 +161,33 @@ std::vector<TriangleMesh> extract_label_surfaces(const SampledField& field) {
         if (l != material) other = std::max(other, row[l]);
       return row[material] - other;
     };
-    for (std::size_t n = 0; n < cells.size(); ++n) {
-      std::array<bool, 8> inside;
-      bool any_in = false, any_out = false;
-      for (std::size_t c = 0; c < 8; ++c) {
-        inside[c] = corner_labels[n * 8 + c] == static_cast<std::uint16_t>(material);
-        any_in |= inside[c];
-        any_out |= !inside[c];
-      }
-      if (!any_in || !any_out) continue;
-      int i, j, k;
-      grid_unkey(cells[n], i, j, k);
-      const std::uint32_t* rows = &corner_rows[n * 8];
-      for (std::size_t t = 0; t < 6; ++t) {
-        int mask = 0;
-        for (int v = 0; v < 4; ++v)
-          if (inside[static_cast<std::size_t>(tets[t][static_cast<std::size_t>(v)])]) mask |= 1 << v;
-        for (const Triangle& tri : table.cases[t][static_cast<std::size_t>(mask)]) {
-          std::array<std::uint32_t, 3> ids;
-          for (int e = 0; e < 3; ++e) {
-            const int ca = tri.edges[static_cast<std::size_t>(e)][0];  // inside corner
-            const int cb = tri.edges[static_cast<std::size_t>(e)][1];  // outside corner
-            const std::size_t edge = static_cast<std::size_t>(rows[ca & cb]) * 8 + static_cast<std::size_t>(ca ^ cb);
-            std::uint32_t& vertex = vertex_of_edge[edge];
-            if (vertex == kNoVertex) {
-              vertex = static_cast<std::uint32_t>(mesh.vertices.size());
-              edges_set.push_back(edge);
-              const std::size_t stride = static_cast<std::size_t>(fc);
-              const double ga = std::max(0.0, g(field.values.data() + rows[ca] * stride));
-              const double gb = std::min(0.0, g(field.values.data() + rows[cb] * stride));
-              const double t_param = ga - gb > 0.0 ? ga / (ga - gb) : 0.5;
-              const Vec3 pa = field.grid.position(i + (ca & 1), j + ((ca >> 1) & 1), k + ((ca >> 2) & 1));
-              const Vec3 pb = field.grid.position(i + (cb & 1), j + ((cb >> 1) & 1), k + ((cb >> 2) & 1));
-              mesh.vertices.push_back(pa + t_param * (pb - pa));
-            }
-            ids[static_cast<std::size_t>(e)] = vertex;
+    std::size_t triangle_count = 0;
+    for (const std::vector<CellTriangle>& triangles : chunk_triangles) triangle_count += triangles.size();
+    mesh.triangles.reserve(triangle_count);
+    mesh.vertices.reserve(triangle_count / 2 + 2);  // closed surfaces: V = T/2 + 2 - 2 genus (Euler)
+    for (const std::vector<CellTriangle>& triangles : chunk_triangles)
+      for (const CellTriangle& triangle : triangles) {
+        const std::uint32_t* cube = &cell_corners[static_cast<std::size_t>(triangle.cell) * 8];
+        std::array<std::uint32_t, 3> ids;
+        for (std::size_t e = 0; e < 3; ++e) {
+          const int ca = static_cast<int>(triangle.corners >> (6 * e)) & 7;        // inside corner
+          const int cb = static_cast<int>(triangle.corners >> (6 * e + 3)) & 7;    // outside corner
+          std::uint32_t& vertex = vertex_of_edge[static_cast<std::size_t>(cube[ca & cb]) * 8 + static_cast<std::size_t>(ca ^ cb)];
+          if (vertex == kNoVertex) {
+            vertex = static_cast<std::uint32_t>(mesh.vertices.size());
+            const double ga = std::max(0.0, g(field.values.data() + corner_rows[cube[ca]] * stride));
+            const double gb = std::min(0.0, g(field.values.data() + corner_rows[cube[cb]] * stride));
+            const double t_param = ga - gb > 0.0 ? ga / (ga - gb) : 0.5;
+            int i, j, k;
+            grid_unkey(cells[triangle.cell], i, j, k);
+            const Vec3 pa = field.grid.position(i + (ca & 1), j + ((ca >> 1) & 1), k + ((ca >> 2) & 1));
+            const Vec3 pb = field.grid.position(i + (cb & 1), j + ((cb >> 1) & 1), k + ((cb >> 2) & 1));
+            mesh.vertices.push_back(pa + t_param * (pb - pa));
           }
-          mesh.triangles.push_back(ids);
+          ids[e] = vertex;
         }
+        mesh.triangles.push_back(ids);
       }
-    }
   }
   return meshes;
 }

@@ -14,6 +14,7 @@
 #include <tbb/parallel_sort.h>
 
 #include "sonoshape/core/log.hpp"
+#include "sorted_keys.hpp"
 
 namespace sonoshape::recon {
 namespace {
@@ -41,6 +42,10 @@ class Sampler {
     return row;
   }
   bool has_value(std::uint64_t key) const { return valid_row(key) != GridIndex::kNone; }
+  /// Counts a row as read in this pass without looking it up (its value is current).
+  void mark_read(std::uint32_t row) const {
+    std::atomic_ref<std::uint32_t>(field_.row_pass[row]).store(field_.pass, std::memory_order_relaxed);
+  }
   /// Queues a vertex for evaluation unless it has a value or is queued.
   void request(int i, int j, int k) {
     const std::uint64_t key = grid_key(i, j, k);
@@ -125,26 +130,6 @@ void for_rows(std::size_t count, const Body& body) {
                       for (std::size_t n = r.begin(); n < r.end(); ++n) body(n);
                     });
 }
-
-// The union of `sorted` (sorted, unique keys) with its copies shifted by each of `shifts`,
-// sorted and unique. A grid key is linear in (i, j, k) (grid_key), so a shifted copy of a sorted
-// list is sorted: merging copies builds the corner and neighbour sets of the smoothing in linear
-// time instead of sorting eight or seven keys per element.
-std::vector<std::uint64_t> union_of_shifts(const std::vector<std::uint64_t>& sorted,
-                                           std::initializer_list<std::int64_t> shifts) {
-  std::vector<std::uint64_t> result = sorted, shifted, merged;
-  for (const std::int64_t shift : shifts) {
-    shifted.resize(sorted.size());
-    std::transform(sorted.begin(), sorted.end(), shifted.begin(),
-                   [shift](std::uint64_t key) { return key + static_cast<std::uint64_t>(shift); });
-    merged.clear();
-    merged.reserve(result.size() + shifted.size());
-    std::set_union(result.begin(), result.end(), shifted.begin(), shifted.end(), std::back_inserter(merged));
-    result.swap(merged);
-  }
-  return result;
-}
-constexpr std::int64_t kKeyStepK = 1, kKeyStepJ = std::int64_t{1} << 21, kKeyStepI = std::int64_t{1} << 42;
 
 bool contains(const std::vector<std::uint64_t>& sorted, std::uint64_t key) {
   return std::binary_search(sorted.begin(), sorted.end(), key);
@@ -360,9 +345,11 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
   SampledField field;
   SampledField& previous = workspace.previous;
   std::vector<char> valid;
-  if (!workspace.previous_valid.empty() && workspace.previous_valid.size() == previous.keys.size() &&
+  const bool kept =
+      !workspace.previous_valid.empty() && workspace.previous_valid.size() == previous.keys.size() &&
       previous.function_count == function_count && previous.grid.depth == grid.depth &&
-      previous.grid.origin == grid.origin && previous.grid.cell_size == grid.cell_size) {
+      previous.grid.origin == grid.origin && previous.grid.cell_size == grid.cell_size;
+  if (kept) {
     // Keep it: its rows go back to their values before the smoothing and the snap (latest
     // change first), and its out-of-date rows are evaluated again when read.
     field = std::move(previous);
@@ -384,53 +371,111 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
   }
   previous = SampledField{};
   workspace.previous_valid.clear();
+  const std::vector<char> valid_at_start = valid;  // the rows of the kept field that kept their values
   Sampler sampler(field, evaluate, workspace.pending, std::move(valid));
   const int start = std::min(options.start_depth, depth);
 
-  // Coarse-to-fine refinement. Cells are given by their min corner in finest units.
+  // Coarse-to-fine refinement. Cells are given by their min corner in finest units. With a kept
+  // field, a cell the last pass also had (`before_index`) and whose corner rows all kept their
+  // values keeps its mixed test: the test reads those values only. Validity is taken as it was
+  // at the start of the pass, before this pass evaluated rows again.
+  std::vector<OctreeWorkspace::RefinementLevel> before;
+  if (kept) before = std::move(workspace.refinement);
+  workspace.refinement.clear();
   std::vector<std::array<int, 3>> cells;
+  std::vector<std::uint32_t> before_index;  // per cell, its index in the last pass's level, or kNone
   {
     const int step = 1 << (depth - start);
     for (int i = 0; i < resolution; i += step)
       for (int j = 0; j < resolution; j += step)
         for (int k = 0; k < resolution; k += step) cells.push_back({i, j, k});
+    const bool same_start = !before.empty() && before.front().cells == cells;
+    before_index.resize(cells.size(), GridIndex::kNone);
+    if (same_start)
+      for (std::size_t n = 0; n < cells.size(); ++n) before_index[n] = static_cast<std::uint32_t>(n);
   }
   for (int level = start;; ++level) {
     const int step = 1 << (depth - level);
+    const std::size_t level_index = static_cast<std::size_t>(level - start);
+    const OctreeWorkspace::RefinementLevel* last = level_index < before.size() ? &before[level_index] : nullptr;
+    OctreeWorkspace::RefinementLevel now;
+    now.corner_rows.resize(cells.size());
+    now.mixed.resize(cells.size());
+    now.split.resize(cells.size());
+    // Cells kept with their test, in parallel; the others are looked up below.
+    std::vector<char> is_kept(cells.size(), 0);
+    if (last != nullptr)
+      for_rows(cells.size(), [&](std::size_t n) {
+        if (before_index[n] == GridIndex::kNone) return;
+        const std::array<std::uint32_t, 8>& rows = last->corner_rows[before_index[n]];
+        for (const std::uint32_t row : rows)
+          if (!valid_at_start[row]) return;
+        for (const std::uint32_t row : rows) sampler.mark_read(row);
+        now.corner_rows[n] = rows;
+        now.mixed[n] = last->mixed[before_index[n]];
+        is_kept[n] = 1;
+      });
+    std::vector<std::uint32_t> tested;  // the cells whose corners are looked up and tested
+    for (std::size_t n = 0; n < cells.size(); ++n)
+      if (!is_kept[n]) tested.push_back(static_cast<std::uint32_t>(n));
     // The corners' rows as the request pass finds them (see corners_mixed).
-    std::vector<std::array<std::uint32_t, 8>> corner_rows(cells.size());
-    sampler.request_each(cells.size(), [&](std::size_t n, const auto& request) {
-      const auto& c = cells[n];
+    sampler.request_each(tested.size(), [&](std::size_t m, const auto& request) {
+      const auto& c = cells[tested[m]];
+      std::array<std::uint32_t, 8>& rows = now.corner_rows[tested[m]];
       for (int corner = 0; corner < 8; ++corner)
-        corner_rows[n][static_cast<std::size_t>(corner)] =
+        rows[static_cast<std::size_t>(corner)] =
             request(c[0] + (corner & 1) * step, c[1] + ((corner >> 1) & 1) * step, c[2] + ((corner >> 2) & 1) * step);
     });
     sampler.flush();
-    std::vector<std::array<int, 3>> refined;
     // Mixed cells, and above the finest level cells holding contour vertices: split further.
-    std::vector<char> cell_is_split(cells.size());
     const auto contour_level = static_cast<std::size_t>(level);
     const bool contours_here = level < depth && contour_level < contours.cells_by_level.size();
+    for_rows(tested.size(), [&](std::size_t m) {
+      const auto& c = cells[tested[m]];
+      now.mixed[tested[m]] = corners_mixed(field, now.corner_rows[tested[m]], c[0], c[1], c[2], step);
+    });
     for_rows(cells.size(), [&](std::size_t n) {
       const auto& c = cells[n];
-      cell_is_split[n] = corners_mixed(field, corner_rows[n], c[0], c[1], c[2], step) ||
-                         (contours_here && contains(contours.cells_by_level[contour_level],
-                                                    grid_key(c[0] / step, c[1] / step, c[2] / step)));
+      now.split[n] = now.mixed[n] || (contours_here && contains(contours.cells_by_level[contour_level],
+                                                                grid_key(c[0] / step, c[1] / step, c[2] / step)));
     });
-    for (std::size_t n = 0; n < cells.size(); ++n) {
-      const auto& c = cells[n];
-      if (level == depth) {
-        if (cell_is_split[n]) field.surface_cells.push_back(grid_key(c[0], c[1], c[2]));
-        continue;
+    if (level == depth) {
+      for (std::size_t n = 0; n < cells.size(); ++n)
+        if (now.split[n]) field.surface_cells.push_back(grid_key(cells[n][0], cells[n][1], cells[n][2]));
+      now.cells = std::move(cells);
+      workspace.refinement.push_back(std::move(now));
+      break;
+    }
+    // The children of the split cells, in order; a child's index in the last pass is found from
+    // its parent's: children follow their parents' order, eight each.
+    std::vector<std::uint32_t> last_child_start;
+    if (last != nullptr) {
+      last_child_start.resize(last->split.size());
+      std::uint32_t children = 0;
+      for (std::size_t q = 0; q < last->split.size(); ++q) {
+        last_child_start[q] = children;
+        if (last->split[q]) children += 8;
       }
-      if (!cell_is_split[n]) continue;
-      const int half = step / 2;
-      for (int child = 0; child < 8; ++child)
+    }
+    std::vector<std::array<int, 3>> refined;
+    std::vector<std::uint32_t> refined_before;
+    const int half = step / 2;
+    for (std::size_t n = 0; n < cells.size(); ++n) {
+      if (!now.split[n]) continue;
+      const auto& c = cells[n];
+      const std::uint32_t q = before_index[n];
+      const bool had_children = q != GridIndex::kNone && last->split[q];
+      for (int child = 0; child < 8; ++child) {
         refined.push_back({c[0] + (child & 1) * half, c[1] + ((child >> 1) & 1) * half,
                            c[2] + ((child >> 2) & 1) * half});
+        refined_before.push_back(had_children ? last_child_start[q] + static_cast<std::uint32_t>(child)
+                                              : GridIndex::kNone);
+      }
     }
-    if (level == depth) break;
+    now.cells = std::move(cells);
+    workspace.refinement.push_back(std::move(now));
     cells = std::move(refined);
+    before_index = std::move(refined_before);
   }
 
   GridIndex& scratch = workspace.scratch;
@@ -457,32 +502,45 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
   // the order).
   const std::vector<std::uint64_t> laplacian_nodes =
       union_of_shifts(nodes, {-kKeyStepK, kKeyStepK, -kKeyStepJ, kKeyStepJ, -kKeyStepI, kKeyStepI});
-  GridIndex& lap_index = scratch;
-  lap_index.clear();
-  for (std::size_t n = 0; n < laplacian_nodes.size(); ++n)
-    lap_index.insert(laplacian_nodes[n], static_cast<std::uint32_t>(n));
-  // The Laplacian nodes and their neighbours: every vertex the bi-Laplacian of a node reads. Row
-  // indices are resolved once (as the request pass finds them; those evaluated in the flush
-  // after it), so the iterations are plain array sweeps.
+  // Every vertex the bi-Laplacian of a node reads: the Laplacian nodes and their neighbours,
+  // sorted. Each is looked up (or evaluated) once and its values copied into `smoothed`, where
+  // the sweeps run: in key order, a vertex's neighbours along k lie next to it and those along
+  // j and i a row or a slice away, where the field's rows (in the order they were first
+  // evaluated) scattered every stencil over memory. The stencils find their vertices by walking
+  // the sorted lists (neighbour_positions); looking up the seven vertices of every Laplacian and
+  // bi-Laplacian stencil in the grid index, as before, cost more than the sweeps.
+  const std::vector<std::uint64_t> stencil_vertices =
+      union_of_shifts(laplacian_nodes, {-kKeyStepK, kKeyStepK, -kKeyStepJ, kKeyStepJ, -kKeyStepI, kKeyStepI});
   const std::size_t fc = static_cast<std::size_t>(function_count);
-  std::vector<std::uint32_t> lap_value_rows(laplacian_nodes.size() * 7);  // centre, 6 neighbours
-  sampler.request_each(laplacian_nodes.size(), [&](std::size_t n, const auto& request) {
+  std::vector<std::uint32_t> stencil_rows(stencil_vertices.size());
+  sampler.request_each(stencil_vertices.size(), [&](std::size_t n, const auto& request) {
     int i, j, k;
-    grid_unkey(laplacian_nodes[n], i, j, k);
-    lap_value_rows[n * 7] = request(i, j, k);
-    for (std::size_t d = 0; d < 6; ++d)
-      lap_value_rows[n * 7 + 1 + d] =
-          request(i + kFaceNeighbours[d][0], j + kFaceNeighbours[d][1], k + kFaceNeighbours[d][2]);
+    grid_unkey(stencil_vertices[n], i, j, k);
+    stencil_rows[n] = request(i, j, k);
   });
   sampler.flush();
-  for_rows(laplacian_nodes.size(), [&](std::size_t n) {
-    int i, j, k;
-    grid_unkey(laplacian_nodes[n], i, j, k);
-    if (lap_value_rows[n * 7] == GridIndex::kNone) lap_value_rows[n * 7] = field.index.at(laplacian_nodes[n]);
-    for (std::size_t d = 0; d < 6; ++d)
-      if (lap_value_rows[n * 7 + 1 + d] == GridIndex::kNone)
-        lap_value_rows[n * 7 + 1 + d] =
-            field.index.at(grid_key(i + kFaceNeighbours[d][0], j + kFaceNeighbours[d][1], k + kFaceNeighbours[d][2]));
+  double* values = field.values.data();
+  std::vector<double> smoothed(stencil_vertices.size() * fc);
+  for_rows(stencil_vertices.size(), [&](std::size_t n) {
+    if (stencil_rows[n] == GridIndex::kNone) stencil_rows[n] = field.index.at(stencil_vertices[n]);
+    std::copy_n(values + stencil_rows[n] * fc, fc, smoothed.data() + n * fc);
+  });
+  // Per Laplacian node, its stencil's positions in stencil_vertices (centre, 6 neighbours); per
+  // node, its stencil's positions in laplacian_nodes and its own in stencil_vertices.
+  std::vector<std::uint32_t> lap_stencil(laplacian_nodes.size() * 7);
+  for (std::size_t d = 0; d < 7; ++d) {
+    const std::vector<std::uint32_t> positions =
+        neighbour_positions(laplacian_nodes, kStencilShifts[d], stencil_vertices);
+    for_rows(laplacian_nodes.size(), [&](std::size_t n) { lap_stencil[n * 7 + d] = positions[n]; });
+  }
+  std::vector<std::uint32_t> node_stencil(nodes.size() * 7);
+  for (std::size_t d = 0; d < 7; ++d) {
+    const std::vector<std::uint32_t> positions = neighbour_positions(nodes, kStencilShifts[d], laplacian_nodes);
+    for_rows(nodes.size(), [&](std::size_t n) { node_stencil[n * 7 + d] = positions[n]; });
+  }
+  std::vector<std::uint32_t> node_position(nodes.size());
+  for_rows(nodes.size(), [&](std::size_t n) {
+    node_position[n] = lap_stencil[static_cast<std::size_t>(node_stencil[n * 7]) * 7];
   });
   // Nodes next to a contour keep their values (Section 4.6): both lists are sorted.
   std::vector<char> node_fixed(nodes.size(), 0);
@@ -491,62 +549,49 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
     else if (fixed[f] < nodes[n]) ++f;
     else node_fixed[n++] = 1;
   }
-  std::vector<std::uint32_t> node_lap_rows(nodes.size() * 7);  // centre, 6 neighbours
-  std::vector<std::uint32_t> node_value_rows(nodes.size());
-  for_rows(nodes.size(), [&](std::size_t n) {
-    int i, j, k;
-    grid_unkey(nodes[n], i, j, k);
-    node_lap_rows[n * 7] = lap_index.at(nodes[n]);
-    node_value_rows[n] = lap_value_rows[static_cast<std::size_t>(node_lap_rows[n * 7]) * 7];
-    for (std::size_t d = 0; d < 6; ++d)
-      node_lap_rows[n * 7 + 1 + d] =
-          lap_index.at(grid_key(i + kFaceNeighbours[d][0], j + kFaceNeighbours[d][1], k + kFaceNeighbours[d][2]));
-  });
-  std::vector<double> laplacian(laplacian_nodes.size() * fc);
-  std::vector<double> update(nodes.size() * fc);
-  // Damped Jacobi on the bi-Laplacian (7-point Laplacian squared: diagonal 42); the damping
-  // keeps the highest grid frequencies stable.
-  constexpr double kDamping = 0.5 / 42.0;
-  double* values = field.values.data();
+  const auto node_row = [&](std::size_t n) { return stencil_rows[node_position[n]]; };
   std::vector<int> label_before(nodes.size());
-  for_rows(nodes.size(), [&](std::size_t n) { label_before[n] = row_label(field, node_value_rows[n]); });
+  for_rows(nodes.size(), [&](std::size_t n) { label_before[n] = row_label(field, node_row(n)); });
   for (std::size_t n = 0; n < nodes.size(); ++n) {
     if (node_fixed[n]) continue;
-    field.changed_rows.push_back(node_value_rows[n]);
-    field.changed_values.insert(field.changed_values.end(), values + node_value_rows[n] * fc,
-                                values + (node_value_rows[n] + 1) * fc);
+    field.changed_rows.push_back(node_row(n));
+    field.changed_values.insert(field.changed_values.end(), values + node_row(n) * fc, values + (node_row(n) + 1) * fc);
   }
+  // Damped Jacobi on the bi-Laplacian (7-point Laplacian squared: diagonal 42); the damping
+  // keeps the highest grid frequencies stable. Each sweep computes every Laplacian before it
+  // moves a node.
+  constexpr double kDamping = 0.5 / 42.0;
+  std::vector<double> laplacian(laplacian_nodes.size() * fc);
   for (int iteration = 0; iteration < iterations; ++iteration) {
     for_rows(laplacian_nodes.size(), [&](std::size_t n) {
-      const std::uint32_t* rows = &lap_value_rows[n * 7];
+      const std::uint32_t* stencil = &lap_stencil[n * 7];
       double* out = &laplacian[n * fc];
       for (std::size_t l = 0; l < fc; ++l) {
-        double sum = -6.0 * values[rows[0] * fc + l];
-        for (int d = 1; d <= 6; ++d) sum += values[rows[d] * fc + l];
-        out[l] = sum;
-      }
-    });
-    for_rows(nodes.size(), [&](std::size_t n) {
-      const std::uint32_t* rows = &node_lap_rows[n * 7];
-      double* out = &update[n * fc];
-      for (std::size_t l = 0; l < fc; ++l) {
-        double sum = -6.0 * laplacian[rows[0] * fc + l];
-        for (int d = 1; d <= 6; ++d) sum += laplacian[rows[d] * fc + l];
+        double sum = -6.0 * smoothed[stencil[0] * fc + l];
+        for (int d = 1; d <= 6; ++d) sum += smoothed[stencil[d] * fc + l];
         out[l] = sum;
       }
     });
     for_rows(nodes.size(), [&](std::size_t n) {
       if (node_fixed[n]) return;
-      double* value = values + node_value_rows[n] * fc;
-      for (std::size_t l = 0; l < fc; ++l) value[l] -= kDamping * update[n * fc + l];
+      const std::uint32_t* stencil = &node_stencil[n * 7];
+      double* value = &smoothed[node_position[n] * fc];
+      for (std::size_t l = 0; l < fc; ++l) {
+        double sum = -6.0 * laplacian[stencil[0] * fc + l];
+        for (int d = 1; d <= 6; ++d) sum += laplacian[stencil[d] * fc + l];
+        value[l] -= kDamping * sum;
+      }
     });
   }
+  for_rows(nodes.size(), [&](std::size_t n) {
+    if (!node_fixed[n]) std::copy_n(&smoothed[node_position[n] * fc], fc, values + node_row(n) * fc);
+  });
   // Smoothing may move labels at the nodes. The band was closed before, and its cells whose
   // corners kept their labels keep their faces: only the cells around the nodes whose label
   // changed are seeds of the new, again closed, band (the rest of the old band is kept where
   // still mixed). Seeding every cell around every node, as before, cost more than the sweeps.
   std::vector<char> label_changed(nodes.size());
-  for_rows(nodes.size(), [&](std::size_t n) { label_changed[n] = row_label(field, node_value_rows[n]) != label_before[n]; });
+  for_rows(nodes.size(), [&](std::size_t n) { label_changed[n] = row_label(field, node_row(n)) != label_before[n]; });
   std::vector<std::uint64_t> seeds;
   for (std::size_t n = 0; n < nodes.size(); ++n) {
     if (!label_changed[n]) continue;
@@ -559,7 +604,7 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
       seeds.push_back(grid_key(ci, cj, ck));
     }
   }
-  close_band(field, sampler, seeds, false, scratch, resolution, field.surface_cells);  // lap_index is done with
+  close_band(field, sampler, seeds, false, scratch, resolution, field.surface_cells);
   field.smoothing_seconds = smoothing_clock.seconds();
 }
 

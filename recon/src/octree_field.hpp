@@ -3,6 +3,7 @@
 // coarse-to-fine refinement where the label changes or contour vertices lie, a closed band of
 // finest-level cells around every label boundary, and bi-Laplacian smoothing that keeps the
 // values next to the input contours.
+#include <array>
 #include <cstdint>
 #include <functional>
 #include <unordered_map>
@@ -116,6 +117,17 @@ struct OctreeWorkspace {
   /// unchanged rows from its cache into a fresh field.
   SampledField previous;
   std::vector<char> previous_valid;
+  /// The refinement of the pass that made `previous`, per level from the start depth: a cell
+  /// whose corner rows all kept their values keeps its mixed test, so an online update looks up
+  /// and tests only the cells with a corner in a changed arrangement cell (it looked up all eight
+  /// corners of every cell of every level: the largest of its octree passes).
+  struct RefinementLevel {
+    std::vector<std::array<int, 3>> cells;                 ///< min corners, finest units
+    std::vector<std::array<std::uint32_t, 8>> corner_rows;  ///< rows of `previous`
+    std::vector<char> mixed;                               ///< corners of different labels
+    std::vector<char> split;                               ///< refined (mixed or contour cell)
+  };
+  std::vector<RefinementLevel> refinement;
 };
 
 /// Samples the field over `box` (everything outside it is the outside label). `contours` refine
