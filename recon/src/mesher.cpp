@@ -84,7 +84,7 @@ std::vector<TriangleMesh> extract_label_surfaces(const SampledField& field) {
   // edge table below small and its accesses near each other, as the cells are in key order too.
   const std::vector<std::uint64_t>& cells = field.surface_cells;
   const std::vector<std::uint64_t> corners =
-      union_of_shifts(union_of_shifts(union_of_shifts(cells, {kKeyStepK}), {kKeyStepJ}), {kKeyStepI});
+      union_of_shifts(cells, kCubeCornerShifts);
   std::vector<std::uint32_t> corner_rows(corners.size());
   std::vector<std::uint16_t> corner_labels(corners.size());  // labels are function indices
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, corners.size(), 1024),
@@ -101,16 +101,7 @@ std::vector<TriangleMesh> extract_label_surfaces(const SampledField& field) {
                     });
   // Per cell, its cube corner c (offset (c & 1, (c >> 1) & 1, (c >> 2) & 1)) in `corners`.
   std::vector<std::uint32_t> cell_corners(cells.size() * 8);
-  for (std::size_t c = 0; c < 8; ++c) {
-    const std::int64_t shift = static_cast<std::int64_t>(c & 1) * kKeyStepI +
-                               static_cast<std::int64_t>((c >> 1) & 1) * kKeyStepJ +
-                               static_cast<std::int64_t>((c >> 2) & 1) * kKeyStepK;
-    const std::vector<std::uint32_t> positions = neighbour_positions(cells, shift, corners);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cells.size(), 4096),
-                      [&](const tbb::blocked_range<std::size_t>& r) {
-                        for (std::size_t n = r.begin(); n < r.end(); ++n) cell_corners[n * 8 + c] = positions[n];
-                      });
-  }
+  neighbour_positions(cells, kCubeCornerShifts, corners, cell_corners.data(), 8);
   // Per material, the triangles of each cell are listed in parallel, in chunks of cells of a
   // fixed size, and numbered in one serial pass in cell order: the vertex order (and so the
   // mesh) is that of a serial walk over the band, whatever the thread count. A triangle is its

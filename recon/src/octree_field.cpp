@@ -135,6 +135,22 @@ bool contains(const std::vector<std::uint64_t>& sorted, std::uint64_t key) {
   return std::binary_search(sorted.begin(), sorted.end(), key);
 }
 
+// Per key of `keys`, the positions in `targets` of its 7-point stencil (kStencilShifts), seven
+// each; `targets` holds every stencil's keys (both lists sorted, unique). The neighbours along k
+// are next to the centre (nothing lies between keys one apart); the others are walked to.
+std::vector<std::uint32_t> stencil_positions(const std::vector<std::uint64_t>& keys,
+                                             const std::vector<std::uint64_t>& targets) {
+  std::vector<std::uint32_t> stencils(keys.size() * 7);
+  neighbour_positions(keys, {kStencilShifts[0], kStencilShifts[1], kStencilShifts[2], kStencilShifts[3], kStencilShifts[4]},
+                      targets, stencils.data(), 7);
+  static_assert(kStencilShifts[5] == -kKeyStepK && kStencilShifts[6] == kKeyStepK);
+  for_rows(keys.size(), [&](std::size_t n) {
+    stencils[n * 7 + 5] = stencils[n * 7] - 1;
+    stencils[n * 7 + 6] = stencils[n * 7] + 1;
+  });
+  return stencils;
+}
+
 // The argmax label of a row of values (the lowest index wins ties), as SampledField::label.
 int row_label(const SampledField& f, std::uint32_t row) {
   const double* values = f.values.data() + static_cast<std::size_t>(row) * static_cast<std::size_t>(f.function_count);
@@ -159,42 +175,38 @@ bool corners_mixed(const SampledField& f, std::array<std::uint32_t, 8>& rows, in
   return false;
 }
 
-// The face of the finest cell (i, j, k) towards neighbour direction d: mixed corner labels?
-bool face_mixed(const SampledField& f, int i, int j, int k, const std::array<int, 3>& d) {
-  int axis = d[0] != 0 ? 0 : (d[1] != 0 ? 1 : 2);
-  std::array<int, 3> base{i, j, k};
-  if (d[static_cast<std::size_t>(axis)] > 0) base[static_cast<std::size_t>(axis)] += 1;
-  const int a1 = (axis + 1) % 3, a2 = (axis + 2) % 3;
-  int first = -1;
-  for (int c = 0; c < 4; ++c) {
-    std::array<int, 3> p = base;
-    p[static_cast<std::size_t>(a1)] += c & 1;
-    p[static_cast<std::size_t>(a2)] += (c >> 1) & 1;
-    const int l = f.label(grid_key(p[0], p[1], p[2]));
-    if (first < 0) first = l;
-    else if (l != first) return true;
-  }
-  return false;
-}
+// The corners of a finest cell on its face towards kFaceNeighbours[d]: corner c has offset
+// (c & 1, (c >> 1) & 1, (c >> 2) & 1).
+constexpr std::array<std::array<int, 4>, 6> kFaceCorners{{{0, 2, 4, 6}, {1, 3, 5, 7}, {0, 1, 4, 5},
+                                                          {2, 3, 6, 7}, {0, 1, 2, 3}, {4, 5, 6, 7}}};
 
 // Keeps the mixed cells among `seeds` (they may repeat; `seeds_mixed`: all are mixed, with
-// current corner values, as the refinement's finest cells) and adds, until closed, every finest
-// cell across a face with mixed corners: otherwise the surface would end at that face. `closed`
-// is a band that was closed before labels changed at corners of seeds only: its other cells kept
-// their corner labels, so they are still mixed (every band cell is) and their faces need not be
-// expanded again. Result in field.surface_cells. `in_band` is scratch space (a direct table is
-// costly to allocate).
+// current corner values, as the refinement's finest cells, whose corner rows `seed_rows` then
+// gives) and adds, until closed, every finest cell across a face with mixed corners: otherwise
+// the surface would end at that face. `closed` is a band that was closed before labels changed at
+// corners of seeds only: its other cells kept their corner labels, so they are still mixed (every
+// band cell is) and their faces need not be expanded again. Result in field.surface_cells.
+// `in_band` is scratch space (a direct table is costly to allocate). The faces are tested on the
+// corner rows the mixed tests found (looking the four corners of each of six faces up again cost
+// more than the rest of the closure).
 void close_band(SampledField& field, Sampler& sampler, const std::vector<std::uint64_t>& seeds, bool seeds_mixed,
-                GridIndex& in_band, int resolution, const std::vector<std::uint64_t>& closed = {}) {
+                GridIndex& in_band, int resolution, const std::vector<std::uint64_t>& closed = {},
+                const std::vector<std::array<std::uint32_t, 8>>& seed_rows = {}) {
+  using CornerRows = std::array<std::uint32_t, 8>;
   in_band.clear();
   std::vector<std::uint64_t> unique_seeds;
+  std::vector<CornerRows> unique_seed_rows;
   unique_seeds.reserve(seeds.size());
-  for (const std::uint64_t key : seeds)
-    if (in_band.insert(key, 0)) unique_seeds.push_back(key);
-  // The mixed cells of `cells`, in their order, their corners evaluated first where they have no
-  // value (the tests run in parallel).
-  const auto requested_mixed_of = [&](const std::vector<std::uint64_t>& cells) {
-    std::vector<std::array<std::uint32_t, 8>> corner_rows(cells.size());
+  for (std::size_t n = 0; n < seeds.size(); ++n)
+    if (in_band.insert(seeds[n], 0)) {
+      unique_seeds.push_back(seeds[n]);
+      if (seeds_mixed) unique_seed_rows.push_back(seed_rows[n]);
+    }
+  // The mixed cells of `cells` and their corner rows, in their order, their corners evaluated
+  // first where they have no value (the tests run in parallel).
+  const auto requested_mixed_of = [&](const std::vector<std::uint64_t>& cells, std::vector<std::uint64_t>& kept,
+                                      std::vector<CornerRows>& kept_rows) {
+    std::vector<CornerRows> corner_rows(cells.size());
     sampler.request_each(cells.size(), [&](std::size_t n, const auto& request) {
       int i, j, k;
       grid_unkey(cells[n], i, j, k);
@@ -209,12 +221,22 @@ void close_band(SampledField& field, Sampler& sampler, const std::vector<std::ui
       grid_unkey(cells[n], i, j, k);
       is_mixed[n] = corners_mixed(field, corner_rows[n], i, j, k, 1);
     });
-    std::vector<std::uint64_t> kept;
+    kept.clear();
+    kept_rows.clear();
     for (std::size_t n = 0; n < cells.size(); ++n)
-      if (is_mixed[n]) kept.push_back(cells[n]);
-    return kept;
+      if (is_mixed[n]) {
+        kept.push_back(cells[n]);
+        kept_rows.push_back(corner_rows[n]);
+      }
   };
-  std::vector<std::uint64_t> frontier = seeds_mixed ? unique_seeds : requested_mixed_of(unique_seeds);
+  std::vector<std::uint64_t> frontier;
+  std::vector<CornerRows> frontier_rows;
+  if (seeds_mixed) {
+    frontier = std::move(unique_seeds);
+    frontier_rows = std::move(unique_seed_rows);
+  } else {
+    requested_mixed_of(unique_seeds, frontier, frontier_rows);
+  }
   std::vector<std::uint64_t> band = frontier;
   for (const std::uint64_t key : closed)
     if (in_band.insert(key, 0)) band.push_back(key);
@@ -225,13 +247,19 @@ void close_band(SampledField& field, Sampler& sampler, const std::vector<std::ui
     for_rows(frontier.size(), [&](std::size_t n) {
       int i, j, k;
       grid_unkey(frontier[n], i, j, k);
+      std::array<int, 8> labels;
+      for (std::size_t c = 0; c < 8; ++c) labels[c] = row_label(field, frontier_rows[n][c]);
       std::uint8_t bits = 0;
       for (std::size_t d = 0; d < kFaceNeighbours.size(); ++d) {
         const int ni = i + kFaceNeighbours[d][0], nj = j + kFaceNeighbours[d][1], nk = k + kFaceNeighbours[d][2];
         if (ni < 0 || nj < 0 || nk < 0 || ni >= resolution || nj >= resolution || nk >= resolution)
           continue;
-        if (!in_band.count(grid_key(ni, nj, nk)) && face_mixed(field, i, j, k, kFaceNeighbours[d]))
-          bits = static_cast<std::uint8_t>(bits | (1u << d));
+        const std::array<int, 4>& face = kFaceCorners[d];
+        const int first = labels[static_cast<std::size_t>(face[0])];
+        const bool mixed = labels[static_cast<std::size_t>(face[1])] != first ||
+                           labels[static_cast<std::size_t>(face[2])] != first ||
+                           labels[static_cast<std::size_t>(face[3])] != first;
+        if (mixed && !in_band.count(grid_key(ni, nj, nk))) bits = static_cast<std::uint8_t>(bits | (1u << d));
       }
       across[n] = bits;
     });
@@ -246,7 +274,7 @@ void close_band(SampledField& field, Sampler& sampler, const std::vector<std::ui
         if (in_band.insert(nkey, 0)) candidates.push_back(nkey);
       }
     }
-    frontier = requested_mixed_of(candidates);
+    requested_mixed_of(candidates, frontier, frontier_rows);
     band.insert(band.end(), frontier.begin(), frontier.end());
   }
   std::sort(band.begin(), band.end());
@@ -383,6 +411,7 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
   if (kept) before = std::move(workspace.refinement);
   workspace.refinement.clear();
   std::vector<std::array<int, 3>> cells;
+  std::vector<std::array<std::uint32_t, 8>> finest_mixed_rows;  // of the finest mixed cells, in order
   std::vector<std::uint32_t> before_index;  // per cell, its index in the last pass's level, or kNone
   {
     const int step = 1 << (depth - start);
@@ -441,7 +470,10 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
     });
     if (level == depth) {
       for (std::size_t n = 0; n < cells.size(); ++n)
-        if (now.split[n]) field.surface_cells.push_back(grid_key(cells[n][0], cells[n][1], cells[n][2]));
+        if (now.split[n]) {
+          field.surface_cells.push_back(grid_key(cells[n][0], cells[n][1], cells[n][2]));
+          finest_mixed_rows.push_back(now.corner_rows[n]);
+        }
       now.cells = std::move(cells);
       workspace.refinement.push_back(std::move(now));
       break;
@@ -480,7 +512,7 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
 
   GridIndex& scratch = workspace.scratch;
   scratch.reset(resolution);
-  close_band(field, sampler, field.surface_cells, /*seeds_mixed=*/true, scratch, resolution);
+  close_band(field, sampler, field.surface_cells, /*seeds_mixed=*/true, scratch, resolution, {}, finest_mixed_rows);
 
   if (options.smoothing_iterations > 0)
     smooth(field, sampler, contours.fixed_vertices, options.smoothing_iterations, scratch);
@@ -497,7 +529,7 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
   Stopwatch smoothing_clock;
   // Smoothing nodes: corners of surface cells (the band is sorted), sorted.
   const std::vector<std::uint64_t> nodes =
-      union_of_shifts(union_of_shifts(union_of_shifts(field.surface_cells, {kKeyStepK}), {kKeyStepJ}), {kKeyStepI});
+      union_of_shifts(field.surface_cells, kCubeCornerShifts);
   // Laplacian domain: the nodes and their six neighbours, sorted (the sweeps do not depend on
   // the order).
   const std::vector<std::uint64_t> laplacian_nodes =
@@ -527,17 +559,8 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
   });
   // Per Laplacian node, its stencil's positions in stencil_vertices (centre, 6 neighbours); per
   // node, its stencil's positions in laplacian_nodes and its own in stencil_vertices.
-  std::vector<std::uint32_t> lap_stencil(laplacian_nodes.size() * 7);
-  for (std::size_t d = 0; d < 7; ++d) {
-    const std::vector<std::uint32_t> positions =
-        neighbour_positions(laplacian_nodes, kStencilShifts[d], stencil_vertices);
-    for_rows(laplacian_nodes.size(), [&](std::size_t n) { lap_stencil[n * 7 + d] = positions[n]; });
-  }
-  std::vector<std::uint32_t> node_stencil(nodes.size() * 7);
-  for (std::size_t d = 0; d < 7; ++d) {
-    const std::vector<std::uint32_t> positions = neighbour_positions(nodes, kStencilShifts[d], laplacian_nodes);
-    for_rows(nodes.size(), [&](std::size_t n) { node_stencil[n * 7 + d] = positions[n]; });
-  }
+  const std::vector<std::uint32_t> lap_stencil = stencil_positions(laplacian_nodes, stencil_vertices);
+  const std::vector<std::uint32_t> node_stencil = stencil_positions(nodes, laplacian_nodes);
   std::vector<std::uint32_t> node_position(nodes.size());
   for_rows(nodes.size(), [&](std::size_t n) {
     node_position[n] = lap_stencil[static_cast<std::size_t>(node_stencil[n * 7]) * 7];
