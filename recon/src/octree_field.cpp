@@ -9,7 +9,6 @@
 #include <unordered_set>
 
 #include <tbb/blocked_range.h>
-#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_sort.h>
 
@@ -21,8 +20,6 @@ namespace {
 
 constexpr std::array<std::array<int, 3>, 6> kFaceNeighbours{
     {{-1, 0, 0}, {1, 0, 0}, {0, -1, 0}, {0, 1, 0}, {0, 0, -1}, {0, 0, 1}}};
-
-void sort_unique(std::vector<std::uint64_t>& keys);
 
 class Sampler {
  public:
@@ -55,26 +52,28 @@ class Sampler {
   /// Queues the vertices that generate(n, request) requests for n in [0, count), in parallel (each
   /// request returns the vertex's row, or GridIndex::kNone when it was queued): in
   /// an online update nearly all of them have values already, and the serial look-ups of those
-  /// (hundreds of thousands per pass) were most of the octree passes' time. Queued in key order.
+  /// (hundreds of thousands per pass) were most of the octree passes' time. Queued in the order
+  /// of n (each fixed chunk of n lists its own; sorting them instead cost more than the look-ups).
   template <typename Generate>
   void request_each(std::size_t count, const Generate& generate) {
-    tbb::enumerable_thread_specific<std::vector<std::uint64_t>> missing;
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 512), [&](const tbb::blocked_range<std::size_t>& r) {
-      std::vector<std::uint64_t>& local = missing.local();
-      // Returns the vertex's row, or GridIndex::kNone when it is queued for evaluation.
-      const auto request_one = [&](int i, int j, int k) {
-        const std::uint64_t key = grid_key(i, j, k);
-        const std::uint32_t row = valid_row(key);
-        if (row == GridIndex::kNone) local.push_back(key);
-        return row;
-      };
-      for (std::size_t n = r.begin(); n < r.end(); ++n) generate(n, request_one);
+    constexpr std::size_t kChunk = 512;
+    std::vector<std::vector<std::uint64_t>> missing((count + kChunk - 1) / kChunk);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, missing.size(), 1), [&](const tbb::blocked_range<std::size_t>& r) {
+      for (std::size_t chunk = r.begin(); chunk < r.end(); ++chunk) {
+        std::vector<std::uint64_t>& local = missing[chunk];
+        // Returns the vertex's row, or GridIndex::kNone when it is queued for evaluation.
+        const auto request_one = [&](int i, int j, int k) {
+          const std::uint64_t key = grid_key(i, j, k);
+          const std::uint32_t row = valid_row(key);
+          if (row == GridIndex::kNone) local.push_back(key);
+          return row;
+        };
+        for (std::size_t n = chunk * kChunk; n < std::min(count, (chunk + 1) * kChunk); ++n) generate(n, request_one);
+      }
     });
-    std::vector<std::uint64_t> keys;
-    for (const std::vector<std::uint64_t>& local : missing) keys.insert(keys.end(), local.begin(), local.end());
-    sort_unique(keys);
-    for (const std::uint64_t key : keys)
-      if (pending_keys_.insert(key, 0)) pending_.push_back(key);
+    for (const std::vector<std::uint64_t>& local : missing)
+      for (const std::uint64_t key : local)
+        if (pending_keys_.insert(key, 0)) pending_.push_back(key);
   }
   /// Evaluates every queued vertex in one parallel batch.
   void flush() {
