@@ -78,13 +78,14 @@ std::vector<TriangleMesh> extract_label_surfaces(const SampledField& field) {
   const int fc = field.function_count;
   const std::size_t stride = static_cast<std::size_t>(fc);
   std::vector<TriangleMesh> meshes(static_cast<std::size_t>(std::max(0, fc - 1)));
-  // The band's corners (sorted keys), their rows and labels, each looked up once; the cells
-  // find their corners among them by walking the sorted lists (the look-ups of every cell's
+  // The band's corners (sorted keys), their rows and labels, each looked up once; the merge that
+  // lists them gives each cell's corners among them (the look-ups of every cell's
   // eight corners were most of the mesher's time). Corners numbered in key order also keep the
   // edge table below small and its accesses near each other, as the cells are in key order too.
   const std::vector<std::uint64_t>& cells = field.surface_cells;
-  const std::vector<std::uint64_t> corners =
-      union_of_shifts(cells, kCubeCornerShifts);
+  // Per cell, its cube corner c (offset (c & 1, (c >> 1) & 1, (c >> 2) & 1)) in `corners`.
+  std::vector<std::uint32_t> cell_corners;
+  const std::vector<std::uint64_t> corners = union_of_shifts(cells, kCubeCornerShifts, &cell_corners);
   std::vector<std::uint32_t> corner_rows(corners.size());
   std::vector<std::uint16_t> corner_labels(corners.size());  // labels are function indices
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, corners.size(), 1024),
@@ -99,9 +100,6 @@ std::vector<TriangleMesh> extract_label_surfaces(const SampledField& field) {
                         corner_labels[n] = static_cast<std::uint16_t>(best);
                       }
                     });
-  // Per cell, its cube corner c (offset (c & 1, (c >> 1) & 1, (c >> 2) & 1)) in `corners`.
-  std::vector<std::uint32_t> cell_corners(cells.size() * 8);
-  neighbour_positions(cells, kCubeCornerShifts, corners, cell_corners.data(), 8);
   // Per material, the triangles of each cell are listed in parallel, in chunks of cells of a
   // fixed size, and numbered in one serial pass in cell order: the vertex order (and so the
   // mesh) is that of a serial walk over the band, whatever the thread count. A triangle is its

@@ -134,22 +134,6 @@ bool contains(const std::vector<std::uint64_t>& sorted, std::uint64_t key) {
   return std::binary_search(sorted.begin(), sorted.end(), key);
 }
 
-// Per key of `keys`, the positions in `targets` of its 7-point stencil (kStencilShifts), seven
-// each; `targets` holds every stencil's keys (both lists sorted, unique). The neighbours along k
-// are next to the centre (nothing lies between keys one apart); the others are walked to.
-std::vector<std::uint32_t> stencil_positions(const std::vector<std::uint64_t>& keys,
-                                             const std::vector<std::uint64_t>& targets) {
-  std::vector<std::uint32_t> stencils(keys.size() * 7);
-  neighbour_positions(keys, {kStencilShifts[0], kStencilShifts[1], kStencilShifts[2], kStencilShifts[3], kStencilShifts[4]},
-                      targets, stencils.data(), 7);
-  static_assert(kStencilShifts[5] == -kKeyStepK && kStencilShifts[6] == kKeyStepK);
-  for_rows(keys.size(), [&](std::size_t n) {
-    stencils[n * 7 + 5] = stencils[n * 7] - 1;
-    stencils[n * 7 + 6] = stencils[n * 7] + 1;
-  });
-  return stencils;
-}
-
 // The argmax label of a row of values (the lowest index wins ties), as SampledField::label.
 int row_label(const SampledField& f, std::uint32_t row) {
   const double* values = f.values.data() + static_cast<std::size_t>(row) * static_cast<std::size_t>(f.function_count);
@@ -531,17 +515,18 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
       union_of_shifts(field.surface_cells, kCubeCornerShifts);
   // Laplacian domain: the nodes and their six neighbours, sorted (the sweeps do not depend on
   // the order).
-  const std::vector<std::uint64_t> laplacian_nodes =
-      union_of_shifts(nodes, {-kKeyStepK, kKeyStepK, -kKeyStepJ, kKeyStepJ, -kKeyStepI, kKeyStepI});
+  // node_stencil: per node, its 7-point stencil's positions in laplacian_nodes (kStencilShifts).
+  std::vector<std::uint32_t> node_stencil;
+  const std::vector<std::uint64_t> laplacian_nodes = union_of_shifts(nodes, kStencilShifts, &node_stencil);
   // Every vertex the bi-Laplacian of a node reads: the Laplacian nodes and their neighbours,
   // sorted. Each is looked up (or evaluated) once and its values copied into `smoothed`, where
   // the sweeps run: in key order, a vertex's neighbours along k lie next to it and those along
   // j and i a row or a slice away, where the field's rows (in the order they were first
-  // evaluated) scattered every stencil over memory. The stencils find their vertices by walking
-  // the sorted lists (neighbour_positions); looking up the seven vertices of every Laplacian and
+  // evaluated) scattered every stencil over memory. The merges that build the sets give each
+  // stencil's positions (union_of_shifts); looking up the seven vertices of every Laplacian and
   // bi-Laplacian stencil in the grid index, as before, cost more than the sweeps.
-  const std::vector<std::uint64_t> stencil_vertices =
-      union_of_shifts(laplacian_nodes, {-kKeyStepK, kKeyStepK, -kKeyStepJ, kKeyStepJ, -kKeyStepI, kKeyStepI});
+  std::vector<std::uint32_t> lap_stencil;  // per Laplacian node, as node_stencil in stencil_vertices
+  const std::vector<std::uint64_t> stencil_vertices = union_of_shifts(laplacian_nodes, kStencilShifts, &lap_stencil);
   const std::size_t fc = static_cast<std::size_t>(function_count);
   std::vector<std::uint32_t> stencil_rows(stencil_vertices.size());
   sampler.request_each(stencil_vertices.size(), [&](std::size_t n, const auto& request) {
@@ -556,10 +541,7 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
     if (stencil_rows[n] == GridIndex::kNone) stencil_rows[n] = field.index.at(stencil_vertices[n]);
     std::copy_n(values + stencil_rows[n] * fc, fc, smoothed.data() + n * fc);
   });
-  // Per Laplacian node, its stencil's positions in stencil_vertices (centre, 6 neighbours); per
-  // node, its stencil's positions in laplacian_nodes and its own in stencil_vertices.
-  const std::vector<std::uint32_t> lap_stencil = stencil_positions(laplacian_nodes, stencil_vertices);
-  const std::vector<std::uint32_t> node_stencil = stencil_positions(nodes, laplacian_nodes);
+  // Per node, its position in stencil_vertices.
   std::vector<std::uint32_t> node_position(nodes.size());
   for_rows(nodes.size(), [&](std::size_t n) {
     node_position[n] = lap_stencil[static_cast<std::size_t>(node_stencil[n * 7]) * 7];

@@ -1,4 +1,5 @@
-// The octree's bookkeeping: the grid-vertex index (direct table and hash), the contour keys an
+// The octree's bookkeeping: the grid-vertex index (direct table and hash), the sorted key sets of
+// the smoothing and the mesher, the contour keys an
 // online engine merges slice by slice, and the field it keeps from one update to the next.
 #include <gtest/gtest.h>
 
@@ -9,6 +10,7 @@
 
 #include "grid_index.hpp"
 #include "octree_field.hpp"
+#include "sorted_keys.hpp"
 
 namespace sonoshape::recon {
 namespace {
@@ -173,6 +175,33 @@ TEST(Octree, AKeptFieldSampledAgainEqualsAFreshField) {
     for (int l = 0; l < 3; ++l) ASSERT_EQ(a[l], b[l]) << "row " << r << " function " << l;
   }
   EXPECT_EQ(read, fresh.keys.size());
+}
+
+// The neighbour sets of the smoothing and the mesher: the merged shifted copies must be the sorted
+// set of all shifted keys, and each key's recorded positions must hold its shifted keys.
+TEST(Octree, UnionOfShiftsListsEveryShiftedKeyAndWhereItLies) {
+  std::mt19937 rng(5);
+  std::uniform_int_distribution<int> index(0, 12);
+  std::vector<std::uint64_t> keys;
+  for (int n = 0; n < 400; ++n) keys.push_back(grid_key(index(rng), index(rng), index(rng)));
+  std::sort(keys.begin(), keys.end());
+  keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
+  for (const auto& shifts : {std::vector<std::int64_t>(kStencilShifts.begin(), kStencilShifts.end()),
+                             std::vector<std::int64_t>(kCubeCornerShifts.begin(), kCubeCornerShifts.end())}) {
+    std::vector<std::uint32_t> positions;
+    const std::vector<std::uint64_t> merged = union_of_shifts(keys, shifts, &positions);
+    std::vector<std::uint64_t> expected;
+    for (const std::uint64_t key : keys)
+      for (const std::int64_t shift : shifts) expected.push_back(key + static_cast<std::uint64_t>(shift));
+    std::sort(expected.begin(), expected.end());
+    expected.erase(std::unique(expected.begin(), expected.end()), expected.end());
+    EXPECT_EQ(merged, expected);
+    ASSERT_EQ(positions.size(), keys.size() * shifts.size());
+    for (std::size_t n = 0; n < keys.size(); ++n)
+      for (std::size_t c = 0; c < shifts.size(); ++c)
+        ASSERT_EQ(merged[positions[n * shifts.size() + c]], keys[n] + static_cast<std::uint64_t>(shifts[c]))
+            << "key " << n << " shift " << c;
+  }
 }
 
 }  // namespace
