@@ -10,6 +10,8 @@
 #include <iterator>
 #include <vector>
 
+#include <tbb/parallel_for.h>
+
 namespace sonoshape::recon {
 
 // The union of the copies of `sorted` (sorted, unique keys) shifted by each of `shifts` (at most
@@ -22,31 +24,61 @@ namespace sonoshape::recon {
 template <typename Shifts = std::initializer_list<std::int64_t>>
 std::vector<std::uint64_t> union_of_shifts(const std::vector<std::uint64_t>& sorted, const Shifts& shifts,
                                            std::vector<std::uint32_t>* positions = nullptr) {
+  constexpr std::uint64_t kDone = ~std::uint64_t{0};  // the head of a copy that is used up
   std::array<std::uint64_t, 8> offset{};  // per copy
-  std::array<std::size_t, 8> next{};      // per copy, its next key
   std::size_t copies = 0;
   for (const std::int64_t shift : shifts) offset[copies++] = static_cast<std::uint64_t>(shift);
   const std::size_t count = sorted.size();
   if (positions != nullptr) positions->resize(count * copies);
-  std::vector<std::uint64_t> result;
-  result.reserve(2 * count);
-  for (;;) {
-    std::uint64_t least = ~std::uint64_t{0};
-    bool any = false;
+  // The output is merged in parts, in parallel: part p holds the shifted keys in [split[p],
+  // split[p + 1]), where each copy's keys start at lower_bound(split - offset).
+  constexpr std::size_t kMinPart = 16384;
+  const std::size_t part_count = std::clamp<std::size_t>(count / kMinPart, 1, 64);
+  std::vector<std::uint64_t> split(part_count + 1);
+  split[0] = 0;
+  split[part_count] = kDone;
+  for (std::size_t p = 1; p < part_count; ++p) split[p] = sorted[count * p / part_count];
+  std::vector<std::array<std::size_t, 8>> first(part_count + 1);  // per part and copy, its first key
+  for (std::size_t p = 0; p <= part_count; ++p)
     for (std::size_t c = 0; c < copies; ++c)
-      if (next[c] < count) {
-        least = std::min(least, sorted[next[c]] + offset[c]);
-        any = true;
-      }
-    if (!any) break;
-    const auto position = static_cast<std::uint32_t>(result.size());
-    result.push_back(least);
+      first[p][c] = p == 0 ? 0
+                    : p == part_count
+                        ? count
+                        : static_cast<std::size_t>(std::lower_bound(sorted.begin(), sorted.end(), split[p] - offset[c]) -
+                                                   sorted.begin());
+  std::vector<std::vector<std::uint64_t>> parts(part_count);
+  tbb::parallel_for(std::size_t{0}, part_count, [&](std::size_t p) {
+    std::vector<std::uint64_t>& out = parts[p];
+    out.reserve(2 * (first[p + 1][0] - first[p][0]) + 16);
+    std::array<std::size_t, 8> next = first[p];
+    std::array<std::uint64_t, 8> head;
+    head.fill(kDone);
+    const auto load = [&](std::size_t c) { head[c] = next[c] < first[p + 1][c] ? sorted[next[c]] + offset[c] : kDone; };
+    for (std::size_t c = 0; c < copies; ++c) load(c);
+    for (;;) {
+      std::uint64_t least = head[0];
+      for (std::size_t c = 1; c < copies; ++c) least = std::min(least, head[c]);
+      if (least == kDone) break;
+      const auto position = static_cast<std::uint32_t>(out.size());  // within the part, for now
+      out.push_back(least);
+      for (std::size_t c = 0; c < copies; ++c)
+        if (head[c] == least) {
+          if (positions != nullptr) (*positions)[next[c] * copies + c] = position;
+          ++next[c];
+          load(c);
+        }
+    }
+  });
+  std::vector<std::size_t> base(part_count + 1, 0);
+  for (std::size_t p = 0; p < part_count; ++p) base[p + 1] = base[p] + parts[p].size();
+  std::vector<std::uint64_t> result(base[part_count]);
+  tbb::parallel_for(std::size_t{0}, part_count, [&](std::size_t p) {
+    std::copy(parts[p].begin(), parts[p].end(), result.begin() + static_cast<std::ptrdiff_t>(base[p]));
+    if (positions == nullptr || p == 0) return;
     for (std::size_t c = 0; c < copies; ++c)
-      if (next[c] < count && sorted[next[c]] + offset[c] == least) {
-        if (positions != nullptr) (*positions)[next[c] * copies + c] = position;
-        ++next[c];
-      }
-  }
+      for (std::size_t n = first[p][c]; n < first[p + 1][c]; ++n)
+        (*positions)[n * copies + c] += static_cast<std::uint32_t>(base[p]);
+  });
   return result;
 }
 /// The key steps of one grid step along k, j and i (see grid_key).

@@ -181,9 +181,9 @@ TEST(Octree, AKeptFieldSampledAgainEqualsAFreshField) {
 // set of all shifted keys, and each key's recorded positions must hold its shifted keys.
 TEST(Octree, UnionOfShiftsListsEveryShiftedKeyAndWhereItLies) {
   std::mt19937 rng(5);
-  std::uniform_int_distribution<int> index(0, 12);
-  std::vector<std::uint64_t> keys;
-  for (int n = 0; n < 400; ++n) keys.push_back(grid_key(index(rng), index(rng), index(rng)));
+  std::uniform_int_distribution<int> index(0, 60);
+  std::vector<std::uint64_t> keys;  // enough that the merge runs in several parts
+  for (int n = 0; n < 80000; ++n) keys.push_back(grid_key(index(rng), index(rng), index(rng)));
   std::sort(keys.begin(), keys.end());
   keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
   for (const auto& shifts : {std::vector<std::int64_t>(kStencilShifts.begin(), kStencilShifts.end()),
@@ -196,6 +196,7 @@ TEST(Octree, UnionOfShiftsListsEveryShiftedKeyAndWhereItLies) {
     std::sort(expected.begin(), expected.end());
     expected.erase(std::unique(expected.begin(), expected.end()), expected.end());
     EXPECT_EQ(merged, expected);
+    ASSERT_GT(keys.size(), 3u * 16384u);
     ASSERT_EQ(positions.size(), keys.size() * shifts.size());
     for (std::size_t n = 0; n < keys.size(); ++n)
       for (std::size_t c = 0; c < shifts.size(); ++c)
