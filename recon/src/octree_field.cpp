@@ -260,7 +260,7 @@ void close_band(SampledField& field, Sampler& sampler, const std::vector<std::ui
     requested_mixed_of(candidates, frontier, frontier_rows);
     band.insert(band.end(), frontier.begin(), frontier.end());
   }
-  std::sort(band.begin(), band.end());
+  tbb::parallel_sort(band.begin(), band.end());
   field.surface_cells = std::move(band);
 }
 

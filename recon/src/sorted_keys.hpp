@@ -30,6 +30,7 @@ std::vector<std::uint64_t> union_of_shifts(const std::vector<std::uint64_t>& sor
   for (const std::int64_t shift : shifts) offset[copies++] = static_cast<std::uint64_t>(shift);
   const std::size_t count = sorted.size();
   if (positions != nullptr) positions->resize(count * copies);
+  if (count == 0) return {};
   // The output is merged in parts, in parallel: part p holds the shifted keys in [split[p],
   // split[p + 1]), where each copy's keys start at lower_bound(split - offset).
   constexpr std::size_t kMinPart = 16384;
@@ -53,20 +54,26 @@ std::vector<std::uint64_t> union_of_shifts(const std::vector<std::uint64_t>& sor
     std::array<std::size_t, 8> next = first[p];
     std::array<std::uint64_t, 8> head;
     head.fill(kDone);
-    const auto load = [&](std::size_t c) { head[c] = next[c] < first[p + 1][c] ? sorted[next[c]] + offset[c] : kDone; };
+    // Branch-free: which copies hold the least key is a coin toss per key, and the branches on it
+    // were mispredicted most of the time.
+    const auto load = [&](std::size_t c) {
+      const std::uint64_t key = sorted[std::min(next[c], count - 1)] + offset[c];
+      head[c] = next[c] < first[p + 1][c] ? key : kDone;
+    };
     for (std::size_t c = 0; c < copies; ++c) load(c);
+    std::uint32_t unused = 0;  // where the positions of copies without the least key go
     for (;;) {
       std::uint64_t least = head[0];
       for (std::size_t c = 1; c < copies; ++c) least = std::min(least, head[c]);
       if (least == kDone) break;
       const auto position = static_cast<std::uint32_t>(out.size());  // within the part, for now
       out.push_back(least);
-      for (std::size_t c = 0; c < copies; ++c)
-        if (head[c] == least) {
-          if (positions != nullptr) (*positions)[next[c] * copies + c] = position;
-          ++next[c];
-          load(c);
-        }
+      for (std::size_t c = 0; c < copies; ++c) {
+        const bool here = head[c] == least;
+        if (positions != nullptr) *(here ? &(*positions)[next[c] * copies + c] : &unused) = position;
+        next[c] += here ? 1 : 0;
+        load(c);
+      }
     }
   });
   std::vector<std::size_t> base(part_count + 1, 0);

@@ -203,6 +203,10 @@ TEST(Octree, UnionOfShiftsListsEveryShiftedKeyAndWhereItLies) {
         ASSERT_EQ(merged[positions[n * shifts.size() + c]], keys[n] + static_cast<std::uint64_t>(shifts[c]))
             << "key " << n << " shift " << c;
   }
+  // An empty band has no neighbours.
+  std::vector<std::uint32_t> positions(3, 0);
+  EXPECT_TRUE(union_of_shifts({}, kStencilShifts, &positions).empty());
+  EXPECT_TRUE(positions.empty());
 }
 
 }  // namespace
