@@ -6,6 +6,7 @@
 #include <cmath>
 #include <initializer_list>
 #include <iterator>
+#include <type_traits>
 #include <unordered_set>
 
 #include <tbb/blocked_range.h>
@@ -566,27 +567,35 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
   // moves a node.
   constexpr double kDamping = 0.5 / 42.0;
   std::vector<double> laplacian(laplacian_nodes.size() * fc);
-  for (int iteration = 0; iteration < iterations; ++iteration) {
-    for_rows(laplacian_nodes.size(), [&](std::size_t n) {
-      const std::uint32_t* stencil = &lap_stencil[n * 7];
-      double* out = &laplacian[n * fc];
-      for (std::size_t l = 0; l < fc; ++l) {
-        double sum = -6.0 * smoothed[stencil[0] * fc + l];
-        for (int d = 1; d <= 6; ++d) sum += smoothed[stencil[d] * fc + l];
-        out[l] = sum;
-      }
-    });
-    for_rows(nodes.size(), [&](std::size_t n) {
-      if (node_fixed[n]) return;
-      const std::uint32_t* stencil = &node_stencil[n * 7];
-      double* value = &smoothed[node_position[n] * fc];
-      for (std::size_t l = 0; l < fc; ++l) {
-        double sum = -6.0 * laplacian[stencil[0] * fc + l];
-        for (int d = 1; d <= 6; ++d) sum += laplacian[stencil[d] * fc + l];
-        value[l] -= kDamping * sum;
-      }
-    });
-  }
+  // The sweeps, for `width` functions per vertex: a compile-time width for the usual one and two
+  // labels (two and three functions) lets the compiler unroll the functions' loops.
+  const auto sweeps = [&](auto width) {
+    const std::size_t w = width;
+    for (int iteration = 0; iteration < iterations; ++iteration) {
+      for_rows(laplacian_nodes.size(), [&](std::size_t n) {
+        const std::uint32_t* stencil = &lap_stencil[n * 7];
+        double* out = &laplacian[n * w];
+        for (std::size_t l = 0; l < w; ++l) {
+          double sum = -6.0 * smoothed[stencil[0] * w + l];
+          for (int d = 1; d <= 6; ++d) sum += smoothed[stencil[d] * w + l];
+          out[l] = sum;
+        }
+      });
+      for_rows(nodes.size(), [&](std::size_t n) {
+        if (node_fixed[n]) return;
+        const std::uint32_t* stencil = &node_stencil[n * 7];
+        double* value = &smoothed[node_position[n] * w];
+        for (std::size_t l = 0; l < w; ++l) {
+          double sum = -6.0 * laplacian[stencil[0] * w + l];
+          for (int d = 1; d <= 6; ++d) sum += laplacian[stencil[d] * w + l];
+          value[l] -= kDamping * sum;
+        }
+      });
+    }
+  };
+  if (fc == 2) sweeps(std::integral_constant<std::size_t, 2>{});
+  else if (fc == 3) sweeps(std::integral_constant<std::size_t, 3>{});
+  else sweeps(fc);
   for_rows(nodes.size(), [&](std::size_t n) {
     if (!node_fixed[n]) std::copy_n(&smoothed[node_position[n] * fc], fc, values + node_row(n) * fc);
   });
