@@ -106,7 +106,7 @@ std::vector<TriangleMesh> extract_label_surfaces(const SampledField& field) {
   // cell and, per vertex, the cube corners of its edge (inside, outside), 3 bits each.
   struct CellTriangle {
     std::uint32_t cell;
-    std::uint32_t corners;  // vertex e: inside corner at bits 6e, outside corner at bits 6e + 3
+    std::uint32_t edge_corners;  // vertex e: inside corner at bits 6e, outside corner at bits 6e + 3
   };
   constexpr std::size_t kChunk = 1024;
   const std::size_t chunk_count = (cells.size() + kChunk - 1) / kChunk;
@@ -134,10 +134,10 @@ std::vector<TriangleMesh> extract_label_surfaces(const SampledField& field) {
             for (int v = 0; v < 4; ++v)
               if ((inside >> tets[t][static_cast<std::size_t>(v)]) & 1) mask |= 1 << v;
             for (const Triangle& tri : table.cases[t][static_cast<std::size_t>(mask)]) {
-              std::uint32_t corners = 0;
+              std::uint32_t edge_corners = 0;
               for (std::size_t e = 0; e < 3; ++e)
-                corners |= static_cast<std::uint32_t>(tri.edges[e][0] | (tri.edges[e][1] << 3)) << (6 * e);
-              out.push_back({static_cast<std::uint32_t>(n), corners});
+                edge_corners |= static_cast<std::uint32_t>(tri.edges[e][0] | (tri.edges[e][1] << 3)) << (6 * e);
+              out.push_back({static_cast<std::uint32_t>(n), edge_corners});
             }
           }
         }
@@ -159,8 +159,8 @@ std::vector<TriangleMesh> extract_label_surfaces(const SampledField& field) {
         const std::uint32_t* cube = &cell_corners[static_cast<std::size_t>(triangle.cell) * 8];
         std::array<std::uint32_t, 3> ids;
         for (std::size_t e = 0; e < 3; ++e) {
-          const int ca = static_cast<int>(triangle.corners >> (6 * e)) & 7;        // inside corner
-          const int cb = static_cast<int>(triangle.corners >> (6 * e + 3)) & 7;    // outside corner
+          const int ca = static_cast<int>(triangle.edge_corners >> (6 * e)) & 7;        // inside corner
+          const int cb = static_cast<int>(triangle.edge_corners >> (6 * e + 3)) & 7;    // outside corner
           std::uint32_t& vertex = vertex_of_edge[static_cast<std::size_t>(cube[ca & cb]) * 8 + static_cast<std::size_t>(ca ^ cb)];
           if (vertex == kNoVertex) {
             vertex = static_cast<std::uint32_t>(mesh.vertices.size());
