@@ -557,11 +557,19 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
   const auto node_row = [&](std::size_t n) { return stencil_rows[node_position[n]]; };
   std::vector<int> label_before(nodes.size());
   for_rows(nodes.size(), [&](std::size_t n) { label_before[n] = row_label(field, node_row(n)); });
-  for (std::size_t n = 0; n < nodes.size(); ++n) {
-    if (node_fixed[n]) continue;
-    field.changed_rows.push_back(node_row(n));
-    field.changed_values.insert(field.changed_values.end(), values + node_row(n) * fc, values + (node_row(n) + 1) * fc);
-  }
+  // The rows the sweeps move and their values before, in node order (see changed_rows), filled
+  // in parallel at each node's place among the moved ones.
+  std::vector<std::uint32_t> moved_before(nodes.size() + 1, 0);
+  for (std::size_t n = 0; n < nodes.size(); ++n) moved_before[n + 1] = moved_before[n] + (node_fixed[n] ? 0 : 1);
+  const std::size_t first_change = field.changed_rows.size();
+  field.changed_rows.resize(first_change + moved_before[nodes.size()]);
+  field.changed_values.resize(field.changed_rows.size() * fc);
+  for_rows(nodes.size(), [&](std::size_t n) {
+    if (node_fixed[n]) return;
+    const std::size_t change = first_change + moved_before[n];
+    field.changed_rows[change] = node_row(n);
+    std::copy_n(values + node_row(n) * fc, fc, field.changed_values.data() + change * fc);
+  });
   // Damped Jacobi on the bi-Laplacian (7-point Laplacian squared: diagonal 42); the damping
   // keeps the highest grid frequencies stable. Each sweep computes every Laplacian before it
   // moves a node.
