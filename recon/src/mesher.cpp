@@ -116,6 +116,7 @@ std::vector<TriangleMesh> extract_label_surfaces(const SampledField& field) {
   // indexes a flat table.
   constexpr std::uint32_t kNoVertex = 0xffffffffu;
   std::vector<std::uint32_t> vertex_of_edge(corners.size() * 8);
+  std::vector<double> corner_g(corners.size());
   for (int material = 1; material < fc; ++material) {
     TriangleMesh& mesh = meshes[static_cast<std::size_t>(material - 1)];
     std::fill(vertex_of_edge.begin(), vertex_of_edge.end(), kNoVertex);
@@ -143,13 +144,19 @@ std::vector<TriangleMesh> extract_label_surfaces(const SampledField& field) {
         }
       }
     });
-    // g = f_m - max_{k != m} f_k: positive inside the label's region.
-    auto g = [&](const double* row) {
-      double other = -std::numeric_limits<double>::infinity();
-      for (int l = 0; l < fc; ++l)
-        if (l != material) other = std::max(other, row[l]);
-      return row[material] - other;
-    };
+    // g = f_m - max_{k != m} f_k per corner, positive inside the label's region: computed in
+    // parallel and read in corner order below (reading the field's rows there, scattered over
+    // memory, was most of the serial pass).
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, corners.size(), 4096),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t n = r.begin(); n < r.end(); ++n) {
+                          const double* row = field.values.data() + corner_rows[n] * stride;
+                          double other = -std::numeric_limits<double>::infinity();
+                          for (int l = 0; l < fc; ++l)
+                            if (l != material) other = std::max(other, row[l]);
+                          corner_g[n] = row[material] - other;
+                        }
+                      });
     std::size_t triangle_count = 0;
     for (const std::vector<CellTriangle>& triangles : chunk_triangles) triangle_count += triangles.size();
     mesh.triangles.reserve(triangle_count);
@@ -164,8 +171,8 @@ std::vector<TriangleMesh> extract_label_surfaces(const SampledField& field) {
           std::uint32_t& vertex = vertex_of_edge[static_cast<std::size_t>(cube[ca & cb]) * 8 + static_cast<std::size_t>(ca ^ cb)];
           if (vertex == kNoVertex) {
             vertex = static_cast<std::uint32_t>(mesh.vertices.size());
-            const double ga = std::max(0.0, g(field.values.data() + corner_rows[cube[ca]] * stride));
-            const double gb = std::min(0.0, g(field.values.data() + corner_rows[cube[cb]] * stride));
+            const double ga = std::max(0.0, corner_g[cube[ca]]);
+            const double gb = std::min(0.0, corner_g[cube[cb]]);
             const double t_param = ga - gb > 0.0 ? ga / (ga - gb) : 0.5;
             int i, j, k;
             grid_unkey(cells[triangle.cell], i, j, k);

@@ -512,11 +512,9 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
   const int function_count = field.function_count;
   Stopwatch smoothing_clock;
   // Smoothing nodes: corners of surface cells (the band is sorted), sorted.
-  const std::vector<std::uint64_t> nodes =
-      union_of_shifts(field.surface_cells, kCubeCornerShifts);
-  // Laplacian domain: the nodes and their six neighbours, sorted (the sweeps do not depend on
-  // the order).
-  // node_stencil: per node, its 7-point stencil's positions in laplacian_nodes (kStencilShifts).
+  const std::vector<std::uint64_t> nodes = union_of_shifts(field.surface_cells, kCubeCornerShifts);
+  // Laplacian domain: the nodes and their six neighbours, sorted; node_stencil: per node, its
+  // 7-point stencil's positions in laplacian_nodes (kStencilShifts).
   std::vector<std::uint32_t> node_stencil;
   const std::vector<std::uint64_t> laplacian_nodes = union_of_shifts(nodes, kStencilShifts, &node_stencil);
   // Every vertex the bi-Laplacian of a node reads: the Laplacian nodes and their neighbours,
