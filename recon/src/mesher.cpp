@@ -91,13 +91,8 @@ std::vector<TriangleMesh> extract_label_surfaces(const SampledField& field) {
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, corners.size(), 1024),
                     [&](const tbb::blocked_range<std::size_t>& r) {
                       for (std::size_t n = r.begin(); n < r.end(); ++n) {
-                        const std::uint32_t row = field.index.at(corners[n]);
-                        const double* values = field.values.data() + row * stride;
-                        int best = 0;  // the argmax, lowest index on ties (SampledField::label)
-                        for (int l = 1; l < fc; ++l)
-                          if (values[l] > values[best]) best = l;
-                        corner_rows[n] = row;
-                        corner_labels[n] = static_cast<std::uint16_t>(best);
+                        corner_rows[n] = field.index.at(corners[n]);
+                        corner_labels[n] = static_cast<std::uint16_t>(field.row_label(corner_rows[n]));
                       }
                     });
   // Per material, the triangles of each cell are listed in parallel, in chunks of cells of a

@@ -135,15 +135,6 @@ bool contains(const std::vector<std::uint64_t>& sorted, std::uint64_t key) {
   return std::binary_search(sorted.begin(), sorted.end(), key);
 }
 
-// The argmax label of a row of values (the lowest index wins ties), as SampledField::label.
-int row_label(const SampledField& f, std::uint32_t row) {
-  const double* values = f.values.data() + static_cast<std::size_t>(row) * static_cast<std::size_t>(f.function_count);
-  int best = 0;
-  for (int l = 1; l < f.function_count; ++l)
-    if (values[l] > values[best]) best = l;
-  return best;
-}
-
 // The cell whose min corner is (i, j, k) with side `step`, from its corners' rows as a request
 // pass found them: fills those it left at GridIndex::kNone (evaluated since), and tells whether
 // the corners' labels differ. The mixed tests of the refinement and the band closure read these
@@ -153,9 +144,9 @@ bool corners_mixed(const SampledField& f, std::array<std::uint32_t, 8>& rows, in
     if (rows[static_cast<std::size_t>(corner)] == GridIndex::kNone)
       rows[static_cast<std::size_t>(corner)] = f.index.at(
           grid_key(i + (corner & 1) * step, j + ((corner >> 1) & 1) * step, k + ((corner >> 2) & 1) * step));
-  const int first = row_label(f, rows[0]);
+  const int first = f.row_label(rows[0]);
   for (std::size_t corner = 1; corner < 8; ++corner)
-    if (row_label(f, rows[corner]) != first) return true;
+    if (f.row_label(rows[corner]) != first) return true;
   return false;
 }
 
@@ -164,19 +155,20 @@ bool corners_mixed(const SampledField& f, std::array<std::uint32_t, 8>& rows, in
 constexpr std::array<std::array<int, 4>, 6> kFaceCorners{{{0, 2, 4, 6}, {1, 3, 5, 7}, {0, 1, 4, 5},
                                                           {2, 3, 6, 7}, {0, 1, 2, 3}, {4, 5, 6, 7}}};
 
-// Keeps the mixed cells among `seeds` (they may repeat; `seeds_mixed`: all are mixed, with
-// current corner values, as the refinement's finest cells, whose corner rows `seed_rows` then
-// gives) and adds, until closed, every finest cell across a face with mixed corners: otherwise
-// the surface would end at that face. `closed` is a band that was closed before labels changed at
-// corners of seeds only: its other cells kept their corner labels, so they are still mixed (every
-// band cell is) and their faces need not be expanded again. Result in field.surface_cells.
-// `in_band` is scratch space (a direct table is costly to allocate). The faces are tested on the
-// corner rows the mixed tests found (looking the four corners of each of six faces up again cost
-// more than the rest of the closure).
-void close_band(SampledField& field, Sampler& sampler, const std::vector<std::uint64_t>& seeds, bool seeds_mixed,
-                GridIndex& in_band, int resolution, const std::vector<std::uint64_t>& closed = {},
-                const std::vector<std::array<std::uint32_t, 8>>& seed_rows = {}) {
-  using CornerRows = std::array<std::uint32_t, 8>;
+// Keeps the mixed cells among `seeds` (they may repeat; with `seed_rows`, all are mixed, with
+// current corner values, as the refinement's finest cells, and those are their corner rows) and
+// adds, until closed, every finest cell across a face with mixed corners: otherwise the surface
+// would end at that face. `closed` is a band that was closed before labels changed at corners of
+// seeds only: its other cells kept their corner labels, so they are still mixed (every band cell
+// is) and their faces need not be expanded again. Result in field.surface_cells. `in_band` is
+// scratch space (a direct table is costly to allocate). The faces are tested on the corner rows
+// the mixed tests found (looking the four corners of each of six faces up again cost more than
+// the rest of the closure).
+using CornerRows = std::array<std::uint32_t, 8>;
+
+void close_band(SampledField& field, Sampler& sampler, const std::vector<std::uint64_t>& seeds,
+                const std::vector<CornerRows>* seed_rows, GridIndex& in_band, int resolution,
+                const std::vector<std::uint64_t>& closed = {}) {
   in_band.clear();
   std::vector<std::uint64_t> unique_seeds;
   std::vector<CornerRows> unique_seed_rows;
@@ -184,7 +176,7 @@ void close_band(SampledField& field, Sampler& sampler, const std::vector<std::ui
   for (std::size_t n = 0; n < seeds.size(); ++n)
     if (in_band.insert(seeds[n], 0)) {
       unique_seeds.push_back(seeds[n]);
-      if (seeds_mixed) unique_seed_rows.push_back(seed_rows[n]);
+      if (seed_rows != nullptr) unique_seed_rows.push_back((*seed_rows)[n]);
     }
   // The mixed cells of `cells` and their corner rows, in their order, their corners evaluated
   // first where they have no value (the tests run in parallel).
@@ -215,7 +207,7 @@ void close_band(SampledField& field, Sampler& sampler, const std::vector<std::ui
   };
   std::vector<std::uint64_t> frontier;
   std::vector<CornerRows> frontier_rows;
-  if (seeds_mixed) {
+  if (seed_rows != nullptr) {
     frontier = std::move(unique_seeds);
     frontier_rows = std::move(unique_seed_rows);
   } else {
@@ -232,7 +224,7 @@ void close_band(SampledField& field, Sampler& sampler, const std::vector<std::ui
       int i, j, k;
       grid_unkey(frontier[n], i, j, k);
       std::array<int, 8> labels;
-      for (std::size_t c = 0; c < 8; ++c) labels[c] = row_label(field, frontier_rows[n][c]);
+      for (std::size_t c = 0; c < 8; ++c) labels[c] = field.row_label(frontier_rows[n][c]);
       std::uint8_t bits = 0;
       for (std::size_t d = 0; d < kFaceNeighbours.size(); ++d) {
         const int ni = i + kFaceNeighbours[d][0], nj = j + kFaceNeighbours[d][1], nk = k + kFaceNeighbours[d][2];
@@ -271,14 +263,6 @@ void snap_thin_regions(SampledField& field, Sampler& sampler, const std::vector<
                        GridIndex& scratch);
 
 }  // namespace
-
-int SampledField::label(std::uint64_t key) const {
-  const double* row = at(key);
-  int best = 0;
-  for (int l = 1; l < function_count; ++l)
-    if (row[l] > row[best]) best = l;
-  return best;
-}
 
 Grid make_grid(const Box3& box, int depth) {
   Grid grid;
@@ -395,7 +379,7 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
   if (kept) before = std::move(workspace.refinement);
   workspace.refinement.clear();
   std::vector<std::array<int, 3>> cells;
-  std::vector<std::array<std::uint32_t, 8>> finest_mixed_rows;  // of the finest mixed cells, in order
+  std::vector<CornerRows> finest_mixed_rows;  // of the finest mixed cells, in order
   std::vector<std::uint32_t> before_index;  // per cell, its index in the last pass's level, or kNone
   {
     const int step = 1 << (depth - start);
@@ -496,7 +480,7 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
 
   GridIndex& scratch = workspace.scratch;
   scratch.reset(resolution);
-  close_band(field, sampler, field.surface_cells, /*seeds_mixed=*/true, scratch, resolution, {}, finest_mixed_rows);
+  close_band(field, sampler, field.surface_cells, &finest_mixed_rows, scratch, resolution);
 
   if (options.smoothing_iterations > 0)
     smooth(field, sampler, contours.fixed_vertices, options.smoothing_iterations, scratch);
@@ -554,7 +538,7 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
   }
   const auto node_row = [&](std::size_t n) { return stencil_rows[node_position[n]]; };
   std::vector<int> label_before(nodes.size());
-  for_rows(nodes.size(), [&](std::size_t n) { label_before[n] = row_label(field, node_row(n)); });
+  for_rows(nodes.size(), [&](std::size_t n) { label_before[n] = field.row_label(node_row(n)); });
   // The rows the sweeps move and their values before, in node order (see changed_rows), filled
   // in parallel at each node's place among the moved ones.
   std::vector<std::uint32_t> moved_before(nodes.size() + 1, 0);
@@ -610,7 +594,7 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
   // changed are seeds of the new, again closed, band (the rest of the old band is kept where
   // still mixed). Seeding every cell around every node, as before, cost more than the sweeps.
   std::vector<char> label_changed(nodes.size());
-  for_rows(nodes.size(), [&](std::size_t n) { label_changed[n] = row_label(field, node_row(n)) != label_before[n]; });
+  for_rows(nodes.size(), [&](std::size_t n) { label_changed[n] = field.row_label(node_row(n)) != label_before[n]; });
   std::vector<std::uint64_t> seeds;
   for (std::size_t n = 0; n < nodes.size(); ++n) {
     if (!label_changed[n]) continue;
@@ -623,7 +607,7 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
       seeds.push_back(grid_key(ci, cj, ck));
     }
   }
-  close_band(field, sampler, seeds, false, scratch, resolution, field.surface_cells);
+  close_band(field, sampler, seeds, nullptr, scratch, resolution, field.surface_cells);
   field.smoothing_seconds = smoothing_clock.seconds();
 }
 
@@ -659,7 +643,7 @@ void snap_thin_regions(SampledField& field, Sampler& sampler, const std::vector<
       seeds.push_back(grid_key(i - (corner & 1), j - ((corner >> 1) & 1), k - ((corner >> 2) & 1)));
   }
   if (seeds.empty()) return;
-  close_band(field, sampler, seeds, false, scratch, resolution, field.surface_cells);
+  close_band(field, sampler, seeds, nullptr, scratch, resolution, field.surface_cells);
 }
 
 }  // namespace

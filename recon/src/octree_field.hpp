@@ -71,8 +71,16 @@ struct SampledField {
   const double* at(std::uint64_t key) const {
     return values.data() + static_cast<std::size_t>(index.at(key)) * static_cast<std::size_t>(function_count);
   }
-  /// Argmax label of a row (the lowest index wins ties).
-  int label(std::uint64_t key) const;
+  /// Argmax label of a vertex's values (the lowest index wins ties).
+  int label(std::uint64_t key) const { return row_label(index.at(key)); }
+  /// The same for a row of values.
+  int row_label(std::uint32_t row) const {
+    const double* row_values = values.data() + static_cast<std::size_t>(row) * static_cast<std::size_t>(function_count);
+    int best = 0;
+    for (int l = 1; l < function_count; ++l)
+      if (row_values[l] > row_values[best]) best = l;
+    return best;
+  }
 };
 
 /// A point of a slice region (world, mm) and its function index: the grid vertex nearest to it

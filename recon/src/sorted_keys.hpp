@@ -7,6 +7,7 @@
 #include <array>
 #include <cstdint>
 #include <initializer_list>
+#include <stdexcept>
 #include <vector>
 
 #include <tbb/parallel_for.h>
@@ -26,7 +27,10 @@ std::vector<std::uint64_t> union_of_shifts(const std::vector<std::uint64_t>& sor
   constexpr std::uint64_t kDone = ~std::uint64_t{0};  // the head of a copy that is used up
   std::array<std::uint64_t, 8> offset{};  // per copy
   std::size_t copies = 0;
-  for (const std::int64_t shift : shifts) offset[copies++] = static_cast<std::uint64_t>(shift);
+  for (const std::int64_t shift : shifts) {
+    if (copies == offset.size()) throw std::length_error("union_of_shifts: more than eight shifts");
+    offset[copies++] = static_cast<std::uint64_t>(shift);
+  }
   const std::size_t count = sorted.size();
   if (positions != nullptr) positions->resize(count * copies);
   if (count == 0) return {};
