@@ -155,13 +155,16 @@ class CellField {
   // The parts of formula 7 at the corners of one slice (completion.cpp).
   struct CornerCache;
   // Computes the parts of formula 7 that `cache` lists for this refinement round of slice s, in
-  // parallel; `corner_faces[j]`: the known faces the j-th 3D part reads.
-  void complete_round(const PreparedSlice& s, const std::vector<std::span<const int>>& corner_faces,
+  // parallel; the j-th 3D part reads the union of the sorted lists of known faces corner_faces[j].
+  void complete_round(const PreparedSlice& s, const std::vector<std::vector<std::span<const int>>>& corner_faces,
                       CornerCache& cache) const;
-  // Known weights of face f seen from p (units of projected_angle / height): the known part of
-  // the face and each material's part (added to materials). False when p is on f's plane.
-  bool known_weights(int face, const Vec3& p, double& known, double* materials) const;
-  // Prefetches the records of the faces after faces[i] that known_weights will read.
+  // Known weights of face f seen from up to four points at once (`count`; units of
+  // projected_angle / height): the known part of the face and each material's part (added to
+  // materials[k * function_count() + material] for point k). ok[k] is false where point k is on
+  // f's plane (or k >= count); those lanes' outputs are meaningless.
+  void known_weights4(int face, const Vec3 (&points)[4], std::size_t count, double (&known)[4], double* materials,
+                      bool (&ok)[4]) const;
+  // Prefetches the records of the faces after faces[i] that known_weights4 will read.
   void prefetch_known_reads(std::span<const int> faces, std::size_t i) const;
 
   const Arrangement& arrangement_;

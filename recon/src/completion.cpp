@@ -153,6 +153,72 @@ class FaceMarks {
   std::uint32_t current_ = 0;
 };
 
+// Corners per chunk of the completion's 3D part (complete_round).
+constexpr std::size_t kCornersPerChunk = 256;
+
+// The faces a chunk of corners reads, in ascending order, each with the corners (positions in
+// the chunk) that read it, once each, in the corners' order: a counting sort of (face, corner)
+// pairs over per-thread dense arrays. Use: count every pair (a corner's pairs one after the
+// other; a face a corner lists twice counts once), group(), add every pair in the same order,
+// then read faces() and readers(i), and finish() (which clears the dense arrays for the next
+// chunk). As with FaceMarks, task bodies that use it must not wait on nested parallel work.
+class FaceReaders {
+ public:
+  static FaceReaders& start(std::size_t face_count) {
+    thread_local FaceReaders readers;
+    if (readers.position_.size() < face_count) readers.position_.resize(face_count, kUnseen);
+    readers.faces_.clear();
+    readers.counts_.clear();
+    readers.last_counted_.clear();
+    return readers;
+  }
+  void count(int face, std::uint32_t reader) {
+    std::uint32_t& position = position_[static_cast<std::size_t>(face)];
+    if (position == kUnseen) {
+      position = static_cast<std::uint32_t>(faces_.size());
+      faces_.push_back(face);
+      counts_.push_back(0);
+      last_counted_.push_back(kUnseen);
+    }
+    if (last_counted_[position] == reader) return;
+    last_counted_[position] = reader;
+    ++counts_[position];
+  }
+  void group() {
+    // Faces in ascending order, each position pointing at its place in that order.
+    std::vector<std::uint32_t> counts_in_order(faces_.size());
+    std::sort(faces_.begin(), faces_.end());
+    for (std::size_t i = 0; i < faces_.size(); ++i) {
+      std::uint32_t& position = position_[static_cast<std::size_t>(faces_[i])];
+      counts_in_order[i] = counts_[position];
+      position = static_cast<std::uint32_t>(i);
+    }
+    begins_.assign(faces_.size() + 1, 0);
+    for (std::size_t i = 0; i < faces_.size(); ++i) begins_[i + 1] = begins_[i] + counts_in_order[i];
+    cursors_.assign(begins_.begin(), begins_.end() - 1);
+    readers_.resize(begins_.back());
+  }
+  void add(int face, std::uint32_t reader) {
+    const std::uint32_t position = position_[static_cast<std::size_t>(face)];
+    std::uint32_t& cursor = cursors_[position];
+    if (cursor > begins_[position] && readers_[cursor - 1] == reader) return;
+    readers_[cursor++] = reader;
+  }
+  std::span<const int> faces() const { return faces_; }
+  std::span<const std::uint32_t> readers(std::size_t i) const {
+    return std::span<const std::uint32_t>(readers_).subspan(begins_[i], begins_[i + 1] - begins_[i]);
+  }
+  void finish() {
+    for (const int face : faces_) position_[static_cast<std::size_t>(face)] = kUnseen;
+  }
+
+ private:
+  static constexpr std::uint32_t kUnseen = ~std::uint32_t{0};
+  std::vector<std::uint32_t> position_;  // per face: kUnseen, or its index in faces_
+  std::vector<int> faces_;
+  std::vector<std::uint32_t> counts_, last_counted_, begins_, cursors_, readers_;
+};
+
 bool in_convex_ccw(const Vec2* polygon, std::size_t count, const Vec2& p) {
   for (std::size_t i = 0; i < count; ++i) {
     const Vec2& a = polygon[i];
@@ -499,8 +565,9 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
     // The known faces each new corner reads: those of the faces of all unknown triangles around
     // it (a corner shared by several faces of the slice gets one 3D part, from the cells of all
     // of them: they are all in one group).
-    std::vector<std::span<const int>> corner_faces(job_vertices.size());
-    std::vector<std::vector<int>> merged_faces(job_vertices.size());  // of corners on several faces
+    // complete_round reads the union of these lists (most corners lie inside one face; those on
+    // face edges read the lists of all the faces around).
+    std::vector<std::vector<std::span<const int>>> corner_faces(job_vertices.size());
     tbb::parallel_for(std::size_t{0}, job_vertices.size(), [&](std::size_t j) {
       std::vector<int> faces_around;  // indices in `faces`
       Cdt::Face_circulator around = cdt.incident_faces(job_vertices[j]), done = around;
@@ -510,21 +577,7 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
         if (!e.skipped && std::find(faces_around.begin(), faces_around.end(), e.face_index) == faces_around.end())
           faces_around.push_back(e.face_index);
       } while (++around != done);
-      if (faces_around.size() == 1) {
-        corner_faces[j] = local_faces_of(faces_around[0]);
-        return;
-      }
-      // The sorted union of sorted lists, merged one list at a time.
-      std::vector<int>& faces_read = merged_faces[j];
-      std::vector<int> merged;
-      faces_read = local_faces_of(faces_around[0]);
-      for (std::size_t k = 1; k < faces_around.size(); ++k) {
-        const std::vector<int>& next = local_faces_of(faces_around[k]);
-        merged.clear();
-        std::set_union(faces_read.begin(), faces_read.end(), next.begin(), next.end(), std::back_inserter(merged));
-        faces_read.swap(merged);
-      }
-      corner_faces[j] = faces_read;
+      for (const int face_index : faces_around) corner_faces[j].push_back(local_faces_of(face_index));
     });
     complete_round(s, corner_faces, cache);
     entry_values.resize(entries.size() * 3 * fc);
@@ -640,35 +693,64 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
   }
 }
 
-void CellField::complete_round(const PreparedSlice& s, const std::vector<std::span<const int>>& corner_faces,
+void CellField::complete_round(const PreparedSlice& s,
+                               const std::vector<std::vector<std::span<const int>>>& corner_faces,
                                CornerCache& cache) const {
   const std::size_t fc = static_cast<std::size_t>(function_count());
   cache.values.resize(cache.on_boundary.size() * cache.stride, 0.0);
-  // (a) the 3D mean-value interpolant of the known faces around, at the corner itself.
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cache.jobs_3d.size()),
-                    [&](const tbb::blocked_range<std::size_t>& range) {
-                      std::vector<double> materials(fc);  // of one face
-                      for (std::size_t j = range.begin(); j != range.end(); ++j) {
-                        const CornerCache::Job& job = cache.jobs_3d[j];
-                        double* n3w = cache.at(job.slot);
-                        const Vec3 x = s.origin + job.corner.x() * s.u + job.corner.y() * s.v;
-                        const std::span<const int> faces_read = corner_faces[j];
-                        for (std::size_t i = 0; i < faces_read.size(); ++i) {
-                          const int g = faces_read[i];
-                          prefetch_known_reads(faces_read, i);
-                          double known = 0.0;
-                          std::fill(materials.begin(), materials.end(), 0.0);
-                          if (!known_weights(g, x, known, materials.data())) continue;
-                          double material_sum = 0.0;
-                          for (std::size_t l = 1; l < fc; ++l) {
-                            n3w[l] += 0.5 * materials[l];
-                            material_sum += materials[l];
-                          }
-                          n3w[0] += 0.5 * (known - material_sum);  // the known outside
-                          n3w[fc] += 0.5 * known;
-                        }
-                      }
-                    });
+  // (a) the 3D mean-value interpolant of the known faces around, at the corner itself. Face by
+  // face within chunks of corners: the corners of a chunk lie close together and read mostly the
+  // same faces, so each face's records, scattered over the arrays of all faces, are reached once
+  // per chunk rather than once per corner. Every corner still adds its faces in ascending order
+  // (its list's), so its sums are the same as corner by corner.
+  const std::size_t job_count = cache.jobs_3d.size();
+  const std::size_t chunk_count = (job_count + kCornersPerChunk - 1) / kCornersPerChunk;
+  tbb::parallel_for(std::size_t{0}, chunk_count, [&](std::size_t chunk) {
+    const std::size_t first = chunk * kCornersPerChunk;
+    const std::size_t last = std::min(job_count, first + kCornersPerChunk);
+    FaceReaders& readers = FaceReaders::start(images_.size());
+    for (std::size_t j = first; j < last; ++j)
+      for (const std::span<const int> list : corner_faces[j])
+        for (const int g : list) readers.count(g, static_cast<std::uint32_t>(j - first));
+    readers.group();
+    for (std::size_t j = first; j < last; ++j)
+      for (const std::span<const int> list : corner_faces[j])
+        for (const int g : list) readers.add(g, static_cast<std::uint32_t>(j - first));
+    Vec3 points[kCornersPerChunk];
+    for (std::size_t j = first; j < last; ++j) {
+      const Vec2& corner = cache.jobs_3d[j].corner;
+      points[j - first] = s.origin + corner.x() * s.u + corner.y() * s.v;
+    }
+    std::vector<double> materials(4 * fc);  // of one face, per lane
+    const std::span<const int> faces = readers.faces();
+    for (std::size_t i = 0; i < faces.size(); ++i) {
+      const int g = faces[i];
+      prefetch_known_reads(faces, i);
+      const std::span<const std::uint32_t> face_readers = readers.readers(i);
+      for (std::size_t r = 0; r < face_readers.size(); r += 4) {
+        const std::size_t lanes = std::min<std::size_t>(4, face_readers.size() - r);
+        Vec3 lane_points[4];
+        for (std::size_t k = 0; k < lanes; ++k) lane_points[k] = points[face_readers[r + k]];
+        double known[4];
+        bool ok[4];
+        std::fill(materials.begin(), materials.end(), 0.0);
+        known_weights4(g, lane_points, lanes, known, materials.data(), ok);
+        for (std::size_t k = 0; k < lanes; ++k) {
+          if (!ok[k]) continue;
+          const double* lane_materials = materials.data() + k * fc;
+          double* n3w = cache.at(cache.jobs_3d[first + face_readers[r + k]].slot);
+          double material_sum = 0.0;
+          for (std::size_t l = 1; l < fc; ++l) {
+            n3w[l] += 0.5 * lane_materials[l];
+            material_sum += lane_materials[l];
+          }
+          n3w[0] += 0.5 * (known[k] - material_sum);  // the known outside
+          n3w[fc] += 0.5 * known[k];
+        }
+      }
+    }
+    readers.finish();
+  });
   // (b) at the corner itself when it lies inside the unknown set (the interpolant is smooth
   // there, and the triangles around the corner share it).
   tbb::parallel_for(std::size_t{0}, cache.jobs_2d.size(), [&](std::size_t j) {
@@ -703,40 +785,72 @@ void CellField::prefetch_known_reads(std::span<const int> faces, std::size_t i) 
   }
 }
 
-bool CellField::known_weights(int face, const Vec3& p, double& known, double* materials) const {
+void CellField::known_weights4(int face, const Vec3 (&points)[4], std::size_t count, double (&known)[4],
+                               double* materials, bool (&ok)[4]) const {
   const FaceImage& image = images_[static_cast<std::size_t>(face)];
   const PlaneFrame& frame = frames_[static_cast<std::size_t>(image.frame)];
-  const Vec3 d = p - frame.origin;
-  const double height = std::abs(d.dot(frame.unit_normal));
-  if (height <= on_face_height_) return false;
-  const Vec2 foot(d.dot(frame.u), d.dot(frame.v));
-  const double inv_height = 1.0 / height;
+  double foot_x[4], foot_y[4], height[4], inv_height[4];
+  int first_ok = -1;
+  for (std::size_t k = 0; k < 4; ++k) {
+    const Vec3 d = points[std::min(k, count - 1)] - frame.origin;
+    height[k] = std::abs(d.dot(frame.unit_normal));
+    ok[k] = k < count && height[k] > on_face_height_;
+    foot_x[k] = d.dot(frame.u);
+    foot_y[k] = d.dot(frame.v);
+    inv_height[k] = 1.0 / height[k];
+    if (ok[k] && first_ok < 0) first_ok = static_cast<int>(k);
+  }
+  if (first_ok < 0) return;
+  for (std::size_t k = 0; k < 4; ++k)
+    if (!ok[k]) {  // a point on the face's plane, or no point: a copy of a lane that is used
+      const std::size_t copy = static_cast<std::size_t>(first_ok);
+      foot_x[k] = foot_x[copy];
+      foot_y[k] = foot_y[copy];
+      height[k] = height[copy];
+      inv_height[k] = inv_height[copy];
+    }
   // The plain edge sums: the completion adds these weights into sums of order 1 / distance, so
   // the absolute accuracy of the plain sum suffices; the split form that keeps small angles'
   // relative accuracy (feet outside a face, most of the faces read here) would cost three times
   // as many atan2.
   // Parts that are the face polygon itself (a face wholly inside a ring: most faces) take the
   // polygon's sum, computed once.
-  double polygon = 0.0;
+  double polygon[4];
   bool polygon_done = false;
-  const auto polygon_angle = [&] {
+  const auto polygon_angle = [&]() -> const double(&)[4] {
     if (!polygon_done)
-      polygon = projected_angle_plain(points_.data() + image.polygon_begin, image.polygon_count, foot, height);
+      projected_angle_plain4(points_.data() + image.polygon_begin, image.polygon_count, foot_x, foot_y, height,
+                             polygon);
     polygon_done = true;
     return polygon;
   };
+  double angle[4];
   const auto copy_or_angle = [&](const FaceImage::Part& part) {
-    return part.polygon_copy != 0 ? part.polygon_copy * polygon_angle() : part_angle(part, foot, height);
+    if (part.polygon_copy != 0) {
+      const double(&whole)[4] = polygon_angle();
+      for (std::size_t k = 0; k < 4; ++k) angle[k] = part.polygon_copy * whole[k];
+    } else if (part.tree_count == 0) {
+      if (part.count < 2) std::fill(angle, angle + 4, 0.0);
+      else projected_angle_plain4(points_.data() + part.begin, part.count, foot_x, foot_y, height, angle);
+    } else {
+      for (std::size_t k = 0; k < 4; ++k) angle[k] = part_angle(part, Vec2(foot_x[k], foot_y[k]), height[k]);
+    }
   };
-  known = 0.0;
   if (image.known_clipped) {
-    for (const FaceImage::Part& part : image.known_parts) known += copy_or_angle(part);
+    std::fill(known, known + 4, 0.0);
+    for (const FaceImage::Part& part : image.known_parts) {
+      copy_or_angle(part);
+      for (std::size_t k = 0; k < 4; ++k) known[k] += angle[k];
+    }
   } else {
-    known = polygon_angle();
+    std::copy_n(polygon_angle(), 4, known);
   }
-  known *= inv_height;
-  for (const FaceImage::Part& part : image.parts) materials[part.material] += copy_or_angle(part) * inv_height;
-  return true;
+  for (std::size_t k = 0; k < 4; ++k) known[k] *= inv_height[k];
+  const std::size_t fc = static_cast<std::size_t>(function_count());
+  for (const FaceImage::Part& part : image.parts) {
+    copy_or_angle(part);
+    for (std::size_t k = 0; k < 4; ++k) materials[k * fc + static_cast<std::size_t>(part.material)] += angle[k] * inv_height[k];
+  }
 }
 
 void CellField::build_unknown_images() {

@@ -158,6 +158,32 @@ __attribute__((target("avx2"))) double projected_angle_plain_avx2(const Vec2* po
   return (lanes[0] + lanes[1]) + (lanes[2] + lanes[3]);
 }
 
+// projected_angle_plain_avx2 of one ring from four feet at once, one foot per lane. Per foot it
+// adds the same edge terms in the same order as that function: there edge k goes to lane k mod 4
+// and the lanes are summed pairwise at the end; here each foot keeps one sum per residue k mod 4
+// and combines them the same way, so every result is projected_angle_plain_avx2's to the bit
+// (the padding edges it adds are zero-length: they add +0). Rings of a handful of edges fill the
+// lanes here, where one foot at a time left most of them padding.
+__attribute__((target("avx2"))) void projected_angle_plain4_avx2(const Vec2* points, std::size_t count,
+                                                                const double (&foot_x)[4], const double (&foot_y)[4],
+                                                                const double (&height)[4], double (&out)[4]) {
+  const __m256d fx = _mm256_loadu_pd(foot_x), fy = _mm256_loadu_pd(foot_y);
+  const __m256d hs = _mm256_loadu_pd(height);
+  const __m256d h2 = _mm256_mul_pd(hs, hs);
+  __m256d sums[4] = {_mm256_setzero_pd(), _mm256_setzero_pd(), _mm256_setzero_pd(), _mm256_setzero_pd()};
+  const Vec2& start = points[count - 1];
+  __m256d ax = _mm256_sub_pd(_mm256_set1_pd(start.x()), fx), ay = _mm256_sub_pd(_mm256_set1_pd(start.y()), fy);
+  for (std::size_t k = 0; k < count; ++k) {
+    const __m256d bx = _mm256_sub_pd(_mm256_set1_pd(points[k].x()), fx);
+    const __m256d by = _mm256_sub_pd(_mm256_set1_pd(points[k].y()), fy);
+    sums[k % 4] = _mm256_add_pd(sums[k % 4], edge_terms_avx2(ax, ay, bx, by, h2));
+    ax = bx;
+    ay = by;
+  }
+  const __m256d total = _mm256_add_pd(_mm256_add_pd(sums[0], sums[1]), _mm256_add_pd(sums[2], sums[3]));
+  _mm256_storeu_pd(out, total);
+}
+
 __attribute__((target("avx2"))) double edge_projected_angle_sum_avx2(const double* ax, const double* ay,
                                                                      const double* bx, const double* by,
                                                                      std::size_t count, double height_sq) {
@@ -312,6 +338,14 @@ double projected_angle_plain(const Vec2* points, std::size_t count, const Vec2& 
   if (kHaveAvx2) return projected_angle_plain_avx2(points, count, foot, height);
 #endif
   return projected_angle_plain_scalar(points, count, foot, height);
+}
+
+void projected_angle_plain4(const Vec2* points, std::size_t count, const double (&foot_x)[4],
+                            const double (&foot_y)[4], const double (&height)[4], double (&out)[4]) {
+#ifdef SONOSHAPE_AVX2_KERNEL
+  if (kHaveAvx2) return projected_angle_plain4_avx2(points, count, foot_x, foot_y, height, out);
+#endif
+  for (int k = 0; k < 4; ++k) out[k] = projected_angle_plain_scalar(points, count, Vec2(foot_x[k], foot_y[k]), height[k]);
 }
 
 double edge_projected_angle_sum(const double* ax, const double* ay, const double* bx, const double* by,

@@ -28,6 +28,11 @@ double projected_angle(const Vec2* points, std::size_t count, const Vec2& foot, 
 /// The plain edge sum behind projected_angle (no treatment of cancellation; for tests).
 double projected_angle_plain(const Vec2* points, std::size_t count, const Vec2& foot, double height);
 
+/// projected_angle_plain of one ring from four feet (foot_x[k], foot_y[k]) at heights height[k],
+/// each result equal to projected_angle_plain's to the bit (count >= 1).
+void projected_angle_plain4(const Vec2* points, std::size_t count, const double (&foot_x)[4],
+                            const double (&foot_y)[4], const double (&height)[4], double (&out)[4]);
+
 /// The sum of edge_projected_angle (below) over `count` separate edges (ax[i], ay[i]) ->
 /// (bx[i], by[i]), coordinates relative to the foot, h2 = height^2: four edges at a time in AVX2
 /// lanes where the CPU has them (each term equal to edge_projected_angle's to the bit, summed in
