@@ -424,13 +424,18 @@ int CellField::evaluate(const Vec3& p, double* out) const {
     if (image.triangle_count == 0) continue;
     const UnknownTriangle* triangles = triangles_.data() + image.triangle_begin;
     const double* values = corner_values_.data() + image.triangle_begin * 3 * fc;
-    double face_unknown = 0.0;
     std::fill(face_w, face_w + n, 0.0);
-    if (image.triangle_tree != nullptr)
+    if (image.triangle_tree != nullptr) {
       add_triangle_weights_tree(triangles, values, n, image.triangle_tree, image.triangle_tree_moments, 0,
-                                foot, height, face_unknown, face_w);
-    else
-      add_triangle_weights(triangles, values, image.triangle_count, n, foot, height, face_unknown, face_w);
+                                foot, height, face_w);
+    } else {
+      double triangles_weight = 0.0;  // not used: see face_unknown
+      add_triangle_weights(triangles, values, image.triangle_count, n, foot, height, triangles_weight, face_w);
+    }
+    // The shares' own total (the completed values are a partition of unity, so it equals the
+    // triangles' weight to rounding), the same way whether the tree summed them or not.
+    double face_unknown = 0.0;
+    for (int l = 0; l < n; ++l) face_unknown += face_w[l];
     if (!(face_unknown > 0.0)) continue;
     // The unknown part's weight comes from its boundary, exactly like `total`; the triangles only
     // split it among the functions. The far-field error of the tree then enters through these

@@ -378,7 +378,7 @@ struct Builder {
       node.left = static_cast<std::int32_t>(build(first, middle));
       node.right = static_cast<std::int32_t>(build(middle, last));
       for (const std::int32_t child : {node.left, node.right})
-        add_translated(&moments[static_cast<std::size_t>(child) * stride], function_count + 1,
+        add_translated(&moments[static_cast<std::size_t>(child) * stride], function_count,
                        nodes[static_cast<std::size_t>(child)].centre - node.centre, &moments[index * stride]);
     } else {
       // Leaves in the key order too, so that the whole layout is canonical.
@@ -394,14 +394,12 @@ struct Builder {
           corners[k] = {t.x(), t.y()};
         }
         uniform_moments(corners, uniform);
-        // Density 0 is 1, density l + 1 is 0.5 (1 + g_l).
-        const double ones[3] = {1.0, 1.0, 1.0};
-        add_linear_moments(corners, uniform, ones, out);
+        // Density l is 0.5 (1 + g_l).
         const double* values = corner_values + static_cast<std::size_t>(order[i]) * 3 * function_count;
         for (std::size_t l = 0; l < function_count; ++l) {
           const double half[3] = {0.5 * (1.0 + values[l]), 0.5 * (1.0 + values[function_count + l]),
                                   0.5 * (1.0 + values[2 * function_count + l])};
-          add_linear_moments(corners, uniform, half, out + (l + 1) * kMoments);
+          add_linear_moments(corners, uniform, half, out + l * kMoments);
         }
       }
     }
@@ -490,9 +488,9 @@ void add_triangle_weights(const UnknownTriangle* triangles, const double* corner
 
 void add_triangle_weights_tree(const UnknownTriangle* triangles, const double* corner_values,
                                int function_count, const TriangleNode* nodes, const double* moments,
-                               std::uint32_t root, const Vec2& foot, double height,
-                               double& unknown_total, double* w) {
+                               std::uint32_t root, const Vec2& foot, double height, double* w) {
   if (!(height > 0.0)) return;
+  double exact_total = 0.0;  // add_exact's, unused
   const std::size_t fc = static_cast<std::size_t>(function_count);
   const std::size_t stride = triangle_moment_stride(function_count);
   const double h2 = height * height;
@@ -538,12 +536,11 @@ void add_triangle_weights_tree(const UnknownTriangle* triangles, const double* c
         }
         return scale * ((s0 + s1) + (s2 + s3));
       };
-      unknown_total += integral(m);
-      for (std::size_t l = 0; l < fc; ++l) w[l] += integral(m + (l + 1) * kMoments);
+      for (std::size_t l = 0; l < fc; ++l) w[l] += integral(m + l * kMoments);
       continue;
     }
     if (node.left < 0) {
-      add_exact(triangles, corner_values, node.first, node.last, function_count, foot, height, unknown_total, w);
+      add_exact(triangles, corner_values, node.first, node.last, function_count, foot, height, exact_total, w);
       continue;
     }
     stack[top++] = static_cast<std::uint32_t>(node.right);

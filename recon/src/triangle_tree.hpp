@@ -56,9 +56,12 @@ constexpr std::size_t triangle_moment_index(int a, int b) {
 /// Doubles of moments per density: (real, imaginary) of each Z_ab, in triangle_moment_index order.
 constexpr std::size_t kTriangleMomentCount = 2 * triangle_moment_index(kTriangleTreeOrder + 1, 0);
 
-/// Doubles of moments per node: densities 1 and 0.5 (1 + g_l) for l = 0..function_count-1.
+/// Doubles of moments per node: densities 0.5 (1 + g_l) for l = 0..function_count-1. The
+/// completed values are a partition of unity (these densities sum to 1: formula 7 splits one
+/// denominator among the functions), so the unknown total is their sum and has no moments of
+/// its own (a third fewer moments to build and read with one label).
 constexpr std::size_t triangle_moment_stride(int function_count) {
-  return (static_cast<std::size_t>(function_count) + 1) * kTriangleMomentCount;
+  return static_cast<std::size_t>(function_count) * kTriangleMomentCount;
 }
 
 /// Exact moments of the linear density with corner values `density` over the triangle
@@ -81,11 +84,11 @@ void add_triangle_weights(const UnknownTriangle* triangles, const double* corner
                           std::size_t count, int function_count, const Vec2& foot, double height,
                           double& unknown_total, double* w);
 
-/// The same sums through the tree `root` (build_triangle_tree): exact over the leaves near the
-/// point, expansions over the nodes seen under a small angle.
+/// The sums w[l] of add_triangle_weights through the tree `root` (build_triangle_tree): exact
+/// over the leaves near the point, expansions over the nodes seen under a small angle. No
+/// unknown total: for completed values (a partition of unity) it is the sum of the w[l].
 void add_triangle_weights_tree(const UnknownTriangle* triangles, const double* corner_values,
                                int function_count, const TriangleNode* nodes, const double* moments,
-                               std::uint32_t root, const Vec2& foot, double height,
-                               double& unknown_total, double* w);
+                               std::uint32_t root, const Vec2& foot, double height, double* w);
 
 }  // namespace sonoshape::recon
