@@ -158,7 +158,7 @@ class CellField {
   // parallel; the j-th 3D part reads the union of the sorted lists of known faces corner_faces[j].
   void complete_round(const PreparedSlice& s, const std::vector<std::vector<std::span<const int>>>& corner_faces,
                       CornerCache& cache) const;
-  // Known weights of face f seen from up to four points at once (`count`; units of
+  // Known weights of face f seen from up to four points at once (`count`, 1 to 4; units of
   // projected_angle / height): the known part of the face and each material's part (added to
   // materials[k * function_count() + material] for point k). ok[k] is false where point k is on
   // f's plane (or k >= count); those lanes' outputs are meaningless.

@@ -700,9 +700,10 @@ void CellField::complete_round(const PreparedSlice& s,
   cache.values.resize(cache.on_boundary.size() * cache.stride, 0.0);
   // (a) the 3D mean-value interpolant of the known faces around, at the corner itself. Face by
   // face within chunks of corners: the corners of a chunk lie close together and read mostly the
-  // same faces, so each face's records, scattered over the arrays of all faces, are reached once
-  // per chunk rather than once per corner. Every corner still adds its faces in ascending order
-  // (its list's), so its sums are the same as corner by corner.
+  // same faces, so each face is read for up to four of them at once, one per AVX2 lane
+  // (known_weights4), where one corner at a time left most lanes padding on rings of a handful
+  // of edges. Every corner still adds its faces in ascending order (its list's) with the same
+  // edge sums, so its sums are the same as corner by corner.
   const std::size_t job_count = cache.jobs_3d.size();
   const std::size_t chunk_count = (job_count + kCornersPerChunk - 1) / kCornersPerChunk;
   tbb::parallel_for(std::size_t{0}, chunk_count, [&](std::size_t chunk) {

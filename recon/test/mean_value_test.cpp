@@ -411,6 +411,36 @@ TEST(MeanValueAlgebra, PlainSumIsTheSumOfItsEdgeTerms) {
   }
 }
 
+// projected_angle_plain4 (one ring from four feet, one per AVX2 lane) gives projected_angle_plain's
+// sum for each foot to the bit: the completion's 3D parts rely on it to stay the same as corner
+// by corner. Rings past 64 edges cross the one-foot kernel's chunks; zero-length edges, feet on
+// vertices and tiny heights are included.
+TEST(MeanValueAlgebra, FourFeetAtOnceGiveEachFootsPlainSum) {
+  std::mt19937 random(23);
+  std::uniform_real_distribution<double> coordinate(-2.0, 2.0);
+  for (const std::size_t count : {1u, 2u, 3u, 4u, 5u, 6u, 7u, 8u, 9u, 63u, 64u, 65u, 129u}) {
+    for (int trial = 0; trial < 20; ++trial) {
+      Ring2 ring;
+      for (std::size_t i = 0; i < count; ++i) {
+        if (i > 0 && trial % 3 == 0 && i % 4 == 0) ring.push_back(ring.back());  // a zero-length edge
+        else ring.emplace_back(coordinate(random), coordinate(random));
+      }
+      double foot_x[4], foot_y[4], height[4], out[4];
+      for (int k = 0; k < 4; ++k) {
+        Vec2 foot(coordinate(random), coordinate(random));
+        if ((trial + k) % 5 == 1) foot = ring[count / 2];  // on a vertex
+        foot_x[k] = foot.x();
+        foot_y[k] = foot.y();
+        height[k] = (trial + k) % 4 == 0 ? 1e-7 : std::abs(coordinate(random)) + 1e-3;
+      }
+      projected_angle_plain4(ring.data(), ring.size(), foot_x, foot_y, height, out);
+      for (int k = 0; k < 4; ++k)
+        EXPECT_EQ(out[k], projected_angle_plain(ring.data(), ring.size(), Vec2(foot_x[k], foot_y[k]), height[k]))
+            << ring.size() << " points, trial " << trial << ", lane " << k;
+    }
+  }
+}
+
 // triangle_weights4 (four triangles in AVX2 lanes) gives triangle_weights' weights to the bit:
 // ordinary triangles, slivers, both orientations, feet on a corner or an edge, and heights small
 // enough for the split form.
