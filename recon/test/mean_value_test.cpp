@@ -377,6 +377,18 @@ TEST(MeanValueKnown, ZeroHeightAndDegenerateRingsGiveZero) {
   EXPECT_NEAR(angle(sliver, Vec2(0.7, 0.2), 0.3), 0.0, 1e-16);
 }
 
+// A ring of `count` random points in [-2, 2]^2; with repeats, every fourth point repeats the one
+// before (a zero-length edge).
+Ring2 random_ring(std::size_t count, bool repeats, std::mt19937& random) {
+  std::uniform_real_distribution<double> coordinate(-2.0, 2.0);
+  Ring2 ring;
+  for (std::size_t i = 0; i < count; ++i) {
+    if (i > 0 && repeats && i % 4 == 0) ring.push_back(ring.back());
+    else ring.emplace_back(coordinate(random), coordinate(random));
+  }
+  return ring;
+}
+
 // projected_angle_plain may sum several edges at a time (SIMD lanes, chosen at run time): it must
 // be the sum of edge_projected_angle over the ring's edges, up to the order of the additions, for
 // rings of every length (lane tails, more edges than one pass holds), repeated points, feet on a
@@ -386,11 +398,7 @@ TEST(MeanValueAlgebra, PlainSumIsTheSumOfItsEdgeTerms) {
   std::uniform_real_distribution<double> coordinate(-2.0, 2.0);
   for (const std::size_t count : {1u, 2u, 3u, 4u, 5u, 7u, 8u, 9u, 63u, 64u, 65u, 129u, 200u}) {
     for (int trial = 0; trial < 20; ++trial) {
-      Ring2 ring;
-      for (std::size_t i = 0; i < count; ++i) {
-        if (i > 0 && trial % 3 == 0 && i % 4 == 0) ring.push_back(ring.back());  // a zero-length edge
-        else ring.emplace_back(coordinate(random), coordinate(random));
-      }
+      const Ring2 ring = random_ring(count, trial % 3 == 0, random);
       Vec2 foot(coordinate(random), coordinate(random));
       if (trial % 5 == 1) foot = ring[count / 2];                          // on a vertex
       if (trial % 5 == 2 && count > 1) foot = 0.25 * ring[0] + 0.75 * ring[1];  // on an edge's line
@@ -420,11 +428,7 @@ TEST(MeanValueAlgebra, FourFeetAtOnceGiveEachFootsPlainSum) {
   std::uniform_real_distribution<double> coordinate(-2.0, 2.0);
   for (const std::size_t count : {1u, 2u, 3u, 4u, 5u, 6u, 7u, 8u, 9u, 63u, 64u, 65u, 129u}) {
     for (int trial = 0; trial < 20; ++trial) {
-      Ring2 ring;
-      for (std::size_t i = 0; i < count; ++i) {
-        if (i > 0 && trial % 3 == 0 && i % 4 == 0) ring.push_back(ring.back());  // a zero-length edge
-        else ring.emplace_back(coordinate(random), coordinate(random));
-      }
+      const Ring2 ring = random_ring(count, trial % 3 == 0, random);
       double foot_x[4], foot_y[4], height[4], out[4];
       for (int k = 0; k < 4; ++k) {
         Vec2 foot(coordinate(random), coordinate(random));
