@@ -2,6 +2,7 @@
 // The mean-value field of every label inside the cells of the arrangement (Bermano et al. 2011,
 // Sections 4.2-4.4 and 6): face images (each slice's labelled regions clipped to each of its
 // faces) and the CPU reference evaluator.
+#include <algorithm>
 #include <cstdint>
 #include <span>
 #include <vector>
@@ -141,6 +142,17 @@ class CellField {
     }
     return projected_angle_tree_plain(points_.data() + part.begin, part.count, tree_nodes_.data(),
                                       part.tree_root, foot, height);
+  }
+  // part_angle from four (foot, height) at once (heights > 0), each result part_angle's to the bit.
+  void part_angle4(const FaceImage::Part& part, const double (&foot_x)[4], const double (&foot_y)[4],
+                   const double (&height)[4], double (&out)[4]) const {
+    if (part.tree_count != 0) {
+      for (std::size_t k = 0; k < 4; ++k) out[k] = part_angle(part, Vec2(foot_x[k], foot_y[k]), height[k]);
+    } else if (part.count < 2) {
+      std::fill(out, out + 4, 0.0);
+    } else {
+      projected_angle_plain4(points_.data() + part.begin, part.count, foot_x, foot_y, height, out);
+    }
   }
   void update_frames();
   void compact_points();

@@ -186,15 +186,13 @@ class FaceReaders {
   }
   void group() {
     // Faces in ascending order, each position pointing at its place in that order.
-    std::vector<std::uint32_t> counts_in_order(faces_.size());
     std::sort(faces_.begin(), faces_.end());
+    begins_.assign(faces_.size() + 1, 0);
     for (std::size_t i = 0; i < faces_.size(); ++i) {
       std::uint32_t& position = position_[static_cast<std::size_t>(faces_[i])];
-      counts_in_order[i] = counts_[position];
+      begins_[i + 1] = begins_[i] + counts_[position];
       position = static_cast<std::uint32_t>(i);
     }
-    begins_.assign(faces_.size() + 1, 0);
-    for (std::size_t i = 0; i < faces_.size(); ++i) begins_[i + 1] = begins_[i] + counts_in_order[i];
     cursors_.assign(begins_.begin(), begins_.end() - 1);
     readers_.resize(begins_.back());
   }
@@ -830,11 +828,8 @@ void CellField::known_weights4(int face, const Vec3 (&points)[4], std::size_t co
     if (part.polygon_copy != 0) {
       const double(&whole)[4] = polygon_angle();
       for (std::size_t k = 0; k < 4; ++k) angle[k] = part.polygon_copy * whole[k];
-    } else if (part.tree_count == 0) {
-      if (part.count < 2) std::fill(angle, angle + 4, 0.0);
-      else projected_angle_plain4(points_.data() + part.begin, part.count, foot_x, foot_y, height, angle);
     } else {
-      for (std::size_t k = 0; k < 4; ++k) angle[k] = part_angle(part, Vec2(foot_x[k], foot_y[k]), height[k]);
+      part_angle4(part, foot_x, foot_y, height, angle);
     }
   };
   if (image.known_clipped) {
