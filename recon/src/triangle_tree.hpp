@@ -5,7 +5,9 @@
 // mean_value.hpp) to the unknown total and 0.5 w_k (1 + v_kl) to every function l. Summed over
 // the triangle these are integrals of the kernel K(y) = 2 h / (|y - foot|^2 + h^2)^2 against a
 // density that is linear on the triangle: 1 for the total, 0.5 (1 + g_l) for function l (g_l the
-// linear interpolant of the corner values). A face of a slice with a field of view carries
+// linear interpolant of the corner values). The trees expand the functions' densities only: for
+// completed values they sum to 1, so the total is their sum (triangle_moment_stride). A face of a
+// slice with a field of view carries
 // hundreds of triangles, most of them far from the point; for a cluster of triangles, the
 // integral is replaced by the Taylor expansion of K about the cluster's centre, to order
 // kTriangleTreeOrder, against the cluster's exact moments of each density (precomputed, in
