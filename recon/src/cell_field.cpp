@@ -429,8 +429,7 @@ int CellField::evaluate(const Vec3& p, double* out) const {
       add_triangle_weights_tree(triangles, values, n, image.triangle_tree, image.triangle_tree_moments, 0,
                                 foot, height, face_w);
     } else {
-      double triangles_weight = 0.0;  // not used: see face_unknown
-      add_triangle_weights(triangles, values, image.triangle_count, n, foot, height, triangles_weight, face_w);
+      add_triangle_weights(triangles, values, image.triangle_count, n, foot, height, face_w);
     }
     // The shares' own total (the completed values are a partition of unity, so it equals the
     // triangles' weight to rounding), the same way whether the tree summed them or not.

@@ -411,7 +411,7 @@ struct Builder {
 // Adds the weights of triangles [first, last) in their order, computed four at a time
 // (triangle_weights4: the same weights as one at a time, to the bit).
 void add_exact(const UnknownTriangle* triangles, const double* corner_values, std::size_t first, std::size_t last,
-               int function_count, const Vec2& foot, double height, double& unknown_total, double* w) {
+               int function_count, const Vec2& foot, double height, double* w) {
   const std::size_t fc = static_cast<std::size_t>(function_count);
   for (std::size_t block = first; block < last; block += 4) {
     const std::size_t count = std::min<std::size_t>(4, last - block);
@@ -425,7 +425,6 @@ void add_exact(const UnknownTriangle* triangles, const double* corner_values, st
       const double* values = corner_values + (block + t) * 3 * fc;
       for (std::size_t k = 0; k < 3; ++k) {
         const double weight = corner_weights[t][k];
-        unknown_total += weight;
         for (std::size_t l = 0; l < fc; ++l) w[l] += 0.5 * weight * (1.0 + values[k * fc + l]);
       }
     }
@@ -482,15 +481,14 @@ std::uint32_t build_triangle_tree(UnknownTriangle* triangles, double* corner_val
 
 void add_triangle_weights(const UnknownTriangle* triangles, const double* corner_values,
                           std::size_t count, int function_count, const Vec2& foot, double height,
-                          double& unknown_total, double* w) {
-  add_exact(triangles, corner_values, 0, count, function_count, foot, height, unknown_total, w);
+                          double* w) {
+  add_exact(triangles, corner_values, 0, count, function_count, foot, height, w);
 }
 
 void add_triangle_weights_tree(const UnknownTriangle* triangles, const double* corner_values,
                                int function_count, const TriangleNode* nodes, const double* moments,
                                std::uint32_t root, const Vec2& foot, double height, double* w) {
   if (!(height > 0.0)) return;
-  double exact_total = 0.0;  // add_exact's, unused
   const std::size_t fc = static_cast<std::size_t>(function_count);
   const std::size_t stride = triangle_moment_stride(function_count);
   const double h2 = height * height;
@@ -540,7 +538,7 @@ void add_triangle_weights_tree(const UnknownTriangle* triangles, const double* c
       continue;
     }
     if (node.left < 0) {
-      add_exact(triangles, corner_values, node.first, node.last, function_count, foot, height, exact_total, w);
+      add_exact(triangles, corner_values, node.first, node.last, function_count, foot, height, w);
       continue;
     }
     stack[top++] = static_cast<std::uint32_t>(node.right);

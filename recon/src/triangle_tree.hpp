@@ -80,11 +80,11 @@ std::uint32_t build_triangle_tree(UnknownTriangle* triangles, double* corner_val
                                   int function_count, std::vector<TriangleNode>& nodes,
                                   std::vector<double>& moments);
 
-/// The exact sums over `count` triangles seen from (foot, height): unknown_total += sum of w_k,
-/// w[l] += sum of 0.5 w_k (1 + v_kl) (units of projected_angle / height).
+/// The exact sums over `count` triangles seen from (foot, height): w[l] += sum of
+/// 0.5 w_k (1 + v_kl) (units of projected_angle / height). For completed values (a partition of
+/// unity) the triangles' total weight is the sum of the w[l].
 void add_triangle_weights(const UnknownTriangle* triangles, const double* corner_values,
-                          std::size_t count, int function_count, const Vec2& foot, double height,
-                          double& unknown_total, double* w);
+                          std::size_t count, int function_count, const Vec2& foot, double height, double* w);
 
 /// The sums w[l] of add_triangle_weights through the tree `root` (build_triangle_tree): exact
 /// over the leaves near the point, expansions over the nodes seen under a small angle. No

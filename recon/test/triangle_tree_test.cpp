@@ -148,11 +148,10 @@ TEST(TriangleTree, MatchesTheExactSumsNearAndFar) {
     const bool far = k % 3 == 2;
     const Vec2 foot = far ? Vec2(far_foot(rng), far_foot(rng)) : Vec2(near_foot(rng), near_foot(rng));
     const double height = std::pow(10.0, far ? far_log_height(rng) : log_height(rng));
-    double triangles_weight = 0.0;  // not used: the field normalises by the sum of the w[l]
     double exact_w[kFunctions] = {}, tree_w[kFunctions] = {};
     // The reference on the triangles' order on entry: the sums do not depend on the layout.
     add_triangle_weights(original.triangles.data(), original.values.data(), original.triangles.size(),
-                         kFunctions, foot, height, triangles_weight, exact_w);
+                         kFunctions, foot, height, exact_w);
     add_triangle_weights_tree(mesh.triangles.data(), mesh.values.data(), kFunctions, nodes.data(),
                               moments.data(), root, foot, height, tree_w);
     double exact_total = 0.0, tree_total = 0.0;
