@@ -213,9 +213,11 @@ void close_band(SampledField& field, Sampler& sampler, const std::vector<std::ui
   } else {
     requested_mixed_of(unique_seeds, frontier, frontier_rows);
   }
+  // The new cells: the mixed seeds and what the closure adds. The closed band is not put into
+  // `in_band` (tens of thousands of serial inserts for a handful of seeds): its cells are found
+  // by a search in it, and it is merged with the new cells at the end.
   std::vector<std::uint64_t> band = frontier;
-  for (const std::uint64_t key : closed)
-    if (in_band.insert(key, 0)) band.push_back(key);
+  const auto in_closed = [&](std::uint64_t key) { return !closed.empty() && contains(closed, key); };
   while (!frontier.empty()) {
     // Per frontier cell, the neighbours across its mixed faces that are not in the band yet (a
     // bit per direction), in parallel; then added in order.
@@ -235,7 +237,8 @@ void close_band(SampledField& field, Sampler& sampler, const std::vector<std::ui
         const bool mixed = labels[static_cast<std::size_t>(face[1])] != first ||
                            labels[static_cast<std::size_t>(face[2])] != first ||
                            labels[static_cast<std::size_t>(face[3])] != first;
-        if (mixed && !in_band.count(grid_key(ni, nj, nk))) bits = static_cast<std::uint8_t>(bits | (1u << d));
+        if (mixed && !in_band.count(grid_key(ni, nj, nk)) && !in_closed(grid_key(ni, nj, nk)))
+          bits = static_cast<std::uint8_t>(bits | (1u << d));
       }
       across[n] = bits;
     });
@@ -254,6 +257,18 @@ void close_band(SampledField& field, Sampler& sampler, const std::vector<std::ui
     band.insert(band.end(), frontier.begin(), frontier.end());
   }
   tbb::parallel_sort(band.begin(), band.end());
+  if (!closed.empty()) {
+    // The closed band less the seeds (a seed is in the band only if it is still mixed, so it is
+    // among the new cells or gone), merged with the new cells: both sorted, no key in both.
+    tbb::parallel_sort(unique_seeds.begin(), unique_seeds.end());
+    std::vector<std::uint64_t> kept;
+    kept.reserve(closed.size());
+    std::set_difference(closed.begin(), closed.end(), unique_seeds.begin(), unique_seeds.end(),
+                        std::back_inserter(kept));
+    std::vector<std::uint64_t> merged(kept.size() + band.size());
+    std::merge(kept.begin(), kept.end(), band.begin(), band.end(), merged.begin());
+    band = std::move(merged);
+  }
   field.surface_cells = std::move(band);
 }
 
@@ -431,11 +446,32 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
       const auto& c = cells[tested[m]];
       now.mixed[tested[m]] = corners_mixed(field, now.corner_rows[tested[m]], c[0], c[1], c[2], step);
     });
-    for_rows(cells.size(), [&](std::size_t n) {
-      const auto& c = cells[n];
-      now.split[n] = now.mixed[n] || (contours_here && contains(contours.cells_by_level[contour_level],
-                                                                grid_key(c[0] / step, c[1] / step, c[2] / step)));
-    });
+    // Which cells of this level hold contour vertices, as a bit per cell where the level is
+    // coarse enough (a binary search in the level's contour cells for every cell of the level
+    // cost a fifth of an online update's refinement).
+    constexpr int kMaxBitLevel = 8;  // 2^24 bits, 2 MiB
+    std::vector<std::uint64_t> contour_bits;
+    const auto bit_of = [level](int i, int j, int k) {
+      return (static_cast<std::size_t>(i) << (2 * level)) | (static_cast<std::size_t>(j) << level) |
+             static_cast<std::size_t>(k);
+    };
+    if (contours_here && level <= kMaxBitLevel) {
+      contour_bits.assign(((std::size_t{1} << (3 * level)) + 63) / 64, 0);
+      for (const std::uint64_t key : contours.cells_by_level[contour_level]) {
+        int i, j, k;
+        grid_unkey(key, i, j, k);
+        const std::size_t bit = bit_of(i, j, k);
+        contour_bits[bit / 64] |= std::uint64_t{1} << (bit % 64);
+      }
+    }
+    const auto contour_cell = [&](const std::array<int, 3>& c) {
+      if (!contours_here) return false;
+      if (contour_bits.empty())
+        return contains(contours.cells_by_level[contour_level], grid_key(c[0] / step, c[1] / step, c[2] / step));
+      const std::size_t bit = bit_of(c[0] / step, c[1] / step, c[2] / step);
+      return ((contour_bits[bit / 64] >> (bit % 64)) & 1u) != 0;
+    };
+    for_rows(cells.size(), [&](std::size_t n) { now.split[n] = now.mixed[n] || contour_cell(cells[n]); });
     if (level == depth) {
       for (std::size_t n = 0; n < cells.size(); ++n)
         if (now.split[n]) {

@@ -36,7 +36,9 @@ std::vector<std::uint64_t> union_of_shifts(const std::vector<std::uint64_t>& sor
   if (count == 0) return {};
   // The output is merged in parts, in parallel: part p holds the shifted keys in [split[p],
   // split[p + 1]), where each copy's keys start at lower_bound(split - offset).
-  constexpr std::size_t kMinPart = 16384;
+  // Parts of at least this many keys: an online update's band is some 20k cells, which parts of
+  // 16k left to one thread (the merges of the smoothing and the mesher then took twice as long).
+  constexpr std::size_t kMinPart = 2048;
   const std::size_t part_count = std::clamp<std::size_t>(count / kMinPart, 1, 64);
   std::vector<std::uint64_t> split(part_count + 1);
   split[0] = 0;
