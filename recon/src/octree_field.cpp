@@ -6,6 +6,8 @@
 #include <cmath>
 #include <initializer_list>
 #include <iterator>
+#include <stdexcept>
+#include <string>
 #include <type_traits>
 #include <unordered_set>
 
@@ -96,10 +98,12 @@ class Sampler {
         field_.index.insert(pending_[n], row);
         field_.keys.push_back(pending_[n]);
         field_.values.resize(field_.values.size() + fc);
+        field_.row_labels.push_back(0);
         field_.row_pass.push_back(field_.pass);
         valid_.push_back(1);
       }
       std::copy_n(evaluated.data() + n * fc, fc, field_.values.data() + row * fc);
+      field_.set_row_label(row);
       field_.row_pass[row] = field_.pass;
       valid_[row] = 1;
     }
@@ -350,6 +354,9 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
 SampledField sample_field(const Box3& box, int function_count, const BatchEvaluator& evaluate,
                           const ContourKeys& contours, const std::vector<RegionSample>& region_samples,
                           const OctreeOptions& options, OctreeWorkspace& workspace) {
+  if (function_count < 1 || function_count > 65536)
+    throw std::invalid_argument("sample_field: " + std::to_string(function_count) +
+                                " functions; labels are kept in 16 bits (at most 65535 materials)");
   const int depth = options.max_depth;
   const int resolution = 1 << depth;
   const Grid grid = make_grid(box, depth);
@@ -367,6 +374,7 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
     const std::size_t fc = static_cast<std::size_t>(function_count);
     for (std::size_t n = field.changed_rows.size(); n-- > 0;)
       std::copy_n(field.changed_values.data() + n * fc, fc, field.values.data() + field.changed_rows[n] * fc);
+    for (const std::uint32_t row : field.changed_rows) field.set_row_label(row);
     field.changed_rows.clear();
     field.changed_values.clear();
     field.surface_cells.clear();
@@ -623,7 +631,9 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
   else if (fc == 3) sweeps(std::integral_constant<std::size_t, 3>{});
   else sweeps(fc);
   for_rows(nodes.size(), [&](std::size_t n) {
-    if (!node_fixed[n]) std::copy_n(&smoothed[node_position[n] * fc], fc, values + node_row(n) * fc);
+    if (node_fixed[n]) return;
+    std::copy_n(&smoothed[node_position[n] * fc], fc, values + node_row(n) * fc);
+    field.set_row_label(node_row(n));
   });
   // Smoothing may move labels at the nodes. The band was closed before, and its cells whose
   // corners kept their labels keep their faces: only the cells around the nodes whose label
@@ -672,6 +682,7 @@ void snap_thin_regions(SampledField& field, Sampler& sampler, const std::vector<
     field.changed_rows.push_back(row_index);
     field.changed_values.insert(field.changed_values.end(), row, row + fc);
     for (std::size_t l = 0; l < fc; ++l) row[l] = static_cast<int>(l) == function ? 1.0 : -1.0;
+    field.set_row_label(row_index);
     ++field.snapped_vertices;
     int i, j, k;
     grid_unkey(key, i, j, k);

@@ -68,18 +68,26 @@ struct SampledField {
   std::vector<std::uint32_t> changed_rows;
   std::vector<double> changed_values;
 
+  /// Per row, the argmax label of its values (the lowest index wins ties), kept by every pass
+  /// that writes values: the band closures, the refinement's mixed tests, the smoothing and the
+  /// mesher read labels of rows scattered over the field, and a byte per row is read from cache
+  /// where the values' two or more doubles per row were not.
+  std::vector<std::uint16_t> row_labels;
+
   const double* at(std::uint64_t key) const {
     return values.data() + static_cast<std::size_t>(index.at(key)) * static_cast<std::size_t>(function_count);
   }
-  /// Argmax label of a vertex's values (the lowest index wins ties).
+  /// Argmax label of a vertex's values.
   int label(std::uint64_t key) const { return row_label(index.at(key)); }
-  /// The same for a row of values.
-  int row_label(std::uint32_t row) const {
+  /// The same for a row (as last labelled by set_row_label).
+  int row_label(std::uint32_t row) const { return row_labels[row]; }
+  /// Labels a row from its values, after they were written.
+  void set_row_label(std::uint32_t row) {
     const double* row_values = values.data() + static_cast<std::size_t>(row) * static_cast<std::size_t>(function_count);
     int best = 0;
     for (int l = 1; l < function_count; ++l)
       if (row_values[l] > row_values[best]) best = l;
-    return best;
+    row_labels[row] = static_cast<std::uint16_t>(best);
   }
 };
 
