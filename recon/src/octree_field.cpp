@@ -24,6 +24,21 @@ namespace {
 constexpr std::array<std::array<int, 3>, 6> kFaceNeighbours{
     {{-1, 0, 0}, {1, 0, 0}, {0, -1, 0}, {0, 1, 0}, {0, 0, -1}, {0, 0, 1}}};
 
+// Copies one row of `count` function values. std::copy_n of two or three doubles became a call
+// to memmove per row, which was most of the smoothing's copies into and out of its array.
+inline void copy_row(const double* from, std::size_t count, double* to) {
+  if (count == 2) {
+    to[0] = from[0];
+    to[1] = from[1];
+  } else if (count == 3) {
+    to[0] = from[0];
+    to[1] = from[1];
+    to[2] = from[2];
+  } else {
+    for (std::size_t l = 0; l < count; ++l) to[l] = from[l];
+  }
+}
+
 class Sampler {
  public:
   /// `pending_keys` is scratch space, emptied here; `valid` says per row of `field` whether its
@@ -102,7 +117,7 @@ class Sampler {
         field_.row_pass.push_back(field_.pass);
         valid_.push_back(1);
       }
-      std::copy_n(evaluated.data() + n * fc, fc, field_.values.data() + row * fc);
+      copy_row(evaluated.data() + n * fc, fc, field_.values.data() + row * fc);
       field_.set_row_label(row);
       field_.row_pass[row] = field_.pass;
       valid_[row] = 1;
@@ -373,7 +388,7 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
     field = std::move(previous);
     const std::size_t fc = static_cast<std::size_t>(function_count);
     for (std::size_t n = field.changed_rows.size(); n-- > 0;)
-      std::copy_n(field.changed_values.data() + n * fc, fc, field.values.data() + field.changed_rows[n] * fc);
+      copy_row(field.changed_values.data() + n * fc, fc, field.values.data() + field.changed_rows[n] * fc);
     for (const std::uint32_t row : field.changed_rows) field.set_row_label(row);
     field.changed_rows.clear();
     field.changed_values.clear();
@@ -566,7 +581,7 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
   std::vector<double> smoothed(stencil_vertices.size() * fc);
   for_rows(stencil_vertices.size(), [&](std::size_t n) {
     if (stencil_rows[n] == GridIndex::kNone) stencil_rows[n] = field.index.at(stencil_vertices[n]);
-    std::copy_n(values + stencil_rows[n] * fc, fc, smoothed.data() + n * fc);
+    copy_row(values + stencil_rows[n] * fc, fc, smoothed.data() + n * fc);
   });
   // Per node, its position in stencil_vertices.
   std::vector<std::uint32_t> node_position(nodes.size());
@@ -594,7 +609,7 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
     if (node_fixed[n]) return;
     const std::size_t change = first_change + moved_before[n];
     field.changed_rows[change] = node_row(n);
-    std::copy_n(values + node_row(n) * fc, fc, field.changed_values.data() + change * fc);
+    copy_row(values + node_row(n) * fc, fc, field.changed_values.data() + change * fc);
   });
   // Damped Jacobi on the bi-Laplacian (7-point Laplacian squared: diagonal 42); the damping
   // keeps the highest grid frequencies stable. Each sweep computes every Laplacian before it
@@ -632,7 +647,7 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
   else sweeps(fc);
   for_rows(nodes.size(), [&](std::size_t n) {
     if (node_fixed[n]) return;
-    std::copy_n(&smoothed[node_position[n] * fc], fc, values + node_row(n) * fc);
+    copy_row(&smoothed[node_position[n] * fc], fc, values + node_row(n) * fc);
     field.set_row_label(node_row(n));
   });
   // Smoothing may move labels at the nodes. The band was closed before, and its cells whose
