@@ -105,7 +105,8 @@ class Sampler {
     }
     const std::size_t fc = static_cast<std::size_t>(field_.function_count);
     std::vector<double> evaluated(pending_.size() * fc);
-    evaluate_(pending_, points, evaluated.data());
+    std::vector<std::uint64_t> tags(pending_.size(), 0);
+    evaluate_(points, evaluated.data(), tags.data());
     for (std::size_t n = 0; n < pending_.size(); ++n) {
       std::uint32_t row = field_.index.find(pending_[n]);
       if (row == GridIndex::kNone) {  // a new row (else a kept row whose value was out of date)
@@ -114,11 +115,13 @@ class Sampler {
         field_.keys.push_back(pending_[n]);
         field_.values.resize(field_.values.size() + fc);
         field_.row_labels.push_back(0);
+        field_.row_tags.push_back(0);
         field_.row_pass.push_back(field_.pass);
         valid_.push_back(1);
       }
       copy_row(evaluated.data() + n * fc, fc, field_.values.data() + row * fc);
       field_.set_row_label(row);
+      field_.row_tags[row] = tags[n];
       field_.row_pass[row] = field_.pass;
       valid_[row] = 1;
     }

@@ -35,10 +35,12 @@ inline void grid_unkey(std::uint64_t key, int& i, int& j, int& k) {
   k = static_cast<int>(static_cast<std::int64_t>(key & 0x1fffff) - kBias);
 }
 
-/// Evaluates grid vertices (their keys and world positions) into `values` (count *
-/// function_count doubles), in parallel. The keys let an online engine reuse cached values.
-using BatchEvaluator = std::function<void(const std::vector<std::uint64_t>& keys,
-                                          const std::vector<Vec3>& points, double* values)>;
+/// Evaluates grid vertices (world positions) into `values` (count * function_count doubles), in
+/// parallel, and gives each value a tag (`tags`, count of them, zero on entry) that the field
+/// keeps with its row (SampledField::row_tags): an online engine tags a value with the
+/// arrangement cell and the update it was evaluated in, to tell which kept rows are current.
+using BatchEvaluator =
+    std::function<void(const std::vector<Vec3>& points, double* values, std::uint64_t* tags)>;
 
 struct OctreeOptions {
   int max_depth = 6;
@@ -53,6 +55,7 @@ struct SampledField {
   GridIndex index;  ///< vertex key -> row in values
   std::vector<double> values;                               ///< row-major, function_count each
   std::vector<std::uint64_t> keys;  ///< vertex key of each row
+  std::vector<std::uint64_t> row_tags;  ///< per row, the evaluator's tag of its value (BatchEvaluator)
   std::vector<std::uint64_t> surface_cells;  ///< finest cells (key of their min corner) with
                                              ///< corners of different labels; closed under
                                              ///< face adjacency

@@ -11,7 +11,6 @@
 
 #include "arrangement.hpp"
 #include "cell_field.hpp"
-#include "grid_index.hpp"
 #include "mean_value.hpp"
 #include "mesher.hpp"
 #include "octree_field.hpp"
@@ -89,36 +88,20 @@ bool same_plane(const LabeledSlice& a, const LabeledSlice& b, double scale) {
          std::abs(na.dot(b.origin_mm - a.origin_mm)) <= kCoincidentTolerance * scale;
 }
 
-// Where and when each grid vertex was last evaluated: its value stays valid while that cell is
-// unchanged (the field inside a cell depends only on that cell's faces and their images). The
-// values themselves live in the sampled field, which is kept from one update to the next.
-class EvaluationStamps {
- public:
-  explicit EvaluationStamps(int resolution) : index_(resolution) {}
-  /// Whether `key` was evaluated in a cell that has not changed since.
-  bool current(std::uint64_t key, const std::vector<std::uint32_t>& cell_generation) const {
-    const std::uint32_t row = index_.find(key);
-    if (row == GridIndex::kNone) return false;
-    const int cell = cells_[row];
-    return cell < 0 || generations_[row] >= cell_generation[static_cast<std::size_t>(cell)];
-  }
-  void store(std::uint64_t key, int cell, std::uint32_t generation) {
-    std::uint32_t row = index_.find(key);
-    if (row == GridIndex::kNone) {
-      row = static_cast<std::uint32_t>(cells_.size());
-      index_.insert(key, row);
-      cells_.push_back(cell);
-      generations_.push_back(generation);
-    }
-    cells_[row] = cell;
-    generations_[row] = generation;
-  }
-
- private:
-  GridIndex index_;
-  std::vector<int> cells_;
-  std::vector<std::uint32_t> generations_;
-};
+// A value's tag in the sampled field (BatchEvaluator): the arrangement cell it was evaluated in
+// (-1: outside the box, where the value is constant) and the update (generation). The value stays
+// current while that cell is unchanged: the field inside a cell depends only on that cell's faces
+// and their images. Kept per row of the field, so that telling which of the kept field's rows are
+// current is one pass over two arrays (a look-up of every row's key in a table of its own, as
+// before, was a tenth of an update's octree passes).
+std::uint64_t evaluation_tag(int cell, std::uint32_t generation) {
+  return (static_cast<std::uint64_t>(static_cast<std::uint32_t>(cell)) << 32) | generation;
+}
+bool tag_current(std::uint64_t tag, const std::vector<std::uint32_t>& cell_generation) {
+  const auto cell = static_cast<std::int32_t>(static_cast<std::uint32_t>(tag >> 32));
+  const auto generation = static_cast<std::uint32_t>(tag);
+  return cell < 0 || generation >= cell_generation[static_cast<std::size_t>(cell)];
+}
 
 }  // namespace
 
@@ -142,7 +125,6 @@ struct Reconstructor::State {
   std::vector<int> material_ids;
   std::unique_ptr<Arrangement> arrangement;
   std::unique_ptr<CellField> field;
-  std::unique_ptr<EvaluationStamps> stamps;
   std::vector<std::uint32_t> cell_generation;  // update count at which each cell last changed
   std::uint32_t generation = 0;
   // What the slices alone decide on the grid, for field->slices()[0, contour_slices): merged
@@ -152,7 +134,7 @@ struct Reconstructor::State {
   std::vector<RegionSample> region_samples;
   std::size_t contour_slices = 0;
   SampledField sampled;
-  bool sampled_is_stamped = false;  // `sampled` is what `stamps` describe (false after a rebuild)
+  bool sampled_tags_current = false;  // `sampled`'s row tags name this arrangement's cells (false after a rebuild)
   OctreeWorkspace octree_workspace;  // kept across updates (see OctreeWorkspace)
   MeshSet mesh;
   ReconstructionStats totals;
@@ -216,8 +198,7 @@ struct Reconstructor::State {
     clock.reset();
     field->refresh({});
     stats.face_images_s += clock.seconds();
-    stamps = std::make_unique<EvaluationStamps>(1 << depth);
-    sampled_is_stamped = false;
+    sampled_tags_current = false;
     octree = OctreeOptions{};
     octree.max_depth = depth;
     octree.smoothing_iterations = options.engine.smoothing_iterations;
@@ -381,38 +362,34 @@ UpdateStats Reconstructor::update() {
   }
 
   const CellField& field = *s.field;
-  EvaluationStamps& stamps = *s.stamps;
   const std::size_t fc = static_cast<std::size_t>(field.function_count());
   std::size_t evaluations = 0;
   double evaluation_seconds = 0.0;
   // The octree asks only for vertices the kept field has no valid value for: all are evaluated
-  // (in parallel) and stamped with their cell.
-  const BatchEvaluator evaluate = [&](const std::vector<std::uint64_t>& keys,
-                                      const std::vector<Vec3>& points, double* values) {
+  // (in parallel) and tagged with their cell and this update.
+  const BatchEvaluator evaluate = [&](const std::vector<Vec3>& points, double* values, std::uint64_t* tags) {
     const Stopwatch evaluation_clock;
-    std::vector<int> cells(keys.size());
     arena.execute([&] {
-      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, keys.size(), 64),
+      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, points.size(), 64),
                         [&](const tbb::blocked_range<std::size_t>& r) {
                           for (std::size_t n = r.begin(); n < r.end(); ++n)
-                            cells[n] = field.evaluate(points[n], values + n * fc);
+                            tags[n] = evaluation_tag(field.evaluate(points[n], values + n * fc), s.generation);
                         });
     });
-    for (std::size_t n = 0; n < keys.size(); ++n) stamps.store(keys[n], cells[n], s.generation);
-    evaluations += keys.size();
+    evaluations += points.size();
     evaluation_seconds += evaluation_clock.seconds();
   };
   Stopwatch clock;
   // In the arena: the octree's parallel loops use the same threads as the evaluation.
   // The last field is kept: its rows whose cells did not change still hold their values.
-  if (s.sampled_is_stamped) {
+  if (s.sampled_tags_current) {
     std::vector<char>& valid = s.octree_workspace.previous_valid;
     valid.assign(s.sampled.keys.size(), 0);
     arena.execute([&] {
       tbb::parallel_for(tbb::blocked_range<std::size_t>(0, valid.size(), 4096),
                         [&](const tbb::blocked_range<std::size_t>& r) {
                           for (std::size_t n = r.begin(); n < r.end(); ++n)
-                            valid[n] = stamps.current(s.sampled.keys[n], s.cell_generation);
+                            valid[n] = tag_current(s.sampled.row_tags[n], s.cell_generation);
                         });
     });
   }
@@ -421,7 +398,7 @@ UpdateStats Reconstructor::update() {
     s.sampled = sample_field(s.box, field.function_count(), evaluate, s.contours, s.region_samples,
                              s.octree, s.octree_workspace);
   });
-  s.sampled_is_stamped = true;
+  s.sampled_tags_current = true;
   stats.smoothing_s = s.sampled.smoothing_seconds;
   stats.field_s = clock.seconds() - stats.smoothing_s;
 

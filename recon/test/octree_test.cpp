@@ -75,8 +75,7 @@ TEST(Octree, BandStaysClosedAfterSnappingThinRegions) {
   const Box3 box{Vec3::Constant(-10.0), Vec3::Constant(10.0)};
   OctreeOptions options;
   options.max_depth = 5;  // cells of 0.625 mm; the sheet's mid-plane z = 5.3 is 0.3 from a vertex
-  const BatchEvaluator evaluate = [](const std::vector<std::uint64_t>&, const std::vector<Vec3>& points,
-                                     double* values) {
+  const BatchEvaluator evaluate = [](const std::vector<Vec3>& points, double* values, std::uint64_t*) {
     for (std::size_t n = 0; n < points.size(); ++n) {
       const Vec3& p = points[n];
       values[3 * n] = 0.0;
@@ -135,7 +134,7 @@ TEST(Octree, AKeptFieldSampledAgainEqualsAFreshField) {
   OctreeOptions options;
   options.max_depth = 5;
   const auto evaluator = [](double shift) {
-    return BatchEvaluator([shift](const std::vector<std::uint64_t>&, const std::vector<Vec3>& points, double* values) {
+    return BatchEvaluator([shift](const std::vector<Vec3>& points, double* values, std::uint64_t*) {
       for (std::size_t n = 0; n < points.size(); ++n) {
         const Vec3& p = points[n];
         const Vec3 centre(0.0, p.x() > 2.0 ? shift : 0.0, -2.0);
