@@ -8,6 +8,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include "key_masks.hpp"
 #include "sorted_keys.hpp"
 
 namespace sonoshape::recon {
@@ -85,7 +86,7 @@ std::vector<TriangleMesh> extract_label_surfaces(const SampledField& field) {
   const std::vector<std::uint64_t>& cells = field.surface_cells;
   // Per cell, its cube corner c (offset (c & 1, (c >> 1) & 1, (c >> 2) & 1)) in `corners`.
   std::vector<std::uint32_t> cell_corners;
-  const std::vector<std::uint64_t> corners = union_of_shifts(cells, kCubeCornerShifts, &cell_corners);
+  const std::vector<std::uint64_t> corners = cube_corner_union(cells, &cell_corners);
   std::vector<std::uint32_t> corner_rows(corners.size());
   std::vector<std::uint16_t> corner_labels(corners.size());  // labels are function indices
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, corners.size(), 1024),

@@ -16,6 +16,7 @@
 #include <tbb/parallel_sort.h>
 
 #include "sonoshape/core/log.hpp"
+#include "key_masks.hpp"
 #include "sorted_keys.hpp"
 
 namespace sonoshape::recon {
@@ -558,11 +559,11 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
   const int function_count = field.function_count;
   Stopwatch smoothing_clock;
   // Smoothing nodes: corners of surface cells (the band is sorted), sorted.
-  const std::vector<std::uint64_t> nodes = union_of_shifts(field.surface_cells, kCubeCornerShifts);
+  const std::vector<std::uint64_t> nodes = cube_corner_union(field.surface_cells);
   // Laplacian domain: the nodes and their six neighbours, sorted; node_stencil: per node, its
   // 7-point stencil's positions in laplacian_nodes (kStencilShifts).
   std::vector<std::uint32_t> node_stencil;
-  const std::vector<std::uint64_t> laplacian_nodes = union_of_shifts(nodes, kStencilShifts, &node_stencil);
+  const std::vector<std::uint64_t> laplacian_nodes = stencil_union(nodes, &node_stencil);
   // Every vertex the bi-Laplacian of a node reads: the Laplacian nodes and their neighbours,
   // sorted. Each is looked up (or evaluated) once and its values copied into `smoothed`, where
   // the sweeps run: in key order, a vertex's neighbours along k lie next to it and those along
@@ -571,7 +572,7 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
   // stencil's positions (union_of_shifts); looking up the seven vertices of every Laplacian and
   // bi-Laplacian stencil in the grid index, as before, cost more than the sweeps.
   std::vector<std::uint32_t> lap_stencil;  // per Laplacian node, as node_stencil in stencil_vertices
-  const std::vector<std::uint64_t> stencil_vertices = union_of_shifts(laplacian_nodes, kStencilShifts, &lap_stencil);
+  const std::vector<std::uint64_t> stencil_vertices = stencil_union(laplacian_nodes, &lap_stencil);
   const std::size_t fc = static_cast<std::size_t>(function_count);
   std::vector<std::uint32_t> stencil_rows(stencil_vertices.size());
   sampler.request_each(stencil_vertices.size(), [&](std::size_t n, const auto& request) {

@@ -10,6 +10,7 @@
 
 #include "grid_index.hpp"
 #include "octree_field.hpp"
+#include "key_masks.hpp"
 #include "sorted_keys.hpp"
 
 namespace sonoshape::recon {
@@ -205,6 +206,42 @@ TEST(Octree, UnionOfShiftsListsEveryShiftedKeyAndWhereItLies) {
   // An empty band has no neighbours.
   std::vector<std::uint32_t> positions(3, 0);
   EXPECT_TRUE(union_of_shifts({}, kStencilShifts, &positions).empty());
+  EXPECT_TRUE(positions.empty());
+}
+
+// The same sets on bit masks (key_masks.hpp): identical keys and positions to the merges, for
+// rows along k of one and of three words, negative indices, a thin shell like a band, and a box too
+// large for masks (the merges then answer).
+TEST(Octree, MaskedUnionsEqualTheMerges) {
+  std::mt19937 rng(9);
+  std::vector<std::vector<std::uint64_t>> sets;
+  std::uniform_int_distribution<int> wide(-3, 140), narrow(5, 40);
+  std::vector<std::uint64_t> scattered, small, shell;
+  for (int n = 0; n < 30000; ++n) scattered.push_back(grid_key(wide(rng), wide(rng), wide(rng)));
+  for (int n = 0; n < 3000; ++n) small.push_back(grid_key(narrow(rng), narrow(rng), narrow(rng)));
+  for (int i = 0; i < 128; ++i)
+    for (int j = 0; j < 128; ++j)
+      for (int k = 0; k < 128; ++k) {
+        const double r = std::sqrt((i - 64.0) * (i - 64.0) + (j - 60.0) * (j - 60.0) + (k - 70.0) * (k - 70.0));
+        if (std::abs(r - 50.0) < 1.0) shell.push_back(grid_key(i, j, k));
+      }
+  const std::vector<std::uint64_t> huge = {grid_key(0, 0, 0), grid_key(3, 5, 7), grid_key(400000, 2, 2)};
+  for (auto* set : {&scattered, &small, &shell}) {
+    std::sort(set->begin(), set->end());
+    set->erase(std::unique(set->begin(), set->end()), set->end());
+  }
+  for (const std::vector<std::uint64_t>* set :
+       std::initializer_list<const std::vector<std::uint64_t>*>{&scattered, &small, &shell, &huge}) {
+    std::vector<std::uint32_t> merged_positions, masked_positions;
+    EXPECT_EQ(cube_corner_union(*set, &masked_positions), union_of_shifts(*set, kCubeCornerShifts, &merged_positions));
+    EXPECT_EQ(masked_positions, merged_positions);
+    EXPECT_EQ(cube_corner_union(*set), union_of_shifts(*set, kCubeCornerShifts));
+    EXPECT_EQ(stencil_union(*set, &masked_positions), union_of_shifts(*set, kStencilShifts, &merged_positions));
+    EXPECT_EQ(masked_positions, merged_positions);
+  }
+  ASSERT_GT(shell.size(), 10000u);
+  std::vector<std::uint32_t> positions(3, 0);
+  EXPECT_TRUE(stencil_union({}, &positions).empty());
   EXPECT_TRUE(positions.empty());
 }
 
