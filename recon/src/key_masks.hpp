@@ -18,6 +18,15 @@
 
 namespace sonoshape::recon {
 
+// Set bits of a word, without a call: a portable build (x86-64 without POPCNT) makes
+// std::popcount a library call per word.
+inline std::uint32_t bit_count(std::uint64_t x) {
+  x = x - ((x >> 1) & 0x5555555555555555ull);
+  x = (x & 0x3333333333333333ull) + ((x >> 2) & 0x3333333333333333ull);
+  x = (x + (x >> 4)) & 0x0f0f0f0f0f0f0f0full;
+  return static_cast<std::uint32_t>((x * 0x0101010101010101ull) >> 56);
+}
+
 /// A set of grid keys in a box, as rows of bits along k.
 class KeyMask {
  public:
@@ -91,22 +100,33 @@ class KeyMask {
     return out;
   }
 
-  /// The keys, sorted; also counts the bits before each row, for position().
+  /// The keys, sorted; also counts the bits before each word, for position().
   std::vector<std::uint64_t> keys() {
-    const std::size_t rows = static_cast<std::size_t>(size_[0]) * static_cast<std::size_t>(size_[1]);
-    row_start_.assign(rows + 1, 0);
-    for (std::size_t r = 0; r < rows; ++r) {
+    // Counts per plane of constant i in parallel, then the planes' offsets.
+    const std::size_t plane_words = static_cast<std::size_t>(size_[1]) * words_;
+    word_start_.assign(bits_.size() + 1, 0);
+    std::vector<std::uint32_t> plane_start(static_cast<std::size_t>(size_[0]) + 1, 0);
+    tbb::parallel_for(0, size_[0], [&](int i) {
       std::uint32_t count = 0;
-      for (std::size_t w = 0; w < words_; ++w) count += static_cast<std::uint32_t>(std::popcount(bits_[r * words_ + w]));
-      row_start_[r + 1] = row_start_[r] + count;
-    }
-    std::vector<std::uint64_t> out(row_start_[rows]);
+      for (std::size_t w = static_cast<std::size_t>(i) * plane_words; w < static_cast<std::size_t>(i + 1) * plane_words; ++w) {
+        word_start_[w] = count;
+        count += bit_count(bits_[w]);
+      }
+      plane_start[static_cast<std::size_t>(i) + 1] = count;
+    });
+    for (std::size_t i = 0; i < static_cast<std::size_t>(size_[0]); ++i) plane_start[i + 1] += plane_start[i];
+    word_start_.back() = plane_start.back();
+    tbb::parallel_for(0, size_[0], [&](int i) {
+      for (std::size_t w = static_cast<std::size_t>(i) * plane_words; w < static_cast<std::size_t>(i + 1) * plane_words; ++w)
+        word_start_[w] += plane_start[static_cast<std::size_t>(i)];
+    });
+    std::vector<std::uint64_t> out(word_start_.back());
     tbb::parallel_for(0, size_[0], [&](int i) {
       for (int j = 0; j < size_[1]; ++j) {
-        const std::size_t r = static_cast<std::size_t>(i) * static_cast<std::size_t>(size_[1]) + static_cast<std::size_t>(j);
-        std::uint32_t n = row_start_[r];
+        const std::size_t first = (static_cast<std::size_t>(i) * static_cast<std::size_t>(size_[1]) + static_cast<std::size_t>(j)) * words_;
+        std::uint32_t n = word_start_[first];
         for (std::size_t w = 0; w < words_; ++w)
-          for (std::uint64_t word = bits_[r * words_ + w]; word != 0; word &= word - 1) {
+          for (std::uint64_t word = bits_[first + w]; word != 0; word &= word - 1) {
             const int b = static_cast<int>(w * 64) + std::countr_zero(word);
             out[n++] = grid_key(i + low_[0], j + low_[1], b + low_[2]);
           }
@@ -116,13 +136,10 @@ class KeyMask {
   }
   /// Where the key (i, j, k), which must be in the set, lies in keys() (called before this).
   std::uint32_t position(int i, int j, int k) const {
-    const std::size_t r = static_cast<std::size_t>(i - low_[0]) * static_cast<std::size_t>(size_[1]) +
-                          static_cast<std::size_t>(j - low_[1]);
     const std::size_t b = static_cast<std::size_t>(k - low_[2]);
-    const std::uint64_t* bits = &bits_[r * words_];
-    std::uint32_t n = row_start_[r];
-    for (std::size_t w = 0; w < b / 64; ++w) n += static_cast<std::uint32_t>(std::popcount(bits[w]));
-    return n + static_cast<std::uint32_t>(std::popcount(bits[b / 64] & ((std::uint64_t{1} << (b % 64)) - 1)));
+    const std::size_t w = (static_cast<std::size_t>(i - low_[0]) * static_cast<std::size_t>(size_[1]) +
+                           static_cast<std::size_t>(j - low_[1])) * words_ + b / 64;
+    return word_start_[w] + bit_count(bits_[w] & ((std::uint64_t{1} << (b % 64)) - 1));
   }
 
  private:
@@ -153,7 +170,7 @@ class KeyMask {
   int size_[3] = {0, 0, 0};
   std::size_t words_ = 0;
   std::vector<std::uint64_t> bits_;
-  std::vector<std::uint32_t> row_start_;
+  std::vector<std::uint32_t> word_start_;  // per word, the set bits before it
   bool valid_ = false;
 };
 
