@@ -174,59 +174,64 @@ class KeyMask {
   bool valid_ = false;
 };
 
-/// union_of_shifts(sorted, kCubeCornerShifts, positions) on masks where they fit.
-inline std::vector<std::uint64_t> cube_corner_union(const std::vector<std::uint64_t>& sorted,
-                                                    std::vector<std::uint32_t>* positions = nullptr) {
-  constexpr std::size_t kMaxWords = std::size_t{1} << 22;  // 32 MiB of bits
-  KeyMask mask(sorted, 1, kMaxWords);
-  if (!mask.valid()) return union_of_shifts(sorted, kCubeCornerShifts, positions);
-  KeyMask corners = mask.cube_corners();
-  std::vector<std::uint64_t> out = corners.keys();
+// Masks of boxes up to this many words (32 MiB of bits: the finest grid up to depth 8).
+constexpr std::size_t kMaxMaskWords = std::size_t{1} << 22;
+
+// The union of `sorted` (sorted, unique) dilated by `dilate` (a KeyMask member) on masks, with
+// per key `width` positions filled by fill(mask, i, j, k, p); the merge of `shifts` where the
+// box is too large for masks.
+template <typename Shifts, typename Dilate, typename Fill>
+std::vector<std::uint64_t> masked_union(const std::vector<std::uint64_t>& sorted, const Shifts& shifts,
+                                        Dilate dilate, std::size_t width, const Fill& fill,
+                                        std::vector<std::uint32_t>* positions) {
+  KeyMask mask(sorted, 1, kMaxMaskWords);
+  if (!mask.valid()) return union_of_shifts(sorted, shifts, positions);
+  KeyMask dilated = (mask.*dilate)();
+  std::vector<std::uint64_t> out = dilated.keys();
   if (positions != nullptr) {
-    positions->resize(sorted.size() * 8);
+    positions->resize(sorted.size() * width);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, sorted.size(), 1024), [&](const tbb::blocked_range<std::size_t>& r) {
       for (std::size_t n = r.begin(); n < r.end(); ++n) {
         int i, j, k;
         grid_unkey(sorted[n], i, j, k);
-        std::uint32_t* p = &(*positions)[n * 8];
-        // Corner c has offset (c & 1, (c >> 1) & 1, (c >> 2) & 1); (i, j, k + 1) follows (i, j, k).
-        for (int c = 0; c < 4; ++c) {
-          p[c] = corners.position(i + (c & 1), j + ((c >> 1) & 1), k);
-          p[c + 4] = p[c] + 1;
-        }
+        fill(dilated, i, j, k, &(*positions)[n * width]);
       }
     });
   }
   return out;
 }
 
+/// union_of_shifts(sorted, kCubeCornerShifts, positions) on masks where they fit.
+inline std::vector<std::uint64_t> cube_corner_union(const std::vector<std::uint64_t>& sorted,
+                                                    std::vector<std::uint32_t>* positions = nullptr) {
+  return masked_union(sorted, kCubeCornerShifts, &KeyMask::cube_corners, 8,
+                      [](const KeyMask& corners, int i, int j, int k, std::uint32_t* p) {
+                        // Corner c has offset (c & 1, (c >> 1) & 1, (c >> 2) & 1); (i, j, k + 1)
+                        // follows (i, j, k).
+                        for (int c = 0; c < 4; ++c) {
+                          p[c] = corners.position(i + (c & 1), j + ((c >> 1) & 1), k);
+                          p[c + 4] = p[c] + 1;
+                        }
+                      },
+                      positions);
+}
+
 /// union_of_shifts(sorted, kStencilShifts, positions) on masks where they fit.
 inline std::vector<std::uint64_t> stencil_union(const std::vector<std::uint64_t>& sorted,
                                                 std::vector<std::uint32_t>* positions = nullptr) {
-  constexpr std::size_t kMaxWords = std::size_t{1} << 22;
-  KeyMask mask(sorted, 1, kMaxWords);
-  if (!mask.valid()) return union_of_shifts(sorted, kStencilShifts, positions);
-  KeyMask dilated = mask.stencil();
-  std::vector<std::uint64_t> out = dilated.keys();
-  if (positions != nullptr) {
-    positions->resize(sorted.size() * 7);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, sorted.size(), 1024), [&](const tbb::blocked_range<std::size_t>& r) {
-      for (std::size_t n = r.begin(); n < r.end(); ++n) {
-        int i, j, k;
-        grid_unkey(sorted[n], i, j, k);
-        std::uint32_t* p = &(*positions)[n * 7];
-        // kStencilShifts: centre, -i, +i, -j, +j, -k, +k; the k neighbours lie beside the centre.
-        p[0] = dilated.position(i, j, k);
-        p[1] = dilated.position(i - 1, j, k);
-        p[2] = dilated.position(i + 1, j, k);
-        p[3] = dilated.position(i, j - 1, k);
-        p[4] = dilated.position(i, j + 1, k);
-        p[5] = p[0] - 1;
-        p[6] = p[0] + 1;
-      }
-    });
-  }
-  return out;
+  return masked_union(sorted, kStencilShifts, &KeyMask::stencil, 7,
+                      [](const KeyMask& dilated, int i, int j, int k, std::uint32_t* p) {
+                        // kStencilShifts: centre, -i, +i, -j, +j, -k, +k; the k neighbours lie
+                        // beside the centre.
+                        p[0] = dilated.position(i, j, k);
+                        p[1] = dilated.position(i - 1, j, k);
+                        p[2] = dilated.position(i + 1, j, k);
+                        p[3] = dilated.position(i, j - 1, k);
+                        p[4] = dilated.position(i, j + 1, k);
+                        p[5] = p[0] - 1;
+                        p[6] = p[0] + 1;
+                      },
+                      positions);
 }
 
 }  // namespace sonoshape::recon
