@@ -240,7 +240,7 @@ void close_band(SampledField& field, Sampler& sampler, const std::vector<std::ui
   // `in_band` (tens of thousands of serial inserts for a handful of seeds): its cells are found
   // by a search in it, and it is merged with the new cells at the end.
   std::vector<std::uint64_t> band = frontier;
-  const auto in_closed = [&](std::uint64_t key) { return !closed.empty() && contains(closed, key); };
+  const auto in_closed = [&](std::uint64_t key) { return contains(closed, key); };
   while (!frontier.empty()) {
     // Per frontier cell, the neighbours across its mixed faces that are not in the band yet (a
     // bit per direction), in parallel; then added in order.
@@ -568,8 +568,8 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
   // sorted. Each is looked up (or evaluated) once and its values copied into `smoothed`, where
   // the sweeps run: in key order, a vertex's neighbours along k lie next to it and those along
   // j and i a row or a slice away, where the field's rows (in the order they were first
-  // evaluated) scattered every stencil over memory. The merges that build the sets give each
-  // stencil's positions (union_of_shifts); looking up the seven vertices of every Laplacian and
+  // evaluated) scattered every stencil over memory. The bit masks that build the sets give each
+  // stencil's positions (key_masks.hpp); looking up the seven vertices of every Laplacian and
   // bi-Laplacian stencil in the grid index, as before, cost more than the sweeps.
   std::vector<std::uint32_t> lap_stencil;  // per Laplacian node, as node_stencil in stencil_vertices
   const std::vector<std::uint64_t> stencil_vertices = stencil_union(laplacian_nodes, &lap_stencil);

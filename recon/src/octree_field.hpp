@@ -73,7 +73,7 @@ struct SampledField {
 
   /// Per row, the argmax label of its values (the lowest index wins ties), kept by every pass
   /// that writes values: the band closures, the refinement's mixed tests, the smoothing and the
-  /// mesher read labels of rows scattered over the field, and a byte per row is read from cache
+  /// mesher read labels of rows scattered over the field, and two bytes per row are read from cache
   /// where the values' two or more doubles per row were not.
   std::vector<std::uint16_t> row_labels;
 
