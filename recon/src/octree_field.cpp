@@ -296,7 +296,8 @@ void close_band(SampledField& field, Sampler& sampler, const std::vector<std::ui
 }
 
 void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64_t>& fixed,
-            int iterations, GridIndex& scratch);
+            int iterations, GridIndex& scratch, const std::vector<char>* valid_at_start,
+            const OctreeWorkspace::SmoothingInputs& last, OctreeWorkspace::SmoothingInputs& next);
 void snap_thin_regions(SampledField& field, Sampler& sampler, const std::vector<RegionSample>& samples,
                        GridIndex& scratch);
 
@@ -419,6 +420,9 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
   // at the start of the pass, before this pass evaluated rows again.
   std::vector<OctreeWorkspace::RefinementLevel> before;
   if (kept) before = std::move(workspace.refinement);
+  OctreeWorkspace::SmoothingInputs last_smoothing;  // rows of the kept field only
+  if (kept) last_smoothing = std::move(workspace.smoothing);
+  workspace.smoothing = {};
   workspace.refinement.clear();
   std::vector<std::array<int, 3>> cells;
   std::vector<CornerRows> finest_mixed_rows;  // of the finest mixed cells, in order
@@ -546,7 +550,8 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
   close_band(field, sampler, field.surface_cells, &finest_mixed_rows, scratch, resolution);
 
   if (options.smoothing_iterations > 0)
-    smooth(field, sampler, contours.fixed_vertices, options.smoothing_iterations, scratch);
+    smooth(field, sampler, contours.fixed_vertices, options.smoothing_iterations, scratch,
+           kept ? &valid_at_start : nullptr, last_smoothing, workspace.smoothing);
   snap_thin_regions(field, sampler, region_samples, scratch);
   return field;
 }
@@ -554,7 +559,8 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
 namespace {
 
 void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64_t>& fixed,
-            int iterations, GridIndex& scratch) {
+            int iterations, GridIndex& scratch, const std::vector<char>* valid_at_start,
+            const OctreeWorkspace::SmoothingInputs& last, OctreeWorkspace::SmoothingInputs& next) {
   const int resolution = 1 << field.grid.depth;
   const int function_count = field.function_count;
   Stopwatch smoothing_clock;
@@ -574,8 +580,30 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
   std::vector<std::uint32_t> lap_stencil;  // per Laplacian node, as node_stencil in stencil_vertices
   const std::vector<std::uint64_t> stencil_vertices = stencil_union(laplacian_nodes, &lap_stencil);
   const std::size_t fc = static_cast<std::size_t>(function_count);
+  // Per stencil vertex, its place among the last pass's inputs if its row kept its value since
+  // (valid at the start of this pass: then nothing has written it), else kNone. Both lists are
+  // sorted: each chunk walks them from a binary search.
+  std::vector<std::uint32_t> in_last(stencil_vertices.size(), GridIndex::kNone);
+  if (valid_at_start != nullptr && !last.keys.empty()) {
+    constexpr std::size_t kChunk = 4096;
+    tbb::parallel_for(std::size_t{0}, (stencil_vertices.size() + kChunk - 1) / kChunk, [&](std::size_t chunk) {
+      const std::size_t end = std::min(stencil_vertices.size(), (chunk + 1) * kChunk);
+      std::size_t m = static_cast<std::size_t>(
+          std::lower_bound(last.keys.begin(), last.keys.end(), stencil_vertices[chunk * kChunk]) - last.keys.begin());
+      for (std::size_t n = chunk * kChunk; n < end && m < last.keys.size(); ++n) {
+        while (m < last.keys.size() && last.keys[m] < stencil_vertices[n]) ++m;
+        if (m < last.keys.size() && last.keys[m] == stencil_vertices[n] && (*valid_at_start)[last.rows[m]])
+          in_last[n] = static_cast<std::uint32_t>(m);
+      }
+    });
+  }
   std::vector<std::uint32_t> stencil_rows(stencil_vertices.size());
   sampler.request_each(stencil_vertices.size(), [&](std::size_t n, const auto& request) {
+    if (in_last[n] != GridIndex::kNone) {
+      stencil_rows[n] = last.rows[in_last[n]];
+      sampler.mark_read(stencil_rows[n]);
+      return;
+    }
     int i, j, k;
     grid_unkey(stencil_vertices[n], i, j, k);
     stencil_rows[n] = request(i, j, k);
@@ -584,9 +612,16 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
   double* values = field.values.data();
   std::vector<double> smoothed(stencil_vertices.size() * fc);
   for_rows(stencil_vertices.size(), [&](std::size_t n) {
+    if (in_last[n] != GridIndex::kNone) {
+      copy_row(&last.values[in_last[n] * fc], fc, smoothed.data() + n * fc);
+      return;
+    }
     if (stencil_rows[n] == GridIndex::kNone) stencil_rows[n] = field.index.at(stencil_vertices[n]);
     copy_row(values + stencil_rows[n] * fc, fc, smoothed.data() + n * fc);
   });
+  next.keys = stencil_vertices;
+  next.rows = stencil_rows;
+  next.values = smoothed;
   // Per node, its position in stencil_vertices.
   std::vector<std::uint32_t> node_position(nodes.size());
   for_rows(nodes.size(), [&](std::size_t n) {

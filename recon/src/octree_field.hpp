@@ -147,6 +147,17 @@ struct OctreeWorkspace {
     std::vector<char> split;                               ///< refined (mixed or contour cell)
   };
   std::vector<RefinementLevel> refinement;
+  /// The smoothing's stencil vertices of the pass that made `previous` (sorted keys), their rows
+  /// and their values before the sweeps. A vertex of the next pass whose row kept its value is
+  /// read from here, in key order, instead of being looked up and read from its row: an online
+  /// update's stencils are nearly all the last pass's, and those scattered look-ups and reads
+  /// were a third of its smoothing set-up.
+  struct SmoothingInputs {
+    std::vector<std::uint64_t> keys;
+    std::vector<std::uint32_t> rows;
+    std::vector<double> values;  ///< function_count per key
+  };
+  SmoothingInputs smoothing;
 };
 
 /// Samples the field over `box` (everything outside it is the outside label). `contours` refine
