@@ -5,7 +5,8 @@
 // bits before it. Same keys in the same order, and the same positions, as union_of_shifts, whose
 // merge of seven or eight shifted copies (a compare and a store per copy and key) was the largest
 // part of an online update's smoothing set-up and a sixth of its mesher. Used where the keys'
-// bounding box is small (the finest grid up to depth 8); union_of_shifts otherwise.
+// bounding box needs at most kMaxMaskWords words (the whole finest grid up to depth 9; the default
+// depth is 7); union_of_shifts otherwise.
 #include <algorithm>
 #include <bit>
 #include <cstdint>
@@ -174,7 +175,7 @@ class KeyMask {
   bool valid_ = false;
 };
 
-// Masks of boxes up to this many words (32 MiB of bits: the finest grid up to depth 8).
+// Masks of boxes up to this many words (32 MiB of bits: the finest grid up to depth 9).
 constexpr std::size_t kMaxMaskWords = std::size_t{1} << 22;
 
 // The union of `sorted` (sorted, unique) dilated by `dilate` (a KeyMask member) on masks, with

@@ -591,7 +591,7 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
   // stencil's positions (key_masks.hpp); looking up the seven vertices of every Laplacian and
   // bi-Laplacian stencil in the grid index, as before, cost more than the sweeps.
   std::vector<std::uint32_t> lap_stencil;  // per Laplacian node, as node_stencil in stencil_vertices
-  const std::vector<std::uint64_t> stencil_vertices = stencil_union(laplacian_nodes, &lap_stencil);
+  std::vector<std::uint64_t> stencil_vertices = stencil_union(laplacian_nodes, &lap_stencil);
   const std::size_t fc = static_cast<std::size_t>(function_count);
   // Per stencil vertex, its place among the last pass's inputs if its row kept its value since
   // (valid at the start of this pass: then nothing has written it), else kNone. Both lists are
@@ -632,7 +632,8 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
     if (stencil_rows[n] == GridIndex::kNone) stencil_rows[n] = field.index.at(stencil_vertices[n]);
     copy_row(values + stencil_rows[n] * fc, fc, smoothed.data() + n * fc);
   });
-  next.keys = stencil_vertices;
+  // This pass's inputs for the next (the sweeps below change `smoothed`).
+  next.keys = std::move(stencil_vertices);
   next.rows = stencil_rows;
   next.values = smoothed;
   // Per node, its position in stencil_vertices.
