@@ -157,8 +157,8 @@ std::vector<TriangleMesh> extract_label_surfaces(const SampledField& field) {
     for (const std::vector<CellTriangle>& triangles : chunk_triangles) triangle_count += triangles.size();
     mesh.triangles.reserve(triangle_count);
     // The serial pass only numbers the vertices (first use in cell order) and records each new
-    // vertex's cell and edge; their positions are computed after it, in parallel (computing them
-    // in the serial pass was half of its time).
+    // vertex's cell and edge; their positions, which the numbering does not need, are computed
+    // after it, in parallel.
     struct NewVertex {
       std::uint32_t cell;
       std::uint32_t edge;  // inside corner | outside corner << 3

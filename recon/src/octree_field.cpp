@@ -26,7 +26,7 @@ constexpr std::array<std::array<int, 3>, 6> kFaceNeighbours{
     {{-1, 0, 0}, {1, 0, 0}, {0, -1, 0}, {0, 1, 0}, {0, 0, -1}, {0, 0, 1}}};
 
 // Copies one row of `count` function values. std::copy_n of two or three doubles became a call
-// to memmove per row, which was most of the smoothing's copies into and out of its array.
+// to memmove per row (perf profiles of online updates showed it in the smoothing's copies).
 inline void copy_row(const double* from, std::size_t count, double* to) {
   if (count == 2) {
     to[0] = from[0];
@@ -58,12 +58,6 @@ class Sampler {
     return row;
   }
   bool has_value(std::uint64_t key) const { return valid_row(key) != GridIndex::kNone; }
-  /// valid_row for a row known to hold a key's value (a kept field's rows never move): no look-up.
-  std::uint32_t valid_known_row(std::uint32_t row) const {
-    if (!valid_[row]) return GridIndex::kNone;
-    mark_read(row);
-    return row;
-  }
   /// Counts a row as read in this pass without looking it up (its value is current).
   void mark_read(std::uint32_t row) const {
     std::atomic_ref<std::uint32_t>(field_.row_pass[row]).store(field_.pass, std::memory_order_relaxed);
@@ -467,20 +461,13 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
     std::vector<std::uint32_t> tested;  // the cells whose corners are looked up and tested
     for (std::size_t n = 0; n < cells.size(); ++n)
       if (!is_kept[n]) tested.push_back(static_cast<std::uint32_t>(n));
-    // The corners' rows as the request pass finds them (see corners_mixed). A cell the last pass
-    // had knows its corners' rows (a kept field's rows never move): only the corners whose rows
-    // are out of date are looked up and queued.
+    // The corners' rows as the request pass finds them (see corners_mixed).
     sampler.request_each(tested.size(), [&](std::size_t m, const auto& request) {
       const auto& c = cells[tested[m]];
       std::array<std::uint32_t, 8>& rows = now.corner_rows[tested[m]];
-      const std::uint32_t q = before_index[tested[m]];
-      for (int corner = 0; corner < 8; ++corner) {
-        std::uint32_t& row = rows[static_cast<std::size_t>(corner)];
-        row = q != GridIndex::kNone ? sampler.valid_known_row(last->corner_rows[q][static_cast<std::size_t>(corner)])
-                                    : GridIndex::kNone;
-        if (row == GridIndex::kNone)
-          row = request(c[0] + (corner & 1) * step, c[1] + ((corner >> 1) & 1) * step, c[2] + ((corner >> 2) & 1) * step);
-      }
+      for (int corner = 0; corner < 8; ++corner)
+        rows[static_cast<std::size_t>(corner)] =
+            request(c[0] + (corner & 1) * step, c[1] + ((corner >> 1) & 1) * step, c[2] + ((corner >> 2) & 1) * step);
     });
     sampler.flush();
     // Mixed cells, and above the finest level cells holding contour vertices: split further.
@@ -491,8 +478,7 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
       now.mixed[tested[m]] = corners_mixed(field, now.corner_rows[tested[m]], c[0], c[1], c[2], step);
     });
     // Which cells of this level hold contour vertices, as a bit per cell where the level is
-    // coarse enough (a binary search in the level's contour cells for every cell of the level
-    // cost a fifth of an online update's refinement).
+    // coarse enough, instead of a binary search in the level's contour cells for every cell.
     constexpr int kMaxBitLevel = 8;  // 2^24 bits, 2 MiB
     std::vector<std::uint64_t> contour_bits;
     const auto bit_of = [level](int i, int j, int k) {

@@ -92,8 +92,8 @@ bool same_plane(const LabeledSlice& a, const LabeledSlice& b, double scale) {
 // (-1: outside the box, where the value is constant) and the update (generation). The value stays
 // current while that cell is unchanged: the field inside a cell depends only on that cell's faces
 // and their images. Kept per row of the field, so that telling which of the kept field's rows are
-// current is one pass over two arrays (a look-up of every row's key in a table of its own, as
-// before, was a tenth of an update's octree passes).
+// current is one pass over the rows (before, every row's key was looked up in a 9 MiB table of its
+// own: about 1 ms per update of spot's sweep by per-pass timers, 0.1 ms now).
 std::uint64_t evaluation_tag(int cell, std::uint32_t generation) {
   return (static_cast<std::uint64_t>(static_cast<std::uint32_t>(cell)) << 32) | generation;
 }
