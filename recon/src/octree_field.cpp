@@ -91,8 +91,11 @@ class Sampler {
       }
     });
     for (const std::vector<std::uint64_t>& local : missing)
-      for (const std::uint64_t key : local)
-        if (pending_keys_.insert(key, 0)) pending_.push_back(key);
+      for (const std::uint64_t key : local) queue(key);
+  }
+  /// Queues a vertex that has no current value (valid_row gave kNone) unless it is queued.
+  void queue(std::uint64_t key) {
+    if (pending_keys_.insert(key, 0)) pending_.push_back(key);
   }
   /// Evaluates every queued vertex in one parallel batch.
   void flush() {
@@ -579,44 +582,45 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
   std::vector<std::uint32_t> lap_stencil;  // per Laplacian node, as node_stencil in stencil_vertices
   std::vector<std::uint64_t> stencil_vertices = stencil_union(laplacian_nodes, &lap_stencil);
   const std::size_t fc = static_cast<std::size_t>(function_count);
-  // Per stencil vertex, its place among the last pass's inputs if its row kept its value since
-  // (valid at the start of this pass: then nothing has written it), else kNone. Both lists are
-  // sorted: each chunk walks them from a binary search.
-  std::vector<std::uint32_t> in_last(stencil_vertices.size(), GridIndex::kNone);
-  if (valid_at_start != nullptr && !last.keys.empty()) {
-    constexpr std::size_t kChunk = 4096;
-    tbb::parallel_for(std::size_t{0}, (stencil_vertices.size() + kChunk - 1) / kChunk, [&](std::size_t chunk) {
-      const std::size_t end = std::min(stencil_vertices.size(), (chunk + 1) * kChunk);
-      std::size_t m = static_cast<std::size_t>(
-          std::lower_bound(last.keys.begin(), last.keys.end(), stencil_vertices[chunk * kChunk]) - last.keys.begin());
-      for (std::size_t n = chunk * kChunk; n < end && m < last.keys.size(); ++n) {
-        while (m < last.keys.size() && last.keys[m] < stencil_vertices[n]) ++m;
-        if (m < last.keys.size() && last.keys[m] == stencil_vertices[n] && (*valid_at_start)[last.rows[m]])
-          in_last[n] = static_cast<std::uint32_t>(m);
-      }
-    });
-  }
+  // Per stencil vertex, its row and its value before the sweeps (in `smoothed`), in one parallel
+  // walk per chunk. A vertex whose row kept its value since the last pass (valid at the start of
+  // this pass: then nothing has written it) is read from the last pass's inputs, found by
+  // walking both sorted lists from a binary search; the others are looked up, and those without
+  // a current value are evaluated (queued in key order) and read after.
   std::vector<std::uint32_t> stencil_rows(stencil_vertices.size());
-  sampler.request_each(stencil_vertices.size(), [&](std::size_t n, const auto& request) {
-    if (in_last[n] != GridIndex::kNone) {
-      stencil_rows[n] = last.rows[in_last[n]];
-      sampler.mark_read(stencil_rows[n]);
-      return;
-    }
-    int i, j, k;
-    grid_unkey(stencil_vertices[n], i, j, k);
-    stencil_rows[n] = request(i, j, k);
-  });
-  sampler.flush();
-  double* values = field.values.data();
   std::vector<double> smoothed(stencil_vertices.size() * fc);
-  for_rows(stencil_vertices.size(), [&](std::size_t n) {
-    if (in_last[n] != GridIndex::kNone) {
-      copy_row(&last.values[in_last[n] * fc], fc, smoothed.data() + n * fc);
-      return;
+  const bool from_last = valid_at_start != nullptr && !last.keys.empty();
+  constexpr std::size_t kChunk = 4096;
+  std::vector<std::vector<std::uint32_t>> missing((stencil_vertices.size() + kChunk - 1) / kChunk);
+  tbb::parallel_for(std::size_t{0}, missing.size(), [&](std::size_t chunk) {
+    const std::size_t begin = chunk * kChunk, end = std::min(stencil_vertices.size(), begin + kChunk);
+    std::size_t m = from_last ? static_cast<std::size_t>(std::lower_bound(last.keys.begin(), last.keys.end(),
+                                                                          stencil_vertices[begin]) - last.keys.begin())
+                              : 0;
+    for (std::size_t n = begin; n < end; ++n) {
+      if (from_last) {
+        while (m < last.keys.size() && last.keys[m] < stencil_vertices[n]) ++m;
+        if (m < last.keys.size() && last.keys[m] == stencil_vertices[n] && (*valid_at_start)[last.rows[m]]) {
+          stencil_rows[n] = last.rows[m];
+          sampler.mark_read(stencil_rows[n]);
+          copy_row(&last.values[m * fc], fc, &smoothed[n * fc]);
+          continue;
+        }
+      }
+      stencil_rows[n] = sampler.valid_row(stencil_vertices[n]);
+      if (stencil_rows[n] == GridIndex::kNone) missing[chunk].push_back(static_cast<std::uint32_t>(n));
+      else copy_row(field.values.data() + stencil_rows[n] * fc, fc, &smoothed[n * fc]);
     }
-    if (stencil_rows[n] == GridIndex::kNone) stencil_rows[n] = field.index.at(stencil_vertices[n]);
-    copy_row(values + stencil_rows[n] * fc, fc, smoothed.data() + n * fc);
+  });
+  std::vector<std::uint32_t> evaluated;  // positions, ascending
+  for (const std::vector<std::uint32_t>& chunk : missing) evaluated.insert(evaluated.end(), chunk.begin(), chunk.end());
+  for (const std::uint32_t n : evaluated) sampler.queue(stencil_vertices[n]);
+  sampler.flush();
+  double* values = field.values.data();  // the flush may have grown the field
+  for_rows(evaluated.size(), [&](std::size_t e) {
+    const std::size_t n = evaluated[e];
+    stencil_rows[n] = field.index.at(stencil_vertices[n]);
+    copy_row(values + stencil_rows[n] * fc, fc, &smoothed[n * fc]);
   });
   // Per node, its position in stencil_vertices.
   std::vector<std::uint32_t> node_position(nodes.size());
