@@ -97,39 +97,50 @@ class Sampler {
   void queue(std::uint64_t key) {
     if (pending_keys_.insert(key, 0)) pending_.push_back(key);
   }
-  /// Evaluates every queued vertex in one parallel batch.
+  /// Evaluates every queued vertex in one parallel batch. Only the new rows are appended
+  /// serially (in queue order); the rest runs in parallel (the serial copy of every value
+  /// was a part of each pass that an online update's re-evaluated end cap made long).
   void flush() {
     if (pending_.empty()) return;
-    std::vector<Vec3> points;
-    points.reserve(pending_.size());
-    for (const std::uint64_t key : pending_) {
+    const std::size_t count = pending_.size();
+    const auto in_parallel = [count](const auto& body) {
+      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 1024), [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t n = r.begin(); n < r.end(); ++n) body(n);
+      });
+    };
+    std::vector<Vec3> points(count);
+    std::vector<std::uint32_t> rows(count);  // a kept row whose value was out of date, or kNone
+    in_parallel([&](std::size_t n) {
       int i, j, k;
-      grid_unkey(key, i, j, k);
-      points.push_back(field_.grid.position(i, j, k));
-    }
+      grid_unkey(pending_[n], i, j, k);
+      points[n] = field_.grid.position(i, j, k);
+      rows[n] = field_.index.find(pending_[n]);
+    });
     const std::size_t fc = static_cast<std::size_t>(field_.function_count);
-    std::vector<double> evaluated(pending_.size() * fc);
-    std::vector<std::uint64_t> tags(pending_.size(), 0);
+    std::vector<double> evaluated(count * fc);
+    std::vector<std::uint64_t> tags(count, 0);
     evaluate_(points, evaluated.data(), tags.data());
-    for (std::size_t n = 0; n < pending_.size(); ++n) {
-      std::uint32_t row = field_.index.find(pending_[n]);
-      if (row == GridIndex::kNone) {  // a new row (else a kept row whose value was out of date)
-        row = static_cast<std::uint32_t>(field_.keys.size());
-        field_.index.insert(pending_[n], row);
+    for (std::size_t n = 0; n < count; ++n)
+      if (rows[n] == GridIndex::kNone) {
+        rows[n] = static_cast<std::uint32_t>(field_.keys.size());
+        field_.index.insert(pending_[n], rows[n]);
         field_.keys.push_back(pending_[n]);
-        field_.values.resize(field_.values.size() + fc);
-        field_.row_labels.push_back(0);
-        field_.row_tags.push_back(0);
-        field_.row_pass.push_back(field_.pass);
-        valid_.push_back(1);
       }
+    const std::size_t row_count = field_.keys.size();
+    field_.values.resize(row_count * fc);
+    field_.row_labels.resize(row_count, 0);
+    field_.row_tags.resize(row_count, 0);
+    field_.row_pass.resize(row_count, field_.pass);
+    valid_.resize(row_count, 1);
+    in_parallel([&](std::size_t n) {
+      const std::uint32_t row = rows[n];
       copy_row(evaluated.data() + n * fc, fc, field_.values.data() + row * fc);
       field_.set_row_label(row);
       field_.row_tags[row] = tags[n];
       field_.row_pass[row] = field_.pass;
       valid_[row] = 1;
-    }
-    field_.evaluations += pending_.size();
+    });
+    field_.evaluations += count;
     pending_.clear();
     pending_keys_.clear();
   }
