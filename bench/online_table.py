@@ -7,8 +7,8 @@ For every model in MODELS it cuts a random set (100 planes), a sweep-like set (1
 sweep of 100 planes whose every slice has a 60-degree sector field of view (the rest unknown),
 feeds each to `sonoshape reconstruct --online --stats` (one update per slice, default depth), and
 reconstructs the first N slices of each set offline (the same box) for N in CHECKPOINTS. Every
-online sequence and every rebuild runs --repeats times (default 3) and the tables take the
-median of each timing.
+online sequence and every rebuild runs --repeats times (default 3; each repeat runs the online
+sequence, then its rebuilds) and the tables take the median of each timing.
 
 Usage: python3 bench/online_table.py [--bin build/apps/sonoshape] [--models horse,spot] [--repeats 3]
        [--plot docs/images/online_update_times.png]
@@ -68,36 +68,36 @@ def main():
             slices = os.path.join(options.work, name + ".slices.json")
             run([options.bin, "slice", "--mesh", f"1:data/models/{MODELS[model]}:{model}", "--planes", family,
                  "--count", str(count), "--seed", "1", "--size-mm", "150", "-o", slices, "--skip-invalid", "-q"] + extra)
-            online_runs = []
+            data = json.load(open(slices))
+            count = len(data["slices"])
+            # The slice counts whose offline rebuild the tables compare an update with.
+            rebuild_counts = sorted({n for n in CHECKPOINTS if n <= count} | set(range(10, count + 1, RATIO_EVERY)))
+            for n in rebuild_counts:  # same bounds: the same box
+                json.dump(dict(data, slices=data["slices"][:n]),
+                          open(os.path.join(options.work, f"{name}_first{n}.slices.json"), "w"))
+            # Each repeat runs the online sequence and then every rebuild, so that an update and the
+            # rebuild it is divided by are measured minutes apart at most, not a whole set apart (the
+            # machine's speed drifts; bench/online_ratio_pairs.py does the same for two builds).
+            online_runs, rebuild_runs = [], {n: [] for n in rebuild_counts}
             for repeat in range(options.repeats):
                 stats_path = os.path.join(options.work, f"{name}.online{repeat}.json")
                 run([options.bin, "reconstruct", slices, "-o", os.path.join(options.work, name + "_online"),
                      "--online", "--stats", stats_path, "-q"])
                 online_runs.append(json.load(open(stats_path)))
+                for n in rebuild_counts:
+                    offline_path = os.path.join(options.work, f"{name}_first{n}.offline{repeat}.json")
+                    run([options.bin, "reconstruct", os.path.join(options.work, f"{name}_first{n}.slices.json"),
+                         "-o", os.path.join(options.work, f"{name}_first{n}"), "--stats", offline_path, "-q"])
+                    rebuild_runs[n].append(json.load(open(offline_path)))
             online = median_stats(online_runs)
             steps = [median_stats([r["steps"][i] for r in online_runs]) for i in range(len(online_runs[0]["steps"]))]
             growth[name] = [s["total_s"] for s in steps]
-            data = json.load(open(slices))
-
-            def rebuild(n):
-                """Offline reconstruction of the first n slices in the same box: its stats."""
-                prefix = dict(data, slices=data["slices"][:n])  # same bounds: the same box
-                prefix_path = os.path.join(options.work, f"{name}_first{n}.slices.json")
-                json.dump(prefix, open(prefix_path, "w"))
-                runs = []
-                for repeat in range(options.repeats):
-                    offline_path = os.path.join(options.work, f"{name}_first{n}.offline{repeat}.json")
-                    run([options.bin, "reconstruct", prefix_path, "-o", os.path.join(options.work, f"{name}_first{n}"),
-                         "--stats", offline_path, "-q"])
-                    runs.append(json.load(open(offline_path)))
-                return median_stats(runs)
-
-            rebuilds = {}
+            rebuilds = {n: median_stats(runs) for n, runs in rebuild_runs.items()}
             ratios = []
             for n in CHECKPOINTS:
                 if n > len(steps):
                     continue
-                offline = rebuilds[n] = rebuild(n)
+                offline = rebuilds[n]
                 step = steps[n - 1]
                 ratio = step["total_s"] / offline["total_s"]
                 ratios.append(ratio)
@@ -111,7 +111,7 @@ def main():
             sampled, evaluation_shares, evaluation_time_shares = [], [], []
             pass_shares, pass_ratios = [], []
             for n in range(10, len(steps) + 1, RATIO_EVERY):
-                offline = rebuilds.get(n) or rebuild(n)
+                offline = rebuilds[n]
                 sampled.append(steps[n - 1]["total_s"] / offline["total_s"])
                 evaluation_shares.append(steps[n - 1]["field_evaluations"] / offline["field_evaluations"])
                 # The update's own evaluation seconds against the whole rebuild: its ratio if the
