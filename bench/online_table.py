@@ -11,7 +11,7 @@ online sequence and every rebuild runs --repeats times (default 3; each repeat r
 sequence, then its rebuilds) and the tables take the median of each timing.
 
 Usage: python3 bench/online_table.py [--bin build/apps/sonoshape] [--models horse,spot] [--repeats 3]
-       [--plot docs/images/online_update_times.png]
+       [--plot docs/images/online_update_times.png] [--reuse]
 Prints Markdown tables on stdout (paste into docs/benchmarks.md); needs python3-matplotlib for
 the plot (skipped with a note when it is missing).
 """
@@ -59,14 +59,22 @@ def main():
     parser.add_argument("--repeats", type=int, default=3,
                         help="runs of every online sequence and rebuild; timings are their medians "
                              "(single runs on a busy 2-core machine move a ratio by up to 0.1)")
+    parser.add_argument("--reuse", action="store_true",
+                        help="keep the stats files a previous run left in --work and run only what is "
+                             "missing (prints that run's tables again)")
     options = parser.parse_args()
     os.makedirs(options.work, exist_ok=True)
+
+    def run_for(path, args):
+        """Runs args, which write `path`, unless --reuse and `path` exists."""
+        if not (options.reuse and os.path.exists(path)):
+            run(args)
     table_rows, summary_rows, split_rows, growth = [], [], [], {}
     for model in options.models.split(","):
         for suffix, (family, count, extra) in FAMILIES.items():
             name = f"{model}_{suffix}"
             slices = os.path.join(options.work, name + ".slices.json")
-            run([options.bin, "slice", "--mesh", f"1:data/models/{MODELS[model]}:{model}", "--planes", family,
+            run_for(slices, [options.bin, "slice", "--mesh", f"1:data/models/{MODELS[model]}:{model}", "--planes", family,
                  "--count", str(count), "--seed", "1", "--size-mm", "150", "-o", slices, "--skip-invalid", "-q"] + extra)
             data = json.load(open(slices))
             count = len(data["slices"])
@@ -81,13 +89,14 @@ def main():
             online_runs, rebuild_runs = [], {n: [] for n in rebuild_counts}
             for repeat in range(options.repeats):
                 stats_path = os.path.join(options.work, f"{name}.online{repeat}.json")
-                run([options.bin, "reconstruct", slices, "-o", os.path.join(options.work, name + "_online"),
-                     "--online", "--stats", stats_path, "-q"])
+                run_for(stats_path, [options.bin, "reconstruct", slices, "-o", os.path.join(options.work, name + "_online"),
+                                     "--online", "--stats", stats_path, "-q"])
                 online_runs.append(json.load(open(stats_path)))
                 for n in rebuild_counts:
                     offline_path = os.path.join(options.work, f"{name}_first{n}.offline{repeat}.json")
-                    run([options.bin, "reconstruct", os.path.join(options.work, f"{name}_first{n}.slices.json"),
-                         "-o", os.path.join(options.work, f"{name}_first{n}"), "--stats", offline_path, "-q"])
+                    run_for(offline_path, [options.bin, "reconstruct",
+                                           os.path.join(options.work, f"{name}_first{n}.slices.json"), "-o",
+                                           os.path.join(options.work, f"{name}_first{n}"), "--stats", offline_path, "-q"])
                     rebuild_runs[n].append(json.load(open(offline_path)))
             online = median_stats(online_runs)
             steps = [median_stats([r["steps"][i] for r in online_runs]) for i in range(len(online_runs[0]["steps"]))]
@@ -108,7 +117,7 @@ def main():
             # The update at every RATIO_EVERY-th slice from 10 on against a rebuild of as many slices.
             # The evaluation share is the zone itself: an update must evaluate again every sampled
             # vertex in the cells its plane split (their field changed).
-            sampled, evaluation_shares, evaluation_time_shares = [], [], []
+            sampled, evaluation_shares, evaluation_time_shares, evaluation_time_ratios = [], [], [], []
             pass_shares, pass_ratios = [], []
             for n in range(10, len(steps) + 1, RATIO_EVERY):
                 offline = rebuilds[n]
@@ -117,6 +126,9 @@ def main():
                 # The update's own evaluation seconds against the whole rebuild: its ratio if the
                 # octree, smoothing and mesh passes (global, see docs/engine.md) cost nothing.
                 evaluation_time_shares.append(steps[n - 1]["evaluation_s"] / offline["total_s"])
+                # ... and against the rebuild's evaluation seconds: with it and the passes' ratio
+                # below, the bounds that faster evaluations or faster passes leave the ratio.
+                evaluation_time_ratios.append(steps[n - 1]["evaluation_s"] / offline["evaluation_s"])
                 # The rest of the update's field, smoothing and mesh time: the octree, smoothing and
                 # mesh passes, against the whole rebuild and against the rebuild's own passes.
                 def passes(stats):
@@ -128,14 +140,15 @@ def main():
             summary_rows.append(
                 f"| {name} | {len(steps)} | {1000 * statistics.median(later):.0f} | "
                 f"{1000 * statistics.quantiles(later, n=10)[8]:.0f} | {1000 * max(later):.0f} | "
-                f"{statistics.median(ratios):.2f} | {statistics.median(sampled):.2f} "
+                f"{statistics.median(ratios):.2f} | {statistics.median(sampled):.3f} "
                 f"({sum(r < 0.2 for r in sampled)} of {len(sampled)} under 0.2) | "
                 f"{statistics.median(evaluation_shares):.2f} ({sum(r < 0.2 for r in evaluation_shares)} of "
                 f"{len(evaluation_shares)} under 0.2) | {statistics.median(evaluation_time_shares):.2f} | "
                 f"{rss_100:.0f} | {online['total_s']:.1f} |")
             split_rows.append(
-                f"| {name} | {statistics.median(sampled):.2f} | {statistics.median(evaluation_time_shares):.2f} | "
-                f"{statistics.median(pass_shares):.2f} | {statistics.median(pass_ratios):.2f} |")
+                f"| {name} | {statistics.median(sampled):.3f} | {statistics.median(evaluation_time_shares):.2f} | "
+                f"{statistics.median(evaluation_time_ratios):.2f} | {statistics.median(pass_shares):.2f} | "
+                f"{statistics.median(pass_ratios):.2f} |")
 
     print("### Online additions (Table II of the paper, online)\n")
     print("| set | slice | arrangement s | face images s | field s | smoothing s | mesh s | update total s "
@@ -150,9 +163,9 @@ def main():
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     print("\n".join(summary_rows))
     print("\n### Where an update's time goes, against a rebuild (every 5th slice from 10, medians)\n")
-    print("| set | update / rebuild | update evaluations s / rebuild s | update passes s / rebuild s | "
-          "update passes s / rebuild passes s |")
-    print("|---|---|---|---|---|")
+    print("| set | update / rebuild | update evaluations s / rebuild s | update evaluations s / rebuild "
+          "evaluations s | update passes s / rebuild s | update passes s / rebuild passes s |")
+    print("|---|---|---|---|---|---|")
     print("\n".join(split_rows))
     print("\n### Time per slice against the slice count (mean of each block of 10 slices, ms)\n")
     names = list(growth)

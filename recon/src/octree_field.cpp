@@ -585,10 +585,10 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
   std::set_difference(nodes.begin(), nodes.end(), fixed.begin(), fixed.end(), std::back_inserter(moving));
   // Laplacian domain: the moving nodes and their six neighbours, sorted; moving_stencil: per
   // moving node, its 7-point stencil's positions in laplacian_nodes (kStencilShifts). Only the
-  // moving nodes' bi-Laplacians are computed, so only their stencils are sampled: on a dense
-  // sweep most nodes lie next to a contour (at 80 slices of spot's sweep, 24k of 39k), and the
-  // domain of every node, as before, had 62k Laplacians where these have 37k (and 86k stencil
-  // vertices where these have 68k), for the same smoothed values.
+  // moving nodes' bi-Laplacians are computed, so only their stencils are sampled. On a dense
+  // sweep most nodes lie next to a contour, and the stencils of every node, sampled before
+  // commit 55aff83 for the same smoothed values, were a tenth of a rebuild's evaluations
+  // (80 slices of spot's sweep: 92k, now 83k; `reconstruct --stats`, field_evaluations).
   std::vector<std::uint32_t> moving_stencil;
   const std::vector<std::uint64_t> laplacian_nodes = stencil_union(moving, &moving_stencil);
   std::vector<std::uint32_t> lap_stencil;  // per Laplacian node, as moving_stencil in stencil_vertices
