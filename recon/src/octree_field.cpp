@@ -40,6 +40,15 @@ inline void copy_row(const double* from, std::size_t count, double* to) {
   }
 }
 
+// Runs body(n) for n in [0, count) on the calling arena's threads; each n writes only its own rows.
+template <typename Body>
+void for_rows(std::size_t count, const Body& body) {
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 1024),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      for (std::size_t n = r.begin(); n < r.end(); ++n) body(n);
+                    });
+}
+
 class Sampler {
  public:
   /// `pending_keys` is scratch space, emptied here; `valid` says per row of `field` whether its
@@ -103,14 +112,9 @@ class Sampler {
   void flush() {
     if (pending_.empty()) return;
     const std::size_t count = pending_.size();
-    const auto in_parallel = [count](const auto& body) {
-      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 1024), [&](const tbb::blocked_range<std::size_t>& r) {
-        for (std::size_t n = r.begin(); n < r.end(); ++n) body(n);
-      });
-    };
     std::vector<Vec3> points(count);
     std::vector<std::uint32_t> rows(count);  // a kept row whose value was out of date, or kNone
-    in_parallel([&](std::size_t n) {
+    for_rows(count, [&](std::size_t n) {
       int i, j, k;
       grid_unkey(pending_[n], i, j, k);
       points[n] = field_.grid.position(i, j, k);
@@ -132,7 +136,7 @@ class Sampler {
     field_.row_tags.resize(row_count, 0);
     field_.row_pass.resize(row_count, field_.pass);
     valid_.resize(row_count, 1);
-    in_parallel([&](std::size_t n) {
+    for_rows(count, [&](std::size_t n) {
       const std::uint32_t row = rows[n];
       copy_row(evaluated.data() + n * fc, fc, field_.values.data() + row * fc);
       field_.set_row_label(row);
@@ -158,14 +162,6 @@ class Sampler {
 void sort_unique(std::vector<std::uint64_t>& keys) {
   tbb::parallel_sort(keys.begin(), keys.end());
   keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
-}
-// Runs body(n) for n in [0, count) on the calling arena's threads; each n writes only its own rows.
-template <typename Body>
-void for_rows(std::size_t count, const Body& body) {
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 1024),
-                    [&](const tbb::blocked_range<std::size_t>& r) {
-                      for (std::size_t n = r.begin(); n < r.end(); ++n) body(n);
-                    });
 }
 
 bool contains(const std::vector<std::uint64_t>& sorted, std::uint64_t key) {
@@ -591,6 +587,13 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
   // (80 slices of spot's sweep: 92k, now 83k; `reconstruct --stats`, field_evaluations).
   std::vector<std::uint32_t> moving_stencil;
   const std::vector<std::uint64_t> laplacian_nodes = stencil_union(moving, &moving_stencil);
+  // Every vertex the bi-Laplacian of a moving node reads: the Laplacian nodes and their
+  // neighbours, sorted. Each is looked up (or evaluated) once and its values copied into
+  // `smoothed`, where the sweeps run: in key order, a vertex's neighbours along k lie next to it
+  // and those along j and i a row or a slice away, where the field's rows (in the order they were
+  // first evaluated) scattered every stencil over memory. The bit masks that build the sets give
+  // each stencil's positions (key_masks.hpp); looking up the seven vertices of every Laplacian
+  // and bi-Laplacian stencil in the grid index cost more than the sweeps.
   std::vector<std::uint32_t> lap_stencil;  // per Laplacian node, as moving_stencil in stencil_vertices
   std::vector<std::uint64_t> stencil_vertices = stencil_union(laplacian_nodes, &lap_stencil);
   const std::size_t fc = static_cast<std::size_t>(function_count);
@@ -646,13 +649,10 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
   const std::size_t first_change = field.changed_rows.size();
   field.changed_rows.resize(first_change + moving.size());
   field.changed_values.resize(field.changed_rows.size() * fc);
-  // The moving nodes' inputs too: `smoothed` gets them back after the sweeps.
-  std::vector<double> moving_inputs(moving.size() * fc);
   for_rows(moving.size(), [&](std::size_t m) {
     const std::size_t change = first_change + m;
     field.changed_rows[change] = node_row(m);
     copy_row(values + node_row(m) * fc, fc, field.changed_values.data() + change * fc);
-    copy_row(&smoothed[moving_position[m] * fc], fc, &moving_inputs[m * fc]);
   });
   // Damped Jacobi on the bi-Laplacian (7-point Laplacian squared: diagonal 42); the damping
   // keeps the highest grid frequencies stable. Each sweep computes every Laplacian before it
@@ -688,14 +688,14 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
   if (fc == 2) sweeps(std::integral_constant<std::size_t, 2>{});
   else if (fc == 3) sweeps(std::integral_constant<std::size_t, 3>{});
   else sweeps(fc);
-  // The smoothed values go to the field's rows, and `smoothed` gets its values before the sweeps
-  // back: this pass's inputs, kept for the next pass (a copy of all of them before the sweeps
-  // cost more).
+  // The smoothed values go to the field's rows, and `smoothed` gets the rows' values before the
+  // sweeps back (saved in changed_values; they are what `smoothed` held): this pass's inputs, kept
+  // for the next pass (a copy of all of them before the sweeps cost more).
   for_rows(moving.size(), [&](std::size_t m) {
     double* value = &smoothed[moving_position[m] * fc];
     copy_row(value, fc, values + node_row(m) * fc);
     field.set_row_label(node_row(m));
-    copy_row(&moving_inputs[m * fc], fc, value);
+    copy_row(field.changed_values.data() + (first_change + m) * fc, fc, value);
   });
   // Smoothing may move labels at the nodes. The band was closed before, and its cells whose
   // corners kept their labels keep their faces: only the cells around the nodes whose label
