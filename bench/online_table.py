@@ -77,9 +77,10 @@ def main():
             run_for(slices, [options.bin, "slice", "--mesh", f"1:data/models/{MODELS[model]}:{model}", "--planes", family,
                  "--count", str(count), "--seed", "1", "--size-mm", "150", "-o", slices, "--skip-invalid", "-q"] + extra)
             data = json.load(open(slices))
-            count = len(data["slices"])
+            slice_count = len(data["slices"])  # planes that cut the model (--skip-invalid)
             # The slice counts whose offline rebuild the tables compare an update with.
-            rebuild_counts = sorted({n for n in CHECKPOINTS if n <= count} | set(range(10, count + 1, RATIO_EVERY)))
+            rebuild_counts = sorted({n for n in CHECKPOINTS if n <= slice_count} |
+                                    set(range(10, slice_count + 1, RATIO_EVERY)))
             for n in rebuild_counts:  # same bounds: the same box
                 json.dump(dict(data, slices=data["slices"][:n]),
                           open(os.path.join(options.work, f"{name}_first{n}.slices.json"), "w"))
@@ -126,8 +127,9 @@ def main():
                 # The update's own evaluation seconds against the whole rebuild: its ratio if the
                 # octree, smoothing and mesh passes (global, see docs/engine.md) cost nothing.
                 evaluation_time_shares.append(steps[n - 1]["evaluation_s"] / offline["total_s"])
-                # ... and against the rebuild's evaluation seconds: with it and the passes' ratio
-                # below, the bounds that faster evaluations or faster passes leave the ratio.
+                # ... and against the rebuild's evaluation seconds: with the passes' ratio below,
+                # what faster evaluations or faster passes, shared by updates and rebuilds, would
+                # make of the update / rebuild ratio (docs/benchmarks.md works it out).
                 evaluation_time_ratios.append(steps[n - 1]["evaluation_s"] / offline["evaluation_s"])
                 # The rest of the update's field, smoothing and mesh time: the octree, smoothing and
                 # mesh passes, against the whole rebuild and against the rebuild's own passes.
