@@ -46,6 +46,16 @@ nlohmann::json stats_json(const recon::ReconstructionStats& stats) {
   return j;
 }
 
+nlohmann::json repairs_json(const std::vector<Repair>& repairs) {
+  nlohmann::json list = nlohmann::json::array();
+  for (const Repair& r : repairs)
+    list.push_back({{"kind", r.kind},
+                    {"where", r.where},
+                    {"detail", r.detail},
+                    {"area_changed", r.area_changed_mm2}});
+  return list;
+}
+
 int write_json(const nlohmann::json& j, const std::string& path) {
   std::ofstream out(path);
   out << j.dump(2) << '\n';
@@ -117,6 +127,7 @@ int run_online(const SliceSet& set, const std::string& output, const std::string
   if (stats_path.empty()) return 0;
   nlohmann::json j = stats_json(totals);
   j["peak_rss_mb"] = peak_rss_mb();
+  j["repairs"] = repairs_json(set.repairs);
   j["steps"] = std::move(steps);
   return write_json(j, stats_path);
 }
@@ -128,6 +139,7 @@ CommandRunner add_reconstruct_command(CLI::App& app) {
     std::string input, output, stats_path;
     recon::ReconstructionOptions engine;
     bool online = false;
+    bool strict = false;
     int emit_every = 0;
     std::string order = "file";
   };
@@ -151,6 +163,9 @@ CommandRunner add_reconstruct_command(CLI::App& app) {
       ->capture_default_str();
   app.add_option("--stats", opt->stats_path, "Write per-stage seconds and counts as JSON (with "
                  "--online: totals and one entry per step)");
+  app.add_flag("--strict", opt->strict,
+               "Refuse input that needs repairs (pinched contours, a flipped plane equation, "
+               "rounding overlaps, ...) instead of repairing it with a warning");
   app.add_flag("--online", opt->online,
                "Feed the slices one by one to the online engine (an update per slice)");
   app.add_option("--emit-every", opt->emit_every,
@@ -161,7 +176,7 @@ CommandRunner add_reconstruct_command(CLI::App& app) {
       ->capture_default_str();
 
   return [opt]() -> int {
-    const Result<SliceSet> slices = read_slice_set(opt->input);
+    const Result<SliceSet> slices = read_slice_set(opt->input, ReadOptions{opt->strict});
     if (!slices) {
       std::cerr << "error: " << slices.message() << '\n';
       return 2;
@@ -192,6 +207,7 @@ CommandRunner add_reconstruct_command(CLI::App& app) {
     if (!opt->stats_path.empty()) {
       nlohmann::json j = stats_json(stats);
       j["peak_rss_mb"] = peak_rss_mb();
+      j["repairs"] = repairs_json(slices->repairs);
       return write_json(j, opt->stats_path);
     }
     return 0;

@@ -236,8 +236,8 @@ Box2 box_of(const Ring2& ring) {
 }
 
 // Converts one plane into a slice; names the slice's regions and holes in `names`.
-LabeledSlice convert_plane(const Plane& plane, const std::string& source_name,
-                           CslNaming::SliceNames& names) {
+LabeledSlice convert_plane(const Plane& plane, CslNaming::SliceNames& names,
+                           detail::RepairLog& repairs) {
   const std::string plane_name =
       "plane " + std::to_string(plane.index) + " (line " + std::to_string(plane.line) + ")";
   names.slice = plane_name;
@@ -286,8 +286,10 @@ LabeledSlice convert_plane(const Plane& plane, const std::string& source_name,
                          detail::format_double(extent) +
                          "); check the plane's A B C D or its vertices");
   if (max_off > 1e-9 * scale)
-    log_warning(source_name + ": " + plane_name + ": vertices lie up to " +
-                detail::format_double(max_off) + " off the plane; projected onto it");
+    repairs.add(plane_name, {"off_plane_vertices", plane_name,
+                             "vertices lie up to " + detail::format_double(max_off) +
+                                 " off the plane; projected onto it",
+                             0.0});
 
   std::vector<Vec2> points;
   points.reserve(plane.vertices.size());
@@ -308,8 +310,10 @@ LabeledSlice convert_plane(const Plane& plane, const std::string& source_name,
     if (!problem.empty()) fail(comp.line, plane_name + ", " + component_names[c] + ": " + problem);
   }
   if (dropped)
-    log_warning(source_name + ": " + plane_name + ": dropped " + std::to_string(dropped) +
-                " repeated consecutive point" + (dropped > 1 ? "s" : ""));
+    repairs.add(plane_name, {"repeated_points", plane_name,
+                             "dropped " + std::to_string(dropped) + " repeated consecutive point" +
+                                 (dropped > 1 ? "s" : ""),
+                             0.0});
 
   for (std::size_t c = 0; c < count; ++c) {
     const Component& comp = plane.components[c];
@@ -404,8 +408,7 @@ LabeledSlice convert_plane(const Plane& plane, const std::string& source_name,
   return slice;
 }
 
-SliceSet parse_csl_text(const std::string& text, const std::string& source_name,
-                        CslNaming& naming) {
+SliceSet parse_csl_text(const std::string& text, CslNaming& naming, detail::RepairLog& repairs) {
   Tokens tokens(text);
   const Token& magic = tokens.take("the header \"CSLC\"");
   if (magic.text != "CSLC")
@@ -424,7 +427,7 @@ SliceSet parse_csl_text(const std::string& text, const std::string& source_name,
   for (long long p = 0; p < n_planes; ++p) {
     const Plane plane = read_plane(tokens, static_cast<int>(n_labels));
     naming.names.emplace_back();
-    set.slices.push_back(convert_plane(plane, source_name, naming.names.back()));
+    set.slices.push_back(convert_plane(plane, naming.names.back(), repairs));
   }
   if (!tokens.done())
     fail(tokens.line(), "unexpected text after the last of the " + std::to_string(n_planes) +
@@ -434,15 +437,19 @@ SliceSet parse_csl_text(const std::string& text, const std::string& source_name,
 
 }  // namespace
 
-Result<SliceSet> parse_csl(const std::string& text, const std::string& source_name) {
+Result<SliceSet> parse_csl(const std::string& text, const std::string& source_name,
+                           const ReadOptions& options) {
   CslNaming naming;
   SliceSet set;
+  detail::RepairLog repairs(source_name, options);
   try {
-    set = parse_csl_text(text, source_name, naming);
+    set = parse_csl_text(text, naming, repairs);
   } catch (const CslProblem& problem) {
     return Status::error(source_name + ": " + problem.what);
+  } catch (const detail::RepairRefused& refused) {
+    return Status::error(refused.message);
   }
-  return detail::finish_parsed_set(std::move(set), source_name, naming);
+  return detail::finish_parsed_set(std::move(set), source_name, naming, repairs);
 }
 
 Status write_csl(const SliceSet& set, const std::filesystem::path& path) {

@@ -19,6 +19,7 @@
 #include <cstring>
 #include <fstream>
 #include <iterator>
+#include <map>
 #include <limits>
 #include <nlohmann/json.hpp>
 #include <set>
@@ -648,15 +649,17 @@ Status validate_slice_set_named(const SliceSet& set, const std::string& source_n
   return Status::error(message);
 }
 
-void merge_identical_slices(SliceSet& set, const SlicePairs& identical,
-                            const std::string& source_name, const SliceNaming& naming) {
+void merge_identical_slices(SliceSet& set, const SlicePairs& identical, const SliceNaming& naming,
+                            RepairLog& repairs) {
   if (identical.empty()) return;
   std::set<std::size_t> dropped;
   for (const auto& [kept, later] : identical) {
     if (dropped.count(kept) || !dropped.insert(later).second) continue;
-    log_warning(source_name + ": " + naming.slice(later) + " lies in the same plane as " +
-                naming.slice(kept) + " with identical contents; merged (dropped " +
-                naming.slice(later) + ")");
+    repairs.add(naming.slice(later),
+                {"duplicate_slice", naming.slice(later),
+                 "lies in the same plane as " + naming.slice(kept) +
+                     " with identical contents; merged (dropped " + naming.slice(later) + ")",
+                 0.0});
   }
   std::vector<LabeledSlice> slices;
   for (std::size_t i = 0; i < set.slices.size(); ++i)
@@ -665,12 +668,52 @@ void merge_identical_slices(SliceSet& set, const SlicePairs& identical,
 }
 
 Result<SliceSet> finish_parsed_set(SliceSet set, const std::string& source_name,
-                                   const SliceNaming& naming) {
+                                   const SliceNaming& naming, RepairLog& repairs) {
   SlicePairs identical;
   if (Status status = validate_slice_set_named(set, source_name, naming, &identical); !status)
     return status;
-  merge_identical_slices(set, identical, source_name, naming);
+  try {
+    merge_identical_slices(set, identical, naming, repairs);
+  } catch (const RepairRefused& refused) {
+    return Status::error(refused.message);
+  }
+  set.repairs = repairs.finish();
   return set;
+}
+
+void RepairLog::add(const std::string& slice_name, Repair repair) {
+  if (strict_)
+    throw RepairRefused{source_name_ + ": " + (repair.where.empty() ? "" : repair.where + ": ") +
+                        repair.detail +
+                        " (--strict refuses input that needs repairs; fix the file, or run "
+                        "without --strict to accept the repair)"};
+  repairs_.emplace_back(slice_name, std::move(repair));
+}
+
+std::vector<Repair> RepairLog::finish() {
+  // One line per slice: a file with a pinched contour on every plane stays readable.
+  std::vector<std::string> order;
+  std::map<std::string, std::string> lines;
+  for (const auto& [slice, repair] : repairs_) {
+    auto [it, first] = lines.try_emplace(slice);
+    if (first) order.push_back(slice);
+    std::string item = repair.detail;
+    if (!repair.where.empty() && repair.where != slice) {
+      const std::string element =
+          repair.where.rfind(slice + ", ", 0) == 0 && !slice.empty()
+              ? repair.where.substr(slice.size() + 2)
+              : repair.where;
+      item = element + ": " + item;
+    }
+    it->second += (first ? "" : "; ") + item;
+  }
+  for (const std::string& slice : order)
+    log_warning(source_name_ + ": " + (slice.empty() ? "" : slice + ": ") + lines[slice]);
+  std::vector<Repair> records;
+  records.reserve(repairs_.size());
+  for (auto& entry : repairs_) records.push_back(std::move(entry.second));
+  repairs_.clear();
+  return records;
 }
 
 }  // namespace detail
@@ -745,12 +788,15 @@ void warn_unknown_keys(const json& object, std::initializer_list<const char*> kn
   }
 }
 
-// Drops repeated consecutive points with a warning naming the ring.
-void clean_ring(Ring2& ring, const std::string& source_name, const std::string& where) {
+// Drops repeated consecutive points, recording a repair of the ring `where` names.
+void clean_ring(Ring2& ring, const std::string& slice_name, const std::string& where,
+                detail::RepairLog& repairs) {
   const std::size_t dropped = detail::drop_repeated_points(ring);
   if (dropped)
-    log_warning(source_name + ": " + where + ": dropped " + std::to_string(dropped) +
-                " repeated consecutive point" + (dropped > 1 ? "s" : ""));
+    repairs.add(slice_name, {"repeated_points", where,
+                             "dropped " + std::to_string(dropped) + " repeated consecutive point" +
+                                 (dropped > 1 ? "s" : ""),
+                             0.0});
 }
 
 int read_label(const json& j, const std::string& where) {
@@ -767,6 +813,7 @@ int read_label(const json& j, const std::string& where) {
 // One element of "slices"; `i` names it in messages. Keys in `also_known` pass without a warning.
 LabeledSlice parse_slice_object(const json& js, std::size_t i, bool normalize,
                                 const std::string& source_name, const detail::SliceNaming& naming,
+                                detail::RepairLog& repairs,
                                 const std::vector<std::string>& also_known = {}) {
   const std::string where = naming.slice(i);
   if (!js.is_object()) fail_at(where, "expected a slice object");
@@ -793,7 +840,7 @@ LabeledSlice parse_slice_object(const json& js, std::size_t i, bool normalize,
     s.timestamp_s = read_number(*t, where + ", timestamp");
   if (const auto fov = js.find("fov"); fov != js.end() && !fov->is_null()) {
     Ring2 ring = read_ring(*fov, where + ", fov");
-    clean_ring(ring, source_name, where + ", fov");
+    clean_ring(ring, where, where + ", fov", repairs);
     s.fov = std::move(ring);
   }
   if (const auto regions = js.find("regions"); regions != js.end()) {
@@ -808,13 +855,13 @@ LabeledSlice parse_slice_object(const json& js, std::size_t i, bool normalize,
       r.label = read_label(jr["label"], region_where);
       warn_unknown_keys(jr, {"label", "polygon", "holes"}, source_name, region_where);
       r.outer = read_ring(jr["polygon"], naming.outer(i, j, r.label));
-      clean_ring(r.outer, source_name, naming.outer(i, j, r.label));
+      clean_ring(r.outer, where, naming.outer(i, j, r.label), repairs);
       if (const auto holes = jr.find("holes"); holes != jr.end()) {
         if (!holes->is_array()) fail_at(region_where, "\"holes\" must be an array of polygons");
         for (std::size_t k = 0; k < holes->size(); ++k) {
           const std::string hole_where = naming.hole(i, j, r.label, k);
           Ring2 hole = read_ring((*holes)[k], hole_where);
-          clean_ring(hole, source_name, hole_where);
+          clean_ring(hole, where, hole_where, repairs);
           r.holes.push_back(std::move(hole));
         }
       }
@@ -824,7 +871,8 @@ LabeledSlice parse_slice_object(const json& js, std::size_t i, bool normalize,
   return s;
 }
 
-SliceSet parse_document(const json& doc, const std::string& source_name) {
+SliceSet parse_document(const json& doc, const std::string& source_name,
+                        detail::RepairLog& repairs) {
   if (!doc.is_object())
     fail_at("document",
             "not a slice set: expected a JSON object with \"format\": "
@@ -887,7 +935,7 @@ SliceSet parse_document(const json& doc, const std::string& source_name) {
     fail_at("slices", "\"slices\" must be an array of slice objects");
   const detail::SliceNaming naming;
   for (std::size_t i = 0; i < slices->size(); ++i)
-    set.slices.push_back(parse_slice_object((*slices)[i], i, normalize, source_name, naming));
+    set.slices.push_back(parse_slice_object((*slices)[i], i, normalize, source_name, naming, repairs));
   return set;
 }
 
@@ -965,7 +1013,8 @@ std::string lower_extension(const std::filesystem::path& path) {
 
 }  // namespace
 
-Result<SliceSet> parse_slice_set_json(const std::string& text, const std::string& source_name) {
+Result<SliceSet> parse_slice_set_json(const std::string& text, const std::string& source_name,
+                                      const ReadOptions& options) {
   json doc;
   try {
     doc = json::parse(text);
@@ -978,14 +1027,17 @@ Result<SliceSet> parse_slice_set_json(const std::string& text, const std::string
                          "); a slice set is a JSON document, see docs/formats/slices.md");
   }
   SliceSet set;
+  detail::RepairLog repairs(source_name, options);
   try {
-    set = parse_document(doc, source_name);
+    set = parse_document(doc, source_name, repairs);
   } catch (const JsonProblem& p) {
     return Status::error(source_name + ": " + p.where + ": " + p.what);
+  } catch (const detail::RepairRefused& refused) {
+    return Status::error(refused.message);
   } catch (const json::exception& e) {
     return Status::error(source_name + ": malformed slice set (" + std::string(e.what()) + ")");
   }
-  return detail::finish_parsed_set(std::move(set), source_name, detail::SliceNaming{});
+  return detail::finish_parsed_set(std::move(set), source_name, detail::SliceNaming{}, repairs);
 }
 
 Status write_slice_set_json(const SliceSet& set, const std::filesystem::path& path) {
@@ -1015,7 +1067,7 @@ Status write_slice_set_json(const SliceSet& set, const std::filesystem::path& pa
 }
 
 Result<std::string> write_slice_json(const LabeledSlice& slice) {
-  if (!all_finite(SliceSet{"mm", {}, std::nullopt, {slice}}))
+  if (!all_finite(SliceSet{"mm", {}, std::nullopt, {slice}, {}}))
     return Status::error("cannot write the slice as JSON: it holds NaN or infinite numbers");
   std::string out;
   append_slice_object(out, slice, /*one_line=*/true);
@@ -1036,8 +1088,10 @@ Result<LabeledSlice> parse_slice_json(const std::string& text, const std::string
     return Status::error(source_name + ": not valid JSON (" + std::string(e.what()) + ")");
   }
   SliceSet set;
+  detail::RepairLog repairs(source_name, ReadOptions{});
   try {
-    set.slices.push_back(parse_slice_object(doc, 0, false, source_name, naming, also_known));
+    set.slices.push_back(
+        parse_slice_object(doc, 0, false, source_name, naming, repairs, also_known));
   } catch (const JsonProblem& p) {
     return Status::error(source_name + ": " + p.where + ": " + p.what);
   } catch (const json::exception& e) {
@@ -1045,14 +1099,15 @@ Result<LabeledSlice> parse_slice_json(const std::string& text, const std::string
   }
   if (Status status = detail::validate_slice_set_named(set, source_name, naming, nullptr); !status)
     return status;
+  repairs.finish();
   return std::move(set.slices.front());
 }
 
-Result<SliceSet> read_slice_set(const std::filesystem::path& path) {
+Result<SliceSet> read_slice_set(const std::filesystem::path& path, const ReadOptions& options) {
   Result<std::string> text = detail::read_text_file(path);
   if (!text) return text.status();
-  if (lower_extension(path) == ".csl") return parse_csl(*text, path.string());
-  return parse_slice_set_json(*text, path.string());
+  if (lower_extension(path) == ".csl") return parse_csl(*text, path.string(), options);
+  return parse_slice_set_json(*text, path.string(), options);
 }
 
 Status write_slice_set(const SliceSet& set, const std::filesystem::path& path) {

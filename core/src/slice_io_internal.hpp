@@ -7,6 +7,7 @@
 #include <utility>
 #include <vector>
 
+#include "sonoshape/core/repairs.hpp"
 #include "sonoshape/core/slice.hpp"
 #include "sonoshape/core/status.hpp"
 
@@ -30,6 +31,31 @@ class SliceNaming {
   virtual std::string outer(std::size_t slice, std::size_t region, int label) const;
   virtual std::string hole(std::size_t slice, std::size_t region, int label,
                            std::size_t hole) const;
+};
+
+/// Thrown by RepairLog::add under ReadOptions::strict; the readers turn it into their Status.
+struct RepairRefused {
+  std::string message;
+};
+
+/// Collects a reader's repairs: the records for SliceSet::repairs, one warning per slice on
+/// stderr when finished, and under ReadOptions::strict an error at the first repair.
+class RepairLog {
+ public:
+  RepairLog(std::string source_name, const ReadOptions& options)
+      : source_name_(std::move(source_name)), strict_(options.strict) {}
+
+  /// Records a repair of the slice named `slice_name` ("" when it concerns the whole file).
+  /// Strict: throws RepairRefused naming the file, the element and the way out.
+  void add(const std::string& slice_name, Repair repair);
+  /// Prints the warnings (one line per slice, slices in the order first repaired) and hands the
+  /// records over.
+  std::vector<Repair> finish();
+
+ private:
+  std::string source_name_;
+  bool strict_ = false;
+  std::vector<std::pair<std::string, Repair>> repairs_;  // (slice name, repair) in order
 };
 
 /// "unknown" or the id as text.
@@ -59,13 +85,14 @@ using SlicePairs = std::vector<std::pair<std::size_t, std::size_t>>;
 Status validate_slice_set_named(const SliceSet& set, const std::string& source_name,
                                 const SliceNaming& naming, SlicePairs* identical);
 
-/// Drops the later slice of each identical pair, with a warning naming both.
-void merge_identical_slices(SliceSet& set, const SlicePairs& identical,
-                            const std::string& source_name, const SliceNaming& naming);
+/// Drops the later slice of each identical pair, recording a repair naming both.
+void merge_identical_slices(SliceSet& set, const SlicePairs& identical, const SliceNaming& naming,
+                            RepairLog& repairs);
 
-/// The common end of both readers: validates a parsed set and merges slices given twice.
+/// The common end of both readers: validates a parsed set, merges slices given twice and hands
+/// the repairs over to SliceSet::repairs (printing their warnings).
 Result<SliceSet> finish_parsed_set(SliceSet set, const std::string& source_name,
-                                   const SliceNaming& naming);
+                                   const SliceNaming& naming, RepairLog& repairs);
 
 /// Whole-file helpers: read text (errors name the path) and write text.
 Result<std::string> read_text_file(const std::filesystem::path& path);

@@ -136,7 +136,7 @@ TEST(Csl, PlaneGivenTwiceIsMergedWithAWarning) {
   const std::string warnings = ::testing::internal::GetCapturedStderr();
   ASSERT_TRUE(result.is_ok()) << result.message();
   EXPECT_EQ(result->slices.size(), 2u);
-  EXPECT_TRUE(contains(warnings, "plane 3 (line 13) lies in the same plane as plane 1 (line 3)"));
+  EXPECT_TRUE(contains(warnings, "plane 3 (line 13): lies in the same plane as plane 1 (line 3)"));
 }
 
 TEST(Csl, PlaneGivenTwiceWithOtherContentsIsAnError) {

@@ -372,7 +372,7 @@ TEST(SliceJson, IdenticalCoincidentSlicesAreMerged) {
   const std::string warnings = ::testing::internal::GetCapturedStderr();
   ASSERT_TRUE(result.is_ok()) << result.message();
   EXPECT_EQ(result->slices.size(), 2u);
-  EXPECT_TRUE(contains(warnings, "slice 2 lies in the same plane as slice 0"));
+  EXPECT_TRUE(contains(warnings, "slice 2: lies in the same plane as slice 0"));
 }
 
 TEST(SliceJsonErrors, CoincidentSlicesThatDisagree) {

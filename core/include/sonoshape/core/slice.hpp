@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "sonoshape/core/geometry.hpp"
+#include "sonoshape/core/repairs.hpp"
 
 namespace sonoshape {
 
@@ -53,6 +54,8 @@ struct SliceSet {
   std::vector<LabelInfo> labels;  ///< declared materials (may be empty for one-label sets)
   std::optional<Box3> bounds;     ///< reconstruction box; none: derived (see default_bounds)
   std::vector<LabeledSlice> slices;
+  /// What the reader repaired to make this set usable, in file order (empty for clean input).
+  std::vector<Repair> repairs;
 
   /// Sorted ids of every material used by a region or declared in `labels`.
   std::vector<int> material_ids() const;

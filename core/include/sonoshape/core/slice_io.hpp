@@ -12,13 +12,17 @@ namespace sonoshape {
 
 /// Reads a slice set, choosing the format by extension (`.csl` or JSON otherwise). Every error of
 /// slices.md is reported with the file, the slice index and the region index, and the fix.
-/// Warnings (merged duplicate planes, projected vertices, ...) go to log_warning.
-Result<SliceSet> read_slice_set(const std::filesystem::path& path);
+/// What can be repaired (merged duplicate planes, projected vertices, ...) is, with one warning
+/// per slice on stderr and a record in SliceSet::repairs; with `options.strict` it is an error.
+Result<SliceSet> read_slice_set(const std::filesystem::path& path,
+                                const ReadOptions& options = {});
 
 /// Parses slice-set JSON text; `source_name` names the input in messages.
-Result<SliceSet> parse_slice_set_json(const std::string& text, const std::string& source_name);
+Result<SliceSet> parse_slice_set_json(const std::string& text, const std::string& source_name,
+                                      const ReadOptions& options = {});
 /// Parses `.csl` text; `source_name` names the input in messages.
-Result<SliceSet> parse_csl(const std::string& text, const std::string& source_name);
+Result<SliceSet> parse_csl(const std::string& text, const std::string& source_name,
+                           const ReadOptions& options = {});
 
 /// Writes JSON (version 1). Fails with a message if the file cannot be written.
 Status write_slice_set_json(const SliceSet& set, const std::filesystem::path& path);
