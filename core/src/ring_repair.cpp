@@ -3,7 +3,9 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <map>
 #include <optional>
+#include <utility>
 #include <polyclipping/clipper.hpp>
 
 #include "slice_io_internal.hpp"
@@ -19,6 +21,10 @@ constexpr double kUnitsPerSize = 1e12;
 struct Frame {
   Vec2 centre = Vec2::Zero();
   double scale = 1.0;  // Clipper units per unit of the ring's coordinates
+  // The ring's own points by their Clipper coordinates: output corners that are input corners
+  // get their exact coordinates back, so that they still coincide with other contours sharing
+  // them (Abdomen traces its organs' outlines again as holes of the body).
+  std::map<std::pair<ClipperLib::cInt, ClipperLib::cInt>, Vec2> exact;
 
   ClipperLib::IntPoint to_clipper(const Vec2& p) const {
     const Vec2 q = (p - centre) * scale;
@@ -26,6 +32,7 @@ struct Frame {
             static_cast<ClipperLib::cInt>(std::llround(q.y()))};
   }
   Vec2 from_clipper(const ClipperLib::IntPoint& q) const {
+    if (const auto it = exact.find({q.X, q.Y}); it != exact.end()) return it->second;
     return centre + Vec2(static_cast<double>(q.X), static_cast<double>(q.Y)) / scale;
   }
 };
@@ -73,10 +80,13 @@ std::size_t ContourRepair::polygons() const {
 ContourRepair repair_contour(const Ring2& ring) {
   ContourRepair out;
   if (ring.size() < 3) return out;
-  const Frame frame = frame_of(ring);
+  Frame frame = frame_of(ring);
   ClipperLib::Path path;
   path.reserve(ring.size());
-  for (const Vec2& p : ring) path.push_back(frame.to_clipper(p));
+  for (const Vec2& p : ring) {
+    path.push_back(frame.to_clipper(p));
+    frame.exact.try_emplace({path.back().X, path.back().Y}, p);
+  }
 
   // Non-zero, not even-odd: the region a contour encloses is where its winding number is not
   // zero. A segmentation's outline that loops over itself (a small loop, a pinch traced twice)

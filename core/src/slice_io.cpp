@@ -437,7 +437,10 @@ bool ring_inside_ring(const Ring2& inner, const Ring2& outer) {
     if (side == CGAL::ON_BOUNDED_SIDE) return true;
     if (side == CGAL::ON_UNBOUNDED_SIDE) return false;
   }
-  return std::abs(signed_area(inner)) <= std::abs(signed_area(outer));
+  // Every vertex on the boundary: a ring in a pocket of `outer` whose corners it touches, or the
+  // same ring. Only the exact difference tells.
+  return exact_inside(to_exact(inner, CGAL::COUNTERCLOCKWISE),
+                      to_exact(outer, CGAL::COUNTERCLOCKWISE));
 }
 
 Status validate_slice_set_named(const SliceSet& set, const std::string& source_name,
@@ -576,6 +579,13 @@ Status validate_slice_set_named(const SliceSet& set, const std::string& source_n
           fail(naming.hole(i, j, r.label, k),
                "hole is not inside the region's outer ring; a hole must lie within its polygon "
                "(touching the boundary is fine), fix it or make it a separate region");
+          holes_ok = false;
+        } else if (std::abs(signed_area(holes[k])) >= std::abs(signed_area(outer))) {
+          // Inside and as large: the outer ring itself. Nothing is left of the region (and the
+          // exact overlap test cannot take such a polygon).
+          fail(naming.hole(i, j, r.label, k),
+               "hole is the region's whole outer ring, so the region has no area; remove the "
+               "region or the hole");
           holes_ok = false;
         }
       }

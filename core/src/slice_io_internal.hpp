@@ -101,9 +101,9 @@ struct ContourRepair {
 };
 
 /// The region that `ring` (at least 3 points) encloses by the non-zero winding rule, as simple,
-/// strictly non-touching rings (Clipper's union, coordinates rounded to 1e-12 of the ring's size).
-/// Meant for rings check_ring reports as self-intersecting; a simple ring comes back as itself up
-/// to that rounding.
+/// strictly non-touching rings (Clipper's union). Corners of `ring` keep their exact coordinates;
+/// new corners (where the ring crosses itself) are computed to 1e-12 of the ring's size. Meant
+/// for rings check_ring reports as self-intersecting.
 ContourRepair repair_contour(const Ring2& ring);
 
 /// The record of a repair_contour: kind "self_intersection", `where` the ring as messages name
@@ -113,7 +113,7 @@ Repair self_intersection_repair(const std::string& where, const std::string& cro
 
 /// True when `inner` lies inside the closed region bounded by `outer` (exact predicates). Meant
 /// for rings that do not cross each other: it decides by the first vertex of `inner` that is not
-/// on the boundary of `outer`; when every vertex is on it, by the areas.
+/// on the boundary of `outer`; when every vertex is on it, by their exact difference.
 bool ring_inside_ring(const Ring2& inner, const Ring2& outer);
 
 /// Pairs (earlier, later) of coincident slices whose contents are identical.

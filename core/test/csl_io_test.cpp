@@ -319,6 +319,34 @@ TEST(CslHoleLabels, AFilledHoleAlsoWrittenAsAComponentIsOneRegion) {
   EXPECT_NEAR(label_area(set.slices[0], 2), 16.0, 1e-12);
 }
 
+TEST(CslHoleLabels, AnOrganWrittenAsAHoleAndAsItsOwnContourIsCutOutOnce) {
+  // As Abdomen does: the label-2 organ is a component of its own and a hole (label 1) of the body.
+  const std::string text = square_plane(20, 4, 2,
+                                        "2 2 0\n6 2 0\n6 6 0\n2 6 0\n"
+                                        "4 2 4 5 6 7\n4 1 0 1 2 3\n4h1 1 7 6 5 4\n");
+  const auto [set, warnings] = parse_with_warnings(text);
+  ASSERT_EQ(set.slices.size(), 1u);
+  const LabeledSlice& s = set.slices[0];
+  ASSERT_EQ(s.regions.size(), 2u);
+  EXPECT_NEAR(label_area(s, 1), 84.0, 1e-12);
+  EXPECT_NEAR(label_area(s, 2), 16.0, 1e-12);
+}
+
+TEST(Csl, AContourInAPocketTouchingItWithEveryCornerIsNotInsideIt) {
+  // Component 1 (label 2, a triangle) sits in a notch of component 0 whose boundary passes
+  // through all three of its corners: it is beside component 0, not in it.
+  const std::string text =
+      "CSLC\n1 3\n1 8 2 0 0 1 0\n"
+      "0 0 0\n10 0 0\n10 10 0\n6 10 0\n5 6 0\n4 10 0\n0 10 0\n5 9 0\n"
+      "7 1 0 1 2 3 4 5 6\n3 2 3 4 5\n";
+  const auto [set, warnings] = parse_with_warnings(text);
+  ASSERT_EQ(set.slices.size(), 1u);
+  const LabeledSlice& s = set.slices[0];
+  ASSERT_EQ(s.regions.size(), 2u);
+  EXPECT_TRUE(s.regions[0].holes.empty());
+  EXPECT_NEAR(label_area(s, 2), 4.0, 1e-12);
+}
+
 TEST(CslErrors, HoleLabelBeyondNLabels) {
   const std::string message = parse_error(
       square_plane(3, 4, 1, "2 2 0\n6 2 0\n6 6 0\n2 6 0\n4 1 0 1 2 3\n4h0 4 4 5 6 7\n"));

@@ -349,6 +349,16 @@ TEST(SliceJsonErrors, HoleOutsideItsPolygon) {
                "slice 0, region 0 (label 1), hole 0: hole is not inside the region's outer ring"));
 }
 
+TEST(SliceJsonErrors, HoleThatIsTheWholeOuterRing) {
+  const std::string square = "[[0,0],[1,0],[1,1],[0,1]]";
+  const std::string region =
+      R"({"label": 1, "polygon": )" + square + R"(, "holes": [)" + square + "]}";
+  const std::string message =
+      parse_error(doc(slice_at(0, region + "," + square_region(2, 0, 0, 1))));
+  EXPECT_TRUE(contains(message, "slice 0, region 0 (label 1), hole 0: hole is the region's whole "
+                                "outer ring"));
+}
+
 TEST(SliceJsonErrors, OverlappingHoles) {
   const std::string region = R"({"label": 1, "polygon": [[0,0],[10,0],[10,10],[0,10]],
       "holes": [[[1,1],[5,1],[5,5],[1,5]], [[4,4],[8,4],[8,8],[4,8]]]})";
