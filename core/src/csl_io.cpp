@@ -355,7 +355,6 @@ struct Piece {
   std::optional<std::size_t> parent;   // hole_of resolved to a piece
   int label = 1;
   std::size_t depth = 0;  // in its component's repair; 0 when not repaired
-  bool part = false;      // one of the rings its component's repair made
   Ring2 ring;
   std::string name;
 };
@@ -433,7 +432,6 @@ std::vector<Piece> make_pieces(const Plane& plane, const std::vector<Vec2>& poin
       Piece part;
       part.component = c;
       part.depth = fixed.rings[k].depth;
-      part.part = true;
       part.hole_of = cut && part.depth == 0 ? comp.parent : std::nullopt;
       part.label = other_label && part.depth % 2 == 1 ? other_label : piece.label;
       part.ring = fixed.rings[k].ring;
@@ -460,35 +458,35 @@ std::vector<Piece> make_pieces(const Plane& plane, const std::vector<Vec2>& poin
              same_points(other.ring, piece.ring);
     });
   }
-  // A part of a repaired contour that is another component's own contour (Abdomen traces a
-  // pinched-off loop of an organ again as a component) is left to that component.
-  for (std::size_t k = 0; k < pieces.size(); ++k) {
-    if (!pieces[k].part || duplicate[k]) continue;
-    for (const Piece& other : pieces) {
-      if (other.part || other.component == pieces[k].component ||
-          !same_points(other.ring, pieces[k].ring))
-        continue;
-      duplicate[k] = true;
-      repairs.add(plane_name, {"self_intersection", plane_name + ", " + pieces[k].name,
-                               "this ring is component " + std::to_string(other.component) +
-                                   "'s contour, which the file gives on its own (label " +
-                                   std::to_string(other.label) + "); left to that component",
-                               0.0});
-      break;
-    }
-  }
   std::vector<Piece> kept;
   for (std::size_t k = 0; k < pieces.size(); ++k)
     if (!duplicate[k]) kept.push_back(std::move(pieces[k]));
   return kept;
 }
 
-// Whether a hole marked in piece `region` has the points of `ring`: files such as Abdomen write
-// an organ twice, as a hole of the body (with the body's label) and as the organ's own contour.
-bool has_marked_hole(const std::vector<Piece>& pieces, std::size_t region, const Ring2& ring) {
-  return std::any_of(pieces.begin(), pieces.end(), [&](const Piece& hole) {
-    return hole.parent == region && same_points(hole.ring, ring);
-  });
+// Whether piece `region` has a hole with the points of `ring` (marked, or an unmarked piece of
+// its label that it contains): files such as Abdomen write an organ twice, as a hole of the body
+// (with the body's label) and as the organ's own contour.
+bool has_hole_like(const std::vector<Piece>& pieces,
+                   const std::vector<std::optional<std::size_t>>& container, std::size_t region,
+                   const Ring2& ring) {
+  for (std::size_t h = 0; h < pieces.size(); ++h) {
+    const bool hole = pieces[h].parent == region || (!pieces[h].parent && container[h] == region &&
+                                                     pieces[h].label == pieces[region].label);
+    if (hole && same_points(pieces[h].ring, ring)) return true;
+  }
+  return false;
+}
+
+// Whether container `r` of a piece lies inside its container `current`: the smaller one does.
+// Two containers bounding the same area (up to rounding of the areas) are one contour given twice,
+// typically an organ and the hole of the body around it (Abdomen): the unmarked one, the organ,
+// is the inner.
+bool inner_container(const std::vector<Piece>& pieces, const std::vector<double>& areas,
+                     std::size_t r, std::size_t current) {
+  if (std::abs(areas[r] - areas[current]) > 1e-12 * areas[current])
+    return areas[r] < areas[current];
+  return !pieces[r].parent && pieces[current].parent;
 }
 
 // Resolves each marked hole to the part of its parent component that holds it.
@@ -561,6 +559,10 @@ LabeledSlice convert_plane(const Plane& plane, int n_labels, CslNaming::SliceNam
     if (outer == inner || !boxes[outer].contains(boxes[inner])) return false;
     if (areas[inner] > areas[outer] || (areas[inner] == areas[outer] && inner < outer))
       return false;
+    // The same contour twice (an organ's pinched-off loop that the file also gives as a
+    // component) bounds the same area: neither holds the other.
+    if (areas[inner] == areas[outer] && same_points(pieces[inner].ring, pieces[outer].ring))
+      return false;
     return detail::ring_inside_ring(pieces[inner].ring, pieces[outer].ring);
   };
   std::vector<std::optional<std::size_t>> container(count);
@@ -570,7 +572,7 @@ LabeledSlice convert_plane(const Plane& plane, int n_labels, CslNaming::SliceNam
     for (std::size_t r = 0; r < count; ++r) {
       if (!contains(r, c)) continue;
       ++depth[c];
-      if (!container[c] || areas[r] < areas[*container[c]]) container[c] = r;
+      if (!container[c] || inner_container(pieces, areas, r, *container[c])) container[c] = r;
     }
   }
 
@@ -590,7 +592,7 @@ LabeledSlice convert_plane(const Plane& plane, int n_labels, CslNaming::SliceNam
     if (pieces[r].label == pieces[c].label) {
       role[c] = Role::kHole;  // a hole without its "h" marker
       owner[c] = r;
-    } else if (!has_marked_hole(pieces, r, pieces[c].ring)) {
+    } else if (!has_hole_like(pieces, container, r, pieces[c].ring)) {
       islands.emplace_back(r, c);  // another material inside r: r needs a hole around it
     }
   }

@@ -347,6 +347,27 @@ TEST(Csl, AContourInAPocketTouchingItWithEveryCornerIsNotInsideIt) {
   EXPECT_NEAR(label_area(s, 2), 4.0, 1e-12);
 }
 
+TEST(CslRepairs, PinchedOffLoopFilledByAnotherMaterialAsAbdomenWritesIt) {
+  // The label-2 organ's contour pinches off a clockwise loop at (10, 15): a hole in the organ by
+  // the non-zero rule, which component 0 (label 3) fills. The body (label 1) has the organ's
+  // outline, without the loop, as a hole, listed before the organ: the organ lies in that hole.
+  const char* text =
+      "CSLC\n1 4\n1 11 4 0 0 1 0\n"
+      "0 0 0\n20 0 0\n20 20 0\n0 20 0\n5 5 0\n15 5 0\n15 15 0\n10 15 0\n11 13 0\n"
+      "9 13 0\n5 15 0\n"
+      "3 3 7 8 9\n4 1 0 1 2 3\n5h1 1 4 5 6 7 10\n8 2 4 5 6 7 8 9 7 10\n";
+  const auto [set, warnings] = parse_with_warnings(text);
+  ASSERT_EQ(set.slices.size(), 1u);
+  const LabeledSlice& s = set.slices[0];
+  EXPECT_NEAR(label_area(s, 1), 300.0, 1e-9);
+  EXPECT_NEAR(label_area(s, 2), 98.0, 1e-9);
+  EXPECT_NEAR(label_area(s, 3), 2.0, 1e-9);
+  ASSERT_EQ(set.repairs.size(), 1u);
+  EXPECT_TRUE(contains(set.repairs[0].detail,
+                       "at (10, 15, 0); repaired into 1 simple polygon "
+                       "with 1 hole"));
+}
+
 TEST(CslErrors, HoleLabelBeyondNLabels) {
   const std::string message = parse_error(
       square_plane(3, 4, 1, "2 2 0\n6 2 0\n6 6 0\n2 6 0\n4 1 0 1 2 3\n4h0 4 4 5 6 7\n"));
