@@ -360,8 +360,8 @@ struct Piece {
 };
 
 std::string world_text(const Vec3& p) {
-  return "(" + detail::format_double(p.x()) + ", " + detail::format_double(p.y()) + ", " +
-         detail::format_double(p.z()) + ")";
+  return "(" + detail::format_short(p.x()) + ", " + detail::format_short(p.y()) + ", " +
+         detail::format_short(p.z()) + ")";
 }
 
 // The same points, in any order.

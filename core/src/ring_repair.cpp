@@ -5,8 +5,8 @@
 #include <limits>
 #include <map>
 #include <optional>
-#include <utility>
 #include <polyclipping/clipper.hpp>
+#include <utility>
 
 #include "slice_io_internal.hpp"
 
@@ -133,6 +133,10 @@ Repair self_intersection_repair(const std::string& where, const std::string& cro
     if (holes) done += " with " + std::to_string(holes) + " hole" + (holes == 1 ? "" : "s");
     done += " by the non-zero rule";
     if (hole) done += " (the area the hole cuts out)";
+    // What the choice of rule decided: even-odd would have left this out.
+    if (result.area_changed > 0.0)
+      done += "; an area of " + format_short(result.area_changed) +
+              " that it covers more than once stays inside (even-odd would cut it out)";
   }
   return {"self_intersection", where, "contour crosses itself at " + crossing + "; " + done,
           result.area_changed};

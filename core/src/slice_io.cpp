@@ -88,6 +88,14 @@ std::string format_double(double value) {
   return std::string(buffer.data(), end);
 }
 
+std::string format_short(double value) {
+  std::array<char, 64> buffer{};
+  const auto [end, ec] = std::to_chars(buffer.data(), buffer.data() + buffer.size(), value,
+                                       std::chars_format::general, 7);
+  if (ec != std::errc()) return "0";
+  return std::string(buffer.data(), end);
+}
+
 Result<std::string> read_text_file(const std::filesystem::path& path) {
   std::error_code ec;
   if (!std::filesystem::exists(path, ec))
@@ -840,7 +848,7 @@ void clean_ring(Ring2& ring, const std::string& slice_name, const std::string& w
 }
 
 std::string plane_point_text(const Vec2& p) {
-  return "[" + detail::format_double(p.x()) + ", " + detail::format_double(p.y()) + "]";
+  return "[" + detail::format_short(p.x()) + ", " + detail::format_short(p.y()) + "]";
 }
 
 // Whether a ring lies inside an outer ring: boxes first, then exact predicates.

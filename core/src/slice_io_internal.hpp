@@ -140,4 +140,7 @@ Status write_text_file(const std::filesystem::path& path, const std::string& tex
 /// Shortest decimal text that reads back as the same double.
 std::string format_double(double value);
 
+/// `value` to 7 significant digits, for places and areas in messages ("56028.62").
+std::string format_short(double value);
+
 }  // namespace sonoshape::detail

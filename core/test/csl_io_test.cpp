@@ -463,6 +463,7 @@ TEST(CslRepairs, SmallLoopIsFilledAndItsAreaReported) {
   EXPECT_NEAR(label_area(s, 1), 106.0, 1e-9);
   ASSERT_EQ(set.repairs.size(), 1u);
   EXPECT_NEAR(set.repairs[0].area_changed_mm2, 4.0, 1e-9);
+  EXPECT_TRUE(contains(warnings, "an area of 4 that it covers more than once stays inside"));
 }
 
 TEST(CslRepairs, PinchedRingBecomesTwoPolygonsTouchingAtAPoint) {
