@@ -167,6 +167,8 @@ TEST(Csl, VerticesFarOffThePlaneAreAnError) {
   const char* text = "CSLC\n1 2\n1 4 1 0 0 1 -2\n0 0 2\n10 0 2\n10 10 3\n0 10 2\n4 1 0 1 2 3\n";
   const std::string message = parse_error(text);
   EXPECT_TRUE(contains(message, "plane 1 (line 3): vertex 2 lies 1 off the plane"));
+  EXPECT_TRUE(contains(message, "and the vertices are not coplanar either (vertex "));
+  EXPECT_TRUE(contains(message, "off the plane that fits them best)"));
 }
 
 TEST(Csl, RepeatedConsecutivePointsAreDropped) {

@@ -275,6 +275,18 @@ TEST(SliceJsonRepairs, PolygonFoldingBackOnItselfLosesItsSpike) {
   EXPECT_NEAR(set.repairs[0].area_changed_mm2, 0.0, 1e-9);
 }
 
+TEST(SliceJsonRepairs, RegionWhoseOuterRingEnclosesNothingIsDropped) {
+  // Out to (4, 0), up to (2, 2) and back the same way: no area.
+  const std::string nothing = R"({"label": 1, "polygon": [[0,0],[4,0],[2,2],[4,0]]})";
+  const auto [set, warnings] =
+      parse_with_warnings(doc(slice_at(0, nothing + "," + square_region(2, 5, 5, 1))));
+  ASSERT_EQ(set.slices.size(), 1u);
+  ASSERT_EQ(set.slices[0].regions.size(), 1u);
+  EXPECT_EQ(set.slices[0].regions[0].label, 2);
+  ASSERT_EQ(set.repairs.size(), 1u);
+  EXPECT_TRUE(contains(set.repairs[0].detail, "it encloses no area; dropped it"));
+}
+
 TEST(SliceJsonRepairs, FovWithASpikeIsRepaired) {
   const std::string slice =
       R"({"origin": [0,0,0], "u": [1,0,0], "v": [0,1,0], "fov": [[0,0],[4,0],[4,4],[4,2],[0,4]], "regions": []})";
