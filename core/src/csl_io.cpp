@@ -511,6 +511,120 @@ void resolve_parents(std::vector<Piece>& pieces, const Plane& plane,
   }
 }
 
+// Each unmarked piece's innermost container, and how many pieces contain it. Nesting, not
+// orientation, decides what an unmarked piece is.
+struct Containers {
+  std::vector<std::optional<std::size_t>> innermost;
+  std::vector<std::size_t> depth;
+};
+
+Containers find_containers(const std::vector<Piece>& pieces) {
+  const std::size_t count = pieces.size();
+  std::vector<Box2> boxes(count);
+  std::vector<double> areas(count);
+  for (std::size_t c = 0; c < count; ++c) {
+    boxes[c] = box_of(pieces[c].ring);
+    areas[c] = std::abs(signed_area(pieces[c].ring));
+  }
+  auto contains = [&](std::size_t outer, std::size_t inner) {
+    if (outer == inner || !boxes[outer].contains(boxes[inner])) return false;
+    if (areas[inner] > areas[outer] || (areas[inner] == areas[outer] && inner < outer))
+      return false;
+    // The same contour twice (an organ's pinched-off loop that the file also gives as a
+    // component) bounds the same area: neither holds the other.
+    if (areas[inner] == areas[outer] && same_points(pieces[inner].ring, pieces[outer].ring))
+      return false;
+    return detail::ring_inside_ring(pieces[inner].ring, pieces[outer].ring);
+  };
+  Containers out{std::vector<std::optional<std::size_t>>(count),
+                 std::vector<std::size_t>(count, 0)};
+  for (std::size_t c = 0; c < count; ++c) {
+    if (pieces[c].parent) continue;
+    for (std::size_t r = 0; r < count; ++r) {
+      if (!contains(r, c)) continue;
+      ++out.depth[c];
+      if (!out.innermost[c] || inner_container(pieces, areas, r, *out.innermost[c]))
+        out.innermost[c] = r;
+    }
+  }
+  return out;
+}
+
+// What the nesting makes of the pieces: each is a region or a hole of a region piece, and
+// regions of another material inside a region need a hole around them (islands).
+struct Nesting {
+  std::vector<bool> hole;
+  std::vector<std::size_t> owner;                            // of a hole: its region piece
+  std::vector<std::pair<std::size_t, std::size_t>> islands;  // (region piece, island)
+};
+
+Nesting nest(const std::vector<Piece>& pieces, const Plane& plane, const std::string& plane_name) {
+  const std::size_t count = pieces.size();
+  const Containers containers = find_containers(pieces);
+  const auto& container = containers.innermost;
+  Nesting out{std::vector<bool>(count, false), std::vector<std::size_t>(count, 0), {}};
+  std::vector<std::size_t> order;
+  for (std::size_t c = 0; c < count; ++c)
+    if (!pieces[c].parent) order.push_back(c);
+  std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
+    return containers.depth[a] < containers.depth[b];
+  });
+  for (std::size_t c : order) {
+    if (!container[c]) continue;
+    const std::size_t r = *container[c];
+    if (pieces[r].parent || out.hole[r]) continue;  // in a hole: a region
+    if (pieces[r].label == pieces[c].label) {
+      out.hole[c] = true;  // a hole without its "h" marker
+      out.owner[c] = r;
+    } else if (!has_hole_like(pieces, container, r, pieces[c].ring)) {
+      out.islands.emplace_back(r, c);  // another material inside r: r needs a hole around it
+    }
+  }
+  for (std::size_t c = 0; c < count; ++c) {
+    if (!pieces[c].parent) continue;
+    const std::size_t p = *pieces[c].parent;
+    if (out.hole[p])
+      fail(plane.components[pieces[c].component].line,
+           plane_name + ", " + pieces[c].name + ": marked as a hole of component " +
+               std::to_string(pieces[p].component) + ", which lies inside component " +
+               std::to_string(pieces[out.owner[p]].component) +
+               " of the same label and so is a hole itself; fix the h marker");
+    out.hole[c] = true;
+    out.owner[c] = p;
+  }
+  return out;
+}
+
+// The slice's regions and holes from the nested pieces, named for messages in `names`.
+void add_regions(const std::vector<Piece>& pieces, const Nesting& nesting, LabeledSlice& slice,
+                 CslNaming::SliceNames& names) {
+  std::vector<std::size_t> region_of(pieces.size(), 0);
+  for (std::size_t c = 0; c < pieces.size(); ++c) {
+    if (nesting.hole[c]) continue;
+    region_of[c] = slice.regions.size();
+    slice.regions.push_back(Region{pieces[c].label, pieces[c].ring, {}});
+    names.regions.push_back(pieces[c].name);
+    names.holes.emplace_back();
+  }
+  auto add_hole = [&](std::size_t region_piece, std::size_t hole, const std::string& name) {
+    const std::size_t j = region_of[region_piece];
+    slice.regions[j].holes.push_back(pieces[hole].ring);
+    names.holes[j].push_back(name);
+  };
+  for (std::size_t c = 0; c < pieces.size(); ++c) {
+    if (!nesting.hole[c]) continue;
+    const std::size_t r = nesting.owner[c];
+    add_hole(r, c,
+             pieces[c].parent ? pieces[c].name
+                              : pieces[c].name + " as a hole of component " +
+                                    std::to_string(pieces[r].component));
+  }
+  for (const auto& [r, island] : nesting.islands)
+    add_hole(
+        r, island,
+        pieces[island].name + " as a hole of component " + std::to_string(pieces[r].component));
+}
+
 // How a plane's equation related to its vertices, for the one warning of the file.
 struct PlaneNote {
   long long index = 0;
@@ -546,91 +660,8 @@ LabeledSlice convert_plane(const Plane& plane, int n_labels, CslNaming::SliceNam
   for (const Vec3& p : plane.vertices) points.push_back(slice.to_plane(p));
   std::vector<Piece> pieces = make_pieces(plane, points, slice, n_labels, plane_name, repairs);
   resolve_parents(pieces, plane, plane_name);
-  const std::size_t count = pieces.size();
-
-  // Nesting, not orientation, decides what an unmarked piece is: its innermost container.
-  std::vector<Box2> boxes(count);
-  std::vector<double> areas(count);
-  for (std::size_t c = 0; c < count; ++c) {
-    boxes[c] = box_of(pieces[c].ring);
-    areas[c] = std::abs(signed_area(pieces[c].ring));
-  }
-  auto contains = [&](std::size_t outer, std::size_t inner) {
-    if (outer == inner || !boxes[outer].contains(boxes[inner])) return false;
-    if (areas[inner] > areas[outer] || (areas[inner] == areas[outer] && inner < outer))
-      return false;
-    // The same contour twice (an organ's pinched-off loop that the file also gives as a
-    // component) bounds the same area: neither holds the other.
-    if (areas[inner] == areas[outer] && same_points(pieces[inner].ring, pieces[outer].ring))
-      return false;
-    return detail::ring_inside_ring(pieces[inner].ring, pieces[outer].ring);
-  };
-  std::vector<std::optional<std::size_t>> container(count);
-  std::vector<std::size_t> depth(count, 0);
-  for (std::size_t c = 0; c < count; ++c) {
-    if (pieces[c].parent) continue;
-    for (std::size_t r = 0; r < count; ++r) {
-      if (!contains(r, c)) continue;
-      ++depth[c];
-      if (!container[c] || inner_container(pieces, areas, r, *container[c])) container[c] = r;
-    }
-  }
-
-  enum class Role { kRegion, kHole };
-  std::vector<Role> role(count, Role::kRegion);
-  std::vector<std::size_t> owner(count, 0);  // the region piece a hole belongs to
-  std::vector<std::size_t> order;
-  for (std::size_t c = 0; c < count; ++c)
-    if (!pieces[c].parent) order.push_back(c);
-  std::stable_sort(order.begin(), order.end(),
-                   [&](std::size_t a, std::size_t b) { return depth[a] < depth[b]; });
-  std::vector<std::pair<std::size_t, std::size_t>> islands;  // (region piece, island)
-  for (std::size_t c : order) {
-    if (!container[c]) continue;
-    const std::size_t r = *container[c];
-    if (pieces[r].parent || role[r] == Role::kHole) continue;  // in a hole: a region
-    if (pieces[r].label == pieces[c].label) {
-      role[c] = Role::kHole;  // a hole without its "h" marker
-      owner[c] = r;
-    } else if (!has_hole_like(pieces, container, r, pieces[c].ring)) {
-      islands.emplace_back(r, c);  // another material inside r: r needs a hole around it
-    }
-  }
-  for (std::size_t c = 0; c < count; ++c) {
-    if (!pieces[c].parent) continue;
-    const std::size_t p = *pieces[c].parent;
-    if (role[p] == Role::kHole)
-      fail(plane.components[pieces[c].component].line,
-           plane_name + ", " + pieces[c].name + ": marked as a hole of component " +
-               std::to_string(pieces[p].component) + ", which lies inside component " +
-               std::to_string(pieces[owner[p]].component) +
-               " of the same label and so is a hole itself; fix the h marker");
-    role[c] = Role::kHole;
-    owner[c] = p;
-  }
-
-  std::vector<std::size_t> region_of(count, 0);
-  for (std::size_t c = 0; c < count; ++c) {
-    if (role[c] != Role::kRegion) continue;
-    region_of[c] = slice.regions.size();
-    slice.regions.push_back(Region{pieces[c].label, pieces[c].ring, {}});
-    names.regions.push_back(pieces[c].name);
-    names.holes.emplace_back();
-  }
-  for (std::size_t c = 0; c < count; ++c) {
-    if (role[c] != Role::kHole) continue;
-    const std::size_t j = region_of[owner[c]];
-    slice.regions[j].holes.push_back(pieces[c].ring);
-    names.holes[j].push_back(pieces[c].parent ? pieces[c].name
-                                              : pieces[c].name + " as a hole of component " +
-                                                    std::to_string(pieces[owner[c]].component));
-  }
-  for (const auto& [r, island] : islands) {
-    const std::size_t j = region_of[r];
-    slice.regions[j].holes.push_back(pieces[island].ring);
-    names.holes[j].push_back(pieces[island].name + " as a hole of component " +
-                             std::to_string(pieces[r].component));
-  }
+  const Nesting nesting = nest(pieces, plane, plane_name);
+  add_regions(pieces, nesting, slice, names);
   return slice;
 }
 
