@@ -360,8 +360,15 @@ struct Piece {
 };
 
 std::string world_text(const Vec3& p) {
-  return "(" + detail::format_short(p.x()) + ", " + detail::format_short(p.y()) + ", " +
-         detail::format_short(p.z()) + ")";
+  // Appended piece by piece: GCC 12 warns falsely (-Wrestrict) on the chained form once inlined.
+  std::string text = "(";
+  text += detail::format_short(p.x());
+  text += ", ";
+  text += detail::format_short(p.y());
+  text += ", ";
+  text += detail::format_short(p.z());
+  text += ")";
+  return text;
 }
 
 // The same points, in any order.
@@ -375,80 +382,65 @@ bool same_points(Ring2 a, Ring2 b) {
   return a == b;
 }
 
-// What a plane's components become before nesting: their rings cleaned and checked, those that
-// cross themselves repaired into the rings they enclose, holes classified by their labels.
-std::vector<Piece> make_pieces(const Plane& plane, const std::vector<Vec2>& points,
-                               const LabeledSlice& slice, int n_labels,
-                               const std::string& plane_name, detail::RepairLog& repairs) {
-  const std::size_t count = plane.components.size();
-  std::vector<Piece> pieces;
-  std::size_t dropped = 0;
-  for (std::size_t c = 0; c < count; ++c) {
-    const Component& comp = plane.components[c];
-    const std::string line = "line " + std::to_string(comp.line);
-    std::string name = "component " + std::to_string(c) + " (" + line + ", label " +
-                       std::to_string(comp.label) + ")";
-    Piece piece;
-    piece.component = c;
-    piece.label = comp.label;
-    bool cut = false;     // a hole of the outside
-    int other_label = 0;  // a hole filled by another material: the parent's label
-    if (comp.parent) {
-      const Component& parent = plane.components[*comp.parent];
-      const std::string of = "hole of component " + std::to_string(*comp.parent);
-      if (parent.parent)
-        fail(comp.line, plane_name + ", " + name + ": marked as a hole of component " +
-                            std::to_string(*comp.parent) +
-                            ", which is itself a hole; a hole's parent must be an outer contour");
-      if (comp.label == parent.label || comp.label == 0 || comp.label == n_labels) {
-        cut = true;
-        piece.hole_of = comp.parent;
-        piece.label = parent.label;
-        name = "component " + std::to_string(c) + " (" + line + ", " + of + ")";
-      } else {
-        other_label = parent.label;
-        name = "component " + std::to_string(c) + " (" + line + ", " + of + ", filled by label " +
-               std::to_string(comp.label) + ")";
-      }
-    }
-    for (std::size_t index : comp.indices) piece.ring.push_back(points[index]);
-    dropped += detail::drop_repeated_points(piece.ring);
-    const detail::RingCheck check = detail::check_ring(piece.ring);
-    if (!check.problem.empty() && !check.self_intersects)
-      fail(comp.line, plane_name + ", " + name + ": " + check.problem);
-    if (!check.self_intersects) {
-      piece.name = name;
-      pieces.push_back(std::move(piece));
-      continue;
-    }
-    const detail::ContourRepair fixed = detail::repair_contour(piece.ring);
-    repairs.add(plane_name, detail::self_intersection_repair(
-                                plane_name + ", " + name,
-                                world_text(slice.to_world(check.crossing)), fixed, cut));
-    // Nesting sorts the parts out: inside a part of the same label a part is its hole, inside a
-    // hole a region. Only the outer parts of a hole of the outside keep the hole marker; the
-    // rings inside a filled hole alternate between the filling and the parent's material.
-    for (std::size_t k = 0; k < fixed.rings.size(); ++k) {
-      Piece part;
-      part.component = c;
-      part.depth = fixed.rings[k].depth;
-      part.hole_of = cut && part.depth == 0 ? comp.parent : std::nullopt;
-      part.label = other_label && part.depth % 2 == 1 ? other_label : piece.label;
-      part.ring = fixed.rings[k].ring;
-      part.name = name + ", part " + std::to_string(k + 1) + " of " +
-                  std::to_string(fixed.rings.size()) + " after its repair";
-      const std::string problem = detail::ring_problem(part.ring);
-      if (!problem.empty()) fail(comp.line, plane_name + ", " + part.name + ": " + problem);
-      pieces.push_back(std::move(part));
-    }
-  }
-  if (dropped)
-    repairs.add(plane_name, {"repeated_points", plane_name,
-                             "dropped " + std::to_string(dropped) + " repeated consecutive point" +
-                                 (dropped > 1 ? "s" : ""),
-                             0.0});
+// How a component enters the nesting. An outer contour is a region of its label. A hole of the
+// outside (labelled with its parent's label, 0 or nLabels) is a marked hole of its parent, with
+// the parent's label. A hole filled by another material is a region of that material, which the
+// nesting cuts out of its parent.
+struct ComponentRole {
+  std::string name;
+  int label = 1;
+  bool cut = false;     // a hole of the outside
+  int other_label = 0;  // a filled hole: the parent's label
+};
 
-  // A filled hole also written as a component of its material is that component.
+ComponentRole component_role(const Plane& plane, std::size_t c, int n_labels,
+                             const std::string& plane_name) {
+  const Component& comp = plane.components[c];
+  const std::string head = "component " + std::to_string(c) + " (line " + std::to_string(comp.line);
+  ComponentRole role{head + ", label " + std::to_string(comp.label) + ")", comp.label};
+  if (!comp.parent) return role;
+  const Component& parent = plane.components[*comp.parent];
+  const std::string of = ", hole of component " + std::to_string(*comp.parent);
+  if (parent.parent)
+    fail(comp.line, plane_name + ", " + role.name + ": marked as a hole of component " +
+                        std::to_string(*comp.parent) +
+                        ", which is itself a hole; a hole's parent must be an outer contour");
+  if (comp.label == parent.label || comp.label == 0 || comp.label == n_labels) {
+    role.cut = true;
+    role.label = parent.label;
+    role.name = head + of + ")";
+  } else {
+    role.other_label = parent.label;
+    role.name = head + of + ", filled by label " + std::to_string(comp.label) + ")";
+  }
+  return role;
+}
+
+// The rings a self-intersecting component encloses, as pieces. Nesting sorts them out: inside a
+// part of the same label a part is its hole, inside a hole a region. Only the outer parts of a
+// hole of the outside keep the hole marker; the rings inside a filled hole alternate between the
+// filling and the parent's material.
+void add_repaired_parts(const Plane& plane, std::size_t c, const ComponentRole& role,
+                        const detail::ContourRepair& fixed, const std::string& plane_name,
+                        std::vector<Piece>& pieces) {
+  for (std::size_t k = 0; k < fixed.rings.size(); ++k) {
+    Piece part;
+    part.component = c;
+    part.depth = fixed.rings[k].depth;
+    part.hole_of = role.cut && part.depth == 0 ? plane.components[c].parent : std::nullopt;
+    part.label = role.other_label && part.depth % 2 == 1 ? role.other_label : role.label;
+    part.ring = fixed.rings[k].ring;
+    part.name = role.name + ", part " + std::to_string(k + 1) + " of " +
+                std::to_string(fixed.rings.size()) + " after its repair";
+    const std::string problem = detail::ring_problem(part.ring);
+    if (!problem.empty())
+      fail(plane.components[c].line, plane_name + ", " + part.name + ": " + problem);
+    pieces.push_back(std::move(part));
+  }
+}
+
+// A filled hole also written as a component of its material is that component.
+std::vector<Piece> without_filled_duplicates(std::vector<Piece> pieces, const Plane& plane) {
   std::vector<bool> duplicate(pieces.size(), false);
   for (std::size_t k = 0; k < pieces.size(); ++k) {
     const Piece& piece = pieces[k];
@@ -462,6 +454,44 @@ std::vector<Piece> make_pieces(const Plane& plane, const std::vector<Vec2>& poin
   for (std::size_t k = 0; k < pieces.size(); ++k)
     if (!duplicate[k]) kept.push_back(std::move(pieces[k]));
   return kept;
+}
+
+// What a plane's components become before nesting: their rings cleaned and checked, those that
+// cross themselves repaired into the rings they enclose (recorded), holes classified by label.
+std::vector<Piece> make_pieces(const Plane& plane, const std::vector<Vec2>& points,
+                               const LabeledSlice& slice, int n_labels,
+                               const std::string& plane_name, detail::RepairLog& repairs) {
+  std::vector<Piece> pieces;
+  std::size_t dropped = 0;
+  for (std::size_t c = 0; c < plane.components.size(); ++c) {
+    const Component& comp = plane.components[c];
+    const ComponentRole role = component_role(plane, c, n_labels, plane_name);
+    Piece piece;
+    piece.component = c;
+    piece.label = role.label;
+    piece.hole_of = role.cut ? comp.parent : std::nullopt;
+    piece.name = role.name;
+    for (std::size_t index : comp.indices) piece.ring.push_back(points[index]);
+    dropped += detail::drop_repeated_points(piece.ring);
+    const detail::RingCheck check = detail::check_ring(piece.ring);
+    if (!check.problem.empty() && !check.self_intersects)
+      fail(comp.line, plane_name + ", " + role.name + ": " + check.problem);
+    if (!check.self_intersects) {
+      pieces.push_back(std::move(piece));
+      continue;
+    }
+    const detail::ContourRepair fixed = detail::repair_contour(piece.ring);
+    repairs.add(plane_name, detail::self_intersection_repair(
+                                plane_name + ", " + role.name,
+                                world_text(slice.to_world(check.crossing)), fixed, role.cut));
+    add_repaired_parts(plane, c, role, fixed, plane_name, pieces);
+  }
+  if (dropped)
+    repairs.add(plane_name, {"repeated_points", plane_name,
+                             "dropped " + std::to_string(dropped) + " repeated consecutive point" +
+                                 (dropped > 1 ? "s" : ""),
+                             0.0});
+  return without_filled_duplicates(std::move(pieces), plane);
 }
 
 // Whether piece `region` has a hole with the points of `ring` (marked, or an unmarked piece of
