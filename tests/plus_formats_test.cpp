@@ -83,6 +83,20 @@ TEST(PlusFormats, MhaAndNrrdCopiesSegmentToTheSameSliceSet) {
   EXPECT_EQ(bytes(outputs[0]), bytes(outputs[1]));
 }
 
+// A NRRD sweep finds its calibration in <name>.plus.xml beside it, as a MetaImage one does.
+TEST(PlusFormats, NrrdSweepFindsItsSidecarCalibration) {
+  sonoshape::testing::TempDir dir;
+  fs::copy_file(kPlus / "NwirePhantomFreehand.igs.nrrd", dir.path() / "sweep.igs.nrrd");
+  fs::copy_file(kCalibration, dir.path() / "sweep.plus.xml");
+  const auto result = run("segment " + (dir.path() / "sweep.igs.nrrd").string() +
+                              " --every 24 -o " + (dir.path() / "s.json").string(),
+                          dir.path() / "log");
+  ASSERT_EQ(result.exit_code, 0) << result.output;
+  EXPECT_NE(result.output.find("calibration from " + (dir.path() / "sweep.plus.xml").string()),
+            std::string::npos)
+      << result.output;
+}
+
 TEST(PlusFormats, ImageOnlySlicerSequenceIsRefusedWithTheReason) {
   sonoshape::testing::TempDir dir;
   const fs::path path = dir.path() / "us.seq.nrrd";

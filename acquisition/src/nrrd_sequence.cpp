@@ -274,11 +274,74 @@ Result<Axes> find_axes(const std::filesystem::path& path, const NrrdHeader& head
   return axes;
 }
 
+// gzip (or zlib) data -> exactly `total` bytes.
+Result<std::vector<std::uint8_t>> decode_gzip(const std::filesystem::path& path,
+                                              std::string_view source,
+                                              const std::filesystem::path& source_path,
+                                              std::size_t total) {
+  // One spare byte tells "exactly sizes" from "more than sizes".
+  std::vector<std::uint8_t> samples(total + 1);
+  const auto [rc, produced] =
+      inflate_buffer(reinterpret_cast<const std::uint8_t*>(source.data()), source.size(),
+                     samples.data(), samples.size(), MAX_WBITS + 32);
+  samples.resize(total);
+  if (rc != Z_STREAM_END && rc != Z_BUF_ERROR)
+    return fail(path,
+                "the gzip data in " + source_path.string() + " is corrupt (zlib error " +
+                    std::to_string(rc) + " after " + std::to_string(produced) + " bytes)",
+                "the file is damaged; copy it again");
+  if (produced > total)
+    return fail(path, "the data holds more samples than 'sizes' describes", "'sizes' is wrong");
+  if (produced < total)
+    return fail(path,
+                "the gzip data decompresses to " + std::to_string(produced) +
+                    " bytes, sizes and type need " + std::to_string(total),
+                "the file is truncated or 'sizes' is wrong");
+  return samples;
+}
+
+// Text samples -> `sample_bytes` bytes each, in the byte order to_grey expects.
+Result<std::vector<std::uint8_t>> decode_text(const std::filesystem::path& path,
+                                              std::string_view source, std::size_t sample_count,
+                                              int sample_bytes, bool big_endian) {
+  std::vector<std::uint8_t> samples;
+  samples.reserve(sample_count * static_cast<std::size_t>(sample_bytes));
+  std::string text(source);
+  for (char& c : text)
+    if (c == '\n' || c == '\r' || c == ',') c = ' ';
+  std::size_t count = 0;
+  for (std::string_view word : split_words(text)) {
+    const auto value = parse_number<long long>(word);
+    if (!value || *value < -32768 || *value > 65535)
+      return fail(path,
+                  "text sample " + std::to_string(count) + " '" + std::string(word.substr(0, 20)) +
+                      "' is not an integer sample",
+                  "the data does not match 'type'");
+    const auto bits = static_cast<std::uint16_t>(*value);
+    const auto lo = static_cast<std::uint8_t>(bits & 0xff);
+    const auto hi = static_cast<std::uint8_t>(bits >> 8);
+    if (sample_bytes == 1) {
+      samples.push_back(lo);
+    } else {
+      samples.push_back(big_endian ? hi : lo);
+      samples.push_back(big_endian ? lo : hi);
+    }
+    ++count;
+  }
+  if (count != sample_count)
+    return fail(path,
+                "the text data has " + std::to_string(count) + " samples, sizes need " +
+                    std::to_string(sample_count),
+                "the file is truncated or 'sizes' is wrong");
+  return samples;
+}
+
 // Reads the bytes that hold the samples: after the header, or from `data file`, after the
 // line skip, decoded. Fails naming the field.
 Result<std::vector<std::uint8_t>> read_samples(const std::filesystem::path& path,
                                                const NrrdHeader& header, const std::string& data,
-                                               std::size_t sample_count, int sample_bytes) {
+                                               std::size_t sample_count, int sample_bytes,
+                                               bool big_endian) {
   const std::size_t total = sample_count * static_cast<std::size_t>(sample_bytes);
   // The samples' file.
   std::string detached;
@@ -348,45 +411,13 @@ Result<std::vector<std::uint8_t>> read_samples(const std::filesystem::path& path
     const auto* first = reinterpret_cast<const std::uint8_t*>(source.data() + offset);
     samples.assign(first, first + total);
   } else if (encoding == "gzip" || encoding == "gz") {
-    // One spare byte tells "exactly sizes" from "more than sizes".
-    samples.resize(total + 1);
-    const auto [rc, produced] =
-        inflate_buffer(reinterpret_cast<const std::uint8_t*>(source.data()), source.size(),
-                       samples.data(), samples.size(), MAX_WBITS + 32);
-    samples.resize(total);
-    if (rc != Z_STREAM_END && rc != Z_BUF_ERROR)
-      return fail(path,
-                  "the gzip data in " + source_path.string() + " is corrupt (zlib error " +
-                      std::to_string(rc) + " after " + std::to_string(produced) + " bytes)",
-                  "the file is damaged; copy it again");
-    if (produced > total)
-      return fail(path, "the data holds more samples than 'sizes' describes", "'sizes' is wrong");
-    if (produced < total)
-      return fail(path,
-                  "the gzip data decompresses to " + std::to_string(produced) +
-                      " bytes, sizes and type need " + std::to_string(total),
-                  "the file is truncated or 'sizes' is wrong");
+    auto decoded = decode_gzip(path, source, source_path, total);
+    if (!decoded) return decoded.status();
+    samples = std::move(*decoded);
   } else if (encoding == "text" || encoding == "txt" || encoding == "ascii") {
-    samples.reserve(total);
-    std::string text(source);
-    for (char& c : text)
-      if (c == '\n' || c == '\r' || c == ',') c = ' ';
-    for (std::string_view word : split_words(text)) {
-      const auto value = parse_number<long long>(word);
-      if (!value || *value < -32768 || *value > 65535)
-        return fail(path,
-                    "text sample " + std::to_string(samples.size() / sample_bytes) + " '" +
-                        std::string(word.substr(0, 20)) + "' is not an integer sample",
-                    "the data does not match 'type'");
-      const auto bits = static_cast<std::uint16_t>(*value);
-      samples.push_back(static_cast<std::uint8_t>(bits & 0xff));
-      if (sample_bytes == 2) samples.push_back(static_cast<std::uint8_t>(bits >> 8));
-    }
-    if (samples.size() != total)
-      return fail(path,
-                  "the text data has " + std::to_string(samples.size() / sample_bytes) +
-                      " samples, sizes need " + std::to_string(sample_count),
-                  "the file is truncated or 'sizes' is wrong");
+    auto decoded = decode_text(path, source, sample_count, sample_bytes, big_endian);
+    if (!decoded) return decoded.status();
+    samples = std::move(*decoded);
   } else {
     return fail(path, where(*encoding_field) + " '" + encoding_field->value + "' is not supported",
                 "re-save it with encoding raw or gzip (Slicer: Save with compression; unu "
@@ -545,7 +576,7 @@ Result<SequenceFile> read_nrrd_sequence(const std::filesystem::path& path,
 
   std::size_t sample_count = 1;
   for (long long s : axes.sizes) sample_count *= static_cast<std::size_t>(s);
-  auto samples = read_samples(path, header, data, sample_count, type->bytes);
+  auto samples = read_samples(path, header, data, sample_count, type->bytes, big_endian);
   if (!samples) return samples.status();
   auto grey = to_grey(path, std::move(*samples), *type, big_endian, *type_field);
   if (!grey) return grey.status();

@@ -294,6 +294,15 @@ TEST(NrrdSequence, TextEncodingReads) {
   const auto file = read_sequence_file(path);
   ASSERT_TRUE(file) << file.message();
   expect_frames(*file, f);
+
+  // Text has no byte order: 16-bit text samples read the same with `endian: big`.
+  std::string header = slicer_header(kListLast + "encoding: text\n", kTimes) + "\n";
+  header.replace(header.find("unsigned char"), 13, "ushort");
+  header.replace(header.find("endian: little"), 14, "endian: big");
+  write_file(path, header, text);
+  const auto wide = read_sequence_file(path);
+  ASSERT_TRUE(wide) << wide.message();
+  expect_frames(*wide, f);
 }
 
 TEST(NrrdSequence, TheContentNotTheNamePicksTheFormat) {
