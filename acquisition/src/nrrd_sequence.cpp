@@ -9,6 +9,7 @@
 #include <array>
 #include <cctype>
 #include <fstream>
+#include <limits>
 #include <map>
 
 #include "sequence_text.hpp"
@@ -202,7 +203,7 @@ Result<Axes> find_axes(const std::filesystem::path& path, const NrrdHeader& head
   Axes axes;
   for (std::string_view word : split_words(sizes_field->value)) {
     const auto size = parse_number<long long>(word);
-    if (!size || *size < 1 || *size > (1ll << 31))
+    if (!size || *size < 1 || *size > std::numeric_limits<int>::max())
       return fail(path,
                   where(*sizes_field) + " '" + sizes_field->value +
                       "' holds a size that is not a positive integer",
@@ -546,64 +547,25 @@ Result<std::optional<Eigen::Matrix4d>> image_to_reference(const std::filesystem:
   return std::optional<Eigen::Matrix4d>(m);
 }
 
-}  // namespace
-
-Result<SequenceFile> read_nrrd_sequence(const std::filesystem::path& path,
-                                        const std::string& data) {
-  auto parsed = parse_header(path, data);
-  if (!parsed) return parsed.status();
-  const NrrdHeader& header = *parsed;
-  auto found_axes = find_axes(path, header);
-  if (!found_axes) return found_axes.status();
-  const Axes& axes = *found_axes;
-
-  const HeaderEntry* type_field = header.field("type");
-  if (!type_field) return fail(path, "the header has no 'type' field", "add e.g. 'type: uint8'");
-  const auto type = sample_type(type_field->value);
-  if (!type)
-    return fail(path, where(*type_field) + " is '" + type_field->value + "'",
-                "only 8-bit grey frames (uint8; 16-bit when every value is 0..255) are read; "
-                "convert the images to unsigned char (e.g. Slicer's Cast Scalar Volume)");
-  bool big_endian = false;
-  if (type->bytes > 1) {
-    const HeaderEntry* endian = header.field("endian");
-    if (!endian || (lower(endian->value) != "little" && lower(endian->value) != "big"))
-      return fail(path,
-                  "'endian' is " + (endian ? "'" + endian->value + "'" : std::string("missing")),
-                  "16-bit samples need 'endian: little' or 'endian: big'");
-    big_endian = lower(endian->value) == "big";
-  }
-
-  std::size_t sample_count = 1;
-  for (long long s : axes.sizes) sample_count *= static_cast<std::size_t>(s);
-  auto samples = read_samples(path, header, data, sample_count, type->bytes, big_endian);
-  if (!samples) return samples.status();
-  auto grey = to_grey(path, std::move(*samples), *type, big_endian, *type_field);
-  if (!grey) return grey.status();
-
-  // Strides of the axes (axis 0 varies fastest), so any axis order reads: PLUS and current
-  // Slicer put the frame axis last, older Slicer first.
-  std::vector<std::size_t> stride(axes.sizes.size(), 1);
-  for (std::size_t a = 1; a < axes.sizes.size(); ++a)
-    stride[a] = stride[a - 1] * static_cast<std::size_t>(axes.sizes[a - 1]);
-  const int w = static_cast<int>(axes.sizes[static_cast<std::size_t>(axes.image_i)]);
-  const int h = static_cast<int>(axes.sizes[static_cast<std::size_t>(axes.image_j)]);
-  const std::size_t n =
-      axes.frames >= 0 ? static_cast<std::size_t>(axes.sizes[static_cast<std::size_t>(axes.frames)])
-                       : 1;
-  const std::size_t si = stride[static_cast<std::size_t>(axes.image_i)];
-  const std::size_t sj = stride[static_cast<std::size_t>(axes.image_j)];
-  const std::size_t sk = axes.frames >= 0 ? stride[static_cast<std::size_t>(axes.frames)] : 0;
-
-  // Per-frame fields: PLUS's Seq_Frame keys and Slicer's per-item attributes.
-  std::vector<FieldList> frame_fields(n);
+// The key/values split into per-frame fields (PLUS's Seq_Frame keys, Slicer's per-item
+// attributes and index values) and global ones.
+struct CollectedFields {
+  std::vector<FieldList> frames;
   FieldList globals;
+};
+
+Result<CollectedFields> collect_fields(const std::filesystem::path& path, const NrrdHeader& header,
+                                       int frame_axis, std::size_t n) {
+  CollectedFields out;
+  out.frames.resize(n);
+  std::vector<FieldList>& frame_fields = out.frames;
+  FieldList& globals = out.globals;
   const HeaderEntry* index_values = nullptr;
   const HeaderEntry* index_type = nullptr;
-  const std::string index_prefix = "axis " + std::to_string(axes.frames) + " index ";
+  const std::string index_prefix = "axis " + std::to_string(frame_axis) + " index ";
   for (const HeaderEntry& kv : header.key_values) {
     auto frame_key = plus_frame_key(kv.name);
-    if (!frame_key) frame_key = slicer_item_key(kv.name, axes.frames);
+    if (!frame_key) frame_key = slicer_item_key(kv.name, frame_axis);
     if (frame_key) {
       if (frame_key->first >= n)
         return fail(path,
@@ -613,11 +575,11 @@ Result<SequenceFile> read_nrrd_sequence(const std::filesystem::path& path,
       set_field(frame_fields[frame_key->first], frame_key->second, kv.value);
       continue;
     }
-    if (axes.frames >= 0 && kv.name == index_prefix + "values") {
+    if (frame_axis >= 0 && kv.name == index_prefix + "values") {
       index_values = &kv;
       continue;
     }
-    if (axes.frames >= 0 && kv.name == index_prefix + "type") index_type = &kv;
+    if (frame_axis >= 0 && kv.name == index_prefix + "type") index_type = &kv;
     set_field(globals, global_key_name(kv.name), kv.value);
   }
   if (index_values) {
@@ -646,6 +608,70 @@ Result<SequenceFile> read_nrrd_sequence(const std::filesystem::path& path,
     }
   }
 
+  return out;
+}
+
+}  // namespace
+
+Result<SequenceFile> read_nrrd_sequence(const std::filesystem::path& path,
+                                        const std::string& data) {
+  auto parsed = parse_header(path, data);
+  if (!parsed) return parsed.status();
+  const NrrdHeader& header = *parsed;
+  auto found_axes = find_axes(path, header);
+  if (!found_axes) return found_axes.status();
+  const Axes& axes = *found_axes;
+
+  const HeaderEntry* type_field = header.field("type");
+  if (!type_field) return fail(path, "the header has no 'type' field", "add e.g. 'type: uint8'");
+  const auto type = sample_type(type_field->value);
+  if (!type)
+    return fail(path, where(*type_field) + " is '" + type_field->value + "'",
+                "only 8-bit grey frames (uint8; 16-bit when every value is 0..255) are read; "
+                "convert the images to unsigned char (e.g. Slicer's Cast Scalar Volume)");
+  bool big_endian = false;
+  if (type->bytes > 1) {
+    const HeaderEntry* endian = header.field("endian");
+    if (!endian || (lower(endian->value) != "little" && lower(endian->value) != "big"))
+      return fail(path,
+                  "'endian' is " + (endian ? "'" + endian->value + "'" : std::string("missing")),
+                  "16-bit samples need 'endian: little' or 'endian: big'");
+    big_endian = lower(endian->value) == "big";
+  }
+
+  // Checked before allocating: a damaged `sizes` must not ask for exabytes.
+  constexpr std::size_t kMaxSamples = std::size_t{1} << 36;
+  std::size_t sample_count = 1;
+  for (long long s : axes.sizes) {
+    if (static_cast<std::size_t>(s) > kMaxSamples / sample_count)
+      return fail(path,
+                  "sizes " + header.field("sizes")->value + " describe more than 2^36 samples",
+                  "the header is damaged, or the sequence too large to read at once");
+    sample_count *= static_cast<std::size_t>(s);
+  }
+  auto samples = read_samples(path, header, data, sample_count, type->bytes, big_endian);
+  if (!samples) return samples.status();
+  auto grey = to_grey(path, std::move(*samples), *type, big_endian, *type_field);
+  if (!grey) return grey.status();
+
+  // Strides of the axes (axis 0 varies fastest), so any axis order reads: PLUS and current
+  // Slicer put the frame axis last, older Slicer first.
+  std::vector<std::size_t> stride(axes.sizes.size(), 1);
+  for (std::size_t a = 1; a < axes.sizes.size(); ++a)
+    stride[a] = stride[a - 1] * static_cast<std::size_t>(axes.sizes[a - 1]);
+  const int w = static_cast<int>(axes.sizes[static_cast<std::size_t>(axes.image_i)]);
+  const int h = static_cast<int>(axes.sizes[static_cast<std::size_t>(axes.image_j)]);
+  const std::size_t n =
+      axes.frames >= 0 ? static_cast<std::size_t>(axes.sizes[static_cast<std::size_t>(axes.frames)])
+                       : 1;
+  const std::size_t si = stride[static_cast<std::size_t>(axes.image_i)];
+  const std::size_t sj = stride[static_cast<std::size_t>(axes.image_j)];
+  const std::size_t sk = axes.frames >= 0 ? stride[static_cast<std::size_t>(axes.frames)] : 0;
+
+  auto fields = collect_fields(path, header, axes.frames, n);
+  if (!fields) return fields.status();
+  std::vector<FieldList>& frame_fields = fields->frames;
+
   const auto geometry = image_to_reference(path, header, axes);
   if (!geometry) return geometry.status();
 
@@ -653,7 +679,7 @@ Result<SequenceFile> read_nrrd_sequence(const std::filesystem::path& path,
   for (const HeaderEntry& f : header.fields)
     if (std::find(kLayoutFields.begin(), kLayoutFields.end(), f.name) == kLayoutFields.end())
       file.set_field(f.name, f.value);
-  for (auto& [key, value] : globals) file.set_field(key, std::move(value));
+  for (auto& [key, value] : fields->globals) file.set_field(key, std::move(value));
   if (*geometry) file.set_field("ImageToReferenceTransform", format_matrix(**geometry));
   for (std::size_t k = 0; k < n; ++k) {
     GreyImage image(w, h);

@@ -305,6 +305,18 @@ TEST(NrrdSequence, TextEncodingReads) {
   expect_frames(*wide, f);
 }
 
+// gzip allows several members one after another (`cat a.gz b.gz`); they are one stream.
+TEST(NrrdSequence, ConcatenatedGzipMembersRead) {
+  const SyntheticFrames f = make_frames();
+  const std::string raw = frames_last(f);
+  const auto path = temp_path("members.seq.nrrd");
+  write_file(path, slicer_header(kListLast + "encoding: gzip\n", kTimes) + "\n",
+             gzip(raw.substr(0, 33)) + gzip(raw.substr(33)));
+  const auto file = read_sequence_file(path);
+  ASSERT_TRUE(file) << file.message();
+  expect_frames(*file, f);
+}
+
 TEST(NrrdSequence, TheContentNotTheNamePicksTheFormat) {
   const SyntheticFrames f = make_frames();
   const auto path = temp_path("really_nrrd.mha");
@@ -392,6 +404,11 @@ TEST(NrrdSequence, UnsupportedOrMalformedFilesGiveClearErrors) {
       nrrd_error("badline.nrrd", "NRRD0004\ntype: uint8\nthis line is nothing\n\n", raw),
       "header line 3");
   expect_contains(nrrd_error("magic.nrrd", "NRRD0009\n\n", raw), "NRRD magic");
+  expect_contains(nrrd_error("huge.seq.nrrd",
+                             with("sizes: 2000000000 2000000000 1 4\n"
+                                  "kinds: domain domain domain list\nencoding: raw\n"),
+                             raw),
+                  "more than 2^36 samples");
 }
 
 TEST(NrrdSequence, RequireTrackingNamesTheTransformsAFileHas) {
