@@ -87,6 +87,7 @@ def one_file(args, name, csl_path, reference):
                                f"1:{reference}", "--slices", csl_path, "--json", eval_path, "-q"])
         if result.returncode != 0:
             row["eval_error"] = result.stderr.strip()
+            print(f"{name}: evaluate failed: {row['eval_error']}", file=sys.stderr)
         else:
             with open(eval_path) as f:
                 row["scores"] = json.load(f)["labels"][0]
@@ -113,10 +114,13 @@ def table(rows):
         if s:
             iou, base = s["iou"], s["baseline_iou"]
             mean, haus = s["mean_surface_distance_percent"], s["hausdorff_distance_percent"]
+        scored = [cell(iou, 4), cell(base, 4), cell(mean, 3), cell(haus, 2)]
+        if "eval_error" in r:
+            scored = ["evaluation failed"] + [""] * 3
         lines.append(
             f"| {r['name']} | {r['slices']} | {materials} | {repairs or 'none'} | "
             f"{r['seconds']:.1f} | {r['peak_rss_mb']:.0f} | {'yes' if r['closed'] else 'NO'} | "
-            f"{cell(iou, 4)} | {cell(base, 4)} | {cell(mean, 3)} | {cell(haus, 2)} |")
+            f"{' | '.join(scored)} |")
     return "\n".join(lines)
 
 
@@ -164,9 +168,11 @@ def main():
     print(text)
     if args.write_doc:
         write_doc(root, text)
-    failed = [r["name"] for r in rows if r["exit"] != 0 or not r.get("closed", False)]
+    failed = [r["name"] for r in rows
+              if r["exit"] != 0 or not r.get("closed", False) or "eval_error" in r]
     if failed:
-        print(f"\nnot reconstructed into closed meshes: {', '.join(failed)}", file=sys.stderr)
+        print(f"\nnot reconstructed into closed meshes (or not evaluated): {', '.join(failed)}",
+              file=sys.stderr)
         return 1
     return 0
 
