@@ -11,6 +11,7 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 #include <string>
+#include <unordered_set>
 
 #include "sonoshape/core/errors.hpp"
 #include "sonoshape/core/slice_io.hpp"
@@ -92,6 +93,22 @@ std::vector<PixelRegion> trace_mask(const cv::Mat& mask, int label) {
 // disjoint (unlike approxPolyDP ring by ring, which lets neighbours cross).
 void simplify_together(std::vector<PixelRegion>& regions, double epsilon_px) {
   if (epsilon_px <= 0.0) return;
+  // The simplification needs rings that share no point (it is undefined, and crashes, on
+  // pinched ones). The tracing guarantees that; should it ever fail, keep the exact outlines.
+  std::unordered_set<std::uint64_t> seen;
+  auto fresh = [&](const Ring2& ring) {
+    for (const Vec2& p : ring) {  // coordinates are quarter pixels: exact in 2 x 32 bits
+      const auto x = static_cast<std::uint32_t>(std::lround(4.0 * p.x()) + (1 << 30));
+      const auto y = static_cast<std::uint32_t>(std::lround(4.0 * p.y()) + (1 << 30));
+      if (!seen.insert((std::uint64_t{x} << 32) | y).second) return false;
+    }
+    return true;
+  };
+  for (const PixelRegion& r : regions) {
+    if (!fresh(r.outer)) return;
+    for (const Ring2& hole : r.holes)
+      if (!fresh(hole)) return;
+  }
   Ct ct;
   std::vector<Ct::Constraint_id> ids;
   auto insert = [&](const Ring2& ring) {
@@ -227,6 +244,23 @@ Status validate_one(const LabeledSlice& slice) {
 
 }  // namespace
 
+void drop_invalid_regions(LabeledSlice& slice, std::vector<Repair>* repairs) {
+  std::vector<Region> regions = std::move(slice.regions), kept;
+  LabeledSlice alone = slice;  // the plane alone: each region is judged on its own
+  alone.fov.reset();
+  for (Region& r : regions) {
+    alone.regions.assign(1, r);
+    if (const Status ok = validate_one(alone); ok) {
+      kept.push_back(std::move(r));
+    } else if (repairs) {
+      const int label = r.label == kUnknownLabel ? kLabelPixelUnknown : r.label;
+      repairs->push_back(Repair{"invalid_region", label_name(label), "dropped: " + ok.message(),
+                                region_area_mm2(r)});
+    }
+  }
+  slice.regions = std::move(kept);
+}
+
 Result<LabeledSlice> make_slice(const LabelImage& labels, const ImageU8& sector,
                                 const Ring2& sector_px, const ImagePlane& plane,
                                 double tolerance_mm, std::vector<Repair>* repairs) {
@@ -246,22 +280,7 @@ Result<LabeledSlice> make_slice(const LabelImage& labels, const ImageU8& sector,
     valid = validate_one(slice);
   }
   if (!valid) {
-    // Keep what is valid on its own; what is not cannot be mended here.
-    std::vector<Region> kept;
-    for (std::size_t k = 0; k < slice.regions.size(); ++k) {
-      LabeledSlice alone = slice;
-      alone.regions = {slice.regions[k]};
-      alone.fov.reset();
-      if (const Status ok = validate_one(alone); ok) {
-        kept.push_back(std::move(slice.regions[k]));
-      } else {
-        const Region& r = slice.regions[k];
-        found.push_back(Repair{"invalid_region",
-                               label_name(r.label == kUnknownLabel ? kLabelPixelUnknown : r.label),
-                               "dropped: " + ok.message(), region_area_mm2(r)});
-      }
-    }
-    slice.regions = std::move(kept);
+    drop_invalid_regions(slice, &found);
     valid = validate_one(slice);
     if (!valid) return valid;
   }

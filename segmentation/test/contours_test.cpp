@@ -161,6 +161,28 @@ TEST(Contours, SimplificationKeepsNeighboursApartAndCutsPoints) {
   EXPECT_LT(simplified_points * 3, exact_points);
 }
 
+TEST(Contours, InvalidRegionsAreDroppedAndRecorded) {
+  // The safety net behind make_slice: what no construction mends is dropped, with a record.
+  LabeledSlice slice;
+  slice.regions.push_back(Region{1, {{0, 0}, {4, 0}, {4, 4}, {0, 4}}, {}});
+  slice.regions.push_back(Region{2, {{10, 0}, {14, 4}, {14, 0}, {10, 4}}, {}});  // a bow tie
+  slice.regions.push_back(Region{kUnknownLabel,
+                                 {{20, 0}, {30, 0}, {30, 10}, {20, 10}},
+                                 {{{21, 1}, {23, 1}, {23, 3}}, {{40, 40}, {41, 40}, {41, 41}}}});
+  std::vector<Repair> repairs;
+  drop_invalid_regions(slice, &repairs);
+  ASSERT_EQ(slice.regions.size(), 1u);
+  EXPECT_EQ(slice.regions[0].label, 1);
+  ASSERT_EQ(repairs.size(), 2u);
+  EXPECT_EQ(repairs[0].kind, "invalid_region");
+  EXPECT_EQ(repairs[0].where, "label 2");
+  EXPECT_NE(repairs[0].detail.find("self-intersects"), std::string::npos) << repairs[0].detail;
+  EXPECT_EQ(repairs[1].where, "unknown");
+  EXPECT_NE(repairs[1].detail.find("hole"), std::string::npos) << repairs[1].detail;
+  EXPECT_NEAR(repairs[1].area_changed_mm2, 100.0 - 2.0 - 0.5, 1e-9);
+  EXPECT_TRUE(validate(slice));
+}
+
 TEST(Contours, InvalidFovIsAnError) {
   const LabelImage map(10, 10, 1);
   const ImageU8 sector(10, 10, 255);

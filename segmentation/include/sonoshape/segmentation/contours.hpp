@@ -44,6 +44,11 @@ std::vector<Region> label_map_regions(const LabelImage& labels, const ImageU8& s
                                       const ImagePlane& plane, double tolerance_mm,
                                       std::vector<Repair>* repairs = nullptr);
 
+/// Drops every region of `slice` that is not valid on its own (validate_slice_set: a ring that
+/// crosses or touches itself, a hole outside its outer ring, ...) and records each in `repairs`
+/// (kind "invalid_region", the label in `where`, the check's message, the region's area in mm²).
+void drop_invalid_regions(LabeledSlice& slice, std::vector<Repair>* repairs);
+
 /// A LabeledSlice of a segmented frame: the plane, the fov (`sector_px` mapped into the plane)
 /// and the regions of label_map_regions. The slice is checked with validate_slice_set; should
 /// the simplified polygons fail, the exact outlines are taken, and should one of those fail,
