@@ -245,7 +245,8 @@ CommandRunner add_scan_command(CLI::App& app) {
   options->sim.height_px = 256;
   app.add_option("--source", options->source,
                  "Where frames and poses come from: sim:PHANTOM_SPEC (sim:default, or "
-                 "LABEL:PATH[:NAME] meshes separated by commas) or replay:FILE.igs.mha")
+                 "LABEL:PATH[:NAME] meshes separated by commas) or replay:FILE (a PLUS .igs.mha or "
+                 ".igs.nrrd)")
       ->required();
   app.add_option("--calibration", options->calibration,
                  "ImageToProbe calibration: PLUS device-set XML or JSON {\"ImageToProbe\": [16 "

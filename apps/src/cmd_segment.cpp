@@ -1,5 +1,6 @@
-// `sonoshape segment`: a tracked sweep (PLUS sequence file) -> slice set, one slice per frame
-// with a valid pose: label map by segmentation/, polygons in the reference frame, fov = sector.
+// `sonoshape segment`: a tracked sweep (PLUS sequence file, MetaImage or NRRD) -> slice set,
+// one slice per frame with a valid pose: label map by segmentation/, polygons in the reference
+// frame, fov = sector.
 #include <CLI/CLI.hpp>
 #include <filesystem>
 #include <iostream>
@@ -30,6 +31,10 @@ int run_segment(const SegmentOptions& options) {
   const auto file = acq::read_sequence_file(options.input);
   if (!file) {
     std::cerr << "error: " << file.message() << '\n';
+    return 1;
+  }
+  if (const Status tracked = acq::require_tracking(*file, options.input); !tracked) {
+    std::cerr << "error: " << tracked.message() << '\n';
     return 1;
   }
   auto optional_path = [](const std::filesystem::path& p) {
@@ -104,7 +109,9 @@ int run_segment(const SegmentOptions& options) {
 
 CommandRunner add_segment_command(CLI::App& app) {
   auto options = std::make_shared<SegmentOptions>();
-  app.add_option("sweep", options->input, "Tracked sweep: PLUS sequence file (.igs.mha, .seq.mha)")
+  app.add_option("sweep", options->input,
+                 "Tracked sweep: PLUS sequence file (.igs.mha, .seq.mha, .igs.nrrd; NRRD is "
+                 "recognised by its content)")
       ->required()
       ->check(CLI::ExistingFile);
   app.add_option("--config", options->config,

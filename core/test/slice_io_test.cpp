@@ -356,7 +356,7 @@ TEST(SliceJson, RepeatedConsecutivePointsAreDroppedWithAWarning) {
   const std::string warnings = ::testing::internal::GetCapturedStderr();
   ASSERT_TRUE(result.is_ok()) << result.message();
   EXPECT_EQ(result->slices[0].regions[0].outer.size(), 4u);
-  EXPECT_TRUE(contains(warnings, "slice 0, region 0 (label 1), outer ring: dropped 2 repeated"));
+  EXPECT_TRUE(contains(warnings, "slice 0: region 0 (label 1), outer ring: dropped 2 repeated"));
 }
 
 TEST(SliceJson, IdenticalCoincidentSlicesAreMerged) {

@@ -87,7 +87,8 @@ std::optional<std::pair<LabelModel, std::vector<LabelModel>>> header_models(
 
 std::filesystem::path sidecar_path(const std::filesystem::path& sequence) {
   std::string name = sequence.filename().string();
-  for (const std::string ext : {".igs.mha", ".seq.mha", ".mha"})
+  for (const std::string ext :
+       {".igs.mha", ".seq.mha", ".mha", ".igs.nrrd", ".seq.nrrd", ".nrrd", ".nhdr"})
     if (name.size() > ext.size() && name.ends_with(ext)) {
       name.resize(name.size() - ext.size());
       break;
