@@ -87,6 +87,26 @@ std::vector<PixelRegion> trace_mask(const cv::Mat& mask, int label) {
   return regions;
 }
 
+// The squared-distance cost made a total order. Equal costs are common on a pixel grid, and the
+// simplification would take them in the order of the triangulation's constraint set, which
+// follows memory addresses: the same frame (or a .mha and a .nrrd copy of it) could simplify
+// differently from run to run. A tie-breaker from the vertex's own coordinates (quarter pixels,
+// distinct for every vertex since no two rings share a point) makes the result reproducible;
+// at most 1e-4 px² it does not change what the tolerance allows.
+struct ReproducibleCost {
+  template <class Pct>
+  boost::optional<double> operator()(const Pct& pct,
+                                     typename Pct::Vertices_in_constraint_iterator it) const {
+    const boost::optional<double> cost = PS::Squared_distance_cost()(pct, it);
+    if (!cost) return cost;
+    const auto quarter = [](double x) {  // 15 bits: exact for images up to 8000 px
+      return static_cast<std::uint32_t>(std::clamp<long>(std::lround(4.0 * x) + 4, 0, 32767));
+    };
+    const std::uint32_t key = (quarter((*it)->point().x()) << 15) | quarter((*it)->point().y());
+    return *cost + 1e-4 * std::ldexp(static_cast<double>(key), -30);
+  }
+};
+
 // Simplifies every ring in one constrained triangulation (CGAL Polyline_simplification_2): a
 // vertex goes only when the shortcut stays within epsilon_px of the removed points and the
 // triangulation shows it crosses no other ring, so simple, disjoint rings stay simple and
@@ -121,8 +141,7 @@ void simplify_together(std::vector<PixelRegion>& regions, double epsilon_px) {
     insert(r.outer);
     for (const Ring2& hole : r.holes) insert(hole);
   }
-  PS::simplify(ct, PS::Squared_distance_cost(),
-               PS::Stop_above_cost_threshold(epsilon_px * epsilon_px));
+  PS::simplify(ct, ReproducibleCost(), PS::Stop_above_cost_threshold(epsilon_px * epsilon_px));
   std::size_t next = 0;
   auto read = [&](Ring2& ring) {
     ring.clear();

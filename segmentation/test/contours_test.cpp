@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <memory>
 #include <random>
 #include <set>
 #include <utility>
@@ -159,6 +160,30 @@ TEST(Contours, SimplificationKeepsNeighboursApartAndCutsPoints) {
     for (const Region& r : slice->regions) points += r.outer.size();
   }
   EXPECT_LT(simplified_points * 3, exact_points);
+}
+
+TEST(Contours, SimplificationIsReproducible) {
+  // Ties in the simplification's cost must not be broken by memory addresses: the same map,
+  // simplified with the heap in different states, gives the same polygons.
+  std::mt19937 rng(11);
+  LabelImage map(60, 50, 0);
+  std::uniform_int_distribution<int> pick(0, 2);
+  for (int j = 0; j < 50; ++j)
+    for (int i = 0; i < 60; ++i) map.at(i, j) = static_cast<std::uint8_t>(pick(rng) ? 1 : 2);
+  const ImageU8 sector(60, 50, 255);
+  std::vector<std::vector<Region>> runs;
+  std::vector<std::unique_ptr<int[]>> clutter;
+  for (int run = 0; run < 4; ++run) {
+    for (int k = 0; k < 100 * (run + 1); ++k) clutter.emplace_back(new int[1 + (k * 7) % 50]);
+    runs.push_back(label_map_regions(map, sector, scaled_plane(0.2), 0.5));
+  }
+  for (int run = 1; run < 4; ++run) {
+    ASSERT_EQ(runs[run].size(), runs[0].size());
+    for (std::size_t r = 0; r < runs[0].size(); ++r) {
+      EXPECT_EQ(runs[run][r].outer, runs[0][r].outer) << "run " << run << " region " << r;
+      EXPECT_EQ(runs[run][r].holes, runs[0][r].holes) << "run " << run << " region " << r;
+    }
+  }
 }
 
 TEST(Contours, InvalidRegionsAreDroppedAndRecorded) {
