@@ -101,6 +101,15 @@ std::string summary_text(const scan::ScanSummary& s) {
       << " ms; update median " << std::setprecision(0) << s.update_ms_median << " ms, max "
       << s.update_ms_max << " ms\n"
       << "  " << s.frame_source << "\n  " << s.pose_source;
+  if (s.repairs.total()) {
+    out << "\n  segmentation repairs " << s.repairs.total() << " (";
+    const char* sep = "";
+    for (const auto& [kind, count] : s.repairs.counts) {
+      out << sep << kind << " " << count;
+      sep = ", ";
+    }
+    out << "; see scan.json)";
+  }
   for (const std::string& e : s.errors) out << "\n  error: " << e;
   return out.str();
 }
