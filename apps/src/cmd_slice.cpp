@@ -115,7 +115,7 @@ int run_slice(const SliceOptions& options) {
     LabeledSlice slice = sim::slice_meshes(meshes, planes[i]);
     // Meshes that self-intersect (cow.obj does) or intersect each other cut into crossing or
     // overlapping polygons, which no reader accepts: check each slice before it is written.
-    SliceSet single{set.units, set.labels, set.bounds, {slice}};
+    SliceSet single{set.units, set.labels, set.bounds, {slice}, {}};
     if (const Status valid = validate_slice_set(single, "plane " + std::to_string(i)); !valid) {
       if (!options.skip_invalid) {
         std::cerr << "error: " << valid.message()
@@ -192,7 +192,7 @@ int run_slice(const SliceOptions& options) {
 CommandRunner add_slice_command(CLI::App& app) {
   auto options = std::make_shared<SliceOptions>();
   app.add_option("--mesh", options->meshes,
-                 "Closed mesh to cut, LABEL:PATH[:NAME] (.obj, .ply, .off); repeat for more")
+                 "Closed mesh to cut, LABEL:PATH[:NAME] (.obj, .ply, .off, .stl); repeat for more")
       ->required();
   app.add_option("--planes", options->family, "Plane family")
       ->check(CLI::IsMember({"parallel", "orthogonal", "random", "sweep"}))
