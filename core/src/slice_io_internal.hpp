@@ -19,6 +19,11 @@ constexpr double kRepeatedPointRelTol = 1e-9;
 constexpr double kBasisTol = 1e-6;
 /// Coincident slices: normals parallel to 1e-9, offsets equal to 1e-9 of the set's size.
 constexpr double kCoincidentTol = 1e-9;
+/// Two regions of one slice whose overlap is at most this fraction of the slice's extent (the
+/// bounding-box diagonal of its regions) thick (2·area/perimeter of each component) share an
+/// edge that rounding moved apart: a set cut by a polygon library and written with 7 decimals
+/// overlaps by about 1e-8 along such edges.
+constexpr double kRoundingOverlapRelTol = 1e-6;
 
 /// How messages name slices, regions and rings. The JSON reader uses the defaults ("slice 3,
 /// region 1 (label 2), hole 0"); the .csl reader names planes and components instead, so a user
@@ -84,6 +89,14 @@ using SlicePairs = std::vector<std::pair<std::size_t, std::size_t>>;
 /// an error: they are returned in `identical` (when non-null) for the reader to merge.
 Status validate_slice_set_named(const SliceSet& set, const std::string& source_name,
                                 const SliceNaming& naming, SlicePairs* identical);
+
+/// Snaps every overlap thinner than kRoundingOverlapRelTol between two regions of one slice:
+/// vertices of the later region within that tolerance of the earlier one's vertices move onto
+/// them, and vertices near the other region's edges are inserted into those edges, so the two
+/// share the edge exactly. Records a "rounding_overlap" repair per pair (RepairRefused under
+/// strict). Thicker overlaps, and slivers that snapping does not remove, are left for
+/// validate_slice_set_named to report.
+void snap_rounding_overlaps(SliceSet& set, const SliceNaming& naming, RepairLog& repairs);
 
 /// Drops the later slice of each identical pair, recording a repair naming both.
 void merge_identical_slices(SliceSet& set, const SlicePairs& identical, const SliceNaming& naming,
