@@ -15,6 +15,7 @@
 #include <map>
 #include <numbers>
 #include <regex>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -163,6 +164,33 @@ std::string json_7_decimals(const SliceSet& set) {
   return out + "]}";
 }
 
+// The set as a .csl contour file writes it: 3D vertices with 7 decimals, one component per region.
+std::string csl_7_decimals(const SliceSet& set) {
+  std::ostringstream out;  // a stream: GCC 12 warns (-Wrestrict) on "text" + std::string chains
+  out << "CSLC\n" << set.slices.size() << " 3\n";
+  for (std::size_t i = 0; i < set.slices.size(); ++i) {
+    const LabeledSlice& s = set.slices[i];
+    std::size_t vertices = 0;
+    for (const Region& r : s.regions) vertices += r.outer.size();
+    out << "\n"
+        << i + 1 << " " << vertices << " " << s.regions.size() << " 0 0 1 "
+        << fixed7(-s.origin_mm.z()) << "\n";
+    std::ostringstream components;
+    std::size_t next = 0;
+    for (const Region& r : s.regions) {
+      components << r.outer.size() << " " << r.label;
+      for (const Vec2& p : r.outer) {
+        const Vec3 w = s.to_world(p);
+        out << fixed7(w.x()) << " " << fixed7(w.y()) << " " << fixed7(w.z()) << "\n";
+        components << " " << next++;
+      }
+      components << "\n";
+    }
+    out << components.str();
+  }
+  return out.str();
+}
+
 // Pairs of regions that the validation refuses as overlapping, counted slice by slice (the
 // validation message of a whole set stops at 20 problems).
 int overlapping_pairs(const SliceSet& set, std::string* first_message = nullptr) {
@@ -215,6 +243,20 @@ TEST(RoundingOverlap, ReaderSnapsThemAndRecordsRepairs) {
   const auto again = read_slice_set(path);
   ASSERT_TRUE(again) << again.message();
   EXPECT_TRUE(again->repairs.empty());
+}
+
+TEST(RoundingOverlap, CslReaderSnapsThemToo) {
+  const auto read = parse_csl(csl_7_decimals(wavy_disc_set()), "wavy.csl");
+  ASSERT_TRUE(read) << read.message();
+  int snapped = 0;
+  for (const Repair& repair : read->repairs)
+    if (repair.kind == "rounding_overlap") {
+      ++snapped;
+      EXPECT_NE(repair.where.find("plane "), std::string::npos) << repair.where;
+      EXPECT_LT(repair.area_changed_mm2, 1e-6) << repair.detail;
+    }
+  EXPECT_GE(snapped, 5);
+  EXPECT_TRUE(validate_slice_set(*read, "snapped"));
 }
 
 TEST(RoundingOverlap, StrictRefusesNamingSliceAndRegions) {
