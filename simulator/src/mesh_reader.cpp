@@ -618,7 +618,9 @@ Result<TriangleMesh> read_mesh(const std::filesystem::path& path, bool allow_emp
     return Status::error("mesh file " + path.string() + ": " + e.message);
   }
   if (mesh.triangles.empty() && !allow_empty)
-    return Status::error("mesh file " + path.string() + ": no faces (a closed mesh is needed)");
+    return Status::error("mesh file " + path.string() +
+                         ": no faces (a closed mesh is needed; export the surface with its "
+                         "triangles, not only its points)");
   return mesh;
 }
 
