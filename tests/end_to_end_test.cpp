@@ -1,14 +1,16 @@
 // The `sonoshape` command end to end: slice a bundled model, reconstruct, evaluate.
 #include <gtest/gtest.h>
 
-#include "sonoshape/testing/command.hpp"
-
+#include <algorithm>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
+#include <vector>
+
+#include "sonoshape/testing/command.hpp"
 
 namespace {
 
@@ -89,14 +91,46 @@ TEST_F(EndToEnd, MalformedInputGivesAClearErrorAndNoMesh) {
     std::ofstream bad(path("bad.slices.json"));
     bad << R"({"format": "sonoshape-slices", "version": 1, "slices": [
       {"origin": [0, 0, 0], "u": [1, 0, 0], "v": [0, 1, 0],
-       "regions": [{"label": 1, "polygon": [[0, 0], [1, 1], [1, 0], [0, 1]]}]}]})";
+       "regions": [{"label": 1, "polygon": [[0, 0], [1, 0], [2, 0]]}]}]})";
   }
   const auto r = run("reconstruct " + path("bad.slices.json") + " -o " + path("bad.ply"));
   EXPECT_NE(r.exit_code, 0);
   EXPECT_NE(r.output.find("bad.slices.json"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("slice 0"), std::string::npos) << r.output;
-  EXPECT_NE(r.output.find("self-intersect"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("zero area"), std::string::npos) << r.output;
   EXPECT_FALSE(fs::exists(path("bad.ply")));
+}
+
+TEST_F(EndToEnd, ReconstructWritesMeshesOnlyForTheMaterialsThatOccur) {
+  // nLabels = 20 with materials 1-3 used (tests/data/real_input/nested_materials.csl).
+  const std::string csl =
+      std::string(SONOSHAPE_DATA_DIR) + "/../tests/data/real_input/nested_materials.csl";
+  const auto r =
+      run("reconstruct " + csl + " -o " + path("out") + " --depth 5 --stats " + path("stats.json"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  std::vector<std::string> files;
+  for (const auto& entry : fs::directory_iterator(path("out")))
+    files.push_back(entry.path().filename().string());
+  std::sort(files.begin(), files.end());
+  EXPECT_EQ(files, (std::vector<std::string>{"label_1.ply", "label_2.ply", "label_3.ply"}));
+  EXPECT_NE(r.output.find("materials 4..19 never occur"), std::string::npos) << r.output;
+}
+
+TEST_F(EndToEnd, StrictRefusesAContourThatWouldBeRepaired) {
+  {
+    std::ofstream bow_tie(path("bow_tie.slices.json"));
+    bow_tie << R"({"format": "sonoshape-slices", "version": 1, "slices": [
+      {"origin": [0, 0, 0], "u": [1, 0, 0], "v": [0, 1, 0],
+       "regions": [{"label": 1, "polygon": [[0, 0], [1, 1], [1, 0], [0, 1]]}]}]})";
+  }
+  const auto r = run("reconstruct " + path("bow_tie.slices.json") + " -o " + path("bow_tie.ply") +
+                     " --strict");
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_NE(r.output.find("slice 0, region 0 (label 1), outer ring: contour crosses itself"),
+            std::string::npos)
+      << r.output;
+  EXPECT_NE(r.output.find("--strict"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(path("bow_tie.ply")));
 }
 
 TEST_F(EndToEnd, MissingInputAndHelp) {

@@ -62,6 +62,30 @@ TEST(ScanCommand, FastSimulatedScanWritesMeshesSlicesAndSummary) {
   EXPECT_GT(slices->slices.size(), 5u);
 }
 
+TEST(ScanCommand, RealPlusRecordingReplaysIntoValidSlicesWithARepairsList) {
+  // The fCal recording (820x616) used to give no slice; every frame offered as a keyframe.
+  sonoshape::testing::TempDir dir;
+  const fs::path plus = fs::path(SONOSHAPE_DATA_DIR) / "plus";
+  const auto result = sonoshape::testing::run_command(
+      SONOSHAPE_BINARY,
+      "scan --source replay:" + (plus / "fCal_Test_Calibration_3NWires.igs.mha").string() +
+          " --calibration " + (plus / "PlusDeviceSet_Server_Sim_NwirePhantom.xml").string() +
+          " --fast --keyframe-angle-deg 0 --keyframe-distance-mm 0 --max-slices 12 --depth 4 -o " +
+          (dir.path() / "out").string(),
+      dir.path() / "log");
+  ASSERT_EQ(result.exit_code, 0) << result.output;
+  const auto summary = read_json(dir.path() / "out" / "scan.json");
+  EXPECT_EQ(summary["dropped"]["segmentation_failed"], 0);
+  EXPECT_EQ(summary["slices"], 12);
+  ASSERT_TRUE(summary.contains("repairs")) << summary.dump();
+  EXPECT_EQ(summary["repairs"]["total"], 0);
+  EXPECT_TRUE(summary["repairs"]["by_kind"].empty());
+  EXPECT_TRUE(summary["repairs"]["first"].is_array());
+  const auto slices = sonoshape::read_slice_set(dir.path() / "out" / "slices.json");
+  ASSERT_TRUE(slices) << slices.message();
+  EXPECT_EQ(slices->slices.size(), 12u);
+}
+
 TEST(ScanCommand, BadSourcesSayWhatToDo) {
   sonoshape::testing::TempDir dir;
   const auto unknown =

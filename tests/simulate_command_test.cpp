@@ -125,4 +125,33 @@ TEST_F(SimulateCommand, SegmentTurnsASimulatedSweepIntoAValidSliceSet) {
   EXPECT_TRUE(fs::exists(dir_ / "out" / "label_1.ply"));
 }
 
+// Frames of 96 px and a real PLUS recording (820x616) used to fail with self-intersecting
+// polygons; --strict proves nothing had to be dropped.
+TEST_F(SimulateCommand, SegmentStrictlyHandlesSmallFramesAndARealRecording) {
+  const auto simulated =
+      run("simulate --frames 8 --width-px 96 --height-px 96 --probe linear "
+          "--seed 3 -o " +
+              (dir_ / "small.igs.mha").string(),
+          dir_ / "log_sim");
+  ASSERT_EQ(simulated.exit_code, 0) << simulated.output;
+  const auto small = run("segment " + (dir_ / "small.igs.mha").string() + " --strict -o " +
+                             (dir_ / "small.slices.json").string(),
+                         dir_ / "log_small");
+  ASSERT_EQ(small.exit_code, 0) << small.output;
+  EXPECT_NE(small.output.find(" 0 failed, 0 repairs"), std::string::npos) << small.output;
+  const auto small_slices = sonoshape::read_slice_set(dir_ / "small.slices.json");
+  ASSERT_TRUE(small_slices) << small_slices.message();
+
+  const fs::path plus = fs::path(SONOSHAPE_DATA_DIR) / "plus";
+  const auto real =
+      run("segment " + (plus / "fCal_Test_Calibration_3NWires.igs.mha").string() +
+              " --calibration " + (plus / "PlusDeviceSet_Server_Sim_NwirePhantom.xml").string() +
+              " --every 20 --strict -o " + (dir_ / "fcal.slices.json").string(),
+          dir_ / "log_fcal");
+  ASSERT_EQ(real.exit_code, 0) << real.output;
+  const auto real_slices = sonoshape::read_slice_set(dir_ / "fcal.slices.json");
+  ASSERT_TRUE(real_slices) << real_slices.message();
+  EXPECT_EQ(real_slices->slices.size(), 10u);  // frames 0, 20, ..., 180
+}
+
 }  // namespace

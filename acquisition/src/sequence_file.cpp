@@ -12,8 +12,15 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "sequence_text.hpp"
+
 namespace sonoshape::acq {
 namespace {
+
+using detail::fail;
+using detail::parse_number;
+using detail::split_words;
+using detail::trim;
 
 constexpr std::string_view kFramePrefix = "Seq_Frame";
 constexpr std::string_view kTransformSuffix = "Transform";
@@ -29,39 +36,8 @@ bool is_layout_key(std::string_view key) {
          std::find(kLayoutKeys.begin(), kLayoutKeys.end(), key) != kLayoutKeys.end();
 }
 
-std::string_view trim(std::string_view s) {
-  const auto first = s.find_first_not_of(" \t\r\n");
-  if (first == std::string_view::npos) return {};
-  const auto last = s.find_last_not_of(" \t\r\n");
-  return s.substr(first, last - first + 1);
-}
-
 bool ends_with(std::string_view s, std::string_view suffix) {
   return s.size() >= suffix.size() && s.substr(s.size() - suffix.size()) == suffix;
-}
-
-std::vector<std::string_view> split_words(std::string_view s) {
-  std::vector<std::string_view> words;
-  std::size_t i = 0;
-  while (i < s.size()) {
-    while (i < s.size() && (s[i] == ' ' || s[i] == '\t')) ++i;
-    const std::size_t start = i;
-    while (i < s.size() && s[i] != ' ' && s[i] != '\t') ++i;
-    if (i > start) words.push_back(s.substr(start, i - start));
-  }
-  return words;
-}
-
-template <typename T>
-std::optional<T> parse_number(std::string_view s) {
-  s = trim(s);
-  if (!s.empty() && s.front() == '+') s.remove_prefix(1);
-  T value{};
-  const auto [end, ec] = std::from_chars(s.data(), s.data() + s.size(), value);
-  if (ec != std::errc() || end != s.data() + s.size() || s.empty()) return std::nullopt;
-  if constexpr (std::is_floating_point_v<T>)
-    if (!std::isfinite(value)) return std::nullopt;
-  return value;
 }
 
 std::string format_number(double value) {
@@ -92,11 +68,6 @@ std::string frame_key(std::size_t k, std::string_view name) {
   std::array<char, 24> digits{};
   std::snprintf(digits.data(), digits.size(), "%04zu", k);
   return std::string(kFramePrefix) + digits.data() + "_" + std::string(name);
-}
-
-Status fail(const std::filesystem::path& path, const std::string& what, const std::string& fix) {
-  return Status::error("sequence file " + path.string() + ": " + what + (fix.empty() ? "" : "; ") +
-                       fix);
 }
 
 }  // namespace
@@ -214,12 +185,61 @@ std::vector<std::string> SequenceFile::transform_names() const {
   return names;
 }
 
+namespace detail {
+
+InflateResult inflate_buffer(const std::uint8_t* in, std::size_t in_size, std::uint8_t* out,
+                             std::size_t out_size, int window_bits) {
+  z_stream stream{};
+  if (inflateInit2(&stream, window_bits) != Z_OK) return {Z_MEM_ERROR, 0};
+  stream.next_in = const_cast<Bytef*>(in);
+  stream.next_out = out;
+  std::size_t in_left = in_size, out_left = out_size;
+  constexpr std::size_t kChunk = 1u << 30;  // zlib counts in uInt: feed large buffers in pieces
+  const bool gzip_members = window_bits > MAX_WBITS;
+  int rc = Z_OK;
+  for (;;) {
+    if (stream.avail_in == 0 && in_left > 0) {
+      stream.avail_in = static_cast<uInt>(std::min(in_left, kChunk));
+      in_left -= stream.avail_in;
+    }
+    if (stream.avail_out == 0 && out_left > 0) {
+      stream.avail_out = static_cast<uInt>(std::min(out_left, kChunk));
+      out_left -= stream.avail_out;
+    }
+    rc = inflate(&stream, Z_NO_FLUSH);
+    if (rc == Z_OK) continue;
+    // gzip allows members one after another (as `cat a.gz b.gz`); anything else after the end
+    // (padding) is ignored, as the MetaImage reader ignores bytes past CompressedDataSize.
+    if (rc == Z_STREAM_END && gzip_members && stream.avail_in >= 2 &&
+        (stream.avail_out > 0 || out_left > 0) && stream.next_in[0] == 0x1f &&
+        stream.next_in[1] == 0x8b) {
+      inflateReset(&stream);
+      continue;
+    }
+    if (rc == Z_BUF_ERROR &&
+        ((stream.avail_in == 0 && in_left == 0) || (stream.avail_out == 0 && out_left == 0)))
+      break;
+    if (rc != Z_BUF_ERROR) break;
+  }
+  // total_out restarts with each gzip member; the output pointer does not.
+  const auto produced = static_cast<std::size_t>(stream.next_out - out);
+  inflateEnd(&stream);
+  return {rc, produced};
+}
+
+}  // namespace detail
+
 Result<SequenceFile> read_sequence_file(const std::filesystem::path& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) return fail(path, "cannot open it", "check the path and that the file is readable");
   std::string data((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   if (in.bad()) return fail(path, "read error", "check the disk and the file");
+  // The content decides, not the name: PLUS writes both formats as .igs.*, Slicer as .seq.nrrd,
+  // and users rename files.
+  if (std::string_view(data).substr(0, 7) == "NRRD000")
+    return detail::read_nrrd_sequence(path, data);
 
+  // MetaImage.
   SequenceFile file;
   std::map<std::size_t, FieldList> frame_fields;
   std::size_t pos = 0;
@@ -236,8 +256,8 @@ Result<SequenceFile> read_sequence_file(const std::filesystem::path& path) {
     const std::size_t eq = line.find('=');
     if (eq == std::string_view::npos) {
       return fail(path, where + " '" + std::string(line.substr(0, 60)) + "' is not 'Key = value'",
-                  "is this a MetaImage (.mha) file? The header must end with "
-                  "'ElementDataFile = LOCAL'");
+                  "sonoshape reads MetaImage sequences (.mha: 'Key = value' lines ending with "
+                  "'ElementDataFile = LOCAL') and NRRD sequences (.nrrd: first line NRRD0004)");
     }
     const std::string key(trim(line.substr(0, eq)));
     std::string value(trim(line.substr(eq + 1)));
@@ -313,33 +333,11 @@ Result<SequenceFile> read_sequence_file(const std::filesystem::path& path) {
                     "the file is truncated; copy it again");
       compressed_size = *size;
     }
-    z_stream stream{};
-    if (inflateInit(&stream) != Z_OK) return fail(path, "zlib inflateInit failed", "");
     // One spare output byte tells "exactly DimSize" from "more than DimSize".
     pixels.resize(total + 1);
-    stream.next_in = reinterpret_cast<Bytef*>(data.data() + pos);
-    stream.next_out = pixels.data();
-    std::size_t in_left = compressed_size, out_left = pixels.size();
-    constexpr std::size_t kChunk = 1u << 30;  // zlib counts in uInt: feed large buffers in pieces
-    int rc = Z_OK;
-    for (;;) {
-      if (stream.avail_in == 0 && in_left > 0) {
-        stream.avail_in = static_cast<uInt>(std::min(in_left, kChunk));
-        in_left -= stream.avail_in;
-      }
-      if (stream.avail_out == 0 && out_left > 0) {
-        stream.avail_out = static_cast<uInt>(std::min(out_left, kChunk));
-        out_left -= stream.avail_out;
-      }
-      rc = inflate(&stream, Z_NO_FLUSH);
-      if (rc == Z_OK) continue;
-      if (rc == Z_BUF_ERROR &&
-          ((stream.avail_in == 0 && in_left == 0) || (stream.avail_out == 0 && out_left == 0)))
-        break;
-      if (rc != Z_BUF_ERROR) break;
-    }
-    const std::size_t produced = stream.total_out;
-    inflateEnd(&stream);
+    const auto [rc, produced] =
+        detail::inflate_buffer(reinterpret_cast<const std::uint8_t*>(data.data() + pos),
+                               compressed_size, pixels.data(), pixels.size(), MAX_WBITS);
     pixels.resize(total);
     if (rc != Z_STREAM_END && rc != Z_BUF_ERROR)
       return fail(path,
@@ -454,6 +452,32 @@ Status write_sequence_file(const SequenceFile& file, const std::filesystem::path
   out.close();
   if (!out) return fail(path, "write error", "check the free disk space");
   return Status::ok();
+}
+
+Status require_tracking(const SequenceFile& file, const std::filesystem::path& path,
+                        std::string_view probe_transform) {
+  const auto names = file.transform_names();
+  if (std::find(names.begin(), names.end(), probe_transform) != names.end()) return Status::ok();
+  std::string known;
+  for (const auto& n : names) known += (known.empty() ? "" : ", ") + n;
+  const std::string field = std::string(probe_transform) + std::string(kTransformSuffix);
+  if (file.field("ImageToReferenceTransform") && names.empty())
+    return fail(path,
+                "an image-only sequence (3D Slicer .seq.nrrd): its frames have no per-frame "
+                "tracking (" +
+                    field +
+                    "), only one image geometry for all frames (ImageToReferenceTransform, "
+                    "from space directions/origin), so every frame would lie in one plane",
+                "Slicer keeps the probe's tracking in separate transform sequences, which "
+                "sonoshape does not read; record the sweep with PLUS (fCal or PlusServer "
+                "capture) as .igs.mha or .igs.nrrd, which store " +
+                    field + " per frame");
+  return fail(path,
+              "no frame has a " + field +
+                  " field (transforms in the file: " + (known.empty() ? "none" : known) + ")",
+              "a tracked sweep needs the probe's pose per frame: record it with the tracker "
+              "(PLUS Seq_FrameNNNN_" +
+                  field + ")");
 }
 
 }  // namespace sonoshape::acq

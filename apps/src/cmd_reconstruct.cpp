@@ -13,6 +13,7 @@
 
 #include "commands.hpp"
 #include "sonoshape/core/log.hpp"
+#include "sonoshape/core/mesh.hpp"
 #include "sonoshape/core/slice_io.hpp"
 #include "sonoshape/publish/mesh_writer.hpp"
 #include "sonoshape/recon/reconstruct.hpp"
@@ -53,6 +54,23 @@ nlohmann::json repairs_json(const std::vector<Repair>& repairs) {
                     {"where", r.where},
                     {"detail", r.detail},
                     {"area_changed", r.area_changed_mm2}});
+  return list;
+}
+
+// What was written, per material: size, enclosed volume and whether the surface is closed,
+// manifold and oriented (users of real data need to see it without a ground truth).
+nlohmann::json meshes_json(const MeshSet& meshes) {
+  nlohmann::json list = nlohmann::json::array();
+  for (const MeshSet::Entry& entry : meshes.meshes) {
+    const MeshHealth health = check_mesh_health(entry.mesh);
+    list.push_back({{"label", entry.label},
+                    {"name", entry.name},
+                    {"vertices", entry.mesh.vertices.size()},
+                    {"triangles", entry.mesh.triangles.size()},
+                    {"volume", signed_volume(entry.mesh)},
+                    {"closed_manifold_oriented", !entry.mesh.empty() &&
+                                                     health.closed_manifold_oriented()}});
+  }
   return list;
 }
 
@@ -128,6 +146,7 @@ int run_online(const SliceSet& set, const std::string& output, const std::string
   nlohmann::json j = stats_json(totals);
   j["peak_rss_mb"] = peak_rss_mb();
   j["repairs"] = repairs_json(set.repairs);
+  j["meshes"] = meshes_json(reconstructor.mesh());
   j["steps"] = std::move(steps);
   return write_json(j, stats_path);
 }
@@ -208,6 +227,7 @@ CommandRunner add_reconstruct_command(CLI::App& app) {
       nlohmann::json j = stats_json(stats);
       j["peak_rss_mb"] = peak_rss_mb();
       j["repairs"] = repairs_json(slices->repairs);
+      j["meshes"] = meshes_json(meshes);
       return write_json(j, opt->stats_path);
     }
     return 0;

@@ -101,6 +101,15 @@ std::string summary_text(const scan::ScanSummary& s) {
       << " ms; update median " << std::setprecision(0) << s.update_ms_median << " ms, max "
       << s.update_ms_max << " ms\n"
       << "  " << s.frame_source << "\n  " << s.pose_source;
+  if (s.repairs.total()) {
+    out << "\n  segmentation repairs " << s.repairs.total() << " (";
+    const char* sep = "";
+    for (const auto& [kind, count] : s.repairs.counts) {
+      out << sep << kind << " " << count;
+      sep = ", ";
+    }
+    out << "; see scan.json)";
+  }
   for (const std::string& e : s.errors) out << "\n  error: " << e;
   return out.str();
 }
@@ -236,7 +245,8 @@ CommandRunner add_scan_command(CLI::App& app) {
   options->sim.height_px = 256;
   app.add_option("--source", options->source,
                  "Where frames and poses come from: sim:PHANTOM_SPEC (sim:default, or "
-                 "LABEL:PATH[:NAME] meshes separated by commas) or replay:FILE.igs.mha")
+                 "LABEL:PATH[:NAME] meshes separated by commas) or replay:FILE (a PLUS .igs.mha or "
+                 ".igs.nrrd)")
       ->required();
   app.add_option("--calibration", options->calibration,
                  "ImageToProbe calibration: PLUS device-set XML or JSON {\"ImageToProbe\": [16 "

@@ -1,5 +1,6 @@
-// `sonoshape segment`: a tracked sweep (PLUS sequence file) -> slice set, one slice per frame
-// with a valid pose: label map by segmentation/, polygons in the reference frame, fov = sector.
+// `sonoshape segment`: a tracked sweep (PLUS sequence file, MetaImage or NRRD) -> slice set,
+// one slice per frame with a valid pose: label map by segmentation/, polygons in the reference
+// frame, fov = sector.
 #include <CLI/CLI.hpp>
 #include <filesystem>
 #include <iostream>
@@ -21,6 +22,7 @@ struct SegmentOptions {
   std::filesystem::path config;
   std::filesystem::path calibration;
   int every = 1;
+  bool strict = false;
   std::filesystem::path output = "slices.json";
 };
 
@@ -29,6 +31,10 @@ int run_segment(const SegmentOptions& options) {
   const auto file = acq::read_sequence_file(options.input);
   if (!file) {
     std::cerr << "error: " << file.message() << '\n';
+    return 1;
+  }
+  if (const Status tracked = acq::require_tracking(*file, options.input); !tracked) {
+    std::cerr << "error: " << tracked.message() << '\n';
     return 1;
   }
   auto optional_path = [](const std::filesystem::path& p) {
@@ -54,8 +60,15 @@ int run_segment(const SegmentOptions& options) {
   seg::SweepSegmentation result;
   {
     Progress progress("segment", considered);
-    result = seg::segment_sweep(*file, *setup, options.every,
-                                [&](std::size_t done) { progress.update(done); });
+    result = seg::segment_sweep(
+        *file, *setup, options.every, [&](std::size_t done) { progress.update(done); },
+        ReadOptions{options.strict});
+  }
+  if (!result.refused.empty()) {
+    std::cerr << "error: " << options.input.string() << ", " << result.refused
+              << "\n(--strict refuses frames whose polygons needed a repair; nothing written. "
+                 "Leave out --strict to drop what cannot be made valid and go on)\n";
+    return 1;
   }
   if (result.slices.slices.empty()) {
     std::cerr << "error: no frame of " << options.input.string()
@@ -83,9 +96,9 @@ int run_segment(const SegmentOptions& options) {
   summary << "segment: " << result.slices.slices.size() << " slices from " << result.frames
           << " frames (every " << options.every << ": " << result.considered << " considered, "
           << result.invalid_pose << " skipped for INVALID pose, " << result.coincident
-          << " coinciding with an earlier plane, " << result.failed << " failed); " << regions
-          << " material regions, " << unknown << " unknown regions, "
-          << static_cast<int>(100.0 * result.unknown_fraction + 0.5)
+          << " coinciding with an earlier plane, " << result.failed << " failed, "
+          << result.repairs.size() << " repairs); " << regions << " material regions, " << unknown
+          << " unknown regions, " << static_cast<int>(100.0 * result.unknown_fraction + 0.5)
           << "% of the sector unknown on average; " << clock.seconds() << " s -> "
           << options.output.string();
   log_info(summary.str());
@@ -96,7 +109,9 @@ int run_segment(const SegmentOptions& options) {
 
 CommandRunner add_segment_command(CLI::App& app) {
   auto options = std::make_shared<SegmentOptions>();
-  app.add_option("sweep", options->input, "Tracked sweep: PLUS sequence file (.igs.mha, .seq.mha)")
+  app.add_option("sweep", options->input,
+                 "Tracked sweep: PLUS sequence file (.igs.mha, .seq.mha, .igs.nrrd; NRRD is "
+                 "recognised by its content)")
       ->required()
       ->check(CLI::ExistingFile);
   app.add_option("--config", options->config,
@@ -112,6 +127,11 @@ CommandRunner add_segment_command(CLI::App& app) {
   app.add_option("--every", options->every, "Keep every K-th frame (from the first)")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
+  app.add_flag("--strict", options->strict,
+               "Refuse instead of repairing: the first frame whose polygons could only be made "
+               "valid by dropping a region stops the run with an error naming the frame "
+               "(exit 1, nothing written). Without it such regions are dropped with one warning "
+               "per frame");
   app.add_option("-o,--output", options->output, "Slice set to write (.slices.json / .json)")
       ->capture_default_str();
   return [options] { return run_segment(*options); };

@@ -11,9 +11,11 @@
 #include <mutex>
 #include <set>
 #include <thread>
+#include <utility>
 
 #include "sonoshape/core/slice_io.hpp"
 #include "sonoshape/scan/pipeline.hpp"
+#include "sonoshape/scan/sink.hpp"
 #include "sonoshape/testing/temp_dir.hpp"
 
 namespace sonoshape::scan {
@@ -67,10 +69,17 @@ std::vector<Pose> sliding_poses(double mm_per_s, int first_ms, int last_ms, int 
 }
 
 // The slice of a frame is its image plane (x, y of the probe) with one square region.
+// Frames in `repaired` report one dropped region each (as seg::make_slice would).
 class FakeSegmentation final : public SegmentationStage {
  public:
-  explicit FakeSegmentation(std::set<std::int64_t> failing = {}) : failing_(std::move(failing)) {}
+  explicit FakeSegmentation(std::set<std::int64_t> failing = {},
+                            std::set<std::int64_t> repaired = {})
+      : failing_(std::move(failing)), repaired_(std::move(repaired)) {}
+  std::vector<Repair> take_repairs() override { return std::exchange(repairs_, {}); }
   Result<LabeledSlice> segment(const TrackedFrame& frame) override {
+    if (repaired_.count(frame.frame.index))
+      repairs_.push_back(Repair{frame.frame.index % 2 ? "invalid_region" : "degenerate_region",
+                                "label 1", "dropped: a sliver", 0.25});
     if (failing_.count(frame.frame.index)) return Status::error("nothing found");
     LabeledSlice slice;
     slice.origin_mm = frame.T_reference_probe.translation();
@@ -82,7 +91,8 @@ class FakeSegmentation final : public SegmentationStage {
   }
 
  private:
-  std::set<std::int64_t> failing_;
+  std::set<std::int64_t> failing_, repaired_;
+  std::vector<Repair> repairs_;
 };
 
 // Keeps the slices; each update sleeps `update_ms` and makes one triangle per slice.
@@ -394,6 +404,30 @@ TEST(ScanPipeline, RejectsMissingParts) {
                             std::make_unique<FakeSegmentation>(),
                             std::make_unique<FakeReconstruction>(), zero),
                std::invalid_argument);
+}
+
+TEST(ScanPipeline, SegmentationRepairsAreCountedAndListedWithTheirFrame) {
+  // Every frame a keyframe (1.2 mm apart); 25 of them report a repair: all are counted by kind,
+  // the first 20 listed with their frame index, and scan.json carries them.
+  std::set<std::int64_t> repaired;
+  for (std::int64_t k = 4; k < 29; ++k) repaired.insert(k);
+  ScanPipeline pipeline(fake_source(std::make_unique<FakeFrames>(40, 33),
+                                    sliding_poses(36.0 * 33.0 / 33.333, -100, 1500, 25)),
+                        std::make_unique<FakeSegmentation>(std::set<std::int64_t>{}, repaired),
+                        std::make_unique<FakeReconstruction>(), fast_options());
+  ASSERT_TRUE(pipeline.start());
+  const ScanSummary summary = pipeline.finish();
+  EXPECT_EQ(summary.counters.slices, 40u);
+  EXPECT_EQ(summary.repairs.total(), 25u);
+  EXPECT_EQ(summary.repairs.counts.at("invalid_region"), 12u);
+  EXPECT_EQ(summary.repairs.counts.at("degenerate_region"), 13u);
+  ASSERT_EQ(summary.repairs.first.size(), RepairReport::kMaxListed);
+  EXPECT_EQ(summary.repairs.first.front().frame, 4u);
+  EXPECT_EQ(summary.repairs.first.back().frame, 23u);
+  const std::string json = summary_json(summary);
+  EXPECT_NE(json.find("\"repairs\""), std::string::npos) << json;
+  EXPECT_NE(json.find("\"invalid_region\": 12"), std::string::npos) << json;
+  EXPECT_NE(json.find("\"frame\": 23"), std::string::npos) << json;
 }
 
 TEST(ScanReport, LatencyPercentilesByNearestRank) {

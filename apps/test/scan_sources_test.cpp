@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <fstream>
 
 #include "sonoshape/acquisition/plus_config.hpp"
 #include "sonoshape/core/mesh.hpp"
@@ -165,6 +166,50 @@ TEST(ScanSources, RealPlusSweepReconstructs) {
   ASSERT_TRUE(mesh) << mesh.message();
   EXPECT_GT(mesh->triangles.size(), 100u);
   EXPECT_TRUE(check_mesh_health(*mesh).closed_manifold_oriented());
+}
+
+// The NRRD copy of a PLUS recording replays with the setup of its MetaImage copy; an image-only
+// Slicer sequence has no poses to replay and is refused with the reason.
+TEST(ScanSources, ReplayReadsPlusNrrdAndRefusesImageOnlySlicerSequences) {
+  ScanSetup setups[2];
+  double origins_s[2] = {0.0, 0.0};
+  int index = 0;
+  for (const char* name : {"NwirePhantomFreehand.igs.mha", "NwirePhantomFreehand.igs.nrrd"}) {
+    SourceRequest request;
+    request.spec = "replay:" + (kData / "plus" / name).string();
+    request.calibration = kPlusConfig;
+    auto source = open_scan_source(request);
+    ASSERT_TRUE(source) << name << ": " << source.message();
+    EXPECT_TRUE(testing::contains(source->description, "97 frames of 820x616")) << name;
+    origins_s[index] = source->device_origin_s;
+    setups[index++] = source->setup;
+  }
+  EXPECT_EQ(origins_s[0], 345.627957);
+  EXPECT_EQ(origins_s[1], origins_s[0]);
+  EXPECT_EQ(setups[1].T_probe_image, setups[0].T_probe_image);
+  EXPECT_EQ(setups[1].geometry.sector, setups[0].geometry.sector);  // found from the pixels
+  EXPECT_EQ(setups[1].geometry.sector_px, setups[0].geometry.sector_px);
+  ASSERT_EQ(setups[1].segmentation.materials.size(), setups[0].segmentation.materials.size());
+  for (std::size_t m = 0; m < setups[0].segmentation.materials.size(); ++m)  // two-class k-means
+    EXPECT_EQ(setups[1].segmentation.materials[m].grey_mean,
+              setups[0].segmentation.materials[m].grey_mean);
+
+  testing::TempDir dir;
+  const fs::path slicer = dir.path() / "us.seq.nrrd";
+  {
+    std::ofstream out(slicer, std::ios::binary);
+    out << "NRRD0004\ntype: uint8\ndimension: 4\nspace: right-anterior-superior\n"
+           "sizes: 32 24 1 2\nspace directions: (0.5,0,0) (0,0.5,0) (0,0,0.5) none\n"
+           "kinds: domain domain domain list\nendian: little\nencoding: raw\n"
+           "space origin: (1,2,3)\naxis 3 index type:=numeric\naxis 3 index values:=0 0.1\n\n"
+        << std::string(32 * 24 * 2, '\x50');
+  }
+  SourceRequest request;
+  request.spec = "replay:" + slicer.string();
+  request.calibration = kPlusConfig;
+  const auto refused = open_scan_source(request);
+  ASSERT_FALSE(refused);
+  EXPECT_TRUE(testing::contains(refused.message(), "image-only sequence")) << refused.message();
 }
 
 TEST(ScanSources, SimulatedScanReconstructsTheTwoOrgans) {

@@ -89,6 +89,14 @@ std::string format_double(double value) {
   return std::string(buffer.data(), end);
 }
 
+std::string format_short(double value) {
+  std::array<char, 64> buffer{};
+  const auto [end, ec] = std::to_chars(buffer.data(), buffer.data() + buffer.size(), value,
+                                       std::chars_format::general, 7);
+  if (ec != std::errc()) return "0";
+  return std::string(buffer.data(), end);
+}
+
 Result<std::string> read_text_file(const std::filesystem::path& path) {
   std::error_code ec;
   if (!std::filesystem::exists(path, ec))
@@ -194,38 +202,68 @@ std::optional<std::pair<std::size_t, std::size_t>> find_crossing_edges(
   return std::nullopt;
 }
 
+// A point shared by edges i and j (i < j) that find_crossing_edges reported.
+Vec2 crossing_point(const std::vector<IK::Point_2>& pts, std::size_t i, std::size_t j) {
+  const std::size_t n = pts.size();
+  if (j == i + 1) return Vec2(pts[j].x(), pts[j].y());  // folding back at their shared corner
+  if (i == 0 && j == n - 1) return Vec2(pts[0].x(), pts[0].y());
+  const IK::Segment_2 a(pts[i], pts[(i + 1) % n]);
+  const IK::Segment_2 b(pts[j], pts[(j + 1) % n]);
+  const auto hit = CGAL::intersection(a, b);
+  if (hit) {
+    if (const IK::Point_2* p = boost::get<IK::Point_2>(&*hit)) return Vec2(p->x(), p->y());
+    if (const IK::Segment_2* s = boost::get<IK::Segment_2>(&*hit))
+      return Vec2(s->source().x(), s->source().y());
+  }
+  return Vec2(pts[j].x(), pts[j].y());
+}
+
 }  // namespace
 
-std::string ring_problem(const Ring2& ring) {
+RingCheck check_ring(const Ring2& ring) {
+  RingCheck check;
   for (std::size_t k = 0; k < ring.size(); ++k)
-    if (!ring[k].allFinite())
-      return "point " + std::to_string(k) + " is not a finite number; write finite coordinates";
+    if (!ring[k].allFinite()) {
+      check.problem =
+          "point " + std::to_string(k) + " is not a finite number; write finite coordinates";
+      return check;
+    }
   std::set<std::pair<double, double>> distinct;
   for (const Vec2& p : ring) distinct.insert({p.x(), p.y()});
-  if (distinct.size() < 3)
-    return "polygon has fewer than 3 distinct points (" + std::to_string(distinct.size()) +
-           "); a region needs at least 3 corners, remove it or complete it";
+  if (distinct.size() < 3) {
+    check.problem = "polygon has fewer than 3 distinct points (" + std::to_string(distinct.size()) +
+                    "); a region needs at least 3 corners, remove it or complete it";
+    return check;
+  }
   const std::vector<IK::Point_2> pts = to_points(ring);
   std::size_t second = 1;
   while (second < pts.size() && pts[second] == pts[0]) ++second;
   bool all_collinear = true;
   for (std::size_t k = second + 1; k < pts.size() && all_collinear; ++k)
     all_collinear = CGAL::collinear(pts[0], pts[second], pts[k]);
-  if (all_collinear)
-    return "polygon has zero area (all its points lie on one line); remove it or fix its points";
+  if (all_collinear) {
+    check.problem =
+        "polygon has zero area (all its points lie on one line); remove it or fix its points";
+    return check;
+  }
   if (!CGAL::is_simple_2(pts.begin(), pts.end(), IK())) {
     const auto edges = find_crossing_edges(pts);
     const std::string which = edges ? " (edges " + std::to_string(edges->first) + " and " +
                                           std::to_string(edges->second) + " cross)"
                                     : "";
-    return "polygon self-intersects" + which +
-           "; fix the contour or split it into separate regions";
+    check.problem =
+        "polygon self-intersects" + which + "; fix the contour or split it into separate regions";
+    check.self_intersects = true;
+    if (edges) check.crossing = crossing_point(pts, edges->first, edges->second);
+    return check;
   }
   const double size = ring_size(ring);
   if (std::abs(signed_area(ring)) <= 1e-12 * size * size)
-    return "polygon has zero area; remove it or fix its points";
-  return {};
+    check.problem = "polygon has zero area; remove it or fix its points";
+  return check;
 }
+
+std::string ring_problem(const Ring2& ring) { return check_ring(ring).problem; }
 
 namespace {
 
@@ -408,7 +446,10 @@ bool ring_inside_ring(const Ring2& inner, const Ring2& outer) {
     if (side == CGAL::ON_BOUNDED_SIDE) return true;
     if (side == CGAL::ON_UNBOUNDED_SIDE) return false;
   }
-  return std::abs(signed_area(inner)) <= std::abs(signed_area(outer));
+  // Every vertex on the boundary: a ring in a pocket of `outer` whose corners it touches, or the
+  // same ring. Only the exact difference tells.
+  return exact_inside(to_exact(inner, CGAL::COUNTERCLOCKWISE),
+                      to_exact(outer, CGAL::COUNTERCLOCKWISE));
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -850,6 +891,13 @@ Status validate_slice_set_named(const SliceSet& set, const std::string& source_n
                "hole is not inside the region's outer ring; a hole must lie within its polygon "
                "(touching the boundary is fine), fix it or make it a separate region");
           holes_ok = false;
+        } else if (std::abs(signed_area(holes[k])) >= std::abs(signed_area(outer))) {
+          // Inside and as large: the outer ring itself. Nothing is left of the region (and the
+          // exact overlap test cannot take such a polygon).
+          fail(naming.hole(i, j, r.label, k),
+               "hole is the region's whole outer ring, so the region has no area; remove the "
+               "region or the hole");
+          holes_ok = false;
         }
       }
       std::vector<Box2> hole_boxes;
@@ -1118,6 +1166,119 @@ void clean_ring(Ring2& ring, const std::string& slice_name, const std::string& w
                              0.0});
 }
 
+std::string plane_point_text(const Vec2& p) {
+  return "[" + detail::format_short(p.x()) + ", " + detail::format_short(p.y()) + "]";
+}
+
+// Whether a ring lies inside an outer ring: boxes first, then exact predicates.
+bool inside_outer(const Ring2& ring, const Ring2& outer) {
+  Vec2 olo = outer.front();
+  Vec2 ohi = outer.front();
+  for (const Vec2& p : outer) {
+    olo = olo.cwiseMin(p);
+    ohi = ohi.cwiseMax(p);
+  }
+  for (const Vec2& p : ring)
+    if ((p.array() < olo.array()).any() || (p.array() > ohi.array()).any()) return false;
+  return detail::ring_inside_ring(ring, outer);
+}
+
+// The regions a hole ring that crossed itself leaves: its outer boundaries are cut out of the
+// region, and islands inside them (odd depth) are the region's material again.
+void add_repaired_hole(const detail::ContourRepair& fixed, int label, std::vector<Ring2>& cut,
+                       std::vector<Region>& islands) {
+  std::vector<std::size_t> island_of(fixed.rings.size(), 0);
+  for (std::size_t k = 0; k < fixed.rings.size(); ++k) {
+    const detail::NestedRing& nested = fixed.rings[k];
+    if (nested.depth == 0) {
+      cut.push_back(nested.ring);
+    } else if (nested.depth % 2 == 1) {
+      island_of[k] = islands.size();
+      islands.push_back(Region{label, nested.ring, {}});
+    } else {
+      islands[island_of[nested.parent]].holes.push_back(nested.ring);
+    }
+  }
+}
+
+// A region whose outer ring or holes cross themselves becomes the regions they enclose by the
+// non-zero rule (detail::repair_contour): the first takes the region's place in the slice, the
+// others follow the slice's regions. Rings that do not cross themselves are kept as written.
+std::vector<Region> repair_region(Region r, std::size_t i, std::size_t j,
+                                  const detail::SliceNaming& naming, detail::RepairLog& repairs) {
+  const detail::RingCheck outer_check = detail::check_ring(r.outer);
+  std::vector<detail::RingCheck> hole_checks;
+  for (const Ring2& hole : r.holes) hole_checks.push_back(detail::check_ring(hole));
+  if (!outer_check.self_intersects &&
+      std::none_of(hole_checks.begin(), hole_checks.end(),
+                   [](const detail::RingCheck& c) { return c.self_intersects; }))
+    return {std::move(r)};
+
+  const std::string slice_name = naming.slice(i);
+  std::vector<Region> out;
+  if (outer_check.self_intersects) {
+    const detail::ContourRepair fixed = detail::repair_contour(r.outer);
+    repairs.add(slice_name, detail::self_intersection_repair(naming.outer(i, j, r.label),
+                                                             plane_point_text(outer_check.crossing),
+                                                             fixed, false));
+    std::vector<std::size_t> region_of(fixed.rings.size(), 0);
+    for (std::size_t k = 0; k < fixed.rings.size(); ++k) {
+      const detail::NestedRing& nested = fixed.rings[k];
+      if (nested.depth % 2 == 0) {
+        region_of[k] = out.size();
+        out.push_back(Region{r.label, nested.ring, {}});
+      } else {
+        out[region_of[nested.parent]].holes.push_back(nested.ring);
+      }
+    }
+    if (out.empty()) return out;  // the outer ring encloses nothing: so does the region
+  } else {
+    out.push_back(Region{r.label, r.outer, {}});
+  }
+  std::vector<Region> islands;
+  for (std::size_t k = 0; k < r.holes.size(); ++k) {
+    std::vector<Ring2> cut;
+    if (hole_checks[k].self_intersects) {
+      const detail::ContourRepair fixed = detail::repair_contour(r.holes[k]);
+      repairs.add(slice_name, detail::self_intersection_repair(
+                                  naming.hole(i, j, r.label, k),
+                                  plane_point_text(hole_checks[k].crossing), fixed, true));
+      add_repaired_hole(fixed, r.label, cut, islands);
+    } else {
+      cut.push_back(r.holes[k]);
+    }
+    // A hole belongs to the part of the repaired outer ring that holds it; when none does, the
+    // first part keeps it and the validation reports a hole outside its region.
+    for (Ring2& ring : cut) {
+      std::size_t owner = 0;
+      for (std::size_t m = 0; m < out.size() && out.size() > 1; ++m)
+        if (inside_outer(ring, out[m].outer)) {
+          owner = m;
+          break;
+        }
+      out[owner].holes.push_back(std::move(ring));
+    }
+  }
+  for (Region& island : islands) out.push_back(std::move(island));
+  return out;
+}
+
+// A fov that crosses itself is repaired when what it encloses is one polygon; a fov cannot hold
+// several polygons or holes.
+void repair_fov(Ring2& ring, const std::string& where, detail::RepairLog& repairs) {
+  const detail::RingCheck check = detail::check_ring(ring);
+  if (!check.self_intersects) return;
+  const detail::ContourRepair fixed = detail::repair_contour(ring);
+  if (fixed.rings.size() != 1)
+    fail_at(where + ", fov", check.problem + "; by the non-zero rule it encloses " +
+                                 std::to_string(fixed.polygons()) + " polygons and " +
+                                 std::to_string(fixed.rings.size() - fixed.polygons()) +
+                                 " holes, but a fov must be one polygon");
+  repairs.add(where, detail::self_intersection_repair(
+                         where + ", fov", plane_point_text(check.crossing), fixed, false));
+  ring = fixed.rings.front().ring;
+}
+
 int read_label(const json& j, const std::string& where) {
   if (j.is_string() && j.get<std::string>() == "unknown") return kUnknownLabel;
   if (j.is_number_integer()) {
@@ -1160,10 +1321,12 @@ LabeledSlice parse_slice_object(const json& js, std::size_t i, bool normalize,
   if (const auto fov = js.find("fov"); fov != js.end() && !fov->is_null()) {
     Ring2 ring = read_ring(*fov, where + ", fov");
     clean_ring(ring, where, where + ", fov", repairs);
+    repair_fov(ring, where, repairs);
     s.fov = std::move(ring);
   }
   if (const auto regions = js.find("regions"); regions != js.end()) {
     if (!regions->is_array()) fail_at(where, "\"regions\" must be an array of region objects");
+    std::vector<Region> parts;  // more regions from repaired ones: they follow the others
     for (std::size_t j = 0; j < regions->size(); ++j) {
       const json& jr = (*regions)[j];
       const std::string region_where = where + ", region " + std::to_string(j);
@@ -1184,8 +1347,11 @@ LabeledSlice parse_slice_object(const json& js, std::size_t i, bool normalize,
           r.holes.push_back(std::move(hole));
         }
       }
-      s.regions.push_back(std::move(r));
+      std::vector<Region> repaired = repair_region(std::move(r), i, j, naming, repairs);
+      for (std::size_t k = 0; k < repaired.size(); ++k)
+        (k == 0 ? s.regions : parts).push_back(std::move(repaired[k]));
     }
+    for (Region& part : parts) s.regions.push_back(std::move(part));
   }
   return s;
 }

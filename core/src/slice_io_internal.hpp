@@ -77,9 +77,48 @@ std::size_t drop_repeated_points(Ring2& ring);
 /// distinct points, simple (exact predicates), non-zero area. Otherwise what is wrong and the fix.
 std::string ring_problem(const Ring2& ring);
 
+/// What check_ring found: the readers repair a ring whose only fault is that it crosses itself.
+struct RingCheck {
+  std::string problem;           ///< empty when the ring is usable; else ring_problem's text
+  bool self_intersects = false;  ///< the fault is that the ring crosses or touches itself
+  Vec2 crossing = Vec2::Zero();  ///< then a point where it does
+};
+
+/// ring_problem, telling a self-intersection apart from the other faults.
+RingCheck check_ring(const Ring2& ring);
+
+/// One ring of a repaired contour. Depth 0 is an outer boundary of what the contour encloses,
+/// depth 1 a hole in the ring `parent`, depth 2 an island in that hole, and so on.
+struct NestedRing {
+  Ring2 ring;
+  std::size_t depth = 0;
+  std::size_t parent = 0;  ///< index in ContourRepair::rings of the enclosing ring (depth > 0)
+};
+
+/// The simple polygons a self-intersecting contour encloses.
+struct ContourRepair {
+  std::vector<NestedRing> rings;  ///< parents before their children; empty: encloses no area
+  /// Area (the ring's units squared) where the non-zero and even-odd rules disagree: covered
+  /// twice or more by the contour, so the choice of rule decided it.
+  double area_changed = 0.0;
+  /// How many rings are outer boundaries (even depth).
+  std::size_t polygons() const;
+};
+
+/// The region that `ring` (at least 3 points) encloses by the non-zero winding rule, as simple,
+/// strictly non-touching rings (Clipper's union). Corners of `ring` keep their exact coordinates;
+/// new corners (where the ring crosses itself) are computed to 1e-12 of the ring's size. Meant
+/// for rings check_ring reports as self-intersecting.
+ContourRepair repair_contour(const Ring2& ring);
+
+/// The record of a repair_contour: kind "self_intersection", `where` the ring as messages name
+/// it, `crossing` the point where it crossed itself as text, `hole` whether the ring is a hole.
+Repair self_intersection_repair(const std::string& where, const std::string& crossing,
+                                const ContourRepair& result, bool hole);
+
 /// True when `inner` lies inside the closed region bounded by `outer` (exact predicates). Meant
 /// for rings that do not cross each other: it decides by the first vertex of `inner` that is not
-/// on the boundary of `outer`; when every vertex is on it, by the areas.
+/// on the boundary of `outer`; when every vertex is on it, by their exact difference.
 bool ring_inside_ring(const Ring2& inner, const Ring2& outer);
 
 /// Pairs (earlier, later) of coincident slices whose contents are identical.
@@ -113,5 +152,8 @@ Status write_text_file(const std::filesystem::path& path, const std::string& tex
 
 /// Shortest decimal text that reads back as the same double.
 std::string format_double(double value);
+
+/// `value` to 7 significant digits, for places and areas in messages ("56028.62").
+std::string format_short(double value);
 
 }  // namespace sonoshape::detail

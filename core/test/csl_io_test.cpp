@@ -1,14 +1,15 @@
 // `.csl` contour files: reading real-world quirks, the errors, writing, and a JSON round trip.
 #include <gtest/gtest.h>
-
-#include "sonoshape/testing/temp_dir.hpp"
 #include <unistd.h>
 
 #include <atomic>
 #include <filesystem>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "sonoshape/core/slice_io.hpp"
+#include "sonoshape/testing/temp_dir.hpp"
 
 namespace sonoshape {
 namespace {
@@ -166,6 +167,8 @@ TEST(Csl, VerticesFarOffThePlaneAreAnError) {
   const char* text = "CSLC\n1 2\n1 4 1 0 0 1 -2\n0 0 2\n10 0 2\n10 10 3\n0 10 2\n4 1 0 1 2 3\n";
   const std::string message = parse_error(text);
   EXPECT_TRUE(contains(message, "plane 1 (line 3): vertex 2 lies 1 off the plane"));
+  EXPECT_TRUE(contains(message, "and the vertices are not coplanar either (vertex "));
+  EXPECT_TRUE(contains(message, "off the plane that fits them best)"));
 }
 
 TEST(Csl, RepeatedConsecutivePointsAreDropped) {
@@ -229,12 +232,297 @@ TEST(CslErrors, StructuralProblems) {
                        "unexpected text after the last of the 1 planes"));
 }
 
-TEST(CslErrors, SelfIntersectingComponentNamesPlaneComponentAndLine) {
-  const std::string message =
-      parse_error("CSLC\n1 2\n1 4 1 0 0 1 0\n0 0 0\n2 2 0\n2 0 0\n0 2 0\n\n4 1 0 1 2 3\n");
-  EXPECT_TRUE(contains(message,
-                       "line 9: plane 1 (line 3), component 0 (line 9, label 1): "
-                       "polygon self-intersects (edges 0 and 2 cross)"));
+TEST(CslErrors, StrictRefusesASelfIntersectingComponentNamingPlaneComponentAndLine) {
+  const Result<SliceSet> result =
+      parse_csl("CSLC\n1 2\n1 4 1 0 0 1 0\n0 0 0\n2 2 0\n2 0 0\n0 2 0\n\n4 1 0 1 2 3\n", "t.csl",
+                ReadOptions{true});
+  ASSERT_FALSE(result.is_ok());
+  EXPECT_TRUE(contains(result.message(),
+                       "t.csl: plane 1 (line 3), component 0 (line 9, label 1): contour crosses "
+                       "itself at (1, 1, 0)"));
+  EXPECT_TRUE(contains(result.message(), "--strict"));
+}
+
+// Reads `text`, returning the set and what went to stderr.
+std::pair<SliceSet, std::string> parse_with_warnings(const std::string& text) {
+  ::testing::internal::CaptureStderr();
+  const Result<SliceSet> result = parse(text);
+  const std::string warnings = ::testing::internal::GetCapturedStderr();
+  EXPECT_TRUE(result.is_ok()) << result.message();
+  return {result.is_ok() ? *result : SliceSet{}, warnings};
+}
+
+double region_area(const Region& r) {
+  double area = std::abs(signed_area(r.outer));
+  for (const Ring2& hole : r.holes) area -= std::abs(signed_area(hole));
+  return area;
+}
+
+double label_area(const LabeledSlice& s, int label) {
+  double area = 0.0;
+  for (const Region& r : s.regions)
+    if (r.label == label) area += region_area(r);
+  return area;
+}
+
+std::size_t count_lines(const std::string& text, const std::string& part) {
+  std::size_t n = 0;
+  for (std::size_t at = text.find(part); at != std::string::npos; at = text.find(part, at + 1)) ++n;
+  return n;
+}
+
+// One plane z = 0 with a 10 x 10 square of label 1 (vertices 0-3), then `more` vertices and
+// components (the vertex count and component count given).
+std::string square_plane(int n_labels, int n_vertices, int n_components, const std::string& more) {
+  return "CSLC\n1 " + std::to_string(n_labels) + "\n1 " + std::to_string(4 + n_vertices) + " " +
+         std::to_string(1 + n_components) + " 0 0 1 0\n0 0 0\n10 0 0\n10 10 0\n0 10 0\n" + more;
+}
+
+TEST(CslHoleLabels, ParentsLabelZeroAndNLabelsAllMeanOutside) {
+  // Three square holes in the label-1 square, labelled 1 (the parent's), 0 and 3 (= nLabels).
+  const std::string text = square_plane(3, 12, 3,
+                                        "1 1 0\n2 1 0\n2 2 0\n1 2 0\n"
+                                        "4 1 0\n5 1 0\n5 2 0\n4 2 0\n"
+                                        "7 1 0\n8 1 0\n8 2 0\n7 2 0\n"
+                                        "4 1 0 1 2 3\n4h0 1 4 5 6 7\n4h0 0 8 9 10 11\n"
+                                        "4h0 3 12 13 14 15\n");
+  const auto [set, warnings] = parse_with_warnings(text);
+  ASSERT_EQ(set.slices.size(), 1u);
+  const LabeledSlice& s = set.slices[0];
+  ASSERT_EQ(s.regions.size(), 1u);
+  EXPECT_EQ(s.regions[0].holes.size(), 3u);
+  EXPECT_NEAR(label_area(s, 1), 97.0, 1e-12);
+  EXPECT_TRUE(set.repairs.empty());
+  EXPECT_TRUE(contains(warnings, "material 2 never occurs"));
+}
+
+TEST(CslHoleLabels, AnotherMaterialFillsTheHole) {
+  // A hole labelled 2 in the label-1 square: label 1 loses it and label 2 fills it.
+  const std::string text = square_plane(3, 4, 1,
+                                        "2 2 0\n6 2 0\n6 6 0\n2 6 0\n"
+                                        "4 1 0 1 2 3\n4h0 2 4 5 6 7\n");
+  const auto [set, warnings] = parse_with_warnings(text);
+  ASSERT_EQ(set.slices.size(), 1u);
+  const LabeledSlice& s = set.slices[0];
+  ASSERT_EQ(s.regions.size(), 2u);
+  EXPECT_NEAR(label_area(s, 1), 84.0, 1e-12);
+  EXPECT_NEAR(label_area(s, 2), 16.0, 1e-12);
+  ASSERT_EQ(set.labels.size(), 2u);
+  EXPECT_TRUE(warnings.empty()) << warnings;
+}
+
+TEST(CslHoleLabels, AFilledHoleAlsoWrittenAsAComponentIsOneRegion) {
+  const std::string text = square_plane(3, 4, 2,
+                                        "2 2 0\n6 2 0\n6 6 0\n2 6 0\n"
+                                        "4 1 0 1 2 3\n4h0 2 4 5 6 7\n4 2 7 6 5 4\n");
+  const auto [set, warnings] = parse_with_warnings(text);
+  ASSERT_EQ(set.slices.size(), 1u);
+  ASSERT_EQ(set.slices[0].regions.size(), 2u);
+  EXPECT_NEAR(label_area(set.slices[0], 2), 16.0, 1e-12);
+}
+
+TEST(CslHoleLabels, AnOrganWrittenAsAHoleAndAsItsOwnContourIsCutOutOnce) {
+  // As Abdomen does: the label-2 organ is a component of its own and a hole (label 1) of the body.
+  const std::string text = square_plane(20, 4, 2,
+                                        "2 2 0\n6 2 0\n6 6 0\n2 6 0\n"
+                                        "4 2 4 5 6 7\n4 1 0 1 2 3\n4h1 1 7 6 5 4\n");
+  const auto [set, warnings] = parse_with_warnings(text);
+  ASSERT_EQ(set.slices.size(), 1u);
+  const LabeledSlice& s = set.slices[0];
+  ASSERT_EQ(s.regions.size(), 2u);
+  EXPECT_NEAR(label_area(s, 1), 84.0, 1e-12);
+  EXPECT_NEAR(label_area(s, 2), 16.0, 1e-12);
+}
+
+TEST(Csl, AContourInAPocketTouchingItWithEveryCornerIsNotInsideIt) {
+  // Component 1 (label 2, a triangle) sits in a notch of component 0 whose boundary passes
+  // through all three of its corners: it is beside component 0, not in it.
+  const std::string text =
+      "CSLC\n1 3\n1 8 2 0 0 1 0\n"
+      "0 0 0\n10 0 0\n10 10 0\n6 10 0\n5 6 0\n4 10 0\n0 10 0\n5 9 0\n"
+      "7 1 0 1 2 3 4 5 6\n3 2 3 4 5\n";
+  const auto [set, warnings] = parse_with_warnings(text);
+  ASSERT_EQ(set.slices.size(), 1u);
+  const LabeledSlice& s = set.slices[0];
+  ASSERT_EQ(s.regions.size(), 2u);
+  EXPECT_TRUE(s.regions[0].holes.empty());
+  EXPECT_NEAR(label_area(s, 2), 4.0, 1e-12);
+}
+
+TEST(CslRepairs, PinchedOffLoopFilledByAnotherMaterialAsAbdomenWritesIt) {
+  // The label-2 organ's contour pinches off a clockwise loop at (10, 15): a hole in the organ by
+  // the non-zero rule, which component 0 (label 3) fills. The body (label 1) has the organ's
+  // outline, without the loop, as a hole, listed before the organ: the organ lies in that hole.
+  const char* text =
+      "CSLC\n1 4\n1 11 4 0 0 1 0\n"
+      "0 0 0\n20 0 0\n20 20 0\n0 20 0\n5 5 0\n15 5 0\n15 15 0\n10 15 0\n11 13 0\n"
+      "9 13 0\n5 15 0\n"
+      "3 3 7 8 9\n4 1 0 1 2 3\n5h1 1 4 5 6 7 10\n8 2 4 5 6 7 8 9 7 10\n";
+  const auto [set, warnings] = parse_with_warnings(text);
+  ASSERT_EQ(set.slices.size(), 1u);
+  const LabeledSlice& s = set.slices[0];
+  EXPECT_NEAR(label_area(s, 1), 300.0, 1e-9);
+  EXPECT_NEAR(label_area(s, 2), 98.0, 1e-9);
+  EXPECT_NEAR(label_area(s, 3), 2.0, 1e-9);
+  ASSERT_EQ(set.repairs.size(), 1u);
+  EXPECT_TRUE(contains(set.repairs[0].detail,
+                       "at (10, 15, 0); repaired into 1 simple polygon "
+                       "with 1 hole"));
+}
+
+TEST(CslErrors, HoleLabelBeyondNLabels) {
+  const std::string message = parse_error(
+      square_plane(3, 4, 1, "2 2 0\n6 2 0\n6 6 0\n2 6 0\n4 1 0 1 2 3\n4h0 4 4 5 6 7\n"));
+  EXPECT_TRUE(contains(message, "plane 1, component 1: label 4 is outside 0..3"));
+}
+
+TEST(CslLabels, DeclaredButUnusedMaterialsAreNotLabelsAndAreNamedOnce) {
+  const std::string text = square_plane(20, 0, 0, "4 1 0 1 2 3\n");
+  const auto [set, warnings] = parse_with_warnings(text);
+  ASSERT_EQ(set.labels.size(), 1u);
+  EXPECT_EQ(set.labels[0].id, 1);
+  EXPECT_EQ(set.material_ids(), std::vector<int>{1});
+  EXPECT_EQ(count_lines(warnings, "\n"), 1u) << warnings;
+  EXPECT_TRUE(contains(warnings, "materials 2..19 never occur"));
+  EXPECT_TRUE(set.repairs.empty());
+  // A note, not a repair: --strict reads the file.
+  EXPECT_TRUE(parse_csl(text, "t.csl", ReadOptions{true}).is_ok());
+}
+
+// Three planes z = 1, 2, 3 written with +D where their vertices satisfy -D (as rose.csl does).
+const char* kFlippedD =
+    "CSLC\n3 2\n"
+    "1 3 1 0 0 1 1\n0 0 1\n4 0 1\n0 4 1\n3 1 0 1 2\n"
+    "2 3 1 0 0 1 2\n0 0 2\n4 0 2\n0 4 2\n3 1 0 1 2\n"
+    "3 3 1 0 0 1 3\n0 0 3\n4 0 3\n0 4 3\n3 1 0 1 2\n";
+
+TEST(CslPlanes, FlippedDIsFittedToTheVerticesWithOneWarningForTheFile) {
+  const auto [set, warnings] = parse_with_warnings(kFlippedD);
+  ASSERT_EQ(set.slices.size(), 3u);
+  for (std::size_t i = 0; i < 3; ++i) {
+    const LabeledSlice& s = set.slices[i];
+    EXPECT_NEAR((s.normal() - Vec3::UnitZ()).norm(), 0.0, 1e-12);  // the written orientation
+    for (const Vec3& p : world(s, s.regions[0].outer))
+      EXPECT_NEAR(p.z(), static_cast<double>(i + 1), 1e-12);
+  }
+  ASSERT_EQ(set.repairs.size(), 1u);
+  EXPECT_EQ(set.repairs[0].kind, "plane_refit");
+  EXPECT_EQ(set.repairs[0].where, "");
+  EXPECT_EQ(count_lines(warnings, "\n"), 1u) << warnings;
+  EXPECT_TRUE(contains(warnings,
+                       "t.csl: planes 1..3 (3 of 3): the plane equation disagrees with its "
+                       "vertices (they satisfy Ax+By+Cz-D=0); fitted the plane to the vertices"));
+  const Result<SliceSet> strict = parse_csl(kFlippedD, "t.csl", ReadOptions{true});
+  ASSERT_FALSE(strict.is_ok());
+  EXPECT_TRUE(contains(strict.message(), "t.csl: planes 1..3 (3 of 3): the plane equation"));
+}
+
+TEST(CslPlanes, NoisyVerticesOfAWronglyWrittenPlaneAreFittedAndProjected) {
+  // The vertices lie near z = 5 + x/10 (noise 1e-5, not coplanar); the plane says z = 0.
+  const char* text =
+      "CSLC\n1 2\n1 4 1 0 0 1 0\n"
+      "0 0 5.00001\n10 0 6\n10 10 6.00001\n0 10 5\n4 1 0 1 2 3\n";
+  const auto [set, warnings] = parse_with_warnings(text);
+  ASSERT_EQ(set.slices.size(), 1u);
+  const Vec3 n = set.slices[0].normal();
+  EXPECT_NEAR((n - Vec3(-0.1, 0, 1).normalized()).norm(), 0.0, 1e-5);
+  ASSERT_EQ(set.repairs.size(), 2u);
+  EXPECT_EQ(set.repairs[0].kind, "off_plane_vertices");
+  EXPECT_EQ(set.repairs[1].kind, "plane_refit");
+  EXPECT_TRUE(contains(warnings, "t.csl: plane 1 (1 of 1): the plane equation disagrees"));
+  EXPECT_FALSE(contains(warnings, "Ax+By+Cz-D=0"));
+}
+
+TEST(CslRepairs, FigureEightBecomesTwoPolygons) {
+  const auto [set, warnings] =
+      parse_with_warnings("CSLC\n1 2\n1 4 1 0 0 1 0\n0 0 0\n2 2 0\n2 0 0\n0 2 0\n4 1 0 1 2 3\n");
+  ASSERT_EQ(set.slices.size(), 1u);
+  const LabeledSlice& s = set.slices[0];
+  ASSERT_EQ(s.regions.size(), 2u);
+  EXPECT_NEAR(label_area(s, 1), 2.0, 1e-9);
+  ASSERT_EQ(set.repairs.size(), 1u);
+  const Repair& r = set.repairs[0];
+  EXPECT_EQ(r.kind, "self_intersection");
+  EXPECT_EQ(r.where, "plane 1 (line 3), component 0 (line 8, label 1)");
+  EXPECT_TRUE(contains(r.detail,
+                       "contour crosses itself at (1, 1, 0); repaired into 2 simple "
+                       "polygons by the non-zero rule"));
+  EXPECT_NEAR(r.area_changed_mm2, 0.0, 1e-9);  // each lobe is covered once
+  EXPECT_TRUE(contains(warnings,
+                       "t.csl: plane 1 (line 3): component 0 (line 8, label 1): "
+                       "contour crosses itself"));
+}
+
+TEST(CslRepairs, SmallLoopIsFilledAndItsAreaReported) {
+  // Along the bottom edge the contour curls once around [4,6]x[0,2], which it then covers twice.
+  const auto [set, warnings] = parse_with_warnings(
+      "CSLC\n1 2\n1 8 1 0 0 1 0\n"
+      "0 0 0\n6 0 0\n6 2 0\n4 2 0\n4 -1 0\n10 -1 0\n10 10 0\n0 10 0\n8 1 0 1 2 3 4 5 6 7\n");
+  ASSERT_EQ(set.slices.size(), 1u);
+  const LabeledSlice& s = set.slices[0];
+  ASSERT_EQ(s.regions.size(), 1u);
+  EXPECT_TRUE(s.regions[0].holes.empty());  // even-odd would have punched [4,6]x[0,2] out
+  EXPECT_NEAR(label_area(s, 1), 106.0, 1e-9);
+  ASSERT_EQ(set.repairs.size(), 1u);
+  EXPECT_NEAR(set.repairs[0].area_changed_mm2, 4.0, 1e-9);
+  EXPECT_TRUE(contains(warnings, "an area of 4 that it covers more than once stays inside"));
+}
+
+TEST(CslRepairs, PinchedRingBecomesTwoPolygonsTouchingAtAPoint) {
+  const auto [set, warnings] = parse_with_warnings(
+      "CSLC\n1 2\n1 7 1 0 0 1 0\n"
+      "0 0 0\n2 0 0\n2 2 0\n4 2 0\n4 4 0\n2 4 0\n0 2 0\n8 1 0 1 2 3 4 5 2 6\n");
+  ASSERT_EQ(set.slices.size(), 1u);
+  ASSERT_EQ(set.slices[0].regions.size(), 2u);
+  EXPECT_NEAR(label_area(set.slices[0], 1), 8.0, 1e-9);
+  ASSERT_EQ(set.repairs.size(), 1u);
+  EXPECT_TRUE(contains(set.repairs[0].detail, "at (2, 2, 0)"));
+}
+
+TEST(CslRepairs, SpikeOutAndBackIsCutOff) {
+  const auto [set, warnings] = parse_with_warnings(
+      square_plane(2, 1, 0, "15 5 0\n6 1 0 1 4 1 2 3\n"));  // 0 -> 10,0 -> 15,5 -> 10,0 -> ...
+  ASSERT_EQ(set.slices.size(), 1u);
+  ASSERT_EQ(set.slices[0].regions.size(), 1u);
+  EXPECT_EQ(set.slices[0].regions[0].outer.size(), 4u);
+  EXPECT_NEAR(label_area(set.slices[0], 1), 100.0, 1e-9);
+  EXPECT_EQ(set.repairs.size(), 1u);
+}
+
+TEST(CslRepairs, SelfIntersectingHoleBecomesTwoHoles) {
+  const std::string text = square_plane(2, 4, 1,
+                                        "2 2 0\n6 6 0\n6 2 0\n2 6 0\n"
+                                        "4 1 0 1 2 3\n4h0 1 4 5 6 7\n");
+  const auto [set, warnings] = parse_with_warnings(text);
+  ASSERT_EQ(set.slices.size(), 1u);
+  ASSERT_EQ(set.slices[0].regions.size(), 1u);
+  EXPECT_EQ(set.slices[0].regions[0].holes.size(), 2u);
+  EXPECT_NEAR(label_area(set.slices[0], 1), 92.0, 1e-9);
+  ASSERT_EQ(set.repairs.size(), 1u);
+  EXPECT_TRUE(contains(set.repairs[0].where, "component 1 (line 13, hole of component 0)"));
+}
+
+TEST(CslRepairs, RingEnclosingNothingIsDropped) {
+  const auto [set, warnings] = parse_with_warnings(
+      square_plane(2, 3, 1, "20 0 0\n24 0 0\n22 2 0\n4 1 0 1 2 3\n4 1 4 5 6 5\n"));
+  ASSERT_EQ(set.slices.size(), 1u);
+  ASSERT_EQ(set.slices[0].regions.size(), 1u);
+  ASSERT_EQ(set.repairs.size(), 1u);
+  EXPECT_TRUE(contains(set.repairs[0].detail, "encloses no area; dropped it"));
+}
+
+TEST(CslRepairs, OneWarningLinePerPlane) {
+  // Two bow ties and a repeated point on one plane, a bow tie on the next.
+  const char* text =
+      "CSLC\n2 2\n"
+      "1 8 2 0 0 1 0\n0 0 0\n2 2 0\n2 0 0\n0 2 0\n5 0 0\n7 2 0\n7 0 0\n5 2 0\n"
+      "5 1 0 1 1 2 3\n4 1 4 5 6 7\n"
+      "2 4 1 0 0 1 -1\n0 0 1\n2 2 1\n2 0 1\n0 2 1\n4 1 0 1 2 3\n";
+  const auto [set, warnings] = parse_with_warnings(text);
+  EXPECT_EQ(set.repairs.size(), 4u);
+  EXPECT_EQ(count_lines(warnings, "\n"), 2u) << warnings;
+  EXPECT_EQ(count_lines(warnings, "plane 1 (line 3): "), 1u) << warnings;
+  EXPECT_EQ(count_lines(warnings, "plane 2 (line "), 1u) << warnings;
 }
 
 TEST(CslErrors, OverlappingComponentsAreNamed) {

@@ -2,14 +2,16 @@
 #include "sonoshape/core/slice_io.hpp"
 
 #include <gtest/gtest.h>
-
-#include "sonoshape/testing/temp_dir.hpp"
 #include <unistd.h>
 
 #include <atomic>
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <utility>
+
+#include "sonoshape/testing/temp_dir.hpp"
 
 namespace sonoshape {
 namespace {
@@ -174,27 +176,126 @@ TEST(SliceJsonErrors, FewerThanThreeDistinctPoints) {
       "slice 1, region 1 (label 1), outer ring: polygon has fewer than 3 distinct points"));
 }
 
-TEST(SliceJsonErrors, SelfIntersectingPolygonNamesTheEdges) {
-  // A bow tie: edge 0 (0,0)-(2,2) crosses edge 2 (2,0)-(0,2).
+double region_area(const Region& r) {
+  double area = std::abs(signed_area(r.outer));
+  for (const Ring2& hole : r.holes) area -= std::abs(signed_area(hole));
+  return area;
+}
+
+// Reads a document that must read, returning the set and what went to stderr.
+std::pair<SliceSet, std::string> parse_with_warnings(const std::string& text) {
+  ::testing::internal::CaptureStderr();
+  const Result<SliceSet> result = parse(text);
+  const std::string warnings = ::testing::internal::GetCapturedStderr();
+  EXPECT_TRUE(result.is_ok()) << result.message();
+  return {result.is_ok() ? *result : SliceSet{}, warnings};
+}
+
+TEST(SliceJsonRepairs, BowTieBecomesTheTwoTrianglesItEncloses) {
+  // Edge 0 (0,0)-(2,2) crosses edge 2 (2,0)-(0,2); region 1 after it keeps its index.
+  const std::string bow_tie = R"({"label": 2, "polygon": [[0,0],[2,2],[2,0],[0,2]]})";
+  const auto [set, warnings] =
+      parse_with_warnings(doc(slice_at(0, bow_tie + "," + square_region(1, 5, 5, 1))));
+  ASSERT_EQ(set.slices.size(), 1u);
+  const LabeledSlice& s = set.slices[0];
+  ASSERT_EQ(s.regions.size(), 3u);
+  EXPECT_EQ(s.regions[0].label, 2);
+  EXPECT_EQ(s.regions[1].label, 1);
+  EXPECT_EQ(s.regions[2].label, 2);
+  EXPECT_NEAR(region_area(s.regions[0]) + region_area(s.regions[2]), 2.0, 1e-9);
+  ASSERT_EQ(set.repairs.size(), 1u);
+  EXPECT_EQ(set.repairs[0].kind, "self_intersection");
+  EXPECT_EQ(set.repairs[0].where, "slice 0, region 0 (label 2), outer ring");
+  EXPECT_TRUE(contains(set.repairs[0].detail,
+                       "contour crosses itself at [1, 1]; repaired into 2 simple polygons by "
+                       "the non-zero rule"));
+  EXPECT_TRUE(contains(warnings,
+                       "t.slices.json: slice 0: region 0 (label 2), outer ring: "
+                       "contour crosses itself"));
+}
+
+TEST(SliceJsonErrors, StrictRefusesASelfIntersectingPolygon) {
   const std::string region = R"({"label": 2, "polygon": [[0,0],[2,2],[2,0],[0,2]]})";
-  const std::string message = parse_error(doc(slice_at(0, region)));
+  const Result<SliceSet> result =
+      parse_slice_set_json(doc(slice_at(0, region)), "t.slices.json", ReadOptions{true});
+  ASSERT_FALSE(result.is_ok());
+  EXPECT_TRUE(contains(result.message(),
+                       "t.slices.json: slice 0, region 0 (label 2), outer ring: contour crosses "
+                       "itself at [1, 1]"));
+  EXPECT_TRUE(contains(result.message(), "--strict"));
+}
+
+TEST(SliceValidation, SelfIntersectingPolygonBuiltInCodeNamesTheEdges) {
+  // validate_slice_set checks sets built in code; it repairs nothing.
+  SliceSet set;
+  set.slices.resize(1);
+  set.slices[0].regions.push_back({2, {Vec2(0, 0), Vec2(2, 2), Vec2(2, 0), Vec2(0, 2)}, {}});
+  const Status status = validate_slice_set(set, "mem");
+  ASSERT_FALSE(status.is_ok());
   EXPECT_TRUE(contains(
-      message,
+      status.message(),
       "slice 0, region 0 (label 2), outer ring: polygon self-intersects (edges 0 and 2 cross)"));
-  EXPECT_TRUE(contains(message, "split it into separate regions"));
+  EXPECT_TRUE(contains(status.message(), "split it into separate regions"));
 }
 
-TEST(SliceJsonErrors, SelfIntersectingHole) {
+TEST(SliceJsonRepairs, SelfIntersectingHoleBecomesTwoHoles) {
   const std::string region = R"({"label": 2, "polygon": [[0,0],[10,0],[10,10],[0,10]],
-      "holes": [[[1,1],[2,1],[2,2],[1,2]], [[3,3],[6,3],[4,6],[5,6]]]})";
-  EXPECT_TRUE(contains(parse_error(doc(slice_at(0, region))),
-                       "slice 0, region 0 (label 2), hole 1: polygon self-intersects"));
+      "holes": [[[1,1],[2,1],[2,2],[1,2]], [[3,3],[7,7],[7,3],[3,7]]]})";
+  const auto [set, warnings] = parse_with_warnings(doc(slice_at(0, region)));
+  ASSERT_EQ(set.slices.size(), 1u);
+  ASSERT_EQ(set.slices[0].regions.size(), 1u);
+  EXPECT_EQ(set.slices[0].regions[0].holes.size(), 3u);
+  EXPECT_NEAR(region_area(set.slices[0].regions[0]), 100.0 - 1.0 - 8.0, 1e-9);
+  ASSERT_EQ(set.repairs.size(), 1u);
+  EXPECT_EQ(set.repairs[0].where, "slice 0, region 0 (label 2), hole 1");
 }
 
-TEST(SliceJsonErrors, PolygonFoldingBackOnItself) {
-  // Adjacent edges 1 and 2 run back along the same line: not simple.
+TEST(SliceJsonRepairs, HolesFollowThePartOfARepairedOuterRingThatHoldsThem) {
+  // A bow tie of two 4 x 4 triangles-ish lobes, each with a small hole.
+  const std::string region = R"({"label": 1, "polygon": [[0,0],[8,8],[8,0],[0,8]],
+      "holes": [[[0.5,3.5],[1.5,3.5],[1.5,4.5],[0.5,4.5]], [[6.5,3.5],[7.5,3.5],[7.5,4.5],[6.5,4.5]]]})";
+  const auto [set, warnings] = parse_with_warnings(doc(slice_at(0, region)));
+  ASSERT_EQ(set.slices.size(), 1u);
+  const LabeledSlice& s = set.slices[0];
+  ASSERT_EQ(s.regions.size(), 2u);
+  EXPECT_EQ(s.regions[0].holes.size(), 1u);
+  EXPECT_EQ(s.regions[1].holes.size(), 1u);
+  EXPECT_NEAR(region_area(s.regions[0]) + region_area(s.regions[1]), 32.0 - 2.0, 1e-9);
+}
+
+TEST(SliceJsonRepairs, PolygonFoldingBackOnItselfLosesItsSpike) {
+  // Adjacent edges 1 and 2 run back along the same line: the spike (4,2)-(4,4) encloses nothing.
   const std::string region = R"({"label": 1, "polygon": [[0,0],[4,0],[4,4],[4,2],[0,4]]})";
-  EXPECT_TRUE(contains(parse_error(doc(slice_at(0, region))), "self-intersects (edges 1 and "));
+  const auto [set, warnings] = parse_with_warnings(doc(slice_at(0, region)));
+  ASSERT_EQ(set.slices.size(), 1u);
+  ASSERT_EQ(set.slices[0].regions.size(), 1u);
+  EXPECT_EQ(set.slices[0].regions[0].outer.size(), 4u);
+  EXPECT_NEAR(region_area(set.slices[0].regions[0]), 12.0, 1e-9);
+  ASSERT_EQ(set.repairs.size(), 1u);
+  EXPECT_NEAR(set.repairs[0].area_changed_mm2, 0.0, 1e-9);
+}
+
+TEST(SliceJsonRepairs, RegionWhoseOuterRingEnclosesNothingIsDropped) {
+  // Out to (4, 0), up to (2, 2) and back the same way: no area.
+  const std::string nothing = R"({"label": 1, "polygon": [[0,0],[4,0],[2,2],[4,0]]})";
+  const auto [set, warnings] =
+      parse_with_warnings(doc(slice_at(0, nothing + "," + square_region(2, 5, 5, 1))));
+  ASSERT_EQ(set.slices.size(), 1u);
+  ASSERT_EQ(set.slices[0].regions.size(), 1u);
+  EXPECT_EQ(set.slices[0].regions[0].label, 2);
+  ASSERT_EQ(set.repairs.size(), 1u);
+  EXPECT_TRUE(contains(set.repairs[0].detail, "it encloses no area; dropped it"));
+}
+
+TEST(SliceJsonRepairs, FovWithASpikeIsRepaired) {
+  const std::string slice =
+      R"({"origin": [0,0,0], "u": [1,0,0], "v": [0,1,0], "fov": [[0,0],[4,0],[4,4],[4,2],[0,4]], "regions": []})";
+  const auto [set, warnings] = parse_with_warnings(doc(slice));
+  ASSERT_EQ(set.slices.size(), 1u);
+  ASSERT_TRUE(set.slices[0].fov.has_value());
+  EXPECT_NEAR(std::abs(signed_area(*set.slices[0].fov)), 12.0, 1e-9);
+  ASSERT_EQ(set.repairs.size(), 1u);
+  EXPECT_EQ(set.repairs[0].where, "slice 0, fov");
 }
 
 TEST(SliceJsonErrors, ZeroArea) {
@@ -258,6 +359,16 @@ TEST(SliceJsonErrors, HoleOutsideItsPolygon) {
   EXPECT_TRUE(
       contains(parse_error(doc(slice_at(0, region))),
                "slice 0, region 0 (label 1), hole 0: hole is not inside the region's outer ring"));
+}
+
+TEST(SliceJsonErrors, HoleThatIsTheWholeOuterRing) {
+  const std::string square = "[[0,0],[1,0],[1,1],[0,1]]";
+  const std::string region =
+      R"({"label": 1, "polygon": )" + square + R"(, "holes": [)" + square + "]}";
+  const std::string message =
+      parse_error(doc(slice_at(0, region + "," + square_region(2, 0, 0, 1))));
+  EXPECT_TRUE(contains(message, "slice 0, region 0 (label 1), hole 0: hole is the region's whole "
+                                "outer ring"));
 }
 
 TEST(SliceJsonErrors, OverlappingHoles) {
@@ -342,7 +453,7 @@ TEST(SliceJsonErrors, BoundsMinNotBelowMax) {
 }
 
 TEST(SliceJsonErrors, ReportsSeveralProblemsAtOnce) {
-  const std::string bad = R"({"label": 1, "polygon": [[0,0],[2,2],[2,0],[0,2]]})";
+  const std::string bad = R"({"label": 1, "polygon": [[0,0],[2,0],[4,0]]})";
   const std::string message = parse_error(doc(
       slice_at(0, bad) + "," + slice_at(1, square_region(1, 0, 0, 1)) + "," + slice_at(2, bad)));
   EXPECT_TRUE(contains(message, "slice 0, region 0"));
@@ -356,7 +467,7 @@ TEST(SliceJson, RepeatedConsecutivePointsAreDroppedWithAWarning) {
   const std::string warnings = ::testing::internal::GetCapturedStderr();
   ASSERT_TRUE(result.is_ok()) << result.message();
   EXPECT_EQ(result->slices[0].regions[0].outer.size(), 4u);
-  EXPECT_TRUE(contains(warnings, "slice 0, region 0 (label 1), outer ring: dropped 2 repeated"));
+  EXPECT_TRUE(contains(warnings, "slice 0: region 0 (label 1), outer ring: dropped 2 repeated"));
 }
 
 TEST(SliceJson, IdenticalCoincidentSlicesAreMerged) {
@@ -383,10 +494,12 @@ TEST(SliceJsonErrors, CoincidentSlicesThatDisagree) {
       message, "slice 0 and slice 2: they lie in the same plane but their contents disagree"));
 }
 
-TEST(SliceJsonErrors, FovSelfIntersecting) {
+TEST(SliceJsonErrors, FovSelfIntersectingIntoTwoPolygons) {
   const std::string slice =
       R"({"origin": [0,0,0], "u": [1,0,0], "v": [0,1,0], "fov": [[0,0],[2,2],[2,0],[0,2]], "regions": []})";
-  EXPECT_TRUE(contains(parse_error(doc(slice)), "slice 0, fov: polygon self-intersects"));
+  const std::string message = parse_error(doc(slice));
+  EXPECT_TRUE(contains(message, "slice 0, fov: polygon self-intersects"));
+  EXPECT_TRUE(contains(message, "it encloses 2 polygons and 0 holes, but a fov must be one"));
 }
 
 TEST(SliceJsonErrors, StructuralProblemsNameTheirPlace) {

@@ -1,10 +1,17 @@
 #include "sonoshape/segmentation/contours.hpp"
 
+#include <CGAL/Constrained_Delaunay_triangulation_2.h>
+#include <CGAL/Constrained_triangulation_plus_2.h>
+#include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
+#include <CGAL/Polyline_simplification_2/simplify.h>
+
 #include <algorithm>
 #include <array>
 #include <cmath>
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
+#include <string>
+#include <unordered_set>
 
 #include "sonoshape/core/errors.hpp"
 #include "sonoshape/core/slice_io.hpp"
@@ -12,18 +19,162 @@
 namespace sonoshape::seg {
 namespace {
 
-// Below this many pixels of area a ring is a line or a point, not a region.
-constexpr double kMinRingAreaPx = 0.5;
+// The masks are traced at this many times their resolution (see trace_mask).
+constexpr int kUpsample = 2;
 
-Ring2 to_ring(const std::vector<cv::Point>& contour, double epsilon_px, const ImagePlane& plane) {
-  std::vector<cv::Point> simplified;
-  if (epsilon_px > 0.0) cv::approxPolyDP(contour, simplified, epsilon_px, true);
-  const std::vector<cv::Point>& points = epsilon_px > 0.0 ? simplified : contour;
-  if (points.size() < 3 || std::abs(cv::contourArea(points)) < kMinRingAreaPx) return {};
+namespace PS = CGAL::Polyline_simplification_2;
+using Kernel = CGAL::Exact_predicates_inexact_constructions_kernel;
+using Tds =
+    CGAL::Triangulation_data_structure_2<PS::Vertex_base_2<Kernel>,
+                                         CGAL::Constrained_triangulation_face_base_2<Kernel>>;
+using Cdt = CGAL::Constrained_Delaunay_triangulation_2<Kernel, Tds, CGAL::Exact_predicates_tag>;
+using Ct = CGAL::Constrained_triangulation_plus_2<Cdt>;
+
+// One region in pixel coordinates (column, row) before it is mapped into the plane.
+struct PixelRegion {
+  int label = 0;
+  Ring2 outer;
+  std::vector<Ring2> holes;
+};
+
+// Removes pinches: where a 2x2 block holds exactly one of its diagonals, the outline would pass
+// through the block's centre twice. One pixel of the pair goes (the lower one), which leaves
+// the block with a single pixel and cannot create a pinch in a block already visited, so one
+// raster pass leaves none (the mask is "well-composed": its 4- and 8-components agree and its
+// boundaries are simple curves that touch neither themselves nor each other).
+void remove_pinches(cv::Mat& mask) {
+  for (int j = 0; j + 1 < mask.rows; ++j) {
+    std::uint8_t* top = mask.ptr<std::uint8_t>(j);
+    std::uint8_t* bottom = mask.ptr<std::uint8_t>(j + 1);
+    for (int i = 0; i + 1 < mask.cols; ++i) {
+      const bool a = top[i], b = top[i + 1], c = bottom[i], d = bottom[i + 1];
+      if (a && d && !b && !c)
+        bottom[i + 1] = 0;
+      else if (b && c && !a && !d)
+        bottom[i] = 0;
+    }
+  }
+}
+
+// The outlines of a well-composed mask, in pixel coordinates. cv::findContours runs through
+// the centres of boundary pixels, so a one-pixel neck or line would give a ring of zero width;
+// traced on the mask upsampled by 2 (each pixel a 2x2 block), every part is at least 2 wide and
+// the ring runs a quarter pixel inside the pixel edges, half a pixel from its neighbours'.
+std::vector<PixelRegion> trace_mask(const cv::Mat& mask, int label) {
+  cv::Mat up;
+  cv::resize(mask, up, cv::Size(), kUpsample, kUpsample, cv::INTER_NEAREST);
+  cv::copyMakeBorder(up, up, 1, 1, 1, 1, cv::BORDER_CONSTANT, cv::Scalar(0));
+  std::vector<std::vector<cv::Point>> contours;
+  std::vector<cv::Vec4i> hierarchy;  // next, previous, first child, parent
+  cv::findContours(up, contours, hierarchy, cv::RETR_CCOMP, cv::CHAIN_APPROX_SIMPLE);
+  auto to_ring = [&](const std::vector<cv::Point>& contour) {
+    Ring2 ring;
+    ring.reserve(contour.size());
+    // Upsampled pixel centre x (1 of border) -> original (x - 1 + 0.5) / 2 - 0.5.
+    auto original = [](int x) { return (x - 1) / static_cast<double>(kUpsample) - 0.25; };
+    for (const cv::Point& p : contour) ring.emplace_back(original(p.x), original(p.y));
+    return ring;
+  };
+  std::vector<PixelRegion> regions;
+  for (std::size_t k = 0; k < contours.size(); ++k) {
+    if (hierarchy[k][3] >= 0) continue;  // a hole: taken with its outer ring
+    PixelRegion region{label, to_ring(contours[k]), {}};
+    for (int child = hierarchy[k][2]; child >= 0;
+         child = hierarchy[static_cast<std::size_t>(child)][0])
+      region.holes.push_back(to_ring(contours[static_cast<std::size_t>(child)]));
+    regions.push_back(std::move(region));
+  }
+  return regions;
+}
+
+// The squared-distance cost made a total order. Equal costs are common on a pixel grid, and the
+// simplification would take them in the order of the triangulation's constraint set, which
+// follows memory addresses: the same frame (or a .mha and a .nrrd copy of it) could simplify
+// differently from run to run. A tie-breaker from the vertex's own coordinates (quarter pixels,
+// distinct for every vertex since no two rings share a point) makes the result reproducible;
+// at most 1e-4 px² it does not change what the tolerance allows.
+struct ReproducibleCost {
+  template <class Pct>
+  boost::optional<double> operator()(const Pct& pct,
+                                     typename Pct::Vertices_in_constraint_iterator it) const {
+    const boost::optional<double> cost = PS::Squared_distance_cost()(pct, it);
+    if (!cost) return cost;
+    const auto quarter = [](double x) {  // 15 bits: exact for images up to 8000 px
+      return static_cast<std::uint32_t>(std::clamp<long>(std::lround(4.0 * x) + 4, 0, 32767));
+    };
+    const std::uint32_t key = (quarter((*it)->point().x()) << 15) | quarter((*it)->point().y());
+    return *cost + 1e-4 * std::ldexp(static_cast<double>(key), -30);
+  }
+};
+
+// Simplifies every ring in one constrained triangulation (CGAL Polyline_simplification_2): a
+// vertex goes only when the shortcut stays within epsilon_px of the removed points and the
+// triangulation shows it crosses no other ring, so simple, disjoint rings stay simple and
+// disjoint (unlike approxPolyDP ring by ring, which lets neighbours cross).
+void simplify_together(std::vector<PixelRegion>& regions, double epsilon_px) {
+  if (epsilon_px <= 0.0) return;
+  // The simplification needs rings that share no point (it is undefined, and crashes, on
+  // pinched ones). The tracing guarantees that; should it ever fail, keep the exact outlines.
+  std::unordered_set<std::uint64_t> seen;
+  auto fresh = [&](const Ring2& ring) {
+    for (const Vec2& p : ring) {  // coordinates are quarter pixels: exact in 2 x 32 bits
+      const auto x = static_cast<std::uint32_t>(std::lround(4.0 * p.x()) + (1 << 30));
+      const auto y = static_cast<std::uint32_t>(std::lround(4.0 * p.y()) + (1 << 30));
+      if (!seen.insert((std::uint64_t{x} << 32) | y).second) return false;
+    }
+    return true;
+  };
+  for (const PixelRegion& r : regions) {
+    if (!fresh(r.outer)) return;
+    for (const Ring2& hole : r.holes)
+      if (!fresh(hole)) return;
+  }
+  Ct ct;
+  std::vector<Ct::Constraint_id> ids;
+  auto insert = [&](const Ring2& ring) {
+    std::vector<Kernel::Point_2> points;
+    points.reserve(ring.size());
+    for (const Vec2& p : ring) points.emplace_back(p.x(), p.y());
+    ids.push_back(ct.insert_constraint(points.begin(), points.end(), true));
+  };
+  for (const PixelRegion& r : regions) {
+    insert(r.outer);
+    for (const Ring2& hole : r.holes) insert(hole);
+  }
+  PS::simplify(ct, ReproducibleCost(), PS::Stop_above_cost_threshold(epsilon_px * epsilon_px));
+  std::size_t next = 0;
+  auto read = [&](Ring2& ring) {
+    ring.clear();
+    const Ct::Constraint_id id = ids[next++];
+    for (auto it = ct.vertices_in_constraint_begin(id); it != ct.vertices_in_constraint_end(id);
+         ++it)
+      ring.emplace_back((*it)->point().x(), (*it)->point().y());
+    if (ring.size() > 1 && ring.front() == ring.back()) ring.pop_back();  // closed: first again
+  };
+  for (PixelRegion& r : regions) {
+    read(r.outer);
+    for (Ring2& hole : r.holes) read(hole);
+  }
+}
+
+// A ring with at least 3 corners and an area: what survives simplification normally is.
+bool has_area(const Ring2& ring) { return ring.size() >= 3 && std::abs(signed_area(ring)) > 1e-6; }
+
+std::string label_name(int label) {
+  return label == kLabelPixelUnknown ? std::string("unknown") : "label " + std::to_string(label);
+}
+
+Ring2 to_plane(const Ring2& ring_px, const ImagePlane& plane) {
   Ring2 ring;
-  ring.reserve(points.size());
-  for (const cv::Point& p : points) ring.push_back(plane.to_plane(p.x, p.y));
+  ring.reserve(ring_px.size());
+  for (const Vec2& p : ring_px) ring.push_back(plane.to_plane(p.x(), p.y()));
   return ring;
+}
+
+double region_area_mm2(const Region& r) {
+  double area = std::abs(signed_area(r.outer));
+  for (const Ring2& hole : r.holes) area -= std::abs(signed_area(hole));
+  return area;
 }
 
 }  // namespace
@@ -53,7 +204,8 @@ ImagePlane image_plane(const Eigen::Matrix4d& T_reference_image, const Vec3& pro
 }
 
 std::vector<Region> label_map_regions(const LabelImage& labels, const ImageU8& sector,
-                                      const ImagePlane& plane, double tolerance_mm) {
+                                      const ImagePlane& plane, double tolerance_mm,
+                                      std::vector<Repair>* repairs) {
   if (labels.width != sector.width || labels.height != sector.height ||
       labels.pixels.size() != sector.pixels.size())
     throw std::invalid_argument("label_map_regions: label map and sector differ in size");
@@ -64,56 +216,95 @@ std::vector<Region> label_map_regions(const LabelImage& labels, const ImageU8& s
   std::array<bool, 256> present{};
   for (std::size_t p = 0; p < labels.pixels.size(); ++p)
     if (sector.pixels[p]) present[labels.pixels[p]] = true;
-  const double epsilon_px = tolerance_mm / plane.spacing_mm();
-  std::vector<Region> regions;
+  std::vector<PixelRegion> pixel_regions;
   for (int value = 1; value < 256; ++value) {
     if (!present[static_cast<std::size_t>(value)]) continue;
     // Outside the sector is unknown through the fov; only unknown inside it needs regions.
-    const cv::Mat mask = (map == value) & in_sector;
-    std::vector<std::vector<cv::Point>> contours;
-    std::vector<cv::Vec4i> hierarchy;  // next, previous, first child, parent
-    cv::findContours(mask, contours, hierarchy, cv::RETR_CCOMP, cv::CHAIN_APPROX_SIMPLE);
-    for (std::size_t k = 0; k < contours.size(); ++k) {
-      if (hierarchy[k][3] >= 0) continue;  // a hole: taken with its outer ring
-      Region region;
-      region.label = value == kLabelPixelUnknown ? kUnknownLabel : value;
-      region.outer = to_ring(contours[k], epsilon_px, plane);
-      if (region.outer.empty()) continue;
-      for (int child = hierarchy[k][2]; child >= 0;
-           child = hierarchy[static_cast<std::size_t>(child)][0]) {
-        Ring2 hole = to_ring(contours[static_cast<std::size_t>(child)], epsilon_px, plane);
-        if (!hole.empty()) region.holes.push_back(std::move(hole));
-      }
-      regions.push_back(std::move(region));
+    cv::Mat mask = (map == value) & in_sector;
+    remove_pinches(mask);
+    for (PixelRegion& r : trace_mask(mask, value)) pixel_regions.push_back(std::move(r));
+  }
+  simplify_together(pixel_regions, tolerance_mm / plane.spacing_mm());
+
+  std::vector<Region> regions;
+  auto record = [&](const PixelRegion& r, const std::string& what, const Ring2& ring) {
+    if (!repairs) return;
+    repairs->push_back(Repair{"degenerate_region", label_name(r.label),
+                              what + " of " + std::to_string(ring.size()) +
+                                  " points and no area after simplification; dropped",
+                              std::abs(signed_area(to_plane(ring, plane)))});
+  };
+  for (const PixelRegion& r : pixel_regions) {
+    if (!has_area(r.outer)) {
+      record(r, "an outer ring", r.outer);
+      continue;
     }
+    Region region;
+    region.label = r.label == kLabelPixelUnknown ? kUnknownLabel : r.label;
+    region.outer = to_plane(r.outer, plane);
+    for (const Ring2& hole : r.holes) {
+      if (has_area(hole))
+        region.holes.push_back(to_plane(hole, plane));
+      else
+        record(r, "a hole", hole);
+    }
+    regions.push_back(std::move(region));
   }
   return regions;
 }
 
+namespace {
+
+Status validate_one(const LabeledSlice& slice) {
+  SliceSet one;
+  one.slices.push_back(slice);
+  return validate_slice_set(one, "segmented frame");
+}
+
+}  // namespace
+
+void drop_invalid_regions(LabeledSlice& slice, std::vector<Repair>* repairs) {
+  std::vector<Region> regions = std::move(slice.regions), kept;
+  LabeledSlice alone = slice;  // the plane alone: each region is judged on its own
+  alone.fov.reset();
+  for (Region& r : regions) {
+    alone.regions.assign(1, r);
+    if (const Status ok = validate_one(alone); ok) {
+      kept.push_back(std::move(r));
+    } else if (repairs) {
+      const int label = r.label == kUnknownLabel ? kLabelPixelUnknown : r.label;
+      repairs->push_back(Repair{"invalid_region", label_name(label), "dropped: " + ok.message(),
+                                region_area_mm2(r)});
+    }
+  }
+  slice.regions = std::move(kept);
+}
+
 Result<LabeledSlice> make_slice(const LabelImage& labels, const ImageU8& sector,
                                 const Ring2& sector_px, const ImagePlane& plane,
-                                double tolerance_mm) {
+                                double tolerance_mm, std::vector<Repair>* repairs) {
   LabeledSlice slice;
   slice.origin_mm = plane.origin_mm;
   slice.u = plane.u;
   slice.v = plane.v;
-  Ring2 fov;
-  for (const Vec2& p : sector_px) fov.push_back(plane.to_plane(p.x(), p.y()));
-  slice.fov = std::move(fov);
-  // Simplification may make neighbouring outlines cross or a ring touch itself: fall back to
-  // smaller tolerances, down to the exact pixel outlines (which the label map keeps simple).
-  std::vector<double> tolerances;
-  for (double t = tolerance_mm; t > 0.05 * plane.spacing_mm(); t *= 0.5) tolerances.push_back(t);
-  tolerances.push_back(0.0);
-  Status last;
-  for (const double tolerance : tolerances) {
-    slice.regions = label_map_regions(labels, sector, plane, tolerance);
-    SliceSet one;
-    one.slices.push_back(slice);
-    last = validate_slice_set(one, "segmented frame");
-    if (last) return slice;
+  slice.fov = to_plane(sector_px, plane);
+  if (Status fov = validate_one(slice); !fov) return fov;  // no region can mend the fov
+  std::vector<Repair> found;
+  slice.regions = label_map_regions(labels, sector, plane, tolerance_mm, &found);
+  Status valid = validate_one(slice);
+  if (!valid && tolerance_mm > 0.0) {
+    // The construction should make this unreachable; the exact outlines are the safer form.
+    found.clear();
+    slice.regions = label_map_regions(labels, sector, plane, 0.0, &found);
+    valid = validate_one(slice);
   }
-  return last;
+  if (!valid) {
+    drop_invalid_regions(slice, &found);
+    valid = validate_one(slice);
+    if (!valid) return valid;
+  }
+  if (repairs) repairs->insert(repairs->end(), found.begin(), found.end());
+  return slice;
 }
 
 }  // namespace sonoshape::seg

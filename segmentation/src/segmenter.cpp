@@ -301,29 +301,27 @@ ImageGeometry auto_geometry(const std::vector<const GreyImage*>& frames, double 
     cv::max(peak, filtered, peak);
   }
   cv::Mat signal = peak > signal_grey;
-  cv::morphologyEx(signal, signal, cv::MORPH_CLOSE, disk(3.0));
-  std::vector<std::vector<cv::Point>> contours;
-  cv::findContours(signal, contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_SIMPLE);
-  std::size_t best = contours.size();
-  double best_area = 0.0;
-  for (std::size_t k = 0; k < contours.size(); ++k) {
-    const double area = cv::contourArea(contours[k]);
-    if (area > best_area) {
-      best_area = area;
-      best = k;
-    }
-  }
-  if (best == contours.size() || best_area < 0.01 * w * h)
+  // Isolated specks (noise, a cursor) must not widen the sector.
+  cv::morphologyEx(signal, signal, cv::MORPH_OPEN, disk(1.0));
+  std::vector<cv::Point> points;
+  cv::findNonZero(signal, points);
+  if (points.size() < 3) return full_image_geometry(w, h, spacing_mm);
+  // The sector is the convex hull of what carries signal: an outline traced from the mask
+  // touches itself at one-pixel necks and diagonal corners (and simplifying it can make it
+  // cross), while a hull is simple by construction. A linear probe's image is a rectangle and a
+  // convex probe's a fan, so the hull adds at most the sliver under a convex probe's face, which
+  // is dark and so becomes unknown by the confidence rule.
+  std::vector<cv::Point> hull;
+  cv::convexHull(points, hull);
+  if (hull.size() < 3 || cv::contourArea(hull) < 0.01 * w * h)
     return full_image_geometry(w, h, spacing_mm);
-  std::vector<cv::Point> outline;
-  cv::approxPolyDP(contours[best], outline, 1.0, true);
   Ring2 ring;
-  for (const cv::Point& p : outline) ring.emplace_back(p.x, p.y);
+  for (const cv::Point& p : hull) ring.emplace_back(p.x, p.y);
   ImageGeometry g;
   g.width_px = w;
   g.height_px = h;
   cv::Mat mask(h, w, CV_8U, cv::Scalar(0));
-  cv::drawContours(mask, contours, static_cast<int>(best), cv::Scalar(255), cv::FILLED);
+  cv::fillConvexPoly(mask, hull, cv::Scalar(255));
   g.sector = to_image(mask);
   g.sector_px = ring;
   g.spacing_mm = spacing_mm;

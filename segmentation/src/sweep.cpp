@@ -14,6 +14,7 @@
 #include "sonoshape/acquisition/plus_config.hpp"
 #include "sonoshape/core/errors.hpp"
 #include "sonoshape/core/log.hpp"
+#include "sonoshape/core/slice_io.hpp"
 #include "sonoshape/segmentation/contours.hpp"
 #include "sonoshape/simulator/sweep.hpp"
 
@@ -86,7 +87,8 @@ std::optional<std::pair<LabelModel, std::vector<LabelModel>>> header_models(
 
 std::filesystem::path sidecar_path(const std::filesystem::path& sequence) {
   std::string name = sequence.filename().string();
-  for (const std::string ext : {".igs.mha", ".seq.mha", ".mha"})
+  for (const std::string ext :
+       {".igs.mha", ".seq.mha", ".mha", ".igs.nrrd", ".seq.nrrd", ".nrrd", ".nhdr"})
     if (name.size() > ext.size() && name.ends_with(ext)) {
       name.resize(name.size() - ext.size());
       break;
@@ -122,6 +124,18 @@ std::vector<const GreyImage*> sampled_frames(const acq::SequenceFile& file) {
   const std::size_t step = std::max<std::size_t>(1, n / kMaxSampledFrames);
   for (std::size_t k = 0; k < n; k += step) frames.push_back(&file.image(k));
   return frames;
+}
+
+// "dropped 2 regions (invalid_region unknown 0.4 mm²: ...; ...)" for a frame's warning.
+std::string describe(const std::vector<Repair>& repairs) {
+  std::ostringstream text;
+  text << repairs.size() << (repairs.size() == 1 ? " repair: " : " repairs: ");
+  for (std::size_t k = 0; k < repairs.size(); ++k) {
+    const Repair& r = repairs[k];
+    text << (k ? "; " : "") << r.kind << " (" << r.where << ", " << r.area_changed_mm2
+         << " mm^2): " << r.detail;
+  }
+  return text.str();
 }
 
 }  // namespace
@@ -247,6 +261,13 @@ Result<SweepSetup> prepare_sweep(const acq::SequenceFile& file,
     setup.geometry = full_image_geometry(w, h, spacing_mm);
     setup.sector_from = "full image";
   } else if (source == SectorSource::kPolygon) {
+    // Every slice's fov is this polygon: a self-crossing one would fail every frame.
+    SliceSet check;
+    check.slices.emplace_back().fov = setup.config.sector_polygon_px;
+    if (const Status valid = validate_slice_set(check, "the config's sector polygon"); !valid)
+      return Status::error(valid.message() +
+                           " (the \"sector\" of the segmentation config, in "
+                           "pixels; give a simple polygon)");
     setup.geometry = polygon_geometry(w, h, spacing_mm, setup.config.sector_polygon_px);
     setup.sector_from = "config polygon";
   }
@@ -289,7 +310,7 @@ std::optional<Eigen::Matrix4d> reference_from_probe(const acq::SequenceFile& fil
 }
 
 SweepSegmentation segment_sweep(const acq::SequenceFile& file, const SweepSetup& setup, int every,
-                                const SweepProgress& progress) {
+                                const SweepProgress& progress, const ReadOptions& options) {
   if (every < 1) throw std::invalid_argument("segment_sweep: every must be >= 1");
   if (file.frame_count() &&
       (file.width() != setup.geometry.width_px || file.height() != setup.geometry.height_px))
@@ -315,8 +336,21 @@ SweepSegmentation segment_sweep(const acq::SequenceFile& file, const SweepSetup&
                              : 0.0;
     ++segmented;
     const ImagePlane plane = image_plane(*pose * setup.T_probe_image, pose->block<3, 1>(0, 3));
+    std::vector<Repair> repairs;
     auto slice = make_slice(segmentation.labels, setup.geometry.sector, setup.geometry.sector_px,
-                            plane, setup.config.simplify_mm);
+                            plane, setup.config.simplify_mm, &repairs);
+    if (!repairs.empty()) {
+      const std::string what = "frame " + std::to_string(k) + ": " + describe(repairs);
+      if (options.strict) {
+        out.refused = what;
+        break;
+      }
+      log_warning("segment: " + what);
+      for (Repair& r : repairs) {
+        r.where = "frame " + std::to_string(k) + ", " + r.where;
+        out.repairs.push_back({k, std::move(r)});
+      }
+    }
     if (!slice) {
       ++out.failed;
       log_warning("segment: frame " + std::to_string(k) + " skipped: " + slice.message());

@@ -78,7 +78,7 @@ ImageGeometry scene_geometry(const sim::Probe& probe) {
 }
 
 struct Scores {
-  std::map<int, double> dice;   // per label value (0 background) over pixels known in both
+  std::map<int, double> dice;  // per label value (0 background) over pixels known in both
   std::map<int, double> truth_known_pixels;  // per label: pixels the truth shows (not shadowed)
   double shadow_covered = 1.0;  // share of the truth's shadow the segmentation calls unknown
   double known_lost = 0.0;      // share of the truth's known pixels called unknown
@@ -248,8 +248,8 @@ TEST(Contours, HolesNestedLabelsAndNoOverlaps) {
   ASSERT_EQ(by_label.at(1)->holes.size(), 1u);
   EXPECT_TRUE(by_label.at(2)->holes.empty());
   EXPECT_TRUE(by_label.count(kUnknownLabel));
-  // 35 x 40 pixels traced through pixel centres: 34 x 39 pixel steps of 0.5 mm, minus the hole.
-  EXPECT_NEAR(std::abs(signed_area(by_label.at(1)->outer)), 34 * 39 * 0.25, 1e-9);
+  // 35 x 40 pixels traced a quarter pixel inside their edges: 34.5 x 39.5 pixels of 0.5 mm.
+  EXPECT_NEAR(std::abs(signed_area(by_label.at(1)->outer)), 34.5 * 39.5 * 0.25, 1e-9);
   const auto slice =
       make_slice(map, sector, {{-0.5, -0.5}, {59.5, -0.5}, {59.5, 49.5}, {-0.5, 49.5}}, plane, 2.0);
   ASSERT_TRUE(slice) << slice.message();

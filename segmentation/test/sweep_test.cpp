@@ -5,6 +5,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <stdexcept>
 
 #include "sonoshape/acquisition/sequence_file.hpp"
 #include "sonoshape/core/slice_io.hpp"
@@ -89,6 +90,84 @@ TEST(SegmentSweep, RealPlusSweepRunsThrough) {
   EXPECT_GT(result.slices.slices.size(), 0u);
   EXPECT_TRUE(validate_slice_set(result.slices, "plus"))
       << validate_slice_set(result.slices, "plus").message();
+}
+
+// A real PLUS recording: the fCal phantom in water (820x616, `MFA`, three N-wires), with the
+// calibration of the PLUS configuration that replays it. It used to give no slice at all (the
+// traced sector and the region outlines touched and crossed themselves).
+SweepSegmentation segment_fcal(int every, const std::optional<SegmentationConfig>& config = {}) {
+  const auto path = kData / "plus" / "fCal_Test_Calibration_3NWires.igs.mha";
+  const auto file = acq::read_sequence_file(path);
+  if (!file) throw std::runtime_error(file.message());
+  const auto calibration =
+      read_calibration(kData / "plus" / "PlusDeviceSet_Server_Sim_NwirePhantom.xml");
+  if (!calibration) throw std::runtime_error(calibration.message());
+  const auto setup = prepare_sweep(*file, path, config, *calibration);
+  if (!setup) throw std::runtime_error(setup.message());
+  return segment_sweep(*file, *setup, every);
+}
+
+void expect_valid_slices_on_95_percent(const SweepSegmentation& result) {
+  EXPECT_GE(result.slices.slices.size() + result.coincident, (95 * result.considered + 99) / 100)
+      << result.failed << " failed, " << result.invalid_pose << " with an INVALID pose";
+  const Status valid = validate_slice_set(result.slices, "fCal");
+  EXPECT_TRUE(valid) << valid.message();
+  EXPECT_TRUE(result.repairs.empty());
+}
+
+TEST(SegmentSweep, RealFCalRecordingEveryTenthFrame) {
+  const SweepSegmentation result = segment_fcal(10);
+  EXPECT_EQ(result.frames, 188u);
+  EXPECT_EQ(result.considered, 19u);
+  expect_valid_slices_on_95_percent(result);
+}
+
+TEST(SegmentSweep, RealFCalSpeckleAsItComesGivesValidSlices) {
+  // Without speckle reduction and cleaning, every speckle grain of the wires and the water's
+  // noise is a region: the hardest input for the outlines (necks, corners, holes everywhere).
+  SegmentationConfig raw;
+  raw.median_px = 1;
+  raw.smoothing_mm = 0.0;
+  raw.opening_mm = 0.0;
+  raw.min_region_mm2 = 0.0;
+  raw.shadow_margin_mm = 0.0;
+  const SweepSegmentation result = segment_fcal(10, raw);
+  std::size_t regions = 0;
+  for (const LabeledSlice& s : result.slices.slices) regions += s.regions.size();
+  EXPECT_GT(regions, 5 * result.slices.slices.size());
+  expect_valid_slices_on_95_percent(result);
+}
+
+// Small frames (96 and 128 px, both probe kinds) used to fail the same way.
+TEST(SegmentSweep, SmallSimulatedFramesGiveSlices) {
+  sim::Phantom phantom;
+  Eigen::Affine3d place = Eigen::Affine3d::Identity();
+  place.translation() = Vec3(-3, 20, 0);
+  phantom.add(1, "organ", sim::make_sphere(10.0), place);
+  place.translation() = Vec3(8, 12, 0);
+  phantom.add(2, "lesion", sim::make_sphere(4.0), place);
+  sim::TrajectoryOptions motion;
+  motion.duration_s = 0.45;
+  motion.sweep_length_mm = 8.0;
+  const auto acquisition = sim::acquire(sim::Trajectory(motion), sim::TrackerOptions{}, 10, 20.0);
+  for (const int size : {96, 128})
+    for (const bool convex : {false, true}) {
+      const sim::Probe probe(convex ? sim::convex_probe_geometry(size, size)
+                                    : sim::linear_probe_geometry(size, size));
+      const sim::BModeSimulator simulator(phantom, probe);
+      const sim::SimulatedSweep sweep = sim::simulate_sweep(simulator, acquisition, 5);
+      const auto setup =
+          prepare_sweep(sweep.bmode, "memory.igs.mha", std::optional<SegmentationConfig>{},
+                        std::optional<Eigen::Matrix4d>{});
+      ASSERT_TRUE(setup) << setup.message();
+      const SweepSegmentation result = segment_sweep(sweep.bmode, *setup);
+      SCOPED_TRACE(std::to_string(size) + (convex ? " px convex" : " px linear"));
+      EXPECT_EQ(result.failed, 0u);
+      EXPECT_TRUE(result.repairs.empty());
+      EXPECT_EQ(result.slices.slices.size() + result.coincident + result.invalid_pose, 10u);
+      const Status valid = validate_slice_set(result.slices, "small frames");
+      EXPECT_TRUE(valid) << valid.message();
+    }
 }
 
 TEST(SegmentSweep, CalibrationFromJson) {

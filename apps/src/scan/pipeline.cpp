@@ -358,6 +358,15 @@ void ScanPipeline::segmentation_loop() {
           return Status::error(std::string("segmentation threw: ") + e.what());
         }
       }();
+      if (const std::vector<Repair> repairs = segmentation_->take_repairs(); !repairs.empty()) {
+        const std::size_t index = candidate->frame.frame.index;
+        std::string text;
+        for (const Repair& r : repairs)
+          text += (text.empty() ? "" : "; ") + r.kind + " (" + r.where + "): " + r.detail;
+        log_warning("scan: frame " + std::to_string(index) + ": " + text);
+        std::lock_guard lock(state_mutex_);
+        for (const Repair& r : repairs) repairs_.add(index, r);
+      }
       if (!segmented) {
         withdraw(candidate->key);
         {
@@ -519,6 +528,7 @@ ScanSummary ScanPipeline::finish() {
     summary.update_ms_max =
         update_ms_.empty() ? 0.0 : *std::max_element(update_ms_.begin(), update_ms_.end());
     summary.duration_s = end_s_ - start_s_;
+    summary.repairs = repairs_;
   }
   summary.frame_source = source_.frames->describe() + ": " + source_state(*source_.frames);
   summary.pose_source = source_.poses->describe() + ": " + source_state(*source_.poses);

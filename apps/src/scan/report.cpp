@@ -21,6 +21,17 @@ const char* to_string(StopReason reason) {
   return "unknown";
 }
 
+void RepairReport::add(std::size_t frame, const Repair& repair) {
+  ++counts[repair.kind];
+  if (first.size() < kMaxListed) first.push_back({frame, repair});
+}
+
+std::size_t RepairReport::total() const {
+  std::size_t n = 0;
+  for (const auto& [kind, count] : counts) n += count;
+  return n;
+}
+
 LatencyStats latency_stats(std::vector<double> samples_s) {
   LatencyStats stats;
   stats.count = samples_s.size();

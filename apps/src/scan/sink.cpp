@@ -68,6 +68,15 @@ std::string summary_json(const ScanSummary& summary) {
                       {"max", summary.latency.max_s}};
   doc["update_ms"] = {{"median", summary.update_ms_median}, {"max", summary.update_ms_max}};
   doc["duration_s"] = summary.duration_s;
+  nlohmann::json listed = nlohmann::json::array();
+  for (const RepairReport::Entry& e : summary.repairs.first)
+    listed.push_back({{"frame", e.frame},
+                      {"kind", e.repair.kind},
+                      {"where", e.repair.where},
+                      {"detail", e.repair.detail},
+                      {"area_changed", e.repair.area_changed_mm2}});
+  doc["repairs"] = {
+      {"total", summary.repairs.total()}, {"by_kind", summary.repairs.counts}, {"first", listed}};
   return doc.dump(2);
 }
 

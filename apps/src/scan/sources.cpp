@@ -26,6 +26,7 @@ Result<ScanSource> open_replay(const SourceRequest& request, const std::string& 
   const std::filesystem::path path(path_text);
   auto file = acq::read_sequence_file(path);
   if (!file) return file.status();
+  if (const Status tracked = acq::require_tracking(*file, path); !tracked) return tracked;
   auto shared = std::make_shared<const acq::SequenceFile>(std::move(*file));
   auto prepared = seg::prepare_sweep(*shared, path, request.segmentation, request.calibration);
   if (!prepared) return prepared.status();

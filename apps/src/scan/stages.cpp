@@ -25,11 +25,14 @@ Result<LabeledSlice> SegmenterStage::segment(const TrackedFrame& frame) {
   const Eigen::Matrix4d T_reference_probe = frame.T_reference_probe.matrix();
   const seg::ImagePlane plane = seg::image_plane(T_reference_probe * setup_.T_probe_image,
                                                  T_reference_probe.block<3, 1>(0, 3));
+  repairs_.clear();
   auto slice = seg::make_slice(segmentation.labels, g.sector, g.sector_px, plane,
-                               setup_.segmentation.simplify_mm);
+                               setup_.segmentation.simplify_mm, &repairs_);
   if (!slice) return slice.status();
   slice->timestamp_s = frame.frame.timestamp_s;
   return slice;
 }
+
+std::vector<Repair> SegmenterStage::take_repairs() { return std::exchange(repairs_, {}); }
 
 }  // namespace sonoshape::scan

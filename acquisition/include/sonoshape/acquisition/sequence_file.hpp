@@ -1,8 +1,11 @@
 #pragma once
-// PLUS tracked-frame sequence files (.igs.mha, .seq.mha, .mha): a MetaImage text header with
-// global fields and per-frame `Seq_FrameNNNN_<Name> = value` fields, then W x H x N 8-bit
-// pixels, zlib-compressed (one stream for all frames) or raw. Every field is kept, unknown ones
-// too, in file order, so a file read and written again keeps all of them.
+// Tracked-frame sequence files, read into one model whatever the format:
+// - PLUS MetaImage (.igs.mha, .seq.mha, .mha): a text header with global fields and per-frame
+//   `Seq_FrameNNNN_<Name> = value` fields, then W x H x N 8-bit pixels, zlib-compressed (one
+//   stream for all frames) or raw. Every field is kept, unknown ones too, in file order, so a
+//   file read and written again keeps all of them.
+// - NRRD (.igs.nrrd from PLUS, .seq.nrrd from 3D Slicer's Sequences module, .nrrd, .nhdr):
+//   see read_sequence_file. Sequences are written as MetaImage only.
 #include <Eigen/Core>
 #include <filesystem>
 #include <optional>
@@ -91,12 +94,49 @@ class SequenceFile {
   std::vector<FieldList> frame_fields_;
 };
 
-/// Reads a sequence file. Supports NDims 2 (one frame) or 3, ElementType MET_UCHAR with one
-/// channel, `ElementDataFile = LOCAL`, compressed (zlib) or raw. Fails with the file, the header
-/// line or frame, and what to do on: unreadable files, lines that are not `Key = value`, missing
-/// or invalid DimSize / ElementType / NDims, per-frame fields of frames past DimSize, truncated
-/// or corrupt pixel data.
+/// Reads a sequence file; the content picks the format: a first line `NRRD0001`..`NRRD0005` is
+/// NRRD, anything else is read as MetaImage.
+///
+/// MetaImage: NDims 2 (one frame) or 3, ElementType MET_UCHAR with one channel,
+/// `ElementDataFile = LOCAL`, compressed (zlib) or raw.
+///
+/// NRRD (docs/formats/sequences.md has the details):
+/// - axes: two image axes (kind `domain`/`space`, the first two longer than one sample; a third
+///   spatial axis must have size 1) and at most one frame axis (kind `list` or `time`, first or
+///   last); other kinds only with size 1. PLUS: `kinds: domain domain list`; Slicer:
+///   `kinds: domain domain domain list` with sizes `W H 1 N` (or the older `list domain domain
+///   domain`). Without a frame axis the file is one frame.
+/// - samples: type uint8 (all spellings), or 8/16-bit signed/unsigned when every value is in
+///   0..255 (16-bit needs `endian`); encoding raw, gzip/gz or text; attached after the blank
+///   line or in one detached `data file` (relative to the header), with `line skip` and, for
+///   raw, `byte skip` (-1 too).
+/// - PLUS key/values `Seq_FrameNNNN_<Name>:=value` become the frame's fields (PLUS's NRRD
+///   `Status` is renamed `ImageStatus`, its MetaImage name); `ultrasound image orientation` and
+///   `ultrasound image type` become UltrasoundImageOrientation / UltrasoundImageType.
+/// - Slicer: `axis <A> index values` of the frame axis give each frame's `Timestamp` (seconds)
+///   when the index type is numeric (or absent), else a `SequenceIndexValue` field (URL-decoded);
+///   `axis <A> item <I> <Name>:=value` becomes field <Name> of frame I. With a 3D space,
+///   `space directions` and `space origin` give the global field `ImageToReferenceTransform`
+///   (pixel (i, j, 0) to the file's space, e.g. LPS mm): one geometry for every frame, since a
+///   .seq.nrrd holds one. Slicer's separate transform sequences (tracking) are not read.
+/// - every other field and key/value is kept as a global field under its own name; the layout
+///   fields (dimension, type, sizes, encoding, endian, kinds, data file, byte/line skip) are
+///   consumed.
+///
+/// Fails with the file, the header line or field or frame, and what to do on: unreadable
+/// files, malformed lines, missing or invalid layout fields, unsupported types or encodings
+/// (bzip2, hex, float, RGB), 3D volumes per frame, several data files, per-frame fields of
+/// frames that do not exist, index values that do not match the frame count, truncated or
+/// corrupt data.
 Result<SequenceFile> read_sequence_file(const std::filesystem::path& path);
+
+/// Succeeds when some frame of `file` (read from `path`) has a `<probe_transform>Transform`
+/// field, the per-frame tracking that `segment` and `scan --source replay:` need. Fails
+/// naming the file and the transforms it has; for an image-only Slicer sequence (global
+/// ImageToReferenceTransform, no per-frame tracking) the message says so and how to get a
+/// tracked recording.
+Status require_tracking(const SequenceFile& file, const std::filesystem::path& path,
+                        std::string_view probe_transform = "ProbeToTracker");
 
 struct SequenceWriteOptions {
   bool compress = true;       ///< zlib stream (CompressedData = True) or raw pixels

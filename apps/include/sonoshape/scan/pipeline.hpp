@@ -141,6 +141,7 @@ class ScanPipeline {
   std::vector<double> latencies_s_;
   std::vector<double> update_ms_;
   std::vector<std::string> errors_;
+  RepairReport repairs_;
   std::optional<StopReason> stop_reason_;
   MeshSet meshes_;
   int stages_running_ = 0;

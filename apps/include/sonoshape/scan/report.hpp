@@ -2,10 +2,12 @@
 // What a scan reports while it runs and when it ends: counters of frames and slices, drops by
 // reason, frame-to-mesh latencies and update times.
 #include <cstddef>
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
 
+#include "sonoshape/core/repairs.hpp"
 #include "sonoshape/core/scan_state.hpp"
 #include "sonoshape/recon/reconstruct.hpp"
 
@@ -65,6 +67,22 @@ struct LatencyStats {
 /// Nearest-rank percentiles of `samples_s` (copied and sorted).
 LatencyStats latency_stats(std::vector<double> samples_s);
 
+/// What the segmentation repaired to make frames' polygons valid (seg::make_slice): counts by
+/// kind, and the first few repairs with their frame index.
+struct RepairReport {
+  /// Repairs listed in `first`; the counts go on beyond it.
+  static constexpr std::size_t kMaxListed = 20;
+  std::map<std::string, std::size_t> counts;  ///< by Repair::kind
+  struct Entry {
+    std::size_t frame = 0;  ///< the frame's index in its source
+    Repair repair;
+  };
+  std::vector<Entry> first;
+
+  void add(std::size_t frame, const Repair& repair);
+  std::size_t total() const;
+};
+
 /// Why the scan stopped.
 enum class StopReason { kSourceEnded, kSourceFailed, kStopRequested, kDuration, kMaxSlices };
 
@@ -82,6 +100,7 @@ struct ScanSummary {
   double update_ms_median = 0.0;    ///< wall time of the reconstruction updates
   double update_ms_max = 0.0;
   double duration_s = 0.0;  ///< wall time from start() to the last stage's end
+  RepairReport repairs;     ///< what the segmentation repaired
 };
 
 }  // namespace sonoshape::scan

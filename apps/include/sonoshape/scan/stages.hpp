@@ -3,9 +3,11 @@
 // frame -> slice) and reconstruction (slices -> meshes), so that the pipeline can be tested
 // with fakes and the engines swapped without touching the threads.
 #include <memory>
+#include <vector>
 
 #include "sonoshape/core/frame.hpp"
 #include "sonoshape/core/mesh.hpp"
+#include "sonoshape/core/repairs.hpp"
 #include "sonoshape/core/slice.hpp"
 #include "sonoshape/core/status.hpp"
 #include "sonoshape/recon/reconstructor.hpp"
@@ -20,6 +22,9 @@ class SegmentationStage {
   /// The slice of `frame` in the reference frame (fov = the sector, timestamp = the frame's),
   /// or why there is none. May throw; the pipeline counts that as a failed frame.
   virtual Result<LabeledSlice> segment(const TrackedFrame& frame) = 0;
+  /// What the last segment() repaired to make the slice valid (dropped regions), handed over
+  /// once; none by default.
+  virtual std::vector<Repair> take_repairs() { return {}; }
 };
 
 /// The segmentation of segmentation/ (seg::segment_frame + seg::make_slice), as
@@ -30,9 +35,11 @@ class SegmenterStage final : public SegmentationStage {
   explicit SegmenterStage(ScanSetup setup);
   /// Fails for frames whose size differs from the setup's geometry.
   Result<LabeledSlice> segment(const TrackedFrame& frame) override;
+  std::vector<Repair> take_repairs() override;
 
  private:
   ScanSetup setup_;
+  std::vector<Repair> repairs_;  // of the last segment()
 };
 
 /// Slices -> meshes, incrementally. Called from the pipeline's reconstruction thread only.

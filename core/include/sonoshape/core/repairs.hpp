@@ -11,8 +11,8 @@ namespace sonoshape {
 /// One repair of input data.
 struct Repair {
   /// Stable identifier a program can branch on, e.g. "self_intersection", "plane_refit",
-  /// "rounding_overlap", "repeated_points", "off_plane_vertices", "duplicate_slice",
-  /// "unused_labels" (docs/formats/slices.md lists them all).
+  /// "rounding_overlap", "repeated_points", "off_plane_vertices", "duplicate_slice"
+  /// (docs/formats/slices.md lists them all).
   std::string kind;
   /// The element as messages name it ("plane 12 (line 3456), component 2"); empty for the file.
   std::string where;

@@ -4,6 +4,7 @@
 #include <vector>
 
 #include "sonoshape/core/image.hpp"
+#include "sonoshape/core/repairs.hpp"
 #include "sonoshape/core/slice.hpp"
 #include "sonoshape/core/status.hpp"
 
@@ -31,19 +32,31 @@ struct ImagePlane {
 ImagePlane image_plane(const Eigen::Matrix4d& T_reference_image, const Vec3& probe_origin_mm);
 
 /// The regions of a label map: for every material id and for unknown pixels inside `sector`
-/// (pixels outside it are left to the slice's fov), contours from cv::findContours with
-/// RETR_CCOMP (outer rings and holes), simplified with approxPolyDP by `tolerance_mm` (0: the
-/// exact pixel-centre outlines), mapped into the plane. Components of fewer than 3 contour points
-/// are dropped.
+/// (pixels outside it are left to the slice's fov), outer rings and holes mapped into the plane.
+/// Valid by construction (docs/segmentation.md, "Polygons"): each label's mask loses the pixels
+/// that touch only diagonally (a pinch), is traced at twice the resolution (cv::findContours,
+/// RETR_CCOMP) so that one-pixel necks keep a width, and all rings are simplified together by
+/// `tolerance_mm` with CGAL's topology-preserving polyline simplification (0: the exact
+/// outlines, a quarter pixel inside the pixel edges). Rings are simple, holes lie strictly
+/// inside their outer ring, and no two rings touch. A ring that still comes out degenerate is
+/// dropped and recorded in `repairs` (kind "degenerate_region"; `where` names the label).
 std::vector<Region> label_map_regions(const LabelImage& labels, const ImageU8& sector,
-                                      const ImagePlane& plane, double tolerance_mm);
+                                      const ImagePlane& plane, double tolerance_mm,
+                                      std::vector<Repair>* repairs = nullptr);
 
-/// A LabeledSlice of a segmented frame: the plane, the fov (`sector_px` mapped into the plane),
-/// and the regions simplified by `tolerance_mm` where that gives a valid slice, else by halved
-/// tolerances down to the exact outlines. Fails (with validate_slice_set's message) only when
-/// even the exact outlines are invalid.
+/// Drops every region of `slice` that is not valid on its own (validate_slice_set: a ring that
+/// crosses or touches itself, a hole outside its outer ring, ...) and records each in `repairs`
+/// (kind "invalid_region", the label in `where`, the check's message, the region's area in mm²).
+void drop_invalid_regions(LabeledSlice& slice, std::vector<Repair>* repairs);
+
+/// A LabeledSlice of a segmented frame: the plane, the fov (`sector_px` mapped into the plane)
+/// and the regions of label_map_regions. The slice is checked with validate_slice_set; should
+/// the simplified polygons fail, the exact outlines are taken, and should one of those fail,
+/// that region is dropped and recorded in `repairs` (kind "invalid_region", with its area).
+/// Fails (with validate_slice_set's message) only when the fov itself is invalid or dropping
+/// regions does not help.
 Result<LabeledSlice> make_slice(const LabelImage& labels, const ImageU8& sector,
                                 const Ring2& sector_px, const ImagePlane& plane,
-                                double tolerance_mm);
+                                double tolerance_mm, std::vector<Repair>* repairs = nullptr);
 
 }  // namespace sonoshape::seg

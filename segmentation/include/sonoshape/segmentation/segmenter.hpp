@@ -30,9 +30,10 @@ ImageGeometry full_image_geometry(int width_px, int height_px, double spacing_mm
 /// below the polygon's top. Throws std::invalid_argument for fewer than 3 points.
 ImageGeometry polygon_geometry(int width_px, int height_px, double spacing_mm,
                                const Ring2& sector_px);
-/// The sector found from the frames: pixels whose median-filtered grey exceeds `signal_grey`
-/// in at least one frame; the largest such component with its holes filled, its outline
-/// simplified by one pixel. Falls back to the full image when nothing carries signal.
+/// The sector found from the frames: the convex hull of the pixels whose median-filtered grey
+/// exceeds `signal_grey` in at least one frame (specks removed by an opening); a hull is a
+/// simple polygon by construction and fits a linear probe's rectangle and a convex probe's fan.
+/// Falls back to the full image when the hull covers less than 1% of it.
 ImageGeometry auto_geometry(const std::vector<const GreyImage*>& frames, double spacing_mm,
                             double signal_grey);
 

@@ -10,6 +10,7 @@
 #include <string>
 
 #include "sonoshape/acquisition/sequence_file.hpp"
+#include "sonoshape/core/repairs.hpp"
 #include "sonoshape/core/slice.hpp"
 #include "sonoshape/core/status.hpp"
 #include "sonoshape/segmentation/config.hpp"
@@ -57,6 +58,12 @@ Result<SweepSetup> prepare_sweep(const acq::SequenceFile& file,
 /// file has no ReferenceToTracker); none when a status is not OK or a transform is unreadable.
 std::optional<Eigen::Matrix4d> reference_from_probe(const acq::SequenceFile& file, std::size_t k);
 
+/// A repair the segmenter made in one frame (see make_slice).
+struct FrameRepair {
+  std::size_t frame = 0;  ///< index of the frame in the file
+  Repair repair;
+};
+
 /// What segment_sweep did.
 struct SweepSegmentation {
   SliceSet slices;
@@ -66,15 +73,23 @@ struct SweepSegmentation {
   std::size_t coincident = 0;     ///< skipped: same plane as the previous slice
   std::size_t failed = 0;         ///< skipped: no valid polygons (see the log)
   double unknown_fraction = 0.0;  ///< mean share of the sector left unknown
+  /// What was dropped to make the polygons of a frame valid, in frame order.
+  std::vector<FrameRepair> repairs;
+  /// With ReadOptions::strict: the first repair as an error ("frame 12, unknown: ..."), after
+  /// which the sweep stopped; empty otherwise.
+  std::string refused;
 };
 
 /// Called with the number of considered frames done.
 using SweepProgress = std::function<void(std::size_t done)>;
 
 /// Segments every `every`-th frame (from frame 0) of `file` into one slice each (in the
-/// reference frame, fov = the sector, timestamp from the file). Throws std::invalid_argument
-/// when `every` < 1 or the frames do not match the setup's geometry.
+/// reference frame, fov = the sector, timestamp from the file). A frame whose polygons needed a
+/// repair logs one warning naming the frame and what was dropped; with `options.strict` the
+/// first such frame stops the sweep instead (SweepSegmentation::refused). Throws
+/// std::invalid_argument when `every` < 1 or the frames do not match the setup's geometry.
 SweepSegmentation segment_sweep(const acq::SequenceFile& file, const SweepSetup& setup,
-                                int every = 1, const SweepProgress& progress = {});
+                                int every = 1, const SweepProgress& progress = {},
+                                const ReadOptions& options = {});
 
 }  // namespace sonoshape::seg

@@ -1,0 +1,132 @@
+// One PLUS recording saved as MetaImage and as NRRD (data/plus/NwirePhantomFreehand.igs.*) must
+// segment to the same slice set through `sonoshape segment`; an image-only Slicer sequence is
+// refused with a message that says why and what to record instead.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include "sonoshape/core/slice_io.hpp"
+#include "sonoshape/testing/command.hpp"
+#include "sonoshape/testing/temp_dir.hpp"
+
+namespace {
+
+namespace fs = std::filesystem;
+
+const fs::path kPlus = fs::path(SONOSHAPE_DATA_DIR) / "plus";
+// The spine recording's calibration: the same 820x616 PLUS setup (ImageToProbe with ~0.085 mm
+// pixels); any calibration serves to compare the two copies.
+const fs::path kCalibration = kPlus / "PlusDeviceSet_SpinePhantomFreehandReconstructionOnly.xml";
+
+sonoshape::testing::CommandResult run(const std::string& arguments, const fs::path& log) {
+  return sonoshape::testing::run_command(SONOSHAPE_BINARY, arguments, log);
+}
+
+std::string bytes(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+}
+
+TEST(PlusFormats, MhaAndNrrdCopiesSegmentToTheSameSliceSet) {
+  sonoshape::testing::TempDir dir;
+  // Models for the N-wire phantom: bright wire echoes in anechoic water. The automatic
+  // two-class split calls the water "no signal" and leaves every slice unknown, which would
+  // compare nothing but the planes; with these the wires are material regions.
+  const fs::path config = dir.path() / "nwire.json";
+  {
+    std::ofstream out(config);
+    out << R"({"format": "sonoshape-segmentation", "version": 1,
+               "background": {"name": "water", "grey_mean": 5, "grey_std": 10},
+               "labels": [{"id": 1, "name": "wire", "grey_mean": 150, "grey_std": 40}],
+               "shadow_fraction": 1.0, "min_region_mm2": 0.5, "opening_mm": 0.2})";
+  }
+  std::string outputs[2];
+  int index = 0;
+  for (const char* name : {"NwirePhantomFreehand.igs.mha", "NwirePhantomFreehand.igs.nrrd"}) {
+    const fs::path out = dir.path() / (std::string(name) + ".slices.json");
+    const auto result =
+        run("segment " + (kPlus / name).string() + " --calibration " + kCalibration.string() +
+                " --config " + config.string() + " --every 4 -o " + out.string(),
+            dir.path() / (std::string(name) + ".log"));
+    ASSERT_EQ(result.exit_code, 0) << name << ":\n" << result.output;
+    outputs[index++] = out.string();
+  }
+  const auto mha = sonoshape::read_slice_set(outputs[0]);
+  ASSERT_TRUE(mha) << mha.message();
+  const auto nrrd = sonoshape::read_slice_set(outputs[1]);
+  ASSERT_TRUE(nrrd) << nrrd.message();
+  // 97 frames, every 4th: 25 considered; each that segments gives a slice.
+  EXPECT_GE(mha->slices.size(), 20u);
+  ASSERT_EQ(mha->slices.size(), nrrd->slices.size());
+  std::size_t wires = 0;
+  for (const auto& slice : mha->slices)
+    for (const auto& region : slice.regions) wires += region.label == 1 ? 1 : 0;
+  EXPECT_GE(wires, 20u);  // the comparison covers segmented regions, not only planes
+  for (std::size_t s = 0; s < mha->slices.size(); ++s) {
+    const auto& a = mha->slices[s];
+    const auto& b = nrrd->slices[s];
+    EXPECT_EQ(a.origin_mm, b.origin_mm) << "slice " << s;
+    EXPECT_EQ(a.u, b.u) << "slice " << s;
+    EXPECT_EQ(a.v, b.v) << "slice " << s;
+    EXPECT_EQ(a.timestamp_s, b.timestamp_s) << "slice " << s;
+    EXPECT_EQ(a.fov, b.fov) << "slice " << s;
+    ASSERT_EQ(a.regions.size(), b.regions.size()) << "slice " << s;
+    for (std::size_t r = 0; r < a.regions.size(); ++r) {
+      EXPECT_EQ(a.regions[r].label, b.regions[r].label);
+      EXPECT_EQ(a.regions[r].outer, b.regions[r].outer) << "slice " << s << " region " << r;
+      EXPECT_EQ(a.regions[r].holes, b.regions[r].holes) << "slice " << s << " region " << r;
+    }
+  }
+  // And the files themselves, byte for byte.
+  EXPECT_EQ(bytes(outputs[0]), bytes(outputs[1]));
+}
+
+// A NRRD sweep finds its calibration in <name>.plus.xml beside it, as a MetaImage one does.
+TEST(PlusFormats, NrrdSweepFindsItsSidecarCalibration) {
+  sonoshape::testing::TempDir dir;
+  fs::copy_file(kPlus / "NwirePhantomFreehand.igs.nrrd", dir.path() / "sweep.igs.nrrd");
+  fs::copy_file(kCalibration, dir.path() / "sweep.plus.xml");
+  const auto result = run("segment " + (dir.path() / "sweep.igs.nrrd").string() +
+                              " --every 24 -o " + (dir.path() / "s.json").string(),
+                          dir.path() / "log");
+  ASSERT_EQ(result.exit_code, 0) << result.output;
+  EXPECT_NE(result.output.find("calibration from " + (dir.path() / "sweep.plus.xml").string()),
+            std::string::npos)
+      << result.output;
+}
+
+TEST(PlusFormats, ImageOnlySlicerSequenceIsRefusedWithTheReason) {
+  sonoshape::testing::TempDir dir;
+  const fs::path path = dir.path() / "us.seq.nrrd";
+  {
+    std::ofstream out(path, std::ios::binary);
+    out << "NRRD0004\n"
+           "type: unsigned char\n"
+           "dimension: 4\n"
+           "space: left-posterior-superior\n"
+           "sizes: 64 48 1 3\n"
+           "space directions: (0.3,0,0) (0,0,-0.3) (0,0.3,0) none\n"
+           "kinds: domain domain domain list\n"
+           "labels: \"\" \"\" \"\" \"frame\"\n"
+           "endian: little\n"
+           "encoding: raw\n"
+           "space origin: (0,0,0)\n"
+           "DataNodeClassName:=vtkMRMLScalarVolumeNode\n"
+           "axis 3 index type:=numeric\n"
+           "axis 3 index values:=0 0.1 0.2\n"
+           "\n"
+        << std::string(64 * 48 * 3, '\x60');
+  }
+  const auto result = run("segment " + path.string() + " --calibration " + kCalibration.string() +
+                              " -o " + (dir.path() / "s.json").string(),
+                          dir.path() / "log");
+  EXPECT_EQ(result.exit_code, 1);
+  EXPECT_NE(result.output.find("image-only sequence (3D Slicer .seq.nrrd)"), std::string::npos)
+      << result.output;
+  EXPECT_NE(result.output.find(".igs.nrrd"), std::string::npos) << result.output;
+  EXPECT_FALSE(fs::exists(dir.path() / "s.json"));
+}
+
+}  // namespace
