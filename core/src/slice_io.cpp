@@ -680,28 +680,23 @@ std::optional<std::size_t> snap_sliver(Region& a, Region& b, const OverlapMeasur
   return changed;
 }
 
-// Snaps the rounding overlaps of one slice; records one repair per pair of regions.
 // Snaps regions a and b of a slice when their overlap is a rounding sliver; records the repair.
-// Returns whether it snapped them.
-bool snap_pair(LabeledSlice& slice, std::size_t index, std::size_t a, std::size_t b,
-               std::vector<std::optional<Region>>& clean, double tol, const std::string& units,
-               const SliceNaming& naming, RepairLog& repairs) {
-  auto segments = [](const Region& region) {
-    Segments out = segments_of(to_points(region.outer));
-    for (const Ring2& hole : region.holes) add_segments(to_points(hole), out);
-    return out;
-  };
-  // Regions whose boundaries do not meet overlap by whole rings: never a sliver.
-  if (!boundaries_meet(segments(*clean[a]), segments(*clean[b]))) return false;
-  const ExactPolygonWithHoles exact_a = to_exact(clean[a]->outer, clean[a]->holes);
-  const ExactPolygonWithHoles exact_b = to_exact(clean[b]->outer, clean[b]->holes);
-  if (!CGAL::do_intersect(exact_a, exact_b)) return false;  // cheaper than measuring
+void snap_pair(LabeledSlice& slice, std::size_t index, std::size_t a, std::size_t b,
+               const std::string& units, const SliceNaming& naming, RepairLog& repairs) {
+  const std::optional<Region> clean_a = clean_region(slice.regions[a]);
+  const std::optional<Region> clean_b = clean_region(slice.regions[b]);
+  if (!clean_a || !clean_b) return;
+  // An earlier snap of this slice may have removed this overlap already.
+  const ExactPolygonWithHoles exact_a = to_exact(clean_a->outer, clean_a->holes);
+  const ExactPolygonWithHoles exact_b = to_exact(clean_b->outer, clean_b->holes);
+  if (!CGAL::do_intersect(exact_a, exact_b)) return;  // cheaper than measuring
   const auto overlap = measure_overlap(exact_a, exact_b);
-  if (!overlap || overlap->width > tol) return false;
-  Region snapped_a = *clean[a];
-  Region snapped_b = *clean[b];
+  const double tol = kRoundingOverlapRelTol * slice_extent(slice);
+  if (!overlap || overlap->width > tol) return;
+  Region snapped_a = *clean_a;
+  Region snapped_b = *clean_b;
   const auto changed = snap_sliver(snapped_a, snapped_b, *overlap, tol);
-  if (!changed) return false;  // the validation reports it
+  if (!changed) return;  // the validation reports it
   std::ostringstream width;
   width.precision(2);
   width << overlap->width;
@@ -715,47 +710,22 @@ bool snap_pair(LabeledSlice& slice, std::size_t index, std::size_t a, std::size_
                    " snapped onto the shared boundary)",
                overlap->area});
   for (auto [k, snapped] : {std::pair{a, &snapped_a}, std::pair{b, &snapped_b}}) {
-    slice.regions[k].outer = snapped->outer;
-    slice.regions[k].holes = snapped->holes;
-    clean[k] = std::move(*snapped);
-  }
-  return true;
-}
-
-// Snaps the rounding overlaps of one slice. A snap moves vertices that a third region may share,
-// so passes repeat (a few at most) until one snaps nothing.
-void snap_slice_overlaps(LabeledSlice& slice, std::size_t index, const std::string& units,
-                         const SliceNaming& naming, RepairLog& repairs) {
-  constexpr int kMaxPasses = 3;
-  const double tol = kRoundingOverlapRelTol * slice_extent(slice);
-  std::vector<std::optional<Region>> clean;
-  for (const Region& r : slice.regions) clean.push_back(clean_region(r));
-  std::vector<Box2> boxes;
-  for (const auto& r : clean)
-    boxes.push_back(r ? box_of(r->outer) : Box2{Vec2::Zero(), Vec2::Zero()});
-  for (int pass = 0; pass < kMaxPasses; ++pass) {
-    bool snapped = false;
-    for (std::size_t a = 0; a < clean.size(); ++a)
-      for (std::size_t b = a + 1; b < clean.size(); ++b)
-        if (clean[a] && clean[b] && boxes[a].interiors_overlap(boxes[b]) &&
-            snap_pair(slice, index, a, b, clean, tol, units, naming, repairs)) {
-          snapped = true;
-          boxes[a] = box_of(clean[a]->outer);
-          boxes[b] = box_of(clean[b]->outer);
-        }
-    if (!snapped) break;
+    slice.regions[k].outer = std::move(snapped->outer);
+    slice.regions[k].holes = std::move(snapped->holes);
   }
 }
 
 }  // namespace
 
-void snap_rounding_overlaps(SliceSet& set, const SliceNaming& naming, RepairLog& repairs) {
-  for (std::size_t i = 0; i < set.slices.size(); ++i)
-    snap_slice_overlaps(set.slices[i], i, set.units, naming, repairs);
+void snap_rounding_overlaps(SliceSet& set, const RegionPairs& pairs, const SliceNaming& naming,
+                            RepairLog& repairs) {
+  for (const RegionPair& pair : pairs)
+    snap_pair(set.slices[pair.slice], pair.slice, pair.a, pair.b, set.units, naming, repairs);
 }
 
 Status validate_slice_set_named(const SliceSet& set, const std::string& source_name,
-                                const SliceNaming& naming, SlicePairs* identical) {
+                                const SliceNaming& naming, SlicePairs* identical,
+                                RegionPairs* thin_overlaps) {
   std::vector<std::string> errors;
   auto fail = [&](const std::string& where, const std::string& what) {
     errors.push_back(source_name + ": " + where + ": " + what);
@@ -940,6 +910,10 @@ Status validate_slice_set_named(const SliceSet& set, const std::string& source_n
               overlapping ? measure_overlap(exact_a, exact_b) : std::nullopt;
           if (!overlap) continue;
           const bool thin = overlap->width <= kRoundingOverlapRelTol * slice_extent(s);
+          if (thin && thin_overlaps) {
+            thin_overlaps->push_back({i, a, b});
+            continue;
+          }
           fail(where, naming.region(i, a, s.regions[a].label) + " and " +
                           naming.region(i, b, s.regions[b].label) + " overlap by " +
                           overlap_text(s, *overlap, set.units) +
@@ -1030,15 +1004,25 @@ void merge_identical_slices(SliceSet& set, const SlicePairs& identical, const Sl
 
 Result<SliceSet> finish_parsed_set(SliceSet set, const std::string& source_name,
                                    const SliceNaming& naming, RepairLog& repairs) {
-  try {
-    // Before the validation, which refuses every overlap that remains.
-    snap_rounding_overlaps(set, naming, repairs);
-  } catch (const RepairRefused& refused) {
-    return Status::error(refused.message);
-  }
+  // Rounding slivers are snapped once the set is otherwise valid (the snap needs valid
+  // polygons), then the set is validated again: a snap moves vertices that a third region may
+  // share, so a few rounds may be needed. What remains is an error.
+  constexpr int kSnapRounds = 3;
   SlicePairs identical;
-  if (Status status = validate_slice_set_named(set, source_name, naming, &identical); !status)
-    return status;
+  RegionPairs thin;
+  Status status = validate_slice_set_named(set, source_name, naming, &identical, &thin);
+  for (int round = 0; status && !thin.empty(); ++round) {
+    try {
+      snap_rounding_overlaps(set, thin, naming, repairs);
+    } catch (const RepairRefused& refused) {
+      return Status::error(refused.message);
+    }
+    identical.clear();
+    thin.clear();
+    status = validate_slice_set_named(set, source_name, naming, &identical,
+                                      round + 1 < kSnapRounds ? &thin : nullptr);
+  }
+  if (!status) return status;
   try {
     merge_identical_slices(set, identical, naming, repairs);
   } catch (const RepairRefused& refused) {

@@ -124,18 +124,28 @@ bool ring_inside_ring(const Ring2& inner, const Ring2& outer);
 /// Pairs (earlier, later) of coincident slices whose contents are identical.
 using SlicePairs = std::vector<std::pair<std::size_t, std::size_t>>;
 
-/// validate_slice_set with the naming of the caller's format. Identical coincident slices are not
-/// an error: they are returned in `identical` (when non-null) for the reader to merge.
-Status validate_slice_set_named(const SliceSet& set, const std::string& source_name,
-                                const SliceNaming& naming, SlicePairs* identical);
+/// Regions `a` < `b` of slice `slice`.
+struct RegionPair {
+  std::size_t slice = 0, a = 0, b = 0;
+};
+using RegionPairs = std::vector<RegionPair>;
 
-/// Snaps every overlap thinner than kRoundingOverlapRelTol between two regions of one slice:
-/// vertices of the later region within that tolerance of the earlier one's vertices move onto
-/// them, and vertices near the other region's edges are inserted into those edges, so the two
-/// share the edge exactly. Records a "rounding_overlap" repair per pair (RepairRefused under
-/// strict). Thicker overlaps, and slivers that snapping does not remove, are left for
-/// validate_slice_set_named to report.
-void snap_rounding_overlaps(SliceSet& set, const SliceNaming& naming, RepairLog& repairs);
+/// validate_slice_set with the naming of the caller's format. Identical coincident slices are not
+/// an error: they are returned in `identical` (when non-null) for the reader to merge. With
+/// `thin_overlaps`, overlaps no thicker than kRoundingOverlapRelTol of the slice's extent are not
+/// errors either: they are returned there for the reader to snap.
+Status validate_slice_set_named(const SliceSet& set, const std::string& source_name,
+                                const SliceNaming& naming, SlicePairs* identical,
+                                RegionPairs* thin_overlaps = nullptr);
+
+/// Snaps the given pairs of regions (valid regions whose overlap validate_slice_set_named found
+/// thin): vertices of the later region within kRoundingOverlapRelTol of the slice's extent of the
+/// earlier one's vertices move onto them, and each region's vertices that near the other's edges
+/// are inserted into those edges, so the two share the edge exactly. A pair is changed only when
+/// the result no longer overlaps under the exact test. Records a "rounding_overlap" repair per
+/// snapped pair (RepairRefused under strict).
+void snap_rounding_overlaps(SliceSet& set, const RegionPairs& pairs, const SliceNaming& naming,
+                            RepairLog& repairs);
 
 /// Drops the later slice of each identical pair, recording a repair naming both.
 void merge_identical_slices(SliceSet& set, const SlicePairs& identical, const SliceNaming& naming,
