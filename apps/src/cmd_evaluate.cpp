@@ -52,12 +52,12 @@ void add_mesh(MeshSet& set, int label, const std::string& name, TriangleMesh mes
             [](const auto& a, const auto& b) { return a.label < b.label; });
 }
 
-// A directory of label_<id>.{ply,obj,off} files, or one mesh file (label 1).
+// A directory of label_<id>.{ply,obj,off,stl} files, or one mesh file (label 1).
 Result<MeshSet> read_reconstruction(const fs::path& path) {
   MeshSet set;
   std::error_code ec;
   if (fs::is_directory(path, ec)) {
-    const std::regex pattern(R"(label_(\d+)\.(ply|obj|off))", std::regex::icase);
+    const std::regex pattern(R"(label_(\d+)\.(ply|obj|off|stl))", std::regex::icase);
     std::vector<std::pair<int, fs::path>> files;
     for (const auto& entry : fs::directory_iterator(path, ec)) {
       std::smatch match;
@@ -69,7 +69,7 @@ Result<MeshSet> read_reconstruction(const fs::path& path) {
       return Status::error("cannot list --recon directory " + path.string() + ": " + ec.message());
     if (files.empty())
       return Status::error("--recon directory " + path.string() +
-                           " holds no label_<id>.ply/.obj/.off mesh");
+                           " holds no label_<id>.ply/.obj/.off/.stl mesh");
     std::sort(files.begin(), files.end());
     for (const auto& [label, file] : files) {
       auto mesh = sim::read_mesh(file, /*allow_empty=*/true);

@@ -192,7 +192,7 @@ int run_slice(const SliceOptions& options) {
 CommandRunner add_slice_command(CLI::App& app) {
   auto options = std::make_shared<SliceOptions>();
   app.add_option("--mesh", options->meshes,
-                 "Closed mesh to cut, LABEL:PATH[:NAME] (.obj, .ply, .off); repeat for more")
+                 "Closed mesh to cut, LABEL:PATH[:NAME] (.obj, .ply, .off, .stl); repeat for more")
       ->required();
   app.add_option("--planes", options->family, "Plane family")
       ->check(CLI::IsMember({"parallel", "orthogonal", "random", "sweep"}))

@@ -13,7 +13,7 @@ inline void add_sim_scenario_options(CLI::App& app, scan::SimScenarioOptions& op
                                      bool with_phantom) {
   if (with_phantom)
     app.add_option("--phantom", options.phantoms,
-                   "Closed organ mesh, LABEL:PATH[:NAME] (.obj, .ply, .off); repeat for more "
+                   "Closed organ mesh, LABEL:PATH[:NAME] (.obj, .ply, .off, .stl); repeat for more "
                    "(organs may nest). Default: spot and cheburashka from data/models with a rib");
   app.add_option("--phantom-size-mm", options.size_mm,
                  "Scale the phantom (one common scale) so its box diagonal is this many mm")

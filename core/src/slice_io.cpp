@@ -24,6 +24,7 @@
 #include <nlohmann/json.hpp>
 #include <set>
 #include <sstream>
+#include <tuple>
 
 #include "slice_io_internal.hpp"
 #include "sonoshape/core/log.hpp"
@@ -451,8 +452,280 @@ bool ring_inside_ring(const Ring2& inner, const Ring2& outer) {
                       to_exact(outer, CGAL::COUNTERCLOCKWISE));
 }
 
+// ---------------------------------------------------------------------------------------------
+// Region overlaps: measured on the exact intersection; thin ones (rounding) snapped by readers
+
+namespace {
+
+// The overlap of two regions of one slice.
+struct OverlapMeasure {
+  double area = 0.0;   // all components together, in the file's units squared
+  double width = 0.0;  // the widest component's 2·area/perimeter: the thickness of a sliver
+  Vec2 location = Vec2::Zero();  // a point inside the largest component (slice coordinates)
+  Box2 box{Vec2::Zero(), Vec2::Zero()};  // box of every component
+};
+
+double exact_ring_length(const ExactPolygon& ring) {
+  double length = 0.0;
+  for (auto e = ring.edges_begin(); e != ring.edges_end(); ++e)
+    length += std::sqrt(CGAL::to_double(e->squared_length()));
+  return length;
+}
+
+// A point strictly inside a polygon with holes (O'Rourke, Computational Geometry in C, 1.6): at
+// the outer ring's leftmost vertex v (convex) with neighbours a and b, the centroid of triangle
+// a-v-b is inside unless vertices lie in that triangle; then the midpoint of v and the one of
+// them farthest from line ab is. A centroid would miss a thin curved sliver.
+EK::Point_2 point_inside(const ExactPolygonWithHoles& polygon) {
+  const ExactPolygon& outer = polygon.outer_boundary();
+  const auto v_it = outer.left_vertex();
+  const auto a_it =
+      v_it == outer.vertices_begin() ? std::prev(outer.vertices_end()) : std::prev(v_it);
+  const auto b_it =
+      std::next(v_it) == outer.vertices_end() ? outer.vertices_begin() : std::next(v_it);
+  const EK::Point_2 &v = *v_it, &a = *a_it, &b = *b_it;
+  if (CGAL::collinear(a, v, b)) return v;  // not a simple polygon; the vertex still locates it
+  const EK::Triangle_2 ear(a, v, b);
+  const EK::Line_2 base(a, b);
+  std::optional<EK::Point_2> deepest;
+  auto consider = [&](const ExactPolygon& ring) {
+    for (auto p = ring.vertices_begin(); p != ring.vertices_end(); ++p)
+      if (ear.has_on_bounded_side(*p) &&
+          (!deepest || CGAL::squared_distance(base, *p) > CGAL::squared_distance(base, *deepest)))
+        deepest = *p;
+  };
+  consider(outer);
+  for (auto h = polygon.holes_begin(); h != polygon.holes_end(); ++h) consider(*h);
+  return deepest ? CGAL::midpoint(v, *deepest) : CGAL::centroid(ear);
+}
+
+// The exact intersection of two regions (valid rings); nullopt when their interiors are
+// disjoint (shared edges and touching corners are not overlaps).
+std::optional<OverlapMeasure> measure_overlap(const ExactPolygonWithHoles& a,
+                                              const ExactPolygonWithHoles& b) {
+  std::vector<ExactPolygonWithHoles> parts;
+  CGAL::intersection(a, b, std::back_inserter(parts));
+  if (parts.empty()) return std::nullopt;
+  OverlapMeasure overlap;
+  double largest = -1.0;
+  bool first = true;
+  for (const ExactPolygonWithHoles& part : parts) {
+    double area = std::abs(CGAL::to_double(part.outer_boundary().area()));
+    double perimeter = exact_ring_length(part.outer_boundary());
+    for (auto h = part.holes_begin(); h != part.holes_end(); ++h) {
+      area -= std::abs(CGAL::to_double(h->area()));
+      perimeter += exact_ring_length(*h);
+    }
+    overlap.area += area;
+    if (perimeter > 0.0) overlap.width = std::max(overlap.width, 2.0 * area / perimeter);
+    if (area > largest) {
+      largest = area;
+      const EK::Point_2 inside = point_inside(part);
+      overlap.location = Vec2(CGAL::to_double(inside.x()), CGAL::to_double(inside.y()));
+    }
+    const CGAL::Bbox_2 box = part.outer_boundary().bbox();
+    const Box2 part_box{Vec2(box.xmin(), box.ymin()), Vec2(box.xmax(), box.ymax())};
+    overlap.box = first ? part_box
+                        : Box2{overlap.box.lo.cwiseMin(part_box.lo),
+                               overlap.box.hi.cwiseMax(part_box.hi)};
+    first = false;
+  }
+  return overlap;
+}
+
+// Bounding-box diagonal of a slice's regions: the scale of its rounding tolerance.
+double slice_extent(const LabeledSlice& slice) {
+  Vec2 lo = Vec2::Constant(std::numeric_limits<double>::infinity());
+  Vec2 hi = -lo;
+  for (const Region& r : slice.regions)
+    for (const Vec2& p : r.outer) {
+      lo = lo.cwiseMin(p);
+      hi = hi.cwiseMax(p);
+    }
+  return slice.regions.empty() ? 0.0 : (hi - lo).norm();
+}
+
+std::string overlap_text(const LabeledSlice& slice, const OverlapMeasure& overlap,
+                         const std::string& units) {
+  // Seven digits find the spot; the shortest round-trip form of a sliver's point would be noise.
+  std::ostringstream text;
+  text.precision(3);
+  text << overlap.area << " " << units << "² around (";
+  text.precision(7);
+  const Vec3 world = slice.to_world(overlap.location);
+  text << overlap.location.x() << ", " << overlap.location.y() << "), world (" << world.x()
+       << ", " << world.y() << ", " << world.z() << ")";
+  return text.str();
+}
+
+// Rings of a region, outer first, each with its repeated points dropped, when all are usable
+// polygons; nullopt otherwise (the validation reports them).
+std::optional<Region> clean_region(const Region& region) {
+  Region clean = region;
+  drop_repeated_points(clean.outer);
+  if (!ring_problem(clean.outer).empty()) return std::nullopt;
+  for (Ring2& hole : clean.holes) {
+    drop_repeated_points(hole);
+    if (!ring_problem(hole).empty()) return std::nullopt;
+  }
+  return clean;
+}
+
+std::vector<Ring2*> rings_of(Region& region) {
+  std::vector<Ring2*> rings{&region.outer};
+  for (Ring2& hole : region.holes) rings.push_back(&hole);
+  return rings;
+}
+
+bool in_box(const Vec2& p, const Box2& box) {
+  return (p.array() >= box.lo.array()).all() && (p.array() <= box.hi.array()).all();
+}
+
+// Moves every vertex of `moving` in `zone` that lies within `tol` of a vertex of `fixed` onto
+// that vertex. Returns how many moved.
+std::size_t snap_to_vertices(Region& moving, Region& fixed, const Box2& zone, double tol) {
+  std::vector<Vec2> targets;
+  for (Ring2* ring : rings_of(fixed))
+    for (const Vec2& p : *ring)
+      if (in_box(p, zone)) targets.push_back(p);
+  std::size_t moved = 0;
+  for (Ring2* ring : rings_of(moving))
+    for (Vec2& q : *ring) {
+      if (!in_box(q, zone)) continue;
+      const Vec2* nearest = nullptr;
+      for (const Vec2& p : targets)
+        if ((p - q).norm() <= tol && (!nearest || (p - q).norm() < (*nearest - q).norm()))
+          nearest = &p;
+      if (nearest && *nearest != q) {
+        q = *nearest;
+        ++moved;
+      }
+    }
+  return moved;
+}
+
+// Inserts into the edges of `target` every vertex of `source` in `zone` that lies within `tol`
+// of an edge's interior (a T-junction that rounding moved off the edge), so both regions
+// share that point exactly. Returns how many were inserted.
+std::size_t insert_near_vertices(Region& target, Region& source, const Box2& zone, double tol) {
+  std::vector<Vec2> points;
+  for (Ring2* ring : rings_of(source))
+    for (const Vec2& q : *ring)
+      if (in_box(q, zone)) points.push_back(q);
+  std::size_t inserted = 0;
+  for (Ring2* ring : rings_of(target)) {
+    const std::set<std::pair<double, double>> own = [&] {
+      std::set<std::pair<double, double>> s;
+      for (const Vec2& p : *ring) s.insert({p.x(), p.y()});
+      return s;
+    }();
+    // (edge, parameter along it, point) of every insertion, applied in order afterwards.
+    std::vector<std::tuple<std::size_t, double, Vec2>> insertions;
+    for (const Vec2& q : points) {
+      if (own.count({q.x(), q.y()})) continue;
+      std::optional<std::tuple<std::size_t, double, Vec2>> best;
+      double best_distance = tol;
+      for (std::size_t k = 0; k < ring->size(); ++k) {
+        const Vec2& p0 = (*ring)[k];
+        const Vec2& p1 = (*ring)[(k + 1) % ring->size()];
+        const Vec2 d = p1 - p0;
+        const double t = (q - p0).dot(d) / d.squaredNorm();
+        if (!(t > 0.0 && t < 1.0)) continue;
+        const double distance = (p0 + t * d - q).norm();
+        if (distance <= best_distance) {
+          best_distance = distance;
+          best = std::make_tuple(k, t, q);
+        }
+      }
+      if (best) insertions.push_back(*best);
+    }
+    if (insertions.empty()) continue;
+    std::sort(insertions.begin(), insertions.end(), [](const auto& x, const auto& y) {
+      return std::tie(std::get<0>(x), std::get<1>(x)) < std::tie(std::get<0>(y), std::get<1>(y));
+    });
+    Ring2 rebuilt;
+    std::size_t next = 0;
+    for (std::size_t k = 0; k < ring->size(); ++k) {
+      rebuilt.push_back((*ring)[k]);
+      for (; next < insertions.size() && std::get<0>(insertions[next]) == k; ++next)
+        rebuilt.push_back(std::get<2>(insertions[next]));
+    }
+    inserted += insertions.size();
+    *ring = std::move(rebuilt);
+  }
+  return inserted;
+}
+
+// Makes two regions whose overlap is a rounding sliver share its boundary exactly: vertices of
+// the later region onto the earlier one's vertices, then each region's vertices near the other's
+// edges inserted into those edges. Returns the number of vertices changed, or nullopt (and
+// leaves the regions as they were) when the result still overlaps or is not a valid polygon.
+std::optional<std::size_t> snap_sliver(Region& a, Region& b, const OverlapMeasure& overlap,
+                                       double tol) {
+  const Box2 zone{overlap.box.lo - Vec2::Constant(2.0 * tol),
+                  overlap.box.hi + Vec2::Constant(2.0 * tol)};
+  Region snapped_a = a;
+  Region snapped_b = b;
+  std::size_t changed = snap_to_vertices(snapped_b, snapped_a, zone, tol);
+  changed += insert_near_vertices(snapped_a, snapped_b, zone, tol);
+  changed += insert_near_vertices(snapped_b, snapped_a, zone, tol);
+  const std::optional<Region> clean_a = clean_region(snapped_a);
+  const std::optional<Region> clean_b = clean_region(snapped_b);
+  if (changed == 0 || !clean_a || !clean_b) return std::nullopt;
+  if (measure_overlap(to_exact(clean_a->outer, clean_a->holes),
+                      to_exact(clean_b->outer, clean_b->holes)))
+    return std::nullopt;
+  a = *clean_a;
+  b = *clean_b;
+  return changed;
+}
+
+// Snaps regions a and b of a slice when their overlap is a rounding sliver; records the repair.
+void snap_pair(LabeledSlice& slice, std::size_t index, std::size_t a, std::size_t b,
+               const std::string& units, const SliceNaming& naming, RepairLog& repairs) {
+  const std::optional<Region> clean_a = clean_region(slice.regions[a]);
+  const std::optional<Region> clean_b = clean_region(slice.regions[b]);
+  if (!clean_a || !clean_b) return;
+  // An earlier snap of this slice may have removed this overlap already.
+  const ExactPolygonWithHoles exact_a = to_exact(clean_a->outer, clean_a->holes);
+  const ExactPolygonWithHoles exact_b = to_exact(clean_b->outer, clean_b->holes);
+  if (!CGAL::do_intersect(exact_a, exact_b)) return;  // cheaper than measuring
+  const auto overlap = measure_overlap(exact_a, exact_b);
+  const double tol = kRoundingOverlapRelTol * slice_extent(slice);
+  if (!overlap || overlap->width > tol) return;
+  Region snapped_a = *clean_a;
+  Region snapped_b = *clean_b;
+  const auto changed = snap_sliver(snapped_a, snapped_b, *overlap, tol);
+  if (!changed) return;  // the validation reports it
+  std::ostringstream width;
+  width.precision(2);
+  width << overlap->width;
+  repairs.add(naming.slice(index),
+              {"rounding_overlap",
+               naming.slice(index) + ", " + naming.region(index, a, slice.regions[a].label) +
+                   " and " + naming.region(index, b, slice.regions[b].label),
+               "overlap of " + overlap_text(slice, *overlap, units) + ", " + width.str() +
+                   " thick, is a shared edge that rounding moved apart (" +
+                   std::to_string(*changed) + (*changed == 1 ? " vertex" : " vertices") +
+                   " snapped onto the shared boundary)",
+               overlap->area});
+  for (auto [k, snapped] : {std::pair{a, &snapped_a}, std::pair{b, &snapped_b}}) {
+    slice.regions[k].outer = std::move(snapped->outer);
+    slice.regions[k].holes = std::move(snapped->holes);
+  }
+}
+
+}  // namespace
+
+void snap_rounding_overlaps(SliceSet& set, const RegionPairs& pairs, const SliceNaming& naming,
+                            RepairLog& repairs) {
+  for (const RegionPair& pair : pairs)
+    snap_pair(set.slices[pair.slice], pair.slice, pair.a, pair.b, set.units, naming, repairs);
+}
+
 Status validate_slice_set_named(const SliceSet& set, const std::string& source_name,
-                                const SliceNaming& naming, SlicePairs* identical) {
+                                const SliceNaming& naming, SlicePairs* identical,
+                                RegionPairs* thin_overlaps) {
   std::vector<std::string> errors;
   auto fail = [&](const std::string& where, const std::string& what) {
     errors.push_back(source_name + ": " + where + ": " + what);
@@ -626,17 +899,31 @@ Status validate_slice_set_named(const SliceSet& set, const std::string& source_n
       for (std::size_t a = 0; a < s.regions.size(); ++a)
         for (std::size_t b = a + 1; b < s.regions.size(); ++b) {
           if (!boxes[a].interiors_overlap(boxes[b])) continue;
-          const bool overlap =
+          const ExactPolygonWithHoles exact_a = to_exact(cleaned[a].outer, cleaned[a].holes);
+          const ExactPolygonWithHoles exact_b = to_exact(cleaned[b].outer, cleaned[b].holes);
+          const bool overlapping =
               boundaries_meet(region_rings[a].segments, region_rings[b].segments)
-                  ? CGAL::do_intersect(to_exact(cleaned[a].outer, cleaned[a].holes),
-                                       to_exact(cleaned[b].outer, cleaned[b].holes))
+                  ? CGAL::do_intersect(exact_a, exact_b)
                   : disjoint_boundaries_overlap(region_rings[a], region_rings[b]);
-          if (overlap)
-            fail(where, naming.region(i, a, s.regions[a].label) + " and " +
-                            naming.region(i, b, s.regions[b].label) +
-                            " overlap; regions of one slice may share edges or sit in each "
-                            "other's holes but not share area, fix the contours or cut one out "
-                            "of the other with a hole");
+          // Measured only when there is something to report: the intersection costs more.
+          const std::optional<OverlapMeasure> overlap =
+              overlapping ? measure_overlap(exact_a, exact_b) : std::nullopt;
+          if (!overlap) continue;
+          const bool thin = overlap->width <= kRoundingOverlapRelTol * slice_extent(s);
+          if (thin && thin_overlaps) {
+            thin_overlaps->push_back({i, a, b});
+            continue;
+          }
+          fail(where, naming.region(i, a, s.regions[a].label) + " and " +
+                          naming.region(i, b, s.regions[b].label) + " overlap by " +
+                          overlap_text(s, *overlap, set.units) +
+                          (thin ? " (a sliver thinner than the rounding tolerance: an edge "
+                                  "the two share, moved apart by rounding; the file readers "
+                                  "snap such slivers, this one is not snapped)"
+                                : "") +
+                          "; regions of one slice may share edges or sit in each other's holes "
+                          "but not share area, fix the contours or cut one out of the other with "
+                          "a hole");
         }
     }
 
@@ -717,9 +1004,25 @@ void merge_identical_slices(SliceSet& set, const SlicePairs& identical, const Sl
 
 Result<SliceSet> finish_parsed_set(SliceSet set, const std::string& source_name,
                                    const SliceNaming& naming, RepairLog& repairs) {
+  // Rounding slivers are snapped once the set is otherwise valid (the snap needs valid
+  // polygons), then the set is validated again: a snap moves vertices that a third region may
+  // share, so a few rounds may be needed. What remains is an error.
+  constexpr int kSnapRounds = 3;
   SlicePairs identical;
-  if (Status status = validate_slice_set_named(set, source_name, naming, &identical); !status)
-    return status;
+  RegionPairs thin;
+  Status status = validate_slice_set_named(set, source_name, naming, &identical, &thin);
+  for (int round = 0; status && !thin.empty(); ++round) {
+    try {
+      snap_rounding_overlaps(set, thin, naming, repairs);
+    } catch (const RepairRefused& refused) {
+      return Status::error(refused.message);
+    }
+    identical.clear();
+    thin.clear();
+    status = validate_slice_set_named(set, source_name, naming, &identical,
+                                      round + 1 < kSnapRounds ? &thin : nullptr);
+  }
+  if (!status) return status;
   try {
     merge_identical_slices(set, identical, naming, repairs);
   } catch (const RepairRefused& refused) {

@@ -19,6 +19,11 @@ constexpr double kRepeatedPointRelTol = 1e-9;
 constexpr double kBasisTol = 1e-6;
 /// Coincident slices: normals parallel to 1e-9, offsets equal to 1e-9 of the set's size.
 constexpr double kCoincidentTol = 1e-9;
+/// Two regions of one slice whose overlap is at most this fraction of the slice's extent (the
+/// bounding-box diagonal of its regions) thick (2·area/perimeter of each component) share an
+/// edge that rounding moved apart: a set cut by a polygon library and written with 7 decimals
+/// overlaps by about 1e-8 along such edges.
+constexpr double kRoundingOverlapRelTol = 1e-6;
 
 /// How messages name slices, regions and rings. The JSON reader uses the defaults ("slice 3,
 /// region 1 (label 2), hole 0"); the .csl reader names planes and components instead, so a user
@@ -119,10 +124,28 @@ bool ring_inside_ring(const Ring2& inner, const Ring2& outer);
 /// Pairs (earlier, later) of coincident slices whose contents are identical.
 using SlicePairs = std::vector<std::pair<std::size_t, std::size_t>>;
 
+/// Regions `a` < `b` of slice `slice`.
+struct RegionPair {
+  std::size_t slice = 0, a = 0, b = 0;
+};
+using RegionPairs = std::vector<RegionPair>;
+
 /// validate_slice_set with the naming of the caller's format. Identical coincident slices are not
-/// an error: they are returned in `identical` (when non-null) for the reader to merge.
+/// an error: they are returned in `identical` (when non-null) for the reader to merge. With
+/// `thin_overlaps`, overlaps no thicker than kRoundingOverlapRelTol of the slice's extent are not
+/// errors either: they are returned there for the reader to snap.
 Status validate_slice_set_named(const SliceSet& set, const std::string& source_name,
-                                const SliceNaming& naming, SlicePairs* identical);
+                                const SliceNaming& naming, SlicePairs* identical,
+                                RegionPairs* thin_overlaps = nullptr);
+
+/// Snaps the given pairs of regions (valid regions whose overlap validate_slice_set_named found
+/// thin): vertices of the later region within kRoundingOverlapRelTol of the slice's extent of the
+/// earlier one's vertices move onto them, and each region's vertices that near the other's edges
+/// are inserted into those edges, so the two share the edge exactly. A pair is changed only when
+/// the result no longer overlaps under the exact test. Records a "rounding_overlap" repair per
+/// snapped pair (RepairRefused under strict).
+void snap_rounding_overlaps(SliceSet& set, const RegionPairs& pairs, const SliceNaming& naming,
+                            RepairLog& repairs);
 
 /// Drops the later slice of each identical pair, recording a repair naming both.
 void merge_identical_slices(SliceSet& set, const SlicePairs& identical, const SliceNaming& naming,

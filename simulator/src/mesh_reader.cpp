@@ -1,12 +1,14 @@
 #include "sonoshape/simulator/mesh_reader.hpp"
 
 #include <algorithm>
+#include <array>
 #include <bit>
 #include <cctype>
 #include <charconv>
 #include <cmath>
 #include <cstring>
 #include <fstream>
+#include <map>
 #include <sstream>
 #include <string>
 #include <string_view>
@@ -409,6 +411,185 @@ TriangleMesh parse_ply(std::string_view text) {
   return mesh;
 }
 
+// ---- STL ----------------------------------------------------------------------------------
+
+// STL stores every facet with its own three corners and no indices. Corners with identical
+// coordinates (exact equality of the numbers as read, float for binary, double for ASCII; -0 and
+// +0 are one value) become one vertex, so a mesh that is closed in the source is closed here.
+// No tolerance: welding near-equal corners would join surfaces the source keeps apart. Facet
+// normals are ignored (the corner order gives the orientation) and so are binary attribute bytes.
+class StlWelder {
+ public:
+  // Adds a facet; one whose corners weld into fewer than three vertices has no area and is
+  // dropped (it would only make edges look non-manifold).
+  void add_facet(const std::array<Vec3, 3>& corners) {
+    std::array<std::uint32_t, 3> triangle{};
+    for (int k = 0; k < 3; ++k) triangle[k] = vertex(corners[k]);
+    if (triangle[0] == triangle[1] || triangle[1] == triangle[2] || triangle[0] == triangle[2])
+      return;
+    mesh_.triangles.push_back(triangle);
+  }
+  TriangleMesh take() { return std::move(mesh_); }
+
+ private:
+  std::uint32_t vertex(const Vec3& p) {
+    const auto [it, added] = index_.try_emplace(
+        std::array<double, 3>{p.x(), p.y(), p.z()},
+        static_cast<std::uint32_t>(mesh_.vertices.size()));
+    if (added) mesh_.vertices.push_back(p);
+    return it->second;
+  }
+  TriangleMesh mesh_;
+  std::map<std::array<double, 3>, std::uint32_t> index_;
+};
+
+constexpr std::size_t kStlHeaderBytes = 84;  // 80-byte header + uint32 facet count
+constexpr std::size_t kStlFacetBytes = 50;   // normal, 3 corners (12 floats) + 2 attribute bytes
+
+// The facet count a binary STL declares (the file must be at least 84 bytes).
+std::uint32_t stl_declared_facets(std::string_view data) {
+  std::uint32_t count = 0;
+  std::memcpy(&count, data.data() + 80, sizeof count);
+  return count;
+}
+
+// Binary when the size is exactly 84 + 50 n for the n declared in bytes 80-83 (for ASCII text
+// those four characters would have to encode its own size). The "solid" prefix is no test: many
+// binary exporters start their 80-byte header with it.
+bool is_binary_stl(std::string_view data) {
+  if (data.size() < kStlHeaderBytes) return false;
+  return kStlHeaderBytes + kStlFacetBytes * std::uint64_t{stl_declared_facets(data)} ==
+         data.size();
+}
+
+std::string_view trim_left(std::string_view text) {
+  std::size_t i = 0;
+  while (i < text.size() && std::isspace(static_cast<unsigned char>(text[i]))) ++i;
+  return text.substr(i);
+}
+
+TriangleMesh parse_binary_stl(std::string_view data) {
+  static_assert(std::endian::native == std::endian::little,
+                "the binary STL reader assumes a little-endian host");
+  const std::uint32_t count = stl_declared_facets(data);
+  StlWelder welder;
+  for (std::uint32_t f = 0; f < count; ++f) {
+    const char* facet = data.data() + kStlHeaderBytes + kStlFacetBytes * std::size_t{f};
+    std::array<float, 12> values{};
+    std::memcpy(values.data(), facet, sizeof values);
+    std::array<Vec3, 3> corners;
+    for (int k = 0; k < 3; ++k) {
+      corners[k] = Vec3(values[3 + 3 * k], values[4 + 3 * k], values[5 + 3 * k]);
+      if (!corners[k].allFinite())
+        throw ParseError{"facet " + std::to_string(f) + ", corner " + std::to_string(k) +
+                         ": coordinate is not finite (NaN or infinity); repair or re-export "
+                         "the mesh"};
+    }
+    welder.add_facet(corners);
+  }
+  return welder.take();
+}
+
+// ASCII: solid NAME { facet normal n n n / outer loop / vertex x y z (3x) / endloop / endfacet }
+// endsolid NAME; several solids in one file are read as one mesh.
+TriangleMesh parse_ascii_stl(std::string_view text) {
+  LineReader lines(text);
+  std::string_view line;
+  StlWelder welder;
+  std::size_t facet = 0;
+  std::array<Vec3, 3> corners;
+  int corner = 0;
+  // What the next line must start with (kFacet also accepts "endsolid").
+  enum class Expect { kSolid, kFacet, kOuter, kVertex, kEndloop, kEndfacet };
+  Expect expect = Expect::kSolid;
+  auto fail = [&](const std::string& what) {
+    throw ParseError{"line " + std::to_string(lines.number()) +
+                     (expect == Expect::kSolid ? "" : ", facet " + std::to_string(facet)) + ": " +
+                     what};
+  };
+  while (lines.next(line)) {
+    const auto words = split_words(line);
+    if (words.empty()) continue;
+    const std::string keyword = lower(std::string(words[0]));
+    auto expected = [&](const char* wanted) {
+      fail("expected '" + std::string(wanted) + "', found '" + std::string(words[0]) +
+           "'; the file is not valid ASCII STL (re-export it, or export binary STL)");
+    };
+    switch (expect) {
+      case Expect::kSolid:
+        if (keyword != "solid") expected("solid");
+        expect = Expect::kFacet;
+        break;
+      case Expect::kFacet:
+        if (keyword == "endsolid") {
+          expect = Expect::kSolid;
+        } else if (keyword == "facet") {
+          expect = Expect::kOuter;
+        } else {
+          expected("facet");
+        }
+        break;
+      case Expect::kOuter:
+        if (keyword != "outer") expected("outer loop");
+        expect = Expect::kVertex;
+        corner = 0;
+        break;
+      case Expect::kVertex:
+        if (keyword != "vertex") expected("vertex");
+        if (words.size() != 4) fail("a vertex needs x y z");
+        for (int k = 0; k < 3; ++k) {
+          double value = 0.0;
+          if (!parse_double(words[k + 1], value))
+            fail("bad vertex coordinate '" + std::string(words[k + 1]) +
+                 "' (NaN and infinity are not coordinates); repair or re-export the mesh");
+          corners[corner][k] = value;
+        }
+        if (++corner == 3) expect = Expect::kEndloop;
+        break;
+      case Expect::kEndloop:
+        if (keyword != "endloop")
+          fail(keyword == "vertex" ? "a facet has more than 3 vertices; triangulate the mesh"
+                                   : "expected 'endloop', found '" + std::string(words[0]) + "'");
+        expect = Expect::kEndfacet;
+        break;
+      case Expect::kEndfacet:
+        if (keyword != "endfacet") expected("endfacet");
+        welder.add_facet(corners);
+        ++facet;
+        expect = Expect::kFacet;
+        break;
+    }
+  }
+  if (expect != Expect::kSolid && expect != Expect::kFacet)
+    fail("the file ends inside a facet; it is truncated, re-export it");
+  if (expect == Expect::kFacet)
+    throw ParseError{"the file ends without 'endsolid' after facet " + std::to_string(facet) +
+                     "; it is truncated, re-export it"};
+  return welder.take();
+}
+
+TriangleMesh parse_stl(std::string_view data) {
+  if (is_binary_stl(data)) return parse_binary_stl(data);
+  // Text has no NUL or other control bytes; a truncated binary file (even one whose header
+  // starts with "solid") has them among its floats.
+  const bool text = std::none_of(data.begin(), data.end(), [](char c) {
+    const auto byte = static_cast<unsigned char>(c);
+    return byte < 0x20 && !std::isspace(byte);
+  });
+  if (text && trim_left(data).substr(0, 5) == "solid") return parse_ascii_stl(data);
+  if (data.empty()) throw ParseError{"the file is empty; re-export the mesh"};
+  if (data.size() < kStlHeaderBytes)
+    throw ParseError{"binary STL needs an 84-byte header, the file has " +
+                     std::to_string(data.size()) + " bytes; it is truncated, re-export it"};
+  const std::uint64_t count = stl_declared_facets(data);
+  const std::uint64_t whole = (data.size() - kStlHeaderBytes) / kStlFacetBytes;
+  throw ParseError{"binary STL declares " + std::to_string(count) + " facets (" +
+                   std::to_string(kStlHeaderBytes + kStlFacetBytes * count) +
+                   " bytes) but the file has " + std::to_string(data.size()) + " bytes" +
+                   (whole < count ? "; facet " + std::to_string(whole) + " is cut off" : "") +
+                   ": the file is truncated or not STL, re-export it"};
+}
+
 }  // namespace
 
 Result<TriangleMesh> read_mesh(const std::filesystem::path& path, bool allow_empty) {
@@ -428,14 +609,18 @@ Result<TriangleMesh> read_mesh(const std::filesystem::path& path, bool allow_emp
       mesh = parse_ply(text);
     else if (extension == ".off")
       mesh = parse_off(text);
+    else if (extension == ".stl")
+      mesh = parse_stl(text);
     else
       return Status::error("mesh file " + path.string() + ": unsupported extension '" + extension +
-                           "' (use .obj, .ply or .off)");
+                           "' (use .obj, .ply, .off or .stl)");
   } catch (const ParseError& e) {
     return Status::error("mesh file " + path.string() + ": " + e.message);
   }
   if (mesh.triangles.empty() && !allow_empty)
-    return Status::error("mesh file " + path.string() + ": no faces (a closed mesh is needed)");
+    return Status::error("mesh file " + path.string() +
+                         ": no faces (a closed mesh is needed; export the surface with its "
+                         "triangles, not only its points)");
   return mesh;
 }
 

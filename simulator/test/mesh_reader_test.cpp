@@ -5,6 +5,8 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <limits>
+#include <set>
 #include <string>
 
 #include "test_shapes.hpp"
@@ -149,13 +151,155 @@ TEST(MeshReader, FileErrors) {
   ASSERT_FALSE(missing);
   EXPECT_NE(missing.message().find("/nonexistent/dir/mesh.obj"), std::string::npos);
 
-  const auto format = read_mesh(write_temp("mesh.stl", "solid x\nendsolid x\n"));
+  const auto format = read_mesh(write_temp("mesh.3ds", "MM"));
   ASSERT_FALSE(format);
-  EXPECT_NE(format.message().find(".stl"), std::string::npos);
+  EXPECT_NE(format.message().find(".3ds"), std::string::npos);
+  EXPECT_NE(format.message().find(".stl"), std::string::npos) << format.message();
 
   const auto empty = read_mesh(write_temp("points.obj", "v 0 0 0\n"));
   ASSERT_FALSE(empty);
   EXPECT_NE(empty.message().find("no faces"), std::string::npos);
+}
+
+// ---- STL ----------------------------------------------------------------------------------
+
+// Each triangle with its own three corners, as STL stores them.
+std::string ascii_stl(const TriangleMesh& mesh) {
+  std::string out = "solid cube\n";
+  for (const auto& t : mesh.triangles) {
+    out += "  facet normal 0 0 0\n    outer loop\n";
+    for (std::uint32_t i : t) {
+      const Vec3& p = mesh.vertices[i];
+      out += "      vertex " + std::to_string(p.x()) + " " + std::to_string(p.y()) + " " +
+             std::to_string(p.z()) + "\n";
+    }
+    out += "    endloop\n  endfacet\n";
+  }
+  return out + "endsolid cube\n";
+}
+
+std::string binary_stl(const TriangleMesh& mesh, const std::string& header) {
+  std::string out = header;
+  out.resize(80, ' ');
+  put<std::uint32_t>(out, static_cast<std::uint32_t>(mesh.triangles.size()));
+  for (const auto& t : mesh.triangles) {
+    for (int k = 0; k < 3; ++k) put<float>(out, 0.0f);
+    for (std::uint32_t i : t)
+      for (int k = 0; k < 3; ++k) put<float>(out, static_cast<float>(mesh.vertices[i][k]));
+    put<std::uint16_t>(out, 0);
+  }
+  return out;
+}
+
+std::string obj_text(const TriangleMesh& mesh) {
+  std::string out;
+  for (const Vec3& p : mesh.vertices)
+    out += "v " + std::to_string(p.x()) + " " + std::to_string(p.y()) + " " +
+           std::to_string(p.z()) + "\n";
+  for (const auto& t : mesh.triangles)
+    out += "f " + std::to_string(t[0] + 1) + " " + std::to_string(t[1] + 1) + " " +
+           std::to_string(t[2] + 1) + "\n";
+  return out;
+}
+
+// V - E + F over the mesh's vertex indices.
+long long euler_characteristic(const TriangleMesh& mesh) {
+  std::set<std::pair<std::uint32_t, std::uint32_t>> edges;
+  for (const auto& t : mesh.triangles)
+    for (int k = 0; k < 3; ++k)
+      edges.insert(std::minmax(t[k], t[(k + 1) % 3]));
+  return static_cast<long long>(mesh.vertices.size()) - static_cast<long long>(edges.size()) +
+         static_cast<long long>(mesh.triangles.size());
+}
+
+void expect_same_closed_mesh(const TriangleMesh& stl, const TriangleMesh& obj) {
+  EXPECT_EQ(stl.vertices.size(), obj.vertices.size());
+  EXPECT_EQ(stl.triangles.size(), obj.triangles.size());
+  EXPECT_NEAR(signed_volume(stl), signed_volume(obj), 1e-9);
+  EXPECT_EQ(euler_characteristic(stl), 2);
+  EXPECT_TRUE(check_mesh_health(stl).closed_manifold_oriented());
+}
+
+TEST(MeshReader, AsciiAndBinaryStlWeldToTheObjMesh) {
+  // A tetrahedron and a cube off-origin (non-integer coordinates survive the float round trip).
+  TriangleMesh tetra;
+  tetra.vertices = {{0.5, 0.25, 0.0}, {2.0, 0.25, 0.0}, {0.5, 1.75, 0.0}, {0.5, 0.25, 1.5}};
+  tetra.triangles = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};
+  for (const auto& [name, shape] :
+       {std::pair<std::string, TriangleMesh>{"tetra", tetra},
+        {"cube", test::cube(Vec3(0.5, -1.25, 2.0), Vec3(3.0, 0.75, 4.5))}}) {
+    SCOPED_TRACE(name);
+    const auto obj = read_mesh(write_temp(name + ".obj", obj_text(shape)));
+    ASSERT_TRUE(obj) << obj.message();
+    EXPECT_TRUE(check_mesh_health(*obj).closed_manifold_oriented());
+    const auto ascii = read_mesh(write_temp(name + "_ascii.stl", ascii_stl(shape)));
+    ASSERT_TRUE(ascii) << ascii.message();
+    expect_same_closed_mesh(*ascii, *obj);
+    const auto binary = read_mesh(write_temp(name + "_binary.STL", binary_stl(shape, "made")));
+    ASSERT_TRUE(binary) << binary.message();
+    expect_same_closed_mesh(*binary, *obj);
+  }
+  EXPECT_NEAR(signed_volume(*read_mesh(write_temp("tetra_ascii.stl", ascii_stl(tetra)))),
+              1.5 * 1.5 * 1.5 / 6.0, 1e-12);
+}
+
+TEST(MeshReader, BinaryStlWhoseHeaderStartsWithSolidIsBinary) {
+  const std::string data = binary_stl(test::cube(), "solid cube exported by a CAD tool");
+  ASSERT_EQ(data.substr(0, 5), "solid");
+  const auto mesh = read_mesh(write_temp("solid_binary.stl", data));
+  ASSERT_TRUE(mesh) << mesh.message();
+  EXPECT_EQ(mesh->vertices.size(), 8u);
+  EXPECT_NEAR(signed_volume(*mesh), 8.0, 1e-12);
+  EXPECT_TRUE(check_mesh_health(*mesh).closed_manifold_oriented());
+}
+
+TEST(MeshReader, StlErrorsNameFileFacetAndFix) {
+  // Truncated binary, with and without a "solid" header: the declared count and the cut facet.
+  for (const std::string& header : {std::string("binary"), std::string("solid x")}) {
+    std::string data = binary_stl(test::cube(), header);
+    data.resize(data.size() - 70);
+    const auto cut = read_mesh(write_temp("cut.stl", data));
+    ASSERT_FALSE(cut);
+    EXPECT_NE(cut.message().find("cut.stl"), std::string::npos) << cut.message();
+    EXPECT_NE(cut.message().find("declares 12 facets"), std::string::npos) << cut.message();
+    EXPECT_NE(cut.message().find("facet 10"), std::string::npos) << cut.message();
+    EXPECT_NE(cut.message().find("re-export"), std::string::npos) << cut.message();
+  }
+  const auto tiny = read_mesh(write_temp("tiny.stl", std::string("\x01\x02", 2)));
+  ASSERT_FALSE(tiny);
+  EXPECT_NE(tiny.message().find("84-byte header"), std::string::npos) << tiny.message();
+
+  std::string ascii = ascii_stl(test::cube());
+  ascii.replace(ascii.find("endloop", ascii.find("endloop") + 1), 7, "endlop");
+  const auto keyword = read_mesh(write_temp("keyword.stl", ascii));
+  ASSERT_FALSE(keyword);
+  EXPECT_NE(keyword.message().find("facet 1"), std::string::npos) << keyword.message();
+  EXPECT_NE(keyword.message().find("'endlop'"), std::string::npos) << keyword.message();
+  EXPECT_NE(keyword.message().find("line 14"), std::string::npos) << keyword.message();
+
+  std::string nan_text = ascii_stl(test::cube());
+  const std::size_t x_at = nan_text.find("vertex ") + 7;
+  nan_text.replace(x_at, nan_text.find(' ', x_at) - x_at, "nan");
+  const auto nan_ascii = read_mesh(write_temp("nan.stl", nan_text));
+  ASSERT_FALSE(nan_ascii);
+  EXPECT_NE(nan_ascii.message().find("facet 0"), std::string::npos) << nan_ascii.message();
+  EXPECT_NE(nan_ascii.message().find("'nan'"), std::string::npos) << nan_ascii.message();
+
+  TriangleMesh with_nan = test::cube();
+  with_nan.vertices.push_back(Vec3(0.0, std::numeric_limits<double>::quiet_NaN(), 0.0));
+  with_nan.triangles[5][1] = static_cast<std::uint32_t>(with_nan.vertices.size() - 1);
+  const auto nan_binary = read_mesh(write_temp("nan_binary.stl", binary_stl(with_nan, "b")));
+  ASSERT_FALSE(nan_binary);
+  EXPECT_NE(nan_binary.message().find("facet 5, corner 1"), std::string::npos)
+      << nan_binary.message();
+
+  const auto no_facets = read_mesh(write_temp("empty.stl", "solid x\nendsolid x\n"));
+  ASSERT_FALSE(no_facets);
+  EXPECT_NE(no_facets.message().find("no faces"), std::string::npos) << no_facets.message();
+  const auto unterminated = read_mesh(write_temp("open.stl", "solid x\n facet normal 0 0 1\n"));
+  ASSERT_FALSE(unterminated);
+  EXPECT_NE(unterminated.message().find("truncated"), std::string::npos)
+      << unterminated.message();
 }
 
 TEST(MeshReader, OrientOutwardFlipsInwardMeshesOnly) {
