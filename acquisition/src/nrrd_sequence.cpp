@@ -17,8 +17,6 @@
 namespace sonoshape::acq::detail {
 namespace {
 
-constexpr std::string_view kFramePrefix = "Seq_Frame";
-
 // NRRD fields that describe how the samples are stored; they are consumed, not kept as fields
 // (a MetaImage written from the sequence must not claim `encoding: gzip`).
 constexpr std::array<std::string_view, 10> kLayoutFields = {
@@ -455,19 +453,12 @@ Result<std::vector<std::uint8_t>> to_grey(const std::filesystem::path& path,
   return grey;
 }
 
-// "Seq_Frame0012_ProbeToTrackerTransform" -> (12, "ProbeToTrackerTransform").
+// PLUS's per-frame field, with the image status under the name its MetaImage writer uses.
 std::optional<std::pair<std::size_t, std::string>> plus_frame_key(std::string_view key) {
-  if (key.substr(0, kFramePrefix.size()) != kFramePrefix) return std::nullopt;
-  const std::string_view rest = key.substr(kFramePrefix.size());
-  const std::size_t underscore = rest.find('_');
-  if (underscore == 0 || underscore == std::string_view::npos || underscore + 1 == rest.size())
-    return std::nullopt;
-  const auto index = parse_number<std::size_t>(rest.substr(0, underscore));
-  if (!index) return std::nullopt;
-  std::string name(rest.substr(underscore + 1));
+  auto frame_key = split_frame_key(key);
   // PLUS's NRRD writer calls the image status "Status", its MetaImage writer "ImageStatus".
-  if (name == "Status") name = "ImageStatus";
-  return std::make_pair(*index, std::move(name));
+  if (frame_key && frame_key->second == "Status") frame_key->second = "ImageStatus";
+  return frame_key;
 }
 
 // "axis 3 item 5 AcquisitionTime" -> (5, "AcquisitionTime") when the axis is `frame_axis`.

@@ -18,11 +18,12 @@ namespace sonoshape::acq {
 namespace {
 
 using detail::fail;
+using detail::kFramePrefix;
+using detail::split_frame_key;
 using detail::parse_number;
 using detail::split_words;
 using detail::trim;
 
-constexpr std::string_view kFramePrefix = "Seq_Frame";
 constexpr std::string_view kTransformSuffix = "Transform";
 constexpr std::string_view kStatusSuffix = "TransformStatus";
 
@@ -50,18 +51,6 @@ std::string format_number(double value) {
 bool is_true(std::string_view value) {
   const std::string_view v = trim(value);
   return v == "True" || v == "true" || v == "TRUE" || v == "1";
-}
-
-// "Seq_Frame0012_ProbeToTrackerTransform" -> (12, "ProbeToTrackerTransform").
-std::optional<std::pair<std::size_t, std::string>> split_frame_key(std::string_view key) {
-  if (key.substr(0, kFramePrefix.size()) != kFramePrefix) return std::nullopt;
-  const std::string_view rest = key.substr(kFramePrefix.size());
-  const std::size_t underscore = rest.find('_');
-  if (underscore == 0 || underscore == std::string_view::npos || underscore + 1 == rest.size())
-    return std::nullopt;
-  const auto index = parse_number<std::size_t>(rest.substr(0, underscore));
-  if (!index) return std::nullopt;
-  return std::make_pair(*index, std::string(rest.substr(underscore + 1)));
 }
 
 std::string frame_key(std::size_t k, std::string_view name) {

@@ -8,6 +8,7 @@
 #include <string>
 #include <string_view>
 #include <type_traits>
+#include <utility>
 #include <vector>
 
 #include "sonoshape/acquisition/sequence_file.hpp"
@@ -44,6 +45,21 @@ std::optional<T> parse_number(std::string_view s) {
   if constexpr (std::is_floating_point_v<T>)
     if (!std::isfinite(value)) return std::nullopt;
   return value;
+}
+
+/// Prefix of PLUS's per-frame fields ("Seq_Frame0012_ProbeToTrackerTransform").
+constexpr std::string_view kFramePrefix = "Seq_Frame";
+
+/// "Seq_Frame0012_ProbeToTrackerTransform" -> (12, "ProbeToTrackerTransform"); none for other keys.
+inline std::optional<std::pair<std::size_t, std::string>> split_frame_key(std::string_view key) {
+  if (key.substr(0, kFramePrefix.size()) != kFramePrefix) return std::nullopt;
+  const std::string_view rest = key.substr(kFramePrefix.size());
+  const std::size_t underscore = rest.find('_');
+  if (underscore == 0 || underscore == std::string_view::npos || underscore + 1 == rest.size())
+    return std::nullopt;
+  const auto index = parse_number<std::size_t>(rest.substr(0, underscore));
+  if (!index) return std::nullopt;
+  return std::make_pair(*index, std::string(rest.substr(underscore + 1)));
 }
 
 /// "sequence file <path>: <what>; <fix>".
