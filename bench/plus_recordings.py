@@ -24,7 +24,8 @@ import re
 import subprocess
 import sys
 
-BEGIN, END = "<!-- plus_recordings:begin -->", "<!-- plus_recordings:end -->"
+from doc_tables import write_between_markers
+
 SPINE = "data/plus/PlusDeviceSet_SpinePhantomFreehandReconstructionOnly.xml"
 NWIRE = "data/plus/PlusDeviceSet_Server_Sim_NwirePhantom.xml"
 # (name, recording, calibration): "data/..." paths are bundled, the others are in PLUSLIBDATA.
@@ -83,18 +84,6 @@ def table(rows):
     return "\n".join(lines)
 
 
-def write_doc(root, text):
-    path = os.path.join(root, "docs", "benchmarks.md")
-    with open(path) as f:
-        doc = f.read()
-    if BEGIN not in doc or END not in doc:
-        raise SystemExit(f"{path} has no {BEGIN} ... {END} markers")
-    head, rest = doc.split(BEGIN, 1)
-    _, tail = rest.split(END, 1)
-    with open(path, "w") as f:
-        f.write(head + BEGIN + "\n" + text + "\n" + END + tail)
-
-
 def main():
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -116,7 +105,7 @@ def main():
                           f"{'byte-identical' if identical else 'DIFFERENT'} slice sets.")
     print(text)
     if args.write_doc:
-        write_doc(root, text)
+        write_between_markers(root, "plus_recordings", text)
     short = [r["name"] for r in rows
              if min(r["segment_slices"], r["scan_slices"]) < 0.95 * r["frames"]]
     if short or not identical:

@@ -25,9 +25,10 @@ import os
 import re
 import subprocess
 import sys
+
+from doc_tables import write_between_markers
 import time
 
-BEGIN, END = "<!-- public_csl:begin -->", "<!-- public_csl:end -->"
 # Reference surfaces whose name is not <csl name>_scaled.stl: the simplified lamp shares the
 # reference of the lamp it was simplified from.
 REFERENCE_OF = {"lamp004_fixed_simplified": "lamp004_fixed"}
@@ -124,18 +125,6 @@ def table(rows):
     return "\n".join(lines)
 
 
-def write_doc(root, text):
-    path = os.path.join(root, "docs", "benchmarks.md")
-    with open(path) as f:
-        doc = f.read()
-    if BEGIN not in doc or END not in doc:
-        raise SystemExit(f"{path} has no {BEGIN} ... {END} markers")
-    head, rest = doc.split(BEGIN, 1)
-    _, tail = rest.split(END, 1)
-    with open(path, "w") as f:
-        f.write(head + BEGIN + "\n" + text + "\n" + END + tail)
-
-
 def main():
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -167,7 +156,7 @@ def main():
     text = table(rows)
     print(text)
     if args.write_doc:
-        write_doc(root, text)
+        write_between_markers(root, "public_csl", text)
     failed = [r["name"] for r in rows
               if r["exit"] != 0 or not r.get("closed", False) or "eval_error" in r]
     if failed:
