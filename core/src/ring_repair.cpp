@@ -137,6 +137,8 @@ Repair self_intersection_repair(const std::string& where, const std::string& cro
     if (result.area_changed > 0.0)
       done += "; an area of " + format_short(result.area_changed) +
               " that it covers more than once stays inside (even-odd would cut it out)";
+    else
+      done += "; area changed: 0 (no part is covered twice)";
   }
   return {"self_intersection", where, "contour crosses itself at " + crossing + "; " + done,
           result.area_changed};
