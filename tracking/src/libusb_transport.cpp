@@ -120,10 +120,10 @@ class LibusbTransport final : public BirdTransport {
   }
 
  private:
-  // A halted endpoint (STALL) is cleared and the transfer counted as one that timed out.
+  // A halted endpoint (STALL) is cleared; the caller retries.
   UsbIo stalled(std::uint8_t endpoint) {
     const int rc = libusb_clear_halt(handle_, endpoint);
-    return rc == LIBUSB_ERROR_NO_DEVICE ? UsbIo::kGone : UsbIo::kTimeout;
+    return rc == LIBUSB_ERROR_NO_DEVICE ? UsbIo::kGone : UsbIo::kStalled;
   }
 
   std::shared_ptr<UsbContext> context_;  // outlives the handle
@@ -163,22 +163,29 @@ libusb_device_handle* open_first(libusb_context* context, std::uint16_t product_
 bool have_libusb() { return true; }
 
 BirdTransportOpener libusb_trakstar_opener(const TrakstarOptions& options) {
+  // The opener keeps the libusb context (and its hotplug callback) between tries: the source
+  // owns the opener, so the context lives as long as the source.
+  struct State {
+    std::shared_ptr<UsbContext> context;
+    int tries = 0;
+  };
+  auto state = std::make_shared<State>();
   const std::uint16_t product_id = options.product_id;
-  auto tries = std::make_shared<int>(0);
-  return [product_id, tries](std::string& error) -> std::unique_ptr<BirdTransport> {
-    auto context = UsbContext::get(error);
-    if (!context) return nullptr;
+  return [product_id, state](std::string& error) -> std::unique_ptr<BirdTransport> {
+    if (!state->context) state->context = UsbContext::get(error);
+    if (!state->context) return nullptr;
+    UsbContext& context = *state->context;
     // With hotplug, look only when a tracker arrived (or now and then): enumerating the bus
     // twice a second is what polling platforms pay.
-    const bool arrived = context->has_hotplug() && context->take_arrival();
-    const bool look = *tries == 0 || !context->has_hotplug() || arrived ||
-                      *tries % kEnumerateEvery == 0;
-    ++*tries;
+    const bool arrived = context.has_hotplug() && context.take_arrival();
+    const bool look = state->tries == 0 || !context.has_hotplug() || arrived ||
+                      state->tries % kEnumerateEvery == 0;
+    ++state->tries;
     if (!look) {
       error = "no trakSTAR/driveBAY: waiting for it to be plugged in";
       return nullptr;
     }
-    libusb_device_handle* handle = open_first(context->context(), product_id, error);
+    libusb_device_handle* handle = open_first(context.context(), product_id, error);
     if (!handle) return nullptr;
     libusb_set_auto_detach_kernel_driver(handle, 1);
     if (const int rc = libusb_claim_interface(handle, 0); rc != 0) {
@@ -187,8 +194,8 @@ BirdTransportOpener libusb_trakstar_opener(const TrakstarOptions& options) {
       libusb_close(handle);
       return nullptr;
     }
-    *tries = 0;
-    return std::make_unique<LibusbTransport>(std::move(context), handle);
+    state->tries = 0;
+    return std::make_unique<LibusbTransport>(state->context, handle);
   };
 }
 

@@ -243,6 +243,7 @@ Result<acq::Polled> TrakstarPoseSource::poll(Pose& pose) {
       lost("the tracker was unplugged (or failed) while reading");
       return acq::Polled::kNothing;
     }
+    if (io == UsbIo::kStalled) count([](TrakstarCounts& c) { ++c.stalls; });
     framer.push(std::span(buffer).first(received));
     record = framer.next();
   }

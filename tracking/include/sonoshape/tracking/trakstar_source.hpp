@@ -45,7 +45,13 @@ struct TrakstarOptions {
 Result<TrakstarOptions> parse_trakstar_options(std::string_view text);
 
 /// The outcome of one bulk transfer.
-enum class UsbIo { kOk, kTimeout, kGone, kError };
+enum class UsbIo {
+  kOk,
+  kTimeout,
+  kStalled,  ///< the endpoint halted (STALL); the transport cleared it, nothing was moved
+  kGone,     ///< the device was unplugged
+  kError,
+};
 
 /// Bulk I/O with one opened tracker: the seam between the Bird protocol and libusb (tests
 /// drive the source through an emulator). Used from the source's thread only.
@@ -73,7 +79,8 @@ struct TrakstarCounts {
   std::size_t not_attached = 0;  ///< kInvalid: no sensor on the port
   std::size_t out_of_range = 0;  ///< kInvalid: beyond the position full scale
   std::size_t bad_rotation = 0;  ///< kInvalid: corrupt orientation
-  std::size_t timeouts = 0;      ///< POINTs without a record in time (stalls)
+  std::size_t timeouts = 0;      ///< POINTs without a record in time
+  std::size_t stalls = 0;        ///< halted endpoints cleared (USB STALL)
   std::size_t skipped_bytes = 0; ///< garbage and cut records
   std::size_t unplugged = 0;     ///< times the tracker vanished
   std::size_t reopened = 0;      ///< times it came back
