@@ -23,7 +23,8 @@ std::int16_t clamp_word(double value) {
 }
 
 bool is_rotation(const Eigen::Matrix3d& r) {
-  const double orthonormal = (r.transpose() * r - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
+  const double orthonormal =
+      (r.transpose() * r - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
   return r.allFinite() && orthonormal < kRotationTolerance && r.determinant() > 0.0;
 }
 
@@ -49,7 +50,9 @@ std::vector<std::uint8_t> change_value(std::uint8_t parameter, std::uint16_t val
           static_cast<std::uint8_t>(value >> 8)};
 }
 
-std::vector<std::uint8_t> examine_value(std::uint8_t parameter) { return {kExamineValue, parameter}; }
+std::vector<std::uint8_t> examine_value(std::uint8_t parameter) {
+  return {kExamineValue, parameter};
+}
 
 std::vector<std::uint8_t> pack_words(std::span<const std::int16_t> words) {
   std::vector<std::uint8_t> bytes;
@@ -70,8 +73,7 @@ std::optional<std::vector<std::int16_t>> unpack_words(std::span<const std::uint8
   std::vector<std::int16_t> words;
   words.reserve(bytes.size() / 2);
   for (std::size_t i = 0; i < bytes.size(); i += 2) {
-    const auto bits =
-        static_cast<std::uint16_t>((bytes[i + 1] << 9) | ((bytes[i] & 0x7F) << 2));
+    const auto bits = static_cast<std::uint16_t>((bytes[i + 1] << 9) | ((bytes[i] & 0x7F) << 2));
     words.push_back(static_cast<std::int16_t>(bits));
   }
   return words;

@@ -33,18 +33,18 @@
 namespace sonoshape::tracking::bird {
 
 // Command bytes.
-inline constexpr std::uint8_t kPoint = 0x42;             ///< 'B': send one record
-inline constexpr std::uint8_t kChangeValue = 0x50;       ///< 'P' PARAM VALUE...
-inline constexpr std::uint8_t kExamineValue = 0x4F;      ///< 'O' PARAM: the device answers
-inline constexpr std::uint8_t kPositionAngles = 0x59;    ///< 'Y': records become POSITION/ANGLES
-inline constexpr std::uint8_t kPositionMatrix = 0x5A;    ///< 'Z': records become POSITION/MATRIX
+inline constexpr std::uint8_t kPoint = 0x42;           ///< 'B': send one record
+inline constexpr std::uint8_t kChangeValue = 0x50;     ///< 'P' PARAM VALUE...
+inline constexpr std::uint8_t kExamineValue = 0x4F;    ///< 'O' PARAM: the device answers
+inline constexpr std::uint8_t kPositionAngles = 0x59;  ///< 'Y': records become POSITION/ANGLES
+inline constexpr std::uint8_t kPositionMatrix = 0x5A;  ///< 'Z': records become POSITION/MATRIX
 /// RS232 TO FBB: 0xF0 | address (1..14) before a command sends it to that bird (sensor).
 /// ASSUMPTION: the trakSTAR addresses its sensors 1..4 this way over USB as well.
 inline constexpr std::uint8_t kToAddress = 0xF0;
 
 // Parameter numbers of CHANGE VALUE / EXAMINE VALUE (two-byte values, LS byte first).
-inline constexpr std::uint8_t kParamPositionScaling = 3;   ///< 0: 36 in full scale, 1: 72 in
-inline constexpr std::uint8_t kParamMeasurementRate = 7;   ///< Hz * 256
+inline constexpr std::uint8_t kParamPositionScaling = 3;  ///< 0: 36 in full scale, 1: 72 in
+inline constexpr std::uint8_t kParamMeasurementRate = 7;  ///< Hz * 256
 
 /// The record formats the backend reads.
 enum class RecordFormat {

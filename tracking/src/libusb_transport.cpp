@@ -101,8 +101,9 @@ class LibusbTransport final : public BirdTransport {
   UsbIo write(std::span<const std::uint8_t> bytes, double timeout_s) override {
     std::vector<std::uint8_t> data(bytes.begin(), bytes.end());  // libusb takes non-const
     int sent = 0;
-    const int rc = libusb_bulk_transfer(handle_, kTrakstarEndpointOut, data.data(),
-                                        static_cast<int>(data.size()), &sent, timeout_ms(timeout_s));
+    const int rc =
+        libusb_bulk_transfer(handle_, kTrakstarEndpointOut, data.data(),
+                             static_cast<int>(data.size()), &sent, timeout_ms(timeout_s));
     if (rc == LIBUSB_ERROR_PIPE) return stalled(kTrakstarEndpointOut);
     if (rc == LIBUSB_SUCCESS && sent != static_cast<int>(data.size())) return UsbIo::kTimeout;
     return to_io(rc);
@@ -110,8 +111,9 @@ class LibusbTransport final : public BirdTransport {
 
   UsbIo read(std::span<std::uint8_t> buffer, std::size_t& received, double timeout_s) override {
     int got = 0;
-    const int rc = libusb_bulk_transfer(handle_, kTrakstarEndpointIn, buffer.data(),
-                                        static_cast<int>(buffer.size()), &got, timeout_ms(timeout_s));
+    const int rc =
+        libusb_bulk_transfer(handle_, kTrakstarEndpointIn, buffer.data(),
+                             static_cast<int>(buffer.size()), &got, timeout_ms(timeout_s));
     received = static_cast<std::size_t>(std::max(got, 0));
     if (rc == LIBUSB_ERROR_PIPE) return stalled(kTrakstarEndpointIn);
     // A timeout may still have delivered part of a record.

@@ -8,8 +8,9 @@ bool have_libusb() { return false; }
 
 BirdTransportOpener libusb_trakstar_opener(const TrakstarOptions&) {
   return [](std::string& error) -> std::unique_ptr<BirdTransport> {
-    error = "this sonoshape was built without libusb; install libusb-1.0-0-dev (scripts/"
-            "install-deps) and configure with -DSONOSHAPE_WITH_LIBUSB=ON";
+    error =
+        "this sonoshape was built without libusb; install libusb-1.0-0-dev (scripts/"
+        "install-deps) and configure with -DSONOSHAPE_WITH_LIBUSB=ON";
     return nullptr;
   };
 }

@@ -36,9 +36,8 @@ std::optional<double> parse_number(std::string_view text) {
 
 Status set_option(TrakstarOptions& options, std::string_view key, std::string_view value) {
   const auto bad = [&](const std::string& takes) {
-    return Status::error("--tracker usb:trakstar: '" + std::string(key) + "=" +
-                         std::string(value) + "' is invalid; " + std::string(key) + " takes " +
-                         takes);
+    return Status::error("--tracker usb:trakstar: '" + std::string(key) + "=" + std::string(value) +
+                         "' is invalid; " + std::string(key) + " takes " + takes);
   };
   if (key == "product") {
     unsigned id = 0;
@@ -155,8 +154,9 @@ Status TrakstarPoseSource::configure() {
   };
   for (const auto& command : commands)
     if (transport_->write(command, options_.reply_timeout_s) != UsbIo::kOk)
-      return Status::error(describe() + ": writing the setup commands failed (check the cable "
-                                        "and that no other program holds the tracker)");
+      return Status::error(describe() +
+                           ": writing the setup commands failed (check the cable "
+                           "and that no other program holds the tracker)");
   // Reads a whole packet each time: a buffer shorter than the device's packet overflows.
   std::vector<std::uint8_t> answer;
   std::array<std::uint8_t, 64> buffer{};
@@ -172,7 +172,8 @@ Status TrakstarPoseSource::configure() {
     return Status::error(describe() +
                          ": the device does not answer the Bird protocol (EXAMINE VALUE "
                          "POSITION SCALING got " +
-                         std::to_string(have) + " of 2 bytes or the wrong value); is it a "
+                         std::to_string(have) +
+                         " of 2 bytes or the wrong value); is it a "
                          "trakSTAR/driveBAY, powered, with its transmitter attached?");
   return Status::ok();
 }
@@ -199,7 +200,8 @@ void TrakstarPoseSource::lost(const std::string& why) {
 Result<acq::Polled> TrakstarPoseSource::reopen() {
   const double now_s = clock_monotonic_s();
   if (now_s < next_reopen_s_) {
-    std::this_thread::sleep_for(std::chrono::duration<double>(std::min(next_reopen_s_ - now_s, 0.05)));
+    std::this_thread::sleep_for(
+        std::chrono::duration<double>(std::min(next_reopen_s_ - now_s, 0.05)));
     return acq::Polled::kNothing;
   }
   next_reopen_s_ = now_s + options_.reopen_interval_s;
@@ -224,8 +226,8 @@ Result<acq::Polled> TrakstarPoseSource::poll(Pose& pose) {
     drain_input();
     drain_ = false;
   }
-  const UsbIo wrote = transport_->write(bird::addressed(options_.sensor, {bird::kPoint}),
-                                        options_.reply_timeout_s);
+  const UsbIo wrote =
+      transport_->write(bird::addressed(options_.sensor, {bird::kPoint}), options_.reply_timeout_s);
   if (wrote == UsbIo::kGone || wrote == UsbIo::kError) {
     lost("the tracker was unplugged (or failed) during POINT");
     return acq::Polled::kNothing;
@@ -260,14 +262,22 @@ Result<acq::Polled> TrakstarPoseSource::poll(Pose& pose) {
       bird::decode_record(*words, kFormat, bird::full_scale_in(options_.long_range));
   pose.timestamp_s = received_s - options_.latency_s;
   pose.T_reference_probe = m.T_tracker_sensor;
-  pose.status = m.fault == bird::RecordFault::kNone ? TrackingStatus::kValid
-                                                    : TrackingStatus::kInvalid;
+  pose.status =
+      m.fault == bird::RecordFault::kNone ? TrackingStatus::kValid : TrackingStatus::kInvalid;
   count([&](TrakstarCounts& c) {
     switch (m.fault) {
-      case bird::RecordFault::kNone: ++c.valid; break;
-      case bird::RecordFault::kSensorNotAttached: ++c.not_attached; break;
-      case bird::RecordFault::kOutOfRange: ++c.out_of_range; break;
-      case bird::RecordFault::kBadRotation: ++c.bad_rotation; break;
+      case bird::RecordFault::kNone:
+        ++c.valid;
+        break;
+      case bird::RecordFault::kSensorNotAttached:
+        ++c.not_attached;
+        break;
+      case bird::RecordFault::kOutOfRange:
+        ++c.out_of_range;
+        break;
+      case bird::RecordFault::kBadRotation:
+        ++c.bad_rotation;
+        break;
     }
   });
   return acq::Polled::kItem;

@@ -127,8 +127,8 @@ TEST(BirdRecord, SensorNotAttachedOutOfRangeAndBadRotationAreFaults) {
 }
 
 TEST(BirdFramer, FindsRecordsBetweenGarbageAndCutRecords) {
-  const auto record = pack_words(
-      encode_record(pose(50, 60, 70, 1, 2, 3), RecordFormat::kPositionAngles, 36.0));
+  const auto record =
+      pack_words(encode_record(pose(50, 60, 70, 1, 2, 3), RecordFormat::kPositionAngles, 36.0));
   RecordFramer framer(RecordFormat::kPositionAngles);
   const std::array<std::uint8_t, 3> garbage = {0x01, 0x7F, 0x33};
   framer.push(garbage);

@@ -16,11 +16,11 @@ namespace sonoshape::tracking::test {
 /// What the emulator does with one POINT.
 enum class PointFault {
   kNone,
-  kGarbage,      ///< three garbage bytes, then the record
-  kStall,        ///< no answer (the backend times out)
-  kDetached,     ///< the sensor is unplugged from the unit: an all-zero record
-  kOutOfRange,   ///< the sensor is beyond the full scale: saturated position words
-  kCutRecord,    ///< half a record, then the whole record
+  kGarbage,     ///< three garbage bytes, then the record
+  kStall,       ///< no answer (the backend times out)
+  kDetached,    ///< the sensor is unplugged from the unit: an all-zero record
+  kOutOfRange,  ///< the sensor is beyond the full scale: saturated position words
+  kCutRecord,   ///< half a record, then the whole record
 };
 
 class BirdEmulator {
@@ -39,8 +39,10 @@ class BirdEmulator {
   void receive(const std::vector<std::uint8_t>& bytes) {
     std::lock_guard lock(mutex_);
     std::size_t i = 0;
-    if (i < bytes.size() && (bytes[i] & 0xF0) == bird::kToAddress) last_address_ = bytes[i++] & 0x0F;
-    else last_address_ = 0;
+    if (i < bytes.size() && (bytes[i] & 0xF0) == bird::kToAddress)
+      last_address_ = bytes[i++] & 0x0F;
+    else
+      last_address_ = 0;
     if (i >= bytes.size()) return;
     const std::uint8_t command = bytes[i];
     if (command == bird::kChangeValue && i + 3 < bytes.size()) {

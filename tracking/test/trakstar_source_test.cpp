@@ -74,8 +74,10 @@ TrakstarOptions fast_options() {
 std::vector<Pose> take(PoseSource& source, std::size_t count) {
   std::vector<Pose> poses;
   while (poses.size() < count)
-    if (auto p = source.next(5.0)) poses.push_back(p->item);
-    else break;
+    if (auto p = source.next(5.0))
+      poses.push_back(p->item);
+    else
+      break;
   return poses;
 }
 
@@ -90,8 +92,7 @@ void expect_near(const Pose& pose, const Eigen::Isometry3d& expected, std::size_
   EXPECT_LT((pose.T_reference_probe.translation() - expected.translation()).cwiseAbs().maxCoeff(),
             0.12)
       << k;
-  EXPECT_LT((pose.T_reference_probe.linear() - expected.linear()).cwiseAbs().maxCoeff(), 1e-3)
-      << k;
+  EXPECT_LT((pose.T_reference_probe.linear() - expected.linear()).cwiseAbs().maxCoeff(), 1e-3) << k;
 }
 
 TEST(TrakstarPoseSource, DeliversTheEmulatorsPosesInMillimetresStampedOnReception) {
@@ -155,8 +156,8 @@ TEST(TrakstarPoseSource, LongRangeReadsPositionsBeyond36Inches) {
 
 TEST(TrakstarPoseSource, FaultScriptGivesInvalidPosesCountedByReasonAndRecovers) {
   FakeDevice device;
-  device.emulator.faults = {{1, PointFault::kGarbage},   {2, PointFault::kStall},
-                            {3, PointFault::kDetached},  {4, PointFault::kDetached},
+  device.emulator.faults = {{1, PointFault::kGarbage},    {2, PointFault::kStall},
+                            {3, PointFault::kDetached},   {4, PointFault::kDetached},
                             {5, PointFault::kOutOfRange}, {6, PointFault::kCutRecord},
                             {7, PointFault::kStall}};
   TrakstarPoseSource source(fast_options(), opener(device));
@@ -165,10 +166,10 @@ TEST(TrakstarPoseSource, FaultScriptGivesInvalidPosesCountedByReasonAndRecovers)
   const auto poses = take(source, 8);
   source.stop();
   ASSERT_EQ(poses.size(), 8u);
-  const std::vector<TrackingStatus> expected = {
-      TrackingStatus::kValid,   TrackingStatus::kValid,   TrackingStatus::kInvalid,
-      TrackingStatus::kInvalid, TrackingStatus::kInvalid, TrackingStatus::kValid,
-      TrackingStatus::kValid,   TrackingStatus::kValid};
+  const std::vector<TrackingStatus> expected = {TrackingStatus::kValid,   TrackingStatus::kValid,
+                                                TrackingStatus::kInvalid, TrackingStatus::kInvalid,
+                                                TrackingStatus::kInvalid, TrackingStatus::kValid,
+                                                TrackingStatus::kValid,   TrackingStatus::kValid};
   const auto sent = device.emulator.sent();
   std::size_t valid = 0;
   for (std::size_t k = 0; k < poses.size(); ++k) {
@@ -243,7 +244,8 @@ TEST(TrakstarPoseSource, ADeviceThatDoesNotAnswerTheProtocolIsRefused) {
 }
 
 TEST(TrakstarOptions, ParsesEveryKeyAndRefusesBadValues) {
-  const auto options = parse_trakstar_options("sensor=2,rate=120,range=72,latency_ms=8,product=0x0007");
+  const auto options =
+      parse_trakstar_options("sensor=2,rate=120,range=72,latency_ms=8,product=0x0007");
   ASSERT_TRUE(options) << options.message();
   EXPECT_EQ(options->sensor, 2);
   EXPECT_DOUBLE_EQ(options->rate_hz, 120.0);

@@ -10,10 +10,10 @@
 
 #include <atomic>
 #include <cerrno>
-#include <cstdlib>
-#include <cstring>
 #include <chrono>
 #include <cstddef>
+#include <cstdlib>
+#include <cstring>
 #include <deque>
 #include <mutex>
 #include <thread>
@@ -65,7 +65,8 @@ class UsbDeviceHandler {
     }
     switch (request) {
       case USBDEVFS_GET_CAPABILITIES: {
-        UMockdevIoctlData* data = umockdev_ioctl_data_resolve(arg, 0, sizeof(std::uint32_t), nullptr);
+        UMockdevIoctlData* data =
+            umockdev_ioctl_data_resolve(arg, 0, sizeof(std::uint32_t), nullptr);
         const std::uint32_t caps = USBDEVFS_CAP_BULK_CONTINUATION | USBDEVFS_CAP_NO_PACKET_SIZE_LIM;
         std::memcpy(data->data, &caps, sizeof caps);
         umockdev_ioctl_client_complete(client, 0, 0);
@@ -107,8 +108,7 @@ class UsbDeviceHandler {
                                            static_cast<gsize>(f->buffer_length), nullptr);
     if (u.buffer) g_object_unref(u.buffer);  // the urb's child list keeps it
     if ((f->endpoint & 0x80) == 0) {
-      if (u.buffer)
-        emulator.receive({u.buffer->data, u.buffer->data + f->buffer_length});
+      if (u.buffer) emulator.receive({u.buffer->data, u.buffer->data + f->buffer_length});
       f->actual_length = f->buffer_length;
       f->status = 0;
       done_.push_back(u);
@@ -215,10 +215,13 @@ class TrakstarTestbed {
         // device: USB 2.0, 64-byte EP0, vendor 0x21e2, product 0x0001, one configuration;
         // configuration 1 (32 bytes): interface 0 (vendor class, two endpoints), bulk OUT 0x02
         // and bulk IN 0x86 with 64-byte packets
-        "H: descriptors=12010002000000" "40e2210100000100000001"
-        "09022000010100" "8032"
+        "H: descriptors=12010002000000"
+        "40e2210100000100000001"
+        "09022000010100"
+        "8032"
         "0904000002ff000000"
-        "07050202400000" "07058602400000\n";
+        "07050202400000"
+        "07058602400000\n";
     GError* error = nullptr;
     if (!umockdev_testbed_add_from_string(testbed_, record, &error)) {
       ADD_FAILURE() << "umockdev record: " << error->message;
@@ -258,8 +261,10 @@ TrakstarOptions fast_options() {
 std::vector<Pose> take(PoseSource& source, std::size_t count) {
   std::vector<Pose> poses;
   while (poses.size() < count)
-    if (auto p = source.next(10.0)) poses.push_back(p->item);
-    else break;
+    if (auto p = source.next(10.0))
+      poses.push_back(p->item);
+    else
+      break;
   return poses;
 }
 

@@ -7,11 +7,11 @@
 #include "sonoshape/acquisition/frame_source.hpp"
 #include "sonoshape/acquisition/sequence_file.hpp"
 #include "sonoshape/core/errors.hpp"
+#include "sonoshape/core/log.hpp"
 #include "sonoshape/segmentation/sweep.hpp"
 #include "sonoshape/simulator/bmode.hpp"
 #include "sonoshape/simulator/sim_source.hpp"
 #include "sonoshape/simulator/sweep.hpp"
-#include "sonoshape/core/log.hpp"
 #include "sonoshape/tracking/pose_source.hpp"
 #include "sonoshape/tracking/trakstar_source.hpp"
 

@@ -31,11 +31,11 @@ inline constexpr std::uint8_t kTrakstarEndpointIn = 0x86;
 
 /// What `--tracker usb:trakstar[:KEY=VALUE,...]` sets.
 struct TrakstarOptions {
-  int sensor = 1;               ///< the sensor's bird address (port), 1..14
-  double rate_hz = 80.0;        ///< measurement rate (Hz), 20..255 (sent as Hz x 256)
-  bool long_range = false;      ///< position full scale 72 in (POSITION SCALING 1), else 36 in
-  double latency_s = 0.0;       ///< subtracted from the reception time of every sample (s)
-  double reply_timeout_s = 0.1; ///< how long one POINT waits for its record (s)
+  int sensor = 1;                  ///< the sensor's bird address (port), 1..14
+  double rate_hz = 80.0;           ///< measurement rate (Hz), 20..255 (sent as Hz x 256)
+  bool long_range = false;         ///< position full scale 72 in (POSITION SCALING 1), else 36 in
+  double latency_s = 0.0;          ///< subtracted from the reception time of every sample (s)
+  double reply_timeout_s = 0.1;    ///< how long one POINT waits for its record (s)
   double reopen_interval_s = 0.5;  ///< how often an unplugged tracker is looked for (s)
   std::uint16_t product_id = 0;    ///< USB product id to open; 0: the first of vendor 0x21E2
 };
@@ -76,14 +76,14 @@ bool have_libusb();
 /// Counts of what the source received, by reason.
 struct TrakstarCounts {
   std::size_t valid = 0;
-  std::size_t not_attached = 0;  ///< kInvalid: no sensor on the port
-  std::size_t out_of_range = 0;  ///< kInvalid: beyond the position full scale
-  std::size_t bad_rotation = 0;  ///< kInvalid: corrupt orientation
-  std::size_t timeouts = 0;      ///< POINTs without a record in time
-  std::size_t stalls = 0;        ///< halted endpoints cleared (USB STALL)
-  std::size_t skipped_bytes = 0; ///< garbage and cut records
-  std::size_t unplugged = 0;     ///< times the tracker vanished
-  std::size_t reopened = 0;      ///< times it came back
+  std::size_t not_attached = 0;   ///< kInvalid: no sensor on the port
+  std::size_t out_of_range = 0;   ///< kInvalid: beyond the position full scale
+  std::size_t bad_rotation = 0;   ///< kInvalid: corrupt orientation
+  std::size_t timeouts = 0;       ///< POINTs without a record in time
+  std::size_t stalls = 0;         ///< halted endpoints cleared (USB STALL)
+  std::size_t skipped_bytes = 0;  ///< garbage and cut records
+  std::size_t unplugged = 0;      ///< times the tracker vanished
+  std::size_t reopened = 0;       ///< times it came back
 };
 
 /// A live trakSTAR pose source. Open failures at start fail the source (no tracker, no
