@@ -3,6 +3,7 @@
 
 #include <atomic>
 #include <cmath>
+#include <cstdio>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -199,6 +200,31 @@ BirdTransportOpener libusb_trakstar_opener(const TrakstarOptions& options) {
     state->tries = 0;
     return std::make_unique<LibusbTransport>(state->context, handle);
   };
+}
+
+Result<std::vector<FoundTracker>> find_trakstars() {
+  std::string error;
+  auto context = UsbContext::get(error);
+  if (!context) return Status::error(error);
+  libusb_device** list = nullptr;
+  const ssize_t count = libusb_get_device_list(context->context(), &list);
+  if (count < 0)
+    return Status::error(std::string("cannot list USB devices: ") +
+                         libusb_strerror(static_cast<int>(count)));
+  std::vector<FoundTracker> found;
+  for (ssize_t i = 0; i < count; ++i) {
+    libusb_device_descriptor descriptor{};
+    if (libusb_get_device_descriptor(list[i], &descriptor) != 0) continue;
+    if (descriptor.idVendor != kTrakstarVendorId) continue;
+    char product[8];
+    std::snprintf(product, sizeof product, "0x%04x", descriptor.idProduct);
+    found.push_back({std::string("usb:trakstar:product=") + product,
+                     "USB bus " + std::to_string(libusb_get_bus_number(list[i])) + " device " +
+                         std::to_string(libusb_get_device_address(list[i])) +
+                         ", vendor 0x21e2 product " + product});
+  }
+  libusb_free_device_list(list, 1);
+  return found;
 }
 
 }  // namespace sonoshape::tracking

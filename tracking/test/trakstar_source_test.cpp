@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 #include <time.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <thread>
@@ -74,11 +75,26 @@ TrakstarOptions fast_options() {
 std::vector<Pose> take(PoseSource& source, std::size_t count) {
   std::vector<Pose> poses;
   while (poses.size() < count)
-    if (auto p = source.next(5.0))
+    if (auto p = source.next(10.0))
       poses.push_back(p->item);
     else
       break;
   return poses;
+}
+
+// Takes `count` samples, stops the source, and adds what it produced meanwhile: then the
+// source's counts describe exactly the samples returned.
+std::vector<Pose> take_then_stop(PoseSource& source, std::size_t count) {
+  std::vector<Pose> poses = take(source, count);
+  source.stop();
+  while (auto p = source.next(0.0)) poses.push_back(p->item);
+  return poses;
+}
+
+std::size_t count_valid(const std::vector<Pose>& poses) {
+  return static_cast<std::size_t>(std::count_if(poses.begin(), poses.end(), [](const Pose& p) {
+    return p.status == TrackingStatus::kValid;
+  }));
 }
 
 double now_s() {
@@ -104,10 +120,9 @@ TEST(TrakstarPoseSource, DeliversTheEmulatorsPosesInMillimetresStampedOnReceptio
   TrakstarPoseSource source(options, opener(device));
   const double before_s = now_s();
   ASSERT_TRUE(source.start());
-  const auto poses = take(source, 20);
+  const auto poses = take_then_stop(source, 20);
   const double after_s = now_s();
-  source.stop();
-  ASSERT_EQ(poses.size(), 20u) << source.message();
+  ASSERT_GE(poses.size(), 20u) << source.message();
   // The setup: range 36 in, 200 Hz x 256, POSITION/MATRIX, sent to sensor 3.
   EXPECT_EQ(device.emulator.value(bird::kParamPositionScaling), 0);
   EXPECT_EQ(device.emulator.value(bird::kParamMeasurementRate), 200 * 256);
@@ -124,7 +139,7 @@ TEST(TrakstarPoseSource, DeliversTheEmulatorsPosesInMillimetresStampedOnReceptio
   }
   // POINTs are paced at the measurement rate: 20 samples at 200 Hz take at least 95 ms.
   EXPECT_GT(poses.back().timestamp_s - poses.front().timestamp_s, 19 / 200.0 - 0.005);
-  EXPECT_EQ(source.counts().valid, 20u);
+  EXPECT_EQ(source.counts().valid, poses.size());
   EXPECT_EQ(source.status_line(), "connected");
 }
 
@@ -140,9 +155,8 @@ TEST(TrakstarPoseSource, LongRangeReadsPositionsBeyond36Inches) {
     options.long_range = long_range;
     TrakstarPoseSource source(options, opener(device));
     ASSERT_TRUE(source.start());
-    const auto poses = take(source, 3);
-    source.stop();
-    ASSERT_EQ(poses.size(), 3u);
+    const auto poses = take_then_stop(source, 3);
+    ASSERT_GE(poses.size(), 3u);
     EXPECT_EQ(device.emulator.value(bird::kParamPositionScaling), long_range ? 1 : 0);
     for (const Pose& p : poses) {
       EXPECT_EQ(p.status, long_range ? TrackingStatus::kValid : TrackingStatus::kInvalid);
@@ -150,7 +164,7 @@ TEST(TrakstarPoseSource, LongRangeReadsPositionsBeyond36Inches) {
         EXPECT_NEAR(p.T_reference_probe.translation().x(), 1500.0, 0.25);
       }
     }
-    EXPECT_EQ(source.counts().out_of_range, long_range ? 0u : 3u);
+    EXPECT_EQ(source.counts().out_of_range, long_range ? 0u : poses.size());
   }
 }
 
@@ -163,9 +177,8 @@ TEST(TrakstarPoseSource, FaultScriptGivesInvalidPosesCountedByReasonAndRecovers)
   TrakstarPoseSource source(fast_options(), opener(device));
   ASSERT_TRUE(source.start());
   // POINTs 0..9 answered except the two stalls: 8 samples.
-  const auto poses = take(source, 8);
-  source.stop();
-  ASSERT_EQ(poses.size(), 8u);
+  const auto poses = take_then_stop(source, 8);
+  ASSERT_GE(poses.size(), 8u);
   const std::vector<TrackingStatus> expected = {TrackingStatus::kValid,   TrackingStatus::kValid,
                                                 TrackingStatus::kInvalid, TrackingStatus::kInvalid,
                                                 TrackingStatus::kInvalid, TrackingStatus::kValid,
@@ -173,11 +186,12 @@ TEST(TrakstarPoseSource, FaultScriptGivesInvalidPosesCountedByReasonAndRecovers)
   const auto sent = device.emulator.sent();
   std::size_t valid = 0;
   for (std::size_t k = 0; k < poses.size(); ++k) {
-    ASSERT_EQ(poses[k].status, expected[k]) << k;
+    ASSERT_EQ(poses[k].status, k < expected.size() ? expected[k] : TrackingStatus::kValid) << k;
     if (poses[k].status == TrackingStatus::kValid) expect_near(poses[k], sent[valid++], k);
   }
   const TrakstarCounts c = source.counts();
-  EXPECT_EQ(c.valid, 5u);
+  EXPECT_EQ(c.valid, count_valid(poses));
+  EXPECT_EQ(c.valid, poses.size() - 3);
   EXPECT_EQ(c.not_attached, 2u);
   EXPECT_EQ(c.out_of_range, 1u);
   EXPECT_EQ(c.timeouts, 2u);
@@ -205,9 +219,8 @@ TEST(TrakstarPoseSource, UnplugMidStreamIsReportedAndPosesContinueAfterReplug) {
   while (source.next(0.0)) {
   }  // samples received before the unplug
   device.plugged = true;
-  const auto after = take(source, 5);
-  source.stop();
-  ASSERT_EQ(after.size(), 5u);
+  const auto after = take_then_stop(source, 5);
+  ASSERT_GE(after.size(), 5u);
   for (const Pose& p : after) EXPECT_EQ(p.status, TrackingStatus::kValid);
   EXPECT_EQ(source.counts().unplugged, 1u);
   EXPECT_EQ(source.counts().reopened, 1u);

@@ -8,6 +8,7 @@
 #include <sys/ioctl.h>
 #include <umockdev.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cerrno>
 #include <chrono>
@@ -253,7 +254,7 @@ class TrakstarTestbed {
 TrakstarOptions fast_options() {
   TrakstarOptions options;
   options.rate_hz = 200.0;
-  options.reply_timeout_s = 0.05;
+  options.reply_timeout_s = 0.2;  // generous: umockdev answers through a socket
   options.reopen_interval_s = 0.02;
   return options;
 }
@@ -266,6 +267,21 @@ std::vector<Pose> take(PoseSource& source, std::size_t count) {
     else
       break;
   return poses;
+}
+
+// Takes `count` samples, stops the source, and adds what it produced meanwhile: then the
+// source's counts describe exactly the samples returned.
+std::vector<Pose> take_then_stop(PoseSource& source, std::size_t count) {
+  std::vector<Pose> poses = take(source, count);
+  source.stop();
+  while (auto p = source.next(0.0)) poses.push_back(p->item);
+  return poses;
+}
+
+std::size_t count_valid(const std::vector<Pose>& poses) {
+  return static_cast<std::size_t>(std::count_if(poses.begin(), poses.end(), [](const Pose& p) {
+    return p.status == TrackingStatus::kValid;
+  }));
 }
 
 class TrakstarUsb : public ::testing::Test {
@@ -292,9 +308,8 @@ TEST_F(TrakstarUsb, KnownPosesArriveThroughLibusbWithFaultsCountedByReason) {
   TrakstarPoseSource source(options);
   ASSERT_TRUE(source.start());
   // POINTs 0..10, the stall unanswered: 10 samples.
-  const auto poses = take(source, 10);
-  source.stop();
-  ASSERT_EQ(poses.size(), 10u) << source.message();
+  const auto poses = take_then_stop(source, 10);
+  ASSERT_GE(poses.size(), 10u) << source.message();
   EXPECT_EQ(bed.handler.emulator.value(bird::kParamMeasurementRate), 200 * 256);
   EXPECT_EQ(bed.handler.emulator.last_address(), 2);
   const auto sent = bed.handler.emulator.sent();
@@ -309,10 +324,24 @@ TEST_F(TrakstarUsb, KnownPosesArriveThroughLibusbWithFaultsCountedByReason) {
               1e-3);
   }
   const TrakstarCounts c = source.counts();
+  EXPECT_EQ(c.valid, count_valid(poses));
   EXPECT_EQ(c.not_attached, 1u);
   EXPECT_EQ(c.out_of_range, 1u);
   EXPECT_EQ(c.timeouts, 1u);
   EXPECT_EQ(c.skipped_bytes, 3u);
+}
+
+TEST_F(TrakstarUsb, FindTrakstarsListsTheDeviceInTheFormTrackerTakes) {
+  TrakstarTestbed bed;
+  const auto found = find_trakstars();
+  ASSERT_TRUE(found) << found.message();
+  ASSERT_EQ(found->size(), 1u);
+  EXPECT_EQ((*found)[0].spec, "usb:trakstar:product=0x0001");
+  EXPECT_EQ((*found)[0].description, "USB bus 1 device 2, vendor 0x21e2 product 0x0001");
+  const auto options = parse_trakstar_options(
+      std::string_view((*found)[0].spec).substr(std::string_view("usb:trakstar:").size()));
+  ASSERT_TRUE(options);
+  EXPECT_EQ(options->product_id, 1);
 }
 
 TEST_F(TrakstarUsb, AStalledEndpointIsClearedAndPosesContinue) {
@@ -322,9 +351,8 @@ TEST_F(TrakstarUsb, AStalledEndpointIsClearedAndPosesContinue) {
   ASSERT_TRUE(source.start());
   ASSERT_EQ(take(source, 3).size(), 3u) << source.message();
   bed.handler.stall_next_in = 1;
-  const auto after = take(source, 5);
-  source.stop();
-  ASSERT_EQ(after.size(), 5u) << source.message();
+  const auto after = take_then_stop(source, 5);
+  ASSERT_GE(after.size(), 5u) << source.message();
   for (const Pose& p : after) EXPECT_EQ(p.status, TrackingStatus::kValid);
   EXPECT_GE(bed.handler.clear_halts.load(), 1);
   EXPECT_EQ(source.counts().stalls, 1u);
@@ -350,9 +378,8 @@ TEST_F(TrakstarUsb, UnplugAndReplugMidStreamAreReportedAndRecovered) {
   while (source.next(0.0)) {
   }
   bed.replug();
-  const auto after = take(source, 5);
-  source.stop();
-  ASSERT_EQ(after.size(), 5u) << source.status_line();
+  const auto after = take_then_stop(source, 5);
+  ASSERT_GE(after.size(), 5u) << source.status_line();
   for (const Pose& p : after) EXPECT_EQ(p.status, TrackingStatus::kValid);
   EXPECT_EQ(source.counts().unplugged, 1u);
   EXPECT_EQ(source.counts().reopened, 1u);

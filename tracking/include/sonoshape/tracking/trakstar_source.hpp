@@ -18,6 +18,7 @@
 #include <span>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "sonoshape/core/status.hpp"
 #include "sonoshape/tracking/pose_source.hpp"
@@ -72,6 +73,15 @@ using BirdTransportOpener = std::function<std::unique_ptr<BirdTransport>(std::st
 BirdTransportOpener libusb_trakstar_opener(const TrakstarOptions& options);
 /// Whether this build has the libusb backend.
 bool have_libusb();
+
+/// A tracker found on USB, in the form `--tracker` takes.
+struct FoundTracker {
+  std::string spec;         ///< e.g. "usb:trakstar:product=0x0001"
+  std::string description;  ///< e.g. "USB bus 1 device 2, vendor 0x21e2 product 0x0001"
+};
+/// The trakSTAR / driveBAY units on USB (vendor 0x21E2), without opening them (for `sonoshape
+/// devices`). Fails when libusb cannot list devices or the build has no libusb.
+Result<std::vector<FoundTracker>> find_trakstars();
 
 /// Counts of what the source received, by reason.
 struct TrakstarCounts {
