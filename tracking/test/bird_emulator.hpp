@@ -2,14 +2,21 @@
 // A trakSTAR emulator for the tests: it parses the Bird commands the backend sends and answers
 // them as the device would (EXAMINE VALUE, records of known poses for POINT), with a fault
 // script for POINTs: garbage bytes, stalls, a detached sensor, out of range, cut records.
+#include <algorithm>
+#include <atomic>
+#include <chrono>
 #include <cstdint>
 #include <deque>
 #include <functional>
 #include <map>
+#include <memory>
 #include <mutex>
+#include <string>
+#include <thread>
 #include <vector>
 
 #include "bird_codec.hpp"
+#include "sonoshape/tracking/trakstar_source.hpp"
 
 namespace sonoshape::tracking::test {
 
@@ -114,5 +121,49 @@ class BirdEmulator {
   std::size_t points_ = 0;
   int last_address_ = 0;
 };
+
+// A plugged-in tracker with an emulator behind it, as a BirdTransport; `plugged = false` makes
+// every transfer and every open fail as a vanished device does.
+struct FakeDevice {
+  BirdEmulator emulator;
+  std::atomic<bool> plugged{true};
+  std::atomic<int> opens{0};
+};
+
+class FakeTransport final : public BirdTransport {
+ public:
+  explicit FakeTransport(FakeDevice& device) : device_(device) {}
+  UsbIo write(std::span<const std::uint8_t> bytes, double) override {
+    if (!device_.plugged) return UsbIo::kGone;
+    device_.emulator.receive({bytes.begin(), bytes.end()});
+    return UsbIo::kOk;
+  }
+  UsbIo read(std::span<std::uint8_t> buffer, std::size_t& received, double timeout_s) override {
+    received = 0;
+    if (!device_.plugged) return UsbIo::kGone;
+    const auto bytes = device_.emulator.take(buffer.size());
+    if (bytes.empty()) {
+      std::this_thread::sleep_for(std::chrono::duration<double>(std::min(timeout_s, 0.002)));
+      return UsbIo::kTimeout;
+    }
+    std::copy(bytes.begin(), bytes.end(), buffer.begin());
+    received = bytes.size();
+    return UsbIo::kOk;
+  }
+
+ private:
+  FakeDevice& device_;
+};
+
+inline BirdTransportOpener opener(FakeDevice& device) {
+  return [&device](std::string& error) -> std::unique_ptr<BirdTransport> {
+    ++device.opens;
+    if (!device.plugged) {
+      error = "no tracker";
+      return nullptr;
+    }
+    return std::make_unique<FakeTransport>(device);
+  };
+}
 
 }  // namespace sonoshape::tracking::test

@@ -17,52 +17,9 @@
 namespace sonoshape::tracking {
 namespace {
 
-using test::BirdEmulator;
+using test::FakeDevice;
+using test::opener;
 using test::PointFault;
-
-// A plugged-in tracker with an emulator behind it; unplug() makes every transfer and every open
-// fail as a vanished device does.
-struct FakeDevice {
-  BirdEmulator emulator;
-  std::atomic<bool> plugged{true};
-  std::atomic<int> opens{0};
-};
-
-class FakeTransport final : public BirdTransport {
- public:
-  explicit FakeTransport(FakeDevice& device) : device_(device) {}
-  UsbIo write(std::span<const std::uint8_t> bytes, double) override {
-    if (!device_.plugged) return UsbIo::kGone;
-    device_.emulator.receive({bytes.begin(), bytes.end()});
-    return UsbIo::kOk;
-  }
-  UsbIo read(std::span<std::uint8_t> buffer, std::size_t& received, double timeout_s) override {
-    received = 0;
-    if (!device_.plugged) return UsbIo::kGone;
-    const auto bytes = device_.emulator.take(buffer.size());
-    if (bytes.empty()) {
-      std::this_thread::sleep_for(std::chrono::duration<double>(std::min(timeout_s, 0.002)));
-      return UsbIo::kTimeout;
-    }
-    std::copy(bytes.begin(), bytes.end(), buffer.begin());
-    received = bytes.size();
-    return UsbIo::kOk;
-  }
-
- private:
-  FakeDevice& device_;
-};
-
-BirdTransportOpener opener(FakeDevice& device) {
-  return [&device](std::string& error) -> std::unique_ptr<BirdTransport> {
-    ++device.opens;
-    if (!device.plugged) {
-      error = "no tracker";
-      return nullptr;
-    }
-    return std::make_unique<FakeTransport>(device);
-  };
-}
 
 TrakstarOptions fast_options() {
   TrakstarOptions options;
