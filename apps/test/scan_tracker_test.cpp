@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 #include <time.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <thread>
@@ -114,7 +115,10 @@ class FinalMeshes final : public ScanSink {
  public:
   Status on_slice(const LabeledSlice&, std::size_t) override { return Status::ok(); }
   Status on_meshes(const MeshSet&, const MeshUpdateInfo&) override { return Status::ok(); }
-  Status on_status(const ScanStatus&) override { return Status::ok(); }
+  Status on_status(const ScanStatus& status) override {
+    statuses.push_back(status);
+    return Status::ok();
+  }
   Status on_finish(const MeshSet& meshes, const SliceSet& slices, const ScanSummary&) override {
     triangles = meshes.meshes.empty() ? 0 : meshes.meshes[0].mesh.triangles.size();
     final_slices = slices;
@@ -122,6 +126,7 @@ class FinalMeshes final : public ScanSink {
   }
   std::size_t triangles = 0;
   SliceSet final_slices;
+  std::vector<ScanStatus> statuses;
 };
 
 TEST(ScanWithTrakstar, UnplugAndReplugMidScanKeepTheMeshesAndPosesResume) {
@@ -168,6 +173,17 @@ TEST(ScanWithTrakstar, UnplugAndReplugMidScanKeepTheMeshesAndPosesResume) {
   const tracking::TrakstarCounts counts = tracker_view->counts();
   EXPECT_EQ(counts.unplugged, 1u);
   EXPECT_EQ(counts.reopened, 1u);
+  // Reported both ways in the scan's status.
+  const auto said = [&](ScanState state, const std::string& text) {
+    return std::any_of(final_meshes->statuses.begin(), final_meshes->statuses.end(),
+                       [&](const ScanStatus& s) {
+                         return s.state == state && s.message.find(text) != std::string::npos;
+                       });
+  };
+  EXPECT_TRUE(said(ScanState::kError, "waiting for the tracker to come back"));
+  EXPECT_TRUE(said(ScanState::kScanning, "is back; frames get poses again"));
+  ASSERT_EQ(summary.errors.size(), 1u);
+  EXPECT_NE(summary.errors[0].find("unplugged"), std::string::npos) << summary.errors[0];
   const DropCounts& dropped = summary.counters.dropped;
   EXPECT_GT(dropped.pose_gap + dropped.pose_extrapolation + dropped.pose_missing, 10u);
 

@@ -191,6 +191,7 @@ void TrakstarPoseSource::lost(const std::string& why) {
   transport_.reset();
   connected_.store(false);
   count([](TrakstarCounts& c) { ++c.unplugged; });
+  lost_.store(true);
   next_reopen_s_ = clock_monotonic_s();
   const std::string line = describe() + ": " + why + "; waiting for the tracker to come back";
   set_status(line);
@@ -208,6 +209,7 @@ Result<acq::Polled> TrakstarPoseSource::reopen() {
   if (!connect()) return acq::Polled::kNothing;
   count([](TrakstarCounts& c) { ++c.reopened; });
   set_status("connected (reopened after an unplug)");
+  lost_.store(false);
   log_info(describe() + ": the tracker is back; poses continue");
   return acq::Polled::kNothing;
 }
