@@ -222,46 +222,57 @@ Result<acq::Polled> TrakstarPoseSource::poll(Pose& pose) {
     return acq::Polled::kNothing;
   }
   next_point_s_ = std::max(next_point_s_ + 1.0 / options_.rate_hz, clock_monotonic_s());
-  std::array<std::uint8_t, 64> buffer{};
   if (drain_) {
     // The record of a POINT that timed out must not answer this one.
     drain_input();
     drain_ = false;
   }
+  const auto record = point();
+  if (!transport_) return acq::Polled::kNothing;  // unplugged during the POINT
+  if (!record) {
+    count([](TrakstarCounts& c) { ++c.timeouts; });
+    drain_ = true;
+    return acq::Polled::kNothing;
+  }
+  pose = to_pose(*record, clock_monotonic_s());
+  return acq::Polled::kItem;
+}
+
+std::optional<std::vector<std::uint8_t>> TrakstarPoseSource::point() {
   const UsbIo wrote =
       transport_->write(bird::addressed(options_.sensor, {bird::kPoint}), options_.reply_timeout_s);
   if (wrote == UsbIo::kGone || wrote == UsbIo::kError) {
     lost("the tracker was unplugged (or failed) during POINT");
-    return acq::Polled::kNothing;
+    return std::nullopt;
   }
   bird::RecordFramer framer(kFormat);
   std::optional<std::vector<std::uint8_t>> record;
+  std::array<std::uint8_t, 64> buffer{};
   const double deadline_s = clock_monotonic_s() + options_.reply_timeout_s;
   for (bool first = true; !record && wrote == UsbIo::kOk; first = false) {
-    // One read at least: a thread descheduled past the deadline must not count a stall.
+    // One read at least: a thread descheduled past the deadline must not count a timeout.
     const double left_s = deadline_s - clock_monotonic_s();
     if (left_s <= 0.0 && !first) break;
     std::size_t received = 0;
     const UsbIo io = transport_->read(buffer, received, std::max(left_s, 0.001));
     if (io == UsbIo::kGone || io == UsbIo::kError) {
       lost("the tracker was unplugged (or failed) while reading");
-      return acq::Polled::kNothing;
+      return std::nullopt;
     }
     if (io == UsbIo::kStalled) count([](TrakstarCounts& c) { ++c.stalls; });
     framer.push(std::span(buffer).first(received));
     record = framer.next();
   }
-  const double received_s = clock_monotonic_s();
   framer.clear();  // anything after the record belongs to no POINT
   count([&](TrakstarCounts& c) { c.skipped_bytes += framer.skipped_bytes(); });
-  if (!record) {
-    count([](TrakstarCounts& c) { ++c.timeouts; });
-    drain_ = true;
-    return acq::Polled::kNothing;
-  }
-  const auto words = bird::unpack_words(*record);  // the framer checked the phasing
+  return record;
+}
+
+Pose TrakstarPoseSource::to_pose(const std::vector<std::uint8_t>& record, double received_s) {
+  const auto words = bird::unpack_words(record);  // the framer checked the phasing
   const bird::Measurement m =
       bird::decode_record(*words, kFormat, bird::full_scale_in(options_.long_range));
+  Pose pose;
   pose.timestamp_s = received_s - options_.latency_s;
   pose.T_reference_probe = m.T_tracker_sensor;
   pose.status =
@@ -282,7 +293,7 @@ Result<acq::Polled> TrakstarPoseSource::poll(Pose& pose) {
         break;
     }
   });
-  return acq::Polled::kItem;
+  return pose;
 }
 
 void TrakstarPoseSource::close() {

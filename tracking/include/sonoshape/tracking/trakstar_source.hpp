@@ -15,6 +15,7 @@
 #include <functional>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <span>
 #include <string>
 #include <string_view>
@@ -122,6 +123,10 @@ class TrakstarPoseSource final : public PoseSource {
  private:
   Status connect();
   Status configure();
+  // One POINT and its record; none on a timeout, or when the tracker vanished (then
+  // transport_ is reset).
+  std::optional<std::vector<std::uint8_t>> point();
+  Pose to_pose(const std::vector<std::uint8_t>& record, double received_s);
   void drain_input();
   void lost(const std::string& why);
   Result<acq::Polled> reopen();
