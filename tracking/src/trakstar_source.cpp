@@ -125,6 +125,7 @@ void TrakstarPoseSource::set_status(std::string line) {
 Status TrakstarPoseSource::open() {
   if (Status connected = connect(); !connected) return connected;
   set_status("connected");
+  connected_.store(true);
   return Status::ok();
 }
 
@@ -136,7 +137,6 @@ Status TrakstarPoseSource::connect() {
     transport_.reset();
     return configured;
   }
-  connected_.store(true);
   return Status::ok();
 }
 
@@ -187,14 +187,16 @@ void TrakstarPoseSource::drain_input() {
   count([&](TrakstarCounts& c) { c.skipped_bytes += drained; });
 }
 
+// The status and counts change before connected() does: a thread that sees the tracker gone
+// sees why.
 void TrakstarPoseSource::lost(const std::string& why) {
   transport_.reset();
-  connected_.store(false);
-  count([](TrakstarCounts& c) { ++c.unplugged; });
-  lost_.store(true);
   next_reopen_s_ = clock_monotonic_s();
   const std::string line = describe() + ": " + why + "; waiting for the tracker to come back";
   set_status(line);
+  count([](TrakstarCounts& c) { ++c.unplugged; });
+  lost_.store(true);
+  connected_.store(false);
   log_warning(line);
 }
 
@@ -210,6 +212,7 @@ Result<acq::Polled> TrakstarPoseSource::reopen() {
   count([](TrakstarCounts& c) { ++c.reopened; });
   set_status("connected (reopened after an unplug)");
   lost_.store(false);
+  connected_.store(true);
   log_info(describe() + ": the tracker is back; poses continue");
   return acq::Polled::kNothing;
 }

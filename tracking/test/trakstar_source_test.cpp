@@ -40,12 +40,19 @@ std::vector<Pose> take(PoseSource& source, std::size_t count) {
 }
 
 // Takes `count` samples, stops the source, and adds what it produced meanwhile: then the
-// source's counts describe exactly the samples returned.
+// source's counts describe the samples returned, but for the one sample a stop() may catch
+// between its decoding (counted) and the closed buffer (see within_one).
 std::vector<Pose> take_then_stop(PoseSource& source, std::size_t count) {
   std::vector<Pose> poses = take(source, count);
   source.stop();
   while (auto p = source.next(0.0)) poses.push_back(p->item);
   return poses;
+}
+
+// A count of the source against the samples delivered: equal, or one more (see take_then_stop).
+void within_one(std::size_t counted, std::size_t delivered) {
+  EXPECT_GE(counted, delivered);
+  EXPECT_LE(counted, delivered + 1);
 }
 
 std::size_t count_valid(const std::vector<Pose>& poses) {
@@ -96,7 +103,7 @@ TEST(TrakstarPoseSource, DeliversTheEmulatorsPosesInMillimetresStampedOnReceptio
   }
   // POINTs are paced at the measurement rate: 20 samples at 200 Hz take at least 95 ms.
   EXPECT_GT(poses.back().timestamp_s - poses.front().timestamp_s, 19 / 200.0 - 0.005);
-  EXPECT_EQ(source.counts().valid, poses.size());
+  within_one(source.counts().valid, poses.size());
   EXPECT_EQ(source.status_line(), "connected");
 }
 
@@ -121,7 +128,7 @@ TEST(TrakstarPoseSource, LongRangeReadsPositionsBeyond36Inches) {
         EXPECT_NEAR(p.T_reference_probe.translation().x(), 1500.0, 0.25);
       }
     }
-    EXPECT_EQ(source.counts().out_of_range, long_range ? 0u : poses.size());
+    within_one(source.counts().out_of_range, long_range ? 0u : poses.size());
   }
 }
 
@@ -147,8 +154,8 @@ TEST(TrakstarPoseSource, FaultScriptGivesInvalidPosesCountedByReasonAndRecovers)
     if (poses[k].status == TrackingStatus::kValid) expect_near(poses[k], sent[valid++], k);
   }
   const TrakstarCounts c = source.counts();
-  EXPECT_EQ(c.valid, count_valid(poses));
-  EXPECT_EQ(c.valid, poses.size() - 3);
+  within_one(c.valid, count_valid(poses));
+  EXPECT_EQ(count_valid(poses), poses.size() - 3);
   EXPECT_EQ(c.not_attached, 2u);
   EXPECT_EQ(c.out_of_range, 1u);
   EXPECT_EQ(c.timeouts, 2u);
