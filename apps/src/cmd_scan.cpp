@@ -27,6 +27,7 @@ namespace {
 
 struct ScanCommandOptions {
   std::string source;
+  std::string tracker;  ///< --tracker: a live tracker replaces the source's poses
   std::filesystem::path calibration;
   std::filesystem::path segmentation;
   std::filesystem::path out;
@@ -134,6 +135,7 @@ int run_scan(const ScanCommandOptions& options) {
   const InterruptGuard interrupts;
   scan::SourceRequest request;
   request.spec = options.source;
+  request.tracker = options.tracker;
   if (!options.calibration.empty()) request.calibration = options.calibration;
   if (!options.segmentation.empty()) request.segmentation = options.segmentation;
   if (!options.bounds.empty()) {
@@ -248,6 +250,10 @@ CommandRunner add_scan_command(CLI::App& app) {
                  "LABEL:PATH[:NAME] meshes separated by commas) or replay:FILE (a PLUS .igs.mha or "
                  ".igs.nrrd)")
       ->required();
+  app.add_option("--tracker", options->tracker,
+                 "A live tracker for the poses instead of the source's: usb:trakstar[:sensor=N,"
+                 "rate=HZ,range=36|72,latency_ms=MS,product=0xID] (NDI/Ascension trakSTAR, "
+                 "driveBAY over USB; defaults sensor=1, rate=80, range=36, latency_ms=0)");
   app.add_option("--calibration", options->calibration,
                  "ImageToProbe calibration: PLUS device-set XML or JSON {\"ImageToProbe\": [16 "
                  "numbers]}. Default: sim: the simulated probe's; replay: the header's, else "
@@ -286,7 +292,8 @@ CommandRunner add_scan_command(CLI::App& app) {
                  "Snapshot endpoint for late joiners (default: the --publish port + 1)");
   app.add_option("--tracker-latency-ms", options->tracker_latency_ms,
                  "How late the tracker's timestamps are relative to the frames (ms). Default: "
-                 "the source's (sim: the simulated latency; replay: 0)");
+                 "the source's (sim: the simulated latency; replay: 0; --tracker usb:trakstar: "
+                 "0, as it subtracts its own latency_ms)");
   app.add_option("--max-pose-gap-ms", options->max_pose_gap_ms,
                  "Tracker samples further apart than this do not interpolate a pose (ms)")
       ->check(CLI::PositiveNumber)

@@ -189,7 +189,21 @@ void ScanPipeline::stage_done() {
   }
 }
 
+// A live tracker that is unplugged (and back) is reported once each way; the scan runs on.
+void ScanPipeline::report_pose_trouble() {
+  std::string trouble = source_.poses->trouble();
+  if (trouble == pose_trouble_) return;
+  if (trouble.empty())
+    report(ScanState::kScanning,
+           "pose source " + source_.poses->describe() + " is back; frames get poses again");
+  else
+    report(ScanState::kError,
+           trouble + "; frames get no pose meanwhile and are dropped; the meshes so far are kept");
+  pose_trouble_ = std::move(trouble);
+}
+
 tracking::SyncedPose ScanPipeline::synchronise(const Frame& frame) {
+  report_pose_trouble();
   const double t = frame.timestamp_s;
   const double deadline_s = acq::monotonic_s() + options_.pose_wait_s;
   // Interpolation needs the tracker sample after the frame's time: wait for it, a little.

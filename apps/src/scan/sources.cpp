@@ -7,11 +7,13 @@
 #include "sonoshape/acquisition/frame_source.hpp"
 #include "sonoshape/acquisition/sequence_file.hpp"
 #include "sonoshape/core/errors.hpp"
+#include "sonoshape/core/log.hpp"
 #include "sonoshape/segmentation/sweep.hpp"
 #include "sonoshape/simulator/bmode.hpp"
 #include "sonoshape/simulator/sim_source.hpp"
 #include "sonoshape/simulator/sweep.hpp"
 #include "sonoshape/tracking/pose_source.hpp"
+#include "sonoshape/tracking/trakstar_source.hpp"
 
 namespace sonoshape::scan {
 namespace {
@@ -169,9 +171,25 @@ Result<ScanSource> open_sim(const SourceRequest& request, const std::string& pha
   return source;
 }
 
-}  // namespace
+// --tracker: a live tracker instead of the source's poses. Its samples are stamped with
+// CLOCK_MONOTONIC minus its own latency option, so the scan adds no latency of its own.
+Status open_tracker(const std::string& spec, ScanSource& source) {
+  const std::string trakstar = "usb:trakstar";
+  if (spec.compare(0, trakstar.size(), trakstar) != 0 ||
+      (spec.size() > trakstar.size() && spec[trakstar.size()] != ':'))
+    return Status::error("--tracker '" + spec +
+                         "': unknown tracker; use usb:trakstar[:sensor=N,rate=HZ,range=36|72,"
+                         "latency_ms=MS,product=0xID]");
+  auto options = tracking::parse_trakstar_options(
+      spec.size() > trakstar.size() ? std::string_view(spec).substr(trakstar.size() + 1) : "");
+  if (!options) return options.status();
+  source.poses = std::make_unique<tracking::TrakstarPoseSource>(*options);
+  source.tracker_latency_s = 0.0;
+  source.description += "; poses from " + source.poses->describe();
+  return Status::ok();
+}
 
-Result<ScanSource> open_scan_source(const SourceRequest& request) {
+Result<ScanSource> open_frames_and_poses(const SourceRequest& request) {
   const std::size_t colon = request.spec.find(':');
   const std::string prefix = request.spec.substr(0, colon);
   const std::string rest = colon == std::string::npos ? "" : request.spec.substr(colon + 1);
@@ -180,6 +198,19 @@ Result<ScanSource> open_scan_source(const SourceRequest& request) {
   return Status::error("--source '" + request.spec +
                        "': unknown source; use sim:PHANTOM_SPEC (e.g. sim:default) or "
                        "replay:FILE.igs.mha");
+}
+
+}  // namespace
+
+Result<ScanSource> open_scan_source(const SourceRequest& request) {
+  auto source = open_frames_and_poses(request);
+  if (!source || request.tracker.empty()) return source;
+  if (Status opened = open_tracker(request.tracker, *source); !opened) return opened;
+  // sim: and replay: frames carry their own clock; a live tracker's is CLOCK_MONOTONIC.
+  log_warning("--tracker with --source " + request.spec +
+              ": the frames are not stamped with CLOCK_MONOTONIC, so the tracker's poses will "
+              "not pair with them; use a live frame source");
+  return source;
 }
 
 }  // namespace sonoshape::scan

@@ -110,6 +110,7 @@ class ScanPipeline {
   void segmentation_loop();
   void reconstruction_loop();
   tracking::SyncedPose synchronise(const Frame& frame);
+  void report_pose_trouble();
   void report(ScanState state, const std::string& message);
   void withdraw(int key);
   void stage_done();
@@ -126,6 +127,7 @@ class ScanPipeline {
 
   tracking::PoseBuffer poses_;         // acquisition thread only
   bool pose_source_reported_ = false;  // acquisition thread only
+  std::string pose_trouble_;           // acquisition thread only: the last one reported
   std::mutex selector_mutex_;
   tracking::KeyframeSelector selector_;
 

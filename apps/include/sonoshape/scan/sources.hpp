@@ -27,6 +27,9 @@ struct SourceRequest {
   /// The reconstruction box; default: sim: the phantom's box padded by 10 % of its diagonal;
   /// replay: none (grown from the slices).
   std::optional<Box3> bounds;
+  /// A live tracker that replaces the source's poses: "usb:trakstar[:sensor=N,rate=HZ,...]"
+  /// (tracking::parse_trakstar_options). Empty: the source's own poses.
+  std::string tracker;
 
   // sim: only.
   SimScenarioOptions sim;
