@@ -19,6 +19,9 @@
 #include "sonoshape/core/log.hpp"
 #include "sonoshape/scan/pipeline.hpp"
 #include "sonoshape/scan/publish_sink.hpp"
+#ifdef SONOSHAPE_WITH_OPENIGTLINK
+#include "sonoshape/scan/igtl_sink.hpp"
+#endif
 #include "sonoshape/scan/sink.hpp"
 #include "sonoshape/scan/sources.hpp"
 
@@ -38,6 +41,7 @@ struct ScanCommandOptions {
   std::size_t max_slices = 0;
   std::string publish;
   std::string snapshot;
+  std::string igtl_serve;
   std::optional<double> tracker_latency_ms;
   double max_pose_gap_ms = 100.0;
   double max_extrapolation_ms = 0.0;
@@ -129,6 +133,47 @@ class InterruptGuard {
   void (*previous_)(int) = SIG_DFL;
 };
 
+// `--igtl-serve [HOST:]PORT`: the OpenIGTLink server as a scan output (null when not asked for);
+// false after printing the error.
+bool add_igtl_sink(const std::string& spec, scan::ScanPipeline& pipeline,
+                   std::shared_ptr<scan::ScanSink>& sink) {
+  if (spec.empty()) return true;
+#ifdef SONOSHAPE_WITH_OPENIGTLINK
+  const std::size_t colon = spec.rfind(':');
+  const std::string host = colon == std::string::npos ? "127.0.0.1" : spec.substr(0, colon);
+  const std::string port_text = colon == std::string::npos ? spec : spec.substr(colon + 1);
+  int port = -1;
+  try {
+    std::size_t used = 0;
+    port = std::stoi(port_text, &used);
+    if (used != port_text.size()) port = -1;
+  } catch (const std::exception&) {
+  }
+  if (port < 0 || port > 65535) {
+    std::cerr << "error: --igtl-serve " << spec
+              << ": expected [HOST:]PORT, e.g. 18944 (Slicer's default) or 0.0.0.0:18944\n";
+    return false;
+  }
+  auto started = scan::IgtlSink::start(host, port);
+  if (!started) {
+    std::cerr << "error: " << started.message() << '\n';
+    return false;
+  }
+  log_info("scan: OpenIGTLink server on " + host + ":" + std::to_string((*started)->port()) +
+           " (3D Slicer: OpenIGTLinkIF, a client connector to this host and port)");
+  sink = *started;
+  pipeline.add_sink(sink);
+  return true;
+#else
+  (void)pipeline;
+  (void)sink;
+  std::cerr << "error: --igtl-serve " << spec
+            << ": this sonoshape was built without OpenIGTLink; install libopenigtlink-dev "
+               "(scripts/install-deps) and configure with -DSONOSHAPE_WITH_OPENIGTLINK=ON\n";
+  return false;
+#endif
+}
+
 int run_scan(const ScanCommandOptions& options) {
   // From the start: a Ctrl-C while the source opens stops the scan as soon as it starts.
   const InterruptGuard interrupts;
@@ -204,6 +249,8 @@ int run_scan(const ScanCommandOptions& options) {
              " (snapshot " + (*sink)->snapshot_endpoint() + ")");
     pipeline.add_sink(*sink);
   }
+  std::shared_ptr<scan::ScanSink> igtl;
+  if (!add_igtl_sink(options.igtl_serve, pipeline, igtl)) return 1;
 
   if (Status started = pipeline.start(); !started) {
     std::cerr << "error: " << started.message() << '\n';
@@ -231,6 +278,9 @@ int run_scan(const ScanCommandOptions& options) {
   if (live_line) std::cerr << '\r' << status_line(pipeline.counters()) << "\033[K\n";
   const scan::ScanSummary summary = pipeline.finish();
   log_info(summary_text(summary));
+#ifdef SONOSHAPE_WITH_OPENIGTLINK
+  if (igtl) log_info("scan: " + static_cast<const scan::IgtlSink&>(*igtl).describe());
+#endif
   if (!options.out.empty())
     log_info("scan: meshes, slices.json and scan.json in " + options.out.string());
   return 0;
@@ -284,6 +334,11 @@ CommandRunner add_scan_command(CLI::App& app) {
                  "e.g. tcp://127.0.0.1:5556");
   app.add_option("--snapshot", options->snapshot,
                  "Snapshot endpoint for late joiners (default: the --publish port + 1)");
+  app.add_option("--igtl-serve", options->igtl_serve,
+                 "Serve the scan over OpenIGTLink on [HOST:]PORT (host 127.0.0.1 unless given; "
+                 "port 0 picks a free one): surfaces as POLYDATA named after the labels, the frame "
+                 "as IMAGE with its pose, STATUS; for 3D Slicer's OpenIGTLinkIF (18944 is its "
+                 "default port)");
   app.add_option("--tracker-latency-ms", options->tracker_latency_ms,
                  "How late the tracker's timestamps are relative to the frames (ms). Default: "
                  "the source's (sim: the simulated latency; replay: 0)");

@@ -272,11 +272,15 @@ void ScanPipeline::acquisition_loop() {
           Candidate{TrackedFrame{std::move(received->item), synced.pose.T_reference_probe,
                                  TrackingStatus::kValid},
                     received->received_s, 0});
+      const Eigen::Matrix4d T_reference_image =
+          candidate->frame.T_reference_probe.matrix() * source_.setup.T_probe_image;
+      // Live views (OpenIGTLink's IMAGE) show every posed frame, not only the keyframes.
+      each_sink("frame",
+                [&](ScanSink& sink) { return sink.on_frame(candidate->frame, T_reference_image); });
       // Keyframe choice before segmentation: near-duplicates cost nothing downstream.
       tracking::FramePlane plane;
       try {
-        plane = tracking::frame_plane(
-            candidate->frame.T_reference_probe.matrix() * source_.setup.T_probe_image, corners_px_);
+        plane = tracking::frame_plane(T_reference_image, corners_px_);
       } catch (const GeometryError& e) {
         {
           std::lock_guard lock(state_mutex_);
