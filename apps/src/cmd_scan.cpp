@@ -57,6 +57,10 @@ struct ScanCommandOptions {
   scan::SimScenarioOptions sim;
   double sweep_s = 20.0;
   double fail_after_s = -1.0;
+  // igtl: only
+  std::string igtl_image;
+  std::string igtl_transform = scan::SourceRequest{}.igtl_transform;
+  std::string igtl_tracker;
 };
 
 // Set by the SIGINT handler, read by the main loop (a lock-free atomic is signal-safe).
@@ -197,6 +201,9 @@ int run_scan(const ScanCommandOptions& options) {
   request.sim_duration_s = options.sweep_s;
   request.sim_fail_after_s = options.fail_after_s;
   request.models_dir = std::filesystem::path(SONOSHAPE_DATA_DIR) / "models";
+  request.igtl_image = options.igtl_image;
+  request.igtl_transform = options.igtl_transform;
+  request.igtl_tracker = options.igtl_tracker;
   auto source = scan::open_scan_source(request);
   if (!source) {
     std::cerr << "error: " << source.message() << '\n';
@@ -295,8 +302,9 @@ CommandRunner add_scan_command(CLI::App& app) {
   options->sim.height_px = 256;
   app.add_option("--source", options->source,
                  "Where frames and poses come from: sim:PHANTOM_SPEC (sim:default, or "
-                 "LABEL:PATH[:NAME] meshes separated by commas) or replay:FILE (a PLUS .igs.mha or "
-                 ".igs.nrrd)")
+                 "LABEL:PATH[:NAME] meshes separated by commas), replay:FILE (a PLUS .igs.mha or "
+                 ".igs.nrrd) or igtl:HOST:PORT (an OpenIGTLink server such as PlusServer, port "
+                 "18944 by default)")
       ->required();
   app.add_option("--calibration", options->calibration,
                  "ImageToProbe calibration: PLUS device-set XML or JSON {\"ImageToProbe\": [16 "
@@ -388,6 +396,16 @@ CommandRunner add_scan_command(CLI::App& app) {
       ->capture_default_str();
   sim->add_option("--sim-fail-after-s", options->fail_after_s,
                   "Fault injection: the simulated probe vanishes after this many seconds");
+  CLI::Option_group* igtl = app.add_option_group("OpenIGTLink source (igtl:)");
+  igtl->add_option("--igtl-image", options->igtl_image,
+                   "IMAGE device name of the frames (default: any IMAGE)");
+  igtl->add_option("--igtl-transform", options->igtl_transform,
+                   "TRANSFORM device name holding the probe pose in the reference frame (PLUS: "
+                   "ProbeToReference, or ProbeToTracker with the tracker as reference); 'image': "
+                   "each IMAGE's own pose (then no --calibration is needed)")
+      ->capture_default_str();
+  igtl->add_option("--igtl-tracker", options->igtl_tracker,
+                   "HOST:PORT of the server sending the TRANSFORMs (default: the --source one)");
   return [options] { return run_scan(*options); };
 }
 
