@@ -24,8 +24,7 @@ namespace {
 constexpr std::uint64_t kMaxBody = 256ull << 20;
 
 double now_s() {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch())
-      .count();
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
 
 // Connects a non-blocking socket to one resolved address, waiting up to `timeout_s`.
@@ -118,9 +117,9 @@ struct IgtlConnection::Impl {
     if (message.timestamp_s == 0.0) {
       // No timestamp (Debian's ImagerServer sets none): the arrival time on the wall clock, the
       // clock senders stamp with, so that it stays comparable with stamped messages.
-      message.timestamp_s = std::chrono::duration<double>(
-                                std::chrono::system_clock::now().time_since_epoch())
-                                .count();
+      message.timestamp_s =
+          std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch())
+              .count();
       message.stamped_on_arrival = true;
     }
     const auto end = buffer.begin() + static_cast<std::ptrdiff_t>(IGTL_HEADER_SIZE + body);
@@ -173,7 +172,8 @@ Result<std::optional<IgtlMessage>> IgtlConnection::next(double timeout_s) {
     if (polled <= 0) continue;
     std::uint8_t chunk[65536];
     const ssize_t n = ::recv(impl_->fd, chunk, sizeof chunk, MSG_DONTWAIT);
-    if (n == 0) return Status::error("OpenIGTLink " + impl_->where + ": the server closed the connection");
+    if (n == 0)
+      return Status::error("OpenIGTLink " + impl_->where + ": the server closed the connection");
     if (n < 0) {
       if (errno == EAGAIN || errno == EWOULDBLOCK || errno == EINTR) continue;
       return Status::error("OpenIGTLink " + impl_->where + ": " + std::strerror(errno));
@@ -192,9 +192,10 @@ Result<IgtlImage> decode_igtl_image(const IgtlMessage& message) {
   image->GetDimensions(size);
   image->GetSpacing(spacing);
   if (image->GetScalarType() != igtl::ImageMessage::TYPE_UINT8 || image->GetNumComponents() != 1)
-    return Status::error(what + ": scalar type " + std::to_string(image->GetScalarType()) + " with " +
-                         std::to_string(image->GetNumComponents()) +
-                         " components; only 8-bit grey (uint8, 1 component) B-mode frames are read");
+    return Status::error(
+        what + ": scalar type " + std::to_string(image->GetScalarType()) + " with " +
+        std::to_string(image->GetNumComponents()) +
+        " components; only 8-bit grey (uint8, 1 component) B-mode frames are read");
   if (size[2] != 1 || size[0] < 1 || size[1] < 1)
     return Status::error(what + ": " + std::to_string(size[0]) + "x" + std::to_string(size[1]) +
                          "x" + std::to_string(size[2]) + "; a 2D frame (depth 1) is expected");
@@ -211,7 +212,8 @@ Result<IgtlImage> decode_igtl_image(const IgtlMessage& message) {
   T.col(0).head<3>() *= spacing[0];
   T.col(1).head<3>() *= spacing[1];
   T.col(2).head<3>() *= spacing[2];
-  T.col(3).head<3>() -= T.col(0).head<3>() * 0.5 * (size[0] - 1) + T.col(1).head<3>() * 0.5 * (size[1] - 1);
+  T.col(3).head<3>() -=
+      T.col(0).head<3>() * 0.5 * (size[0] - 1) + T.col(1).head<3>() * 0.5 * (size[1] - 1);
   out.T_reference_image = T;
   out.spacing_mm[0] = spacing[0];
   out.spacing_mm[1] = spacing[1];

@@ -63,7 +63,8 @@ std::string device_name(const MeshSet::Entry& entry) {
 Result<PackedPtr> pack_polydata(const std::string& name, const TriangleMesh& mesh) {
   igtl::PolyDataPointArray::Pointer points = igtl::PolyDataPointArray::New();
   for (const Vec3& v : mesh.vertices) {
-    if (!v.allFinite()) return Status::error("OpenIGTLink: surface " + name + " has a non-finite vertex");
+    if (!v.allFinite())
+      return Status::error("OpenIGTLink: surface " + name + " has a non-finite vertex");
     points->AddPoint(static_cast<float>(v.x()), static_cast<float>(v.y()),
                      static_cast<float>(v.z()));
   }
@@ -246,8 +247,8 @@ struct IgtlServer::Impl {
       if (client.inbox.size() < IGTL_HEADER_SIZE + body) return;
       const std::string type = header->GetDeviceType();
       const std::string name = header->GetDeviceName();
-      client.inbox.erase(client.inbox.begin(),
-                         client.inbox.begin() + static_cast<std::ptrdiff_t>(IGTL_HEADER_SIZE + body));
+      client.inbox.erase(client.inbox.begin(), client.inbox.begin() + static_cast<std::ptrdiff_t>(
+                                                                          IGTL_HEADER_SIZE + body));
       if (type == "GET_POLYDATA") {
         if (const auto it = surfaces.find(name); it != surfaces.end()) {
           enqueue(client, it->second);
@@ -358,21 +359,23 @@ Result<IgtlServer> IgtlServer::start(const IgtlServerOptions& options) {
   address.sin_family = AF_INET;
   address.sin_port = htons(static_cast<std::uint16_t>(options.port));
   if (::inet_pton(AF_INET, options.host.c_str(), &address.sin_addr) != 1)
-    return Status::error(options.option + " " + where + ": '" + options.host +
-                         "' is not an IPv4 address (use 127.0.0.1, or 0.0.0.0 for every interface)");
+    return Status::error(
+        options.option + " " + where + ": '" + options.host +
+        "' is not an IPv4 address (use 127.0.0.1, or 0.0.0.0 for every interface)");
   auto impl = std::make_unique<Impl>();
   impl->options = options;
   impl->listen_fd = ::socket(AF_INET, SOCK_STREAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
   impl->wake_fd = ::eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);
   if (impl->listen_fd < 0 || impl->wake_fd < 0)
-    return Status::error("OpenIGTLink: cannot create a socket: " + std::string(std::strerror(errno)));
+    return Status::error("OpenIGTLink: cannot create a socket: " +
+                         std::string(std::strerror(errno)));
   const int one = 1;
   ::setsockopt(impl->listen_fd, SOL_SOCKET, SO_REUSEADDR, &one, sizeof one);
   if (::bind(impl->listen_fd, reinterpret_cast<const sockaddr*>(&address), sizeof address) != 0 ||
       ::listen(impl->listen_fd, 8) != 0) {
     const int error = errno;
-    return Status::error(options.option + " " + where + ": cannot listen (" +
-                         std::strerror(error) + ")" +
+    return Status::error(options.option + " " + where + ": cannot listen (" + std::strerror(error) +
+                         ")" +
                          (error == EADDRINUSE ? "; another program serves this port: pick "
                                                 "another, or 0 for a free one"
                                               : ""));

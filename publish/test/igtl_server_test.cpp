@@ -48,7 +48,8 @@ TEST(IgtlServer, ANewClientGetsEverySurfaceTheImageWithItsPoseAndTheStatus) {
   ASSERT_GT(server.port(), 0);
   ASSERT_TRUE(server.publish_meshes(two_labels()));
   GreyImage image(4, 3);
-  for (std::size_t k = 0; k < image.pixels.size(); ++k) image.pixels[k] = static_cast<std::uint8_t>(7 * k);
+  for (std::size_t k = 0; k < image.pixels.size(); ++k)
+    image.pixels[k] = static_cast<std::uint8_t>(7 * k);
   // Pixels 0.5 mm wide and 0.25 mm high, turned 90 degrees about z, moved to (10, 20, 30).
   Eigen::Matrix4d T = Eigen::Matrix4d::Identity();
   T.block<3, 3>(0, 0) = Eigen::AngleAxisd(M_PI / 2, Eigen::Vector3d::UnitZ()).toRotationMatrix() *

@@ -2,22 +2,20 @@
 // watched by Debian's ReceiveClient example (built from its shipped source) together with
 // clients written with the OpenIGTLink library, one of which vanishes mid-scan; IgtlServer
 // answering Debian's PolyDataClient. Loopback only, ports picked by the system, every wait bounded.
+#include <gtest/gtest.h>
 #include <signal.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
-#include <gtest/gtest.h>
-
 #include <chrono>
 #include <filesystem>
 #include <fstream>
+#include <nlohmann/json.hpp>
 #include <regex>
 #include <set>
 #include <sstream>
 #include <string>
 #include <thread>
-
-#include <nlohmann/json.hpp>
 
 #include "sonoshape/publish/igtl_server.hpp"
 #include "sonoshape/testing/igtl_client.hpp"
@@ -92,8 +90,8 @@ std::string summary_slices(const std::string& log) {
 }
 
 // Receives until the server closes (or nothing comes for the client's timeout): the POLYDATA
-// names, those with at least one triangle, and how many IMAGE and STATUS messages came; `last_status`
-// the error name (state) of the newest STATUS.
+// names, those with at least one triangle, and how many IMAGE and STATUS messages came;
+// `last_status` the error name (state) of the newest STATUS.
 struct Watched {
   std::set<std::string> names, surfaces;
   std::size_t images = 0, statuses = 0;
@@ -141,8 +139,7 @@ TEST(IgtlPeers, DebiansReceiveClientAndALibraryClientGetEveryLabelAndTheImageDur
   // others have triangles.
   const auto slices = nlohmann::json::parse(file_text(dir.path() / "out" / "slices.json"));
   std::set<std::string> labels;
-  for (const auto& label : slices["labels"])
-    labels.insert(label["name"].get<std::string>());
+  for (const auto& label : slices["labels"]) labels.insert(label["name"].get<std::string>());
   ASSERT_EQ(labels.size(), 3u) << scan_text;
   EXPECT_EQ(watched.names, labels);
   EXPECT_GE(watched.surfaces.size(), 2u);
@@ -209,9 +206,8 @@ TEST(IgtlPeers, DebiansPolyDataClientGetsTheSurfacesItAsksFor) {
   sonoshape::testing::TempDir dir;
   const fs::path log = dir.path() / "polydata.log";
   // The example sends GET_POLYDATA ten times, half a second apart, and reads one reply each.
-  const pid_t client = spawn(std::string(POLYDATA_CLIENT) + " 127.0.0.1 " +
-                                 std::to_string(server->port()),
-                             log);
+  const pid_t client =
+      spawn(std::string(POLYDATA_CLIENT) + " 127.0.0.1 " + std::to_string(server->port()), log);
   // Its first read is the surface the server sends on connection; its requests are answered.
   ASSERT_EQ(wait_exit(client, 20.0), 0) << file_text(log);
   const std::string text = file_text(log);

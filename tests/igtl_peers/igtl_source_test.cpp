@@ -1,13 +1,12 @@
 // OpenIGTLink in (`--source igtl:`): the frame and pose sources against Debian's ImagerServer and
 // TrackerServer examples (built from their shipped sources), and against sonoshape's own server
 // for the pose an IMAGE carries. Loopback only; every wait bounded.
+#include <gtest/gtest.h>
 #include <netinet/in.h>
 #include <signal.h>
 #include <sys/socket.h>
 #include <sys/wait.h>
 #include <unistd.h>
-
-#include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
 #include <chrono>
@@ -172,9 +171,11 @@ TEST(IgtlSources, AnImagesOwnPoseAndPixelsSurviveTheRoundTripThroughOurServer) {
   ASSERT_EQ(server->stats().clients, 2u);
 
   GreyImage image(6, 4);
-  for (std::size_t k = 0; k < image.pixels.size(); ++k) image.pixels[k] = static_cast<std::uint8_t>(k);
+  for (std::size_t k = 0; k < image.pixels.size(); ++k)
+    image.pixels[k] = static_cast<std::uint8_t>(k);
   Eigen::Isometry3d T_reference_probe = Eigen::Isometry3d::Identity();
-  T_reference_probe.linear() = Eigen::AngleAxisd(0.3, Eigen::Vector3d(1, 2, 3).normalized()).matrix();
+  T_reference_probe.linear() =
+      Eigen::AngleAxisd(0.3, Eigen::Vector3d(1, 2, 3).normalized()).matrix();
   T_reference_probe.translation() = Eigen::Vector3d(5, -7, 11);
   const Eigen::Matrix4d T_probe_image = Eigen::Vector4d(0.2, 0.3, 1.0, 1.0).asDiagonal();
   ASSERT_TRUE(server->publish_image(image, T_reference_probe.matrix() * T_probe_image));
@@ -224,12 +225,12 @@ TEST(IgtlSources, AScanReconstructsFromImagerServerFramesAndTrackerServerPoses) 
   const std::string calibration = ::testing::TempDir() + "igtl_calibration.json";
   std::ofstream(calibration) << R"({"ImageToProbe": [0.5,0,0,0, 0,0.5,0,0, 0,0,1,0, 0,0,0,1]})";
   int code = 0;
-  const std::string out = run("timeout 60 " + std::string(SONOSHAPE_BINARY) +
-                                  " scan --source igtl:127.0.0.1:" + std::to_string(imager.port()) +
-                                  " --igtl-tracker 127.0.0.1:" + std::to_string(tracker.port()) +
-                                  " --igtl-transform Tracker --calibration " + calibration +
-                                  " --duration 1.5",
-                              code);
+  const std::string out =
+      run("timeout 60 " + std::string(SONOSHAPE_BINARY) +
+              " scan --source igtl:127.0.0.1:" + std::to_string(imager.port()) +
+              " --igtl-tracker 127.0.0.1:" + std::to_string(tracker.port()) +
+              " --igtl-transform Tracker --calibration " + calibration + " --duration 1.5",
+          code);
   ASSERT_EQ(code, 0) << out;
   EXPECT_NE(out.find("OpenIGTLink 127.0.0.1:" + std::to_string(imager.port()) + ": 256x256 frames"),
             std::string::npos)
@@ -244,14 +245,14 @@ TEST(IgtlSources, AScanReconstructsFromImagerServerFramesAndTrackerServerPoses) 
 TEST(IgtlSources, AScanWithoutItsServerSaysWhereItLookedAndWhatIsMissing) {
   int code = 0;
   const int port = free_port();
-  std::string out = run(std::string(SONOSHAPE_BINARY) + " scan --source igtl:127.0.0.1:" +
-                            std::to_string(port) + " --igtl-transform image",
-                        code);
+  std::string out =
+      run(std::string(SONOSHAPE_BINARY) + " scan --source igtl:127.0.0.1:" + std::to_string(port) +
+              " --igtl-transform image",
+          code);
   EXPECT_EQ(code, 1);
   EXPECT_NE(out.find("127.0.0.1:" + std::to_string(port)), std::string::npos) << out;
   EXPECT_NE(out.find("PlusServer"), std::string::npos) << out;
-  out = run(std::string(SONOSHAPE_BINARY) + " scan --source igtl:127.0.0.1:" +
-                std::to_string(port),
+  out = run(std::string(SONOSHAPE_BINARY) + " scan --source igtl:127.0.0.1:" + std::to_string(port),
             code);
   EXPECT_EQ(code, 1);
   EXPECT_NE(out.find("--calibration"), std::string::npos) << out;

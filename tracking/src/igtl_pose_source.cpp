@@ -9,8 +9,7 @@ IgtlPoseSource::~IgtlPoseSource() { stop(); }
 
 std::string IgtlPoseSource::describe() const {
   return "igtl:" + endpoint_.text() +
-         (from_ == IgtlPoseFrom::kTransform ? " (TRANSFORM " + device_ + ")"
-                                            : " (IMAGE poses)");
+         (from_ == IgtlPoseFrom::kTransform ? " (TRANSFORM " + device_ + ")" : " (IMAGE poses)");
 }
 
 Status IgtlPoseSource::open() {
@@ -24,7 +23,8 @@ Pose pose_from_matrix(const Eigen::Matrix4d& T, double timestamp_s) {
   Pose pose;
   pose.timestamp_s = timestamp_s;
   const Eigen::Matrix3d R = T.block<3, 3>(0, 0);
-  if (!T.allFinite() || (R.transpose() * R - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff() > 1e-3 ||
+  if (!T.allFinite() ||
+      (R.transpose() * R - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff() > 1e-3 ||
       R.determinant() < 0.0) {
     pose.status = TrackingStatus::kInvalid;
     return pose;

@@ -49,9 +49,8 @@ int IgtlSink::port() const { return impl_->server.port(); }
 std::string IgtlSink::describe() const {
   const publish::IgtlServerStats s = impl_->server.stats();
   return "OpenIGTLink: " + std::to_string(s.clients_accepted) + " clients served, " +
-         std::to_string(s.messages_sent) + " messages sent, " +
-         std::to_string(s.messages_dropped) + " dropped for slow clients, " +
-         std::to_string(s.requests_answered) + " requests answered";
+         std::to_string(s.messages_sent) + " messages sent, " + std::to_string(s.messages_dropped) +
+         " dropped for slow clients, " + std::to_string(s.requests_answered) + " requests answered";
 }
 
 }  // namespace sonoshape::scan

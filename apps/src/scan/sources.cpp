@@ -196,11 +196,15 @@ Result<ScanSource> open_igtl(const SourceRequest& request, const std::string& en
         (request.igtl_image.empty() || (*message)->device == request.igtl_image))
       first = std::move(*message);
   }
-  if (!first)
+  if (!first) {
+    std::ostringstream wait;
+    wait << request.igtl_wait_s;
     return Status::error("--source igtl:" + endpoint->text() + ": no IMAGE" +
                          (request.igtl_image.empty() ? "" : " named '" + request.igtl_image + "'") +
-                         " within " + std::to_string(request.igtl_wait_s) +
-                         " s; is the server streaming (PlusServer: an IMAGE in its OutputChannel)?");
+                         " within " + wait.str() +
+                         " s; is the server streaming (PlusServer: an IMAGE in its "
+                         "OutputChannel)?");
+  }
   auto image = acq::decode_igtl_image(*first);
   if (!image) return image.status();
 

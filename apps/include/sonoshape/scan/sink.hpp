@@ -30,7 +30,8 @@ class ScanSink {
   virtual ~ScanSink() = default;
   /// A frame that got a pose, before the keyframe choice; `T_reference_image` maps its pixels
   /// (column, row, 0) to reference mm (spacing included). Called from the acquisition thread for
-  /// every such frame, so it must be quick; by default ignored.
+  /// every such frame, except while another sink call is in progress (the acquisition never
+  /// waits for a sink), so it must be quick; by default ignored.
   virtual Status on_frame(const TrackedFrame& /*frame*/,
                           const Eigen::Matrix4d& /*T_reference_image*/) {
     return Status::ok();

@@ -37,11 +37,11 @@ struct IgtlServerOptions {
 
 /// What the server has done so far (for tests and the scan summary).
 struct IgtlServerStats {
-  std::size_t clients = 0;            ///< connected now
-  std::size_t clients_accepted = 0;   ///< connections accepted since the start
-  std::uint64_t messages_sent = 0;    ///< messages written whole to a client
-  std::uint64_t messages_dropped = 0; ///< messages a slow client missed (replaced or evicted)
-  std::uint64_t requests_answered = 0;///< GET_POLYDATA / GET_IMAGE / GET_STATUS answered
+  std::size_t clients = 0;              ///< connected now
+  std::size_t clients_accepted = 0;     ///< connections accepted since the start
+  std::uint64_t messages_sent = 0;      ///< messages written whole to a client
+  std::uint64_t messages_dropped = 0;   ///< messages a slow client missed (replaced or evicted)
+  std::uint64_t requests_answered = 0;  ///< GET_POLYDATA / GET_IMAGE / GET_STATUS answered
 };
 
 /// Serves one scan over OpenIGTLink. Each connected client gets, on connection, the newest

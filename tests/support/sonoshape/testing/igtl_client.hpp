@@ -40,8 +40,7 @@ class IgtlClient {
     Received r;
     igtl::MessageHeader::Pointer header = igtl::MessageHeader::New();
     header->InitPack();
-    if (socket_->Receive(header->GetPackPointer(), header->GetPackSize()) !=
-        header->GetPackSize())
+    if (socket_->Receive(header->GetPackPointer(), header->GetPackSize()) != header->GetPackSize())
       return r;
     header->Unpack();
     r.type = header->GetDeviceType();
