@@ -14,6 +14,7 @@
 
 #include "igtlImageMessage.h"
 #include "igtlMessageHeader.h"
+#include "igtlTrackingDataMessage.h"
 #include "igtlTransformMessage.h"
 #include "igtl_header.h"
 
@@ -180,6 +181,57 @@ Result<std::optional<IgtlMessage>> IgtlConnection::next(double timeout_s) {
     }
     impl_->buffer.insert(impl_->buffer.end(), chunk, chunk + n);
   }
+}
+
+Status IgtlConnection::send(const std::vector<std::uint8_t>& bytes, double timeout_s) {
+  const double deadline_s = now_s() + timeout_s;
+  std::size_t sent = 0;
+  while (sent < bytes.size()) {
+    const ssize_t n =
+        ::send(impl_->fd, bytes.data() + sent, bytes.size() - sent, MSG_DONTWAIT | MSG_NOSIGNAL);
+    if (n > 0) {
+      sent += static_cast<std::size_t>(n);
+      continue;
+    }
+    if (n < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR)
+      return Status::error("OpenIGTLink " + impl_->where + ": cannot send (" +
+                           std::strerror(errno) + ")");
+    const double left_s = deadline_s - now_s();
+    if (left_s <= 0.0)
+      return Status::error("OpenIGTLink " + impl_->where + ": the server takes no data");
+    pollfd p{impl_->fd, POLLOUT, 0};
+    ::poll(&p, 1, static_cast<int>(1e3 * left_s) + 1);
+  }
+  return Status::ok();
+}
+
+std::vector<std::uint8_t> igtl_start_tracking_data(int interval_ms) {
+  igtl::StartTrackingDataMessage::Pointer start = igtl::StartTrackingDataMessage::New();
+  start->SetDeviceName("sonoshape");
+  start->SetResolution(interval_ms);
+  start->Pack();
+  const auto* begin = static_cast<const std::uint8_t*>(start->GetPackPointer());
+  return std::vector<std::uint8_t>(begin, begin + start->GetPackSize());
+}
+
+Result<std::optional<Eigen::Matrix4d>> decode_igtl_tracking_data(const IgtlMessage& message,
+                                                                 const std::string& element) {
+  igtl::TrackingDataMessage::Pointer data = igtl::TrackingDataMessage::New();
+  if (message.type != "TDATA" || !unpack(data, message))
+    return Status::error("OpenIGTLink TDATA '" + message.device +
+                         "': damaged message (size or CRC)");
+  for (int k = 0; k < data->GetNumberOfTrackingDataElements(); ++k) {
+    igtl::TrackingDataElement::Pointer e;
+    data->GetTrackingDataElement(k, e);
+    if (element != e->GetName()) continue;
+    igtl::Matrix4x4 m;
+    e->GetMatrix(m);
+    Eigen::Matrix4d T = Eigen::Matrix4d::Identity();
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 4; ++c) T(r, c) = m[r][c];
+    return std::optional<Eigen::Matrix4d>(T);
+  }
+  return std::optional<Eigen::Matrix4d>();
 }
 
 Result<IgtlImage> decode_igtl_image(const IgtlMessage& message) {

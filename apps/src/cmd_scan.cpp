@@ -401,8 +401,9 @@ CommandRunner add_scan_command(CLI::App& app) {
                    "IMAGE device name of the frames (default: any IMAGE)");
   igtl->add_option("--igtl-transform", options->igtl_transform,
                    "TRANSFORM device name holding the probe pose in the reference frame (PLUS: "
-                   "ProbeToReference, or ProbeToTracker with the tracker as reference); 'image': "
-                   "each IMAGE's own pose (then no --calibration is needed)")
+                   "ProbeToReference, or ProbeToTracker with the tracker as reference); "
+                   "'tdata:NAME': the tool NAME of TDATA messages (streaming requested with "
+                   "STT_TDATA); 'image': each IMAGE's own pose (then no --calibration is needed)")
       ->capture_default_str();
   igtl->add_option("--igtl-tracker", options->igtl_tracker,
                    "HOST:PORT of the server sending the TRANSFORMs (default: the --source one)");

@@ -156,6 +156,26 @@ TEST(IgtlSources, PosesFromDebiansTrackerServerAreItsMatricesInOrder) {
             TrackingStatus::kValid);
 }
 
+TEST(IgtlSources, PosesFromDebiansTrackingDataServerAreOneToolOfItsTdataStream) {
+  Peer server({TRACKING_DATA_SERVER});
+  ASSERT_TRUE(server.up());
+  // It streams only after STT_TDATA, which the source sends on connection.
+  tracking::IgtlPoseSource channel0({"127.0.0.1", server.port()}, "Channel 0",
+                                    tracking::IgtlPoseFrom::kTrackingData);
+  ASSERT_TRUE(channel0.start());
+  const std::vector<Pose> poses = take<tracking::IgtlPoseSource, Pose>(channel0, 5, 10.0);
+  ASSERT_EQ(poses.size(), 5u) << channel0.message();
+  for (std::size_t k = 0; k < poses.size(); ++k) {
+    EXPECT_EQ(poses[k].status, TrackingStatus::kValid);
+    if (k > 0) {
+      EXPECT_GT(poses[k].timestamp_s, poses[k - 1].timestamp_s);
+      // Channel 0 moves (its phase steps 0.1 per message): consecutive samples differ.
+      EXPECT_FALSE(poses[k].T_reference_probe.isApprox(poses[k - 1].T_reference_probe, 1e-6));
+    }
+  }
+  EXPECT_EQ(channel0.dropped(), 0u);
+}
+
 TEST(IgtlSources, AnImagesOwnPoseAndPixelsSurviveTheRoundTripThroughOurServer) {
   publish::IgtlServerOptions options;
   options.port = 0;

@@ -16,6 +16,9 @@ Status IgtlPoseSource::open() {
   auto connection = acq::IgtlConnection::connect(endpoint_);
   if (!connection) return connection.status();
   connection_.emplace(std::move(*connection));
+  // TDATA streams only on request; every 20 ms (50 Hz) is as fast as trackers usually go.
+  if (from_ == IgtlPoseFrom::kTrackingData)
+    return connection_->send(acq::igtl_start_tracking_data(20));
   return Status::ok();
 }
 
@@ -47,6 +50,16 @@ Result<acq::Polled> IgtlPoseSource::poll(Pose& pose) {
       return acq::Polled::kNothing;
     }
     pose = pose_from_matrix(*T, m.timestamp_s);
+    return acq::Polled::kItem;
+  }
+  if (from_ == IgtlPoseFrom::kTrackingData && m.type == "TDATA") {
+    auto T = acq::decode_igtl_tracking_data(m, device_);
+    if (!T) {
+      count_lost(1);
+      return acq::Polled::kNothing;
+    }
+    if (!*T) return acq::Polled::kNothing;  // this tool is not in this message
+    pose = pose_from_matrix(**T, m.timestamp_s);
     return acq::Polled::kItem;
   }
   if (from_ == IgtlPoseFrom::kImage && m.type == "IMAGE" && named) {

@@ -249,9 +249,17 @@ Result<ScanSource> open_igtl(const SourceRequest& request, const std::string& en
                            std::to_string(image->image.height);
   source.frames = std::make_unique<acq::IgtlFrameSource>(*endpoint, request.igtl_image,
                                                          std::move(*connection), std::move(first));
-  source.poses = std::make_unique<tracking::IgtlPoseSource>(
-      tracker, pose_from_image ? request.igtl_image : request.igtl_transform,
-      pose_from_image ? tracking::IgtlPoseFrom::kImage : tracking::IgtlPoseFrom::kTransform);
+  const std::string tdata = "tdata:";
+  if (pose_from_image) {
+    source.poses = std::make_unique<tracking::IgtlPoseSource>(tracker, request.igtl_image,
+                                                              tracking::IgtlPoseFrom::kImage);
+  } else if (request.igtl_transform.rfind(tdata, 0) == 0) {
+    source.poses = std::make_unique<tracking::IgtlPoseSource>(
+        tracker, request.igtl_transform.substr(tdata.size()), tracking::IgtlPoseFrom::kTrackingData);
+  } else {
+    source.poses = std::make_unique<tracking::IgtlPoseSource>(tracker, request.igtl_transform,
+                                                              tracking::IgtlPoseFrom::kTransform);
+  }
   source.device_origin_s = 0.0;
   source.tracker_latency_s = 0.0;  // both stamped by the server (PlusServer: one clock)
   source.description = "OpenIGTLink " + endpoint->text() + ": " + size + " frames; poses from " +

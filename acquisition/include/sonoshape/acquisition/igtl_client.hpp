@@ -49,6 +49,10 @@ class IgtlConnection {
   /// Fails when the server closed the connection or sent a malformed header.
   Result<std::optional<IgtlMessage>> next(double timeout_s);
 
+  /// Sends `bytes` (a packed message) whole, waiting up to `timeout_s` for room. Fails when the
+  /// connection is gone or stays full.
+  Status send(const std::vector<std::uint8_t>& bytes, double timeout_s = 1.0);
+
  private:
   struct Impl;
   explicit IgtlConnection(std::unique_ptr<Impl> impl);
@@ -70,5 +74,14 @@ Result<IgtlImage> decode_igtl_image(const IgtlMessage& message);
 
 /// Decodes a TRANSFORM (CRC checked): the 4x4 matrix, mm.
 Result<Eigen::Matrix4d> decode_igtl_transform(const IgtlMessage& message);
+
+/// A packed STT_TDATA request: asks a server to stream TDATA every `interval_ms` (PlusServer
+/// and Debian's TrackingDataServer stream TDATA only after one).
+std::vector<std::uint8_t> igtl_start_tracking_data(int interval_ms);
+
+/// The matrix (mm) of the element named `element` in a TDATA message (CRC checked); none when
+/// the message has no such element.
+Result<std::optional<Eigen::Matrix4d>> decode_igtl_tracking_data(const IgtlMessage& message,
+                                                                 const std::string& element);
 
 }  // namespace sonoshape::acq

@@ -37,8 +37,9 @@ struct SourceRequest {
 
   // igtl: only (an OpenIGTLink server such as PlusServer; needs SONOSHAPE_WITH_OPENIGTLINK).
   std::string igtl_image;  ///< IMAGE device name of the frames ("": any)
-  /// TRANSFORM device name carrying T_reference_probe; "image": the IMAGE's own pose (the probe
-  /// frame is then the image's, and the calibration its pixel spacing).
+  /// TRANSFORM device name carrying T_reference_probe; "tdata:NAME": the element NAME of TDATA
+  /// messages; "image": the IMAGE's own pose (the probe frame is then the image's, and the
+  /// calibration its pixel spacing).
   std::string igtl_transform = "ProbeToReference";
   std::string igtl_tracker;  ///< HOST:PORT sending the TRANSFORMs ("": the --source server)
   double igtl_wait_s = 5.0;  ///< how long to wait for the first IMAGE (its size sets the setup)

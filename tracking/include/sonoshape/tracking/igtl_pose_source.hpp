@@ -12,9 +12,10 @@ namespace sonoshape::tracking {
 
 /// Which message carries the probe pose.
 enum class IgtlPoseFrom {
-  kTransform,  ///< TRANSFORM messages named so: the matrix is T_reference_probe
-  kImage,      ///< IMAGE messages named so ("": any): the image's own pose; the probe frame is
-               ///< then the image's, in mm, at pixel (0, 0) (calibration: the pixel spacing)
+  kTransform,     ///< TRANSFORM messages named so: the matrix is T_reference_probe
+  kTrackingData,  ///< the element so named of TDATA messages (streaming asked for on connection)
+  kImage,         ///< IMAGE messages named so ("": any): the image's own pose; the probe frame is
+                  ///< then the image's, in mm, at pixel (0, 0) (calibration: the pixel spacing)
 };
 
 /// Receives tracker samples from an OpenIGTLink server over a connection of its own (a
