@@ -255,7 +255,8 @@ Result<ScanSource> open_igtl(const SourceRequest& request, const std::string& en
                                                               tracking::IgtlPoseFrom::kImage);
   } else if (request.igtl_transform.rfind(tdata, 0) == 0) {
     source.poses = std::make_unique<tracking::IgtlPoseSource>(
-        tracker, request.igtl_transform.substr(tdata.size()), tracking::IgtlPoseFrom::kTrackingData);
+        tracker, request.igtl_transform.substr(tdata.size()),
+        tracking::IgtlPoseFrom::kTrackingData);
   } else {
     source.poses = std::make_unique<tracking::IgtlPoseSource>(tracker, request.igtl_transform,
                                                               tracking::IgtlPoseFrom::kTransform);
