@@ -171,16 +171,29 @@ bool add_igtl_sink(const std::string& spec, scan::ScanPipeline& pipeline,
 #else
   (void)pipeline;
   (void)sink;
-  std::cerr << "error: --igtl-serve " << spec
-            << ": this sonoshape was built without OpenIGTLink; install libopenigtlink-dev "
-               "(scripts/install-deps) and configure with -DSONOSHAPE_WITH_OPENIGTLINK=ON\n";
-  return false;
+  return false;  // refused by igtl_serve_available before the source opened
 #endif
+}
+
+// Without OpenIGTLink, `--igtl-serve` is refused before the source opens (a simulated one learns
+// its models first).
+bool igtl_serve_available(const std::string& spec) {
+#ifndef SONOSHAPE_WITH_OPENIGTLINK
+  if (!spec.empty()) {
+    std::cerr << "error: --igtl-serve " << spec
+              << ": this sonoshape was built without OpenIGTLink; install libopenigtlink-dev "
+                 "(scripts/install-deps) and configure with -DSONOSHAPE_WITH_OPENIGTLINK=ON\n";
+    return false;
+  }
+#endif
+  (void)spec;
+  return true;
 }
 
 int run_scan(const ScanCommandOptions& options) {
   // From the start: a Ctrl-C while the source opens stops the scan as soon as it starts.
   const InterruptGuard interrupts;
+  if (!igtl_serve_available(options.igtl_serve)) return 1;
   scan::SourceRequest request;
   request.spec = options.source;
   if (!options.calibration.empty()) request.calibration = options.calibration;
