@@ -19,6 +19,9 @@
 #include "sonoshape/core/log.hpp"
 #include "sonoshape/scan/pipeline.hpp"
 #include "sonoshape/scan/publish_sink.hpp"
+#ifdef SONOSHAPE_WITH_OPENIGTLINK
+#include "sonoshape/scan/igtl_sink.hpp"
+#endif
 #include "sonoshape/scan/sink.hpp"
 #include "sonoshape/scan/sources.hpp"
 
@@ -39,6 +42,7 @@ struct ScanCommandOptions {
   std::size_t max_slices = 0;
   std::string publish;
   std::string snapshot;
+  std::string igtl_serve;
   std::optional<double> tracker_latency_ms;
   double max_pose_gap_ms = 100.0;
   double max_extrapolation_ms = 0.0;
@@ -54,6 +58,10 @@ struct ScanCommandOptions {
   scan::SimScenarioOptions sim;
   double sweep_s = 20.0;
   double fail_after_s = -1.0;
+  // igtl: only
+  std::string igtl_image;
+  std::string igtl_transform = scan::SourceRequest{}.igtl_transform;
+  std::string igtl_tracker;
 };
 
 // Set by the SIGINT handler, read by the main loop (a lock-free atomic is signal-safe).
@@ -130,9 +138,63 @@ class InterruptGuard {
   void (*previous_)(int) = SIG_DFL;
 };
 
+// `--igtl-serve [HOST:]PORT`: the OpenIGTLink server as a scan output (null when not asked for);
+// false after printing the error.
+bool add_igtl_sink(const std::string& spec, scan::ScanPipeline& pipeline,
+                   std::shared_ptr<scan::ScanSink>& sink) {
+  if (spec.empty()) return true;
+#ifdef SONOSHAPE_WITH_OPENIGTLINK
+  const std::size_t colon = spec.rfind(':');
+  const std::string host = colon == std::string::npos ? "127.0.0.1" : spec.substr(0, colon);
+  const std::string port_text = colon == std::string::npos ? spec : spec.substr(colon + 1);
+  int port = -1;
+  try {
+    std::size_t used = 0;
+    port = std::stoi(port_text, &used);
+    if (used != port_text.size()) port = -1;
+  } catch (const std::exception&) {
+  }
+  if (port < 0 || port > 65535) {
+    std::cerr << "error: --igtl-serve " << spec
+              << ": expected [HOST:]PORT, e.g. 18944 (Slicer's default) or 0.0.0.0:18944\n";
+    return false;
+  }
+  auto started = scan::IgtlSink::start(host, port);
+  if (!started) {
+    std::cerr << "error: " << started.message() << '\n';
+    return false;
+  }
+  log_info("scan: OpenIGTLink server on " + host + ":" + std::to_string((*started)->port()) +
+           " (3D Slicer: OpenIGTLinkIF, a client connector to this host and port)");
+  sink = *started;
+  pipeline.add_sink(sink);
+  return true;
+#else
+  (void)pipeline;
+  (void)sink;
+  return false;  // refused by igtl_serve_available before the source opened
+#endif
+}
+
+// Without OpenIGTLink, `--igtl-serve` is refused before the source opens (a simulated one learns
+// its models first).
+bool igtl_serve_available(const std::string& spec) {
+#ifndef SONOSHAPE_WITH_OPENIGTLINK
+  if (!spec.empty()) {
+    std::cerr << "error: --igtl-serve " << spec
+              << ": this sonoshape was built without OpenIGTLink; install libopenigtlink-dev "
+                 "(scripts/install-deps) and configure with -DSONOSHAPE_WITH_OPENIGTLINK=ON\n";
+    return false;
+  }
+#endif
+  (void)spec;
+  return true;
+}
+
 int run_scan(const ScanCommandOptions& options) {
   // From the start: a Ctrl-C while the source opens stops the scan as soon as it starts.
   const InterruptGuard interrupts;
+  if (!igtl_serve_available(options.igtl_serve)) return 1;
   scan::SourceRequest request;
   request.spec = options.source;
   request.tracker = options.tracker;
@@ -154,6 +216,9 @@ int run_scan(const ScanCommandOptions& options) {
   request.sim_duration_s = options.sweep_s;
   request.sim_fail_after_s = options.fail_after_s;
   request.models_dir = std::filesystem::path(SONOSHAPE_DATA_DIR) / "models";
+  request.igtl_image = options.igtl_image;
+  request.igtl_transform = options.igtl_transform;
+  request.igtl_tracker = options.igtl_tracker;
   auto source = scan::open_scan_source(request);
   if (!source) {
     std::cerr << "error: " << source.message() << '\n';
@@ -206,6 +271,8 @@ int run_scan(const ScanCommandOptions& options) {
              " (snapshot " + (*sink)->snapshot_endpoint() + ")");
     pipeline.add_sink(*sink);
   }
+  std::shared_ptr<scan::ScanSink> igtl;
+  if (!add_igtl_sink(options.igtl_serve, pipeline, igtl)) return 1;
 
   if (Status started = pipeline.start(); !started) {
     std::cerr << "error: " << started.message() << '\n';
@@ -233,6 +300,9 @@ int run_scan(const ScanCommandOptions& options) {
   if (live_line) std::cerr << '\r' << status_line(pipeline.counters()) << "\033[K\n";
   const scan::ScanSummary summary = pipeline.finish();
   log_info(summary_text(summary));
+#ifdef SONOSHAPE_WITH_OPENIGTLINK
+  if (igtl) log_info("scan: " + static_cast<const scan::IgtlSink&>(*igtl).describe());
+#endif
   if (!options.out.empty())
     log_info("scan: meshes, slices.json and scan.json in " + options.out.string());
   return 0;
@@ -247,8 +317,9 @@ CommandRunner add_scan_command(CLI::App& app) {
   options->sim.height_px = 256;
   app.add_option("--source", options->source,
                  "Where frames and poses come from: sim:PHANTOM_SPEC (sim:default, or "
-                 "LABEL:PATH[:NAME] meshes separated by commas) or replay:FILE (a PLUS .igs.mha or "
-                 ".igs.nrrd)")
+                 "LABEL:PATH[:NAME] meshes separated by commas), replay:FILE (a PLUS .igs.mha or "
+                 ".igs.nrrd) or igtl:HOST:PORT (an OpenIGTLink server such as PlusServer, port "
+                 "18944 by default)")
       ->required();
   app.add_option("--tracker", options->tracker,
                  "A live tracker for the poses instead of the source's: usb:trakstar[:sensor=N,"
@@ -290,6 +361,11 @@ CommandRunner add_scan_command(CLI::App& app) {
                  "e.g. tcp://127.0.0.1:5556");
   app.add_option("--snapshot", options->snapshot,
                  "Snapshot endpoint for late joiners (default: the --publish port + 1)");
+  app.add_option("--igtl-serve", options->igtl_serve,
+                 "Serve the scan over OpenIGTLink on [HOST:]PORT (host 127.0.0.1 unless given; "
+                 "port 0 picks a free one): surfaces as POLYDATA named after the labels, the frame "
+                 "as IMAGE with its pose, STATUS; for 3D Slicer's OpenIGTLinkIF (18944 is its "
+                 "default port)");
   app.add_option("--tracker-latency-ms", options->tracker_latency_ms,
                  "How late the tracker's timestamps are relative to the frames (ms). Default: "
                  "the source's (sim: the simulated latency; replay: 0; --tracker usb:trakstar: "
@@ -340,6 +416,17 @@ CommandRunner add_scan_command(CLI::App& app) {
       ->capture_default_str();
   sim->add_option("--sim-fail-after-s", options->fail_after_s,
                   "Fault injection: the simulated probe vanishes after this many seconds");
+  CLI::Option_group* igtl = app.add_option_group("OpenIGTLink source (igtl:)");
+  igtl->add_option("--igtl-image", options->igtl_image,
+                   "IMAGE device name of the frames (default: any IMAGE)");
+  igtl->add_option("--igtl-transform", options->igtl_transform,
+                   "TRANSFORM device name holding the probe pose in the reference frame (PLUS: "
+                   "ProbeToReference, or ProbeToTracker with the tracker as reference); "
+                   "'tdata:NAME': the tool NAME of TDATA messages (streaming requested with "
+                   "STT_TDATA); 'image': each IMAGE's own pose (then no --calibration is needed)")
+      ->capture_default_str();
+  igtl->add_option("--igtl-tracker", options->igtl_tracker,
+                   "HOST:PORT of the server sending the TRANSFORMs (default: the --source one)");
   return [options] { return run_scan(*options); };
 }
 

@@ -159,6 +159,23 @@ void ScanPipeline::each_sink(const char* what, F&& call) {
   }
 }
 
+void ScanPipeline::offer_frame(const TrackedFrame& frame,
+                               const Eigen::Matrix4d& T_reference_image) {
+  // Live views (OpenIGTLink's IMAGE) show every posed frame, not only the keyframes. The
+  // acquisition thread never waits for a sink: while another thread is in one (writing meshes),
+  // this frame is not shown.
+  std::unique_lock lock(sink_mutex_, std::try_to_lock);
+  if (!lock.owns_lock()) return;
+  for (const auto& sink : sinks_) {
+    try {
+      if (const Status status = sink->on_frame(frame, T_reference_image); !status)
+        log_warning("scan output (frame): " + status.message());
+    } catch (const std::exception& e) {
+      log_warning(std::string("scan output (frame) threw: ") + e.what());
+    }
+  }
+}
+
 void ScanPipeline::report(ScanState state, const std::string& message) {
   ScanStatus status;
   {
@@ -286,11 +303,13 @@ void ScanPipeline::acquisition_loop() {
           Candidate{TrackedFrame{std::move(received->item), synced.pose.T_reference_probe,
                                  TrackingStatus::kValid},
                     received->received_s, 0});
+      const Eigen::Matrix4d T_reference_image =
+          candidate->frame.T_reference_probe.matrix() * source_.setup.T_probe_image;
+      offer_frame(candidate->frame, T_reference_image);
       // Keyframe choice before segmentation: near-duplicates cost nothing downstream.
       tracking::FramePlane plane;
       try {
-        plane = tracking::frame_plane(
-            candidate->frame.T_reference_probe.matrix() * source_.setup.T_probe_image, corners_px_);
+        plane = tracking::frame_plane(T_reference_image, corners_px_);
       } catch (const GeometryError& e) {
         {
           std::lock_guard lock(state_mutex_);

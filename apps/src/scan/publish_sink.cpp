@@ -1,14 +1,13 @@
 #include "sonoshape/scan/publish_sink.hpp"
 
 #include "sonoshape/publish/publisher.hpp"
+#include "status_report.hpp"
 
 namespace sonoshape::scan {
 
 struct PublishSink::Impl {
   publish::MeshPublisher publisher;
 };
-
-namespace {
 
 publish::StatusReport report_of(const ScanStatus& status) {
   publish::StatusReport report;
@@ -25,8 +24,6 @@ publish::StatusReport report_of(const ScanStatus& status) {
   report.message = status.message;
   return report;
 }
-
-}  // namespace
 
 Result<std::shared_ptr<PublishSink>> PublishSink::bind(const std::string& endpoint,
                                                        const std::string& snapshot_endpoint) {

@@ -14,6 +14,10 @@
 #include "sonoshape/simulator/sweep.hpp"
 #include "sonoshape/tracking/pose_source.hpp"
 #include "sonoshape/tracking/trakstar_source.hpp"
+#ifdef SONOSHAPE_WITH_OPENIGTLINK
+#include "sonoshape/acquisition/igtl_frame_source.hpp"
+#include "sonoshape/tracking/igtl_pose_source.hpp"
+#endif
 
 namespace sonoshape::scan {
 namespace {
@@ -189,15 +193,120 @@ Status open_tracker(const std::string& spec, ScanSource& source) {
   return Status::ok();
 }
 
+#ifdef SONOSHAPE_WITH_OPENIGTLINK
+// Connects to the frames' server and waits for the first IMAGE: its size (and, for poses from
+// the image, its spacing) sets up the segmentation before the scan starts.
+Result<ScanSource> open_igtl(const SourceRequest& request, const std::string& endpoint_text) {
+  auto endpoint = acq::parse_igtl_endpoint(endpoint_text, "--source igtl:");
+  if (!endpoint) return endpoint.status();
+  const bool pose_from_image = request.igtl_transform == "image";
+  if (!pose_from_image && !request.calibration)
+    return Status::error("--source igtl: needs --calibration (ImageToProbe) for the poses of "
+                         "TRANSFORM '" + request.igtl_transform +
+                         "', or --igtl-transform image to take each IMAGE's own pose");
+  auto connection = acq::IgtlConnection::connect(*endpoint);
+  if (!connection) return connection.status();
+  std::optional<acq::IgtlMessage> first;
+  const double deadline_s = acq::monotonic_s() + request.igtl_wait_s;
+  while (!first && acq::monotonic_s() < deadline_s) {
+    auto message = connection->next(std::max(0.0, deadline_s - acq::monotonic_s()));
+    if (!message) return message.status();
+    if (*message && (*message)->type == "IMAGE" &&
+        (request.igtl_image.empty() || (*message)->device == request.igtl_image))
+      first = std::move(*message);
+  }
+  if (!first) {
+    std::ostringstream wait;
+    wait << request.igtl_wait_s;
+    return Status::error("--source igtl:" + endpoint->text() + ": no IMAGE" +
+                         (request.igtl_image.empty() ? "" : " named '" + request.igtl_image + "'") +
+                         " within " + wait.str() +
+                         " s; is the server streaming (PlusServer: an IMAGE in its "
+                         "OutputChannel)?");
+  }
+  auto image = acq::decode_igtl_image(*first);
+  if (!image) return image.status();
+
+  ScanSource source;
+  ScanSetup& setup = source.setup;
+  if (request.calibration) {
+    auto read = seg::read_calibration(*request.calibration);
+    if (!read) return read.status();
+    setup.T_probe_image = *read;
+    setup.calibration_from = request.calibration->string();
+  } else {
+    setup.T_probe_image = Eigen::Vector4d(image->spacing_mm[0], image->spacing_mm[1], 1.0, 1.0)
+                              .asDiagonal();
+    setup.calibration_from = "the IMAGE's pixel spacing (poses from the IMAGE)";
+  }
+  const double spacing_mm = std::sqrt(setup.T_probe_image.col(0).head<3>().norm() *
+                                      setup.T_probe_image.col(1).head<3>().norm());
+  setup.geometry = seg::full_image_geometry(image->image.width, image->image.height, spacing_mm);
+  setup.sector_from = "the whole image";
+  seg::SegmentationConfig config;
+  setup.models_from = "two-class k-means on the first frame";
+  if (request.segmentation) {
+    auto read = seg::read_segmentation_config(*request.segmentation);
+    if (!read) return read.status();
+    config = std::move(*read);
+    setup.models_from = request.segmentation->string();
+  }
+  if (config.materials.empty()) config = seg::auto_two_class(image->image.pixels, config);
+  if (const Status valid = config.validate(); !valid) return valid;
+  setup.segmentation = std::move(config);
+  for (const seg::LabelModel& m : setup.segmentation.materials)
+    setup.labels.push_back({m.label, m.name});
+  setup.bounds = request.bounds;
+
+  acq::IgtlEndpoint tracker = *endpoint;
+  if (!request.igtl_tracker.empty()) {
+    auto parsed = acq::parse_igtl_endpoint(request.igtl_tracker, "--igtl-tracker");
+    if (!parsed) return parsed.status();
+    tracker = *parsed;
+  }
+  const std::string size = std::to_string(image->image.width) + "x" +
+                           std::to_string(image->image.height);
+  source.frames = std::make_unique<acq::IgtlFrameSource>(*endpoint, request.igtl_image,
+                                                         std::move(*connection), std::move(first));
+  const std::string tdata = "tdata:";
+  if (pose_from_image) {
+    source.poses = std::make_unique<tracking::IgtlPoseSource>(tracker, request.igtl_image,
+                                                              tracking::IgtlPoseFrom::kImage);
+  } else if (request.igtl_transform.rfind(tdata, 0) == 0) {
+    source.poses = std::make_unique<tracking::IgtlPoseSource>(
+        tracker, request.igtl_transform.substr(tdata.size()),
+        tracking::IgtlPoseFrom::kTrackingData);
+  } else {
+    source.poses = std::make_unique<tracking::IgtlPoseSource>(tracker, request.igtl_transform,
+                                                              tracking::IgtlPoseFrom::kTransform);
+  }
+  source.device_origin_s = 0.0;
+  source.tracker_latency_s = 0.0;  // both stamped by the server (PlusServer: one clock)
+  source.description = "OpenIGTLink " + endpoint->text() + ": " + size + " frames; poses from " +
+                       source.poses->describe() + "; calibration from " +
+                       setup.calibration_from + "; models " + setup.models_from;
+  return source;
+}
+#endif
+
+
 Result<ScanSource> open_frames_and_poses(const SourceRequest& request) {
   const std::size_t colon = request.spec.find(':');
   const std::string prefix = request.spec.substr(0, colon);
   const std::string rest = colon == std::string::npos ? "" : request.spec.substr(colon + 1);
   if (prefix == "sim") return open_sim(request, rest);
   if (prefix == "replay") return open_replay(request, rest);
+#ifdef SONOSHAPE_WITH_OPENIGTLINK
+  if (prefix == "igtl") return open_igtl(request, rest);
+#else
+  if (prefix == "igtl")
+    return Status::error("--source igtl: this sonoshape was built without OpenIGTLink; install "
+                         "libopenigtlink-dev (scripts/install-deps) and configure with "
+                         "-DSONOSHAPE_WITH_OPENIGTLINK=ON");
+#endif
   return Status::error("--source '" + request.spec +
-                       "': unknown source; use sim:PHANTOM_SPEC (e.g. sim:default) or "
-                       "replay:FILE.igs.mha");
+                       "': unknown source; use sim:PHANTOM_SPEC (e.g. sim:default), "
+                       "replay:FILE.igs.mha or igtl:HOST:PORT");
 }
 
 }  // namespace

@@ -116,6 +116,7 @@ class ScanPipeline {
   void stage_done();
   template <typename F>
   void each_sink(const char* what, F&& call);
+  void offer_frame(const TrackedFrame& frame, const Eigen::Matrix4d& T_reference_image);
 
   ScanSource source_;
   std::unique_ptr<SegmentationStage> segmentation_;

@@ -2,10 +2,12 @@
 // Outputs of a scan: a ScanSink receives slices, meshes and status reports (the ZeroMQ
 // publisher, the file writer, tests). Calls into sinks are serialised by the pipeline (never
 // two at once) but may come from different pipeline threads; a sink should return quickly.
+#include <Eigen/Core>
 #include <cstddef>
 #include <filesystem>
 #include <string>
 
+#include "sonoshape/core/frame.hpp"
 #include "sonoshape/core/mesh.hpp"
 #include "sonoshape/core/slice.hpp"
 #include "sonoshape/core/status.hpp"
@@ -26,6 +28,14 @@ struct MeshUpdateInfo {
 class ScanSink {
  public:
   virtual ~ScanSink() = default;
+  /// A frame that got a pose, before the keyframe choice; `T_reference_image` maps its pixels
+  /// (column, row, 0) to reference mm (spacing included). Called from the acquisition thread for
+  /// every such frame, except while another sink call is in progress (the acquisition never
+  /// waits for a sink), so it must be quick; by default ignored.
+  virtual Status on_frame(const TrackedFrame& /*frame*/,
+                          const Eigen::Matrix4d& /*T_reference_image*/) {
+    return Status::ok();
+  }
   /// A slice just joined the reconstruction; `index` counts the scan's slices from 0.
   virtual Status on_slice(const LabeledSlice& slice, std::size_t index) = 0;
   /// The meshes after an update (one per material; a material may vanish).

@@ -1,6 +1,7 @@
 #pragma once
 // The scan's sources chosen by a string (design.md, "Devices"): `sim:PHANTOM_SPEC` (a simulated
-// probe and tracker) or `replay:FILE.igs.mha` (a PLUS sequence file: frames, poses, statuses).
+// probe and tracker), `replay:FILE.igs.mha` (a PLUS sequence file: frames, poses, statuses) or
+// `igtl:HOST:PORT` (an OpenIGTLink server such as PlusServer: IMAGE and TRANSFORM messages).
 // Hardware backends add their prefix here without changing the pipeline.
 #include <filesystem>
 #include <optional>
@@ -36,6 +37,15 @@ struct SourceRequest {
   double sim_duration_s = 20.0;  ///< length of the simulated sweep (s)
   double sim_fail_after_s = -1;  ///< fault injection: the probe vanishes at this time (< 0: never)
   std::filesystem::path models_dir;  ///< bundled models of the built-in demo phantom
+
+  // igtl: only (an OpenIGTLink server such as PlusServer; needs SONOSHAPE_WITH_OPENIGTLINK).
+  std::string igtl_image;  ///< IMAGE device name of the frames ("": any)
+  /// TRANSFORM device name carrying T_reference_probe; "tdata:NAME": the element NAME of TDATA
+  /// messages; "image": the IMAGE's own pose (the probe frame is then the image's, and the
+  /// calibration its pixel spacing).
+  std::string igtl_transform = "ProbeToReference";
+  std::string igtl_tracker;  ///< HOST:PORT sending the TRANSFORMs ("": the --source server)
+  double igtl_wait_s = 5.0;  ///< how long to wait for the first IMAGE (its size sets the setup)
 };
 
 /// Opens the sources of `request` and prepares the setup. Fails with a message that names the

@@ -1,0 +1,87 @@
+#pragma once
+// The client side of OpenIGTLink (protocol v2, as a PlusServer speaks it): one TCP connection
+// read message by message, and the decoding of the IMAGE and TRANSFORM messages the igtl:
+// sources use. Built only with SONOSHAPE_WITH_OPENIGTLINK; no OpenIGTLink type appears here.
+#include <Eigen/Core>
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "sonoshape/core/image.hpp"
+#include "sonoshape/core/status.hpp"
+
+namespace sonoshape::acq {
+
+/// Where an OpenIGTLink server listens. 18944 is OpenIGTLink's and PlusServer's default port.
+struct IgtlEndpoint {
+  std::string host = "127.0.0.1";
+  int port = 18944;
+  std::string text() const { return host + ":" + std::to_string(port); }
+};
+
+/// "HOST:PORT", or "HOST" (port 18944). Errors name `option` and the expected form.
+Result<IgtlEndpoint> parse_igtl_endpoint(const std::string& text, const std::string& option);
+
+/// One whole message as it came over the wire (header and body; CRC not yet checked).
+struct IgtlMessage {
+  std::string type;    ///< "IMAGE", "TRANSFORM", ...
+  std::string device;  ///< the device name
+  /// The header's timestamp (s since 1970 on the sender's clock); when the sender set none,
+  /// the arrival time on this machine's wall clock (and stamped_on_arrival).
+  double timestamp_s = 0.0;
+  bool stamped_on_arrival = false;
+  std::vector<std::uint8_t> bytes;
+};
+
+/// A client connection. Not thread-safe: one thread reads it.
+class IgtlConnection {
+ public:
+  /// Connects (waiting up to `timeout_s`); errors name the endpoint and say to check that the
+  /// server (e.g. PlusServer) runs and listens there.
+  static Result<IgtlConnection> connect(const IgtlEndpoint& endpoint, double timeout_s = 5.0);
+  IgtlConnection(IgtlConnection&&) noexcept;
+  IgtlConnection& operator=(IgtlConnection&&) noexcept;
+  ~IgtlConnection();
+
+  /// The next whole message, waiting up to `timeout_s` (none when none completed in time).
+  /// Fails when the server closed the connection or sent a malformed header.
+  Result<std::optional<IgtlMessage>> next(double timeout_s);
+
+  /// Sends `bytes` (a packed message) whole, waiting up to `timeout_s` for room. Fails when the
+  /// connection is gone or stays full.
+  Status send(const std::vector<std::uint8_t>& bytes, double timeout_s = 1.0);
+
+ private:
+  struct Impl;
+  explicit IgtlConnection(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+/// An IMAGE message's content: an 8-bit single-channel 2D image and its matrix.
+struct IgtlImage {
+  GreyImage image;
+  /// Pixel (column, row, 0) to the sender's reference frame (mm): the message's unit axes
+  /// scaled by its spacing, the origin moved from the image centre to pixel (0, 0).
+  Eigen::Matrix4d T_reference_image = Eigen::Matrix4d::Identity();
+  double spacing_mm[2] = {1.0, 1.0};  ///< column and row spacing
+};
+
+/// Decodes an IMAGE (CRC checked). Refuses other scalar types, several components and 3D
+/// volumes with a message naming the device and what it sent.
+Result<IgtlImage> decode_igtl_image(const IgtlMessage& message);
+
+/// Decodes a TRANSFORM (CRC checked): the 4x4 matrix, mm.
+Result<Eigen::Matrix4d> decode_igtl_transform(const IgtlMessage& message);
+
+/// A packed STT_TDATA request: asks a server to stream TDATA every `interval_ms` (PlusServer
+/// and Debian's TrackingDataServer stream TDATA only after one).
+std::vector<std::uint8_t> igtl_start_tracking_data(int interval_ms);
+
+/// The matrix (mm) of the element named `element` in a TDATA message (CRC checked); none when
+/// the message has no such element.
+Result<std::optional<Eigen::Matrix4d>> decode_igtl_tracking_data(const IgtlMessage& message,
+                                                                 const std::string& element);
+
+}  // namespace sonoshape::acq

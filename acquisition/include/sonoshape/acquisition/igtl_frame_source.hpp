@@ -1,0 +1,41 @@
+#pragma once
+// `--source igtl:HOST:PORT`, frames: the IMAGE messages of an OpenIGTLink server (PlusServer).
+// Built only with SONOSHAPE_WITH_OPENIGTLINK.
+#include <optional>
+#include <string>
+
+#include "sonoshape/acquisition/frame_source.hpp"
+#include "sonoshape/acquisition/igtl_client.hpp"
+
+namespace sonoshape::acq {
+
+/// Receives the IMAGE messages named `image_device` ("" : any) from an OpenIGTLink server;
+/// every other message is skipped. Frame::timestamp_s is the message's timestamp (the
+/// sender's clock, as PlusServer stamps its frames), Frame::index counts the frames kept.
+/// Images that cannot be read (not 8-bit grey 2D, damaged) are dropped and counted; a closed
+/// connection fails the source with the server's address.
+class IgtlFrameSource final : public FrameSource {
+ public:
+  IgtlFrameSource(IgtlEndpoint endpoint, std::string image_device);
+  /// Reads an open connection, delivering `first` (a message already read from it, e.g. to
+  /// learn the image size before the scan starts) before the rest.
+  IgtlFrameSource(IgtlEndpoint endpoint, std::string image_device, IgtlConnection connection,
+                  std::optional<IgtlMessage> first);
+  ~IgtlFrameSource() override;
+
+  std::string describe() const override { return "igtl:" + endpoint_.text(); }
+
+ protected:
+  Status open() override;
+  Result<Polled> poll(Frame& frame) override;
+  void close() override { connection_.reset(); }
+
+ private:
+  IgtlEndpoint endpoint_;
+  std::string image_device_;
+  std::optional<IgtlConnection> connection_;
+  std::optional<IgtlMessage> pending_;
+  std::int64_t next_index_ = 0;
+};
+
+}  // namespace sonoshape::acq

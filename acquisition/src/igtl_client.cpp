@@ -1,0 +1,288 @@
+#include "sonoshape/acquisition/igtl_client.hpp"
+
+#include <fcntl.h>
+#include <netdb.h>
+#include <netinet/in.h>
+#include <netinet/tcp.h>
+#include <poll.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <chrono>
+#include <cstring>
+
+#include "igtlImageMessage.h"
+#include "igtlMessageHeader.h"
+#include "igtlTrackingDataMessage.h"
+#include "igtlTransformMessage.h"
+#include "igtl_header.h"
+
+namespace sonoshape::acq {
+namespace {
+
+// IMAGE bodies of a 2D ultrasound frame are well below this; anything larger is a broken stream.
+constexpr std::uint64_t kMaxBody = 256ull << 20;
+
+double now_s() {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+
+// Connects a non-blocking socket to one resolved address, waiting up to `timeout_s`.
+int connect_one(const addrinfo& a, double timeout_s) {
+  const int fd = ::socket(a.ai_family, a.ai_socktype | SOCK_NONBLOCK | SOCK_CLOEXEC, a.ai_protocol);
+  if (fd < 0) return -1;
+  if (::connect(fd, a.ai_addr, a.ai_addrlen) != 0 && errno != EINPROGRESS) {
+    ::close(fd);
+    return -1;
+  }
+  pollfd p{fd, POLLOUT, 0};
+  int error = 0;
+  socklen_t length = sizeof error;
+  if (::poll(&p, 1, static_cast<int>(1e3 * timeout_s)) != 1 ||
+      ::getsockopt(fd, SOL_SOCKET, SO_ERROR, &error, &length) != 0 || error != 0) {
+    ::close(fd);
+    errno = error ? error : ETIMEDOUT;
+    return -1;
+  }
+  const int one = 1;
+  ::setsockopt(fd, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
+  return fd;
+}
+
+template <typename Message>
+bool unpack(Message& message, const IgtlMessage& raw) {
+  igtl::MessageHeader::Pointer header = igtl::MessageHeader::New();
+  header->InitPack();
+  std::memcpy(header->GetPackPointer(), raw.bytes.data(), IGTL_HEADER_SIZE);
+  header->Unpack();
+  message->SetMessageHeader(header);
+  message->AllocatePack();
+  if (raw.bytes.size() != IGTL_HEADER_SIZE + static_cast<std::size_t>(message->GetPackBodySize()))
+    return false;
+  std::memcpy(message->GetPackBodyPointer(), raw.bytes.data() + IGTL_HEADER_SIZE,
+              raw.bytes.size() - IGTL_HEADER_SIZE);
+  return (message->Unpack(1) & igtl::MessageHeader::UNPACK_BODY) != 0;
+}
+
+}  // namespace
+
+Result<IgtlEndpoint> parse_igtl_endpoint(const std::string& text, const std::string& option) {
+  IgtlEndpoint endpoint;
+  const std::size_t colon = text.rfind(':');
+  endpoint.host = text.substr(0, colon);
+  if (colon != std::string::npos) {
+    const std::string port = text.substr(colon + 1);
+    std::size_t used = 0;
+    try {
+      endpoint.port = std::stoi(port, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (used == 0 || used != port.size() || endpoint.port < 1 || endpoint.port > 65535)
+      endpoint.host.clear();
+  }
+  if (endpoint.host.empty())
+    return Status::error(option + " '" + text +
+                         "': expected HOST:PORT of an OpenIGTLink server, e.g. 127.0.0.1:18944 "
+                         "(PlusServer's default port)");
+  return endpoint;
+}
+
+struct IgtlConnection::Impl {
+  int fd = -1;
+  std::string where;
+  std::vector<std::uint8_t> buffer;
+  ~Impl() {
+    if (fd >= 0) ::close(fd);
+  }
+
+  // The first whole message in the buffer, removed from it; none when incomplete.
+  Result<std::optional<IgtlMessage>> take() {
+    if (buffer.size() < IGTL_HEADER_SIZE) return std::optional<IgtlMessage>();
+    igtl::MessageHeader::Pointer header = igtl::MessageHeader::New();
+    header->InitPack();
+    std::memcpy(header->GetPackPointer(), buffer.data(), IGTL_HEADER_SIZE);
+    header->Unpack();
+    const auto body = static_cast<std::uint64_t>(header->GetBodySizeToRead());
+    if (body > kMaxBody)
+      return Status::error("OpenIGTLink " + where + ": a message announces " +
+                           std::to_string(body) + " bytes; not an OpenIGTLink stream?");
+    if (buffer.size() < IGTL_HEADER_SIZE + body) return std::optional<IgtlMessage>();
+    IgtlMessage message;
+    message.type = header->GetDeviceType();
+    message.device = header->GetDeviceName();
+    igtl::TimeStamp::Pointer stamp = igtl::TimeStamp::New();
+    header->GetTimeStamp(stamp);
+    message.timestamp_s = stamp->GetTimeStamp();
+    if (message.timestamp_s == 0.0) {
+      // No timestamp (Debian's ImagerServer sets none): the arrival time on the wall clock, the
+      // clock senders stamp with, so that it stays comparable with stamped messages.
+      message.timestamp_s =
+          std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch())
+              .count();
+      message.stamped_on_arrival = true;
+    }
+    const auto end = buffer.begin() + static_cast<std::ptrdiff_t>(IGTL_HEADER_SIZE + body);
+    message.bytes.assign(buffer.begin(), end);
+    buffer.erase(buffer.begin(), end);
+    return std::optional<IgtlMessage>(std::move(message));
+  }
+};
+
+Result<IgtlConnection> IgtlConnection::connect(const IgtlEndpoint& endpoint, double timeout_s) {
+  addrinfo hints{};
+  hints.ai_family = AF_UNSPEC;
+  hints.ai_socktype = SOCK_STREAM;
+  addrinfo* found = nullptr;
+  const std::string port = std::to_string(endpoint.port);
+  if (const int error = ::getaddrinfo(endpoint.host.c_str(), port.c_str(), &hints, &found))
+    return Status::error("OpenIGTLink " + endpoint.text() + ": cannot resolve '" + endpoint.host +
+                         "' (" + ::gai_strerror(error) + ")");
+  auto impl = std::make_unique<Impl>();
+  impl->where = endpoint.text();
+  int error = 0;
+  for (const addrinfo* a = found; a && impl->fd < 0; a = a->ai_next) {
+    impl->fd = connect_one(*a, timeout_s);
+    if (impl->fd < 0) error = errno;
+  }
+  ::freeaddrinfo(found);
+  if (impl->fd < 0)
+    return Status::error("OpenIGTLink " + endpoint.text() + ": cannot connect (" +
+                         std::strerror(error) +
+                         "); check that the server (e.g. PlusServer) runs and listens there");
+  return IgtlConnection(std::move(impl));
+}
+
+IgtlConnection::IgtlConnection(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+IgtlConnection::IgtlConnection(IgtlConnection&&) noexcept = default;
+IgtlConnection& IgtlConnection::operator=(IgtlConnection&&) noexcept = default;
+IgtlConnection::~IgtlConnection() = default;
+
+Result<std::optional<IgtlMessage>> IgtlConnection::next(double timeout_s) {
+  const double deadline_s = now_s() + timeout_s;
+  while (true) {
+    auto ready = impl_->take();
+    if (!ready || *ready) return ready;
+    const double left_s = deadline_s - now_s();
+    if (left_s <= 0.0) return std::optional<IgtlMessage>();
+    pollfd p{impl_->fd, POLLIN, 0};
+    const int polled = ::poll(&p, 1, static_cast<int>(1e3 * left_s) + 1);
+    if (polled < 0 && errno != EINTR)
+      return Status::error("OpenIGTLink " + impl_->where + ": " + std::strerror(errno));
+    if (polled <= 0) continue;
+    std::uint8_t chunk[65536];
+    const ssize_t n = ::recv(impl_->fd, chunk, sizeof chunk, MSG_DONTWAIT);
+    if (n == 0)
+      return Status::error("OpenIGTLink " + impl_->where + ": the server closed the connection");
+    if (n < 0) {
+      if (errno == EAGAIN || errno == EWOULDBLOCK || errno == EINTR) continue;
+      return Status::error("OpenIGTLink " + impl_->where + ": " + std::strerror(errno));
+    }
+    impl_->buffer.insert(impl_->buffer.end(), chunk, chunk + n);
+  }
+}
+
+Status IgtlConnection::send(const std::vector<std::uint8_t>& bytes, double timeout_s) {
+  const double deadline_s = now_s() + timeout_s;
+  std::size_t sent = 0;
+  while (sent < bytes.size()) {
+    const ssize_t n =
+        ::send(impl_->fd, bytes.data() + sent, bytes.size() - sent, MSG_DONTWAIT | MSG_NOSIGNAL);
+    if (n > 0) {
+      sent += static_cast<std::size_t>(n);
+      continue;
+    }
+    if (n < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR)
+      return Status::error("OpenIGTLink " + impl_->where + ": cannot send (" +
+                           std::strerror(errno) + ")");
+    const double left_s = deadline_s - now_s();
+    if (left_s <= 0.0)
+      return Status::error("OpenIGTLink " + impl_->where + ": the server takes no data");
+    pollfd p{impl_->fd, POLLOUT, 0};
+    ::poll(&p, 1, static_cast<int>(1e3 * left_s) + 1);
+  }
+  return Status::ok();
+}
+
+std::vector<std::uint8_t> igtl_start_tracking_data(int interval_ms) {
+  igtl::StartTrackingDataMessage::Pointer start = igtl::StartTrackingDataMessage::New();
+  start->SetDeviceName("sonoshape");
+  start->SetResolution(interval_ms);
+  start->Pack();
+  const auto* begin = static_cast<const std::uint8_t*>(start->GetPackPointer());
+  return std::vector<std::uint8_t>(begin, begin + start->GetPackSize());
+}
+
+Result<std::optional<Eigen::Matrix4d>> decode_igtl_tracking_data(const IgtlMessage& message,
+                                                                 const std::string& element) {
+  igtl::TrackingDataMessage::Pointer data = igtl::TrackingDataMessage::New();
+  if (message.type != "TDATA" || !unpack(data, message))
+    return Status::error("OpenIGTLink TDATA '" + message.device +
+                         "': damaged message (size or CRC)");
+  for (int k = 0; k < data->GetNumberOfTrackingDataElements(); ++k) {
+    igtl::TrackingDataElement::Pointer e;
+    data->GetTrackingDataElement(k, e);
+    if (element != e->GetName()) continue;
+    igtl::Matrix4x4 m;
+    e->GetMatrix(m);
+    Eigen::Matrix4d T = Eigen::Matrix4d::Identity();
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 4; ++c) T(r, c) = m[r][c];
+    return std::optional<Eigen::Matrix4d>(T);
+  }
+  return std::optional<Eigen::Matrix4d>();
+}
+
+Result<IgtlImage> decode_igtl_image(const IgtlMessage& message) {
+  igtl::ImageMessage::Pointer image = igtl::ImageMessage::New();
+  const std::string what = "OpenIGTLink IMAGE '" + message.device + "'";
+  if (message.type != "IMAGE" || !unpack(image, message))
+    return Status::error(what + ": damaged message (size or CRC)");
+  int size[3];
+  float spacing[3];
+  image->GetDimensions(size);
+  image->GetSpacing(spacing);
+  if (image->GetScalarType() != igtl::ImageMessage::TYPE_UINT8 || image->GetNumComponents() != 1)
+    return Status::error(
+        what + ": scalar type " + std::to_string(image->GetScalarType()) + " with " +
+        std::to_string(image->GetNumComponents()) +
+        " components; only 8-bit grey (uint8, 1 component) B-mode frames are read");
+  if (size[2] != 1 || size[0] < 1 || size[1] < 1)
+    return Status::error(what + ": " + std::to_string(size[0]) + "x" + std::to_string(size[1]) +
+                         "x" + std::to_string(size[2]) + "; a 2D frame (depth 1) is expected");
+  IgtlImage out;
+  out.image = GreyImage(size[0], size[1]);
+  const auto* pixels = static_cast<const std::uint8_t*>(image->GetScalarPointer());
+  std::copy(pixels, pixels + out.image.pixels.size(), out.image.pixels.begin());
+  igtl::Matrix4x4 m;
+  image->GetMatrix(m);
+  Eigen::Matrix4d T = Eigen::Matrix4d::Identity();
+  for (int r = 0; r < 4; ++r)
+    for (int c = 0; c < 4; ++c) T(r, c) = m[r][c];
+  // OpenIGTLink: unit axes, the spacing apart, origin at the image centre.
+  T.col(0).head<3>() *= spacing[0];
+  T.col(1).head<3>() *= spacing[1];
+  T.col(2).head<3>() *= spacing[2];
+  T.col(3).head<3>() -=
+      T.col(0).head<3>() * 0.5 * (size[0] - 1) + T.col(1).head<3>() * 0.5 * (size[1] - 1);
+  out.T_reference_image = T;
+  out.spacing_mm[0] = spacing[0];
+  out.spacing_mm[1] = spacing[1];
+  return out;
+}
+
+Result<Eigen::Matrix4d> decode_igtl_transform(const IgtlMessage& message) {
+  igtl::TransformMessage::Pointer transform = igtl::TransformMessage::New();
+  if (message.type != "TRANSFORM" || !unpack(transform, message))
+    return Status::error("OpenIGTLink TRANSFORM '" + message.device +
+                         "': damaged message (size or CRC)");
+  igtl::Matrix4x4 m;
+  transform->GetMatrix(m);
+  Eigen::Matrix4d T = Eigen::Matrix4d::Identity();
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 4; ++c) T(r, c) = m[r][c];
+  return T;
+}
+
+}  // namespace sonoshape::acq

@@ -1,0 +1,221 @@
+// OpenIGTLink out (issue 22, point 3): `sonoshape scan --igtl-serve` during a simulated scan,
+// watched by Debian's ReceiveClient example (built from its shipped source) together with
+// clients written with the OpenIGTLink library, one of which vanishes mid-scan; IgtlServer
+// answering Debian's PolyDataClient. Loopback only, ports picked by the system, every wait bounded.
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <regex>
+#include <set>
+#include <sstream>
+#include <string>
+#include <thread>
+
+#include "sonoshape/publish/igtl_server.hpp"
+#include "sonoshape/testing/igtl_client.hpp"
+#include "sonoshape/testing/temp_dir.hpp"
+
+namespace {
+
+namespace fs = std::filesystem;
+using sonoshape::testing::contains;
+using sonoshape::testing::IgtlClient;
+using sonoshape::testing::Received;
+
+// The simulated sweep played as fast as the pipeline goes: deterministic slices, a few seconds.
+const std::string kScan = std::string(SONOSHAPE_BINARY) + " scan --source sim:default --fast ";
+
+std::string file_text(const fs::path& path) {
+  std::ifstream in(path);
+  std::stringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+
+// Starts `command` through sh (exec'd: signals reach the program) with its output in `log`.
+pid_t spawn(const std::string& command, const fs::path& log) {
+  const std::string line = "exec " + command + " > " + log.string() + " 2>&1";
+  const pid_t pid = fork();
+  if (pid == 0) {
+    execl("/bin/sh", "sh", "-c", line.c_str(), static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  return pid;
+}
+
+// Waits for `pid` up to `timeout_s` (then kills it); returns its exit code (-1: killed).
+int wait_exit(pid_t pid, double timeout_s) {
+  int status = 0;
+  const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
+  while (waitpid(pid, &status, WNOHANG) == 0) {
+    if (std::chrono::steady_clock::now() > end) {
+      kill(pid, SIGKILL);
+      waitpid(pid, &status, 0);
+      return -1;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+// The port a scan's log announces ("OpenIGTLink server on 127.0.0.1:PORT"), waiting up to
+// `timeout_s`; 0 when it never does.
+int announced_port(const fs::path& log, double timeout_s) {
+  const std::regex line("OpenIGTLink server on 127\\.0\\.0\\.1:([0-9]+)");
+  const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
+  while (std::chrono::steady_clock::now() < end) {
+    std::smatch match;
+    const std::string text = file_text(log);
+    if (std::regex_search(text, match, line)) return std::stoi(match[1]);
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  return 0;
+}
+
+std::size_t count(const std::string& text, const std::string& part) {
+  std::size_t n = 0;
+  for (auto at = text.find(part); at != std::string::npos; at = text.find(part, at + 1)) ++n;
+  return n;
+}
+
+std::string summary_slices(const std::string& log) {
+  std::smatch match;
+  return std::regex_search(log, match, std::regex("\n  slices ([0-9]+),")) ? match[1].str() : "?";
+}
+
+// Receives until the server closes (or nothing comes for the client's timeout): the POLYDATA
+// names, those with at least one triangle, and how many IMAGE and STATUS messages came;
+// `last_status` the error name (state) of the newest STATUS.
+struct Watched {
+  std::set<std::string> names, surfaces;
+  std::size_t images = 0, statuses = 0;
+  std::string last_status;
+  int image_width = 0;
+};
+
+Watched watch(IgtlClient& client) {
+  Watched w;
+  for (Received r = client.next(); !r.type.empty(); r = client.next()) {
+    if (r.type == "POLYDATA") w.names.insert(r.name);
+    if (r.type == "POLYDATA" && sonoshape::testing::triangles(r) > 0) w.surfaces.insert(r.name);
+    if (r.type == "IMAGE") {
+      ++w.images;
+      int size[3];
+      r.image->GetDimensions(size);
+      w.image_width = size[0];
+    }
+    if (r.type == "STATUS") {
+      ++w.statuses;
+      w.last_status = r.status->GetErrorName();
+    }
+  }
+  return w;
+}
+
+TEST(IgtlPeers, DebiansReceiveClientAndALibraryClientGetEveryLabelAndTheImageDuringAScan) {
+  sonoshape::testing::TempDir dir;
+  const fs::path scan_log = dir.path() / "scan.log", client_log = dir.path() / "client.log";
+  const pid_t scan = spawn(kScan + "--igtl-serve 0 -o " + (dir.path() / "out").string(), scan_log);
+  const int port = announced_port(scan_log, 30.0);
+  ASSERT_GT(port, 0) << file_text(scan_log);
+  // Debian's example prints what it receives and exits when the server closes the connection.
+  const pid_t receiver =
+      spawn(std::string(RECEIVE_CLIENT) + " 127.0.0.1 " + std::to_string(port), client_log);
+  IgtlClient library_client(port);
+  ASSERT_TRUE(library_client.connected());
+  const Watched watched = watch(library_client);
+  ASSERT_EQ(wait_exit(scan, 60.0), 0) << file_text(scan_log);
+  EXPECT_EQ(wait_exit(receiver, 10.0), 0);
+  const std::string scan_text = file_text(scan_log), received = file_text(client_log);
+
+  // Every label of the scan (slices.json names them) arrived as a POLYDATA named after it; in
+  // this sweep the probe never cuts the third one (its mesh file is empty too), so only the
+  // others have triangles.
+  const auto slices = nlohmann::json::parse(file_text(dir.path() / "out" / "slices.json"));
+  std::set<std::string> labels;
+  for (const auto& label : slices["labels"]) labels.insert(label["name"].get<std::string>());
+  ASSERT_EQ(labels.size(), 3u) << scan_text;
+  EXPECT_EQ(watched.names, labels);
+  EXPECT_GE(watched.surfaces.size(), 2u);
+  for (const std::string& name : watched.surfaces) EXPECT_TRUE(labels.count(name)) << name;
+  EXPECT_GT(watched.images, 0u);
+  EXPECT_EQ(watched.image_width, 256);
+  EXPECT_EQ(watched.last_status, "idle");  // the final status reaches the clients
+
+  // Debian's ReceiveClient: the surfaces (it skips POLYDATA bodies, naming the type), the frames
+  // decoded as 256 x 256 images with CRC checked, and the statuses down to the final one.
+  EXPECT_GE(count(received, "Receiving : POLYDATA"), labels.size()) << received.substr(0, 2000);
+  EXPECT_TRUE(contains(received, "Receiving IMAGE data type."));
+  EXPECT_TRUE(contains(received, "Device Name           : Image"));
+  EXPECT_TRUE(contains(received, "Dimensions            : (256, 256, 1)"));
+  EXPECT_TRUE(contains(received, "Receiving STATUS data type."));
+  EXPECT_TRUE(contains(received, " Error Name: idle"));
+  EXPECT_TRUE(contains(scan_text, "2 clients served")) << scan_text;
+}
+
+TEST(IgtlPeers, AClientThatVanishesMidScanChangesNothingForTheScan) {
+  sonoshape::testing::TempDir dir;
+  // The same sweep without any client: --fast makes its slices deterministic.
+  const fs::path alone_log = dir.path() / "alone.log";
+  ASSERT_EQ(wait_exit(spawn(kScan, alone_log), 60.0), 0) << file_text(alone_log);
+
+  const fs::path scan_log = dir.path() / "scan.log", client_log = dir.path() / "client.log";
+  const pid_t scan = spawn(kScan + "--igtl-serve 0", scan_log);
+  const int port = announced_port(scan_log, 30.0);
+  ASSERT_GT(port, 0) << file_text(scan_log);
+  const pid_t receiver =
+      spawn(std::string(RECEIVE_CLIENT) + " 127.0.0.1 " + std::to_string(port), client_log);
+  {
+    IgtlClient vanishing(port);
+    ASSERT_TRUE(vanishing.connected());
+    ASSERT_FALSE(vanishing.next().type.empty());
+  }  // closed after one message, with the rest of the scan's messages unread
+  // Debian's client killed mid-scan, as a crashed viewer would be.
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  kill(receiver, SIGKILL);
+  waitpid(receiver, nullptr, 0);
+
+  ASSERT_EQ(wait_exit(scan, 60.0), 0) << file_text(scan_log);
+  const std::string scan_text = file_text(scan_log);
+  EXPECT_TRUE(contains(scan_text, "scan summary (source ended"));
+  EXPECT_EQ(summary_slices(scan_text), summary_slices(file_text(alone_log))) << scan_text;
+  EXPECT_NE(summary_slices(scan_text), "?");
+  EXPECT_FALSE(contains(scan_text, "error:"));
+  EXPECT_TRUE(contains(file_text(client_log), "Receiving IMAGE data type."));
+}
+
+TEST(IgtlPeers, DebiansPolyDataClientGetsTheSurfacesItAsksFor) {
+  sonoshape::publish::IgtlServerOptions options;
+  options.port = 0;
+  auto server = sonoshape::publish::IgtlServer::start(options);
+  ASSERT_TRUE(server) << server.message();
+  sonoshape::MeshSet meshes;
+  sonoshape::TriangleMesh tetrahedron;
+  tetrahedron.vertices = {sonoshape::Vec3(0, 0, 0), sonoshape::Vec3(10, 0, 0),
+                          sonoshape::Vec3(0, 10, 0), sonoshape::Vec3(0, 0, 10)};
+  tetrahedron.triangles = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};
+  meshes.meshes.push_back({1, "liver", tetrahedron});
+  ASSERT_TRUE(server->publish_meshes(meshes));
+
+  sonoshape::testing::TempDir dir;
+  const fs::path log = dir.path() / "polydata.log";
+  // The example sends GET_POLYDATA ten times, half a second apart, and reads one reply each.
+  const pid_t client =
+      spawn(std::string(POLYDATA_CLIENT) + " 127.0.0.1 " + std::to_string(server->port()), log);
+  // Its first read is the surface the server sends on connection; its requests are answered.
+  ASSERT_EQ(wait_exit(client, 20.0), 0) << file_text(log);
+  const std::string text = file_text(log);
+  EXPECT_EQ(count(text, "Receiving POLYDATA data type."), 10u) << text;
+  EXPECT_FALSE(contains(text, "Invalid response"));
+  EXPECT_TRUE(contains(text, "point[1] = (10, 0, 0)"));
+  EXPECT_TRUE(contains(text, "cell[3] = (1, 1, 2, 3)"));  // its print repeats the first index
+  EXPECT_GE(server->stats().requests_answered, 9u);
+}
+
+}  // namespace

@@ -1,0 +1,282 @@
+// OpenIGTLink in (`--source igtl:`): the frame and pose sources against Debian's ImagerServer and
+// TrackerServer examples (built from their shipped sources), and against sonoshape's own server
+// for the pose an IMAGE carries. Loopback only; every wait bounded.
+#include <gtest/gtest.h>
+#include <netinet/in.h>
+#include <signal.h>
+#include <sys/socket.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <Eigen/Geometry>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <regex>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "sonoshape/acquisition/igtl_frame_source.hpp"
+#include "sonoshape/publish/igtl_server.hpp"
+#include "sonoshape/tracking/igtl_pose_source.hpp"
+
+namespace sonoshape {
+namespace {
+
+// A port free now (bound to 0 and released): the example servers take a port number and cannot
+// pick one themselves.
+int free_port() {
+  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  ::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a);
+  socklen_t n = sizeof a;
+  ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &n);
+  ::close(fd);
+  return ntohs(a.sin_port);
+}
+
+// Whether something listens on `port` (from /proc/net/tcp, without connecting: the examples
+// serve one client at a time, so a probing connection would take the test's place).
+bool listening(int port) {
+  std::ifstream in("/proc/net/tcp");
+  std::string line;
+  char hex[8];
+  std::snprintf(hex, sizeof hex, ":%04X", port);
+  while (std::getline(in, line)) {
+    std::istringstream fields(line);
+    std::string slot, local, remote, state;
+    fields >> slot >> local >> remote >> state;
+    if (local.size() > 5 && local.substr(local.size() - 5) == hex && state == "0A") return true;
+  }
+  return false;
+}
+
+// An example server as a child process, killed at the end of the test.
+class Peer {
+ public:
+  Peer(const std::vector<std::string>& argv) : port_(free_port()) {
+    pid_ = fork();
+    if (pid_ == 0) {
+      std::vector<std::string> args = argv;
+      args.insert(args.begin() + 1, std::to_string(port_));
+      std::vector<char*> raw;
+      for (auto& a : args) raw.push_back(a.data());
+      raw.push_back(nullptr);
+      std::freopen("/dev/null", "w", stdout);
+      std::freopen("/dev/null", "w", stderr);
+      execv(raw[0], raw.data());
+      _exit(127);
+    }
+    for (int k = 0; k < 250 && !listening(port_); ++k)
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  ~Peer() {
+    kill(pid_, SIGKILL);
+    waitpid(pid_, nullptr, 0);
+  }
+  int port() const { return port_; }
+  bool up() const { return listening(port_); }
+
+ private:
+  int port_;
+  pid_t pid_ = -1;
+};
+
+double wall_clock_s() {
+  return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+}
+
+template <typename Source, typename Item>
+std::vector<Item> take(Source& source, std::size_t count, double timeout_s) {
+  std::vector<Item> items;
+  const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
+  while (items.size() < count && std::chrono::steady_clock::now() < end && !source.finished())
+    if (auto r = source.next(0.1)) items.push_back(r->item);
+  return items;
+}
+
+TEST(IgtlSources, FramesFromDebiansImagerServerArriveWholeAndInOrder) {
+  Peer imager({IMAGER_SERVER, "50", IMAGER_IMAGES});  // 50 frames per second
+  ASSERT_TRUE(imager.up());
+  acq::IgtlFrameSource source({"127.0.0.1", imager.port()}, "");
+  const double before_s = wall_clock_s();
+  ASSERT_TRUE(source.start());
+  const std::vector<Frame> frames = take<acq::IgtlFrameSource, Frame>(source, 10, 10.0);
+  const double after_s = wall_clock_s();
+  ASSERT_EQ(frames.size(), 10u) << source.message();
+  for (std::size_t k = 0; k < frames.size(); ++k) {
+    EXPECT_EQ(frames[k].index, static_cast<std::int64_t>(k));
+    EXPECT_EQ(frames[k].image.width, 256);
+    EXPECT_EQ(frames[k].image.height, 256);
+    // The example sets no timestamp: the arrival time on the wall clock stands in for it.
+    EXPECT_GE(frames[k].timestamp_s, before_s);
+    EXPECT_LE(frames[k].timestamp_s, after_s);
+    if (k > 0) {
+      EXPECT_GT(frames[k].timestamp_s, frames[k - 1].timestamp_s);
+    }
+  }
+  // The test images differ: they are the example's files, not a constant.
+  EXPECT_NE(frames[0].image.pixels, frames[1].image.pixels);
+  EXPECT_EQ(source.dropped(), 0u);
+}
+
+TEST(IgtlSources, PosesFromDebiansTrackerServerAreItsMatricesInOrder) {
+  Peer tracker({TRACKER_SERVER, "50"});
+  ASSERT_TRUE(tracker.up());
+  tracking::IgtlPoseSource source({"127.0.0.1", tracker.port()}, "Tracker",
+                                  tracking::IgtlPoseFrom::kTransform);
+  ASSERT_TRUE(source.start());
+  const std::vector<Pose> poses = take<tracking::IgtlPoseSource, Pose>(source, 5, 10.0);
+  ASSERT_EQ(poses.size(), 5u) << source.message();
+  const double now_s = wall_clock_s();
+  for (std::size_t k = 0; k < poses.size(); ++k) {
+    // The example's k-th sample (its sequence starts with the first connection): position
+    // 50 (cos 0.2k, sin 0.2k, cos 0.2k) mm, sent every 20 ms without a timestamp (the arrival
+    // time stands in; the round trip below shows a sender's timestamp is kept).
+    const double phi = 0.2 * static_cast<double>(k);
+    EXPECT_EQ(poses[k].status, TrackingStatus::kValid);
+    EXPECT_TRUE(poses[k].T_reference_probe.translation().isApprox(
+        50.0 * Eigen::Vector3d(std::cos(phi), std::sin(phi), std::cos(phi)), 1e-5))
+        << poses[k].T_reference_probe.translation().transpose();
+    EXPECT_NEAR(poses[k].timestamp_s, now_s, 5.0);
+    if (k > 0) {
+      EXPECT_GT(poses[k].timestamp_s, poses[k - 1].timestamp_s);
+    }
+  }
+  // Non-rigid matrices are INVALID samples, not skewed poses.
+  Eigen::Matrix4d skewed = Eigen::Matrix4d::Identity();
+  skewed(0, 1) = 0.1;
+  EXPECT_EQ(tracking::pose_from_matrix(skewed, 1.0).status, TrackingStatus::kInvalid);
+  EXPECT_EQ(tracking::pose_from_matrix(Eigen::Matrix4d::Identity(), 1.0).status,
+            TrackingStatus::kValid);
+}
+
+TEST(IgtlSources, PosesFromDebiansTrackingDataServerAreOneToolOfItsTdataStream) {
+  Peer server({TRACKING_DATA_SERVER});
+  ASSERT_TRUE(server.up());
+  // It streams only after STT_TDATA, which the source sends on connection.
+  tracking::IgtlPoseSource channel0({"127.0.0.1", server.port()}, "Channel 0",
+                                    tracking::IgtlPoseFrom::kTrackingData);
+  ASSERT_TRUE(channel0.start());
+  const std::vector<Pose> poses = take<tracking::IgtlPoseSource, Pose>(channel0, 5, 10.0);
+  ASSERT_EQ(poses.size(), 5u) << channel0.message();
+  for (std::size_t k = 0; k < poses.size(); ++k) {
+    EXPECT_EQ(poses[k].status, TrackingStatus::kValid);
+    if (k > 0) {
+      EXPECT_GT(poses[k].timestamp_s, poses[k - 1].timestamp_s);
+      // Channel 0 moves (its phase steps 0.1 per message): consecutive samples differ.
+      EXPECT_FALSE(poses[k].T_reference_probe.isApprox(poses[k - 1].T_reference_probe, 1e-6));
+    }
+  }
+  EXPECT_EQ(channel0.dropped(), 0u);
+}
+
+TEST(IgtlSources, AnImagesOwnPoseAndPixelsSurviveTheRoundTripThroughOurServer) {
+  publish::IgtlServerOptions options;
+  options.port = 0;
+  auto server = publish::IgtlServer::start(options);
+  ASSERT_TRUE(server) << server.message();
+  tracking::IgtlPoseSource poses({"127.0.0.1", server->port()}, "Image",
+                                 tracking::IgtlPoseFrom::kImage);
+  acq::IgtlFrameSource frames({"127.0.0.1", server->port()}, "Image");
+  ASSERT_TRUE(poses.start());
+  ASSERT_TRUE(frames.start());
+  for (int k = 0; k < 100 && server->stats().clients < 2; ++k)
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  ASSERT_EQ(server->stats().clients, 2u);
+
+  GreyImage image(6, 4);
+  for (std::size_t k = 0; k < image.pixels.size(); ++k)
+    image.pixels[k] = static_cast<std::uint8_t>(k);
+  Eigen::Isometry3d T_reference_probe = Eigen::Isometry3d::Identity();
+  T_reference_probe.linear() =
+      Eigen::AngleAxisd(0.3, Eigen::Vector3d(1, 2, 3).normalized()).matrix();
+  T_reference_probe.translation() = Eigen::Vector3d(5, -7, 11);
+  const Eigen::Matrix4d T_probe_image = Eigen::Vector4d(0.2, 0.3, 1.0, 1.0).asDiagonal();
+  ASSERT_TRUE(server->publish_image(image, T_reference_probe.matrix() * T_probe_image));
+
+  const auto pose = take<tracking::IgtlPoseSource, Pose>(poses, 1, 5.0);
+  const auto frame = take<acq::IgtlFrameSource, Frame>(frames, 1, 5.0);
+  ASSERT_EQ(pose.size(), 1u) << poses.message();
+  ASSERT_EQ(frame.size(), 1u) << frames.message();
+  EXPECT_EQ(pose[0].status, TrackingStatus::kValid);
+  // Float on the wire: 1e-5 relative.
+  EXPECT_TRUE(pose[0].T_reference_probe.matrix().isApprox(T_reference_probe.matrix(), 1e-5))
+      << pose[0].T_reference_probe.matrix();
+  EXPECT_EQ(frame[0].image.pixels, image.pixels);
+  // One message read over two connections at different times: one timestamp, the sender's.
+  EXPECT_EQ(frame[0].timestamp_s, pose[0].timestamp_s);
+}
+
+TEST(IgtlSources, ANoServerIsAFailedSourceNamingTheAddress) {
+  const int port = free_port();
+  acq::IgtlFrameSource source({"127.0.0.1", port}, "");
+  ASSERT_TRUE(source.start());
+  EXPECT_TRUE((take<acq::IgtlFrameSource, Frame>(source, 1, 5.0).empty()));
+  EXPECT_EQ(source.state(), acq::SourceState::kFailed);
+  EXPECT_NE(source.message().find("127.0.0.1:" + std::to_string(port)), std::string::npos)
+      << source.message();
+  EXPECT_FALSE(acq::parse_igtl_endpoint("host:port", "--source igtl:"));
+  EXPECT_EQ(acq::parse_igtl_endpoint("localhost", "--source igtl:")->port, 18944);
+}
+
+std::string run(const std::string& command, int& exit_code) {
+  std::string output;
+  FILE* pipe = ::popen((command + " 2>&1").c_str(), "r");
+  char buffer[4096];
+  while (std::size_t n = std::fread(buffer, 1, sizeof buffer, pipe)) output.append(buffer, n);
+  const int status = ::pclose(pipe);
+  exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return output;
+}
+
+// `scan --source igtl:` end to end: frames from Debian's ImagerServer, poses from its
+// TrackerServer (a moving, rotating sensor), segmented and reconstructed.
+TEST(IgtlSources, AScanReconstructsFromImagerServerFramesAndTrackerServerPoses) {
+  Peer imager({IMAGER_SERVER, "30", IMAGER_IMAGES});
+  Peer tracker({TRACKER_SERVER, "40"});  // 100 samples, then it drops the connection: 2.5 s
+  ASSERT_TRUE(imager.up());
+  ASSERT_TRUE(tracker.up());
+  const std::string calibration = ::testing::TempDir() + "igtl_calibration.json";
+  std::ofstream(calibration) << R"({"ImageToProbe": [0.5,0,0,0, 0,0.5,0,0, 0,0,1,0, 0,0,0,1]})";
+  int code = 0;
+  const std::string out =
+      run("timeout 60 " + std::string(SONOSHAPE_BINARY) +
+              " scan --source igtl:127.0.0.1:" + std::to_string(imager.port()) +
+              " --igtl-tracker 127.0.0.1:" + std::to_string(tracker.port()) +
+              " --igtl-transform Tracker --calibration " + calibration + " --duration 1.5",
+          code);
+  ASSERT_EQ(code, 0) << out;
+  EXPECT_NE(out.find("OpenIGTLink 127.0.0.1:" + std::to_string(imager.port()) + ": 256x256 frames"),
+            std::string::npos)
+      << out;
+  std::smatch m;
+  ASSERT_TRUE(std::regex_search(out, m, std::regex("frames received ([0-9]+)"))) << out;
+  EXPECT_GE(std::stoi(m[1]), 20) << out;  // 30 per second for 1.5 s
+  ASSERT_TRUE(std::regex_search(out, m, std::regex("\n  slices ([0-9]+),"))) << out;
+  EXPECT_GT(std::stoi(m[1]), 0) << out;
+}
+
+TEST(IgtlSources, AScanWithoutItsServerSaysWhereItLookedAndWhatIsMissing) {
+  int code = 0;
+  const int port = free_port();
+  std::string out =
+      run(std::string(SONOSHAPE_BINARY) + " scan --source igtl:127.0.0.1:" + std::to_string(port) +
+              " --igtl-transform image",
+          code);
+  EXPECT_EQ(code, 1);
+  EXPECT_NE(out.find("127.0.0.1:" + std::to_string(port)), std::string::npos) << out;
+  EXPECT_NE(out.find("PlusServer"), std::string::npos) << out;
+  out = run(std::string(SONOSHAPE_BINARY) + " scan --source igtl:127.0.0.1:" + std::to_string(port),
+            code);
+  EXPECT_EQ(code, 1);
+  EXPECT_NE(out.find("--calibration"), std::string::npos) << out;
+}
+
+}  // namespace
+}  // namespace sonoshape

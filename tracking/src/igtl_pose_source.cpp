@@ -1,0 +1,81 @@
+#include "sonoshape/tracking/igtl_pose_source.hpp"
+
+namespace sonoshape::tracking {
+
+IgtlPoseSource::IgtlPoseSource(acq::IgtlEndpoint endpoint, std::string device, IgtlPoseFrom from)
+    : endpoint_(std::move(endpoint)), device_(std::move(device)), from_(from) {}
+
+IgtlPoseSource::~IgtlPoseSource() { stop(); }
+
+std::string IgtlPoseSource::describe() const {
+  return "igtl:" + endpoint_.text() +
+         (from_ == IgtlPoseFrom::kTransform ? " (TRANSFORM " + device_ + ")" : " (IMAGE poses)");
+}
+
+Status IgtlPoseSource::open() {
+  auto connection = acq::IgtlConnection::connect(endpoint_);
+  if (!connection) return connection.status();
+  connection_.emplace(std::move(*connection));
+  // TDATA streams only on request; every 20 ms (50 Hz) is as fast as trackers usually go.
+  if (from_ == IgtlPoseFrom::kTrackingData)
+    return connection_->send(acq::igtl_start_tracking_data(20));
+  return Status::ok();
+}
+
+Pose pose_from_matrix(const Eigen::Matrix4d& T, double timestamp_s) {
+  Pose pose;
+  pose.timestamp_s = timestamp_s;
+  const Eigen::Matrix3d R = T.block<3, 3>(0, 0);
+  if (!T.allFinite() ||
+      (R.transpose() * R - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff() > 1e-3 ||
+      R.determinant() < 0.0) {
+    pose.status = TrackingStatus::kInvalid;
+    return pose;
+  }
+  pose.T_reference_probe.linear() = R;
+  pose.T_reference_probe.translation() = T.block<3, 1>(0, 3);
+  return pose;
+}
+
+Result<acq::Polled> IgtlPoseSource::poll(Pose& pose) {
+  auto message = connection_->next(0.1);
+  if (!message) return message.status();
+  if (!*message) return acq::Polled::kNothing;
+  const acq::IgtlMessage& m = **message;
+  const bool named = device_.empty() || m.device == device_;
+  if (from_ == IgtlPoseFrom::kTransform && m.type == "TRANSFORM" && named) {
+    auto T = acq::decode_igtl_transform(m);
+    if (!T) {
+      count_lost(1);
+      return acq::Polled::kNothing;
+    }
+    pose = pose_from_matrix(*T, m.timestamp_s);
+    return acq::Polled::kItem;
+  }
+  if (from_ == IgtlPoseFrom::kTrackingData && m.type == "TDATA") {
+    auto T = acq::decode_igtl_tracking_data(m, device_);
+    if (!T) {
+      count_lost(1);
+      return acq::Polled::kNothing;
+    }
+    if (!*T) return acq::Polled::kNothing;  // this tool is not in this message
+    pose = pose_from_matrix(**T, m.timestamp_s);
+    return acq::Polled::kItem;
+  }
+  if (from_ == IgtlPoseFrom::kImage && m.type == "IMAGE" && named) {
+    auto image = acq::decode_igtl_image(m);
+    if (!image) {
+      count_lost(1);
+      return acq::Polled::kNothing;
+    }
+    // The image frame in mm: the spacing divided out of the pixel axes.
+    Eigen::Matrix4d T = image->T_reference_image;
+    T.col(0).head<3>() /= image->spacing_mm[0];
+    T.col(1).head<3>() /= image->spacing_mm[1];
+    pose = pose_from_matrix(T, m.timestamp_s);
+    return acq::Polled::kItem;
+  }
+  return acq::Polled::kNothing;
+}
+
+}  // namespace sonoshape::tracking
