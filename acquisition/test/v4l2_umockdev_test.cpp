@@ -17,6 +17,7 @@
 #include <thread>
 #include <variant>
 
+#include "sonoshape/acquisition/v4l2_devices.hpp"
 #include "sonoshape/acquisition/v4l2_source.hpp"
 
 namespace sonoshape::acq {
@@ -30,7 +31,14 @@ constexpr const char* kDeviceRecord =
     "E: DEVNAME=/dev/video0\n"
     "A: dev=81:0\n"
     "A: name=Fake USB grabber\n";
-constexpr const char* kSysPath = "/sys/devices/pci0000:00/usb1/1-1/1-1:1.0/video4linux/video0";
+// The grabber's second node carries metadata only, as UVC devices' odd nodes do.
+constexpr const char* kMetadataRecord =
+    "P: /devices/pci0000:00/usb1/1-1/1-1:1.0/video4linux/video1\n"
+    "N: video1\n"
+    "E: SUBSYSTEM=video4linux\n"
+    "E: DEVNAME=/dev/video1\n"
+    "A: dev=81:1\n"
+    "A: name=Fake USB grabber\n";
 
 // What the emulated grabber does; shared with umockdev's worker thread.
 struct Grabber {
@@ -39,13 +47,64 @@ struct Grabber {
   bool unplugged = false;
 };
 
-void* resolve(UMockdevIoctlClient* client, gsize size) {
-  UMockdevIoctlData* data =
-      umockdev_ioctl_data_resolve(umockdev_ioctl_client_get_arg(client), 0, size, nullptr);
-  return data ? data->data : nullptr;
+// The struct an ioctl points to: copied from the client, written back by store().
+template <typename T>
+struct Argument {
+  explicit Argument(UMockdevIoctlClient* client)
+      : data(umockdev_ioctl_data_resolve(umockdev_ioctl_client_get_arg(client), 0, sizeof(T),
+                                         nullptr)) {
+    if (data) std::memcpy(&value, data->data, sizeof(T));
+  }
+  void store() {
+    if (data) std::memcpy(data->data, &value, sizeof(T));
+  }
+  UMockdevIoctlData* data;
+  T value{};
+};
+
+template <std::size_t N>
+void set_text(std::uint8_t (&field)[N], const char* text) {
+  std::snprintf(reinterpret_cast<char*>(field), N, "%s", text);
 }
 
-void answer_format(v4l2_format& format) {
+gboolean complete(UMockdevIoctlClient* client, bool ok, int error = EINVAL) {
+  umockdev_ioctl_client_complete(client, ok ? 0 : -1, ok ? 0 : error);
+  return TRUE;
+}
+
+bool answer_capability(v4l2_capability& cap, bool metadata) {
+  cap = v4l2_capability{};
+  set_text(cap.card, "Fake USB grabber");
+  set_text(cap.bus_info, "usb-0000:00:14.0-1");
+  cap.capabilities =
+      V4L2_CAP_DEVICE_CAPS | V4L2_CAP_VIDEO_CAPTURE | V4L2_CAP_READWRITE | V4L2_CAP_META_CAPTURE;
+  cap.device_caps = metadata ? V4L2_CAP_META_CAPTURE | V4L2_CAP_STREAMING
+                             : V4L2_CAP_VIDEO_CAPTURE | V4L2_CAP_READWRITE;
+  return true;
+}
+
+bool answer_format_description(v4l2_fmtdesc& desc) {
+  if (desc.index != 0) return false;
+  desc.pixelformat = V4L2_PIX_FMT_GREY;
+  set_text(desc.description, "8-bit Greyscale");
+  return true;
+}
+
+bool answer_frame_size(v4l2_frmsizeenum& size) {
+  if (size.index != 0 || size.pixel_format != V4L2_PIX_FMT_GREY) return false;
+  size.type = V4L2_FRMSIZE_TYPE_DISCRETE;
+  size.discrete = {kWidth, kHeight};
+  return true;
+}
+
+bool answer_frame_interval(v4l2_frmivalenum& interval) {  // 15 and 30 fps, slowest first
+  if (interval.index >= 2 || interval.width != kWidth || interval.height != kHeight) return false;
+  interval.type = V4L2_FRMIVAL_TYPE_DISCRETE;
+  interval.discrete = {1, interval.index == 0 ? 15u : 30u};
+  return true;
+}
+
+bool answer_format(v4l2_format& format) {
   v4l2_pix_format& pix = format.fmt.pix;
   pix.width = kWidth;  // the only size and format this grabber has
   pix.height = kHeight;
@@ -53,43 +112,37 @@ void answer_format(v4l2_format& format) {
   pix.field = V4L2_FIELD_NONE;
   pix.bytesperline = kWidth;
   pix.sizeimage = kWidth * kHeight;
+  return true;
+}
+
+template <typename T, typename Answer>
+gboolean answer(UMockdevIoctlClient* client, Answer fill) {
+  Argument<T> arg(client);
+  const bool ok = fill(arg.value);
+  if (ok) arg.store();
+  return complete(client, ok);
 }
 
 gboolean on_ioctl(UMockdevIoctlBase*, UMockdevIoctlClient* client, gpointer user) {
   auto* grabber = static_cast<Grabber*>(user);
   std::lock_guard lock(grabber->mutex);
-  if (grabber->unplugged) {
-    umockdev_ioctl_client_complete(client, -1, ENODEV);
-    return TRUE;
-  }
+  if (grabber->unplugged) return complete(client, false, ENODEV);
+  const bool metadata = std::strcmp(umockdev_ioctl_client_get_devnode(client), "/dev/video1") == 0;
   switch (umockdev_ioctl_client_get_request(client)) {
-    case VIDIOC_QUERYCAP: {
-      auto* cap = static_cast<v4l2_capability*>(resolve(client, sizeof(v4l2_capability)));
-      std::memset(cap, 0, sizeof *cap);
-      std::strcpy(reinterpret_cast<char*>(cap->card), "Fake USB grabber");
-      cap->capabilities = V4L2_CAP_DEVICE_CAPS | V4L2_CAP_VIDEO_CAPTURE | V4L2_CAP_READWRITE;
-      cap->device_caps = V4L2_CAP_VIDEO_CAPTURE | V4L2_CAP_READWRITE;
-      umockdev_ioctl_client_complete(client, 0, 0);
-      return TRUE;
-    }
-    case VIDIOC_ENUM_FMT: {
-      auto* desc = static_cast<v4l2_fmtdesc*>(resolve(client, sizeof(v4l2_fmtdesc)));
-      if (desc->index != 0) {
-        umockdev_ioctl_client_complete(client, -1, EINVAL);
-        return TRUE;
-      }
-      desc->pixelformat = V4L2_PIX_FMT_GREY;
-      umockdev_ioctl_client_complete(client, 0, 0);
-      return TRUE;
-    }
+    case VIDIOC_QUERYCAP:
+      return answer<v4l2_capability>(
+          client, [&](v4l2_capability& cap) { return answer_capability(cap, metadata); });
+    case VIDIOC_ENUM_FMT:
+      return answer<v4l2_fmtdesc>(client, answer_format_description);
+    case VIDIOC_ENUM_FRAMESIZES:
+      return answer<v4l2_frmsizeenum>(client, answer_frame_size);
+    case VIDIOC_ENUM_FRAMEINTERVALS:
+      return answer<v4l2_frmivalenum>(client, answer_frame_interval);
     case VIDIOC_G_FMT:
     case VIDIOC_S_FMT:
-      answer_format(*static_cast<v4l2_format*>(resolve(client, sizeof(v4l2_format))));
-      umockdev_ioctl_client_complete(client, 0, 0);
-      return TRUE;
+      return answer<v4l2_format>(client, answer_format);
     default:  // no G_PARM: the frame rate stays unknown, as with many cheap grabbers
-      umockdev_ioctl_client_complete(client, -1, ENOTTY);
-      return TRUE;
+      return complete(client, false, ENOTTY);
   }
 }
 
@@ -280,6 +333,40 @@ TEST_F(V4l2Umockdev, MmapOnAGrabberThatCannotStreamFailsNamingTheFix) {
   EXPECT_NE(source.message().find("'Fake USB grabber' does not stream; use io=read"),
             std::string::npos)
       << source.message();
+}
+
+TEST_F(V4l2Umockdev, DevicesListsCaptureNodesWithModesAPastableSourceOpens) {
+  GError* error = nullptr;
+  ASSERT_TRUE(umockdev_testbed_add_from_string(testbed_, kMetadataRecord, &error))
+      << error->message;
+  ASSERT_TRUE(umockdev_testbed_attach_ioctl(testbed_, "/dev/video1", handler_, &error))
+      << error->message;
+  auto system = system_v4l2_device();
+  const auto devices = list_v4l2_devices(*system);
+  ASSERT_EQ(devices.size(), 1u);  // video1 is metadata only
+  const V4l2DeviceInfo& grabber = devices.front();
+  EXPECT_EQ(grabber.path, "/dev/video0");
+  EXPECT_EQ(grabber.card, "Fake USB grabber");
+  EXPECT_EQ(grabber.bus, "usb-0000:00:14.0-1");
+  EXPECT_TRUE(grabber.read);
+  EXPECT_FALSE(grabber.streaming);
+  ASSERT_EQ(grabber.formats.size(), 1u);
+  EXPECT_EQ(grabber.formats[0].description, "8-bit Greyscale");
+  ASSERT_EQ(grabber.formats[0].sizes.size(), 1u);
+  EXPECT_EQ(grabber.formats[0].sizes[0].rates_hz, (std::vector<double>{30.0, 15.0}));
+  const auto specs = v4l2_source_specs(grabber);
+  ASSERT_EQ(specs,
+            (std::vector<std::string>{"v4l2:/dev/video0?size=32x24&format=GREY&fps=30&io=read"}));
+
+  // What `sonoshape devices` prints is what --source takes.
+  const auto options = parse_v4l2_spec(specs[0].substr(5));
+  ASSERT_TRUE(options) << options.message();
+  push(grey_frame(9));
+  V4l2FrameSource source(*options);
+  ASSERT_TRUE(source.start());
+  const auto frames = take(source, 1);
+  ASSERT_EQ(frames.size(), 1u) << source.message();
+  EXPECT_EQ(frames[0].image.at(1, 1), 1 + 3 + 9);
 }
 
 }  // namespace
