@@ -147,4 +147,41 @@ std::vector<std::string> v4l2_source_specs(const V4l2DeviceInfo& info) {
   return specs;
 }
 
+std::string v4l2_devices_report(const std::vector<V4l2DeviceInfo>& devices,
+                                const std::vector<std::string>& unreadable) {
+  std::ostringstream out;
+  out << "Frame grabbers (V4L2):\n";
+  if (devices.empty())
+    out << "  no video capture device found (is the grabber plugged in? ls /dev/video*)\n";
+  for (const V4l2DeviceInfo& info : devices) {
+    out << "  " << info.path << "  " << info.card << "  (" << info.bus
+        << "; io: " << (info.streaming ? "mmap" : "") << (info.streaming && info.read ? ", " : "")
+        << (info.read ? "read" : "") << ")\n";
+    const std::vector<std::string> specs = v4l2_source_specs(info);
+    std::size_t next_spec = 0;
+    for (const V4l2FormatInfo& format : info.formats) {
+      out << "    " << fourcc_text(format.fourcc) << "  " << format.description;
+      if (!format.readable) {
+        out << "  (sonoshape reads GREY, YUYV and MJPG only)\n";
+        continue;
+      }
+      out << (format.size_range.empty() ? "" : "  sizes " + format.size_range) << "\n";
+      if (format.sizes.empty()) out << "      --source " << specs[next_spec++] << "\n";
+      for (const V4l2FrameSize& size : format.sizes) {
+        out << "      " << size.width_px << "x" << size.height_px;
+        for (std::size_t k = 0; k < size.rates_hz.size(); ++k)
+          out << (k == 0 ? " at " : ", ") << rate_text(size.rates_hz[k])
+              << (k + 1 == size.rates_hz.size() ? " fps" : "");
+        out << ":  --source " << specs[next_spec++] << "\n";
+      }
+    }
+  }
+  for (const std::string& node : unreadable) {
+    out << "  cannot open " << node << "\n";
+    if (node.find(std::strerror(EACCES)) != std::string::npos)
+      out << "    (add the user to the 'video' group: usermod -aG video USER, log in again)\n";
+  }
+  return out.str();
+}
+
 }  // namespace sonoshape::acq

@@ -3,8 +3,6 @@
 // and can fail them with ENODEV (unplugged) or EIO. Runs under umockdev-wrapper (ctest does so).
 // umockdev emulates neither mmap() nor poll(): the MMAP path is tested in v4l2_source_test.cpp.
 #include <gtest/gtest.h>
-#include <linux/videodev2.h>
-#include <umockdev.h>
 
 #include <cerrno>
 #include <chrono>
@@ -19,165 +17,14 @@
 
 #include "sonoshape/acquisition/v4l2_devices.hpp"
 #include "sonoshape/acquisition/v4l2_source.hpp"
+#include "sonoshape/testing/fake_v4l2_grabber.hpp"
 
 namespace sonoshape::acq {
 namespace {
 
-constexpr int kWidth = 32, kHeight = 24;
-constexpr const char* kDeviceRecord =
-    "P: /devices/pci0000:00/usb1/1-1/1-1:1.0/video4linux/video0\n"
-    "N: video0\n"
-    "E: SUBSYSTEM=video4linux\n"
-    "E: DEVNAME=/dev/video0\n"
-    "A: dev=81:0\n"
-    "A: name=Fake USB grabber\n";
-// The grabber's second node carries metadata only, as UVC devices' odd nodes do.
-constexpr const char* kMetadataRecord =
-    "P: /devices/pci0000:00/usb1/1-1/1-1:1.0/video4linux/video1\n"
-    "N: video1\n"
-    "E: SUBSYSTEM=video4linux\n"
-    "E: DEVNAME=/dev/video1\n"
-    "A: dev=81:1\n"
-    "A: name=Fake USB grabber\n";
-
-// What the emulated grabber does; shared with umockdev's worker thread.
-struct Grabber {
-  std::mutex mutex;
-  std::deque<std::variant<std::vector<std::uint8_t>, int>> reads;  // a frame or an errno
-  bool unplugged = false;
-};
-
-// The struct an ioctl points to: copied from the client, written back by store().
-template <typename T>
-struct Argument {
-  explicit Argument(UMockdevIoctlClient* client)
-      : data(umockdev_ioctl_data_resolve(umockdev_ioctl_client_get_arg(client), 0, sizeof(T),
-                                         nullptr)) {
-    if (data) std::memcpy(&value, data->data, sizeof(T));
-  }
-  void store() {
-    if (data) std::memcpy(data->data, &value, sizeof(T));
-  }
-  UMockdevIoctlData* data;
-  T value{};
-};
-
-template <std::size_t N>
-void set_text(std::uint8_t (&field)[N], const char* text) {
-  std::snprintf(reinterpret_cast<char*>(field), N, "%s", text);
-}
-
-gboolean complete(UMockdevIoctlClient* client, bool ok, int error = EINVAL) {
-  umockdev_ioctl_client_complete(client, ok ? 0 : -1, ok ? 0 : error);
-  return TRUE;
-}
-
-bool answer_capability(v4l2_capability& cap, bool metadata) {
-  cap = v4l2_capability{};
-  set_text(cap.card, "Fake USB grabber");
-  set_text(cap.bus_info, "usb-0000:00:14.0-1");
-  cap.capabilities =
-      V4L2_CAP_DEVICE_CAPS | V4L2_CAP_VIDEO_CAPTURE | V4L2_CAP_READWRITE | V4L2_CAP_META_CAPTURE;
-  cap.device_caps = metadata ? V4L2_CAP_META_CAPTURE | V4L2_CAP_STREAMING
-                             : V4L2_CAP_VIDEO_CAPTURE | V4L2_CAP_READWRITE;
-  return true;
-}
-
-bool answer_format_description(v4l2_fmtdesc& desc) {
-  if (desc.index != 0) return false;
-  desc.pixelformat = V4L2_PIX_FMT_GREY;
-  set_text(desc.description, "8-bit Greyscale");
-  return true;
-}
-
-bool answer_frame_size(v4l2_frmsizeenum& size) {
-  if (size.index != 0 || size.pixel_format != V4L2_PIX_FMT_GREY) return false;
-  size.type = V4L2_FRMSIZE_TYPE_DISCRETE;
-  size.discrete = {kWidth, kHeight};
-  return true;
-}
-
-bool answer_frame_interval(v4l2_frmivalenum& interval) {  // 15 and 30 fps, slowest first
-  if (interval.index >= 2 || interval.width != kWidth || interval.height != kHeight) return false;
-  interval.type = V4L2_FRMIVAL_TYPE_DISCRETE;
-  interval.discrete = {1, interval.index == 0 ? 15u : 30u};
-  return true;
-}
-
-bool answer_format(v4l2_format& format) {
-  v4l2_pix_format& pix = format.fmt.pix;
-  pix.width = kWidth;  // the only size and format this grabber has
-  pix.height = kHeight;
-  pix.pixelformat = V4L2_PIX_FMT_GREY;
-  pix.field = V4L2_FIELD_NONE;
-  pix.bytesperline = kWidth;
-  pix.sizeimage = kWidth * kHeight;
-  return true;
-}
-
-template <typename T, typename Answer>
-gboolean answer(UMockdevIoctlClient* client, Answer fill) {
-  Argument<T> arg(client);
-  const bool ok = fill(arg.value);
-  if (ok) arg.store();
-  return complete(client, ok);
-}
-
-gboolean on_ioctl(UMockdevIoctlBase*, UMockdevIoctlClient* client, gpointer user) {
-  auto* grabber = static_cast<Grabber*>(user);
-  std::lock_guard lock(grabber->mutex);
-  if (grabber->unplugged) return complete(client, false, ENODEV);
-  const bool metadata = std::strcmp(umockdev_ioctl_client_get_devnode(client), "/dev/video1") == 0;
-  switch (umockdev_ioctl_client_get_request(client)) {
-    case VIDIOC_QUERYCAP:
-      return answer<v4l2_capability>(
-          client, [&](v4l2_capability& cap) { return answer_capability(cap, metadata); });
-    case VIDIOC_ENUM_FMT:
-      return answer<v4l2_fmtdesc>(client, answer_format_description);
-    case VIDIOC_ENUM_FRAMESIZES:
-      return answer<v4l2_frmsizeenum>(client, answer_frame_size);
-    case VIDIOC_ENUM_FRAMEINTERVALS:
-      return answer<v4l2_frmivalenum>(client, answer_frame_interval);
-    case VIDIOC_G_FMT:
-    case VIDIOC_S_FMT:
-      return answer<v4l2_format>(client, answer_format);
-    default:  // no G_PARM: the frame rate stays unknown, as with many cheap grabbers
-      return complete(client, false, ENOTTY);
-  }
-}
-
-gboolean on_read(UMockdevIoctlBase*, UMockdevIoctlClient* client, gpointer user) {
-  auto* grabber = static_cast<Grabber*>(user);
-  std::lock_guard lock(grabber->mutex);
-  if (grabber->unplugged) {
-    umockdev_ioctl_client_complete(client, -1, ENODEV);
-    return TRUE;
-  }
-  if (grabber->reads.empty()) {
-    umockdev_ioctl_client_complete(client, -1, EAGAIN);
-    return TRUE;
-  }
-  auto next = std::move(grabber->reads.front());
-  grabber->reads.pop_front();
-  if (const int* error = std::get_if<int>(&next)) {
-    umockdev_ioctl_client_complete(client, -1, *error);
-    return TRUE;
-  }
-  const auto& frame = std::get<std::vector<std::uint8_t>>(next);
-  UMockdevIoctlData* buffer = umockdev_ioctl_client_get_arg(client);
-  const std::size_t n = std::min(frame.size(), static_cast<std::size_t>(buffer->data_len));
-  std::memcpy(buffer->data, frame.data(), n);
-  umockdev_ioctl_client_complete(client, static_cast<glong>(n), 0);
-  return TRUE;
-}
-
-std::vector<std::uint8_t> grey_frame(int shade) {
-  std::vector<std::uint8_t> bytes(std::size_t(kWidth) * kHeight);
-  for (int j = 0; j < kHeight; ++j)
-    for (int i = 0; i < kWidth; ++i)
-      bytes[std::size_t(j) * kWidth + i] = static_cast<std::uint8_t>(i + 3 * j + shade);
-  return bytes;
-}
+using testing::fake_v4l2::grey_frame;
+using testing::fake_v4l2::kHeight;
+using testing::fake_v4l2::kWidth;
 
 double clock_monotonic_s() {
   timespec now{};
@@ -188,48 +35,14 @@ double clock_monotonic_s() {
 class V4l2Umockdev : public ::testing::Test {
  protected:
   void SetUp() override {
-    const char* preload = std::getenv("LD_PRELOAD");
-    ASSERT_TRUE(preload && std::strstr(preload, "umockdev-preload"))
+    ASSERT_TRUE(testing::umockdev_preloaded())
         << "run this test under umockdev-wrapper (ctest does)";
-    testbed_ = umockdev_testbed_new();
-    handler_ = umockdev_ioctl_base_new();
-    g_signal_connect(handler_, "handle-ioctl", G_CALLBACK(on_ioctl), &grabber_);
-    g_signal_connect(handler_, "handle-read", G_CALLBACK(on_read), &grabber_);
-    plug_in();
+    grabber_ = std::make_unique<testing::FakeV4l2Grabber>(with_metadata_node_);
   }
-  void TearDown() override {
-    if (handler_) g_object_unref(handler_);
-    if (testbed_) g_object_unref(testbed_);
-  }
-  void plug_in() {
-    GError* error = nullptr;
-    ASSERT_TRUE(umockdev_testbed_add_from_string(testbed_, kDeviceRecord, &error))
-        << error->message;
-    ASSERT_TRUE(umockdev_testbed_attach_ioctl(testbed_, "/dev/video0", handler_, &error))
-        << error->message;
-  }
-  // The node vanishes and comes back as the kernel's would. (umockdev 0.17 cannot add a
-  // device again after umockdev_testbed_remove_device: it keeps the node's PTY.)
-  std::string node_path(const char* suffix) const {
-    gchar* root = umockdev_testbed_get_root_dir(testbed_);
-    std::string path = std::string(root) + "/dev/video0" + suffix;
-    g_free(root);
-    return path;
-  }
-  void remove_node() {
-    ASSERT_EQ(std::rename(node_path("").c_str(), node_path(".gone").c_str()), 0);
-  }
-  void restore_node() {
-    ASSERT_EQ(std::rename(node_path(".gone").c_str(), node_path("").c_str()), 0);
-  }
-  void push(std::variant<std::vector<std::uint8_t>, int> read) {
-    std::lock_guard lock(grabber_.mutex);
-    grabber_.reads.push_back(std::move(read));
-  }
-  void set_unplugged(bool unplugged) {
-    std::lock_guard lock(grabber_.mutex);
-    grabber_.unplugged = unplugged;
-  }
+  void push(testing::FakeV4l2Grabber::Read read) { grabber_->push(std::move(read)); }
+  void set_unplugged(bool unplugged) { grabber_->set_unplugged(unplugged); }
+  void remove_node() { ASSERT_TRUE(grabber_->remove_node()); }
+  void restore_node() { ASSERT_TRUE(grabber_->restore_node()); }
   static V4l2Options options() {
     V4l2Options o;
     o.device = "/dev/video0";
@@ -248,9 +61,16 @@ class V4l2Umockdev : public ::testing::Test {
     return frames;
   }
 
-  Grabber grabber_;
-  UMockdevTestbed* testbed_ = nullptr;
-  UMockdevIoctlBase* handler_ = nullptr;
+  bool with_metadata_node_ = false;
+  std::unique_ptr<testing::FakeV4l2Grabber> grabber_;
+};
+
+class V4l2UmockdevWithMetadataNode : public V4l2Umockdev {
+ protected:
+  void SetUp() override {
+    with_metadata_node_ = true;
+    V4l2Umockdev::SetUp();
+  }
 };
 
 TEST_F(V4l2Umockdev, ReadIoDeliversCroppedFramesStampedOnArrival) {
@@ -335,12 +155,7 @@ TEST_F(V4l2Umockdev, MmapOnAGrabberThatCannotStreamFailsNamingTheFix) {
       << source.message();
 }
 
-TEST_F(V4l2Umockdev, DevicesListsCaptureNodesWithModesAPastableSourceOpens) {
-  GError* error = nullptr;
-  ASSERT_TRUE(umockdev_testbed_add_from_string(testbed_, kMetadataRecord, &error))
-      << error->message;
-  ASSERT_TRUE(umockdev_testbed_attach_ioctl(testbed_, "/dev/video1", handler_, &error))
-      << error->message;
+TEST_F(V4l2UmockdevWithMetadataNode, DevicesListsCaptureNodesWithModesAPastableSourceOpens) {
   auto system = system_v4l2_device();
   const auto devices = list_v4l2_devices(*system);
   ASSERT_EQ(devices.size(), 1u);  // video1 is metadata only
@@ -357,6 +172,19 @@ TEST_F(V4l2Umockdev, DevicesListsCaptureNodesWithModesAPastableSourceOpens) {
   const auto specs = v4l2_source_specs(grabber);
   ASSERT_EQ(specs,
             (std::vector<std::string>{"v4l2:/dev/video0?size=32x24&format=GREY&fps=30&io=read"}));
+
+  const std::string report = v4l2_devices_report(devices, {"/dev/video9: Permission denied"});
+  EXPECT_NE(report.find("/dev/video0  Fake USB grabber  (usb-0000:00:14.0-1; io: read)\n"
+                        "    GREY  8-bit Greyscale\n"
+                        "      32x24 at 30, 15 fps:  --source " +
+                        specs[0] + "\n"),
+            std::string::npos)
+      << report;
+  EXPECT_NE(report.find("cannot open /dev/video9: Permission denied\n    (add the user to the "
+                        "'video' group"),
+            std::string::npos)
+      << report;
+  EXPECT_NE(v4l2_devices_report({}, {}).find("no video capture device found"), std::string::npos);
 
   // What `sonoshape devices` prints is what --source takes.
   const auto options = parse_v4l2_spec(specs[0].substr(5));

@@ -52,4 +52,11 @@ std::vector<V4l2DeviceInfo> list_v4l2_devices(
 /// range, one without size.
 std::vector<std::string> v4l2_source_specs(const V4l2DeviceInfo& info);
 
+/// The text `sonoshape devices` prints for the grabbers: per device its node, card, bus and
+/// I/O methods, per format its sizes and rates, and under each readable mode the `--source`
+/// to paste; formats sonoshape does not read are named as such; `unreadable` nodes are listed
+/// with the fix for a permission problem. Says so when there is no device.
+std::string v4l2_devices_report(const std::vector<V4l2DeviceInfo>& devices,
+                                const std::vector<std::string>& unreadable);
+
 }  // namespace sonoshape::acq
