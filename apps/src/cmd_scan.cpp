@@ -157,6 +157,12 @@ int run_scan(const ScanCommandOptions& options) {
     std::cerr << "error: " << source.message() << '\n';
     return 1;
   }
+  // Hardware frame sources (v4l2:) bring no poses: those come from a tracker.
+  if (!source->poses) {
+    std::cerr << "error: --source " << options.source
+              << ": the frames need probe poses from a tracker (--tracker)\n";
+    return 1;
+  }
   log_info("scan: " + source->description);
 
   scan::ScanOptions scan_options;
@@ -245,8 +251,10 @@ CommandRunner add_scan_command(CLI::App& app) {
   options->sim.height_px = 256;
   app.add_option("--source", options->source,
                  "Where frames and poses come from: sim:PHANTOM_SPEC (sim:default, or "
-                 "LABEL:PATH[:NAME] meshes separated by commas) or replay:FILE (a PLUS .igs.mha or "
-                 ".igs.nrrd)")
+                 "LABEL:PATH[:NAME] meshes separated by commas), replay:FILE (a PLUS .igs.mha or "
+                 ".igs.nrrd) or v4l2:/dev/videoN?size=WxH&format=F&fps=HZ&io=mmap|read&"
+                 "crop=X,Y,W,H (a frame grabber; frames only, poses from a tracker; "
+                 "`sonoshape devices` lists grabbers)")
       ->required();
   app.add_option("--calibration", options->calibration,
                  "ImageToProbe calibration: PLUS device-set XML or JSON {\"ImageToProbe\": [16 "
