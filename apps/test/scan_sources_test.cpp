@@ -250,58 +250,5 @@ TEST(ScanSources, SimulatedProbeVanishingMidScanKeepsTheMeshesSoFar) {
   EXPECT_TRUE(fs::exists(dir.path() / "label_1.ply"));
 }
 
-#ifdef SONOSHAPE_WITH_V4L2
-// A grabber's calibration and label models, written where a user would keep them.
-struct GrabberFiles {
-  testing::TempDir dir;
-  fs::path calibration = dir.path() / "calibration.json";
-  fs::path segmentation = dir.path() / "probe.seg.json";
-  explicit GrabberFiles(const std::string& sector = "\"full\"") {
-    std::ofstream(calibration) << R"({"ImageToProbe": [0.2, 0, 0, -30, 0, 0.2, 0, 0,)"
-                               << R"( 0, 0, 1, 0, 0, 0, 0, 1]})";
-    std::ofstream(segmentation)
-        << R"({"format": "sonoshape-segmentation", "version": 1, "labels": [)"
-        << R"({"id": 3, "name": "vessel", "grey_mean": 20, "grey_std": 10}], "sector": )" << sector
-        << "}";
-  }
-};
-
-TEST(ScanSources, GrabberSourceIsTheCroppedImageWithTheGivenCalibrationAndModels) {
-  GrabberFiles files;
-  SourceRequest request;
-  request.spec = "v4l2:/dev/video9?size=1280x720&format=YUYV&crop=100,50,300,200";
-  request.calibration = files.calibration;
-  request.segmentation = files.segmentation;
-  auto source = open_scan_source(request);  // the device is opened when the scan starts
-  ASSERT_TRUE(source) << source.message();
-  EXPECT_EQ(source->frames->describe(), "v4l2:/dev/video9");
-  EXPECT_FALSE(source->poses);  // the tracker's
-  EXPECT_EQ(source->setup.geometry.width_px, 300);
-  EXPECT_EQ(source->setup.geometry.height_px, 200);
-  EXPECT_NEAR(source->setup.geometry.spacing_mm, 0.2, 1e-12);
-  EXPECT_EQ(source->setup.sector_from, "full image");
-  ASSERT_EQ(source->setup.labels.size(), 1u);
-  EXPECT_EQ(source->setup.labels[0].name, "vessel");
-  EXPECT_DOUBLE_EQ(source->setup.T_probe_image(0, 3), -30.0);
-}
-
-TEST(ScanSources, GrabberSourceSaysWhatItStillNeeds) {
-  GrabberFiles files;
-  SourceRequest request;
-  request.spec = "v4l2:/dev/video0";
-  EXPECT_TRUE(testing::contains(open_scan_source(request).message(), "give crop=X,Y,W,H"));
-  request.spec = "v4l2:/dev/video0?crop=0,0,64,48";
-  EXPECT_TRUE(testing::contains(open_scan_source(request).message(), "needs --calibration"));
-  request.calibration = files.calibration;
-  EXPECT_TRUE(testing::contains(open_scan_source(request).message(), "needs --segmentation"));
-  request.spec = "v4l2:/dev/video0?crop=0,0,64";
-  EXPECT_TRUE(testing::contains(open_scan_source(request).message(), "crop=0,0,64"));
-  GrabberFiles automatic("\"auto\"");
-  request.spec = "v4l2:/dev/video0?crop=0,0,64,48";
-  request.segmentation = automatic.segmentation;
-  EXPECT_TRUE(testing::contains(open_scan_source(request).message(), "cannot find the sector"));
-}
-#endif
-
 }  // namespace
 }  // namespace sonoshape::scan
