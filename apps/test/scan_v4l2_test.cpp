@@ -7,7 +7,10 @@
 #include <chrono>
 #include <filesystem>
 #include <fstream>
+#include <mutex>
+#include <string>
 #include <thread>
+#include <vector>
 
 #include "sonoshape/acquisition/v4l2_source.hpp"
 #include "sonoshape/scan/sources.hpp"
@@ -120,6 +123,43 @@ ScanSummary run_fast(ScanSource source, const std::shared_ptr<ScanSink>& sink, s
   return pipeline.finish();
 }
 
+// The frames of a simulated source (rendered again: seeded) as a GREY grabber's MMAP buffers,
+// stamped with the frames' times; the fake pads each 160-pixel row to 168 bytes.
+std::vector<testing::FakeV4l2Driver::Filled> grabbed_frames(acq::FrameSource& frames) {
+  acq::SourceOptions drain;
+  drain.wait_when_full = true;
+  EXPECT_TRUE(frames.start(drain));
+  std::vector<testing::FakeV4l2Driver::Filled> buffers;
+  while (auto frame = frames.next(30.0)) {
+    const GreyImage& image = frame->item.image;
+    std::vector<std::uint8_t> bytes(std::size_t(image.height) * 168, 0);
+    for (int j = 0; j < image.height; ++j)
+      std::copy_n(image.pixels.begin() + j * image.width, image.width, bytes.begin() + j * 168);
+    buffers.push_back({std::move(bytes), static_cast<std::uint32_t>(buffers.size()),
+                       frame->item.timestamp_s, V4L2_BUF_FLAG_TIMESTAMP_MONOTONIC});
+  }
+  return buffers;
+}
+
+// The final meshes of `got` are those of `want`: same labels and triangle counts, IoU >= 0.99
+// for every label with a surface.
+void expect_same_meshes(const MeshSet& got, const MeshSet& want, const Box3& box) {
+  ASSERT_EQ(got.meshes.size(), want.meshes.size());
+  MeshSet seen;
+  for (std::size_t k = 0; k < want.meshes.size(); ++k) {
+    EXPECT_EQ(got.meshes[k].label, want.meshes[k].label);
+    EXPECT_EQ(got.meshes[k].mesh.triangles.size(), want.meshes[k].mesh.triangles.size())
+        << "label " << want.meshes[k].label;
+    if (!want.meshes[k].mesh.triangles.empty()) seen.meshes.push_back(want.meshes[k]);
+  }
+  ASSERT_GE(seen.meshes.size(), 2u);  // the two organs (the rib hides in its shadow)
+  sim::EvaluationOptions evaluation;
+  evaluation.grid_resolution = 80;
+  evaluation.surface_samples = 2000;
+  for (const auto& score : sim::evaluate(got, seen, nullptr, box, evaluation))
+    EXPECT_GE(score.iou, 0.99) << "label " << score.label;
+}
+
 TEST(ScanV4l2, SimulatedSweepThroughAnEmulatedGrabberReconstructsAsThroughSim) {
   // The reference: the sweep as `sim:` delivers it.
   auto reference_source = open_scan_source(small_sim_request());
@@ -129,25 +169,14 @@ TEST(ScanV4l2, SimulatedSweepThroughAnEmulatedGrabberReconstructsAsThroughSim) {
   const ScanSummary expected = run_fast(std::move(*reference_source), reference, 11);
   ASSERT_EQ(expected.counters.frames_received, 11u);
 
-  // The same frames, rendered again (seeded), as a GREY grabber's MMAP buffers stamped with the
-  // frames' times; poses and setup as before.
+  // The same frames as a grabber delivers them; poses and setup as before.
   auto source = open_scan_source(small_sim_request());
   ASSERT_TRUE(source) << source.message();
-  acq::SourceOptions drain;
-  drain.wait_when_full = true;
-  ASSERT_TRUE(source->frames->start(drain));
   auto driver = std::make_shared<testing::FakeV4l2Driver>("/dev/video3", 160, 160);
   driver->offered = {V4L2_PIX_FMT_GREY};
-  std::uint32_t sequence = 0;
-  while (auto frame = source->frames->next(30.0)) {
-    const GreyImage& image = frame->item.image;
-    std::vector<std::uint8_t> bytes(160 * 168, 0);  // the fake pads rows to 168 bytes
-    for (int j = 0; j < image.height; ++j)
-      std::copy_n(image.pixels.begin() + j * image.width, image.width, bytes.begin() + j * 168);
-    driver->push(testing::FakeV4l2Driver::Filled{
-        std::move(bytes), sequence++, frame->item.timestamp_s, V4L2_BUF_FLAG_TIMESTAMP_MONOTONIC});
-  }
-  ASSERT_EQ(sequence, 11u);
+  auto buffers = grabbed_frames(*source->frames);
+  ASSERT_EQ(buffers.size(), 11u);
+  for (auto& buffer : buffers) driver->push(std::move(buffer));
   auto options = acq::parse_v4l2_spec("/dev/video3?format=GREY");
   ASSERT_TRUE(options);
   source->frames = std::make_unique<acq::V4l2FrameSource>(*options, driver);
@@ -158,23 +187,113 @@ TEST(ScanV4l2, SimulatedSweepThroughAnEmulatedGrabberReconstructsAsThroughSim) {
   EXPECT_EQ(summary.counters.dropped.total(), 0u);
   EXPECT_EQ(summary.counters.slices, expected.counters.slices);
   EXPECT_TRUE(summary.errors.empty()) << summary.errors.front();
-  // Every label alike: the same triangle count (none for the rib, hidden in its shadow), and
-  // the same volume where there is one.
-  ASSERT_EQ(grabbed->final.meshes.size(), reference->final.meshes.size());
-  MeshSet seen;
-  for (std::size_t k = 0; k < reference->final.meshes.size(); ++k) {
-    const auto& want = reference->final.meshes[k];
-    const auto& got = grabbed->final.meshes[k];
-    EXPECT_EQ(got.label, want.label);
-    EXPECT_EQ(got.mesh.triangles.size(), want.mesh.triangles.size()) << "label " << want.label;
-    if (!want.mesh.triangles.empty()) seen.meshes.push_back(want);
+  expect_same_meshes(grabbed->final, reference->final, box);
+}
+
+// Records statuses and the slice count of every mesh update, in order.
+class Recorder final : public ScanSink {
+ public:
+  Status on_slice(const LabeledSlice&, std::size_t) override { return Status::ok(); }
+  Status on_meshes(const MeshSet&, const MeshUpdateInfo& info) override {
+    std::lock_guard lock(mutex);
+    events.push_back("meshes " + std::to_string(info.slices));
+    return Status::ok();
   }
-  ASSERT_GE(seen.meshes.size(), 2u);  // the two organs
-  sim::EvaluationOptions evaluation;
-  evaluation.grid_resolution = 80;
-  evaluation.surface_samples = 2000;
-  for (const auto& score : sim::evaluate(grabbed->final, seen, nullptr, box, evaluation))
-    EXPECT_GE(score.iou, 0.99) << "label " << score.label;
+  Status on_status(const ScanStatus& status) override {
+    std::lock_guard lock(mutex);
+    events.push_back(std::string(to_string(status.state)) + " " + status.message);
+    return Status::ok();
+  }
+  Status on_finish(const MeshSet& meshes, const SliceSet&, const ScanSummary&) override {
+    final = meshes;
+    return Status::ok();
+  }
+  std::mutex mutex;
+  std::vector<std::string> events;
+  MeshSet final;
+};
+
+TEST(ScanV4l2, GrabberUnpluggedMidScanIsReportedAndTheScanGoesOnWithItsMeshes) {
+  auto reference_source = open_scan_source(small_sim_request());
+  ASSERT_TRUE(reference_source) << reference_source.message();
+  const Box3 box = *reference_source->setup.bounds;
+  auto reference = std::make_shared<FinalMeshes>();
+  run_fast(std::move(*reference_source), reference, 11);
+
+  auto source = open_scan_source(small_sim_request());
+  ASSERT_TRUE(source) << source.message();
+  auto driver = std::make_shared<testing::FakeV4l2Driver>("/dev/video3", 160, 160);
+  driver->offered = {V4L2_PIX_FMT_GREY};
+  auto buffers = grabbed_frames(*source->frames);
+  ASSERT_EQ(buffers.size(), 11u);
+  for (std::size_t k = 0; k < 6; ++k) driver->push(buffers[k]);
+  auto options = acq::parse_v4l2_spec("/dev/video3?format=GREY");
+  ASSERT_TRUE(options);
+  options->reopen_first_s = 0.01;
+  options->reopen_max_s = 0.05;
+  auto grabber = std::make_unique<acq::V4l2FrameSource>(*options, driver);
+  const acq::V4l2FrameSource* watched = grabber.get();  // owned by the pipeline below
+  source->frames = std::move(grabber);
+
+  recon::ReconstructorOptions engine;
+  engine.engine.max_depth = 5;
+  engine.bounds = source->setup.bounds;
+  engine.labels = source->setup.labels;
+  ScanOptions scan;
+  scan.real_time = false;
+  scan.drop_when_behind = false;
+  scan.sync.tracker_latency_s = source->tracker_latency_s.value_or(0.0);
+  auto segmentation = std::make_unique<SegmenterStage>(source->setup);
+  ScanPipeline pipeline(std::move(*source), std::move(segmentation),
+                        make_reconstructor_stage(engine), scan);
+  auto recorder = std::make_shared<Recorder>();
+  pipeline.add_sink(recorder);
+  ASSERT_TRUE(pipeline.start());
+  const auto wait = [&](auto done) {
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+    while (!done() && std::chrono::steady_clock::now() < deadline)
+      std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    return done();
+  };
+  ASSERT_TRUE(wait([&] { return pipeline.counters().updates > 0; }));
+  ASSERT_TRUE(wait([&] { return pipeline.counters().frames_received == 6; }));
+
+  driver->set_present(false);  // unplugged mid-sweep
+  ASSERT_TRUE(wait([&] { return !watched->condition().empty(); }));
+  std::this_thread::sleep_for(std::chrono::milliseconds(100));  // reopening fails meanwhile
+  EXPECT_EQ(pipeline.counters().frames_received, 6u);
+  const MeshSet during = pipeline.meshes();  // kept while the grabber is away
+
+  driver->set_present(true);  // back: the rest of the sweep, numbered from 0 again
+  for (std::size_t k = 6; k < 11; ++k) {
+    buffers[k].sequence = static_cast<std::uint32_t>(k - 6);
+    driver->push(buffers[k]);
+  }
+  ASSERT_TRUE(wait([&] { return pipeline.counters().frames_received == 11; }));
+  pipeline.request_stop();
+  const ScanSummary summary = pipeline.finish();
+
+  EXPECT_EQ(summary.counters.dropped.total(), 0u);
+  EXPECT_EQ(watched->counters().unplugs, 1u);
+  EXPECT_EQ(watched->counters().reopens, 1u);
+  ASSERT_EQ(summary.errors.size(), 1u);
+  EXPECT_TRUE(testing::contains(summary.errors[0], "vanished")) << summary.errors[0];
+  EXPECT_FALSE(during.meshes.empty());
+  // The sinks heard the unplug, then the return; mesh updates never lost slices.
+  std::size_t unplugged = 0, back = 0, last_slices = 0;
+  for (std::size_t k = 0; k < recorder->events.size(); ++k) {
+    const std::string& e = recorder->events[k];
+    if (e.rfind("error frame source v4l2:/dev/video3: /dev/video3 vanished", 0) == 0) unplugged = k;
+    if (e.rfind("scanning frame source v4l2:/dev/video3 is back", 0) == 0) back = k;
+    if (e.rfind("meshes ", 0) == 0) {
+      const std::size_t slices = std::stoul(e.substr(7));
+      EXPECT_GE(slices, last_slices) << e;
+      last_slices = slices;
+    }
+  }
+  EXPECT_GT(unplugged, 0u);
+  EXPECT_GT(back, unplugged);
+  expect_same_meshes(recorder->final, reference->final, box);
 }
 
 }  // namespace
