@@ -136,7 +136,8 @@ std::string rect_text(const PixelRect& r) {
 
 Status check_crop(const PixelRect& crop, int width_px, int height_px) {
   if (crop.x_px < 0 || crop.y_px < 0 || crop.width_px <= 0 || crop.height_px <= 0 ||
-      crop.x_px + crop.width_px > width_px || crop.y_px + crop.height_px > height_px)
+      std::int64_t{crop.x_px} + crop.width_px > width_px ||
+      std::int64_t{crop.y_px} + crop.height_px > height_px)
     return Status::error("crop " + rect_text(crop) + " is not inside the " +
                          std::to_string(width_px) + "x" + std::to_string(height_px) +
                          " frame; choose the scanner's image area inside it");
@@ -276,7 +277,8 @@ Status V4l2FrameSource::open_device() {
                          "); " + fix);
   }
   std::uint32_t fourcc = 0;
-  Status status = query_and_choose_format(fourcc);
+  Status status = query_capabilities();
+  if (status) status = choose_format(fourcc);
   if (status) status = set_format(fourcc);
   if (status) {
     set_frame_rate();
@@ -295,7 +297,7 @@ Status V4l2FrameSource::open_device() {
   return Status::ok();
 }
 
-Status V4l2FrameSource::query_and_choose_format(std::uint32_t& fourcc) {
+Status V4l2FrameSource::query_capabilities() {
   v4l2_capability cap{};
   if (xioctl(VIDIOC_QUERYCAP, &cap) < 0)
     return Status::error(describe() + ": VIDIOC_QUERYCAP failed (" + errno_text(errno) + "); " +
@@ -318,7 +320,10 @@ Status V4l2FrameSource::query_and_choose_format(std::uint32_t& fourcc) {
     return Status::error(describe() + ": '" + current_.card +
                          "' does not support read(); use io=mmap");
   current_.io = io;
+  return Status::ok();
+}
 
+Status V4l2FrameSource::choose_format(std::uint32_t& fourcc) {
   std::vector<std::uint32_t> offered;
   for (std::uint32_t index = 0;; ++index) {
     v4l2_fmtdesc desc{};

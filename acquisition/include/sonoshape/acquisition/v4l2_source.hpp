@@ -130,7 +130,8 @@ class V4l2FrameSource final : public FrameSource {
   enum class Read { kFrame, kNothing, kUnplugged };
 
   Status open_device();
-  Status query_and_choose_format(std::uint32_t& fourcc);
+  Status query_capabilities();
+  Status choose_format(std::uint32_t& fourcc);
   Status set_format(std::uint32_t fourcc);
   void set_frame_rate();
   Status start_mmap();
