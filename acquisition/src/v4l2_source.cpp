@@ -237,6 +237,13 @@ V4l2Counters V4l2FrameSource::counters() const {
   return counters_;
 }
 
+std::map<std::string, std::size_t> V4l2FrameSource::losses() const {
+  const V4l2Counters c = counters();
+  return {{"driver_dropped", c.driver_dropped},
+          {"error_frames", c.error_frames},
+          {"undecodable", c.undecodable}};
+}
+
 std::optional<V4l2Format> V4l2FrameSource::format() const {
   std::lock_guard lock(mutex_);
   return format_;

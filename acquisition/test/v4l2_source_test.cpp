@@ -11,6 +11,7 @@
 #include <chrono>
 #include <cstring>
 #include <deque>
+#include <map>
 #include <mutex>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -233,6 +234,8 @@ TEST(V4l2Mmap, SequenceGapsAreCountedAsDriverDrops) {
   ASSERT_TRUE(source.start());
   ASSERT_EQ(take(source, 5).size(), 5u);
   EXPECT_EQ(source.counters().driver_dropped, 2u + 4u);
+  EXPECT_EQ(source.losses(), (std::map<std::string, std::size_t>{
+                                 {"driver_dropped", 6}, {"error_frames", 0}, {"undecodable", 0}}));
   EXPECT_EQ(source.counters().delivered, 5u);
   EXPECT_EQ(source.dropped(), 6u);
 }

@@ -7,6 +7,7 @@
 #include <chrono>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <mutex>
 #include <string>
 #include <thread>
@@ -176,7 +177,18 @@ TEST(ScanV4l2, SimulatedSweepThroughAnEmulatedGrabberReconstructsAsThroughSim) {
   driver->offered = {V4L2_PIX_FMT_GREY};
   auto buffers = grabbed_frames(*source->frames);
   ASSERT_EQ(buffers.size(), 11u);
-  for (auto& buffer : buffers) driver->push(std::move(buffer));
+  // Beside the sweep's frames, a buffer the driver flags broken (after frame 4) and a frame
+  // the driver missed (its number is skipped before frame 8): both lost, counted by reason.
+  std::uint32_t sequence = 0;
+  for (std::size_t k = 0; k < buffers.size(); ++k) {
+    if (k == 5)
+      driver->push(testing::FakeV4l2Driver::Filled{
+          buffers[0].bytes, sequence++, buffers[4].timestamp_s + 0.1,
+          V4L2_BUF_FLAG_TIMESTAMP_MONOTONIC | V4L2_BUF_FLAG_ERROR});
+    if (k == 8) ++sequence;
+    buffers[k].sequence = sequence++;
+    driver->push(std::move(buffers[k]));
+  }
   auto options = acq::parse_v4l2_spec("/dev/video3?format=GREY");
   ASSERT_TRUE(options);
   source->frames = std::make_unique<acq::V4l2FrameSource>(*options, driver);
@@ -184,7 +196,13 @@ TEST(ScanV4l2, SimulatedSweepThroughAnEmulatedGrabberReconstructsAsThroughSim) {
   const ScanSummary summary = run_fast(std::move(*source), grabbed, 11);
 
   EXPECT_EQ(summary.counters.frames_received, 11u);
-  EXPECT_EQ(summary.counters.dropped.total(), 0u);
+  EXPECT_EQ(summary.counters.dropped.source, 2u);
+  EXPECT_EQ(summary.counters.dropped.total(), 2u);
+  EXPECT_EQ(summary.frame_source_losses,
+            (std::map<std::string, std::size_t>{
+                {"driver_dropped", 1}, {"error_frames", 1}, {"undecodable", 0}}));
+  EXPECT_TRUE(testing::contains(summary.frame_source, "lost driver_dropped 1, error_frames 1"))
+      << summary.frame_source;
   EXPECT_EQ(summary.counters.slices, expected.counters.slices);
   EXPECT_TRUE(summary.errors.empty()) << summary.errors.front();
   expect_same_meshes(grabbed->final, reference->final, box);

@@ -35,8 +35,11 @@ template <typename T>
 std::string source_state(const acq::StreamSource<T>& s) {
   const std::string message = s.message();
   const std::string condition = s.condition();
+  std::string lost;
+  for (const auto& [reason, count] : s.losses())
+    if (count > 0) lost += (lost.empty() ? "; lost " : ", ") + reason + " " + std::to_string(count);
   return std::string(acq::to_string(s.state())) + (message.empty() ? "" : ": " + message) +
-         (condition.empty() ? "" : " (" + condition + ")");
+         (condition.empty() ? "" : " (" + condition + ")") + lost;
 }
 
 double median(std::vector<double> values) {
@@ -539,6 +542,7 @@ ScanSummary ScanPipeline::finish() {
     summary.counters = counters_;
     summary.stop_reason = stop_reason_.value_or(StopReason::kSourceEnded);
     summary.errors = errors_;
+    summary.frame_source_losses = source_.frames->losses();
     summary.latency = latency_stats(latencies_s_);
     summary.update_ms_median = median(update_ms_);
     summary.update_ms_max =

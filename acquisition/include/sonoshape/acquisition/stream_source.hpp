@@ -9,6 +9,7 @@
 #include <chrono>
 #include <cstddef>
 #include <exception>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -159,6 +160,10 @@ class StreamSource {
   /// Items dropped because the consumer fell behind (buffer full, live mode), or reported lost
   /// by the backend (count_lost: e.g. a simulation rendering slower than real time).
   std::size_t dropped() const { return lost_.load() + (buffer_ ? buffer_->dropped() : 0); }
+  /// The items the backend lost (count_lost), by reason in the backend's words (a V4L2
+  /// grabber: "driver_dropped", "error_frames", "undecodable"); empty when it keeps no
+  /// breakdown. Thread-safe.
+  virtual std::map<std::string, std::size_t> losses() const { return {}; }
 
  protected:
   /// Opens the device or file; a failure ends the source (kFailed) with its message.

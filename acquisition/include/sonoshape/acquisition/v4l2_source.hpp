@@ -7,6 +7,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <functional>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -114,6 +115,8 @@ class V4l2FrameSource final : public FrameSource {
   std::string describe() const override { return "v4l2:" + options_.device; }
   /// Thread-safe snapshot of the loss counters.
   V4l2Counters counters() const;
+  /// driver_dropped, error_frames and undecodable of counters().
+  std::map<std::string, std::size_t> losses() const override;
   /// What the driver granted at the last (re)open; none before the first.
   std::optional<V4l2Format> format() const;
 
