@@ -510,7 +510,7 @@ Result<V4l2FrameSource::Read> V4l2FrameSource::dequeue_mmap(Frame& frame) {
     if (e == EIO) {  // a transient fault (e.g. signal loss): that frame is gone
       update([](V4l2Counters& c) { ++c.error_frames; });
       count_lost(1);
-      return Read::kNothing;
+      return restart_stream();
     }
     return Status::error(describe() + ": VIDIOC_DQBUF failed (" + errno_text(e) + ")");
   }
@@ -543,6 +543,26 @@ Result<V4l2FrameSource::Read> V4l2FrameSource::dequeue_mmap(Frame& frame) {
     mark_unplugged("VIDIOC_QBUF");  // the frame already copied is still good
   }
   return delivered ? Read::kFrame : Read::kNothing;
+}
+
+// After EIO the driver may have kept a buffer, or stopped capturing: STREAMOFF takes every
+// buffer back, and all of them are queued again.
+Result<V4l2FrameSource::Read> V4l2FrameSource::restart_stream() {
+  int type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
+  bool ok = xioctl(VIDIOC_STREAMOFF, &type) == 0;
+  for (std::uint32_t index = 0; ok && index < buffers_.size(); ++index) {
+    v4l2_buffer buffer{};
+    buffer.type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
+    buffer.memory = V4L2_MEMORY_MMAP;
+    buffer.index = index;
+    ok = xioctl(VIDIOC_QBUF, &buffer) == 0;
+  }
+  if (ok) ok = xioctl(VIDIOC_STREAMON, &type) == 0;
+  if (ok) return Read::kNothing;
+  const int e = errno;
+  if (e == ENODEV) return mark_unplugged("restarting the stream after EIO");
+  return Status::error(describe() + ": restarting the stream after EIO failed (" + errno_text(e) +
+                       ")");
 }
 
 Result<V4l2FrameSource::Read> V4l2FrameSource::read_frame(Frame& frame) {

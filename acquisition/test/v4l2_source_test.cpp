@@ -257,6 +257,7 @@ TEST(V4l2Mmap, ErrorBuffersAndEioAreDroppedAndCountedEintrAndEagainRetried) {
   EXPECT_EQ(frames[1].index, 1);
   EXPECT_EQ(source.counters().error_frames, 2u);
   EXPECT_EQ(source.counters().driver_dropped, 0u);  // the error buffer kept its sequence number
+  EXPECT_EQ(driver->stream_starts(), 2);            // EIO restarted the stream
   EXPECT_EQ(source.dropped(), 2u);
   EXPECT_EQ(source.state(), SourceState::kRunning);
 }

@@ -140,6 +140,7 @@ class V4l2FrameSource final : public FrameSource {
   Status start_mmap();
   void release_device();
   Result<Read> dequeue_mmap(Frame& frame);
+  Result<Read> restart_stream();
   Result<Read> read_frame(Frame& frame);
   Result<Read> wait_readable();
   Result<Polled> try_reopen();

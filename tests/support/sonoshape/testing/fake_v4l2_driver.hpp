@@ -67,6 +67,11 @@ class FakeV4l2Driver final : public acq::V4l2Device {
     std::lock_guard lock(mutex_);
     return reqbufs_zero_;
   }
+  /// STREAMON calls so far.
+  int stream_starts() const {
+    std::lock_guard lock(mutex_);
+    return stream_starts_;
+  }
   bool streaming() const {
     std::lock_guard lock(mutex_);
     return streaming_;
@@ -175,8 +180,12 @@ class FakeV4l2Driver final : public acq::V4l2Device {
       case VIDIOC_DQBUF:
         return dequeue(*static_cast<v4l2_buffer*>(arg));
       case VIDIOC_STREAMON:
-      case VIDIOC_STREAMOFF:
-        streaming_ = request == VIDIOC_STREAMON;
+        ++stream_starts_;
+        streaming_ = true;
+        return 0;
+      case VIDIOC_STREAMOFF:  // the driver takes every buffer back
+        streaming_ = false;
+        queued_.clear();
         return 0;
       default:
         return fail(ENOTTY);
@@ -220,6 +229,7 @@ class FakeV4l2Driver final : public acq::V4l2Device {
   int open_fds_ = 0;
   int reqbufs_zero_ = 0;
   bool streaming_ = false;
+  int stream_starts_ = 0;
 };
 
 }  // namespace sonoshape::testing
