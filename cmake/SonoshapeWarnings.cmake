@@ -16,3 +16,20 @@ function(sonoshape_add_test name)
   sonoshape_target_defaults(${name})
   gtest_discover_tests(${name} DISCOVERY_TIMEOUT 60 PROPERTIES LABELS "${ARG_LABELS}")
 endfunction()
+
+# sonoshape_add_umockdev_test(<name> SOURCES ... LIBS ...): a GoogleTest program that emulates
+# devices with umockdev, so it runs under umockdev-wrapper (LD_PRELOAD): one ctest entry for the
+# whole program. Skipped when umockdev (libumockdev-dev, umockdev) is not installed.
+function(sonoshape_add_umockdev_test name)
+  cmake_parse_arguments(ARG "" "" "SOURCES;LIBS" ${ARGN})
+  if(NOT UMOCKDEV_FOUND OR NOT SONOSHAPE_UMOCKDEV_WRAPPER)
+    message(STATUS "${name}: umockdev not found, test not built")
+    return()
+  endif()
+  add_executable(${name} ${ARG_SOURCES})
+  target_link_libraries(${name} PRIVATE ${ARG_LIBS} PkgConfig::UMOCKDEV GTest::gtest
+                                        GTest::gtest_main)
+  target_include_directories(${name} PRIVATE ${PROJECT_SOURCE_DIR}/tests/support)
+  sonoshape_target_defaults(${name})
+  add_test(NAME ${name} COMMAND ${SONOSHAPE_UMOCKDEV_WRAPPER} $<TARGET_FILE:${name}>)
+endfunction()

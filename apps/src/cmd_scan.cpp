@@ -224,6 +224,12 @@ int run_scan(const ScanCommandOptions& options) {
     std::cerr << "error: " << source.message() << '\n';
     return 1;
   }
+  // Hardware frame sources (v4l2:) bring no poses: those come from a tracker.
+  if (!source->poses) {
+    std::cerr << "error: --source " << options.source
+              << ": the frames need probe poses from a tracker (--tracker)\n";
+    return 1;
+  }
   log_info("scan: " + source->description);
 
   scan::ScanOptions scan_options;
@@ -318,8 +324,10 @@ CommandRunner add_scan_command(CLI::App& app) {
   app.add_option("--source", options->source,
                  "Where frames and poses come from: sim:PHANTOM_SPEC (sim:default, or "
                  "LABEL:PATH[:NAME] meshes separated by commas), replay:FILE (a PLUS .igs.mha or "
-                 ".igs.nrrd) or igtl:HOST:PORT (an OpenIGTLink server such as PlusServer, port "
-                 "18944 by default)")
+                 ".igs.nrrd), igtl:HOST:PORT (an OpenIGTLink server such as PlusServer, port "
+                 "18944 by default) or v4l2:/dev/videoN?size=WxH&format=F&fps=HZ&io=mmap|read&"
+                 "crop=X,Y,W,H (a frame grabber; frames only, poses from --tracker; "
+                 "`sonoshape devices` lists grabbers)")
       ->required();
   app.add_option("--tracker", options->tracker,
                  "A live tracker for the poses instead of the source's: usb:trakstar[:sensor=N,"

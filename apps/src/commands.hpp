@@ -18,5 +18,6 @@ CommandRunner add_simulate_command(CLI::App& app);
 CommandRunner add_segment_command(CLI::App& app);
 CommandRunner add_scan_command(CLI::App& app);
 CommandRunner add_listen_command(CLI::App& app);
+CommandRunner add_devices_command(CLI::App& app);
 
 }  // namespace sonoshape::apps

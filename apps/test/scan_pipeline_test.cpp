@@ -56,6 +56,47 @@ class FakeFrames final : public acq::FrameSource {
   int next_ = 0;
 };
 
+// Frames like FakeFrames, but after `unplug_at` frames the device is gone for `gap_s` of wall
+// time: the source stays running and says so in condition(), as the V4L2 grabber does.
+class UnpluggingFrames final : public acq::FrameSource {
+ public:
+  UnpluggingFrames(int count, int period_ms, int unplug_at, double gap_s)
+      : count_(count), period_ms_(period_ms), unplug_at_(unplug_at), gap_s_(gap_s) {}
+  ~UnpluggingFrames() override { stop(); }
+  std::string describe() const override { return "fake grabber"; }
+
+ protected:
+  Status open() override { return Status::ok(); }
+  Result<acq::Polled> poll(Frame& frame) override {
+    if (next_ == unplug_at_ && !replugged_) {
+      if (unplugged_at_s_ < 0.0) {
+        unplugged_at_s_ = acq::monotonic_s();
+        set_condition("/dev/video0 vanished (ENODEV); reopening it when it comes back");
+      }
+      if (acq::monotonic_s() - unplugged_at_s_ < gap_s_) {
+        std::this_thread::sleep_for(5ms);
+        return acq::Polled::kNothing;
+      }
+      replugged_ = true;
+      set_condition("");
+    }
+    if (next_ == count_) return acq::Polled::kEnd;
+    frame.image = GreyImage(8, 8, 100);
+    frame.index = next_;
+    frame.timestamp_s = (next_ * period_ms_) / 1000.0;
+    ++next_;
+    return acq::Polled::kItem;
+  }
+  bool is_playback() const override { return true; }
+
+ private:
+  int count_, period_ms_, unplug_at_;
+  double gap_s_;
+  double unplugged_at_s_ = -1.0;
+  bool replugged_ = false;
+  int next_ = 0;
+};
+
 // The probe slides along z at `mm_per_s`, sampled every `period_ms` over [first_ms, last_ms].
 std::vector<Pose> sliding_poses(double mm_per_s, int first_ms, int last_ms, int period_ms) {
   std::vector<Pose> samples;
@@ -346,6 +387,34 @@ TEST(ScanPipeline, AVanishingSourceIsReportedAndTheMeshesSoFarAreKept) {
     ASSERT_TRUE(slices) << slices.message();
     EXPECT_EQ(slices->slices.size(), 20u);
   }
+}
+
+TEST(ScanPipeline, AnUnpluggedGrabberIsReportedAndTheScanGoesOnWhenItIsBack) {
+  ScanPipeline pipeline(fake_source(std::make_unique<UnpluggingFrames>(40, 33, 15, 0.3),
+                                    sliding_poses(60.0, -100, 2000, 25)),
+                        std::make_unique<FakeSegmentation>(),
+                        std::make_unique<FakeReconstruction>(), fast_options());
+  auto sink = std::make_shared<RecordingSink>();
+  pipeline.add_sink(sink);
+  ASSERT_TRUE(pipeline.start());
+  const ScanSummary summary = pipeline.finish();
+  EXPECT_EQ(summary.stop_reason, StopReason::kSourceEnded);
+  EXPECT_EQ(summary.counters.frames_received, 40u);
+  EXPECT_EQ(summary.counters.slices, 40u);
+  const auto unplugged =
+      std::find_if(sink->statuses.begin(), sink->statuses.end(), [](const ScanStatus& s) {
+        return s.state == ScanState::kError &&
+               s.message.find("vanished (ENODEV)") != std::string::npos;
+      });
+  ASSERT_NE(unplugged, sink->statuses.end());
+  EXPECT_TRUE(testing::contains(unplugged->message, "the meshes so far are kept"));
+  const auto back = std::find_if(unplugged, sink->statuses.end(), [](const ScanStatus& s) {
+    return s.state == ScanState::kScanning && s.message.find("is back") != std::string::npos;
+  });
+  ASSERT_NE(back, sink->statuses.end());
+  ASSERT_EQ(summary.errors.size(), 1u);  // the unplug, reported once
+  EXPECT_EQ(sink->finishes, 1);
+  EXPECT_EQ(sink->final_triangles, 40u);
 }
 
 TEST(ScanPipeline, StopRequestFinishesCleanly) {

@@ -34,7 +34,12 @@ constexpr double kPollS = 0.05;
 template <typename T>
 std::string source_state(const acq::StreamSource<T>& s) {
   const std::string message = s.message();
-  return std::string(acq::to_string(s.state())) + (message.empty() ? "" : ": " + message);
+  const std::string condition = s.condition();
+  std::string lost;
+  for (const auto& [reason, count] : s.losses())
+    if (count > 0) lost += (lost.empty() ? "; lost " : ", ") + reason + " " + std::to_string(count);
+  return std::string(acq::to_string(s.state())) + (message.empty() ? "" : ": " + message) +
+         (condition.empty() ? "" : " (" + condition + ")") + lost;
 }
 
 double median(std::vector<double> values) {
@@ -244,6 +249,19 @@ tracking::SyncedPose ScanPipeline::synchronise(const Frame& frame) {
   return synced;
 }
 
+// A live source riding out trouble (a grabber unplugged and being reopened) stays running:
+// the sinks hear when the trouble starts and when it is over; the meshes are kept meanwhile.
+void ScanPipeline::watch_frame_source() {
+  std::string condition = source_.frames->condition();
+  if (condition == frame_condition_) return;
+  frame_condition_ = condition;
+  const std::string name = "frame source " + source_.frames->describe();
+  if (condition.empty())
+    report(ScanState::kScanning, name + " is back; the scan goes on");
+  else
+    report(ScanState::kError, name + ": " + condition + "; the meshes so far are kept");
+}
+
 void ScanPipeline::acquisition_loop() {
   StopReason reason = StopReason::kSourceEnded;
   bool degenerate_reported = false;
@@ -265,6 +283,7 @@ void ScanPipeline::acquisition_loop() {
         }
       }
       auto received = source_.frames->next(kPollS);
+      watch_frame_source();
       if (!received) {
         if (source_.frames->finished()) {
           reason = source_.frames->state() == acq::SourceState::kFailed ? StopReason::kSourceFailed
@@ -556,6 +575,7 @@ ScanSummary ScanPipeline::finish() {
     summary.counters = counters_;
     summary.stop_reason = stop_reason_.value_or(StopReason::kSourceEnded);
     summary.errors = errors_;
+    summary.frame_source_losses = source_.frames->losses();
     summary.latency = latency_stats(latencies_s_);
     summary.update_ms_median = median(update_ms_);
     summary.update_ms_max =

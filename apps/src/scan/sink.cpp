@@ -61,6 +61,8 @@ std::string summary_json(const ScanSummary& summary) {
   doc["stop_reason"] = to_string(summary.stop_reason);
   doc["frame_source"] = summary.frame_source;
   doc["pose_source"] = summary.pose_source;
+  if (!summary.frame_source_losses.empty())
+    doc["frame_source_losses"] = summary.frame_source_losses;
   doc["errors"] = summary.errors;
   doc["latency_s"] = {{"count", summary.latency.count},
                       {"p50", summary.latency.p50_s},

@@ -8,6 +8,7 @@
 #include "sonoshape/acquisition/sequence_file.hpp"
 #include "sonoshape/core/errors.hpp"
 #include "sonoshape/core/log.hpp"
+#include "sonoshape/core/slice_io.hpp"
 #include "sonoshape/segmentation/sweep.hpp"
 #include "sonoshape/simulator/bmode.hpp"
 #include "sonoshape/simulator/sim_source.hpp"
@@ -17,6 +18,9 @@
 #ifdef SONOSHAPE_WITH_OPENIGTLINK
 #include "sonoshape/acquisition/igtl_frame_source.hpp"
 #include "sonoshape/tracking/igtl_pose_source.hpp"
+#endif
+#ifdef SONOSHAPE_WITH_V4L2
+#include "sonoshape/acquisition/v4l2_source.hpp"
 #endif
 
 namespace sonoshape::scan {
@@ -193,6 +197,83 @@ Status open_tracker(const std::string& spec, ScanSource& source) {
   return Status::ok();
 }
 
+#ifdef SONOSHAPE_WITH_V4L2
+// The sector of live frames: a live source has no header probe and no recording to find the
+// sector in, so the configuration says it (whole image or polygon).
+Result<seg::ImageGeometry> live_geometry(const seg::SegmentationConfig& config, int width_px,
+                                         int height_px, double spacing_mm, std::string& from) {
+  if (config.sector == seg::SectorSource::kPolygon) {
+    SliceSet check;
+    check.slices.emplace_back().fov = config.sector_polygon_px;
+    if (const Status valid = validate_slice_set(check, "the config's sector polygon"); !valid)
+      return Status::error(valid.message() + " (the \"sector\" of the segmentation config)");
+    from = "config polygon";
+    return seg::polygon_geometry(width_px, height_px, spacing_mm, config.sector_polygon_px);
+  }
+  if (config.sector == seg::SectorSource::kAuto)
+    return Status::error(
+        "--source v4l2: a live source cannot find the sector from a recording; "
+        "set \"sector\" to \"full\" or a polygon in --segmentation");
+  from = "full image";
+  return seg::full_image_geometry(width_px, height_px, spacing_mm);
+}
+
+// A frame grabber: frames from the device, poses from the tracker (--tracker, which the caller
+// attaches: ScanSource::poses stays empty here). The image size is the crop's (or size=), known
+// before the first frame; calibration and label models must be given.
+Result<ScanSource> open_v4l2(const SourceRequest& request, const std::string& spec) {
+  auto options = acq::parse_v4l2_spec(spec);
+  if (!options) return options.status();
+  const int width_px = options->crop ? options->crop->width_px : options->width_px;
+  const int height_px = options->crop ? options->crop->height_px : options->height_px;
+  if (width_px <= 0)
+    return Status::error("--source v4l2:" + spec +
+                         ": give crop=X,Y,W,H (the scanner's image area) or size=WxH, so that "
+                         "the image the calibration applies to is known");
+  if (!request.calibration)
+    return Status::error("--source v4l2: needs --calibration (the probe's ImageToProbe for the " +
+                         std::to_string(width_px) + "x" + std::to_string(height_px) +
+                         " cropped image: PLUS device-set XML or JSON)");
+  if (!request.segmentation)
+    return Status::error(
+        "--source v4l2: needs --segmentation (the label models of this probe "
+        "and preset, docs/segmentation.md)");
+  ScanSource source;
+  ScanSetup& setup = source.setup;
+  auto calibration = seg::read_calibration(*request.calibration);
+  if (!calibration) return calibration.status();
+  setup.T_probe_image = *calibration;
+  setup.calibration_from = request.calibration->string();
+  const double spacing_mm = std::sqrt(setup.T_probe_image.block<3, 1>(0, 0).norm() *
+                                      setup.T_probe_image.block<3, 1>(0, 1).norm());
+  if (!(spacing_mm > 0.0) || !std::isfinite(spacing_mm))
+    return Status::error(setup.calibration_from + ": the ImageToProbe calibration is degenerate");
+  auto config = seg::read_segmentation_config(*request.segmentation);
+  if (!config) return config.status();
+  if (config->materials.empty())
+    return Status::error(request.segmentation->string() +
+                         ": no materials; a live source needs the label models");
+  if (const Status valid = config->validate(); !valid) return valid;
+  setup.segmentation = std::move(*config);
+  setup.models_from = request.segmentation->string();
+  auto geometry =
+      live_geometry(setup.segmentation, width_px, height_px, spacing_mm, setup.sector_from);
+  if (!geometry) return geometry.status();
+  setup.geometry = std::move(*geometry);
+  for (const seg::LabelModel& m : setup.segmentation.materials)
+    setup.labels.push_back({m.label, m.name});
+  setup.bounds = request.bounds;
+  std::ostringstream text;
+  text << "V4L2 grabber " << options->device << ", " << width_px << "x" << height_px
+       << " image; calibration from " << setup.calibration_from << "; models from "
+       << setup.models_from << "; sector from " << setup.sector_from;
+  source.description = text.str();
+  source.frames = std::make_unique<acq::V4l2FrameSource>(std::move(*options));
+  return source;
+}
+#endif
+
+
 #ifdef SONOSHAPE_WITH_OPENIGTLINK
 // Connects to the frames' server and waits for the first IMAGE: its size (and, for poses from
 // the image, its spacing) sets up the segmentation before the scan starts.
@@ -304,9 +385,16 @@ Result<ScanSource> open_frames_and_poses(const SourceRequest& request) {
                          "libopenigtlink-dev (scripts/install-deps) and configure with "
                          "-DSONOSHAPE_WITH_OPENIGTLINK=ON");
 #endif
+#ifdef SONOSHAPE_WITH_V4L2
+  if (prefix == "v4l2") return open_v4l2(request, rest);
+  const std::string live = ", v4l2:/dev/videoN (`sonoshape devices` lists them)";
+#else
+  const std::string live;
+#endif
   return Status::error("--source '" + request.spec +
                        "': unknown source; use sim:PHANTOM_SPEC (e.g. sim:default), "
-                       "replay:FILE.igs.mha or igtl:HOST:PORT");
+                       "replay:FILE.igs.mha, igtl:HOST:PORT" +
+                       live);
 }
 
 }  // namespace
@@ -315,7 +403,9 @@ Result<ScanSource> open_scan_source(const SourceRequest& request) {
   auto source = open_frames_and_poses(request);
   if (!source || request.tracker.empty()) return source;
   if (Status opened = open_tracker(request.tracker, *source); !opened) return opened;
-  // sim: and replay: frames carry their own clock; a live tracker's is CLOCK_MONOTONIC.
+  // A grabber stamps frames with CLOCK_MONOTONIC, as the tracker does its samples; sim: and
+  // replay: frames carry their own clock.
+  if (request.spec.rfind("v4l2:", 0) == 0) return source;
   log_warning("--tracker with --source " + request.spec +
               ": the frames are not stamped with CLOCK_MONOTONIC, so the tracker's poses will "
               "not pair with them; use a live frame source");

@@ -9,11 +9,13 @@
 #include <chrono>
 #include <cstddef>
 #include <exception>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <optional>
 #include <string>
 #include <thread>
+#include <utility>
 
 #include "sonoshape/core/bounded_queue.hpp"
 #include "sonoshape/core/status.hpp"
@@ -147,11 +149,21 @@ class StreamSource {
     std::lock_guard lock(message_mutex_);
     return message_;
   }
+  /// Trouble a running source is riding out (e.g. "device unplugged; reopening it"); empty
+  /// when all is well. Thread-safe.
+  std::string condition() const {
+    std::lock_guard lock(message_mutex_);
+    return condition_;
+  }
   /// Items the backend produced (delivered to the buffer or dropped by it).
   std::size_t produced() const { return produced_.load(); }
   /// Items dropped because the consumer fell behind (buffer full, live mode), or reported lost
   /// by the backend (count_lost: e.g. a simulation rendering slower than real time).
   std::size_t dropped() const { return lost_.load() + (buffer_ ? buffer_->dropped() : 0); }
+  /// The items the backend lost (count_lost), by reason in the backend's words (a V4L2
+  /// grabber: "driver_dropped", "error_frames", "undecodable"); empty when it keeps no
+  /// breakdown. Thread-safe.
+  virtual std::map<std::string, std::size_t> losses() const { return {}; }
 
  protected:
   /// Opens the device or file; a failure ends the source (kFailed) with its message.
@@ -177,6 +189,11 @@ class StreamSource {
   bool stop_requested() const { return stop_requested_.load(); }
   /// Records `count` items the device produced that never reached the buffer.
   void count_lost(std::size_t count) { lost_.fetch_add(count); }
+  /// Sets condition() (empty: all is well again).
+  void set_condition(std::string text) {
+    std::lock_guard lock(message_mutex_);
+    condition_ = std::move(text);
+  }
 
  private:
   void finish(SourceState state, std::string message) {
@@ -262,6 +279,7 @@ class StreamSource {
   std::atomic<std::size_t> lost_{0};
   mutable std::mutex message_mutex_;
   std::string message_;
+  std::string condition_;
 };
 
 }  // namespace sonoshape::acq

@@ -107,6 +107,7 @@ class ScanPipeline {
   struct Candidate;
   struct SliceItem;
   void acquisition_loop();
+  void watch_frame_source();
   void segmentation_loop();
   void reconstruction_loop();
   tracking::SyncedPose synchronise(const Frame& frame);
@@ -129,6 +130,7 @@ class ScanPipeline {
   tracking::PoseBuffer poses_;         // acquisition thread only
   bool pose_source_reported_ = false;  // acquisition thread only
   std::string pose_trouble_;           // acquisition thread only: the last one reported
+  std::string frame_condition_;        // acquisition thread only: last condition reported
   std::mutex selector_mutex_;
   tracking::KeyframeSelector selector_;
 

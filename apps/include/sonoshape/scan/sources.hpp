@@ -2,6 +2,8 @@
 // The scan's sources chosen by a string (design.md, "Devices"): `sim:PHANTOM_SPEC` (a simulated
 // probe and tracker), `replay:FILE.igs.mha` (a PLUS sequence file: frames, poses, statuses) or
 // `igtl:HOST:PORT` (an OpenIGTLink server such as PlusServer: IMAGE and TRANSFORM messages).
+// `v4l2:/dev/videoN?...` (a frame grabber: frames only; ScanSource::poses is left empty for the
+// tracker; needs calibration, segmentation and crop= or size=; see v4l2_source.hpp).
 // Hardware backends add their prefix here without changing the pipeline.
 #include <filesystem>
 #include <optional>
