@@ -192,12 +192,12 @@ void TrakstarPoseSource::drain_input() {
 void TrakstarPoseSource::lost(const std::string& why) {
   transport_.reset();
   next_reopen_s_ = clock_monotonic_s();
-  const std::string line = describe() + ": " + why + "; waiting for the tracker to come back";
+  const std::string line = why + "; waiting for the tracker to come back";
   set_status(line);
   count([](TrakstarCounts& c) { ++c.unplugged; });
-  lost_.store(true);
+  set_condition(line);  // the scan reports it while the source runs on
   connected_.store(false);
-  log_warning(line);
+  log_warning(describe() + ": " + line);
 }
 
 Result<acq::Polled> TrakstarPoseSource::reopen() {
@@ -211,7 +211,7 @@ Result<acq::Polled> TrakstarPoseSource::reopen() {
   if (!connect()) return acq::Polled::kNothing;
   count([](TrakstarCounts& c) { ++c.reopened; });
   set_status("connected (reopened after an unplug)");
-  lost_.store(false);
+  set_condition("");
   connected_.store(true);
   log_info(describe() + ": the tracker is back; poses continue");
   return acq::Polled::kNothing;

@@ -175,7 +175,7 @@ TEST(TrakstarPoseSource, UnplugMidStreamIsReportedAndPosesContinueAfterReplug) {
   ASSERT_FALSE(source.connected());
   EXPECT_NE(source.status_line().find("waiting for the tracker to come back"), std::string::npos)
       << source.status_line();
-  EXPECT_EQ(source.trouble(), source.status_line());
+  EXPECT_EQ(source.condition(), source.status_line());
   // Tries to reopen while unplugged, and the source keeps running.
   const int opens = device.opens;
   std::this_thread::sleep_for(std::chrono::milliseconds(50));
@@ -190,7 +190,7 @@ TEST(TrakstarPoseSource, UnplugMidStreamIsReportedAndPosesContinueAfterReplug) {
   EXPECT_EQ(source.counts().unplugged, 1u);
   EXPECT_EQ(source.counts().reopened, 1u);
   EXPECT_EQ(source.status_line(), "connected (reopened after an unplug)");
-  EXPECT_EQ(source.trouble(), "");
+  EXPECT_EQ(source.condition(), "");
 }
 
 TEST(TrakstarPoseSource, NoTrackerAtStartFailsTheSourceWithTheReason) {

@@ -211,21 +211,10 @@ void ScanPipeline::stage_done() {
   }
 }
 
-// A live tracker that is unplugged (and back) is reported once each way; the scan runs on.
-void ScanPipeline::report_pose_trouble() {
-  std::string trouble = source_.poses->trouble();
-  if (trouble == pose_trouble_) return;
-  if (trouble.empty())
-    report(ScanState::kScanning,
-           "pose source " + source_.poses->describe() + " is back; frames get poses again");
-  else
-    report(ScanState::kError,
-           trouble + "; frames get no pose meanwhile and are dropped; the meshes so far are kept");
-  pose_trouble_ = std::move(trouble);
-}
-
 tracking::SyncedPose ScanPipeline::synchronise(const Frame& frame) {
-  report_pose_trouble();
+  watch_condition(source_.poses->condition(), pose_condition_,
+                  "pose source " + source_.poses->describe(), "frames get poses again",
+                  "frames get no pose meanwhile and are dropped");
   const double t = frame.timestamp_s;
   const double deadline_s = acq::monotonic_s() + options_.pose_wait_s;
   // Interpolation needs the tracker sample after the frame's time: wait for it, a little.
@@ -249,17 +238,19 @@ tracking::SyncedPose ScanPipeline::synchronise(const Frame& frame) {
   return synced;
 }
 
-// A live source riding out trouble (a grabber unplugged and being reopened) stays running:
-// the sinks hear when the trouble starts and when it is over; the meshes are kept meanwhile.
-void ScanPipeline::watch_frame_source() {
-  std::string condition = source_.frames->condition();
-  if (condition == frame_condition_) return;
-  frame_condition_ = condition;
-  const std::string name = "frame source " + source_.frames->describe();
+// A live source riding out trouble (a grabber or tracker unplugged and being reopened) stays
+// running: the sinks hear once when the trouble starts and once when it is over; the meshes
+// are kept meanwhile.
+void ScanPipeline::watch_condition(const std::string& condition, std::string& last_reported,
+                                   const std::string& name, const std::string& when_back,
+                                   const std::string& meanwhile) {
+  if (condition == last_reported) return;
+  last_reported = condition;
   if (condition.empty())
-    report(ScanState::kScanning, name + " is back; the scan goes on");
+    report(ScanState::kScanning, name + " is back; " + when_back);
   else
-    report(ScanState::kError, name + ": " + condition + "; the meshes so far are kept");
+    report(ScanState::kError, name + ": " + condition + (meanwhile.empty() ? "" : "; ") +
+                                  meanwhile + "; the meshes so far are kept");
 }
 
 void ScanPipeline::acquisition_loop() {
@@ -283,7 +274,8 @@ void ScanPipeline::acquisition_loop() {
         }
       }
       auto received = source_.frames->next(kPollS);
-      watch_frame_source();
+      watch_condition(source_.frames->condition(), frame_condition_,
+                      "frame source " + source_.frames->describe(), "the scan goes on", "");
       if (!received) {
         if (source_.frames->finished()) {
           reason = source_.frames->state() == acq::SourceState::kFailed ? StopReason::kSourceFailed

@@ -107,11 +107,13 @@ class ScanPipeline {
   struct Candidate;
   struct SliceItem;
   void acquisition_loop();
-  void watch_frame_source();
+  /// Reports a live source's condition() when it changes (once into trouble, once back).
+  void watch_condition(const std::string& condition, std::string& last_reported,
+                       const std::string& name, const std::string& when_back,
+                       const std::string& meanwhile);
   void segmentation_loop();
   void reconstruction_loop();
   tracking::SyncedPose synchronise(const Frame& frame);
-  void report_pose_trouble();
   void report(ScanState state, const std::string& message);
   void withdraw(int key);
   void stage_done();
@@ -129,8 +131,8 @@ class ScanPipeline {
 
   tracking::PoseBuffer poses_;         // acquisition thread only
   bool pose_source_reported_ = false;  // acquisition thread only
-  std::string pose_trouble_;           // acquisition thread only: the last one reported
   std::string frame_condition_;        // acquisition thread only: last condition reported
+  std::string pose_condition_;         // acquisition thread only: last condition reported
   std::mutex selector_mutex_;
   tracking::KeyframeSelector selector_;
 

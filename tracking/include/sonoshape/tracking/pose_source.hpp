@@ -15,12 +15,6 @@ namespace sonoshape::tracking {
 /// A stream of tracker samples, T_reference_probe with status, in time order on the tracker's
 /// clock. See acq::StreamSource for the threading and lifetime rules.
 class PoseSource : public acq::StreamSource<Pose> {
- public:
-  /// What is wrong with a live tracker now while its source runs on (e.g. "unplugged ...;
-  /// waiting for the tracker to come back"); empty while all is well, and for recorded
-  /// sources. Any thread: the scan polls it for its status.
-  virtual std::string trouble() const { return {}; }
-
  protected:
   double timestamp_s(const Pose& pose) const override { return pose.timestamp_s; }
 };

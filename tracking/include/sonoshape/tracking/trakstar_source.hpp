@@ -112,8 +112,6 @@ class TrakstarPoseSource final : public PoseSource {
   std::string status_line() const;
   /// Whether a tracker is open now (any thread).
   bool connected() const { return connected_.load(); }
-  /// The unplug being waited out (status_line()), or empty (any thread).
-  std::string trouble() const override { return lost_.load() ? status_line() : std::string(); }
 
  protected:
   Status open() override;
@@ -140,7 +138,6 @@ class TrakstarPoseSource final : public PoseSource {
   double next_point_s_ = 0.0;  // POINTs are paced at the measurement rate
   bool drain_ = false;         // a POINT timed out: its record may still come
   std::atomic<bool> connected_{false};
-  std::atomic<bool> lost_{false};  // unplugged after a successful open, not back yet
   mutable std::mutex mutex_;       // guards counts_ and status_
   TrakstarCounts counts_;
   std::string status_ = "not started";
