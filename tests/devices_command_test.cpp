@@ -7,6 +7,7 @@
 #include "sonoshape/testing/command.hpp"
 #include "sonoshape/testing/fake_v4l2_grabber.hpp"
 #include "sonoshape/testing/temp_dir.hpp"
+#include "sonoshape/testing/trakstar_usb_record.hpp"
 
 namespace sonoshape {
 namespace {
@@ -35,6 +36,25 @@ TEST(DevicesCommand, SaysSoWhenNoGrabberIsAttached) {
   g_object_unref(empty);
   ASSERT_EQ(result.exit_code, 0) << result.output;
   EXPECT_NE(result.output.find("no video capture device found"), std::string::npos)
+      << result.output;
+  EXPECT_NE(result.output.find("Trackers (USB):\n  no trakSTAR / driveBAY found"),
+            std::string::npos)
+      << result.output;
+}
+
+TEST(DevicesCommand, ListsATrakstarOnUsbWithAPastableTracker) {
+  ASSERT_TRUE(testing::umockdev_preloaded()) << "run under umockdev-wrapper (ctest does)";
+  UMockdevTestbed* bed = umockdev_testbed_new();
+  GError* error = nullptr;
+  ASSERT_TRUE(umockdev_testbed_add_from_string(bed, testing::kTrakstarUsbRecord, &error))
+      << (error ? error->message : "");
+  testing::TempDir dir;
+  const auto result = testing::run_command(SONOSHAPE_BINARY, "devices", dir.path() / "log.txt");
+  g_object_unref(bed);
+  ASSERT_EQ(result.exit_code, 0) << result.output;
+  EXPECT_NE(result.output.find("Trackers (USB):\n  USB bus 1 device 2, vendor 0x21e2 product "
+                               "0x0001:  --tracker usb:trakstar:product=0x0001\n"),
+            std::string::npos)
       << result.output;
 }
 

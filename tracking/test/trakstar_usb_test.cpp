@@ -20,6 +20,7 @@
 #include <thread>
 
 #include "bird_emulator.hpp"
+#include "sonoshape/testing/trakstar_usb_record.hpp"
 #include "sonoshape/tracking/trakstar_source.hpp"
 
 namespace sonoshape::tracking {
@@ -29,7 +30,7 @@ using test::BirdEmulator;
 using test::PointFault;
 
 constexpr const char* kDevNode = "/dev/bus/usb/001/002";
-constexpr const char* kSysPath = "/sys/devices/pci0000:00/usb1/1-1";
+constexpr const char* kSysPath = sonoshape::testing::kTrakstarSysPath;
 
 // A usbfs device node served by the emulator. Runs in umockdev's worker thread.
 class UsbDeviceHandler {
@@ -195,36 +196,9 @@ class TrakstarTestbed {
     g_object_unref(testbed_);
   }
 
-  // umockdev's record format (what umockdev-record writes): the N: line makes the usbfs node.
   void plug() {
-    const char* record =
-        "P: /devices/pci0000:00/usb1/1-1\n"
-        "N: bus/usb/001/002\n"
-        "E: DEVNAME=/dev/bus/usb/001/002\n"
-        "E: DEVTYPE=usb_device\n"
-        "E: SUBSYSTEM=usb\n"
-        "E: BUSNUM=001\n"
-        "E: DEVNUM=002\n"
-        "E: PRODUCT=21e2/1/100\n"
-        "A: busnum=1\\n\n"
-        "A: devnum=2\\n\n"
-        "A: idVendor=21e2\\n\n"
-        "A: idProduct=0001\\n\n"
-        "A: speed=12\\n\n"
-        "A: bConfigurationValue=1\\n\n"
-        "A: bNumConfigurations=1\\n\n"
-        // device: USB 2.0, 64-byte EP0, vendor 0x21e2, product 0x0001, one configuration;
-        // configuration 1 (32 bytes): interface 0 (vendor class, two endpoints), bulk OUT 0x02
-        // and bulk IN 0x86 with 64-byte packets
-        "H: descriptors=12010002000000"
-        "40e2210100000100000001"
-        "09022000010100"
-        "8032"
-        "0904000002ff000000"
-        "07050202400000"
-        "07058602400000\n";
     GError* error = nullptr;
-    if (!umockdev_testbed_add_from_string(testbed_, record, &error)) {
+    if (!umockdev_testbed_add_from_string(testbed_, sonoshape::testing::kTrakstarUsbRecord, &error)) {
       ADD_FAILURE() << "umockdev record: " << error->message;
       g_error_free(error);
     }
