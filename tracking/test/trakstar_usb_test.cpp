@@ -20,6 +20,7 @@
 #include <thread>
 
 #include "bird_emulator.hpp"
+#include "pose_samples.hpp"
 #include "sonoshape/testing/trakstar_usb_record.hpp"
 #include "sonoshape/tracking/trakstar_source.hpp"
 
@@ -233,37 +234,10 @@ TrakstarOptions fast_options() {
   return options;
 }
 
-std::vector<Pose> take(PoseSource& source, std::size_t count) {
-  std::vector<Pose> poses;
-  while (poses.size() < count)
-    if (auto p = source.next(10.0))
-      poses.push_back(p->item);
-    else
-      break;
-  return poses;
-}
-
-// Takes `count` samples, stops the source, and adds what it produced meanwhile: then the
-// source's counts describe the samples returned, but for the one sample a stop() may catch
-// between its decoding (counted) and the closed buffer (see within_one).
-std::vector<Pose> take_then_stop(PoseSource& source, std::size_t count) {
-  std::vector<Pose> poses = take(source, count);
-  source.stop();
-  while (auto p = source.next(0.0)) poses.push_back(p->item);
-  return poses;
-}
-
-// A count of the source against the samples delivered: equal, or one more (see take_then_stop).
-void within_one(std::size_t counted, std::size_t delivered) {
-  EXPECT_GE(counted, delivered);
-  EXPECT_LE(counted, delivered + 1);
-}
-
-std::size_t count_valid(const std::vector<Pose>& poses) {
-  return static_cast<std::size_t>(std::count_if(poses.begin(), poses.end(), [](const Pose& p) {
-    return p.status == TrackingStatus::kValid;
-  }));
-}
+using test::count_valid;
+using test::take;
+using test::take_then_stop;
+using test::within_one;
 
 class TrakstarUsb : public ::testing::Test {
  protected:
