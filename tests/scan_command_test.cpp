@@ -22,6 +22,9 @@ namespace {
 
 namespace fs = std::filesystem;
 using sonoshape::testing::contains;
+using sonoshape::testing::file_text;
+using sonoshape::testing::spawn;
+using sonoshape::testing::wait_exit;
 
 // A small, quick simulated scan (160 x 160 px, 5 fps, coarse reconstruction).
 const std::string kSmallSim =
@@ -136,39 +139,6 @@ TEST(ScanCommand, InterruptStopsCleanlyAndWritesTheMeshes) {
   EXPECT_TRUE(fs::exists(out / "slices.json")) << text;
 }
 
-// Starts `command` (run through sh, exec'd so that signals reach it) with its output in `log`.
-pid_t spawn(const std::string& command, const fs::path& log) {
-  const std::string line = "exec " + command + " > " + log.string() + " 2>&1";
-  const pid_t pid = fork();
-  if (pid == 0) {
-    execl("/bin/sh", "sh", "-c", line.c_str(), static_cast<char*>(nullptr));
-    _exit(127);
-  }
-  return pid;
-}
-
-// Waits for `pid` up to `timeout_s` (then SIGTERM, and wait); returns its exit code (-1: killed).
-int wait_exit(pid_t pid, double timeout_s) {
-  int status = 0;
-  const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
-  while (waitpid(pid, &status, WNOHANG) == 0) {
-    if (std::chrono::steady_clock::now() > end) {
-      kill(pid, SIGTERM);
-      waitpid(pid, &status, 0);
-      break;
-    }
-    std::this_thread::sleep_for(std::chrono::milliseconds(50));
-  }
-  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-}
-
-std::string file_text(const fs::path& path) {
-  std::ifstream in(path);
-  std::stringstream text;
-  text << in.rdbuf();
-  return text.str();
-}
-
 // The live stream end to end: `sonoshape scan --publish` with `sonoshape listen` processes that
 // keep up, join late, are slow, or die mid-scan.
 TEST(ScanCommand, PublishesToListenersThatKeepUpJoinLateAreSlowOrDie) {
@@ -197,7 +167,7 @@ TEST(ScanCommand, PublishesToListenersThatKeepUpJoinLateAreSlowOrDie) {
   ASSERT_EQ(wait_exit(scan, 120.0), 0) << file_text(dir.path() / "scan.log");
   EXPECT_EQ(wait_exit(keeps_up, 20.0), 0) << file_text(dir.path() / "keeps_up.log");
   EXPECT_EQ(wait_exit(late, 20.0), 0) << file_text(dir.path() / "late.log");
-  wait_exit(slow, 5.0);  // it may still be working through its queue: stopped with SIGTERM
+  wait_exit(slow, 5.0, SIGTERM);  // it may still be working through its queue: stopped with SIGTERM
 
   const auto scan_summary = read_json(out / "scan.json");
   EXPECT_EQ(scan_summary["stop_reason"], "source ended");

@@ -18,6 +18,7 @@
 #include <thread>
 
 #include "sonoshape/publish/igtl_server.hpp"
+#include "sonoshape/testing/command.hpp"
 #include "sonoshape/testing/igtl_client.hpp"
 #include "sonoshape/testing/temp_dir.hpp"
 
@@ -25,44 +26,14 @@ namespace {
 
 namespace fs = std::filesystem;
 using sonoshape::testing::contains;
+using sonoshape::testing::file_text;
+using sonoshape::testing::spawn;
+using sonoshape::testing::wait_exit;
 using sonoshape::testing::IgtlClient;
 using sonoshape::testing::Received;
 
 // The simulated sweep played as fast as the pipeline goes: deterministic slices, a few seconds.
 const std::string kScan = std::string(SONOSHAPE_BINARY) + " scan --source sim:default --fast ";
-
-std::string file_text(const fs::path& path) {
-  std::ifstream in(path);
-  std::stringstream text;
-  text << in.rdbuf();
-  return text.str();
-}
-
-// Starts `command` through sh (exec'd: signals reach the program) with its output in `log`.
-pid_t spawn(const std::string& command, const fs::path& log) {
-  const std::string line = "exec " + command + " > " + log.string() + " 2>&1";
-  const pid_t pid = fork();
-  if (pid == 0) {
-    execl("/bin/sh", "sh", "-c", line.c_str(), static_cast<char*>(nullptr));
-    _exit(127);
-  }
-  return pid;
-}
-
-// Waits for `pid` up to `timeout_s` (then kills it); returns its exit code (-1: killed).
-int wait_exit(pid_t pid, double timeout_s) {
-  int status = 0;
-  const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
-  while (waitpid(pid, &status, WNOHANG) == 0) {
-    if (std::chrono::steady_clock::now() > end) {
-      kill(pid, SIGKILL);
-      waitpid(pid, &status, 0);
-      return -1;
-    }
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  }
-  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-}
 
 // The port a scan's log announces ("OpenIGTLink server on 127.0.0.1:PORT"), waiting up to
 // `timeout_s`; 0 when it never does.
