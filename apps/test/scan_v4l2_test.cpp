@@ -1,23 +1,29 @@
 // `--source v4l2:` in the scan: the setup of a grabber source, and the simulator's sweep played
-// through an emulated grabber (the MMAP path, driver timestamps) reconstructing as the same sweep
-// through `sim:` does.
+// through an emulated grabber (the MMAP path, driver timestamps), alone and with an emulated
+// trakSTAR tracker, reconstructing as the same sweep through `sim:` does.
 #include <gtest/gtest.h>
 #include <linux/videodev2.h>
+#include <time.h>
 
+#include <atomic>
 #include <chrono>
 #include <filesystem>
 #include <fstream>
+#include <iostream>
 #include <map>
 #include <mutex>
 #include <string>
 #include <thread>
 #include <vector>
 
+#include "bird_emulator.hpp"
 #include "sonoshape/acquisition/v4l2_source.hpp"
 #include "sonoshape/scan/sources.hpp"
 #include "sonoshape/simulator/evaluation.hpp"
 #include "sonoshape/testing/fake_v4l2_driver.hpp"
 #include "sonoshape/testing/temp_dir.hpp"
+#include "sonoshape/tracking/time_sync.hpp"
+#include "sonoshape/tracking/trakstar_source.hpp"
 
 namespace sonoshape::scan {
 namespace {
@@ -100,15 +106,15 @@ class FinalMeshes final : public ScanSink {
   MeshSet final;
 };
 
-// Runs a scan as fast as it goes; a live source never ends, so the scan is stopped once
-// `frames` frames are in (queued work is still finished).
-ScanSummary run_fast(ScanSource source, const std::shared_ptr<ScanSink>& sink, std::size_t frames) {
+// Runs a scan until `frames` frames are in and each has been dealt with (a slice, a
+// near-duplicate, or a drop), then stops it: a live source never ends, and stopping as soon as
+// the last frame is in would cut its wait for the tracker sample after it.
+ScanSummary run_scan(ScanSource source, const std::shared_ptr<ScanSink>& sink, std::size_t frames,
+                     ScanOptions options) {
   recon::ReconstructorOptions engine;
   engine.engine.max_depth = 5;
   engine.bounds = source.setup.bounds;
   engine.labels = source.setup.labels;
-  ScanOptions options;
-  options.real_time = false;
   options.drop_when_behind = false;
   options.sync.tracker_latency_s = source.tracker_latency_s.value_or(0.0);
   auto segmentation = std::make_unique<SegmenterStage>(source.setup);
@@ -116,12 +122,23 @@ ScanSummary run_fast(ScanSource source, const std::shared_ptr<ScanSink>& sink, s
                         make_reconstructor_stage(engine), options);
   pipeline.add_sink(sink);
   EXPECT_TRUE(pipeline.start());
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
-  while (pipeline.counters().frames_received < frames &&
-         std::chrono::steady_clock::now() < deadline && !pipeline.wait_for(0.01)) {
+  const auto dealt_with = [&] {
+    const ScanCounters c = pipeline.counters();
+    return c.frames_received >= frames &&
+           c.slices + c.keyframes_skipped + c.dropped.total() - c.dropped.source >= frames;
+  };
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+  while (!dealt_with() && std::chrono::steady_clock::now() < deadline && !pipeline.wait_for(0.01)) {
   }
   pipeline.request_stop();
   return pipeline.finish();
+}
+
+// Runs a scan as fast as it goes (queued work is still finished).
+ScanSummary run_fast(ScanSource source, const std::shared_ptr<ScanSink>& sink, std::size_t frames) {
+  ScanOptions options;
+  options.real_time = false;
+  return run_scan(std::move(source), sink, frames, options);
 }
 
 // The frames of a simulated source (rendered again: seeded) as a GREY grabber's MMAP buffers,
@@ -142,23 +159,28 @@ std::vector<testing::FakeV4l2Driver::Filled> grabbed_frames(acq::FrameSource& fr
   return buffers;
 }
 
-// The final meshes of `got` are those of `want`: same labels and triangle counts, IoU >= 0.99
-// for every label with a surface.
-void expect_same_meshes(const MeshSet& got, const MeshSet& want, const Box3& box) {
-  ASSERT_EQ(got.meshes.size(), want.meshes.size());
+// The final meshes of `got` are those of `want`: same labels (and, with `same_triangles`, the
+// same triangle counts), IoU >= 0.99 for every label with a surface. Returns the scores.
+std::vector<sim::LabelScore> expect_same_meshes(const MeshSet& got, const MeshSet& want,
+                                                const Box3& box, bool same_triangles = true) {
+  EXPECT_EQ(got.meshes.size(), want.meshes.size());
+  if (got.meshes.size() != want.meshes.size()) return {};
   MeshSet seen;
   for (std::size_t k = 0; k < want.meshes.size(); ++k) {
     EXPECT_EQ(got.meshes[k].label, want.meshes[k].label);
-    EXPECT_EQ(got.meshes[k].mesh.triangles.size(), want.meshes[k].mesh.triangles.size())
-        << "label " << want.meshes[k].label;
+    if (same_triangles) {
+      EXPECT_EQ(got.meshes[k].mesh.triangles.size(), want.meshes[k].mesh.triangles.size())
+          << "label " << want.meshes[k].label;
+    }
     if (!want.meshes[k].mesh.triangles.empty()) seen.meshes.push_back(want.meshes[k]);
   }
-  ASSERT_GE(seen.meshes.size(), 2u);  // the two organs (the rib hides in its shadow)
+  EXPECT_GE(seen.meshes.size(), 2u);  // the two organs (the rib hides in its shadow)
   sim::EvaluationOptions evaluation;
   evaluation.grid_resolution = 80;
   evaluation.surface_samples = 2000;
-  for (const auto& score : sim::evaluate(got, seen, nullptr, box, evaluation))
-    EXPECT_GE(score.iou, 0.99) << "label " << score.label;
+  auto scores = sim::evaluate(got, seen, nullptr, box, evaluation);
+  for (const auto& score : scores) EXPECT_GE(score.iou, 0.99) << "label " << score.label;
+  return scores;
 }
 
 TEST(ScanV4l2, SimulatedSweepThroughAnEmulatedGrabberReconstructsAsThroughSim) {
@@ -206,6 +228,152 @@ TEST(ScanV4l2, SimulatedSweepThroughAnEmulatedGrabberReconstructsAsThroughSim) {
   EXPECT_EQ(summary.counters.slices, expected.counters.slices);
   EXPECT_TRUE(summary.errors.empty()) << summary.errors.front();
   expect_same_meshes(grabbed->final, reference->final, box);
+}
+
+// ---------------------------------------------------------------------------------------------
+// The whole sweep through emulated devices (issue 22, "What done means" 1). The `sim:` sweep's
+// frames are played through the fake grabber (FakeV4l2Driver: MMAP buffers stamped
+// V4L2_BUF_FLAG_TIMESTAMP_MONOTONIC at t0 + the frame's sim time, each handed over 20 ms after
+// that time, as a grabber delivers a frame after capturing it) and its tracker samples through
+// the trakSTAR source talking the Bird protocol to the emulator (tracking/test/bird_emulator.hpp)
+// at 100 Hz: a POINT answered at CLOCK_MONOTONIC time t carries the sweep's pose at sim time
+// t - t0, interpolated from the sim's recorded samples exactly as the `sim:` scan interpolates
+// them for a frame (tracking::PoseBuffer, same latency and largest gap), and where the sim's
+// tracker had no valid pose (a dropped-sample gap, an INVALID burst) an out-of-range record, which
+// the source delivers as an INVALID pose. The scan runs in real time on CLOCK_MONOTONIC and is
+// compared with the same sweep through `sim:`.
+//
+// Reference frame: the transmitter's frame is the sim's reference frame (identity), so the
+// reconstruction box and the meshes compare as they are; the test checks that every sample lies
+// within the 36 in (914.4 mm) full scale of the position words, with margin.
+//
+// Tolerance: the Bird record carries 14 of 16 bits per word. Positions come in steps of
+// 4 x 914.4 / 32768 = 0.112 mm (the emulator rounds, as a device reports its measurement to its
+// words' resolution: <= 0.056 mm per axis); matrix elements in steps of 4 / 32768 = 1.2e-4
+// (<= 0.01 mm at 100 mm depth). A rigid shift d of an organ of radius r costs about 1.5 d / r of
+// IoU; for this small sweep (11 slices, depth-5 octree, the second organ a few hundred
+// triangles) it is more: poses quantised to the wire alone measured IoU 0.992 / 0.991, and a
+// rigid shift of 0.03 mm 0.994 / 0.991 (0.05 mm: 0.990 / 0.985). Time adds little: a sample is
+// stamped when the source receives it, microseconds after the emulator read the clock, and the
+// 100 Hz samples interpolate the sim's 40 Hz ones to about 1e-3 rad / 0.05 mm. Measured here:
+// IoU 0.994 / 0.998. Without rounding (truncated words: a -0.056 mm bias on every axis) the
+// second organ fell to 0.94, which is why the emulator rounds. Slice counts may differ by one
+// where a frame lies at the edge of an INVALID burst of the sim's tracker.
+
+// Seconds on CLOCK_MONOTONIC: the clock of V4L2 driver timestamps and of trakSTAR samples.
+double clock_monotonic_s() {
+  timespec t{};
+  clock_gettime(CLOCK_MONOTONIC, &t);
+  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
+}
+
+// The tracker samples of a simulated source, in time order.
+std::vector<Pose> recorded_poses(tracking::PoseSource& poses) {
+  acq::SourceOptions drain;
+  drain.wait_when_full = true;
+  EXPECT_TRUE(poses.start(drain));
+  std::vector<Pose> samples;
+  while (auto sample = poses.next(30.0)) samples.push_back(sample->item);
+  return samples;
+}
+
+// Hands each buffer to the driver once CLOCK_MONOTONIC is `delay_s` past its timestamp.
+class RealTimeGrabber {
+ public:
+  RealTimeGrabber(std::shared_ptr<testing::FakeV4l2Driver> driver,
+                  std::vector<testing::FakeV4l2Driver::Filled> buffers, double delay_s)
+      : thread_([this, driver, buffers = std::move(buffers), delay_s]() mutable {
+          for (auto& buffer : buffers) {
+            while (!stop_ && clock_monotonic_s() < buffer.timestamp_s + delay_s)
+              std::this_thread::sleep_for(std::chrono::milliseconds(1));
+            if (stop_) return;
+            driver->push(std::move(buffer));
+          }
+        }) {}
+  ~RealTimeGrabber() {
+    stop_ = true;
+    thread_.join();
+  }
+
+ private:
+  std::atomic<bool> stop_{false};
+  std::thread thread_;
+};
+
+TEST(ScanV4l2, SimulatedSweepThroughEmulatedGrabberAndTrackerReconstructsAsThroughSim) {
+  const SourceRequest request = small_sim_request();
+  auto reference_source = open_scan_source(request);
+  ASSERT_TRUE(reference_source) << reference_source.message();
+  const Box3 box = *reference_source->setup.bounds;
+  const double latency_s = reference_source->tracker_latency_s.value_or(0.0);
+  auto reference = std::make_shared<FinalMeshes>();
+  const ScanSummary expected = run_fast(std::move(*reference_source), reference, 11);
+  ASSERT_EQ(expected.counters.frames_received, 11u);
+
+  // The sweep's frames and tracker samples, recorded (the simulation is seeded).
+  auto source = open_scan_source(request);
+  ASSERT_TRUE(source) << source.message();
+  auto buffers = grabbed_frames(*source->frames);
+  ASSERT_EQ(buffers.size(), 11u);
+  tracking::SyncOptions sync;
+  sync.tracker_latency_s = latency_s;  // as the `sim:` scan interpolates
+  auto sweep = std::make_shared<tracking::PoseBuffer>(sync);
+  for (const Pose& sample : recorded_poses(*source->poses)) {
+    if (sample.status == TrackingStatus::kValid) {
+      ASSERT_LT(sample.T_reference_probe.translation().cwiseAbs().maxCoeff(), 800.0)
+          << "beyond the tracker's full scale: place the transmitter elsewhere";
+    }
+    sweep->add(sample);
+  }
+
+  // The sweep starts on CLOCK_MONOTONIC at t0, once the tracker is connected.
+  const double t0_s = clock_monotonic_s() + 0.5;
+  tracking::test::FakeDevice tracker;
+  tracker.emulator.pose_of = [sweep, t0_s](std::size_t) {
+    const tracking::SyncedPose at = sweep->pose_at(clock_monotonic_s() - t0_s);
+    if (at.ok()) return at.pose.T_reference_probe;
+    Eigen::Isometry3d beyond = Eigen::Isometry3d::Identity();  // saturates: out of range
+    beyond.translation().x() = 2.0 * tracking::bird::full_scale_in(false) * 25.4;
+    return beyond;
+  };
+  tracking::TrakstarOptions tracker_options;
+  tracker_options.rate_hz = 100.0;
+  auto trakstar = std::make_unique<tracking::TrakstarPoseSource>(tracker_options,
+                                                                 tracking::test::opener(tracker));
+  const tracking::TrakstarPoseSource* tracker_view = trakstar.get();  // owned by the pipeline
+  source->poses = std::move(trakstar);
+  source->tracker_latency_s = 0.0;  // the trakSTAR source stamps its samples itself
+
+  auto driver = std::make_shared<testing::FakeV4l2Driver>("/dev/video3", 160, 160);
+  driver->offered = {V4L2_PIX_FMT_GREY};
+  for (auto& buffer : buffers) buffer.timestamp_s += t0_s;
+  auto options = acq::parse_v4l2_spec("/dev/video3?format=GREY");
+  ASSERT_TRUE(options);
+  source->frames = std::make_unique<acq::V4l2FrameSource>(*options, driver);
+
+  auto emulated = std::make_shared<FinalMeshes>();
+  ScanSummary summary;
+  {
+    RealTimeGrabber grabber(driver, std::move(buffers), 0.02);
+    summary = run_scan(std::move(*source), emulated, 11, ScanOptions{});  // real time
+  }
+
+  EXPECT_EQ(summary.counters.frames_received, 11u);
+  EXPECT_TRUE(summary.errors.empty()) << summary.errors.front();
+  EXPECT_EQ(summary.counters.dropped.source, 0u);
+  EXPECT_LE(summary.counters.dropped.total(), expected.counters.dropped.total() + 1);
+  EXPECT_NEAR(double(summary.counters.slices), double(expected.counters.slices), 1.0);
+  const tracking::TrakstarCounts counts = tracker_view->counts();
+  EXPECT_GT(counts.valid, 150u);  // 100 Hz over the sweep's 2 s and more
+  EXPECT_EQ(counts.timeouts + counts.skipped_bytes + counts.unplugged, 0u);
+  EXPECT_EQ(counts.not_attached + counts.bad_rotation, 0u);
+  std::cout << "reference: " << expected.counters.slices << " slices, "
+            << expected.counters.dropped.total()
+            << " dropped; emulated: " << summary.counters.slices << " slices, "
+            << summary.counters.dropped.total() << " dropped, tracker " << counts.valid
+            << " valid, " << counts.out_of_range << " out of range\n";
+  for (const auto& score : expect_same_meshes(emulated->final, reference->final, box, false))
+    std::cout << "label " << score.label << ": IoU " << score.iou << "\n";
 }
 
 // Records statuses and the slice count of every mesh update, in order.
