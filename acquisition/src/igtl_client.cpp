@@ -8,9 +8,13 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <chrono>
 #include <cstring>
+#include <sstream>
+#include <thread>
+#include <utility>
 
 #include "igtlImageMessage.h"
 #include "igtlMessageHeader.h"
@@ -203,6 +207,64 @@ Status IgtlConnection::send(const std::vector<std::uint8_t>& bytes, double timeo
     ::poll(&p, 1, static_cast<int>(1e3 * left_s) + 1);
   }
   return Status::ok();
+}
+
+IgtlLink::IgtlLink(IgtlEndpoint endpoint, OnConnect on_connect, double retry_s)
+    : endpoint_(std::move(endpoint)), on_connect_(std::move(on_connect)), retry_s_(retry_s) {}
+
+IgtlLink::IgtlLink(IgtlEndpoint endpoint, IgtlConnection open, OnConnect on_connect,
+                   double retry_s)
+    : IgtlLink(std::move(endpoint), std::move(on_connect), retry_s) {
+  connection_.emplace(std::move(open));
+}
+
+Status IgtlLink::open() {
+  if (connection_) return Status::ok();
+  auto connection = IgtlConnection::connect(endpoint_);
+  if (!connection) return connection.status();
+  connection_.emplace(std::move(*connection));
+  return on_connect_ ? on_connect_(*connection_) : Status::ok();
+}
+
+std::optional<IgtlMessage> IgtlLink::next(double timeout_s) {
+  if (!connection_) {
+    reconnect_when_due();
+    if (!connection_) return std::nullopt;
+  }
+  auto message = connection_->next(timeout_s);
+  if (!message) {
+    lose(message.message());
+    return std::nullopt;
+  }
+  return std::move(*message);
+}
+
+void IgtlLink::lose(const std::string& why) {
+  connection_.reset();
+  std::ostringstream retry;
+  retry << retry_s_;
+  trouble_ = why + "; connecting again every " + retry.str() + " s";
+  next_try_s_ = now_s() + retry_s_;
+}
+
+// A short connect timeout: the source's thread must stay responsive to stop().
+void IgtlLink::reconnect_when_due() {
+  const double wait_s = next_try_s_ - now_s();
+  if (wait_s > 0.0) {
+    std::this_thread::sleep_for(std::chrono::duration<double>(std::min(wait_s, 0.05)));
+    return;
+  }
+  next_try_s_ = now_s() + retry_s_;
+  auto connection = IgtlConnection::connect(endpoint_, std::min(retry_s_, 0.5));
+  if (!connection) return;
+  connection_.emplace(std::move(*connection));
+  if (on_connect_) {
+    if (const Status sent = on_connect_(*connection_); !sent) {
+      lose(sent.message());
+      return;
+    }
+  }
+  trouble_.clear();
 }
 
 std::vector<std::uint8_t> igtl_start_tracking_data(int interval_ms) {

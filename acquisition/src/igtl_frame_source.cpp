@@ -5,39 +5,31 @@
 namespace sonoshape::acq {
 
 IgtlFrameSource::IgtlFrameSource(IgtlEndpoint endpoint, std::string image_device)
-    : endpoint_(std::move(endpoint)), image_device_(std::move(image_device)) {}
+    : link_(std::move(endpoint)), image_device_(std::move(image_device)) {}
 
 IgtlFrameSource::IgtlFrameSource(IgtlEndpoint endpoint, std::string image_device,
                                  IgtlConnection connection, std::optional<IgtlMessage> first)
-    : endpoint_(std::move(endpoint)),
+    : link_(std::move(endpoint), std::move(connection)),
       image_device_(std::move(image_device)),
-      connection_(std::move(connection)),
       pending_(std::move(first)) {}
 
 IgtlFrameSource::~IgtlFrameSource() { stop(); }
 
-Status IgtlFrameSource::open() {
-  if (connection_) return Status::ok();  // handed over open
-  auto connection = IgtlConnection::connect(endpoint_);
-  if (!connection) return connection.status();
-  connection_.emplace(std::move(*connection));
-  return Status::ok();
-}
+Status IgtlFrameSource::open() { return link_.open(); }
 
 Result<Polled> IgtlFrameSource::poll(Frame& frame) {
-  Result<std::optional<IgtlMessage>> message =
-      pending_ ? Result<std::optional<IgtlMessage>>(std::exchange(pending_, std::nullopt))
-               : connection_->next(0.1);
-  if (!message) return message.status();
-  if (!*message || (*message)->type != "IMAGE") return Polled::kNothing;
-  if (!image_device_.empty() && (*message)->device != image_device_) return Polled::kNothing;
-  auto image = decode_igtl_image(**message);
+  std::optional<IgtlMessage> message =
+      pending_ ? std::exchange(pending_, std::nullopt) : link_.next(0.1);
+  set_condition(link_.trouble());
+  if (!message || message->type != "IMAGE") return Polled::kNothing;
+  if (!image_device_.empty() && message->device != image_device_) return Polled::kNothing;
+  auto image = decode_igtl_image(*message);
   if (!image) {
     count_lost(1);
     return Polled::kNothing;
   }
   frame.image = std::move(image->image);
-  frame.timestamp_s = (*message)->timestamp_s;
+  frame.timestamp_s = message->timestamp_s;
   frame.index = next_index_++;
   return Polled::kItem;
 }

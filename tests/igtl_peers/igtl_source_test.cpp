@@ -213,6 +213,53 @@ TEST(IgtlSources, AnImagesOwnPoseAndPixelsSurviveTheRoundTripThroughOurServer) {
   EXPECT_EQ(frame[0].timestamp_s, pose[0].timestamp_s);
 }
 
+TEST(IgtlSources, AServerRestartedMidStreamIsReportedAndFramesAndPosesResume) {
+  publish::IgtlServerOptions options;
+  options.port = 0;
+  auto server = publish::IgtlServer::start(options);
+  ASSERT_TRUE(server) << server.message();
+  options.port = server->port();  // the restarted server listens where the first did
+  tracking::IgtlPoseSource poses({"127.0.0.1", options.port}, "Image",
+                                 tracking::IgtlPoseFrom::kImage);
+  acq::IgtlFrameSource frames({"127.0.0.1", options.port}, "Image");
+  ASSERT_TRUE(poses.start());
+  ASSERT_TRUE(frames.start());
+  auto wait_for_clients = [](const publish::IgtlServer& s, std::size_t n) {
+    for (int k = 0; k < 300 && s.stats().clients < n; ++k)
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    return s.stats().clients;
+  };
+  ASSERT_EQ(wait_for_clients(*server, 2), 2u);
+  const GreyImage image(6, 4, 7);
+  const Eigen::Matrix4d T_reference_image = Eigen::Vector4d(0.2, 0.3, 1.0, 1.0).asDiagonal();
+  ASSERT_TRUE(server->publish_image(image, T_reference_image));
+  ASSERT_EQ((take<acq::IgtlFrameSource, Frame>(frames, 1, 5.0).size()), 1u) << frames.message();
+  ASSERT_EQ((take<tracking::IgtlPoseSource, Pose>(poses, 1, 5.0).size()), 1u) << poses.message();
+
+  // The server goes away: both sources keep running and say why.
+  server = Status::error("stopped by the test");
+  for (int k = 0; k < 300 && (frames.condition().empty() || poses.condition().empty()); ++k)
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  EXPECT_NE(frames.condition().find("connecting again"), std::string::npos) << frames.condition();
+  EXPECT_NE(poses.condition().find("connecting again"), std::string::npos) << poses.condition();
+  EXPECT_EQ(frames.state(), acq::SourceState::kRunning);
+  EXPECT_EQ(poses.state(), acq::SourceState::kRunning);
+
+  // Back on the same port: the sources connect again and the next image arrives.
+  server = publish::IgtlServer::start(options);
+  ASSERT_TRUE(server) << server.message();
+  ASSERT_EQ(wait_for_clients(*server, 2), 2u);
+  ASSERT_TRUE(server->publish_image(image, T_reference_image));
+  const auto frame = take<acq::IgtlFrameSource, Frame>(frames, 1, 5.0);
+  const auto pose = take<tracking::IgtlPoseSource, Pose>(poses, 1, 5.0);
+  ASSERT_EQ(frame.size(), 1u) << frames.message();
+  ASSERT_EQ(pose.size(), 1u) << poses.message();
+  EXPECT_EQ(frame[0].image.pixels, image.pixels);
+  EXPECT_EQ(pose[0].status, TrackingStatus::kValid);
+  EXPECT_EQ(frames.condition(), "");
+  EXPECT_EQ(poses.condition(), "");
+}
+
 TEST(IgtlSources, ANoServerIsAFailedSourceNamingTheAddress) {
   const int port = free_port();
   acq::IgtlFrameSource source({"127.0.0.1", port}, "");

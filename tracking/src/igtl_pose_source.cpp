@@ -3,24 +3,25 @@
 namespace sonoshape::tracking {
 
 IgtlPoseSource::IgtlPoseSource(acq::IgtlEndpoint endpoint, std::string device, IgtlPoseFrom from)
-    : endpoint_(std::move(endpoint)), device_(std::move(device)), from_(from) {}
+    : device_(std::move(device)),
+      from_(from),
+      // TDATA streams only on request, on every connection; every 20 ms (50 Hz) is as fast as
+      // trackers usually go.
+      link_(std::move(endpoint),
+            from == IgtlPoseFrom::kTrackingData
+                ? acq::IgtlLink::OnConnect([](acq::IgtlConnection& connection) {
+                    return connection.send(acq::igtl_start_tracking_data(20));
+                  })
+                : acq::IgtlLink::OnConnect()) {}
 
 IgtlPoseSource::~IgtlPoseSource() { stop(); }
 
 std::string IgtlPoseSource::describe() const {
-  return "igtl:" + endpoint_.text() +
+  return "igtl:" + link_.endpoint().text() +
          (from_ == IgtlPoseFrom::kTransform ? " (TRANSFORM " + device_ + ")" : " (IMAGE poses)");
 }
 
-Status IgtlPoseSource::open() {
-  auto connection = acq::IgtlConnection::connect(endpoint_);
-  if (!connection) return connection.status();
-  connection_.emplace(std::move(*connection));
-  // TDATA streams only on request; every 20 ms (50 Hz) is as fast as trackers usually go.
-  if (from_ == IgtlPoseFrom::kTrackingData)
-    return connection_->send(acq::igtl_start_tracking_data(20));
-  return Status::ok();
-}
+Status IgtlPoseSource::open() { return link_.open(); }
 
 Pose pose_from_matrix(const Eigen::Matrix4d& T, double timestamp_s) {
   Pose pose;
@@ -38,10 +39,10 @@ Pose pose_from_matrix(const Eigen::Matrix4d& T, double timestamp_s) {
 }
 
 Result<acq::Polled> IgtlPoseSource::poll(Pose& pose) {
-  auto message = connection_->next(0.1);
-  if (!message) return message.status();
-  if (!*message) return acq::Polled::kNothing;
-  const acq::IgtlMessage& m = **message;
+  const std::optional<acq::IgtlMessage> message = link_.next(0.1);
+  set_condition(link_.trouble());
+  if (!message) return acq::Polled::kNothing;
+  const acq::IgtlMessage& m = *message;
   const bool named = device_.empty() || m.device == device_;
   if (from_ == IgtlPoseFrom::kTransform && m.type == "TRANSFORM" && named) {
     auto T = acq::decode_igtl_transform(m);

@@ -4,6 +4,7 @@
 // sources use. Built only with SONOSHAPE_WITH_OPENIGTLINK; no OpenIGTLink type appears here.
 #include <Eigen/Core>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <string>
@@ -57,6 +58,42 @@ class IgtlConnection {
   struct Impl;
   explicit IgtlConnection(std::unique_ptr<Impl> impl);
   std::unique_ptr<Impl> impl_;
+};
+
+/// A connection that outlives its server's restarts (a PlusServer restarted mid-scan): the
+/// first connection must succeed, but once it is lost next() returns nothing, trouble() says why,
+/// and a new connection is tried every `retry_s` until the server is back. Not thread-safe: one
+/// source's thread uses it.
+class IgtlLink {
+ public:
+  /// Called after every connection, the first included (e.g. to ask for a TDATA stream).
+  using OnConnect = std::function<Status(IgtlConnection&)>;
+
+  explicit IgtlLink(IgtlEndpoint endpoint, OnConnect on_connect = {}, double retry_s = 0.5);
+  /// Starts from a connection already open (its first messages read by the caller).
+  IgtlLink(IgtlEndpoint endpoint, IgtlConnection open, OnConnect on_connect = {},
+           double retry_s = 0.5);
+
+  const IgtlEndpoint& endpoint() const { return endpoint_; }
+  /// Connects the first time (nothing when already open); errors as IgtlConnection::connect.
+  Status open();
+  /// The next whole message, waiting up to `timeout_s`; none when none came, or while the
+  /// connection is lost (then it tries to reconnect when a retry is due).
+  std::optional<IgtlMessage> next(double timeout_s);
+  /// Why the connection is lost and being retried; empty while connected.
+  const std::string& trouble() const { return trouble_; }
+  void close() { connection_.reset(); }
+
+ private:
+  void lose(const std::string& why);
+  void reconnect_when_due();
+
+  IgtlEndpoint endpoint_;
+  OnConnect on_connect_;
+  double retry_s_;
+  std::optional<IgtlConnection> connection_;
+  std::string trouble_;
+  double next_try_s_ = 0.0;
 };
 
 /// An IMAGE message's content: an 8-bit single-channel 2D image and its matrix.

@@ -12,8 +12,10 @@ namespace sonoshape::acq {
 /// Receives the IMAGE messages named `image_device` ("" : any) from an OpenIGTLink server;
 /// every other message is skipped. Frame::timestamp_s is the message's timestamp (the
 /// sender's clock, as PlusServer stamps its frames), Frame::index counts the frames kept.
-/// Images that cannot be read (not 8-bit grey 2D, damaged) are dropped and counted; a closed
-/// connection fails the source with the server's address.
+/// Images that cannot be read (not 8-bit grey 2D, damaged) are dropped and counted. A server
+/// that is not there at start fails the source with its address; one that goes away later is
+/// the source's condition() while it is connected to again (IgtlLink), and frames resume when
+/// it is back.
 class IgtlFrameSource final : public FrameSource {
  public:
   IgtlFrameSource(IgtlEndpoint endpoint, std::string image_device);
@@ -23,17 +25,16 @@ class IgtlFrameSource final : public FrameSource {
                   std::optional<IgtlMessage> first);
   ~IgtlFrameSource() override;
 
-  std::string describe() const override { return "igtl:" + endpoint_.text(); }
+  std::string describe() const override { return "igtl:" + link_.endpoint().text(); }
 
  protected:
   Status open() override;
   Result<Polled> poll(Frame& frame) override;
-  void close() override { connection_.reset(); }
+  void close() override { link_.close(); }
 
  private:
-  IgtlEndpoint endpoint_;
+  IgtlLink link_;
   std::string image_device_;
-  std::optional<IgtlConnection> connection_;
   std::optional<IgtlMessage> pending_;
   std::int64_t next_index_ = 0;
 };

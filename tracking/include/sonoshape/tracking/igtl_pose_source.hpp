@@ -21,7 +21,8 @@ enum class IgtlPoseFrom {
 /// Receives tracker samples from an OpenIGTLink server over a connection of its own (a
 /// PlusServer serves every client the same stream). Pose::timestamp_s is the message's
 /// timestamp. A matrix that is not finite or not rigid (rotation part off by more than 1e-3)
-/// is an INVALID sample, never used as a pose.
+/// is an INVALID sample, never used as a pose. A server that goes away after the first
+/// connection is the source's condition() while it is connected to again (acq::IgtlLink).
 class IgtlPoseSource final : public PoseSource {
  public:
   IgtlPoseSource(acq::IgtlEndpoint endpoint, std::string device, IgtlPoseFrom from);
@@ -32,13 +33,12 @@ class IgtlPoseSource final : public PoseSource {
  protected:
   Status open() override;
   Result<acq::Polled> poll(Pose& pose) override;
-  void close() override { connection_.reset(); }
+  void close() override { link_.close(); }
 
  private:
-  acq::IgtlEndpoint endpoint_;
   std::string device_;
   IgtlPoseFrom from_;
-  std::optional<acq::IgtlConnection> connection_;
+  acq::IgtlLink link_;
 };
 
 /// A sample from a matrix: rigid within 1e-3 -> valid, else kInvalid (identity pose).
