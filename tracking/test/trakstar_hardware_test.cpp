@@ -19,7 +19,9 @@ TEST(TrakstarHardware, ARealUnitDeliversPosesAtItsRate) {
   ASSERT_TRUE(options) << options.message();
   const auto found = find_trakstars();
   ASSERT_TRUE(found) << found.message();
-  ASSERT_FALSE(found->empty()) << "no trakSTAR/driveBAY on USB";
+  if (found->empty())
+    GTEST_SKIP() << "no trakSTAR/driveBAY on USB: attach one (transmitter and a sensor) to run "
+                    "this hardware test";
   TrakstarPoseSource source(*options);
   ASSERT_TRUE(source.start());
   std::vector<Pose> poses;
