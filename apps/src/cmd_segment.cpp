@@ -1,9 +1,11 @@
 // `sonoshape segment`: a tracked sweep (PLUS sequence file, MetaImage or NRRD) -> slice set,
-// one slice per frame with a valid pose: label map by segmentation/, polygons in the reference
-// frame, fov = sector.
+// one slice per frame with a valid pose: label map by segmentation/ (or, for a simulated sweep,
+// the truth label frames: --perfect-labels), polygons in the reference frame, fov = sector.
+// --truth-labels scores every frame's label map against the simulator's truth.
 #include <CLI/CLI.hpp>
 #include <filesystem>
 #include <iostream>
+#include <map>
 #include <memory>
 #include <optional>
 #include <sstream>
@@ -24,7 +26,46 @@ struct SegmentOptions {
   int every = 1;
   bool strict = false;
   std::filesystem::path output = "slices.json";
+  std::filesystem::path truth_labels;    ///< score against these label frames
+  std::filesystem::path perfect_labels;  ///< use these label frames instead of the segmenter
+  std::filesystem::path report;          ///< JSON of the scores
 };
+
+// Reads label frames given by `option` and checks them against the sweep; none when not given.
+Result<std::optional<acq::SequenceFile>> read_label_frames(const acq::SequenceFile& sweep,
+                                                           const SegmentOptions& options,
+                                                           const std::filesystem::path& path,
+                                                           const std::string& option) {
+  if (path.empty()) return std::optional<acq::SequenceFile>();
+  if (!std::filesystem::is_regular_file(path))
+    return Status::error(option + " " + path.string() +
+                         ": no such file; give DIR/labels.mha as `sonoshape simulate --truth DIR` "
+                         "writes it");
+  auto labels = acq::read_sequence_file(path);
+  if (!labels) return Status::error(option + ": " + labels.message());
+  if (const Status same = seg::check_truth_labels(sweep, options.input, *labels, path); !same)
+    return Status::error(option + ": " + same.message());
+  return std::optional<acq::SequenceFile>(std::move(*labels));
+}
+
+// The table on stderr and the JSON report of --truth-labels.
+int report_comparison(const seg::SweepSegmentation& result, const seg::SweepSetup& setup,
+                      const SegmentOptions& options) {
+  std::map<int, std::string> names{{setup.config.background.label, "background"}};
+  for (const auto& m : setup.config.materials) names[m.label] = m.name;
+  std::cerr << seg::format_comparison(result.comparison_total, names);
+  if (options.report.empty()) return 0;
+  std::error_code ec;
+  if (!options.report.parent_path().empty())
+    std::filesystem::create_directories(options.report.parent_path(), ec);
+  if (const Status written = seg::write_comparison_report(
+          result.comparisons, result.comparison_total, names, options.report);
+      !written) {
+    std::cerr << "error: " << written.message() << '\n';
+    return 1;
+  }
+  return 0;
+}
 
 int run_segment(const SegmentOptions& options) {
   Stopwatch clock;
@@ -46,6 +87,19 @@ int run_segment(const SegmentOptions& options) {
     std::cerr << "error: " << setup.message() << '\n';
     return 1;
   }
+  if (!options.report.empty() && options.truth_labels.empty()) {
+    std::cerr << "error: --report " << options.report.string()
+              << " needs --truth-labels DIR/labels.mha (the frames to score against)\n";
+    return 1;
+  }
+  const auto truth = read_label_frames(*file, options, options.truth_labels, "--truth-labels");
+  const auto perfect =
+      read_label_frames(*file, options, options.perfect_labels, "--perfect-labels");
+  for (const auto* read : {&truth, &perfect})
+    if (!*read) {
+      std::cerr << "error: " << read->message() << '\n';
+      return 1;
+    }
   std::ostringstream models;
   models << "background " << setup->config.background.grey_mean;
   for (const auto& m : setup->config.materials)
@@ -62,7 +116,8 @@ int run_segment(const SegmentOptions& options) {
     Progress progress("segment", considered);
     result = seg::segment_sweep(
         *file, *setup, options.every, [&](std::size_t done) { progress.update(done); },
-        ReadOptions{options.strict});
+        ReadOptions{options.strict},
+        seg::SweepLabels{*perfect ? &**perfect : nullptr, *truth ? &**truth : nullptr});
   }
   if (!result.refused.empty()) {
     std::cerr << "error: " << options.input.string() << ", " << result.refused
@@ -102,7 +157,7 @@ int run_segment(const SegmentOptions& options) {
           << "% of the sector unknown on average; " << clock.seconds() << " s -> "
           << options.output.string();
   log_info(summary.str());
-  return 0;
+  return options.truth_labels.empty() ? 0 : report_comparison(result, *setup, options);
 }
 
 }  // namespace
@@ -134,6 +189,15 @@ CommandRunner add_segment_command(CLI::App& app) {
                "per frame");
   app.add_option("-o,--output", options->output, "Slice set to write (.slices.json / .json)")
       ->capture_default_str();
+  app.add_option("--truth-labels", options->truth_labels,
+                 "Truth label frames of a simulated sweep (DIR/labels.mha of `simulate --truth "
+                 "DIR`): score every frame's label map against them (Dice per label, precision/"
+                 "recall of the unknown area; a table on stderr)");
+  app.add_option("--perfect-labels", options->perfect_labels,
+                 "Use these truth label frames instead of the segmenter (same contours and "
+                 "placement): the upper bound of the sweep");
+  app.add_option("--report", options->report,
+                 "With --truth-labels: write the scores per frame and in total as JSON");
   return [options] { return run_segment(*options); };
 }
 

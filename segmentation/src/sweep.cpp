@@ -138,6 +138,13 @@ std::string describe(const std::vector<Repair>& repairs) {
   return text.str();
 }
 
+std::size_t unknown_in_sector(const LabelImage& labels, const ImageGeometry& geometry) {
+  std::size_t count = 0;
+  for (std::size_t p = 0; p < labels.pixels.size(); ++p)
+    count += geometry.sector.pixels[p] && labels.pixels[p] == kLabelPixelUnknown ? 1 : 0;
+  return count;
+}
+
 }  // namespace
 
 Result<ImageGeometry> geometry_from_header(const acq::FieldList& fields) {
@@ -310,11 +317,17 @@ std::optional<Eigen::Matrix4d> reference_from_probe(const acq::SequenceFile& fil
 }
 
 SweepSegmentation segment_sweep(const acq::SequenceFile& file, const SweepSetup& setup, int every,
-                                const SweepProgress& progress, const ReadOptions& options) {
+                                const SweepProgress& progress, const ReadOptions& options,
+                                const SweepLabels& labels) {
   if (every < 1) throw std::invalid_argument("segment_sweep: every must be >= 1");
   if (file.frame_count() &&
       (file.width() != setup.geometry.width_px || file.height() != setup.geometry.height_px))
     throw std::invalid_argument("segment_sweep: the frames do not match the setup's geometry");
+  for (const acq::SequenceFile* other : {labels.perfect, labels.truth})
+    if (other)
+      if (const Status same = check_truth_labels(file, "the sweep", *other, "the label frames");
+          !same)
+        throw std::invalid_argument("segment_sweep: " + same.message());
   SweepSegmentation out;
   out.frames = file.frame_count();
   for (const LabelModel& m : setup.config.materials) out.slices.labels.push_back({m.label, m.name});
@@ -330,15 +343,23 @@ SweepSegmentation segment_sweep(const acq::SequenceFile& file, const SweepSetup&
       if (progress) progress(out.considered);
       continue;
     }
-    const Segmentation segmentation = segment_frame(file.image(k), setup.geometry, setup.config);
-    unknown_sum += sector_px ? static_cast<double>(segmentation.unknown_in_sector_px) /
+    const LabelImage frame_labels = labels.perfect
+                                        ? labels.perfect->image(k)
+                                        : segment_frame(file.image(k), setup.geometry, setup.config)
+                                              .labels;
+    if (labels.truth) {
+      out.comparisons.push_back(
+          {k, compare_labels(labels.truth->image(k), frame_labels, setup.geometry.sector)});
+      out.comparison_total.add(out.comparisons.back().comparison);
+    }
+    unknown_sum += sector_px ? static_cast<double>(unknown_in_sector(frame_labels, setup.geometry)) /
                                    static_cast<double>(sector_px)
                              : 0.0;
     ++segmented;
     const ImagePlane plane = image_plane(*pose * setup.T_probe_image, pose->block<3, 1>(0, 3));
     std::vector<Repair> repairs;
-    auto slice = make_slice(segmentation.labels, setup.geometry.sector, setup.geometry.sector_px,
-                            plane, setup.config.simplify_mm, &repairs);
+    auto slice = make_slice(frame_labels, setup.geometry.sector, setup.geometry.sector_px, plane,
+                            setup.config.simplify_mm, &repairs);
     if (!repairs.empty()) {
       const std::string what = "frame " + std::to_string(k) + ": " + describe(repairs);
       if (options.strict) {

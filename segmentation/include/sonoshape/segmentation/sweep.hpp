@@ -14,6 +14,7 @@
 #include "sonoshape/core/slice.hpp"
 #include "sonoshape/core/status.hpp"
 #include "sonoshape/segmentation/config.hpp"
+#include "sonoshape/segmentation/scoring.hpp"
 #include "sonoshape/segmentation/segmenter.hpp"
 
 namespace sonoshape::seg {
@@ -75,9 +76,25 @@ struct SweepSegmentation {
   double unknown_fraction = 0.0;  ///< mean share of the sector left unknown
   /// What was dropped to make the polygons of a frame valid, in frame order.
   std::vector<FrameRepair> repairs;
+  /// With SweepLabels::truth: each segmented frame's label map against its truth frame, in frame
+  /// order, and their sum.
+  std::vector<FrameComparison> comparisons;
+  LabelComparison comparison_total;
   /// With ReadOptions::strict: the first repair as an error ("frame 12, unknown: ..."), after
   /// which the sweep stopped; empty otherwise.
   std::string refused;
+};
+
+/// Other sources and checks of the label maps, for simulated sweeps whose truth label frames
+/// (`sonoshape simulate --truth DIR`: DIR/labels.mha) are known. Each file must hold one frame
+/// per frame of the sweep, of the same size (check_truth_labels).
+struct SweepLabels {
+  /// When set, frame k's label map is this file's frame k instead of the segmenter's ("perfect
+  /// labels"): the same contours and placement, so the run is the upper bound of the sweep.
+  const acq::SequenceFile* perfect = nullptr;
+  /// When set, every segmented frame's label map is compared with this file's frame of the
+  /// same index (SweepSegmentation::comparisons).
+  const acq::SequenceFile* truth = nullptr;
 };
 
 /// Called with the number of considered frames done.
@@ -87,9 +104,10 @@ using SweepProgress = std::function<void(std::size_t done)>;
 /// reference frame, fov = the sector, timestamp from the file). A frame whose polygons needed a
 /// repair logs one warning naming the frame and what was dropped; with `options.strict` the
 /// first such frame stops the sweep instead (SweepSegmentation::refused). Throws
-/// std::invalid_argument when `every` < 1 or the frames do not match the setup's geometry.
+/// std::invalid_argument when `every` < 1, the frames do not match the setup's geometry, or a
+/// file of `labels` does not match the frames (check_truth_labels says which).
 SweepSegmentation segment_sweep(const acq::SequenceFile& file, const SweepSetup& setup,
                                 int every = 1, const SweepProgress& progress = {},
-                                const ReadOptions& options = {});
+                                const ReadOptions& options = {}, const SweepLabels& labels = {});
 
 }  // namespace sonoshape::seg
