@@ -6,6 +6,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
 
@@ -152,6 +153,70 @@ TEST_F(SimulateCommand, SegmentStrictlyHandlesSmallFramesAndARealRecording) {
   const auto real_slices = sonoshape::read_slice_set(dir_ / "fcal.slices.json");
   ASSERT_TRUE(real_slices) << real_slices.message();
   EXPECT_EQ(real_slices->slices.size(), 10u);  // frames 0, 20, ..., 180
+}
+
+// --truth-labels scores the segmenter against the simulator's truth frames; --perfect-labels
+// puts those frames through the same contours and placement, the upper bound of the sweep.
+TEST_F(SimulateCommand, SegmentScoresAgainstTheTruthAndPerfectLabelsReconstruct) {
+  const auto simulated =
+      run("simulate --frames 8 --width-px 160 --height-px 128 --seed 4 -o " +
+              (dir_ / "s.igs.mha").string() + " --truth " + (dir_ / "truth").string(),
+          dir_ / "log_sim");
+  ASSERT_EQ(simulated.exit_code, 0) << simulated.output;
+  const std::string sweep = (dir_ / "s.igs.mha").string();
+  const std::string truth = (dir_ / "truth" / "labels.mha").string();
+  auto read_json = [](const fs::path& path) { return nlohmann::json::parse(bytes(path)); };
+
+  const auto perfect = run("segment " + sweep + " --perfect-labels " + truth + " --truth-labels " +
+                               truth + " --report " + (dir_ / "perfect.json").string() + " -o " +
+                               (dir_ / "perfect.slices.json").string(),
+                           dir_ / "log_perfect");
+  ASSERT_EQ(perfect.exit_code, 0) << perfect.output;
+  const auto perfect_report = read_json(dir_ / "perfect.json");
+  ASSERT_GE(perfect_report["total"]["labels"].size(), 2u) << perfect_report.dump();
+  for (const auto& [label, score] : perfect_report["total"]["labels"].items())
+    EXPECT_EQ(score["dice"], 1.0) << "label " << label;
+  EXPECT_EQ(perfect_report["total"]["unknown"]["recall"], 1.0);
+  const auto reconstructed = run("reconstruct " + (dir_ / "perfect.slices.json").string() +
+                                     " --depth 5 -o " + (dir_ / "out").string(),
+                                 dir_ / "log_recon");
+  ASSERT_EQ(reconstructed.exit_code, 0) << reconstructed.output;
+  EXPECT_TRUE(fs::exists(dir_ / "out" / "label_1.ply"));
+
+  const auto ours =
+      run("segment " + sweep + " --truth-labels " + truth + " --report " +
+              (dir_ / "ours.json").string() + " -o " + (dir_ / "ours.slices.json").string(),
+          dir_ / "log_ours");
+  ASSERT_EQ(ours.exit_code, 0) << ours.output;
+  EXPECT_NE(ours.output.find("Dice"), std::string::npos) << ours.output;
+  const auto report = read_json(dir_ / "ours.json");
+  const auto slices = sonoshape::read_slice_set(dir_ / "ours.slices.json");
+  ASSERT_TRUE(slices) << slices.message();
+  EXPECT_GE(report["frames"].size(), slices->slices.size());  // every segmented frame
+  const double spot = report["total"]["labels"]["1"]["dice"].get<double>();
+  EXPECT_GT(spot, 0.0);
+  EXPECT_LT(spot, 1.0);
+
+  const auto missing =
+      run("segment " + sweep + " --truth-labels " + (dir_ / "nowhere.mha").string() + " -o " +
+              (dir_ / "x.slices.json").string(),
+          dir_ / "log_missing");
+  EXPECT_EQ(missing.exit_code, 1);
+  EXPECT_NE(missing.output.find("nowhere.mha: no such file"), std::string::npos) << missing.output;
+  const auto other =
+      run("simulate --frames 5 --width-px 160 --height-px 128 -o " + (dir_ / "o.igs.mha").string() +
+              " --truth " + (dir_ / "other").string(),
+          dir_ / "log_other");
+  ASSERT_EQ(other.exit_code, 0) << other.output;
+  const auto mismatched =
+      run("segment " + sweep + " --perfect-labels " + (dir_ / "other" / "labels.mha").string() +
+              " -o " + (dir_ / "x.slices.json").string(),
+          dir_ / "log_mismatched");
+  EXPECT_EQ(mismatched.exit_code, 1);
+  EXPECT_NE(mismatched.output.find("has 5 label frames but " + sweep + " has 8 frames"),
+            std::string::npos)
+      << mismatched.output;
+  EXPECT_FALSE(fs::exists(dir_ / "x.slices.json"));
 }
 
 }  // namespace

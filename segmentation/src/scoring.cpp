@@ -70,8 +70,9 @@ LabelComparison compare_labels(const LabelImage& truth, const LabelImage& ours,
   if (truth.width != ours.width || truth.height != ours.height || truth.width != sector.width ||
       truth.height != sector.height || truth.pixels.size() != ours.pixels.size() ||
       truth.pixels.size() != sector.pixels.size())
-    throw std::invalid_argument("compare_labels: the truth, our label map and the sector differ "
-                                "in size");
+    throw std::invalid_argument(
+        "compare_labels: the truth, our label map and the sector differ "
+        "in size");
   // Counted in flat arrays first: a map lookup per pixel would dominate the time.
   std::vector<std::size_t> truth_px(256, 0), ours_px(256, 0), both_px(256, 0);
   LabelComparison out;
@@ -97,8 +98,10 @@ LabelComparison compare_labels(const LabelImage& truth, const LabelImage& ours,
 
 Status check_truth_labels(const acq::SequenceFile& sweep, const std::filesystem::path& sweep_path,
                           const acq::SequenceFile& truth, const std::filesystem::path& truth_path) {
-  const std::string fix = "; give the labels.mha that `sonoshape simulate --truth DIR` wrote "
-                          "together with " + sweep_path.string();
+  const std::string fix =
+      "; give the labels.mha that `sonoshape simulate --truth DIR` wrote "
+      "together with " +
+      sweep_path.string();
   if (truth.frame_count() != sweep.frame_count())
     return Status::error(truth_path.string() + " has " + std::to_string(truth.frame_count()) +
                          " label frames but " + sweep_path.string() + " has " +

@@ -343,18 +343,18 @@ SweepSegmentation segment_sweep(const acq::SequenceFile& file, const SweepSetup&
       if (progress) progress(out.considered);
       continue;
     }
-    const LabelImage frame_labels = labels.perfect
-                                        ? labels.perfect->image(k)
-                                        : segment_frame(file.image(k), setup.geometry, setup.config)
-                                              .labels;
+    const LabelImage frame_labels =
+        labels.perfect ? labels.perfect->image(k)
+                       : segment_frame(file.image(k), setup.geometry, setup.config).labels;
     if (labels.truth) {
       out.comparisons.push_back(
           {k, compare_labels(labels.truth->image(k), frame_labels, setup.geometry.sector)});
       out.comparison_total.add(out.comparisons.back().comparison);
     }
-    unknown_sum += sector_px ? static_cast<double>(unknown_in_sector(frame_labels, setup.geometry)) /
-                                   static_cast<double>(sector_px)
-                             : 0.0;
+    unknown_sum += sector_px
+                       ? static_cast<double>(unknown_in_sector(frame_labels, setup.geometry)) /
+                             static_cast<double>(sector_px)
+                       : 0.0;
     ++segmented;
     const ImagePlane plane = image_plane(*pose * setup.T_probe_image, pose->block<3, 1>(0, 3));
     std::vector<Repair> repairs;

@@ -61,7 +61,8 @@ struct FrameComparison {
 
 /// A short table for the terminal: per label its name (from `names`, else "label_<id>") and
 /// Dice over the sweep, then the unknown area's precision and recall.
-std::string format_comparison(const LabelComparison& total, const std::map<int, std::string>& names);
+std::string format_comparison(const LabelComparison& total,
+                              const std::map<int, std::string>& names);
 
 /// Writes the JSON report {"frames": [{"frame", "labels": {id: {dice, truth_px, ours_px,
 /// both_px}}, "unknown": {precision, recall, ...}}], "total": {...}} (NaN as null) to `path`;
