@@ -1,0 +1,233 @@
+#!/usr/bin/env python3
+"""Scores the segmentation of simulated sweeps against the simulator's truth, beside perfect labels.
+
+For each case (a phantom, a probe, a trajectory and a tracker noise level) this runs
+  sonoshape simulate [case options] --frames N --seed S -o WORK/CASE.igs.mha --truth WORK/CASE_truth
+  sonoshape segment WORK/CASE.igs.mha --truth-labels WORK/CASE_truth/labels.mha
+                    --report WORK/CASE.seg.json --every K -o WORK/CASE.slices.json
+  sonoshape segment WORK/CASE.igs.mha --perfect-labels WORK/CASE_truth/labels.mha
+                    --every K -o WORK/CASE.perfect.slices.json
+  sonoshape reconstruct X.slices.json -o X_recon --depth D        (for both slice sets)
+  sonoshape evaluate --recon X_recon --truth L:WORK/CASE_truth/label_L.ply ...
+                     --slices X.slices.json --json X.eval.json
+and prints one Markdown table: per case and label, the segmenter's Dice over all frames (the
+report's `total`), the scan IoU with the segmenter's slices, the scan IoU with perfect labels (the
+truth label frames through the same contour and placement code: the upper bound of the scan) and
+the gap between the two. A label without a reconstructed mesh shows "no mesh" (and counts as IoU 0
+in the gap). `--write-doc` puts the table into docs/benchmarks.md between
+`<!-- segmentation_table:begin -->` and `<!-- segmentation_table:end -->`.
+
+Phantoms: "default" (spot, cheburashka and a rib, as `simulate` makes it), "nested" (spot with a
+copy of itself at 30 % inside it, written to WORK/phantoms/), "similar" (the default layout with
+cheburashka as hypoechoic as spot). Noise levels are the tracker's: "low" (the simulator's default,
+0.1 mm / 0.05 deg) and "high" (0.5 mm / 0.3 deg). The default set is quick (4 cases); `--full`
+runs every phantom x probe x trajectory x noise level (48 cases).
+The exit status is non-zero when a command fails.
+
+Usage: bench/segmentation_table.py [--binary build/apps/sonoshape] [--work out/bench/segmentation]
+                                   [--full] [--only CASE ...] [--frames 200] [--every 4]
+                                   [--depth 7] [--seed 1] [--write-doc]
+"""
+import argparse
+import itertools
+import json
+import os
+import platform
+import re
+import subprocess
+import sys
+import time
+
+from doc_tables import write_between_markers
+
+PROBES = ["convex", "linear"]
+TRAJECTORIES = ["sweep", "fan", "rock", "rotate"]
+NOISE = {"low": [], "high": ["--position-noise-mm", "0.5", "--angle-noise-deg", "0.3"]}
+QUICK = [("default", "convex", "sweep", "low"), ("default", "linear", "sweep", "low"),
+         ("nested", "convex", "sweep", "low"), ("similar", "convex", "sweep", "low")]
+
+# The inner organ of the nested phantom: spot scaled by 0.3 about its box centre and moved by this
+# much (spot's own units; its box is about 0.94 x 1.69 x 1.72) into the torso (checked: every
+# vertex of the copy lies inside spot).
+NESTED_SCALE = 0.3
+NESTED_SHIFT = (0.0, 0.05, -0.15)
+
+
+def write_scaled_obj(src, dst, scale, shift):
+    """Copies the .obj `src` to `dst` with its vertices scaled about the box centre and shifted
+    (in the mesh's own units); faces and everything else are kept as written."""
+    with open(src) as f:
+        lines = f.read().splitlines()
+    vertices = [[float(x) for x in line.split()[1:4]] for line in lines if line.startswith("v ")]
+    lo = [min(v[i] for v in vertices) for i in range(3)]
+    hi = [max(v[i] for v in vertices) for i in range(3)]
+    centre = [0.5 * (lo[i] + hi[i]) for i in range(3)]
+    out = []
+    for line in lines:
+        if line.startswith("v "):
+            v = [float(x) for x in line.split()[1:4]]
+            line = "v " + " ".join(f"{centre[i] + shift[i] + scale * (v[i] - centre[i]):.6f}"
+                                   for i in range(3))
+        out.append(line)
+    with open(dst, "w") as f:
+        f.write("\n".join(out) + "\n")
+
+
+def phantom_args(root, work, phantom):
+    if phantom == "default":
+        return []
+    if phantom == "similar":
+        return ["--tissue", "1:hypoechoic", "--tissue", "2:hypoechoic"]
+    spot = os.path.join(root, "data", "models", "spot.obj")
+    inner = os.path.join(work, "phantoms", "spot_inner.obj")
+    os.makedirs(os.path.dirname(inner), exist_ok=True)
+    write_scaled_obj(spot, inner, NESTED_SCALE, NESTED_SHIFT)
+    return ["--phantom", f"1:{spot}:spot", "--phantom", f"2:{inner}:inner",
+            "--tissue", "1:hypoechoic", "--tissue", "2:hyperechoic"]
+
+
+def case_name(case):
+    return "_".join(case)
+
+
+def header_label_names(sweep):
+    """{label: name} from the `SonoshapeLabels = 1:spot 2:...` line `simulate` writes in the
+    sequence header (the names of labels that no frame shows are nowhere else)."""
+    with open(sweep, "rb") as f:
+        header = f.read(65536).split(b"ElementDataFile", 1)[0].decode("latin-1")
+    m = re.search(r"^SonoshapeLabels = (.*)$", header, re.MULTILINE)
+    pairs = (item.split(":", 1) for item in (m.group(1).split() if m else []))
+    return {int(label): name for label, name in pairs}
+
+
+def run(cmd, what):
+    result = subprocess.run(cmd, capture_output=True, text=True)
+    if result.returncode != 0:
+        lines = result.stderr.strip().splitlines()
+        raise RuntimeError(f"{what} failed: {lines[-1] if lines else result.returncode}")
+    return result
+
+
+def scan_scores(args, base, slices, truth_meshes):
+    """Reconstructs `slices` into BASE_recon and scores it: {label: eval entry}."""
+    recon, eval_path = base + "_recon", base + ".eval.json"
+    cmd = [args.binary, "reconstruct", slices, "-o", recon, "-q"]
+    if args.depth:
+        cmd += ["--depth", str(args.depth)]
+    run(cmd, f"reconstruct {slices}")
+    truths = [t for label, path in truth_meshes for t in ("--truth", f"{label}:{path}")]
+    run([args.binary, "evaluate", "--recon", recon, *truths, "--slices", slices,
+         "--json", eval_path, "-q"], f"evaluate {recon}")
+    with open(eval_path) as f:
+        return {entry["label"]: entry for entry in json.load(f)["labels"]}
+
+
+def one_case(args, root, case):
+    phantom, probe, trajectory, noise = case
+    base = os.path.join(args.work, case_name(case))
+    truth = base + "_truth"
+    run([args.binary, "simulate", *phantom_args(root, args.work, phantom), "--probe", probe,
+         "--trajectory", trajectory, *NOISE[noise], "--frames", str(args.frames),
+         "--seed", str(args.seed), "-o", base + ".igs.mha", "--truth", truth], "simulate")
+    labels_mha = os.path.join(truth, "labels.mha")
+    run([args.binary, "segment", base + ".igs.mha", "--truth-labels", labels_mha,
+         "--report", base + ".seg.json", "--every", str(args.every), "-o", base + ".slices.json"],
+        "segment")
+    run([args.binary, "segment", base + ".igs.mha", "--perfect-labels", labels_mha,
+         "--every", str(args.every), "-o", base + ".perfect.slices.json"], "segment (perfect)")
+    with open(base + ".seg.json") as f:
+        total = json.load(f)["total"]
+    truth_meshes = sorted((int(m.group(1)), os.path.join(truth, name))
+                          for name in os.listdir(truth)
+                          if (m := re.fullmatch(r"label_(\d+)\.ply", name)))
+    ours = scan_scores(args, base, base + ".slices.json", truth_meshes)
+    perfect = scan_scores(args, base + ".perfect", base + ".perfect.slices.json", truth_meshes)
+    names = header_label_names(base + ".igs.mha")
+    rows = []
+    for label, _ in truth_meshes:
+        dice = total["labels"].get(str(label), {})
+        name = dice.get("name") or names.get(label, f"label_{label}")
+        rows.append({"case": case, "label": label, "name": name, "dice": dice.get("dice"),
+                     "ours": ours.get(label), "perfect": perfect.get(label)})
+    return rows, total["unknown"]
+
+
+def iou(entry):
+    """The scan IoU, or None when the label has no reconstructed mesh."""
+    if not entry or not entry.get("reconstructed") or entry.get("iou") is None:
+        return None
+    return entry["iou"]
+
+
+def cell(value):
+    return "no mesh" if value is None else f"{value:.3f}"
+
+
+def table(rows, failures):
+    lines = ["| phantom | probe | trajectory | tracker noise | label | Dice | scan IoU "
+             "(segmenter) | scan IoU (perfect labels) | gap |", "|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        ours, perfect = iou(r["ours"]), iou(r["perfect"])
+        gap = f"{(perfect or 0.0) - (ours or 0.0):.3f}" if perfect is not None else "–"
+        # A label missing from the report is in no truth frame (nor in ours): nothing to score.
+        dice = "not in frames" if r["dice"] is None else f"{r['dice']:.3f}"
+        lines.append(f"| {' | '.join(r['case'])} | {r['label']} {r['name']} | {dice} | "
+                     f"{cell(ours)} | {cell(perfect)} | {gap} |")
+    for case, error in failures:
+        lines.append(f"| {' | '.join(case)} | FAILED: {error} | | | | |")
+    return "\n".join(lines)
+
+
+def provenance(args, seconds, cases):
+    folder = os.path.dirname(os.path.abspath(args.binary))
+    commit = subprocess.run(["git", "-C", folder, "rev-parse", "--short", "HEAD"],
+                            capture_output=True, text=True).stdout.strip() or "unknown"
+    return (f"{len(cases)} cases, --frames {args.frames} --every {args.every} "
+            f"--depth {args.depth or 'default'} --seed {args.seed}; sonoshape at commit {commit}; "
+            f"{os.cpu_count()} cores ({platform.machine()}, {platform.system()}); "
+            f"{seconds:.0f} s in all.")
+
+
+def main():
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--binary", default=os.path.join(root, "build", "apps", "sonoshape"))
+    parser.add_argument("--work", default=os.path.join(root, "out", "bench", "segmentation"))
+    parser.add_argument("--full", action="store_true",
+                        help="every phantom x probe x trajectory x noise level (48 cases)")
+    parser.add_argument("--only", nargs="*", help="case names (phantom_probe_trajectory_noise)")
+    parser.add_argument("--frames", type=int, default=200, help="frames per simulated sweep")
+    parser.add_argument("--every", type=int, default=4, help="segment every K-th frame")
+    parser.add_argument("--depth", type=int, default=7, help="octree depth (0: the default)")
+    parser.add_argument("--seed", type=int, default=1, help="seed of the simulator")
+    parser.add_argument("--write-doc", action="store_true",
+                        help="write the table into docs/benchmarks.md")
+    args = parser.parse_args()
+    os.makedirs(args.work, exist_ok=True)
+    cases = (list(itertools.product(["default", "nested", "similar"], PROBES, TRAJECTORIES,
+                                    list(NOISE))) if args.full else QUICK)
+    if args.only:
+        cases = [c for c in cases if case_name(c) in args.only]
+        if not cases:
+            raise SystemExit(f"no case named {' '.join(args.only)} (add --full for the grid?)")
+    rows, failures = [], []
+    start = time.monotonic()
+    for case in cases:
+        case_start = time.monotonic()
+        try:
+            case_rows, unknown = one_case(args, root, case)
+            rows += case_rows
+            print(f"{case_name(case)}: {time.monotonic() - case_start:.1f} s (unknown area "
+                  f"precision {unknown['precision']}, recall {unknown['recall']})", file=sys.stderr)
+        except RuntimeError as e:
+            failures.append((case, str(e)))
+            print(f"{case_name(case)}: {e}", file=sys.stderr)
+    text = table(rows, failures) + "\n\n" + provenance(args, time.monotonic() - start, cases)
+    print(text)
+    if args.write_doc:
+        write_between_markers(root, "segmentation_table", text)
+    return 1 if failures else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
