@@ -165,7 +165,8 @@ def cell(value):
 
 def table(rows, failures):
     lines = ["| phantom | probe | trajectory | tracker noise | label | Dice | scan IoU "
-             "(segmenter) | scan IoU (perfect labels) | gap |", "|---|---|---|---|---|---|---|---|---|"]
+             "(segmenter) | scan IoU (perfect labels) | gap |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         ours, perfect = iou(r["ours"]), iou(r["perfect"])
         gap = f"{(perfect or 0.0) - (ours or 0.0):.3f}" if perfect is not None else "–"
