@@ -7,6 +7,7 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "small_sweep.hpp"
 #include "sonoshape/core/slice_io.hpp"
 #include "sonoshape/segmentation/sweep.hpp"
 #include "sonoshape/simulator/bmode.hpp"
@@ -99,24 +100,8 @@ TEST(CheckTruthLabels, MismatchedFrameCountsAndSizesNameTheFileFrameAndFix) {
       << size.message();
 }
 
-sim::SimulatedSweep small_sweep() {
-  sim::Phantom phantom;
-  Eigen::Affine3d place = Eigen::Affine3d::Identity();
-  place.translation() = Vec3(-5, 25, 0);
-  phantom.add(1, "organ", sim::make_sphere(12.0), place);
-  place.translation() = Vec3(12, 15, 0);
-  phantom.add(2, "lesion", sim::make_sphere(5.0), place);
-  const sim::Probe probe(sim::linear_probe_geometry(160, 160));
-  const sim::BModeSimulator simulator(phantom, probe);
-  sim::TrajectoryOptions motion;
-  motion.duration_s = 0.45;
-  motion.sweep_length_mm = 8.0;
-  const auto acquisition = sim::acquire(sim::Trajectory(motion), sim::TrackerOptions{}, 8, 20.0);
-  return sim::simulate_sweep(simulator, acquisition, 3);
-}
-
 TEST(SegmentSweepLabels, PerfectLabelsScoreOneAndTheSegmenterBelowOne) {
-  const sim::SimulatedSweep sweep = small_sweep();
+  const sim::SimulatedSweep sweep = test::organ_and_lesion_sweep(8).sweep;
   const auto setup =
       prepare_sweep(sweep.bmode, "memory.igs.mha", std::optional<SegmentationConfig>{},
                     std::optional<Eigen::Matrix4d>{});

@@ -7,6 +7,7 @@
 #include <fstream>
 #include <stdexcept>
 
+#include "small_sweep.hpp"
 #include "sonoshape/acquisition/sequence_file.hpp"
 #include "sonoshape/core/slice_io.hpp"
 #include "sonoshape/simulator/bmode.hpp"
@@ -20,22 +21,10 @@ namespace {
 const std::filesystem::path kData = SONOSHAPE_DATA_DIR;
 
 TEST(SegmentSweep, SimulatedSweepFromItsHeaderAlone) {
-  sim::Phantom phantom;
-  Eigen::Affine3d place = Eigen::Affine3d::Identity();
-  place.translation() = Vec3(-5, 25, 0);
-  phantom.add(1, "organ", sim::make_sphere(12.0), place);
-  place.translation() = Vec3(12, 15, 0);
-  phantom.add(2, "lesion", sim::make_sphere(5.0), place);
-  const sim::Probe probe(sim::linear_probe_geometry(160, 160));
-  const sim::BModeSimulator simulator(phantom, probe);
-  sim::TrajectoryOptions motion;
-  motion.duration_s = 0.45;
-  motion.sweep_length_mm = 8.0;
   sim::TrackerOptions tracker;
   tracker.invalid_probability = 0.05;
   tracker.seed = 4;
-  const auto acquisition = sim::acquire(sim::Trajectory(motion), tracker, 10, 20.0);
-  const sim::SimulatedSweep sweep = sim::simulate_sweep(simulator, acquisition, 3);
+  const auto [acquisition, sweep] = test::organ_and_lesion_sweep(10, tracker);
 
   const auto setup =
       prepare_sweep(sweep.bmode, "memory.igs.mha", std::optional<SegmentationConfig>{},

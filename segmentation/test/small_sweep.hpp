@@ -1,0 +1,38 @@
+#pragma once
+// A small simulated sweep for segmentation tests: a 12 mm sphere (label 1, "organ") with a 5 mm
+// sphere beside it (label 2, "lesion"), seen by a 160 px linear probe sliding 8 mm.
+#include <Eigen/Geometry>
+
+#include "sonoshape/simulator/bmode.hpp"
+#include "sonoshape/simulator/phantom.hpp"
+#include "sonoshape/simulator/sweep.hpp"
+#include "sonoshape/simulator/trajectory.hpp"
+
+namespace sonoshape::seg::test {
+
+/// The probe's motion with its tracked poses, and the frames rendered from it.
+struct SmallSweep {
+  sim::SimulatedAcquisition acquisition;
+  sim::SimulatedSweep sweep;
+};
+
+/// `frames` frames at 20 Hz with the tracker `tracker` (speckle seed 3).
+inline SmallSweep organ_and_lesion_sweep(int frames, const sim::TrackerOptions& tracker = {}) {
+  sim::Phantom phantom;
+  Eigen::Affine3d place = Eigen::Affine3d::Identity();
+  place.translation() = Vec3(-5, 25, 0);
+  phantom.add(1, "organ", sim::make_sphere(12.0), place);
+  place.translation() = Vec3(12, 15, 0);
+  phantom.add(2, "lesion", sim::make_sphere(5.0), place);
+  const sim::Probe probe(sim::linear_probe_geometry(160, 160));
+  const sim::BModeSimulator simulator(phantom, probe);
+  sim::TrajectoryOptions motion;
+  motion.duration_s = 0.45;
+  motion.sweep_length_mm = 8.0;
+  SmallSweep out;
+  out.acquisition = sim::acquire(sim::Trajectory(motion), tracker, frames, 20.0);
+  out.sweep = sim::simulate_sweep(simulator, out.acquisition, 3);
+  return out;
+}
+
+}  // namespace sonoshape::seg::test
