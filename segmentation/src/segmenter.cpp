@@ -8,6 +8,9 @@
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
 
+#include "reflectors.hpp"
+#include "segmenter_internal.hpp"
+
 namespace sonoshape::seg {
 namespace {
 
@@ -24,6 +27,8 @@ constexpr int kMaxRepairPasses = 20;
 constexpr std::uint8_t kUndecided = 1;
 // A class this much brighter (grey) than every other is a strong reflector (see segment_frame).
 constexpr double kReflectorGapGrey = 60.0;
+// A reflector band narrower than this (mm) is speckle, not a bone surface.
+constexpr double kMinReflectorWidthMm = 1.0;
 
 cv::Mat wrap(const ImageU8& image) {
   return cv::Mat(image.height, image.width, CV_8U, const_cast<std::uint8_t*>(image.pixels.data()));
@@ -331,6 +336,11 @@ ImageGeometry auto_geometry(const std::vector<const GreyImage*>& frames, double 
 
 Segmentation segment_frame(const GreyImage& image, const ImageGeometry& geometry,
                            const SegmentationConfig& config) {
+  return detail::segment_frame(image, geometry, config, {});
+}
+
+Segmentation detail::segment_frame(const GreyImage& image, const ImageGeometry& geometry,
+                                   const SegmentationConfig& config, const RefineStep& refine) {
   geometry.check();
   if (image.width != geometry.width_px || image.height != geometry.height_px ||
       image.pixels.size() != geometry.sector.pixels.size())
@@ -440,8 +450,10 @@ Segmentation segment_frame(const GreyImage& image, const ImageGeometry& geometry
       std::uint8_t* out = map.ptr<std::uint8_t>(j);
       for (int i = 0; i < w; ++i) {
         const double offset = trend.a + trend.b * d[i];
-        out[i] = (!in[i] || dark[i])               ? kLabelPixelUnknown
+        // A reflector's echo is signal even inside the margin of the shadow it casts.
+        out[i] = !in[i]                            ? kLabelPixelUnknown
                  : m[i] - offset >= reflector_grey ? by_mean[0].value
+                 : dark[i]                         ? kLabelPixelUnknown
                                                    : classify(s[i] - offset);
       }
     }
@@ -478,6 +490,16 @@ Segmentation segment_frame(const GreyImage& image, const ImageGeometry& geometry
     }
   }
   classify_all();
+  if (reflector_class && by_mean[0].value != kLabelPixelOutside)
+    for (const LabelModel& m : config.materials)
+      if (m.label == by_mean[0].value && m.thickness_mm > 0.0)
+        detail::fill_reflector_sections(map, sector, by_mean[0].value, m.thickness_mm / px_mm,
+                                        std::max(3, static_cast<int>(std::lround(
+                                                        kMinReflectorWidthMm / px_mm))));
+  if (refine) {
+    cv::Mat compensated_median = median_f - (trend.a + trend.b * depth);
+    refine(map, compensated_median, low, sector);
+  }
 
   // Morphological cleaning on the label map (every label from the same map, so regions cannot
   // overlap), then no diagonal-only contacts so that every outline is a simple polygon.

@@ -95,6 +95,9 @@ struct SweepLabels {
   /// When set, every segmented frame's label map is compared with this file's frame of the
   /// same index (SweepSegmentation::comparisons).
   const acq::SequenceFile* truth = nullptr;
+  /// When set, called with the index and the label map of every frame that gets one (the
+  /// segmenter's or the perfect one), before its contours are traced: pictures, diagnostics.
+  std::function<void(std::size_t frame, const LabelImage& labels)> on_label_map;
 };
 
 /// Called with the number of considered frames done.
