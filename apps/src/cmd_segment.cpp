@@ -15,6 +15,7 @@
 #include "sonoshape/acquisition/sequence_file.hpp"
 #include "sonoshape/core/log.hpp"
 #include "sonoshape/core/slice_io.hpp"
+#include "sonoshape/scan/label_prior.hpp"
 #include "sonoshape/segmentation/overlay.hpp"
 #include "sonoshape/segmentation/sweep.hpp"
 
@@ -34,7 +35,26 @@ struct SegmentOptions {
   std::filesystem::path overlays;        ///< directory for the overlay pictures
   int overlay_every = 1;                 ///< picture every K-th segmented frame
   std::string method;                    ///< "", "threshold" or "graph-cut": overrides the config
+  std::string prior = "reconstruction";  ///< graph cut's prior: "reconstruction" or "none"
+  int prior_depth = 6;                   ///< octree depth of the prior's reconstruction
 };
+
+// The box (mm, reference frame) of the sectors of every frame with a valid pose, padded by a
+// tenth of its diagonal; none when no frame has one.
+std::optional<Box3> sweep_box(const acq::SequenceFile& file, const seg::SweepSetup& setup) {
+  std::optional<Box3> box;
+  for (std::size_t k = 0; k < file.frame_count(); ++k) {
+    const auto pose = seg::reference_from_probe(file, k);
+    if (!pose) continue;
+    const Eigen::Matrix4d T_reference_image = *pose * setup.T_probe_image;
+    for (const Vec2& p : setup.geometry.sector_px) {
+      const Vec3 q = (T_reference_image * Eigen::Vector4d(p.x(), p.y(), 0.0, 1.0)).head<3>();
+      box = box ? Box3{box->min.cwiseMin(q), box->max.cwiseMax(q)} : Box3{q, q};
+    }
+  }
+  if (box) *box = box->padded(0.1 * box->diagonal());
+  return box;
+}
 
 // Writes DIR/frame_NNNN.png for every `every`-th label map it is called with; remembers the
 // first failure (a full disk must not stop the segmentation, but the run reports it).
@@ -160,6 +180,17 @@ int run_segment(const SegmentOptions& options) {
     overlays.emplace(options, *file, setup->geometry.sector, *truth ? &**truth : nullptr);
     sources.on_label_map = [&](std::size_t k, const LabelImage& labels) { (*overlays)(k, labels); };
   }
+  // The graph cut's prior: an online reconstruction of the slices made so far, in the box
+  // that every frame's sector spans (a fixed box: a growing one would rebuild every time).
+  std::optional<scan::ReconstructionPrior> prior;
+  if (setup->config.method == seg::LabellingMethod::kGraphCut && !*perfect &&
+      options.prior == "reconstruction") {
+    recon::ReconstructorOptions recon_options;
+    recon_options.engine.max_depth = options.prior_depth;
+    recon_options.bounds = sweep_box(*file, *setup);
+    prior.emplace(recon_options);
+    sources.predictor = &*prior;
+  }
   seg::SweepSegmentation result;
   {
     Progress progress("segment", considered);
@@ -257,6 +288,15 @@ CommandRunner add_segment_command(CLI::App& app) {
                  "refined by a multi-label graph cut with learnt appearance models); default: "
                  "the config's `method`, else threshold")
       ->check(CLI::IsMember({"threshold", "graph-cut"}));
+  app.add_option("--prior", options->prior,
+                 "With --method graph-cut: reconstruction (the surfaces built from the slices so "
+                 "far predict each new frame) or none (the image alone)")
+      ->check(CLI::IsMember({"reconstruction", "none"}))
+      ->capture_default_str();
+  app.add_option("--prior-depth", options->prior_depth,
+                 "Octree depth of the prior's reconstruction (coarser is faster)")
+      ->check(CLI::Range(3, 10))
+      ->capture_default_str();
   app.add_option("--overlays", options->overlays,
                  "Directory for pictures of the frames with our label outlines (and the truth's "
                  "in white with --truth-labels): DIR/frame_NNNN.png");

@@ -106,8 +106,10 @@ Status SegmentationConfig::validate() const {
   if (median_px < 1 || median_px % 2 == 0 || median_px > 31)
     return Status::error("segmentation config: median_px must be odd, 1..31 (got " +
                          std::to_string(median_px) + ")");
-  for (const auto& [name, value] : std::array<std::pair<const char*, double>, 8>{
+  for (const auto& [name, value] : std::array<std::pair<const char*, double>, 10>{
            {{"smoothing_mm", smoothing_mm},
+            {"psf_sigma_mm", psf_sigma_mm},
+            {"dynamic_range_db", dynamic_range_db},
             {"confidence_window_mm", confidence_window_mm},
             {"shadow_fraction", shadow_fraction},
             {"shadow_margin_mm", shadow_margin_mm},
@@ -196,6 +198,8 @@ Result<SegmentationConfig> parse_segmentation_config(const std::string& json_tex
                          : key == "min_region_mm2"       ? &config.min_region_mm2
                          : key == "simplify_mm"          ? &config.simplify_mm
                          : key == "sector_signal_grey"   ? &config.sector_signal_grey
+                         : key == "psf_sigma_mm"         ? &config.psf_sigma_mm
+                         : key == "dynamic_range_db"     ? &config.dynamic_range_db
                                                          : nullptr;
         if (!target)
           throw ConfigProblem{key, "unknown key; see docs/segmentation.md for the fields"};
@@ -235,6 +239,8 @@ std::string to_json(const SegmentationConfig& c) {
   doc["shadow_margin_mm"] = c.shadow_margin_mm;
   doc["max_depth_mm"] = c.max_depth_mm;
   doc["depth_compensation"] = c.depth_compensation;
+  doc["psf_sigma_mm"] = c.psf_sigma_mm;
+  doc["dynamic_range_db"] = c.dynamic_range_db;
   doc["method"] = c.method == LabellingMethod::kGraphCut ? "graph_cut" : "threshold";
   doc["opening_mm"] = c.opening_mm;
   doc["min_region_mm2"] = c.min_region_mm2;

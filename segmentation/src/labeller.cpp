@@ -23,6 +23,8 @@ constexpr int kMinModelPixels = 200;
 constexpr double kMedianSpreadShare = 0.5;
 // The cost that keeps a cell off a label (a reflector's cells on it, the others off it).
 constexpr float kExcluded = 1e6f;
+// Cells this far (in cells) from a boundary of the starting labelling take part in the cut.
+constexpr int kBandCells = 3;
 
 struct Appearance {
   double mean = 0.0, variance = 1.0;
@@ -39,7 +41,6 @@ struct GraphCutLabeller::Impl {
   std::vector<std::uint8_t> values;  // label index -> pixel value
   int reflector = -1;                // index of the reflector label, if any
   std::vector<Appearance> models;
-  std::unique_ptr<detail::GridLabelling> grid;
 
   Impl(const SegmentationConfig& c, const ImageGeometry& g, const GraphCutOptions& o)
       : config(c), geometry(g), options(o) {
@@ -66,13 +67,6 @@ struct GraphCutLabeller::Impl {
     if (order.size() > 1 && all[order[0]]->grey_mean - all[order[1]]->grey_mean > kReflectorGapGrey &&
         order[0] != 0)
       reflector = static_cast<int>(order[0]);
-    std::vector<std::uint8_t> active(static_cast<std::size_t>(grid_w) * grid_h, 0);
-    for (int j = 0; j < geometry.height_px; ++j)
-      for (int i = 0; i < geometry.width_px; ++i)
-        if (geometry.sector.at(i, j))
-          active[static_cast<std::size_t>(j / block_px) * grid_w + i / block_px] = 1;
-    grid = std::make_unique<detail::GridLabelling>(grid_w, grid_h, active,
-                                                   static_cast<int>(values.size()));
   }
 
   int index_of(std::uint8_t value) const {
@@ -152,7 +146,8 @@ struct GraphCutLabeller::Impl {
       }
       if (reflector_cell) start[c] = static_cast<std::uint8_t>(reflector);
     }
-    if (prior) add_prior(*prior, count, cost);
+    std::vector<std::uint8_t> prior_disagrees;
+    if (prior) prior_disagrees = add_prior(*prior, count, start, cost);
 
     // Contrast-sensitive Potts weights between neighbouring cells: cheap to cut where the grey
     // changes by much more than one tissue's spread.
@@ -174,7 +169,26 @@ struct GraphCutLabeller::Impl {
         if (ci + 1 < grid_w) right[c] = weight(c + 1);
         if (cj + 1 < grid_h) down[c] = weight(c + static_cast<std::size_t>(grid_w));
       }
-    grid->minimise(cost, right, down, start, options.cycles);
+    // Only cells near a boundary of the starting labelling, or where the prior disagrees with
+    // it, can change at an optimum of reasonable weights: the cut runs on that band, and the
+    // cells outside it enter as fixed neighbours (their Potts terms become unary ones).
+    const std::vector<std::uint8_t> band = changeable_band(start, count, prior_disagrees);
+    for (int cj = 0; cj < grid_h; ++cj)
+      for (int ci = 0; ci < grid_w; ++ci) {
+        const std::size_t c = static_cast<std::size_t>(cj) * grid_w + ci;
+        if (!band[c]) continue;
+        auto fixed_neighbour = [&](std::size_t d, float w) {
+          if (band[d] || count[d] == 0.0 || w == 0.0f) return;
+          for (std::size_t l = 0; l < labels; ++l)
+            if (l != start[d]) cost[c * labels + l] += w;
+        };
+        if (ci + 1 < grid_w) fixed_neighbour(c + 1, right[c]);
+        if (ci > 0) fixed_neighbour(c - 1, right[c - 1]);
+        if (cj + 1 < grid_h) fixed_neighbour(c + static_cast<std::size_t>(grid_w), down[c]);
+        if (cj > 0) fixed_neighbour(c - static_cast<std::size_t>(grid_w), down[c - grid_w]);
+      }
+    detail::GridLabelling cut(grid_w, grid_h, band, static_cast<int>(labels));
+    cut.minimise(cost, right, down, start, options.cycles);
 
     for (int j = 0; j < map.rows; ++j) {
       const std::uint8_t* use = usable.ptr<std::uint8_t>(j);
@@ -189,10 +203,43 @@ struct GraphCutLabeller::Impl {
     }
   }
 
+  // Cells within kBandCells of a cell whose starting label differs from a neighbour's, or of a
+  // cell whose prior disagrees with its starting label (and that has pixels to decide).
+  std::vector<std::uint8_t> changeable_band(const std::vector<std::uint8_t>& start,
+                                            const std::vector<double>& count,
+                                            const std::vector<std::uint8_t>& prior_disagrees) const {
+    cv::Mat seed(grid_h, grid_w, CV_8U, cv::Scalar(0));
+    for (int cj = 0; cj < grid_h; ++cj)
+      for (int ci = 0; ci < grid_w; ++ci) {
+        const std::size_t c = static_cast<std::size_t>(cj) * grid_w + ci;
+        if (count[c] == 0.0) continue;
+        const bool edge =
+            (ci + 1 < grid_w && count[c + 1] > 0.0 && start[c + 1] != start[c]) ||
+            (cj + 1 < grid_h && count[c + grid_w] > 0.0 && start[c + grid_w] != start[c]);
+        if (edge || (!prior_disagrees.empty() && prior_disagrees[c])) {
+          seed.at<std::uint8_t>(cj, ci) = 255;
+          if (ci + 1 < grid_w) seed.at<std::uint8_t>(cj, ci + 1) = 255;
+          if (cj + 1 < grid_h) seed.at<std::uint8_t>(cj + 1, ci) = 255;
+        }
+      }
+    cv::dilate(seed, seed,
+               cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * kBandCells + 1,
+                                                                  2 * kBandCells + 1)));
+    std::vector<std::uint8_t> band(static_cast<std::size_t>(grid_w) * grid_h, 0);
+    for (int cj = 0; cj < grid_h; ++cj)
+      for (int ci = 0; ci < grid_w; ++ci) {
+        const std::size_t c = static_cast<std::size_t>(cj) * grid_w + ci;
+        band[c] = seed.at<std::uint8_t>(cj, ci) && count[c] > 0.0;
+      }
+    return band;
+  }
+
   // Disagreeing with the prediction costs prior_weight per pixel, scaled by the prediction's
   // confidence: none on its own boundaries, full from prior_margin_mm inside its regions.
-  void add_prior(const LabelImage& prior, const std::vector<double>& count,
-                 std::vector<float>& cost) const {
+  // Returns, per cell, whether the prior predicts another label than `start`.
+  std::vector<std::uint8_t> add_prior(const LabelImage& prior, const std::vector<double>& count,
+                                      const std::vector<std::uint8_t>& start,
+                                      std::vector<float>& cost) const {
     if (prior.width != geometry.width_px || prior.height != geometry.height_px)
       throw std::invalid_argument("GraphCutLabeller: the prior label map is " +
                                   std::to_string(prior.width) + "x" +
@@ -219,11 +266,13 @@ struct GraphCutLabeller::Impl {
     cv::distanceTransform(interior, distance, cv::DIST_L2, 3);
     const double cell_mm = block_px * geometry.spacing_mm;
     const std::size_t labels = values.size();
+    std::vector<std::uint8_t> disagrees(count.size(), 0);
     for (int cj = 0; cj < grid_h; ++cj)
       for (int ci = 0; ci < grid_w; ++ci) {
         const std::size_t c = static_cast<std::size_t>(cj) * grid_w + ci;
         const int expected = index_of(predicted.at<std::uint8_t>(cj, ci));
         if (expected < 0 || count[c] == 0.0) continue;
+        disagrees[c] = start[c] != expected;
         const double confidence =
             std::min(1.0, distance.at<float>(cj, ci) * cell_mm / options.prior_margin_mm);
         const auto penalty = static_cast<float>(options.prior_weight * count[c] * confidence);
@@ -231,6 +280,7 @@ struct GraphCutLabeller::Impl {
           if (static_cast<int>(l) != expected && cost[c * labels + l] < kExcluded)
             cost[c * labels + l] += penalty;
       }
+    return disagrees;
   }
 };
 
@@ -247,8 +297,16 @@ const ImageGeometry& GraphCutLabeller::geometry() const { return impl_->geometry
 Segmentation GraphCutLabeller::segment(const GreyImage& image, const LabelImage* prior) {
   return detail::segment_frame(
       image, impl_->geometry, impl_->config,
-      [&](cv::Mat& map, const cv::Mat& grey, const cv::Mat& low, const cv::Mat& sector) {
+      [&](cv::Mat& map, const cv::Mat& grey, const cv::Mat& low, const cv::Mat& sector,
+          cv::Mat& keep) {
         impl_->refine(map, grey, low, sector, prior);
+        if (prior) {
+          // Small parts where the reconstruction predicts the same organ are kept.
+          const cv::Mat predicted(prior->height, prior->width, CV_8U,
+                                  const_cast<std::uint8_t*>(prior->pixels.data()));
+          keep = (map == predicted) & (predicted != kLabelPixelOutside) &
+                 (predicted != kLabelPixelUnknown);
+        }
       });
 }
 

@@ -14,33 +14,46 @@ namespace {
 // be a guess beyond what the image shows.
 constexpr double kMinWidthFactor = 1.0;
 constexpr double kMaxWidthFactor = 3.0;
+// Columns whose surface lies within this many rows of the apex share the apex (their mean is
+// the section's centre column).
+constexpr int kApexRowsPx = 1;
 
 struct Section {
   double centre_x = 0.0, centre_y = 0.0;  // px
   double half_width = 0.0, half_height = 0.0;
 };
 
-// The ellipse of one band, from the top row of each of its columns: with the centre at half the
-// thickness below the apex, a point (x, top) of the upper arc satisfies
-// (x - cx)^2 = a^2 (1 - ((cy - top) / b)^2); a^2 is the least-squares solution over the columns.
-Section fit_section(const std::vector<int>& top_row, int first_column, double thickness_px) {
+// The ellipse of one band, from the surface row of each of its columns (-1: none): the apex is
+// the shallowest surface row and the centre lies half the thickness below it, under the columns
+// at the apex (the arc a fan sees can reach further down one side than the other, so its
+// column span is no measure of the centre). A point (x, y) of the upper arc satisfies
+// (x - cx)^2 = a^2 (1 - ((cy - y) / b)^2); a^2 is the least-squares solution over the columns.
+Section fit_section(const std::vector<int>& surface_row, int first_column, double thickness_px) {
   Section s;
   s.half_height = 0.5 * thickness_px;
   int apex = std::numeric_limits<int>::max();
-  int last_column = first_column;
-  for (std::size_t k = 0; k < top_row.size(); ++k)
-    if (top_row[k] >= 0) {
-      apex = std::min(apex, top_row[k]);
-      last_column = first_column + static_cast<int>(k);
+  int first = -1, last = -1;
+  for (std::size_t k = 0; k < surface_row.size(); ++k)
+    if (surface_row[k] >= 0) {
+      apex = std::min(apex, surface_row[k]);
+      if (first < 0) first = static_cast<int>(k);
+      last = static_cast<int>(k);
     }
-  s.centre_x = 0.5 * (first_column + last_column);
+  double apex_sum = 0.0;
+  int apex_columns = 0;
+  for (std::size_t k = 0; k < surface_row.size(); ++k)
+    if (surface_row[k] >= 0 && surface_row[k] <= apex + kApexRowsPx) {
+      apex_sum += static_cast<double>(k);
+      ++apex_columns;
+    }
+  s.centre_x = first_column + apex_sum / apex_columns;
   s.centre_y = apex + s.half_height;
-  const double half_band = 0.5 * (last_column - first_column + 1);
+  const double half_band = 0.5 * (last - first + 1);
   double num = 0.0, den = 0.0;
-  for (std::size_t k = 0; k < top_row.size(); ++k) {
-    if (top_row[k] < 0) continue;
+  for (std::size_t k = 0; k < surface_row.size(); ++k) {
+    if (surface_row[k] < 0) continue;
     const double dx = first_column + static_cast<double>(k) - s.centre_x;
-    const double dy = std::min(1.0, (s.centre_y - top_row[k]) / s.half_height);
+    const double dy = std::min(1.0, (s.centre_y - surface_row[k]) / s.half_height);
     const double u = 1.0 - dy * dy;
     num += dx * dx * u;
     den += u * u;
@@ -52,8 +65,8 @@ Section fit_section(const std::vector<int>& top_row, int first_column, double th
 
 }  // namespace
 
-void fill_reflector_sections(cv::Mat& map, const cv::Mat& sector, std::uint8_t label,
-                             double thickness_px, int min_width_px) {
+void fill_reflector_sections(cv::Mat& map, const cv::Mat& grey, const cv::Mat& sector,
+                             std::uint8_t label, double thickness_px, int min_width_px) {
   if (!(thickness_px > 0.0)) return;
   const cv::Mat band = map == label;
   cv::Mat components, stats, centroids;
@@ -63,14 +76,22 @@ void fill_reflector_sections(cv::Mat& map, const cv::Mat& sector, std::uint8_t l
     const int x0 = stats.at<int>(c, cv::CC_STAT_LEFT), y0 = stats.at<int>(c, cv::CC_STAT_TOP);
     const int w = stats.at<int>(c, cv::CC_STAT_WIDTH), h = stats.at<int>(c, cv::CC_STAT_HEIGHT);
     if (w < min_width_px) continue;
-    std::vector<int> top_row(static_cast<std::size_t>(w), -1);
+    // The surface is where the echo peaks down each column: the point-spread function spreads
+    // a specular echo evenly about the boundary, so the band's top lies above it.
+    std::vector<int> surface_row(static_cast<std::size_t>(w), -1);
+    std::vector<float> peak(static_cast<std::size_t>(w), -1.0f);
     for (int j = y0; j < y0 + h; ++j) {
       const int* row = components.ptr<int>(j);
-      for (int i = x0; i < x0 + w; ++i)
-        if (row[i] == c && top_row[static_cast<std::size_t>(i - x0)] < 0)
-          top_row[static_cast<std::size_t>(i - x0)] = j;
+      const float* g = grey.ptr<float>(j);
+      for (int i = x0; i < x0 + w; ++i) {
+        const auto k = static_cast<std::size_t>(i - x0);
+        if (row[i] == c && g[i] > peak[k]) {
+          peak[k] = g[i];
+          surface_row[k] = j;
+        }
+      }
     }
-    sections.push_back(fit_section(top_row, x0, thickness_px));
+    sections.push_back(fit_section(surface_row, x0, thickness_px));
   }
   for (const Section& s : sections) {
     const int i0 = std::max(0, static_cast<int>(std::floor(s.centre_x - s.half_width)));

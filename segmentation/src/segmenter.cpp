@@ -8,6 +8,7 @@
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
 
+#include "blooming.hpp"
 #include "reflectors.hpp"
 #include "segmenter_internal.hpp"
 
@@ -183,8 +184,11 @@ void open_labels(cv::Mat& map, const cv::Mat& sector, double radius_px) {
   fill_undecided(map, undecided, sector);
 }
 
-// Components of any label smaller than min_px are re-labelled from their surroundings.
-void remove_small_components(cv::Mat& map, const cv::Mat& sector, double min_px) {
+// Components of any label smaller than min_px are re-labelled from their surroundings, unless
+// at least half their pixels are set in `keep` (when not empty): a small part of an organ that
+// the reconstruction predicts there is no speckle.
+void remove_small_components(cv::Mat& map, const cv::Mat& sector, double min_px,
+                             const cv::Mat& keep) {
   if (min_px < 1.0) return;
   cv::Mat undecided(map.size(), CV_8U, cv::Scalar(0));
   for (const std::uint8_t v : present_values(map, sector)) {
@@ -193,8 +197,14 @@ void remove_small_components(cv::Mat& map, const cv::Mat& sector, double min_px)
     const int n = cv::connectedComponentsWithStats(mask, components, stats, centroids, 8, CV_32S);
     std::vector<bool> small(static_cast<std::size_t>(n), false);
     bool any = false;
+    std::vector<int> kept_px(static_cast<std::size_t>(n), 0);
+    if (!keep.empty())
+      for (int j = 0; j < map.rows; ++j)
+        for (int i = 0; i < map.cols; ++i)
+          if (keep.at<std::uint8_t>(j, i)) ++kept_px[static_cast<std::size_t>(components.at<int>(j, i))];
     for (int c = 1; c < n; ++c)
-      if (stats.at<int>(c, cv::CC_STAT_AREA) < min_px)
+      if (stats.at<int>(c, cv::CC_STAT_AREA) < min_px &&
+          2 * kept_px[static_cast<std::size_t>(c)] < stats.at<int>(c, cv::CC_STAT_AREA))
         any = small[static_cast<std::size_t>(c)] = true;
     if (!any) continue;
     for (int j = 0; j < map.rows; ++j)
@@ -493,18 +503,25 @@ Segmentation detail::segment_frame(const GreyImage& image, const ImageGeometry& 
   if (reflector_class && by_mean[0].value != kLabelPixelOutside)
     for (const LabelModel& m : config.materials)
       if (m.label == by_mean[0].value && m.thickness_mm > 0.0)
-        detail::fill_reflector_sections(map, sector, by_mean[0].value, m.thickness_mm / px_mm,
+        detail::fill_reflector_sections(map, median_f, sector, by_mean[0].value, m.thickness_mm / px_mm,
                                         std::max(3, static_cast<int>(std::lround(
                                                         kMinReflectorWidthMm / px_mm))));
+  cv::Mat keep;
   if (refine) {
     cv::Mat compensated_median = median_f - (trend.a + trend.b * depth);
-    refine(map, compensated_median, low, sector);
+    refine(map, compensated_median, low, sector, keep);
+  }
+  {
+    std::vector<detail::GreyClass> grey_classes;
+    for (const Class& c : classes) grey_classes.push_back({c.value, c.mean});
+    detail::undo_blooming(map, sector, grey_classes, config.psf_sigma_mm, config.dynamic_range_db,
+                          px_mm, reflector_class ? by_mean[0].value : -1);
   }
 
   // Morphological cleaning on the label map (every label from the same map, so regions cannot
   // overlap), then no diagonal-only contacts so that every outline is a simple polygon.
   open_labels(map, sector, config.opening_mm / px_mm);
-  remove_small_components(map, sector, config.min_region_mm2 / (px_mm * px_mm));
+  remove_small_components(map, sector, config.min_region_mm2 / (px_mm * px_mm), keep);
   repair_diagonal_contacts(map, sector);
   map.setTo(kLabelPixelUnknown, ~sector);
 

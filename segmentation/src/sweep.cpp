@@ -286,6 +286,15 @@ Result<SweepSetup> prepare_sweep(const acq::SequenceFile& file,
     setup.sector_from = "config polygon";
   }
 
+  // The imaging system's blur, when the configuration does not give it: the header's.
+  if (setup.config.psf_sigma_mm == 0.0)
+    if (const auto sigma = file.field("SonoshapePsfSigmaMm")) {
+      setup.config.psf_sigma_mm = std::max(0.0, to_number(*sigma).value_or(0.0));
+      if (const auto range = file.field("SonoshapeDynamicRangeDb"))
+        setup.config.dynamic_range_db =
+            to_number(*range).value_or(setup.config.dynamic_range_db);
+    }
+
   // Label models: the config's, the header's, or two classes found in the data.
   if (setup.config.materials.empty()) {
     if (const auto models = header_models(file)) {
@@ -353,9 +362,12 @@ SweepSegmentation segment_sweep(const acq::SequenceFile& file, const SweepSetup&
       if (progress) progress(out.considered);
       continue;
     }
+    const ImagePlane plane = image_plane(*pose * setup.T_probe_image, pose->block<3, 1>(0, 3));
+    std::optional<LabelImage> prior;
+    if (labeller && labels.predictor) prior = labels.predictor->predict(plane, setup.geometry);
     const LabelImage frame_labels =
         labels.perfect ? labels.perfect->image(k)
-        : labeller     ? labeller->segment(file.image(k)).labels
+        : labeller     ? labeller->segment(file.image(k), prior ? &*prior : nullptr).labels
                        : segment_frame(file.image(k), setup.geometry, setup.config).labels;
     if (labels.on_label_map) labels.on_label_map(k, frame_labels);
     if (labels.truth) {
@@ -368,7 +380,6 @@ SweepSegmentation segment_sweep(const acq::SequenceFile& file, const SweepSetup&
                              static_cast<double>(sector_px)
                        : 0.0;
     ++segmented;
-    const ImagePlane plane = image_plane(*pose * setup.T_probe_image, pose->block<3, 1>(0, 3));
     std::vector<Repair> repairs;
     auto slice = make_slice(frame_labels, setup.geometry.sector, setup.geometry.sector_px, plane,
                             setup.config.simplify_mm, &repairs);
@@ -401,6 +412,7 @@ SweepSegmentation segment_sweep(const acq::SequenceFile& file, const SweepSetup&
     if (coincident) {
       ++out.coincident;
     } else {
+      if (labeller && labels.predictor) labels.predictor->add(*slice);
       out.slices.slices.push_back(std::move(*slice));
     }
     if (progress) progress(out.considered);

@@ -66,6 +66,7 @@ TEST(GridLabelling, KeepsInactiveCellsAndChecksSizes) {
 // The upper arc of a disc (what a probe sees of a rib) becomes the whole disc.
 TEST(ReflectorSections, UpperArcBecomesTheDisc) {
   cv::Mat map(100, 100, CV_8U, cv::Scalar(0)), sector(100, 100, CV_8U, cv::Scalar(255));
+  cv::Mat grey(100, 100, CV_32F, cv::Scalar(100.0f));
   const double cx = 50, cy = 50, r = 15;
   int disc = 0;
   for (int j = 0; j < 100; ++j)
@@ -73,9 +74,12 @@ TEST(ReflectorSections, UpperArcBecomesTheDisc) {
       const double d = std::hypot(i - cx, j - cy);
       if (d <= r) ++disc;
       // A band two pixels thick on the arc within 60 degrees of the top.
-      if (d <= r && d > r - 2 && j < cy - r * 0.5) map.at<std::uint8_t>(j, i) = 3;
+      if (d <= r && d > r - 2 && j < cy - r * 0.5) {
+        map.at<std::uint8_t>(j, i) = 3;
+        grey.at<float>(j, i) = d > r - 1 ? 250.0f : 200.0f;  // the echo peaks on the surface
+      }
     }
-  detail::fill_reflector_sections(map, sector, 3, 2 * r, 3);
+  detail::fill_reflector_sections(map, grey, sector, 3, 2 * r, 3);
   int both = 0, ours = 0;
   for (int j = 0; j < 100; ++j)
     for (int i = 0; i < 100; ++i) {
@@ -89,13 +93,14 @@ TEST(ReflectorSections, UpperArcBecomesTheDisc) {
 
 TEST(ReflectorSections, SpecksAndUnknownThicknessChangeNothing) {
   cv::Mat map(20, 20, CV_8U, cv::Scalar(0)), sector(20, 20, CV_8U, cv::Scalar(255));
+  const cv::Mat grey(20, 20, CV_32F, cv::Scalar(100.0f));
   map.at<std::uint8_t>(5, 5) = 3;  // one bright speck
   const cv::Mat before = map.clone();
-  detail::fill_reflector_sections(map, sector, 3, 8.0, 3);
+  detail::fill_reflector_sections(map, grey, sector, 3, 8.0, 3);
   EXPECT_EQ(cv::countNonZero(map != before), 0);
   map.row(5).setTo(3);
   const cv::Mat band = map.clone();
-  detail::fill_reflector_sections(map, sector, 3, 0.0, 3);
+  detail::fill_reflector_sections(map, grey, sector, 3, 0.0, 3);
   EXPECT_EQ(cv::countNonZero(map != band), 0);
 }
 

@@ -303,6 +303,12 @@ const Phantom& BModeSimulator::phantom() const { return impl_->phantom; }
 const Probe& BModeSimulator::probe() const { return impl_->probe; }
 const BModeOptions& BModeSimulator::options() const { return impl_->options; }
 
+double BModeSimulator::psf_sigma_mm() const {
+  const double wavelength_mm = kSoundSpeedMmPerUs / impl_->probe.geometry().frequency_mhz;
+  return 0.5 * (impl_->options.psf_lateral_wavelengths + impl_->options.psf_axial_wavelengths) *
+         wavelength_mm;
+}
+
 SimulatedFrame BModeSimulator::render(const Eigen::Isometry3d& T_reference_probe,
                                       std::uint64_t seed) const {
   return impl_->render(T_reference_probe, seed);

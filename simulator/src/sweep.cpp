@@ -232,6 +232,9 @@ SimulatedSweep simulate_sweep(const BModeSimulator& simulator,
   global.emplace_back("SonoshapeLabelGreyStd", stds);
   if (!thicknesses.empty()) global.emplace_back("SonoshapeLabelThicknessMm", thicknesses);
   global.emplace_back("SonoshapeUnknownLabel", std::to_string(kLabelPixelUnknown));
+  global.emplace_back("SonoshapePsfSigmaMm",
+                      number(std::round(simulator.psf_sigma_mm() * 1000.0) / 1000.0));
+  global.emplace_back("SonoshapeDynamicRangeDb", number(simulator.options().dynamic_range_db));
   global.emplace_back("SonoshapeShadowThresholdDb",
                       number(simulator.options().shadow_threshold_db));
   global.emplace_back("SonoshapeSeed", std::to_string(seed));

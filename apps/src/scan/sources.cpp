@@ -92,6 +92,10 @@ seg::SegmentationConfig learn_sim_models(const sim::BModeSimulator& simulator,
     caster_runs_px.push_back(sim::shadow_caster_runs_px(frame));
   }
   seg::SegmentationConfig config = seg::learn_label_models(grey, visible, base);
+  if (config.psf_sigma_mm == 0.0) {
+    config.psf_sigma_mm = simulator.psf_sigma_mm();
+    config.dynamic_range_db = simulator.options().dynamic_range_db;
+  }
   const auto thickness = sim::shadow_caster_thickness_mm(caster_runs_px, probe.spacing_mm());
   for (seg::LabelModel& m : config.materials)
     if (const auto t = thickness.find(m.label); t != thickness.end()) m.thickness_mm = t->second;

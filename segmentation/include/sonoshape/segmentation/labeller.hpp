@@ -7,12 +7,29 @@
 // `cell_mm`. It refines segment_frame's threshold labelling, which seeds it; shadows and areas
 // without signal stay unknown, and strong reflectors keep the threshold method's sections.
 #include <memory>
+#include <optional>
 
 #include "sonoshape/core/image.hpp"
+#include "sonoshape/core/slice.hpp"
+#include "sonoshape/segmentation/contours.hpp"
 #include "sonoshape/segmentation/config.hpp"
 #include "sonoshape/segmentation/segmenter.hpp"
 
 namespace sonoshape::seg {
+
+/// What the surfaces already reconstructed predict of a new frame: the prior of the graph cut.
+/// Implemented where a reconstruction lives (the scan pipeline, `segment`).
+class LabelPredictor {
+ public:
+  virtual ~LabelPredictor() = default;
+  /// The label map the reconstruction predicts for a frame lying in `plane`, of the geometry's
+  /// size (0 background, material ids, kLabelPixelUnknown outside the sector); none while
+  /// nothing is reconstructed.
+  virtual std::optional<LabelImage> predict(const ImagePlane& plane,
+                                            const ImageGeometry& geometry) = 0;
+  /// Adds the slice of a segmented frame to the reconstruction behind the predictions.
+  virtual void add(const LabeledSlice& slice) = 0;
+};
 
 /// Keeps what the labelling carries from frame to frame: the grid's graph (built for the
 /// geometry once) and the appearance models. One per sweep; not thread-safe.

@@ -74,6 +74,9 @@ class BModeSimulator {
   const Phantom& phantom() const;
   const Probe& probe() const;
   const BModeOptions& options() const;
+  /// The point-spread function's Gaussian sigma (mm): the mean of its lateral and axial sigmas
+  /// at the probe's frequency (what a segmenter's blooming correction needs).
+  double psf_sigma_mm() const;
 
   /// The frame seen by the probe at T_reference_probe; the speckle pattern comes from `seed`
   /// (same seed and pose: the same image, bit for bit).
