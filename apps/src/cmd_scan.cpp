@@ -120,6 +120,11 @@ std::string summary_text(const scan::ScanSummary& s) {
     }
     out << "; see scan.json)";
   }
+  if (s.segmentation_scores) {
+    // The keyframes' label maps against the simulator's truth (indented under the summary).
+    std::istringstream table(seg::format_comparison(*s.segmentation_scores, s.label_names));
+    for (std::string line; std::getline(table, line);) out << "\n  " << line;
+  }
   for (const std::string& e : s.errors) out << "\n  error: " << e;
   return out.str();
 }
@@ -263,7 +268,9 @@ int run_scan(const ScanCommandOptions& options) {
                                             : seg::LabellingMethod::kThreshold;
   std::unique_ptr<scan::SegmentationStage> segmentation;
   try {
-    segmentation = std::make_unique<scan::SegmenterStage>(source->setup);
+    auto segmenter = std::make_unique<scan::SegmenterStage>(source->setup);
+    if (source->truth_of_frame) segmenter->score_against(source->truth_of_frame);
+    segmentation = std::move(segmenter);
   } catch (const std::exception& e) {
     std::cerr << "error: " << e.what() << '\n';
     return 1;

@@ -243,6 +243,8 @@ class CountingSegmenter final : public SegmentationStage {
     inner_.on_meshes(meshes);
     if (!meshes.meshes.empty()) ++meshes_seen;
   }
+  std::optional<seg::LabelComparison> scores() const override { return inner_.scores(); }
+  SegmenterStage& inner() { return inner_; }
   std::atomic<int> meshes_seen{0};
 
  private:
@@ -261,6 +263,8 @@ TEST(ScanSources, GraphCutScanTakesTheReconstructionAsItsPrior) {
   options.real_time = false;
   options.drop_when_behind = false;
   auto segmenter = std::make_unique<CountingSegmenter>(source->setup);
+  ASSERT_TRUE(source->truth_of_frame);
+  segmenter->inner().score_against(source->truth_of_frame);
   CountingSegmenter* counting = segmenter.get();
   ScanPipeline pipeline(std::move(*source), std::move(segmenter),
                         make_reconstructor_stage(engine), options);
@@ -272,6 +276,13 @@ TEST(ScanSources, GraphCutScanTakesTheReconstructionAsItsPrior) {
   EXPECT_GT(summary.counters.slices, 5u);
   EXPECT_GT(counting->meshes_seen.load(), 0);  // later frames had a prior
   EXPECT_TRUE(fs::exists(dir.path() / "label_1.ply"));
+  // Every keyframe was scored against the simulator's truth, and the scores reached scan.json.
+  ASSERT_TRUE(summary.segmentation_scores);
+  EXPECT_GT(summary.segmentation_scores->labels.at(0).dice(), 0.9);
+  EXPECT_GT(summary.segmentation_scores->labels.at(1).dice(), 0.7);
+  std::ifstream json(dir.path() / "scan.json");
+  const std::string text((std::istreambuf_iterator<char>(json)), std::istreambuf_iterator<char>());
+  EXPECT_TRUE(testing::contains(text, "segmentation_scores")) << text;
 }
 
 TEST(ScanSources, SimulatedProbeVanishingMidScanKeepsTheMeshesSoFar) {

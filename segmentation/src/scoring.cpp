@@ -118,6 +118,11 @@ Status check_truth_labels(const acq::SequenceFile& sweep, const std::filesystem:
   return Status::ok();
 }
 
+std::string comparison_json_text(const LabelComparison& comparison,
+                                 const std::map<int, std::string>& names) {
+  return comparison_json(comparison, names).dump();
+}
+
 std::string format_comparison(const LabelComparison& total,
                               const std::map<int, std::string>& names) {
   std::ostringstream text;

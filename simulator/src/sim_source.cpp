@@ -11,6 +11,23 @@ std::uint64_t frame_seed(std::uint64_t seed, std::size_t k) {
   return seed * 0x9E3779B97F4A7C15ull + k * 0xBF58476D1CE4E5B9ull;
 }
 
+void FrameTruthStore::put(std::int64_t index, LabelImage truth) {
+  std::lock_guard lock(mutex_);
+  frames_.emplace_back(index, std::move(truth));
+  while (frames_.size() > capacity_) frames_.pop_front();
+}
+
+std::optional<LabelImage> FrameTruthStore::take(std::int64_t index) {
+  std::lock_guard lock(mutex_);
+  for (auto it = frames_.begin(); it != frames_.end(); ++it)
+    if (it->first == index) {
+      LabelImage truth = std::move(it->second);
+      frames_.erase(it);
+      return truth;
+    }
+  return std::nullopt;
+}
+
 SimFrameSource::SimFrameSource(std::shared_ptr<const BModeSimulator> simulator,
                                Trajectory trajectory, const SimFrameOptions& options,
                                std::string name)
@@ -52,6 +69,7 @@ Result<acq::Polled> SimFrameSource::poll(Frame& frame) {
   const double t_s = static_cast<double>(k) / options_.frame_rate_hz;
   SimulatedFrame rendered = simulator_->render(
       trajectory_.T_reference_probe(t_s), frame_seed(options_.seed, static_cast<std::size_t>(k)));
+  if (options_.truth) options_.truth->put(k, std::move(rendered.truth));
   frame.image = std::move(rendered.bmode);
   frame.timestamp_s = t_s;
   frame.index = k;

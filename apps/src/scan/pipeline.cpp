@@ -575,6 +575,9 @@ ScanSummary ScanPipeline::finish() {
         update_ms_.empty() ? 0.0 : *std::max_element(update_ms_.begin(), update_ms_.end());
     summary.duration_s = end_s_ - start_s_;
     summary.repairs = repairs_;
+    summary.segmentation_scores = segmentation_->scores();
+    summary.label_names[0] = "background";
+    for (const LabelInfo& l : source_.setup.labels) summary.label_names[l.id] = l.name;
   }
   summary.frame_source = source_.frames->describe() + ": " + source_state(*source_.frames);
   summary.pose_source = source_.poses->describe() + ": " + source_state(*source_.poses);

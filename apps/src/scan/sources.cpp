@@ -173,6 +173,10 @@ Result<ScanSource> open_sim(const SourceRequest& request, const std::string& pha
   if (request.sim_fail_after_s >= 0.0)
     frame_options.fail_after_frames =
         static_cast<long>(std::floor(request.sim_fail_after_s * options.frame_rate_hz));
+  frame_options.truth = std::make_shared<sim::FrameTruthStore>();
+  source.truth_of_frame = [truth = frame_options.truth](std::int64_t index) {
+    return truth->take(index);
+  };
   const std::string name = "sim:" + (phantom_spec.empty() ? std::string("default") : phantom_spec);
   source.frames = std::make_unique<sim::SimFrameSource>(simulator, trajectory, frame_options, name);
   // The tracker samples the whole sweep (and a margin for its latency), as sim::acquire does.

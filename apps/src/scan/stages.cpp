@@ -51,12 +51,27 @@ Result<LabeledSlice> SegmenterStage::segment(const TrackedFrame& frame) {
   } else {
     segmentation = seg::segment_frame(image, g, setup_.segmentation);
   }
+  if (truth_of_frame_)
+    if (const auto truth = truth_of_frame_(frame.frame.index)) {
+      scores_.add(seg::compare_labels(*truth, segmentation.labels, g.sector));
+      ++scored_frames_;
+    }
   repairs_.clear();
   auto slice = seg::make_slice(segmentation.labels, g.sector, g.sector_px, plane,
                                setup_.segmentation.simplify_mm, &repairs_);
   if (!slice) return slice.status();
   slice->timestamp_s = frame.frame.timestamp_s;
   return slice;
+}
+
+void SegmenterStage::score_against(
+    std::function<std::optional<LabelImage>(std::int64_t)> truth_of_frame) {
+  truth_of_frame_ = std::move(truth_of_frame);
+}
+
+std::optional<seg::LabelComparison> SegmenterStage::scores() const {
+  if (scored_frames_ == 0) return std::nullopt;
+  return scores_;
 }
 
 std::vector<Repair> SegmenterStage::take_repairs() { return std::exchange(repairs_, {}); }

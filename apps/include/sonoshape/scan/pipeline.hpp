@@ -16,6 +16,7 @@
 #include <array>
 #include <atomic>
 #include <condition_variable>
+#include <functional>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -46,6 +47,9 @@ struct ScanSource {
   /// The tracker latency when the source knows it (a simulated tracker); none: unknown.
   std::optional<double> tracker_latency_s;
   std::string description;  ///< one line for the log
+  /// A simulated source's truth label frame by frame index (none once it is gone), for scoring
+  /// the segmentation as the scan goes; empty for real sources.
+  std::function<std::optional<LabelImage>(std::int64_t frame_index)> truth_of_frame;
 };
 
 /// How the pipeline runs.

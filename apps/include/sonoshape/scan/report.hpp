@@ -10,6 +10,7 @@
 #include "sonoshape/core/repairs.hpp"
 #include "sonoshape/core/scan_state.hpp"
 #include "sonoshape/recon/reconstruct.hpp"
+#include "sonoshape/segmentation/scoring.hpp"
 
 namespace sonoshape::scan {
 
@@ -103,6 +104,9 @@ struct ScanSummary {
   double update_ms_max = 0.0;
   double duration_s = 0.0;  ///< wall time from start() to the last stage's end
   RepairReport repairs;     ///< what the segmentation repaired
+  /// Simulated sources: the keyframes' label maps against the simulator's truth, summed.
+  std::optional<seg::LabelComparison> segmentation_scores;
+  std::map<int, std::string> label_names;  ///< for the scores' table
 };
 
 }  // namespace sonoshape::scan

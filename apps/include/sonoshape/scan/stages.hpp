@@ -2,8 +2,10 @@
 // The two heavy stages of the scan pipeline behind small interfaces: segmentation (tracked
 // frame -> slice) and reconstruction (slices -> meshes), so that the pipeline can be tested
 // with fakes and the engines swapped without touching the threads.
+#include <functional>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <vector>
 
 #include "sonoshape/core/frame.hpp"
@@ -14,6 +16,7 @@
 #include "sonoshape/recon/reconstructor.hpp"
 #include "sonoshape/scan/setup.hpp"
 #include "sonoshape/segmentation/labeller.hpp"
+#include "sonoshape/segmentation/scoring.hpp"
 
 namespace sonoshape::scan {
 
@@ -31,6 +34,9 @@ class SegmentationStage {
   /// frames. Called from the reconstruction thread: implementations must be thread-safe with
   /// segment(). Ignored by default.
   virtual void on_meshes(const MeshSet& /*meshes*/) {}
+  /// The segmentation's label maps against the truth so far (simulated sources), summed over
+  /// the scored frames; none when nothing was scored. Called after the stage has stopped.
+  virtual std::optional<seg::LabelComparison> scores() const { return std::nullopt; }
 };
 
 /// The segmentation of segmentation/ (seg::segment_frame + seg::make_slice), as
@@ -45,8 +51,14 @@ class SegmenterStage final : public SegmentationStage {
   Result<LabeledSlice> segment(const TrackedFrame& frame) override;
   std::vector<Repair> take_repairs() override;
   void on_meshes(const MeshSet& meshes) override;
+  /// Scores every label map against the truth this gives for its frame (simulated sources).
+  void score_against(std::function<std::optional<LabelImage>(std::int64_t)> truth_of_frame);
+  std::optional<seg::LabelComparison> scores() const override;
 
  private:
+  std::function<std::optional<LabelImage>(std::int64_t)> truth_of_frame_;
+  seg::LabelComparison scores_;
+  std::size_t scored_frames_ = 0;
   ScanSetup setup_;
   std::vector<Repair> repairs_;  // of the last segment()
   std::unique_ptr<seg::GraphCutLabeller> labeller_;  // with the graph-cut method

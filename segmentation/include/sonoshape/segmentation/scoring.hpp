@@ -64,6 +64,11 @@ struct FrameComparison {
 std::string format_comparison(const LabelComparison& total,
                               const std::map<int, std::string>& names);
 
+/// The JSON text of one comparison: {"sector_px", "labels": {id: {dice, truth_px, ours_px,
+/// both_px, name}}, "unknown": {precision, recall, ...}} (NaN as null), as in the report.
+std::string comparison_json_text(const LabelComparison& comparison,
+                                 const std::map<int, std::string>& names);
+
 /// Writes the JSON report {"frames": [{"frame", "labels": {id: {dice, truth_px, ours_px,
 /// both_px}}, "unknown": {precision, recall, ...}}], "total": {...}} (NaN as null) to `path`;
 /// fails naming the file.

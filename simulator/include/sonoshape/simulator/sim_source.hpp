@@ -3,7 +3,10 @@
 // rendered on demand at the trajectory's true pose, at the probe's frame rate in real time or
 // as fast as they render. Its tracker is a tracking::RecordedPoseSource playing sim::track().
 #include <cstdint>
+#include <deque>
 #include <memory>
+#include <mutex>
+#include <optional>
 #include <string>
 
 #include "sonoshape/acquisition/frame_source.hpp"
@@ -11,6 +14,22 @@
 #include "sonoshape/simulator/trajectory.hpp"
 
 namespace sonoshape::sim {
+
+/// The truth label frames of a simulated source's latest frames, by frame index, for scoring
+/// the segmentation live. Thread-safe; keeps the newest `capacity` frames.
+class FrameTruthStore {
+ public:
+  explicit FrameTruthStore(std::size_t capacity = 64) : capacity_(capacity) {}
+  void put(std::int64_t index, LabelImage truth);
+  /// The truth of frame `index` (removed from the store); none when it was never stored or is
+  /// older than the newest `capacity` frames.
+  std::optional<LabelImage> take(std::int64_t index);
+
+ private:
+  std::mutex mutex_;
+  std::size_t capacity_;
+  std::deque<std::pair<std::int64_t, LabelImage>> frames_;
+};
 
 /// What the simulated probe delivers.
 struct SimFrameOptions {
@@ -20,6 +39,8 @@ struct SimFrameOptions {
   /// Fault injection: poll() fails with "probe vanished" once this many frames were delivered
   /// (< 0: never), as when a cable is pulled mid-scan.
   long fail_after_frames = -1;
+  /// When set, every frame's truth label map (SimulatedFrame::truth) is put there.
+  std::shared_ptr<FrameTruthStore> truth;
 };
 
 /// A simulated probe. In real-time playback a frame that could not be rendered in time is
