@@ -204,14 +204,17 @@ class TrakstarTestbed {
       g_error_free(error);
     }
   }
+  // Unplugging answers every ioctl with ENODEV, as the kernel does for a vanished device, but
+  // keeps the emulated node: removing it from the testbed while the source's reader waits in a
+  // transfer leaves that ioctl unanswered for good (umockdev serves it through a socket of the
+  // node), which hung the test under load.
   void unplug() {
     handler.gone = true;
     umockdev_testbed_uevent(testbed_, kSysPath, "remove");
-    umockdev_testbed_remove_device(testbed_, kSysPath);
   }
   void replug() {
-    plug();  // sends "add"
     handler.gone = false;
+    umockdev_testbed_uevent(testbed_, kSysPath, "add");
   }
 
   bool attached() const { return attached_; }
