@@ -4,6 +4,7 @@
 #include <array>
 #include <cmath>
 #include <limits>
+#include <stdexcept>
 #include <string>
 
 #include "sonoshape/core/errors.hpp"
@@ -70,8 +71,27 @@ Arrangement::Arrangement(const Box3& box) : box_(box) {
     }
   }
   cell_bounds_.push_back(box);
-  bsp_.push_back({-1, -1, -1, 0});
+  bsp_.push_back({-1, -1, -1, 0, -1});
   leaf_of_cell_.push_back(0);
+}
+
+Arrangement::Arrangement(const Box3& box, bool on_demand) : Arrangement(box) {
+  if (!on_demand) return;
+  on_demand_ = true;
+  // The box cell becomes the root region: the faces keep their polygons, the cell goes.
+  Region root;
+  for (const int f : cells_[0].faces) {
+    const ArrangementFace& face = faces_[static_cast<std::size_t>(f)];
+    root.faces.push_back({face.plane, 1, face.vertices, face.edge_planes});
+  }
+  root.bounds = box;
+  root.next = planes_.size();
+  regions_.push_back(std::move(root));
+  cells_.clear();
+  faces_.clear();
+  cell_bounds_.clear();
+  leaf_of_cell_.clear();
+  bsp_.assign(1, BspNode{-1, -1, -1, -1, 0});
 }
 
 int Arrangement::add_vertex(const Point3& p) {
@@ -282,9 +302,9 @@ void Arrangement::split_cell(int cell_id, int new_plane, std::vector<int>& chang
   }
   const int leaf = leaf_of_cell_[static_cast<std::size_t>(cell_id)];
   const int neg_leaf = static_cast<int>(bsp_.size());
-  bsp_.push_back({-1, -1, -1, cell_neg});
-  bsp_.push_back({-1, -1, -1, cell_pos});
-  bsp_[static_cast<std::size_t>(leaf)] = {new_plane, neg_leaf, neg_leaf + 1, -1};
+  bsp_.push_back({-1, -1, -1, cell_neg, -1});
+  bsp_.push_back({-1, -1, -1, cell_pos, -1});
+  bsp_[static_cast<std::size_t>(leaf)] = {new_plane, neg_leaf, neg_leaf + 1, -1, -1};
   leaf_of_cell_[static_cast<std::size_t>(cell_neg)] = neg_leaf;
   leaf_of_cell_.push_back(neg_leaf + 1);
   changed.push_back(cell_neg);
@@ -295,6 +315,8 @@ std::vector<int> Arrangement::insert_plane(const Vec3& normal, double offset, in
   if (!(normal.allFinite() && std::isfinite(offset)) || normal.norm() == 0.0)
     throw GeometryError("arrangement: plane of slice " + std::to_string(slice) +
                         " has no valid normal");
+  if (on_demand_ && !cells_.empty())
+    throw std::logic_error("arrangement: a plane inserted after cells were built on demand");
   const Plane3 exact(normal.x(), normal.y(), normal.z(), offset);
   for (std::size_t p = 0; p < planes_.size(); ++p) {
     if (exact == planes_[p].exact || exact == planes_[p].exact.opposite()) {
@@ -306,6 +328,7 @@ std::vector<int> Arrangement::insert_plane(const Vec3& normal, double offset, in
   }
   const int plane_id = static_cast<int>(planes_.size());
   planes_.push_back({normal, offset, slice, exact});
+  if (on_demand_) return {};  // cells are split when construct_cell reaches them
 
   edge_vertex_cache_.clear();
   face_split_cache_.clear();
@@ -337,9 +360,257 @@ std::vector<int> Arrangement::insert_plane(const Vec3& normal, double offset, in
     }
     if (has_pos && has_neg) split_cell(static_cast<int>(c), plane_id, changed);
   }
+  reset_signs();
+  return changed;
+}
+
+void Arrangement::reset_signs() {
   for (const int v : touched_vertices_) sign_cache_[static_cast<std::size_t>(v)] = kUnknownSign;
   touched_vertices_.clear();
-  return changed;
+}
+
+bool Arrangement::region_crossed(const Region& region, int plane_id) {
+  // Quick rejection with the region's double bounds, as insert_plane does for cells.
+  const ArrangementPlane& plane = planes_[static_cast<std::size_t>(plane_id)];
+  const Box3& b = region.bounds;
+  const double scale = plane.normal.cwiseAbs().dot(box_.max.cwiseAbs().cwiseMax(box_.min.cwiseAbs())) +
+                       std::abs(plane.offset);
+  const double center_value = plane.normal.dot(0.5 * (b.min + b.max)) + plane.offset;
+  const double reach = 0.5 * plane.normal.cwiseAbs().dot(b.max - b.min);
+  if (center_value - reach > 1e-9 * scale || center_value + reach < -1e-9 * scale) return false;
+  bool has_pos = false, has_neg = false;
+  for (const RegionFace& face : region.faces) {
+    for (const int v : face.vertices) {
+      const int s = plane_side(plane.exact, v);
+      has_pos |= s > 0;
+      has_neg |= s < 0;
+    }
+    if (has_pos && has_neg) break;
+  }
+  reset_signs();
+  return has_pos && has_neg;
+}
+
+int Arrangement::triple_vertex(int a, int b, int face_plane, int edge_plane, int new_plane) {
+  // One id per edge within a split (the two faces on an edge must agree), and one exact
+  // construction per triple of planes across regions.
+  const auto [edge, edge_new] = edge_vertex_cache_.try_emplace(pair_key(a, b), -1);
+  if (!edge_new) return edge->second;
+  std::array<int, 3> t{face_plane, edge_plane, new_plane};
+  std::sort(t.begin(), t.end());
+  const std::uint64_t key = (static_cast<std::uint64_t>(t[0]) << 42) |
+                            (static_cast<std::uint64_t>(t[1]) << 21) | static_cast<std::uint64_t>(t[2]);
+  const auto found = triple_vertices_.find(key);
+  if (found != triple_vertices_.end()) {
+    edge->second = found->second;
+    sign_cache_[static_cast<std::size_t>(found->second)] = 0;
+    touched_vertices_.push_back(found->second);
+    return found->second;
+  }
+  edge_vertex_cache_.erase(edge);
+  const int id = edge_vertex(a, b, face_plane, edge_plane, new_plane);
+  triple_vertices_.emplace(key, id);
+  return id;
+}
+
+std::pair<int, int> Arrangement::split_region(int id, int new_plane) {
+  Region old = std::move(regions_[static_cast<std::size_t>(id)]);
+  const Plane3& q = planes_[static_cast<std::size_t>(new_plane)].exact;
+  edge_vertex_cache_.clear();
+  Region pos, neg;
+  pos.next = neg.next = old.next;
+  struct DirectedEdge {
+    int from, to, plane;
+  };
+  std::vector<DirectedEdge> section;  // boundary of the new face, counter-clockwise about q
+  for (RegionFace& face : old.faces) {
+    bool has_pos = false, has_neg = false;
+    for (const int v : face.vertices) {
+      const int s = plane_side(q, v);
+      has_pos |= s > 0;
+      has_neg |= s < 0;
+    }
+    const std::size_t n = face.vertices.size();
+    if (has_pos && has_neg) {
+      // The polygon's two parts, as Arrangement::split_face.
+      RegionFace fp{face.plane, face.sigma, {}, {}}, fn{face.plane, face.sigma, {}, {}};
+      int chord_from = -1, chord_to = -1;
+      for (std::size_t i = 0; i < n; ++i) {
+        const int vi = face.vertices[i], vj = face.vertices[(i + 1) % n];
+        const int si = plane_side(q, vi), sj = plane_side(q, vj);
+        const int edge_plane = face.edge_planes[i];
+        int crossing = -1;
+        if ((si > 0 && sj < 0) || (si < 0 && sj > 0))
+          crossing = triple_vertex(vi, vj, face.plane, edge_plane, new_plane);
+        if (si >= 0) {
+          fp.vertices.push_back(vi);
+          fp.edge_planes.push_back(si == 0 && sj < 0 ? new_plane : edge_plane);
+          if (si > 0 && sj < 0) {
+            fp.vertices.push_back(crossing);
+            fp.edge_planes.push_back(new_plane);
+          }
+        } else if (sj > 0) {
+          fp.vertices.push_back(crossing);
+          fp.edge_planes.push_back(edge_plane);
+        }
+        if (si <= 0) {
+          fn.vertices.push_back(vi);
+          fn.edge_planes.push_back(si == 0 && sj > 0 ? new_plane : edge_plane);
+          if (si < 0 && sj > 0) {
+            fn.vertices.push_back(crossing);
+            fn.edge_planes.push_back(new_plane);
+          }
+        } else if (sj < 0) {
+          fn.vertices.push_back(crossing);
+          fn.edge_planes.push_back(edge_plane);
+        }
+      }
+      for (std::size_t k = 0; k < fp.vertices.size(); ++k)
+        if (fp.edge_planes[k] == new_plane) {
+          chord_from = fp.vertices[k];
+          chord_to = fp.vertices[(k + 1) % fp.vertices.size()];
+        }
+      if (chord_from < 0 || fp.vertices.size() < 3 || fn.vertices.size() < 3)
+        throw GeometryError("arrangement: inconsistent split of a face on plane " + std::to_string(face.plane));
+      // The region lies on side sigma of the face's plane: its stored order is then clockwise
+      // seen from outside the region when sigma > 0, which flips the chord's direction.
+      if (face.sigma < 0) section.push_back({chord_from, chord_to, face.plane});
+      else section.push_back({chord_to, chord_from, face.plane});
+      pos.faces.push_back(std::move(fp));
+      neg.faces.push_back(std::move(fn));
+    } else if (has_pos || has_neg) {
+      for (std::size_t i = 0; i < n; ++i) {
+        const int a = face.vertices[i], b = face.vertices[(i + 1) % n];
+        if (plane_side(q, a) != 0 || plane_side(q, b) != 0) continue;
+        const bool forward = has_pos ? face.sigma < 0 : face.sigma > 0;
+        section.push_back(forward ? DirectedEdge{a, b, face.plane} : DirectedEdge{b, a, face.plane});
+      }
+      (has_pos ? pos : neg).faces.push_back(std::move(face));
+    } else {
+      throw GeometryError("arrangement: a face of a crossed region lies on the new plane");
+    }
+  }
+  std::unordered_map<int, std::pair<int, int>> next;  // from -> (to, plane)
+  for (const DirectedEdge& e : section) {
+    const auto [it, inserted] = next.try_emplace(e.from, e.to, e.plane);
+    if (!inserted && it->second.first != e.to)
+      throw GeometryError("arrangement: a region's cross-section by plane " + std::to_string(new_plane) +
+                          " is not a simple cycle");
+  }
+  RegionFace section_face{new_plane, 1, {}, {}};
+  int v = next.begin()->first;
+  for (std::size_t k = 0; k < next.size(); ++k) {
+    const auto it = next.find(v);
+    if (it == next.end())
+      throw GeometryError("arrangement: open cross-section of a region by plane " + std::to_string(new_plane));
+    section_face.vertices.push_back(v);
+    section_face.edge_planes.push_back(it->second.second);
+    v = it->second.first;
+  }
+  if (v != section_face.vertices.front() || section_face.vertices.size() < 3)
+    throw GeometryError("arrangement: the cross-section of a region by plane " + std::to_string(new_plane) +
+                        " does not close");
+  reset_signs();
+  neg.faces.push_back(section_face);
+  neg.faces.back().sigma = -1;
+  pos.faces.push_back(std::move(section_face));
+  for (Region* r : {&neg, &pos}) {
+    r->bounds = {Vec3::Constant(std::numeric_limits<double>::infinity()),
+                 Vec3::Constant(-std::numeric_limits<double>::infinity())};
+    for (const RegionFace& face : r->faces)
+      for (const int vid : face.vertices) {
+        r->bounds.min = r->bounds.min.cwiseMin(vertex(vid));
+        r->bounds.max = r->bounds.max.cwiseMax(vertex(vid));
+      }
+  }
+  regions_[static_cast<std::size_t>(id)] = std::move(neg);
+  int pos_id;
+  if (!free_regions_.empty()) {
+    pos_id = free_regions_.back();
+    free_regions_.pop_back();
+    regions_[static_cast<std::size_t>(pos_id)] = std::move(pos);
+  } else {
+    pos_id = static_cast<int>(regions_.size());
+    regions_.push_back(std::move(pos));
+  }
+  return {id, pos_id};
+}
+
+int Arrangement::finish_region(int id) {
+  Region& region = regions_[static_cast<std::size_t>(id)];
+  const int cell = static_cast<int>(cells_.size());
+  cells_.push_back({});
+  for (RegionFace& face : region.faces) {
+    std::vector<int> sorted = face.vertices;
+    std::sort(sorted.begin(), sorted.end());
+    std::uint64_t key = static_cast<std::uint64_t>(face.plane) * 0x9E3779B97F4A7C15ull;
+    for (const int v : sorted) key = (key ^ static_cast<std::uint64_t>(v)) * 0x100000001B3ull;
+    int shared = -1;
+    const auto [first, last] = faces_by_key_.equal_range(key);
+    for (auto it = first; it != last && shared < 0; ++it) {
+      ArrangementFace& f = faces_[static_cast<std::size_t>(it->second)];
+      int& side = face.sigma > 0 ? f.cell_positive : f.cell_negative;
+      if (f.plane != face.plane || side >= 0 || f.vertices.size() != sorted.size()) continue;
+      std::vector<int> other = f.vertices;
+      std::sort(other.begin(), other.end());
+      if (other != sorted) continue;
+      side = cell;
+      shared = it->second;
+    }
+    if (shared >= 0) {
+      cells_.back().faces.push_back(shared);
+      continue;
+    }
+    faces_by_key_.emplace(key, static_cast<int>(faces_.size()));
+    cells_.back().faces.push_back(static_cast<int>(faces_.size()));
+    ArrangementFace f;
+    f.plane = face.plane;
+    f.vertices = std::move(face.vertices);
+    f.edge_planes = std::move(face.edge_planes);
+    // The neighbour across is not built yet: it takes this face when it is.
+    (face.sigma > 0 ? f.cell_positive : f.cell_negative) = cell;
+    faces_.push_back(std::move(f));
+  }
+  cell_bounds_.push_back(region.bounds);
+  region = Region{};
+  free_regions_.push_back(id);
+  return cell;
+}
+
+int Arrangement::construct_cell(const Vec3& p) {
+  if (!on_demand_) return locate(p);
+  int node = 0;
+  for (;;) {
+    BspNode n = bsp_[static_cast<std::size_t>(node)];
+    if (n.plane >= 0) {
+      const ArrangementPlane& plane = planes_[static_cast<std::size_t>(n.plane)];
+      node = plane.normal.dot(p) + plane.offset >= 0.0 ? n.positive : n.negative;
+      continue;
+    }
+    if (n.cell >= 0) return n.cell;
+    // A region not refined yet: the first plane still crossing it splits it; with none left it
+    // is a cell of the full arrangement.
+    Region& region = regions_[static_cast<std::size_t>(n.region)];
+    int crossing = -1;
+    for (; region.next < planes_.size(); ++region.next) {
+      if (region_crossed(region, static_cast<int>(region.next))) {
+        crossing = static_cast<int>(region.next++);
+        break;
+      }
+    }
+    if (crossing < 0) {
+      const int cell = finish_region(n.region);
+      bsp_[static_cast<std::size_t>(node)].cell = cell;
+      bsp_[static_cast<std::size_t>(node)].region = -1;
+      leaf_of_cell_.push_back(node);
+      return cell;
+    }
+    const auto [neg, pos] = split_region(n.region, crossing);
+    const int first = static_cast<int>(bsp_.size());
+    bsp_.push_back({-1, -1, -1, -1, neg});
+    bsp_.push_back({-1, -1, -1, -1, pos});
+    bsp_[static_cast<std::size_t>(node)] = {crossing, first, first + 1, -1, -1};
+  }
 }
 
 std::vector<int> Arrangement::faces_split_by_last_plane() const {

@@ -8,6 +8,14 @@
 // so near-parallel planes, three planes through a line, four through a point and planes through
 // existing vertices all give a consistent cell complex. Doubles are used only after the
 // combinatorics is fixed (evaluation, face images).
+//
+// On demand (issue 24): the full arrangement of k planes has O(k^3) cells, of which the octree
+// evaluates only those the surface passes through. An on-demand arrangement records the planes
+// and builds a cell only when construct_cell() is asked for a point in it: a lazily refined BSP
+// whose leaves are convex regions with the planes that may still cross them; a query splits its
+// leaf by those planes in turn (the same exact predicates and depth-one vertex constructions),
+// following the point's side, until no plane crosses the region. That region is the cell of the
+// full arrangement containing the point; it shares the faces its built neighbours have.
 #include <CGAL/Exact_predicates_exact_constructions_kernel.h>
 
 #include <cstdint>
@@ -49,6 +57,18 @@ class Arrangement {
  public:
   /// The box as one cell with six faces. Throws GeometryError for an empty box.
   explicit Arrangement(const Box3& box);
+  /// The box as one region whose cells are built on demand (construct_cell) when `on_demand`.
+  Arrangement(const Box3& box, bool on_demand);
+
+  /// True when cells are built on demand: insert_plane then only records the plane, cells and
+  /// faces exist only once construct_cell() built them, and locate() must not be used.
+  bool on_demand() const { return on_demand_; }
+  /// On demand: the cell of the full arrangement containing p (p inside the box), built with its
+  /// faces on first use, found in O(depth) afterwards. Points on a plane may go to either side,
+  /// as locate(). Not thread-safe: call it from one thread, then read cells concurrently.
+  int construct_cell(const Vec3& p);
+  /// On demand: the leaves of the lazy BSP (built cells and regions not yet refined).
+  std::size_t region_count() const { return regions_.size() - free_regions_.size() + cells_.size(); }
 
   /// Adds the plane n.x + d = 0 (exact doubles) carrying `slice`, splitting every cell it crosses.
   /// Returns the ids of the cells created or changed (both halves of every split cell). A plane
@@ -93,12 +113,37 @@ class Arrangement {
     int plane = -1;  // -1: leaf
     int negative = -1, positive = -1;
     int cell = -1;
+    int region = -1;  // on demand: a leaf not refined yet (cell -1)
+  };
+  // On demand: a face of one region, on `plane`, counter-clockwise about the plane's normal as
+  // ArrangementFace; the region lies on side `sigma` (+1 / -1) of the plane.
+  struct RegionFace {
+    int plane = -1;
+    int sigma = 1;
+    std::vector<int> vertices;
+    std::vector<int> edge_planes;
+  };
+  // On demand: a convex region of the lazy BSP; the planes from index `next` on may cross it.
+  struct Region {
+    std::vector<RegionFace> faces;
+    Box3 bounds;
+    std::size_t next = 0;
   };
   int add_vertex(const ExactKernel::Point_3& p);
   int plane_side(const ExactKernel::Plane_3& plane, int vertex_id);
   int edge_vertex(int a, int b, int face_plane, int edge_plane, int new_plane);
   FaceSplit split_face(int face_id, int new_plane);
   void split_cell(int cell_id, int new_plane, std::vector<int>& changed);
+  // On demand: whether `plane` has vertices of `region` strictly on both sides.
+  bool region_crossed(const Region& region, int plane);
+  // On demand: splits region `id` by `plane` into two regions (ids returned as negative,
+  // positive); the parent's slot is reused for the negative part.
+  std::pair<int, int> split_region(int id, int plane);
+  // On demand: turns a region no plane crosses into a cell; a face the neighbour across it
+  // already built is shared.
+  int finish_region(int id);
+  int triple_vertex(int a, int b, int face_plane, int edge_plane, int new_plane);
+  void reset_signs();
 
   Box3 box_;
   std::vector<ArrangementPlane> planes_;
@@ -109,6 +154,15 @@ class Arrangement {
   std::vector<Box3> cell_bounds_;  // double bounds of each cell's vertices, for quick rejection
   std::vector<BspNode> bsp_;
   std::vector<int> leaf_of_cell_;
+
+  bool on_demand_ = false;
+  std::vector<Region> regions_;
+  std::vector<int> free_regions_;
+  // Exact vertices by their three planes (sorted), so that regions sharing a vertex share it.
+  std::unordered_map<std::uint64_t, int> triple_vertices_;
+  // Built faces by a hash of their plane and sorted vertices: the two cells on a face share it
+  // (and its image) when both are built.
+  std::unordered_multimap<std::uint64_t, int> faces_by_key_;
 
   // Per-insertion scratch state.
   std::vector<std::int8_t> sign_cache_;  // 2: not computed

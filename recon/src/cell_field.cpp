@@ -354,18 +354,26 @@ void CellField::build_face_image(int face_id) {
   image.fully_unknown = unknown_area >= (1.0 - 1e-9) * std::abs(signed_area(polygon));
 }
 
-int CellField::evaluate(const Vec3& p, double* out) const {
-  const int n = function_count();
-  const std::size_t fc = static_cast<std::size_t>(n);
+bool CellField::outside_box(const Vec3& p, double* out) const {
   const Box3& box = arrangement_.box();
-  if (!((p.array() > box.min.array()).all() && (p.array() < box.max.array()).all())) {
-    out[0] = 1.0;
-    for (int l = 1; l < n; ++l) out[l] = -1.0;
-    return -1;
-  }
+  if ((p.array() > box.min.array()).all() && (p.array() < box.max.array()).all()) return false;
+  out[0] = 1.0;
+  for (int l = 1; l < function_count(); ++l) out[l] = -1.0;
+  return true;
+}
+
+int CellField::evaluate(const Vec3& p, double* out) const {
+  if (outside_box(p, out)) return -1;
   // Evaluations come in runs of nearby points: the last cell this thread found is the first guess.
   thread_local int last_cell = -1;
-  const int cell = last_cell = arrangement_.locate(p, last_cell);
+  last_cell = arrangement_.locate(p, last_cell);
+  return evaluate_in(last_cell, p, out);
+}
+
+int CellField::evaluate_in(int cell, const Vec3& p, double* out) const {
+  if (outside_box(p, out)) return -1;
+  const int n = function_count();
+  const std::size_t fc = static_cast<std::size_t>(n);
   // w[l] accumulates the mean-value weight of label l: its known parts of the faces plus its
   // share of the completed unknown triangles; w[0] only the completed share of the outside.
   constexpr int kMaxStack = 16;

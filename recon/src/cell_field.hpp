@@ -97,6 +97,10 @@ class CellField {
   /// f_l(p) for l = 0..K into `out` (function_count() doubles), each in [-1, 1]; outside the
   /// box (and on it) the outside label holds. Returns the cell used (-1 outside the box).
   int evaluate(const Vec3& p, double* out) const;
+  /// evaluate() in a given cell: `cell` must contain p (the arrangement's locate or
+  /// construct_cell of p), with the images of its faces built (refresh after construct_cell).
+  /// Returns `cell` (-1 outside the box).
+  int evaluate_in(int cell, const Vec3& p, double* out) const;
   /// Unknown-region statistics: triangles, cell groups, completion seconds.
   std::size_t unknown_triangle_count() const { return triangles_.size(); }
   std::size_t group_count() const { return group_count_; }
@@ -128,6 +132,7 @@ class CellField {
     std::vector<std::uint64_t> hashes;
   };
   void build_face_image(int face_id);
+  bool outside_box(const Vec3& p, double* out) const;
   // Gives a long part its far-field tree.
   void add_tree(FaceImage::Part& part);
   // The plain edge sum (projected_angle_plain) of a part, through its tree when it has one. The
