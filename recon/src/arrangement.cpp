@@ -392,36 +392,108 @@ bool Arrangement::region_crossed(const Region& region, int plane_id) {
 }
 
 int Arrangement::triple_vertex(int a, int b, int face_plane, int edge_plane, int new_plane) {
-  // One id per edge within a split (the two faces on an edge must agree), and one exact
-  // construction per triple of planes across regions.
-  const auto [edge, edge_new] = edge_vertex_cache_.try_emplace(pair_key(a, b), -1);
-  if (!edge_new) return edge->second;
+  // One id per edge within a split (the two faces on an edge must agree: a few entries, searched
+  // in order), and one exact construction per triple of planes across regions.
+  const std::uint64_t edge = pair_key(a, b);
+  for (const auto& [key, id] : split_vertices_)
+    if (key == edge) return id;
   std::array<int, 3> t{face_plane, edge_plane, new_plane};
   std::sort(t.begin(), t.end());
   const std::uint64_t key = (static_cast<std::uint64_t>(t[0]) << 42) |
                             (static_cast<std::uint64_t>(t[1]) << 21) | static_cast<std::uint64_t>(t[2]);
-  const auto found = triple_vertices_.find(key);
-  if (found != triple_vertices_.end()) {
-    edge->second = found->second;
-    sign_cache_[static_cast<std::size_t>(found->second)] = 0;
-    touched_vertices_.push_back(found->second);
-    return found->second;
+  const auto [it, inserted] = triple_vertices_.try_emplace(key, -1);
+  if (inserted) {
+    edge_vertex_cache_.clear();
+    it->second = edge_vertex(a, b, face_plane, edge_plane, new_plane);
+  } else {
+    sign_cache_[static_cast<std::size_t>(it->second)] = 0;  // on the new plane
+    touched_vertices_.push_back(it->second);
   }
-  edge_vertex_cache_.erase(edge);
-  const int id = edge_vertex(a, b, face_plane, edge_plane, new_plane);
-  triple_vertices_.emplace(key, id);
-  return id;
+  split_vertices_.emplace_back(edge, it->second);
+  return it->second;
+}
+
+Arrangement::DirectedEdge Arrangement::split_region_face(const RegionFace& face, int new_plane, RegionFace& pos,
+                                                         RegionFace& neg) {
+  // The polygon's two parts, as split_face: each kept vertex is pushed with the plane of the
+  // edge leaving it in the new polygon; the part on a side leaves it at one crossing point and
+  // re-enters at another, and the edge between them is the chord on the new plane.
+  const Plane3& q = planes_[static_cast<std::size_t>(new_plane)].exact;
+  const std::size_t n = face.vertices.size();
+  for (RegionFace* part : {&pos, &neg}) {
+    *part = RegionFace{face.plane, face.sigma, {}, {}};
+    part->vertices.reserve(n + 1);
+    part->edge_planes.reserve(n + 1);
+  }
+  for (std::size_t i = 0; i < n; ++i) {
+    const int vi = face.vertices[i], vj = face.vertices[(i + 1) % n];
+    const int si = plane_side(q, vi), sj = plane_side(q, vj);
+    const int edge_plane = face.edge_planes[i];
+    int crossing = -1;
+    if ((si > 0 && sj < 0) || (si < 0 && sj > 0))
+      crossing = triple_vertex(vi, vj, face.plane, edge_plane, new_plane);
+    for (const int side : {1, -1}) {
+      RegionFace& part = side > 0 ? pos : neg;
+      if (si * side >= 0) {
+        part.vertices.push_back(vi);
+        part.edge_planes.push_back(si == 0 && sj * side < 0 ? new_plane : edge_plane);
+        if (si * side > 0 && sj * side < 0) {
+          part.vertices.push_back(crossing);
+          part.edge_planes.push_back(new_plane);
+        }
+      } else if (sj * side > 0) {
+        part.vertices.push_back(crossing);
+        part.edge_planes.push_back(edge_plane);
+      }
+    }
+  }
+  int chord_from = -1, chord_to = -1;
+  for (std::size_t k = 0; k < pos.vertices.size(); ++k)
+    if (pos.edge_planes[k] == new_plane) {
+      chord_from = pos.vertices[k];
+      chord_to = pos.vertices[(k + 1) % pos.vertices.size()];
+    }
+  if (chord_from < 0 || pos.vertices.size() < 3 || neg.vertices.size() < 3)
+    throw GeometryError("arrangement: inconsistent split of a face on plane " + std::to_string(face.plane));
+  // The region lies on side sigma of the face's plane: its stored order is then clockwise seen
+  // from outside the region when sigma > 0, which flips the chord's direction.
+  return face.sigma < 0 ? DirectedEdge{chord_from, chord_to, face.plane} : DirectedEdge{chord_to, chord_from, face.plane};
+}
+
+Arrangement::RegionFace Arrangement::close_section(const std::vector<DirectedEdge>& section, int new_plane) const {
+  // Chains the section's edges (an edge on the plane may come from two faces) into one cycle,
+  // counter-clockwise about the new plane, starting at the first face's edge (so the polygon
+  // does not depend on vertex ids, which depend on the order cells were built in).
+  auto fail = [&](const char* what) {
+    return GeometryError(std::string("arrangement: the cross-section of a region by plane ") +
+                         std::to_string(new_plane) + " " + what);
+  };
+  for (std::size_t i = 0; i < section.size(); ++i)
+    for (std::size_t j = 0; j < i; ++j)
+      if (section[i].from == section[j].from && section[i].to != section[j].to) throw fail("is not a simple cycle");
+  RegionFace face{new_plane, 1, {}, {}};
+  face.vertices.reserve(section.size());
+  face.edge_planes.reserve(section.size());
+  int v = section.front().from;
+  do {
+    const auto next = std::find_if(section.begin(), section.end(), [&](const DirectedEdge& e) { return e.from == v; });
+    if (next == section.end()) throw fail("is open");
+    face.vertices.push_back(v);
+    face.edge_planes.push_back(next->plane);
+    v = next->to;
+  } while (v != face.vertices.front() && face.vertices.size() <= section.size());
+  if (v != face.vertices.front() || face.vertices.size() < 3) throw fail("does not close");
+  return face;
 }
 
 std::pair<int, int> Arrangement::split_region(int id, int new_plane) {
   Region old = std::move(regions_[static_cast<std::size_t>(id)]);
   const Plane3& q = planes_[static_cast<std::size_t>(new_plane)].exact;
-  edge_vertex_cache_.clear();
+  split_vertices_.clear();
   Region pos, neg;
   pos.next = neg.next = old.next;
-  struct DirectedEdge {
-    int from, to, plane;
-  };
+  pos.faces.reserve(old.faces.size() + 1);
+  neg.faces.reserve(old.faces.size() + 1);
   std::vector<DirectedEdge> section;  // boundary of the new face, counter-clockwise about q
   for (RegionFace& face : old.faces) {
     bool has_pos = false, has_neg = false;
@@ -430,55 +502,13 @@ std::pair<int, int> Arrangement::split_region(int id, int new_plane) {
       has_pos |= s > 0;
       has_neg |= s < 0;
     }
-    const std::size_t n = face.vertices.size();
     if (has_pos && has_neg) {
-      // The polygon's two parts, as Arrangement::split_face.
-      RegionFace fp{face.plane, face.sigma, {}, {}}, fn{face.plane, face.sigma, {}, {}};
-      int chord_from = -1, chord_to = -1;
-      for (std::size_t i = 0; i < n; ++i) {
-        const int vi = face.vertices[i], vj = face.vertices[(i + 1) % n];
-        const int si = plane_side(q, vi), sj = plane_side(q, vj);
-        const int edge_plane = face.edge_planes[i];
-        int crossing = -1;
-        if ((si > 0 && sj < 0) || (si < 0 && sj > 0))
-          crossing = triple_vertex(vi, vj, face.plane, edge_plane, new_plane);
-        if (si >= 0) {
-          fp.vertices.push_back(vi);
-          fp.edge_planes.push_back(si == 0 && sj < 0 ? new_plane : edge_plane);
-          if (si > 0 && sj < 0) {
-            fp.vertices.push_back(crossing);
-            fp.edge_planes.push_back(new_plane);
-          }
-        } else if (sj > 0) {
-          fp.vertices.push_back(crossing);
-          fp.edge_planes.push_back(edge_plane);
-        }
-        if (si <= 0) {
-          fn.vertices.push_back(vi);
-          fn.edge_planes.push_back(si == 0 && sj > 0 ? new_plane : edge_plane);
-          if (si < 0 && sj > 0) {
-            fn.vertices.push_back(crossing);
-            fn.edge_planes.push_back(new_plane);
-          }
-        } else if (sj < 0) {
-          fn.vertices.push_back(crossing);
-          fn.edge_planes.push_back(edge_plane);
-        }
-      }
-      for (std::size_t k = 0; k < fp.vertices.size(); ++k)
-        if (fp.edge_planes[k] == new_plane) {
-          chord_from = fp.vertices[k];
-          chord_to = fp.vertices[(k + 1) % fp.vertices.size()];
-        }
-      if (chord_from < 0 || fp.vertices.size() < 3 || fn.vertices.size() < 3)
-        throw GeometryError("arrangement: inconsistent split of a face on plane " + std::to_string(face.plane));
-      // The region lies on side sigma of the face's plane: its stored order is then clockwise
-      // seen from outside the region when sigma > 0, which flips the chord's direction.
-      if (face.sigma < 0) section.push_back({chord_from, chord_to, face.plane});
-      else section.push_back({chord_to, chord_from, face.plane});
-      pos.faces.push_back(std::move(fp));
-      neg.faces.push_back(std::move(fn));
+      pos.faces.emplace_back();
+      neg.faces.emplace_back();
+      section.push_back(split_region_face(face, new_plane, pos.faces.back(), neg.faces.back()));
     } else if (has_pos || has_neg) {
+      // An edge of this face lying on the new plane bounds the new face too.
+      const std::size_t n = face.vertices.size();
       for (std::size_t i = 0; i < n; ++i) {
         const int a = face.vertices[i], b = face.vertices[(i + 1) % n];
         if (plane_side(q, a) != 0 || plane_side(q, b) != 0) continue;
@@ -490,26 +520,8 @@ std::pair<int, int> Arrangement::split_region(int id, int new_plane) {
       throw GeometryError("arrangement: a face of a crossed region lies on the new plane");
     }
   }
-  std::unordered_map<int, std::pair<int, int>> next;  // from -> (to, plane)
-  for (const DirectedEdge& e : section) {
-    const auto [it, inserted] = next.try_emplace(e.from, e.to, e.plane);
-    if (!inserted && it->second.first != e.to)
-      throw GeometryError("arrangement: a region's cross-section by plane " + std::to_string(new_plane) +
-                          " is not a simple cycle");
-  }
-  RegionFace section_face{new_plane, 1, {}, {}};
-  int v = next.begin()->first;
-  for (std::size_t k = 0; k < next.size(); ++k) {
-    const auto it = next.find(v);
-    if (it == next.end())
-      throw GeometryError("arrangement: open cross-section of a region by plane " + std::to_string(new_plane));
-    section_face.vertices.push_back(v);
-    section_face.edge_planes.push_back(it->second.second);
-    v = it->second.first;
-  }
-  if (v != section_face.vertices.front() || section_face.vertices.size() < 3)
-    throw GeometryError("arrangement: the cross-section of a region by plane " + std::to_string(new_plane) +
-                        " does not close");
+  if (section.empty()) throw GeometryError("arrangement: a crossed region has no cross-section");
+  RegionFace section_face = close_section(section, new_plane);
   reset_signs();
   neg.faces.push_back(section_face);
   neg.faces.back().sigma = -1;
@@ -540,8 +552,10 @@ int Arrangement::finish_region(int id) {
   Region& region = regions_[static_cast<std::size_t>(id)];
   const int cell = static_cast<int>(cells_.size());
   cells_.push_back({});
+  cells_.back().faces.reserve(region.faces.size());
+  std::vector<int> sorted, other;
   for (RegionFace& face : region.faces) {
-    std::vector<int> sorted = face.vertices;
+    sorted = face.vertices;
     std::sort(sorted.begin(), sorted.end());
     std::uint64_t key = static_cast<std::uint64_t>(face.plane) * 0x9E3779B97F4A7C15ull;
     for (const int v : sorted) key = (key ^ static_cast<std::uint64_t>(v)) * 0x100000001B3ull;
@@ -551,7 +565,7 @@ int Arrangement::finish_region(int id) {
       ArrangementFace& f = faces_[static_cast<std::size_t>(it->second)];
       int& side = face.sigma > 0 ? f.cell_positive : f.cell_negative;
       if (f.plane != face.plane || side >= 0 || f.vertices.size() != sorted.size()) continue;
-      std::vector<int> other = f.vertices;
+      other = f.vertices;
       std::sort(other.begin(), other.end());
       if (other != sorted) continue;
       side = cell;
@@ -565,6 +579,13 @@ int Arrangement::finish_region(int id) {
     cells_.back().faces.push_back(static_cast<int>(faces_.size()));
     ArrangementFace f;
     f.plane = face.plane;
+    // Starting at the vertex of smallest coordinates: the face's polygon, and so its image, are
+    // the same whichever of its two cells was built first.
+    const auto start = std::min_element(face.vertices.begin(), face.vertices.end(), [&](int a, int b) {
+      return std::lexicographical_compare(vertex(a).data(), vertex(a).data() + 3, vertex(b).data(), vertex(b).data() + 3);
+    }) - face.vertices.begin();
+    std::rotate(face.vertices.begin(), face.vertices.begin() + start, face.vertices.end());
+    std::rotate(face.edge_planes.begin(), face.edge_planes.begin() + start, face.edge_planes.end());
     f.vertices = std::move(face.vertices);
     f.edge_planes = std::move(face.edge_planes);
     // The neighbour across is not built yet: it takes this face when it is.

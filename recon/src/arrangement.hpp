@@ -123,6 +123,9 @@ class Arrangement {
     std::vector<int> vertices;
     std::vector<int> edge_planes;
   };
+  struct DirectedEdge {
+    int from, to, plane;
+  };
   // On demand: a convex region of the lazy BSP; the planes from index `next` on may cross it.
   struct Region {
     std::vector<RegionFace> faces;
@@ -142,6 +145,11 @@ class Arrangement {
   // On demand: turns a region no plane crosses into a cell; a face the neighbour across it
   // already built is shared.
   int finish_region(int id);
+  // On demand: splits a face of a region by `new_plane` into `pos` and `neg`; returns the chord
+  // as an edge of the cross-section (counter-clockwise about the new plane).
+  DirectedEdge split_region_face(const RegionFace& face, int new_plane, RegionFace& pos, RegionFace& neg);
+  // On demand: the cross-section's edges chained into the new face.
+  RegionFace close_section(const std::vector<DirectedEdge>& section, int new_plane) const;
   int triple_vertex(int a, int b, int face_plane, int edge_plane, int new_plane);
   void reset_signs();
 
@@ -163,6 +171,7 @@ class Arrangement {
   // Built faces by a hash of their plane and sorted vertices: the two cells on a face share it
   // (and its image) when both are built.
   std::unordered_multimap<std::uint64_t, int> faces_by_key_;
+  std::vector<std::pair<std::uint64_t, int>> split_vertices_;  // per split: edge -> crossing vertex
 
   // Per-insertion scratch state.
   std::vector<std::int8_t> sign_cache_;  // 2: not computed
