@@ -82,7 +82,9 @@ Arrangement::Arrangement(const Box3& box, bool on_demand) : Arrangement(box) {
   Region root;
   for (const int f : cells_[0].faces) {
     const ArrangementFace& face = faces_[static_cast<std::size_t>(f)];
-    root.faces.push_back({face.plane, 1, face.vertices, face.edge_planes});
+    root.faces.insert(root.faces.end(), {face.plane, 1, static_cast<int>(face.vertices.size())});
+    for (std::size_t i = 0; i < face.vertices.size(); ++i)
+      root.faces.insert(root.faces.end(), {face.vertices[i], face.edge_planes[i]});
   }
   root.bounds = box;
   root.next = planes_.size();
@@ -379,13 +381,14 @@ bool Arrangement::region_crossed(const Region& region, int plane_id) {
   const double reach = 0.5 * plane.normal.cwiseAbs().dot(b.max - b.min);
   if (center_value - reach > 1e-9 * scale || center_value + reach < -1e-9 * scale) return false;
   bool has_pos = false, has_neg = false;
-  for (const RegionFace& face : region.faces) {
-    for (const int v : face.vertices) {
-      const int s = plane_side(plane.exact, v);
+  for (std::size_t at = 0; at < region.faces.size() && !(has_pos && has_neg);) {
+    const RegionFace face = region_face(region.faces, at);
+    for (int i = 0; i < face.count; ++i) {
+      const int s = plane_side(plane.exact, face.vertex(i));
       has_pos |= s > 0;
       has_neg |= s < 0;
     }
-    if (has_pos && has_neg) break;
+    at += face.size();
   }
   reset_signs();
   return has_pos && has_neg;
@@ -413,54 +416,51 @@ int Arrangement::triple_vertex(int a, int b, int face_plane, int edge_plane, int
   return it->second;
 }
 
-Arrangement::DirectedEdge Arrangement::split_region_face(const RegionFace& face, int new_plane, RegionFace& pos,
-                                                         RegionFace& neg) {
+Arrangement::DirectedEdge Arrangement::split_region_face(const RegionFace& face, int new_plane,
+                                                         std::vector<int>& pos, std::vector<int>& neg) {
   // The polygon's two parts, as split_face: each kept vertex is pushed with the plane of the
   // edge leaving it in the new polygon; the part on a side leaves it at one crossing point and
   // re-enters at another, and the edge between them is the chord on the new plane.
   const Plane3& q = planes_[static_cast<std::size_t>(new_plane)].exact;
-  const std::size_t n = face.vertices.size();
-  for (RegionFace* part : {&pos, &neg}) {
-    *part = RegionFace{face.plane, face.sigma, {}, {}};
-    part->vertices.reserve(n + 1);
-    part->edge_planes.reserve(n + 1);
-  }
-  for (std::size_t i = 0; i < n; ++i) {
-    const int vi = face.vertices[i], vj = face.vertices[(i + 1) % n];
+  const int n = face.count;
+  const std::size_t pos_at = pos.size(), neg_at = neg.size();
+  pos.insert(pos.end(), {face.plane, face.sigma, 0});
+  neg.insert(neg.end(), {face.plane, face.sigma, 0});
+  for (int i = 0; i < n; ++i) {
+    const int vi = face.vertex(i), vj = face.vertex((i + 1) % n);
     const int si = plane_side(q, vi), sj = plane_side(q, vj);
-    const int edge_plane = face.edge_planes[i];
+    const int edge_plane = face.edge_plane(i);
     int crossing = -1;
     if ((si > 0 && sj < 0) || (si < 0 && sj > 0))
       crossing = triple_vertex(vi, vj, face.plane, edge_plane, new_plane);
     for (const int side : {1, -1}) {
-      RegionFace& part = side > 0 ? pos : neg;
+      std::vector<int>& part = side > 0 ? pos : neg;
       if (si * side >= 0) {
-        part.vertices.push_back(vi);
-        part.edge_planes.push_back(si == 0 && sj * side < 0 ? new_plane : edge_plane);
-        if (si * side > 0 && sj * side < 0) {
-          part.vertices.push_back(crossing);
-          part.edge_planes.push_back(new_plane);
-        }
+        part.insert(part.end(), {vi, si == 0 && sj * side < 0 ? new_plane : edge_plane});
+        if (si * side > 0 && sj * side < 0) part.insert(part.end(), {crossing, new_plane});
       } else if (sj * side > 0) {
-        part.vertices.push_back(crossing);
-        part.edge_planes.push_back(edge_plane);
+        part.insert(part.end(), {crossing, edge_plane});
       }
     }
   }
+  pos[pos_at + 2] = static_cast<int>((pos.size() - pos_at - 3) / 2);
+  neg[neg_at + 2] = static_cast<int>((neg.size() - neg_at - 3) / 2);
+  const RegionFace p = region_face(pos, pos_at);
   int chord_from = -1, chord_to = -1;
-  for (std::size_t k = 0; k < pos.vertices.size(); ++k)
-    if (pos.edge_planes[k] == new_plane) {
-      chord_from = pos.vertices[k];
-      chord_to = pos.vertices[(k + 1) % pos.vertices.size()];
+  for (int k = 0; k < p.count; ++k)
+    if (p.edge_plane(k) == new_plane) {
+      chord_from = p.vertex(k);
+      chord_to = p.vertex((k + 1) % p.count);
     }
-  if (chord_from < 0 || pos.vertices.size() < 3 || neg.vertices.size() < 3)
+  if (chord_from < 0 || p.count < 3 || neg[neg_at + 2] < 3)
     throw GeometryError("arrangement: inconsistent split of a face on plane " + std::to_string(face.plane));
   // The region lies on side sigma of the face's plane: its stored order is then clockwise seen
   // from outside the region when sigma > 0, which flips the chord's direction.
   return face.sigma < 0 ? DirectedEdge{chord_from, chord_to, face.plane} : DirectedEdge{chord_to, chord_from, face.plane};
 }
 
-Arrangement::RegionFace Arrangement::close_section(const std::vector<DirectedEdge>& section, int new_plane) const {
+void Arrangement::close_section(const std::vector<DirectedEdge>& section, int new_plane, int sigma,
+                                std::vector<int>& out) const {
   // Chains the section's edges (an edge on the plane may come from two faces) into one cycle,
   // counter-clockwise about the new plane, starting at the first face's edge (so the polygon
   // does not depend on vertex ids, which depend on the order cells were built in).
@@ -471,19 +471,18 @@ Arrangement::RegionFace Arrangement::close_section(const std::vector<DirectedEdg
   for (std::size_t i = 0; i < section.size(); ++i)
     for (std::size_t j = 0; j < i; ++j)
       if (section[i].from == section[j].from && section[i].to != section[j].to) throw fail("is not a simple cycle");
-  RegionFace face{new_plane, 1, {}, {}};
-  face.vertices.reserve(section.size());
-  face.edge_planes.reserve(section.size());
-  int v = section.front().from;
+  const std::size_t at = out.size();
+  out.insert(out.end(), {new_plane, sigma, 0});
+  int v = section.front().from, count = 0;
   do {
     const auto next = std::find_if(section.begin(), section.end(), [&](const DirectedEdge& e) { return e.from == v; });
     if (next == section.end()) throw fail("is open");
-    face.vertices.push_back(v);
-    face.edge_planes.push_back(next->plane);
+    out.insert(out.end(), {v, next->plane});
+    ++count;
     v = next->to;
-  } while (v != face.vertices.front() && face.vertices.size() <= section.size());
-  if (v != face.vertices.front() || face.vertices.size() < 3) throw fail("does not close");
-  return face;
+  } while (v != section.front().from && static_cast<std::size_t>(count) <= section.size());
+  if (v != section.front().from || count < 3) throw fail("does not close");
+  out[at + 2] = count;
 }
 
 std::pair<int, int> Arrangement::split_region(int id, int new_plane) {
@@ -492,48 +491,50 @@ std::pair<int, int> Arrangement::split_region(int id, int new_plane) {
   split_vertices_.clear();
   Region pos, neg;
   pos.next = neg.next = old.next;
-  pos.faces.reserve(old.faces.size() + 1);
-  neg.faces.reserve(old.faces.size() + 1);
-  std::vector<DirectedEdge> section;  // boundary of the new face, counter-clockwise about q
-  for (RegionFace& face : old.faces) {
+  pos.faces.reserve(old.faces.size() + 32);
+  neg.faces.reserve(old.faces.size() + 32);
+  std::vector<DirectedEdge>& section = section_scratch_;  // boundary of the new face
+  section.clear();
+  for (std::size_t at = 0; at < old.faces.size();) {
+    const RegionFace face = region_face(old.faces, at);
+    at += face.size();
     bool has_pos = false, has_neg = false;
-    for (const int v : face.vertices) {
-      const int s = plane_side(q, v);
+    for (int i = 0; i < face.count; ++i) {
+      const int s = plane_side(q, face.vertex(i));
       has_pos |= s > 0;
       has_neg |= s < 0;
     }
     if (has_pos && has_neg) {
-      pos.faces.emplace_back();
-      neg.faces.emplace_back();
-      section.push_back(split_region_face(face, new_plane, pos.faces.back(), neg.faces.back()));
+      section.push_back(split_region_face(face, new_plane, pos.faces, neg.faces));
     } else if (has_pos || has_neg) {
       // An edge of this face lying on the new plane bounds the new face too.
-      const std::size_t n = face.vertices.size();
-      for (std::size_t i = 0; i < n; ++i) {
-        const int a = face.vertices[i], b = face.vertices[(i + 1) % n];
+      for (int i = 0; i < face.count; ++i) {
+        const int a = face.vertex(i), b = face.vertex((i + 1) % face.count);
         if (plane_side(q, a) != 0 || plane_side(q, b) != 0) continue;
         const bool forward = has_pos ? face.sigma < 0 : face.sigma > 0;
         section.push_back(forward ? DirectedEdge{a, b, face.plane} : DirectedEdge{b, a, face.plane});
       }
-      (has_pos ? pos : neg).faces.push_back(std::move(face));
+      std::vector<int>& side = has_pos ? pos.faces : neg.faces;
+      side.insert(side.end(), face.corners - 3, face.corners + 2 * face.count);
     } else {
       throw GeometryError("arrangement: a face of a crossed region lies on the new plane");
     }
   }
   if (section.empty()) throw GeometryError("arrangement: a crossed region has no cross-section");
-  RegionFace section_face = close_section(section, new_plane);
+  close_section(section, new_plane, -1, neg.faces);
+  close_section(section, new_plane, 1, pos.faces);
   reset_signs();
-  neg.faces.push_back(section_face);
-  neg.faces.back().sigma = -1;
-  pos.faces.push_back(std::move(section_face));
   for (Region* r : {&neg, &pos}) {
     r->bounds = {Vec3::Constant(std::numeric_limits<double>::infinity()),
                  Vec3::Constant(-std::numeric_limits<double>::infinity())};
-    for (const RegionFace& face : r->faces)
-      for (const int vid : face.vertices) {
-        r->bounds.min = r->bounds.min.cwiseMin(vertex(vid));
-        r->bounds.max = r->bounds.max.cwiseMax(vertex(vid));
+    for (std::size_t at = 0; at < r->faces.size();) {
+      const RegionFace face = region_face(r->faces, at);
+      for (int i = 0; i < face.count; ++i) {
+        r->bounds.min = r->bounds.min.cwiseMin(vertex(face.vertex(i)));
+        r->bounds.max = r->bounds.max.cwiseMax(vertex(face.vertex(i)));
       }
+      at += face.size();
+    }
   }
   regions_[static_cast<std::size_t>(id)] = std::move(neg);
   int pos_id;
@@ -552,10 +553,12 @@ int Arrangement::finish_region(int id) {
   Region& region = regions_[static_cast<std::size_t>(id)];
   const int cell = static_cast<int>(cells_.size());
   cells_.push_back({});
-  cells_.back().faces.reserve(region.faces.size());
-  std::vector<int> sorted, other;
-  for (RegionFace& face : region.faces) {
-    sorted = face.vertices;
+  std::vector<int>& sorted = sorted_scratch_;
+  for (std::size_t at = 0; at < region.faces.size();) {
+    const RegionFace face = region_face(region.faces, at);
+    at += face.size();
+    sorted.clear();
+    for (int i = 0; i < face.count; ++i) sorted.push_back(face.vertex(i));
     std::sort(sorted.begin(), sorted.end());
     std::uint64_t key = static_cast<std::uint64_t>(face.plane) * 0x9E3779B97F4A7C15ull;
     for (const int v : sorted) key = (key ^ static_cast<std::uint64_t>(v)) * 0x100000001B3ull;
@@ -565,9 +568,7 @@ int Arrangement::finish_region(int id) {
       ArrangementFace& f = faces_[static_cast<std::size_t>(it->second)];
       int& side = face.sigma > 0 ? f.cell_positive : f.cell_negative;
       if (f.plane != face.plane || side >= 0 || f.vertices.size() != sorted.size()) continue;
-      other = f.vertices;
-      std::sort(other.begin(), other.end());
-      if (other != sorted) continue;
+      if (!std::is_permutation(f.vertices.begin(), f.vertices.end(), sorted.begin())) continue;
       side = cell;
       shared = it->second;
     }
@@ -577,17 +578,22 @@ int Arrangement::finish_region(int id) {
     }
     faces_by_key_.emplace(key, static_cast<int>(faces_.size()));
     cells_.back().faces.push_back(static_cast<int>(faces_.size()));
-    ArrangementFace f;
-    f.plane = face.plane;
     // Starting at the vertex of smallest coordinates: the face's polygon, and so its image, are
     // the same whichever of its two cells was built first.
-    const auto start = std::min_element(face.vertices.begin(), face.vertices.end(), [&](int a, int b) {
-      return std::lexicographical_compare(vertex(a).data(), vertex(a).data() + 3, vertex(b).data(), vertex(b).data() + 3);
-    }) - face.vertices.begin();
-    std::rotate(face.vertices.begin(), face.vertices.begin() + start, face.vertices.end());
-    std::rotate(face.edge_planes.begin(), face.edge_planes.begin() + start, face.edge_planes.end());
-    f.vertices = std::move(face.vertices);
-    f.edge_planes = std::move(face.edge_planes);
+    int start = 0;
+    for (int i = 1; i < face.count; ++i) {
+      const Vec3& a = vertex(face.vertex(i));
+      const Vec3& b = vertex(face.vertex(start));
+      if (std::lexicographical_compare(a.data(), a.data() + 3, b.data(), b.data() + 3)) start = i;
+    }
+    ArrangementFace f;
+    f.plane = face.plane;
+    f.vertices.reserve(static_cast<std::size_t>(face.count));
+    f.edge_planes.reserve(static_cast<std::size_t>(face.count));
+    for (int k = 0; k < face.count; ++k) {
+      f.vertices.push_back(face.vertex((start + k) % face.count));
+      f.edge_planes.push_back(face.edge_plane((start + k) % face.count));
+    }
     // The neighbour across is not built yet: it takes this face when it is.
     (face.sigma > 0 ? f.cell_positive : f.cell_negative) = cell;
     faces_.push_back(std::move(f));

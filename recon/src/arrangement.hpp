@@ -115,43 +115,53 @@ class Arrangement {
     int cell = -1;
     int region = -1;  // on demand: a leaf not refined yet (cell -1)
   };
-  // On demand: a face of one region, on `plane`, counter-clockwise about the plane's normal as
-  // ArrangementFace; the region lies on side `sigma` (+1 / -1) of the plane.
-  struct RegionFace {
-    int plane = -1;
-    int sigma = 1;
-    std::vector<int> vertices;
-    std::vector<int> edge_planes;
+  // On demand: a convex region of the lazy BSP; the planes from index `next` on may cross it.
+  // Its faces are records in one array (one allocation per region: a split makes two regions,
+  // and hundreds of thousands of splits made allocation a fifth of the time): plane, sigma
+  // (+1 / -1: the region's side of the plane), n, then n pairs (vertex, edge plane), the
+  // vertices counter-clockwise about the plane's normal as in ArrangementFace.
+  struct Region {
+    std::vector<int> faces;
+    Box3 bounds;
+    std::size_t next = 0;
   };
   struct DirectedEdge {
     int from, to, plane;
   };
-  // On demand: a convex region of the lazy BSP; the planes from index `next` on may cross it.
-  struct Region {
-    std::vector<RegionFace> faces;
-    Box3 bounds;
-    std::size_t next = 0;
+  // On demand: the record of a face starting at faces[at]: `count` corners from `corners`.
+  struct RegionFace {
+    int plane, sigma, count;
+    const int* corners;  // vertex, edge plane, vertex, edge plane, ...
+    int vertex(int i) const { return corners[2 * i]; }
+    int edge_plane(int i) const { return corners[2 * i + 1]; }
+    std::size_t size() const { return 3 + 2 * static_cast<std::size_t>(count); }
   };
-  int add_vertex(const ExactKernel::Point_3& p);
-  int plane_side(const ExactKernel::Plane_3& plane, int vertex_id);
-  int edge_vertex(int a, int b, int face_plane, int edge_plane, int new_plane);
-  FaceSplit split_face(int face_id, int new_plane);
-  void split_cell(int cell_id, int new_plane, std::vector<int>& changed);
+  static RegionFace region_face(const std::vector<int>& faces, std::size_t at) {
+    return {faces[at], faces[at + 1], faces[at + 2], faces.data() + at + 3};
+  }
   // On demand: whether `plane` has vertices of `region` strictly on both sides.
   bool region_crossed(const Region& region, int plane);
   // On demand: splits region `id` by `plane` into two regions (ids returned as negative,
   // positive); the parent's slot is reused for the negative part.
   std::pair<int, int> split_region(int id, int plane);
+  // On demand: appends the parts of `face` on each side of `new_plane` to `pos` and `neg`;
+  // returns the chord as an edge of the cross-section (counter-clockwise about the new plane).
+  DirectedEdge split_region_face(const RegionFace& face, int new_plane, std::vector<int>& pos,
+                                 std::vector<int>& neg);
+  // On demand: the cross-section's edges chained into the new face, appended to `out` with
+  // side `sigma`.
+  void close_section(const std::vector<DirectedEdge>& section, int new_plane, int sigma,
+                     std::vector<int>& out) const;
   // On demand: turns a region no plane crosses into a cell; a face the neighbour across it
   // already built is shared.
   int finish_region(int id);
-  // On demand: splits a face of a region by `new_plane` into `pos` and `neg`; returns the chord
-  // as an edge of the cross-section (counter-clockwise about the new plane).
-  DirectedEdge split_region_face(const RegionFace& face, int new_plane, RegionFace& pos, RegionFace& neg);
-  // On demand: the cross-section's edges chained into the new face.
-  RegionFace close_section(const std::vector<DirectedEdge>& section, int new_plane) const;
   int triple_vertex(int a, int b, int face_plane, int edge_plane, int new_plane);
   void reset_signs();
+  int add_vertex(const ExactKernel::Point_3& p);
+  int plane_side(const ExactKernel::Plane_3& plane, int vertex_id);
+  int edge_vertex(int a, int b, int face_plane, int edge_plane, int new_plane);
+  FaceSplit split_face(int face_id, int new_plane);
+  void split_cell(int cell_id, int new_plane, std::vector<int>& changed);
 
   Box3 box_;
   std::vector<ArrangementPlane> planes_;
@@ -172,6 +182,8 @@ class Arrangement {
   // (and its image) when both are built.
   std::unordered_multimap<std::uint64_t, int> faces_by_key_;
   std::vector<std::pair<std::uint64_t, int>> split_vertices_;  // per split: edge -> crossing vertex
+  std::vector<DirectedEdge> section_scratch_;
+  std::vector<int> sorted_scratch_;
 
   // Per-insertion scratch state.
   std::vector<std::int8_t> sign_cache_;  // 2: not computed
