@@ -100,6 +100,7 @@ int Arrangement::add_vertex(const Point3& p) {
   vertices_.push_back(p);
   vertex_approx_.push_back(to_vec3(p));
   sign_cache_.push_back(kUnknownSign);
+  vertex_keys_.push_back(std::uint64_t{1} << 63 | vertices_.size());  // a box corner: itself
   return static_cast<int>(vertices_.size()) - 1;
 }
 
@@ -124,6 +125,11 @@ int Arrangement::plane_side(const Plane3& plane, int vertex_id) {
 int Arrangement::edge_vertex(int a, int b, int face_plane, int edge_plane, int new_plane) {
   const auto [it, inserted] = edge_vertex_cache_.try_emplace(pair_key(a, b), -1);
   if (!inserted) return it->second;
+  it->second = plane_vertex(face_plane, edge_plane, new_plane);
+  return it->second;
+}
+
+int Arrangement::plane_vertex(int face_plane, int edge_plane, int new_plane) {
   // The edge lies exactly on its face's plane and its edge plane, so the crossing point is the
   // exact intersection of three input planes: a construction of depth one, cheap to make exact.
   const auto result =
@@ -138,7 +144,12 @@ int Arrangement::edge_vertex(int a, int b, int face_plane, int edge_plane, int n
   const int id = add_vertex(*point);
   sign_cache_[static_cast<std::size_t>(id)] = 0;
   touched_vertices_.push_back(id);
-  it->second = id;
+  if (on_demand_) {
+    std::array<int, 3> t{face_plane, edge_plane, new_plane};
+    std::sort(t.begin(), t.end());
+    vertex_keys_.back() = (static_cast<std::uint64_t>(t[0]) << 42) | (static_cast<std::uint64_t>(t[1]) << 21) |
+                          static_cast<std::uint64_t>(t[2]);
+  }
   return id;
 }
 
@@ -394,26 +405,17 @@ bool Arrangement::region_crossed(const Region& region, int plane_id) {
   return has_pos && has_neg;
 }
 
-int Arrangement::triple_vertex(int a, int b, int face_plane, int edge_plane, int new_plane) {
-  // One id per edge within a split (the two faces on an edge must agree: a few entries, searched
-  // in order), and one exact construction per triple of planes across regions.
+int Arrangement::split_vertex(int a, int b, int face_plane, int edge_plane, int new_plane) {
+  // One vertex per edge within a split (the two faces on an edge must agree: a few entries,
+  // searched in order). Regions do not share vertices: a vertex met again in another region is
+  // constructed again (the same exact point), which costs less than finding it in a table of
+  // a million; faces are matched by their vertices' planes instead (finish_region).
   const std::uint64_t edge = pair_key(a, b);
   for (const auto& [key, id] : split_vertices_)
     if (key == edge) return id;
-  std::array<int, 3> t{face_plane, edge_plane, new_plane};
-  std::sort(t.begin(), t.end());
-  const std::uint64_t key = (static_cast<std::uint64_t>(t[0]) << 42) |
-                            (static_cast<std::uint64_t>(t[1]) << 21) | static_cast<std::uint64_t>(t[2]);
-  const auto [it, inserted] = triple_vertices_.try_emplace(key, -1);
-  if (inserted) {
-    edge_vertex_cache_.clear();
-    it->second = edge_vertex(a, b, face_plane, edge_plane, new_plane);
-  } else {
-    sign_cache_[static_cast<std::size_t>(it->second)] = 0;  // on the new plane
-    touched_vertices_.push_back(it->second);
-  }
-  split_vertices_.emplace_back(edge, it->second);
-  return it->second;
+  const int id = plane_vertex(face_plane, edge_plane, new_plane);
+  split_vertices_.emplace_back(edge, id);
+  return id;
 }
 
 Arrangement::DirectedEdge Arrangement::split_region_face(const RegionFace& face, int new_plane,
@@ -432,7 +434,7 @@ Arrangement::DirectedEdge Arrangement::split_region_face(const RegionFace& face,
     const int edge_plane = face.edge_plane(i);
     int crossing = -1;
     if ((si > 0 && sj < 0) || (si < 0 && sj > 0))
-      crossing = triple_vertex(vi, vj, face.plane, edge_plane, new_plane);
+      crossing = split_vertex(vi, vj, face.plane, edge_plane, new_plane);
     for (const int side : {1, -1}) {
       std::vector<int>& part = side > 0 ? pos : neg;
       if (si * side >= 0) {
@@ -553,22 +555,26 @@ int Arrangement::finish_region(int id) {
   Region& region = regions_[static_cast<std::size_t>(id)];
   const int cell = static_cast<int>(cells_.size());
   cells_.push_back({});
-  std::vector<int>& sorted = sorted_scratch_;
+  std::vector<std::uint64_t>& sorted = sorted_scratch_;
   for (std::size_t at = 0; at < region.faces.size();) {
     const RegionFace face = region_face(region.faces, at);
     at += face.size();
+    // The face's identity: its plane and its vertices' planes (the same exact points).
     sorted.clear();
-    for (int i = 0; i < face.count; ++i) sorted.push_back(face.vertex(i));
+    for (int i = 0; i < face.count; ++i) sorted.push_back(vertex_keys_[static_cast<std::size_t>(face.vertex(i))]);
     std::sort(sorted.begin(), sorted.end());
     std::uint64_t key = static_cast<std::uint64_t>(face.plane) * 0x9E3779B97F4A7C15ull;
-    for (const int v : sorted) key = (key ^ static_cast<std::uint64_t>(v)) * 0x100000001B3ull;
+    for (const std::uint64_t v : sorted) key = (key ^ v) * 0x100000001B3ull;
     int shared = -1;
     const auto [first, last] = faces_by_key_.equal_range(key);
     for (auto it = first; it != last && shared < 0; ++it) {
       ArrangementFace& f = faces_[static_cast<std::size_t>(it->second)];
       int& side = face.sigma > 0 ? f.cell_positive : f.cell_negative;
       if (f.plane != face.plane || side >= 0 || f.vertices.size() != sorted.size()) continue;
-      if (!std::is_permutation(f.vertices.begin(), f.vertices.end(), sorted.begin())) continue;
+      if (!std::all_of(f.vertices.begin(), f.vertices.end(), [&](int v) {
+            return std::binary_search(sorted.begin(), sorted.end(), vertex_keys_[static_cast<std::size_t>(v)]);
+          }))
+        continue;
       side = cell;
       shared = it->second;
     }

@@ -15,7 +15,9 @@
 // whose leaves are convex regions with the planes that may still cross them; a query splits its
 // leaf by those planes in turn (the same exact predicates and depth-one vertex constructions),
 // following the point's side, until no plane crosses the region. That region is the cell of the
-// full arrangement containing the point; it shares the faces its built neighbours have.
+// full arrangement containing the point; it shares the faces its built neighbours have. Regions
+// do not share vertices (finding them again cost more than constructing them: the same three
+// planes give the same exact point), so a cell's faces may name one point by two ids.
 #include <CGAL/Exact_predicates_exact_constructions_kernel.h>
 
 #include <cstdint>
@@ -155,7 +157,9 @@ class Arrangement {
   // On demand: turns a region no plane crosses into a cell; a face the neighbour across it
   // already built is shared.
   int finish_region(int id);
-  int triple_vertex(int a, int b, int face_plane, int edge_plane, int new_plane);
+  int split_vertex(int a, int b, int face_plane, int edge_plane, int new_plane);
+  // The exact intersection of three planes as a new vertex (on the last: sign 0 cached).
+  int plane_vertex(int face_plane, int edge_plane, int new_plane);
   void reset_signs();
   int add_vertex(const ExactKernel::Point_3& p);
   int plane_side(const ExactKernel::Plane_3& plane, int vertex_id);
@@ -176,14 +180,15 @@ class Arrangement {
   bool on_demand_ = false;
   std::vector<Region> regions_;
   std::vector<int> free_regions_;
-  // Exact vertices by their three planes (sorted), so that regions sharing a vertex share it.
-  std::unordered_map<std::uint64_t, int> triple_vertices_;
-  // Built faces by a hash of their plane and sorted vertices: the two cells on a face share it
-  // (and its image) when both are built.
+  // On demand: each vertex's three planes (sorted, 21 bits each), or bit 63 and its id for a
+  // box corner: the same key is the same exact point.
+  std::vector<std::uint64_t> vertex_keys_;
+  // Built faces by a hash of their plane and sorted vertex keys: the two cells on a face share
+  // it (and its image) when both are built.
   std::unordered_multimap<std::uint64_t, int> faces_by_key_;
   std::vector<std::pair<std::uint64_t, int>> split_vertices_;  // per split: edge -> crossing vertex
   std::vector<DirectedEdge> section_scratch_;
-  std::vector<int> sorted_scratch_;
+  std::vector<std::uint64_t> sorted_scratch_;
 
   // Per-insertion scratch state.
   std::vector<std::int8_t> sign_cache_;  // 2: not computed
