@@ -7,10 +7,11 @@ For every N in COUNTS (and FULL_COUNTS with --full) it cuts N random planes thro
 --size-mm 200`), reconstructs them with `sonoshape reconstruct --stats` --repeats times and keeps
 the best (smallest) time of each stage: the machine is shared, and the best of a few runs is the
 figure least moved by the others' load. Peak RSS is the child's own (os.wait4), the largest of the
-runs. With --before BIN the same sets are also reconstructed by another binary (e.g. main's) and
-the table shows both.
+runs. Slices whose section of the mesh self-intersects are dropped (`slice --skip-invalid`: one of
+the 500 random planes), and the table says how many were kept. With --before BIN the same sets
+are also reconstructed by another binary (e.g. main's) and the table shows both.
 
-Usage: python3 bench/growth_table.py [--bin build/apps/sonoshape] [--before /work/main/build/apps/sonoshape]
+Usage: python3 bench/growth_table.py [--bin build/apps/sonoshape] [--before OTHER_BINARY]
        [--sets random,sweep] [--repeats 3] [--threads 0] [--full] [--write-doc]
 Prints a Markdown table; --write-doc writes it into docs/benchmarks.md between
 `<!-- growth_table:begin -->` and `<!-- growth_table:end -->`.
@@ -68,7 +69,8 @@ def make_set(binary, planes, count, work):
     path = os.path.join(work, f"horse_{planes}{count}.slices.json")
     if not os.path.exists(path):
         subprocess.run([binary, "slice", "--mesh", "1:data/models/horse.ply:horse", "--planes", planes,
-                        "--count", str(count), "--seed", "3", "--size-mm", "200", "-o", path, "-q"],
+                        "--count", str(count), "--seed", "3", "--size-mm", "200", "-o", path, "-q",
+                        "--skip-invalid"],
                        check=True, capture_output=True)
     return path
 
@@ -76,7 +78,8 @@ def make_set(binary, planes, count, work):
 def row_cells(name, stats):
     if stats is None:
         return [name, "–", "–", "–", "–", "–", "–"]
-    return [name, f"{stats['total_s']:.2f}", f"{stats['arrangement_s']:.2f}", f"{stats['face_images_s']:.2f}",
+    return [name + (f" ({stats['slices']} kept)" if stats["slices"] != stats["requested"] else ""),
+            f"{stats['total_s']:.2f}", f"{stats['arrangement_s']:.2f}", f"{stats['face_images_s']:.2f}",
             f"{stats['evaluation_s']:.2f}", f"{stats['cells']:,}".replace(",", " "), f"{stats['rss_mb']:.0f}"]
 
 
@@ -107,6 +110,7 @@ def main():
                 stats = None
                 if name == "after" or count <= args.before_max:
                     stats = best_of(binary, slices, args.work, args.repeats, args.threads)
+                    stats["requested"] = count
                 label = f"{count} ({name})" if args.before else str(count)
                 lines.append("| " + " | ".join(row_cells(label, stats)) + " |")
                 print(lines[-1], file=sys.stderr)

@@ -147,7 +147,8 @@ int Arrangement::plane_vertex(int face_plane, int edge_plane, int new_plane) {
   if (on_demand_) {
     std::array<int, 3> t{face_plane, edge_plane, new_plane};
     std::sort(t.begin(), t.end());
-    vertex_keys_.back() = (static_cast<std::uint64_t>(t[0]) << 42) | (static_cast<std::uint64_t>(t[1]) << 21) |
+    vertex_keys_.back() = (static_cast<std::uint64_t>(t[0]) << 42) |
+                          (static_cast<std::uint64_t>(t[1]) << 21) |
                           static_cast<std::uint64_t>(t[2]);
   }
   return id;
@@ -386,8 +387,9 @@ bool Arrangement::region_crossed(const Region& region, int plane_id) {
   // Quick rejection with the region's double bounds, as insert_plane does for cells.
   const ArrangementPlane& plane = planes_[static_cast<std::size_t>(plane_id)];
   const Box3& b = region.bounds;
-  const double scale = plane.normal.cwiseAbs().dot(box_.max.cwiseAbs().cwiseMax(box_.min.cwiseAbs())) +
-                       std::abs(plane.offset);
+  const double scale =
+      plane.normal.cwiseAbs().dot(box_.max.cwiseAbs().cwiseMax(box_.min.cwiseAbs())) +
+      std::abs(plane.offset);
   const double center_value = plane.normal.dot(0.5 * (b.min + b.max)) + plane.offset;
   const double reach = 0.5 * plane.normal.cwiseAbs().dot(b.max - b.min);
   if (center_value - reach > 1e-9 * scale || center_value + reach < -1e-9 * scale) return false;
@@ -419,7 +421,8 @@ int Arrangement::split_vertex(int a, int b, int face_plane, int edge_plane, int 
 }
 
 Arrangement::DirectedEdge Arrangement::split_region_face(const RegionFace& face, int new_plane,
-                                                         std::vector<int>& pos, std::vector<int>& neg) {
+                                                         std::vector<int>& pos,
+                                                         std::vector<int>& neg) {
   // The polygon's two parts, as split_face: each kept vertex is pushed with the plane of the
   // edge leaving it in the new polygon; the part on a side leaves it at one crossing point and
   // re-enters at another, and the edge between them is the chord on the new plane.
@@ -455,10 +458,12 @@ Arrangement::DirectedEdge Arrangement::split_region_face(const RegionFace& face,
       chord_to = p.vertex((k + 1) % p.count);
     }
   if (chord_from < 0 || p.count < 3 || neg[neg_at + 2] < 3)
-    throw GeometryError("arrangement: inconsistent split of a face on plane " + std::to_string(face.plane));
+    throw GeometryError("arrangement: inconsistent split of a face on plane " +
+                        std::to_string(face.plane));
   // The region lies on side sigma of the face's plane: its stored order is then clockwise seen
   // from outside the region when sigma > 0, which flips the chord's direction.
-  return face.sigma < 0 ? DirectedEdge{chord_from, chord_to, face.plane} : DirectedEdge{chord_to, chord_from, face.plane};
+  return face.sigma < 0 ? DirectedEdge{chord_from, chord_to, face.plane}
+                        : DirectedEdge{chord_to, chord_from, face.plane};
 }
 
 void Arrangement::close_section(const std::vector<DirectedEdge>& section, int new_plane, int sigma,
@@ -472,12 +477,14 @@ void Arrangement::close_section(const std::vector<DirectedEdge>& section, int ne
   };
   for (std::size_t i = 0; i < section.size(); ++i)
     for (std::size_t j = 0; j < i; ++j)
-      if (section[i].from == section[j].from && section[i].to != section[j].to) throw fail("is not a simple cycle");
+      if (section[i].from == section[j].from && section[i].to != section[j].to)
+        throw fail("is not a simple cycle");
   const std::size_t at = out.size();
   out.insert(out.end(), {new_plane, sigma, 0});
   int v = section.front().from, count = 0;
   do {
-    const auto next = std::find_if(section.begin(), section.end(), [&](const DirectedEdge& e) { return e.from == v; });
+    const auto next = std::find_if(section.begin(), section.end(),
+                                   [&](const DirectedEdge& e) { return e.from == v; });
     if (next == section.end()) throw fail("is open");
     out.insert(out.end(), {v, next->plane});
     ++count;
@@ -514,7 +521,8 @@ std::pair<int, int> Arrangement::split_region(int id, int new_plane) {
         const int a = face.vertex(i), b = face.vertex((i + 1) % face.count);
         if (plane_side(q, a) != 0 || plane_side(q, b) != 0) continue;
         const bool forward = has_pos ? face.sigma < 0 : face.sigma > 0;
-        section.push_back(forward ? DirectedEdge{a, b, face.plane} : DirectedEdge{b, a, face.plane});
+        section.push_back(forward ? DirectedEdge{a, b, face.plane}
+                                  : DirectedEdge{b, a, face.plane});
       }
       std::vector<int>& side = has_pos ? pos.faces : neg.faces;
       side.insert(side.end(), face.corners - 3, face.corners + 2 * face.count);
@@ -561,7 +569,8 @@ int Arrangement::finish_region(int id) {
     at += face.size();
     // The face's identity: its plane and its vertices' planes (the same exact points).
     sorted.clear();
-    for (int i = 0; i < face.count; ++i) sorted.push_back(vertex_keys_[static_cast<std::size_t>(face.vertex(i))]);
+    for (int i = 0; i < face.count; ++i)
+      sorted.push_back(vertex_keys_[static_cast<std::size_t>(face.vertex(i))]);
     std::sort(sorted.begin(), sorted.end());
     std::uint64_t key = static_cast<std::uint64_t>(face.plane) * 0x9E3779B97F4A7C15ull;
     for (const std::uint64_t v : sorted) key = (key ^ v) * 0x100000001B3ull;
@@ -572,7 +581,8 @@ int Arrangement::finish_region(int id) {
       int& side = face.sigma > 0 ? f.cell_positive : f.cell_negative;
       if (f.plane != face.plane || side >= 0 || f.vertices.size() != sorted.size()) continue;
       if (!std::all_of(f.vertices.begin(), f.vertices.end(), [&](int v) {
-            return std::binary_search(sorted.begin(), sorted.end(), vertex_keys_[static_cast<std::size_t>(v)]);
+            return std::binary_search(sorted.begin(), sorted.end(),
+                                      vertex_keys_[static_cast<std::size_t>(v)]);
           }))
         continue;
       side = cell;
@@ -663,19 +673,27 @@ int Arrangement::locate(const Vec3& p) const {
   return bsp_[static_cast<std::size_t>(node)].cell;
 }
 
-int Arrangement::locate(const Vec3& p, int guess) const {
-  if (guess < 0 || static_cast<std::size_t>(guess) >= cells_.size()) return locate(p);
+bool Arrangement::clear_inside(const Vec3& p, int cell) const {
+  if (cell < 0 || static_cast<std::size_t>(cell) >= cells_.size()) return false;
   // Inside the convex cell, farther from each of its faces' planes than rounding can move a
   // side-of-plane test (1e-9 of the box diagonal, against errors of about 1e-16 of it). Every
   // plane on the tree's path to the cell has the whole cell on one side, so it is at least as far
   // from p as the cell's boundary: the walk would take the same side at every node.
   const double margin = 1e-9 * box_.diagonal();
-  for (const int f : cells_[static_cast<std::size_t>(guess)].faces) {
+  for (const int f : cells_[static_cast<std::size_t>(cell)].faces) {
     const ArrangementFace& face = faces_[static_cast<std::size_t>(f)];
     const double side = planes_[static_cast<std::size_t>(face.plane)].signed_distance(p);
-    if (face.cell_positive == guess ? !(side > margin) : !(side < -margin)) return locate(p);
+    if (face.cell_positive == cell ? !(side > margin) : !(side < -margin)) return false;
   }
-  return guess;
+  return true;
+}
+
+int Arrangement::locate(const Vec3& p, int guess) const {
+  return clear_inside(p, guess) ? guess : locate(p);
+}
+
+int Arrangement::construct_cell(const Vec3& p, int guess) {
+  return on_demand_ && clear_inside(p, guess) ? guess : construct_cell(p);
 }
 
 }  // namespace sonoshape::recon

@@ -69,8 +69,13 @@ class Arrangement {
   /// faces on first use, found in O(depth) afterwards. Points on a plane may go to either side,
   /// as locate(). Not thread-safe: call it from one thread, then read cells concurrently.
   int construct_cell(const Vec3& p);
+  /// construct_cell(p) from a guess (a built cell or -1): the guess when p lies inside it clear
+  /// of its faces' planes, as locate(p, guess). Sweeps make the tree as deep as the planes.
+  int construct_cell(const Vec3& p, int guess);
   /// On demand: the leaves of the lazy BSP (built cells and regions not yet refined).
-  std::size_t region_count() const { return regions_.size() - free_regions_.size() + cells_.size(); }
+  std::size_t region_count() const {
+    return regions_.size() - free_regions_.size() + cells_.size();
+  }
 
   /// Adds the plane n.x + d = 0 (exact doubles) carrying `slice`, splitting every cell it crosses.
   /// Returns the ids of the cells created or changed (both halves of every split cell). A plane
@@ -161,6 +166,8 @@ class Arrangement {
   // The exact intersection of three planes as a new vertex (on the last: sign 0 cached).
   int plane_vertex(int face_plane, int edge_plane, int new_plane);
   void reset_signs();
+  // Whether p lies inside `cell` (any id) farther from its faces' planes than rounding reaches.
+  bool clear_inside(const Vec3& p, int cell) const;
   int add_vertex(const ExactKernel::Point_3& p);
   int plane_side(const ExactKernel::Plane_3& plane, int vertex_id);
   int edge_vertex(int a, int b, int face_plane, int edge_plane, int new_plane);

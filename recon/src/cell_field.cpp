@@ -1,12 +1,12 @@
 #include "cell_field.hpp"
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
 #include <span>
-
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
 
 #include "mean_value.hpp"
 #include "sonoshape/core/errors.hpp"
@@ -166,7 +166,8 @@ std::vector<int> CellField::refresh(const std::vector<int>& split_faces) {
   for (std::size_t f = 0; f < images_.size(); ++f)
     if (rebuilt[f]) to_build.push_back(static_cast<int>(f));
   build_images(to_build);
-  for (const int f : to_build) image_generations_[static_cast<std::size_t>(f)] = ++last_image_generation_;
+  for (const int f : to_build)
+    image_generations_[static_cast<std::size_t>(f)] = ++last_image_generation_;
 
   std::vector<int> completion_changed;
   bool any_unknown = false;
@@ -252,15 +253,17 @@ void CellField::build_images(const std::vector<int>& faces) {
   };
   std::vector<Buffers> buffers(chunks);
   auto chunk_faces = [&](std::size_t c) {
-    return std::span<const int>(faces).subspan(c * kChunk, std::min(kChunk, faces.size() - c * kChunk));
+    return std::span<const int>(faces).subspan(c * kChunk,
+                                               std::min(kChunk, faces.size() - c * kChunk));
   };
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunks, 1), [&](const tbb::blocked_range<std::size_t>& r) {
-    for (std::size_t c = r.begin(); c < r.end(); ++c)
-      for (const int f : chunk_faces(c)) {
-        images_[static_cast<std::size_t>(f)] = FaceImage{};
-        build_face_image(f, buffers[c].points, buffers[c].trees);
-      }
-  });
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunks, 1),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      for (std::size_t c = r.begin(); c < r.end(); ++c)
+                        for (const int f : chunk_faces(c)) {
+                          images_[static_cast<std::size_t>(f)] = FaceImage{};
+                          build_face_image(f, buffers[c].points, buffers[c].trees);
+                        }
+                    });
   for (std::size_t c = 0; c < chunks; ++c) {
     const auto point_base = static_cast<std::uint32_t>(points_.size());
     const auto tree_base = static_cast<std::int32_t>(tree_nodes_.size());
@@ -285,14 +288,16 @@ void CellField::build_images(const std::vector<int>& faces) {
   }
 }
 
-void CellField::add_tree(FaceImage::Part& part, const std::vector<Vec2>& points, std::vector<ChainNode>& trees) {
+void CellField::add_tree(FaceImage::Part& part, const std::vector<Vec2>& points,
+                         std::vector<ChainNode>& trees) {
   if (part.count < kChainTreeMinEdges) return;
   const std::size_t before = trees.size();
   part.tree_root = build_chain_tree(points.data() + part.begin, part.count, trees);
   part.tree_count = static_cast<std::uint32_t>(trees.size() - before);
 }
 
-void CellField::build_face_image(int face_id, std::vector<Vec2>& points, std::vector<ChainNode>& trees) {
+void CellField::build_face_image(int face_id, std::vector<Vec2>& points,
+                                 std::vector<ChainNode>& trees) {
   const ArrangementFace& face = arrangement_.face(face_id);
   const ArrangementPlane& plane = arrangement_.plane(face.plane);
   FaceImage& image = images_[static_cast<std::size_t>(face_id)];
@@ -363,8 +368,10 @@ void CellField::build_face_image(int face_id, std::vector<Vec2>& points, std::ve
       if (winding == 0) return;
       parts.push_back({material, static_cast<std::uint32_t>(points.size()),
                        static_cast<std::uint32_t>(polygon.size()), 0, 0, winding < 0 ? -1 : 1});
-      if (winding < 0) points.insert(points.end(), polygon.rbegin(), polygon.rend());  // a hole
-      else points.insert(points.end(), polygon.begin(), polygon.end());
+      if (winding < 0)
+        points.insert(points.end(), polygon.rbegin(), polygon.rend());  // a hole
+      else
+        points.insert(points.end(), polygon.begin(), polygon.end());
       return;
     }
     const Ring2 clipped = clip_ring_to_convex(ring, half_planes);
@@ -398,7 +405,8 @@ void CellField::build_face_image(int face_id, std::vector<Vec2>& points, std::ve
   for (FaceImage::Part& part : image.known_parts) add_tree(part, points, trees);
   double unknown_area = 0.0;
   for (const FaceImage::Part& part : image.unknown_parts)
-    unknown_area += signed_area(Ring2(points.begin() + part.begin, points.begin() + part.begin + part.count));
+    unknown_area +=
+        signed_area(Ring2(points.begin() + part.begin, points.begin() + part.begin + part.count));
   image.fully_unknown = unknown_area >= (1.0 - 1e-9) * std::abs(signed_area(polygon));
 }
 

@@ -138,7 +138,8 @@ class CellField {
   void build_face_image(int face_id, std::vector<Vec2>& points, std::vector<ChainNode>& trees);
   bool outside_box(const Vec3& p, double* out) const;
   // Gives a long part its far-field tree.
-  static void add_tree(FaceImage::Part& part, const std::vector<Vec2>& points, std::vector<ChainNode>& trees);
+  static void add_tree(FaceImage::Part& part, const std::vector<Vec2>& points,
+                       std::vector<ChainNode>& trees);
   // The plain edge sum (projected_angle_plain) of a part, through its tree when it has one. The
   // field and the completion add these into sums over a cell's faces, of order 1 / height of the
   // nearest face, and divide by their total: an absolute error of rounding in each term is all

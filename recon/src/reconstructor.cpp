@@ -379,17 +379,20 @@ UpdateStats Reconstructor::update() {
   std::vector<int> point_cells;
   // The octree asks only for vertices the kept field has no valid value for: all are evaluated
   // (in parallel) and tagged with their cell and this update.
-  const BatchEvaluator evaluate = [&](const std::vector<Vec3>& points, double* values, std::uint64_t* tags) {
+  const BatchEvaluator evaluate = [&](const std::vector<Vec3>& points, double* values,
+                                      std::uint64_t* tags) {
     if (s.arrangement->on_demand()) {
       // The cells of the points are built first (one thread: the lazy tree changes), then
       // evaluated in parallel like those of the whole arrangement.
       Stopwatch clock;
       point_cells.resize(points.size());
       const Box3& box = s.box;
+      int guess = -1;  // the points come in runs of neighbours
       for (std::size_t n = 0; n < points.size(); ++n) {
         const Vec3& p = points[n];
-        const bool inside = (p.array() > box.min.array()).all() && (p.array() < box.max.array()).all();
-        point_cells[n] = inside ? s.arrangement->construct_cell(p) : -1;
+        const bool inside =
+            (p.array() > box.min.array()).all() && (p.array() < box.max.array()).all();
+        point_cells[n] = inside ? guess = s.arrangement->construct_cell(p, guess) : -1;
       }
       stats.arrangement_s += clock.seconds();
       clock.reset();
@@ -401,7 +404,8 @@ UpdateStats Reconstructor::update() {
                           [&](const tbb::blocked_range<std::size_t>& r) {
                             for (std::size_t n = r.begin(); n < r.end(); ++n)
                               tags[n] = evaluation_tag(
-                                  field.evaluate_in(point_cells[n], points[n], values + n * fc), s.generation);
+                                  field.evaluate_in(point_cells[n], points[n], values + n * fc),
+                                  s.generation);
                           });
       });
       evaluations += points.size();

@@ -30,9 +30,11 @@ CellShape shape_of(const Arrangement& arr, int cell) {
   for (const int f : arr.cell(cell).faces) {
     const ArrangementFace& face = arr.face(f);
     std::vector<std::array<double, 3>> vertices;
-    for (const int v : face.vertices) vertices.push_back({arr.vertex(v).x(), arr.vertex(v).y(), arr.vertex(v).z()});
+    for (const int v : face.vertices)
+      vertices.push_back({arr.vertex(v).x(), arr.vertex(v).y(), arr.vertex(v).z()});
     std::sort(vertices.begin(), vertices.end());
-    const auto [it, inserted] = shape.emplace(std::make_pair(face.plane, face.cell_positive == cell ? 1 : -1), vertices);
+    const auto [it, inserted] =
+        shape.emplace(std::make_pair(face.plane, face.cell_positive == cell ? 1 : -1), vertices);
     EXPECT_TRUE(inserted) << "two faces of cell " << cell << " on plane " << face.plane;
   }
   return shape;
@@ -94,10 +96,14 @@ void expect_same_cells(const std::vector<Plane>& planes, const std::vector<Vec3>
   for (const Vec3& p : points) {
     const int c = lazy.construct_cell(p);
     EXPECT_EQ(lazy.construct_cell(p), c) << "a second query must find the built cell";
+    // A guess is taken only where the walk would end in it (points on planes take the walk).
+    for (const int guess : {c, c - 1, c + 1, 0, -1, static_cast<int>(lazy.cell_count()) - 1})
+      EXPECT_EQ(lazy.construct_cell(p, guess), c) << "guess " << guess;
     expect_closed(lazy, c);
     bool clear = true;
     for (std::size_t i = 0; i < planes.size(); ++i)
-      clear &= std::abs(planes[i].normal.dot(p) + planes[i].offset) > 1e-9 * planes[i].normal.norm();
+      clear &=
+          std::abs(planes[i].normal.dot(p) + planes[i].offset) > 1e-9 * planes[i].normal.norm();
     if (clear) {
       EXPECT_EQ(shape_of(lazy, c), shape_of(whole, whole.locate(p))) << "at " << p.transpose();
       ++compared;
@@ -117,7 +123,9 @@ std::vector<Vec3> random_points(std::mt19937_64& rng, int count) {
   std::uniform_real_distribution<double> inside(0.0, 1.0);
   std::vector<Vec3> points;
   for (int k = 0; k < count; ++k)
-    points.push_back(kUnitBox.min + (kUnitBox.max - kUnitBox.min).cwiseProduct(Vec3(inside(rng), inside(rng), inside(rng))));
+    points.push_back(
+        kUnitBox.min +
+        (kUnitBox.max - kUnitBox.min).cwiseProduct(Vec3(inside(rng), inside(rng), inside(rng))));
   return points;
 }
 
@@ -138,9 +146,15 @@ TEST(OnDemandArrangement, DegeneratePlanesGiveTheWholeArrangementsCells) {
   // Three planes through a line, more through a point, planes through vertices and edges of the
   // box and of each other, nearly parallel planes, and a sweep (a deep tree); then points on
   // planes, on their lines and at their crossings as well as random ones.
-  std::vector<Plane> planes{{Vec3(1, 0, 0), 0.0},   {Vec3(0, 1, 0), 0.0},  {Vec3(1, 1, 0), 0.0},
-                            {Vec3(0, 0, 1), 0.0},   {Vec3(1, -1, 1), 0.0}, {Vec3(1, -1, 0), 0.0},
-                            {Vec3(1, -2, 0), 0.0},  {Vec3(0, 0, 1), -0.1}, {Vec3(1e-9, 1e-9, 1), -0.1 + 1e-12},
+  std::vector<Plane> planes{{Vec3(1, 0, 0), 0.0},
+                            {Vec3(0, 1, 0), 0.0},
+                            {Vec3(1, 1, 0), 0.0},
+                            {Vec3(0, 0, 1), 0.0},
+                            {Vec3(1, -1, 1), 0.0},
+                            {Vec3(1, -1, 0), 0.0},
+                            {Vec3(1, -2, 0), 0.0},
+                            {Vec3(0, 0, 1), -0.1},
+                            {Vec3(1e-9, 1e-9, 1), -0.1 + 1e-12},
                             {Vec3(0, 1e-15, 1), -0.1 - 1e-15}};
   for (const double x : {-0.5, 0.5}) planes.push_back({Vec3(1, 0, 0), -x});
   for (int i = 0; i < 8; ++i) planes.push_back({Vec3(0.01 * i, 0.02, 1), -(-1.2 + 0.3 * i)});
@@ -196,7 +210,8 @@ LabeledSlice spheres_slice(const Vec3& origin, const Vec3& u, const Vec3& v) {
   auto add_sphere = [&](const Vec3& centre, double radius, int label) {
     const double d = n.dot(centre - s.origin_mm);
     if (std::abs(d) >= 0.95 * radius) return;
-    s.regions.push_back({label, circle(s.to_plane(centre - d * n), std::sqrt(radius * radius - d * d), 48), {}});
+    s.regions.push_back(
+        {label, circle(s.to_plane(centre - d * n), std::sqrt(radius * radius - d * d), 48), {}});
   };
   add_sphere(Vec3(-10, 0, 0), 0.5 * kRadius, 1);
   add_sphere(Vec3(16, 4, 2), 0.3 * kRadius, 2);
@@ -224,14 +239,15 @@ SliceSet sweep_set(int count) {
   for (int k = 0; k < count; ++k) {
     const double tilt = -0.4 + 0.8 * k / (count - 1), rock = 0.3 * std::sin(1.3 * k);
     const Vec3 u = Vec3(std::cos(rock), 0, std::sin(rock));
-    const Vec3 v = (Vec3(0, std::cos(tilt), std::sin(tilt)) - std::sin(rock) * std::sin(tilt) * u).normalized();
+    const Vec3 v = (Vec3(0, std::cos(tilt), std::sin(tilt)) - std::sin(rock) * std::sin(tilt) * u)
+                       .normalized();
     set.slices.push_back(spheres_slice(Vec3(0, 0, -10.0 + 20.0 * k / (count - 1)), u, v));
   }
   return set;
 }
 
-std::unique_ptr<Reconstructor> reconstruct_with(const SliceSet& set, bool on_demand, ReconstructionStats* stats,
-                                                int threads = 2) {
+std::unique_ptr<Reconstructor> reconstruct_with(const SliceSet& set, bool on_demand,
+                                                ReconstructionStats* stats, int threads = 2) {
   ReconstructorOptions options;
   options.bounds = kBox;
   options.engine.max_depth = 5;
