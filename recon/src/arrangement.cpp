@@ -4,6 +4,7 @@
 #include <array>
 #include <cmath>
 #include <limits>
+#include <stdexcept>
 #include <string>
 
 #include "sonoshape/core/errors.hpp"
@@ -70,14 +71,36 @@ Arrangement::Arrangement(const Box3& box) : box_(box) {
     }
   }
   cell_bounds_.push_back(box);
-  bsp_.push_back({-1, -1, -1, 0});
+  bsp_.push_back({-1, -1, -1, 0, -1});
   leaf_of_cell_.push_back(0);
+}
+
+Arrangement::Arrangement(const Box3& box, bool on_demand) : Arrangement(box) {
+  if (!on_demand) return;
+  on_demand_ = true;
+  // The box cell becomes the root region: the faces keep their polygons, the cell goes.
+  Region root;
+  for (const int f : cells_[0].faces) {
+    const ArrangementFace& face = faces_[static_cast<std::size_t>(f)];
+    root.faces.insert(root.faces.end(), {face.plane, 1, static_cast<int>(face.vertices.size())});
+    for (std::size_t i = 0; i < face.vertices.size(); ++i)
+      root.faces.insert(root.faces.end(), {face.vertices[i], face.edge_planes[i]});
+  }
+  root.bounds = box;
+  root.next = planes_.size();
+  regions_.push_back(std::move(root));
+  cells_.clear();
+  faces_.clear();
+  cell_bounds_.clear();
+  leaf_of_cell_.clear();
+  bsp_.assign(1, BspNode{-1, -1, -1, -1, 0});
 }
 
 int Arrangement::add_vertex(const Point3& p) {
   vertices_.push_back(p);
   vertex_approx_.push_back(to_vec3(p));
   sign_cache_.push_back(kUnknownSign);
+  vertex_keys_.push_back(std::uint64_t{1} << 63 | vertices_.size());  // a box corner: itself
   return static_cast<int>(vertices_.size()) - 1;
 }
 
@@ -102,6 +125,11 @@ int Arrangement::plane_side(const Plane3& plane, int vertex_id) {
 int Arrangement::edge_vertex(int a, int b, int face_plane, int edge_plane, int new_plane) {
   const auto [it, inserted] = edge_vertex_cache_.try_emplace(pair_key(a, b), -1);
   if (!inserted) return it->second;
+  it->second = plane_vertex(face_plane, edge_plane, new_plane);
+  return it->second;
+}
+
+int Arrangement::plane_vertex(int face_plane, int edge_plane, int new_plane) {
   // The edge lies exactly on its face's plane and its edge plane, so the crossing point is the
   // exact intersection of three input planes: a construction of depth one, cheap to make exact.
   const auto result =
@@ -116,7 +144,13 @@ int Arrangement::edge_vertex(int a, int b, int face_plane, int edge_plane, int n
   const int id = add_vertex(*point);
   sign_cache_[static_cast<std::size_t>(id)] = 0;
   touched_vertices_.push_back(id);
-  it->second = id;
+  if (on_demand_) {
+    std::array<int, 3> t{face_plane, edge_plane, new_plane};
+    std::sort(t.begin(), t.end());
+    vertex_keys_.back() = (static_cast<std::uint64_t>(t[0]) << 42) |
+                          (static_cast<std::uint64_t>(t[1]) << 21) |
+                          static_cast<std::uint64_t>(t[2]);
+  }
   return id;
 }
 
@@ -282,9 +316,9 @@ void Arrangement::split_cell(int cell_id, int new_plane, std::vector<int>& chang
   }
   const int leaf = leaf_of_cell_[static_cast<std::size_t>(cell_id)];
   const int neg_leaf = static_cast<int>(bsp_.size());
-  bsp_.push_back({-1, -1, -1, cell_neg});
-  bsp_.push_back({-1, -1, -1, cell_pos});
-  bsp_[static_cast<std::size_t>(leaf)] = {new_plane, neg_leaf, neg_leaf + 1, -1};
+  bsp_.push_back({-1, -1, -1, cell_neg, -1});
+  bsp_.push_back({-1, -1, -1, cell_pos, -1});
+  bsp_[static_cast<std::size_t>(leaf)] = {new_plane, neg_leaf, neg_leaf + 1, -1, -1};
   leaf_of_cell_[static_cast<std::size_t>(cell_neg)] = neg_leaf;
   leaf_of_cell_.push_back(neg_leaf + 1);
   changed.push_back(cell_neg);
@@ -295,6 +329,8 @@ std::vector<int> Arrangement::insert_plane(const Vec3& normal, double offset, in
   if (!(normal.allFinite() && std::isfinite(offset)) || normal.norm() == 0.0)
     throw GeometryError("arrangement: plane of slice " + std::to_string(slice) +
                         " has no valid normal");
+  if (on_demand_ && !cells_.empty())
+    throw std::logic_error("arrangement: a plane inserted after cells were built on demand");
   const Plane3 exact(normal.x(), normal.y(), normal.z(), offset);
   for (std::size_t p = 0; p < planes_.size(); ++p) {
     if (exact == planes_[p].exact || exact == planes_[p].exact.opposite()) {
@@ -306,6 +342,7 @@ std::vector<int> Arrangement::insert_plane(const Vec3& normal, double offset, in
   }
   const int plane_id = static_cast<int>(planes_.size());
   planes_.push_back({normal, offset, slice, exact});
+  if (on_demand_) return {};  // cells are split when construct_cell reaches them
 
   edge_vertex_cache_.clear();
   face_split_cache_.clear();
@@ -337,9 +374,286 @@ std::vector<int> Arrangement::insert_plane(const Vec3& normal, double offset, in
     }
     if (has_pos && has_neg) split_cell(static_cast<int>(c), plane_id, changed);
   }
+  reset_signs();
+  return changed;
+}
+
+void Arrangement::reset_signs() {
   for (const int v : touched_vertices_) sign_cache_[static_cast<std::size_t>(v)] = kUnknownSign;
   touched_vertices_.clear();
-  return changed;
+}
+
+bool Arrangement::region_crossed(const Region& region, int plane_id) {
+  // Quick rejection with the region's double bounds, as insert_plane does for cells.
+  const ArrangementPlane& plane = planes_[static_cast<std::size_t>(plane_id)];
+  const Box3& b = region.bounds;
+  const double scale =
+      plane.normal.cwiseAbs().dot(box_.max.cwiseAbs().cwiseMax(box_.min.cwiseAbs())) +
+      std::abs(plane.offset);
+  const double center_value = plane.normal.dot(0.5 * (b.min + b.max)) + plane.offset;
+  const double reach = 0.5 * plane.normal.cwiseAbs().dot(b.max - b.min);
+  if (center_value - reach > 1e-9 * scale || center_value + reach < -1e-9 * scale) return false;
+  bool has_pos = false, has_neg = false;
+  for (std::size_t at = 0; at < region.faces.size() && !(has_pos && has_neg);) {
+    const RegionFace face = region_face(region.faces, at);
+    for (int i = 0; i < face.count; ++i) {
+      const int s = plane_side(plane.exact, face.vertex(i));
+      has_pos |= s > 0;
+      has_neg |= s < 0;
+    }
+    at += face.size();
+  }
+  reset_signs();
+  return has_pos && has_neg;
+}
+
+int Arrangement::split_vertex(int a, int b, int face_plane, int edge_plane, int new_plane) {
+  // One vertex per edge within a split (the two faces on an edge must agree: a few entries,
+  // searched in order). Regions do not share vertices: a vertex met again in another region is
+  // constructed again (the same exact point), which costs less than finding it in a table of
+  // a million; faces are matched by their vertices' planes instead (finish_region).
+  const std::uint64_t edge = pair_key(a, b);
+  for (const auto& [key, id] : split_vertices_)
+    if (key == edge) return id;
+  const int id = plane_vertex(face_plane, edge_plane, new_plane);
+  split_vertices_.emplace_back(edge, id);
+  return id;
+}
+
+Arrangement::DirectedEdge Arrangement::split_region_face(const RegionFace& face, int new_plane,
+                                                         std::vector<int>& pos,
+                                                         std::vector<int>& neg) {
+  // The polygon's two parts, as split_face: each kept vertex is pushed with the plane of the
+  // edge leaving it in the new polygon; the part on a side leaves it at one crossing point and
+  // re-enters at another, and the edge between them is the chord on the new plane.
+  const Plane3& q = planes_[static_cast<std::size_t>(new_plane)].exact;
+  const int n = face.count;
+  const std::size_t pos_at = pos.size(), neg_at = neg.size();
+  pos.insert(pos.end(), {face.plane, face.sigma, 0});
+  neg.insert(neg.end(), {face.plane, face.sigma, 0});
+  for (int i = 0; i < n; ++i) {
+    const int vi = face.vertex(i), vj = face.vertex((i + 1) % n);
+    const int si = plane_side(q, vi), sj = plane_side(q, vj);
+    const int edge_plane = face.edge_plane(i);
+    int crossing = -1;
+    if ((si > 0 && sj < 0) || (si < 0 && sj > 0))
+      crossing = split_vertex(vi, vj, face.plane, edge_plane, new_plane);
+    for (const int side : {1, -1}) {
+      std::vector<int>& part = side > 0 ? pos : neg;
+      if (si * side >= 0) {
+        part.insert(part.end(), {vi, si == 0 && sj * side < 0 ? new_plane : edge_plane});
+        if (si * side > 0 && sj * side < 0) part.insert(part.end(), {crossing, new_plane});
+      } else if (sj * side > 0) {
+        part.insert(part.end(), {crossing, edge_plane});
+      }
+    }
+  }
+  pos[pos_at + 2] = static_cast<int>((pos.size() - pos_at - 3) / 2);
+  neg[neg_at + 2] = static_cast<int>((neg.size() - neg_at - 3) / 2);
+  const RegionFace p = region_face(pos, pos_at);
+  int chord_from = -1, chord_to = -1;
+  for (int k = 0; k < p.count; ++k)
+    if (p.edge_plane(k) == new_plane) {
+      chord_from = p.vertex(k);
+      chord_to = p.vertex((k + 1) % p.count);
+    }
+  if (chord_from < 0 || p.count < 3 || neg[neg_at + 2] < 3)
+    throw GeometryError("arrangement: inconsistent split of a face on plane " +
+                        std::to_string(face.plane));
+  // The region lies on side sigma of the face's plane: its stored order is then clockwise seen
+  // from outside the region when sigma > 0, which flips the chord's direction.
+  return face.sigma < 0 ? DirectedEdge{chord_from, chord_to, face.plane}
+                        : DirectedEdge{chord_to, chord_from, face.plane};
+}
+
+void Arrangement::close_section(const std::vector<DirectedEdge>& section, int new_plane, int sigma,
+                                std::vector<int>& out) const {
+  // Chains the section's edges (an edge on the plane may come from two faces) into one cycle,
+  // counter-clockwise about the new plane, starting at the first face's edge (so the polygon
+  // does not depend on vertex ids, which depend on the order cells were built in).
+  auto fail = [&](const char* what) {
+    return GeometryError(std::string("arrangement: the cross-section of a region by plane ") +
+                         std::to_string(new_plane) + " " + what);
+  };
+  for (std::size_t i = 0; i < section.size(); ++i)
+    for (std::size_t j = 0; j < i; ++j)
+      if (section[i].from == section[j].from && section[i].to != section[j].to)
+        throw fail("is not a simple cycle");
+  const std::size_t at = out.size();
+  out.insert(out.end(), {new_plane, sigma, 0});
+  int v = section.front().from, count = 0;
+  do {
+    const auto next = std::find_if(section.begin(), section.end(),
+                                   [&](const DirectedEdge& e) { return e.from == v; });
+    if (next == section.end()) throw fail("is open");
+    out.insert(out.end(), {v, next->plane});
+    ++count;
+    v = next->to;
+  } while (v != section.front().from && static_cast<std::size_t>(count) <= section.size());
+  if (v != section.front().from || count < 3) throw fail("does not close");
+  out[at + 2] = count;
+}
+
+std::pair<int, int> Arrangement::split_region(int id, int new_plane) {
+  Region old = std::move(regions_[static_cast<std::size_t>(id)]);
+  const Plane3& q = planes_[static_cast<std::size_t>(new_plane)].exact;
+  split_vertices_.clear();
+  Region pos, neg;
+  pos.next = neg.next = old.next;
+  pos.faces.reserve(old.faces.size() + 32);
+  neg.faces.reserve(old.faces.size() + 32);
+  std::vector<DirectedEdge>& section = section_scratch_;  // boundary of the new face
+  section.clear();
+  for (std::size_t at = 0; at < old.faces.size();) {
+    const RegionFace face = region_face(old.faces, at);
+    at += face.size();
+    bool has_pos = false, has_neg = false;
+    for (int i = 0; i < face.count; ++i) {
+      const int s = plane_side(q, face.vertex(i));
+      has_pos |= s > 0;
+      has_neg |= s < 0;
+    }
+    if (has_pos && has_neg) {
+      section.push_back(split_region_face(face, new_plane, pos.faces, neg.faces));
+    } else if (has_pos || has_neg) {
+      // An edge of this face lying on the new plane bounds the new face too.
+      for (int i = 0; i < face.count; ++i) {
+        const int a = face.vertex(i), b = face.vertex((i + 1) % face.count);
+        if (plane_side(q, a) != 0 || plane_side(q, b) != 0) continue;
+        const bool forward = has_pos ? face.sigma < 0 : face.sigma > 0;
+        section.push_back(forward ? DirectedEdge{a, b, face.plane}
+                                  : DirectedEdge{b, a, face.plane});
+      }
+      std::vector<int>& side = has_pos ? pos.faces : neg.faces;
+      side.insert(side.end(), face.corners - 3, face.corners + 2 * face.count);
+    } else {
+      throw GeometryError("arrangement: a face of a crossed region lies on the new plane");
+    }
+  }
+  if (section.empty()) throw GeometryError("arrangement: a crossed region has no cross-section");
+  close_section(section, new_plane, -1, neg.faces);
+  close_section(section, new_plane, 1, pos.faces);
+  reset_signs();
+  for (Region* r : {&neg, &pos}) {
+    r->bounds = {Vec3::Constant(std::numeric_limits<double>::infinity()),
+                 Vec3::Constant(-std::numeric_limits<double>::infinity())};
+    for (std::size_t at = 0; at < r->faces.size();) {
+      const RegionFace face = region_face(r->faces, at);
+      for (int i = 0; i < face.count; ++i) {
+        r->bounds.min = r->bounds.min.cwiseMin(vertex(face.vertex(i)));
+        r->bounds.max = r->bounds.max.cwiseMax(vertex(face.vertex(i)));
+      }
+      at += face.size();
+    }
+  }
+  regions_[static_cast<std::size_t>(id)] = std::move(neg);
+  int pos_id;
+  if (!free_regions_.empty()) {
+    pos_id = free_regions_.back();
+    free_regions_.pop_back();
+    regions_[static_cast<std::size_t>(pos_id)] = std::move(pos);
+  } else {
+    pos_id = static_cast<int>(regions_.size());
+    regions_.push_back(std::move(pos));
+  }
+  return {id, pos_id};
+}
+
+int Arrangement::finish_region(int id) {
+  Region& region = regions_[static_cast<std::size_t>(id)];
+  const int cell = static_cast<int>(cells_.size());
+  cells_.push_back({});
+  std::vector<std::uint64_t>& sorted = sorted_scratch_;
+  for (std::size_t at = 0; at < region.faces.size();) {
+    const RegionFace face = region_face(region.faces, at);
+    at += face.size();
+    // The face's identity: its plane and its vertices' planes (the same exact points).
+    sorted.clear();
+    for (int i = 0; i < face.count; ++i)
+      sorted.push_back(vertex_keys_[static_cast<std::size_t>(face.vertex(i))]);
+    std::sort(sorted.begin(), sorted.end());
+    std::uint64_t key = static_cast<std::uint64_t>(face.plane) * 0x9E3779B97F4A7C15ull;
+    for (const std::uint64_t v : sorted) key = (key ^ v) * 0x100000001B3ull;
+    int shared = -1;
+    const auto [first, last] = faces_by_key_.equal_range(key);
+    for (auto it = first; it != last && shared < 0; ++it) {
+      ArrangementFace& f = faces_[static_cast<std::size_t>(it->second)];
+      int& side = face.sigma > 0 ? f.cell_positive : f.cell_negative;
+      if (f.plane != face.plane || side >= 0 || f.vertices.size() != sorted.size()) continue;
+      if (!std::all_of(f.vertices.begin(), f.vertices.end(), [&](int v) {
+            return std::binary_search(sorted.begin(), sorted.end(),
+                                      vertex_keys_[static_cast<std::size_t>(v)]);
+          }))
+        continue;
+      side = cell;
+      shared = it->second;
+    }
+    if (shared >= 0) {
+      cells_.back().faces.push_back(shared);
+      continue;
+    }
+    faces_by_key_.emplace(key, static_cast<int>(faces_.size()));
+    cells_.back().faces.push_back(static_cast<int>(faces_.size()));
+    // Starting at the vertex of smallest coordinates: the face's polygon, and so its image, are
+    // the same whichever of its two cells was built first.
+    int start = 0;
+    for (int i = 1; i < face.count; ++i) {
+      const Vec3& a = vertex(face.vertex(i));
+      const Vec3& b = vertex(face.vertex(start));
+      if (std::lexicographical_compare(a.data(), a.data() + 3, b.data(), b.data() + 3)) start = i;
+    }
+    ArrangementFace f;
+    f.plane = face.plane;
+    f.vertices.reserve(static_cast<std::size_t>(face.count));
+    f.edge_planes.reserve(static_cast<std::size_t>(face.count));
+    for (int k = 0; k < face.count; ++k) {
+      f.vertices.push_back(face.vertex((start + k) % face.count));
+      f.edge_planes.push_back(face.edge_plane((start + k) % face.count));
+    }
+    // The neighbour across is not built yet: it takes this face when it is.
+    (face.sigma > 0 ? f.cell_positive : f.cell_negative) = cell;
+    faces_.push_back(std::move(f));
+  }
+  cell_bounds_.push_back(region.bounds);
+  region = Region{};
+  free_regions_.push_back(id);
+  return cell;
+}
+
+int Arrangement::construct_cell(const Vec3& p) {
+  if (!on_demand_) return locate(p);
+  int node = 0;
+  for (;;) {
+    BspNode n = bsp_[static_cast<std::size_t>(node)];
+    if (n.plane >= 0) {
+      const ArrangementPlane& plane = planes_[static_cast<std::size_t>(n.plane)];
+      node = plane.normal.dot(p) + plane.offset >= 0.0 ? n.positive : n.negative;
+      continue;
+    }
+    if (n.cell >= 0) return n.cell;
+    // A region not refined yet: the first plane still crossing it splits it; with none left it
+    // is a cell of the full arrangement.
+    Region& region = regions_[static_cast<std::size_t>(n.region)];
+    int crossing = -1;
+    for (; region.next < planes_.size(); ++region.next) {
+      if (region_crossed(region, static_cast<int>(region.next))) {
+        crossing = static_cast<int>(region.next++);
+        break;
+      }
+    }
+    if (crossing < 0) {
+      const int cell = finish_region(n.region);
+      bsp_[static_cast<std::size_t>(node)].cell = cell;
+      bsp_[static_cast<std::size_t>(node)].region = -1;
+      leaf_of_cell_.push_back(node);
+      return cell;
+    }
+    const auto [neg, pos] = split_region(n.region, crossing);
+    const int first = static_cast<int>(bsp_.size());
+    bsp_.push_back({-1, -1, -1, -1, neg});
+    bsp_.push_back({-1, -1, -1, -1, pos});
+    bsp_[static_cast<std::size_t>(node)] = {crossing, first, first + 1, -1, -1};
+  }
 }
 
 std::vector<int> Arrangement::faces_split_by_last_plane() const {
@@ -359,19 +673,27 @@ int Arrangement::locate(const Vec3& p) const {
   return bsp_[static_cast<std::size_t>(node)].cell;
 }
 
-int Arrangement::locate(const Vec3& p, int guess) const {
-  if (guess < 0 || static_cast<std::size_t>(guess) >= cells_.size()) return locate(p);
+bool Arrangement::clear_inside(const Vec3& p, int cell) const {
+  if (cell < 0 || static_cast<std::size_t>(cell) >= cells_.size()) return false;
   // Inside the convex cell, farther from each of its faces' planes than rounding can move a
   // side-of-plane test (1e-9 of the box diagonal, against errors of about 1e-16 of it). Every
   // plane on the tree's path to the cell has the whole cell on one side, so it is at least as far
   // from p as the cell's boundary: the walk would take the same side at every node.
   const double margin = 1e-9 * box_.diagonal();
-  for (const int f : cells_[static_cast<std::size_t>(guess)].faces) {
+  for (const int f : cells_[static_cast<std::size_t>(cell)].faces) {
     const ArrangementFace& face = faces_[static_cast<std::size_t>(f)];
     const double side = planes_[static_cast<std::size_t>(face.plane)].signed_distance(p);
-    if (face.cell_positive == guess ? !(side > margin) : !(side < -margin)) return locate(p);
+    if (face.cell_positive == cell ? !(side > margin) : !(side < -margin)) return false;
   }
-  return guess;
+  return true;
+}
+
+int Arrangement::locate(const Vec3& p, int guess) const {
+  return clear_inside(p, guess) ? guess : locate(p);
+}
+
+int Arrangement::construct_cell(const Vec3& p, int guess) {
+  return on_demand_ && clear_inside(p, guess) ? guess : construct_cell(p);
 }
 
 }  // namespace sonoshape::recon

@@ -8,6 +8,16 @@
 // so near-parallel planes, three planes through a line, four through a point and planes through
 // existing vertices all give a consistent cell complex. Doubles are used only after the
 // combinatorics is fixed (evaluation, face images).
+//
+// On demand (issue 24): the full arrangement of k planes has O(k^3) cells, of which the octree
+// evaluates only those the surface passes through. An on-demand arrangement records the planes
+// and builds a cell only when construct_cell() is asked for a point in it: a lazily refined BSP
+// whose leaves are convex regions with the planes that may still cross them; a query splits its
+// leaf by those planes in turn (the same exact predicates and depth-one vertex constructions),
+// following the point's side, until no plane crosses the region. That region is the cell of the
+// full arrangement containing the point; it shares the faces its built neighbours have. Regions
+// do not share vertices (finding them again cost more than constructing them: the same three
+// planes give the same exact point), so a cell's faces may name one point by two ids.
 #include <CGAL/Exact_predicates_exact_constructions_kernel.h>
 
 #include <cstdint>
@@ -49,6 +59,23 @@ class Arrangement {
  public:
   /// The box as one cell with six faces. Throws GeometryError for an empty box.
   explicit Arrangement(const Box3& box);
+  /// The box as one region whose cells are built on demand (construct_cell) when `on_demand`.
+  Arrangement(const Box3& box, bool on_demand);
+
+  /// True when cells are built on demand: insert_plane then only records the plane, cells and
+  /// faces exist only once construct_cell() built them, and locate() must not be used.
+  bool on_demand() const { return on_demand_; }
+  /// On demand: the cell of the full arrangement containing p (p inside the box), built with its
+  /// faces on first use, found in O(depth) afterwards. Points on a plane may go to either side,
+  /// as locate(). Not thread-safe: call it from one thread, then read cells concurrently.
+  int construct_cell(const Vec3& p);
+  /// construct_cell(p) from a guess (a built cell or -1): the guess when p lies inside it clear
+  /// of its faces' planes, as locate(p, guess). Sweeps make the tree as deep as the planes.
+  int construct_cell(const Vec3& p, int guess);
+  /// On demand: the leaves of the lazy BSP (built cells and regions not yet refined).
+  std::size_t region_count() const {
+    return regions_.size() - free_regions_.size() + cells_.size();
+  }
 
   /// Adds the plane n.x + d = 0 (exact doubles) carrying `slice`, splitting every cell it crosses.
   /// Returns the ids of the cells created or changed (both halves of every split cell). A plane
@@ -93,7 +120,54 @@ class Arrangement {
     int plane = -1;  // -1: leaf
     int negative = -1, positive = -1;
     int cell = -1;
+    int region = -1;  // on demand: a leaf not refined yet (cell -1)
   };
+  // On demand: a convex region of the lazy BSP; the planes from index `next` on may cross it.
+  // Its faces are records in one array (one allocation per region: a split makes two regions,
+  // and hundreds of thousands of splits made allocation a fifth of the time): plane, sigma
+  // (+1 / -1: the region's side of the plane), n, then n pairs (vertex, edge plane), the
+  // vertices counter-clockwise about the plane's normal as in ArrangementFace.
+  struct Region {
+    std::vector<int> faces;
+    Box3 bounds;
+    std::size_t next = 0;
+  };
+  struct DirectedEdge {
+    int from, to, plane;
+  };
+  // On demand: the record of a face starting at faces[at]: `count` corners from `corners`.
+  struct RegionFace {
+    int plane, sigma, count;
+    const int* corners;  // vertex, edge plane, vertex, edge plane, ...
+    int vertex(int i) const { return corners[2 * i]; }
+    int edge_plane(int i) const { return corners[2 * i + 1]; }
+    std::size_t size() const { return 3 + 2 * static_cast<std::size_t>(count); }
+  };
+  static RegionFace region_face(const std::vector<int>& faces, std::size_t at) {
+    return {faces[at], faces[at + 1], faces[at + 2], faces.data() + at + 3};
+  }
+  // On demand: whether `plane` has vertices of `region` strictly on both sides.
+  bool region_crossed(const Region& region, int plane);
+  // On demand: splits region `id` by `plane` into two regions (ids returned as negative,
+  // positive); the parent's slot is reused for the negative part.
+  std::pair<int, int> split_region(int id, int plane);
+  // On demand: appends the parts of `face` on each side of `new_plane` to `pos` and `neg`;
+  // returns the chord as an edge of the cross-section (counter-clockwise about the new plane).
+  DirectedEdge split_region_face(const RegionFace& face, int new_plane, std::vector<int>& pos,
+                                 std::vector<int>& neg);
+  // On demand: the cross-section's edges chained into the new face, appended to `out` with
+  // side `sigma`.
+  void close_section(const std::vector<DirectedEdge>& section, int new_plane, int sigma,
+                     std::vector<int>& out) const;
+  // On demand: turns a region no plane crosses into a cell; a face the neighbour across it
+  // already built is shared.
+  int finish_region(int id);
+  int split_vertex(int a, int b, int face_plane, int edge_plane, int new_plane);
+  // The exact intersection of three planes as a new vertex (on the last: sign 0 cached).
+  int plane_vertex(int face_plane, int edge_plane, int new_plane);
+  void reset_signs();
+  // Whether p lies inside `cell` (any id) farther from its faces' planes than rounding reaches.
+  bool clear_inside(const Vec3& p, int cell) const;
   int add_vertex(const ExactKernel::Point_3& p);
   int plane_side(const ExactKernel::Plane_3& plane, int vertex_id);
   int edge_vertex(int a, int b, int face_plane, int edge_plane, int new_plane);
@@ -109,6 +183,19 @@ class Arrangement {
   std::vector<Box3> cell_bounds_;  // double bounds of each cell's vertices, for quick rejection
   std::vector<BspNode> bsp_;
   std::vector<int> leaf_of_cell_;
+
+  bool on_demand_ = false;
+  std::vector<Region> regions_;
+  std::vector<int> free_regions_;
+  // On demand: each vertex's three planes (sorted, 21 bits each), or bit 63 and its id for a
+  // box corner: the same key is the same exact point.
+  std::vector<std::uint64_t> vertex_keys_;
+  // Built faces by a hash of their plane and sorted vertex keys: the two cells on a face share
+  // it (and its image) when both are built.
+  std::unordered_multimap<std::uint64_t, int> faces_by_key_;
+  std::vector<std::pair<std::uint64_t, int>> split_vertices_;  // per split: edge -> crossing vertex
+  std::vector<DirectedEdge> section_scratch_;
+  std::vector<std::uint64_t> sorted_scratch_;
 
   // Per-insertion scratch state.
   std::vector<std::int8_t> sign_cache_;  // 2: not computed

@@ -1,8 +1,12 @@
 #include "cell_field.hpp"
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <span>
 
 #include "mean_value.hpp"
 #include "sonoshape/core/errors.hpp"
@@ -158,12 +162,12 @@ std::vector<int> CellField::refresh(const std::vector<int>& split_faces) {
   for (std::size_t f = old_face_count; f < images_.size(); ++f) rebuilt[f] = 1;
   for (const int f : split_faces) rebuilt[static_cast<std::size_t>(f)] = 1;
   image_generations_.resize(images_.size(), 0);
+  std::vector<int> to_build;
   for (std::size_t f = 0; f < images_.size(); ++f)
-    if (rebuilt[f]) {
-      images_[f] = FaceImage{};
-      build_face_image(static_cast<int>(f));
-      image_generations_[f] = ++last_image_generation_;
-    }
+    if (rebuilt[f]) to_build.push_back(static_cast<int>(f));
+  build_images(to_build);
+  for (const int f : to_build)
+    image_generations_[static_cast<std::size_t>(f)] = ++last_image_generation_;
 
   std::vector<int> completion_changed;
   bool any_unknown = false;
@@ -237,14 +241,63 @@ void CellField::compact_points() {
   tree_nodes_ = std::move(compacted_trees);
 }
 
-void CellField::add_tree(FaceImage::Part& part) {
-  if (part.count < kChainTreeMinEdges) return;
-  const std::size_t before = tree_nodes_.size();
-  part.tree_root = build_chain_tree(points_.data() + part.begin, part.count, tree_nodes_);
-  part.tree_count = static_cast<std::uint32_t>(tree_nodes_.size() - before);
+void CellField::build_images(const std::vector<int>& faces) {
+  // Fixed chunks of faces, each built into its own buffers on any thread, then appended in
+  // order: points_ and tree_nodes_ are those of building one face after the other, whatever
+  // the number of threads.
+  constexpr std::size_t kChunk = 64;
+  const std::size_t chunks = (faces.size() + kChunk - 1) / kChunk;
+  struct Buffers {
+    std::vector<Vec2> points;
+    std::vector<ChainNode> trees;
+  };
+  std::vector<Buffers> buffers(chunks);
+  auto chunk_faces = [&](std::size_t c) {
+    return std::span<const int>(faces).subspan(c * kChunk,
+                                               std::min(kChunk, faces.size() - c * kChunk));
+  };
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunks, 1),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      for (std::size_t c = r.begin(); c < r.end(); ++c)
+                        for (const int f : chunk_faces(c)) {
+                          images_[static_cast<std::size_t>(f)] = FaceImage{};
+                          build_face_image(f, buffers[c].points, buffers[c].trees);
+                        }
+                    });
+  for (std::size_t c = 0; c < chunks; ++c) {
+    const auto point_base = static_cast<std::uint32_t>(points_.size());
+    const auto tree_base = static_cast<std::int32_t>(tree_nodes_.size());
+    points_.insert(points_.end(), buffers[c].points.begin(), buffers[c].points.end());
+    for (ChainNode node : buffers[c].trees) {
+      if (node.left >= 0) node.left += tree_base;
+      if (node.right >= 0) node.right += tree_base;
+      tree_nodes_.push_back(node);
+    }
+    buffers[c] = Buffers{};
+    auto shift = [&](FaceImage::Part& part) {
+      part.begin += point_base;
+      if (part.tree_count != 0) part.tree_root += static_cast<std::uint32_t>(tree_base);
+    };
+    for (const int f : chunk_faces(c)) {
+      FaceImage& image = images_[static_cast<std::size_t>(f)];
+      image.polygon_begin += point_base;
+      for (FaceImage::Part& part : image.parts) shift(part);
+      for (FaceImage::Part& part : image.unknown_parts) shift(part);
+      for (FaceImage::Part& part : image.known_parts) shift(part);
+    }
+  }
 }
 
-void CellField::build_face_image(int face_id) {
+void CellField::add_tree(FaceImage::Part& part, const std::vector<Vec2>& points,
+                         std::vector<ChainNode>& trees) {
+  if (part.count < kChainTreeMinEdges) return;
+  const std::size_t before = trees.size();
+  part.tree_root = build_chain_tree(points.data() + part.begin, part.count, trees);
+  part.tree_count = static_cast<std::uint32_t>(trees.size() - before);
+}
+
+void CellField::build_face_image(int face_id, std::vector<Vec2>& points,
+                                 std::vector<ChainNode>& trees) {
   const ArrangementFace& face = arrangement_.face(face_id);
   const ArrangementPlane& plane = arrangement_.plane(face.plane);
   FaceImage& image = images_[static_cast<std::size_t>(face_id)];
@@ -256,9 +309,9 @@ void CellField::build_face_image(int face_id) {
     const Vec3 d = arrangement_.vertex(v) - frame.origin;
     polygon.emplace_back(d.dot(frame.u), d.dot(frame.v));
   }
-  image.polygon_begin = static_cast<std::uint32_t>(points_.size());
+  image.polygon_begin = static_cast<std::uint32_t>(points.size());
   image.polygon_count = static_cast<std::uint32_t>(polygon.size());
-  points_.insert(points_.end(), polygon.begin(), polygon.end());
+  points.insert(points.end(), polygon.begin(), polygon.end());
   if (plane.slice < 0) return;  // box faces are outside
 
   // The face as half-planes a*x + b*y + c >= 0 in the slice's (u, v) coordinates, one per
@@ -313,17 +366,19 @@ void CellField::build_face_image(int face_id) {
     if (!edge_near) {
       const int winding = winding_number(ring.data(), ring.size(), centre);
       if (winding == 0) return;
-      parts.push_back({material, static_cast<std::uint32_t>(points_.size()),
+      parts.push_back({material, static_cast<std::uint32_t>(points.size()),
                        static_cast<std::uint32_t>(polygon.size()), 0, 0, winding < 0 ? -1 : 1});
-      if (winding < 0) points_.insert(points_.end(), polygon.rbegin(), polygon.rend());  // a hole
-      else points_.insert(points_.end(), polygon.begin(), polygon.end());
+      if (winding < 0)
+        points.insert(points.end(), polygon.rbegin(), polygon.rend());  // a hole
+      else
+        points.insert(points.end(), polygon.begin(), polygon.end());
       return;
     }
     const Ring2 clipped = clip_ring_to_convex(ring, half_planes);
     if (clipped.empty()) return;
-    parts.push_back({material, static_cast<std::uint32_t>(points_.size()),
+    parts.push_back({material, static_cast<std::uint32_t>(points.size()),
                      static_cast<std::uint32_t>(clipped.size())});
-    points_.insert(points_.end(), clipped.begin(), clipped.end());
+    points.insert(points.end(), clipped.begin(), clipped.end());
   };
   const PreparedSlice& slice = slices_[static_cast<std::size_t>(plane.slice)];
   for (std::size_t m = 1; m < slice.rings_by_material.size(); ++m) {
@@ -345,27 +400,36 @@ void CellField::build_face_image(int face_id) {
     image.known_clipped = true;
     for (const Ring2& ring : slice.known) add_part(ring, 0, image.known_parts);
   }
-  for (FaceImage::Part& part : image.parts) add_tree(part);
-  for (FaceImage::Part& part : image.unknown_parts) add_tree(part);
-  for (FaceImage::Part& part : image.known_parts) add_tree(part);
+  for (FaceImage::Part& part : image.parts) add_tree(part, points, trees);
+  for (FaceImage::Part& part : image.unknown_parts) add_tree(part, points, trees);
+  for (FaceImage::Part& part : image.known_parts) add_tree(part, points, trees);
   double unknown_area = 0.0;
   for (const FaceImage::Part& part : image.unknown_parts)
-    unknown_area += signed_area(Ring2(points_.begin() + part.begin, points_.begin() + part.begin + part.count));
+    unknown_area +=
+        signed_area(Ring2(points.begin() + part.begin, points.begin() + part.begin + part.count));
   image.fully_unknown = unknown_area >= (1.0 - 1e-9) * std::abs(signed_area(polygon));
 }
 
-int CellField::evaluate(const Vec3& p, double* out) const {
-  const int n = function_count();
-  const std::size_t fc = static_cast<std::size_t>(n);
+bool CellField::outside_box(const Vec3& p, double* out) const {
   const Box3& box = arrangement_.box();
-  if (!((p.array() > box.min.array()).all() && (p.array() < box.max.array()).all())) {
-    out[0] = 1.0;
-    for (int l = 1; l < n; ++l) out[l] = -1.0;
-    return -1;
-  }
+  if ((p.array() > box.min.array()).all() && (p.array() < box.max.array()).all()) return false;
+  out[0] = 1.0;
+  for (int l = 1; l < function_count(); ++l) out[l] = -1.0;
+  return true;
+}
+
+int CellField::evaluate(const Vec3& p, double* out) const {
+  if (outside_box(p, out)) return -1;
   // Evaluations come in runs of nearby points: the last cell this thread found is the first guess.
   thread_local int last_cell = -1;
-  const int cell = last_cell = arrangement_.locate(p, last_cell);
+  last_cell = arrangement_.locate(p, last_cell);
+  return evaluate_in(last_cell, p, out);
+}
+
+int CellField::evaluate_in(int cell, const Vec3& p, double* out) const {
+  if (outside_box(p, out)) return -1;
+  const int n = function_count();
+  const std::size_t fc = static_cast<std::size_t>(n);
   // w[l] accumulates the mean-value weight of label l: its known parts of the faces plus its
   // share of the completed unknown triangles; w[0] only the completed share of the outside.
   constexpr int kMaxStack = 16;

@@ -97,6 +97,10 @@ class CellField {
   /// f_l(p) for l = 0..K into `out` (function_count() doubles), each in [-1, 1]; outside the
   /// box (and on it) the outside label holds. Returns the cell used (-1 outside the box).
   int evaluate(const Vec3& p, double* out) const;
+  /// evaluate() in a given cell: `cell` must contain p (the arrangement's locate or
+  /// construct_cell of p), with the images of its faces built (refresh after construct_cell).
+  /// Returns `cell` (-1 outside the box).
+  int evaluate_in(int cell, const Vec3& p, double* out) const;
   /// Unknown-region statistics: triangles, cell groups, completion seconds.
   std::size_t unknown_triangle_count() const { return triangles_.size(); }
   std::size_t group_count() const { return group_count_; }
@@ -127,9 +131,15 @@ class CellField {
     std::vector<std::vector<double>> tree_moments;
     std::vector<std::uint64_t> hashes;
   };
-  void build_face_image(int face_id);
+  // Builds the images of `faces` (on the calling arena's threads, the same result on any number).
+  void build_images(const std::vector<int>& faces);
+  // Builds the image of one face, its points and trees appended to `points` and `trees` (offsets
+  // into those); writes images_[face_id] only.
+  void build_face_image(int face_id, std::vector<Vec2>& points, std::vector<ChainNode>& trees);
+  bool outside_box(const Vec3& p, double* out) const;
   // Gives a long part its far-field tree.
-  void add_tree(FaceImage::Part& part);
+  static void add_tree(FaceImage::Part& part, const std::vector<Vec2>& points,
+                       std::vector<ChainNode>& trees);
   // The plain edge sum (projected_angle_plain) of a part, through its tree when it has one. The
   // field and the completion add these into sums over a cell's faces, of order 1 / height of the
   // nearest face, and divide by their total: an absolute error of rounding in each term is all

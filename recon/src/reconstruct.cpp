@@ -15,6 +15,7 @@ MeshSet reconstruct(const SliceSet& set, const ReconstructionOptions& options,
   ReconstructorOptions setup;
   setup.engine = options;
   setup.bounds = set.effective_bounds();
+  setup.cells_on_demand = true;  // one update: only the cells the octree reaches are built
   for (const int id : set.material_ids()) setup.labels.push_back({id, set.label_name(id)});
   Reconstructor reconstructor(setup);
   try {

@@ -82,6 +82,12 @@ bool same_slice(const LabeledSlice& a, const LabeledSlice& b) {
   return true;
 }
 
+// Whether the engine completes unknown regions on `slice` (as prepare_slice decides).
+bool has_unknown(const LabeledSlice& slice) {
+  return slice.fov || std::any_of(slice.regions.begin(), slice.regions.end(),
+                                  [](const Region& r) { return r.label == kUnknownLabel; });
+}
+
 bool same_plane(const LabeledSlice& a, const LabeledSlice& b, double scale) {
   const Vec3 na = a.normal().normalized(), nb = b.normal().normalized();
   return std::abs(na.dot(nb)) >= 1.0 - kCoincidentTolerance &&
@@ -183,7 +189,10 @@ struct Reconstructor::State {
     material_ids = materials_of(list);
     depth = options.engine.max_depth > 0 ? options.engine.max_depth : default_depth(box);
     Stopwatch clock;
-    arrangement = std::make_unique<Arrangement>(box);
+    const bool on_demand =
+        options.cells_on_demand &&
+        std::none_of(list.begin(), list.end(), [](const Entry& e) { return has_unknown(e.slice); });
+    arrangement = std::make_unique<Arrangement>(box, on_demand);
     field = std::make_unique<CellField>(*arrangement, static_cast<int>(material_ids.size()));
     {
       Progress progress("arrangement", list.size());
@@ -296,8 +305,10 @@ UpdateStats Reconstructor::update() {
   try {
     arena.execute([&] {
       const Box3 next_box = s.slice_set_of(next).effective_bounds();
-      const bool full = !s.built || out.slices_removed > 0 || s.materials_of(next) != s.material_ids ||
-                        next_box.min != s.box.min || next_box.max != s.box.max;
+      // Cells built on demand are only those of the last field: a new plane rebuilds them all.
+      const bool full = !s.built || s.arrangement->on_demand() || out.slices_removed > 0 ||
+                        s.materials_of(next) != s.material_ids || next_box.min != s.box.min ||
+                        next_box.max != s.box.max;
       std::vector<int> changed_cells;
       if (full) {
         s.rebuild(next, stats);
@@ -365,9 +376,42 @@ UpdateStats Reconstructor::update() {
   const std::size_t fc = static_cast<std::size_t>(field.function_count());
   std::size_t evaluations = 0;
   double evaluation_seconds = 0.0;
+  std::vector<int> point_cells;
   // The octree asks only for vertices the kept field has no valid value for: all are evaluated
   // (in parallel) and tagged with their cell and this update.
-  const BatchEvaluator evaluate = [&](const std::vector<Vec3>& points, double* values, std::uint64_t* tags) {
+  const BatchEvaluator evaluate = [&](const std::vector<Vec3>& points, double* values,
+                                      std::uint64_t* tags) {
+    if (s.arrangement->on_demand()) {
+      // The cells of the points are built first (one thread: the lazy tree changes), then
+      // evaluated in parallel like those of the whole arrangement.
+      Stopwatch clock;
+      point_cells.resize(points.size());
+      const Box3& box = s.box;
+      int guess = -1;  // the points come in runs of neighbours
+      for (std::size_t n = 0; n < points.size(); ++n) {
+        const Vec3& p = points[n];
+        const bool inside =
+            (p.array() > box.min.array()).all() && (p.array() < box.max.array()).all();
+        point_cells[n] = inside ? guess = s.arrangement->construct_cell(p, guess) : -1;
+      }
+      stats.arrangement_s += clock.seconds();
+      clock.reset();
+      arena.execute([&] { s.field->refresh({}); });  // the images of the new cells' faces
+      stats.face_images_s += clock.seconds();
+      const Stopwatch evaluation_clock;
+      arena.execute([&] {
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, points.size(), 64),
+                          [&](const tbb::blocked_range<std::size_t>& r) {
+                            for (std::size_t n = r.begin(); n < r.end(); ++n)
+                              tags[n] = evaluation_tag(
+                                  field.evaluate_in(point_cells[n], points[n], values + n * fc),
+                                  s.generation);
+                          });
+      });
+      evaluations += points.size();
+      evaluation_seconds += evaluation_clock.seconds();
+      return;
+    }
     const Stopwatch evaluation_clock;
     arena.execute([&] {
       tbb::parallel_for(tbb::blocked_range<std::size_t>(0, points.size(), 64),
@@ -415,6 +459,7 @@ UpdateStats Reconstructor::update() {
 
   stats.slices = s.entries.size();
   stats.cells = s.arrangement->cell_count();
+  if (out.full_rebuild && s.arrangement->on_demand()) out.cells_changed = stats.cells;
   stats.faces = s.arrangement->face_count();
   stats.field_evaluations = evaluations;
   stats.evaluation_s = evaluation_seconds;

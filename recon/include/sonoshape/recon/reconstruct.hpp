@@ -18,6 +18,9 @@ struct ReconstructionOptions {
 };
 
 /// Per-stage wall time in seconds and counts of one reconstruction.
+/// With cells built on demand (reconstruct()), the cells and images are built when the octree
+/// first evaluates a point in them: arrangement_s and face_images_s are then parts of field_s and
+/// smoothing_s, and `cells` / `faces` count those built.
 struct ReconstructionStats {
   double arrangement_s = 0, face_images_s = 0, field_s = 0, smoothing_s = 0, mesh_s = 0, total_s = 0;
   std::size_t slices = 0, cells = 0, faces = 0, field_evaluations = 0;

@@ -26,6 +26,12 @@ struct ReconstructorOptions {
   std::optional<Box3> bounds;
   /// Materials known up front (ids and names); materials first seen in a slice are added.
   std::vector<LabelInfo> labels;
+  /// Build the arrangement's cells and face images only where the field is evaluated (issue
+  /// 24): the cost follows the surface instead of the cube of the slice count, with the same
+  /// field. Every update is then a full rebuild, so it suits one update (reconstruct()); the
+  /// online engine keeps the whole arrangement. Sets with unknown regions or fields of view use
+  /// the whole arrangement (their completion reads the faces around the unknown regions).
+  bool cells_on_demand = false;
 };
 
 /// What one update() did.

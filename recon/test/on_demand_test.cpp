@@ -1,0 +1,383 @@
+// Cells built on demand (issue 24) against the whole arrangement: every cell a point reaches is
+// the whole arrangement's cell there (same planes, same exact vertices, closed), and the engine's
+// field and meshes are those of the whole arrangement on random, sweep and unknown-region sets.
+#include <gtest/gtest.h>
+
+#include <array>
+#include <cmath>
+#include <map>
+#include <numbers>
+#include <random>
+
+#include "arrangement.hpp"
+#include "sonoshape/recon/reconstruct.hpp"
+#include "sonoshape/recon/reconstructor.hpp"
+
+namespace sonoshape::recon {
+namespace {
+
+// ---------------------------------------------------------------------------------------------
+// The arrangement
+
+const Box3 kUnitBox{Vec3(-1.0, -2.0, -1.5), Vec3(2.0, 1.0, 1.5)};
+
+// A cell as (plane, side of the plane the cell is on) -> the face's vertices, sorted. Vertices
+// are the doubles rounded from exact points: the same exact point gives the same double.
+using CellShape = std::map<std::pair<int, int>, std::vector<std::array<double, 3>>>;
+
+CellShape shape_of(const Arrangement& arr, int cell) {
+  CellShape shape;
+  for (const int f : arr.cell(cell).faces) {
+    const ArrangementFace& face = arr.face(f);
+    std::vector<std::array<double, 3>> vertices;
+    for (const int v : face.vertices)
+      vertices.push_back({arr.vertex(v).x(), arr.vertex(v).y(), arr.vertex(v).z()});
+    std::sort(vertices.begin(), vertices.end());
+    const auto [it, inserted] =
+        shape.emplace(std::make_pair(face.plane, face.cell_positive == cell ? 1 : -1), vertices);
+    EXPECT_TRUE(inserted) << "two faces of cell " << cell << " on plane " << face.plane;
+  }
+  return shape;
+}
+
+// A built cell is a closed polyhedron: oriented outwards, its faces use each edge once in each
+// direction, and its vertices lie exactly on their planes. Regions do not share vertices, so a
+// face shared with a neighbour may name a point by another id: edges are compared by the first
+// id of the cell with the same exact point.
+void expect_closed(const Arrangement& arr, int cell) {
+  std::vector<int> ids;
+  auto representative = [&](int v) {
+    for (const int w : ids)
+      if (arr.exact_vertex(w) == arr.exact_vertex(v)) return w;
+    ids.push_back(v);
+    return v;
+  };
+  std::map<std::pair<int, int>, int> edges;
+  for (const int f : arr.cell(cell).faces) {
+    const ArrangementFace& face = arr.face(f);
+    ASSERT_TRUE(face.cell_positive == cell || face.cell_negative == cell);
+    const std::size_t n = face.vertices.size();
+    ASSERT_GE(n, 3u);
+    for (std::size_t i = 0; i < n; ++i) {
+      int a = face.vertices[i], b = face.vertices[(i + 1) % n];
+      EXPECT_EQ(arr.side(face.plane, a), 0);
+      EXPECT_EQ(arr.side(face.edge_planes[i], a), 0);
+      EXPECT_EQ(arr.side(face.edge_planes[i], b), 0);
+      a = representative(a);
+      b = representative(b);
+      if (face.cell_positive == cell) std::swap(a, b);
+      ++edges[{a, b}];
+    }
+  }
+  for (const auto& [edge, count] : edges) {
+    EXPECT_EQ(count, 1) << "cell " << cell;
+    EXPECT_TRUE(edges.count({edge.second, edge.first})) << "cell " << cell << " is not closed";
+  }
+}
+
+struct Plane {
+  Vec3 normal;
+  double offset;
+};
+
+// Inserts `planes` into a whole and an on-demand arrangement, then compares the cells of
+// `points`: a point clear of every plane must get the same cell; a point on planes a cell whose
+// closure holds it.
+void expect_same_cells(const std::vector<Plane>& planes, const std::vector<Vec3>& points) {
+  Arrangement whole(kUnitBox);
+  Arrangement lazy(kUnitBox, true);
+  ASSERT_TRUE(lazy.on_demand());
+  for (std::size_t i = 0; i < planes.size(); ++i) {
+    whole.insert_plane(planes[i].normal, planes[i].offset, static_cast<int>(i));
+    EXPECT_TRUE(lazy.insert_plane(planes[i].normal, planes[i].offset, static_cast<int>(i)).empty());
+  }
+  EXPECT_EQ(lazy.cell_count(), 0u);
+  int compared = 0;
+  for (const Vec3& p : points) {
+    const int c = lazy.construct_cell(p);
+    EXPECT_EQ(lazy.construct_cell(p), c) << "a second query must find the built cell";
+    // A guess is taken only where the walk would end in it (points on planes take the walk).
+    for (const int guess : {c, c - 1, c + 1, 0, -1, static_cast<int>(lazy.cell_count()) - 1})
+      EXPECT_EQ(lazy.construct_cell(p, guess), c) << "guess " << guess;
+    expect_closed(lazy, c);
+    bool clear = true;
+    for (std::size_t i = 0; i < planes.size(); ++i)
+      clear &=
+          std::abs(planes[i].normal.dot(p) + planes[i].offset) > 1e-9 * planes[i].normal.norm();
+    if (clear) {
+      EXPECT_EQ(shape_of(lazy, c), shape_of(whole, whole.locate(p))) << "at " << p.transpose();
+      ++compared;
+    } else {
+      for (const int f : lazy.cell(c).faces) {
+        const ArrangementFace& face = lazy.face(f);
+        const double s = lazy.plane(face.plane).signed_distance(p);
+        EXPECT_GE(face.cell_positive == c ? s : -s, -1e-12) << "at " << p.transpose();
+      }
+    }
+  }
+  EXPECT_GT(compared, 0);
+  EXPECT_LE(lazy.cell_count(), whole.cell_count());
+}
+
+std::vector<Vec3> random_points(std::mt19937_64& rng, int count) {
+  std::uniform_real_distribution<double> inside(0.0, 1.0);
+  std::vector<Vec3> points;
+  for (int k = 0; k < count; ++k)
+    points.push_back(
+        kUnitBox.min +
+        (kUnitBox.max - kUnitBox.min).cwiseProduct(Vec3(inside(rng), inside(rng), inside(rng))));
+  return points;
+}
+
+TEST(OnDemandArrangement, RandomPlanesGiveTheWholeArrangementsCells) {
+  std::mt19937_64 rng(7);
+  std::normal_distribution<double> gauss;
+  std::uniform_real_distribution<double> uniform(-0.8, 0.8);
+  std::vector<Plane> planes;
+  for (int i = 0; i < 14; ++i) {
+    const Vec3 n(gauss(rng), gauss(rng), gauss(rng));
+    const Vec3 p(uniform(rng), uniform(rng), uniform(rng));
+    planes.push_back({n, -n.dot(p)});
+  }
+  expect_same_cells(planes, random_points(rng, 400));
+}
+
+TEST(OnDemandArrangement, DegeneratePlanesGiveTheWholeArrangementsCells) {
+  // Three planes through a line, more through a point, planes through vertices and edges of the
+  // box and of each other, nearly parallel planes, and a sweep (a deep tree); then points on
+  // planes, on their lines and at their crossings as well as random ones.
+  std::vector<Plane> planes{{Vec3(1, 0, 0), 0.0},
+                            {Vec3(0, 1, 0), 0.0},
+                            {Vec3(1, 1, 0), 0.0},
+                            {Vec3(0, 0, 1), 0.0},
+                            {Vec3(1, -1, 1), 0.0},
+                            {Vec3(1, -1, 0), 0.0},
+                            {Vec3(1, -2, 0), 0.0},
+                            {Vec3(0, 0, 1), -0.1},
+                            {Vec3(1e-9, 1e-9, 1), -0.1 + 1e-12},
+                            {Vec3(0, 1e-15, 1), -0.1 - 1e-15}};
+  for (const double x : {-0.5, 0.5}) planes.push_back({Vec3(1, 0, 0), -x});
+  for (int i = 0; i < 8; ++i) planes.push_back({Vec3(0.01 * i, 0.02, 1), -(-1.2 + 0.3 * i)});
+  std::mt19937_64 rng(11);
+  std::vector<Vec3> points = random_points(rng, 400);
+  for (const double x : {-0.5, 0.0, 0.5, 0.25})
+    for (const double y : {-1.0, 0.0, -0.5})
+      for (const double z : {-1.2, -0.1, 0.0, 0.3, 0.7}) points.emplace_back(x, y, z);
+  expect_same_cells(planes, points);
+}
+
+TEST(OnDemandArrangement, BuildsOnlyTheCellsItIsAskedFor) {
+  std::mt19937_64 rng(3);
+  std::normal_distribution<double> gauss;
+  std::uniform_real_distribution<double> uniform(-0.8, 0.8);
+  Arrangement whole(kUnitBox), lazy(kUnitBox, true);
+  for (int i = 0; i < 30; ++i) {
+    const Vec3 n(gauss(rng), gauss(rng), gauss(rng));
+    const Vec3 p(uniform(rng), uniform(rng), uniform(rng));
+    whole.insert_plane(n, -n.dot(p), i);
+    lazy.insert_plane(n, -n.dot(p), i);
+  }
+  // Points along a short segment reach a few cells of the thousands.
+  for (int k = 0; k <= 50; ++k) lazy.construct_cell(Vec3(0.1 + 0.004 * k, -0.3, 0.2));
+  EXPECT_GT(whole.cell_count(), 2000u);
+  EXPECT_LT(lazy.cell_count(), 40u);
+  EXPECT_LT(lazy.region_count(), 40u * 30u);
+  EXPECT_THROW(lazy.insert_plane(Vec3(0, 0, 1), 0.3, 30), std::logic_error);
+}
+
+// ---------------------------------------------------------------------------------------------
+// The engine
+
+constexpr double kRadius = 30.0;
+const Box3 kBox{Vec3::Constant(-45.0), Vec3::Constant(45.0)};
+
+Ring2 circle(const Vec2& center, double radius, int n) {
+  Ring2 ring;
+  for (int i = 0; i < n; ++i) {
+    const double t = 2.0 * std::numbers::pi * i / n;
+    ring.emplace_back(center.x() + radius * std::cos(t), center.y() + radius * std::sin(t));
+  }
+  return ring;
+}
+
+// The sections of a sphere (label 1) and a smaller one (label 2) by the plane (origin, u, v).
+LabeledSlice spheres_slice(const Vec3& origin, const Vec3& u, const Vec3& v) {
+  LabeledSlice s;
+  s.u = u;
+  s.v = v;
+  s.origin_mm = origin;
+  const Vec3 n = u.cross(v);
+  auto add_sphere = [&](const Vec3& centre, double radius, int label) {
+    const double d = n.dot(centre - s.origin_mm);
+    if (std::abs(d) >= 0.95 * radius) return;
+    s.regions.push_back(
+        {label, circle(s.to_plane(centre - d * n), std::sqrt(radius * radius - d * d), 48), {}});
+  };
+  add_sphere(Vec3(-10, 0, 0), 0.5 * kRadius, 1);
+  add_sphere(Vec3(16, 4, 2), 0.3 * kRadius, 2);
+  return s;
+}
+
+SliceSet random_set(unsigned seed, int count) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> normal(0.0, 1.0);
+  std::uniform_real_distribution<double> uniform(-0.8, 0.8);
+  SliceSet set;
+  while (static_cast<int>(set.slices.size()) < count) {
+    const Vec3 n = Vec3(normal(rng), normal(rng), normal(rng)).normalized();
+    const Vec3 u = n.unitOrthogonal();
+    LabeledSlice s = spheres_slice(n * (uniform(rng) * kRadius), u, n.cross(u));
+    if (!s.regions.empty()) set.slices.push_back(std::move(s));
+  }
+  return set;
+}
+
+// A freehand-like sweep: planes z = h, h rising, tilted about x by a growing angle and rocked
+// about y, so that neighbours meet inside the box as a hand-held probe's do.
+SliceSet sweep_set(int count) {
+  SliceSet set;
+  for (int k = 0; k < count; ++k) {
+    const double tilt = -0.4 + 0.8 * k / (count - 1), rock = 0.3 * std::sin(1.3 * k);
+    const Vec3 u = Vec3(std::cos(rock), 0, std::sin(rock));
+    const Vec3 v = (Vec3(0, std::cos(tilt), std::sin(tilt)) - std::sin(rock) * std::sin(tilt) * u)
+                       .normalized();
+    set.slices.push_back(spheres_slice(Vec3(0, 0, -10.0 + 20.0 * k / (count - 1)), u, v));
+  }
+  return set;
+}
+
+std::unique_ptr<Reconstructor> reconstruct_with(const SliceSet& set, bool on_demand,
+                                                ReconstructionStats* stats, int threads = 2) {
+  ReconstructorOptions options;
+  options.bounds = kBox;
+  options.engine.max_depth = 5;
+  options.engine.threads = threads;
+  options.labels = {{1, "big"}, {2, "small"}};
+  options.cells_on_demand = on_demand;
+  auto r = std::make_unique<Reconstructor>(options);
+  for (const LabeledSlice& s : set.slices) r->add_slice(s);
+  const UpdateStats update = r->update();
+  if (stats) *stats = update.step;
+  return r;
+}
+
+// The field at every sampled vertex within 1e-9 and the same meshes (triangles and vertices).
+// `fewer`: the on-demand engine builds fewer cells than the whole arrangement has.
+void expect_same_reconstruction(const SliceSet& set, bool fewer) {
+  ReconstructionStats whole_stats, lazy_stats;
+  const auto whole = reconstruct_with(set, false, &whole_stats);
+  const auto lazy = reconstruct_with(set, true, &lazy_stats);
+  const auto a = whole->sampled_field();
+  const auto b = lazy->sampled_field();
+  ASSERT_EQ(a.size(), b.size());
+  double worst = 0.0;
+  for (std::size_t n = 0; n < a.size(); ++n) {
+    ASSERT_EQ(a[n].first, b[n].first) << "sampled vertices differ at row " << n;
+    for (std::size_t l = 0; l < a[n].second.size(); ++l)
+      worst = std::max(worst, std::abs(a[n].second[l] - b[n].second[l]));
+  }
+  EXPECT_LE(worst, 1e-9);
+  const MeshSet& ma = whole->mesh();
+  const MeshSet& mb = lazy->mesh();
+  ASSERT_EQ(ma.meshes.size(), mb.meshes.size());
+  std::size_t triangles = 0;
+  for (std::size_t m = 0; m < ma.meshes.size(); ++m) {
+    ASSERT_EQ(ma.meshes[m].mesh.vertices.size(), mb.meshes[m].mesh.vertices.size());
+    ASSERT_EQ(ma.meshes[m].mesh.triangles, mb.meshes[m].mesh.triangles);
+    for (std::size_t v = 0; v < ma.meshes[m].mesh.vertices.size(); ++v)
+      EXPECT_LE((ma.meshes[m].mesh.vertices[v] - mb.meshes[m].mesh.vertices[v]).norm(), 1e-9);
+    triangles += ma.meshes[m].mesh.triangles.size();
+  }
+  EXPECT_GT(triangles, 100u);
+  EXPECT_EQ(whole_stats.field_evaluations, lazy_stats.field_evaluations);
+  if (fewer) {
+    EXPECT_LT(lazy_stats.cells, whole_stats.cells);
+  } else {
+    EXPECT_EQ(lazy_stats.cells, whole_stats.cells);
+  }
+}
+
+TEST(OnDemandEngine, RandomSetsGiveTheWholeArrangementsFieldAndMeshes) {
+  for (const unsigned seed : {21u, 22u}) {
+    SCOPED_TRACE("seed " + std::to_string(seed));
+    expect_same_reconstruction(random_set(seed, 24), true);
+  }
+}
+
+TEST(OnDemandEngine, SweepSetsGiveTheWholeArrangementsFieldAndMeshes) {
+  expect_same_reconstruction(sweep_set(20), true);
+}
+
+TEST(OnDemandEngine, UnknownRegionSetsGiveTheWholeArrangementsFieldAndMeshes) {
+  // An unknown region on some slices and a field of view on others: the completion needs the
+  // faces around the unknown regions, so these sets keep the whole arrangement.
+  SliceSet set = random_set(23, 10);
+  int unknown = 0;
+  for (std::size_t k = 0; k < set.slices.size(); k += 3) {
+    // A disc of radius 8 clear of the slice's sections (circles: centroid and radius).
+    LabeledSlice& slice = set.slices[k];
+    for (int t = 0; t < 12; ++t) {
+      const Vec2 c = 28.0 * Vec2(std::cos(0.5 * t), std::sin(0.5 * t));
+      bool clear = true;
+      for (const Region& r : slice.regions) {
+        Vec2 centre = Vec2::Zero();
+        for (const Vec2& q : r.outer) centre += q;
+        centre /= static_cast<double>(r.outer.size());
+        clear &= (c - centre).norm() > (r.outer[0] - centre).norm() + 9.0;
+      }
+      if (!clear) continue;
+      slice.regions.push_back({kUnknownLabel, circle(c, 8.0, 24), {}});
+      ++unknown;
+      break;
+    }
+  }
+  Ring2 fov;
+  for (int k = 0; k < 6; ++k) {
+    const double t = 2.0 * std::numbers::pi * k / 6;
+    fov.emplace_back(40.0 * std::cos(t), 40.0 * std::sin(t));
+  }
+  ASSERT_GE(unknown, 3);
+  set.slices[1].fov = fov;
+  expect_same_reconstruction(set, false);
+}
+
+// `threads` bounds every stage of the on-demand engine too, and the result does not depend on
+// it: the cells are built on one thread, the face images in fixed chunks merged in order, and
+// the polygon of a face shared by two cells is the same whichever was built first.
+TEST(OnDemandEngine, OneThreadGivesTheFieldAndMeshesOfTwo) {
+  const SliceSet set = random_set(25, 30);
+  ReconstructionStats one_stats, two_stats;
+  const auto one = reconstruct_with(set, true, &one_stats, 1);
+  const auto two = reconstruct_with(set, true, &two_stats, 2);
+  EXPECT_EQ(one_stats.cells, two_stats.cells);
+  EXPECT_EQ(one_stats.faces, two_stats.faces);
+  const auto a = one->sampled_field();
+  const auto b = two->sampled_field();
+  ASSERT_EQ(a.size(), b.size());
+  for (std::size_t n = 0; n < a.size(); ++n) {
+    ASSERT_EQ(a[n].first, b[n].first);
+    ASSERT_EQ(a[n].second, b[n].second) << "row " << n;
+  }
+  ASSERT_EQ(one->mesh().meshes.size(), two->mesh().meshes.size());
+  for (std::size_t m = 0; m < one->mesh().meshes.size(); ++m) {
+    EXPECT_EQ(one->mesh().meshes[m].mesh.vertices, two->mesh().meshes[m].mesh.vertices);
+    EXPECT_EQ(one->mesh().meshes[m].mesh.triangles, two->mesh().meshes[m].mesh.triangles);
+  }
+}
+
+TEST(OnDemandEngine, TheOneShotReconstructionBuildsCellsOnDemand) {
+  SliceSet set = random_set(24, 24);
+  set.bounds = kBox;
+  set.labels = {{1, "big"}, {2, "small"}};
+  ReconstructionOptions options;
+  options.max_depth = 5;
+  ReconstructionStats stats, whole;
+  const MeshSet meshes = reconstruct(set, options, &stats);
+  reconstruct_with(set, false, &whole);
+  EXPECT_LT(stats.cells, whole.cells);
+  EXPECT_GT(stats.cells, 0u);
+  EXPECT_EQ(meshes.meshes.size(), 2u);
+}
+
+}  // namespace
+}  // namespace sonoshape::recon
