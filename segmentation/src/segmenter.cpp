@@ -8,6 +8,8 @@
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
 
+#include "stage_times.hpp"
+
 namespace sonoshape::seg {
 namespace {
 
@@ -339,6 +341,7 @@ Segmentation segment_frame(const GreyImage& image, const ImageGeometry& geometry
                                 std::to_string(geometry.width_px) + "x" +
                                 std::to_string(geometry.height_px));
   if (const Status valid = config.validate(); !valid) throw std::invalid_argument(valid.message());
+  detail::StageClock clock;
   const int w = image.width, h = image.height;
   const double px_mm = geometry.spacing_mm;
   const cv::Mat grey = wrap(image);
@@ -359,6 +362,7 @@ Segmentation segment_frame(const GreyImage& image, const ImageGeometry& geometry
   median.convertTo(smoothed, CV_32F);
   if (config.smoothing_mm > 0.0)
     smoothed = MaskedBlur(mask01, config.smoothing_mm / px_mm)(smoothed);
+  clock.lap(detail::Stage::kFilter);
 
   // Confidence from local statistics of the raw grey: where nearly every pixel of the window is
   // dark there is no echo (shadow, lost signal). Speckle of log-compressed tissue keeps a large
@@ -395,6 +399,7 @@ Segmentation segment_frame(const GreyImage& image, const ImageGeometry& geometry
   if (config.max_depth_mm > 0.0) low |= (depth > config.max_depth_mm) & sector;
   if (config.shadow_margin_mm > 0.0) cv::dilate(low, low, disk(config.shadow_margin_mm / px_mm));
   low &= sector;
+  clock.lap(detail::Stage::kConfidence);
 
   // Classes: background then materials, each with its grey mean.
   struct Class {
@@ -478,6 +483,7 @@ Segmentation segment_frame(const GreyImage& image, const ImageGeometry& geometry
     }
   }
   classify_all();
+  clock.lap(detail::Stage::kClassify);
 
   // Morphological cleaning on the label map (every label from the same map, so regions cannot
   // overlap), then no diagonal-only contacts so that every outline is a simple polygon.
@@ -499,6 +505,7 @@ Segmentation segment_frame(const GreyImage& image, const ImageGeometry& geometry
     for (int i = 0; i < w; ++i)
       if (sector.at<std::uint8_t>(j, i) && map.at<std::uint8_t>(j, i) == kLabelPixelUnknown)
         ++result.unknown_in_sector_px;
+  clock.lap(detail::Stage::kCleaning);
   return result;
 }
 
