@@ -12,10 +12,12 @@
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
+#include <ctime>
 #include <fstream>
 #include <iostream>
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
 #include <optional>
 #include <string>
 #include <vector>
@@ -104,13 +106,18 @@ int main(int argc, char** argv) {
     std::cerr << options.sweep << ": no frame with a valid pose\n";
     return 1;
   }
+  const ImageU8& sector = setup->geometry.sector;
+  const cv::Rect box = cv::boundingRect(
+      cv::Mat(sector.height, sector.width, CV_8U, const_cast<std::uint8_t*>(sector.pixels.data())));
+  std::size_t sector_px = 0;
+  for (const std::uint8_t v : sector.pixels) sector_px += v ? 1 : 0;
   std::ofstream dump;
   if (options.dump_labels) dump.open(*options.dump_labels, std::ios::binary);
 
   auto one_frame = [&](std::size_t k, const Eigen::Matrix4d& pose) {
     const seg::Segmentation s = seg::segment_frame(file->image(k), setup->geometry, setup->config);
-    const seg::ImagePlane plane = seg::image_plane(pose * setup->T_probe_image,
-                                                   pose.block<3, 1>(0, 3));
+    const seg::ImagePlane plane =
+        seg::image_plane(pose * setup->T_probe_image, pose.block<3, 1>(0, 3));
     std::vector<Repair> repairs;
     const auto slice = seg::make_slice(s.labels, setup->geometry.sector, setup->geometry.sector_px,
                                        plane, setup->config.simplify_mm, &repairs);
@@ -122,6 +129,7 @@ int main(int argc, char** argv) {
   seg::detail::stage_times_sink = &stages;
   double contours_ms = 0.0;
   std::vector<double> frame_ms;
+  const std::clock_t cpu_start = std::clock();
   std::size_t regions = 0;
   for (int pass = 0; pass < options.repeat; ++pass)
     for (const auto& [k, pose] : frames) {
@@ -129,8 +137,7 @@ int main(int argc, char** argv) {
       const double before = stages.ms[0] + stages.ms[1] + stages.ms[2] + stages.ms[3];
       const auto [labels, n] = one_frame(k, pose);
       const double total = std::chrono::duration<double, std::milli>(Clock::now() - start).count();
-      const double segmenting =
-          stages.ms[0] + stages.ms[1] + stages.ms[2] + stages.ms[3] - before;
+      const double segmenting = stages.ms[0] + stages.ms[1] + stages.ms[2] + stages.ms[3] - before;
       contours_ms += total - segmenting;
       frame_ms.push_back(total);
       if (pass == 0) {
@@ -141,6 +148,9 @@ int main(int argc, char** argv) {
       }
     }
   seg::detail::stage_times_sink = nullptr;
+  // Processor time of all threads (OpenCV's pool included): on a machine shared with other
+  // work, the wall time includes waiting for a core, this does not.
+  const double cpu_ms = 1000.0 * static_cast<double>(std::clock() - cpu_start) / CLOCKS_PER_SEC;
 
   const auto n = static_cast<double>(frame_ms.size());
   const char* names[] = {"filter", "confidence", "classify", "cleaning"};
@@ -152,6 +162,9 @@ int main(int argc, char** argv) {
   out["repeat"] = options.repeat;
   out["opencv_threads"] = cv::getNumThreads();
   out["regions_first_pass"] = regions;
+  out["sector_fraction"] =
+      static_cast<double>(sector_px) / static_cast<double>(sector.pixels.size());
+  out["sector_box"] = {box.x, box.y, box.width, box.height};
   for (std::size_t s = 0; s < 4; ++s) out["stage_ms"][names[s]] = stages.ms[s] / n;
   out["stage_ms"]["contours"] = contours_ms / n;
   double sum = 0.0;
@@ -159,13 +172,17 @@ int main(int argc, char** argv) {
   out["frame_ms"] = {{"mean", sum / n},
                      {"median", percentile(frame_ms, 0.5)},
                      {"p90", percentile(frame_ms, 0.9)},
-                     {"max", percentile(frame_ms, 1.0)}};
-  std::printf("%s: %dx%d, %zu frames x %d, OpenCV threads %d\n", options.sweep.c_str(),
-              file->width(), file->height(), frames.size(), options.repeat, cv::getNumThreads());
+                     {"max", percentile(frame_ms, 1.0)},
+                     {"cpu_mean", cpu_ms / n}};
+  std::printf("%s: %dx%d (sector %.0f%% of it, box %dx%d), %zu frames x %d, OpenCV threads %d\n",
+              options.sweep.c_str(), file->width(), file->height(),
+              100.0 * out["sector_fraction"].get<double>(), box.width, box.height, frames.size(),
+              options.repeat, cv::getNumThreads());
   for (const char* name : {"filter", "confidence", "classify", "cleaning", "contours"})
     std::printf("  %-10s %7.2f ms\n", name, out["stage_ms"][name].get<double>());
-  std::printf("  frame      %7.2f ms mean, %.2f median, %.2f p90, %.2f max\n", sum / n,
-              percentile(frame_ms, 0.5), percentile(frame_ms, 0.9), percentile(frame_ms, 1.0));
+  std::printf("  frame      %7.2f ms mean, %.2f median, %.2f p90, %.2f max; %.2f ms CPU\n", sum / n,
+              percentile(frame_ms, 0.5), percentile(frame_ms, 0.9), percentile(frame_ms, 1.0),
+              cpu_ms / n);
   if (options.json) std::ofstream(*options.json) << out.dump(2) << "\n";
   return 0;
 }
