@@ -2,6 +2,9 @@
 
 #include <algorithm>
 #include <cstdint>
+#if defined(__x86_64__) || defined(__i386__)
+#include <immintrin.h>
+#endif
 #include <limits>
 #include <opencv2/imgproc.hpp>
 #include <optional>
@@ -53,45 +56,99 @@ cv::Mat morph_runs(const cv::Mat& mask, const std::vector<int>& half, bool erode
   CV_Assert(mask.type() == CV_8U);
   const int w = mask.cols, h = mask.rows, anchor = static_cast<int>(half.size()) / 2;
   std::vector<std::uint8_t> distance(static_cast<std::size_t>(w) * static_cast<std::size_t>(h));
-  std::vector<bool> row_has_set(static_cast<std::size_t>(h));
-  for (int y = 0; y < h; ++y) {
-    const std::uint8_t* src = mask.ptr<std::uint8_t>(y);
-    std::uint8_t* d = distance.data() + static_cast<std::ptrdiff_t>(y) * w;
-    std::uint8_t run = kFar;
-    bool any = false;
-    for (int x = 0; x < w; ++x) {
-      const bool set = (src[x] != 0) != erode;
-      run = set ? 0 : run == kFar ? kFar : static_cast<std::uint8_t>(run + 1);
-      d[x] = run;
-      any = any || set;
+  std::vector<char> row_has_set(static_cast<std::size_t>(h));
+  // Rows are independent in both steps: they are spread over OpenCV's threads.
+  cv::parallel_for_(cv::Range(0, h), [&](const cv::Range& rows) {
+    for (int y = rows.start; y < rows.end; ++y) {
+      const std::uint8_t* src = mask.ptr<std::uint8_t>(y);
+      std::uint8_t* d = distance.data() + static_cast<std::ptrdiff_t>(y) * w;
+      std::uint8_t run = kFar;
+      bool any = false;
+      for (int x = 0; x < w; ++x) {
+        const bool set = (src[x] != 0) != erode;
+        run = set ? 0 : run == kFar ? kFar : static_cast<std::uint8_t>(run + 1);
+        d[x] = run;
+        any = any || set;
+      }
+      run = kFar;
+      for (int x = w - 1; x >= 0; --x) {
+        const bool set = (src[x] != 0) != erode;
+        run = set ? 0 : run == kFar ? kFar : static_cast<std::uint8_t>(run + 1);
+        d[x] = std::min(d[x], run);
+      }
+      row_has_set[static_cast<std::size_t>(y)] = any;
     }
-    run = kFar;
-    for (int x = w - 1; x >= 0; --x) {
-      const bool set = (src[x] != 0) != erode;
-      run = set ? 0 : run == kFar ? kFar : static_cast<std::uint8_t>(run + 1);
-      d[x] = std::min(d[x], run);
-    }
-    row_has_set[static_cast<std::size_t>(y)] = any;
-  }
+  });
   cv::Mat out(h, w, CV_8U);
-  std::vector<std::uint8_t> hit(static_cast<std::size_t>(w));
   const std::uint8_t reached = erode ? 0 : 255, missed = erode ? 255 : 0;
-  for (int y = 0; y < h; ++y) {
-    std::fill(hit.begin(), hit.end(), std::uint8_t{0});
-    std::uint8_t* hits = hit.data();
-    for (int k = 0; k < static_cast<int>(half.size()); ++k) {
-      const int source = y + k - anchor;
-      const int r = half[static_cast<std::size_t>(k)];
-      if (source < 0 || source >= h || r < 0 || !row_has_set[static_cast<std::size_t>(source)])
-        continue;
-      mark_within(hits, distance.data() + static_cast<std::ptrdiff_t>(source) * w,
-                  static_cast<std::uint8_t>(r), w);
+  cv::parallel_for_(cv::Range(0, h), [&](const cv::Range& rows) {
+    std::vector<std::uint8_t> hit(static_cast<std::size_t>(w));
+    for (int y = rows.start; y < rows.end; ++y) {
+      std::fill(hit.begin(), hit.end(), std::uint8_t{0});
+      for (int k = 0; k < static_cast<int>(half.size()); ++k) {
+        const int source = y + k - anchor;
+        const int r = half[static_cast<std::size_t>(k)];
+        if (source < 0 || source >= h || r < 0 || !row_has_set[static_cast<std::size_t>(source)])
+          continue;
+        mark_within(hit.data(), distance.data() + static_cast<std::ptrdiff_t>(source) * w,
+                    static_cast<std::uint8_t>(r), w);
+      }
+      std::uint8_t* o = out.ptr<std::uint8_t>(y);
+      for (int x = 0; x < w; ++x) o[x] = hit[static_cast<std::size_t>(x)] ? reached : missed;
     }
-    std::uint8_t* o = out.ptr<std::uint8_t>(y);
-    for (int x = 0; x < w; ++x) o[x] = hits[x] ? reached : missed;
-  }
+  });
   return out;
 }
+
+// out[x] = k[0] c[x] + sum over i = 1..r of k[i] (c[x - i step] + c[x + i step]), x < n: one
+// pass of a symmetric kernel along a row (step 1) or a column (step = the row pitch).
+using SymmetricTaps = void (*)(float* out, const float* c, std::ptrdiff_t step, const float* k,
+                               int r, int n);
+
+void symmetric_taps_plain(float* out, const float* c, std::ptrdiff_t step, const float* k, int r,
+                          int n) {
+  for (int x = 0; x < n; ++x) {
+    float sum = k[0] * c[x];
+    for (int i = 1; i <= r; ++i) sum += k[i] * (c[x - i * step] + c[x + i * step]);
+    out[x] = sum;
+  }
+}
+
+#if defined(__x86_64__) || defined(__i386__)
+// The same sums, 32 pixels at a time in four AVX2 registers; the same operations in the same
+// order as the plain path (no fused multiply-add), so the same bits.
+__attribute__((target("avx2"))) void symmetric_taps_avx2(float* out, const float* c,
+                                                         std::ptrdiff_t step, const float* k, int r,
+                                                         int n) {
+  int x = 0;
+  for (; x + 32 <= n; x += 32) {
+    const __m256 centre = _mm256_set1_ps(k[0]);
+    __m256 sum[4];
+    for (int b = 0; b < 4; ++b) sum[b] = _mm256_mul_ps(centre, _mm256_loadu_ps(c + x + 8 * b));
+    for (int i = 1; i <= r; ++i) {
+      const __m256 weight = _mm256_set1_ps(k[i]);
+      const float* lo = c + x - i * step;
+      const float* hi = c + x + i * step;
+      for (int b = 0; b < 4; ++b)
+        sum[b] = _mm256_add_ps(sum[b],
+                               _mm256_mul_ps(weight, _mm256_add_ps(_mm256_loadu_ps(lo + 8 * b),
+                                                                   _mm256_loadu_ps(hi + 8 * b))));
+    }
+    for (int b = 0; b < 4; ++b) _mm256_storeu_ps(out + x + 8 * b, sum[b]);
+  }
+  symmetric_taps_plain(out + x, c + x, step, k, r, n - x);
+}
+
+// (An AVX-512 variant was no faster here, and GCC contracts its multiply-adds into FMA, which
+// would change the bits.)
+SymmetricTaps symmetric_taps() {
+  static const SymmetricTaps taps =
+      __builtin_cpu_supports("avx2") ? symmetric_taps_avx2 : symmetric_taps_plain;
+  return taps;
+}
+#else
+SymmetricTaps symmetric_taps() { return symmetric_taps_plain; }
+#endif
 
 }  // namespace
 
@@ -113,18 +170,39 @@ cv::Mat open_runs(const cv::Mat& mask, const cv::Mat& kernel) {
   return dilate_runs(erode_runs(mask, kernel), kernel);
 }
 
-cv::Mat gaussian_blur_rows(const cv::Mat& src, double sigma) {
-  CV_Assert(src.type() == CV_32F);
-  cv::Mat dst(src.size(), src.type());
-  // Stripes much thinner than the kernel would filter the rows around them more than once.
-  const int stripes = std::clamp(cv::getNumThreads(), 1, std::max(1, src.rows / 64));
-  cv::parallel_for_(cv::Range(0, stripes), [&](const cv::Range& range) {
-    for (int s = range.start; s < range.end; ++s) {
-      const int from = src.rows * s / stripes, to = src.rows * (s + 1) / stripes;
-      cv::Mat out = dst.rowRange(from, to);  // a view: GaussianBlur writes into dst
-      // A row range is a view into src, so the blur reads the real rows beyond it.
-      cv::GaussianBlur(src.rowRange(from, to), out, cv::Size(0, 0), sigma);
+cv::Mat gaussian_blur_rows(const cv::Mat& src, double sigma, cv::Rect region, bool simd) {
+  CV_Assert(src.type() == CV_32F && sigma > 0.0);
+  const int w = src.cols, h = src.rows;
+  const cv::Rect whole(0, 0, w, h);
+  region = region.empty() ? whole : region & whole;
+  cv::Mat dst(src.size(), src.type(), cv::Scalar(0));
+  if (region.empty()) return dst;
+  const int r = (cvRound(sigma * 8.0 + 1.0) | 1) / 2;  // OpenCV's size for float images
+  const cv::Mat kernel = cv::getGaussianKernel(2 * r + 1, sigma, CV_32F);
+  const float* k = kernel.ptr<float>() + r;  // k[-i] == k[i]
+  const SymmetricTaps taps = simd ? symmetric_taps() : symmetric_taps_plain;
+  // Rows first: the rows the columns pass reads (the region's, r more above and below,
+  // reflected into the image), each padded by r reflected pixels on both sides.
+  const int top = region.y - r, bottom = region.y + region.height + r;
+  cv::Mat across(bottom - top, w, CV_32F);
+  cv::parallel_for_(cv::Range(top, bottom), [&](const cv::Range& rows) {
+    std::vector<float> padded(static_cast<std::size_t>(w + 2 * r));
+    for (int t = rows.start; t < rows.end; ++t) {
+      const float* row = src.ptr<float>(cv::borderInterpolate(t, h, cv::BORDER_REFLECT_101));
+      std::copy(row, row + w, padded.begin() + r);
+      for (int x = 1; x <= r; ++x) {
+        padded[static_cast<std::size_t>(r - x)] =
+            row[cv::borderInterpolate(-x, w, cv::BORDER_REFLECT_101)];
+        padded[static_cast<std::size_t>(r + w - 1 + x)] =
+            row[cv::borderInterpolate(w - 1 + x, w, cv::BORDER_REFLECT_101)];
+      }
+      taps(across.ptr<float>(t - top), padded.data() + r, 1, k, r, w);
     }
+  });
+  cv::parallel_for_(cv::Range(region.y, region.y + region.height), [&](const cv::Range& rows) {
+    for (int y = rows.start; y < rows.end; ++y)
+      taps(dst.ptr<float>(y) + region.x, across.ptr<float>(y - top) + region.x,
+           static_cast<std::ptrdiff_t>(across.step1()), k, r, region.width);
   });
   return dst;
 }

@@ -84,13 +84,14 @@ bool same_pixels(const cv::Mat& a, const cv::Mat& b) {
 }
 
 // Mean of `src` over a Gaussian window restricted to the mask (normalised convolution), so
-// the black outside the sector does not darken its edges.
+// the black outside the sector does not darken its edges. Computed only in `region` (the
+// mask's bounding box: nothing reads it elsewhere), zero outside.
 class MaskedBlur {
  public:
-  MaskedBlur(const cv::Mat& mask01, double sigma_px)
-      : mask_(mask01), weight_(weight(mask01, sigma_px)), sigma_(sigma_px) {}
+  MaskedBlur(const cv::Mat& mask01, double sigma_px, const cv::Rect& region)
+      : mask_(mask01), weight_(weight(mask01, sigma_px)), sigma_(sigma_px), region_(region) {}
   cv::Mat operator()(const cv::Mat& src) const {
-    return detail::gaussian_blur_rows(src.mul(mask_), sigma_) / weight_;
+    return detail::gaussian_blur_rows(src.mul(mask_), sigma_, region_) / weight_;
   }
 
  private:
@@ -114,6 +115,7 @@ class MaskedBlur {
 
   cv::Mat mask_, weight_;
   double sigma_;
+  cv::Rect region_;
 };
 
 // Least-squares line y = a + b x with weights.
@@ -455,6 +457,7 @@ Segmentation segment_frame(const GreyImage& image, const ImageGeometry& geometry
   const int w = roi.width, h = roi.height;
   const cv::Mat grey = wrap(image)(roi);
   const cv::Mat sector = whole_sector(roi);
+  const cv::Rect sector_box = cv::boundingRect(sector);
   cv::Mat mask01;
   sector.convertTo(mask01, CV_32F, 1.0 / 255.0);
   const std::vector<float> depth_values =
@@ -471,7 +474,7 @@ Segmentation segment_frame(const GreyImage& image, const ImageGeometry& geometry
     median = grey;
   median.convertTo(smoothed, CV_32F);
   if (config.smoothing_mm > 0.0)
-    smoothed = MaskedBlur(mask01, config.smoothing_mm / px_mm)(smoothed);
+    smoothed = MaskedBlur(mask01, config.smoothing_mm / px_mm, sector_box)(smoothed);
   clock.lap(detail::Stage::kFilter);
 
   // Confidence from local statistics of the raw grey: where nearly every pixel of the window is
@@ -483,7 +486,8 @@ Segmentation segment_frame(const GreyImage& image, const ImageGeometry& geometry
   const cv::Mat dark_mask = grey <= shadow_grey;
   cv::Mat dark;
   dark_mask.convertTo(dark, CV_32F, 1.0 / 255.0);
-  const cv::Mat dark_fraction = MaskedBlur(mask01, config.confidence_window_mm / px_mm)(dark);
+  const cv::Mat dark_fraction =
+      MaskedBlur(mask01, config.confidence_window_mm / px_mm, sector_box)(dark);
   cv::Mat low = (dark_fraction > config.shadow_fraction) & sector;
   // With an anechoic material (a cyst reads as black as a shadow) only dark areas that reach
   // the far end of the sector are shadows: a shadow runs down its beams to the bottom.
