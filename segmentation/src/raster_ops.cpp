@@ -115,26 +115,37 @@ void symmetric_taps_plain(float* out, const float* c, std::ptrdiff_t step, const
 }
 
 #if defined(__x86_64__) || defined(__i386__)
-// The same sums, 32 pixels at a time in four AVX2 registers; the same operations in the same
-// order as the plain path (no fused multiply-add), so the same bits.
+// The same sums, 64 pixels at a time in eight AVX2 registers (enough independent sums to
+// hide the additions' latency); the same operations in the same order as the plain path (no
+// fused multiply-add), so the same bits.
 __attribute__((target("avx2"))) void symmetric_taps_avx2(float* out, const float* c,
                                                          std::ptrdiff_t step, const float* k, int r,
                                                          int n) {
+  constexpr int kRegisters = 8;
   int x = 0;
-  for (; x + 32 <= n; x += 32) {
+  for (; x + 8 * kRegisters <= n; x += 8 * kRegisters) {
     const __m256 centre = _mm256_set1_ps(k[0]);
-    __m256 sum[4];
-    for (int b = 0; b < 4; ++b) sum[b] = _mm256_mul_ps(centre, _mm256_loadu_ps(c + x + 8 * b));
+    __m256 sum[kRegisters];
+    for (int b = 0; b < kRegisters; ++b)
+      sum[b] = _mm256_mul_ps(centre, _mm256_loadu_ps(c + x + 8 * b));
     for (int i = 1; i <= r; ++i) {
       const __m256 weight = _mm256_set1_ps(k[i]);
       const float* lo = c + x - i * step;
       const float* hi = c + x + i * step;
-      for (int b = 0; b < 4; ++b)
+      for (int b = 0; b < kRegisters; ++b)
         sum[b] = _mm256_add_ps(sum[b],
                                _mm256_mul_ps(weight, _mm256_add_ps(_mm256_loadu_ps(lo + 8 * b),
                                                                    _mm256_loadu_ps(hi + 8 * b))));
     }
-    for (int b = 0; b < 4; ++b) _mm256_storeu_ps(out + x + 8 * b, sum[b]);
+    for (int b = 0; b < kRegisters; ++b) _mm256_storeu_ps(out + x + 8 * b, sum[b]);
+  }
+  for (; x + 8 <= n; x += 8) {
+    __m256 sum = _mm256_mul_ps(_mm256_set1_ps(k[0]), _mm256_loadu_ps(c + x));
+    for (int i = 1; i <= r; ++i)
+      sum = _mm256_add_ps(sum, _mm256_mul_ps(_mm256_set1_ps(k[i]),
+                                             _mm256_add_ps(_mm256_loadu_ps(c + x - i * step),
+                                                           _mm256_loadu_ps(c + x + i * step))));
+    _mm256_storeu_ps(out + x, sum);
   }
   symmetric_taps_plain(out + x, c + x, step, k, r, n - x);
 }
@@ -199,10 +210,17 @@ cv::Mat gaussian_blur_rows(const cv::Mat& src, double sigma, cv::Rect region, bo
       taps(across.ptr<float>(t - top), padded.data() + r, 1, k, r, w);
     }
   });
-  cv::parallel_for_(cv::Range(region.y, region.y + region.height), [&](const cv::Range& rows) {
-    for (int y = rows.start; y < rows.end; ++y)
-      taps(dst.ptr<float>(y) + region.x, across.ptr<float>(y - top) + region.x,
-           static_cast<std::ptrdiff_t>(across.step1()), k, r, region.width);
+  // Columns in blocks of 64, row after row: the 2r + 1 rows of a block under the kernel stay
+  // in the first-level cache from one output row to the next.
+  constexpr int kBlock = 64;
+  const int blocks = (region.width + kBlock - 1) / kBlock;
+  cv::parallel_for_(cv::Range(0, blocks), [&](const cv::Range& range) {
+    for (int b = range.start; b < range.end; ++b) {
+      const int x = region.x + b * kBlock, n = std::min(kBlock, region.x + region.width - x);
+      for (int y = region.y; y < region.y + region.height; ++y)
+        taps(dst.ptr<float>(y) + x, across.ptr<float>(y - top) + x,
+             static_cast<std::ptrdiff_t>(across.step1()), k, r, n);
+    }
   });
   return dst;
 }

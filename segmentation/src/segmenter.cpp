@@ -201,52 +201,26 @@ void fill_undecided(cv::Mat& map, cv::Mat& undecided, const cv::Mat& sector) {
   }
 }
 
-// Values present among the sector's pixels.
-std::vector<std::uint8_t> present_values(const cv::Mat& map, const cv::Mat& sector) {
-  std::array<bool, 256> seen{};
-  for (int j = 0; j < map.rows; ++j) {
-    const std::uint8_t* m = map.ptr<std::uint8_t>(j);
-    const std::uint8_t* in = sector.ptr<std::uint8_t>(j);
-    for (int i = 0; i < map.cols; ++i)
-      if (in[i]) seen[m[i]] = true;
-  }
-  std::vector<std::uint8_t> values;
-  for (int v = 0; v < 256; ++v)
-    if (seen[static_cast<std::size_t>(v)]) values.push_back(static_cast<std::uint8_t>(v));
-  return values;
-}
-
-// Runs `work` for every value present in the sector, the values spread over OpenCV's threads.
-// The values' masks are disjoint, so the work of one may write its own pixels of a shared map.
-template <class Work>
-void for_each_value(const cv::Mat& map, const cv::Mat& sector, const Work& work) {
-  const std::vector<std::uint8_t> values = present_values(map, sector);
-  cv::parallel_for_(cv::Range(0, static_cast<int>(values.size())), [&](const cv::Range& range) {
-    for (int k = range.start; k < range.end; ++k) work(values[static_cast<std::size_t>(k)]);
-  });
-}
-
 // Opening of every label's mask: the thin parts it removes are re-labelled by their neighbours
-// (for the background this closes the materials, and the other way round).
+// (for the background this closes the materials, and the other way round). All labels at once,
+// the same as cv::morphologyEx(MORPH_OPEN) of each label's mask: a pixel survives the erosion
+// of its label's mask when the disk around it lies in the sector and holds that label alone
+// (the map's grey-level erosion and dilation agree there); since the disk is symmetric, the
+// disks of two survivors of different labels cannot overlap, so a pixel is in its own label's
+// opening exactly when the disk around it holds a survivor. Four passes instead of two per
+// label.
 void open_labels(cv::Mat& map, const cv::Mat& sector, double radius_px) {
   if (radius_px < 0.5) return;
   const cv::Mat kernel = disk(radius_px);
+  cv::Mat lowest, highest, inside;
+  cv::erode(map, lowest, kernel);
+  cv::dilate(map, highest, kernel);
+  cv::erode(sector, inside, kernel);
+  const cv::Mat survivors = (lowest == highest) & inside;
+  cv::Mat opened;
+  cv::dilate(survivors, opened, kernel);
   cv::Mat undecided(map.size(), CV_8U, cv::Scalar(0));
-  for_each_value(map, sector, [&](std::uint8_t v) {
-    const cv::Mat whole = (map == v) & sector;
-    // The opening reads no farther than the disk from the label's pixels.
-    const cv::Rect box = grown_box(whole, kernel.rows / 2 + 1);
-    const cv::Mat mask = whole(box);
-    cv::Mat opened;
-    cv::morphologyEx(mask, opened, cv::MORPH_OPEN, kernel);
-    for (int j = 0; j < box.height; ++j) {
-      const std::uint8_t* in = mask.ptr<std::uint8_t>(j);
-      const std::uint8_t* kept = opened.ptr<std::uint8_t>(j);
-      std::uint8_t* u = undecided.ptr<std::uint8_t>(box.y + j) + box.x;
-      for (int i = 0; i < box.width; ++i)
-        if (in[i] && !kept[i]) u[i] = kUndecided;
-    }
-  });
+  undecided.setTo(kUndecided, sector & ~opened);
   fill_undecided(map, undecided, sector);
 }
 
