@@ -146,7 +146,9 @@ struct LineFit {
 };
 
 // Re-labels undecided pixels (flag set) from their decided 8-neighbours in the sector, by
-// majority, growing inwards; what stays undecided becomes unknown.
+// majority, growing inwards; what stays undecided becomes unknown. A pass looks only at the
+// undecided pixels next to those the previous pass decided (at first, at all): no other can
+// have gained a decided neighbour.
 void fill_undecided(cv::Mat& map, cv::Mat& undecided, const cv::Mat& sector) {
   const int w = map.cols, h = map.rows;
   std::vector<int> todo;
@@ -157,11 +159,11 @@ void fill_undecided(cv::Mat& map, cv::Mat& undecided, const cv::Mat& sector) {
   }
   if (todo.empty()) return;
   std::vector<std::pair<int, std::uint8_t>> assigned;
-  std::vector<int> still;
-  for (int pass = 0; pass < kMaxFillPasses && !todo.empty(); ++pass) {
+  std::vector<int> candidates = todo, next;
+  cv::Mat queued(map.size(), CV_8U, cv::Scalar(0));
+  for (int pass = 0; pass < kMaxFillPasses && !candidates.empty(); ++pass) {
     assigned.clear();
-    still.clear();
-    for (const int p : todo) {
+    for (const int p : candidates) {
       const int i = p % w, j = p / w;
       std::array<std::uint8_t, 8> values{};
       std::array<int, 8> counts{};
@@ -179,25 +181,38 @@ void fill_undecided(cv::Mat& map, cv::Mat& undecided, const cv::Mat& sector) {
           ++counts[static_cast<std::size_t>(k)];
         }
       }
-      if (distinct == 0) {
-        still.push_back(p);
-        continue;
-      }
+      if (distinct == 0) continue;
       std::size_t best = 0;
       for (std::size_t k = 1; k < static_cast<std::size_t>(distinct); ++k)
         if (counts[k] > counts[best]) best = k;
       assigned.emplace_back(p, values[best]);
     }
-    for (const auto& [p, v] : assigned) {
-      map.at<std::uint8_t>(p / w, p % w) = v;
-      undecided.at<std::uint8_t>(p / w, p % w) = 0;
-    }
-    todo.swap(still);
     if (assigned.empty()) break;
+    for (const auto& [p, v] : assigned) {
+      map.ptr<std::uint8_t>(p / w)[p % w] = v;
+      undecided.ptr<std::uint8_t>(p / w)[p % w] = 0;
+    }
+    next.clear();
+    for (const auto& [p, v] : assigned) {
+      const int i = p % w, j = p / w;
+      for (int y = std::max(j - 1, 0); y <= std::min(j + 1, h - 1); ++y) {
+        const std::uint8_t* u = undecided.ptr<std::uint8_t>(y);
+        std::uint8_t* q = queued.ptr<std::uint8_t>(y);
+        for (int x = std::max(i - 1, 0); x <= std::min(i + 1, w - 1); ++x)
+          if (u[x] && !q[x]) {
+            q[x] = 1;
+            next.push_back(y * w + x);
+          }
+      }
+    }
+    for (const int p : next) queued.ptr<std::uint8_t>(p / w)[p % w] = 0;
+    candidates.swap(next);
   }
   for (const int p : todo) {
-    map.at<std::uint8_t>(p / w, p % w) = kLabelPixelUnknown;
-    undecided.at<std::uint8_t>(p / w, p % w) = 0;
+    std::uint8_t& u = undecided.ptr<std::uint8_t>(p / w)[p % w];
+    if (!u) continue;
+    map.ptr<std::uint8_t>(p / w)[p % w] = kLabelPixelUnknown;
+    u = 0;
   }
 }
 
