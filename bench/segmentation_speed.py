@@ -145,7 +145,8 @@ def main():
         f"--repeat {args.repeat}, {args.sim_frames} simulated frames, {args.scan_s:g} s scans; "
         f"sonoshape at commit {commit}; {os.cpu_count()} cores ({platform.machine()}, "
         f"{platform.system()}), load average {load_before:.1f} at the start and "
-        f"{os.getloadavg()[0]:.1f} at the end; {time.time() - start:.0f} s in all."])
+        f"{os.getloadavg()[0]:.1f} at the end, niceness {os.nice(0)}; "
+        f"{time.time() - start:.0f} s in all."])
     print(text)
     if args.write_doc:
         write_between_markers(root, "segmentation_speed", text)

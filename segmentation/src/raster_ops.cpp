@@ -207,7 +207,8 @@ cv::Mat gaussian_blur_rows(const cv::Mat& src, double sigma, cv::Rect region, bo
         padded[static_cast<std::size_t>(r + w - 1 + x)] =
             row[cv::borderInterpolate(w - 1 + x, w, cv::BORDER_REFLECT_101)];
       }
-      taps(across.ptr<float>(t - top), padded.data() + r, 1, k, r, w);
+      taps(across.ptr<float>(t - top) + region.x, padded.data() + r + region.x, 1, k, r,
+           region.width);  // the columns pass reads no other column
     }
   });
   // Columns in blocks of 64, row after row: the 2r + 1 rows of a block under the kernel stay
