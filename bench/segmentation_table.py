@@ -3,17 +3,17 @@
 
 For each case (a phantom, a probe, a trajectory and a tracker noise level) this runs
   sonoshape simulate [case options] --frames N --seed S -o WORK/CASE.igs.mha --truth WORK/CASE_truth
-  sonoshape segment WORK/CASE.igs.mha --truth-labels WORK/CASE_truth/labels.mha
-                    --report WORK/CASE.seg.json --every K -o WORK/CASE.slices.json
+  sonoshape segment WORK/CASE.igs.mha --method M --truth-labels WORK/CASE_truth/labels.mha
+                    --report WORK/CASE.M.seg.json --every K -o WORK/CASE.M.slices.json
+                    (M: threshold, the baseline, and graph-cut)
   sonoshape segment WORK/CASE.igs.mha --perfect-labels WORK/CASE_truth/labels.mha
                     --every K -o WORK/CASE.perfect.slices.json
   sonoshape reconstruct X.slices.json -o X_recon --depth D        (for both slice sets)
   sonoshape evaluate --recon X_recon --truth L:WORK/CASE_truth/label_L.ply ...
                      --slices X.slices.json --json X.eval.json
-and prints one Markdown table: per case and label, the segmenter's Dice over all frames (the
-report's `total`), the scan IoU with the segmenter's slices, the scan IoU with perfect labels (the
-truth label frames through the same contour and placement code: the upper bound of the scan) and
-the gap between the two. A label without a reconstructed mesh shows "no mesh" (and counts as IoU 0
+and prints one Markdown table: per case and label, each method's Dice over all frames (the
+report's `total`) and scan IoU, the scan IoU with perfect labels (the truth label frames through
+the same contour and placement code: the upper bound of the scan) and each method's gap to it. A label without a reconstructed mesh shows "no mesh" (and counts as IoU 0
 in the gap). `--write-doc` puts the table into docs/benchmarks.md between
 `<!-- segmentation_table:begin -->` and `<!-- segmentation_table:end -->`.
 
@@ -43,6 +43,8 @@ from doc_tables import write_between_markers
 PROBES = ["convex", "linear"]
 TRAJECTORIES = ["sweep", "fan", "rock", "rotate"]
 NOISE = {"low": [], "high": ["--position-noise-mm", "0.5", "--angle-noise-deg", "0.3"]}
+# The labelling methods compared (`segment --method`): the baseline first.
+METHODS = ["threshold", "graph-cut"]
 QUICK = [("default", "convex", "sweep", "low"), ("default", "linear", "sweep", "low"),
          ("nested", "convex", "sweep", "low"), ("similar", "convex", "sweep", "low")]
 
@@ -130,26 +132,31 @@ def one_case(args, root, case):
          "--trajectory", trajectory, *NOISE[noise], "--frames", str(args.frames),
          "--seed", str(args.seed), "-o", base + ".igs.mha", "--truth", truth], "simulate")
     labels_mha = os.path.join(truth, "labels.mha")
-    run([args.binary, "segment", base + ".igs.mha", "--truth-labels", labels_mha,
-         "--report", base + ".seg.json", "--every", str(args.every), "-o", base + ".slices.json"],
-        "segment")
-    run([args.binary, "segment", base + ".igs.mha", "--perfect-labels", labels_mha,
-         "--every", str(args.every), "-o", base + ".perfect.slices.json"], "segment (perfect)")
-    with open(base + ".seg.json") as f:
-        total = json.load(f)["total"]
     truth_meshes = sorted((int(m.group(1)), os.path.join(truth, name))
                           for name in os.listdir(truth)
                           if (m := re.fullmatch(r"label_(\d+)\.ply", name)))
-    ours = scan_scores(args, base, base + ".slices.json", truth_meshes)
+    totals, scans = {}, {}
+    for method in METHODS:
+        out = f"{base}.{method}"
+        run([args.binary, "segment", base + ".igs.mha", "--method", method, "--truth-labels",
+             labels_mha, "--report", out + ".seg.json", "--every", str(args.every),
+             "-o", out + ".slices.json"], f"segment --method {method}")
+        with open(out + ".seg.json") as f:
+            totals[method] = json.load(f)["total"]
+        scans[method] = scan_scores(args, out, out + ".slices.json", truth_meshes)
+    run([args.binary, "segment", base + ".igs.mha", "--perfect-labels", labels_mha,
+         "--every", str(args.every), "-o", base + ".perfect.slices.json"], "segment (perfect)")
     perfect = scan_scores(args, base + ".perfect", base + ".perfect.slices.json", truth_meshes)
     names = header_label_names(base + ".igs.mha")
     rows = []
     for label, _ in truth_meshes:
-        dice = total["labels"].get(str(label), {})
-        name = dice.get("name") or names.get(label, f"label_{label}")
-        rows.append({"case": case, "label": label, "name": name, "dice": dice.get("dice"),
-                     "ours": ours.get(label), "perfect": perfect.get(label)})
-    return rows, total["unknown"]
+        row = {"case": case, "label": label, "perfect": perfect.get(label)}
+        for method in METHODS:
+            dice = totals[method]["labels"].get(str(label), {})
+            row["name"] = dice.get("name") or names.get(label, f"label_{label}")
+            row[method] = {"dice": dice.get("dice"), "scan": scans[method].get(label)}
+        rows.append(row)
+    return rows, totals[METHODS[-1]]["unknown"]
 
 
 def iou(entry):
@@ -164,18 +171,25 @@ def cell(value):
 
 
 def table(rows, failures):
-    lines = ["| phantom | probe | trajectory | tracker noise | label | Dice | scan IoU "
-             "(segmenter) | scan IoU (perfect labels) | gap |",
-             "|---|---|---|---|---|---|---|---|---|"]
+    lines = ["| phantom | probe | trajectory | noise | label | Dice threshold | Dice graph cut "
+             "| IoU threshold | IoU graph cut | IoU perfect labels | gap threshold "
+             "| gap graph cut |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
-        ours, perfect = iou(r["ours"]), iou(r["perfect"])
-        gap = f"{(perfect or 0.0) - (ours or 0.0):.3f}" if perfect is not None else "–"
-        # A label missing from the report is in no truth frame (nor in ours): nothing to score.
-        dice = "not in frames" if r["dice"] is None else f"{r['dice']:.3f}"
-        lines.append(f"| {' | '.join(r['case'])} | {r['label']} {r['name']} | {dice} | "
-                     f"{cell(ours)} | {cell(perfect)} | {gap} |")
+        perfect = iou(r["perfect"])
+        dices, scans, gaps = [], [], []
+        for method in METHODS:
+            ours = iou(r[method]["scan"])
+            # A label missing from the report is in no truth frame (nor in ours).
+            dice = r[method]["dice"]
+            dices.append("not in frames" if dice is None else f"{dice:.3f}")
+            scans.append(cell(ours))
+            gaps.append(f"{perfect - (ours or 0.0):.3f}" if perfect is not None else "–")
+        lines.append(f"| {' | '.join(r['case'])} | {r['label']} {r['name']} | "
+                     f"{' | '.join(dices)} | {' | '.join(scans)} | {cell(perfect)} | "
+                     f"{' | '.join(gaps)} |")
     for case, error in failures:
-        lines.append(f"| {' | '.join(case)} | FAILED: {error} | | | | |")
+        lines.append(f"| {' | '.join(case)} | FAILED: {error} | | | | | | | | | | |")
     return "\n".join(lines)
 
 

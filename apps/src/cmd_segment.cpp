@@ -3,6 +3,7 @@
 // the truth label frames: --perfect-labels), polygons in the reference frame, fov = sector.
 // --truth-labels scores every frame's label map against the simulator's truth.
 #include <CLI/CLI.hpp>
+#include <cstdio>
 #include <filesystem>
 #include <iostream>
 #include <map>
@@ -14,6 +15,8 @@
 #include "sonoshape/acquisition/sequence_file.hpp"
 #include "sonoshape/core/log.hpp"
 #include "sonoshape/core/slice_io.hpp"
+#include "sonoshape/scan/label_prior.hpp"
+#include "sonoshape/segmentation/overlay.hpp"
 #include "sonoshape/segmentation/sweep.hpp"
 
 namespace sonoshape::apps {
@@ -29,6 +32,56 @@ struct SegmentOptions {
   std::filesystem::path truth_labels;    ///< score against these label frames
   std::filesystem::path perfect_labels;  ///< use these label frames instead of the segmenter
   std::filesystem::path report;          ///< JSON of the scores
+  std::filesystem::path overlays;        ///< directory for the overlay pictures
+  int overlay_every = 1;                 ///< picture every K-th segmented frame
+  std::string method;                    ///< "", "threshold" or "graph-cut": overrides the config
+  std::string prior = "reconstruction";  ///< graph cut's prior: "reconstruction" or "none"
+  int prior_depth = 6;                   ///< octree depth of the prior's reconstruction
+};
+
+// The box (mm, reference frame) of the sectors of every frame with a valid pose, padded by a
+// tenth of its diagonal; none when no frame has one.
+std::optional<Box3> sweep_box(const acq::SequenceFile& file, const seg::SweepSetup& setup) {
+  std::optional<Box3> box;
+  for (std::size_t k = 0; k < file.frame_count(); ++k) {
+    const auto pose = seg::reference_from_probe(file, k);
+    if (!pose) continue;
+    const Eigen::Matrix4d T_reference_image = *pose * setup.T_probe_image;
+    for (const Vec2& p : setup.geometry.sector_px) {
+      const Vec3 q = (T_reference_image * Eigen::Vector4d(p.x(), p.y(), 0.0, 1.0)).head<3>();
+      box = box ? Box3{box->min.cwiseMin(q), box->max.cwiseMax(q)} : Box3{q, q};
+    }
+  }
+  if (box) *box = box->padded(0.1 * box->diagonal());
+  return box;
+}
+
+// Writes DIR/frame_NNNN.png for every `every`-th label map it is called with; remembers the
+// first failure (a full disk must not stop the segmentation, but the run reports it).
+class OverlayWriter {
+ public:
+  OverlayWriter(const SegmentOptions& options, const acq::SequenceFile& sweep,
+                const ImageU8& sector, const acq::SequenceFile* truth)
+      : options_(options), sweep_(sweep), sector_(sector), truth_(truth) {}
+  void operator()(std::size_t frame, const LabelImage& labels) {
+    if (seen_++ % static_cast<std::size_t>(options_.overlay_every) != 0 || !status_) return;
+    char name[32];
+    std::snprintf(name, sizeof name, "frame_%04zu.png", frame);
+    const LabelImage truth = truth_ ? truth_->image(frame) : LabelImage();
+    status_ = seg::write_overlay(options_.overlays / name, sweep_.image(frame), labels, sector_,
+                                 truth_ ? &truth : nullptr);
+    if (status_) ++written_;
+  }
+  const Status& status() const { return status_; }
+  std::size_t written() const { return written_; }
+
+ private:
+  const SegmentOptions& options_;
+  const acq::SequenceFile& sweep_;
+  const ImageU8& sector_;
+  const acq::SequenceFile* truth_;
+  std::size_t seen_ = 0, written_ = 0;
+  Status status_ = Status::ok();
 };
 
 // Reads label frames given by `option` and checks them against the sweep; none when not given.
@@ -81,12 +134,15 @@ int run_segment(const SegmentOptions& options) {
   auto optional_path = [](const std::filesystem::path& p) {
     return p.empty() ? std::nullopt : std::optional<std::filesystem::path>(p);
   };
-  const auto setup = seg::prepare_sweep(*file, options.input, optional_path(options.config),
+  auto setup = seg::prepare_sweep(*file, options.input, optional_path(options.config),
                                         optional_path(options.calibration));
   if (!setup) {
     std::cerr << "error: " << setup.message() << '\n';
     return 1;
   }
+  if (!options.method.empty())
+    setup->config.method = options.method == "graph-cut" ? seg::LabellingMethod::kGraphCut
+                                                         : seg::LabellingMethod::kThreshold;
   if (!options.report.empty() && options.truth_labels.empty()) {
     std::cerr << "error: --report " << options.report.string()
               << " needs --truth-labels DIR/labels.mha (the frames to score against)\n";
@@ -111,13 +167,44 @@ int run_segment(const SegmentOptions& options) {
   const std::size_t considered =
       (file->frame_count() + static_cast<std::size_t>(options.every) - 1) /
       static_cast<std::size_t>(options.every);
+  seg::SweepLabels sources{*perfect ? &**perfect : nullptr, *truth ? &**truth : nullptr, {}};
+  std::optional<OverlayWriter> overlays;
+  if (!options.overlays.empty()) {
+    std::error_code made;
+    std::filesystem::create_directories(options.overlays, made);
+    if (made) {
+      std::cerr << "error: cannot create the --overlays directory " << options.overlays.string()
+                << ": " << made.message() << '\n';
+      return 1;
+    }
+    overlays.emplace(options, *file, setup->geometry.sector, *truth ? &**truth : nullptr);
+    sources.on_label_map = [&](std::size_t k, const LabelImage& labels) { (*overlays)(k, labels); };
+  }
+  // The graph cut's prior: an online reconstruction of the slices made so far, in the box
+  // that every frame's sector spans (a fixed box: a growing one would rebuild every time).
+  std::optional<scan::ReconstructionPrior> prior;
+  if (setup->config.method == seg::LabellingMethod::kGraphCut && !*perfect &&
+      options.prior == "reconstruction") {
+    recon::ReconstructorOptions recon_options;
+    recon_options.engine.max_depth = options.prior_depth;
+    recon_options.bounds = sweep_box(*file, *setup);
+    prior.emplace(recon_options);
+    sources.predictor = &*prior;
+  }
   seg::SweepSegmentation result;
   {
     Progress progress("segment", considered);
     result = seg::segment_sweep(
         *file, *setup, options.every, [&](std::size_t done) { progress.update(done); },
-        ReadOptions{options.strict},
-        seg::SweepLabels{*perfect ? &**perfect : nullptr, *truth ? &**truth : nullptr});
+        ReadOptions{options.strict}, sources);
+  }
+  if (overlays) {
+    if (!overlays->status()) {
+      std::cerr << "error: " << overlays->status().message() << '\n';
+      return 1;
+    }
+    log_info("segment: " + std::to_string(overlays->written()) + " overlay pictures in " +
+             options.overlays.string());
   }
   if (!result.refused.empty()) {
     std::cerr << "error: " << options.input.string() << ", " << result.refused
@@ -196,6 +283,27 @@ CommandRunner add_segment_command(CLI::App& app) {
   app.add_option("--perfect-labels", options->perfect_labels,
                  "Use these truth label frames instead of the segmenter (same contours and "
                  "placement): the upper bound of the sweep");
+  app.add_option("--method", options->method,
+                 "Labelling: threshold (nearest grey model after smoothing) or graph-cut (that "
+                 "refined by a multi-label graph cut with learnt appearance models); default: "
+                 "the config's `method`, else threshold")
+      ->check(CLI::IsMember({"threshold", "graph-cut"}));
+  app.add_option("--prior", options->prior,
+                 "With --method graph-cut: reconstruction (the surfaces built from the slices so "
+                 "far predict each new frame) or none (the image alone)")
+      ->check(CLI::IsMember({"reconstruction", "none"}))
+      ->capture_default_str();
+  app.add_option("--prior-depth", options->prior_depth,
+                 "Octree depth of the prior's reconstruction (coarser is faster)")
+      ->check(CLI::Range(3, 10))
+      ->capture_default_str();
+  app.add_option("--overlays", options->overlays,
+                 "Directory for pictures of the frames with our label outlines (and the truth's "
+                 "in white with --truth-labels): DIR/frame_NNNN.png");
+  app.add_option("--overlay-every", options->overlay_every,
+                 "With --overlays: a picture of every K-th segmented frame")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
   app.add_option("--report", options->report,
                  "With --truth-labels: write the scores per frame and in total as JSON");
   return [options] { return run_segment(*options); };

@@ -46,9 +46,12 @@ LabelModel read_model(const json& j, const std::string& where, bool is_backgroun
       model.grey_mean = number_at(value, where + ".grey_mean");
     } else if (key == "grey_std") {
       model.grey_std = number_at(value, where + ".grey_std");
+    } else if (key == "thickness_mm" && !is_background) {
+      model.thickness_mm = number_at(value, where + ".thickness_mm");
     } else {
       throw ConfigProblem{where, "unknown key '" + key + "' (known: " +
-                                     (is_background ? "" : "id, ") + "name, grey_mean, grey_std)"};
+                                     (is_background ? "" : "id, ") + "name, grey_mean, grey_std" +
+                                     (is_background ? "" : ", thickness_mm") + ")"};
     }
   }
   if (!is_background && !j.contains("id")) throw ConfigProblem{where, "missing 'id'"};
@@ -63,6 +66,7 @@ json model_json(const LabelModel& m, bool with_id) {
   j["name"] = m.name;
   j["grey_mean"] = m.grey_mean;
   j["grey_std"] = m.grey_std;
+  if (with_id && m.thickness_mm > 0.0) j["thickness_mm"] = m.thickness_mm;
   return j;
 }
 
@@ -94,11 +98,18 @@ Status SegmentationConfig::validate() const {
     if (!(m->grey_std > 0.0) || m->grey_mean < 0.0 || m->grey_mean > 255.0)
       return Status::error("segmentation config: label " + std::to_string(m->label) +
                            " needs grey_mean in 0..255 and grey_std > 0");
+  for (const LabelModel& m : materials)
+    if (!(m.thickness_mm >= 0.0) || !std::isfinite(m.thickness_mm))
+      return Status::error("segmentation config: label " + std::to_string(m.label) +
+                           " has thickness_mm " + std::to_string(m.thickness_mm) +
+                           "; give a length in mm >= 0 (0: unknown)");
   if (median_px < 1 || median_px % 2 == 0 || median_px > 31)
     return Status::error("segmentation config: median_px must be odd, 1..31 (got " +
                          std::to_string(median_px) + ")");
-  for (const auto& [name, value] : std::array<std::pair<const char*, double>, 8>{
+  for (const auto& [name, value] : std::array<std::pair<const char*, double>, 10>{
            {{"smoothing_mm", smoothing_mm},
+            {"psf_sigma_mm", psf_sigma_mm},
+            {"dynamic_range_db", dynamic_range_db},
             {"confidence_window_mm", confidence_window_mm},
             {"shadow_fraction", shadow_fraction},
             {"shadow_margin_mm", shadow_margin_mm},
@@ -171,6 +182,11 @@ Result<SegmentationConfig> parse_segmentation_config(const std::string& json_tex
         } else {
           throw ConfigProblem{key, "expected a string or a polygon [[column, row], ...]"};
         }
+      } else if (key == "method") {
+        const std::string name = value.is_string() ? value.get<std::string>() : "";
+        if (name == "threshold") config.method = LabellingMethod::kThreshold;
+        else if (name == "graph_cut") config.method = LabellingMethod::kGraphCut;
+        else throw ConfigProblem{key, "expected \"threshold\" or \"graph_cut\""};
       } else {
         double* target = key == "smoothing_mm"           ? &config.smoothing_mm
                          : key == "confidence_window_mm" ? &config.confidence_window_mm
@@ -182,6 +198,8 @@ Result<SegmentationConfig> parse_segmentation_config(const std::string& json_tex
                          : key == "min_region_mm2"       ? &config.min_region_mm2
                          : key == "simplify_mm"          ? &config.simplify_mm
                          : key == "sector_signal_grey"   ? &config.sector_signal_grey
+                         : key == "psf_sigma_mm"         ? &config.psf_sigma_mm
+                         : key == "dynamic_range_db"     ? &config.dynamic_range_db
                                                          : nullptr;
         if (!target)
           throw ConfigProblem{key, "unknown key; see docs/segmentation.md for the fields"};
@@ -221,6 +239,9 @@ std::string to_json(const SegmentationConfig& c) {
   doc["shadow_margin_mm"] = c.shadow_margin_mm;
   doc["max_depth_mm"] = c.max_depth_mm;
   doc["depth_compensation"] = c.depth_compensation;
+  doc["psf_sigma_mm"] = c.psf_sigma_mm;
+  doc["dynamic_range_db"] = c.dynamic_range_db;
+  doc["method"] = c.method == LabellingMethod::kGraphCut ? "graph_cut" : "threshold";
   doc["opening_mm"] = c.opening_mm;
   doc["min_region_mm2"] = c.min_region_mm2;
   doc["simplify_mm"] = c.simplify_mm;

@@ -9,7 +9,10 @@
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
 
+#include "blooming.hpp"
 #include "raster_ops.hpp"
+#include "reflectors.hpp"
+#include "segmenter_internal.hpp"
 #include "stage_times.hpp"
 
 namespace sonoshape::seg {
@@ -28,6 +31,8 @@ constexpr int kMaxRepairPasses = 20;
 constexpr std::uint8_t kUndecided = 1;
 // A class this much brighter (grey) than every other is a strong reflector (see segment_frame).
 constexpr double kReflectorGapGrey = 60.0;
+// A reflector band narrower than this (mm) is speckle, not a bone surface.
+constexpr double kMinReflectorWidthMm = 1.0;
 
 cv::Mat wrap(const ImageU8& image) {
   return cv::Mat(image.height, image.width, CV_8U, const_cast<std::uint8_t*>(image.pixels.data()));
@@ -242,8 +247,11 @@ void open_labels(cv::Mat& map, const cv::Mat& sector, double radius_px) {
 // Components of any label smaller than min_px are re-labelled from their surroundings. The
 // components are each label's 8-connected components inside the sector (what
 // cv::connectedComponents finds label by label), found for all labels at once: the runs of one
-// label in a row, joined to the runs of the same label in the row above that they touch.
-void remove_small_components(cv::Mat& map, const cv::Mat& sector, double min_px) {
+// label in a row, joined to the runs of the same label in the row above that they touch. A
+// small component stays when at least half its pixels are set in `keep` (when not empty): a
+// small part of an organ that the reconstruction predicts there is no speckle.
+void remove_small_components(cv::Mat& map, const cv::Mat& sector, double min_px,
+                             const cv::Mat& keep) {
   if (min_px < 1.0) return;
   struct Run {
     int row, from, to;  // columns from..to, inclusive
@@ -279,11 +287,19 @@ void remove_small_components(cv::Mat& map, const cv::Mat& sector, double min_px)
         if (runs[a].value == run.value) parent[root(a)] = root(r);
     }
   }
-  std::vector<double> area(runs.size(), 0.0);
-  for (std::size_t r = 0; r < runs.size(); ++r) area[root(r)] += runs[r].to - runs[r].from + 1;
+  std::vector<double> area(runs.size(), 0.0), kept(runs.size(), 0.0);
+  for (std::size_t r = 0; r < runs.size(); ++r) {
+    const std::size_t c = root(r);
+    area[c] += runs[r].to - runs[r].from + 1;
+    if (!keep.empty()) {
+      const std::uint8_t* k = keep.ptr<std::uint8_t>(runs[r].row);
+      kept[c] += static_cast<double>(std::count_if(k + runs[r].from, k + runs[r].to + 1,
+                                                   [](std::uint8_t v) { return v != 0; }));
+    }
+  }
   cv::Mat undecided(map.size(), CV_8U, cv::Scalar(0));
   for (std::size_t r = 0; r < runs.size(); ++r)
-    if (area[root(r)] < min_px) {
+    if (const std::size_t c = root(r); area[c] < min_px && 2.0 * kept[c] < area[c]) {
       std::uint8_t* u = undecided.ptr<std::uint8_t>(runs[r].row);
       std::fill(u + runs[r].from, u + runs[r].to + 1, kUndecided);
     }
@@ -423,6 +439,11 @@ ImageGeometry auto_geometry(const std::vector<const GreyImage*>& frames, double 
 
 Segmentation segment_frame(const GreyImage& image, const ImageGeometry& geometry,
                            const SegmentationConfig& config) {
+  return detail::segment_frame(image, geometry, config, {});
+}
+
+Segmentation detail::segment_frame(const GreyImage& image, const ImageGeometry& geometry,
+                                   const SegmentationConfig& config, const RefineStep& refine) {
   geometry.check();
   if (image.width != geometry.width_px || image.height != geometry.height_px ||
       image.pixels.size() != geometry.sector.pixels.size())
@@ -554,8 +575,10 @@ Segmentation segment_frame(const GreyImage& image, const ImageGeometry& geometry
     std::uint8_t* out = map.ptr<std::uint8_t>(j);
     for (int i = first; i < w; i += step) {
       const double offset = trend.a + trend.b * d[i];
-      out[i] = (!in[i] || dark[i])               ? kLabelPixelUnknown
+      // A reflector's echo is signal even inside the margin of the shadow it casts.
+      out[i] = !in[i]                            ? kLabelPixelUnknown
                : m[i] - offset >= reflector_grey ? by_mean[0].value
+               : dark[i]                         ? kLabelPixelUnknown
                                                  : classify(s[i] - offset);
     }
   };
@@ -605,12 +628,50 @@ Segmentation segment_frame(const GreyImage& image, const ImageGeometry& geometry
     }
   }
   classify_all();
+  // The steps between classification and cleaning (bone sections, the graph cut, blooming)
+  // work on whole frames (the graph cut's cells and prior are in image pixels): they get the
+  // work region inside the whole image, with what the image holds outside the sector there
+  // (unknown labels; zero grey and masks, which they read only inside the sector).
+  const bool sections =
+      reflector_class && by_mean[0].value != kLabelPixelOutside &&
+      std::any_of(config.materials.begin(), config.materials.end(), [&](const LabelModel& m) {
+        return m.label == by_mean[0].value && m.thickness_mm > 0.0;
+      });
+  const bool cropped = roi.size() != cv::Size(image.width, image.height) &&
+                       (sections || refine || config.psf_sigma_mm > 0.0);
+  auto in_image = [&](const cv::Mat& part, double outside) {
+    if (!cropped) return part;
+    cv::Mat out(image.height, image.width, part.type(), cv::Scalar(outside));
+    part.copyTo(out(roi));
+    return out;
+  };
+  cv::Mat whole_map = in_image(map, kLabelPixelUnknown), keep;
+  const cv::Mat sector_in_image = in_image(sector, 0);
+  if (sections)
+    for (const LabelModel& m : config.materials)
+      if (m.label == by_mean[0].value && m.thickness_mm > 0.0)
+        detail::fill_reflector_sections(
+            whole_map, in_image(median_f, 0), sector_in_image, by_mean[0].value,
+            m.thickness_mm / px_mm,
+            std::max(3, static_cast<int>(std::lround(kMinReflectorWidthMm / px_mm))));
+  if (refine) {
+    cv::Mat compensated_median = median_f - (trend.a + trend.b * depth);
+    refine(whole_map, in_image(compensated_median, 0), in_image(low, 0), sector_in_image, keep);
+    if (!keep.empty() && cropped) keep = keep(roi);
+  }
   clock.lap(detail::Stage::kClassify);
+  {
+    std::vector<detail::GreyClass> grey_classes;
+    for (const Class& c : classes) grey_classes.push_back({c.value, c.mean});
+    detail::undo_blooming(whole_map, sector_in_image, grey_classes, config.psf_sigma_mm,
+                          config.dynamic_range_db, px_mm, reflector_class ? by_mean[0].value : -1);
+  }
+  if (cropped) whole_map(roi).copyTo(map);
 
   // Morphological cleaning on the label map (every label from the same map, so regions cannot
   // overlap), then no diagonal-only contacts so that every outline is a simple polygon.
   open_labels(map, sector, config.opening_mm / px_mm);
-  remove_small_components(map, sector, config.min_region_mm2 / (px_mm * px_mm));
+  remove_small_components(map, sector, config.min_region_mm2 / (px_mm * px_mm), keep);
   repair_diagonal_contacts(map, sector);
   map.setTo(kLabelPixelUnknown, ~sector);
 

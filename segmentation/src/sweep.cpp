@@ -1,5 +1,7 @@
 #include "sonoshape/segmentation/sweep.hpp"
 
+#include "sonoshape/segmentation/labeller.hpp"
+
 #include <algorithm>
 #include <charconv>
 #include <cmath>
@@ -8,6 +10,7 @@
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
+#include <optional>
 #include <sstream>
 #include <stdexcept>
 
@@ -16,6 +19,7 @@
 #include "sonoshape/core/log.hpp"
 #include "sonoshape/core/slice_io.hpp"
 #include "sonoshape/segmentation/contours.hpp"
+#include "sonoshape/segmentation/labeller.hpp"
 #include "sonoshape/simulator/sweep.hpp"
 
 namespace sonoshape::seg {
@@ -62,6 +66,7 @@ std::optional<std::pair<LabelModel, std::vector<LabelModel>>> header_models(
   const auto mean_items = parse_items(*means);
   const auto std_items = parse_items(*stds);
   const auto names = parse_items(file.field("SonoshapeLabels").value_or(""));
+  const auto thicknesses = parse_items(file.field("SonoshapeLabelThicknessMm").value_or(""));
   LabelModel background{0, "background", 120.0, 28.0};
   std::vector<LabelModel> materials;
   bool have_background = false;
@@ -78,6 +83,8 @@ std::optional<std::pair<LabelModel, std::vector<LabelModel>>> header_models(
     } else {
       const auto name = names.find(label);
       m.name = name != names.end() ? name->second : "label_" + std::to_string(label);
+      if (const auto t = thicknesses.find(label); t != thicknesses.end())
+        m.thickness_mm = std::max(0.0, to_number(t->second).value_or(0.0));
       materials.push_back(m);
     }
   }
@@ -279,6 +286,15 @@ Result<SweepSetup> prepare_sweep(const acq::SequenceFile& file,
     setup.sector_from = "config polygon";
   }
 
+  // The imaging system's blur, when the configuration does not give it: the header's.
+  if (setup.config.psf_sigma_mm == 0.0)
+    if (const auto sigma = file.field("SonoshapePsfSigmaMm")) {
+      setup.config.psf_sigma_mm = std::max(0.0, to_number(*sigma).value_or(0.0));
+      if (const auto range = file.field("SonoshapeDynamicRangeDb"))
+        setup.config.dynamic_range_db =
+            to_number(*range).value_or(setup.config.dynamic_range_db);
+    }
+
   // Label models: the config's, the header's, or two classes found in the data.
   if (setup.config.materials.empty()) {
     if (const auto models = header_models(file)) {
@@ -335,6 +351,9 @@ SweepSegmentation segment_sweep(const acq::SequenceFile& file, const SweepSetup&
   for (const std::uint8_t v : setup.geometry.sector.pixels) sector_px += v ? 1 : 0;
   double unknown_sum = 0.0;
   std::size_t segmented = 0;
+  std::optional<GraphCutLabeller> labeller;
+  if (!labels.perfect && setup.config.method == LabellingMethod::kGraphCut)
+    labeller.emplace(setup.config, setup.geometry, setup.config.graph_cut);
   for (std::size_t k = 0; k < file.frame_count(); k += static_cast<std::size_t>(every)) {
     ++out.considered;
     const auto pose = reference_from_probe(file, k);
@@ -343,9 +362,14 @@ SweepSegmentation segment_sweep(const acq::SequenceFile& file, const SweepSetup&
       if (progress) progress(out.considered);
       continue;
     }
+    const ImagePlane plane = image_plane(*pose * setup.T_probe_image, pose->block<3, 1>(0, 3));
+    std::optional<LabelImage> prior;
+    if (labeller && labels.predictor) prior = labels.predictor->predict(plane, setup.geometry);
     const LabelImage frame_labels =
         labels.perfect ? labels.perfect->image(k)
+        : labeller     ? labeller->segment(file.image(k), prior ? &*prior : nullptr).labels
                        : segment_frame(file.image(k), setup.geometry, setup.config).labels;
+    if (labels.on_label_map) labels.on_label_map(k, frame_labels);
     if (labels.truth) {
       out.comparisons.push_back(
           {k, compare_labels(labels.truth->image(k), frame_labels, setup.geometry.sector)});
@@ -356,7 +380,6 @@ SweepSegmentation segment_sweep(const acq::SequenceFile& file, const SweepSetup&
                              static_cast<double>(sector_px)
                        : 0.0;
     ++segmented;
-    const ImagePlane plane = image_plane(*pose * setup.T_probe_image, pose->block<3, 1>(0, 3));
     std::vector<Repair> repairs;
     auto slice = make_slice(frame_labels, setup.geometry.sector, setup.geometry.sector_px, plane,
                             setup.config.simplify_mm, &repairs);
@@ -389,11 +412,26 @@ SweepSegmentation segment_sweep(const acq::SequenceFile& file, const SweepSetup&
     if (coincident) {
       ++out.coincident;
     } else {
+      if (labeller && labels.predictor) labels.predictor->add(*slice);
       out.slices.slices.push_back(std::move(*slice));
     }
     if (progress) progress(out.considered);
   }
   out.unknown_fraction = segmented ? unknown_sum / static_cast<double>(segmented) : 0.0;
+  // Perfect label frames may show a label the models lack (a bone whose every pixel lies in its
+  // own shadow has no grey model): declare it, named as the header names it.
+  const auto names = parse_items(file.field("SonoshapeLabels").value_or(""));
+  for (const LabeledSlice& slice : out.slices.slices)
+    for (const Region& r : slice.regions) {
+      if (r.label == kUnknownLabel) continue;
+      auto& declared = out.slices.labels;
+      if (std::any_of(declared.begin(), declared.end(),
+                      [&](const LabelInfo& l) { return l.id == r.label; }))
+        continue;
+      const auto name = names.find(r.label);
+      declared.push_back({r.label, name != names.end() ? name->second
+                                                      : "label_" + std::to_string(r.label)});
+    }
   return out;
 }
 

@@ -107,7 +107,7 @@ TEST(SegmentSweepLabels, PerfectLabelsScoreOneAndTheSegmenterBelowOne) {
                     std::optional<Eigen::Matrix4d>{});
   ASSERT_TRUE(setup) << setup.message();
   const SweepSegmentation perfect =
-      segment_sweep(sweep.bmode, *setup, 1, {}, {}, SweepLabels{&sweep.truth, &sweep.truth});
+      segment_sweep(sweep.bmode, *setup, 1, {}, {}, SweepLabels{&sweep.truth, &sweep.truth, {}});
   ASSERT_EQ(perfect.comparisons.size(), perfect.considered - perfect.invalid_pose);
   ASSERT_GE(perfect.comparison_total.labels.size(), 3u);  // background, organ, lesion
   for (const auto& [label, counts] : perfect.comparison_total.labels)
@@ -116,7 +116,7 @@ TEST(SegmentSweepLabels, PerfectLabelsScoreOneAndTheSegmenterBelowOne) {
   EXPECT_TRUE(validate_slice_set(perfect.slices, "perfect"));
 
   const SweepSegmentation ours =
-      segment_sweep(sweep.bmode, *setup, 1, {}, {}, SweepLabels{nullptr, &sweep.truth});
+      segment_sweep(sweep.bmode, *setup, 1, {}, {}, SweepLabels{nullptr, &sweep.truth, {}});
   ASSERT_EQ(ours.comparisons.size(), perfect.comparisons.size());
   const double organ = ours.comparison_total.labels.at(1).dice();
   EXPECT_GT(organ, 0.5);  // the segmenter finds the organ, but not to the pixel
@@ -124,7 +124,7 @@ TEST(SegmentSweepLabels, PerfectLabelsScoreOneAndTheSegmenterBelowOne) {
 
   acq::SequenceFile short_truth;
   short_truth.add_frame(sweep.truth.image(0));
-  EXPECT_THROW(segment_sweep(sweep.bmode, *setup, 1, {}, {}, SweepLabels{&short_truth, nullptr}),
+  EXPECT_THROW(segment_sweep(sweep.bmode, *setup, 1, {}, {}, SweepLabels{&short_truth, nullptr, {}}),
                std::invalid_argument);
 }
 

@@ -125,14 +125,14 @@ TEST_P(SegmentSimulated, MatchesGroundTruthAndTheCut) {
 
   // Models learned from a labelled neighbouring frame with other speckle.
   const sim::SimulatedFrame training = simulator.render(scene.pose(2.0), 11);
-  const SegmentationConfig config = learn_label_models(training.bmode, training.truth);
+  const SegmentationConfig config = learn_label_models(training.bmode, training.visible_truth());
   ASSERT_EQ(config.materials.size(), 3u);
   ASSERT_TRUE(config.validate());
 
   const sim::SimulatedFrame frame = simulator.render(scene.pose(0.0), 5);
   ASSERT_GT(frame.shadow_fraction, 0.01);  // the rib shadows part of the image
   const Segmentation seg = segment_frame(frame.bmode, geometry, config);
-  const Scores s = score(frame.truth, frame.labels, seg.labels);
+  const Scores s = score(frame.visible_truth(), frame.labels, seg.labels);
   for (const auto& [label, dice] : s.dice)
     std::cout << (convex ? "convex" : "linear") << " label " << label << " Dice " << dice << '\n';
   std::cout << "shadow covered " << s.shadow_covered << ", known lost " << s.known_lost

@@ -23,6 +23,9 @@ constexpr double kRayleighMean = 1.2533141373155;
 constexpr double kMinAmplitude = 1e-6;
 // Speed of sound in soft tissue (mm per microsecond), for the wavelength.
 constexpr double kSoundSpeedMmPerUs = 1.54;
+// A tissue that loses the shadow threshold over this path (cm, one way) casts shadows on its
+// own inside (bone); see render().
+constexpr double kShadowCasterPathCm = 0.1;
 
 void check_label(int label) {
   if (label < 1 || label > kMaxPixelLabel)
@@ -246,6 +249,15 @@ SimulatedFrame BModeSimulator::Impl::render(const Eigen::Isometry3d& T_reference
   frame.bmode = GreyImage(width, height, 0);
   frame.labels = labels;
   frame.truth = labels;
+  frame.shadow = ImageU8(width, height, 0);
+  // An organ that loses the shadow threshold within a millimetre (bone) shadows its own inside:
+  // it stays its label in the truth, since its surface echo shows where it is and its extent
+  // below the surface is anatomy (a rib's thickness) that a segmenter is told, not shown.
+  std::array<bool, 256> casts_shadow{};
+  for (int l = 1; l < 255; ++l)
+    casts_shadow[static_cast<std::size_t>(l)] =
+        2.0 * attenuation[static_cast<std::size_t>(l)] * f * kShadowCasterPathCm >=
+        options.shadow_threshold_db;
   std::size_t shadow_pixels = 0;
   for (int j = 0; j < height; ++j) {
     const float* grey_row = grey_image.ptr<float>(j);
@@ -259,7 +271,8 @@ SimulatedFrame BModeSimulator::Impl::render(const Eigen::Isometry3d& T_reference
       frame.bmode.at(i, j) =
           static_cast<std::uint8_t>(std::clamp(std::lround(grey_row[i]), 0L, 255L));
       if (shadow_row[i]) {
-        frame.truth.at(i, j) = kLabelPixelUnknown;
+        frame.shadow.at(i, j) = 255;
+        if (!casts_shadow[labels.at(i, j)]) frame.truth.at(i, j) = kLabelPixelUnknown;
         ++shadow_pixels;
       }
     }
@@ -267,6 +280,13 @@ SimulatedFrame BModeSimulator::Impl::render(const Eigen::Isometry3d& T_reference
   frame.shadow_fraction =
       sector_pixels ? static_cast<double>(shadow_pixels) / static_cast<double>(sector_pixels) : 0;
   return frame;
+}
+
+LabelImage SimulatedFrame::visible_truth() const {
+  LabelImage out = truth;
+  for (std::size_t p = 0; p < out.pixels.size(); ++p)
+    if (shadow.pixels[p]) out.pixels[p] = kLabelPixelUnknown;
+  return out;
 }
 
 BModeSimulator::BModeSimulator(Phantom phantom, const Probe& probe, const BModeOptions& options) {
@@ -282,6 +302,12 @@ BModeSimulator& BModeSimulator::operator=(BModeSimulator&&) noexcept = default;
 const Phantom& BModeSimulator::phantom() const { return impl_->phantom; }
 const Probe& BModeSimulator::probe() const { return impl_->probe; }
 const BModeOptions& BModeSimulator::options() const { return impl_->options; }
+
+double BModeSimulator::psf_sigma_mm() const {
+  const double wavelength_mm = kSoundSpeedMmPerUs / impl_->probe.geometry().frequency_mhz;
+  return 0.5 * (impl_->options.psf_lateral_wavelengths + impl_->options.psf_axial_wavelengths) *
+         wavelength_mm;
+}
 
 SimulatedFrame BModeSimulator::render(const Eigen::Isometry3d& T_reference_probe,
                                       std::uint64_t seed) const {

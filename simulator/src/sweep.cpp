@@ -65,6 +65,40 @@ struct GreyStats {
 
 }  // namespace
 
+std::array<int, 256> shadow_caster_runs_px(const SimulatedFrame& f) {
+  std::array<bool, 256> caster{};
+  for (std::size_t p = 0; p < f.truth.pixels.size(); ++p)
+    if (f.shadow.pixels[p] && f.truth.pixels[p] != kLabelPixelUnknown)
+      caster[f.truth.pixels[p]] = true;
+  std::array<int, 256> longest{};
+  for (int i = 0; i < f.truth.width; ++i) {
+    int run = 0;
+    std::uint8_t previous = kLabelPixelUnknown;
+    for (int j = 0; j < f.truth.height; ++j) {
+      const std::uint8_t l = f.truth.at(i, j);
+      run = l == previous ? run + 1 : 1;
+      previous = l;
+      if (caster[l]) longest[l] = std::max(longest[l], run);
+    }
+  }
+  return longest;
+}
+
+std::map<int, double> shadow_caster_thickness_mm(const std::vector<std::array<int, 256>>& runs_px,
+                                                 double spacing_mm) {
+  std::map<int, double> thickness;
+  for (int l = 1; l < 255; ++l) {
+    std::vector<int> runs;
+    for (const auto& r : runs_px)
+      if (r[static_cast<std::size_t>(l)] > 0) runs.push_back(r[static_cast<std::size_t>(l)]);
+    if (runs.empty()) continue;
+    std::nth_element(runs.begin(), runs.begin() + static_cast<std::ptrdiff_t>(runs.size() / 2),
+                     runs.end());
+    thickness[l] = runs[runs.size() / 2] * spacing_mm;
+  }
+  return thickness;
+}
+
 acq::FieldList probe_fields(const Probe& probe) {
   const ProbeGeometry& g = probe.geometry();
   acq::FieldList fields;
@@ -128,20 +162,23 @@ SimulatedSweep simulate_sweep(const BModeSimulator& simulator,
   const Probe& probe = simulator.probe();
   std::vector<SimulatedFrame> frames(n);
   std::vector<GreyStats> stats(n);
+  std::vector<std::array<int, 256>> caster_runs_px(n);
   for (std::size_t first = 0; first < n; first += kChunkFrames) {
     const std::size_t last = std::min(n, first + kChunkFrames);
     tbb::parallel_for(first, last, [&](std::size_t k) {
       // Seeds independent of the order frames run in (shared with SimFrameSource).
       frames[k] = simulator.render(acquisition.true_poses[k], frame_seed(seed, k));
       const SimulatedFrame& f = frames[k];
+      // Grey models from what the probe sees: not a bone's shadowed inside.
       for (std::size_t p = 0; p < f.truth.pixels.size(); ++p) {
         const std::uint8_t l = f.truth.pixels[p];
-        if (l == kLabelPixelUnknown) continue;
+        if (l == kLabelPixelUnknown || f.shadow.pixels[p]) continue;
         const double grey = f.bmode.pixels[p];
         stats[k].sum[l] += grey;
         stats[k].sum_sq[l] += grey * grey;
         stats[k].count[l] += 1.0;
       }
+      caster_runs_px[k] = shadow_caster_runs_px(f);
     });
     if (progress) progress(last);
   }
@@ -184,11 +221,20 @@ SimulatedSweep simulate_sweep(const BModeSimulator& simulator,
     append_item(means, l, number(std::round(mean * 100.0) / 100.0));
     append_item(stds, l, number(std::round(std::sqrt(variance) * 100.0) / 100.0));
   }
+  // A segmenter sees only the surface of an organ that shadows its own inside (bone) and needs
+  // its thickness to fill its cross-section.
+  std::string thicknesses;
+  for (const auto& [label, mm] : shadow_caster_thickness_mm(caster_runs_px, probe.spacing_mm()))
+    append_item(thicknesses, label, number(std::round(mm * 100.0) / 100.0));
   global.emplace_back("SonoshapeLabels", names);
   global.emplace_back("SonoshapeLabelEchogenicity", echogenicity);
   global.emplace_back("SonoshapeLabelGreyMean", means);
   global.emplace_back("SonoshapeLabelGreyStd", stds);
+  if (!thicknesses.empty()) global.emplace_back("SonoshapeLabelThicknessMm", thicknesses);
   global.emplace_back("SonoshapeUnknownLabel", std::to_string(kLabelPixelUnknown));
+  global.emplace_back("SonoshapePsfSigmaMm",
+                      number(std::round(simulator.psf_sigma_mm() * 1000.0) / 1000.0));
+  global.emplace_back("SonoshapeDynamicRangeDb", number(simulator.options().dynamic_range_db));
   global.emplace_back("SonoshapeShadowThresholdDb",
                       number(simulator.options().shadow_threshold_db));
   global.emplace_back("SonoshapeSeed", std::to_string(seed));

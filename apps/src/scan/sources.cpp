@@ -1,5 +1,6 @@
 #include "sonoshape/scan/sources.hpp"
 
+#include <array>
 #include <algorithm>
 #include <cmath>
 #include <sstream>
@@ -74,7 +75,8 @@ seg::SegmentationConfig learn_sim_models(const sim::BModeSimulator& simulator,
   const sim::Probe& probe = simulator.probe();
   const int w = probe.width_px(), h = probe.height_px();
   GreyImage grey(w, h * kModelFrames);
-  LabelImage truth(w, h * kModelFrames);
+  LabelImage visible(w, h * kModelFrames);
+  std::vector<std::array<int, 256>> caster_runs_px;
   for (int k = 0; k < kModelFrames; ++k) {
     const double t_s = trajectory.duration_s() * (k + 0.5) / kModelFrames;
     // Seeds apart from the scan's frames: the models must not have seen the frames they read.
@@ -83,10 +85,21 @@ seg::SegmentationConfig learn_sim_models(const sim::BModeSimulator& simulator,
                          sim::frame_seed(seed ^ 0x5EEDull, static_cast<std::size_t>(k)));
     std::copy(frame.bmode.pixels.begin(), frame.bmode.pixels.end(),
               grey.pixels.begin() + static_cast<std::ptrdiff_t>(k) * w * h);
-    std::copy(frame.truth.pixels.begin(), frame.truth.pixels.end(),
-              truth.pixels.begin() + static_cast<std::ptrdiff_t>(k) * w * h);
+    // Grey models from what the probe sees: not a bone's shadowed inside.
+    const LabelImage shown = frame.visible_truth();
+    std::copy(shown.pixels.begin(), shown.pixels.end(),
+              visible.pixels.begin() + static_cast<std::ptrdiff_t>(k) * w * h);
+    caster_runs_px.push_back(sim::shadow_caster_runs_px(frame));
   }
-  return seg::learn_label_models(grey, truth, base);
+  seg::SegmentationConfig config = seg::learn_label_models(grey, visible, base);
+  if (config.psf_sigma_mm == 0.0) {
+    config.psf_sigma_mm = simulator.psf_sigma_mm();
+    config.dynamic_range_db = simulator.options().dynamic_range_db;
+  }
+  const auto thickness = sim::shadow_caster_thickness_mm(caster_runs_px, probe.spacing_mm());
+  for (seg::LabelModel& m : config.materials)
+    if (const auto t = thickness.find(m.label); t != thickness.end()) m.thickness_mm = t->second;
+  return config;
 }
 
 Result<ScanSource> open_sim(const SourceRequest& request, const std::string& phantom_spec) {

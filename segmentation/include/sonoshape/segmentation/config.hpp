@@ -20,6 +20,10 @@ struct LabelModel {
   std::string name;
   double grey_mean = 128.0;
   double grey_std = 25.0;
+  /// For a strong reflector that shadows its own inside (bone): its extent along the beam below
+  /// its surface echo (mm), the anatomy that fills its cross-section (see segment_frame); 0:
+  /// unknown, only the visible surface band gets the label.
+  double thickness_mm = 0.0;
 };
 
 /// Where the image sector (the part of the frame the probe sees) comes from.
@@ -28,6 +32,23 @@ enum class SectorSource {
   kAuto,     ///< pixels that carry signal in some frame (largest component, filled)
   kFull,     ///< the whole image
   kPolygon,  ///< SegmentationConfig::sector_polygon_px
+};
+
+/// Parameters of the graph-cut labelling (nats: natural-log likelihood units per pixel).
+struct GraphCutOptions {
+  double cell_mm = 0.6;           ///< grid cell size (a cell is a block of pixels)
+  double smoothness = 1.5;        ///< Potts weight per pixel of boundary between equal greys
+  double prior_weight = 1.0;      ///< cost per pixel of disagreeing with a confident prior
+  double prior_margin_mm = 2.0;   ///< the prior's confidence grows over this distance from its
+                                  ///< own boundaries (the reconstruction is least sure there)
+  double model_update = 0.3;      ///< weight of each frame in the running appearance models
+  int cycles = 2;                 ///< expansion passes over all labels
+};
+
+/// How a frame's pixels get their labels.
+enum class LabellingMethod {
+  kThreshold,  ///< nearest grey model per pixel after smoothing, then morphology
+  kGraphCut,   ///< that labelling refined by a graph cut (see GraphCutLabeller)
 };
 
 /// Segmentation parameters. Defaults suit the simulator's frames; lengths are in mm.
@@ -51,6 +72,13 @@ struct SegmentationConfig {
   double shadow_margin_mm = 1.5;
   /// Beyond this depth (mm along the beam) nothing is trusted; 0: no limit.
   double max_depth_mm = 0.0;
+  /// The imaging system's point-spread function, Gaussian sigma (mm, mean of lateral and axial)
+  /// and the log compression's range (dB): where two tissues meet, the blurred echo power puts
+  /// the grey midpoint inside the darker one (blooming); the labelling moves such boundaries
+  /// back by the shift these imply. 0: unknown, no correction (the simulator writes both in
+  /// the header; a probe's data sheet gives its resolution).
+  double psf_sigma_mm = 0.0;
+  double dynamic_range_db = 50.0;
   /// Removes the residual depth trend of the grey (attenuation not undone by time-gain
   /// compensation), fitted per frame as a line in depth.
   bool depth_compensation = true;
@@ -62,6 +90,9 @@ struct SegmentationConfig {
   /// Polygon simplification tolerance (mm, approxPolyDP); reduced per slice where the
   /// simplified polygons would not be valid.
   double simplify_mm = 0.3;
+
+  LabellingMethod method = LabellingMethod::kThreshold;
+  GraphCutOptions graph_cut;
 
   SectorSource sector = SectorSource::kDefault;
   Ring2 sector_polygon_px;  ///< kPolygon: the sector in pixel coordinates (column, row)

@@ -14,6 +14,7 @@
 #include "sonoshape/core/slice.hpp"
 #include "sonoshape/core/status.hpp"
 #include "sonoshape/segmentation/config.hpp"
+#include "sonoshape/segmentation/labeller.hpp"
 #include "sonoshape/segmentation/scoring.hpp"
 #include "sonoshape/segmentation/segmenter.hpp"
 
@@ -95,6 +96,12 @@ struct SweepLabels {
   /// When set, every segmented frame's label map is compared with this file's frame of the
   /// same index (SweepSegmentation::comparisons).
   const acq::SequenceFile* truth = nullptr;
+  /// When set, called with the index and the label map of every frame that gets one (the
+  /// segmenter's or the perfect one), before its contours are traced: pictures, diagnostics.
+  std::function<void(std::size_t frame, const LabelImage& labels)> on_label_map;
+  /// With the graph-cut method: the reconstruction that predicts each frame (the cut's prior)
+  /// and is given every slice made; none: the image alone.
+  LabelPredictor* predictor = nullptr;
 };
 
 /// Called with the number of considered frames done.

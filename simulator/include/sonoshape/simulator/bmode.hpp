@@ -5,7 +5,8 @@
 // the impedance jump and the angle of incidence), attenuation with depth partly compensated by
 // time-gain compensation, and shadows behind strong reflectors and absorbers; then log
 // compression and scan conversion. Also returns the ground truth a careful segmenter should
-// produce: the labels, unknown (255) outside the sector and in shadows.
+// produce: the labels, unknown (255) outside the sector and in shadows (but a bone, which
+// shadows its own inside, keeps its whole cross-section).
 #include <Eigen/Geometry>
 #include <cstdint>
 #include <memory>
@@ -40,7 +41,14 @@ struct BModeOptions {
 struct SimulatedFrame {
   GreyImage bmode;    ///< the B-mode image, 0 outside the sector
   LabelImage labels;  ///< the cut rasterised (0 background, label ids), 255 outside the sector
-  LabelImage truth;   ///< `labels` with shadowed pixels also 255 (unknown)
+  /// `labels` with shadowed pixels also 255 (unknown), except those of an organ that shadows
+  /// its own inside (bone): they keep its label.
+  LabelImage truth;
+  ImageU8 shadow;     ///< 255 where the pixel is shadowed (whatever its label), else 0
+
+  /// `truth` with every shadowed pixel unknown: what the image shows of each label (the pixels
+  /// to learn grey models from).
+  LabelImage visible_truth() const;
   /// The exact cut in the reference frame: (u, v) = the probe's (x, y) axes, so its in-plane
   /// coordinates are probe mm; fov = the sector.
   LabeledSlice slice;
@@ -66,6 +74,9 @@ class BModeSimulator {
   const Phantom& phantom() const;
   const Probe& probe() const;
   const BModeOptions& options() const;
+  /// The point-spread function's Gaussian sigma (mm): the mean of its lateral and axial sigmas
+  /// at the probe's frequency (what a segmenter's blooming correction needs).
+  double psf_sigma_mm() const;
 
   /// The frame seen by the probe at T_reference_probe; the speckle pattern comes from `seed`
   /// (same seed and pose: the same image, bit for bit).

@@ -17,8 +17,10 @@
 // Per frame: Timestamp, ImageStatus = OK, ProbeToTrackerTransform(+Status) as tracked (noise,
 // latency, INVALID), ReferenceToTrackerTransform = identity (the phantom is the tracker's
 // reference), TrueProbeToReferenceTransform (the exact pose, for evaluation only).
+#include <array>
 #include <cstdint>
 #include <functional>
+#include <map>
 #include <vector>
 
 #include "sonoshape/acquisition/sequence_file.hpp"
@@ -46,6 +48,15 @@ using SweepProgress = std::function<void(std::size_t done)>;
 SimulatedSweep simulate_sweep(const BModeSimulator& simulator,
                               const SimulatedAcquisition& acquisition, std::uint64_t seed,
                               const SweepProgress& progress = {});
+
+/// The longest run (pixels) of each label down an image column of the frame's truth, for the
+/// labels that keep their pixels inside their own shadow (bone; see SimulatedFrame::truth); 0
+/// for the others.
+std::array<int, 256> shadow_caster_runs_px(const SimulatedFrame& frame);
+/// The thickness along the beam (mm) of each such organ over many frames: the median of its
+/// runs in the frames that show it (runs from shadow_caster_runs_px), times the pixel spacing.
+std::map<int, double> shadow_caster_thickness_mm(const std::vector<std::array<int, 256>>& runs_px,
+                                                 double spacing_mm);
 
 /// The probe fields of the header list above.
 acq::FieldList probe_fields(const Probe& probe);

@@ -1,0 +1,62 @@
+#include "blooming.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <opencv2/imgproc.hpp>
+
+namespace sonoshape::seg::detail {
+namespace {
+
+// Inverse of the standard normal distribution function by bisection (|z| < 8 is plenty).
+double inverse_normal(double p) {
+  double lo = -8.0, hi = 8.0;
+  for (int k = 0; k < 60; ++k) {
+    const double mid = 0.5 * (lo + hi);
+    (0.5 * std::erfc(-mid / std::sqrt(2.0)) < p ? lo : hi) = mid;
+  }
+  return 0.5 * (lo + hi);
+}
+
+}  // namespace
+
+double blooming_shift_mm(double dark_grey, double bright_grey, double psf_sigma_mm,
+                         double dynamic_range_db) {
+  if (!(bright_grey > dark_grey) || !(psf_sigma_mm > 0.0) || !(dynamic_range_db > 0.0))
+    return 0.0;
+  const double ratio = std::pow(10.0, (bright_grey - dark_grey) * dynamic_range_db / 255.0 / 10.0);
+  return -psf_sigma_mm * inverse_normal(1.0 / (std::sqrt(ratio) + 1.0));
+}
+
+void undo_blooming(cv::Mat& map, const cv::Mat& sector, const std::vector<GreyClass>& classes,
+                   double psf_sigma_mm, double dynamic_range_db, double spacing_mm,
+                   int excluded) {
+  if (!(psf_sigma_mm > 0.0)) return;
+  const cv::Mat original = map.clone();
+  for (const GreyClass& bright : classes) {
+    if (bright.value == excluded) continue;
+    const cv::Mat bright_mask = (original == bright.value) & sector;
+    if (cv::countNonZero(bright_mask) == 0) continue;
+    std::vector<GreyClass> darker;
+    for (const GreyClass& c : classes)
+      if (c.grey_mean < bright.grey_mean && c.value != excluded) darker.push_back(c);
+    std::sort(darker.begin(), darker.end(), [](const GreyClass& a, const GreyClass& b) {
+      return a.grey_mean > b.grey_mean;  // the nearest in grey first
+    });
+    cv::Mat taken(map.size(), CV_8U, cv::Scalar(0));
+    for (const GreyClass& dark : darker) {
+      const double shift_px =
+          blooming_shift_mm(dark.grey_mean, bright.grey_mean, psf_sigma_mm, dynamic_range_db) /
+          spacing_mm;
+      if (shift_px <= 0.0) continue;
+      // Distance (px) from every pixel centre to the nearest dark pixel centre; the boundary
+      // lies half a pixel from the dark pixel, so a bright pixel within 0.5 + shift goes back.
+      cv::Mat distance;
+      cv::distanceTransform(~(original == dark.value), distance, cv::DIST_L2, cv::DIST_MASK_5);
+      const cv::Mat back = bright_mask & ~taken & (distance <= 0.5 + shift_px);
+      map.setTo(dark.value, back);
+      taken |= back;
+    }
+  }
+}
+
+}  // namespace sonoshape::seg::detail

@@ -1,0 +1,190 @@
+#include "graph_cut.hpp"
+
+// GCC's flow analysis flags Boost.Graph's edge iterators (boost::optional members) as maybe
+// uninitialised when it inlines the max-flow here; a known false positive of Boost 1.74 with
+// GCC 12, silenced for this file only.
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#endif
+
+#include <boost/graph/adjacency_list.hpp>
+#include <boost/graph/boykov_kolmogorov_max_flow.hpp>
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+
+namespace sonoshape::seg::detail {
+namespace {
+
+using Traits = boost::adjacency_list_traits<boost::vecS, boost::vecS, boost::directedS>;
+using Edge = Traits::edge_descriptor;
+using Vertex = Traits::vertex_descriptor;
+
+// The cost of taking alpha for a cell that already has it (the binary choice is void there).
+constexpr float kForbidden = 1e9f;
+
+struct EdgeData {
+  float capacity = 0.0f;
+  float residual = 0.0f;
+  Edge reverse;
+};
+struct VertexData {
+  boost::default_color_type colour = boost::white_color;
+  float distance = 0.0f;
+  Edge predecessor;
+};
+using Graph =
+    boost::adjacency_list<boost::vecS, boost::vecS, boost::directedS, VertexData, EdgeData>;
+
+// A neighbour pair's two directed edges (each the other's reverse).
+struct Pair {
+  std::size_t first = 0, second = 0;  // active-cell indices
+  std::size_t grid = 0;               // grid index of `first`
+  bool right = true;                  // `second` is the right (else the lower) neighbour
+  Edge forward, backward;
+};
+
+}  // namespace
+
+struct GridLabelling::Impl {
+  Graph graph;
+  Vertex source = 0, sink = 0;
+  std::vector<std::size_t> cells;  // grid index of each active cell (= its vertex)
+  std::vector<Edge> from_source, to_sink;
+  std::vector<Pair> pairs;
+
+  Edge add_edge_pair(Vertex a, Vertex b, Edge* back) {
+    const Edge forward = boost::add_edge(a, b, graph).first;
+    const Edge backward = boost::add_edge(b, a, graph).first;
+    graph[forward].reverse = backward;
+    graph[backward].reverse = forward;
+    if (back) *back = backward;
+    return forward;
+  }
+};
+
+GridLabelling::GridLabelling(int width, int height, const std::vector<std::uint8_t>& active,
+                             int labels)
+    : impl_(std::make_unique<Impl>()), width_(width), height_(height), labels_(labels) {
+  if (width <= 0 || height <= 0 || labels < 1 || labels > 255 ||
+      active.size() != static_cast<std::size_t>(width) * static_cast<std::size_t>(height))
+    throw std::invalid_argument("GridLabelling: the active mask does not match the grid");
+  const std::size_t n = active.size();
+  std::vector<std::size_t> vertex_of(n, std::numeric_limits<std::size_t>::max());
+  for (std::size_t c = 0; c < n; ++c)
+    if (active[c]) {
+      vertex_of[c] = impl_->cells.size();
+      impl_->cells.push_back(c);
+    }
+  Impl& g = *impl_;
+  const std::size_t cells = g.cells.size();
+  g.graph = Graph(cells + 2);
+  g.source = cells;
+  g.sink = cells + 1;
+  g.from_source.reserve(cells);
+  g.to_sink.reserve(cells);
+  for (std::size_t v = 0; v < cells; ++v) {
+    g.from_source.push_back(g.add_edge_pair(g.source, v, nullptr));
+    g.to_sink.push_back(g.add_edge_pair(v, g.sink, nullptr));
+  }
+  for (std::size_t v = 0; v < cells; ++v) {
+    const std::size_t c = g.cells[v];
+    const int i = static_cast<int>(c % static_cast<std::size_t>(width));
+    const int j = static_cast<int>(c / static_cast<std::size_t>(width));
+    for (const bool right : {true, false}) {
+      if (right ? i + 1 >= width : j + 1 >= height) continue;
+      const std::size_t d = right ? c + 1 : c + static_cast<std::size_t>(width);
+      if (!active[d]) continue;
+      Pair p;
+      p.first = v;
+      p.second = vertex_of[d];
+      p.grid = c;
+      p.right = right;
+      p.forward = g.add_edge_pair(v, p.second, &p.backward);
+      g.pairs.push_back(p);
+    }
+  }
+}
+
+GridLabelling::~GridLabelling() = default;
+
+double GridLabelling::minimise(const std::vector<float>& cost,
+                               const std::vector<float>& right_weight,
+                               const std::vector<float>& down_weight,
+                               std::vector<std::uint8_t>& labelling, int cycles) {
+  const std::size_t n = static_cast<std::size_t>(width_) * static_cast<std::size_t>(height_);
+  const auto labels = static_cast<std::size_t>(labels_);
+  if (cost.size() != n * labels || right_weight.size() != n || down_weight.size() != n ||
+      labelling.size() != n)
+    throw std::invalid_argument("GridLabelling::minimise: sizes do not match the grid");
+  Impl& g = *impl_;
+  const auto energy = [&] {
+    double e = 0.0;
+    for (const std::size_t c : g.cells) e += cost[c * labels + labelling[c]];
+    for (const Pair& p : g.pairs) {
+      const std::size_t d = g.cells[p.second];
+      if (labelling[p.grid] != labelling[d])
+        e += p.right ? right_weight[p.grid] : down_weight[p.grid];
+    }
+    return e;
+  };
+  double best = energy();
+  std::vector<float> keep(g.cells.size()), move(g.cells.size());
+  for (int cycle = 0; cycle < cycles; ++cycle) {
+    bool improved = false;
+    for (std::size_t alpha = 0; alpha < labels; ++alpha) {
+      // Binary problem: x = 0 keeps the label, x = 1 takes alpha. Unary terms first, then
+      // each pair's Potts term split into unary parts and one edge (Kolmogorov and Zabih 2004).
+      for (std::size_t v = 0; v < g.cells.size(); ++v) {
+        const std::size_t c = g.cells[v];
+        keep[v] = cost[c * labels + labelling[c]];
+        move[v] = labelling[c] == alpha ? kForbidden : cost[c * labels + alpha];
+      }
+      for (const Pair& p : g.pairs) {
+        const std::size_t c = p.grid, d = g.cells[p.second];
+        const float w = p.right ? right_weight[c] : down_weight[c];
+        const bool a_alpha = labelling[c] == alpha, b_alpha = labelling[d] == alpha;
+        const float e00 = labelling[c] != labelling[d] ? w : 0.0f;
+        const float e01 = a_alpha ? 0.0f : w;  // c keeps, d takes alpha
+        const float e10 = b_alpha ? 0.0f : w;  // c takes alpha, d keeps
+        // E = e00 + (e10 - e00) x_c + (0 - e10) x_d + (e01 + e10 - e00) (1 - x_c) x_d
+        move[p.first] += e10 - e00;
+        move[p.second] -= e10;
+        const float edge = e01 + e10 - e00;  // >= 0 for a metric (Potts)
+        g.graph[p.forward].capacity = edge;
+        g.graph[p.backward].capacity = 0.0f;
+      }
+      for (std::size_t v = 0; v < g.cells.size(); ++v) {
+        const float m = std::min(keep[v], move[v]);
+        g.graph[g.from_source[v]].capacity = move[v] - m;  // paid when v takes alpha (sink side)
+        g.graph[g.to_sink[v]].capacity = keep[v] - m;      // paid when v keeps (source side)
+        g.graph[g.graph[g.from_source[v]].reverse].capacity = 0.0f;
+        g.graph[g.graph[g.to_sink[v]].reverse].capacity = 0.0f;
+      }
+      boost::boykov_kolmogorov_max_flow(
+          g.graph, boost::get(&EdgeData::capacity, g.graph),
+          boost::get(&EdgeData::residual, g.graph), boost::get(&EdgeData::reverse, g.graph),
+          boost::get(&VertexData::predecessor, g.graph), boost::get(&VertexData::colour, g.graph),
+          boost::get(&VertexData::distance, g.graph), boost::get(boost::vertex_index, g.graph),
+          g.source, g.sink);
+      std::vector<std::uint8_t> proposal = labelling;
+      const boost::default_color_type source_colour = g.graph[g.source].colour;
+      for (std::size_t v = 0; v < g.cells.size(); ++v)
+        if (g.graph[v].colour != source_colour)
+          proposal[g.cells[v]] = static_cast<std::uint8_t>(alpha);
+      std::swap(proposal, labelling);
+      const double e = energy();
+      if (e < best - 1e-6 * std::max(1.0, std::abs(best))) {
+        best = e;
+        improved = true;
+      } else {
+        std::swap(proposal, labelling);  // an expansion never raises the energy; keep the old
+      }
+    }
+    if (!improved) break;
+  }
+  return best;
+}
+
+}  // namespace sonoshape::seg::detail

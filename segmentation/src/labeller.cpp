@@ -1,0 +1,313 @@
+#include "sonoshape/segmentation/labeller.hpp"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <opencv2/imgproc.hpp>
+#include <stdexcept>
+#include <vector>
+
+#include "graph_cut.hpp"
+#include "segmenter_internal.hpp"
+
+namespace sonoshape::seg {
+namespace {
+
+// A class this much brighter (grey) than every other is a strong reflector (as in
+// segment_frame, whose sections the graph cut keeps).
+constexpr double kReflectorGapGrey = 60.0;
+// Fewer interior pixels than this in a frame leave a label's appearance model as it was.
+constexpr int kMinModelPixels = 200;
+// Before any frame has taught a label's model, its spread in the median-filtered grey is this
+// share of the raw grey's spread (the median averages several speckle cells).
+constexpr double kMedianSpreadShare = 0.5;
+// The cost that keeps a cell off a label (a reflector's cells on it, the others off it).
+constexpr float kExcluded = 1e6f;
+// Cells this far (in cells) from a boundary of the starting labelling take part in the cut.
+constexpr int kBandCells = 3;
+
+struct Appearance {
+  double mean = 0.0, variance = 1.0;
+};
+
+}  // namespace
+
+struct GraphCutLabeller::Impl {
+  SegmentationConfig config;
+  ImageGeometry geometry;
+  GraphCutOptions options;
+  int block_px = 1;
+  int grid_w = 0, grid_h = 0;
+  std::vector<std::uint8_t> values;  // label index -> pixel value
+  int reflector = -1;                // index of the reflector label, if any
+  std::vector<Appearance> models;
+
+  Impl(const SegmentationConfig& c, const ImageGeometry& g, const GraphCutOptions& o)
+      : config(c), geometry(g), options(o) {
+    geometry.check();
+    if (const Status valid = config.validate(); !valid)
+      throw std::invalid_argument(valid.message());
+    if (!(options.cell_mm > 0.0) || options.smoothness < 0.0 || options.prior_weight < 0.0 ||
+        options.cycles < 1 || !(options.model_update >= 0.0 && options.model_update <= 1.0))
+      throw std::invalid_argument("GraphCutLabeller: invalid options");
+    block_px = std::max(1, static_cast<int>(std::lround(options.cell_mm / geometry.spacing_mm)));
+    grid_w = (geometry.width_px + block_px - 1) / block_px;
+    grid_h = (geometry.height_px + block_px - 1) / block_px;
+    std::vector<const LabelModel*> all{&config.background};
+    for (const LabelModel& m : config.materials) all.push_back(&m);
+    for (const LabelModel* m : all) {
+      values.push_back(static_cast<std::uint8_t>(m->label));
+      const double s = m->grey_std * kMedianSpreadShare;
+      models.push_back({m->grey_mean, s * s});
+    }
+    std::vector<std::size_t> order(all.size());
+    for (std::size_t k = 0; k < order.size(); ++k) order[k] = k;
+    std::sort(order.begin(), order.end(),
+              [&](std::size_t a, std::size_t b) { return all[a]->grey_mean > all[b]->grey_mean; });
+    if (order.size() > 1 && all[order[0]]->grey_mean - all[order[1]]->grey_mean > kReflectorGapGrey &&
+        order[0] != 0)
+      reflector = static_cast<int>(order[0]);
+  }
+
+  int index_of(std::uint8_t value) const {
+    for (std::size_t k = 0; k < values.size(); ++k)
+      if (values[k] == value) return static_cast<int>(k);
+    return -1;
+  }
+
+  // Running appearance models from the interiors (two pixels in from every edge) of the
+  // threshold labelling: the pixels whose label the blur of an edge cannot have changed.
+  void learn(const cv::Mat& map, const cv::Mat& grey, const cv::Mat& usable) {
+    const cv::Mat kernel = cv::getStructuringElement(cv::MORPH_RECT, cv::Size(5, 5));
+    for (std::size_t k = 0; k < values.size(); ++k) {
+      if (static_cast<int>(k) == reflector) continue;
+      cv::Mat inside = (map == values[k]) & usable;
+      cv::erode(inside, inside, kernel);
+      if (cv::countNonZero(inside) < kMinModelPixels) continue;
+      cv::Scalar mean, spread;
+      cv::meanStdDev(grey, mean, spread, inside);
+      const double w = options.model_update;
+      models[k].mean = (1.0 - w) * models[k].mean + w * mean[0];
+      models[k].variance =
+          (1.0 - w) * models[k].variance + w * std::max(1.0, spread[0] * spread[0]);
+    }
+  }
+
+  void refine(cv::Mat& map, const cv::Mat& grey, const cv::Mat& low, const cv::Mat& sector,
+              const LabelImage* prior) {
+    const cv::Mat usable = sector & ~low & (map != kLabelPixelUnknown);
+    learn(map, grey, usable);
+    const std::size_t cells = static_cast<std::size_t>(grid_w) * grid_h;
+    const std::size_t labels = values.size();
+    std::vector<double> count(cells, 0.0), sum(cells, 0.0), sum_sq(cells, 0.0);
+    std::vector<int> reflector_px(cells, 0);
+    std::vector<std::uint8_t> start(cells, 0);
+    for (int j = 0; j < map.rows; ++j) {
+      const float* g = grey.ptr<float>(j);
+      const std::uint8_t* use = usable.ptr<std::uint8_t>(j);
+      const std::uint8_t* m = map.ptr<std::uint8_t>(j);
+      const std::size_t row = static_cast<std::size_t>(j / block_px) * grid_w;
+      for (int i = 0; i < map.cols; ++i) {
+        const std::size_t c = row + static_cast<std::size_t>(i / block_px);
+        if (reflector >= 0 && m[i] == values[static_cast<std::size_t>(reflector)]) ++reflector_px[c];
+        if (!use[i]) continue;
+        count[c] += 1.0;
+        sum[c] += g[i];
+        sum_sq[c] += static_cast<double>(g[i]) * g[i];
+      }
+    }
+    // The threshold labelling seeds the cut: each cell starts with its centre pixel's label.
+    for (int cj = 0; cj < grid_h; ++cj)
+      for (int ci = 0; ci < grid_w; ++ci) {
+        const int i = std::min(map.cols - 1, ci * block_px + block_px / 2);
+        const int j = std::min(map.rows - 1, cj * block_px + block_px / 2);
+        start[static_cast<std::size_t>(cj) * grid_w + ci] =
+            static_cast<std::uint8_t>(std::max(0, index_of(map.at<std::uint8_t>(j, i))));
+      }
+
+    std::vector<float> cost(cells * labels, 0.0f);
+    for (std::size_t c = 0; c < cells; ++c) {
+      const double n = count[c];
+      const bool reflector_cell = reflector >= 0 && 2 * reflector_px[c] > n;
+      double lowest = 1e300;
+      for (std::size_t l = 0; l < labels; ++l) {
+        if (n == 0.0) break;
+        const Appearance& a = models[l];
+        const double squares = sum_sq[c] - 2.0 * a.mean * sum[c] + n * a.mean * a.mean;
+        const double e = 0.5 * n * std::log(a.variance) + 0.5 * squares / a.variance;
+        cost[c * labels + l] = static_cast<float>(e);
+        lowest = std::min(lowest, e);
+      }
+      for (std::size_t l = 0; l < labels; ++l) {
+        float& e = cost[c * labels + l];
+        if (n > 0.0) e -= static_cast<float>(lowest);
+        if (reflector >= 0 && (static_cast<int>(l) == reflector) != reflector_cell) e = kExcluded;
+        else if (reflector_cell) e = 0.0f;
+      }
+      if (reflector_cell) start[c] = static_cast<std::uint8_t>(reflector);
+    }
+    std::vector<std::uint8_t> prior_disagrees;
+    if (prior) prior_disagrees = add_prior(*prior, count, start, cost);
+
+    // Contrast-sensitive Potts weights between neighbouring cells: cheap to cut where the grey
+    // changes by much more than one tissue's spread.
+    double mean_variance = 0.0;
+    for (const Appearance& a : models) mean_variance += a.variance;
+    mean_variance /= static_cast<double>(models.size());
+    std::vector<float> right(cells, 0.0f), down(cells, 0.0f);
+    const double per_edge = options.smoothness * block_px;
+    for (int cj = 0; cj < grid_h; ++cj)
+      for (int ci = 0; ci < grid_w; ++ci) {
+        const std::size_t c = static_cast<std::size_t>(cj) * grid_w + ci;
+        if (count[c] == 0.0) continue;
+        const double g = sum[c] / count[c];
+        auto weight = [&](std::size_t d) {
+          if (count[d] == 0.0) return 0.0f;
+          const double diff = g - sum[d] / count[d];
+          return static_cast<float>(per_edge * std::exp(-0.5 * diff * diff / mean_variance));
+        };
+        if (ci + 1 < grid_w) right[c] = weight(c + 1);
+        if (cj + 1 < grid_h) down[c] = weight(c + static_cast<std::size_t>(grid_w));
+      }
+    // Only cells near a boundary of the starting labelling, or where the prior disagrees with
+    // it, can change at an optimum of reasonable weights: the cut runs on that band, and the
+    // cells outside it enter as fixed neighbours (their Potts terms become unary ones).
+    const std::vector<std::uint8_t> band = changeable_band(start, count, prior_disagrees);
+    for (int cj = 0; cj < grid_h; ++cj)
+      for (int ci = 0; ci < grid_w; ++ci) {
+        const std::size_t c = static_cast<std::size_t>(cj) * grid_w + ci;
+        if (!band[c]) continue;
+        auto fixed_neighbour = [&](std::size_t d, float w) {
+          if (band[d] || count[d] == 0.0 || w == 0.0f) return;
+          for (std::size_t l = 0; l < labels; ++l)
+            if (l != start[d]) cost[c * labels + l] += w;
+        };
+        if (ci + 1 < grid_w) fixed_neighbour(c + 1, right[c]);
+        if (ci > 0) fixed_neighbour(c - 1, right[c - 1]);
+        if (cj + 1 < grid_h) fixed_neighbour(c + static_cast<std::size_t>(grid_w), down[c]);
+        if (cj > 0) fixed_neighbour(c - static_cast<std::size_t>(grid_w), down[c - grid_w]);
+      }
+    detail::GridLabelling cut(grid_w, grid_h, band, static_cast<int>(labels));
+    cut.minimise(cost, right, down, start, options.cycles);
+
+    for (int j = 0; j < map.rows; ++j) {
+      const std::uint8_t* use = usable.ptr<std::uint8_t>(j);
+      std::uint8_t* m = map.ptr<std::uint8_t>(j);
+      const std::size_t row = static_cast<std::size_t>(j / block_px) * grid_w;
+      for (int i = 0; i < map.cols; ++i) {
+        const std::size_t c = row + static_cast<std::size_t>(i / block_px);
+        if (!use[i] || count[c] == 0.0) continue;
+        if (reflector >= 0 && m[i] == values[static_cast<std::size_t>(reflector)]) continue;
+        m[i] = values[start[c]];
+      }
+    }
+  }
+
+  // Cells within kBandCells of a cell whose starting label differs from a neighbour's, or of a
+  // cell whose prior disagrees with its starting label (and that has pixels to decide).
+  std::vector<std::uint8_t> changeable_band(const std::vector<std::uint8_t>& start,
+                                            const std::vector<double>& count,
+                                            const std::vector<std::uint8_t>& prior_disagrees) const {
+    cv::Mat seed(grid_h, grid_w, CV_8U, cv::Scalar(0));
+    for (int cj = 0; cj < grid_h; ++cj)
+      for (int ci = 0; ci < grid_w; ++ci) {
+        const std::size_t c = static_cast<std::size_t>(cj) * grid_w + ci;
+        if (count[c] == 0.0) continue;
+        const bool edge =
+            (ci + 1 < grid_w && count[c + 1] > 0.0 && start[c + 1] != start[c]) ||
+            (cj + 1 < grid_h && count[c + grid_w] > 0.0 && start[c + grid_w] != start[c]);
+        if (edge || (!prior_disagrees.empty() && prior_disagrees[c])) {
+          seed.at<std::uint8_t>(cj, ci) = 255;
+          if (ci + 1 < grid_w) seed.at<std::uint8_t>(cj, ci + 1) = 255;
+          if (cj + 1 < grid_h) seed.at<std::uint8_t>(cj + 1, ci) = 255;
+        }
+      }
+    cv::dilate(seed, seed,
+               cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * kBandCells + 1,
+                                                                  2 * kBandCells + 1)));
+    std::vector<std::uint8_t> band(static_cast<std::size_t>(grid_w) * grid_h, 0);
+    for (int cj = 0; cj < grid_h; ++cj)
+      for (int ci = 0; ci < grid_w; ++ci) {
+        const std::size_t c = static_cast<std::size_t>(cj) * grid_w + ci;
+        band[c] = seed.at<std::uint8_t>(cj, ci) && count[c] > 0.0;
+      }
+    return band;
+  }
+
+  // Disagreeing with the prediction costs prior_weight per pixel, scaled by the prediction's
+  // confidence: none on its own boundaries, full from prior_margin_mm inside its regions.
+  // Returns, per cell, whether the prior predicts another label than `start`.
+  std::vector<std::uint8_t> add_prior(const LabelImage& prior, const std::vector<double>& count,
+                                      const std::vector<std::uint8_t>& start,
+                                      std::vector<float>& cost) const {
+    if (prior.width != geometry.width_px || prior.height != geometry.height_px)
+      throw std::invalid_argument("GraphCutLabeller: the prior label map is " +
+                                  std::to_string(prior.width) + "x" +
+                                  std::to_string(prior.height) + ", the frames " +
+                                  std::to_string(geometry.width_px) + "x" +
+                                  std::to_string(geometry.height_px));
+    cv::Mat predicted(grid_h, grid_w, CV_8U);
+    for (int cj = 0; cj < grid_h; ++cj)
+      for (int ci = 0; ci < grid_w; ++ci)
+        predicted.at<std::uint8_t>(cj, ci) =
+            prior.at(std::min(prior.width - 1, ci * block_px + block_px / 2),
+                     std::min(prior.height - 1, cj * block_px + block_px / 2));
+    cv::Mat interior(grid_h, grid_w, CV_8U, cv::Scalar(255));
+    for (int cj = 0; cj < grid_h; ++cj)
+      for (int ci = 0; ci < grid_w; ++ci) {
+        const std::uint8_t v = predicted.at<std::uint8_t>(cj, ci);
+        const bool edge = (ci + 1 < grid_w && predicted.at<std::uint8_t>(cj, ci + 1) != v) ||
+                          (cj + 1 < grid_h && predicted.at<std::uint8_t>(cj + 1, ci) != v) ||
+                          (ci > 0 && predicted.at<std::uint8_t>(cj, ci - 1) != v) ||
+                          (cj > 0 && predicted.at<std::uint8_t>(cj - 1, ci) != v);
+        if (edge || v == kLabelPixelUnknown) interior.at<std::uint8_t>(cj, ci) = 0;
+      }
+    cv::Mat distance;
+    cv::distanceTransform(interior, distance, cv::DIST_L2, 3);
+    const double cell_mm = block_px * geometry.spacing_mm;
+    const std::size_t labels = values.size();
+    std::vector<std::uint8_t> disagrees(count.size(), 0);
+    for (int cj = 0; cj < grid_h; ++cj)
+      for (int ci = 0; ci < grid_w; ++ci) {
+        const std::size_t c = static_cast<std::size_t>(cj) * grid_w + ci;
+        const int expected = index_of(predicted.at<std::uint8_t>(cj, ci));
+        if (expected < 0 || count[c] == 0.0) continue;
+        disagrees[c] = start[c] != expected;
+        const double confidence =
+            std::min(1.0, distance.at<float>(cj, ci) * cell_mm / options.prior_margin_mm);
+        const auto penalty = static_cast<float>(options.prior_weight * count[c] * confidence);
+        for (std::size_t l = 0; l < labels; ++l)
+          if (static_cast<int>(l) != expected && cost[c * labels + l] < kExcluded)
+            cost[c * labels + l] += penalty;
+      }
+    return disagrees;
+  }
+};
+
+GraphCutLabeller::GraphCutLabeller(const SegmentationConfig& config, const ImageGeometry& geometry,
+                                   const GraphCutOptions& options)
+    : impl_(std::make_unique<Impl>(config, geometry, options)) {}
+GraphCutLabeller::~GraphCutLabeller() = default;
+GraphCutLabeller::GraphCutLabeller(GraphCutLabeller&&) noexcept = default;
+GraphCutLabeller& GraphCutLabeller::operator=(GraphCutLabeller&&) noexcept = default;
+
+const SegmentationConfig& GraphCutLabeller::config() const { return impl_->config; }
+const ImageGeometry& GraphCutLabeller::geometry() const { return impl_->geometry; }
+
+Segmentation GraphCutLabeller::segment(const GreyImage& image, const LabelImage* prior) {
+  return detail::segment_frame(
+      image, impl_->geometry, impl_->config,
+      [&](cv::Mat& map, const cv::Mat& grey, const cv::Mat& low, const cv::Mat& sector,
+          cv::Mat& keep) {
+        impl_->refine(map, grey, low, sector, prior);
+        if (prior) {
+          // Small parts where the reconstruction predicts the same organ are kept.
+          const cv::Mat predicted(prior->height, prior->width, CV_8U,
+                                  const_cast<std::uint8_t*>(prior->pixels.data()));
+          keep = (map == predicted) & (predicted != kLabelPixelOutside) &
+                 (predicted != kLabelPixelUnknown);
+        }
+      });
+}
+
+}  // namespace sonoshape::seg

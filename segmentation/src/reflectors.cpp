@@ -1,0 +1,113 @@
+#include "reflectors.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <opencv2/imgproc.hpp>
+#include <vector>
+
+namespace sonoshape::seg::detail {
+namespace {
+
+// The width of the ellipse is fitted within these multiples of the band's half width: a band
+// is at least the section's visible top, and a section wider than three times the band would
+// be a guess beyond what the image shows.
+constexpr double kMinWidthFactor = 1.0;
+constexpr double kMaxWidthFactor = 3.0;
+// Columns whose surface lies within this many rows of the apex share the apex (their mean is
+// the section's centre column).
+constexpr int kApexRowsPx = 1;
+
+struct Section {
+  double centre_x = 0.0, centre_y = 0.0;  // px
+  double half_width = 0.0, half_height = 0.0;
+};
+
+// The ellipse of one band, from the surface row of each of its columns (-1: none): the apex is
+// the shallowest surface row and the centre lies half the thickness below it, under the columns
+// at the apex (the arc a fan sees can reach further down one side than the other, so its
+// column span is no measure of the centre). A point (x, y) of the upper arc satisfies
+// (x - cx)^2 = a^2 (1 - ((cy - y) / b)^2); a^2 is the least-squares solution over the columns.
+Section fit_section(const std::vector<int>& surface_row, int first_column, double thickness_px) {
+  Section s;
+  s.half_height = 0.5 * thickness_px;
+  int apex = std::numeric_limits<int>::max();
+  int first = -1, last = -1;
+  for (std::size_t k = 0; k < surface_row.size(); ++k)
+    if (surface_row[k] >= 0) {
+      apex = std::min(apex, surface_row[k]);
+      if (first < 0) first = static_cast<int>(k);
+      last = static_cast<int>(k);
+    }
+  double apex_sum = 0.0;
+  int apex_columns = 0;
+  for (std::size_t k = 0; k < surface_row.size(); ++k)
+    if (surface_row[k] >= 0 && surface_row[k] <= apex + kApexRowsPx) {
+      apex_sum += static_cast<double>(k);
+      ++apex_columns;
+    }
+  s.centre_x = first_column + apex_sum / apex_columns;
+  s.centre_y = apex + s.half_height;
+  const double half_band = 0.5 * (last - first + 1);
+  double num = 0.0, den = 0.0;
+  for (std::size_t k = 0; k < surface_row.size(); ++k) {
+    if (surface_row[k] < 0) continue;
+    const double dx = first_column + static_cast<double>(k) - s.centre_x;
+    const double dy = std::min(1.0, (s.centre_y - surface_row[k]) / s.half_height);
+    const double u = 1.0 - dy * dy;
+    num += dx * dx * u;
+    den += u * u;
+  }
+  const double fitted = den > 0.0 ? std::sqrt(num / den) : half_band;
+  s.half_width = std::clamp(fitted, kMinWidthFactor * half_band, kMaxWidthFactor * half_band);
+  return s;
+}
+
+}  // namespace
+
+void fill_reflector_sections(cv::Mat& map, const cv::Mat& grey, const cv::Mat& sector,
+                             std::uint8_t label, double thickness_px, int min_width_px) {
+  if (!(thickness_px > 0.0)) return;
+  const cv::Mat band = map == label;
+  cv::Mat components, stats, centroids;
+  const int n = cv::connectedComponentsWithStats(band, components, stats, centroids, 8, CV_32S);
+  std::vector<Section> sections;
+  for (int c = 1; c < n; ++c) {
+    const int x0 = stats.at<int>(c, cv::CC_STAT_LEFT), y0 = stats.at<int>(c, cv::CC_STAT_TOP);
+    const int w = stats.at<int>(c, cv::CC_STAT_WIDTH), h = stats.at<int>(c, cv::CC_STAT_HEIGHT);
+    if (w < min_width_px) continue;
+    // The surface is where the echo peaks down each column: the point-spread function spreads
+    // a specular echo evenly about the boundary, so the band's top lies above it.
+    std::vector<int> surface_row(static_cast<std::size_t>(w), -1);
+    std::vector<float> peak(static_cast<std::size_t>(w), -1.0f);
+    for (int j = y0; j < y0 + h; ++j) {
+      const int* row = components.ptr<int>(j);
+      const float* g = grey.ptr<float>(j);
+      for (int i = x0; i < x0 + w; ++i) {
+        const auto k = static_cast<std::size_t>(i - x0);
+        if (row[i] == c && g[i] > peak[k]) {
+          peak[k] = g[i];
+          surface_row[k] = j;
+        }
+      }
+    }
+    sections.push_back(fit_section(surface_row, x0, thickness_px));
+  }
+  for (const Section& s : sections) {
+    const int i0 = std::max(0, static_cast<int>(std::floor(s.centre_x - s.half_width)));
+    const int i1 = std::min(map.cols - 1, static_cast<int>(std::ceil(s.centre_x + s.half_width)));
+    const int j0 = std::max(0, static_cast<int>(std::floor(s.centre_y - s.half_height)));
+    const int j1 = std::min(map.rows - 1, static_cast<int>(std::ceil(s.centre_y + s.half_height)));
+    for (int j = j0; j <= j1; ++j) {
+      const double dy = (j - s.centre_y) / s.half_height;
+      std::uint8_t* out = map.ptr<std::uint8_t>(j);
+      const std::uint8_t* in = sector.ptr<std::uint8_t>(j);
+      for (int i = i0; i <= i1; ++i) {
+        const double dx = (i - s.centre_x) / s.half_width;
+        if (in[i] && dx * dx + dy * dy <= 1.0) out[i] = label;
+      }
+    }
+  }
+}
+
+}  // namespace sonoshape::seg::detail

@@ -1,0 +1,180 @@
+// The graph-cut labelling (grid alpha-expansion, the labeller over simulated frames), bone
+// sections from their surface band, and the overlay pictures.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <opencv2/core.hpp>
+#include <random>
+
+#include "graph_cut.hpp"
+#include "reflectors.hpp"
+#include "small_sweep.hpp"
+#include "sonoshape/segmentation/config.hpp"
+#include "sonoshape/segmentation/labeller.hpp"
+#include "sonoshape/segmentation/overlay.hpp"
+#include "sonoshape/segmentation/scoring.hpp"
+#include "sonoshape/segmentation/sweep.hpp"
+
+namespace sonoshape::seg {
+namespace {
+
+// A square of label 1 in a field of 0, seen through noisy costs: the Potts term must give back
+// the square where the pixelwise minimum is speckled, and never raise the energy.
+TEST(GridLabelling, RecoversASquareFromNoisyCosts) {
+  const int w = 40, h = 30;
+  std::vector<std::uint8_t> active(static_cast<std::size_t>(w) * h, 1);
+  detail::GridLabelling grid(w, h, active, 3);
+  std::mt19937 rng(7);
+  std::normal_distribution<float> noise(0.0f, 0.9f);
+  std::vector<float> cost(active.size() * 3);
+  std::vector<std::uint8_t> truth(active.size()), labelling(active.size());
+  for (int j = 0; j < h; ++j)
+    for (int i = 0; i < w; ++i) {
+      const std::size_t c = static_cast<std::size_t>(j) * w + i;
+      truth[c] = (i >= 10 && i < 30 && j >= 8 && j < 22) ? 1 : 0;
+      for (std::size_t l = 0; l < 3; ++l)
+        cost[c * 3 + l] = (l == truth[c] ? 0.0f : 1.0f) + noise(rng);
+      std::size_t best = 0;  // the pixelwise minimum starts the cut
+      for (std::size_t l = 1; l < 3; ++l)
+        if (cost[c * 3 + l] < cost[c * 3 + best]) best = l;
+      labelling[c] = static_cast<std::uint8_t>(best);
+    }
+  auto wrong = [&] {
+    int n = 0;
+    for (std::size_t c = 0; c < truth.size(); ++c) n += labelling[c] != truth[c];
+    return n;
+  };
+  const int wrong_before = wrong();
+  const std::vector<float> weight(active.size(), 1.2f);
+  grid.minimise(cost, weight, weight, labelling, 3);
+  EXPECT_GT(wrong_before, 200);
+  EXPECT_LT(wrong(), 25) << "before the cut: " << wrong_before;
+}
+
+TEST(GridLabelling, KeepsInactiveCellsAndChecksSizes) {
+  std::vector<std::uint8_t> active = {1, 1, 0, 1};
+  detail::GridLabelling grid(2, 2, active, 2);
+  std::vector<float> cost = {0, 5, 5, 0, 0, 0, 0, 5};
+  std::vector<std::uint8_t> labelling = {1, 1, 1, 1};
+  const std::vector<float> weight(4, 0.0f);
+  grid.minimise(cost, weight, weight, labelling, 2);
+  EXPECT_EQ(labelling, (std::vector<std::uint8_t>{0, 1, 1, 0}));
+  std::vector<std::uint8_t> short_labelling(3);
+  EXPECT_THROW(grid.minimise(cost, weight, weight, short_labelling, 1), std::invalid_argument);
+}
+
+// The upper arc of a disc (what a probe sees of a rib) becomes the whole disc.
+TEST(ReflectorSections, UpperArcBecomesTheDisc) {
+  cv::Mat map(100, 100, CV_8U, cv::Scalar(0)), sector(100, 100, CV_8U, cv::Scalar(255));
+  cv::Mat grey(100, 100, CV_32F, cv::Scalar(100.0f));
+  const double cx = 50, cy = 50, r = 15;
+  int disc = 0;
+  for (int j = 0; j < 100; ++j)
+    for (int i = 0; i < 100; ++i) {
+      const double d = std::hypot(i - cx, j - cy);
+      if (d <= r) ++disc;
+      // A band two pixels thick on the arc within 60 degrees of the top.
+      if (d <= r && d > r - 2 && j < cy - r * 0.5) {
+        map.at<std::uint8_t>(j, i) = 3;
+        grey.at<float>(j, i) = d > r - 1 ? 250.0f : 200.0f;  // the echo peaks on the surface
+      }
+    }
+  detail::fill_reflector_sections(map, grey, sector, 3, 2 * r, 3);
+  int both = 0, ours = 0;
+  for (int j = 0; j < 100; ++j)
+    for (int i = 0; i < 100; ++i) {
+      const bool in = std::hypot(i - cx, j - cy) <= r, got = map.at<std::uint8_t>(j, i) == 3;
+      ours += got;
+      both += in && got;
+    }
+  const double iou = static_cast<double>(both) / (disc + ours - both);
+  EXPECT_GT(iou, 0.85) << "ours " << ours << " px, disc " << disc << " px";
+}
+
+TEST(ReflectorSections, SpecksAndUnknownThicknessChangeNothing) {
+  cv::Mat map(20, 20, CV_8U, cv::Scalar(0)), sector(20, 20, CV_8U, cv::Scalar(255));
+  const cv::Mat grey(20, 20, CV_32F, cv::Scalar(100.0f));
+  map.at<std::uint8_t>(5, 5) = 3;  // one bright speck
+  const cv::Mat before = map.clone();
+  detail::fill_reflector_sections(map, grey, sector, 3, 8.0, 3);
+  EXPECT_EQ(cv::countNonZero(map != before), 0);
+  map.row(5).setTo(3);
+  const cv::Mat band = map.clone();
+  detail::fill_reflector_sections(map, grey, sector, 3, 0.0, 3);
+  EXPECT_EQ(cv::countNonZero(map != band), 0);
+}
+
+// Over a small simulated sweep the graph cut is at least as close to the truth as the
+// threshold labelling it starts from, and a prior equal to the truth brings it closer still.
+TEST(GraphCutLabeller, RefinesTheThresholdLabellingAndFollowsAPrior) {
+  const test::SmallSweep small = test::organ_and_lesion_sweep(8);
+  const acq::SequenceFile& bmode = small.sweep.bmode;
+  const acq::SequenceFile& truth_frames = small.sweep.truth;
+  const auto setup =
+      prepare_sweep(bmode, "small.igs.mha", std::optional<SegmentationConfig>(), std::nullopt);
+  ASSERT_TRUE(setup) << setup.message();
+  GraphCutLabeller plain(setup->config, setup->geometry), guided(setup->config, setup->geometry);
+  LabelComparison threshold_total, cut_total, guided_total;
+  for (std::size_t k = 0; k < bmode.frame_count(); ++k) {
+    const GreyImage image = bmode.image(k);
+    const LabelImage truth = truth_frames.image(k);
+    threshold_total.add(compare_labels(
+        truth, segment_frame(image, setup->geometry, setup->config).labels,
+        setup->geometry.sector));
+    cut_total.add(compare_labels(truth, plain.segment(image).labels, setup->geometry.sector));
+    guided_total.add(
+        compare_labels(truth, guided.segment(image, &truth).labels, setup->geometry.sector));
+  }
+  for (const auto& [label, counts] : threshold_total.labels) {
+    if (label == 0) continue;
+    std::cout << "label " << label << " Dice threshold " << counts.dice() << ", graph cut "
+              << cut_total.labels[label].dice() << ", with the truth as prior "
+              << guided_total.labels[label].dice() << '\n';
+    EXPECT_GE(cut_total.labels[label].dice(), counts.dice() - 0.02) << "label " << label;
+    EXPECT_GE(guided_total.labels[label].dice(), cut_total.labels[label].dice() - 0.005)
+        << "label " << label;
+  }
+  const LabelImage wrong_size(3, 3, 0);
+  EXPECT_THROW(guided.segment(bmode.image(0), &wrong_size), std::invalid_argument);
+}
+
+TEST(Overlay, WritesAPictureAndNamesASizeMismatch) {
+  const auto dir = std::filesystem::temp_directory_path() / "sonoshape_overlay_test";
+  std::filesystem::create_directories(dir);
+  GreyImage frame(32, 24, 100);
+  LabelImage ours(32, 24, 0), truth(32, 24, 0);
+  for (int j = 8; j < 16; ++j)
+    for (int i = 8; i < 20; ++i) ours.at(i, j) = truth.at(i + 1, j) = 1;
+  const ImageU8 sector(32, 24, 255);
+  ASSERT_TRUE(write_overlay(dir / "a.png", frame, ours, sector, &truth));
+  EXPECT_GT(std::filesystem::file_size(dir / "a.png"), 100u);
+  const LabelImage small(8, 8, 0);
+  const Status mismatch = write_overlay(dir / "b.png", frame, small, sector);
+  ASSERT_FALSE(mismatch);
+  EXPECT_NE(mismatch.message().find("differ in size"), std::string::npos) << mismatch.message();
+  const Status unwritable = write_overlay(dir / "no_such_dir" / "c.png", frame, ours, sector);
+  EXPECT_FALSE(unwritable);
+  std::filesystem::remove_all(dir);
+}
+
+TEST(SegmentationConfigMethod, ParsesAndRoundTrips) {
+  const auto config = parse_segmentation_config(
+      R"({"format": "sonoshape-segmentation", "version": 1, "method": "graph_cut",
+          "labels": [{"id": 3, "name": "rib", "grey_mean": 250, "grey_std": 15,
+                      "thickness_mm": 9.5}]})",
+      "test");
+  ASSERT_TRUE(config) << config.message();
+  EXPECT_EQ(config->method, LabellingMethod::kGraphCut);
+  EXPECT_DOUBLE_EQ(config->materials.at(0).thickness_mm, 9.5);
+  const auto again = parse_segmentation_config(to_json(*config), "round trip");
+  ASSERT_TRUE(again) << again.message();
+  EXPECT_EQ(again->method, LabellingMethod::kGraphCut);
+  EXPECT_DOUBLE_EQ(again->materials.at(0).thickness_mm, 9.5);
+  const auto bad = parse_segmentation_config(
+      R"({"format": "sonoshape-segmentation", "version": 1, "method": "magic"})", "bad.json");
+  ASSERT_FALSE(bad);
+  EXPECT_NE(bad.message().find("method"), std::string::npos) << bad.message();
+}
+
+}  // namespace
+}  // namespace sonoshape::seg
