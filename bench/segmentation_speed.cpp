@@ -3,11 +3,13 @@
 // validity check). docs/benchmarks.md, "Segmentation speed"; bench/segmentation_speed.py runs it.
 //
 //   sonoshape_seg_speed SWEEP.igs.mha [--calibration FILE] [--threads N] [--repeat R]
-//                       [--json OUT.json] [--dump-labels OUT.raw]
+//                       [--method threshold|graph-cut] [--json OUT.json] [--dump-labels OUT.raw]
 //
-// --threads N sets OpenCV's pool (cv::setNumThreads); without it OpenCV's default is kept. Every
-// frame with a valid pose is segmented R times (after one untimed warm-up frame). --dump-labels
-// writes the label maps of the first pass, frame after frame (raw bytes), to compare two builds.
+// --method graph-cut segments through seg::GraphCutLabeller (no prior: the image alone) instead
+// of seg::segment_frame. --threads N sets OpenCV's pool (cv::setNumThreads); without it OpenCV's
+// default is kept. Every frame with a valid pose is segmented R times (after one untimed warm-up
+// frame). --dump-labels writes the label maps of the first pass, frame after frame (raw bytes), to
+// compare two builds.
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -24,6 +26,7 @@
 
 #include "sonoshape/acquisition/sequence_file.hpp"
 #include "sonoshape/segmentation/contours.hpp"
+#include "sonoshape/segmentation/labeller.hpp"
 #include "sonoshape/segmentation/segmenter.hpp"
 #include "sonoshape/segmentation/sweep.hpp"
 #include "stage_times.hpp"
@@ -38,12 +41,13 @@ struct Options {
   std::optional<std::string> calibration, json, dump_labels;
   int threads = -1;  // -1: OpenCV's default
   int repeat = 3;
+  bool graph_cut = false;
 };
 
 [[noreturn]] void usage(const std::string& why) {
   std::cerr << "sonoshape_seg_speed: " << why
             << "\nusage: sonoshape_seg_speed SWEEP [--calibration FILE] [--threads N] "
-               "[--repeat R] [--json OUT] [--dump-labels OUT]\n";
+               "[--repeat R] [--method threshold|graph-cut] [--json OUT] [--dump-labels OUT]\n";
   std::exit(2);
 }
 
@@ -61,7 +65,12 @@ Options parse(int argc, char** argv) {
       o.threads = std::atoi(value().c_str());
     else if (arg == "--repeat")
       o.repeat = std::atoi(value().c_str());
-    else if (arg == "--json")
+    else if (arg == "--method") {
+      const std::string method = value();
+      if (method != "threshold" && method != "graph-cut")
+        usage("--method is threshold or graph-cut, not " + method);
+      o.graph_cut = method == "graph-cut";
+    } else if (arg == "--json")
       o.json = value();
     else if (arg == "--dump-labels")
       o.dump_labels = value();
@@ -114,8 +123,12 @@ int main(int argc, char** argv) {
   std::ofstream dump;
   if (options.dump_labels) dump.open(*options.dump_labels, std::ios::binary);
 
+  std::optional<seg::GraphCutLabeller> labeller;
+  if (options.graph_cut) labeller.emplace(setup->config, setup->geometry, setup->config.graph_cut);
   auto one_frame = [&](std::size_t k, const Eigen::Matrix4d& pose) {
-    const seg::Segmentation s = seg::segment_frame(file->image(k), setup->geometry, setup->config);
+    const seg::Segmentation s =
+        labeller ? labeller->segment(file->image(k))
+                 : seg::segment_frame(file->image(k), setup->geometry, setup->config);
     const seg::ImagePlane plane =
         seg::image_plane(pose * setup->T_probe_image, pose.block<3, 1>(0, 3));
     std::vector<Repair> repairs;
@@ -160,6 +173,7 @@ int main(int argc, char** argv) {
   out["height_px"] = file->height();
   out["frames"] = frames.size();
   out["repeat"] = options.repeat;
+  out["method"] = options.graph_cut ? "graph-cut" : "threshold";
   out["opencv_threads"] = cv::getNumThreads();
   out["regions_first_pass"] = regions;
   out["sector_fraction"] =
@@ -169,10 +183,21 @@ int main(int argc, char** argv) {
   out["stage_ms"]["contours"] = contours_ms / n;
   double sum = 0.0;
   for (const double t : frame_ms) sum += t;
+  // Each frame's fastest pass, averaged over the frames: on a machine shared with other work the
+  // least disturbed passes, near what an idle machine gives.
+  double best_sum = 0.0;
+  for (std::size_t f = 0; f < frames.size(); ++f) {
+    double best = frame_ms[f];
+    for (std::size_t k = f; k < frame_ms.size(); k += frames.size())
+      best = std::min(best, frame_ms[k]);
+    best_sum += best;
+  }
+  const double best_mean = best_sum / static_cast<double>(frames.size());
   out["frame_ms"] = {{"mean", sum / n},
                      {"median", percentile(frame_ms, 0.5)},
                      {"p90", percentile(frame_ms, 0.9)},
                      {"max", percentile(frame_ms, 1.0)},
+                     {"best_of_repeats_mean", best_mean},
                      {"cpu_mean", cpu_ms / n}};
   std::printf("%s: %dx%d (sector %.0f%% of it, box %dx%d), %zu frames x %d, OpenCV threads %d\n",
               options.sweep.c_str(), file->width(), file->height(),
@@ -180,9 +205,10 @@ int main(int argc, char** argv) {
               options.repeat, cv::getNumThreads());
   for (const char* name : {"filter", "confidence", "classify", "cleaning", "contours"})
     std::printf("  %-10s %7.2f ms\n", name, out["stage_ms"][name].get<double>());
-  std::printf("  frame      %7.2f ms mean, %.2f median, %.2f p90, %.2f max; %.2f ms CPU\n", sum / n,
-              percentile(frame_ms, 0.5), percentile(frame_ms, 0.9), percentile(frame_ms, 1.0),
-              cpu_ms / n);
+  std::printf(
+      "  frame      %7.2f ms mean, %.2f median, %.2f p90, %.2f max, %.2f best of %d; %.2f ms CPU\n",
+      sum / n, percentile(frame_ms, 0.5), percentile(frame_ms, 0.9), percentile(frame_ms, 1.0),
+      best_mean, options.repeat, cpu_ms / n);
   if (options.json) std::ofstream(*options.json) << out.dump(2) << "\n";
   return 0;
 }

@@ -4,9 +4,11 @@
 Runs
   sonoshape simulate --width-px 820 --height-px 616 --frames N --frame-rate 30 --seed 1
                      -o WORK/sim820.igs.mha
-  sonoshape_seg_speed SWEEP [--calibration FILE] [--threads 1] --repeat R --json OUT
+  sonoshape_seg_speed SWEEP [--calibration FILE] [--threads 1] [--method graph-cut] --repeat R
+                      --json OUT
 for the PLUS spine recording (data/plus/SpinePhantomFreehand.igs.mha with its calibration) and the
-simulated sweep, with OpenCV's default thread count and with 1 thread (and the same with
+simulated sweep, with OpenCV's default thread count and with 1 thread, and the graph cut (image
+alone, no prior) with the default thread count (and the same with
 --baseline, a sonoshape_seg_speed built from an earlier commit, for a before/after under the same
 load), then
   sonoshape simulate ... --frames 30*S --frame-rate 30 -o WORK/scan820.igs.mha
@@ -53,8 +55,8 @@ def run(cmd, what):
     return result
 
 
-def speed(binary, sweep, calibration, threads, repeat, out):
-    cmd = [binary, sweep, "--repeat", str(repeat), "--json", out]
+def speed(binary, sweep, calibration, threads, method, repeat, out):
+    cmd = [binary, sweep, "--repeat", str(repeat), "--method", method, "--json", out]
     if calibration:
         cmd += ["--calibration", calibration]
     if threads:
@@ -71,14 +73,15 @@ def scan(binary, source_args, out):
 
 
 def speed_table(rows):
-    lines = ["| frames | build | OpenCV threads | " + " | ".join(STAGES) +
-             " | frame mean | frame p90 | processor time |",
-             "|---|---|---|" + "---|" * len(STAGES) + "---|---|---|"]
+    lines = ["| frames | method | build | OpenCV threads | " + " | ".join(STAGES) +
+             " | frame mean | frame p90 | best of repeats | processor time |",
+             "|---|---|---|---|" + "---|" * len(STAGES) + "---|---|---|---|"]
     for name, build, r in rows:
         stages = " | ".join(f"{r['stage_ms'][s]:.1f}" for s in STAGES)
-        lines.append(f"| {name} | {build} | {r['opencv_threads']} | {stages} | "
+        lines.append(f"| {name} | {r['method']} | {build} | {r['opencv_threads']} | {stages} | "
                      f"**{r['frame_ms']['mean']:.1f}** | {r['frame_ms']['p90']:.1f} | "
-                     f"{r['frame_ms']['cpu_mean']:.1f} |")
+                     f"{r['frame_ms']['best_of_repeats_mean']:.1f} | "
+                     f"**{r['frame_ms']['cpu_mean']:.1f}** |")
     return "\n".join(lines)
 
 
@@ -119,11 +122,12 @@ def main():
         builds.insert(0, (args.baseline_name, args.baseline))
     rows = []
     for name, sweep, calibration in inputs:
-        for threads in [None, 1]:
+        for method, threads in [("threshold", None), ("threshold", 1), ("graph-cut", None)]:
             for build, binary in builds:
-                out = os.path.join(args.work, f"{name.split()[0]}_{build}_{threads or 'default'}.json")
-                rows.append((name, build,
-                             speed(binary, sweep, calibration, threads, args.repeat, out)))
+                out = os.path.join(args.work, f"{name.split()[0]}_{method}_{build.split()[0]}_"
+                                              f"{threads or 'default'}.json")
+                rows.append((name, build, speed(binary, sweep, calibration, threads, method,
+                                                 args.repeat, out)))
 
     frames = str(int(round(30 * args.scan_s)))
     recorded = os.path.join(args.work, "scan820.igs.mha")
