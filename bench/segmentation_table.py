@@ -3,9 +3,10 @@
 
 For each case (a phantom, a probe, a trajectory and a tracker noise level) this runs
   sonoshape simulate [case options] --frames N --seed S -o WORK/CASE.igs.mha --truth WORK/CASE_truth
-  sonoshape segment WORK/CASE.igs.mha --method M --truth-labels WORK/CASE_truth/labels.mha
+  sonoshape segment WORK/CASE.igs.mha METHOD --truth-labels WORK/CASE_truth/labels.mha
                     --report WORK/CASE.M.seg.json --every K -o WORK/CASE.M.slices.json
-                    (M: threshold, the baseline, and graph-cut)
+                    (METHOD: `--method threshold`, the baseline; `--method graph-cut --prior
+                    none`; `--method graph-cut --prior reconstruction`)
   sonoshape segment WORK/CASE.igs.mha --perfect-labels WORK/CASE_truth/labels.mha
                     --every K -o WORK/CASE.perfect.slices.json
   sonoshape reconstruct X.slices.json -o X_recon --depth D        (for both slice sets)
@@ -43,8 +44,11 @@ from doc_tables import write_between_markers
 PROBES = ["convex", "linear"]
 TRAJECTORIES = ["sweep", "fan", "rock", "rotate"]
 NOISE = {"low": [], "high": ["--position-noise-mm", "0.5", "--angle-noise-deg", "0.3"]}
-# The labelling methods compared (`segment --method`): the baseline first.
-METHODS = ["threshold", "graph-cut"]
+# The labellings compared, as `segment` options: the baseline first, then the graph cut on the
+# image alone and with the reconstruction of the slices so far as its prior.
+METHODS = {"threshold": ["--method", "threshold"],
+           "graph cut": ["--method", "graph-cut", "--prior", "none"],
+           "graph cut + prior": ["--method", "graph-cut", "--prior", "reconstruction"]}
 QUICK = [("default", "convex", "sweep", "low"), ("default", "linear", "sweep", "low"),
          ("nested", "convex", "sweep", "low"), ("similar", "convex", "sweep", "low")]
 
@@ -136,11 +140,11 @@ def one_case(args, root, case):
                           for name in os.listdir(truth)
                           if (m := re.fullmatch(r"label_(\d+)\.ply", name)))
     totals, scans = {}, {}
-    for method in METHODS:
-        out = f"{base}.{method}"
-        run([args.binary, "segment", base + ".igs.mha", "--method", method, "--truth-labels",
+    for method, options in METHODS.items():
+        out = f"{base}.{method.replace(' ', '').replace('+', '_')}"
+        run([args.binary, "segment", base + ".igs.mha", *options, "--truth-labels",
              labels_mha, "--report", out + ".seg.json", "--every", str(args.every),
-             "-o", out + ".slices.json"], f"segment --method {method}")
+             "-o", out + ".slices.json"], f"segment {' '.join(options)}")
         with open(out + ".seg.json") as f:
             totals[method] = json.load(f)["total"]
         scans[method] = scan_scores(args, out, out + ".slices.json", truth_meshes)
@@ -156,7 +160,7 @@ def one_case(args, root, case):
             row["name"] = dice.get("name") or names.get(label, f"label_{label}")
             row[method] = {"dice": dice.get("dice"), "scan": scans[method].get(label)}
         rows.append(row)
-    return rows, totals[METHODS[-1]]["unknown"]
+    return rows, totals[list(METHODS)[-1]]["unknown"]
 
 
 def iou(entry):
@@ -171,10 +175,11 @@ def cell(value):
 
 
 def table(rows, failures):
-    lines = ["| phantom | probe | trajectory | noise | label | Dice threshold | Dice graph cut "
-             "| IoU threshold | IoU graph cut | IoU perfect labels | gap threshold "
-             "| gap graph cut |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    methods = list(METHODS)
+    header = (["phantom", "probe", "trajectory", "noise", "label"] +
+              [f"Dice {m}" for m in methods] + [f"IoU {m}" for m in methods] +
+              ["IoU perfect labels"] + [f"gap {m}" for m in methods])
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for r in rows:
         perfect = iou(r["perfect"])
         dices, scans, gaps = [], [], []
@@ -189,7 +194,7 @@ def table(rows, failures):
                      f"{' | '.join(dices)} | {' | '.join(scans)} | {cell(perfect)} | "
                      f"{' | '.join(gaps)} |")
     for case, error in failures:
-        lines.append(f"| {' | '.join(case)} | FAILED: {error} | | | | | | | | | | |")
+        lines.append(f"| {' | '.join(case)} | FAILED: {error} |" + " |" * (len(header) - 5))
     return "\n".join(lines)
 
 

@@ -33,6 +33,7 @@ struct ScanCommandOptions {
   std::string tracker;  ///< --tracker: a live tracker replaces the source's poses
   std::filesystem::path calibration;
   std::filesystem::path segmentation;
+  std::string method;  // "", "threshold" or "graph-cut": overrides the configuration
   std::filesystem::path out;
   std::size_t save_every = 0;
   double duration_s = 0.0;
@@ -256,6 +257,10 @@ int run_scan(const ScanCommandOptions& options) {
   engine.bounds = source->setup.bounds;
   engine.labels = source->setup.labels;
 
+  if (!options.method.empty())
+    source->setup.segmentation.method = options.method == "graph-cut"
+                                            ? seg::LabellingMethod::kGraphCut
+                                            : seg::LabellingMethod::kThreshold;
   std::unique_ptr<scan::SegmentationStage> segmentation;
   try {
     segmentation = std::make_unique<scan::SegmenterStage>(source->setup);
@@ -342,6 +347,11 @@ CommandRunner add_scan_command(CLI::App& app) {
                  "Segmentation config JSON (docs/segmentation.md). Default: sim: models learnt "
                  "from simulated frames; replay: the header's, else a two-class split")
       ->check(CLI::ExistingFile);
+  app.add_option("--method", options->method,
+                 "Labelling: threshold, or graph-cut (refined by a multi-label graph cut whose "
+                 "prior is the surfaces reconstructed so far, cut by each new frame's plane); "
+                 "default: the configuration's `method`, else threshold")
+      ->check(CLI::IsMember({"threshold", "graph-cut"}));
   app.add_option("-o,--out", options->out,
                  "Directory for the meshes (label_<id>.ply), slices.json and scan.json, written "
                  "at the end (also after Ctrl-C or a failing source)");

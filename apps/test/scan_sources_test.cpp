@@ -3,6 +3,7 @@
 // probe that vanishes mid-scan.
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <filesystem>
 #include <fstream>
 
@@ -229,6 +230,48 @@ TEST(ScanSources, SimulatedScanReconstructsTheTwoOrgans) {
   EXPECT_TRUE(summary.errors.empty()) << summary.errors.front();
   EXPECT_TRUE(fs::exists(dir.path() / "label_1.ply"));
   EXPECT_TRUE(fs::exists(dir.path() / "label_2.ply"));
+}
+
+// Counts the meshes the pipeline hands to the segmentation stage it wraps.
+class CountingSegmenter final : public SegmentationStage {
+ public:
+  explicit CountingSegmenter(ScanSetup setup) : inner_(std::move(setup)) {}
+  Result<LabeledSlice> segment(const TrackedFrame& frame) override {
+    return inner_.segment(frame);
+  }
+  void on_meshes(const MeshSet& meshes) override {
+    inner_.on_meshes(meshes);
+    if (!meshes.meshes.empty()) ++meshes_seen;
+  }
+  std::atomic<int> meshes_seen{0};
+
+ private:
+  SegmenterStage inner_;
+};
+
+TEST(ScanSources, GraphCutScanTakesTheReconstructionAsItsPrior) {
+  auto source = open_scan_source(small_sim_request());
+  ASSERT_TRUE(source) << source.message();
+  source->setup.segmentation.method = seg::LabellingMethod::kGraphCut;
+  recon::ReconstructorOptions engine;
+  engine.engine.max_depth = 5;
+  engine.bounds = source->setup.bounds;
+  engine.labels = source->setup.labels;
+  ScanOptions options;
+  options.real_time = false;
+  options.drop_when_behind = false;
+  auto segmenter = std::make_unique<CountingSegmenter>(source->setup);
+  CountingSegmenter* counting = segmenter.get();
+  ScanPipeline pipeline(std::move(*source), std::move(segmenter),
+                        make_reconstructor_stage(engine), options);
+  testing::TempDir dir;
+  pipeline.add_sink(std::make_shared<FileSink>(dir.path()));
+  ASSERT_TRUE(pipeline.start());
+  const ScanSummary summary = pipeline.finish();
+  EXPECT_EQ(summary.counters.dropped.total(), 0u);
+  EXPECT_GT(summary.counters.slices, 5u);
+  EXPECT_GT(counting->meshes_seen.load(), 0);  // later frames had a prior
+  EXPECT_TRUE(fs::exists(dir.path() / "label_1.ply"));
 }
 
 TEST(ScanSources, SimulatedProbeVanishingMidScanKeepsTheMeshesSoFar) {

@@ -518,6 +518,7 @@ void ScanPipeline::reconstruction_loop() {
         update_ms_.push_back(c.last_update_ms);
         last_update_ = stats.step;
         meshes_ = reconstruction_->meshes();
+        segmentation_->on_meshes(meshes_);  // the next frames' prior (graph-cut method)
         info.slices = c.slices;
         info.timestamp_s = c.last_slice_timestamp_s;
         info.stats = stats.step;

@@ -1,8 +1,10 @@
 #include "sonoshape/scan/stages.hpp"
 
+#include <optional>
 #include <stdexcept>
 #include <utility>
 
+#include "sonoshape/scan/label_prior.hpp"
 #include "sonoshape/segmentation/contours.hpp"
 
 namespace sonoshape::scan {
@@ -11,6 +13,18 @@ SegmenterStage::SegmenterStage(ScanSetup setup) : setup_(std::move(setup)) {
   setup_.geometry.check();
   if (const Status valid = setup_.segmentation.validate(); !valid)
     throw std::invalid_argument("segmentation configuration: " + valid.message());
+  if (setup_.segmentation.method == seg::LabellingMethod::kGraphCut)
+    labeller_ = std::make_unique<seg::GraphCutLabeller>(setup_.segmentation, setup_.geometry,
+                                                         setup_.segmentation.graph_cut);
+}
+
+SegmenterStage::~SegmenterStage() = default;
+
+void SegmenterStage::on_meshes(const MeshSet& meshes) {
+  if (!labeller_) return;
+  auto copy = std::make_shared<const MeshSet>(meshes);
+  std::lock_guard lock(meshes_mutex_);
+  meshes_ = std::move(copy);
 }
 
 Result<LabeledSlice> SegmenterStage::segment(const TrackedFrame& frame) {
@@ -21,10 +35,22 @@ Result<LabeledSlice> SegmenterStage::segment(const TrackedFrame& frame) {
                          std::to_string(image.width) + "x" + std::to_string(image.height) +
                          " but the setup expects " + std::to_string(g.width_px) + "x" +
                          std::to_string(g.height_px) + " (wrong probe preset?)");
-  const seg::Segmentation segmentation = seg::segment_frame(image, g, setup_.segmentation);
   const Eigen::Matrix4d T_reference_probe = frame.T_reference_probe.matrix();
   const seg::ImagePlane plane = seg::image_plane(T_reference_probe * setup_.T_probe_image,
                                                  T_reference_probe.block<3, 1>(0, 3));
+  seg::Segmentation segmentation;
+  if (labeller_) {
+    std::shared_ptr<const MeshSet> meshes;
+    {
+      std::lock_guard lock(meshes_mutex_);
+      meshes = meshes_;
+    }
+    std::optional<LabelImage> prior;
+    if (meshes && !meshes->meshes.empty()) prior = predict_label_map(*meshes, plane, g);
+    segmentation = labeller_->segment(image, prior ? &*prior : nullptr);
+  } else {
+    segmentation = seg::segment_frame(image, g, setup_.segmentation);
+  }
   repairs_.clear();
   auto slice = seg::make_slice(segmentation.labels, g.sector, g.sector_px, plane,
                                setup_.segmentation.simplify_mm, &repairs_);

@@ -3,6 +3,7 @@
 // frame -> slice) and reconstruction (slices -> meshes), so that the pipeline can be tested
 // with fakes and the engines swapped without touching the threads.
 #include <memory>
+#include <mutex>
 #include <vector>
 
 #include "sonoshape/core/frame.hpp"
@@ -12,6 +13,7 @@
 #include "sonoshape/core/status.hpp"
 #include "sonoshape/recon/reconstructor.hpp"
 #include "sonoshape/scan/setup.hpp"
+#include "sonoshape/segmentation/labeller.hpp"
 
 namespace sonoshape::scan {
 
@@ -25,21 +27,31 @@ class SegmentationStage {
   /// What the last segment() repaired to make the slice valid (dropped regions), handed over
   /// once; none by default.
   virtual std::vector<Repair> take_repairs() { return {}; }
+  /// The meshes of the reconstruction's latest update, for a stage that lets them guide the next
+  /// frames. Called from the reconstruction thread: implementations must be thread-safe with
+  /// segment(). Ignored by default.
+  virtual void on_meshes(const MeshSet& /*meshes*/) {}
 };
 
 /// The segmentation of segmentation/ (seg::segment_frame + seg::make_slice), as
-/// `sonoshape segment` does it frame by frame.
+/// `sonoshape segment` does it frame by frame. With the graph-cut method, the meshes of the
+/// latest reconstruction update, cut by each new frame's plane, are the cut's prior.
 class SegmenterStage final : public SegmentationStage {
  public:
   /// Throws std::invalid_argument for a setup whose configuration or geometry is invalid.
   explicit SegmenterStage(ScanSetup setup);
+  ~SegmenterStage() override;
   /// Fails for frames whose size differs from the setup's geometry.
   Result<LabeledSlice> segment(const TrackedFrame& frame) override;
   std::vector<Repair> take_repairs() override;
+  void on_meshes(const MeshSet& meshes) override;
 
  private:
   ScanSetup setup_;
   std::vector<Repair> repairs_;  // of the last segment()
+  std::unique_ptr<seg::GraphCutLabeller> labeller_;  // with the graph-cut method
+  std::mutex meshes_mutex_;
+  std::shared_ptr<const MeshSet> meshes_;  // of the latest update, for the prior
 };
 
 /// Slices -> meshes, incrementally. Called from the pipeline's reconstruction thread only.
