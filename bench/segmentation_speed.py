@@ -13,6 +13,8 @@ alone, no prior) with the default thread count (and the same with
 load), then
   sonoshape simulate ... --frames 30*S --frame-rate 30 -o WORK/scan820.igs.mha
   sonoshape scan --source replay:WORK/scan820.igs.mha --realtime -o WORK/scan
+  sonoshape scan --source replay:WORK/scan820.igs.mha --realtime --method graph-cut
+                 -o WORK/scan_graph_cut
   sonoshape scan --source sim:default --width-px 820 --height-px 616 --frame-rate 30
                  --sweep-s S --realtime -o WORK/scan_sim
 and prints Markdown tables: the stages' mean wall time per frame (filter: median and masked
@@ -133,8 +135,12 @@ def main():
     recorded = os.path.join(args.work, "scan820.igs.mha")
     run([args.binary, "simulate", *SIZE, "--frames", frames, "--frame-rate", "30", "--seed", "1",
          "-o", recorded], "simulate (scan)")
-    scans = [("replay of a simulated sweep", scan(args.binary, ["--source", f"replay:{recorded}"],
+    replay = ["--source", f"replay:{recorded}"]
+    scans = [("replay of a simulated sweep", scan(args.binary, replay,
                                                   os.path.join(args.work, "scan"))),
+             ("the same, --method graph-cut",
+              scan(args.binary, [*replay, "--method", "graph-cut"],
+                   os.path.join(args.work, "scan_graph_cut"))),
              ("sim:default (rendered live)",
               scan(args.binary, ["--source", "sim:default", *SIZE, "--frame-rate", "30",
                                  "--sweep-s", str(args.scan_s)],
