@@ -8,9 +8,8 @@ Runs
                       --json OUT
 for the PLUS spine recording (data/plus/SpinePhantomFreehand.igs.mha with its calibration) and the
 simulated sweep, with OpenCV's default thread count and with 1 thread, and the graph cut (image
-alone, no prior) with the default thread count (and the same with
---baseline, a sonoshape_seg_speed built from an earlier commit, for a before/after under the same
-load), then
+alone, no prior) with the default thread count (and the same with --baseline, a
+sonoshape_seg_speed built from an earlier commit, for a before/after under the same load), then
   sonoshape simulate ... --frames 30*S --frame-rate 30 -o WORK/scan820.igs.mha
   sonoshape scan --source replay:WORK/scan820.igs.mha --realtime -o WORK/scan
   sonoshape scan --source replay:WORK/scan820.igs.mha --realtime --method graph-cut
@@ -18,11 +17,12 @@ load), then
   sonoshape scan --source sim:default --width-px 820 --height-px 616 --frame-rate 30
                  --sweep-s S --realtime -o WORK/scan_sim
 and prints Markdown tables: the stages' mean wall time per frame (filter: median and masked
-Gaussian; confidence: dark fraction, shadows, margin; classify: depth trend and nearest mean;
-cleaning: opening, small components, diagonal repair, output maps; contours: seg::make_slice,
-i.e. tracing, simplification and the validity check), the whole frame's mean, 90th percentile and
-processor time (all threads; on a shared machine the wall time includes waiting for a core), and
-the scans' drops by reason. `--write-doc` puts them into docs/benchmarks.md between
+Gaussian; confidence: dark fraction, shadows, margin; classify: depth trend, nearest mean, bone
+sections, the graph cut; cleaning: blooming correction, opening, small components, diagonal
+repair, output maps; contours: seg::make_slice, i.e. tracing, simplification and the validity
+check), the whole frame's mean, 90th percentile, best of the repeats (each frame's fastest pass,
+averaged) and processor time (all threads; on a shared machine the wall time includes waiting for
+a core), and the scans' drops by reason. `--write-doc` puts them into docs/benchmarks.md between
 `<!-- segmentation_speed:begin -->` and `<!-- segmentation_speed:end -->`.
 The exit status is non-zero when a command fails.
 
