@@ -17,6 +17,24 @@ double inverse_normal(double p) {
   return 0.5 * (lo + hi);
 }
 
+// The pixels whose cv::distanceTransform distance (DIST_L2, DIST_MASK_5) to the nearest set
+// pixel of `mask` (CV_8U) is at most `limit_px`, without the transform of the whole frame: the
+// mask dilated by that distance's own ball of radius limit_px. The 5x5 chamfer distance is a
+// minimum over the set pixels of a function of the offset alone (integer weights, scaled), so
+// the two agree exactly; the ball is taken from distanceTransform itself, on an image holding
+// its centre alone. The chamfer distance is at least the larger of |dx| and |dy|, so the ball
+// fits in a square of half-width floor(limit_px).
+cv::Mat within_distance(const cv::Mat& mask, double limit_px) {
+  const int r = static_cast<int>(std::floor(std::max(0.0, limit_px))) + 1;
+  cv::Mat centre(2 * r + 1, 2 * r + 1, CV_8U, cv::Scalar(255)), distance;
+  centre.at<std::uint8_t>(r, r) = 0;
+  cv::distanceTransform(centre, distance, cv::DIST_L2, cv::DIST_MASK_5);
+  const cv::Mat ball = distance <= limit_px;
+  cv::Mat within;
+  cv::dilate(mask, within, ball);
+  return within;
+}
+
 }  // namespace
 
 double blooming_shift_mm(double dark_grey, double bright_grey, double psf_sigma_mm,
@@ -50,9 +68,8 @@ void undo_blooming(cv::Mat& map, const cv::Mat& sector, const std::vector<GreyCl
       if (shift_px <= 0.0) continue;
       // Distance (px) from every pixel centre to the nearest dark pixel centre; the boundary
       // lies half a pixel from the dark pixel, so a bright pixel within 0.5 + shift goes back.
-      cv::Mat distance;
-      cv::distanceTransform(~(original == dark.value), distance, cv::DIST_L2, cv::DIST_MASK_5);
-      const cv::Mat back = bright_mask & ~taken & (distance <= 0.5 + shift_px);
+      const cv::Mat back =
+          bright_mask & ~taken & within_distance(original == dark.value, 0.5 + shift_px);
       map.setTo(dark.value, back);
       taken |= back;
     }

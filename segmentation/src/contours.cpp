@@ -60,13 +60,16 @@ void remove_pinches(cv::Mat& mask) {
 // the centres of boundary pixels, so a one-pixel neck or line would give a ring of zero width;
 // traced on the mask upsampled by 2 (each pixel a 2x2 block), every part is at least 2 wide and
 // the ring runs a quarter pixel inside the pixel edges, half a pixel from its neighbours'.
-std::vector<PixelRegion> trace_mask(const cv::Mat& mask, int label) {
+// `mask` may be a part of the image whose top-left pixel is `origin`, with nothing set outside
+// it: the rings are those of the whole image (findContours meets them in the same order).
+std::vector<PixelRegion> trace_mask(const cv::Mat& mask, int label, cv::Point origin) {
   cv::Mat up;
   cv::resize(mask, up, cv::Size(), kUpsample, kUpsample, cv::INTER_NEAREST);
   cv::copyMakeBorder(up, up, 1, 1, 1, 1, cv::BORDER_CONSTANT, cv::Scalar(0));
   std::vector<std::vector<cv::Point>> contours;
   std::vector<cv::Vec4i> hierarchy;  // next, previous, first child, parent
-  cv::findContours(up, contours, hierarchy, cv::RETR_CCOMP, cv::CHAIN_APPROX_SIMPLE);
+  cv::findContours(up, contours, hierarchy, cv::RETR_CCOMP, cv::CHAIN_APPROX_SIMPLE,
+                   origin * kUpsample);
   auto to_ring = [&](const std::vector<cv::Point>& contour) {
     Ring2 ring;
     ring.reserve(contour.size());
@@ -216,14 +219,27 @@ std::vector<Region> label_map_regions(const LabelImage& labels, const ImageU8& s
   std::array<bool, 256> present{};
   for (std::size_t p = 0; p < labels.pixels.size(); ++p)
     if (sector.pixels[p]) present[labels.pixels[p]] = true;
+  std::vector<int> values;
+  for (int value = 1; value < 256; ++value)
+    if (present[static_cast<std::size_t>(value)]) values.push_back(value);
+  // The labels are traced apart (on OpenCV's threads), each in its own bounding box grown by a
+  // pixel (the upsampled mask of the whole frame was most of the time), and collected in order.
+  std::vector<std::vector<PixelRegion>> traced(values.size());
+  cv::parallel_for_(cv::Range(0, static_cast<int>(values.size())), [&](const cv::Range& range) {
+    for (int k = range.start; k < range.end; ++k) {
+      const int value = values[static_cast<std::size_t>(k)];
+      // Outside the sector is unknown through the fov; only unknown inside it needs regions.
+      const cv::Mat whole = (map == value) & in_sector;
+      const cv::Rect box =
+          (cv::boundingRect(whole) + cv::Point(-1, -1) + cv::Size(2, 2)) & cv::Rect({}, map.size());
+      cv::Mat mask = whole(box).clone();
+      remove_pinches(mask);
+      traced[static_cast<std::size_t>(k)] = trace_mask(mask, value, box.tl());
+    }
+  });
   std::vector<PixelRegion> pixel_regions;
-  for (int value = 1; value < 256; ++value) {
-    if (!present[static_cast<std::size_t>(value)]) continue;
-    // Outside the sector is unknown through the fov; only unknown inside it needs regions.
-    cv::Mat mask = (map == value) & in_sector;
-    remove_pinches(mask);
-    for (PixelRegion& r : trace_mask(mask, value)) pixel_regions.push_back(std::move(r));
-  }
+  for (std::vector<PixelRegion>& regions : traced)
+    for (PixelRegion& r : regions) pixel_regions.push_back(std::move(r));
   simplify_together(pixel_regions, tolerance_mm / plane.spacing_mm());
 
   std::vector<Region> regions;

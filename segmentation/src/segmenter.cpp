@@ -3,14 +3,17 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
 
 #include "blooming.hpp"
+#include "raster_ops.hpp"
 #include "reflectors.hpp"
 #include "segmenter_internal.hpp"
+#include "stage_times.hpp"
 
 namespace sonoshape::seg {
 namespace {
@@ -62,23 +65,62 @@ std::vector<float> column_depth(const ImageU8& sector, double spacing_mm) {
   return depth;
 }
 
+// The radius of OpenCV's Gaussian kernel for a float image (ksize = round(8 sigma + 1) | 1).
+int gaussian_radius_px(double sigma_px) {
+  return sigma_px > 0.0 ? (cvRound(sigma_px * 8.0 + 1.0) | 1) / 2 : 0;
+}
+
+// The bounding box of a mask's pixels grown by `reach_px` on every side, clipped to the mask
+// (the whole mask when it is empty).
+cv::Rect grown_box(const cv::Mat& mask, int reach_px) {
+  const cv::Rect box = cv::boundingRect(mask);
+  if (box.empty()) return {0, 0, mask.cols, mask.rows};
+  return cv::Rect(box.x - reach_px, box.y - reach_px, box.width + 2 * reach_px,
+                  box.height + 2 * reach_px) &
+         cv::Rect(0, 0, mask.cols, mask.rows);
+}
+
+bool same_pixels(const cv::Mat& a, const cv::Mat& b) {
+  if (a.size() != b.size() || a.type() != b.type()) return false;
+  const std::size_t row_bytes = static_cast<std::size_t>(a.cols) * a.elemSize();
+  for (int j = 0; j < a.rows; ++j)
+    if (std::memcmp(a.ptr(j), b.ptr(j), row_bytes) != 0) return false;
+  return true;
+}
+
 // Mean of `src` over a Gaussian window restricted to the mask (normalised convolution), so
-// the black outside the sector does not darken its edges.
+// the black outside the sector does not darken its edges. Computed only in `region` (the
+// mask's bounding box: nothing reads it elsewhere), zero outside.
 class MaskedBlur {
  public:
-  MaskedBlur(const cv::Mat& mask01, double sigma_px) : mask_(mask01), sigma_(sigma_px) {
-    cv::GaussianBlur(mask_, weight_, cv::Size(0, 0), sigma_);
-    cv::max(weight_, 1e-4, weight_);
-  }
+  MaskedBlur(const cv::Mat& mask01, double sigma_px, const cv::Rect& region)
+      : mask_(mask01), weight_(weight(mask01, sigma_px)), sigma_(sigma_px), region_(region) {}
   cv::Mat operator()(const cv::Mat& src) const {
-    cv::Mat num;
-    cv::GaussianBlur(src.mul(mask_), num, cv::Size(0, 0), sigma_);
-    return num / weight_;
+    return detail::gaussian_blur_rows(src.mul(mask_), sigma_, region_) / weight_;
   }
 
  private:
+  // The blurred mask depends on the sector alone, the same in every frame of a sweep, so each
+  // thread keeps the last few (a few MB each) instead of blurring the mask again per frame.
+  static cv::Mat weight(const cv::Mat& mask01, double sigma_px) {
+    struct Entry {
+      cv::Mat mask, weight;
+      double sigma;
+    };
+    constexpr std::size_t kEntries = 4;
+    thread_local std::vector<Entry> cache;
+    for (const Entry& e : cache)
+      if (e.sigma == sigma_px && same_pixels(e.mask, mask01)) return e.weight;
+    cv::Mat w = detail::gaussian_blur_rows(mask01, sigma_px);
+    cv::max(w, 1e-4, w);
+    if (cache.size() == kEntries) cache.erase(cache.begin());
+    cache.push_back({mask01.clone(), w, sigma_px});
+    return w;
+  }
+
   cv::Mat mask_, weight_;
   double sigma_;
+  cv::Rect region_;
 };
 
 // Least-squares line y = a + b x with weights.
@@ -109,109 +151,158 @@ struct LineFit {
 };
 
 // Re-labels undecided pixels (flag set) from their decided 8-neighbours in the sector, by
-// majority, growing inwards; what stays undecided becomes unknown.
+// majority, growing inwards; what stays undecided becomes unknown. A pass looks only at the
+// undecided pixels next to those the previous pass decided (at first, at all): no other can
+// have gained a decided neighbour.
 void fill_undecided(cv::Mat& map, cv::Mat& undecided, const cv::Mat& sector) {
   const int w = map.cols, h = map.rows;
   std::vector<int> todo;
-  for (int j = 0; j < h; ++j)
+  for (int j = 0; j < h; ++j) {
+    const std::uint8_t* u = undecided.ptr<std::uint8_t>(j);
     for (int i = 0; i < w; ++i)
-      if (undecided.at<std::uint8_t>(j, i)) todo.push_back(j * w + i);
+      if (u[i]) todo.push_back(j * w + i);
+  }
+  if (todo.empty()) return;
   std::vector<std::pair<int, std::uint8_t>> assigned;
-  for (int pass = 0; pass < kMaxFillPasses && !todo.empty(); ++pass) {
+  std::vector<int> candidates = todo, next;
+  cv::Mat queued(map.size(), CV_8U, cv::Scalar(0));
+  for (int pass = 0; pass < kMaxFillPasses && !candidates.empty(); ++pass) {
     assigned.clear();
-    std::vector<int> still;
-    for (const int p : todo) {
+    for (const int p : candidates) {
       const int i = p % w, j = p / w;
       std::array<std::uint8_t, 8> values{};
       std::array<int, 8> counts{};
       int distinct = 0;
-      for (int dj = -1; dj <= 1; ++dj)
-        for (int di = -1; di <= 1; ++di) {
-          const int x = i + di, y = j + dj;
-          if ((di == 0 && dj == 0) || x < 0 || y < 0 || x >= w || y >= h) continue;
-          if (!sector.at<std::uint8_t>(y, x) || undecided.at<std::uint8_t>(y, x)) continue;
-          const std::uint8_t v = map.at<std::uint8_t>(y, x);
+      for (int y = std::max(j - 1, 0); y <= std::min(j + 1, h - 1); ++y) {
+        const std::uint8_t* in = sector.ptr<std::uint8_t>(y);
+        const std::uint8_t* u = undecided.ptr<std::uint8_t>(y);
+        const std::uint8_t* m = map.ptr<std::uint8_t>(y);
+        for (int x = std::max(i - 1, 0); x <= std::min(i + 1, w - 1); ++x) {
+          if ((x == i && y == j) || !in[x] || u[x]) continue;
+          const std::uint8_t v = m[x];
           int k = 0;
           while (k < distinct && values[static_cast<std::size_t>(k)] != v) ++k;
           if (k == distinct) values[static_cast<std::size_t>(distinct++)] = v;
           ++counts[static_cast<std::size_t>(k)];
         }
-      if (distinct == 0) {
-        still.push_back(p);
-        continue;
       }
+      if (distinct == 0) continue;
       std::size_t best = 0;
       for (std::size_t k = 1; k < static_cast<std::size_t>(distinct); ++k)
         if (counts[k] > counts[best]) best = k;
       assigned.emplace_back(p, values[best]);
     }
-    for (const auto& [p, v] : assigned) {
-      map.at<std::uint8_t>(p / w, p % w) = v;
-      undecided.at<std::uint8_t>(p / w, p % w) = 0;
-    }
-    todo.swap(still);
     if (assigned.empty()) break;
+    for (const auto& [p, v] : assigned) {
+      map.ptr<std::uint8_t>(p / w)[p % w] = v;
+      undecided.ptr<std::uint8_t>(p / w)[p % w] = 0;
+    }
+    next.clear();
+    for (const auto& [p, v] : assigned) {
+      const int i = p % w, j = p / w;
+      for (int y = std::max(j - 1, 0); y <= std::min(j + 1, h - 1); ++y) {
+        const std::uint8_t* u = undecided.ptr<std::uint8_t>(y);
+        std::uint8_t* q = queued.ptr<std::uint8_t>(y);
+        for (int x = std::max(i - 1, 0); x <= std::min(i + 1, w - 1); ++x)
+          if (u[x] && !q[x]) {
+            q[x] = 1;
+            next.push_back(y * w + x);
+          }
+      }
+    }
+    for (const int p : next) queued.ptr<std::uint8_t>(p / w)[p % w] = 0;
+    candidates.swap(next);
   }
   for (const int p : todo) {
-    map.at<std::uint8_t>(p / w, p % w) = kLabelPixelUnknown;
-    undecided.at<std::uint8_t>(p / w, p % w) = 0;
+    std::uint8_t& u = undecided.ptr<std::uint8_t>(p / w)[p % w];
+    if (!u) continue;
+    map.ptr<std::uint8_t>(p / w)[p % w] = kLabelPixelUnknown;
+    u = 0;
   }
-}
-
-// Values present among the sector's pixels.
-std::vector<std::uint8_t> present_values(const cv::Mat& map, const cv::Mat& sector) {
-  std::array<bool, 256> seen{};
-  for (int j = 0; j < map.rows; ++j)
-    for (int i = 0; i < map.cols; ++i)
-      if (sector.at<std::uint8_t>(j, i)) seen[map.at<std::uint8_t>(j, i)] = true;
-  std::vector<std::uint8_t> values;
-  for (int v = 0; v < 256; ++v)
-    if (seen[static_cast<std::size_t>(v)]) values.push_back(static_cast<std::uint8_t>(v));
-  return values;
 }
 
 // Opening of every label's mask: the thin parts it removes are re-labelled by their neighbours
-// (for the background this closes the materials, and the other way round).
+// (for the background this closes the materials, and the other way round). All labels at once,
+// the same as cv::morphologyEx(MORPH_OPEN) of each label's mask: a pixel survives the erosion
+// of its label's mask when the disk around it lies in the sector and holds that label alone
+// (the map's grey-level erosion and dilation agree there); since the disk is symmetric, the
+// disks of two survivors of different labels cannot overlap, so a pixel is in its own label's
+// opening exactly when the disk around it holds a survivor. Four passes instead of two per
+// label.
 void open_labels(cv::Mat& map, const cv::Mat& sector, double radius_px) {
   if (radius_px < 0.5) return;
   const cv::Mat kernel = disk(radius_px);
+  cv::Mat lowest, highest, inside;
+  cv::erode(map, lowest, kernel);
+  cv::dilate(map, highest, kernel);
+  cv::erode(sector, inside, kernel);
+  const cv::Mat survivors = (lowest == highest) & inside;
+  cv::Mat opened;
+  cv::dilate(survivors, opened, kernel);
   cv::Mat undecided(map.size(), CV_8U, cv::Scalar(0));
-  for (const std::uint8_t v : present_values(map, sector)) {
-    cv::Mat mask = (map == v) & sector, opened;
-    cv::morphologyEx(mask, opened, cv::MORPH_OPEN, kernel);
-    undecided.setTo(kUndecided, mask & ~opened);
-  }
+  undecided.setTo(kUndecided, sector & ~opened);
   fill_undecided(map, undecided, sector);
 }
 
-// Components of any label smaller than min_px are re-labelled from their surroundings, unless
-// at least half their pixels are set in `keep` (when not empty): a small part of an organ that
-// the reconstruction predicts there is no speckle.
+// Components of any label smaller than min_px are re-labelled from their surroundings. The
+// components are each label's 8-connected components inside the sector (what
+// cv::connectedComponents finds label by label), found for all labels at once: the runs of one
+// label in a row, joined to the runs of the same label in the row above that they touch. A
+// small component stays when at least half its pixels are set in `keep` (when not empty): a
+// small part of an organ that the reconstruction predicts there is no speckle.
 void remove_small_components(cv::Mat& map, const cv::Mat& sector, double min_px,
                              const cv::Mat& keep) {
   if (min_px < 1.0) return;
-  cv::Mat undecided(map.size(), CV_8U, cv::Scalar(0));
-  for (const std::uint8_t v : present_values(map, sector)) {
-    const cv::Mat mask = (map == v) & sector;
-    cv::Mat components, stats, centroids;
-    const int n = cv::connectedComponentsWithStats(mask, components, stats, centroids, 8, CV_32S);
-    std::vector<bool> small(static_cast<std::size_t>(n), false);
-    bool any = false;
-    std::vector<int> kept_px(static_cast<std::size_t>(n), 0);
-    if (!keep.empty())
-      for (int j = 0; j < map.rows; ++j)
-        for (int i = 0; i < map.cols; ++i)
-          if (keep.at<std::uint8_t>(j, i)) ++kept_px[static_cast<std::size_t>(components.at<int>(j, i))];
-    for (int c = 1; c < n; ++c)
-      if (stats.at<int>(c, cv::CC_STAT_AREA) < min_px &&
-          2 * kept_px[static_cast<std::size_t>(c)] < stats.at<int>(c, cv::CC_STAT_AREA))
-        any = small[static_cast<std::size_t>(c)] = true;
-    if (!any) continue;
-    for (int j = 0; j < map.rows; ++j)
-      for (int i = 0; i < map.cols; ++i)
-        if (small[static_cast<std::size_t>(components.at<int>(j, i))])
-          undecided.at<std::uint8_t>(j, i) = kUndecided;
+  struct Run {
+    int row, from, to;  // columns from..to, inclusive
+    std::uint8_t value;
+  };
+  std::vector<Run> runs;
+  std::vector<std::size_t> row_begin(static_cast<std::size_t>(map.rows) + 1);
+  for (int j = 0; j < map.rows; ++j) {
+    row_begin[static_cast<std::size_t>(j)] = runs.size();
+    const std::uint8_t* in = sector.ptr<std::uint8_t>(j);
+    const std::uint8_t* m = map.ptr<std::uint8_t>(j);
+    for (int i = 0; i < map.cols; ++i) {
+      if (!in[i]) continue;
+      const int from = i;
+      while (i + 1 < map.cols && in[i + 1] && m[i + 1] == m[from]) ++i;
+      runs.push_back({j, from, i, m[from]});
+    }
   }
+  row_begin.back() = runs.size();
+  std::vector<std::size_t> parent(runs.size());
+  for (std::size_t r = 0; r < runs.size(); ++r) parent[r] = r;
+  auto root = [&](std::size_t r) {
+    while (parent[r] != r) r = parent[r] = parent[parent[r]];
+    return r;
+  };
+  for (std::size_t j = 1; j < static_cast<std::size_t>(map.rows); ++j) {
+    std::size_t above = row_begin[j - 1];
+    for (std::size_t r = row_begin[j]; r < row_begin[j + 1]; ++r) {
+      const Run& run = runs[r];
+      while (above < row_begin[j] && runs[above].to + 1 < run.from) ++above;
+      // Runs above that touch this one, diagonally included.
+      for (std::size_t a = above; a < row_begin[j] && runs[a].from <= run.to + 1; ++a)
+        if (runs[a].value == run.value) parent[root(a)] = root(r);
+    }
+  }
+  std::vector<double> area(runs.size(), 0.0), kept(runs.size(), 0.0);
+  for (std::size_t r = 0; r < runs.size(); ++r) {
+    const std::size_t c = root(r);
+    area[c] += runs[r].to - runs[r].from + 1;
+    if (!keep.empty()) {
+      const std::uint8_t* k = keep.ptr<std::uint8_t>(runs[r].row);
+      kept[c] += static_cast<double>(std::count_if(k + runs[r].from, k + runs[r].to + 1,
+                                                   [](std::uint8_t v) { return v != 0; }));
+    }
+  }
+  cv::Mat undecided(map.size(), CV_8U, cv::Scalar(0));
+  for (std::size_t r = 0; r < runs.size(); ++r)
+    if (const std::size_t c = root(r); area[c] < min_px && 2.0 * kept[c] < area[c]) {
+      std::uint8_t* u = undecided.ptr<std::uint8_t>(runs[r].row);
+      std::fill(u + runs[r].from, u + runs[r].to + 1, kUndecided);
+    }
   fill_undecided(map, undecided, sector);
 }
 
@@ -220,35 +311,37 @@ void remove_small_components(cv::Mat& map, const cv::Mat& sector, double min_px,
 // the label on the other diagonal. The block's other diagonal gets a pixel of the label.
 void repair_diagonal_contacts(cv::Mat& map, const cv::Mat& sector) {
   constexpr int kOutside = 256;
-  auto value = [&](int i, int j) {
-    return sector.at<std::uint8_t>(j, i) ? static_cast<int>(map.at<std::uint8_t>(j, i)) : kOutside;
-  };
-  auto settable = [&](int i, int j) { return sector.at<std::uint8_t>(j, i) != 0; };
   for (int pass = 0; pass < kMaxRepairPasses; ++pass) {
     bool changed = false;
-    for (int j = 0; j + 1 < map.rows; ++j)
+    for (int j = 0; j + 1 < map.rows; ++j) {
+      std::uint8_t* top = map.ptr<std::uint8_t>(j);
+      std::uint8_t* bottom = map.ptr<std::uint8_t>(j + 1);
+      const std::uint8_t* top_in = sector.ptr<std::uint8_t>(j);
+      const std::uint8_t* bottom_in = sector.ptr<std::uint8_t>(j + 1);
       for (int i = 0; i + 1 < map.cols; ++i) {
-        const int a = value(i, j), b = value(i + 1, j), c = value(i, j + 1),
-                  d = value(i + 1, j + 1);
+        const int a = top_in[i] ? top[i] : kOutside, b = top_in[i + 1] ? top[i + 1] : kOutside,
+                  c = bottom_in[i] ? bottom[i] : kOutside,
+                  d = bottom_in[i + 1] ? bottom[i + 1] : kOutside;
         // The diagonal (i, j)-(i+1, j+1) ...
         if (a == d && a != kOutside && b != a && c != a) {
-          if (settable(i + 1, j))
-            map.at<std::uint8_t>(j, i + 1) = static_cast<std::uint8_t>(a);
-          else if (settable(i, j + 1))
-            map.at<std::uint8_t>(j + 1, i) = static_cast<std::uint8_t>(a);
+          if (top_in[i + 1])
+            top[i + 1] = static_cast<std::uint8_t>(a);
+          else if (bottom_in[i])
+            bottom[i] = static_cast<std::uint8_t>(a);
           else
-            map.at<std::uint8_t>(j, i) = kLabelPixelUnknown;
+            top[i] = kLabelPixelUnknown;
           changed = true;
         } else if (b == c && b != kOutside && a != b && d != b) {  // ... and the other one.
-          if (settable(i, j))
-            map.at<std::uint8_t>(j, i) = static_cast<std::uint8_t>(b);
-          else if (settable(i + 1, j + 1))
-            map.at<std::uint8_t>(j + 1, i + 1) = static_cast<std::uint8_t>(b);
+          if (top_in[i])
+            top[i] = static_cast<std::uint8_t>(b);
+          else if (bottom_in[i + 1])
+            bottom[i + 1] = static_cast<std::uint8_t>(b);
           else
-            map.at<std::uint8_t>(j, i + 1) = kLabelPixelUnknown;
+            top[i + 1] = kLabelPixelUnknown;
           changed = true;
         }
       }
+    }
     if (!changed) return;
   }
 }
@@ -359,15 +452,28 @@ Segmentation detail::segment_frame(const GreyImage& image, const ImageGeometry& 
                                 std::to_string(geometry.width_px) + "x" +
                                 std::to_string(geometry.height_px));
   if (const Status valid = config.validate(); !valid) throw std::invalid_argument(valid.message());
-  const int w = image.width, h = image.height;
+  detail::StageClock clock;
   const double px_mm = geometry.spacing_mm;
-  const cv::Mat grey = wrap(image);
-  const cv::Mat sector = wrap(geometry.sector) > 0;
+  const cv::Mat whole_sector = wrap(geometry.sector) > 0;
+  // Everything below works in the sector's bounding box grown by the farthest any filter reads
+  // from a pixel (clipped to the image): only sector pixels are read back, so the labels are
+  // those of the whole image, at a fraction of the cost for a fan or a narrow sector.
+  const cv::Rect roi = grown_box(
+      whole_sector, std::max({config.median_px / 2, gaussian_radius_px(config.smoothing_mm / px_mm),
+                              gaussian_radius_px(config.confidence_window_mm / px_mm),
+                              disk(config.shadow_margin_mm / px_mm).rows / 2,
+                              disk(config.opening_mm / px_mm).rows / 2}) +
+                        1);
+  const int w = roi.width, h = roi.height;
+  const cv::Mat grey = wrap(image)(roi);
+  const cv::Mat sector = whole_sector(roi);
+  const cv::Rect sector_box = cv::boundingRect(sector);
   cv::Mat mask01;
   sector.convertTo(mask01, CV_32F, 1.0 / 255.0);
   const std::vector<float> depth_values =
       geometry.depth_mm.empty() ? column_depth(geometry.sector, px_mm) : geometry.depth_mm;
-  const cv::Mat depth(h, w, CV_32F, const_cast<float*>(depth_values.data()));
+  const cv::Mat depth =
+      cv::Mat(image.height, image.width, CV_32F, const_cast<float*>(depth_values.data()))(roi);
 
   // Speckle reduction: the median removes speckle's bright and dark outliers without blurring
   // edges; the Gaussian then averages over several speckle cells.
@@ -378,7 +484,8 @@ Segmentation detail::segment_frame(const GreyImage& image, const ImageGeometry& 
     median = grey;
   median.convertTo(smoothed, CV_32F);
   if (config.smoothing_mm > 0.0)
-    smoothed = MaskedBlur(mask01, config.smoothing_mm / px_mm)(smoothed);
+    smoothed = MaskedBlur(mask01, config.smoothing_mm / px_mm, sector_box)(smoothed);
+  clock.lap(detail::Stage::kFilter);
 
   // Confidence from local statistics of the raw grey: where nearly every pixel of the window is
   // dark there is no echo (shadow, lost signal). Speckle of log-compressed tissue keeps a large
@@ -389,7 +496,8 @@ Segmentation detail::segment_frame(const GreyImage& image, const ImageGeometry& 
   const cv::Mat dark_mask = grey <= shadow_grey;
   cv::Mat dark;
   dark_mask.convertTo(dark, CV_32F, 1.0 / 255.0);
-  const cv::Mat dark_fraction = MaskedBlur(mask01, config.confidence_window_mm / px_mm)(dark);
+  const cv::Mat dark_fraction =
+      MaskedBlur(mask01, config.confidence_window_mm / px_mm, sector_box)(dark);
   cv::Mat low = (dark_fraction > config.shadow_fraction) & sector;
   // With an anechoic material (a cyst reads as black as a shadow) only dark areas that reach
   // the far end of the sector are shadows: a shadow runs down its beams to the bottom.
@@ -400,21 +508,28 @@ Segmentation detail::segment_frame(const GreyImage& image, const ImageGeometry& 
     cv::Mat components;
     const int n = cv::connectedComponents(low, components, 8, CV_32S);
     std::vector<bool> reaches_far_end(static_cast<std::size_t>(n), false);
-    for (int j = 0; j < h; ++j)
-      for (int i = 0; i < w; ++i) {
-        const bool far = j + 1 == h || !sector.at<std::uint8_t>(j + 1, i);
-        if (far && sector.at<std::uint8_t>(j, i))
-          reaches_far_end[static_cast<std::size_t>(components.at<int>(j, i))] = true;
-      }
-    for (int j = 0; j < h; ++j)
-      for (int i = 0; i < w; ++i) {
-        const int c = components.at<int>(j, i);
-        if (c > 0 && !reaches_far_end[static_cast<std::size_t>(c)]) low.at<std::uint8_t>(j, i) = 0;
-      }
+    // (The work region leaves a row below the sector unless the sector reaches the image's end.)
+    for (int j = 0; j < h; ++j) {
+      const std::uint8_t* in = sector.ptr<std::uint8_t>(j);
+      const std::uint8_t* below = j + 1 < h ? sector.ptr<std::uint8_t>(j + 1) : nullptr;
+      const int* component = components.ptr<int>(j);
+      for (int i = 0; i < w; ++i)
+        if (in[i] && (!below || !below[i]))
+          reaches_far_end[static_cast<std::size_t>(component[i])] = true;
+    }
+    for (int j = 0; j < h; ++j) {
+      const int* component = components.ptr<int>(j);
+      std::uint8_t* dark = low.ptr<std::uint8_t>(j);
+      for (int i = 0; i < w; ++i)
+        if (component[i] > 0 && !reaches_far_end[static_cast<std::size_t>(component[i])])
+          dark[i] = 0;
+    }
   }
   if (config.max_depth_mm > 0.0) low |= (depth > config.max_depth_mm) & sector;
-  if (config.shadow_margin_mm > 0.0) cv::dilate(low, low, disk(config.shadow_margin_mm / px_mm));
+  if (config.shadow_margin_mm > 0.0)
+    low = detail::dilate_runs(low, disk(config.shadow_margin_mm / px_mm));
   low &= sector;
+  clock.lap(detail::Stage::kConfidence);
 
   // Classes: background then materials, each with its grey mean.
   struct Class {
@@ -450,34 +565,42 @@ Segmentation detail::segment_frame(const GreyImage& image, const ImageGeometry& 
   // (mostly background), then refined from all classified pixels against their class means.
   Line trend;
   cv::Mat map(h, w, CV_8U, cv::Scalar(kLabelPixelUnknown));
-  auto classify_all = [&] {
-    for (int j = 0; j < h; ++j) {
-      const float* s = smoothed.ptr<float>(j);
-      const float* d = depth.ptr<float>(j);
-      const std::uint8_t* in = sector.ptr<std::uint8_t>(j);
-      const std::uint8_t* dark = low.ptr<std::uint8_t>(j);
-      const float* m = median_f.ptr<float>(j);
-      std::uint8_t* out = map.ptr<std::uint8_t>(j);
-      for (int i = 0; i < w; ++i) {
-        const double offset = trend.a + trend.b * d[i];
-        // A reflector's echo is signal even inside the margin of the shadow it casts.
-        out[i] = !in[i]                            ? kLabelPixelUnknown
-                 : m[i] - offset >= reflector_grey ? by_mean[0].value
-                 : dark[i]                         ? kLabelPixelUnknown
-                                                   : classify(s[i] - offset);
-      }
+  // Labels of row j's pixels first, first + step, ... under the current trend.
+  auto classify_row = [&](int j, int first, int step) {
+    const float* s = smoothed.ptr<float>(j);
+    const float* d = depth.ptr<float>(j);
+    const std::uint8_t* in = sector.ptr<std::uint8_t>(j);
+    const std::uint8_t* dark = low.ptr<std::uint8_t>(j);
+    const float* m = median_f.ptr<float>(j);
+    std::uint8_t* out = map.ptr<std::uint8_t>(j);
+    for (int i = first; i < w; i += step) {
+      const double offset = trend.a + trend.b * d[i];
+      // A reflector's echo is signal even inside the margin of the shadow it casts.
+      out[i] = !in[i]                            ? kLabelPixelUnknown
+               : m[i] - offset >= reflector_grey ? by_mean[0].value
+               : dark[i]                         ? kLabelPixelUnknown
+                                                 : classify(s[i] - offset);
     }
+  };
+  auto classify_all = [&] {
+    cv::parallel_for_(cv::Range(0, h), [&](const cv::Range& rows) {
+      for (int j = rows.start; j < rows.end; ++j) classify_row(j, 0, 1);
+    });
   };
   if (config.depth_compensation) {
     std::vector<std::vector<float>> bins;
-    for (int j = 0; j < h; ++j)
+    for (int j = 0; j < h; ++j) {
+      const std::uint8_t* in = sector.ptr<std::uint8_t>(j);
+      const std::uint8_t* dark = low.ptr<std::uint8_t>(j);
+      const float* d = depth.ptr<float>(j);
+      const float* s = smoothed.ptr<float>(j);
       for (int i = 0; i < w; ++i) {
-        if (!sector.at<std::uint8_t>(j, i) || low.at<std::uint8_t>(j, i)) continue;
-        const auto bin =
-            static_cast<std::size_t>(std::max(0.0f, depth.at<float>(j, i)) / kDepthBinMm);
+        if (!in[i] || dark[i]) continue;
+        const auto bin = static_cast<std::size_t>(std::max(0.0f, d[i]) / kDepthBinMm);
         if (bin >= bins.size()) bins.resize(bin + 1);
-        bins[bin].push_back(smoothed.at<float>(j, i));
+        bins[bin].push_back(s[i]);
       }
+    }
     LineFit fit;
     for (std::size_t b = 0; b < bins.size(); ++b) {
       auto& v = bins[b];
@@ -488,35 +611,62 @@ Segmentation detail::segment_frame(const GreyImage& image, const ImageGeometry& 
     }
     trend = fit.solve();
     for (int iteration = 0; iteration < kTrendIterations; ++iteration) {
-      classify_all();
       LineFit residuals;
-      for (int j = 0; j < h; j += 2)  // every other row and column: plenty of samples
-        for (int i = 0; i < w; i += 2) {
-          const std::uint8_t l = map.at<std::uint8_t>(j, i);
-          if (l == kLabelPixelUnknown) continue;
-          residuals.add(depth.at<float>(j, i), smoothed.at<float>(j, i) - class_mean[l]);
+      // Every other row and column of the image (plenty of samples), in the work region; only
+      // these need a label before the final classification.
+      for (int j = roi.y % 2; j < h; j += 2) {
+        classify_row(j, roi.x % 2, 2);
+        const std::uint8_t* m = map.ptr<std::uint8_t>(j);
+        const float* d = depth.ptr<float>(j);
+        const float* s = smoothed.ptr<float>(j);
+        for (int i = roi.x % 2; i < w; i += 2) {
+          if (m[i] == kLabelPixelUnknown) continue;
+          residuals.add(d[i], s[i] - class_mean[m[i]]);
         }
+      }
       trend = residuals.solve();
     }
   }
   classify_all();
-  if (reflector_class && by_mean[0].value != kLabelPixelOutside)
+  // The steps between classification and cleaning (bone sections, the graph cut, blooming)
+  // work on whole frames (the graph cut's cells and prior are in image pixels): they get the
+  // work region inside the whole image, with what the image holds outside the sector there
+  // (unknown labels; zero grey and masks, which they read only inside the sector).
+  const bool sections =
+      reflector_class && by_mean[0].value != kLabelPixelOutside &&
+      std::any_of(config.materials.begin(), config.materials.end(), [&](const LabelModel& m) {
+        return m.label == by_mean[0].value && m.thickness_mm > 0.0;
+      });
+  const bool cropped = roi.size() != cv::Size(image.width, image.height) &&
+                       (sections || refine || config.psf_sigma_mm > 0.0);
+  auto in_image = [&](const cv::Mat& part, double outside) {
+    if (!cropped) return part;
+    cv::Mat out(image.height, image.width, part.type(), cv::Scalar(outside));
+    part.copyTo(out(roi));
+    return out;
+  };
+  cv::Mat whole_map = in_image(map, kLabelPixelUnknown), keep;
+  const cv::Mat sector_in_image = in_image(sector, 0);
+  if (sections)
     for (const LabelModel& m : config.materials)
       if (m.label == by_mean[0].value && m.thickness_mm > 0.0)
-        detail::fill_reflector_sections(map, median_f, sector, by_mean[0].value, m.thickness_mm / px_mm,
-                                        std::max(3, static_cast<int>(std::lround(
-                                                        kMinReflectorWidthMm / px_mm))));
-  cv::Mat keep;
+        detail::fill_reflector_sections(
+            whole_map, in_image(median_f, 0), sector_in_image, by_mean[0].value,
+            m.thickness_mm / px_mm,
+            std::max(3, static_cast<int>(std::lround(kMinReflectorWidthMm / px_mm))));
   if (refine) {
     cv::Mat compensated_median = median_f - (trend.a + trend.b * depth);
-    refine(map, compensated_median, low, sector, keep);
+    refine(whole_map, in_image(compensated_median, 0), in_image(low, 0), sector_in_image, keep);
+    if (!keep.empty() && cropped) keep = keep(roi);
   }
+  clock.lap(detail::Stage::kClassify);
   {
     std::vector<detail::GreyClass> grey_classes;
     for (const Class& c : classes) grey_classes.push_back({c.value, c.mean});
-    detail::undo_blooming(map, sector, grey_classes, config.psf_sigma_mm, config.dynamic_range_db,
-                          px_mm, reflector_class ? by_mean[0].value : -1);
+    detail::undo_blooming(whole_map, sector_in_image, grey_classes, config.psf_sigma_mm,
+                          config.dynamic_range_db, px_mm, reflector_class ? by_mean[0].value : -1);
   }
+  if (cropped) whole_map(roi).copyTo(map);
 
   // Morphological cleaning on the label map (every label from the same map, so regions cannot
   // overlap), then no diagonal-only contacts so that every outline is a simple polygon.
@@ -525,19 +675,28 @@ Segmentation detail::segment_frame(const GreyImage& image, const ImageGeometry& 
   repair_diagonal_contacts(map, sector);
   map.setTo(kLabelPixelUnknown, ~sector);
 
+  // Back into the whole image: outside the work region is outside the sector.
+  auto whole = [&](const cv::Mat& part, std::uint8_t outside) {
+    cv::Mat out(image.height, image.width, CV_8U, cv::Scalar(outside));
+    part.copyTo(out(roi));
+    return to_image(out);
+  };
   Segmentation result;
-  result.labels = to_image(map);
+  result.labels = whole(map, kLabelPixelUnknown);
   cv::Mat compensated = smoothed - (trend.a + trend.b * depth);
   compensated.setTo(0.0, ~sector);
   cv::Mat compensated_u8;
   compensated.convertTo(compensated_u8, CV_8U);  // saturates to 0..255
-  result.smoothed = to_image(compensated_u8);
-  result.low_confidence = to_image(low);
+  result.smoothed = whole(compensated_u8, 0);
+  result.low_confidence = whole(low, 0);
   result.depth_slope_grey_per_mm = trend.b;
-  for (int j = 0; j < h; ++j)
+  for (int j = 0; j < h; ++j) {
+    const std::uint8_t* in = sector.ptr<std::uint8_t>(j);
+    const std::uint8_t* m = map.ptr<std::uint8_t>(j);
     for (int i = 0; i < w; ++i)
-      if (sector.at<std::uint8_t>(j, i) && map.at<std::uint8_t>(j, i) == kLabelPixelUnknown)
-        ++result.unknown_in_sector_px;
+      if (in[i] && m[i] == kLabelPixelUnknown) ++result.unknown_in_sector_px;
+  }
+  clock.lap(detail::Stage::kCleaning);
   return result;
 }
 
