@@ -53,6 +53,8 @@ struct GridLabelling::Impl {
   std::vector<std::size_t> cells;  // grid index of each active cell (= its vertex)
   std::vector<Edge> from_source, to_sink;
   std::vector<Pair> pairs;
+  // The pairs each active cell takes part in (CSR: pair_of[pair_start[v] .. pair_start[v+1])).
+  std::vector<std::size_t> pair_start, pair_of;
 
   Edge add_edge_pair(Vertex a, Vertex b, Edge* back) {
     const Edge forward = boost::add_edge(a, b, graph).first;
@@ -105,6 +107,18 @@ GridLabelling::GridLabelling(int width, int height, const std::vector<std::uint8
       g.pairs.push_back(p);
     }
   }
+  g.pair_start.assign(cells + 1, 0);
+  for (const Pair& p : g.pairs) {
+    ++g.pair_start[p.first + 1];
+    ++g.pair_start[p.second + 1];
+  }
+  for (std::size_t v = 0; v < cells; ++v) g.pair_start[v + 1] += g.pair_start[v];
+  g.pair_of.resize(2 * g.pairs.size());
+  std::vector<std::size_t> fill(g.pair_start.begin(), g.pair_start.end() - 1);
+  for (std::size_t k = 0; k < g.pairs.size(); ++k) {
+    g.pair_of[fill[g.pairs[k].first]++] = k;
+    g.pair_of[fill[g.pairs[k].second]++] = k;
+  }
 }
 
 GridLabelling::~GridLabelling() = default;
@@ -131,9 +145,15 @@ double GridLabelling::minimise(const std::vector<float>& cost,
   };
   double best = energy();
   std::vector<float> keep(g.cells.size()), move(g.cells.size());
+  std::vector<std::size_t> moved;
+  std::vector<std::uint8_t> in_moved(g.cells.size(), 0), old_label(g.cells.size(), 0);
   for (int cycle = 0; cycle < cycles; ++cycle) {
     bool improved = false;
     for (std::size_t alpha = 0; alpha < labels; ++alpha) {
+      const bool takeable = std::any_of(g.cells.begin(), g.cells.end(), [&](std::size_t c) {
+        return labelling[c] != alpha && cost[c * labels + alpha] < kExcludedCost;
+      });
+      if (!takeable) continue;
       // Binary problem: x = 0 keeps the label, x = 1 takes alpha. Unary terms first, then
       // each pair's Potts term split into unary parts and one edge (Kolmogorov and Zabih 2004).
       for (std::size_t v = 0; v < g.cells.size(); ++v) {
@@ -168,19 +188,45 @@ double GridLabelling::minimise(const std::vector<float>& cost,
           boost::get(&VertexData::predecessor, g.graph), boost::get(&VertexData::colour, g.graph),
           boost::get(&VertexData::distance, g.graph), boost::get(boost::vertex_index, g.graph),
           g.source, g.sink);
-      std::vector<std::uint8_t> proposal = labelling;
+      // The cells that take alpha, and the energy change they make: their unary terms and the
+      // Potts terms of their pairs (each pair once), old labels against new.
       const boost::default_color_type source_colour = g.graph[g.source].colour;
+      moved.clear();
       for (std::size_t v = 0; v < g.cells.size(); ++v)
-        if (g.graph[v].colour != source_colour)
-          proposal[g.cells[v]] = static_cast<std::uint8_t>(alpha);
-      std::swap(proposal, labelling);
-      const double e = energy();
-      if (e < best - 1e-6 * std::max(1.0, std::abs(best))) {
-        best = e;
+        if (g.graph[v].colour != source_colour && labelling[g.cells[v]] != alpha)
+          moved.push_back(v);
+      if (moved.empty()) continue;
+      double change = 0.0;
+      auto pair_terms = [&] {
+        double e = 0.0;
+        for (const std::size_t v : moved)
+          for (std::size_t k = g.pair_start[v]; k < g.pair_start[v + 1]; ++k) {
+            const Pair& p = g.pairs[g.pair_of[k]];
+            const std::size_t other = p.first == v ? p.second : p.first;
+            // A pair between two moved cells is counted from its first cell only.
+            if (in_moved[other] && other < v) continue;
+            if (labelling[p.grid] != labelling[g.cells[p.second]])
+              e += p.right ? right_weight[p.grid] : down_weight[p.grid];
+          }
+        return e;
+      };
+      for (const std::size_t v : moved) in_moved[v] = 1;
+      change -= pair_terms();
+      for (const std::size_t v : moved) {
+        const std::size_t c = g.cells[v];
+        change += cost[c * labels + alpha] - cost[c * labels + labelling[c]];
+        old_label[v] = labelling[c];
+        labelling[c] = static_cast<std::uint8_t>(alpha);
+      }
+      change += pair_terms();
+      if (change < -1e-6 * std::max(1.0, std::abs(best))) {
+        best += change;
         improved = true;
       } else {
-        std::swap(proposal, labelling);  // an expansion never raises the energy; keep the old
+        // An exact expansion never raises the energy; in floating point a tie may: keep the old.
+        for (const std::size_t v : moved) labelling[g.cells[v]] = old_label[v];
       }
+      for (const std::size_t v : moved) in_moved[v] = 0;
     }
     if (!improved) break;
   }

@@ -9,6 +9,10 @@
 
 namespace sonoshape::seg::detail {
 
+/// A cost at or above this keeps a cell off a label; an expansion that no cell can take (every
+/// cell has the label or this cost for it) is skipped.
+constexpr float kExcludedCost = 1e6f;
+
 /// A 4-connected grid of `width` x `height` cells of which `active` ones take part; a cell's
 /// labels are indices 0..labels-1.
 class GridLabelling {

@@ -22,7 +22,7 @@ constexpr int kMinModelPixels = 200;
 // share of the raw grey's spread (the median averages several speckle cells).
 constexpr double kMedianSpreadShare = 0.5;
 // The cost that keeps a cell off a label (a reflector's cells on it, the others off it).
-constexpr float kExcluded = 1e6f;
+constexpr float kExcluded = detail::kExcludedCost;
 // Cells this far (in cells) from a boundary of the starting labelling take part in the cut.
 constexpr int kBandCells = 3;
 
