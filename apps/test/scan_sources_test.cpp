@@ -51,7 +51,8 @@ class CollectingStage final : public ReconstructionStage {
 // the real reconstruction (coarse: these tests check the wiring, not the accuracy) or the given
 // stage.
 ScanSummary run_fast(ScanSource source, const std::shared_ptr<ScanSink>& sink,
-                     std::unique_ptr<ReconstructionStage> stage = nullptr) {
+                     std::unique_ptr<ReconstructionStage> stage = nullptr,
+                     std::unique_ptr<SegmentationStage> segmentation = nullptr) {
   if (!stage) {
     recon::ReconstructorOptions engine;
     engine.engine.max_depth = 5;
@@ -63,7 +64,7 @@ ScanSummary run_fast(ScanSource source, const std::shared_ptr<ScanSink>& sink,
   options.real_time = false;
   options.drop_when_behind = false;
   options.sync.tracker_latency_s = source.tracker_latency_s.value_or(0.0);
-  auto segmentation = std::make_unique<SegmenterStage>(source.setup);
+  if (!segmentation) segmentation = std::make_unique<SegmenterStage>(source.setup);
   ScanPipeline pipeline(std::move(source), std::move(segmentation), std::move(stage), options);
   pipeline.add_sink(sink);
   EXPECT_TRUE(pipeline.start());
@@ -241,11 +242,12 @@ class CountingSegmenter final : public SegmentationStage {
   }
   void on_meshes(const MeshSet& meshes) override {
     inner_.on_meshes(meshes);
-    if (!meshes.meshes.empty()) ++meshes_seen;
+    if (!meshes.meshes.empty()) ++*meshes_seen;
   }
   std::optional<seg::LabelComparison> scores() const override { return inner_.scores(); }
   SegmenterStage& inner() { return inner_; }
-  std::atomic<int> meshes_seen{0};
+  // Shared: the pipeline owns (and destroys) the stage.
+  std::shared_ptr<std::atomic<int>> meshes_seen = std::make_shared<std::atomic<int>>(0);
 
  private:
   SegmenterStage inner_;
@@ -255,26 +257,16 @@ TEST(ScanSources, GraphCutScanTakesTheReconstructionAsItsPrior) {
   auto source = open_scan_source(small_sim_request());
   ASSERT_TRUE(source) << source.message();
   source->setup.segmentation.method = seg::LabellingMethod::kGraphCut;
-  recon::ReconstructorOptions engine;
-  engine.engine.max_depth = 5;
-  engine.bounds = source->setup.bounds;
-  engine.labels = source->setup.labels;
-  ScanOptions options;
-  options.real_time = false;
-  options.drop_when_behind = false;
   auto segmenter = std::make_unique<CountingSegmenter>(source->setup);
   ASSERT_TRUE(source->truth_of_frame);
   segmenter->inner().score_against(source->truth_of_frame);
-  CountingSegmenter* counting = segmenter.get();
-  ScanPipeline pipeline(std::move(*source), std::move(segmenter),
-                        make_reconstructor_stage(engine), options);
+  const auto meshes_seen = segmenter->meshes_seen;
   testing::TempDir dir;
-  pipeline.add_sink(std::make_shared<FileSink>(dir.path()));
-  ASSERT_TRUE(pipeline.start());
-  const ScanSummary summary = pipeline.finish();
+  const ScanSummary summary = run_fast(std::move(*source), std::make_shared<FileSink>(dir.path()),
+                                       nullptr, std::move(segmenter));
   EXPECT_EQ(summary.counters.dropped.total(), 0u);
   EXPECT_GT(summary.counters.slices, 5u);
-  EXPECT_GT(counting->meshes_seen.load(), 0);  // later frames had a prior
+  EXPECT_GT(meshes_seen->load(), 0);  // later frames had a prior
   EXPECT_TRUE(fs::exists(dir.path() / "label_1.ply"));
   // Every keyframe was scored against the simulator's truth, and the scores reached scan.json.
   ASSERT_TRUE(summary.segmentation_scores);

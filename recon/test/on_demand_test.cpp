@@ -13,6 +13,8 @@
 #include "sonoshape/recon/reconstruct.hpp"
 #include "sonoshape/recon/reconstructor.hpp"
 
+#include "test_shapes.hpp"
+
 namespace sonoshape::recon {
 namespace {
 
@@ -191,14 +193,7 @@ TEST(OnDemandArrangement, BuildsOnlyTheCellsItIsAskedFor) {
 constexpr double kRadius = 30.0;
 const Box3 kBox{Vec3::Constant(-45.0), Vec3::Constant(45.0)};
 
-Ring2 circle(const Vec2& center, double radius, int n) {
-  Ring2 ring;
-  for (int i = 0; i < n; ++i) {
-    const double t = 2.0 * std::numbers::pi * i / n;
-    ring.emplace_back(center.x() + radius * std::cos(t), center.y() + radius * std::sin(t));
-  }
-  return ring;
-}
+using test::circle;
 
 // The sections of a sphere (label 1) and a smaller one (label 2) by the plane (origin, u, v).
 LabeledSlice spheres_slice(const Vec3& origin, const Vec3& u, const Vec3& v) {

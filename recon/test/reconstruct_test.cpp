@@ -7,17 +7,12 @@
 #include "sonoshape/core/errors.hpp"
 #include "sonoshape/recon/reconstruct.hpp"
 
+#include "test_shapes.hpp"
+
 namespace sonoshape::recon {
 namespace {
 
-Ring2 circle(const Vec2& center, double radius, int n) {
-  Ring2 ring;
-  for (int i = 0; i < n; ++i) {
-    const double t = 2.0 * std::numbers::pi * i / n;
-    ring.emplace_back(center.x() + radius * std::cos(t), center.y() + radius * std::sin(t));
-  }
-  return ring;
-}
+using test::circle;
 
 // A slice of a sphere of radius r centred at the origin through the plane (origin, u, v).
 LabeledSlice sphere_slice(const Vec3& origin, const Vec3& u, const Vec3& v, double r, int label) {

@@ -10,20 +10,15 @@
 #include "sonoshape/recon/reconstruct.hpp"
 #include "sonoshape/recon/reconstructor.hpp"
 
+#include "test_shapes.hpp"
+
 namespace sonoshape::recon {
 namespace {
 
 constexpr double kRadius = 30.0;
 const Box3 kBox{Vec3::Constant(-45.0), Vec3::Constant(45.0)};
 
-Ring2 circle(const Vec2& center, double radius, int n) {
-  Ring2 ring;
-  for (int i = 0; i < n; ++i) {
-    const double t = 2.0 * std::numbers::pi * i / n;
-    ring.emplace_back(center.x() + radius * std::cos(t), center.y() + radius * std::sin(t));
-  }
-  return ring;
-}
+using test::circle;
 
 // A 70 degree, 85 mm fan with its apex 45 mm from the centre of the plane's disc.
 Ring2 sector_fan() {
