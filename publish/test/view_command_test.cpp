@@ -1,5 +1,5 @@
-// `sonoshape view` end to end: a publisher in this process, the command as a child process, and
-// a page's WebSocket and HTTP requests against it.
+// `sonoshape view` and `scan --view` end to end: the command as a child process (against a
+// publisher in this process, or its own simulated scan), and a page's WebSocket and HTTP requests.
 #include <fcntl.h>
 #include <gtest/gtest.h>
 #include <signal.h>
@@ -10,6 +10,8 @@
 #include <chrono>
 #include <filesystem>
 #include <fstream>
+#include <map>
+#include <nlohmann/json.hpp>
 #include <regex>
 #include <sstream>
 #include <thread>
@@ -28,12 +30,13 @@ using namespace sonoshape::testing::view;
 using sonoshape::testing::TempDir;
 using Clock = std::chrono::steady_clock;
 
-// A running `sonoshape view`, its output captured in a file.
+// A running `sonoshape view` (or another subcommand), its output captured in a file.
 class ViewProcess {
  public:
-  ViewProcess(const std::vector<std::string>& arguments, std::filesystem::path log)
+  ViewProcess(const std::vector<std::string>& arguments, std::filesystem::path log,
+              const std::string& command = "view")
       : log_(std::move(log)) {
-    std::vector<std::string> args{SONOSHAPE_BINARY, "view"};
+    std::vector<std::string> args{SONOSHAPE_BINARY, command};
     args.insert(args.end(), arguments.begin(), arguments.end());
     std::vector<char*> argv;
     for (std::string& a : args) argv.push_back(a.data());
@@ -77,9 +80,10 @@ class ViewProcess {
     return text.str();
   }
 
-  /// The page's address the command printed; empty when it printed none within `timeout`.
-  std::string url(std::chrono::seconds timeout) const {
-    const std::regex address(R"(open (http://127\.0\.0\.1:[0-9]+/))");
+  /// The page's address the command printed after `lead` ("open " for view, "live view at " for
+  /// scan); empty when it printed none within `timeout`.
+  std::string url(std::chrono::seconds timeout, const std::string& lead = "open ") const {
+    const std::regex address(lead + R"((http://127\.0\.0\.1:[0-9]+/))");
     const auto deadline = Clock::now() + timeout;
     while (Clock::now() < deadline) {
       std::smatch match;
@@ -88,6 +92,16 @@ class ViewProcess {
       std::this_thread::sleep_for(20ms);
     }
     return {};
+  }
+
+  /// Whether the output shows `text` within `timeout`.
+  bool shows(const std::string& text, std::chrono::seconds timeout) const {
+    const auto deadline = Clock::now() + timeout;
+    while (Clock::now() < deadline) {
+      if (output().find(text) != std::string::npos) return true;
+      std::this_thread::sleep_for(50ms);
+    }
+    return false;
   }
 
  private:
@@ -150,6 +164,61 @@ TEST(ViewCommand, NeedsASnapshotEndpointItCannotGuess) {
                    dir.path() / "view.log");
   EXPECT_EQ(view.wait(20s), 1);
   EXPECT_NE(view.output().find("--snapshot"), std::string::npos) << view.output();
+}
+
+TEST(ScanView, ServesTheScanItselfAndHoldsTheFinishedOneUntilInterrupted) {
+  TempDir dir;
+  const std::filesystem::path out = dir.path() / "out";
+  ViewProcess scan({"--source",
+                    "sim:default",
+                    "--width-px",
+                    "160",
+                    "--height-px",
+                    "160",
+                    "--frame-rate",
+                    "5",
+                    "--depth",
+                    "5",
+                    "--sweep-s",
+                    "2",
+                    "--fast",
+                    "--publish",
+                    "tcp://127.0.0.1:*",
+                    "--snapshot",
+                    "tcp://127.0.0.1:*",
+                    "--view",
+                    "127.0.0.1:0",
+                    "--view-hold",
+                    "-o",
+                    out.string()},
+                   dir.path() / "scan.log", "scan");
+  const std::string url = scan.url(60s, "live view at ");
+  ASSERT_FALSE(url.empty()) << scan.output();
+  ASSERT_TRUE(scan.shows("shows it until Ctrl-C", 120s)) << scan.output();
+  EXPECT_EQ(http_get(url, "/").status, 200u);
+
+  // A page opened after the scan: the finished surfaces and the final status.
+  Page page(url);
+  const nlohmann::json summary = nlohmann::json::parse(std::ifstream(out / "scan.json"));
+  std::map<std::string, Frames> newest;
+  // The newest of every topic (viewer, mesh.1 to mesh.3, status), in the order they first came.
+  for (int i = 0; i < 10 && !(newest.count("status") && newest.count("mesh.2")); ++i) {
+    Frames frames = page.read();
+    ASSERT_FALSE(frames.empty());
+    newest[frames[0]] = std::move(frames);
+  }
+  ASSERT_TRUE(newest.count("mesh.1") && newest.count("mesh.2")) << newest.begin()->first;
+  EXPECT_TRUE(decode_message(newest["mesh.2"]));
+  const Frames& status = newest["status"];
+  const Result<StreamMessage> decoded = decode_message(status);
+  ASSERT_TRUE(decoded) << decoded.message();
+  const auto& report = std::get<StatusReport>(decoded->body);
+  EXPECT_EQ(report.state, ScanState::kIdle);
+  EXPECT_EQ(report.frames_received, summary["frames_received"].get<std::uint64_t>());
+  EXPECT_EQ(report.slices, summary["slices"].get<std::uint64_t>());
+
+  scan.signal(SIGINT);
+  EXPECT_EQ(scan.wait(10s), 0) << scan.output();
 }
 
 }  // namespace
