@@ -17,9 +17,11 @@
 namespace sonoshape::apps {
 namespace {
 
+#ifdef SONOSHAPE_WITH_VIEWER
 volatile std::sig_atomic_t g_view_stop = 0;
 
 extern "C" void on_view_stop(int signal) { g_view_stop = signal; }
+#endif
 
 struct ViewCommandOptions {
   std::string endpoint = "tcp://127.0.0.1:5556";
