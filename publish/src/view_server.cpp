@@ -13,9 +13,11 @@
 #include <boost/beast/core.hpp>
 #include <boost/beast/http.hpp>
 #include <boost/beast/websocket.hpp>
+#include <cctype>
 #include <fstream>
 #include <mutex>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <sstream>
 #include <thread>
 
@@ -171,7 +173,11 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
   ~WsSession() { --server_.open_connections; }
 
   void run(http::request<http::string_body> request) {
-    ws_.set_option(websocket::stream_base::timeout::suggested(beast::role_type::server));
+    // Pings at half the idle timeout: a page that only listens (browsers answer pings) stays
+    // connected through a paused scan, and a vanished one is noticed.
+    auto timeouts = websocket::stream_base::timeout::suggested(beast::role_type::server);
+    timeouts.keep_alive_pings = true;
+    ws_.set_option(timeouts);
     ws_.binary(true);
     ws_.async_accept(request, [self = shared_from_this()](beast::error_code ec) {
       if (ec) return;
@@ -348,7 +354,8 @@ Result<ViewServer> ViewServer::start(const ViewServerOptions& options) {
   if (host == "localhost") host = "127.0.0.1";
   unsigned long port = 0;
   const std::string port_text = address.substr(colon + 1);
-  if (!std::all_of(port_text.begin(), port_text.end(), ::isdigit) || port_text.size() > 5 ||
+  const auto digit = [](char c) { return std::isdigit(static_cast<unsigned char>(c)) != 0; };
+  if (!std::all_of(port_text.begin(), port_text.end(), digit) || port_text.size() > 5 ||
       (port = std::stoul(port_text)) > 65535)
     return Status::error("viewer address '" + address + "' has no valid port" + fix);
   beast::error_code ec;
