@@ -1,6 +1,7 @@
 // The browser view end to end: a short simulated scan, `sonoshape view` following it, and Debian's
 // chromium (headless, software WebGL) showing the page. Checks that every label's colour is in
-// the rendered picture and that the page's status numbers match the scan's scan.json.
+// the rendered picture, that the page's status numbers match the scan's scan.json, and that the
+// page's PLY and STL downloads hold the scan's final surfaces (their triangle counts).
 //
 // node tests/browser/viewer_e2e.mjs SONOSHAPE_BINARY WORK_DIR [SCREENSHOT.png [--full]]
 // --full scans the default simulation (256 x 256 px, 30 fps, 6 s): the README's picture.
@@ -249,6 +250,20 @@ async function main() {
     console.log(`label ${label} (${labelColor(label)}): ${count} pixels`);
     if (count < kMinPixels)
       fail(`label ${label}'s colour ${labelColor(label)} covers ${count} pixels (< ${kMinPixels}); see ${path.join(workDir, 'page.png')}`);
+  }
+  // The page's downloads: each surface as PLY and STL, with the scan's own final triangle count.
+  for (const label of labels) {
+    const ply = await evaluate(`window.sonoshapeViewer.exportMesh(${label}, 'ply')`);
+    const stl = await evaluate(`window.sonoshapeViewer.exportMesh(${label}, 'stl')`);
+    if (!ply || !stl) fail(`label ${label}: the page exports no surface`);
+    const header = Buffer.from(ply.head).toString('latin1');
+    const plyFaces = Number((header.match(/element face (\d+)/) ?? [0, -1])[1]);
+    const stlFaces = Buffer.from(stl.head).readUInt32LE(80);
+    const expected = faces(`label_${label}.ply`);
+    if (!header.startsWith('ply\nformat binary_little_endian 1.0') || plyFaces !== expected)
+      fail(`label ${label}: PLY download has ${plyFaces} faces, the scan wrote ${expected}:\n${header}`);
+    if (stlFaces !== expected || stl.size !== 84 + 50 * expected)
+      fail(`label ${label}: STL download has ${stlFaces} triangles in ${stl.size} bytes, not ${expected}`);
   }
   console.log(`page: ${state.labels.join(', ')}; frames ${state.frames}, slices ${state.slices}; ` +
               `${((Date.now() - started) / 1000).toFixed(1)} s`);

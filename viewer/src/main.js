@@ -27,14 +27,38 @@ function legendRow(label, name) {
   row.innerHTML =
     '<input type="checkbox" checked title="show or hide">' +
     '<span class="swatch"></span><span class="name"></span><span class="count"></span>' +
-    '<input type="range" min="0" max="1" step="0.05" value="1" title="opacity">';
+    '<input type="range" min="0" max="1" step="0.05" value="1" title="opacity">' +
+    '<span class="downloads"><button data-format="ply" title="download the surface (mm)">PLY</button>' +
+    '<button data-format="stl" title="download the surface (mm)">STL</button></span>';
   row.querySelector('.swatch').style.background = color;
   row.querySelector('.name').textContent = name || 'label ' + label;
   const [visible, opacity] = row.querySelectorAll('input');
   visible.addEventListener('change', () => view.setVisible(label, visible.checked));
   opacity.addEventListener('input', () => view.setOpacity(label, Number(opacity.value)));
+  for (const button of row.querySelectorAll('button[data-format]'))
+    button.addEventListener('click', () => downloadMesh(label, button.dataset.format));
   $('legend').appendChild(row);
   return row;
+}
+
+function download(url, filename) {
+  const link = document.createElement('a');
+  link.href = url;
+  link.download = filename;
+  link.click();
+}
+
+function fileStem(label) {
+  const name = labels.get(label)?.row.querySelector('.name').textContent ?? '';
+  return 'label_' + label + (name ? '_' + name.replace(/[^A-Za-z0-9_-]+/g, '_') : '');
+}
+
+function downloadMesh(label, format) {
+  const bytes = view.exportMesh(label, format);
+  if (!bytes) return say('label ' + label + ' has no surface yet', 'warn');
+  const url = URL.createObjectURL(new Blob([bytes], { type: 'application/octet-stream' }));
+  download(url, fileStem(label) + '.' + format);
+  setTimeout(() => URL.revokeObjectURL(url), 10000);
 }
 
 function showMesh(message) {
@@ -57,10 +81,10 @@ function showMesh(message) {
 function showStatus(header) {
   $('state').textContent = header.state + (header.message ? ': ' + header.message : '');
   $('state').className = header.state;
-  $('frames').textContent = header.frames_received;
-  $('dropped').textContent = header.frames_dropped;
-  $('slices').textContent = header.slices;
-  $('update-ms').textContent = header.total_ms.toFixed(0);
+  $('frames').textContent = header.frames_received ?? '–';
+  $('dropped').textContent = header.frames_dropped ?? '–';
+  $('slices').textContent = header.slices ?? '–';
+  $('update-ms').textContent = Number(header.total_ms ?? 0).toFixed(0);
 }
 
 function followScan(header) {
@@ -122,6 +146,15 @@ setInterval(() => {
 }, 1000);
 
 $('reset').addEventListener('click', () => view.resetView());
+$('screenshot').addEventListener('click',
+  () => download(view.screenshot(), 'sonoshape-' + (scan ?? 'view').slice(0, 8) + '.png'));
+// For tests: the header of a label's export and its size, as a download would write it.
+window.sonoshapeViewer.exportMesh = (label, format) => {
+  const bytes = view.exportMesh(label, format);
+  if (!bytes) return null;
+  const head = new Uint8Array(bytes, 0, Math.min(bytes.byteLength, 400));
+  return { size: bytes.byteLength, head: [...head] };
+};
 window.addEventListener('keydown', (event) => {
   if (event.key === 'r' && event.target === document.body) view.resetView();
 });

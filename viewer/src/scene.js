@@ -2,6 +2,8 @@
 // when something changed: the scan shares this workstation's processors.
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
+import { PLYExporter } from 'three/addons/exporters/PLYExporter.js';
+import { STLExporter } from 'three/addons/exporters/STLExporter.js';
 
 export class SceneView {
   /** @param {HTMLElement} container the element the canvas fills */
@@ -124,6 +126,25 @@ export class SceneView {
     this.camera.updateProjectionMatrix();
     this.controls.update();
     this.requestRender();
+  }
+
+  /**
+   * The current surface of one label as a binary file, positions in mm in the stream's frame.
+   * @param {'ply'|'stl'} format little-endian PLY (vertices and triangles) or binary STL
+   * @returns {ArrayBuffer|null} null when the label has no surface
+   */
+  exportMesh(label, format) {
+    const mesh = this.meshes.get(label);
+    if (!mesh || !mesh.geometry.index || mesh.geometry.index.count === 0) return null;
+    if (format === 'stl') return new STLExporter().parse(mesh, { binary: true }).buffer;
+    return new PLYExporter().parse(mesh, null,
+                                   { binary: true, littleEndian: true, excludeAttributes: ['normal'] });
+  }
+
+  /** The picture as drawn, a PNG data URL. */
+  screenshot() {
+    this.renderer.render(this.scene, this.camera);
+    return this.renderer.domElement.toDataURL('image/png');
   }
 
   resetView() {
