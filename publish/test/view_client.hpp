@@ -2,12 +2,12 @@
 // A page's side of `sonoshape view` for tests: HTTP GET and a WebSocket that unpacks messages
 // (as viewer/src/decode.js does), with Boost.Beast.
 #include <gtest/gtest.h>
-#include <sys/socket.h>
 
 #include <boost/asio/ip/tcp.hpp>
 #include <boost/beast/core.hpp>
 #include <boost/beast/http.hpp>
 #include <boost/beast/websocket.hpp>
+#include <chrono>
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
@@ -68,13 +68,11 @@ inline Reply http_get(const std::string& url, const std::string& target) {
   return {response.result_int(), std::string(response[http::field::content_type]), response.body()};
 }
 
-// A page's WebSocket, with reads that give up after a few seconds instead of hanging a test.
+// A page's WebSocket, with reads that give up after a while instead of hanging a test.
 class Page {
  public:
   explicit Page(const std::string& url, const std::string& origin = {}) : ws_(ioc_) {
     ws_.next_layer().connect(tcp::endpoint(asio::ip::make_address("127.0.0.1"), port_of(url)));
-    const timeval timeout{5, 0};
-    setsockopt(ws_.next_layer().native_handle(), SOL_SOCKET, SO_RCVTIMEO, &timeout, sizeof timeout);
     const std::string host = "127.0.0.1:" + std::to_string(port_of(url));
     if (!origin.empty())
       ws_.set_option(websocket::stream_base::decorator([origin](websocket::request_type& request) {
@@ -83,9 +81,30 @@ class Page {
     ws_.handshake(host, "/stream");
   }
 
+  /// The next message; none (a test failure) when none comes within 10 s or the server closed.
   Frames read() {
     beast::flat_buffer buffer;
-    ws_.read(buffer);
+    bool done = false;
+    beast::error_code result;
+    ws_.async_read(buffer, [&](beast::error_code ec, std::size_t) {
+      done = true;
+      result = ec;
+    });
+    ioc_.restart();
+    ioc_.run_for(std::chrono::seconds(10));
+    if (!done) {
+      // Closing completes the read (aborted) before its handler's locals go.
+      beast::error_code ignored;
+      ws_.next_layer().close(ignored);
+      ioc_.restart();
+      ioc_.run();
+      ADD_FAILURE() << "no message within 10 s";
+      return {};
+    }
+    if (result) {
+      ADD_FAILURE() << "reading the WebSocket: " << result.message();
+      return {};
+    }
     EXPECT_TRUE(ws_.got_binary());
     return unpack(beast::buffers_to_string(buffer.data()));
   }
@@ -94,6 +113,7 @@ class Page {
   Frames read_topic(const std::string& topic) {
     for (int i = 0; i < 50; ++i) {
       Frames frames = read();
+      if (frames.empty()) break;
       if (frames.at(0) == topic) return frames;
     }
     ADD_FAILURE() << "no " << topic << " message";

@@ -258,6 +258,44 @@ TEST(StreamView, RelaysARunningScanToAPageThroughTheSnapshotThenLive) {
   EXPECT_GE(view.messages_relayed(), 4u);  // the snapshot's three and the grown liver
 }
 
+TEST(StreamView, FollowsAScanRestartedOnTheSameEndpoints) {
+  PublisherOptions publisher_options;
+  publisher_options.endpoint = "tcp://127.0.0.1:*";
+  publisher_options.snapshot_endpoint = "tcp://127.0.0.1:*";
+  publisher_options.linger_ms = 0;
+  auto first = std::make_unique<MeshPublisher>(MeshPublisher::bind(publisher_options).value());
+  MeshSet meshes;
+  meshes.meshes = {{1, "liver", tetrahedron(10.0)}, {2, "kidney", tetrahedron(5.0)}};
+  ASSERT_TRUE(first->publish_meshes(meshes, 1.0, 3));
+
+  StreamViewOptions options;
+  options.stream.endpoint = first->endpoint();
+  options.stream.snapshot_endpoint = first->snapshot_endpoint();
+  options.server.http = "127.0.0.1:0";
+  options.server.web_root = web_root();
+  const StreamView view = StreamView::start(options).value();
+  Page page(view.url());
+  EXPECT_NE(page.read_topic("mesh.2").at(1).find(first->scan()), std::string::npos);
+
+  // The scan restarts: a new publisher, a new scan uuid, the same endpoints. Its first messages
+  // may pass before the subscriber has reconnected; the view then joins through the snapshot.
+  publisher_options.endpoint = first->endpoint();
+  publisher_options.snapshot_endpoint = first->snapshot_endpoint();
+  first.reset();
+  MeshPublisher second = MeshPublisher::bind(publisher_options).value();
+  meshes.meshes = {{1, "liver", tetrahedron(7.0)}};
+  ASSERT_TRUE(second.publish_meshes(meshes, 0.5, 1));
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));
+  ASSERT_TRUE(second.publish_status(StatusReport{}));
+
+  const Frames liver = page.read_topic("mesh.1");
+  const Result<StreamMessage> decoded = decode_message(liver);
+  ASSERT_TRUE(decoded) << decoded.message();
+  EXPECT_EQ(decoded->scan, second.scan());
+  const Frames status = page.read_topic("status");
+  EXPECT_NE(status.at(1).find(second.scan()), std::string::npos);
+}
+
 TEST(StreamView, TellsThePageWhileNoPublisherAnswers) {
   StreamViewOptions options;
   options.stream.endpoint = "tcp://127.0.0.1:1";  // nothing listens on port 1
