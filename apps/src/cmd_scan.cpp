@@ -13,6 +13,7 @@
 #include <memory>
 #include <optional>
 #include <sstream>
+#include <thread>
 
 #include "commands.hpp"
 #include "sim_options.hpp"
@@ -24,6 +25,10 @@
 #endif
 #include "sonoshape/scan/sink.hpp"
 #include "sonoshape/scan/sources.hpp"
+#include "view_options.hpp"
+#ifdef SONOSHAPE_WITH_VIEWER
+#include "sonoshape/publish/stream_view.hpp"
+#endif
 
 namespace sonoshape::apps {
 namespace {
@@ -44,6 +49,8 @@ struct ScanCommandOptions {
   std::string publish;
   std::string snapshot;
   std::string igtl_serve;
+  std::optional<std::string> view;  ///< --view [ADDR]: the browser view's HOST:PORT
+  bool view_hold = false;
   std::optional<double> tracker_latency_ms;
   double max_pose_gap_ms = 100.0;
   double max_extrapolation_ms = 0.0;
@@ -197,10 +204,32 @@ bool igtl_serve_available(const std::string& spec) {
   return true;
 }
 
+#ifdef SONOSHAPE_WITH_VIEWER
+// `--view`: the same server as `sonoshape view`, following this scan's own stream through its
+// snapshot, so that a page opened at any time shows the whole scan so far.
+Result<std::unique_ptr<publish::StreamView>> start_view(const std::string& address,
+                                                        const scan::PublishSink& sink) {
+  publish::StreamViewOptions view;
+  view.stream.endpoint = sink.endpoint();
+  view.stream.snapshot_endpoint = sink.snapshot_endpoint();
+  view.server.http = address;
+  view.server.web_root = SONOSHAPE_VIEWER_DIR;
+  Result<publish::StreamView> started = publish::StreamView::start(view);
+  if (!started) return started.status();
+  return std::make_unique<publish::StreamView>(std::move(*started));
+}
+#endif
+
 int run_scan(const ScanCommandOptions& options) {
   // From the start: a Ctrl-C while the source opens stops the scan as soon as it starts.
   const InterruptGuard interrupts;
   if (!igtl_serve_available(options.igtl_serve)) return 1;
+#ifndef SONOSHAPE_WITH_VIEWER
+  if (options.view) {
+    std::cerr << "error: --view: " << kViewerMissing << '\n';
+    return 1;
+  }
+#endif
   scan::SourceRequest request;
   request.spec = options.source;
   request.tracker = options.tracker;
@@ -279,8 +308,14 @@ int run_scan(const ScanCommandOptions& options) {
                               scan::make_reconstructor_stage(engine), scan_options);
   if (!options.out.empty())
     pipeline.add_sink(std::make_shared<scan::FileSink>(options.out, options.save_every));
-  if (!options.publish.empty()) {
-    auto sink = scan::PublishSink::bind(options.publish, options.snapshot);
+  // The view follows the mesh stream: --view publishes it on the default endpoint if need be.
+  const std::string publish_endpoint =
+      options.publish.empty() && options.view ? "tcp://127.0.0.1:5556" : options.publish;
+#ifdef SONOSHAPE_WITH_VIEWER
+  std::unique_ptr<publish::StreamView> view;
+#endif
+  if (!publish_endpoint.empty()) {
+    auto sink = scan::PublishSink::bind(publish_endpoint, options.snapshot);
     if (!sink) {
       std::cerr << "error: " << sink.message() << '\n';
       return 1;
@@ -288,6 +323,18 @@ int run_scan(const ScanCommandOptions& options) {
     log_info("scan: publishing scan " + (*sink)->scan_id() + " on " + (*sink)->endpoint() +
              " (snapshot " + (*sink)->snapshot_endpoint() + ")");
     pipeline.add_sink(*sink);
+#ifdef SONOSHAPE_WITH_VIEWER
+    if (options.view) {
+      const std::string address = options.view->empty() ? kDefaultViewAddress : *options.view;
+      auto started = start_view(address, **sink);
+      if (!started) {
+        std::cerr << "error: --view: " << started.message() << '\n';
+        return 1;
+      }
+      view = std::move(*started);
+      log_info("scan: live view at " + view->url());
+    }
+#endif
   }
   std::shared_ptr<scan::ScanSink> igtl;
   if (!add_igtl_sink(options.igtl_serve, pipeline, igtl)) return 1;
@@ -323,6 +370,12 @@ int run_scan(const ScanCommandOptions& options) {
 #endif
   if (!options.out.empty())
     log_info("scan: meshes, slices.json and scan.json in " + options.out.string());
+#ifdef SONOSHAPE_WITH_VIEWER
+  if (view && options.view_hold && g_interrupts.load() == 0) {
+    log_info("scan: finished; " + view->url() + " shows it until Ctrl-C");
+    while (g_interrupts.load() == 0) std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+#endif
   return 0;
 }
 
@@ -386,6 +439,14 @@ CommandRunner add_scan_command(CLI::App& app) {
                  "e.g. tcp://127.0.0.1:5556");
   app.add_option("--snapshot", options->snapshot,
                  "Snapshot endpoint for late joiners (default: the --publish port + 1)");
+  app.add_option("--view", options->view,
+                 "Show the scan live in the browser: serve the page on HOST:PORT (default " +
+                     std::string(kDefaultViewAddress) +
+                     ", loopback) and publish the mesh stream (on --publish, else "
+                     "tcp://127.0.0.1:5556) for it")
+      ->expected(0, 1);
+  app.add_flag("--view-hold", options->view_hold,
+               "With --view: after the scan, keep showing it until Ctrl-C");
   app.add_option("--igtl-serve", options->igtl_serve,
                  "Serve the scan over OpenIGTLink on [HOST:]PORT (host 127.0.0.1 unless given; "
                  "port 0 picks a free one): surfaces as POLYDATA named after the labels, the frame "

@@ -19,5 +19,6 @@ CommandRunner add_segment_command(CLI::App& app);
 CommandRunner add_scan_command(CLI::App& app);
 CommandRunner add_listen_command(CLI::App& app);
 CommandRunner add_devices_command(CLI::App& app);
+CommandRunner add_view_command(CLI::App& app);
 
 }  // namespace sonoshape::apps

@@ -39,6 +39,8 @@ int main(int argc, char** argv) {
       sonoshape::apps::add_scan_command);
   add("listen", "Receive a live mesh stream, check it against the format and record it",
       sonoshape::apps::add_listen_command);
+  add("view", "Show a live mesh stream in the browser: serves a page and relays the stream to it",
+      sonoshape::apps::add_view_command);
   add("devices", "List the frame grabbers attached, each mode as a --source to paste",
       sonoshape::apps::add_devices_command);
 

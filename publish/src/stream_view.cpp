@@ -1,0 +1,119 @@
+// StreamView: a MeshSubscriber thread that hands the stream's messages, as received, to a
+// ViewServer.
+#include "sonoshape/publish/stream_view.hpp"
+
+#include <algorithm>
+#include <atomic>
+#include <thread>
+
+#include "sonoshape/core/log.hpp"
+
+namespace sonoshape::publish {
+namespace {
+
+// How long one receive waits before looking at the stop flag again.
+constexpr std::chrono::milliseconds kPollInterval{200};
+// The longest a connect waits for a snapshot: bounds how long stopping can take.
+constexpr int kMaxSnapshotWaitMs = 2000;
+
+}  // namespace
+
+struct StreamView::Impl {
+  explicit Impl(const StreamViewOptions& view_options, ViewServer view_server)
+      : options(view_options), server(std::move(view_server)) {}
+
+  StreamViewOptions options;
+  ViewServer server;
+  std::atomic<bool> stop{false};
+  std::atomic<std::uint64_t> relayed{0};
+  std::thread thread;  // declared last: started once the members above exist
+
+  void sleep_unless_stopped(std::chrono::milliseconds duration) {
+    const auto until = std::chrono::steady_clock::now() + duration;
+    while (!stop && std::chrono::steady_clock::now() < until)
+      std::this_thread::sleep_for(std::min(duration, std::chrono::milliseconds(50)));
+  }
+
+  void run() {
+    SubscriberOptions stream = options.stream;
+    // Every topic, slices included: seqs then run without gaps, so a scan that started while
+    // the view was away shows (its first message seen is not seq 1).
+    stream.topics.clear();
+    stream.snapshot_timeout_ms = std::min(stream.snapshot_timeout_ms, kMaxSnapshotWaitMs);
+    std::string last_problem;
+    while (!stop) {
+      Result<MeshSubscriber> subscriber = MeshSubscriber::connect(stream);
+      if (!subscriber) {
+        if (subscriber.message() != last_problem) {
+          last_problem = subscriber.message();
+          log_warning("view: " + last_problem + " (trying again every " +
+                      std::to_string(options.retry_ms) + " ms)");
+          server.post_stream_state(false, stream.endpoint, last_problem);
+        }
+        sleep_unless_stopped(std::chrono::milliseconds(options.retry_ms));
+        continue;
+      }
+      last_problem.clear();
+      log_info("view: following the mesh stream at " + stream.endpoint);
+      server.post_stream_state(true, stream.endpoint, "");
+      relay(*subscriber, !stream.snapshot_endpoint.empty());
+    }
+  }
+
+  // Relays until stopped, or until a scan that began while the view was away calls for a
+  // fresh snapshot (returns then, and run() joins again).
+  void relay(MeshSubscriber& subscriber, bool can_rejoin) {
+    std::string scan;
+    while (!stop) {
+      auto received = subscriber.receive(kPollInterval);
+      if (!received) {
+        log_warning("view: skipped an invalid message: " + received.message());
+        continue;
+      }
+      if (!*received) continue;
+      const StreamMessage& message = **received;
+      if (message.scan != scan) {
+        if (!scan.empty() && message.seq > 1 && can_rejoin) {
+          log_info("view: scan " + message.scan + " began while away; joining it afresh");
+          return;
+        }
+        if (!scan.empty()) log_info("view: new scan " + message.scan);
+        scan = message.scan;
+      }
+      // The page draws surfaces and status; slices and the snapshot's end stay here.
+      if (!std::holds_alternative<MeshUpdate>(message.body) &&
+          !std::holds_alternative<StatusReport>(message.body))
+        continue;
+      ++relayed;  // first: a page that has the message sees it counted
+      server.post(subscriber.last_frames());
+    }
+  }
+};
+
+StreamView::StreamView(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+StreamView::StreamView(StreamView&&) noexcept = default;
+StreamView& StreamView::operator=(StreamView&&) noexcept = default;
+
+StreamView::~StreamView() {
+  if (!impl_) return;
+  impl_->stop = true;
+  if (impl_->thread.joinable()) impl_->thread.join();
+}
+
+Result<StreamView> StreamView::start(const StreamViewOptions& options) {
+  Result<ViewServer> server = ViewServer::start(options.server);
+  if (!server) return server.status();
+  auto impl = std::make_unique<Impl>(options, std::move(*server));
+  impl->server.post_stream_state(false, options.stream.endpoint, "connecting");
+  Impl* raw = impl.get();
+  impl->thread = std::thread([raw] { raw->run(); });
+  return StreamView(std::move(impl));
+}
+
+std::string StreamView::url() const { return impl_->server.url(); }
+
+const ViewServer& StreamView::server() const { return impl_->server; }
+
+std::uint64_t StreamView::messages_relayed() const { return impl_->relayed.load(); }
+
+}  // namespace sonoshape::publish

@@ -1,0 +1,419 @@
+// ViewServer: the page over HTTP and the stream over WebSocket, with Boost.Beast.
+//
+// Why Boost.Beast: header-only (nothing to link but Asio's threads), packaged in Debian's
+// libboost-dev that CGAL already needs, well kept (part of Boost, releases three times a year),
+// and it speaks HTTP and WebSocket over one Asio socket, so the page and its stream share one
+// port and one thread. All Beast and Asio types stay in this file.
+#include "sonoshape/publish/view_server.hpp"
+
+#include <algorithm>
+#include <atomic>
+#include <boost/asio/ip/tcp.hpp>
+#include <boost/asio/post.hpp>
+#include <boost/beast/core.hpp>
+#include <boost/beast/http.hpp>
+#include <boost/beast/websocket.hpp>
+#include <cctype>
+#include <fstream>
+#include <mutex>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <sstream>
+#include <thread>
+
+namespace sonoshape::publish {
+namespace {
+
+namespace asio = boost::asio;
+namespace beast = boost::beast;
+namespace http = beast::http;
+namespace websocket = beast::websocket;
+using tcp = asio::ip::tcp;
+
+// An idle HTTP connection (no request) is closed after this long.
+constexpr std::chrono::seconds kHttpTimeout{30};
+// The largest request the server reads: the page only ever asks for files.
+constexpr std::uint64_t kMaxRequestBytes = 16 * 1024;
+
+void append_u32(std::string& out, std::uint32_t value) {
+  for (int byte = 0; byte < 4; ++byte)
+    out.push_back(static_cast<char>((value >> (8 * byte)) & 0xff));
+}
+
+// One message on its way to the pages: packed once, shared by every connection.
+struct Item {
+  std::string topic;
+  std::string scan;  // empty for `viewer` messages, which belong to no scan
+  std::shared_ptr<const std::string> packed;
+};
+
+// Adds `item` to `queue`, keeping one item per topic: a newer message of a topic replaces the
+// older one in its place. A message of a new scan drops every item of other scans. Returns how
+// many items it dropped or replaced.
+std::uint64_t conflate(std::vector<Item>& queue, Item item) {
+  std::uint64_t dropped = 0;
+  if (!item.scan.empty()) {
+    const auto old_scan = [&](const Item& queued) {
+      return !queued.scan.empty() && queued.scan != item.scan;
+    };
+    dropped += std::erase_if(queue, old_scan);
+  }
+  const auto same = std::find_if(queue.begin(), queue.end(),
+                                 [&](const Item& queued) { return queued.topic == item.topic; });
+  if (same != queue.end()) {
+    *same = std::move(item);
+    return dropped + 1;
+  }
+  queue.push_back(std::move(item));
+  return dropped;
+}
+
+std::string scan_of(const Frames& frames) {
+  if (frames.size() < 2) return {};
+  const nlohmann::json header = nlohmann::json::parse(frames[1], nullptr, false);
+  if (!header.is_object() || !header.contains("scan") || !header["scan"].is_string()) return {};
+  return header["scan"].get<std::string>();
+}
+
+std::string_view content_type(const std::filesystem::path& path) {
+  const std::string ext = path.extension().string();
+  if (ext == ".html") return "text/html; charset=utf-8";
+  if (ext == ".js") return "text/javascript; charset=utf-8";
+  if (ext == ".css") return "text/css; charset=utf-8";
+  if (ext == ".png") return "image/png";
+  if (ext == ".json") return "application/json";
+  return "application/octet-stream";
+}
+
+// The file a request target names, or none for a target outside what the page needs: the
+// page's own files and three.js's build and addons, with no way up (`..`) or sideways.
+std::optional<std::filesystem::path> resolve_target(const std::filesystem::path& root,
+                                                    std::string_view target) {
+  target = target.substr(0, target.find('?'));
+  if (target == "/") return root / "index.html";
+  if (target.empty() || target[0] != '/') return std::nullopt;
+  const bool plain = std::all_of(target.begin(), target.end(), [](char c) {
+    return std::isalnum(static_cast<unsigned char>(c)) || c == '.' || c == '_' || c == '-' ||
+           c == '/';
+  });
+  if (!plain || target.find("..") != std::string_view::npos ||
+      target.find("//") != std::string_view::npos)
+    return std::nullopt;
+  const std::string_view rest = target.substr(1);
+  if (rest.starts_with("three/")) {
+    const std::string_view inner = rest.substr(6);
+    if (!inner.starts_with("build/") && !inner.starts_with("examples/jsm/")) return std::nullopt;
+    return root / "node_modules" / "three" / std::string(inner);
+  }
+  if (rest == "index.html" || (rest.starts_with("src/") && rest.ends_with(".js")) ||
+      rest == "style.css")
+    return root / std::string(rest);
+  return std::nullopt;
+}
+
+}  // namespace
+
+std::string pack_frames(const Frames& frames) {
+  std::size_t size = 4 + 4 * frames.size();
+  for (const std::string& frame : frames) size += (frame.size() + 3) / 4 * 4;
+  std::string out;
+  out.reserve(size);
+  append_u32(out, static_cast<std::uint32_t>(frames.size()));
+  for (const std::string& frame : frames) append_u32(out, static_cast<std::uint32_t>(frame.size()));
+  for (const std::string& frame : frames) {
+    out += frame;
+    out.append((4 - frame.size() % 4) % 4, '\0');
+  }
+  return out;
+}
+
+namespace view_detail {
+
+class WsSession;
+
+// The server's state, shared by its sessions (ViewServer::Impl is this, under a private name).
+struct ServerCore {
+  std::filesystem::path web_root;
+  std::string url;
+  std::atomic<std::size_t> open_connections{0};
+  std::atomic<std::uint64_t> replaced{0};
+
+  // Messages posted and not yet handed to the connections; guarded by mutex, so that post()
+  // only ever takes a short lock and never waits for the network.
+  std::mutex mutex;
+  std::vector<Item> inbox;
+  bool drain_scheduled = false;
+
+  // Only the server thread touches these.
+  std::vector<std::weak_ptr<WsSession>> sessions;
+  std::vector<Item> cache;  // the newest message of every topic, for pages that join late
+
+  // Declared last: destroyed first, with every connection, while the members above still live.
+  asio::io_context ioc{1};
+  tcp::acceptor acceptor{ioc};
+  std::thread thread;
+
+  void accept();
+  void drain();
+  void add_session(const std::shared_ptr<WsSession>& session);
+};
+
+}  // namespace view_detail
+
+struct ViewServer::Impl : view_detail::ServerCore {};
+
+namespace view_detail {
+
+// One page's WebSocket: sends the newest message of each topic, one write at a time.
+class WsSession : public std::enable_shared_from_this<WsSession> {
+ public:
+  WsSession(tcp::socket socket, ServerCore& server) : ws_(std::move(socket)), server_(server) {
+    ++server_.open_connections;
+  }
+  ~WsSession() { --server_.open_connections; }
+
+  void run(http::request<http::string_body> request) {
+    // Pings at half the idle timeout: a page that only listens (browsers answer pings) stays
+    // connected through a paused scan, and a vanished one is noticed.
+    auto timeouts = websocket::stream_base::timeout::suggested(beast::role_type::server);
+    timeouts.keep_alive_pings = true;
+    ws_.set_option(timeouts);
+    ws_.binary(true);
+    ws_.async_accept(request, [self = shared_from_this()](beast::error_code ec) {
+      if (ec) return;
+      self->server_.add_session(self);
+      self->read();
+    });
+  }
+
+  void enqueue(Item item) {
+    server_.replaced += conflate(pending_, std::move(item));
+    if (!writing_) write_next();
+  }
+
+ private:
+  // The page sends nothing the server needs; reading keeps pings, pongs and the close
+  // handshake going, and ends the session when the page goes.
+  void read() {
+    ws_.async_read(incoming_, [self = shared_from_this()](beast::error_code ec, std::size_t) {
+      if (ec) return;
+      self->incoming_.clear();
+      self->read();
+    });
+  }
+
+  void write_next() {
+    if (pending_.empty()) {
+      writing_ = false;
+      return;
+    }
+    writing_ = true;
+    current_ = std::move(pending_.front());
+    pending_.erase(pending_.begin());
+    ws_.async_write(asio::buffer(*current_.packed),
+                    [self = shared_from_this()](beast::error_code ec, std::size_t) {
+                      self->current_ = {};
+                      if (ec) return;  // the page went: the session ends with its handlers
+                      self->write_next();
+                    });
+  }
+
+  websocket::stream<beast::tcp_stream> ws_;
+  ServerCore& server_;
+  beast::flat_buffer incoming_;
+  std::vector<Item> pending_;
+  Item current_;
+  bool writing_ = false;
+};
+
+// One HTTP connection: files for the page, or the upgrade to its WebSocket.
+class HttpSession : public std::enable_shared_from_this<HttpSession> {
+ public:
+  HttpSession(tcp::socket socket, ServerCore& server)
+      : stream_(std::move(socket)), server_(server) {}
+
+  void read() {
+    parser_.emplace();
+    parser_->body_limit(kMaxRequestBytes);
+    stream_.expires_after(kHttpTimeout);
+    http::async_read(stream_, buffer_, *parser_,
+                     [self = shared_from_this()](beast::error_code ec, std::size_t) {
+                       if (ec) return;  // closed, timed out or malformed: drop the connection
+                       self->on_request(self->parser_->release());
+                     });
+  }
+
+ private:
+  void on_request(http::request<http::string_body> request) {
+    if (websocket::is_upgrade(request)) {
+      // A page of another site open in the same browser must not read the scan: browsers
+      // always send Origin with a WebSocket, and ours is this server's own address.
+      const std::string origin(request[http::field::origin]);
+      if (!origin.empty() && origin != "http://" + std::string(request[http::field::host]))
+        return respond(request, http::status::forbidden, "text/plain",
+                       "the viewer's WebSocket serves only its own page\n");
+      stream_.expires_never();
+      std::make_shared<WsSession>(stream_.release_socket(), server_)->run(std::move(request));
+      return;
+    }
+    if (request.method() != http::verb::get && request.method() != http::verb::head)
+      return respond(request, http::status::method_not_allowed, "text/plain", "GET only\n");
+    const std::string target(request.target());
+    const auto path = resolve_target(server_.web_root, target);
+    std::ifstream file;
+    if (path) file.open(*path, std::ios::binary);
+    if (!path || !file.is_open()) {
+      const bool three = target.starts_with("/three/");
+      return respond(request, http::status::not_found, "text/plain",
+                     three ? "three.js is not installed in viewer/node_modules: run "
+                             "scripts/install-deps (it runs npm ci in viewer/)\n"
+                           : "not found\n");
+    }
+    std::ostringstream body;
+    body << file.rdbuf();
+    respond(request, http::status::ok, content_type(*path), std::move(body).str());
+  }
+
+  void respond(const http::request<http::string_body>& request, http::status status,
+               std::string_view type, std::string body) {
+    auto response = std::make_shared<http::response<http::string_body>>(status, request.version());
+    response->set(http::field::server, "sonoshape");
+    response->set(http::field::content_type, std::string(type));
+    // The page changes with sonoshape: never run a stale copy.
+    response->set(http::field::cache_control, "no-cache");
+    response->set("X-Content-Type-Options", "nosniff");
+    response->keep_alive(request.keep_alive());
+    const bool head = request.method() == http::verb::head;
+    response->body() = std::move(body);
+    response->prepare_payload();
+    if (head) response->body().clear();
+    http::async_write(stream_, *response,
+                      [self = shared_from_this(), response](beast::error_code ec, std::size_t) {
+                        if (ec) return;
+                        if (response->keep_alive()) return self->read();
+                        beast::error_code ignored;
+                        self->stream_.socket().shutdown(tcp::socket::shutdown_send, ignored);
+                      });
+  }
+
+  beast::tcp_stream stream_;
+  ServerCore& server_;
+  beast::flat_buffer buffer_;
+  std::optional<http::request_parser<http::string_body>> parser_;
+};
+
+void ServerCore::accept() {
+  acceptor.async_accept([this](beast::error_code ec, tcp::socket socket) {
+    if (ec == asio::error::operation_aborted) return;
+    if (!ec) std::make_shared<HttpSession>(std::move(socket), *this)->read();
+    accept();
+  });
+}
+
+void ServerCore::add_session(const std::shared_ptr<WsSession>& session) {
+  std::erase_if(sessions, [](const std::weak_ptr<WsSession>& s) { return s.expired(); });
+  sessions.push_back(session);
+  for (const Item& item : cache) session->enqueue(item);
+}
+
+void ServerCore::drain() {
+  std::vector<Item> items;
+  {
+    const std::lock_guard lock(mutex);
+    items.swap(inbox);
+    drain_scheduled = false;
+  }
+  for (Item& item : items) {
+    conflate(cache, item);
+    for (const std::weak_ptr<WsSession>& weak : sessions)
+      if (const auto session = weak.lock()) session->enqueue(item);
+  }
+}
+
+}  // namespace view_detail
+
+ViewServer::ViewServer(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+ViewServer::ViewServer(ViewServer&&) noexcept = default;
+ViewServer& ViewServer::operator=(ViewServer&&) noexcept = default;
+
+ViewServer::~ViewServer() {
+  if (!impl_) return;
+  impl_->ioc.stop();
+  if (impl_->thread.joinable()) impl_->thread.join();
+}
+
+Result<ViewServer> ViewServer::start(const ViewServerOptions& options) {
+  const std::string& address = options.http;
+  const std::string fix = "; give --http HOST:PORT, e.g. 127.0.0.1:8080 (port 0 picks a free one)";
+  const std::size_t colon = address.rfind(':');
+  if (colon == std::string::npos || colon == 0 || colon + 1 == address.size())
+    return Status::error("viewer address '" + address + "' is not HOST:PORT" + fix);
+  std::string host = address.substr(0, colon);
+  if (host.size() > 2 && host.front() == '[' && host.back() == ']')
+    host = host.substr(1, host.size() - 2);
+  if (host == "localhost") host = "127.0.0.1";
+  unsigned long port = 0;
+  const std::string port_text = address.substr(colon + 1);
+  const auto digit = [](char c) { return std::isdigit(static_cast<unsigned char>(c)) != 0; };
+  if (!std::all_of(port_text.begin(), port_text.end(), digit) || port_text.size() > 5 ||
+      (port = std::stoul(port_text)) > 65535)
+    return Status::error("viewer address '" + address + "' has no valid port" + fix);
+  beast::error_code ec;
+  const asio::ip::address ip = asio::ip::make_address(host, ec);
+  if (ec)
+    return Status::error("viewer address '" + address + "': '" + host +
+                         "' is not an IP address of this machine" + fix);
+  if (!std::filesystem::is_regular_file(options.web_root / "index.html"))
+    return Status::error("the viewer's page is not in " + options.web_root.string() +
+                         " (no index.html); give the viewer/ folder of the sonoshape sources "
+                         "with --web-root");
+
+  auto impl = std::make_unique<Impl>();
+  impl->web_root = options.web_root;
+  const tcp::endpoint endpoint(ip, static_cast<unsigned short>(port));
+  impl->acceptor.open(endpoint.protocol(), ec);
+  if (!ec) impl->acceptor.set_option(asio::socket_base::reuse_address(true), ec);
+  if (!ec) impl->acceptor.bind(endpoint, ec);
+  if (!ec) impl->acceptor.listen(asio::socket_base::max_listen_connections, ec);
+  if (ec)
+    return Status::error(
+        "cannot serve the viewer on " + address + ": " + ec.message() +
+        (ec == asio::error::address_in_use ? "; another program has the port" : "") + fix);
+  const tcp::endpoint bound = impl->acceptor.local_endpoint();
+  const std::string shown = ip.is_v6() ? "[" + host + "]" : host;
+  impl->url = "http://" + shown + ":" + std::to_string(bound.port()) + "/";
+  impl->accept();
+  Impl* raw = impl.get();
+  impl->thread = std::thread([raw] { raw->ioc.run(); });
+  return ViewServer(std::move(impl));
+}
+
+void ViewServer::post(const Frames& frames) {
+  if (frames.empty()) return;
+  Item item{frames[0], scan_of(frames), std::make_shared<const std::string>(pack_frames(frames))};
+  bool schedule = false;
+  {
+    const std::lock_guard lock(impl_->mutex);
+    impl_->replaced += conflate(impl_->inbox, std::move(item));
+    schedule = !impl_->drain_scheduled;
+    impl_->drain_scheduled = true;
+  }
+  if (schedule) asio::post(impl_->ioc, [raw = impl_.get()] { raw->drain(); });
+}
+
+void ViewServer::post_stream_state(bool connected, const std::string& endpoint,
+                                   const std::string& message) {
+  nlohmann::json header;
+  header["stream"] = connected ? "connected" : "waiting";
+  header["endpoint"] = endpoint;
+  if (!message.empty()) header["message"] = message;
+  post(Frames{std::string(kViewerTopic), header.dump()});
+}
+
+std::string ViewServer::url() const { return impl_->url; }
+
+std::size_t ViewServer::connections() const { return impl_->open_connections.load(); }
+
+std::uint64_t ViewServer::messages_replaced() const { return impl_->replaced.load(); }
+
+}  // namespace sonoshape::publish

@@ -1,0 +1,225 @@
+// `sonoshape view` and `scan --view` end to end: the command as a child process (against a
+// publisher in this process, or its own simulated scan), and a page's WebSocket and HTTP requests.
+#include <fcntl.h>
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <regex>
+#include <sstream>
+#include <thread>
+
+#include "sonoshape/publish/publisher.hpp"
+#include "sonoshape/testing/temp_dir.hpp"
+#include "view_client.hpp"
+
+extern char** environ;
+
+namespace sonoshape::publish {
+namespace {
+
+using namespace std::chrono_literals;
+using namespace sonoshape::testing::view;
+using sonoshape::testing::TempDir;
+using Clock = std::chrono::steady_clock;
+
+// A running `sonoshape view` (or another subcommand), its output captured in a file.
+class ViewProcess {
+ public:
+  ViewProcess(const std::vector<std::string>& arguments, std::filesystem::path log,
+              const std::string& command = "view")
+      : log_(std::move(log)) {
+    std::vector<std::string> args{SONOSHAPE_BINARY, command};
+    args.insert(args.end(), arguments.begin(), arguments.end());
+    std::vector<char*> argv;
+    for (std::string& a : args) argv.push_back(a.data());
+    argv.push_back(nullptr);
+    posix_spawn_file_actions_t actions;
+    posix_spawn_file_actions_init(&actions);
+    posix_spawn_file_actions_addopen(&actions, 1, log_.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    posix_spawn_file_actions_adddup2(&actions, 1, 2);
+    if (posix_spawn(&pid_, argv[0], &actions, nullptr, argv.data(), environ) != 0) pid_ = -1;
+    posix_spawn_file_actions_destroy(&actions);
+  }
+  ~ViewProcess() {
+    if (pid_ > 0) {
+      kill(pid_, SIGKILL);
+      waitpid(pid_, nullptr, 0);
+    }
+  }
+  ViewProcess(const ViewProcess&) = delete;
+  ViewProcess& operator=(const ViewProcess&) = delete;
+
+  void signal(int number) const { kill(pid_, number); }
+
+  /// The exit code, or -1 when it did not exit normally within `timeout`.
+  int wait(std::chrono::seconds timeout) {
+    const auto deadline = Clock::now() + timeout;
+    int status = 0;
+    while (Clock::now() < deadline) {
+      if (waitpid(pid_, &status, WNOHANG) == pid_) {
+        pid_ = -1;
+        return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+      }
+      std::this_thread::sleep_for(10ms);
+    }
+    return -1;
+  }
+
+  std::string output() const {
+    std::ifstream in(log_);
+    std::stringstream text;
+    text << in.rdbuf();
+    return text.str();
+  }
+
+  /// The page's address the command printed after `lead` ("open " for view, "live view at " for
+  /// scan); empty when it printed none within `timeout`.
+  std::string url(std::chrono::seconds timeout, const std::string& lead = "open ") const {
+    const std::regex address(lead + R"((http://127\.0\.0\.1:[0-9]+/))");
+    const auto deadline = Clock::now() + timeout;
+    while (Clock::now() < deadline) {
+      std::smatch match;
+      const std::string text = output();
+      if (std::regex_search(text, match, address)) return match[1];
+      std::this_thread::sleep_for(20ms);
+    }
+    return {};
+  }
+
+  /// Whether the output shows `text` within `timeout`.
+  bool shows(const std::string& text, std::chrono::seconds timeout) const {
+    const auto deadline = Clock::now() + timeout;
+    while (Clock::now() < deadline) {
+      if (output().find(text) != std::string::npos) return true;
+      std::this_thread::sleep_for(50ms);
+    }
+    return false;
+  }
+
+ private:
+  std::filesystem::path log_;
+  pid_t pid_ = -1;
+};
+
+TriangleMesh triangle(double size_mm) {
+  TriangleMesh mesh;
+  mesh.vertices = {Vec3(0, 0, 0), Vec3(size_mm, 0, 0), Vec3(0, size_mm, 0)};
+  mesh.triangles = {{0, 1, 2}};
+  return mesh;
+}
+
+TEST(ViewCommand, ServesThePageAndRelaysARunningScanUntilInterrupted) {
+  TempDir dir;
+  write_web_root(dir.path() / "web", true);
+  PublisherOptions options;
+  options.endpoint = "tcp://127.0.0.1:*";
+  options.snapshot_endpoint = "tcp://127.0.0.1:*";
+  options.linger_ms = 0;
+  MeshPublisher publisher = MeshPublisher::bind(options).value();
+  MeshSet meshes;
+  meshes.meshes = {{1, "liver", triangle(10.0)}, {3, "bone", triangle(4.0)}};
+  ASSERT_TRUE(publisher.publish_meshes(meshes, 0.5, 2));
+
+  ViewProcess view({publisher.endpoint(), "--snapshot", publisher.snapshot_endpoint(), "--http",
+                    "127.0.0.1:0", "--duration", "60", "--web-root", (dir.path() / "web").string()},
+                   dir.path() / "view.log");
+  const std::string url = view.url(20s);
+  ASSERT_FALSE(url.empty()) << view.output();
+  EXPECT_EQ(http_get(url, "/").status, 200u);
+
+  Page page(url);
+  const Frames liver = page.read_topic("mesh.1");
+  EXPECT_NE(liver.at(1).find("\"liver\""), std::string::npos);
+  page.read_topic("mesh.3");
+  StatusReport status;
+  status.frames_received = 77;
+  ASSERT_TRUE(publisher.publish_status(status));
+  const Frames live = page.read_topic("status");
+  EXPECT_NE(live.at(1).find("\"frames_received\":77"), std::string::npos) << live.at(1);
+
+  view.signal(SIGINT);
+  EXPECT_EQ(view.wait(10s), 0) << view.output();
+  EXPECT_NE(view.output().find("view: relayed"), std::string::npos) << view.output();
+}
+
+TEST(ViewCommand, RefusesAnAddressItCannotServeOn) {
+  TempDir dir;
+  ViewProcess view({"tcp://127.0.0.1:5556", "--http", "127.0.0.1:http"}, dir.path() / "view.log");
+  EXPECT_EQ(view.wait(20s), 1);
+  EXPECT_NE(view.output().find("error: viewer address '127.0.0.1:http'"), std::string::npos)
+      << view.output();
+}
+
+TEST(ViewCommand, NeedsASnapshotEndpointItCannotGuess) {
+  TempDir dir;
+  ViewProcess view({"ipc:///tmp/sonoshape-view-test", "--http", "127.0.0.1:0"},
+                   dir.path() / "view.log");
+  EXPECT_EQ(view.wait(20s), 1);
+  EXPECT_NE(view.output().find("--snapshot"), std::string::npos) << view.output();
+}
+
+TEST(ScanView, ServesTheScanItselfAndHoldsTheFinishedOneUntilInterrupted) {
+  TempDir dir;
+  const std::filesystem::path out = dir.path() / "out";
+  ViewProcess scan({"--source",
+                    "sim:default",
+                    "--width-px",
+                    "160",
+                    "--height-px",
+                    "160",
+                    "--frame-rate",
+                    "5",
+                    "--depth",
+                    "5",
+                    "--sweep-s",
+                    "2",
+                    "--fast",
+                    "--publish",
+                    "tcp://127.0.0.1:*",
+                    "--snapshot",
+                    "tcp://127.0.0.1:*",
+                    "--view",
+                    "127.0.0.1:0",
+                    "--view-hold",
+                    "-o",
+                    out.string()},
+                   dir.path() / "scan.log", "scan");
+  const std::string url = scan.url(60s, "live view at ");
+  ASSERT_FALSE(url.empty()) << scan.output();
+  ASSERT_TRUE(scan.shows("shows it until Ctrl-C", 120s)) << scan.output();
+  EXPECT_EQ(http_get(url, "/").status, 200u);
+
+  // A page opened after the scan: the finished surfaces and the final status.
+  Page page(url);
+  const nlohmann::json summary = nlohmann::json::parse(std::ifstream(out / "scan.json"));
+  std::map<std::string, Frames> newest;
+  // The newest of every topic (viewer, mesh.1 to mesh.3, status), in the order they first came.
+  for (int i = 0; i < 10 && !(newest.count("status") && newest.count("mesh.2")); ++i) {
+    Frames frames = page.read();
+    ASSERT_FALSE(frames.empty());
+    newest[frames[0]] = std::move(frames);
+  }
+  ASSERT_TRUE(newest.count("mesh.1") && newest.count("mesh.2")) << newest.begin()->first;
+  EXPECT_TRUE(decode_message(newest["mesh.2"]));
+  const Frames& status = newest["status"];
+  const Result<StreamMessage> decoded = decode_message(status);
+  ASSERT_TRUE(decoded) << decoded.message();
+  const auto& report = std::get<StatusReport>(decoded->body);
+  EXPECT_EQ(report.state, ScanState::kIdle);
+  EXPECT_EQ(report.frames_received, summary["frames_received"].get<std::uint64_t>());
+  EXPECT_EQ(report.slices, summary["slices"].get<std::uint64_t>());
+
+  scan.signal(SIGINT);
+  EXPECT_EQ(scan.wait(10s), 0) << scan.output();
+}
+
+}  // namespace
+}  // namespace sonoshape::publish

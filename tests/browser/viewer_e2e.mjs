@@ -1,0 +1,274 @@
+// The browser view end to end: a short simulated scan, `sonoshape view` following it, and Debian's
+// chromium (headless, software WebGL) showing the page. Checks that every label's colour is in
+// the rendered picture, that the page's status numbers match the scan's scan.json, and that the
+// page's PLY and STL downloads hold the scan's final surfaces (their triangle counts).
+//
+// node tests/browser/viewer_e2e.mjs SONOSHAPE_BINARY WORK_DIR [SCREENSHOT.png [--full]]
+// --full scans the default simulation (256 x 256 px, 30 fps, 6 s): the README's picture.
+// Exits 77 (ctest: skipped) with the reason when chromium or three.js is missing. Only node's
+// own modules: chromium is driven over its DevTools protocol on a pipe (--remote-debugging-pipe).
+import { spawn, spawnSync } from 'node:child_process';
+import fs from 'node:fs';
+import path from 'node:path';
+import zlib from 'node:zlib';
+import { fileURLToPath } from 'node:url';
+import { labelColor } from '../../viewer/src/palette.js';
+
+const here = path.dirname(fileURLToPath(import.meta.url));
+const [sonoshape, workDir, screenshotPath, mode] = process.argv.slice(2);
+const kWidth = 1200;
+const kHeight = 800;
+const kPanelWidth = 300;  // the side panel (style.css): colours are counted left of it
+const kMinPixels = 150;   // of each label's colour in the scene
+const children = [];
+
+function skip(reason) {
+  console.log('SKIPPED: ' + reason);
+  process.exit(77);
+}
+
+function fail(reason) {
+  console.error('FAILED: ' + reason);
+  for (const child of children) child.kill('SIGKILL');
+  process.exit(1);
+}
+
+function findChromium() {
+  for (const name of ['chromium', 'chromium-browser', 'google-chrome']) {
+    const found = spawnSync('sh', ['-c', 'command -v ' + name], { encoding: 'utf8' });
+    if (found.status === 0) return found.stdout.trim();
+  }
+  return null;
+}
+
+const sleep = (ms) => new Promise((resolve) => setTimeout(resolve, ms));
+
+// Starts a program with its output collected; `waitFor(regex)` resolves with the first match.
+function start(command, args) {
+  const child = spawn(command, args, { stdio: ['ignore', 'pipe', 'pipe'] });
+  children.push(child);
+  let output = '';
+  child.stdout.on('data', (d) => { output += d; });
+  child.stderr.on('data', (d) => { output += d; });
+  child.output = () => output;
+  child.waitFor = async (pattern, timeoutMs) => {
+    const deadline = Date.now() + timeoutMs;
+    while (Date.now() < deadline) {
+      const match = output.match(pattern);
+      if (match) return match;
+      if (child.exitCode !== null) break;
+      await sleep(50);
+    }
+    fail(command + ' printed no ' + pattern + ' in ' + timeoutMs + ' ms:\n' + output);
+  };
+  child.exited = new Promise((resolve) => child.on('exit', (code) => resolve(code)));
+  return child;
+}
+
+// Chromium's DevTools protocol over fds 3 (commands in) and 4 (replies out), NUL-separated JSON.
+function devtools(chromium) {
+  const browser = spawn(chromium, [
+    '--headless', '--no-sandbox', '--remote-debugging-pipe', '--use-angle=swiftshader',
+    '--enable-unsafe-swiftshader', '--no-first-run', '--disable-extensions',
+    `--window-size=${kWidth},${kHeight}`, '--user-data-dir=' + path.join(workDir, 'chromium'),
+    'about:blank',
+  ], { stdio: ['ignore', 'ignore', 'ignore', 'pipe', 'pipe'] });
+  children.push(browser);
+  const pending = new Map();
+  let nextId = 1;
+  let buffer = '';
+  browser.stdio[4].on('data', (data) => {
+    buffer += data.toString('utf8');
+    let end;
+    while ((end = buffer.indexOf('\0')) >= 0) {
+      const message = JSON.parse(buffer.slice(0, end));
+      buffer = buffer.slice(end + 1);
+      const waiter = pending.get(message.id);
+      if (!waiter) continue;
+      pending.delete(message.id);
+      if (message.error) waiter.reject(new Error(JSON.stringify(message.error)));
+      else waiter.resolve(message.result);
+    }
+  });
+  const send = (method, params = {}, sessionId = undefined) => new Promise((resolve, reject) => {
+    const id = nextId++;
+    pending.set(id, { resolve, reject });
+    browser.stdio[3].write(JSON.stringify({ id, method, params, sessionId }) + '\0');
+  });
+  return { browser, send };
+}
+
+// Decodes an 8-bit RGB or RGBA PNG (what Page.captureScreenshot gives) into RGBA pixels.
+function decodePng(png) {
+  let at = 8;
+  let width = 0;
+  let height = 0;
+  let channels = 0;
+  const idat = [];
+  while (at < png.length) {
+    const length = png.readUInt32BE(at);
+    const type = png.toString('ascii', at + 4, at + 8);
+    const data = png.subarray(at + 8, at + 8 + length);
+    if (type === 'IHDR') {
+      width = data.readUInt32BE(0);
+      height = data.readUInt32BE(4);
+      if (data[8] !== 8 || data[12] !== 0) fail('PNG is not 8-bit, non-interlaced');
+      channels = { 2: 3, 6: 4 }[data[9]];
+      if (!channels) fail('PNG colour type ' + data[9]);
+    } else if (type === 'IDAT') {
+      idat.push(data);
+    }
+    at += 12 + length;
+  }
+  const raw = zlib.inflateSync(Buffer.concat(idat));
+  const stride = width * channels;
+  const pixels = Buffer.alloc(width * height * 4);
+  let previous = Buffer.alloc(stride);
+  for (let y = 0; y < height; ++y) {
+    const filter = raw[y * (stride + 1)];
+    const line = Buffer.from(raw.subarray(y * (stride + 1) + 1, (y + 1) * (stride + 1)));
+    for (let x = 0; x < stride; ++x) {
+      const a = x >= channels ? line[x - channels] : 0;
+      const b = previous[x];
+      const c = x >= channels ? previous[x - channels] : 0;
+      let predictor = 0;
+      if (filter === 1) predictor = a;
+      else if (filter === 2) predictor = b;
+      else if (filter === 3) predictor = (a + b) >> 1;
+      else if (filter === 4) {
+        const p = a + b - c;
+        const pa = Math.abs(p - a);
+        const pb = Math.abs(p - b);
+        const pc = Math.abs(p - c);
+        predictor = pa <= pb && pa <= pc ? a : pb <= pc ? b : c;
+      }
+      line[x] = (line[x] + predictor) & 0xff;
+    }
+    for (let x = 0; x < width; ++x)
+      for (let k = 0; k < 4; ++k)
+        pixels[(y * width + x) * 4 + k] = k < channels ? line[x * channels + k] : 255;
+    previous = line;
+  }
+  return { width, height, pixels };
+}
+
+function hueOf(r, g, b) {
+  const max = Math.max(r, g, b);
+  const min = Math.min(r, g, b);
+  if (max === min) return { hue: 0, saturation: 0, value: max / 255 };
+  const d = max - min;
+  let hue = max === r ? ((g - b) / d) % 6 : max === g ? (b - r) / d + 2 : (r - g) / d + 4;
+  hue = (hue * 60 + 360) % 360;
+  return { hue, saturation: d / max, value: max / 255 };
+}
+
+// Pixels of the scene (left of the panel) whose hue is that of `color`, lit or shaded.
+function countColour(image, color) {
+  const target = hueOf(parseInt(color.slice(1, 3), 16), parseInt(color.slice(3, 5), 16),
+                       parseInt(color.slice(5, 7), 16));
+  let count = 0;
+  const sceneWidth = image.width - kPanelWidth * (image.width / kWidth);
+  for (let y = 0; y < image.height; ++y)
+    for (let x = 0; x < sceneWidth; ++x) {
+      const i = (y * image.width + x) * 4;
+      const pixel = hueOf(image.pixels[i], image.pixels[i + 1], image.pixels[i + 2]);
+      const distance = Math.min(Math.abs(pixel.hue - target.hue), 360 - Math.abs(pixel.hue - target.hue));
+      if (pixel.saturation > 0.35 && pixel.value > 0.15 && distance < 10) ++count;
+    }
+  return count;
+}
+
+async function main() {
+  if (!sonoshape || !workDir) fail('usage: viewer_e2e.mjs SONOSHAPE_BINARY WORK_DIR [SCREENSHOT.png]');
+  const chromium = findChromium();
+  if (!chromium) skip('chromium is not installed (scripts/install-deps installs it)');
+  if (!fs.existsSync(path.join(here, '../../viewer/node_modules/three/build/three.module.js')))
+    skip('three.js is not in viewer/node_modules (scripts/install-deps runs npm ci)');
+  fs.rmSync(workDir, { recursive: true, force: true });
+  fs.mkdirSync(workDir, { recursive: true });
+  const started = Date.now();
+
+  // A short simulated sweep played in real time, so that the view joins it while it runs.
+  const out = path.join(workDir, 'scan');
+  const sweep = mode === '--full'
+    ? ['--sweep-s', '6']
+    : ['--width-px', '160', '--height-px', '160', '--frame-rate', '8', '--depth', '5', '--sweep-s', '4'];
+  const scan = start(sonoshape, ['scan', '--source', 'sim:default', ...sweep, '--realtime',
+    '--publish', 'tcp://127.0.0.1:*', '--snapshot', 'tcp://127.0.0.1:*', '-o', out]);
+  const [, pub, snapshot] = await scan.waitFor(/on (tcp:\/\/\S+) \(snapshot (tcp:\/\/\S+)\)/, 60000);
+  const view = start(sonoshape, ['view', pub, '--snapshot', snapshot, '--http', '127.0.0.1:0']);
+  const [, url] = await view.waitFor(/open (http:\/\/127\.0\.0\.1:\d+\/)/, 20000);
+
+  const { send } = devtools(chromium);
+  const { targetInfos } = await send('Target.getTargets');
+  const page = targetInfos.find((t) => t.type === 'page');
+  if (!page) fail('chromium opened no page');
+  const { sessionId } = await send('Target.attachToTarget', { targetId: page.targetId, flatten: true });
+  await send('Emulation.setDeviceMetricsOverride',
+             { width: kWidth, height: kHeight, deviceScaleFactor: 1, mobile: false }, sessionId);
+  await send('Page.navigate', { url }, sessionId);
+
+  const scanCode = await scan.exited;
+  if (scanCode !== 0) fail('the scan exited with ' + scanCode + ':\n' + scan.output());
+  const summary = JSON.parse(fs.readFileSync(path.join(out, 'scan.json'), 'utf8'));
+
+  // Wait until the page shows the finished scan: idle, every label drawn, a frame rendered.
+  const evaluate = async (expression) =>
+    (await send('Runtime.evaluate', { expression, returnByValue: true }, sessionId)).result.value;
+  let state;
+  for (let i = 0; i < 300; ++i) {
+    state = await evaluate(`({ ...window.sonoshapeViewer,
+      state: document.getElementById('state')?.textContent ?? '',
+      frames: document.getElementById('frames')?.textContent,
+      slices: document.getElementById('slices')?.textContent,
+      labels: [...document.querySelectorAll('#legend .name')].map((n) => n.textContent) })`);
+    if (state && state.state.startsWith('idle') && state.labelsDrawn >= 2 && state.rendered > 0) break;
+    await sleep(100);
+  }
+  if (!state || !state.state.startsWith('idle')) fail('the page never showed the idle scan: ' + JSON.stringify(state));
+  await sleep(500);  // the last requested frame
+  if (String(summary.frames_received) !== state.frames)
+    fail(`frames in: page ${state.frames}, scan.json ${summary.frames_received}`);
+  if (String(summary.slices) !== state.slices)
+    fail(`slices: page ${state.slices}, scan.json ${summary.slices}`);
+
+  const { data } = await send('Page.captureScreenshot', { format: 'png' }, sessionId);
+  const png = Buffer.from(data, 'base64');
+  fs.writeFileSync(path.join(workDir, 'page.png'), png);
+  if (screenshotPath) fs.writeFileSync(screenshotPath, png);
+  const image = decodePng(png);
+  // Every label the scan wrote a surface for (a short sweep may miss a small organ: an empty mesh).
+  const faces = (file) => {
+    const header = fs.readFileSync(path.join(out, file)).subarray(0, 1024).toString('latin1');
+    return Number((header.match(/element face (\d+)/) ?? [0, 0])[1]);
+  };
+  const labels = fs.readdirSync(out).map((f) => f.match(/^label_(\d+)\.ply$/))
+    .filter((m) => m && faces(m[0]) > 0).map((m) => Number(m[1]));
+  if (labels.length < 2) fail('the scan wrote ' + labels.length + ' non-empty label meshes');
+  for (const label of labels) {
+    const count = countColour(image, labelColor(label));
+    console.log(`label ${label} (${labelColor(label)}): ${count} pixels`);
+    if (count < kMinPixels)
+      fail(`label ${label}'s colour ${labelColor(label)} covers ${count} pixels (< ${kMinPixels}); see ${path.join(workDir, 'page.png')}`);
+  }
+  // The page's downloads: each surface as PLY and STL, with the scan's own final triangle count.
+  for (const label of labels) {
+    const ply = await evaluate(`window.sonoshapeViewer.exportMesh(${label}, 'ply')`);
+    const stl = await evaluate(`window.sonoshapeViewer.exportMesh(${label}, 'stl')`);
+    if (!ply || !stl) fail(`label ${label}: the page exports no surface`);
+    const header = Buffer.from(ply.head).toString('latin1');
+    const plyFaces = Number((header.match(/element face (\d+)/) ?? [0, -1])[1]);
+    const stlFaces = Buffer.from(stl.head).readUInt32LE(80);
+    const expected = faces(`label_${label}.ply`);
+    if (!header.startsWith('ply\nformat binary_little_endian 1.0') || plyFaces !== expected)
+      fail(`label ${label}: PLY download has ${plyFaces} faces, the scan wrote ${expected}:\n${header}`);
+    if (stlFaces !== expected || stl.size !== 84 + 50 * expected)
+      fail(`label ${label}: STL download has ${stlFaces} triangles in ${stl.size} bytes, not ${expected}`);
+  }
+  console.log(`page: ${state.labels.join(', ')}; frames ${state.frames}, slices ${state.slices}; ` +
+              `${((Date.now() - started) / 1000).toFixed(1)} s`);
+  for (const child of children) child.kill('SIGTERM');
+  process.exit(0);
+}
+
+main().catch((e) => fail(e.stack || String(e)));

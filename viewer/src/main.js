@@ -1,0 +1,161 @@
+// The page: a WebSocket to `sonoshape view`, decoded messages to the scene, legend and status.
+import { decodeMessage, DecodeError } from './decode.js';
+import { labelColor } from './palette.js';
+import { SceneView } from './scene.js';
+
+const $ = (id) => document.getElementById(id);
+const view = new SceneView($('scene'));
+const labels = new Map();  // label -> { name, triangles, row }
+let scan = null;
+let lastMessageAt = 0;
+let retryDelayMs = 500;
+let everConnected = false;
+
+// For tests and scripts: what the page has drawn so far.
+window.sonoshapeViewer = { labelsDrawn: 0, messages: 0, rendered: 0, scan: null };
+view.onRendered = () => { window.sonoshapeViewer.rendered += 1; };
+
+function say(text, kind = 'info') {
+  const line = $('connection');
+  line.textContent = text;
+  line.className = kind;
+}
+
+function legendRow(label, name) {
+  const row = document.createElement('li');
+  const color = labelColor(label);
+  row.innerHTML =
+    '<input type="checkbox" checked title="show or hide">' +
+    '<span class="swatch"></span><span class="name"></span><span class="count"></span>' +
+    '<input type="range" min="0" max="1" step="0.05" value="1" title="opacity">' +
+    '<span class="downloads"><button data-format="ply" title="download the surface (mm)">PLY</button>' +
+    '<button data-format="stl" title="download the surface (mm)">STL</button></span>';
+  row.querySelector('.swatch').style.background = color;
+  row.querySelector('.name').textContent = name || 'label ' + label;
+  const [visible, opacity] = row.querySelectorAll('input');
+  visible.addEventListener('change', () => view.setVisible(label, visible.checked));
+  opacity.addEventListener('input', () => view.setOpacity(label, Number(opacity.value)));
+  for (const button of row.querySelectorAll('button[data-format]'))
+    button.addEventListener('click', () => downloadMesh(label, button.dataset.format));
+  $('legend').appendChild(row);
+  return row;
+}
+
+function download(url, filename) {
+  const link = document.createElement('a');
+  link.href = url;
+  link.download = filename;
+  link.click();
+}
+
+function fileStem(label) {
+  const name = labels.get(label)?.row.querySelector('.name').textContent ?? '';
+  return 'label_' + label + (name ? '_' + name.replace(/[^A-Za-z0-9_-]+/g, '_') : '');
+}
+
+function downloadMesh(label, format) {
+  const bytes = view.exportMesh(label, format);
+  if (!bytes) return say('label ' + label + ' has no surface yet', 'warn');
+  const url = URL.createObjectURL(new Blob([bytes], { type: 'application/octet-stream' }));
+  download(url, fileStem(label) + '.' + format);
+  setTimeout(() => URL.revokeObjectURL(url), 10000);
+}
+
+function showMesh(message) {
+  let entry = labels.get(message.label);
+  if (!entry) {
+    entry = { row: legendRow(message.label, message.name) };
+    labels.set(message.label, entry);
+    // Keep the legend in label order.
+    [...labels.keys()].sort((a, b) => a - b).forEach((l) => $('legend').appendChild(labels.get(l).row));
+  }
+  const triangles = message.indices.length / 3;
+  entry.row.querySelector('.name').textContent = message.name || 'label ' + message.label;
+  entry.row.querySelector('.count').textContent =
+    triangles ? triangles.toLocaleString('en') + ' triangles' : 'none yet';
+  view.setMesh(message.label, labelColor(message.label), message.positions, message.indices,
+               message.normals);
+  window.sonoshapeViewer.labelsDrawn = [...labels.keys()].length;
+}
+
+function showStatus(header) {
+  $('state').textContent = header.state + (header.message ? ': ' + header.message : '');
+  $('state').className = header.state;
+  $('frames').textContent = header.frames_received ?? '–';
+  $('dropped').textContent = header.frames_dropped ?? '–';
+  $('slices').textContent = header.slices ?? '–';
+  $('update-ms').textContent = Number(header.total_ms ?? 0).toFixed(0);
+}
+
+function followScan(header) {
+  if (header.scan === scan) return;
+  if (scan !== null) {
+    say('a new scan began (' + header.scan.slice(0, 8) + '): its surfaces replace the old ones', 'info');
+    view.clear();
+    labels.clear();
+    $('legend').replaceChildren();
+  }
+  scan = header.scan;
+  window.sonoshapeViewer.scan = scan;
+  $('scan').textContent = scan.slice(0, 8);
+}
+
+function onMessage(event) {
+  let message;
+  try {
+    message = decodeMessage(event.data);
+  } catch (e) {
+    if (!(e instanceof DecodeError)) throw e;
+    console.warn('sonoshape viewer: skipped a message:', e.message);
+    return;
+  }
+  lastMessageAt = performance.now();
+  window.sonoshapeViewer.messages += 1;
+  if (message.kind === 'viewer') {
+    const h = message.header;
+    if (h.stream === 'connected') say('following the scan at ' + h.endpoint, 'ok');
+    else say('waiting for a scan at ' + h.endpoint + (h.message ? ': ' + h.message : ''), 'warn');
+    return;
+  }
+  followScan(message.header);
+  if (message.kind === 'mesh') showMesh(message);
+  else showStatus(message.header);
+}
+
+function connect() {
+  const socket = new WebSocket((location.protocol === 'https:' ? 'wss://' : 'ws://') + location.host + '/stream');
+  socket.binaryType = 'arraybuffer';
+  socket.addEventListener('open', () => {
+    retryDelayMs = 500;
+    say(everConnected ? 'reconnected to sonoshape' : 'connected to sonoshape', 'ok');
+    everConnected = true;
+  });
+  socket.addEventListener('message', onMessage);
+  socket.addEventListener('close', () => {
+    const seconds = (retryDelayMs / 1000).toFixed(1);
+    say((everConnected ? 'lost sonoshape' : 'cannot reach sonoshape') + ' at ' + location.host +
+        '; trying again in ' + seconds + ' s', 'error');
+    setTimeout(connect, retryDelayMs);
+    retryDelayMs = Math.min(retryDelayMs * 2, 5000);
+  });
+}
+
+// How long since the stream last said anything: a stalled scan shows.
+setInterval(() => {
+  $('age').textContent = lastMessageAt ? ((performance.now() - lastMessageAt) / 1000).toFixed(0) + ' s ago' : '–';
+}, 1000);
+
+$('reset').addEventListener('click', () => view.resetView());
+$('screenshot').addEventListener('click',
+  () => download(view.screenshot(), 'sonoshape-' + (scan ?? 'view').slice(0, 8) + '.png'));
+// For tests: the header of a label's export and its size, as a download would write it.
+window.sonoshapeViewer.exportMesh = (label, format) => {
+  const bytes = view.exportMesh(label, format);
+  if (!bytes) return null;
+  const head = new Uint8Array(bytes, 0, Math.min(bytes.byteLength, 400));
+  return { size: bytes.byteLength, head: [...head] };
+};
+window.addEventListener('keydown', (event) => {
+  if (event.key === 'r' && event.target === document.body) view.resetView();
+});
+connect();
