@@ -8,18 +8,13 @@ endfunction()
 
 # sonoshape_add_test(<name> SOURCES ... LIBS ...): one GoogleTest executable registered with ctest.
 function(sonoshape_add_test name)
-  cmake_parse_arguments(ARG "" "FILTER" "SOURCES;LIBS;LABELS" ${ARGN})
+  cmake_parse_arguments(ARG "" "" "SOURCES;LIBS;LABELS" ${ARGN})
   add_executable(${name} ${ARG_SOURCES})
   target_link_libraries(${name} PRIVATE ${ARG_LIBS} GTest::gtest GTest::gtest_main)
   target_compile_definitions(${name} PRIVATE SONOSHAPE_DATA_DIR="${SONOSHAPE_DATA_DIR}")
   target_include_directories(${name} PRIVATE ${PROJECT_SOURCE_DIR}/tests/support)
   sonoshape_target_defaults(${name})
-  if(ARG_FILTER)  # a GoogleTest filter: only these tests of the program are registered here
-    gtest_discover_tests(${name} DISCOVERY_TIMEOUT 60 TEST_FILTER "${ARG_FILTER}"
-                         PROPERTIES LABELS "${ARG_LABELS}")
-  else()
-    gtest_discover_tests(${name} DISCOVERY_TIMEOUT 60 PROPERTIES LABELS "${ARG_LABELS}")
-  endif()
+  gtest_discover_tests(${name} DISCOVERY_TIMEOUT 60 PROPERTIES LABELS "${ARG_LABELS}")
 endfunction()
 
 # sonoshape_add_umockdev_test(<name> SOURCES ... LIBS ...): a GoogleTest program that emulates

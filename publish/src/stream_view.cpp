@@ -15,6 +15,11 @@ namespace {
 constexpr std::chrono::milliseconds kPollInterval{200};
 // The longest a connect waits for a snapshot: bounds how long stopping can take.
 constexpr int kMaxSnapshotWaitMs = 2000;
+// After this long without a message, the view takes a fresh snapshot if the stream went on past
+// its last refresh: the PUB socket drops what a slow reader cannot take (its high-water mark),
+// and the end of a burst (the last meshes and the final status of a scan) has no later
+// message whose seq would show the gap.
+constexpr std::chrono::milliseconds kQuietRefresh{1000};
 
 }  // namespace
 
@@ -26,6 +31,11 @@ struct StreamView::Impl {
   ViewServer server;
   std::atomic<bool> stop{false};
   std::atomic<std::uint64_t> relayed{0};
+  // The scan followed, the highest seq seen of it, and the seq up to which a refresh (a fresh
+  // snapshot after a quiet spell) has been taken: at most one refresh per stretch of messages.
+  std::string followed_scan;
+  std::uint64_t highest_seq = 0;
+  std::uint64_t refreshed_up_to = 0;
   std::thread thread;  // declared last: started once the members above exist
 
   void sleep_unless_stopped(std::chrono::milliseconds duration) {
@@ -41,6 +51,7 @@ struct StreamView::Impl {
     stream.topics.clear();
     stream.snapshot_timeout_ms = std::min(stream.snapshot_timeout_ms, kMaxSnapshotWaitMs);
     std::string last_problem;
+    bool following = false;
     while (!stop) {
       Result<MeshSubscriber> subscriber = MeshSubscriber::connect(stream);
       if (!subscriber) {
@@ -53,25 +64,44 @@ struct StreamView::Impl {
         sleep_unless_stopped(std::chrono::milliseconds(options.retry_ms));
         continue;
       }
+      // Said once per connection (a refresh after a quiet spell joins again without a word).
+      if (!following || !last_problem.empty()) {
+        log_info("view: following the mesh stream at " + stream.endpoint);
+        server.post_stream_state(true, stream.endpoint, "");
+      }
+      following = true;
       last_problem.clear();
-      log_info("view: following the mesh stream at " + stream.endpoint);
-      server.post_stream_state(true, stream.endpoint, "");
       relay(*subscriber, !stream.snapshot_endpoint.empty());
     }
   }
 
-  // Relays until stopped, or until a scan that began while the view was away calls for a
-  // fresh snapshot (returns then, and run() joins again).
+  // Relays until stopped, or until a fresh snapshot is called for (returns then, and run()
+  // joins again): a scan that began while the view was away, or a quiet spell after messages
+  // the view may have lost (kQuietRefresh).
   void relay(MeshSubscriber& subscriber, bool can_rejoin) {
     std::string scan;
+    auto quiet = std::chrono::milliseconds(0);
     while (!stop) {
       auto received = subscriber.receive(kPollInterval);
       if (!received) {
         log_warning("view: skipped an invalid message: " + received.message());
         continue;
       }
-      if (!*received) continue;
+      if (!*received) {
+        quiet += kPollInterval;
+        if (can_rejoin && quiet >= kQuietRefresh && highest_seq > refreshed_up_to) {
+          refreshed_up_to = highest_seq;
+          return;  // run() joins again: the snapshot holds the newest meshes and status
+        }
+        continue;
+      }
+      quiet = std::chrono::milliseconds(0);
       const StreamMessage& message = **received;
+      if (message.scan != followed_scan) {
+        followed_scan = message.scan;
+        highest_seq = refreshed_up_to = 0;
+      }
+      highest_seq = std::max(highest_seq, message.seq);
       if (message.scan != scan) {
         if (!scan.empty() && message.seq > 1 && can_rejoin) {
           log_info("view: scan " + message.scan + " began while away; joining it afresh");
