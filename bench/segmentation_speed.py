@@ -119,7 +119,7 @@ def main():
          "--seed", "1", "-o", sim], "simulate")
     inputs = [("PLUS spine", os.path.join(root, PLUS[0]), os.path.join(root, PLUS[1])),
               ("simulated", sim, None)]
-    builds = [("after", args.speed_binary)]
+    builds = [("this" if not args.baseline else "after", args.speed_binary)]
     if args.baseline:
         builds.insert(0, (args.baseline_name, args.baseline))
     rows = []
