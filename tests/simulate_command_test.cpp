@@ -124,6 +124,19 @@ TEST_F(SimulateCommand, SegmentTurnsASimulatedSweepIntoAValidSliceSet) {
                                  dir_ / "log_recon");
   ASSERT_EQ(reconstructed.exit_code, 0) << reconstructed.output;
   EXPECT_TRUE(fs::exists(dir_ / "out" / "label_1.ply"));
+
+  // An organ the models name but the cleaning removes everywhere is reported, with the reason.
+  {
+    std::ofstream config(dir_ / "big_regions.json");
+    config << R"({"format": "sonoshape-segmentation", "version": 1, "min_region_mm2": 5000})";
+  }
+  const auto lost = run("segment " + (dir_ / "s.igs.mha").string() + " --config " +
+                            (dir_ / "big_regions.json").string() + " -o " +
+                            (dir_ / "lost.slices.json").string(),
+                        dir_ / "log_lost");
+  EXPECT_NE(lost.output.find("label 2 (cheburashka) is in no slice: no frame's pixels"),
+            std::string::npos)
+      << lost.output;
 }
 
 // Frames of 96 px and a real PLUS recording (820x616) used to fail with self-intersecting

@@ -132,6 +132,7 @@ std::string summary_text(const scan::ScanSummary& s) {
     std::istringstream table(seg::format_comparison(*s.segmentation_scores, s.label_names));
     for (std::string line; std::getline(table, line);) out << "\n  " << line;
   }
+  for (const std::string& missing : s.labels_without_mesh) out << "\n  " << missing;
   for (const std::string& e : s.errors) out << "\n  error: " << e;
   return out.str();
 }

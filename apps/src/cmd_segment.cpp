@@ -3,6 +3,7 @@
 // the truth label frames: --perfect-labels), polygons in the reference frame, fov = sector.
 // --truth-labels scores every frame's label map against the simulator's truth.
 #include <CLI/CLI.hpp>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
@@ -244,6 +245,20 @@ int run_segment(const SegmentOptions& options) {
           << "% of the sector unknown on average; " << clock.seconds() << " s -> "
           << options.output.string();
   log_info(summary.str());
+  // Every organ the models name must be in the output, or the summary says why not.
+  for (const seg::LabelModel& m : setup->config.materials) {
+    if (result.slices_with_label.count(m.label)) continue;
+    const auto frames = result.frames_with_label.find(m.label);
+    log_warning(
+        "segment: label " + std::to_string(m.label) + " (" + m.name + ") is in no slice: " +
+        (frames == result.frames_with_label.end()
+             ? "no frame's pixels were given it (its grey model, mean " +
+                   std::to_string(static_cast<int>(std::lround(m.grey_mean))) +
+                   ", matched nothing that survived the cleaning: check the model, or lower "
+                   "min_region_mm2 / opening_mm for small organs)"
+             : "its regions in " + std::to_string(frames->second) +
+                   " frames were all dropped as invalid polygons (see the repairs)"));
+  }
   return options.truth_labels.empty() ? 0 : report_comparison(result, *setup, options);
 }
 

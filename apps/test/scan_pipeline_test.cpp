@@ -289,7 +289,23 @@ TEST(ScanPipeline, FastPlaybackLosesNothingAndBatchesBehindASlowReconstruction) 
   EXPECT_GE(summary.latency.p95_s, summary.latency.p50_s);
   EXPECT_GE(summary.update_ms_median, 15.0);
   EXPECT_TRUE(summary.errors.empty());
+  EXPECT_TRUE(summary.labels_without_mesh.empty());
   EXPECT_EQ(pipeline.finish().counters.slices, 30u);  // idempotent
+}
+
+TEST(ScanPipeline, TheSummarySaysWhyAMaterialOfTheSetupHasNoMesh) {
+  ScanSource source = fake_source(std::make_unique<FakeFrames>(20, 33),
+                                  sliding_poses(18.0, -100, 800, 25));
+  source.setup.labels = {{1, "organ"}, {2, "lesion"}};  // the segmentation only finds the organ
+  ScanPipeline pipeline(std::move(source), std::make_unique<FakeSegmentation>(),
+                        std::make_unique<FakeReconstruction>(0), fast_options());
+  ASSERT_TRUE(pipeline.start());
+  const ScanSummary summary = pipeline.finish();
+  ASSERT_GT(summary.counters.slices, 0u);
+  ASSERT_EQ(summary.labels_without_mesh.size(), 1u);
+  EXPECT_NE(summary.labels_without_mesh[0].find("label 2 (lesion): no mesh: no slice holds it"),
+            std::string::npos)
+      << summary.labels_without_mesh[0];
 }
 
 TEST(ScanPipeline, RealTimeDropsAndCountsWhenTheReconstructionFallsBehind) {

@@ -1,8 +1,7 @@
 #include "sonoshape/segmentation/sweep.hpp"
 
-#include "sonoshape/segmentation/labeller.hpp"
-
 #include <algorithm>
+#include <array>
 #include <charconv>
 #include <cmath>
 #include <fstream>
@@ -11,6 +10,7 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 #include <optional>
+#include <set>
 #include <sstream>
 #include <stdexcept>
 
@@ -370,6 +370,12 @@ SweepSegmentation segment_sweep(const acq::SequenceFile& file, const SweepSetup&
         : labeller     ? labeller->segment(file.image(k), prior ? &*prior : nullptr).labels
                        : segment_frame(file.image(k), setup.geometry, setup.config).labels;
     if (labels.on_label_map) labels.on_label_map(k, frame_labels);
+    {
+      std::array<bool, 256> present{};
+      for (const std::uint8_t v : frame_labels.pixels) present[v] = true;
+      for (const LabelModel& m : setup.config.materials)
+        if (present[static_cast<std::size_t>(m.label)]) ++out.frames_with_label[m.label];
+    }
     if (labels.truth) {
       out.comparisons.push_back(
           {k, compare_labels(labels.truth->image(k), frame_labels, setup.geometry.sector)});
@@ -413,6 +419,10 @@ SweepSegmentation segment_sweep(const acq::SequenceFile& file, const SweepSetup&
       ++out.coincident;
     } else {
       if (labeller && labels.predictor) labels.predictor->add(*slice);
+      std::set<int> in_slice;
+      for (const Region& r : slice->regions)
+        if (r.label != kUnknownLabel) in_slice.insert(r.label);
+      for (const int l : in_slice) ++out.slices_with_label[l];
       out.slices.slices.push_back(std::move(*slice));
     }
     if (progress) progress(out.considered);

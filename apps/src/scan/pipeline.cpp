@@ -28,6 +28,30 @@ struct ScanPipeline::SliceItem {
 
 namespace {
 
+// Every material of `labels` without a mesh in `meshes`, with why: none of the slices holds it,
+// or its regions were thinner than the octree's cells.
+std::vector<std::string> labels_without_mesh(const std::vector<LabelInfo>& labels,
+                                             const SliceSet& slices, const MeshSet& meshes) {
+  std::vector<std::string> out;
+  for (const LabelInfo& l : labels) {
+    const bool meshed = std::any_of(meshes.meshes.begin(), meshes.meshes.end(), [&](const auto& e) {
+      return e.label == l.id && !e.mesh.triangles.empty();
+    });
+    if (meshed) continue;
+    std::size_t holding = 0;
+    for (const LabeledSlice& slice : slices.slices)
+      holding += std::any_of(slice.regions.begin(), slice.regions.end(),
+                             [&](const Region& r) { return r.label == l.id; });
+    out.push_back("label " + std::to_string(l.id) + " (" + l.name + "): no mesh: " +
+                  (holding == 0 ? std::string("no slice holds it (the segmentation never gave "
+                                              "it a region)")
+                                : "its regions in " + std::to_string(holding) +
+                                      " slices are thinner than the octree's cells (raise "
+                                      "--depth)"));
+  }
+  return out;
+}
+
 // How long a stage waits on its input before it looks at its stop conditions again.
 constexpr double kPollS = 0.05;
 
@@ -585,6 +609,7 @@ ScanSummary ScanPipeline::finish() {
                                "): " + std::to_string(summary.counters.slices) + " slices");
   const SliceSet slices = reconstruction_->slice_set();
   const MeshSet& meshes = reconstruction_->meshes();
+  summary.labels_without_mesh = labels_without_mesh(source_.setup.labels, slices, meshes);
   each_sink("finish", [&](ScanSink& sink) { return sink.on_finish(meshes, slices, summary); });
   std::lock_guard lock(state_mutex_);
   summary_ = summary;

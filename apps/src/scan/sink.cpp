@@ -79,6 +79,7 @@ std::string summary_json(const ScanSummary& summary) {
                       {"area_changed", e.repair.area_changed_mm2}});
   doc["repairs"] = {
       {"total", summary.repairs.total()}, {"by_kind", summary.repairs.counts}, {"first", listed}};
+  doc["labels_without_mesh"] = summary.labels_without_mesh;
   if (summary.segmentation_scores)
     doc["segmentation_scores"] = nlohmann::json::parse(
         seg::comparison_json_text(*summary.segmentation_scores, summary.label_names));

@@ -107,6 +107,8 @@ struct ScanSummary {
   /// Simulated sources: the keyframes' label maps against the simulator's truth, summed.
   std::optional<seg::LabelComparison> segmentation_scores;
   std::map<int, std::string> label_names;  ///< for the scores' table
+  /// Every material of the setup without a mesh at the end, with why: "label 3 (rib): ...".
+  std::vector<std::string> labels_without_mesh;
 };
 
 }  // namespace sonoshape::scan

@@ -6,6 +6,7 @@
 #include <cstddef>
 #include <filesystem>
 #include <functional>
+#include <map>
 #include <optional>
 #include <string>
 
@@ -81,6 +82,10 @@ struct SweepSegmentation {
   /// order, and their sum.
   std::vector<FrameComparison> comparisons;
   LabelComparison comparison_total;
+  /// Per material label of the setup: the frames whose label map holds it and the slices with a
+  /// region of it (a label with frames but no slices lost every region to the repairs).
+  std::map<int, std::size_t> frames_with_label;
+  std::map<int, std::size_t> slices_with_label;
   /// With ReadOptions::strict: the first repair as an error ("frame 12, unknown: ..."), after
   /// which the sweep stopped; empty otherwise.
   std::string refused;
