@@ -16,9 +16,9 @@
 #include <zmq_addon.hpp>
 
 #include "sonoshape/publish/publisher.hpp"
+#include "sonoshape/testing/child_process.hpp"
 #include "sonoshape/testing/temp_dir.hpp"
 
-extern char** environ;
 
 namespace sonoshape::publish {
 namespace {
@@ -30,58 +30,17 @@ using sonoshape::testing::TempDir;
 using Clock = std::chrono::steady_clock;
 
 // A running `sonoshape listen`, its output captured in a file.
-class ListenProcess {
+class ListenProcess : public sonoshape::testing::ChildProcess {
  public:
   ListenProcess(const std::vector<std::string>& arguments, std::filesystem::path log)
-      : log_(std::move(log)) {
-    std::vector<std::string> args{SONOSHAPE_BINARY, "listen"};
-    args.insert(args.end(), arguments.begin(), arguments.end());
-    std::vector<char*> argv;
-    for (std::string& a : args) argv.push_back(a.data());
-    argv.push_back(nullptr);
-    posix_spawn_file_actions_t actions;
-    posix_spawn_file_actions_init(&actions);
-    posix_spawn_file_actions_addopen(&actions, 1, log_.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    posix_spawn_file_actions_adddup2(&actions, 1, 2);
-    if (posix_spawn(&pid_, argv[0], &actions, nullptr, argv.data(), environ) != 0) pid_ = -1;
-    posix_spawn_file_actions_destroy(&actions);
-  }
-  ~ListenProcess() {
-    if (pid_ > 0) {
-      kill(pid_, SIGKILL);
-      waitpid(pid_, nullptr, 0);
-    }
-  }
-  ListenProcess(const ListenProcess&) = delete;
-  ListenProcess& operator=(const ListenProcess&) = delete;
-
-  bool started() const { return pid_ > 0; }
-  void signal(int number) const { kill(pid_, number); }
-
-  /// The exit code, or -1 when it did not exit normally within `timeout` (then it is killed).
-  int wait(std::chrono::seconds timeout) {
-    const auto deadline = Clock::now() + timeout;
-    int status = 0;
-    while (Clock::now() < deadline) {
-      if (waitpid(pid_, &status, WNOHANG) == pid_) {
-        pid_ = -1;
-        return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-      }
-      std::this_thread::sleep_for(10ms);
-    }
-    return -1;
-  }
-
-  std::string output() const {
-    std::ifstream in(log_);
-    std::stringstream text;
-    text << in.rdbuf();
-    return text.str();
-  }
+      : ChildProcess(argv_of(arguments), std::move(log)) {}
 
  private:
-  pid_t pid_ = -1;
-  std::filesystem::path log_;
+  static std::vector<std::string> argv_of(const std::vector<std::string>& arguments) {
+    std::vector<std::string> argv{SONOSHAPE_BINARY, "listen"};
+    argv.insert(argv.end(), arguments.begin(), arguments.end());
+    return argv;
+  }
 };
 
 json read_json(const std::filesystem::path& path) {

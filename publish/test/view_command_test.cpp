@@ -17,10 +17,10 @@
 #include <thread>
 
 #include "sonoshape/publish/publisher.hpp"
+#include "sonoshape/testing/child_process.hpp"
 #include "sonoshape/testing/temp_dir.hpp"
 #include "view_client.hpp"
 
-extern char** environ;
 
 namespace sonoshape::publish {
 namespace {
@@ -30,55 +30,19 @@ using namespace sonoshape::testing::view;
 using sonoshape::testing::TempDir;
 using Clock = std::chrono::steady_clock;
 
+std::vector<std::string> with_binary(const std::string& command,
+                                     const std::vector<std::string>& arguments) {
+  std::vector<std::string> argv{SONOSHAPE_BINARY, command};
+  argv.insert(argv.end(), arguments.begin(), arguments.end());
+  return argv;
+}
+
 // A running `sonoshape view` (or another subcommand), its output captured in a file.
-class ViewProcess {
+class ViewProcess : public sonoshape::testing::ChildProcess {
  public:
   ViewProcess(const std::vector<std::string>& arguments, std::filesystem::path log,
               const std::string& command = "view")
-      : log_(std::move(log)) {
-    std::vector<std::string> args{SONOSHAPE_BINARY, command};
-    args.insert(args.end(), arguments.begin(), arguments.end());
-    std::vector<char*> argv;
-    for (std::string& a : args) argv.push_back(a.data());
-    argv.push_back(nullptr);
-    posix_spawn_file_actions_t actions;
-    posix_spawn_file_actions_init(&actions);
-    posix_spawn_file_actions_addopen(&actions, 1, log_.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    posix_spawn_file_actions_adddup2(&actions, 1, 2);
-    if (posix_spawn(&pid_, argv[0], &actions, nullptr, argv.data(), environ) != 0) pid_ = -1;
-    posix_spawn_file_actions_destroy(&actions);
-  }
-  ~ViewProcess() {
-    if (pid_ > 0) {
-      kill(pid_, SIGKILL);
-      waitpid(pid_, nullptr, 0);
-    }
-  }
-  ViewProcess(const ViewProcess&) = delete;
-  ViewProcess& operator=(const ViewProcess&) = delete;
-
-  void signal(int number) const { kill(pid_, number); }
-
-  /// The exit code, or -1 when it did not exit normally within `timeout`.
-  int wait(std::chrono::seconds timeout) {
-    const auto deadline = Clock::now() + timeout;
-    int status = 0;
-    while (Clock::now() < deadline) {
-      if (waitpid(pid_, &status, WNOHANG) == pid_) {
-        pid_ = -1;
-        return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-      }
-      std::this_thread::sleep_for(10ms);
-    }
-    return -1;
-  }
-
-  std::string output() const {
-    std::ifstream in(log_);
-    std::stringstream text;
-    text << in.rdbuf();
-    return text.str();
-  }
+      : ChildProcess(with_binary(command, arguments), std::move(log)) {}
 
   /// The page's address the command printed after `lead` ("open " for view, "live view at " for
   /// scan); empty when it printed none within `timeout`.
@@ -93,20 +57,6 @@ class ViewProcess {
     }
     return {};
   }
-
-  /// Whether the output shows `text` within `timeout`.
-  bool shows(const std::string& text, std::chrono::seconds timeout) const {
-    const auto deadline = Clock::now() + timeout;
-    while (Clock::now() < deadline) {
-      if (output().find(text) != std::string::npos) return true;
-      std::this_thread::sleep_for(50ms);
-    }
-    return false;
-  }
-
- private:
-  std::filesystem::path log_;
-  pid_t pid_ = -1;
 };
 
 TriangleMesh triangle(double size_mm) {
