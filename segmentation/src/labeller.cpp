@@ -13,9 +13,6 @@
 namespace sonoshape::seg {
 namespace {
 
-// A class this much brighter (grey) than every other is a strong reflector (as in
-// segment_frame, whose sections the graph cut keeps).
-constexpr double kReflectorGapGrey = 60.0;
 // Fewer interior pixels than this in a frame leave a label's appearance model as it was.
 constexpr int kMinModelPixels = 200;
 // Before any frame has taught a label's model, its spread in the median-filtered grey is this
@@ -64,8 +61,9 @@ struct GraphCutLabeller::Impl {
     for (std::size_t k = 0; k < order.size(); ++k) order[k] = k;
     std::sort(order.begin(), order.end(),
               [&](std::size_t a, std::size_t b) { return all[a]->grey_mean > all[b]->grey_mean; });
-    if (order.size() > 1 && all[order[0]]->grey_mean - all[order[1]]->grey_mean > kReflectorGapGrey &&
-        order[0] != 0)
+    const double gap_grey =
+        order.size() > 1 ? all[order[0]]->grey_mean - all[order[1]]->grey_mean : 0.0;
+    if (gap_grey > detail::kReflectorGapGrey && order[0] != 0)
       reflector = static_cast<int>(order[0]);
   }
 

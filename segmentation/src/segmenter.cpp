@@ -29,8 +29,6 @@ constexpr double kMaxSlopeGreyPerMm = 3.0;
 constexpr int kMaxFillPasses = 200;
 constexpr int kMaxRepairPasses = 20;
 constexpr std::uint8_t kUndecided = 1;
-// A class this much brighter (grey) than every other is a strong reflector (see segment_frame).
-constexpr double kReflectorGapGrey = 60.0;
 // A reflector band narrower than this (mm) is speckle, not a bone surface.
 constexpr double kMinReflectorWidthMm = 1.0;
 
@@ -549,7 +547,7 @@ Segmentation detail::segment_frame(const GreyImage& image, const ImageGeometry& 
   std::sort(by_mean.begin(), by_mean.end(),
             [](const Class& x, const Class& y) { return x.mean > y.mean; });
   const bool reflector_class =
-      by_mean.size() > 1 && by_mean[0].mean - by_mean[1].mean > kReflectorGapGrey;
+      by_mean.size() > 1 && by_mean[0].mean - by_mean[1].mean > detail::kReflectorGapGrey;
   const double reflector_grey = reflector_class ? 0.5 * (by_mean[0].mean + by_mean[1].mean) : 1e9;
   cv::Mat median_f;
   median.convertTo(median_f, CV_32F);

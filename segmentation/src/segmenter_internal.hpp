@@ -7,6 +7,11 @@
 
 namespace sonoshape::seg::detail {
 
+/// A class (background or material) whose grey mean stands this far above every other's is a
+/// strong reflector (bone): its thin band is found on the median-filtered grey and its
+/// cross-section drawn from its thickness (segment_frame); the graph cut keeps it as drawn.
+constexpr double kReflectorGapGrey = 60.0;
+
 /// Called with the classified label map (CV_8U, changed in place), the median-filtered and
 /// depth-compensated grey (CV_32F), the low-confidence mask and the sector mask (CV_8U, 255 =
 /// set), before the morphological cleaning; it may set `keep` (CV_8U) to the pixels whose
