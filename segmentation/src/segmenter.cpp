@@ -607,23 +607,41 @@ Segmentation detail::segment_frame(const GreyImage& image, const ImageGeometry& 
       fit.add((static_cast<double>(b) + 0.5) * kDepthBinMm,
               v[v.size() / 2] - config.background.grey_mean, static_cast<double>(v.size()));
     }
-    trend = fit.solve();
-    for (int iteration = 0; iteration < kTrendIterations; ++iteration) {
-      LineFit residuals;
-      // Every other row and column of the image (plenty of samples), in the work region; only
-      // these need a label before the final classification.
-      for (int j = roi.y % 2; j < h; j += 2) {
-        classify_row(j, roi.x % 2, 2);
-        const std::uint8_t* m = map.ptr<std::uint8_t>(j);
-        const float* d = depth.ptr<float>(j);
-        const float* s = smoothed.ptr<float>(j);
-        for (int i = roi.x % 2; i < w; i += 2) {
-          if (m[i] == kLabelPixelUnknown) continue;
-          residuals.add(d[i], s[i] - class_mean[m[i]]);
+    // The EM-like alternation from a start: label the samples (every other row and column of
+    // the work region: plenty, and only these need a label before the final classification)
+    // with the trend, refit the trend to their residuals; returns the trend and the samples'
+    // mean squared residual under it.
+    auto refine_trend = [&](Line start) {
+      trend = start;
+      double squares = 0.0, samples = 0.0;
+      for (int iteration = 0; iteration <= kTrendIterations; ++iteration) {
+        LineFit residuals;
+        squares = samples = 0.0;
+        for (int j = roi.y % 2; j < h; j += 2) {
+          classify_row(j, roi.x % 2, 2);
+          const std::uint8_t* m = map.ptr<std::uint8_t>(j);
+          const float* d = depth.ptr<float>(j);
+          const float* s = smoothed.ptr<float>(j);
+          for (int i = roi.x % 2; i < w; i += 2) {
+            if (m[i] == kLabelPixelUnknown) continue;
+            const double r = s[i] - class_mean[m[i]];
+            residuals.add(d[i], r);
+            const double e = r - (trend.a + trend.b * d[i]);
+            squares += e * e;
+            samples += 1.0;
+          }
         }
+        if (iteration < kTrendIterations) trend = residuals.solve();
       }
-      trend = residuals.solve();
-    }
+      return std::make_pair(trend, samples > 0.0 ? squares / samples : 0.0);
+    };
+    // Two starts: the per-depth medians (right when the background fills most depths) and no
+    // trend (right when one organ fills the image, as under a linear probe inside a large
+    // organ, where the medians are the organ's and would shift every class); the better fit
+    // wins.
+    const auto from_medians = refine_trend(fit.solve());
+    const auto from_none = refine_trend(Line{});
+    trend = from_none.second < from_medians.second ? from_none.first : from_medians.first;
   }
   classify_all();
   // The steps between classification and cleaning (bone sections, the graph cut, blooming)
