@@ -106,9 +106,8 @@ Status SegmentationConfig::validate() const {
   if (median_px < 1 || median_px % 2 == 0 || median_px > 31)
     return Status::error("segmentation config: median_px must be odd, 1..31 (got " +
                          std::to_string(median_px) + ")");
-  for (const auto& [name, value] : std::array<std::pair<const char*, double>, 10>{
+  for (const auto& [name, value] : std::array<std::pair<const char*, double>, 9>{
            {{"smoothing_mm", smoothing_mm},
-            {"psf_sigma_mm", psf_sigma_mm},
             {"dynamic_range_db", dynamic_range_db},
             {"confidence_window_mm", confidence_window_mm},
             {"shadow_fraction", shadow_fraction},
@@ -120,6 +119,9 @@ Status SegmentationConfig::validate() const {
     if (!(value >= 0.0) || !std::isfinite(value))
       return Status::error(std::string("segmentation config: ") + name +
                            " must be a finite number >= 0");
+  if (!std::isfinite(psf_sigma_mm))
+    return Status::error("segmentation config: psf_sigma_mm must be a finite number (mm; "
+                         "negative: from the sweep's header; 0: no blooming correction)");
   if (shadow_fraction > 1.0)
     return Status::error("segmentation config: shadow_fraction must be in 0..1");
   if (!(confidence_window_mm > 0.0))

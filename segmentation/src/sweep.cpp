@@ -287,7 +287,7 @@ Result<SweepSetup> prepare_sweep(const acq::SequenceFile& file,
   }
 
   // The imaging system's blur, when the configuration does not give it: the header's.
-  if (setup.config.psf_sigma_mm == 0.0)
+  if (setup.config.psf_sigma_mm < 0.0)
     if (const auto sigma = file.field("SonoshapePsfSigmaMm")) {
       setup.config.psf_sigma_mm = std::max(0.0, to_number(*sigma).value_or(0.0));
       if (const auto range = file.field("SonoshapeDynamicRangeDb"))

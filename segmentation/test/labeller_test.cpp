@@ -138,6 +138,24 @@ TEST(GraphCutLabeller, RefinesTheThresholdLabellingAndFollowsAPrior) {
   EXPECT_THROW(guided.segment(bmode.image(0), &wrong_size), std::invalid_argument);
 }
 
+// The blur behind the blooming correction comes from a simulated sweep's header unless the
+// configuration gives it; 0 there turns the correction off.
+TEST(SweepSetup, BlurFromTheHeaderUnlessTheConfigurationGivesIt) {
+  const test::SmallSweep small = test::organ_and_lesion_sweep(2);
+  const auto from_header =
+      prepare_sweep(small.sweep.bmode, "s.igs.mha", std::optional<SegmentationConfig>(),
+                    std::nullopt);
+  ASSERT_TRUE(from_header) << from_header.message();
+  EXPECT_GT(from_header->config.psf_sigma_mm, 0.0);
+  SegmentationConfig off;
+  off.psf_sigma_mm = 0.0;
+  const auto without =
+      prepare_sweep(small.sweep.bmode, "s.igs.mha", std::optional<SegmentationConfig>(off),
+                    std::nullopt);
+  ASSERT_TRUE(without) << without.message();
+  EXPECT_EQ(without->config.psf_sigma_mm, 0.0);
+}
+
 TEST(Overlay, WritesAPictureAndNamesASizeMismatch) {
   const auto dir = std::filesystem::temp_directory_path() / "sonoshape_overlay_test";
   std::filesystem::create_directories(dir);

@@ -92,7 +92,7 @@ seg::SegmentationConfig learn_sim_models(const sim::BModeSimulator& simulator,
     caster_runs_px.push_back(sim::shadow_caster_runs_px(frame));
   }
   seg::SegmentationConfig config = seg::learn_label_models(grey, visible, base);
-  if (config.psf_sigma_mm == 0.0) {
+  if (config.psf_sigma_mm < 0.0) {
     config.psf_sigma_mm = simulator.psf_sigma_mm();
     config.dynamic_range_db = simulator.options().dynamic_range_db;
   }

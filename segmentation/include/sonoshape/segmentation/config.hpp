@@ -75,9 +75,10 @@ struct SegmentationConfig {
   /// The imaging system's point-spread function, Gaussian sigma (mm, mean of lateral and axial)
   /// and the log compression's range (dB): where two tissues meet, the blurred echo power puts
   /// the grey midpoint inside the darker one (blooming); the labelling moves such boundaries
-  /// back by the shift these imply. 0: unknown, no correction (the simulator writes both in
-  /// the header; a probe's data sheet gives its resolution).
-  double psf_sigma_mm = 0.0;
+  /// back by the shift these imply. Negative: the simulated sweep's header gives them
+  /// (SonoshapePsfSigmaMm, SonoshapeDynamicRangeDb), else no correction; 0: no correction (a
+  /// probe's data sheet gives its resolution).
+  double psf_sigma_mm = -1.0;
   double dynamic_range_db = 50.0;
   /// Removes the residual depth trend of the grey (attenuation not undone by time-gain
   /// compensation), fitted per frame as a line in depth.
