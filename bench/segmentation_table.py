@@ -6,7 +6,9 @@ For each case (a phantom, a probe, a trajectory and a tracker noise level) this 
   sonoshape segment WORK/CASE.igs.mha METHOD --truth-labels WORK/CASE_truth/labels.mha
                     --report WORK/CASE.M.seg.json --every K -o WORK/CASE.M.slices.json
                     (METHOD: `--method threshold`, the baseline; `--method graph-cut --prior
-                    none`; `--method graph-cut --prior reconstruction`)
+                    none`; `--method graph-cut --prior reconstruction`; the graph cuts with
+                    `--seed L:X,Y,Z` per organ, its truth mesh's vertex centroid, as a
+                    clinician's one click on each organ)
   sonoshape segment WORK/CASE.igs.mha --perfect-labels WORK/CASE_truth/labels.mha
                     --every K -o WORK/CASE.perfect.slices.json
   sonoshape reconstruct X.slices.json -o X_recon --depth D        (for both slice sets)
@@ -35,6 +37,7 @@ import json
 import os
 import platform
 import re
+import struct
 import subprocess
 import sys
 import time
@@ -106,6 +109,33 @@ def header_label_names(sweep):
     return {int(label): name for label, name in pairs}
 
 
+def header_models(sweep):
+    """The labels with a grey model in the sequence header (`SonoshapeLabelGreyMean`)."""
+    with open(sweep, "rb") as f:
+        header = f.read(65536).split(b"ElementDataFile", 1)[0].decode("latin-1")
+    m = re.search(r"^SonoshapeLabelGreyMean = (.*)$", header, re.MULTILINE)
+    return {int(item.split(":", 1)[0]) for item in (m.group(1).split() if m else [])}
+
+
+def vertex_centroid(ply):
+    """The mean of a binary little-endian PLY's float x y z vertices (as `simulate` writes)."""
+    with open(ply, "rb") as f:
+        data = f.read()
+    header, _, body = data.partition(b"end_header\n")
+    count = next(int(line.split()[2]) for line in header.decode("latin-1").splitlines()
+                 if line.startswith("element vertex"))
+    xyz = struct.unpack_from(f"<{3 * count}f", body)
+    return [sum(xyz[i::3]) / count for i in range(3)]
+
+
+def seed_args(sweep, truth_meshes):
+    """`--seed L:X,Y,Z` for every organ with a grey model: its truth mesh's vertex centroid,
+    standing in for the clinician's one click on each organ that tells look-alikes apart."""
+    models = header_models(sweep)
+    return [arg for label, path in truth_meshes if label in models
+            for arg in ("--seed", f"{label}:" + ",".join(f"{c:.2f}" for c in vertex_centroid(path)))]
+
+
 def run(cmd, what):
     result = subprocess.run(cmd, capture_output=True, text=True)
     if result.returncode != 0:
@@ -140,8 +170,11 @@ def one_case(args, root, case):
                           for name in os.listdir(truth)
                           if (m := re.fullmatch(r"label_(\d+)\.ply", name)))
     totals, scans = {}, {}
+    seeds = seed_args(base + ".igs.mha", truth_meshes)
     for method, options in METHODS.items():
         out = f"{base}.{method.replace(' ', '').replace('+', '_')}"
+        if "graph-cut" in options:
+            options = options + seeds
         run([args.binary, "segment", base + ".igs.mha", *options, "--truth-labels",
              labels_mha, "--report", out + ".seg.json", "--every", str(args.every),
              "-o", out + ".slices.json"], f"segment {' '.join(options)}")

@@ -230,6 +230,28 @@ TEST_F(SimulateCommand, SegmentScoresAgainstTheTruthAndPerfectLabelsReconstruct)
             std::string::npos)
       << mismatched.output;
   EXPECT_FALSE(fs::exists(dir_ / "x.slices.json"));
+
+  // --seed names a material of the models in effect and three numbers.
+  const auto seeded = run("segment " + sweep + " --method graph-cut --prior none --seed "
+                          "1:-8,0.2,0.1 --seed 2:23,11.6,0.1 -o " +
+                              (dir_ / "seeded.slices.json").string(),
+                          dir_ / "log_seeded");
+  EXPECT_EQ(seeded.exit_code, 0) << seeded.output;
+  const auto unknown_label = run("segment " + sweep + " --seed 9:1,2,3 -o " +
+                                     (dir_ / "x.slices.json").string(),
+                                 dir_ / "log_seed9");
+  EXPECT_EQ(unknown_label.exit_code, 1);
+  EXPECT_NE(unknown_label.output.find("--seed '9:1,2,3': label 9 is not among the "
+                                      "segmentation's materials (1:spot"),
+            std::string::npos)
+      << unknown_label.output;
+  const auto two_numbers = run("segment " + sweep + " --seed 1:1,2 -o " +
+                                   (dir_ / "x.slices.json").string(),
+                               dir_ / "log_seed2");
+  EXPECT_EQ(two_numbers.exit_code, 1);
+  EXPECT_NE(two_numbers.output.find("three finite numbers"), std::string::npos)
+      << two_numbers.output;
+  EXPECT_FALSE(fs::exists(dir_ / "x.slices.json"));
 }
 
 }  // namespace

@@ -16,6 +16,7 @@
 #include <thread>
 
 #include "commands.hpp"
+#include "seed_option.hpp"
 #include "sim_options.hpp"
 #include "sonoshape/core/log.hpp"
 #include "sonoshape/scan/pipeline.hpp"
@@ -39,6 +40,7 @@ struct ScanCommandOptions {
   std::filesystem::path calibration;
   std::filesystem::path segmentation;
   std::string method;  // "", "threshold" or "graph-cut": overrides the configuration
+  std::vector<std::string> seeds;  // LABEL:X,Y,Z, see seed_option.hpp
   std::filesystem::path out;
   std::size_t save_every = 0;
   double duration_s = 0.0;
@@ -296,6 +298,10 @@ int run_scan(const ScanCommandOptions& options) {
     source->setup.segmentation.method = options.method == "graph-cut"
                                             ? seg::LabellingMethod::kGraphCut
                                             : seg::LabellingMethod::kThreshold;
+  if (const Status seeded = apply_seeds(options.seeds, source->setup.segmentation); !seeded) {
+    std::cerr << "error: " << seeded.message() << '\n';
+    return 1;
+  }
   std::unique_ptr<scan::SegmentationStage> segmentation;
   try {
     auto segmenter = std::make_unique<scan::SegmenterStage>(source->setup);
@@ -413,6 +419,9 @@ CommandRunner add_scan_command(CLI::App& app) {
                  "prior is the surfaces reconstructed so far, cut by each new frame's plane); "
                  "default: the configuration's `method`, else threshold")
       ->check(CLI::IsMember({"threshold", "graph-cut"}));
+  app.add_option("--seed", options->seeds,
+                 "LABEL:X,Y,Z (mm, reference frame; repeatable): a point inside that organ; with "
+                 "--method graph-cut it tells apart organs whose grey models look alike");
   app.add_option("-o,--out", options->out,
                  "Directory for the meshes (label_<id>.ply), slices.json and scan.json, written "
                  "at the end (also after Ctrl-C or a failing source)");

@@ -16,6 +16,7 @@
 #include "sonoshape/acquisition/sequence_file.hpp"
 #include "sonoshape/core/log.hpp"
 #include "sonoshape/core/slice_io.hpp"
+#include "seed_option.hpp"
 #include "sonoshape/scan/label_prior.hpp"
 #include "sonoshape/segmentation/overlay.hpp"
 #include "sonoshape/segmentation/sweep.hpp"
@@ -38,6 +39,7 @@ struct SegmentOptions {
   std::string method;                    ///< "", "threshold" or "graph-cut": overrides the config
   std::string prior = "reconstruction";  ///< graph cut's prior: "reconstruction" or "none"
   int prior_depth = 6;                   ///< octree depth of the prior's reconstruction
+  std::vector<std::string> seeds;        ///< LABEL:X,Y,Z, see seed_option.hpp
 };
 
 // The box (mm, reference frame) of the sectors of every frame with a valid pose, padded by a
@@ -144,6 +146,10 @@ int run_segment(const SegmentOptions& options) {
   if (!options.method.empty())
     setup->config.method = options.method == "graph-cut" ? seg::LabellingMethod::kGraphCut
                                                          : seg::LabellingMethod::kThreshold;
+  if (const Status seeded = apply_seeds(options.seeds, setup->config); !seeded) {
+    std::cerr << "error: " << seeded.message() << '\n';
+    return 1;
+  }
   if (!options.report.empty() && options.truth_labels.empty()) {
     std::cerr << "error: --report " << options.report.string()
               << " needs --truth-labels DIR/labels.mha (the frames to score against)\n";
@@ -312,6 +318,11 @@ CommandRunner add_segment_command(CLI::App& app) {
                  "Octree depth of the prior's reconstruction (coarser is faster)")
       ->check(CLI::Range(3, 10))
       ->capture_default_str();
+  app.add_option("--seed", options->seeds,
+                 "LABEL:X,Y,Z (mm, reference frame; repeatable): a point inside that organ. With "
+                 "--method graph-cut, organs whose grey models look alike are told apart by "
+                 "where they are: a region the reconstruction does not predict takes the label "
+                 "of the nearest seed");
   app.add_option("--overlays", options->overlays,
                  "Directory for pictures of the frames with our label outlines (and the truth's "
                  "in white with --truth-labels): DIR/frame_NNNN.png");

@@ -48,10 +48,16 @@ LabelModel read_model(const json& j, const std::string& where, bool is_backgroun
       model.grey_std = number_at(value, where + ".grey_std");
     } else if (key == "thickness_mm" && !is_background) {
       model.thickness_mm = number_at(value, where + ".thickness_mm");
+    } else if (key == "seed_mm" && !is_background) {
+      if (!value.is_array() || value.size() != 3)
+        throw ConfigProblem{where + ".seed_mm", "expected [x, y, z] in mm, got " + value.dump()};
+      model.seed_mm = Vec3(number_at(value[0], where + ".seed_mm[0]"),
+                           number_at(value[1], where + ".seed_mm[1]"),
+                           number_at(value[2], where + ".seed_mm[2]"));
     } else {
       throw ConfigProblem{where, "unknown key '" + key + "' (known: " +
                                      (is_background ? "" : "id, ") + "name, grey_mean, grey_std" +
-                                     (is_background ? "" : ", thickness_mm") + ")"};
+                                     (is_background ? "" : ", thickness_mm, seed_mm") + ")"};
     }
   }
   if (!is_background && !j.contains("id")) throw ConfigProblem{where, "missing 'id'"};
@@ -67,6 +73,7 @@ json model_json(const LabelModel& m, bool with_id) {
   j["grey_mean"] = m.grey_mean;
   j["grey_std"] = m.grey_std;
   if (with_id && m.thickness_mm > 0.0) j["thickness_mm"] = m.thickness_mm;
+  if (with_id && m.seed_mm) j["seed_mm"] = {m.seed_mm->x(), m.seed_mm->y(), m.seed_mm->z()};
   return j;
 }
 

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
 #include <vector>
@@ -23,6 +24,13 @@ constexpr float kExcluded = detail::kExcludedCost;
 // Cells this far (in cells) from a boundary of the starting labelling take part in the cut.
 constexpr int kBandCells = 3;
 
+// Organs whose grey means differ by less than this share of their spread look alike: the image
+// cannot tell which is which, only where each region is.
+constexpr double kLookAlikeShare = 0.5;
+// A region takes an organ's label from the prior when at least this share of it lies where the
+// reconstruction predicts that organ (a region at the edge of a prediction overlaps it partly).
+constexpr double kPredictedShare = 0.1;
+
 struct Appearance {
   double mean = 0.0, variance = 1.0;
 };
@@ -38,6 +46,8 @@ struct GraphCutLabeller::Impl {
   std::vector<std::uint8_t> values;  // label index -> pixel value
   int reflector = -1;                // index of the reflector label, if any
   std::vector<Appearance> models;
+  // Groups of look-alike materials (indices into values), each of two or more.
+  std::vector<std::vector<int>> look_alikes;
 
   Impl(const SegmentationConfig& c, const ImageGeometry& g, const GraphCutOptions& o)
       : config(c), geometry(g), options(o) {
@@ -65,6 +75,59 @@ struct GraphCutLabeller::Impl {
         order.size() > 1 ? all[order[0]]->grey_mean - all[order[1]]->grey_mean : 0.0;
     if (gap_grey > detail::kReflectorGapGrey && order[0] != 0)
       reflector = static_cast<int>(order[0]);
+    group_look_alikes(all);
+    merge_look_alike_models();
+  }
+
+  // The threshold labelling that seeds the cut classifies by the nearest grey mean: a group of
+  // look-alikes classifies as one tissue at the group's mean (apart, the brighter member would
+  // pull the boundary with the background towards it and let dark speckle in).
+  void merge_look_alike_models() {
+    for (const std::vector<int>& group : look_alikes) {
+      double mean = 0.0, variance = 0.0;
+      for (const int k : group) {
+        const LabelModel& m = config.materials[static_cast<std::size_t>(k) - 1];
+        mean += m.grey_mean;
+        variance += m.grey_std * m.grey_std;
+      }
+      mean /= static_cast<double>(group.size());
+      variance /= static_cast<double>(group.size());
+      for (const int k : group) {
+        LabelModel& m = config.materials[static_cast<std::size_t>(k) - 1];
+        m.grey_mean = mean;
+        m.grey_std = std::sqrt(variance);
+        models[static_cast<std::size_t>(k)] = {mean, variance * kMedianSpreadShare *
+                                                         kMedianSpreadShare};
+      }
+    }
+  }
+
+  void group_look_alikes(const std::vector<const LabelModel*>& all) {
+    std::vector<int> group(all.size(), -1);
+    for (std::size_t a = 1; a < all.size(); ++a)
+      for (std::size_t b = a + 1; b < all.size(); ++b) {
+        if (static_cast<int>(a) == reflector || static_cast<int>(b) == reflector) continue;
+        const double spread = std::min(all[a]->grey_std, all[b]->grey_std);
+        if (std::abs(all[a]->grey_mean - all[b]->grey_mean) >= kLookAlikeShare * spread) continue;
+        if (group[a] < 0 && group[b] < 0) {
+          group[a] = group[b] = static_cast<int>(look_alikes.size());
+          look_alikes.push_back({static_cast<int>(a), static_cast<int>(b)});
+        } else if (group[b] < 0) {
+          group[b] = group[a];
+          look_alikes[static_cast<std::size_t>(group[a])].push_back(static_cast<int>(b));
+        } else if (group[a] < 0) {
+          group[a] = group[b];
+          look_alikes[static_cast<std::size_t>(group[b])].push_back(static_cast<int>(a));
+        } else if (group[a] != group[b]) {  // join b's group into a's
+          const int from = group[b];
+          for (const int k : look_alikes[static_cast<std::size_t>(from)]) {
+            group[static_cast<std::size_t>(k)] = group[a];
+            look_alikes[static_cast<std::size_t>(group[a])].push_back(k);
+          }
+          look_alikes[static_cast<std::size_t>(from)].clear();
+        }
+      }
+    std::erase_if(look_alikes, [](const std::vector<int>& g) { return g.empty(); });
   }
 
   int index_of(std::uint8_t value) const {
@@ -201,6 +264,95 @@ struct GraphCutLabeller::Impl {
     }
   }
 
+  // Gives each connected region of look-alike labels its organ's identity (see segment()).
+  void assign_identities(cv::Mat& map, const LabelImage* prior, const ImagePlane* plane) const {
+    for (const std::vector<int>& group : look_alikes) {
+      cv::Mat member(map.size(), CV_8U, cv::Scalar(0));
+      for (const int k : group) member |= map == values[static_cast<std::size_t>(k)];
+      cv::Mat regions, stats, centroids;
+      const int n = cv::connectedComponentsWithStats(member, regions, stats, centroids, 8, CV_32S);
+      if (n <= 1) continue;
+      const std::vector<int> overlap = predicted_overlap(regions, n, group, prior);
+      const std::size_t g_count = group.size();
+      for (int r = 1; r < n; ++r) {
+        const cv::Rect box(stats.at<int>(r, cv::CC_STAT_LEFT), stats.at<int>(r, cv::CC_STAT_TOP),
+                           stats.at<int>(r, cv::CC_STAT_WIDTH),
+                           stats.at<int>(r, cv::CC_STAT_HEIGHT));
+        const double area = stats.at<int>(r, cv::CC_STAT_AREA);
+        std::vector<std::uint8_t> predicted;
+        for (std::size_t g = 0; g < g_count; ++g)
+          if (overlap[static_cast<std::size_t>(r) * g_count + g] >= kPredictedShare * area)
+            predicted.push_back(values[static_cast<std::size_t>(group[g])]);
+        if (predicted.size() > 1) {
+          split_by_prediction(map, regions, r, box, predicted, *prior);
+          continue;
+        }
+        std::uint8_t label = 0;
+        if (predicted.size() == 1) label = predicted[0];
+        else if (plane) label = nearest_seed(group, *plane, centroids.at<double>(r, 0),
+                                             centroids.at<double>(r, 1));
+        if (label == 0) continue;
+        cv::Mat part = map(box);
+        part.setTo(label, regions(box) == r);
+      }
+    }
+  }
+
+  // Per region (rows) and group member (columns): the region's pixels the prior predicts as it.
+  std::vector<int> predicted_overlap(const cv::Mat& regions, int n, const std::vector<int>& group,
+                                     const LabelImage* prior) const {
+    std::vector<int> overlap(static_cast<std::size_t>(n) * group.size(), 0);
+    if (!prior) return overlap;
+    std::array<int, 256> member_of{};
+    member_of.fill(-1);
+    for (std::size_t g = 0; g < group.size(); ++g)
+      member_of[values[static_cast<std::size_t>(group[g])]] = static_cast<int>(g);
+    for (int j = 0; j < regions.rows; ++j) {
+      const int* region = regions.ptr<int>(j);
+      const std::uint8_t* p = prior->pixels.data() + static_cast<std::size_t>(j) * prior->width;
+      for (int i = 0; i < regions.cols; ++i)
+        if (region[i] > 0 && member_of[p[i]] >= 0)
+          ++overlap[static_cast<std::size_t>(region[i]) * group.size() +
+                    static_cast<std::size_t>(member_of[p[i]])];
+    }
+    return overlap;
+  }
+
+  // A region over several predicted organs: each pixel takes the organ predicted nearest it.
+  static void split_by_prediction(cv::Mat& map, const cv::Mat& regions, int r, const cv::Rect& box,
+                                  const std::vector<std::uint8_t>& predicted,
+                                  const LabelImage& prior) {
+    const cv::Mat prior_box = cv::Mat(prior.height, prior.width, CV_8U,
+                                      const_cast<std::uint8_t*>(prior.pixels.data()))(box);
+    cv::Mat nearest(box.size(), CV_32F, cv::Scalar(std::numeric_limits<float>::max()));
+    cv::Mat label(box.size(), CV_8U, cv::Scalar(predicted[0]));
+    for (const std::uint8_t value : predicted) {
+      cv::Mat distance;
+      cv::distanceTransform(prior_box != value, distance, cv::DIST_L2, 3);
+      const cv::Mat closer = distance < nearest;
+      distance.copyTo(nearest, closer);
+      label.setTo(value, closer);
+    }
+    label.copyTo(map(box), regions(box) == r);
+  }
+
+  // The look-alike whose seed lies nearest the region's centroid (pixel column x, row y); 0
+  // when none of the group has a seed.
+  std::uint8_t nearest_seed(const std::vector<int>& group, const ImagePlane& plane, double x,
+                            double y) const {
+    const Vec2 a = plane.to_plane(x, y);
+    const Vec3 at = plane.origin_mm + a.x() * plane.u + a.y() * plane.v;
+    std::uint8_t best = 0;
+    double best_mm = std::numeric_limits<double>::infinity();
+    for (const int k : group) {
+      const LabelModel& m = config.materials[static_cast<std::size_t>(k) - 1];
+      if (!m.seed_mm) continue;
+      const double mm = (*m.seed_mm - at).norm();
+      if (mm < best_mm) best_mm = mm, best = values[static_cast<std::size_t>(k)];
+    }
+    return best;
+  }
+
   // Cells within kBandCells of a cell whose starting label differs from a neighbour's, or of a
   // cell whose prior disagrees with its starting label (and that has pixels to decide).
   std::vector<std::uint8_t> changeable_band(const std::vector<std::uint8_t>& start,
@@ -292,14 +444,16 @@ GraphCutLabeller& GraphCutLabeller::operator=(GraphCutLabeller&&) noexcept = def
 const SegmentationConfig& GraphCutLabeller::config() const { return impl_->config; }
 const ImageGeometry& GraphCutLabeller::geometry() const { return impl_->geometry; }
 
-Segmentation GraphCutLabeller::segment(const GreyImage& image, const LabelImage* prior) {
+Segmentation GraphCutLabeller::segment(const GreyImage& image, const LabelImage* prior,
+                                       const ImagePlane* plane) {
   return detail::segment_frame(
       image, impl_->geometry, impl_->config,
       [&](cv::Mat& map, const cv::Mat& grey, const cv::Mat& low, const cv::Mat& sector,
           cv::Mat& keep) {
         impl_->refine(map, grey, low, sector, prior);
+        impl_->assign_identities(map, prior, plane);
+        // Small parts where the reconstruction predicts the same organ are kept.
         if (prior) {
-          // Small parts where the reconstruction predicts the same organ are kept.
           const cv::Mat predicted(prior->height, prior->width, CV_8U,
                                   const_cast<std::uint8_t*>(prior->pixels.data()));
           keep = (map == predicted) & (predicted != kLabelPixelOutside) &

@@ -367,7 +367,7 @@ SweepSegmentation segment_sweep(const acq::SequenceFile& file, const SweepSetup&
     if (labeller && labels.predictor) prior = labels.predictor->predict(plane, setup.geometry);
     const LabelImage frame_labels =
         labels.perfect ? labels.perfect->image(k)
-        : labeller     ? labeller->segment(file.image(k), prior ? &*prior : nullptr).labels
+        : labeller     ? labeller->segment(file.image(k), prior ? &*prior : nullptr, &plane).labels
                        : segment_frame(file.image(k), setup.geometry, setup.config).labels;
     if (labels.on_label_map) labels.on_label_map(k, frame_labels);
     {

@@ -138,6 +138,65 @@ TEST(GraphCutLabeller, RefinesTheThresholdLabellingAndFollowsAPrior) {
   EXPECT_THROW(guided.segment(bmode.image(0), &wrong_size), std::invalid_argument);
 }
 
+// Two organs of the same grey (look-alikes): which is which comes from the prior where it
+// predicts them and from the nearest seed elsewhere, not from the image.
+TEST(GraphCutLabeller, NamesLookAlikeOrgansByPriorThenSeed) {
+  const int w = 160, h = 100;
+  const double px_mm = 0.25;
+  const ImageGeometry geometry = full_image_geometry(w, h, px_mm);
+  GreyImage image(w, h, 0);
+  std::mt19937 rng(3);
+  std::normal_distribution<double> speckle(0.0, 12.0);
+  const cv::Point left(40, 50), right(120, 50);
+  const int radius_px = 22;
+  for (int j = 0; j < h; ++j)
+    for (int i = 0; i < w; ++i) {
+      const bool in = std::hypot(i - left.x, j - left.y) < radius_px ||
+                      std::hypot(i - right.x, j - right.y) < radius_px;
+      image.at(i, j) = static_cast<std::uint8_t>(
+          std::clamp((in ? 50.0 : 130.0) + speckle(rng), 0.0, 255.0));
+    }
+  SegmentationConfig config;
+  config.background = {0, "background", 130.0, 12.0};
+  config.materials = {{1, "a", 50.0, 12.0}, {2, "b", 50.0, 12.0}};
+  config.depth_compensation = false;
+  config.psf_sigma_mm = 0.0;
+  ImagePlane plane;  // pixels -> mm: the plane's (a, b) are the reference frame's (x, y)
+  plane.pixel_to_plane << px_mm, 0.0, 0.0, 0.0, px_mm, 0.0;
+  const Vec3 left_mm(left.x * px_mm, left.y * px_mm, 0.0);
+  const Vec3 right_mm(right.x * px_mm, right.y * px_mm, 0.0);
+  auto label_at = [](const LabelImage& labels, cv::Point p) { return int{labels.at(p.x, p.y)}; };
+
+  // Seeds alone: the left disc is organ 2, the right one organ 1.
+  config.materials[0].seed_mm = right_mm;
+  config.materials[1].seed_mm = left_mm;
+  GraphCutLabeller seeded(config, geometry);
+  const LabelImage by_seed = seeded.segment(image, nullptr, &plane).labels;
+  EXPECT_EQ(label_at(by_seed, left), 2);
+  EXPECT_EQ(label_at(by_seed, right), 1);
+
+  // A prior over the left disc names it, whatever the seeds say; the right one keeps its seed.
+  LabelImage prior(w, h, 0);
+  for (int j = 0; j < h; ++j)
+    for (int i = 0; i < w; ++i)
+      if (std::hypot(i - left.x, j - left.y) < radius_px - 3) prior.at(i, j) = 1;
+  GraphCutLabeller guided(config, geometry);
+  const LabelImage by_prior = guided.segment(image, &prior, &plane).labels;
+  EXPECT_EQ(label_at(by_prior, left), 1);
+  EXPECT_EQ(label_at(by_prior, right), 1);
+  config.materials[0].seed_mm = left_mm;  // now the right disc is nearest seed 2
+  config.materials[1].seed_mm = right_mm;
+  GraphCutLabeller reseeded(config, geometry);
+  const LabelImage both = reseeded.segment(image, &prior, &plane).labels;
+  EXPECT_EQ(label_at(both, left), 1);
+  EXPECT_EQ(label_at(both, right), 2);
+
+  // Without a plane, seeds cannot place a region: each keeps the label the cut gave it.
+  const LabelImage unplaced = GraphCutLabeller(config, geometry).segment(image).labels;
+  EXPECT_NE(label_at(unplaced, left), 0);
+  EXPECT_NE(label_at(unplaced, right), 0);
+}
+
 // The blur behind the blooming correction comes from a simulated sweep's header unless the
 // configuration gives it; 0 there turns the correction off.
 TEST(SweepSetup, BlurFromTheHeaderUnlessTheConfigurationGivesIt) {
@@ -179,7 +238,7 @@ TEST(SegmentationConfigMethod, ParsesAndRoundTrips) {
   const auto config = parse_segmentation_config(
       R"({"format": "sonoshape-segmentation", "version": 1, "method": "graph_cut",
           "labels": [{"id": 3, "name": "rib", "grey_mean": 250, "grey_std": 15,
-                      "thickness_mm": 9.5}]})",
+                      "thickness_mm": 9.5, "seed_mm": [1.5, -2, 30]}]})",
       "test");
   ASSERT_TRUE(config) << config.message();
   EXPECT_EQ(config->method, LabellingMethod::kGraphCut);
@@ -188,6 +247,14 @@ TEST(SegmentationConfigMethod, ParsesAndRoundTrips) {
   ASSERT_TRUE(again) << again.message();
   EXPECT_EQ(again->method, LabellingMethod::kGraphCut);
   EXPECT_DOUBLE_EQ(again->materials.at(0).thickness_mm, 9.5);
+  ASSERT_TRUE(again->materials.at(0).seed_mm.has_value());
+  EXPECT_EQ(*again->materials.at(0).seed_mm, Vec3(1.5, -2.0, 30.0));
+  const auto bad_seed = parse_segmentation_config(
+      R"({"format": "sonoshape-segmentation", "version": 1,
+          "labels": [{"id": 1, "grey_mean": 50, "seed_mm": [1, 2]}]})", "seed.json");
+  ASSERT_FALSE(bad_seed);
+  EXPECT_NE(bad_seed.message().find("labels[0].seed_mm"), std::string::npos)
+      << bad_seed.message();
   const auto bad = parse_segmentation_config(
       R"({"format": "sonoshape-segmentation", "version": 1, "method": "magic"})", "bad.json");
   ASSERT_FALSE(bad);

@@ -47,7 +47,7 @@ Result<LabeledSlice> SegmenterStage::segment(const TrackedFrame& frame) {
     }
     std::optional<LabelImage> prior;
     if (meshes && !meshes->meshes.empty()) prior = predict_label_map(*meshes, plane, g);
-    segmentation = labeller_->segment(image, prior ? &*prior : nullptr);
+    segmentation = labeller_->segment(image, prior ? &*prior : nullptr, &plane);
   } else {
     segmentation = seg::segment_frame(image, g, setup_.segmentation);
   }

@@ -4,6 +4,7 @@
 // mm, so one configuration serves images of any pixel spacing). The JSON form is documented in
 // docs/segmentation.md.
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -24,6 +25,10 @@ struct LabelModel {
   /// its surface echo (mm), the anatomy that fills its cross-section (see segment_frame); 0:
   /// unknown, only the visible surface band gets the label.
   double thickness_mm = 0.0;
+  /// A point inside the organ in the reference frame (mm), as a clinician marks it once: where
+  /// organs look alike (grey models the image cannot tell apart), a region the reconstruction
+  /// does not predict takes the label of the nearest seed (see GraphCutLabeller). None: unknown.
+  std::optional<Vec3> seed_mm = std::nullopt;
 };
 
 /// Where the image sector (the part of the frame the probe sees) comes from.

@@ -44,8 +44,17 @@ class GraphCutLabeller {
 
   /// Segments one frame: segment_frame's labelling refined by the graph cut. `prior`, when
   /// given, is a label map of the frame's size (0 background, material ids, kLabelPixelUnknown
-  /// where nothing is predicted); a frame before any surface exists passes none.
-  Segmentation segment(const GreyImage& image, const LabelImage* prior = nullptr);
+  /// where nothing is predicted); a frame before any surface exists passes none. `plane` (the
+  /// frame's placement) lets the labels' seeds name look-alike organs; see assign_identities.
+  ///
+  /// Organs whose grey models the image cannot tell apart ("look-alikes": means closer than
+  /// half their spread) are classified as one tissue (their models averaged) and get their
+  /// identity from where they are: each connected region of such
+  /// labels takes the label the prior predicts over it (split between the predicted organs,
+  /// pixel by nearest prediction, where it overlaps several), else the label of the nearest
+  /// seed (LabelModel::seed_mm) to its centroid, else keeps the cut's label.
+  Segmentation segment(const GreyImage& image, const LabelImage* prior = nullptr,
+                       const ImagePlane* plane = nullptr);
 
   const SegmentationConfig& config() const;
   const ImageGeometry& geometry() const;
