@@ -1,25 +1,30 @@
 #include "graph_cut.hpp"
 
 // GCC's flow analysis flags Boost.Graph's edge iterators (boost::optional members) as maybe
-// uninitialised when it inlines the max-flow here; a known false positive of Boost 1.74 with
-// GCC 12, silenced for this file only.
+// uninitialised when it inlines the max-flow here, and the compressed sparse row graph's
+// one-entry row-start vector as indexed out of bounds when it inlines the graph's
+// construction: known false positives of Boost 1.74 with GCC 12, silenced for this file only.
 #if defined(__GNUC__) && !defined(__clang__)
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#pragma GCC diagnostic ignored "-Warray-bounds"
 #endif
 
-#include <boost/graph/adjacency_list.hpp>
 #include <boost/graph/boykov_kolmogorov_max_flow.hpp>
+#include <boost/graph/compressed_sparse_row_graph.hpp>
 #include <algorithm>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
+#include <utility>
 
 namespace sonoshape::seg::detail {
 namespace {
 
-using Traits = boost::adjacency_list_traits<boost::vecS, boost::vecS, boost::directedS>;
-using Edge = Traits::edge_descriptor;
-using Vertex = Traits::vertex_descriptor;
+// The graph is a compressed sparse row graph, built from one sorted edge list: a frame's graph
+// is new every frame (its band moves), and an adjacency_list spent more time allocating and
+// freeing its per-vertex edge vectors than the max-flows took (callgrind).
+using Vertex = std::size_t;
+using Edge = boost::detail::csr_edge_descriptor<Vertex, std::size_t>;
 
 // The cost of taking alpha for a cell that already has it (the binary choice is void there).
 constexpr float kForbidden = 1e9f;
@@ -34,8 +39,8 @@ struct VertexData {
   float distance = 0.0f;
   Edge predecessor;
 };
-using Graph =
-    boost::adjacency_list<boost::vecS, boost::vecS, boost::directedS, VertexData, EdgeData>;
+using Graph = boost::compressed_sparse_row_graph<boost::directedS, VertexData, EdgeData,
+                                                 boost::no_property, Vertex, std::size_t>;
 
 // A neighbour pair's two directed edges (each the other's reverse).
 struct Pair {
@@ -55,15 +60,6 @@ struct GridLabelling::Impl {
   std::vector<Pair> pairs;
   // The pairs each active cell takes part in (CSR: pair_of[pair_start[v] .. pair_start[v+1])).
   std::vector<std::size_t> pair_start, pair_of;
-
-  Edge add_edge_pair(Vertex a, Vertex b, Edge* back) {
-    const Edge forward = boost::add_edge(a, b, graph).first;
-    const Edge backward = boost::add_edge(b, a, graph).first;
-    graph[forward].reverse = backward;
-    graph[backward].reverse = forward;
-    if (back) *back = backward;
-    return forward;
-  }
 };
 
 GridLabelling::GridLabelling(int width, int height, const std::vector<std::uint8_t>& active,
@@ -74,22 +70,13 @@ GridLabelling::GridLabelling(int width, int height, const std::vector<std::uint8
     throw std::invalid_argument("GridLabelling: the active mask does not match the grid");
   const std::size_t n = active.size();
   std::vector<std::size_t> vertex_of(n, std::numeric_limits<std::size_t>::max());
+  Impl& g = *impl_;
   for (std::size_t c = 0; c < n; ++c)
     if (active[c]) {
-      vertex_of[c] = impl_->cells.size();
-      impl_->cells.push_back(c);
+      vertex_of[c] = g.cells.size();
+      g.cells.push_back(c);
     }
-  Impl& g = *impl_;
   const std::size_t cells = g.cells.size();
-  g.graph = Graph(cells + 2);
-  g.source = cells;
-  g.sink = cells + 1;
-  g.from_source.reserve(cells);
-  g.to_sink.reserve(cells);
-  for (std::size_t v = 0; v < cells; ++v) {
-    g.from_source.push_back(g.add_edge_pair(g.source, v, nullptr));
-    g.to_sink.push_back(g.add_edge_pair(v, g.sink, nullptr));
-  }
   for (std::size_t v = 0; v < cells; ++v) {
     const std::size_t c = g.cells[v];
     const int i = static_cast<int>(c % static_cast<std::size_t>(width));
@@ -103,7 +90,6 @@ GridLabelling::GridLabelling(int width, int height, const std::vector<std::uint8
       p.second = vertex_of[d];
       p.grid = c;
       p.right = right;
-      p.forward = g.add_edge_pair(v, p.second, &p.backward);
       g.pairs.push_back(p);
     }
   }
@@ -119,6 +105,44 @@ GridLabelling::GridLabelling(int width, int height, const std::vector<std::uint8
     g.pair_of[fill[g.pairs[k].first]++] = k;
     g.pair_of[fill[g.pairs[k].second]++] = k;
   }
+
+  // Edges sorted by their source vertex: each cell's to the sink, to the source, then to its
+  // pair neighbours in pair_of order; then the source's to every cell, the sink's to every cell.
+  // Edge e's index is its place in this list.
+  g.source = cells;
+  g.sink = cells + 1;
+  auto first_edge = [&](std::size_t v) { return 2 * v + g.pair_start[v]; };
+  const std::size_t from_source_0 = first_edge(cells), from_sink_0 = from_source_0 + cells;
+  std::vector<std::pair<Vertex, Vertex>> edges;
+  edges.reserve(from_sink_0 + cells);
+  for (std::size_t v = 0; v < cells; ++v) {
+    edges.emplace_back(v, g.sink);
+    edges.emplace_back(v, g.source);
+    for (std::size_t k = g.pair_start[v]; k < g.pair_start[v + 1]; ++k) {
+      const Pair& p = g.pairs[g.pair_of[k]];
+      edges.emplace_back(v, p.first == v ? p.second : p.first);
+    }
+  }
+  for (std::size_t v = 0; v < cells; ++v) edges.emplace_back(g.source, v);
+  for (std::size_t v = 0; v < cells; ++v) edges.emplace_back(g.sink, v);
+  g.graph = Graph(boost::edges_are_sorted, edges.begin(), edges.end(), cells + 2, edges.size());
+  auto link = [&](Edge a, Edge b) {
+    g.graph[a].reverse = b;
+    g.graph[b].reverse = a;
+  };
+  g.from_source.reserve(cells);
+  g.to_sink.reserve(cells);
+  for (std::size_t v = 0; v < cells; ++v) {
+    g.to_sink.emplace_back(v, first_edge(v));
+    g.from_source.emplace_back(g.source, from_source_0 + v);
+    link(g.to_sink.back(), Edge(g.sink, from_sink_0 + v));
+    link(Edge(v, first_edge(v) + 1), g.from_source.back());
+    for (std::size_t k = g.pair_start[v]; k < g.pair_start[v + 1]; ++k) {
+      Pair& p = g.pairs[g.pair_of[k]];
+      (p.first == v ? p.forward : p.backward) = Edge(v, first_edge(v) + 2 + (k - g.pair_start[v]));
+    }
+  }
+  for (const Pair& p : g.pairs) link(p.forward, p.backward);
 }
 
 GridLabelling::~GridLabelling() = default;

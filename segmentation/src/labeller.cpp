@@ -5,6 +5,7 @@
 #include <cmath>
 #include <limits>
 #include <opencv2/imgproc.hpp>
+#include <optional>
 #include <stdexcept>
 #include <vector>
 
@@ -96,8 +97,8 @@ struct GraphCutLabeller::Impl {
         LabelModel& m = config.materials[static_cast<std::size_t>(k) - 1];
         m.grey_mean = mean;
         m.grey_std = std::sqrt(variance);
-        models[static_cast<std::size_t>(k)] = {mean, variance * kMedianSpreadShare *
-                                                         kMedianSpreadShare};
+        models[static_cast<std::size_t>(k)] = {mean,
+                                               variance * kMedianSpreadShare * kMedianSpreadShare};
       }
     }
   }
@@ -136,104 +137,118 @@ struct GraphCutLabeller::Impl {
     return -1;
   }
 
-  // Running appearance models from the interiors (two pixels in from every edge) of the
-  // threshold labelling: the pixels whose label the blur of an edge cannot have changed.
-  void learn(const cv::Mat& map, const cv::Mat& grey, const cv::Mat& usable) {
-    const cv::Mat kernel = cv::getStructuringElement(cv::MORPH_RECT, cv::Size(5, 5));
-    for (std::size_t k = 0; k < values.size(); ++k) {
-      if (static_cast<int>(k) == reflector) continue;
-      cv::Mat inside = (map == values[k]) & usable;
-      cv::erode(inside, inside, kernel);
-      if (cv::countNonZero(inside) < kMinModelPixels) continue;
-      cv::Scalar mean, spread;
-      cv::meanStdDev(grey, mean, spread, inside);
+  // The per-cell sums of the usable pixels' grey, and each cell's reflector pixels.
+  struct CellSums {
+    std::vector<double> count, sum, sum_sq;
+    std::vector<int> reflector_px;
+    // The one label of a cell whose pixels are all usable and of that label; kNotPure else.
+    std::vector<int> pure;
+  };
+  static constexpr int kNotPure = -1, kNoPixelYet = -2;
+
+  CellSums cell_sums(const cv::Mat& map, const cv::Mat& grey, const cv::Mat& usable) const {
+    const std::size_t cells = static_cast<std::size_t>(grid_w) * grid_h;
+    CellSums s{std::vector<double>(cells, 0.0), std::vector<double>(cells, 0.0),
+               std::vector<double>(cells, 0.0), std::vector<int>(cells, 0),
+               std::vector<int>(cells, kNoPixelYet)};
+    std::vector<std::size_t> cell_of_column(static_cast<std::size_t>(map.cols));
+    for (int i = 0; i < map.cols; ++i)
+      cell_of_column[static_cast<std::size_t>(i)] = static_cast<std::size_t>(i / block_px);
+    const int reflector_value = reflector >= 0 ? values[static_cast<std::size_t>(reflector)] : -1;
+    // Rows of cells in parallel: each writes only its own cells.
+    cv::parallel_for_(cv::Range(0, grid_h), [&](const cv::Range& cell_rows) {
+      const int j_end = std::min(map.rows, cell_rows.end * block_px);
+      for (int j = cell_rows.start * block_px; j < j_end; ++j) {
+        const float* g = grey.ptr<float>(j);
+        const std::uint8_t* use = usable.ptr<std::uint8_t>(j);
+        const std::uint8_t* m = map.ptr<std::uint8_t>(j);
+        const std::size_t row = static_cast<std::size_t>(j / block_px) * grid_w;
+        for (int i = 0; i < map.cols; ++i) {
+          const std::size_t c = row + cell_of_column[static_cast<std::size_t>(i)];
+          if (m[i] == reflector_value) ++s.reflector_px[c];
+          int& pure = s.pure[c];
+          if (!use[i]) {
+            pure = kNotPure;
+            continue;
+          }
+          if (pure == kNoPixelYet)
+            pure = m[i];
+          else if (pure != m[i])
+            pure = kNotPure;
+          s.count[c] += 1.0;
+          s.sum[c] += g[i];
+          s.sum_sq[c] += static_cast<double>(g[i]) * g[i];
+        }
+      }
+    });
+    return s;
+  }
+
+  // Running appearance models from the interiors of the threshold labelling: the cells all of
+  // whose pixels, and all of whose four neighbours' pixels, are usable and of one label (the
+  // pixels whose label the blur of an edge cannot have changed), from the cells' sums.
+  void learn(const CellSums& sums) {
+    const std::size_t labels = values.size();
+    std::vector<double> n(labels, 0.0), sum(labels, 0.0), sum_sq(labels, 0.0);
+    std::array<int, 256> index{};
+    index.fill(-1);
+    for (std::size_t k = 0; k < labels; ++k) index[values[k]] = static_cast<int>(k);
+    for (int cj = 1; cj + 1 < grid_h; ++cj)
+      for (int ci = 1; ci + 1 < grid_w; ++ci) {
+        const std::size_t c = static_cast<std::size_t>(cj) * grid_w + ci;
+        const int value = sums.pure[c];
+        if (value < 0 || sums.pure[c - 1] != value || sums.pure[c + 1] != value ||
+            sums.pure[c - grid_w] != value || sums.pure[c + grid_w] != value)
+          continue;
+        const int k = index[static_cast<std::size_t>(value)];
+        if (k < 0) continue;
+        n[static_cast<std::size_t>(k)] += sums.count[c];
+        sum[static_cast<std::size_t>(k)] += sums.sum[c];
+        sum_sq[static_cast<std::size_t>(k)] += sums.sum_sq[c];
+      }
+    for (std::size_t k = 0; k < labels; ++k) {
+      if (static_cast<int>(k) == reflector || n[k] < kMinModelPixels) continue;
+      const double mean = sum[k] / n[k];
+      const double variance = std::max(1.0, sum_sq[k] / n[k] - mean * mean);
       const double w = options.model_update;
-      models[k].mean = (1.0 - w) * models[k].mean + w * mean[0];
-      models[k].variance =
-          (1.0 - w) * models[k].variance + w * std::max(1.0, spread[0] * spread[0]);
+      models[k].mean = (1.0 - w) * models[k].mean + w * mean;
+      models[k].variance = (1.0 - w) * models[k].variance + w * variance;
     }
   }
 
   void refine(cv::Mat& map, const cv::Mat& grey, const cv::Mat& low, const cv::Mat& sector,
               const LabelImage* prior) {
     const cv::Mat usable = sector & ~low & (map != kLabelPixelUnknown);
-    learn(map, grey, usable);
     const std::size_t cells = static_cast<std::size_t>(grid_w) * grid_h;
     const std::size_t labels = values.size();
-    std::vector<double> count(cells, 0.0), sum(cells, 0.0), sum_sq(cells, 0.0);
-    std::vector<int> reflector_px(cells, 0);
-    std::vector<std::uint8_t> start(cells, 0);
-    for (int j = 0; j < map.rows; ++j) {
-      const float* g = grey.ptr<float>(j);
-      const std::uint8_t* use = usable.ptr<std::uint8_t>(j);
-      const std::uint8_t* m = map.ptr<std::uint8_t>(j);
-      const std::size_t row = static_cast<std::size_t>(j / block_px) * grid_w;
-      for (int i = 0; i < map.cols; ++i) {
-        const std::size_t c = row + static_cast<std::size_t>(i / block_px);
-        if (reflector >= 0 && m[i] == values[static_cast<std::size_t>(reflector)]) ++reflector_px[c];
-        if (!use[i]) continue;
-        count[c] += 1.0;
-        sum[c] += g[i];
-        sum_sq[c] += static_cast<double>(g[i]) * g[i];
-      }
-    }
-    // The threshold labelling seeds the cut: each cell starts with its centre pixel's label.
-    for (int cj = 0; cj < grid_h; ++cj)
-      for (int ci = 0; ci < grid_w; ++ci) {
-        const int i = std::min(map.cols - 1, ci * block_px + block_px / 2);
-        const int j = std::min(map.rows - 1, cj * block_px + block_px / 2);
-        start[static_cast<std::size_t>(cj) * grid_w + ci] =
-            static_cast<std::uint8_t>(std::max(0, index_of(map.at<std::uint8_t>(j, i))));
-      }
-
-    std::vector<float> cost(cells * labels, 0.0f);
-    for (std::size_t c = 0; c < cells; ++c) {
-      const double n = count[c];
-      const bool reflector_cell = reflector >= 0 && 2 * reflector_px[c] > n;
-      double lowest = 1e300;
-      for (std::size_t l = 0; l < labels; ++l) {
-        if (n == 0.0) break;
-        const Appearance& a = models[l];
-        const double squares = sum_sq[c] - 2.0 * a.mean * sum[c] + n * a.mean * a.mean;
-        const double e = 0.5 * n * std::log(a.variance) + 0.5 * squares / a.variance;
-        cost[c * labels + l] = static_cast<float>(e);
-        lowest = std::min(lowest, e);
-      }
-      for (std::size_t l = 0; l < labels; ++l) {
-        float& e = cost[c * labels + l];
-        if (n > 0.0) e -= static_cast<float>(lowest);
-        if (reflector >= 0 && (static_cast<int>(l) == reflector) != reflector_cell) e = kExcluded;
-        else if (reflector_cell) e = 0.0f;
-      }
-      if (reflector_cell) start[c] = static_cast<std::uint8_t>(reflector);
-    }
-    std::vector<std::uint8_t> prior_disagrees;
-    if (prior) prior_disagrees = add_prior(*prior, count, start, cost);
-
-    // Contrast-sensitive Potts weights between neighbouring cells: cheap to cut where the grey
-    // changes by much more than one tissue's spread.
-    double mean_variance = 0.0;
-    for (const Appearance& a : models) mean_variance += a.variance;
-    mean_variance /= static_cast<double>(models.size());
-    std::vector<float> right(cells, 0.0f), down(cells, 0.0f);
-    const double per_edge = options.smoothness * block_px;
+    const CellSums sums = cell_sums(map, grey, usable);
+    learn(sums);
+    const std::vector<double>& count = sums.count;
+    // The threshold labelling seeds the cut: each cell starts with its centre pixel's label,
+    // a cell mostly of reflector pixels with the reflector's.
+    std::vector<std::uint8_t> start(cells, 0), reflector_cell(cells, 0);
     for (int cj = 0; cj < grid_h; ++cj)
       for (int ci = 0; ci < grid_w; ++ci) {
         const std::size_t c = static_cast<std::size_t>(cj) * grid_w + ci;
-        if (count[c] == 0.0) continue;
-        const double g = sum[c] / count[c];
-        auto weight = [&](std::size_t d) {
-          if (count[d] == 0.0) return 0.0f;
-          const double diff = g - sum[d] / count[d];
-          return static_cast<float>(per_edge * std::exp(-0.5 * diff * diff / mean_variance));
-        };
-        if (ci + 1 < grid_w) right[c] = weight(c + 1);
-        if (cj + 1 < grid_h) down[c] = weight(c + static_cast<std::size_t>(grid_w));
+        const int i = std::min(map.cols - 1, ci * block_px + block_px / 2);
+        const int j = std::min(map.rows - 1, cj * block_px + block_px / 2);
+        start[c] = static_cast<std::uint8_t>(std::max(0, index_of(map.at<std::uint8_t>(j, i))));
+        reflector_cell[c] = reflector >= 0 && 2 * sums.reflector_px[c] > count[c];
+        if (reflector_cell[c]) start[c] = static_cast<std::uint8_t>(reflector);
       }
+    std::optional<PriorCells> predicted;
+    if (prior) predicted = prior_cells(*prior, count, start);
     // Only cells near a boundary of the starting labelling, or where the prior disagrees with
     // it, can change at an optimum of reasonable weights: the cut runs on that band, and the
-    // cells outside it enter as fixed neighbours (their Potts terms become unary ones).
-    const std::vector<std::uint8_t> band = changeable_band(start, count, prior_disagrees);
+    // cells outside it enter as fixed neighbours (their Potts terms become unary ones). Costs
+    // and weights are needed on the band alone.
+    const std::vector<std::uint8_t> band = changeable_band(
+        start, count, predicted ? predicted->disagrees : std::vector<std::uint8_t>{});
+    std::vector<float> cost(cells * labels, 0.0f);
+    band_costs(sums, reflector_cell, band, cost);
+    if (predicted) add_prior(*predicted, count, band, cost);
+    std::vector<float> right(cells, 0.0f), down(cells, 0.0f);
+    potts_weights(sums, band, right, down);
     for (int cj = 0; cj < grid_h; ++cj)
       for (int ci = 0; ci < grid_w; ++ci) {
         const std::size_t c = static_cast<std::size_t>(cj) * grid_w + ci;
@@ -249,19 +264,83 @@ struct GraphCutLabeller::Impl {
         if (cj > 0) fixed_neighbour(c - static_cast<std::size_t>(grid_w), down[c - grid_w]);
       }
     detail::GridLabelling cut(grid_w, grid_h, band, static_cast<int>(labels));
+    const std::vector<std::uint8_t> initial = start;
     cut.minimise(cost, right, down, start, options.cycles);
 
-    for (int j = 0; j < map.rows; ++j) {
-      const std::uint8_t* use = usable.ptr<std::uint8_t>(j);
-      std::uint8_t* m = map.ptr<std::uint8_t>(j);
-      const std::size_t row = static_cast<std::size_t>(j / block_px) * grid_w;
-      for (int i = 0; i < map.cols; ++i) {
-        const std::size_t c = row + static_cast<std::size_t>(i / block_px);
-        if (!use[i] || count[c] == 0.0) continue;
-        if (reflector >= 0 && m[i] == values[static_cast<std::size_t>(reflector)]) continue;
-        m[i] = values[start[c]];
+    // The cut decides cells; where it keeps a cell's starting label the threshold labelling's
+    // pixels stay (their boundaries are finer than a cell), elsewhere the cell's pixels move.
+    const int reflector_value = reflector >= 0 ? values[static_cast<std::size_t>(reflector)] : -1;
+    for (std::size_t c = 0; c < cells; ++c) {
+      if (start[c] == initial[c] || count[c] == 0.0) continue;
+      const int ci = static_cast<int>(c % static_cast<std::size_t>(grid_w));
+      const int cj = static_cast<int>(c / static_cast<std::size_t>(grid_w));
+      const int i_end = std::min(map.cols, (ci + 1) * block_px);
+      const int j_end = std::min(map.rows, (cj + 1) * block_px);
+      for (int j = cj * block_px; j < j_end; ++j) {
+        const std::uint8_t* use = usable.ptr<std::uint8_t>(j);
+        std::uint8_t* m = map.ptr<std::uint8_t>(j);
+        for (int i = ci * block_px; i < i_end; ++i)
+          if (use[i] && m[i] != reflector_value) m[i] = values[start[c]];
       }
     }
+  }
+
+  // The band cells' costs: each label's negative log-likelihood of the cell's grey under its
+  // Gaussian model, less the cell's lowest; a reflector cell takes only the reflector and the
+  // others never.
+  void band_costs(const CellSums& sums, const std::vector<std::uint8_t>& reflector_cell,
+                  const std::vector<std::uint8_t>& band, std::vector<float>& cost) const {
+    const std::size_t labels = values.size();
+    std::vector<double> half_log_variance(labels), half_precision(labels);
+    for (std::size_t l = 0; l < labels; ++l) {
+      half_log_variance[l] = 0.5 * std::log(models[l].variance);
+      half_precision[l] = 0.5 / models[l].variance;
+    }
+    for (std::size_t c = 0; c < band.size(); ++c) {
+      if (!band[c]) continue;
+      const double n = sums.count[c];
+      double lowest = 1e300;
+      for (std::size_t l = 0; l < labels && n > 0.0; ++l) {
+        const double mean = models[l].mean;
+        const double squares = sums.sum_sq[c] - 2.0 * mean * sums.sum[c] + n * mean * mean;
+        const double e = n * half_log_variance[l] + squares * half_precision[l];
+        cost[c * labels + l] = static_cast<float>(e);
+        lowest = std::min(lowest, e);
+      }
+      for (std::size_t l = 0; l < labels; ++l) {
+        float& e = cost[c * labels + l];
+        if (n > 0.0) e -= static_cast<float>(lowest);
+        if (reflector >= 0 && (static_cast<int>(l) == reflector) != (reflector_cell[c] != 0))
+          e = kExcluded;
+        else if (reflector_cell[c])
+          e = 0.0f;
+      }
+    }
+  }
+
+  // Contrast-sensitive Potts weights between neighbouring cells (right[c]: c and the cell to
+  // its right; down[c]: c and the one below), where one of the two is on the band: cheap to cut
+  // where the grey changes by much more than one tissue's spread.
+  void potts_weights(const CellSums& sums, const std::vector<std::uint8_t>& band,
+                     std::vector<float>& right, std::vector<float>& down) const {
+    double mean_variance = 0.0;
+    for (const Appearance& a : models) mean_variance += a.variance;
+    mean_variance /= static_cast<double>(models.size());
+    const double per_edge = options.smoothness * block_px;
+    const double half_precision = 0.5 / mean_variance;
+    for (int cj = 0; cj < grid_h; ++cj)
+      for (int ci = 0; ci < grid_w; ++ci) {
+        const std::size_t c = static_cast<std::size_t>(cj) * grid_w + ci;
+        if (sums.count[c] == 0.0) continue;
+        const double g = sums.sum[c] / sums.count[c];
+        auto weight = [&](std::size_t d) {
+          if (sums.count[d] == 0.0 || !(band[c] || band[d])) return 0.0f;
+          const double diff = g - sums.sum[d] / sums.count[d];
+          return static_cast<float>(per_edge * std::exp(-diff * diff * half_precision));
+        };
+        if (ci + 1 < grid_w) right[c] = weight(c + 1);
+        if (cj + 1 < grid_h) down[c] = weight(c + static_cast<std::size_t>(grid_w));
+      }
   }
 
   // Gives each connected region of look-alike labels its organ's identity (see segment()).
@@ -288,9 +367,11 @@ struct GraphCutLabeller::Impl {
           continue;
         }
         std::uint8_t label = 0;
-        if (predicted.size() == 1) label = predicted[0];
-        else if (plane) label = nearest_seed(group, *plane, centroids.at<double>(r, 0),
-                                             centroids.at<double>(r, 1));
+        if (predicted.size() == 1)
+          label = predicted[0];
+        else if (plane)
+          label =
+              nearest_seed(group, *plane, centroids.at<double>(r, 0), centroids.at<double>(r, 1));
         if (label == 0) continue;
         cv::Mat part = map(box);
         part.setTo(label, regions(box) == r);
@@ -355,9 +436,9 @@ struct GraphCutLabeller::Impl {
 
   // Cells within kBandCells of a cell whose starting label differs from a neighbour's, or of a
   // cell whose prior disagrees with its starting label (and that has pixels to decide).
-  std::vector<std::uint8_t> changeable_band(const std::vector<std::uint8_t>& start,
-                                            const std::vector<double>& count,
-                                            const std::vector<std::uint8_t>& prior_disagrees) const {
+  std::vector<std::uint8_t> changeable_band(
+      const std::vector<std::uint8_t>& start, const std::vector<double>& count,
+      const std::vector<std::uint8_t>& prior_disagrees) const {
     cv::Mat seed(grid_h, grid_w, CV_8U, cv::Scalar(0));
     for (int cj = 0; cj < grid_h; ++cj)
       for (int ci = 0; ci < grid_w; ++ci) {
@@ -373,8 +454,8 @@ struct GraphCutLabeller::Impl {
         }
       }
     cv::dilate(seed, seed,
-               cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * kBandCells + 1,
-                                                                  2 * kBandCells + 1)));
+               cv::getStructuringElement(cv::MORPH_RECT,
+                                         cv::Size(2 * kBandCells + 1, 2 * kBandCells + 1)));
     std::vector<std::uint8_t> band(static_cast<std::size_t>(grid_w) * grid_h, 0);
     for (int cj = 0; cj < grid_h; ++cj)
       for (int ci = 0; ci < grid_w; ++ci) {
@@ -384,17 +465,21 @@ struct GraphCutLabeller::Impl {
     return band;
   }
 
-  // Disagreeing with the prediction costs prior_weight per pixel, scaled by the prediction's
-  // confidence: none on its own boundaries, full from prior_margin_mm inside its regions.
-  // Returns, per cell, whether the prior predicts another label than `start`.
-  std::vector<std::uint8_t> add_prior(const LabelImage& prior, const std::vector<double>& count,
-                                      const std::vector<std::uint8_t>& start,
-                                      std::vector<float>& cost) const {
+  // What the prior predicts of each cell: its label index (-1: nothing) and the confidence,
+  // which grows from nothing on the prediction's own boundaries (where the reconstruction is
+  // least sure) to full prior_margin_mm inside its regions; and where it disagrees with `start`.
+  struct PriorCells {
+    std::vector<int> expected;
+    std::vector<float> confidence;
+    std::vector<std::uint8_t> disagrees;
+  };
+
+  PriorCells prior_cells(const LabelImage& prior, const std::vector<double>& count,
+                         const std::vector<std::uint8_t>& start) const {
     if (prior.width != geometry.width_px || prior.height != geometry.height_px)
       throw std::invalid_argument("GraphCutLabeller: the prior label map is " +
-                                  std::to_string(prior.width) + "x" +
-                                  std::to_string(prior.height) + ", the frames " +
-                                  std::to_string(geometry.width_px) + "x" +
+                                  std::to_string(prior.width) + "x" + std::to_string(prior.height) +
+                                  ", the frames " + std::to_string(geometry.width_px) + "x" +
                                   std::to_string(geometry.height_px));
     cv::Mat predicted(grid_h, grid_w, CV_8U);
     for (int cj = 0; cj < grid_h; ++cj)
@@ -415,22 +500,35 @@ struct GraphCutLabeller::Impl {
     cv::Mat distance;
     cv::distanceTransform(interior, distance, cv::DIST_L2, 3);
     const double cell_mm = block_px * geometry.spacing_mm;
-    const std::size_t labels = values.size();
-    std::vector<std::uint8_t> disagrees(count.size(), 0);
+    const std::size_t cells = count.size();
+    PriorCells out{std::vector<int>(cells, -1), std::vector<float>(cells, 0.0f),
+                   std::vector<std::uint8_t>(cells, 0)};
     for (int cj = 0; cj < grid_h; ++cj)
       for (int ci = 0; ci < grid_w; ++ci) {
         const std::size_t c = static_cast<std::size_t>(cj) * grid_w + ci;
         const int expected = index_of(predicted.at<std::uint8_t>(cj, ci));
         if (expected < 0 || count[c] == 0.0) continue;
-        disagrees[c] = start[c] != expected;
-        const double confidence =
-            std::min(1.0, distance.at<float>(cj, ci) * cell_mm / options.prior_margin_mm);
-        const auto penalty = static_cast<float>(options.prior_weight * count[c] * confidence);
-        for (std::size_t l = 0; l < labels; ++l)
-          if (static_cast<int>(l) != expected && cost[c * labels + l] < kExcluded)
-            cost[c * labels + l] += penalty;
+        out.expected[c] = expected;
+        out.disagrees[c] = start[c] != expected;
+        out.confidence[c] = static_cast<float>(
+            std::min(1.0, distance.at<float>(cj, ci) * cell_mm / options.prior_margin_mm));
       }
-    return disagrees;
+    return out;
+  }
+
+  // Disagreeing with the prediction costs prior_weight per pixel, scaled by its confidence.
+  void add_prior(const PriorCells& predicted, const std::vector<double>& count,
+                 const std::vector<std::uint8_t>& band, std::vector<float>& cost) const {
+    const std::size_t labels = values.size();
+    for (std::size_t c = 0; c < count.size(); ++c) {
+      const int expected = predicted.expected[c];
+      if (!band[c] || expected < 0) continue;
+      const auto penalty =
+          static_cast<float>(options.prior_weight * count[c] * predicted.confidence[c]);
+      for (std::size_t l = 0; l < labels; ++l)
+        if (static_cast<int>(l) != expected && cost[c * labels + l] < kExcluded)
+          cost[c * labels + l] += penalty;
+    }
   }
 };
 
@@ -446,20 +544,21 @@ const ImageGeometry& GraphCutLabeller::geometry() const { return impl_->geometry
 
 Segmentation GraphCutLabeller::segment(const GreyImage& image, const LabelImage* prior,
                                        const ImagePlane* plane) {
-  return detail::segment_frame(
-      image, impl_->geometry, impl_->config,
-      [&](cv::Mat& map, const cv::Mat& grey, const cv::Mat& low, const cv::Mat& sector,
-          cv::Mat& keep) {
-        impl_->refine(map, grey, low, sector, prior);
-        impl_->assign_identities(map, prior, plane);
-        // Small parts where the reconstruction predicts the same organ are kept.
-        if (prior) {
-          const cv::Mat predicted(prior->height, prior->width, CV_8U,
-                                  const_cast<std::uint8_t*>(prior->pixels.data()));
-          keep = (map == predicted) & (predicted != kLabelPixelOutside) &
-                 (predicted != kLabelPixelUnknown);
-        }
-      });
+  return detail::segment_frame(image, impl_->geometry, impl_->config,
+                               [&](cv::Mat& map, const cv::Mat& grey, const cv::Mat& low,
+                                   const cv::Mat& sector, cv::Mat& keep) {
+                                 impl_->refine(map, grey, low, sector, prior);
+                                 impl_->assign_identities(map, prior, plane);
+                                 // Small parts where the reconstruction predicts the same organ are
+                                 // kept.
+                                 if (prior) {
+                                   const cv::Mat predicted(
+                                       prior->height, prior->width, CV_8U,
+                                       const_cast<std::uint8_t*>(prior->pixels.data()));
+                                   keep = (map == predicted) & (predicted != kLabelPixelOutside) &
+                                          (predicted != kLabelPixelUnknown);
+                                 }
+                               });
 }
 
 }  // namespace sonoshape::seg
