@@ -286,8 +286,8 @@ Status KeyframeJournal::write_pending() {
     // Back to the last whole record: a later retry must not follow half of one.
     [[maybe_unused]] const int cut = ::ftruncate(fd_, static_cast<off_t>(size_));
     return Status::error("cannot append to the journal " + path_.string() + ": " +
-                         system_reason(error) + "; " + std::to_string(pending_keyframes_) +
-                         " keyframes are held in memory and written when it works again");
+                         system_reason(error) + "; keyframes held in memory until it works again: " +
+                         std::to_string(pending_keyframes_));
   }
   size_ += bytes.size();
   written_ += pending_keyframes_;

@@ -685,9 +685,11 @@ ScanSummary ScanPipeline::finish() {
   const MeshSet& meshes = reconstruction_->meshes();
   summary.labels_without_mesh = labels_without_mesh(source_.setup.labels, slices, meshes);
   each_sink("finish", [&](ScanSink& sink) { return sink.on_finish(meshes, slices, summary); });
-  if (journal_)
-    if (Status ended = journal_->finish(slices.slices.size()); !ended)
-      log_warning("scan: " + ended.message());
+  if (journal_ && !journal_->finish(slices.slices.size()))
+    log_warning("scan: the journal " + journal_->path().string() + " holds " +
+                std::to_string(journal_->written()) + " of the " +
+                std::to_string(slices.slices.size()) +
+                " keyframes (see above): --resume on this directory goes on after them");
   std::lock_guard lock(state_mutex_);
   summary_ = summary;
   return summary;
