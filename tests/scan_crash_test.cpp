@@ -32,8 +32,8 @@ using sonoshape::testing::TempDir;
 
 // About 0.9 s here: 31 frames of 160 x 160 px, 19 keyframes, meshes saved after every update.
 const std::vector<std::string> kScan = {
-    "scan",        "--source",     "sim:default", "--width-px", "160", "--height-px", "160",
-    "--frame-rate", "5",           "--sweep-s",   "6",          "--depth", "5", "--fast",
+    "scan",         "--source", "sim:default", "--width-px", "160",     "--height-px", "160",
+    "--frame-rate", "5",        "--sweep-s",   "6",          "--depth", "5",           "--fast",
     "--save-every", "1"};
 
 std::vector<std::string> scan_into(const fs::path& out) {
@@ -192,8 +192,9 @@ TEST_P(ScanKilled, AtARandomMomentLeavesReadableOutputAndResumesToTheSameMeshes)
       sonoshape::scan::read_journal(reference() / sonoshape::scan::kJournalName);
   ASSERT_TRUE(reference_journal);
   EXPECT_EQ(after->keyframes.size(), reference_journal->keyframes.size());
-  std::cout << "killed " << kill_after_ms << " ms after the journal appeared, with " << before->keyframes.size()
-            << " keyframes journalled" << (before->torn_tail ? " and a torn tail" : "") << '\n';
+  std::cout << "killed " << kill_after_ms << " ms after the journal appeared, with "
+            << before->keyframes.size() << " keyframes journalled"
+            << (before->torn_tail ? " and a torn tail" : "") << '\n';
 }
 
 INSTANTIATE_TEST_SUITE_P(Seeds, ScanKilled, ::testing::Values(1u, 2u, 3u, 4u, 5u, 6u));
@@ -281,7 +282,8 @@ TEST_F(ScanCrash, AFullDiskIsReportedOnceAndTheScanGoesOnToTheSameResult) {
   ASSERT_EQ(code, 0) << output;
   auto count = [&](const std::string& text) {
     std::size_t n = 0;
-    for (std::size_t at = output.find(text); at != std::string::npos; at = output.find(text, at + 1))
+    for (std::size_t at = output.find(text); at != std::string::npos;
+         at = output.find(text, at + 1))
       ++n;
     return n;
   };

@@ -261,8 +261,8 @@ bool create_journal(const fs::path& out, std::shared_ptr<scan::KeyframeJournal>&
     const auto old = scan::read_journal(path);
     if (!old || !old->finished) {
       std::cerr << "error: --out " << out.string() << " holds the journal of a scan that did not "
-                << "finish (" << (old ? std::to_string(old->keyframes.size()) + " keyframes"
-                                      : old.message())
+                << "finish ("
+                << (old ? std::to_string(old->keyframes.size()) + " keyframes" : old.message())
                 << "); go on with it: sonoshape scan --resume " << out.string()
                 << ", or choose another --out\n";
       return false;
@@ -410,25 +410,23 @@ int run_scan(const ScanCommandOptions& options, const Resume* resume) {
     std::cerr << "error: " << e.what() << '\n';
     return 1;
   }
-  const bool playback = options.source.rfind("sim:", 0) == 0 ||
-                        options.source.rfind("replay:", 0) == 0;
+  const bool playback =
+      options.source.rfind("sim:", 0) == 0 || options.source.rfind("replay:", 0) == 0;
   scan::ScanPipeline pipeline(std::move(*source), std::move(segmentation),
                               scan::make_reconstructor_stage(engine), scan_options);
   if (resume) {
     const scan::JournalContents& contents = resume->journal;
     remove_partial_files(options.out);
     if (Status restored = pipeline.restore(contents.keyframes); !restored) {
-      std::cerr << "error: --resume " << options.out.string() << ": " << restored.message()
-                << '\n';
+      std::cerr << "error: --resume " << options.out.string() << ": " << restored.message() << '\n';
       return 1;
     }
     const std::int64_t after =
         contents.keyframes.empty() ? -1 : contents.keyframes.back().frame_index;
-    auto reopened = scan::KeyframeJournal::reopen(options.out / scan::kJournalName, contents,
-                                                  after);
+    auto reopened =
+        scan::KeyframeJournal::reopen(options.out / scan::kJournalName, contents, after);
     if (!reopened) {
-      std::cerr << "error: --resume " << options.out.string() << ": " << reopened.message()
-                << '\n';
+      std::cerr << "error: --resume " << options.out.string() << ": " << reopened.message() << '\n';
       return 1;
     }
     journal = std::move(*reopened);

@@ -2,7 +2,6 @@
 // is dropped at any cut, a full disk (ENOSPC injected through JournalIo) keeps the file a prefix
 // of the keyframes and the held ones are written once it has room, and atomic file writes.
 #include <gtest/gtest.h>
-
 #include <unistd.h>
 
 #include <cerrno>
@@ -111,9 +110,8 @@ TEST(ScanJournal, AFullDiskKeepsAPrefixAndTheHeldKeyframesAreWrittenWhenThereIsR
       if (fits > 0 && ::pwrite(fd, data, fits, static_cast<off_t>(offset)) < 0) return errno;
       return ENOSPC;
     }
-    return ::pwrite(fd, data, size, static_cast<off_t>(offset)) == static_cast<ssize_t>(size)
-               ? 0
-               : EIO;
+    return ::pwrite(fd, data, size, static_cast<off_t>(offset)) == static_cast<ssize_t>(size) ? 0
+                                                                                              : EIO;
   };
   auto journal = KeyframeJournal::create(path, {"--source", "sim:default"}, io);
   ASSERT_TRUE(journal);

@@ -105,7 +105,8 @@ Status sync_directory(const fs::path& directory) {
 json plane_json(const tracking::FramePlane& plane) {
   json corners = json::array();
   for (const Vec3& c : plane.corners_mm) corners.push_back({c.x(), c.y(), c.z()});
-  return {{"corners_mm", corners}, {"normal", {plane.normal.x(), plane.normal.y(), plane.normal.z()}}};
+  return {{"corners_mm", corners},
+          {"normal", {plane.normal.x(), plane.normal.y(), plane.normal.z()}}};
 }
 
 Vec3 vec3_of(const json& value) {
@@ -198,8 +199,8 @@ Result<JournalContents> read_journal(const fs::path& path) {
   JournalContents contents;
   std::size_t at = kHeaderBytes;
   for (std::size_t record = 0; at < bytes.size(); ++record) {
-    const std::string where = name + ", record " + std::to_string(record) + " at byte " +
-                              std::to_string(at);
+    const std::string where =
+        name + ", record " + std::to_string(record) + " at byte " + std::to_string(at);
     const std::size_t left = bytes.size() - at;
     const std::uint32_t length = left >= kRecordHeaderBytes ? get_u32(bytes, at) : 0;
     const bool cut_short = left < kRecordHeaderBytes || left - kRecordHeaderBytes < length;
@@ -218,8 +219,8 @@ Result<JournalContents> read_journal(const fs::path& path) {
     if (bad_length || bad_crc)
       return Status::error(where + ": " + (bad_length ? "impossible length" : "checksum mismatch") +
                            " with records after it: the file is corrupt, not torn by a crash");
-    if (Status applied = apply_record(bytes.substr(at + kRecordHeaderBytes, length), where,
-                                      contents);
+    if (Status applied =
+            apply_record(bytes.substr(at + kRecordHeaderBytes, length), where, contents);
         !applied)
       return applied;
     if (record == 0 && contents.arguments.empty())
@@ -242,13 +243,12 @@ KeyframeJournal::~KeyframeJournal() {
 Result<std::unique_ptr<KeyframeJournal>> KeyframeJournal::create(
     const fs::path& path, const std::vector<std::string>& arguments, JournalIo io) {
   const std::string start =
-      header_bytes() + encode_record({{"type", "scan"}, {"version", kVersion},
-                                      {"arguments", arguments}});
+      header_bytes() +
+      encode_record({{"type", "scan"}, {"version", kVersion}, {"arguments", arguments}});
   if (Status written = write_file_atomically(path, start); !written) return written;
   const int fd = ::open(path.c_str(), O_WRONLY | O_CLOEXEC);
   if (fd < 0)
-    return Status::error("cannot open the journal " + path.string() + ": " +
-                         system_reason(errno));
+    return Status::error("cannot open the journal " + path.string() + ": " + system_reason(errno));
   return std::unique_ptr<KeyframeJournal>(
       new KeyframeJournal(path, fd, start.size(), std::move(io)));
 }
@@ -260,8 +260,7 @@ Result<std::unique_ptr<KeyframeJournal>> KeyframeJournal::reopen(const fs::path&
   const std::uint64_t valid_bytes = contents.valid_bytes;
   const int fd = ::open(path.c_str(), O_WRONLY | O_CLOEXEC);
   if (fd < 0)
-    return Status::error("cannot open the journal " + path.string() + ": " +
-                         system_reason(errno));
+    return Status::error("cannot open the journal " + path.string() + ": " + system_reason(errno));
   // Cut off a torn tail: the next record must follow the last whole one.
   if (::ftruncate(fd, static_cast<off_t>(valid_bytes)) != 0) {
     const int error = errno;
@@ -285,9 +284,9 @@ Status KeyframeJournal::write_pending() {
   if (error) {
     // Back to the last whole record: a later retry must not follow half of one.
     [[maybe_unused]] const int cut = ::ftruncate(fd_, static_cast<off_t>(size_));
-    return Status::error("cannot append to the journal " + path_.string() + ": " +
-                         system_reason(error) + "; keyframes held in memory until it works again: " +
-                         std::to_string(pending_keyframes_));
+    return Status::error(
+        "cannot append to the journal " + path_.string() + ": " + system_reason(error) +
+        "; keyframes held in memory until it works again: " + std::to_string(pending_keyframes_));
   }
   size_ += bytes.size();
   written_ += pending_keyframes_;
@@ -317,7 +316,8 @@ Status KeyframeJournal::finish(std::size_t slices) {
 Status write_file_atomically(const fs::path& path, const std::string& text) {
   const fs::path partial = path.parent_path() / (".partial-" + path.filename().string());
   const int fd = ::open(partial.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-  if (fd < 0) return Status::error("cannot create " + partial.string() + ": " + system_reason(errno));
+  if (fd < 0)
+    return Status::error("cannot create " + partial.string() + ": " + system_reason(errno));
   int error = posix_write_at(fd, text.data(), text.size(), 0);
   if (!error) error = sync_fd(fd);
   ::close(fd);

@@ -173,7 +173,8 @@ void ScanPipeline::publish_restored() {
   MeshUpdateInfo info;
   info.slices = restored_;
   info.timestamp_s = counters().last_slice_timestamp_s;
-  each_sink("meshes", [&](ScanSink& sink) { return sink.on_meshes(reconstruction_->meshes(), info); });
+  each_sink("meshes",
+            [&](ScanSink& sink) { return sink.on_meshes(reconstruction_->meshes(), info); });
 }
 
 void ScanPipeline::journal_added(const std::vector<const SliceItem*>& added) {
@@ -405,7 +406,9 @@ void ScanPipeline::acquisition_loop() {
       auto candidate = std::make_unique<Candidate>(
           Candidate{TrackedFrame{std::move(received->item), synced.pose.T_reference_probe,
                                  TrackingStatus::kValid},
-                    received->received_s, 0, {}});
+                    received->received_s,
+                    0,
+                    {}});
       const Eigen::Matrix4d T_reference_image =
           candidate->frame.T_reference_probe.matrix() * source_.setup.T_probe_image;
       offer_frame(candidate->frame, T_reference_image);
@@ -514,10 +517,9 @@ void ScanPipeline::segmentation_loop() {
                   " gave no slice: " + segmented.message());
         continue;
       }
-      auto item = std::make_unique<SliceItem>(SliceItem{*segmented, candidate->received_s,
-                                                        candidate->key,
-                                                        candidate->frame.frame.index,
-                                                        candidate->plane});
+      auto item =
+          std::make_unique<SliceItem>(SliceItem{*segmented, candidate->received_s, candidate->key,
+                                                candidate->frame.frame.index, candidate->plane});
       const int key = item->key;
       if (options_.drop_when_behind) {
         std::optional<std::unique_ptr<SliceItem>> evicted;

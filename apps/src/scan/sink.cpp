@@ -135,7 +135,8 @@ Status FileSink::on_finish(const MeshSet& meshes, const SliceSet& slices,
       if (first) first = written;
     }
   }
-  if (Status written = write_file_atomically(directory_ / "scan.json", summary_json(summary) + '\n');
+  if (Status written =
+          write_file_atomically(directory_ / "scan.json", summary_json(summary) + '\n');
       !written && first)
     first = written;
   return first;

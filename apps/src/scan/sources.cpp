@@ -55,7 +55,8 @@ Result<ScanSource> open_replay(const SourceRequest& request, const std::string& 
   setup.sector_from = prepared->sector_from;
   std::size_t first_frame = 0;
   if (request.resume_after_frame) {
-    first_frame = static_cast<std::size_t>(std::max<std::int64_t>(*request.resume_after_frame + 1, 0));
+    first_frame =
+        static_cast<std::size_t>(std::max<std::int64_t>(*request.resume_after_frame + 1, 0));
     if (first_frame >= shared->frame_count())
       return Status::error("--resume: the journal ends at frame " +
                            std::to_string(*request.resume_after_frame) + " but " + path.string() +
@@ -64,8 +65,8 @@ Result<ScanSource> open_replay(const SourceRequest& request, const std::string& 
   }
   source.frames = std::make_unique<acq::ReplayFrameSource>(shared, path.string(), first_frame);
   source.poses = std::make_unique<tracking::ReplayPoseSource>(shared, path.string());
-  source.device_origin_s = first_frame == 0 ? acq::first_timestamp_s(*shared)
-                                            : shared->frame(first_frame).timestamp_s;
+  source.device_origin_s =
+      first_frame == 0 ? acq::first_timestamp_s(*shared) : shared->frame(first_frame).timestamp_s;
   // PLUS stores the tracker already interpolated at each frame's time.
   source.tracker_latency_s = 0.0;
   std::ostringstream text;
