@@ -234,6 +234,51 @@ TEST_F(ScanCrash, ATornLastRecordIsReportedDroppedAndTheResumeStillMatches) {
   expect_same_result(out(dir));
 }
 
+TEST(ScanCrashReplay, AReplayResumesAtTheFrameAfterItsJournalToTheSameMeshes) {
+  // The PLUS recording, every frame a keyframe, stopped at 8: a kill after 4 keyframes (the 5th
+  // torn) resumes at frame 4 of the file and ends with the same meshes and slices.
+  const fs::path plus = fs::path(SONOSHAPE_DATA_DIR) / "plus";
+  TempDir dir;
+  auto replay_into = [&](const fs::path& out) {
+    return std::vector<std::string>{
+        SONOSHAPE_BINARY,
+        "scan",
+        "--source",
+        "replay:" + (plus / "fCal_Test_Calibration_3NWires.igs.mha").string(),
+        "--calibration",
+        (plus / "PlusDeviceSet_Server_Sim_NwirePhantom.xml").string(),
+        "--fast",
+        "--keyframe-angle-deg",
+        "0",
+        "--keyframe-distance-mm",
+        "0",
+        "--max-slices",
+        "8",
+        "--depth",
+        "4",
+        "-o",
+        out.string()};
+  };
+  std::string output;
+  const fs::path whole = dir.path() / "whole";
+  ASSERT_EQ(run(replay_into(whole), dir.path() / "whole.log", output), 0) << output;
+  const fs::path resumed = dir.path() / "resumed";
+  copy_torn_journal(whole / sonoshape::scan::kJournalName, resumed / sonoshape::scan::kJournalName,
+                    5, 40);
+  ASSERT_EQ(run({SONOSHAPE_BINARY, "scan", "--resume", resumed.string()},
+                dir.path() / "resumed.log", output),
+            0)
+      << output;
+  EXPECT_NE(output.find("with 4 journalled keyframes; the source goes on at frame 4"),
+            std::string::npos)
+      << output;
+  const std::vector<std::string> names = result_files(whole);
+  ASSERT_EQ(names, (std::vector<std::string>{"label_1.ply", "slices.json"}));
+  EXPECT_EQ(result_files(resumed), names);
+  for (const std::string& name : names)
+    EXPECT_TRUE(bytes_of(resumed / name) == bytes_of(whole / name)) << name << " differs";
+}
+
 TEST_F(ScanCrash, ACorruptRecordBeforeOthersIsAnErrorNamingItsOffset) {
   TempDir dir;
   const fs::path journal = out(dir) / sonoshape::scan::kJournalName;
