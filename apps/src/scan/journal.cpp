@@ -296,15 +296,21 @@ Status KeyframeJournal::write_pending() {
 }
 
 Status KeyframeJournal::append(const JournalKeyframe& keyframe) {
-  auto slice = write_slice_json(keyframe.slice);
-  if (!slice) return Status::error("journal " + path_.string() + ": " + slice.message());
-  json record = {{"type", "keyframe"},
-                 {"n", written_ + pending_keyframes_},
-                 {"frame", keyframe.frame_index},
-                 {"plane", plane_json(keyframe.plane)}};
-  record["slice"] = json::parse(*slice);
-  pending_.push_back(encode_record(record));
-  ++pending_keyframes_;
+  return append(std::vector<JournalKeyframe>{keyframe});
+}
+
+Status KeyframeJournal::append(const std::vector<JournalKeyframe>& keyframes) {
+  for (const JournalKeyframe& keyframe : keyframes) {
+    auto slice = write_slice_json(keyframe.slice);
+    if (!slice) return Status::error("journal " + path_.string() + ": " + slice.message());
+    json record = {{"type", "keyframe"},
+                   {"n", written_ + pending_keyframes_},
+                   {"frame", keyframe.frame_index},
+                   {"plane", plane_json(keyframe.plane)}};
+    record["slice"] = json::parse(*slice);
+    pending_.push_back(encode_record(record));
+    ++pending_keyframes_;
+  }
   return write_pending();
 }
 

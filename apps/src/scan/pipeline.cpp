@@ -179,9 +179,10 @@ void ScanPipeline::publish_restored() {
 
 void ScanPipeline::journal_added(const std::vector<const SliceItem*>& added) {
   if (!journal_) return;
-  Status status;
+  std::vector<JournalKeyframe> keyframes;
   for (const SliceItem* item : added)
-    if (status) status = journal_->append({item->frame_index, item->plane, item->slice});
+    keyframes.push_back({item->frame_index, item->plane, item->slice});
+  const Status status = journal_->append(keyframes);
   if (!status && !journal_failing_) {
     journal_failing_ = true;
     report(ScanState::kError, status.message() + "; the scan goes on (said once)");
