@@ -4,8 +4,9 @@
 
 namespace sonoshape::acq {
 
-ReplayFrameSource::ReplayFrameSource(std::shared_ptr<const SequenceFile> file, std::string name)
-    : file_(std::move(file)), name_(std::move(name)) {}
+ReplayFrameSource::ReplayFrameSource(std::shared_ptr<const SequenceFile> file, std::string name,
+                                     std::size_t first_frame)
+    : file_(std::move(file)), name_(std::move(name)), first_frame_(first_frame) {}
 
 ReplayFrameSource::~ReplayFrameSource() { stop(); }
 
@@ -13,7 +14,7 @@ Status ReplayFrameSource::open() {
   if (!file_ || file_->frame_count() == 0)
     return Status::error(describe() +
                          ": the sequence has no frames; record or choose another file");
-  next_ = 0;
+  next_ = first_frame_;
   return Status::ok();
 }
 

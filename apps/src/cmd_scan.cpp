@@ -1,9 +1,11 @@
 // `sonoshape scan`: the live pipeline. Frames and poses from a source (sim:, replay:), time
 // sync, keyframes, segmentation and online reconstruction on their own threads, meshes to
-// --out (and, once wired, to the ZeroMQ stream). Prints a live status line and a summary.
+// --out and the ZeroMQ stream. Prints a live status line and a summary. With --out, every
+// accepted keyframe goes to a journal there first, and `scan --resume DIR` goes on from it.
 #include <unistd.h>
 
 #include <CLI/CLI.hpp>
+#include <algorithm>
 #include <atomic>
 #include <csignal>
 #include <cstdio>
@@ -19,6 +21,7 @@
 #include "seed_option.hpp"
 #include "sim_options.hpp"
 #include "sonoshape/core/log.hpp"
+#include "sonoshape/scan/journal.hpp"
 #include "sonoshape/scan/pipeline.hpp"
 #include "sonoshape/scan/publish_sink.hpp"
 #ifdef SONOSHAPE_WITH_OPENIGTLINK
@@ -42,6 +45,7 @@ struct ScanCommandOptions {
   std::string method;  // "", "threshold" or "graph-cut": overrides the configuration
   std::vector<std::string> seeds;  // LABEL:X,Y,Z, see seed_option.hpp
   std::filesystem::path out;
+  std::filesystem::path resume;  ///< --resume DIR: the scan whose journal is in DIR goes on
   std::size_t save_every = 0;
   double duration_s = 0.0;
   bool real_time = false;
@@ -223,10 +227,109 @@ Result<std::unique_ptr<publish::StreamView>> start_view(const std::string& addre
 }
 #endif
 
-int run_scan(const ScanCommandOptions& options) {
+namespace fs = std::filesystem;
+
+// What --resume found in the journal.
+struct Resume {
+  scan::JournalContents journal;
+};
+
+// The arguments after `scan` on this command line, without the global flags (-v, -q).
+std::vector<std::string> scan_arguments() {
+  const std::vector<std::string>& line = command_line();
+  std::vector<std::string> out;
+  const auto start = std::find(line.begin() + (line.empty() ? 0 : 1), line.end(), "scan");
+  if (start == line.end()) return out;
+  for (auto it = start + 1; it != line.end(); ++it)
+    if (*it != "-v" && *it != "--verbose" && *it != "-q" && *it != "--quiet") out.push_back(*it);
+  return out;
+}
+
+// Temporary files a killed scan left in `directory` (`.partial-*`): never a result.
+void remove_partial_files(const fs::path& directory) {
+  std::error_code ec;
+  for (const auto& entry : fs::directory_iterator(directory, ec)) {
+    if (entry.path().filename().string().rfind(".partial-", 0) != 0) continue;
+    std::error_code ignored;
+    fs::remove(entry.path(), ignored);
+  }
+}
+
+// --out: a new journal there, unless it holds the journal of a scan that did not finish (its
+// keyframes are the patient's: resume it or choose another --out). False after the message.
+bool create_journal(const fs::path& out, std::shared_ptr<scan::KeyframeJournal>& journal) {
+  const fs::path path = out / scan::kJournalName;
+  if (fs::exists(path)) {
+    const auto old = scan::read_journal(path);
+    if (!old || !old->finished) {
+      std::cerr << "error: --out " << out.string() << " holds the journal of a scan that did not "
+                << "finish ("
+                << (old ? std::to_string(old->keyframes.size()) + " keyframes" : old.message())
+                << "); go on with it: sonoshape scan --resume " << out.string()
+                << ", or choose another --out\n";
+      return false;
+    }
+  }
+  std::error_code ec;
+  fs::create_directories(out, ec);
+  auto created = scan::KeyframeJournal::create(path, scan_arguments());
+  if (!created) {
+    std::cerr << "error: " << created.message() << '\n';
+    return false;
+  }
+  journal = std::move(*created);
+  return true;
+}
+
+int run_scan(const ScanCommandOptions& options, const Resume* resume);
+void add_scan_options(CLI::App& app, ScanCommandOptions& options);
+
+// --resume DIR: the journal's scan again, with its own arguments, going on after its keyframes.
+int resume_scan(const fs::path& directory) {
+  const std::vector<std::string> given = scan_arguments();
+  if (!(given.size() == 2 && given[0] == "--resume") &&
+      !(given.size() == 1 && given[0].rfind("--resume=", 0) == 0)) {
+    std::cerr << "error: --resume DIR takes no other scan options: they come from the journal "
+                 "in DIR (the scan goes on as it was started)\n";
+    return 1;
+  }
+  auto journal = scan::read_journal(directory / scan::kJournalName);
+  if (!journal) {
+    std::cerr << "error: --resume " << directory.string() << ": " << journal.message() << '\n';
+    return 1;
+  }
+  if (journal->torn_tail) log_warning("scan: " + *journal->torn_tail);
+  if (journal->arguments.empty()) {
+    std::cerr << "error: --resume " << directory.string()
+              << ": the journal lost its first record (the scan's options): the scan was killed "
+                 "before its first keyframe; start it again\n";
+    return 1;
+  }
+  ScanCommandOptions options;
+  CLI::App app;
+  add_scan_options(app, options);
+  std::vector<std::string> arguments = journal->arguments;
+  std::reverse(arguments.begin(), arguments.end());  // CLI11 takes them last first
+  try {
+    app.parse(arguments);
+  } catch (const CLI::ParseError& e) {
+    std::cerr << "error: --resume " << directory.string() << ": the journal's options no longer "
+              << "parse (" << e.what() << "); was it written by another sonoshape?\n";
+    return 1;
+  }
+  options.out = directory;
+  const Resume state{std::move(*journal)};
+  return run_scan(options, &state);
+}
+
+int run_scan(const ScanCommandOptions& options, const Resume* resume) {
   // From the start: a Ctrl-C while the source opens stops the scan as soon as it starts.
   const InterruptGuard interrupts;
+  // A file-size limit (ulimit -f) must fail a write like a full disk, not kill the scan.
+  std::signal(SIGXFSZ, SIG_IGN);
   if (!igtl_serve_available(options.igtl_serve)) return 1;
+  std::shared_ptr<scan::KeyframeJournal> journal;
+  if (!resume && !options.out.empty() && !create_journal(options.out, journal)) return 1;
 #ifndef SONOSHAPE_WITH_VIEWER
   if (options.view) {
     std::cerr << "error: --view: " << kViewerMissing << '\n';
@@ -257,6 +360,8 @@ int run_scan(const ScanCommandOptions& options) {
   request.igtl_image = options.igtl_image;
   request.igtl_transform = options.igtl_transform;
   request.igtl_tracker = options.igtl_tracker;
+  if (resume && !resume->journal.keyframes.empty())
+    request.resume_after_frame = resume->journal.keyframes.back().frame_index;
   auto source = scan::open_scan_source(request);
   if (!source) {
     std::cerr << "error: " << source.message() << '\n';
@@ -311,8 +416,32 @@ int run_scan(const ScanCommandOptions& options) {
     std::cerr << "error: " << e.what() << '\n';
     return 1;
   }
+  const bool playback =
+      options.source.rfind("sim:", 0) == 0 || options.source.rfind("replay:", 0) == 0;
   scan::ScanPipeline pipeline(std::move(*source), std::move(segmentation),
                               scan::make_reconstructor_stage(engine), scan_options);
+  if (resume) {
+    const scan::JournalContents& contents = resume->journal;
+    remove_partial_files(options.out);
+    if (Status restored = pipeline.restore(contents.keyframes); !restored) {
+      std::cerr << "error: --resume " << options.out.string() << ": " << restored.message() << '\n';
+      return 1;
+    }
+    const std::int64_t after =
+        contents.keyframes.empty() ? -1 : contents.keyframes.back().frame_index;
+    auto reopened =
+        scan::KeyframeJournal::reopen(options.out / scan::kJournalName, contents, after);
+    if (!reopened) {
+      std::cerr << "error: --resume " << options.out.string() << ": " << reopened.message() << '\n';
+      return 1;
+    }
+    journal = std::move(*reopened);
+    log_info("scan: resuming " + options.out.string() + " with " +
+             std::to_string(contents.keyframes.size()) + " journalled keyframes; " +
+             (playback ? "the source goes on at frame " + std::to_string(after + 1)
+                       : "a live source goes on from the frame it delivers now"));
+  }
+  pipeline.set_journal(journal);
   if (!options.out.empty())
     pipeline.add_sink(std::make_shared<scan::FileSink>(options.out, options.save_every));
   // The view follows the mesh stream: --view publishes it on the default endpoint if need be.
@@ -386,13 +515,17 @@ int run_scan(const ScanCommandOptions& options) {
   return 0;
 }
 
-}  // namespace
-
-CommandRunner add_scan_command(CLI::App& app) {
-  auto options = std::make_shared<ScanCommandOptions>();
+void add_scan_options(CLI::App& app, ScanCommandOptions& o) {
+  ScanCommandOptions* options = &o;
   options->sim.frame_rate_hz = 30.0;
   options->sim.width_px = 256;
   options->sim.height_px = 256;
+  app.add_option("--resume", options->resume,
+                 "Go on with the scan whose --out was DIR, after it was killed or stopped: its "
+                 "options and keyframes come from DIR/scan.journal (docs/formats/scan-journal.md); "
+                 "sim: and replay: sources go on at the frame after the last journalled one, "
+                 "live sources from the frame they deliver now")
+      ->check(CLI::ExistingDirectory);
   app.add_option("--source", options->source,
                  "Where frames and poses come from: sim:PHANTOM_SPEC (sim:default, or "
                  "LABEL:PATH[:NAME] meshes separated by commas), replay:FILE (a PLUS .igs.mha or "
@@ -400,7 +533,7 @@ CommandRunner add_scan_command(CLI::App& app) {
                  "18944 by default) or v4l2:/dev/videoN?size=WxH&format=F&fps=HZ&io=mmap|read&"
                  "crop=X,Y,W,H (a frame grabber; frames only, poses from --tracker; "
                  "`sonoshape devices` lists grabbers)")
-      ->required();
+      ->excludes("--resume");
   app.add_option("--tracker", options->tracker,
                  "A live tracker for the poses instead of the source's: usb:trakstar[:sensor=N,"
                  "rate=HZ,range=36|72,latency_ms=MS,product=0xID] (NDI/Ascension trakSTAR, "
@@ -424,7 +557,8 @@ CommandRunner add_scan_command(CLI::App& app) {
                  "--method graph-cut it tells apart organs whose grey models look alike");
   app.add_option("-o,--out", options->out,
                  "Directory for the meshes (label_<id>.ply), slices.json and scan.json, written "
-                 "at the end (also after Ctrl-C or a failing source)");
+                 "at the end (also after Ctrl-C or a failing source), and the journal of the "
+                 "keyframes (scan.journal), written as they are accepted: see --resume");
   app.add_option("--save-every", options->save_every,
                  "Also write the meshes to --out every N slices (0: at the end only)")
       ->capture_default_str();
@@ -523,7 +657,21 @@ CommandRunner add_scan_command(CLI::App& app) {
       ->capture_default_str();
   igtl->add_option("--igtl-tracker", options->igtl_tracker,
                    "HOST:PORT of the server sending the TRANSFORMs (default: the --source one)");
-  return [options] { return run_scan(*options); };
+}
+
+}  // namespace
+
+CommandRunner add_scan_command(CLI::App& app) {
+  auto options = std::make_shared<ScanCommandOptions>();
+  add_scan_options(app, *options);
+  return [options] {
+    if (!options->resume.empty()) return resume_scan(options->resume);
+    if (options->source.empty()) {
+      std::cerr << "error: --source is required (or --resume DIR)\n";
+      return 1;
+    }
+    return run_scan(*options, nullptr);
+  };
 }
 
 }  // namespace sonoshape::apps

@@ -2,6 +2,8 @@
 // Subcommands of the `sonoshape` command. Each registers its options on the CLI11 app and
 // returns the callback that runs it (exit code 0 on success).
 #include <functional>
+#include <string>
+#include <vector>
 
 namespace CLI {
 class App;
@@ -10,6 +12,10 @@ class App;
 namespace sonoshape::apps {
 
 using CommandRunner = std::function<int()>;
+
+/// The command line as main() received it (argv[0] included), for a command that records how
+/// it was started (`scan` in its journal).
+const std::vector<std::string>& command_line();
 
 CommandRunner add_reconstruct_command(CLI::App& app);
 CommandRunner add_slice_command(CLI::App& app);

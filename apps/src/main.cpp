@@ -7,7 +7,15 @@
 #include "commands.hpp"
 #include "sonoshape/core/log.hpp"
 
+namespace sonoshape::apps {
+namespace {
+std::vector<std::string> g_command_line;
+}
+const std::vector<std::string>& command_line() { return g_command_line; }
+}  // namespace sonoshape::apps
+
 int main(int argc, char** argv) {
+  sonoshape::apps::g_command_line.assign(argv, argv + argc);
   CLI::App app{"sonoshape: reconstruction of 3D surfaces from arbitrary cross-sections"};
   app.require_subcommand(1);
   app.fallthrough();  // global flags may follow the subcommand

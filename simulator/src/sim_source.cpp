@@ -36,14 +36,15 @@ SimFrameSource::SimFrameSource(std::shared_ptr<const BModeSimulator> simulator,
       options_(options),
       name_(std::move(name)) {
   if (!simulator_) throw std::invalid_argument("SimFrameSource: no simulator");
-  if (!(options.frame_rate_hz > 0.0) || options.frame_count < 1)
-    throw std::invalid_argument("SimFrameSource: need a positive frame rate and frames");
+  if (!(options.frame_rate_hz > 0.0) || options.frame_count < 1 || options.first_frame < 0)
+    throw std::invalid_argument(
+        "SimFrameSource: need a positive frame rate, frames and a first frame >= 0");
 }
 
 SimFrameSource::~SimFrameSource() { stop(); }
 
 Status SimFrameSource::open() {
-  next_ = 0;
+  next_ = options_.first_frame;
   delivered_ = 0;
   return Status::ok();
 }

@@ -16,6 +16,7 @@ struct ScanPipeline::Candidate {
   TrackedFrame frame;
   double received_s = 0.0;
   int key = 0;
+  tracking::FramePlane plane;  // for the journal
 };
 
 // A segmented keyframe on its way to the reconstruction.
@@ -24,6 +25,7 @@ struct ScanPipeline::SliceItem {
   double received_s = 0.0;
   int key = 0;
   std::int64_t frame_index = 0;
+  tracking::FramePlane plane;
 };
 
 namespace {
@@ -121,6 +123,74 @@ void ScanPipeline::add_sink(std::shared_ptr<ScanSink> sink) {
   if (!sink) return;
   std::lock_guard lock(sink_mutex_);
   sinks_.push_back(std::move(sink));
+}
+
+void ScanPipeline::set_journal(std::shared_ptr<KeyframeJournal> journal) {
+  journal_ = std::move(journal);
+}
+
+Status ScanPipeline::restore(const std::vector<JournalKeyframe>& keyframes) {
+  {
+    std::lock_guard lock(state_mutex_);
+    if (started_) return Status::error("scan: restore() after start()");
+  }
+  if (keyframes.empty()) return Status::ok();
+  for (std::size_t i = 0; i < keyframes.size(); ++i) {
+    try {
+      reconstruction_->add_slice(keyframes[i].slice);
+    } catch (const std::exception& e) {
+      return Status::error("journalled keyframe " + std::to_string(i) + " (frame " +
+                           std::to_string(keyframes[i].frame_index) +
+                           ") was refused by the reconstruction: " + e.what());
+    }
+    // Accepted once against a superset of these planes, each is accepted again.
+    selector_.offer(keyframes[i].plane);
+  }
+  try {
+    reconstruction_->update();
+  } catch (const std::exception& e) {
+    return Status::error(std::string("the reconstruction of the journalled keyframes failed: ") +
+                         e.what());
+  }
+  restored_ = keyframes.size();
+  meshes_ = reconstruction_->meshes();
+  counters_.slices = reconstruction_->slice_count();
+  counters_.last_slice_timestamp_s = keyframes.back().slice.timestamp_s.value_or(0.0);
+  segmentation_->on_meshes(meshes_);
+  return Status::ok();
+}
+
+// The restored slices and meshes to the sinks, as if they had just been reconstructed.
+void ScanPipeline::publish_restored() {
+  if (restored_ == 0) return;
+  const SliceSet restored = reconstruction_->slice_set();
+  each_sink("slice", [&](ScanSink& sink) {
+    Status result;
+    for (std::size_t k = 0; k < restored.slices.size() && result; ++k)
+      result = sink.on_slice(restored.slices[k], k);
+    return result;
+  });
+  MeshUpdateInfo info;
+  info.slices = restored_;
+  info.timestamp_s = counters().last_slice_timestamp_s;
+  each_sink("meshes",
+            [&](ScanSink& sink) { return sink.on_meshes(reconstruction_->meshes(), info); });
+}
+
+void ScanPipeline::journal_added(const std::vector<const SliceItem*>& added) {
+  if (!journal_) return;
+  std::vector<JournalKeyframe> keyframes;
+  for (const SliceItem* item : added)
+    keyframes.push_back({item->frame_index, item->plane, item->slice});
+  const Status status = journal_->append(keyframes);
+  if (!status && !journal_failing_) {
+    journal_failing_ = true;
+    report(ScanState::kError, status.message() + "; the scan goes on (said once)");
+  } else if (status && journal_failing_) {
+    journal_failing_ = false;
+    report(ScanState::kScanning, "the journal " + journal_->path().string() +
+                                     " is written again: every keyframe is on disk");
+  }
 }
 
 Status ScanPipeline::start() {
@@ -337,7 +407,9 @@ void ScanPipeline::acquisition_loop() {
       auto candidate = std::make_unique<Candidate>(
           Candidate{TrackedFrame{std::move(received->item), synced.pose.T_reference_probe,
                                  TrackingStatus::kValid},
-                    received->received_s, 0});
+                    received->received_s,
+                    0,
+                    {}});
       const Eigen::Matrix4d T_reference_image =
           candidate->frame.T_reference_probe.matrix() * source_.setup.T_probe_image;
       offer_frame(candidate->frame, T_reference_image);
@@ -368,6 +440,7 @@ void ScanPipeline::acquisition_loop() {
         continue;
       }
       candidate->key = *key;
+      candidate->plane = plane;
       if (options_.drop_when_behind) {
         std::optional<std::unique_ptr<Candidate>> evicted;
         if (!to_segmentation_->push_drop_oldest(std::move(candidate), &evicted)) {
@@ -445,8 +518,9 @@ void ScanPipeline::segmentation_loop() {
                   " gave no slice: " + segmented.message());
         continue;
       }
-      auto item = std::make_unique<SliceItem>(SliceItem{
-          *segmented, candidate->received_s, candidate->key, candidate->frame.frame.index});
+      auto item =
+          std::make_unique<SliceItem>(SliceItem{*segmented, candidate->received_s, candidate->key,
+                                                candidate->frame.frame.index, candidate->plane});
       const int key = item->key;
       if (options_.drop_when_behind) {
         std::optional<std::unique_ptr<SliceItem>> evicted;
@@ -471,8 +545,9 @@ void ScanPipeline::segmentation_loop() {
 }
 
 void ScanPipeline::reconstruction_loop() {
-  std::size_t slice_index = 0;
+  std::size_t slice_index = restored_;
   try {
+    publish_restored();
     while (true) {
       auto first = to_reconstruction_->pop(kPollS);
       if (!first) {
@@ -515,6 +590,8 @@ void ScanPipeline::reconstruction_loop() {
         continue;
       }
       const double ready_s = acq::monotonic_s();
+      // On disk before anyone hears of it: what a subscriber saw, a resume restores.
+      journal_added(added);
       if (log_level() >= LogLevel::kDebug) {
         const recon::ReconstructionStats& st = stats.step;
         log_debug("scan: update +" + std::to_string(added.size()) + " slices -> " +
@@ -611,6 +688,11 @@ ScanSummary ScanPipeline::finish() {
   const MeshSet& meshes = reconstruction_->meshes();
   summary.labels_without_mesh = labels_without_mesh(source_.setup.labels, slices, meshes);
   each_sink("finish", [&](ScanSink& sink) { return sink.on_finish(meshes, slices, summary); });
+  if (journal_ && !journal_->finish(slices.slices.size()))
+    log_warning("scan: the journal " + journal_->path().string() + " holds " +
+                std::to_string(journal_->written()) + " of the " +
+                std::to_string(slices.slices.size()) +
+                " keyframes (see above): --resume on this directory goes on after them");
   std::lock_guard lock(state_mutex_);
   summary_ = summary;
   return summary;

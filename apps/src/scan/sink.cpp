@@ -1,28 +1,18 @@
 #include "sonoshape/scan/sink.hpp"
 
-#include <fstream>
 #include <nlohmann/json.hpp>
 #include <system_error>
 #include <utility>
 
+#include "sonoshape/core/log.hpp"
 #include "sonoshape/core/slice_io.hpp"
 #include "sonoshape/publish/mesh_writer.hpp"
+#include "sonoshape/scan/journal.hpp"
 
 namespace sonoshape::scan {
 namespace {
 
 namespace fs = std::filesystem;
-
-// Moves a finished file over its final name: readers see the old file or the new one, never
-// half of one (rename is atomic within a file system).
-Status move_into_place(const fs::path& from, const fs::path& to) {
-  std::error_code ec;
-  fs::rename(from, to, ec);
-  if (ec)
-    return Status::error("cannot move " + from.string() + " to " + to.string() + ": " +
-                         ec.message());
-  return Status::ok();
-}
 
 Status ensure_directory(const fs::path& directory) {
   std::error_code ec;
@@ -93,40 +83,63 @@ Status FileSink::on_slice(const LabeledSlice&, std::size_t) { return Status::ok(
 
 Status FileSink::on_status(const ScanStatus&) { return Status::ok(); }
 
+// Writes under a temporary name in the same directory, then sync_and_rename: after a crash the
+// final name holds the previous version or the new one, whole. A failed write leaves no
+// temporary file behind (a full disk wants its space back).
 Status FileSink::write_meshes(const MeshSet& meshes) {
   if (Status made = ensure_directory(directory_); !made) return made;
   for (const MeshSet::Entry& entry : meshes.meshes) {
     const std::string name = "label_" + std::to_string(entry.label) + ".ply";
     const fs::path partial = directory_ / (".partial-" + name);
-    if (Status written = publish::write_mesh(entry.mesh, partial); !written) return written;
-    if (Status moved = move_into_place(partial, directory_ / name); !moved) return moved;
+    Status written = publish::write_mesh(entry.mesh, partial);
+    if (written) written = sync_and_rename(partial, directory_ / name);
+    if (!written) {
+      std::error_code ignored;
+      fs::remove(partial, ignored);
+      return written;
+    }
   }
   ++saves_;
   return Status::ok();
 }
 
+Status FileSink::reported(Status status) {
+  if (status) {
+    if (failures_ > 0)
+      log_info("scan: writing to " + directory_.string() + " works again (" +
+               std::to_string(failures_) + " saves had failed)");
+    failures_ = 0;
+    return status;
+  }
+  // Once per run of failures: a full disk fails every save, and one line says it.
+  return failures_++ == 0 ? status : Status::ok();
+}
+
 Status FileSink::on_meshes(const MeshSet& meshes, const MeshUpdateInfo& info) {
   if (save_every_ == 0 || info.slices < saved_at_slices_ + save_every_) return Status::ok();
   saved_at_slices_ = info.slices - info.slices % save_every_;
-  return write_meshes(meshes);
+  return reported(write_meshes(meshes));
 }
 
 Status FileSink::on_finish(const MeshSet& meshes, const SliceSet& slices,
                            const ScanSummary& summary) {
-  if (Status written = write_meshes(meshes); !written) return written;
+  // Each file on its own: a mesh that does not fit must not cost the summary.
+  Status first = write_meshes(meshes);
   if (!slices.slices.empty()) {
     const fs::path partial = directory_ / ".partial-slices.json";
-    if (Status written = write_slice_set_json(slices, partial); !written) return written;
-    if (Status moved = move_into_place(partial, directory_ / "slices.json"); !moved) return moved;
+    Status written = write_slice_set_json(slices, partial);
+    if (written) written = sync_and_rename(partial, directory_ / "slices.json");
+    if (!written) {
+      std::error_code ignored;
+      fs::remove(partial, ignored);
+      if (first) first = written;
+    }
   }
-  const fs::path partial = directory_ / ".partial-scan.json";
-  {
-    std::ofstream out(partial, std::ios::trunc);
-    out << summary_json(summary) << '\n';
-    if (!out)
-      return Status::error("cannot write " + partial.string() + " (disk full? not writable?)");
-  }
-  return move_into_place(partial, directory_ / "scan.json");
+  if (Status written =
+          write_file_atomically(directory_ / "scan.json", summary_json(summary) + '\n');
+      !written && first)
+    first = written;
+  return first;
 }
 
 }  // namespace sonoshape::scan

@@ -53,9 +53,20 @@ Result<ScanSource> open_replay(const SourceRequest& request, const std::string& 
   setup.calibration_from = prepared->calibration_from;
   setup.models_from = prepared->models_from;
   setup.sector_from = prepared->sector_from;
-  source.frames = std::make_unique<acq::ReplayFrameSource>(shared, path.string());
+  std::size_t first_frame = 0;
+  if (request.resume_after_frame) {
+    first_frame =
+        static_cast<std::size_t>(std::max<std::int64_t>(*request.resume_after_frame + 1, 0));
+    if (first_frame >= shared->frame_count())
+      return Status::error("--resume: the journal ends at frame " +
+                           std::to_string(*request.resume_after_frame) + " but " + path.string() +
+                           " has " + std::to_string(shared->frame_count()) +
+                           " frames: is it the file the scan was started with?");
+  }
+  source.frames = std::make_unique<acq::ReplayFrameSource>(shared, path.string(), first_frame);
   source.poses = std::make_unique<tracking::ReplayPoseSource>(shared, path.string());
-  source.device_origin_s = acq::first_timestamp_s(*shared);
+  source.device_origin_s =
+      first_frame == 0 ? acq::first_timestamp_s(*shared) : shared->frame(first_frame).timestamp_s;
   // PLUS stores the tracker already interpolated at each frame's time.
   source.tracker_latency_s = 0.0;
   std::ostringstream text;
@@ -170,6 +181,11 @@ Result<ScanSource> open_sim(const SourceRequest& request, const std::string& pha
   frame_options.frame_rate_hz = options.frame_rate_hz;
   frame_options.frame_count = frame_count;
   frame_options.seed = options.seed;
+  if (request.resume_after_frame) {
+    frame_options.first_frame =
+        static_cast<long>(std::max<std::int64_t>(*request.resume_after_frame + 1, 0));
+    source.device_origin_s = static_cast<double>(frame_options.first_frame) / options.frame_rate_hz;
+  }
   if (request.sim_fail_after_s >= 0.0)
     frame_options.fail_after_frames =
         static_cast<long>(std::floor(request.sim_fail_after_s * options.frame_rate_hz));
@@ -184,7 +200,6 @@ Result<ScanSource> open_sim(const SourceRequest& request, const std::string& pha
   source.poses = std::make_unique<tracking::RecordedPoseSource>(
       sim::track(trajectory, scenario->tracker, -margin_s, duration_s + margin_s),
       name + " (tracker)");
-  source.device_origin_s = 0.0;
   source.tracker_latency_s = scenario->tracker.latency_s;
   std::ostringstream text;
   text << "simulated " << sim::to_string(probe.type()) << " probe " << probe.width_px() << "x"

@@ -24,9 +24,11 @@ class FrameSource : public StreamSource<Frame> {
 /// or as fast as possible (SourceOptions::playback).
 class ReplayFrameSource final : public FrameSource {
  public:
-  /// Replays `file`, shared with the pose replay of the same file; `name` names it in messages
+  /// Replays `file`, shared with the pose replay of the same file, from frame `first_frame` (a
+  /// resumed scan goes on after the last frame it journalled); `name` names it in messages
   /// (usually the path).
-  ReplayFrameSource(std::shared_ptr<const SequenceFile> file, std::string name);
+  ReplayFrameSource(std::shared_ptr<const SequenceFile> file, std::string name,
+                    std::size_t first_frame = 0);
   ~ReplayFrameSource() override;
 
   std::string describe() const override { return "replay:" + name_; }
@@ -39,6 +41,7 @@ class ReplayFrameSource final : public FrameSource {
  private:
   std::shared_ptr<const SequenceFile> file_;
   std::string name_;
+  std::size_t first_frame_ = 0;
   std::size_t next_ = 0;
 };
 

@@ -26,6 +26,7 @@
 
 #include "sonoshape/acquisition/frame_source.hpp"
 #include "sonoshape/core/bounded_queue.hpp"
+#include "sonoshape/scan/journal.hpp"
 #include "sonoshape/scan/report.hpp"
 #include "sonoshape/scan/setup.hpp"
 #include "sonoshape/scan/sink.hpp"
@@ -88,6 +89,16 @@ class ScanPipeline {
 
   /// Adds an output (before start()); sinks are called in the order added.
   void add_sink(std::shared_ptr<ScanSink> sink);
+  /// Appends every keyframe the reconstruction accepts to `journal` (before start()), right
+  /// after the update that took it and before the sinks hear of it, and its end record at
+  /// finish(). A failing append is reported once (kError) and retried with the next keyframe;
+  /// the scan goes on.
+  void set_journal(std::shared_ptr<KeyframeJournal> journal);
+  /// A resumed scan (before start()): puts `keyframes` (a journal's) into the reconstruction in
+  /// one update and into the keyframe choice, so that the scan goes on where it stopped. The
+  /// sinks get these slices and meshes when the scan starts. Fails when the reconstruction
+  /// refuses a slice or the update fails (the message names the keyframe).
+  Status restore(const std::vector<JournalKeyframe>& keyframes);
 
   /// Starts the sources and the three threads. Fails when already started or when a source
   /// cannot start.
@@ -124,6 +135,8 @@ class ScanPipeline {
   template <typename F>
   void each_sink(const char* what, F&& call);
   void offer_frame(const TrackedFrame& frame, const Eigen::Matrix4d& T_reference_image);
+  void journal_added(const std::vector<const SliceItem*>& added);
+  void publish_restored();
 
   ScanSource source_;
   std::unique_ptr<SegmentationStage> segmentation_;
@@ -162,6 +175,10 @@ class ScanPipeline {
   double start_s_ = 0.0;
   double end_s_ = 0.0;
   std::atomic<bool> stop_requested_{false};
+
+  std::shared_ptr<KeyframeJournal> journal_;  // reconstruction thread once started
+  bool journal_failing_ = false;              // reconstruction thread only
+  std::size_t restored_ = 0;                  // slices restore() put in
 };
 
 }  // namespace sonoshape::scan

@@ -68,10 +68,13 @@ class FileSink final : public ScanSink {
 
  private:
   Status write_meshes(const MeshSet& meshes);
+  /// `status` the first time saving fails after a success; ok for the repeats.
+  Status reported(Status status);
   std::filesystem::path directory_;
   std::size_t save_every_;
   std::size_t saved_at_slices_ = 0;
   std::size_t saves_ = 0;
+  std::size_t failures_ = 0;  // saves failed since the last one that worked
 };
 
 /// The JSON form of a summary (what `scan.json` holds), for tools and tests.

@@ -33,6 +33,10 @@ struct SourceRequest {
   /// A live tracker that replaces the source's poses: "usb:trakstar[:sensor=N,rate=HZ,...]"
   /// (tracking::parse_trakstar_options). Empty: the source's own poses.
   std::string tracker;
+  /// A resumed scan: the last frame its journal holds. Recorded and simulated sources (sim:,
+  /// replay:) start at the frame after it; live sources (igtl:, v4l2:) have no past to seek and
+  /// go on from the frame they deliver now. None: from the start.
+  std::optional<std::int64_t> resume_after_frame;
 
   // sim: only.
   SimScenarioOptions sim;

@@ -39,6 +39,9 @@ struct SimFrameOptions {
   /// Fault injection: poll() fails with "probe vanished" once this many frames were delivered
   /// (< 0: never), as when a cable is pulled mid-scan.
   long fail_after_frames = -1;
+  /// The first frame delivered (a resumed scan goes on after the last frame it journalled);
+  /// real-time playback then starts at its time (Playback::device_origin_s).
+  long first_frame = 0;
   /// When set, every frame's truth label map (SimulatedFrame::truth) is put there.
   std::shared_ptr<FrameTruthStore> truth;
 };
