@@ -266,6 +266,10 @@ Status MeshPublisher::publish_slice(const LabeledSlice& slice, std::uint64_t ind
   return impl_->publish({StreamMessage{0, {}, SliceUpdate{index, slice}}});
 }
 
+Status MeshPublisher::publish_frame(const FrameImage& frame) {
+  return impl_->publish({StreamMessage{0, {}, frame}});
+}
+
 Status MeshPublisher::publish_status(const StatusReport& status) {
   return impl_->publish({StreamMessage{0, {}, status}});
 }

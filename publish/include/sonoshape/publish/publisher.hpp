@@ -63,6 +63,11 @@ class MeshPublisher {
   /// non-finite numbers.
   Status publish_slice(const LabeledSlice& slice, std::uint64_t index);
 
+  /// Publishes a B-mode frame preview (a `frame` message; keep it small and rare: the caller
+  /// downsamples and rate-limits). Fails for what encode_message refuses (an empty or oversized
+  /// picture, a plane that is not orthonormal, non-finite numbers).
+  Status publish_frame(const FrameImage& frame);
+
   /// Publishes a status report. Fails for negative or non-finite times, or state error without a
   /// message.
   Status publish_status(const StatusReport& status);
