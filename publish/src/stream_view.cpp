@@ -110,10 +110,8 @@ struct StreamView::Impl {
         if (!scan.empty()) log_info("view: new scan " + message.scan);
         scan = message.scan;
       }
-      // The page draws surfaces and status; slices and the snapshot's end stay here.
-      if (!std::holds_alternative<MeshUpdate>(message.body) &&
-          !std::holds_alternative<StatusReport>(message.body))
-        continue;
+      // The page draws surfaces, slices, frames and status; the snapshot's end stays here.
+      if (std::holds_alternative<SnapshotEnd>(message.body)) continue;
       ++relayed;  // first: a page that has the message sees it counted
       server.post(subscriber.last_frames());
     }

@@ -194,7 +194,8 @@ async function main() {
     ? ['--sweep-s', '6']
     : ['--width-px', '160', '--height-px', '160', '--frame-rate', '8', '--depth', '5', '--sweep-s', '4'];
   const scan = start(sonoshape, ['scan', '--source', 'sim:default', ...sweep, '--realtime',
-    '--publish', 'tcp://127.0.0.1:*', '--snapshot', 'tcp://127.0.0.1:*', '-o', out]);
+    '--publish', 'tcp://127.0.0.1:*', '--snapshot', 'tcp://127.0.0.1:*', '--publish-frames', '5',
+    '-o', out]);
   const [, pub, snapshot] = await scan.waitFor(/on (tcp:\/\/\S+) \(snapshot (tcp:\/\/\S+)\)/, 60000);
   const view = start(sonoshape, ['view', pub, '--snapshot', snapshot, '--http', '127.0.0.1:0']);
   const [, url] = await view.waitFor(/open (http:\/\/127\.0\.0\.1:\d+\/)/, 20000);
@@ -221,6 +222,7 @@ async function main() {
       state: document.getElementById('state')?.textContent ?? '',
       frames: document.getElementById('frames')?.textContent,
       slices: document.getElementById('slices')?.textContent,
+      latency: document.getElementById('latency-ms')?.textContent,
       labels: [...document.querySelectorAll('#legend .name')].map((n) => n.textContent) })`);
     if (state && state.state.startsWith('idle') && state.labelsDrawn >= 2 && state.rendered > 0) break;
     await sleep(100);
@@ -231,6 +233,12 @@ async function main() {
     fail(`frames in: page ${state.frames}, scan.json ${summary.frames_received}`);
   if (String(summary.slices) !== state.slices)
     fail(`slices: page ${state.slices}, scan.json ${summary.slices}`);
+  // The slice planes drawn: every slice the view saw (it may join after the first ones: slices
+  // are not in a snapshot), the newest included; the B-mode frame on its plane; the latency.
+  const drawn = await evaluate('window.sonoshapeViewer.slices');
+  if (drawn < 1 || drawn > summary.slices) fail(`slice planes drawn: ${drawn} of ${summary.slices}`);
+  if (state.framesShown < 1) fail('the page showed no B-mode frame');
+  if (!/^\d+$/.test(state.latency)) fail(`frame-to-mesh latency shown as ${state.latency}`);
 
   const { data } = await send('Page.captureScreenshot', { format: 'png' }, sessionId);
   const png = Buffer.from(data, 'base64');
@@ -251,6 +259,24 @@ async function main() {
     if (count < kMinPixels)
       fail(`label ${label}'s colour ${labelColor(label)} covers ${count} pixels (< ${kMinPixels}); see ${path.join(workDir, 'page.png')}`);
   }
+  // What is still unscanned: the surfaces coloured by distance to the slices; the scanned parts
+  // (0 mm) are the ramp's green, a hue no label of this scan has.
+  await evaluate("window.sonoshapeViewer.setColoring('distance', 10)");
+  let coverage = null;
+  for (let i = 0; i < 50 && !coverage; ++i) {
+    await sleep(100);
+    coverage = await evaluate('window.sonoshapeViewer.coverage');
+  }
+  if (!coverage) fail('the page never coloured the surfaces by distance');
+  await sleep(300);
+  const distancePng = Buffer.from((await send('Page.captureScreenshot', { format: 'png' }, sessionId)).data, 'base64');
+  fs.writeFileSync(path.join(workDir, 'distance.png'), distancePng);
+  const coloured = decodePng(distancePng);
+  const green = countColour(coloured, '#2ebf5c');
+  console.log(`distance colouring: ${green} green (scanned) pixels; ${coverage.vertices} vertices in ${coverage.ms.toFixed(0)} ms`);
+  if (green < kMinPixels) fail(`the distance colouring shows ${green} green pixels (< ${kMinPixels})`);
+  await evaluate("window.sonoshapeViewer.setColoring('label')");
+
   // The page's downloads: each surface as PLY and STL, with the scan's own final triangle count.
   for (const label of labels) {
     const ply = await evaluate(`window.sonoshapeViewer.exportMesh(${label}, 'ply')`);
@@ -265,7 +291,8 @@ async function main() {
     if (stlFaces !== expected || stl.size !== 84 + 50 * expected)
       fail(`label ${label}: STL download has ${stlFaces} triangles in ${stl.size} bytes, not ${expected}`);
   }
-  console.log(`page: ${state.labels.join(', ')}; frames ${state.frames}, slices ${state.slices}; ` +
+  console.log(`page: ${state.labels.join(', ')}; frames ${state.frames}, slices ${state.slices} ` +
+              `(${drawn} planes drawn), ${state.framesShown} B-mode frames shown; ` +
               `${((Date.now() - started) / 1000).toFixed(1)} s`);
   for (const child of children) child.kill('SIGTERM');
   process.exit(0);

@@ -1,6 +1,7 @@
 // The page: a WebSocket to `sonoshape view`, decoded messages to the scene, legend and status.
 import { decodeMessage, DecodeError } from './decode.js';
 import { labelColor } from './palette.js';
+import { rampCss } from './coverage.js';
 import { SceneView } from './scene.js';
 
 const $ = (id) => document.getElementById(id);
@@ -12,8 +13,12 @@ let retryDelayMs = 500;
 let everConnected = false;
 
 // For tests and scripts: what the page has drawn so far.
-window.sonoshapeViewer = { labelsDrawn: 0, messages: 0, rendered: 0, scan: null };
+window.sonoshapeViewer = {
+  labelsDrawn: 0, messages: 0, rendered: 0, scan: null, slices: 0, framesShown: 0,
+  coverage: null,  // the last distance colouring: vertices and milliseconds
+};
 view.onRendered = () => { window.sonoshapeViewer.rendered += 1; };
+view.onCoverage = (c) => { window.sonoshapeViewer.coverage = c; };
 
 function say(text, kind = 'info') {
   const line = $('connection');
@@ -78,13 +83,28 @@ function showMesh(message) {
   window.sonoshapeViewer.labelsDrawn = [...labels.keys()].length;
 }
 
+function showSlice(message) {
+  view.addSlice(message);
+  window.sonoshapeViewer.slices = view.slices.length;
+  $('planes').textContent = view.slices.length;
+}
+
+function showFrame(message) {
+  view.setFrame(message);
+  window.sonoshapeViewer.framesShown += 1;
+}
+
+// Milliseconds as the status shows them: '–' until the scan has said.
+const ms = (value) => (Number.isFinite(value) ? Number(value).toFixed(0) : '–');
+
 function showStatus(header) {
   $('state').textContent = header.state + (header.message ? ': ' + header.message : '');
   $('state').className = header.state;
   $('frames').textContent = header.frames_received ?? '–';
   $('dropped').textContent = header.frames_dropped ?? '–';
   $('slices').textContent = header.slices ?? '–';
-  $('update-ms').textContent = Number(header.total_ms ?? 0).toFixed(0);
+  $('update-ms').textContent = ms(header.update_ms ?? header.total_ms);
+  $('latency-ms').textContent = ms(header.latency_ms);
 }
 
 function followScan(header) {
@@ -94,6 +114,8 @@ function followScan(header) {
     view.clear();
     labels.clear();
     $('legend').replaceChildren();
+    $('planes').textContent = '0';
+    window.sonoshapeViewer.slices = 0;
   }
   scan = header.scan;
   window.sonoshapeViewer.scan = scan;
@@ -119,6 +141,8 @@ function onMessage(event) {
   }
   followScan(message.header);
   if (message.kind === 'mesh') showMesh(message);
+  else if (message.kind === 'slice') showSlice(message);
+  else if (message.kind === 'frame') showFrame(message);
   else showStatus(message.header);
 }
 
@@ -146,6 +170,27 @@ setInterval(() => {
 }, 1000);
 
 $('reset').addEventListener('click', () => view.resetView());
+
+// Colouring: the labels' own colours, or how far each part is from the slices that saw it.
+function setColoring() {
+  const distance = $('color-distance').checked;
+  const scale = Number($('scale-mm').value);
+  view.setColorMode(distance ? 'distance' : 'label', scale);
+  $('scale').hidden = !distance;
+  $('scale-mid').textContent = scale / 2;
+  $('scale-max').textContent = '≥ ' + scale;
+}
+$('scale-bar').style.background = rampCss();
+for (const id of ['color-label', 'color-distance', 'scale-mm'])
+  $(id).addEventListener('change', setColoring);
+$('show-slices').addEventListener('change', () => view.setSlicesVisible($('show-slices').checked));
+$('show-frame').addEventListener('change', () => view.setFrameVisible($('show-frame').checked));
+// For tests and scripts: switch the colouring as the buttons do.
+window.sonoshapeViewer.setColoring = (mode, scaleMm = 10) => {
+  $(mode === 'distance' ? 'color-distance' : 'color-label').checked = true;
+  $('scale-mm').value = String(scaleMm);
+  setColoring();
+};
 $('screenshot').addEventListener('click',
   () => download(view.screenshot(), 'sonoshape-' + (scan ?? 'view').slice(0, 8) + '.png'));
 // For tests: the header of a label's export and its size, as a download would write it.
