@@ -6,13 +6,14 @@
 // node tests/browser/viewer_e2e.mjs SONOSHAPE_BINARY WORK_DIR [SCREENSHOT.png [--full]]
 // --full scans the default simulation (256 x 256 px, 30 fps, 6 s): the README's picture.
 // Exits 77 (ctest: skipped) with the reason when chromium or three.js is missing. Only node's
-// own modules: chromium is driven over its DevTools protocol on a pipe (--remote-debugging-pipe).
-import { spawn, spawnSync } from 'node:child_process';
+// own modules: chromium is driven over its DevTools protocol on a pipe (chromium.mjs).
+import { spawn } from 'node:child_process';
 import fs from 'node:fs';
 import path from 'node:path';
 import zlib from 'node:zlib';
 import { fileURLToPath } from 'node:url';
 import { labelColor } from '../../viewer/src/palette.js';
+import { findChromium, launchChromium, openPage } from './chromium.mjs';
 
 const here = path.dirname(fileURLToPath(import.meta.url));
 const [sonoshape, workDir, screenshotPath, mode] = process.argv.slice(2);
@@ -31,14 +32,6 @@ function fail(reason) {
   console.error('FAILED: ' + reason);
   for (const child of children) child.kill('SIGKILL');
   process.exit(1);
-}
-
-function findChromium() {
-  for (const name of ['chromium', 'chromium-browser', 'google-chrome']) {
-    const found = spawnSync('sh', ['-c', 'command -v ' + name], { encoding: 'utf8' });
-    if (found.status === 0) return found.stdout.trim();
-  }
-  return null;
 }
 
 const sleep = (ms) => new Promise((resolve) => setTimeout(resolve, ms));
@@ -63,39 +56,6 @@ function start(command, args) {
   };
   child.exited = new Promise((resolve) => child.on('exit', (code) => resolve(code)));
   return child;
-}
-
-// Chromium's DevTools protocol over fds 3 (commands in) and 4 (replies out), NUL-separated JSON.
-function devtools(chromium) {
-  const browser = spawn(chromium, [
-    '--headless', '--no-sandbox', '--remote-debugging-pipe', '--use-angle=swiftshader',
-    '--enable-unsafe-swiftshader', '--no-first-run', '--disable-extensions',
-    `--window-size=${kWidth},${kHeight}`, '--user-data-dir=' + path.join(workDir, 'chromium'),
-    'about:blank',
-  ], { stdio: ['ignore', 'ignore', 'ignore', 'pipe', 'pipe'] });
-  children.push(browser);
-  const pending = new Map();
-  let nextId = 1;
-  let buffer = '';
-  browser.stdio[4].on('data', (data) => {
-    buffer += data.toString('utf8');
-    let end;
-    while ((end = buffer.indexOf('\0')) >= 0) {
-      const message = JSON.parse(buffer.slice(0, end));
-      buffer = buffer.slice(end + 1);
-      const waiter = pending.get(message.id);
-      if (!waiter) continue;
-      pending.delete(message.id);
-      if (message.error) waiter.reject(new Error(JSON.stringify(message.error)));
-      else waiter.resolve(message.result);
-    }
-  });
-  const send = (method, params = {}, sessionId = undefined) => new Promise((resolve, reject) => {
-    const id = nextId++;
-    pending.set(id, { resolve, reject });
-    browser.stdio[3].write(JSON.stringify({ id, method, params, sessionId }) + '\0');
-  });
-  return { browser, send };
 }
 
 // Decodes an 8-bit RGB or RGBA PNG (what Page.captureScreenshot gives) into RGBA pixels.
@@ -200,22 +160,16 @@ async function main() {
   const view = start(sonoshape, ['view', pub, '--snapshot', snapshot, '--http', '127.0.0.1:0']);
   const [, url] = await view.waitFor(/open (http:\/\/127\.0\.0\.1:\d+\/)/, 20000);
 
-  const { send } = devtools(chromium);
-  const { targetInfos } = await send('Target.getTargets');
-  const page = targetInfos.find((t) => t.type === 'page');
-  if (!page) fail('chromium opened no page');
-  const { sessionId } = await send('Target.attachToTarget', { targetId: page.targetId, flatten: true });
-  await send('Emulation.setDeviceMetricsOverride',
-             { width: kWidth, height: kHeight, deviceScaleFactor: 1, mobile: false }, sessionId);
-  await send('Page.navigate', { url }, sessionId);
+  const { browser, send } = launchChromium(chromium, { width: kWidth, height: kHeight,
+                                                        userDataDir: path.join(workDir, 'chromium') });
+  children.push(browser);
+  const { sessionId, evaluate } = await openPage(send, url, kWidth, kHeight);
 
   const scanCode = await scan.exited;
   if (scanCode !== 0) fail('the scan exited with ' + scanCode + ':\n' + scan.output());
   const summary = JSON.parse(fs.readFileSync(path.join(out, 'scan.json'), 'utf8'));
 
   // Wait until the page shows the finished scan: idle, every label drawn, a frame rendered.
-  const evaluate = async (expression) =>
-    (await send('Runtime.evaluate', { expression, returnByValue: true }, sessionId)).result.value;
   let state;
   for (let i = 0; i < 300; ++i) {
     state = await evaluate(`({ ...window.sonoshapeViewer,

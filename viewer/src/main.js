@@ -17,7 +17,10 @@ window.sonoshapeViewer = {
   labelsDrawn: 0, messages: 0, rendered: 0, scan: null, slices: 0, framesShown: 0,
   coverage: null,  // the last distance colouring: vertices and milliseconds
 };
-view.onRendered = () => { window.sonoshapeViewer.rendered += 1; };
+view.onRendered = () => {
+  window.sonoshapeViewer.rendered += 1;
+  noteDrawn();
+};
 view.onCoverage = (c) => { window.sonoshapeViewer.coverage = c; };
 
 function say(text, kind = 'info') {
@@ -66,7 +69,23 @@ function downloadMesh(label, format) {
   setTimeout(() => URL.revokeObjectURL(url), 10000);
 }
 
-function showMesh(message) {
+// For bench/viewer_bench.mjs: when each mesh was drawn. A script sets `drawLog` to an array; the
+// page then waits for each picture to be finished (a one-pixel read) and appends
+// {label, seq, timestamp_s, received_ms, drawn_ms} (Unix times in ms) for every mesh it holds.
+let undrawn = [];
+function noteDrawn() {
+  const log = window.sonoshapeViewer.drawLog;
+  if (!Array.isArray(log) || !undrawn.length) return;
+  view.finishDrawing();
+  const drawnMs = performance.timeOrigin + performance.now();
+  for (const entry of undrawn) log.push({ ...entry, drawn_ms: drawnMs });
+  undrawn = [];
+}
+
+function showMesh(message, receivedMs) {
+  if (Array.isArray(window.sonoshapeViewer.drawLog))
+    undrawn.push({ label: message.label, seq: message.header.seq,
+                   timestamp_s: message.header.timestamp_s, received_ms: receivedMs });
   let entry = labels.get(message.label);
   if (!entry) {
     entry = { row: legendRow(message.label, message.name) };
@@ -123,6 +142,7 @@ function followScan(header) {
 }
 
 function onMessage(event) {
+  const receivedMs = performance.timeOrigin + performance.now();
   let message;
   try {
     message = decodeMessage(event.data);
@@ -140,7 +160,7 @@ function onMessage(event) {
     return;
   }
   followScan(message.header);
-  if (message.kind === 'mesh') showMesh(message);
+  if (message.kind === 'mesh') showMesh(message, receivedMs);
   else if (message.kind === 'slice') showSlice(message);
   else if (message.kind === 'frame') showFrame(message);
   else showStatus(message.header);
@@ -185,6 +205,20 @@ for (const id of ['color-label', 'color-distance', 'scale-mm'])
   $(id).addEventListener('change', setColoring);
 $('show-slices').addEventListener('change', () => view.setSlicesVisible($('show-slices').checked));
 $('show-frame').addEventListener('change', () => view.setFrameVisible($('show-frame').checked));
+// For bench/viewer_bench.mjs: the frame rate of orbiting the scene, each picture finished.
+window.sonoshapeViewer.measureFps = (seconds) => new Promise((resolve) => {
+  const start = performance.now();
+  let frames = 0;
+  const step = () => {
+    view.orbitStep(0.02);
+    view.finishDrawing();
+    ++frames;
+    const elapsed = (performance.now() - start) / 1000;
+    if (elapsed < seconds) requestAnimationFrame(step);
+    else resolve({ frames, seconds: elapsed, fps: frames / elapsed });
+  };
+  requestAnimationFrame(step);
+});
 // For tests and scripts: switch the colouring as the buttons do.
 window.sonoshapeViewer.setColoring = (mode, scaleMm = 10) => {
   $(mode === 'distance' ? 'color-distance' : 'color-label').checked = true;

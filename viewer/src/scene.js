@@ -335,6 +335,22 @@ export class SceneView {
                                    { binary: true, littleEndian: true, excludeAttributes: ['normal', 'color'] });
   }
 
+  /** Waits until the picture drawn so far is finished (a one-pixel read): for measurements. */
+  finishDrawing() {
+    const gl = this.renderer.getContext();
+    gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, new Uint8Array(4));
+  }
+
+  /** Turns the camera about the view's target by `radians` and draws at once: for measurements. */
+  orbitStep(radians) {
+    const offset = this.camera.position.clone().sub(this.controls.target);
+    offset.applyAxisAngle(this.camera.up, radians);
+    this.camera.position.copy(this.controls.target).add(offset);
+    this.camera.lookAt(this.controls.target);
+    if (this.colorMode === 'distance') this.recolor();
+    this.renderer.render(this.scene, this.camera);
+  }
+
   /** The picture as drawn, a PNG data URL. */
   screenshot() {
     this.renderer.render(this.scene, this.camera);
