@@ -81,7 +81,8 @@ async function main() {
   const { sessionId, evaluate } = await openPage(send, url, kWidth, kHeight);
   for (let i = 0; i < 100 && !(await evaluate('!!window.sonoshapeViewer')); ++i) await sleep(100);
 
-  const results = { chromium: (await send('Browser.getVersion')).product, runs: [] };
+  const results = { chromium: (await send('Browser.getVersion')).product,
+                    gpu: await evaluate('window.sonoshapeViewer.gpu'), runs: [] };
   for (const [k, size] of sizes.entries()) {
     const intervalMs = intervals[Math.min(k, intervals.length - 1)];
     await evaluate('window.sonoshapeViewer.drawLog = []');
@@ -119,7 +120,8 @@ async function main() {
   const { data } = await send('Page.captureScreenshot', { format: 'png' }, sessionId);
   fs.writeFileSync(path.join(workDir, 'page.png'), Buffer.from(data, 'base64'));
   fs.writeFileSync(path.join(workDir, 'viewer_bench.json'), JSON.stringify(results, null, 2) + '\n');
-  console.log(`${results.chromium}; results in ${path.join(workDir, 'viewer_bench.json')}`);
+  console.log(`${results.chromium}, WebGL on ${results.gpu.name} (antialias ` +
+              `${results.gpu.antialias}); results in ${path.join(workDir, 'viewer_bench.json')}`);
   for (const child of children) child.kill('SIGTERM');
   process.exit(0);
 }

@@ -17,6 +17,7 @@ window.sonoshapeViewer = {
   labelsDrawn: 0, messages: 0, rendered: 0, scan: null, slices: 0, framesShown: 0,
   coverage: null,  // the last distance colouring: vertices and milliseconds
 };
+window.sonoshapeViewer.gpu = { name: view.gpu, antialias: view.antialias };
 view.onRendered = () => {
   window.sonoshapeViewer.rendered += 1;
   noteDrawn();

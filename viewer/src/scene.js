@@ -11,8 +11,12 @@ export class SceneView {
   /** @param {HTMLElement} container the element the canvas fills */
   constructor(container) {
     this.container = container;
-    // preserveDrawingBuffer: the picture stays readable for screenshots.
-    this.renderer = new THREE.WebGLRenderer({ antialias: true, preserveDrawingBuffer: true });
+    // preserveDrawingBuffer: the picture stays readable for screenshots. No multisampling where
+    // the GPU is emulated on the processors (a workstation without a graphics driver, headless
+    // chromium): there it quadruples the cost of every picture (docs/benchmarks.md).
+    this.gpu = gpuName();
+    this.antialias = !/swiftshader|llvmpipe|softpipe|software/i.test(this.gpu);
+    this.renderer = new THREE.WebGLRenderer({ antialias: this.antialias, preserveDrawingBuffer: true });
     this.renderer.setPixelRatio(window.devicePixelRatio);
     container.appendChild(this.renderer.domElement);
     this.scene = new THREE.Scene();
@@ -361,6 +365,16 @@ export class SceneView {
     this.userMoved = false;
     this.frameAll();
   }
+}
+
+// The name of the GPU (or of its software emulation) that WebGL draws with; '' when unknown.
+function gpuName() {
+  const gl = document.createElement('canvas').getContext('webgl2');
+  if (!gl) return '';
+  const info = gl.getExtension('WEBGL_debug_renderer_info');
+  const name = String(gl.getParameter(info ? info.UNMASKED_RENDERER_WEBGL : gl.RENDERER) ?? '');
+  gl.getExtension('WEBGL_lose_context')?.loseContext();
+  return name;
 }
 
 // The outline of what a slice saw, as world points: its sector (fov), or, for a slice that saw
