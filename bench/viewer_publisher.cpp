@@ -33,7 +33,9 @@ TriangleMesh sphere(std::size_t triangles, double radius_mm, const Vec3& centre)
                                                         std::cos(theta)));
     }
   }
-  const auto at = [&](int i, int j) { return static_cast<std::uint32_t>(i * sectors + j % sectors); };
+  const auto at = [&](int i, int j) {
+    return static_cast<std::uint32_t>(i * sectors + j % sectors);
+  };
   for (int i = 0; i < rings; ++i)
     for (int j = 0; j < sectors; ++j) {
       mesh.triangles.push_back({at(i, j), at(i + 1, j), at(i + 1, j + 1)});
@@ -43,8 +45,7 @@ TriangleMesh sphere(std::size_t triangles, double radius_mm, const Vec3& centre)
 }
 
 double unix_seconds() {
-  return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch())
-      .count();
+  return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
 }
 
 }  // namespace

@@ -67,7 +67,7 @@ TEST(PublishSinkPreviews, AFrameGoesOutDownsampledOnItsPlaneAtMostAtTheRate) {
   EXPECT_EQ(preview.timestamp_s, 1.5);
   ASSERT_EQ(preview.image.width, 128);
   ASSERT_EQ(preview.image.height, 64);
-  EXPECT_EQ(preview.image.at(63, 10), 0);     // area averaging of whole 4 x 4 blocks
+  EXPECT_EQ(preview.image.at(63, 10), 0);  // area averaging of whole 4 x 4 blocks
   EXPECT_EQ(preview.image.at(64, 10), 200);
   EXPECT_NEAR(preview.size_mm.x(), 512 * 0.2, 1e-9);
   EXPECT_NEAR(preview.size_mm.y(), 256 * 0.3, 1e-9);

@@ -212,8 +212,9 @@ Result<Frames> encode_frame(const StreamMessage& message, const FrameImage& fram
 }
 
 Result<Frames> encode_status(const StreamMessage& message, const StatusReport& status) {
-  for (double ms : {status.arrangement_ms, status.field_ms, status.smoothing_ms, status.mesh_ms,
-                    status.total_ms, status.update_ms.value_or(0.0), status.latency_ms.value_or(0.0)})
+  for (double ms :
+       {status.arrangement_ms, status.field_ms, status.smoothing_ms, status.mesh_ms,
+        status.total_ms, status.update_ms.value_or(0.0), status.latency_ms.value_or(0.0)})
     if (!std::isfinite(ms) || ms < 0.0)
       return Status::error("cannot encode status: a stage time is negative or not finite");
   if (status.state == ScanState::kError && status.message.empty())
@@ -502,8 +503,8 @@ StatusReport decode_status(const json& header) {
     *value = read_finite(header, key);
     if (*value < 0.0) invalid(std::string("\"") + key + "\" is negative");
   }
-  for (auto [key, value] : {std::pair{"update_ms", &status.update_ms},
-                            std::pair{"latency_ms", &status.latency_ms}})
+  for (auto [key, value] :
+       {std::pair{"update_ms", &status.update_ms}, std::pair{"latency_ms", &status.latency_ms}})
     if (header.contains(key)) {
       *value = read_finite(header, key);
       if (**value < 0.0) invalid(std::string("\"") + key + "\" is negative");

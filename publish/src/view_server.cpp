@@ -88,8 +88,7 @@ std::pair<std::string, std::string> scan_and_key(const Frames& frames) {
   if (frames.size() < 2) return {{}, key};
   const nlohmann::json header = nlohmann::json::parse(frames[1], nullptr, false);
   if (!header.is_object()) return {{}, key};
-  if (frames[0] == kSliceTopic && header.contains("seq"))
-    key += "#" + header["seq"].dump();
+  if (frames[0] == kSliceTopic && header.contains("seq")) key += "#" + header["seq"].dump();
   if (!header.contains("scan") || !header["scan"].is_string()) return {{}, key};
   return {header["scan"].get<std::string>(), key};
 }

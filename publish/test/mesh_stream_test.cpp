@@ -205,7 +205,8 @@ TEST(MeshStreamRoundTrip, SliceDirectionsAreExactAfterTheRoundTrip) {
   slice.u = Vec3(std::cos(0.3), std::sin(0.3), 0.0);
   slice.v = Vec3(-std::sin(0.3) * std::cos(1.1), std::cos(0.3) * std::cos(1.1), std::sin(1.1));
   slice.origin_mm = Vec3(0.1, 1.0 / 3.0, -7.0 / 9.0);
-  Result<StreamMessage> decoded = decode_message(encoded(StreamMessage{2, kScan, SliceUpdate{0, slice}}));
+  Result<StreamMessage> decoded =
+      decode_message(encoded(StreamMessage{2, kScan, SliceUpdate{0, slice}}));
   ASSERT_TRUE(decoded.is_ok()) << decoded.message();
   const auto& got = std::get<SliceUpdate>(decoded->body).slice;
   EXPECT_EQ(got.u, slice.u);
@@ -273,7 +274,10 @@ TEST(MeshStreamDecode, RejectsBadFrames) {
   expect_rejected(with_header(good, [](json& h) { h["format"] = "rgb8"; }),
                   {"unknown \"format\" \"rgb8\""});
   expect_rejected(with_header(good, [](json& h) { h["width"] = 0; }), {"width and height"});
-  expect_rejected(with_header(good, [](json& h) { h["plane"]["u"] = {0, 0, 2}; }),
+  expect_rejected(with_header(good,
+                              [](json& h) {
+                                h["plane"]["u"] = {0, 0, 2};
+                              }),
                   {"unit and orthogonal"});
   expect_rejected(with_header(good, [](json& h) { h["size_mm"] = {40, -1}; }), {"\"size_mm\""});
   for (const char* key : {"index", "timestamp_s", "format", "width", "height", "plane", "size_mm"})
@@ -494,7 +498,10 @@ TEST(MeshStreamDecode, RejectsInvalidSlices) {
                                 h["plane"]["u"] = {0, 2, 0};
                               }),
                   {"slice seq 5", "u is not unit length"});
-  expect_rejected(with_header(good, [](json& h) { h["v"] = json::array({0, 0, 1}); }),
+  expect_rejected(with_header(good,
+                              [](json& h) {
+                                h["v"] = json::array({0, 0, 1});
+                              }),
                   {"slice", "unknown format version"});
   expect_rejected(with_header(good, [](json& h) { h["plane"] = "xy"; }),
                   {"slice seq 5", "\"plane\" must be"});

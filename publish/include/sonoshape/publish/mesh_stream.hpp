@@ -77,10 +77,10 @@ struct PlaneFrame {
 /// pixel (i, j) (row j from the transducer side, row-major) covers a in [i, i+1) * size_mm[0] /
 /// width and b in [j, j+1) * size_mm[1] / height.
 struct FrameImage {
-  std::int64_t index = 0;     ///< the frame's position in its source, from 0
-  double timestamp_s = 0.0;   ///< acquisition time (device clock)
-  GreyImage image;            ///< 8-bit grey, width * height bytes; not empty
-  PlaneFrame plane;           ///< origin at the outer corner of pixel (0, 0)
+  std::int64_t index = 0;       ///< the frame's position in its source, from 0
+  double timestamp_s = 0.0;     ///< acquisition time (device clock)
+  GreyImage image;              ///< 8-bit grey, width * height bytes; not empty
+  PlaneFrame plane;             ///< origin at the outer corner of pixel (0, 0)
   Vec2 size_mm = Vec2::Zero();  ///< the picture's extent along u and v, both > 0
 };
 
