@@ -403,13 +403,13 @@ function planeCoords(plane, point) {
 // The probe: a block on the picture's top edge (row 0, where the transducer sits), centred, as
 // wide as a probe's face, standing away from the picture (-v) and as thick as a hand-held probe.
 function placeProbe(probe, plane, widthMm) {
-  const face = Math.min(Math.max(0.35 * widthMm, 10), 60);
+  const face = Math.min(Math.max(0.25 * widthMm, 10), 40);
   const [u, v] = [new THREE.Vector3(...plane.u), new THREE.Vector3(...plane.v)];
   const n = new THREE.Vector3().crossVectors(u, v);
   const centre = new THREE.Vector3(...plane.origin).addScaledVector(u, widthMm / 2)
-    .addScaledVector(v, -0.6 * face);
+    .addScaledVector(v, -0.4 * face);
   probe.matrixAutoUpdate = false;
-  probe.matrix.makeBasis(u.multiplyScalar(face), v.multiplyScalar(1.2 * face), n.multiplyScalar(0.45 * face))
+  probe.matrix.makeBasis(u.multiplyScalar(face), v.multiplyScalar(0.8 * face), n.multiplyScalar(0.35 * face))
     .setPosition(centre);
 }
 
