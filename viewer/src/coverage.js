@@ -4,20 +4,69 @@
 // someone looks at this colouring, and it never takes time from the scan's reconstruction.
 // No three.js here, so that node's test runner checks it as it is.
 
+// How far a simplified sector outline may stray from the slice's own (mm): a convex probe's
+// sector arrives with hundreds of points on its arc, and the distances need a tenth of them.
+export const kOutlineToleranceMm = 0.25;
+
+// Douglas–Peucker on a closed ring of [a, b] points: the points that keep every dropped one
+// within `tolerance` of the simplified ring.
+function simplifyRing(ring, tolerance) {
+  if (ring.length <= 8) return ring;
+  const keep = new Uint8Array(ring.length);
+  const toleranceSq = tolerance * tolerance;
+  const split = (first, last) => {
+    const [ax, ay] = ring[first];
+    const [bx, by] = ring[last % ring.length];
+    const ex = bx - ax;
+    const ey = by - ay;
+    const lengthSq = ex * ex + ey * ey;
+    let worst = -1;
+    let worstSq = toleranceSq;
+    for (let i = first + 1; i < last; ++i) {
+      const [px, py] = ring[i];
+      const t = lengthSq > 0 ? Math.max(0, Math.min(1, ((px - ax) * ex + (py - ay) * ey) / lengthSq)) : 0;
+      const dSq = (ax + t * ex - px) ** 2 + (ay + t * ey - py) ** 2;
+      if (dSq > worstSq) {
+        worstSq = dSq;
+        worst = i;
+      }
+    }
+    if (worst < 0) return;
+    keep[worst] = 1;
+    split(first, worst);
+    split(worst, last);
+  };
+  // Closed: split at the point farthest from the first, then each half.
+  let far = 1;
+  for (let i = 1; i < ring.length; ++i)
+    if ((ring[i][0] - ring[0][0]) ** 2 + (ring[i][1] - ring[0][1]) ** 2 >
+        (ring[far][0] - ring[0][0]) ** 2 + (ring[far][1] - ring[0][1]) ** 2)
+      far = i;
+  keep[0] = keep[far] = 1;
+  split(0, far);
+  split(far, ring.length);
+  return ring.filter((_, i) => keep[i]);
+}
+
 /**
  * A slice as the distance needs it: its plane and the polygon of the plane it saw.
  * @param {{plane: {origin: number[], u: number[], v: number[]}, fov: number[][]|null}} slice a
  *   decoded slice message (decode.js); `fov` null: the slice saw its whole plane (slices.md)
- * @returns {{origin: number[], u: number[], v: number[], n: number[], ring: Float64Array|null}}
- *   `n` the unit normal u × v, `ring` the fov's [a, b] points flattened
+ * @returns {{origin: number[], u: number[], v: number[], n: number[], ring: Float64Array|null,
+ *   box: number[]|null}} `n` the unit normal u × v, `ring` the fov's [a, b] points flattened
+ *   (simplified to kOutlineToleranceMm), `box` its [a0, a1, b0, b1]
  */
 export function slicePatch(slice) {
   const { origin, u, v } = slice.plane;
   const n = [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]];
   const length = Math.hypot(n[0], n[1], n[2]) || 1;
+  const ring = slice.fov ? simplifyRing(slice.fov, kOutlineToleranceMm) : null;
+  const as = ring ? ring.map((p) => p[0]) : [];
+  const bs = ring ? ring.map((p) => p[1]) : [];
   return {
     origin, u, v, n: n.map((x) => x / length),
-    ring: slice.fov ? Float64Array.from(slice.fov.flat()) : null,
+    ring: ring ? Float64Array.from(ring.flat()) : null,
+    box: ring ? [Math.min(...as), Math.max(...as), Math.min(...bs), Math.max(...bs)] : null,
   };
 }
 
@@ -47,7 +96,7 @@ function ringDistanceSq(ring, a, b) {
 /**
  * The distance (mm) from every position to the nearest point that a slice saw: the part of its
  * plane inside its field of view. A point on a slice inside its sector is 0; a point beside the
- * sector counts the in-plane distance to the sector too.
+ * sector counts the in-plane distance to the sector too (to within kOutlineToleranceMm).
  * @param {Float32Array} positions x y z interleaved, mm
  * @param {ReturnType<typeof slicePatch>[]} patches
  * @param {number} [limitMm] distances are needed only up to this (the colour scale's end): a
@@ -61,6 +110,7 @@ export function distanceToSlices(positions, patches, limitMm = Infinity) {
   const planes = new Float64Array(12 * patches.length);
   patches.forEach((p, k) => planes.set([...p.origin, ...p.n, ...p.u, ...p.v], 12 * k));
   const rings = patches.map((p) => p.ring);
+  const boxes = patches.map((p) => p.box);
   const limitSq = limitMm * limitMm;
   // Neighbouring vertices are mostly nearest to the same slice: starting each vertex's search at
   // the previous one's nearest makes the bound tight at once, so most planes are passed over
@@ -86,6 +136,11 @@ export function distanceToSlices(positions, patches, limitMm = Infinity) {
       if (ring) {
         const a = rx * planes[o + 6] + ry * planes[o + 7] + rz * planes[o + 8];
         const b = rx * planes[o + 9] + ry * planes[o + 10] + rz * planes[o + 11];
+        // The sector's box bounds the in-plane distance from below: a cheap second rejection.
+        const box = boxes[k];
+        const ea = Math.max(box[0] - a, 0, a - box[1]);
+        const eb = Math.max(box[2] - b, 0, b - box[3]);
+        if (dSq + ea * ea + eb * eb >= bestSq) continue;
         dSq += ringDistanceSq(ring, a, b);
         if (dSq >= bestSq) continue;
       }

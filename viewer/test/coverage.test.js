@@ -1,7 +1,7 @@
 // What is still unscanned: the distance from surface points to the slices that saw them.
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
-import { distanceToSlices, distanceColor, slicePatch } from '../src/coverage.js';
+import { distanceToSlices, distanceColor, kOutlineToleranceMm, slicePatch } from '../src/coverage.js';
 
 // A slice in the plane z = z0 whose sector is the square [0, 10] x [0, 10] of (x, y).
 function squareSlice(z0) {
@@ -56,4 +56,27 @@ test('the colour ramp runs from green (scanned) through yellow to red at the sca
   assert.ok(far[0] > far[1]);
   const mid = distanceColor(5, 10);
   assert.ok(mid[0] > 0.9 && mid[1] > 0.7);
+});
+
+test('a sector with hundreds of points on its arc: distances within the outline tolerance', () => {
+  // A convex probe's sector: apex at (0, -20), arc of radius 120 about it, 256 points.
+  const fov = [];
+  for (let i = 0; i < 255; ++i) {
+    const angle = -0.6 + (1.2 * i) / 254;
+    fov.push([120 * Math.sin(angle), -20 + 120 * Math.cos(angle)]);
+  }
+  fov.push([0, -20]);
+  const patch = slicePatch({ plane: { origin: [0, 0, 0], u: [1, 0, 0], v: [0, 1, 0] }, fov });
+  assert.ok(patch.ring.length / 2 < 64, `${patch.ring.length / 2} points kept`);
+  const points = [];
+  const expected = [];
+  for (let i = 0; i < 50; ++i) {
+    const angle = -0.55 + (1.1 * i) / 49;
+    const radius = 125 + (i % 5);  // outside the arc, in the plane: the distance is radial
+    points.push(radius * Math.sin(angle), -20 + radius * Math.cos(angle), 0);
+    expected.push(radius - 120);
+  }
+  const d = distanceToSlices(new Float32Array(points), [patch]);
+  expected.forEach((e, i) => assert.ok(Math.abs(d[i] - e) <= kOutlineToleranceMm + 1e-3, `${d[i]} vs ${e}`));
+  near(distanceToSlices(new Float32Array([0, 50, 0]), [patch])[0], 0);  // inside the sector
 });
