@@ -210,7 +210,15 @@ TEST(MeshPublisher, LateJoinerGetsTheSnapshotThenContinuesWithoutGaps) {
   EXPECT_EQ(subscriber->snapshot_seq(), n);
   EXPECT_EQ(publisher.snapshots_served(), 1u);
 
-  // The snapshot: newest mesh of each label (seqs 5 and 6), newest status (seq 4), then end.
+  // The snapshot: every slice in order (seqs 3 and 7), newest mesh of each label (seqs 5 and
+  // 6), newest status (seq 4), then end. Live slices with seq <= 7 are dropped as covered: the
+  // snapshot must hold them.
+  for (std::uint64_t index : {0u, 1u}) {
+    const StreamMessage slice = receive_or_fail(*subscriber);
+    ASSERT_EQ(slice.topic(), "slice");
+    EXPECT_EQ(slice.seq, index == 0 ? 3u : 7u);
+    EXPECT_EQ(std::get<SliceUpdate>(slice.body).index, index);
+  }
   const StreamMessage liver = receive_or_fail(*subscriber);
   EXPECT_EQ(liver.topic(), "mesh.1");
   EXPECT_EQ(liver.seq, 5u);

@@ -99,9 +99,11 @@ export class SceneView {
 
   /**
    * Adds a slice (a decoded slice message) to the planes drawn: every slice's outline, the last
-   * three emphasised, the newest filled. Surfaces coloured by distance take it into account.
+   * three emphasised, the newest filled. Surfaces coloured by distance take it into account. A
+   * slice already shown (the same index: a fresh snapshot repeats them) is left as it is.
    */
   addSlice(slice) {
+    if (this.slices.some((s) => s.index === slice.index)) return;
     this.slices.push(slice);
     this.patches.push(slicePatch(slice));
     this.rebuildSlices();
