@@ -75,6 +75,7 @@ struct MeshPublisher::Impl {
   mutable std::mutex mutex;
   std::map<int, std::shared_ptr<const Frames>> latest_meshes;
   std::shared_ptr<const Frames> latest_status;
+  std::shared_ptr<const Frames> latest_frame;
   std::deque<std::shared_ptr<const Frames>> slices;  // the scan's, the newest kMaxSnapshotSlices
   std::uint64_t last_seq = 0;
   std::atomic<std::uint64_t> snapshots_served{0};
@@ -131,6 +132,7 @@ struct MeshPublisher::Impl {
       messages.assign(slices.begin(), slices.end());
       for (const auto& [label, frames] : latest_meshes) messages.push_back(frames);
       if (latest_status) messages.push_back(latest_status);
+      if (latest_frame) messages.push_back(latest_frame);
       seq = last_seq;
     }
     StreamMessage end{seq, scan, SnapshotEnd{}};
@@ -163,6 +165,8 @@ struct MeshPublisher::Impl {
           latest_status = encoded[k];
         else if (std::holds_alternative<SliceUpdate>(messages[k].body))
           slices.push_back(encoded[k]);
+        else if (std::holds_alternative<FrameImage>(messages[k].body))
+          latest_frame = encoded[k];
         if (slices.size() > kMaxSnapshotSlices) slices.pop_front();
         last_seq = messages[k].seq;
         ++next_seq;

@@ -14,7 +14,7 @@ let everConnected = false;
 
 // For tests and scripts: what the page has drawn so far.
 window.sonoshapeViewer = {
-  labelsDrawn: 0, messages: 0, rendered: 0, scan: null, slices: 0, framesShown: 0,
+  labelsDrawn: 0, messages: 0, rendered: 0, scan: null, slicesDrawn: 0, framesShown: 0,
   coverage: null,  // the last distance colouring: vertices and milliseconds
 };
 window.sonoshapeViewer.gpu = { name: view.gpu, antialias: view.antialias };
@@ -105,7 +105,7 @@ function showMesh(message, receivedMs) {
 
 function showSlice(message) {
   view.addSlice(message);
-  window.sonoshapeViewer.slices = view.slices.length;
+  window.sonoshapeViewer.slicesDrawn = view.slices.length;
   $('planes').textContent = view.slices.length;
 }
 
@@ -135,7 +135,7 @@ function followScan(header) {
     labels.clear();
     $('legend').replaceChildren();
     $('planes').textContent = '0';
-    window.sonoshapeViewer.slices = 0;
+    window.sonoshapeViewer.slicesDrawn = 0;
   }
   scan = header.scan;
   window.sonoshapeViewer.scan = scan;

@@ -42,7 +42,7 @@ constexpr std::size_t kMaxSnapshotSlices = 4096;
 /// across topics, from 1) and the scan's uuid (a random v4 uuid drawn per publisher). Publishing
 /// never blocks: a slow or vanished subscriber only misses messages. A thread of its own answers
 /// snapshot requests with every slice of the scan (the newest kMaxSnapshotSlices, in order), the
-/// newest mesh of every label and the newest status.
+/// newest mesh of every label, the newest status and the newest frame preview.
 ///
 /// Thread safety: call the publish functions from one thread (or serialise them); the snapshot
 /// thread shares only state guarded inside.
