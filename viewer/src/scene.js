@@ -33,7 +33,9 @@ export class SceneView {
     this.controls.addEventListener('change', () => this.requestRender());
     this.controls.addEventListener('start', () => { this.userMoved = true; });
     this.meshes = new Map();  // label -> THREE.Mesh
-    this.slices = [];         // decoded slice messages, in index order
+    this.slices = [];         // decoded slice messages, in the order they came
+    this.sliceIndices = new Set();
+    this.slicesChanged = false;
     this.patches = [];        // their planes and sectors (coverage.js)
     this.sliceGroup = new THREE.Group();
     this.scene.add(this.sliceGroup);
@@ -61,11 +63,17 @@ export class SceneView {
     this.renderQueued = true;
     requestAnimationFrame(() => {
       this.renderQueued = false;
-      // Distances once per drawn picture: the slices and meshes of one update arrive together.
-      if (this.colorMode === 'distance') this.recolor();
+      this.prepare();
       this.renderer.render(this.scene, this.camera);
       this.onRendered?.();
     });
+  }
+
+  // Slices and distances once per drawn picture: the slices and meshes of one update arrive
+  // together.
+  prepare() {
+    if (this.slicesChanged) this.rebuildSlices();
+    if (this.colorMode === 'distance') this.recolor();
   }
 
   /**
@@ -103,14 +111,17 @@ export class SceneView {
    * slice already shown (the same index: a fresh snapshot repeats them) is left as it is.
    */
   addSlice(slice) {
-    if (this.slices.some((s) => s.index === slice.index)) return;
+    if (this.sliceIndices.has(slice.index)) return;
+    this.sliceIndices.add(slice.index);
     this.slices.push(slice);
     this.patches.push(slicePatch(slice));
-    this.rebuildSlices();
+    // Rebuilt once per drawn picture: a late page gets hundreds of slices at once.
+    this.slicesChanged = true;
     this.requestRender();
   }
 
   rebuildSlices() {
+    this.slicesChanged = false;
     for (const child of [...this.sliceGroup.children]) {
       this.sliceGroup.remove(child);
       child.geometry.dispose();
@@ -175,9 +186,11 @@ export class SceneView {
       view.mesh.material.needsUpdate = true;
     }
     // Grey to opaque RGBA; black (outside the sector, no echo) see-through.
-    for (let i = 0; i < pixels.length; ++i) {
+    const rgba = view.rgba;
+    for (let i = 0, j = 0; i < pixels.length; ++i, j += 4) {
       const g = pixels[i];
-      view.rgba.set([g, g, g, g < 8 ? 0 : 255], 4 * i);
+      rgba[j] = rgba[j + 1] = rgba[j + 2] = g;
+      rgba[j + 3] = g < 8 ? 0 : 255;
     }
     view.texture.needsUpdate = true;
     // Texture row 0 (v = 0) is the picture's row 0: the plane's origin side.
@@ -291,6 +304,7 @@ export class SceneView {
     }
     this.meshes.clear();
     this.slices = [];
+    this.sliceIndices.clear();
     this.patches = [];
     this.rebuildSlices();
     if (this.frameView) {
@@ -353,12 +367,13 @@ export class SceneView {
     offset.applyAxisAngle(this.camera.up, radians);
     this.camera.position.copy(this.controls.target).add(offset);
     this.camera.lookAt(this.controls.target);
-    if (this.colorMode === 'distance') this.recolor();
+    this.prepare();
     this.renderer.render(this.scene, this.camera);
   }
 
   /** The picture as drawn, a PNG data URL. */
   screenshot() {
+    this.prepare();
     this.renderer.render(this.scene, this.camera);
     return this.renderer.domElement.toDataURL('image/png');
   }
