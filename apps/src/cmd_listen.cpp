@@ -55,6 +55,7 @@ struct Tally {
   std::uint64_t write_errors = 0;
   std::uint64_t slices = 0;
   std::uint64_t statuses = 0;
+  std::uint64_t frame_images = 0;  // `frame` messages (B-mode previews), not written
   std::optional<std::uint64_t> first_seq;
   std::optional<std::uint64_t> last_seq;
   std::optional<std::uint64_t> snapshot_seq;
@@ -100,6 +101,7 @@ Status write_summary(const ListenOptions& options, const Tally& tally, double du
   summary["meshes"] = meshes;
   summary["slices"] = tally.slices;
   summary["statuses"] = tally.statuses;
+  summary["frame_images"] = tally.frame_images;
   summary["last_state"] = optional_json(tally.last_state);
   summary["write_errors"] = tally.write_errors;
   summary["duration_s"] = duration_s;
@@ -217,6 +219,8 @@ int run_listen(const ListenOptions& options) {
         }
       } else if (std::holds_alternative<publish::SliceUpdate>(message.body)) {
         ++tally.slices;
+      } else if (std::holds_alternative<publish::FrameImage>(message.body)) {
+        ++tally.frame_images;
       } else if (const auto* status = std::get_if<publish::StatusReport>(&message.body)) {
         ++tally.statuses;
         tally.last_state = std::string(publish::to_string(status->state));

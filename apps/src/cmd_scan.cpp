@@ -57,6 +57,7 @@ struct ScanCommandOptions {
   std::string igtl_serve;
   std::optional<std::string> view;  ///< --view [ADDR]: the browser view's HOST:PORT
   bool view_hold = false;
+  std::optional<double> publish_frames_hz;  ///< --publish-frames: B-mode previews a second
   std::optional<double> tracker_latency_ms;
   double max_pose_gap_ms = 100.0;
   double max_extrapolation_ms = 0.0;
@@ -451,7 +452,11 @@ int run_scan(const ScanCommandOptions& options, const Resume* resume) {
   std::unique_ptr<publish::StreamView> view;
 #endif
   if (!publish_endpoint.empty()) {
-    auto sink = scan::PublishSink::bind(publish_endpoint, options.snapshot);
+    // The browser view shows the current frame on its plane: with --view, previews go out at
+    // 5 a second unless told otherwise (a 256 px grey picture: about 50 KB each).
+    scan::FramePreviewOptions previews;
+    previews.rate_hz = options.publish_frames_hz.value_or(options.view ? 5.0 : 0.0);
+    auto sink = scan::PublishSink::bind(publish_endpoint, options.snapshot, previews);
     if (!sink) {
       std::cerr << "error: " << sink.message() << '\n';
       return 1;
@@ -591,6 +596,11 @@ void add_scan_options(CLI::App& app, ScanCommandOptions& o) {
       ->expected(0, 1);
   app.add_flag("--view-hold", options->view_hold,
                "With --view: after the scan, keep showing it until Ctrl-C");
+  app.add_option("--publish-frames", options->publish_frames_hz,
+                 "Publish at most this many B-mode frames a second on the mesh stream, as grey "
+                 "pictures of at most 256 px a side on their planes (`frame` messages; default 5 "
+                 "with --view, else 0: none)")
+      ->check(CLI::NonNegativeNumber);
   app.add_option("--igtl-serve", options->igtl_serve,
                  "Serve the scan over OpenIGTLink on [HOST:]PORT (host 127.0.0.1 unless given; "
                  "port 0 picks a free one): surfaces as POLYDATA named after the labels, the frame "

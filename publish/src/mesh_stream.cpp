@@ -145,26 +145,76 @@ Result<Frames> encode_mesh(const StreamMessage& message, const MeshUpdate& updat
   return frames;
 }
 
+ordered_json plane_json(const PlaneFrame& plane) {
+  ordered_json j;
+  j["origin"] = vec3_json(plane.origin_mm);
+  j["u"] = vec3_json(plane.u);
+  j["v"] = vec3_json(plane.v);
+  return j;
+}
+
 Result<Frames> encode_slice(const StreamMessage& message, const SliceUpdate& update) {
   Result<std::string> object = write_slice_json(update.slice);
   if (!object)
     return Status::error("cannot encode slice " + std::to_string(update.index) + ": " +
                          object.message());
-  // The slice object plus the message's own keys, in front so that a reader sees them first.
-  // No version key: "v" is the slice's second direction.
-  ordered_json own;
-  own["seq"] = message.seq;
-  own["scan"] = message.scan;
-  own["index"] = update.index;
-  std::string header = own.dump();
-  header.pop_back();  // the closing brace
-  header += ", " + object->substr(1);
-  return Frames{std::string(kSliceTopic), std::move(header)};
+  // The message's own keys first, so that a reader sees them first; the slice's plane under
+  // "plane", so that "v" is the version as in every other header; then the rest of the slice
+  // object (fov, regions, timestamp) as slices.md writes it.
+  ordered_json header;
+  header["v"] = kMeshStreamVersion;
+  header["seq"] = message.seq;
+  header["scan"] = message.scan;
+  header["index"] = update.index;
+  header["plane"] = plane_json({update.slice.origin_mm, update.slice.u, update.slice.v});
+  ordered_json slice = ordered_json::parse(*object);
+  for (auto& [key, value] : slice.items())
+    if (key != "origin" && key != "u" && key != "v") header[key] = std::move(value);
+  return Frames{std::string(kSliceTopic), header.dump()};
+}
+
+// Whether `plane` has unit, orthogonal directions (to 1e-6, as slices.md asks of a slice).
+bool orthonormal(const PlaneFrame& plane) {
+  constexpr double kTol = 1e-6;
+  return plane.origin_mm.allFinite() && std::abs(plane.u.norm() - 1.0) <= kTol &&
+         std::abs(plane.v.norm() - 1.0) <= kTol && std::abs(plane.u.dot(plane.v)) <= kTol;
+}
+
+Result<Frames> encode_frame(const StreamMessage& message, const FrameImage& frame) {
+  const std::string where = "cannot encode frame " + std::to_string(frame.index) + ": ";
+  const GreyImage& image = frame.image;
+  if (image.width < 1 || image.height < 1 || image.width > kMaxFrameImageSide ||
+      image.height > kMaxFrameImageSide)
+    return Status::error(where + "picture of " + std::to_string(image.width) + " x " +
+                         std::to_string(image.height) + " px; give 1 to " +
+                         std::to_string(kMaxFrameImageSide) + " px a side (downsample it)");
+  if (image.pixels.size() != static_cast<std::size_t>(image.width) * image.height)
+    return Status::error(where + "the picture holds " + std::to_string(image.pixels.size()) +
+                         " pixels, not width * height");
+  if (!std::isfinite(frame.timestamp_s) || !frame.size_mm.allFinite() ||
+      (frame.size_mm.array() <= 0.0).any())
+    return Status::error(where + "timestamp_s and size_mm must be finite, size_mm positive");
+  if (!orthonormal(frame.plane))
+    return Status::error(where + "the plane's u and v must be unit and orthogonal");
+  ordered_json header;
+  header["v"] = kMeshStreamVersion;
+  header["seq"] = message.seq;
+  header["scan"] = message.scan;
+  header["index"] = frame.index;
+  header["timestamp_s"] = frame.timestamp_s;
+  header["format"] = "gray8";
+  header["width"] = image.width;
+  header["height"] = image.height;
+  header["plane"] = plane_json(frame.plane);
+  header["size_mm"] = ordered_json::array({frame.size_mm.x(), frame.size_mm.y()});
+  return Frames{std::string(kFrameTopic), header.dump(),
+                std::string(image.pixels.begin(), image.pixels.end())};
 }
 
 Result<Frames> encode_status(const StreamMessage& message, const StatusReport& status) {
-  for (double ms : {status.arrangement_ms, status.field_ms, status.smoothing_ms, status.mesh_ms,
-                    status.total_ms})
+  for (double ms :
+       {status.arrangement_ms, status.field_ms, status.smoothing_ms, status.mesh_ms,
+        status.total_ms, status.update_ms.value_or(0.0), status.latency_ms.value_or(0.0)})
     if (!std::isfinite(ms) || ms < 0.0)
       return Status::error("cannot encode status: a stage time is negative or not finite");
   if (status.state == ScanState::kError && status.message.empty())
@@ -181,6 +231,8 @@ Result<Frames> encode_status(const StreamMessage& message, const StatusReport& s
   header["smoothing_ms"] = status.smoothing_ms;
   header["mesh_ms"] = status.mesh_ms;
   header["total_ms"] = status.total_ms;
+  if (status.update_ms) header["update_ms"] = *status.update_ms;
+  if (status.latency_ms) header["latency_ms"] = *status.latency_ms;
   header["state"] = std::string(to_string(status.state));
   if (!status.message.empty()) header["message"] = status.message;
   return Frames{std::string(kStatusTopic), header.dump()};
@@ -373,6 +425,70 @@ MeshUpdate decode_mesh(const Frames& frames, const json& header, int topic_label
   return update;
 }
 
+PlaneFrame read_plane(const json& header) {
+  const json& plane = required(header, "plane");
+  if (!plane.is_object())
+    invalid("\"plane\" must be {\"origin\": [x, y, z], \"u\": [..], \"v\": [..]}, got " +
+            short_dump(plane));
+  PlaneFrame out;
+  out.origin_mm = read_vec3(required(plane, "origin"), "\"plane\" origin");
+  out.u = read_vec3(required(plane, "u"), "\"plane\" u");
+  out.v = read_vec3(required(plane, "v"), "\"plane\" v");
+  return out;
+}
+
+// The slice object of slices.md inside a slice header: the plane's origin, u and v at the top
+// level again, and every key that is not the message's own.
+std::string slice_object_of(const json& header) {
+  const json& plane = required(header, "plane");
+  if (!plane.is_object())
+    invalid("\"plane\" must be {\"origin\": [x, y, z], \"u\": [..], \"v\": [..]}, got " +
+            short_dump(plane));
+  json object = json::object();
+  for (const char* key : {"origin", "u", "v"}) {
+    if (!plane.contains(key)) invalid(std::string("\"plane\" ") + key + " is missing");
+    object[key] = plane[key];
+  }
+  for (const auto& [key, value] : header.items())
+    if (key != "v" && key != "seq" && key != "scan" && key != "index" && key != "plane" &&
+        key != "origin" && key != "u")
+      object[key] = value;
+  return object.dump();
+}
+
+FrameImage decode_frame(const Frames& frames, const json& header) {
+  check_frame_count(frames, 3, "a frame message");
+  FrameImage frame;
+  const json& index = required(header, "index");
+  if (!index.is_number_integer() || index.get<long long>() < 0)
+    invalid("\"index\" must be an integer >= 0, got " + short_dump(index));
+  frame.index = index.get<std::int64_t>();
+  frame.timestamp_s = read_finite(header, "timestamp_s");
+  if (const std::string format = read_string(header, "format"); format != "gray8")
+    invalid("unknown \"format\" " + printable(format) + " (gray8)");
+  const std::uint64_t width = read_count(header, "width");
+  const std::uint64_t height = read_count(header, "height");
+  const auto side = static_cast<std::uint64_t>(kMaxFrameImageSide);
+  if (width < 1 || height < 1 || width > side || height > side)
+    invalid("a picture of " + std::to_string(width) + " x " + std::to_string(height) +
+            " px; width and height are 1 to " + std::to_string(side));
+  if (frames[2].size() != width * height)
+    invalid("frame 2 holds " + std::to_string(frames[2].size()) + " bytes but width * height is " +
+            std::to_string(width * height) + " (one byte per pixel)");
+  frame.plane = read_plane(header);
+  if (!orthonormal(frame.plane)) invalid("\"plane\" u and v must be unit and orthogonal");
+  const json& size = required(header, "size_mm");
+  if (!size.is_array() || size.size() != 2 || !size[0].is_number() || !size[1].is_number() ||
+      !(size[0].get<double>() > 0.0) || !(size[1].get<double>() > 0.0) ||
+      !std::isfinite(size[0].get<double>()) || !std::isfinite(size[1].get<double>()))
+    invalid("\"size_mm\" must be [width, height] in mm, both > 0, got " + short_dump(size));
+  frame.size_mm = Vec2(size[0].get<double>(), size[1].get<double>());
+  frame.image.width = static_cast<int>(width);
+  frame.image.height = static_cast<int>(height);
+  frame.image.pixels.assign(frames[2].begin(), frames[2].end());
+  return frame;
+}
+
 StatusReport decode_status(const json& header) {
   StatusReport status;
   status.frames_received = read_count(header, "frames_received");
@@ -387,6 +503,12 @@ StatusReport decode_status(const json& header) {
     *value = read_finite(header, key);
     if (*value < 0.0) invalid(std::string("\"") + key + "\" is negative");
   }
+  for (auto [key, value] :
+       {std::pair{"update_ms", &status.update_ms}, std::pair{"latency_ms", &status.latency_ms}})
+    if (header.contains(key)) {
+      *value = read_finite(header, key);
+      if (**value < 0.0) invalid(std::string("\"") + key + "\" is negative");
+    }
   const std::string state = read_string(header, "state");
   if (state == "scanning")
     status.state = ScanState::kScanning;
@@ -411,6 +533,7 @@ std::string StreamMessage::topic() const {
     }
     std::string operator()(const SliceUpdate&) const { return std::string(kSliceTopic); }
     std::string operator()(const StatusReport&) const { return std::string(kStatusTopic); }
+    std::string operator()(const FrameImage&) const { return std::string(kFrameTopic); }
     std::string operator()(const SnapshotEnd&) const { return std::string(kEndTopic); }
   } visitor;
   return std::visit(visitor, body);
@@ -426,6 +549,8 @@ Result<Frames> encode_message(const StreamMessage& message) {
     return encode_slice(message, *slice);
   if (const auto* status = std::get_if<StatusReport>(&message.body))
     return encode_status(message, *status);
+  if (const auto* frame = std::get_if<FrameImage>(&message.body))
+    return encode_frame(message, *frame);
   return encode_end(message);
 }
 
@@ -434,9 +559,10 @@ Result<StreamMessage> decode_message(const Frames& frames) {
   const std::string& topic = frames.front();
   const int label = mesh_topic_label(topic);
   const bool is_end = topic == kEndTopic;
-  if (label == 0 && topic != kSliceTopic && topic != kStatusTopic && !is_end)
+  if (label == 0 && topic != kSliceTopic && topic != kStatusTopic && topic != kFrameTopic &&
+      !is_end)
     return Status::error("unknown topic " + printable(topic) +
-                         " (expected mesh.<label id>, slice, status or end)");
+                         " (expected mesh.<label id>, slice, status, frame or end)");
   std::string where = topic;  // grows to "topic seq N" once the seq is known
   StreamMessage message;
   try {
@@ -448,8 +574,7 @@ Result<StreamMessage> decode_message(const Frames& frames) {
       invalid("the header (frame 1) is not valid JSON: " + printable(frames[1]));
     }
     if (!header.is_object()) invalid("the header (frame 1) is not a JSON object");
-    // A slice header cannot carry the version: its "v" is the slice's second direction.
-    if (topic != kSliceTopic) check_version(header, /*optional=*/is_end);
+    check_version(header, /*optional=*/is_end);
     message.seq = read_count(header, "seq");
     where += " seq " + std::to_string(message.seq);
     if (message.seq == 0 && !is_end) invalid("seq 0: seq starts at 1");
@@ -464,10 +589,12 @@ Result<StreamMessage> decode_message(const Frames& frames) {
       check_frame_count(frames, 2, "a slice message");
       SliceUpdate update;
       update.index = read_count(header, "index");
-      Result<LabeledSlice> slice = parse_slice_json(frames[1], where, {"seq", "scan", "index"});
+      Result<LabeledSlice> slice = parse_slice_json(slice_object_of(header), where);
       if (!slice) return slice.status();  // already prefixed with `where`
       update.slice = std::move(*slice);
       message.body = std::move(update);
+    } else if (topic == kFrameTopic) {
+      message.body = decode_frame(frames, header);
     } else if (topic == kStatusTopic) {
       check_frame_count(frames, 2, "a status message");
       message.body = decode_status(header);

@@ -4,6 +4,7 @@
 #include <array>
 #include <atomic>
 #include <cstdio>
+#include <deque>
 #include <map>
 #include <mutex>
 #include <random>
@@ -18,8 +19,9 @@ namespace {
 
 // Each publisher has its own context, so one fixed name serves every publisher.
 constexpr const char* kStopEndpoint = "inproc://sonoshape-publisher-stop";
-// Snapshot replies queued per client before dropping: room for many labels.
-constexpr int kSnapshotSendHwm = 1000;
+// Snapshot replies queued per client before dropping: every slice kept, and room for many
+// labels (a ROUTER drops what is over its high-water mark, the end included).
+constexpr int kSnapshotSendHwm = static_cast<int>(kMaxSnapshotSlices) + 1024;
 
 }  // namespace
 
@@ -73,6 +75,8 @@ struct MeshPublisher::Impl {
   mutable std::mutex mutex;
   std::map<int, std::shared_ptr<const Frames>> latest_meshes;
   std::shared_ptr<const Frames> latest_status;
+  std::shared_ptr<const Frames> latest_frame;
+  std::deque<std::shared_ptr<const Frames>> slices;  // the scan's, the newest kMaxSnapshotSlices
   std::uint64_t last_seq = 0;
   std::atomic<std::uint64_t> snapshots_served{0};
 
@@ -125,8 +129,10 @@ struct MeshPublisher::Impl {
     std::uint64_t seq = 0;
     {
       const std::lock_guard<std::mutex> lock(mutex);
+      messages.assign(slices.begin(), slices.end());
       for (const auto& [label, frames] : latest_meshes) messages.push_back(frames);
       if (latest_status) messages.push_back(latest_status);
+      if (latest_frame) messages.push_back(latest_frame);
       seq = last_seq;
     }
     StreamMessage end{seq, scan, SnapshotEnd{}};
@@ -157,6 +163,11 @@ struct MeshPublisher::Impl {
           latest_meshes[mesh->label] = encoded[k];
         else if (std::holds_alternative<StatusReport>(messages[k].body))
           latest_status = encoded[k];
+        else if (std::holds_alternative<SliceUpdate>(messages[k].body))
+          slices.push_back(encoded[k]);
+        else if (std::holds_alternative<FrameImage>(messages[k].body))
+          latest_frame = encoded[k];
+        if (slices.size() > kMaxSnapshotSlices) slices.pop_front();
         last_seq = messages[k].seq;
         ++next_seq;
         // A PUB socket drops instead of blocking: a false here is not an error.
@@ -264,6 +275,10 @@ Status MeshPublisher::publish_meshes(const MeshSet& meshes, double timestamp_s,
 
 Status MeshPublisher::publish_slice(const LabeledSlice& slice, std::uint64_t index) {
   return impl_->publish({StreamMessage{0, {}, SliceUpdate{index, slice}}});
+}
+
+Status MeshPublisher::publish_frame(const FrameImage& frame) {
+  return impl_->publish({StreamMessage{0, {}, frame}});
 }
 
 Status MeshPublisher::publish_status(const StatusReport& status) {

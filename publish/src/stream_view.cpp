@@ -20,6 +20,9 @@ constexpr int kMaxSnapshotWaitMs = 2000;
 // and the end of a burst (the last meshes and the final status of a scan) has no later
 // message whose seq would show the gap.
 constexpr std::chrono::milliseconds kQuietRefresh{1000};
+// The least time between two fresh snapshots taken for a gap in the seqs: a reader that keeps
+// falling behind does not ask for one after every message.
+constexpr std::chrono::milliseconds kGapRefreshInterval{1000};
 
 }  // namespace
 
@@ -36,6 +39,7 @@ struct StreamView::Impl {
   std::string followed_scan;
   std::uint64_t highest_seq = 0;
   std::uint64_t refreshed_up_to = 0;
+  std::chrono::steady_clock::time_point last_gap_refresh{};
   std::thread thread;  // declared last: started once the members above exist
 
   void sleep_unless_stopped(std::chrono::milliseconds duration) {
@@ -81,6 +85,8 @@ struct StreamView::Impl {
   void relay(MeshSubscriber& subscriber, bool can_rejoin) {
     std::string scan;
     auto quiet = std::chrono::milliseconds(0);
+    // Live: past the snapshot's end (whose messages come with old, scattered seqs).
+    bool live = !can_rejoin;
     while (!stop) {
       auto received = subscriber.receive(kPollInterval);
       if (!received) {
@@ -101,6 +107,10 @@ struct StreamView::Impl {
         followed_scan = message.scan;
         highest_seq = refreshed_up_to = 0;
       }
+      // The publisher dropped messages for this reader (its high-water mark, when the relay falls
+      // behind). A lost mesh is replaced by the next one, but a lost slice only comes back with
+      // a snapshot, and the page draws every slice: join again now (after this message).
+      const bool gap = live && highest_seq > 0 && message.seq > highest_seq + 1;
       highest_seq = std::max(highest_seq, message.seq);
       if (message.scan != scan) {
         if (!scan.empty() && message.seq > 1 && can_rejoin) {
@@ -110,12 +120,21 @@ struct StreamView::Impl {
         if (!scan.empty()) log_info("view: new scan " + message.scan);
         scan = message.scan;
       }
-      // The page draws surfaces and status; slices and the snapshot's end stay here.
-      if (!std::holds_alternative<MeshUpdate>(message.body) &&
-          !std::holds_alternative<StatusReport>(message.body))
+      // The page draws surfaces, slices, frames and status; the snapshot's end stays here.
+      if (std::holds_alternative<SnapshotEnd>(message.body)) {
+        live = true;
         continue;
+      }
       ++relayed;  // first: a page that has the message sees it counted
       server.post(subscriber.last_frames());
+      const auto now = std::chrono::steady_clock::now();
+      if (gap && can_rejoin && now - last_gap_refresh >= kGapRefreshInterval) {
+        last_gap_refresh = now;
+        refreshed_up_to = highest_seq;
+        log_debug("view: messages lost before seq " + std::to_string(message.seq) +
+                  "; joining again for the slices among them");
+        return;
+      }
     }
   }
 };

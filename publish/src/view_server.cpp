@@ -40,16 +40,23 @@ void append_u32(std::string& out, std::uint32_t value) {
     out.push_back(static_cast<char>((value >> (8 * byte)) & 0xff));
 }
 
+// The slices a page keeps (and a late page is sent): every slice of a scan, up to this many, the
+// oldest dropped beyond. A slice message is a few kilobytes.
+constexpr std::size_t kMaxSlicesKept = 4096;
+
 // One message on its way to the pages: packed once, shared by every connection.
 struct Item {
   std::string topic;
   std::string scan;  // empty for `viewer` messages, which belong to no scan
   std::shared_ptr<const std::string> packed;
+  // What a newer message replaces: its topic, except that every slice is its own ("slice#<seq>"),
+  // since the page draws the slice planes so far and colours the surfaces by them.
+  std::string key;
 };
 
-// Adds `item` to `queue`, keeping one item per topic: a newer message of a topic replaces the
-// older one in its place. A message of a new scan drops every item of other scans. Returns how
-// many items it dropped or replaced.
+// Adds `item` to `queue`, keeping one item per key: a newer message of a topic replaces the
+// older one in its place; slices accumulate up to kMaxSlicesKept. A message of a new scan drops
+// every item of other scans. Returns how many items it dropped or replaced.
 std::uint64_t conflate(std::vector<Item>& queue, Item item) {
   std::uint64_t dropped = 0;
   if (!item.scan.empty()) {
@@ -59,20 +66,31 @@ std::uint64_t conflate(std::vector<Item>& queue, Item item) {
     dropped += std::erase_if(queue, old_scan);
   }
   const auto same = std::find_if(queue.begin(), queue.end(),
-                                 [&](const Item& queued) { return queued.topic == item.topic; });
+                                 [&](const Item& queued) { return queued.key == item.key; });
   if (same != queue.end()) {
     *same = std::move(item);
     return dropped + 1;
   }
+  const bool slice = item.topic == kSliceTopic;
   queue.push_back(std::move(item));
+  const auto is_slice = [](const Item& queued) { return queued.topic == kSliceTopic; };
+  if (slice && static_cast<std::size_t>(std::count_if(queue.begin(), queue.end(), is_slice)) >
+                   kMaxSlicesKept) {
+    queue.erase(std::find_if(queue.begin(), queue.end(), is_slice));
+    ++dropped;
+  }
   return dropped;
 }
 
-std::string scan_of(const Frames& frames) {
-  if (frames.size() < 2) return {};
+// The scan uuid of a message (empty when it has none) and its conflation key.
+std::pair<std::string, std::string> scan_and_key(const Frames& frames) {
+  std::string key = frames[0];
+  if (frames.size() < 2) return {{}, key};
   const nlohmann::json header = nlohmann::json::parse(frames[1], nullptr, false);
-  if (!header.is_object() || !header.contains("scan") || !header["scan"].is_string()) return {};
-  return header["scan"].get<std::string>();
+  if (!header.is_object()) return {{}, key};
+  if (frames[0] == kSliceTopic && header.contains("seq")) key += "#" + header["seq"].dump();
+  if (!header.contains("scan") || !header["scan"].is_string()) return {{}, key};
+  return {header["scan"].get<std::string>(), key};
 }
 
 std::string_view content_type(const std::filesystem::path& path) {
@@ -390,7 +408,9 @@ Result<ViewServer> ViewServer::start(const ViewServerOptions& options) {
 
 void ViewServer::post(const Frames& frames) {
   if (frames.empty()) return;
-  Item item{frames[0], scan_of(frames), std::make_shared<const std::string>(pack_frames(frames))};
+  auto [scan, key] = scan_and_key(frames);
+  Item item{frames[0], std::move(scan), std::make_shared<const std::string>(pack_frames(frames)),
+            std::move(key)};
   bool schedule = false;
   {
     const std::lock_guard lock(impl_->mutex);

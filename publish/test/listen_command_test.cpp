@@ -122,6 +122,10 @@ TEST(ListenCommand, RecordsAScanUntilIdle) {
   slice.regions.push_back({1, {Vec2(0, 0), Vec2(1, 0), Vec2(0, 1)}, {}});
   ASSERT_TRUE(publisher->publish_slice(slice, 0));
   ASSERT_TRUE(publisher->publish_meshes(two_organs(1.0), 0.1, 1));
+  FrameImage frame;
+  frame.image = GreyImage(4, 2, 128);
+  frame.size_mm = Vec2(40, 20);
+  ASSERT_TRUE(publisher->publish_frame(frame));
   ASSERT_TRUE(publisher->publish_slice(slice, 1));
   ASSERT_TRUE(publisher->publish_meshes(two_organs(2.0), 0.2, 2));
   ASSERT_TRUE(publisher->publish_status(status_of(ScanState::kIdle, 2)));
@@ -134,6 +138,7 @@ TEST(ListenCommand, RecordsAScanUntilIdle) {
   EXPECT_EQ(summary["scan"], publisher->scan());
   EXPECT_EQ(summary["meshes"], json({{"1", 2}, {"2", 2}}));
   EXPECT_EQ(summary["slices"], 2);
+  EXPECT_EQ(summary["frame_images"], 1);
   EXPECT_EQ(summary["last_state"], "idle");
   EXPECT_EQ(summary["stopped_by"], "idle");
   EXPECT_EQ(
@@ -159,6 +164,10 @@ TEST(ListenCommand, RecordsAScanUntilIdle) {
   EXPECT_EQ(last_mesh["vertex_count"], 6);
   EXPECT_EQ(lines[lines.size() - 4]["topic"], "slice");
   EXPECT_EQ(lines[lines.size() - 4]["index"], 1);
+  EXPECT_EQ(lines[lines.size() - 4]["v"], 1);  // the version, the plane under "plane"
+  EXPECT_EQ(lines[lines.size() - 4]["plane"]["v"], json::array({0, 1, 0}));
+  EXPECT_EQ(lines[lines.size() - 5]["topic"], "frame");
+  EXPECT_EQ(lines[lines.size() - 5]["width"], 4);
 }
 
 TEST(ListenCommand, JoinsARunningScanThroughTheSnapshot) {

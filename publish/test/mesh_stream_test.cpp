@@ -65,6 +65,8 @@ StatusReport sample_status() {
   status.smoothing_ms = 3.0;
   status.mesh_ms = 4.75;
   status.total_ms = 29.5;
+  status.update_ms = 31.0;
+  status.latency_ms = 142.5;
   return status;
 }
 
@@ -87,7 +89,8 @@ Frames with_header(Frames frames, Edit edit) {
 void expect_rejected(const Frames& frames, std::initializer_list<std::string> expected) {
   Result<StreamMessage> decoded = decode_message(frames);
   ASSERT_FALSE(decoded.is_ok()) << "accepted a malformed message";
-  for (const std::string& part : expected) EXPECT_TRUE(contains(decoded.message(), part));
+  for (const std::string& part : expected)
+    EXPECT_TRUE(contains(decoded.message(), part)) << decoded.message() << "\nlacks: " << part;
 }
 
 void put_float(std::string& bytes, std::size_t index, float value) {
@@ -161,17 +164,23 @@ TEST(MeshStreamRoundTrip, VanishedMaterialIsAnEmptyMesh) {
   EXPECT_FALSE(update.bounds.has_value());
 }
 
-TEST(MeshStreamRoundTrip, SliceIsOneSliceObjectWithSeqAndIndex) {
+TEST(MeshStreamRoundTrip, SliceCarriesTheVersionAndItsPlaneUnderPlane) {
   const LabeledSlice slice = sample_slice();
   const Frames frames = encoded(StreamMessage{9, kScan, SliceUpdate{4, slice}});
   ASSERT_EQ(frames.size(), 2u);
   EXPECT_EQ(frames[0], "slice");
   EXPECT_EQ(frames[1].find('\n'), std::string::npos);
   const json header = json::parse(frames[1]);
+  EXPECT_EQ(header["v"], 1);  // the version, as in every header
   EXPECT_EQ(header["seq"], 9);
   EXPECT_EQ(header["index"], 4);
+  EXPECT_EQ(header["plane"]["origin"], json::array({1.5, -2, 12.25}));
+  EXPECT_EQ(header["plane"]["u"], json::array({0, 1, 0}));
+  EXPECT_EQ(header["plane"]["v"], json::array({0, 0, 1}));
+  EXPECT_FALSE(header.contains("origin"));
+  EXPECT_FALSE(header.contains("u"));
   EXPECT_EQ(header["regions"][1]["label"], "unknown");
-  EXPECT_EQ(header["v"], json::array({0, 0, 1}));  // the slice's direction, not a version
+  EXPECT_EQ(header["fov"].size(), 4u);
 
   Result<StreamMessage> decoded = decode_message(frames);
   ASSERT_TRUE(decoded.is_ok()) << decoded.message();
@@ -188,6 +197,95 @@ TEST(MeshStreamRoundTrip, SliceIsOneSliceObjectWithSeqAndIndex) {
   EXPECT_EQ(update.slice.regions[0].outer, slice.regions[0].outer);
   EXPECT_EQ(update.slice.regions[0].holes, slice.regions[0].holes);
   EXPECT_EQ(update.slice.regions[1].label, kUnknownLabel);
+}
+
+TEST(MeshStreamRoundTrip, SliceDirectionsAreExactAfterTheRoundTrip) {
+  // Directions that are not round in binary: the header's numbers must read back bit for bit.
+  LabeledSlice slice = sample_slice();
+  slice.u = Vec3(std::cos(0.3), std::sin(0.3), 0.0);
+  slice.v = Vec3(-std::sin(0.3) * std::cos(1.1), std::cos(0.3) * std::cos(1.1), std::sin(1.1));
+  slice.origin_mm = Vec3(0.1, 1.0 / 3.0, -7.0 / 9.0);
+  Result<StreamMessage> decoded =
+      decode_message(encoded(StreamMessage{2, kScan, SliceUpdate{0, slice}}));
+  ASSERT_TRUE(decoded.is_ok()) << decoded.message();
+  const auto& got = std::get<SliceUpdate>(decoded->body).slice;
+  EXPECT_EQ(got.u, slice.u);
+  EXPECT_EQ(got.v, slice.v);
+  EXPECT_EQ(got.origin_mm, slice.origin_mm);
+}
+
+FrameImage sample_frame() {
+  FrameImage frame;
+  frame.index = 31;
+  frame.timestamp_s = 1.25;
+  frame.image = GreyImage(3, 2);
+  frame.image.pixels = {0, 50, 100, 150, 200, 255};
+  frame.plane.origin_mm = Vec3(-20, 0, 5);
+  frame.plane.u = Vec3(1, 0, 0);
+  frame.plane.v = Vec3(0, 0, -1);
+  frame.size_mm = Vec2(40, 30);
+  return frame;
+}
+
+TEST(MeshStreamRoundTrip, FrameIsAGreyPictureOnItsPlane) {
+  const Frames frames = encoded(StreamMessage{12, kScan, sample_frame()});
+  ASSERT_EQ(frames.size(), 3u);
+  EXPECT_EQ(frames[0], "frame");
+  const json header = json::parse(frames[1]);
+  EXPECT_EQ(header["v"], 1);
+  EXPECT_EQ(header["format"], "gray8");
+  EXPECT_EQ(header["width"], 3);
+  EXPECT_EQ(header["height"], 2);
+  EXPECT_EQ(header["plane"]["v"], json::array({0, 0, -1}));
+  EXPECT_EQ(header["size_mm"], json::array({40, 30}));
+  EXPECT_EQ(frames[2], std::string("\x00\x32\x64\x96\xc8\xff", 6));
+  Result<StreamMessage> decoded = decode_message(frames);
+  ASSERT_TRUE(decoded.is_ok()) << decoded.message();
+  EXPECT_EQ(decoded->seq, 12u);
+  const auto& got = std::get<FrameImage>(decoded->body);
+  EXPECT_EQ(got.index, 31);
+  EXPECT_EQ(got.timestamp_s, 1.25);
+  EXPECT_EQ(got.image, sample_frame().image);
+  EXPECT_EQ(got.plane.origin_mm, Vec3(-20, 0, 5));
+  EXPECT_EQ(got.plane.v, Vec3(0, 0, -1));
+  EXPECT_EQ(got.size_mm, Vec2(40, 30));
+}
+
+TEST(MeshStreamEncode, RefusesFramesThatAreNotPreviews) {
+  FrameImage empty = sample_frame();
+  empty.image = GreyImage();
+  EXPECT_TRUE(contains(encode_message(StreamMessage{1, kScan, empty}).message(), "0 x 0 px"));
+  FrameImage huge = sample_frame();
+  huge.image = GreyImage(kMaxFrameImageSide + 1, 1);
+  EXPECT_TRUE(contains(encode_message(StreamMessage{1, kScan, huge}).message(), "downsample"));
+  FrameImage skew = sample_frame();
+  skew.plane.v = Vec3(1, 0, 1).normalized();
+  EXPECT_TRUE(contains(encode_message(StreamMessage{1, kScan, skew}).message(), "orthogonal"));
+  FrameImage flat = sample_frame();
+  flat.size_mm.y() = 0.0;
+  EXPECT_TRUE(contains(encode_message(StreamMessage{1, kScan, flat}).message(), "positive"));
+}
+
+TEST(MeshStreamDecode, RejectsBadFrames) {
+  const Frames good = encoded(StreamMessage{12, kScan, sample_frame()});
+  Frames short_pixels = good;
+  short_pixels[2].pop_back();
+  expect_rejected(short_pixels, {"frame seq 12", "frame 2 holds 5 bytes but width * height is 6"});
+  expect_rejected(with_header(good, [](json& h) { h["format"] = "rgb8"; }),
+                  {"unknown \"format\" \"rgb8\""});
+  expect_rejected(with_header(good, [](json& h) { h["width"] = 0; }), {"width and height"});
+  expect_rejected(with_header(good,
+                              [](json& h) {
+                                h["plane"]["u"] = {0, 0, 2};
+                              }),
+                  {"unit and orthogonal"});
+  expect_rejected(with_header(good, [](json& h) { h["size_mm"] = {40, -1}; }), {"\"size_mm\""});
+  for (const char* key : {"index", "timestamp_s", "format", "width", "height", "plane", "size_mm"})
+    expect_rejected(with_header(good, [&](json& h) { h.erase(key); }),
+                    {"frame", std::string("\"") + key + "\" is missing"});
+  Frames no_pixels = good;
+  no_pixels.pop_back();
+  expect_rejected(no_pixels, {"2 frames", "a frame message has 3"});
 }
 
 TEST(MeshStreamRoundTrip, StatusKeepsEveryField) {
@@ -209,6 +307,8 @@ TEST(MeshStreamRoundTrip, StatusKeepsEveryField) {
   EXPECT_EQ(got.smoothing_ms, 3.0);
   EXPECT_EQ(got.mesh_ms, 4.75);
   EXPECT_EQ(got.total_ms, 29.5);
+  EXPECT_EQ(got.update_ms, 31.0);
+  EXPECT_EQ(got.latency_ms, 142.5);
   EXPECT_EQ(got.state, ScanState::kError);
   EXPECT_EQ(got.message, "tracker lost");
   for (ScanState state : {ScanState::kScanning, ScanState::kIdle}) {
@@ -218,6 +318,20 @@ TEST(MeshStreamRoundTrip, StatusKeepsEveryField) {
     ASSERT_TRUE(again.is_ok()) << again.message();
     EXPECT_EQ(std::get<StatusReport>(again->body).state, state);
   }
+}
+
+TEST(MeshStreamRoundTrip, StatusBeforeTheFirstUpdateHasNoLatency) {
+  StatusReport status = sample_status();
+  status.update_ms.reset();
+  status.latency_ms.reset();
+  const Frames frames = encoded(StreamMessage{3, kScan, status});
+  EXPECT_FALSE(json::parse(frames[1]).contains("latency_ms"));
+  Result<StreamMessage> decoded = decode_message(frames);
+  ASSERT_TRUE(decoded.is_ok()) << decoded.message();
+  EXPECT_FALSE(std::get<StatusReport>(decoded->body).latency_ms.has_value());
+  EXPECT_FALSE(std::get<StatusReport>(decoded->body).update_ms.has_value());
+  expect_rejected(with_header(frames, [](json& h) { h["latency_ms"] = -2.0; }),
+                  {"\"latency_ms\" is negative"});
 }
 
 TEST(MeshStreamRoundTrip, EndCarriesTheSeq) {
@@ -304,9 +418,12 @@ TEST(MeshStreamDecode, RejectsMissingFields) {
     expect_rejected(with_header(status, [&](json& h) { h.erase(key); }),
                     {"status", std::string("\"") + key + "\" is missing"});
   const Frames slice = encoded(StreamMessage{5, kScan, SliceUpdate{2, sample_slice()}});
-  for (const char* key : {"seq", "scan", "index", "origin", "u", "v"})
+  for (const char* key : {"v", "seq", "scan", "index", "plane"})
     expect_rejected(with_header(slice, [&](json& h) { h.erase(key); }),
                     {"slice", std::string("\"") + key + "\" is missing"});
+  for (const char* key : {"origin", "u", "v"})
+    expect_rejected(with_header(slice, [&](json& h) { h["plane"].erase(key); }),
+                    {"slice", std::string("\"plane\" ") + key + " is missing"});
   expect_rejected(Frames{"end", "{}"}, {"end", "\"seq\" is missing"});
 }
 
@@ -378,9 +495,16 @@ TEST(MeshStreamDecode, RejectsInvalidSlices) {
   const Frames good = encoded(StreamMessage{5, kScan, SliceUpdate{2, sample_slice()}});
   expect_rejected(with_header(good,
                               [](json& h) {
-                                h["u"] = {0, 2, 0};
+                                h["plane"]["u"] = {0, 2, 0};
                               }),
                   {"slice seq 5", "u is not unit length"});
+  expect_rejected(with_header(good,
+                              [](json& h) {
+                                h["v"] = json::array({0, 0, 1});
+                              }),
+                  {"slice", "unknown format version"});
+  expect_rejected(with_header(good, [](json& h) { h["plane"] = "xy"; }),
+                  {"slice seq 5", "\"plane\" must be"});
   expect_rejected(with_header(good,
                               [](json& h) {
                                 h["regions"][0]["polygon"] = {{0, 0}, {5, 0}, {10, 0}};

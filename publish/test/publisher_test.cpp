@@ -199,8 +199,13 @@ TEST(MeshPublisher, LateJoinerGetsTheSnapshotThenContinuesWithoutGaps) {
   ASSERT_TRUE(publisher.publish_status(scanning_status(1)));
   ASSERT_TRUE(publisher.publish_meshes(two_organs(3.0), 1.5, 2));  // newest meshes: size 3
   ASSERT_TRUE(publisher.publish_slice(square_slice(1.0), 1));
+  FrameImage frame;
+  frame.index = 40;
+  frame.image = GreyImage(2, 2, 9);
+  frame.size_mm = Vec2(20, 20);
+  ASSERT_TRUE(publisher.publish_frame(frame));
   const std::uint64_t n = publisher.last_seq();
-  ASSERT_EQ(n, 7u);
+  ASSERT_EQ(n, 8u);
 
   SubscriberOptions options;
   options.endpoint = publisher.endpoint();
@@ -210,7 +215,15 @@ TEST(MeshPublisher, LateJoinerGetsTheSnapshotThenContinuesWithoutGaps) {
   EXPECT_EQ(subscriber->snapshot_seq(), n);
   EXPECT_EQ(publisher.snapshots_served(), 1u);
 
-  // The snapshot: newest mesh of each label (seqs 5 and 6), newest status (seq 4), then end.
+  // The snapshot: every slice in order (seqs 3 and 7), newest mesh of each label (seqs 5 and
+  // 6), newest status (seq 4), newest frame (seq 8), then end. Live messages with seq <= 8 are
+  // dropped as covered: the snapshot must hold every slice.
+  for (std::uint64_t index : {0u, 1u}) {
+    const StreamMessage slice = receive_or_fail(*subscriber);
+    ASSERT_EQ(slice.topic(), "slice");
+    EXPECT_EQ(slice.seq, index == 0 ? 3u : 7u);
+    EXPECT_EQ(std::get<SliceUpdate>(slice.body).index, index);
+  }
   const StreamMessage liver = receive_or_fail(*subscriber);
   EXPECT_EQ(liver.topic(), "mesh.1");
   EXPECT_EQ(liver.seq, 5u);
@@ -221,6 +234,9 @@ TEST(MeshPublisher, LateJoinerGetsTheSnapshotThenContinuesWithoutGaps) {
   const StreamMessage status = receive_or_fail(*subscriber);
   EXPECT_EQ(status.topic(), "status");
   EXPECT_EQ(status.seq, 4u);
+  const StreamMessage preview = receive_or_fail(*subscriber);
+  EXPECT_EQ(preview.topic(), "frame");
+  EXPECT_EQ(std::get<FrameImage>(preview.body).index, 40);
   const StreamMessage end = receive_or_fail(*subscriber);
   EXPECT_EQ(end.topic(), "end");
   EXPECT_EQ(end.seq, n);

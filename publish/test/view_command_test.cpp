@@ -13,6 +13,7 @@
 #include <map>
 #include <nlohmann/json.hpp>
 #include <regex>
+#include <set>
 #include <sstream>
 #include <thread>
 
@@ -20,7 +21,6 @@
 #include "sonoshape/testing/child_process.hpp"
 #include "sonoshape/testing/temp_dir.hpp"
 #include "view_client.hpp"
-
 
 namespace sonoshape::publish {
 namespace {
@@ -147,23 +147,36 @@ TEST(ScanView, ServesTheScanItselfAndHoldsTheFinishedOneUntilInterrupted) {
   ASSERT_TRUE(scan.shows("shows it until Ctrl-C", 120s)) << scan.output();
   EXPECT_EQ(http_get(url, "/").status, 200u);
 
-  // A page opened after the scan: the finished surfaces and the final status.
+  // A page opened after the scan: every slice, the finished surfaces, the final status and the
+  // newest B-mode frame (--view publishes frame previews).
   Page page(url);
   const nlohmann::json summary = nlohmann::json::parse(std::ifstream(out / "scan.json"));
+  const auto slices = summary["slices"].get<std::size_t>();
   std::map<std::string, Frames> newest;
-  // The newest of every topic (viewer, mesh.1 to mesh.3, status), in the order they first came.
-  for (int i = 0; i < 10 && !(newest.count("status") && newest.count("mesh.2")); ++i) {
+  std::set<std::uint64_t> slice_indices;
+  // The newest of every topic (viewer, mesh.1 to mesh.3, status, frame) and every slice, in the
+  // order they first came.
+  for (int i = 0; i < 1000 && !(newest.count("status") && newest.count("mesh.2") &&
+                                newest.count("frame") && slice_indices.size() == slices);
+       ++i) {
     Frames frames = page.read();
     ASSERT_FALSE(frames.empty());
+    if (frames[0] == "slice") {
+      Result<StreamMessage> slice = decode_message(frames);
+      ASSERT_TRUE(slice) << slice.message();
+      slice_indices.insert(std::get<SliceUpdate>(slice->body).index);
+    }
     newest[frames[0]] = std::move(frames);
   }
+  EXPECT_EQ(slice_indices.size(), slices);
+  EXPECT_TRUE(newest.count("frame"));
   ASSERT_TRUE(newest.count("mesh.1") && newest.count("mesh.2")) << newest.begin()->first;
   EXPECT_TRUE(decode_message(newest["mesh.2"]));
   // The scan prints its hold line as it publishes its final (idle) status, which reaches the
   // page through the subscriber a moment later: a page may first get the last scanning status.
   Result<StreamMessage> decoded = decode_message(newest["status"]);
   ASSERT_TRUE(decoded) << decoded.message();
-  for (int i = 0; i < 10 && std::get<StatusReport>(decoded->body).state != ScanState::kIdle; ++i) {
+  for (int i = 0; i < 100 && std::get<StatusReport>(decoded->body).state != ScanState::kIdle; ++i) {
     Frames frames = page.read();
     ASSERT_FALSE(frames.empty());
     if (frames[0] != "status") continue;

@@ -190,6 +190,45 @@ TEST(ViewServer, ALatePageGetsTheNewestOfEveryTopicAndANewScanDropsTheOld) {
   EXPECT_NE(status.at(1).find("scan-b"), std::string::npos);  // scan-a's mesh.2 is gone
 }
 
+Frames slice_frames(const std::string& scan, std::uint64_t seq, std::uint64_t index) {
+  LabeledSlice slice;
+  slice.origin_mm = Vec3(0, 0, static_cast<double>(index));
+  Region organ;
+  organ.label = 1;
+  organ.outer = {Vec2(0, 0), Vec2(5, 0), Vec2(5, 5), Vec2(0, 5)};
+  slice.regions = {organ};
+  return encode_message(StreamMessage{seq, scan, SliceUpdate{index, slice}}).value();
+}
+
+TEST(ViewServer, APageGetsEverySliceOfTheScanAndALatePageTooButNotAnOldScans) {
+  // The page draws the slice planes so far and colours the surfaces by them: no slice of the
+  // current scan is conflated away, whereas meshes and frames keep only the newest.
+  ViewServer server = start_server();
+  server.post(slice_frames("scan-a", 1, 0));
+  server.post(slice_frames("scan-a", 2, 1));
+  server.post(mesh_frames("scan-a", 3, 1, 10.0));
+  server.post(slice_frames("scan-a", 4, 2));
+  server.post(mesh_frames("scan-a", 5, 1, 12.0));
+  Page late(server.url());
+  std::vector<std::uint64_t> slice_seqs;
+  std::uint64_t mesh_seq = 0;
+  for (int k = 0; k < 4; ++k) {
+    const Frames frames = late.read();
+    if (frames.at(0) == "slice")
+      slice_seqs.push_back(seq_of(frames));
+    else
+      mesh_seq = seq_of(frames);
+  }
+  EXPECT_EQ(slice_seqs, (std::vector<std::uint64_t>{1, 2, 4}));
+  EXPECT_EQ(mesh_seq, 5u);
+
+  server.post(slice_frames("scan-b", 1, 0));
+  Page later(server.url());
+  const Frames first = later.read();
+  EXPECT_EQ(first.at(0), "slice");
+  EXPECT_NE(first.at(1).find("scan-b"), std::string::npos);  // scan-a's slices are gone
+}
+
 TEST(ViewServer, APageThatDoesNotReadLosesIntermediateMeshesNeverTheNewestAndNeverBlocks) {
   ViewServer server = start_server();
   Page slow(server.url());

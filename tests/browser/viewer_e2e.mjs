@@ -6,13 +6,14 @@
 // node tests/browser/viewer_e2e.mjs SONOSHAPE_BINARY WORK_DIR [SCREENSHOT.png [--full]]
 // --full scans the default simulation (256 x 256 px, 30 fps, 6 s): the README's picture.
 // Exits 77 (ctest: skipped) with the reason when chromium or three.js is missing. Only node's
-// own modules: chromium is driven over its DevTools protocol on a pipe (--remote-debugging-pipe).
-import { spawn, spawnSync } from 'node:child_process';
+// own modules: chromium is driven over its DevTools protocol on a pipe (chromium.mjs).
+import { spawn } from 'node:child_process';
 import fs from 'node:fs';
 import path from 'node:path';
 import zlib from 'node:zlib';
 import { fileURLToPath } from 'node:url';
 import { labelColor } from '../../viewer/src/palette.js';
+import { findChromium, launchChromium, openPage } from './chromium.mjs';
 
 const here = path.dirname(fileURLToPath(import.meta.url));
 const [sonoshape, workDir, screenshotPath, mode] = process.argv.slice(2);
@@ -31,14 +32,6 @@ function fail(reason) {
   console.error('FAILED: ' + reason);
   for (const child of children) child.kill('SIGKILL');
   process.exit(1);
-}
-
-function findChromium() {
-  for (const name of ['chromium', 'chromium-browser', 'google-chrome']) {
-    const found = spawnSync('sh', ['-c', 'command -v ' + name], { encoding: 'utf8' });
-    if (found.status === 0) return found.stdout.trim();
-  }
-  return null;
 }
 
 const sleep = (ms) => new Promise((resolve) => setTimeout(resolve, ms));
@@ -63,39 +56,6 @@ function start(command, args) {
   };
   child.exited = new Promise((resolve) => child.on('exit', (code) => resolve(code)));
   return child;
-}
-
-// Chromium's DevTools protocol over fds 3 (commands in) and 4 (replies out), NUL-separated JSON.
-function devtools(chromium) {
-  const browser = spawn(chromium, [
-    '--headless', '--no-sandbox', '--remote-debugging-pipe', '--use-angle=swiftshader',
-    '--enable-unsafe-swiftshader', '--no-first-run', '--disable-extensions',
-    `--window-size=${kWidth},${kHeight}`, '--user-data-dir=' + path.join(workDir, 'chromium'),
-    'about:blank',
-  ], { stdio: ['ignore', 'ignore', 'ignore', 'pipe', 'pipe'] });
-  children.push(browser);
-  const pending = new Map();
-  let nextId = 1;
-  let buffer = '';
-  browser.stdio[4].on('data', (data) => {
-    buffer += data.toString('utf8');
-    let end;
-    while ((end = buffer.indexOf('\0')) >= 0) {
-      const message = JSON.parse(buffer.slice(0, end));
-      buffer = buffer.slice(end + 1);
-      const waiter = pending.get(message.id);
-      if (!waiter) continue;
-      pending.delete(message.id);
-      if (message.error) waiter.reject(new Error(JSON.stringify(message.error)));
-      else waiter.resolve(message.result);
-    }
-  });
-  const send = (method, params = {}, sessionId = undefined) => new Promise((resolve, reject) => {
-    const id = nextId++;
-    pending.set(id, { resolve, reject });
-    browser.stdio[3].write(JSON.stringify({ id, method, params, sessionId }) + '\0');
-  });
-  return { browser, send };
 }
 
 // Decodes an 8-bit RGB or RGBA PNG (what Page.captureScreenshot gives) into RGBA pixels.
@@ -188,49 +148,52 @@ async function main() {
   fs.mkdirSync(workDir, { recursive: true });
   const started = Date.now();
 
-  // A short simulated sweep played in real time, so that the view joins it while it runs.
+  // A short simulated sweep played in real time, so that the view joins it while it runs. The
+  // scan's own view (--view-hold, on a port of its own) only keeps the publisher up after the
+  // scan, as at the bedside: messages a loaded machine drops come back with a fresh snapshot.
   const out = path.join(workDir, 'scan');
   const sweep = mode === '--full'
     ? ['--sweep-s', '6']
     : ['--width-px', '160', '--height-px', '160', '--frame-rate', '8', '--depth', '5', '--sweep-s', '4'];
   const scan = start(sonoshape, ['scan', '--source', 'sim:default', ...sweep, '--realtime',
-    '--publish', 'tcp://127.0.0.1:*', '--snapshot', 'tcp://127.0.0.1:*', '-o', out]);
+    '--publish', 'tcp://127.0.0.1:*', '--snapshot', 'tcp://127.0.0.1:*', '--publish-frames', '5',
+    '--view', '127.0.0.1:0', '--view-hold', '-o', out]);
   const [, pub, snapshot] = await scan.waitFor(/on (tcp:\/\/\S+) \(snapshot (tcp:\/\/\S+)\)/, 60000);
   const view = start(sonoshape, ['view', pub, '--snapshot', snapshot, '--http', '127.0.0.1:0']);
   const [, url] = await view.waitFor(/open (http:\/\/127\.0\.0\.1:\d+\/)/, 20000);
 
-  const { send } = devtools(chromium);
-  const { targetInfos } = await send('Target.getTargets');
-  const page = targetInfos.find((t) => t.type === 'page');
-  if (!page) fail('chromium opened no page');
-  const { sessionId } = await send('Target.attachToTarget', { targetId: page.targetId, flatten: true });
-  await send('Emulation.setDeviceMetricsOverride',
-             { width: kWidth, height: kHeight, deviceScaleFactor: 1, mobile: false }, sessionId);
-  await send('Page.navigate', { url }, sessionId);
+  const { browser, send } = launchChromium(chromium, { width: kWidth, height: kHeight,
+                                                        userDataDir: path.join(workDir, 'chromium') });
+  children.push(browser);
+  const { sessionId, evaluate } = await openPage(send, url, kWidth, kHeight);
 
-  const scanCode = await scan.exited;
-  if (scanCode !== 0) fail('the scan exited with ' + scanCode + ':\n' + scan.output());
+  await scan.waitFor(/scan: finished; \S+ shows it until Ctrl-C/, 60000);
   const summary = JSON.parse(fs.readFileSync(path.join(out, 'scan.json'), 'utf8'));
 
   // Wait until the page shows the finished scan: idle, every label drawn, a frame rendered.
-  const evaluate = async (expression) =>
-    (await send('Runtime.evaluate', { expression, returnByValue: true }, sessionId)).result.value;
   let state;
   for (let i = 0; i < 300; ++i) {
     state = await evaluate(`({ ...window.sonoshapeViewer,
       state: document.getElementById('state')?.textContent ?? '',
       frames: document.getElementById('frames')?.textContent,
       slices: document.getElementById('slices')?.textContent,
+      latency: document.getElementById('latency-ms')?.textContent,
       labels: [...document.querySelectorAll('#legend .name')].map((n) => n.textContent) })`);
-    if (state && state.state.startsWith('idle') && state.labelsDrawn >= 2 && state.rendered > 0) break;
+    if (state && state.state.startsWith('idle') && state.labelsDrawn >= 2 && state.rendered > 0 &&
+        state.slicesDrawn === summary.slices && state.framesShown > 0) break;
     await sleep(100);
   }
-  if (!state || !state.state.startsWith('idle')) fail('the page never showed the idle scan: ' + JSON.stringify(state));
+  if (!state || !state.state.startsWith('idle') || state.slicesDrawn !== summary.slices)
+    fail('the page never showed the idle scan with its ' + summary.slices + ' slices: ' + JSON.stringify(state));
   await sleep(500);  // the last requested frame
   if (String(summary.frames_received) !== state.frames)
     fail(`frames in: page ${state.frames}, scan.json ${summary.frames_received}`);
   if (String(summary.slices) !== state.slices)
     fail(`slices: page ${state.slices}, scan.json ${summary.slices}`);
+  // Every slice of the scan drawn (those before the view joined came with the snapshot), a
+  // B-mode frame on its plane (waited for above), and the latency.
+  const drawn = state.slicesDrawn;
+  if (!/^\d+$/.test(state.latency)) fail(`frame-to-mesh latency shown as ${state.latency}`);
 
   const { data } = await send('Page.captureScreenshot', { format: 'png' }, sessionId);
   const png = Buffer.from(data, 'base64');
@@ -251,6 +214,24 @@ async function main() {
     if (count < kMinPixels)
       fail(`label ${label}'s colour ${labelColor(label)} covers ${count} pixels (< ${kMinPixels}); see ${path.join(workDir, 'page.png')}`);
   }
+  // What is still unscanned: the surfaces coloured by distance to the slices; the scanned parts
+  // (0 mm) are the ramp's green, a hue no label of this scan has.
+  await evaluate("window.sonoshapeViewer.setColoring('distance', 10)");
+  let coverage = null;
+  for (let i = 0; i < 50 && !coverage; ++i) {
+    await sleep(100);
+    coverage = await evaluate('window.sonoshapeViewer.coverage');
+  }
+  if (!coverage) fail('the page never coloured the surfaces by distance');
+  await sleep(300);
+  const distancePng = Buffer.from((await send('Page.captureScreenshot', { format: 'png' }, sessionId)).data, 'base64');
+  fs.writeFileSync(path.join(workDir, 'distance.png'), distancePng);
+  const coloured = decodePng(distancePng);
+  const green = countColour(coloured, '#2ebf5c');
+  console.log(`distance colouring: ${green} green (scanned) pixels; ${coverage.vertices} vertices in ${coverage.ms.toFixed(0)} ms`);
+  if (green < kMinPixels) fail(`the distance colouring shows ${green} green pixels (< ${kMinPixels})`);
+  await evaluate("window.sonoshapeViewer.setColoring('label')");
+
   // The page's downloads: each surface as PLY and STL, with the scan's own final triangle count.
   for (const label of labels) {
     const ply = await evaluate(`window.sonoshapeViewer.exportMesh(${label}, 'ply')`);
@@ -265,7 +246,8 @@ async function main() {
     if (stlFaces !== expected || stl.size !== 84 + 50 * expected)
       fail(`label ${label}: STL download has ${stlFaces} triangles in ${stl.size} bytes, not ${expected}`);
   }
-  console.log(`page: ${state.labels.join(', ')}; frames ${state.frames}, slices ${state.slices}; ` +
+  console.log(`page: ${state.labels.join(', ')}; frames ${state.frames}, slices ${state.slices} ` +
+              `(${drawn} planes drawn), ${state.framesShown} B-mode frames shown; ` +
               `${((Date.now() - started) / 1000).toFixed(1)} s`);
   for (const child of children) child.kill('SIGTERM');
   process.exit(0);

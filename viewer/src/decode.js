@@ -72,12 +72,69 @@ function decodeMesh(topic, header, frames) {
   };
 }
 
+function isVec3(value) {
+  return Array.isArray(value) && value.length === 3 && value.every(Number.isFinite);
+}
+
+// A plane as the stream writes it: {"origin", "u", "v"}, u and v unit and orthogonal (1e-6, as
+// slices.md asks). Returned as plain arrays.
+function decodePlane(plane, fail) {
+  if (plane === null || typeof plane !== 'object' || Array.isArray(plane)) fail('"plane" is missing');
+  for (const key of ['origin', 'u', 'v'])
+    if (!isVec3(plane[key])) fail('"plane" ' + key + ' must be [x, y, z], finite');
+  const dot = (a, b) => a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+  if (Math.abs(dot(plane.u, plane.u) - 1) > 2e-6 || Math.abs(dot(plane.v, plane.v) - 1) > 2e-6 ||
+      Math.abs(dot(plane.u, plane.v)) > 1e-6)
+    fail('"plane" u and v must be unit and orthogonal');
+  return { origin: plane.origin, u: plane.u, v: plane.v };
+}
+
+function isRing(ring) {
+  return Array.isArray(ring) && ring.length >= 3 &&
+    ring.every((p) => Array.isArray(p) && p.length === 2 && p.every(Number.isFinite));
+}
+
+function decodeSlice(topic, header, frames) {
+  const fail = (what) => {
+    throw new DecodeError(topic + ' seq ' + header.seq + ': ' + what);
+  };
+  if (frames.length !== 2) fail(frames.length + ' frames, not 2');
+  if (!isCount(header.index)) fail('"index" must be a count');
+  const plane = decodePlane(header.plane, fail);
+  const fov = header.fov === undefined ? null : header.fov;
+  if (fov !== null && !isRing(fov)) fail('"fov" must be a ring of [a, b] points');
+  const regions = header.regions ?? [];
+  if (!Array.isArray(regions) || !regions.every((r) => r && isRing(r.polygon)))
+    fail('"regions" must be a list of regions with a "polygon"');
+  return { kind: 'slice', topic, header, index: header.index, plane, fov, regions };
+}
+
+function decodeFrame(topic, header, frames) {
+  const fail = (what) => {
+    throw new DecodeError(topic + ' seq ' + header.seq + ': ' + what);
+  };
+  if (frames.length !== 3) fail(frames.length + ' frames, not 3');
+  if (header.format !== 'gray8') fail('format ' + JSON.stringify(header.format) + ', not gray8');
+  const { width, height } = header;
+  if (!isCount(width) || !isCount(height) || width < 1 || height < 1 || width > 1024 || height > 1024)
+    fail('width and height must be 1 to 1024 pixels');
+  if (frames[2].byteLength !== width * height) fail('pixels frame is not width * height bytes');
+  const plane = decodePlane(header.plane, fail);
+  const size = header.size_mm;
+  if (!Array.isArray(size) || size.length !== 2 || !size.every((x) => Number.isFinite(x) && x > 0))
+    fail('"size_mm" must be [width, height] in mm, both > 0');
+  return { kind: 'frame', topic, header, width, height, pixels: frames[2], plane, sizeMm: size };
+}
+
 /**
  * Decodes one WebSocket message.
  * @param {ArrayBuffer} buffer
- * @returns {{kind: 'mesh'|'status'|'viewer', topic: string, header: object}} and, for a mesh,
- *   `label`, `name`, `positions` (Float32Array, x y z in mm), `indices` (Uint32Array, three per
- *   triangle) and `normals` (Float32Array or null), all views into `buffer`
+ * @returns {{kind: 'mesh'|'slice'|'frame'|'status'|'viewer', topic: string, header: object}} and,
+ *   for a mesh, `label`, `name`, `positions` (Float32Array, x y z in mm), `indices` (Uint32Array,
+ *   three per triangle) and `normals` (Float32Array or null), all views into `buffer`; for a
+ *   slice, `index`, `plane` ({origin, u, v} arrays, mm), `fov` ([a, b] points or null: the whole
+ *   plane) and `regions`; for a frame, `width`, `height`, `pixels` (Uint8Array, row-major from
+ *   the transducer side), `plane` and `sizeMm` ([width, height] of the picture in mm)
  * @throws {DecodeError} naming the topic and seq for anything the format does not allow
  */
 export function decodeMessage(buffer) {
@@ -95,8 +152,11 @@ export function decodeMessage(buffer) {
   if (header === null || typeof header !== 'object' || Array.isArray(header))
     throw new DecodeError(topic + ': header is not a JSON object');
   if (topic === 'viewer') return { kind: 'viewer', topic, header };
-  if (header.v !== 1) throw new DecodeError(topic + ' seq ' + header.seq + ': version ' + header.v + ', not 1');
+  // Every stream header carries the version (a slice's plane is under "plane").
+  if (header.v !== 1) throw new DecodeError(topic + ' seq ' + header.seq + ': version ' + JSON.stringify(header.v) + ', not 1');
   if (topic.startsWith('mesh.')) return decodeMesh(topic, header, frames);
+  if (topic === 'slice') return decodeSlice(topic, header, frames);
+  if (topic === 'frame') return decodeFrame(topic, header, frames);
   if (topic === 'status') {
     if (frames.length !== 2) throw new DecodeError('status seq ' + header.seq + ': ' + frames.length + ' frames, not 2');
     return { kind: 'status', topic, header };

@@ -1,6 +1,7 @@
 // The page: a WebSocket to `sonoshape view`, decoded messages to the scene, legend and status.
 import { decodeMessage, DecodeError } from './decode.js';
 import { labelColor } from './palette.js';
+import { rampCss } from './coverage.js';
 import { SceneView } from './scene.js';
 
 const $ = (id) => document.getElementById(id);
@@ -12,8 +13,16 @@ let retryDelayMs = 500;
 let everConnected = false;
 
 // For tests and scripts: what the page has drawn so far.
-window.sonoshapeViewer = { labelsDrawn: 0, messages: 0, rendered: 0, scan: null };
-view.onRendered = () => { window.sonoshapeViewer.rendered += 1; };
+window.sonoshapeViewer = {
+  labelsDrawn: 0, messages: 0, rendered: 0, scan: null, slicesDrawn: 0, framesShown: 0,
+  coverage: null,  // the last distance colouring: vertices and milliseconds
+};
+window.sonoshapeViewer.gpu = { name: view.gpu, antialias: view.antialias };
+view.onRendered = () => {
+  window.sonoshapeViewer.rendered += 1;
+  noteDrawn();
+};
+view.onCoverage = (c) => { window.sonoshapeViewer.coverage = c; };
 
 function say(text, kind = 'info') {
   const line = $('connection');
@@ -61,7 +70,23 @@ function downloadMesh(label, format) {
   setTimeout(() => URL.revokeObjectURL(url), 10000);
 }
 
-function showMesh(message) {
+// For bench/viewer_bench.mjs: when each mesh was drawn. A script sets `drawLog` to an array; the
+// page then waits for each picture to be finished (a one-pixel read) and appends
+// {label, seq, timestamp_s, received_ms, drawn_ms} (Unix times in ms) for every mesh it holds.
+let undrawn = [];
+function noteDrawn() {
+  const log = window.sonoshapeViewer.drawLog;
+  if (!Array.isArray(log) || !undrawn.length) return;
+  view.finishDrawing();
+  const drawnMs = performance.timeOrigin + performance.now();
+  for (const entry of undrawn) log.push({ ...entry, drawn_ms: drawnMs });
+  undrawn = [];
+}
+
+function showMesh(message, receivedMs) {
+  if (Array.isArray(window.sonoshapeViewer.drawLog))
+    undrawn.push({ label: message.label, seq: message.header.seq,
+                   timestamp_s: message.header.timestamp_s, received_ms: receivedMs });
   let entry = labels.get(message.label);
   if (!entry) {
     entry = { row: legendRow(message.label, message.name) };
@@ -78,13 +103,28 @@ function showMesh(message) {
   window.sonoshapeViewer.labelsDrawn = [...labels.keys()].length;
 }
 
+function showSlice(message) {
+  view.addSlice(message);
+  window.sonoshapeViewer.slicesDrawn = view.slices.length;
+  $('planes').textContent = view.slices.length;
+}
+
+function showFrame(message) {
+  view.setFrame(message);
+  window.sonoshapeViewer.framesShown += 1;
+}
+
+// Milliseconds as the status shows them: '–' until the scan has said.
+const ms = (value) => (Number.isFinite(value) ? Number(value).toFixed(0) : '–');
+
 function showStatus(header) {
   $('state').textContent = header.state + (header.message ? ': ' + header.message : '');
   $('state').className = header.state;
   $('frames').textContent = header.frames_received ?? '–';
   $('dropped').textContent = header.frames_dropped ?? '–';
   $('slices').textContent = header.slices ?? '–';
-  $('update-ms').textContent = Number(header.total_ms ?? 0).toFixed(0);
+  $('update-ms').textContent = ms(header.update_ms ?? header.total_ms);
+  $('latency-ms').textContent = ms(header.latency_ms);
 }
 
 function followScan(header) {
@@ -94,6 +134,8 @@ function followScan(header) {
     view.clear();
     labels.clear();
     $('legend').replaceChildren();
+    $('planes').textContent = '0';
+    window.sonoshapeViewer.slicesDrawn = 0;
   }
   scan = header.scan;
   window.sonoshapeViewer.scan = scan;
@@ -101,6 +143,7 @@ function followScan(header) {
 }
 
 function onMessage(event) {
+  const receivedMs = performance.timeOrigin + performance.now();
   let message;
   try {
     message = decodeMessage(event.data);
@@ -118,7 +161,9 @@ function onMessage(event) {
     return;
   }
   followScan(message.header);
-  if (message.kind === 'mesh') showMesh(message);
+  if (message.kind === 'mesh') showMesh(message, receivedMs);
+  else if (message.kind === 'slice') showSlice(message);
+  else if (message.kind === 'frame') showFrame(message);
   else showStatus(message.header);
 }
 
@@ -146,6 +191,41 @@ setInterval(() => {
 }, 1000);
 
 $('reset').addEventListener('click', () => view.resetView());
+
+// Colouring: the labels' own colours, or how far each part is from the slices that saw it.
+function setColoring() {
+  const distance = $('color-distance').checked;
+  const scale = Number($('scale-mm').value);
+  view.setColorMode(distance ? 'distance' : 'label', scale);
+  $('scale').hidden = !distance;
+  $('scale-mid').textContent = scale / 2;
+  $('scale-max').textContent = '≥ ' + scale;
+}
+$('scale-bar').style.background = rampCss();
+for (const id of ['color-label', 'color-distance', 'scale-mm'])
+  $(id).addEventListener('change', setColoring);
+$('show-slices').addEventListener('change', () => view.setSlicesVisible($('show-slices').checked));
+$('show-frame').addEventListener('change', () => view.setFrameVisible($('show-frame').checked));
+// For bench/viewer_bench.mjs: the frame rate of orbiting the scene, each picture finished.
+window.sonoshapeViewer.measureFps = (seconds) => new Promise((resolve) => {
+  const start = performance.now();
+  let frames = 0;
+  const step = () => {
+    view.orbitStep(0.02);
+    view.finishDrawing();
+    ++frames;
+    const elapsed = (performance.now() - start) / 1000;
+    if (elapsed < seconds) requestAnimationFrame(step);
+    else resolve({ frames, seconds: elapsed, fps: frames / elapsed });
+  };
+  requestAnimationFrame(step);
+});
+// For tests and scripts: switch the colouring as the buttons do.
+window.sonoshapeViewer.setColoring = (mode, scaleMm = 10) => {
+  $(mode === 'distance' ? 'color-distance' : 'color-label').checked = true;
+  $('scale-mm').value = String(scaleMm);
+  setColoring();
+};
 $('screenshot').addEventListener('click',
   () => download(view.screenshot(), 'sonoshape-' + (scan ?? 'view').slice(0, 8) + '.png'));
 // For tests: the header of a label's export and its size, as a download would write it.

@@ -78,6 +78,45 @@ test('status and viewer messages carry their headers', () => {
   assert.equal(viewer.header.stream, 'waiting');
 });
 
+function sliceHeader(fields = {}) {
+  return JSON.stringify({
+    v: 1, seq: 12, scan: 'a1', index: 4,
+    plane: { origin: [1.5, -2, 12.25], u: [0, 1, 0], v: [0, 0, 1] }, timestamp: 0.5,
+    fov: [[-40, 0], [40, 0], [40, 60], [-40, 60]],
+    regions: [{ label: 1, polygon: [[-10, 5], [12, 5], [12, 30]] }], ...fields,
+  });
+}
+
+function frameHeader(fields = {}) {
+  return JSON.stringify({
+    v: 1, seq: 13, scan: 'a1', index: 31, timestamp_s: 1.25, format: 'gray8', width: 3, height: 2,
+    plane: { origin: [-20, 0, 5], u: [1, 0, 0], v: [0, 0, -1] }, size_mm: [40, 30], ...fields,
+  });
+}
+
+const pixels = new Uint8Array([0, 50, 100, 150, 200, 255]);
+
+test('a slice message carries the version and its plane under "plane"', () => {
+  const slice = decodeMessage(pack(['slice', sliceHeader()]));
+  assert.equal(slice.kind, 'slice');
+  assert.equal(slice.index, 4);
+  assert.deepEqual(slice.plane, { origin: [1.5, -2, 12.25], u: [0, 1, 0], v: [0, 0, 1] });
+  assert.equal(slice.fov.length, 4);
+  assert.equal(slice.regions.length, 1);
+  const wholePlane = decodeMessage(pack(['slice', sliceHeader({ fov: undefined })]));
+  assert.equal(wholePlane.fov, null);
+});
+
+test('a frame message is a grey picture on its plane', () => {
+  const frame = decodeMessage(pack(['frame', frameHeader(), pixels]));
+  assert.equal(frame.kind, 'frame');
+  assert.equal(frame.width, 3);
+  assert.equal(frame.height, 2);
+  assert.deepEqual([...frame.pixels], [...pixels]);
+  assert.deepEqual(frame.sizeMm, [40, 30]);
+  assert.deepEqual(frame.plane.v, [0, 0, -1]);
+});
+
 test('messages that break the format are refused, naming topic and problem', () => {
   const cases = [
     [pack(['mesh.2', meshHeader({ vertex_count: 5 }), positions, indices]), /mesh.2 seq 7: positions frame/],
@@ -91,6 +130,17 @@ test('messages that break the format are refused, naming topic and problem', () 
     [pack(['mesh.2', '[1,2]', positions, indices]), /not a JSON object/],
     [pack(['mesh.2', '{"v":1', positions, indices]), /not UTF-8 JSON/],
     [pack(['slice', JSON.stringify({ seq: 3 })]), /version undefined/],
+    // The old slice header: its plane at the top level, "v" a direction, not the version.
+    [pack(['slice', JSON.stringify({ seq: 3, origin: [0, 0, 0], u: [1, 0, 0], v: [0, 1, 0] })]),
+     /slice seq 3: version \[0,1,0\], not 1/],
+    [pack(['slice', sliceHeader({ plane: undefined })]), /slice seq 12: "plane" is missing/],
+    [pack(['slice', sliceHeader({ plane: { origin: [0, 0, 0], u: [2, 0, 0], v: [0, 1, 0] } })]),
+     /unit and orthogonal/],
+    [pack(['slice', sliceHeader({ fov: [[0, 0], [1, 1]] })]), /"fov" must be a ring/],
+    [pack(['frame', frameHeader(), pixels.subarray(0, 5)]), /frame seq 13: pixels frame/],
+    [pack(['frame', frameHeader({ format: 'rgb8' }), pixels]), /not gray8/],
+    [pack(['frame', frameHeader({ size_mm: [40, 0] }), pixels]), /size_mm/],
+    [pack(['frame', frameHeader()]), /2 frames, not 3/],
     [pack(['nonsense', JSON.stringify({ v: 1, seq: 3 })]), /unknown topic "nonsense"/],
     [pack(['status', JSON.stringify({ v: 1, seq: 3 }), 'extra']), /3 frames, not 2/],
   ];

@@ -1,5 +1,10 @@
 #include "sonoshape/scan/publish_sink.hpp"
 
+#include <chrono>
+#include <cmath>
+#include <opencv2/imgproc.hpp>
+#include <optional>
+
 #include "sonoshape/publish/publisher.hpp"
 #include "status_report.hpp"
 
@@ -7,7 +12,50 @@ namespace sonoshape::scan {
 
 struct PublishSink::Impl {
   publish::MeshPublisher publisher;
+  FramePreviewOptions previews;
+  std::optional<std::chrono::steady_clock::time_point> last_preview;
 };
+
+namespace {
+
+// The frame as a preview of at most `max_side_px` a side, on the plane its pixels lie in:
+// `T_reference_image` maps pixel centres (column, row, 0) to mm, so the picture's corner is
+// pixel (-0.5, -0.5).
+Result<publish::FrameImage> frame_preview(const TrackedFrame& tracked,
+                                          const Eigen::Matrix4d& T_reference_image,
+                                          int max_side_px) {
+  const GreyImage& image = tracked.frame.image;
+  const Vec3 column = T_reference_image.block<3, 1>(0, 0);
+  const Vec3 row = T_reference_image.block<3, 1>(0, 1);
+  const double spacing_u = column.norm();
+  const double spacing_v = row.norm();
+  if (!(spacing_u > 0.0) || !(spacing_v > 0.0) || !std::isfinite(spacing_u) ||
+      !std::isfinite(spacing_v) || !T_reference_image.allFinite())
+    return Status::error("frame " + std::to_string(tracked.frame.index) +
+                         ": its image-to-reference transform has no usable pixel spacing");
+  publish::FrameImage out;
+  out.index = tracked.frame.index;
+  out.timestamp_s = tracked.frame.timestamp_s;
+  out.plane.u = column / spacing_u;
+  // A calibration is rigid up to spacing; take v orthogonal to u all the same (a preview).
+  out.plane.v = (row - out.plane.u * out.plane.u.dot(row)).normalized();
+  out.plane.origin_mm = (T_reference_image * Eigen::Vector4d(-0.5, -0.5, 0.0, 1.0)).head<3>();
+  out.size_mm = Vec2(image.width * spacing_u, image.height * spacing_v);
+
+  const double scale =
+      std::min(1.0, static_cast<double>(max_side_px) / std::max(image.width, image.height));
+  const int width = std::max(1, static_cast<int>(std::lround(image.width * scale)));
+  const int height = std::max(1, static_cast<int>(std::lround(image.height * scale)));
+  const cv::Mat source(image.height, image.width, CV_8UC1,
+                       const_cast<std::uint8_t*>(image.pixels.data()));
+  out.image = GreyImage(width, height);
+  cv::Mat target(height, width, CV_8UC1, out.image.pixels.data());
+  // Area averaging: a downsampled B-mode picture without aliasing speckle into stripes.
+  cv::resize(source, target, target.size(), 0.0, 0.0, cv::INTER_AREA);
+  return out;
+}
+
+}  // namespace
 
 publish::StatusReport report_of(const ScanStatus& status) {
   publish::StatusReport report;
@@ -20,24 +68,46 @@ publish::StatusReport report_of(const ScanStatus& status) {
   report.smoothing_ms = 1e3 * status.last_update.smoothing_s;
   report.mesh_ms = 1e3 * status.last_update.mesh_s;
   report.total_ms = 1e3 * status.last_update.total_s;
+  if (status.counters.updates > 0) {
+    report.update_ms = status.counters.last_update_ms;
+    report.latency_ms = 1e3 * status.counters.last_latency_s;
+  }
   report.state = status.state;
   report.message = status.message;
   return report;
 }
 
 Result<std::shared_ptr<PublishSink>> PublishSink::bind(const std::string& endpoint,
-                                                       const std::string& snapshot_endpoint) {
+                                                       const std::string& snapshot_endpoint,
+                                                       const FramePreviewOptions& previews) {
+  if (!(previews.rate_hz >= 0.0) || previews.max_side_px < 1 ||
+      previews.max_side_px > publish::kMaxFrameImageSide)
+    return Status::error("frame previews: the rate must be >= 0 per second and the side 1 to " +
+                         std::to_string(publish::kMaxFrameImageSide) + " px");
   publish::PublisherOptions options;
   options.endpoint = endpoint;
   options.snapshot_endpoint = snapshot_endpoint;
   Result<publish::MeshPublisher> publisher = publish::MeshPublisher::bind(options);
   if (!publisher) return publisher.status();
-  auto impl = std::make_unique<Impl>(Impl{std::move(*publisher)});
+  auto impl = std::make_unique<Impl>(Impl{std::move(*publisher), previews, std::nullopt});
   return std::shared_ptr<PublishSink>(new PublishSink(std::move(impl)));
 }
 
 PublishSink::PublishSink(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 PublishSink::~PublishSink() = default;
+
+Status PublishSink::on_frame(const TrackedFrame& frame, const Eigen::Matrix4d& T_reference_image) {
+  const FramePreviewOptions& previews = impl_->previews;
+  if (previews.rate_hz <= 0.0 || frame.frame.image.empty()) return Status::ok();
+  const auto now = std::chrono::steady_clock::now();
+  const std::chrono::duration<double> period(1.0 / previews.rate_hz);
+  if (impl_->last_preview && now - *impl_->last_preview < period) return Status::ok();
+  impl_->last_preview = now;
+  Result<publish::FrameImage> preview =
+      frame_preview(frame, T_reference_image, previews.max_side_px);
+  if (!preview) return preview.status();
+  return impl_->publisher.publish_frame(*preview);
+}
 
 Status PublishSink::on_slice(const LabeledSlice& slice, std::size_t index) {
   return impl_->publisher.publish_slice(slice, index);

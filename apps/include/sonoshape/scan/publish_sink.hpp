@@ -9,16 +9,28 @@
 
 namespace sonoshape::scan {
 
+/// Which B-mode frames go out as `frame` messages (small grey previews for live views).
+struct FramePreviewOptions {
+  /// At most this many previews a second (the first frame after each period); 0: none.
+  double rate_hz = 0.0;
+  /// The preview's longest side, in pixels (downsampled by area averaging, never enlarged).
+  int max_side_px = 256;
+};
+
 /// Publishes a scan on `endpoint` (PUB) with its snapshot server on `snapshot_endpoint`
 /// (empty: the PUB port + 1). Sending never blocks the pipeline: a slow subscriber only misses
 /// intermediate updates.
 class PublishSink final : public ScanSink {
  public:
   /// Binds both sockets; fails with a message naming the endpoint and how to fix it.
+  /// `previews`: which posed frames are also published as `frame` messages.
   static Result<std::shared_ptr<PublishSink>> bind(const std::string& endpoint,
-                                                   const std::string& snapshot_endpoint = {});
+                                                   const std::string& snapshot_endpoint = {},
+                                                   const FramePreviewOptions& previews = {});
   ~PublishSink() override;
 
+  /// Publishes a downsampled copy of the frame on its plane, at most previews.rate_hz a second.
+  Status on_frame(const TrackedFrame& frame, const Eigen::Matrix4d& T_reference_image) override;
   Status on_slice(const LabeledSlice& slice, std::size_t index) override;
   Status on_meshes(const MeshSet& meshes, const MeshUpdateInfo& info) override;
   Status on_status(const ScanStatus& status) override;

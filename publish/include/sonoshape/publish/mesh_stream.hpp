@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "sonoshape/core/geometry.hpp"
+#include "sonoshape/core/image.hpp"
 #include "sonoshape/core/mesh.hpp"
 #include "sonoshape/core/scan_state.hpp"
 #include "sonoshape/core/slice.hpp"
@@ -24,6 +25,8 @@ constexpr int kMeshStreamVersion = 1;
 constexpr std::string_view kMeshTopicPrefix = "mesh.";
 /// Topic of slice messages.
 constexpr std::string_view kSliceTopic = "slice";
+/// Topic of B-mode frame messages (an optional, downsampled grey picture of the current frame).
+constexpr std::string_view kFrameTopic = "frame";
 /// Topic of status messages.
 constexpr std::string_view kStatusTopic = "status";
 /// Topic of the last message of a snapshot reply.
@@ -61,6 +64,26 @@ struct SliceUpdate {
   LabeledSlice slice;
 };
 
+/// Where a plane lies: the world point of its in-plane (0, 0), and two unit, orthogonal
+/// directions; the in-plane point (a, b) is origin_mm + a*u + b*v (slices.md).
+struct PlaneFrame {
+  Vec3 origin_mm = Vec3::Zero();
+  Vec3 u = Vec3::UnitX();
+  Vec3 v = Vec3::UnitY();
+};
+
+/// Body of a `frame` message: a B-mode frame as a small grey picture on its plane, for views.
+/// The picture covers the rectangle a in [0, size_mm[0]], b in [0, size_mm[1]] of `plane`;
+/// pixel (i, j) (row j from the transducer side, row-major) covers a in [i, i+1) * size_mm[0] /
+/// width and b in [j, j+1) * size_mm[1] / height.
+struct FrameImage {
+  std::int64_t index = 0;       ///< the frame's position in its source, from 0
+  double timestamp_s = 0.0;     ///< acquisition time (device clock)
+  GreyImage image;              ///< 8-bit grey, width * height bytes; not empty
+  PlaneFrame plane;             ///< origin at the outer corner of pixel (0, 0)
+  Vec2 size_mm = Vec2::Zero();  ///< the picture's extent along u and v, both > 0
+};
+
 /// Body of a `status` message: counters and the stage times of the last update.
 struct StatusReport {
   std::uint64_t frames_received = 0;
@@ -71,6 +94,10 @@ struct StatusReport {
   double smoothing_ms = 0.0;
   double mesh_ms = 0.0;
   double total_ms = 0.0;
+  /// Wall time of the last update and the frame-to-mesh latency of its newest slice (from the
+  /// frame's arrival to its surfaces being ready), in ms; none before the first update.
+  std::optional<double> update_ms;
+  std::optional<double> latency_ms;
   ScanState state = ScanState::kScanning;
   std::string message;  ///< what went wrong; required (non-empty) when state is kError
 };
@@ -82,16 +109,21 @@ struct SnapshotEnd {};
 struct StreamMessage {
   std::uint64_t seq = 0;  ///< from 1, one counter across topics; `end` may carry 0 (nothing yet)
   std::string scan;       ///< uuid of the scan
-  std::variant<MeshUpdate, SliceUpdate, StatusReport, SnapshotEnd> body;
+  std::variant<MeshUpdate, SliceUpdate, StatusReport, FrameImage, SnapshotEnd> body;
 
-  /// The topic of the body: "mesh.<label>", "slice", "status" or "end".
+  /// The topic of the body: "mesh.<label>", "slice", "status", "frame" or "end".
   std::string topic() const;
 };
+
+/// The largest side (pixels) of a `frame` message's picture: it is a preview, not the data.
+constexpr int kMaxFrameImageSide = 1024;
 
 /// Builds the frames of a message. Fails (nothing built) when the message cannot be sent as the
 /// format says: NaN or infinite numbers, a label below 1, a triangle index out of range, more than
 /// 2^32-1 vertices or triangles, normals not one per vertex, an error state without a message, an
-/// empty scan uuid, or seq 0 outside `end`.
+/// empty scan uuid, seq 0 outside `end`, or a frame image that is empty, larger than
+/// kMaxFrameImageSide on a side, has pixels not width * height, or a size or plane that is not
+/// positive and orthonormal.
 Result<Frames> encode_message(const StreamMessage& message);
 
 /// Checks received frames against the format and parses them. The error names the topic and seq

@@ -1,6 +1,7 @@
 #pragma once
 // The live mesh stream's server side (docs/formats/mesh-stream.md): a PUB socket for the
 // messages and a snapshot server for late joiners.
+#include <cstddef>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -34,10 +35,14 @@ struct PublisherOptions {
   std::string snapshot_option = "--snapshot";
 };
 
+/// The most slices a snapshot carries: the scan's newest (a slice message is a few kilobytes).
+constexpr std::size_t kMaxSnapshotSlices = 4096;
+
 /// Publishes meshes, slices and status of one scan. Every message gets the next seq (one counter
 /// across topics, from 1) and the scan's uuid (a random v4 uuid drawn per publisher). Publishing
 /// never blocks: a slow or vanished subscriber only misses messages. A thread of its own answers
-/// snapshot requests with the newest mesh of every label and the newest status.
+/// snapshot requests with every slice of the scan (the newest kMaxSnapshotSlices, in order), the
+/// newest mesh of every label, the newest status and the newest frame preview.
 ///
 /// Thread safety: call the publish functions from one thread (or serialise them); the snapshot
 /// thread shares only state guarded inside.
@@ -62,6 +67,11 @@ class MeshPublisher {
   /// Publishes the slice just added; `index`: its position in the scan, from 0. Fails for
   /// non-finite numbers.
   Status publish_slice(const LabeledSlice& slice, std::uint64_t index);
+
+  /// Publishes a B-mode frame preview (a `frame` message; keep it small and rare: the caller
+  /// downsamples and rate-limits). Fails for what encode_message refuses (an empty or oversized
+  /// picture, a plane that is not orthonormal, non-finite numbers).
+  Status publish_frame(const FrameImage& frame);
 
   /// Publishes a status report. Fails for negative or non-finite times, or state error without a
   /// message.

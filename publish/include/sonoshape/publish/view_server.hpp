@@ -34,8 +34,10 @@ struct ViewServerOptions {
 
 /// Serves the page and forwards stream messages to every connected page. post() never blocks:
 /// each connection keeps only the newest message of every topic that it has not yet sent, so a
-/// slow browser loses intermediate meshes, never the latest, and never slows the caller. A page
-/// that connects late first receives the newest message of every topic of the current scan.
+/// slow browser loses intermediate meshes, never the latest, and never slows the caller; slices
+/// are the exception: each one is kept (up to 4096 a scan), as the page draws them all. A page
+/// that connects late first receives the newest message of every topic of the current scan and
+/// its slices.
 ///
 /// Thread safety: post() may be called from any thread; one thread of its own runs the server.
 class ViewServer {
