@@ -200,6 +200,11 @@ std::vector<int> CellField::refresh(const std::vector<int>& split_faces) {
   return completion_changed;
 }
 
+void CellField::release_images(const std::vector<int>& faces) {
+  for (const int f : faces)
+    if (static_cast<std::size_t>(f) < images_.size()) images_[static_cast<std::size_t>(f)] = FaceImage{};
+}
+
 void CellField::compact_points() {
   std::size_t live = 0;
   for (const FaceImage& image : images_) {

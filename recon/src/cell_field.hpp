@@ -91,6 +91,9 @@ class CellField {
   /// unknown regions. Returns the cells whose faces' completed values changed: their field
   /// changed too.
   std::vector<int> refresh(const std::vector<int>& split_faces);
+  /// Drops the images of `faces`, which no cell reads any more (faces an on-demand arrangement
+  /// retired), so that the next refresh reclaims their points.
+  void release_images(const std::vector<int>& faces);
 
   /// Number of functions: materials + 1 (index 0 is the outside).
   int function_count() const { return material_count_ + 1; }
