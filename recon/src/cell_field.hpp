@@ -196,6 +196,7 @@ class CellField {
   std::vector<PreparedSlice> slices_;
   int material_count_;
   double on_face_height_;  // below this height a point is on the face
+  std::size_t next_compaction_check_ = 0;  // compact_points counts live points from this size
   std::vector<PlaneFrame> frames_;  // one per arrangement plane
   std::vector<Vec2> points_;
   std::vector<ChainNode> tree_nodes_;  // far-field trees of the long parts

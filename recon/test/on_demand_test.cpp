@@ -2,6 +2,7 @@
 // the whole arrangement's cell there (same planes, same exact vertices, closed), and the engine's
 // field and meshes are those of the whole arrangement on random, sweep and unknown-region sets.
 #include <gtest/gtest.h>
+#include <tbb/global_control.h>
 
 #include <algorithm>
 #include <array>
@@ -542,6 +543,8 @@ TEST(OnDemandOnline, AnUnknownRegionArrivingRebuildsOnTheWholeArrangement) {
 // `threads` bounds every stage of the online engine on demand, and its results do not depend
 // on it: the same field and meshes, to the bit, for 1, 2, 4 and 16 threads after each update.
 TEST(OnDemandOnline, ResultsAreIdenticalForAnyThreadCount) {
+  // TBB allows as many workers as cores by default: let 16 threads run on a smaller machine.
+  const tbb::global_control workers(tbb::global_control::max_allowed_parallelism, 16);
   const SliceSet set = random_set(34, 16);
   std::vector<std::unique_ptr<Reconstructor>> engines;
   for (const int threads : {1, 2, 4, 16})
