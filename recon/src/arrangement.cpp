@@ -645,6 +645,12 @@ void Arrangement::reopen_cell(int cell, int plane_id) {
         retired_faces_.push_back(f);
         break;
       }
+    // Its polygon goes with the last cell on it (the other one, if built, is crossed too and
+    // copies it when it is reopened).
+    if (face.cell_positive < 0 && face.cell_negative < 0) {
+      std::vector<int>().swap(face.vertices);
+      std::vector<int>().swap(face.edge_planes);
+    }
   }
   std::vector<int>().swap(cells_[static_cast<std::size_t>(cell)].faces);
   ++reopened_cells_;
