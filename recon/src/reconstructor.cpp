@@ -370,14 +370,17 @@ UpdateStats Reconstructor::update() {
   s.pending_adds.clear();
   s.pending_removes.clear();
 
-  // Contour vertices refine the octree; contour segments fix the smoothing next to them.
+  // Contour vertices refine the octree; contour segments fix the smoothing next to them. In the
+  // arena too: contour_keys sorts in parallel, and --threads bounds every stage.
   const std::vector<PreparedSlice>& slices = s.field->slices();
   const Grid grid = make_grid(s.box, s.octree.max_depth);
-  for (; s.contour_slices < slices.size(); ++s.contour_slices) {
-    const PreparedSlice& slice = slices[s.contour_slices];
-    merge_contour_keys(s.contours, contour_keys(grid, s.octree, contour_segments(slice)));
-    add_thin_region_samples(slice, grid.cell_size, s.region_samples);
-  }
+  arena.execute([&] {
+    for (; s.contour_slices < slices.size(); ++s.contour_slices) {
+      const PreparedSlice& slice = slices[s.contour_slices];
+      merge_contour_keys(s.contours, contour_keys(grid, s.octree, contour_segments(slice)));
+      add_thin_region_samples(slice, grid.cell_size, s.region_samples);
+    }
+  });
 
   const CellField& field = *s.field;
   const std::size_t fc = static_cast<std::size_t>(field.function_count());

@@ -3,9 +3,12 @@
 // field and meshes are those of the whole arrangement on random, sweep and unknown-region sets.
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_scheduler_observer.h>
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cmath>
 #include <map>
 #include <numbers>
@@ -562,6 +565,41 @@ TEST(OnDemandOnline, ResultsAreIdenticalForAnyThreadCount) {
     EXPECT_EQ(engines[0]->totals().cells, engines[e]->totals().cells);
     expect_identical(*engines[0], *engines[e]);
   }
+}
+
+// Counts the worker threads that join the calling thread's default arena: the engine's stages
+// run in its own arena of `threads` threads, so none should.
+class DefaultArenaWorkers : public tbb::task_scheduler_observer {
+ public:
+  DefaultArenaWorkers() { observe(true); }
+  ~DefaultArenaWorkers() override { observe(false); }
+  void on_scheduler_entry(bool worker) override {
+    if (worker) ++workers;
+  }
+  std::atomic<int> workers{0};
+};
+
+TEST(OnDemandOnline, EveryStageRunsInTheEnginesArena) {
+  const tbb::global_control allow(tbb::global_control::max_allowed_parallelism, 4);
+  const SliceSet set = random_set(35, 10);
+  {
+    DefaultArenaWorkers observer;
+    Reconstructor engine(engine_options(true, 1));
+    for (std::size_t k = 0; k < set.slices.size(); ++k) {
+      engine.add_slice(set.slices[k]);
+      if (k >= 3) engine.update();
+    }
+    EXPECT_EQ(observer.workers.load(), 0) << "a stage ran parallel work outside the engine's arena";
+  }
+  // The observer does see workers that join the default arena (else the check above is void).
+  DefaultArenaWorkers observer;
+  std::atomic<double> sink{0.0};
+  tbb::parallel_for(0, 256, [&](int i) {
+    double x = i;
+    for (int k = 0; k < 200000; ++k) x = std::sqrt(x + k);
+    sink = sink + x;
+  });
+  if (observer.workers.load() == 0) GTEST_SKIP() << "no worker joined a parallel loop here";
 }
 
 TEST(OnDemandEngine, TheOneShotReconstructionBuildsCellsOnDemand) {
