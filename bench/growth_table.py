@@ -175,10 +175,11 @@ def main():
         slices = make_set(args.bin, "sweep", args.sweep_online, args.work)
         stats, rss = reconstruct_online(args.bin, slices, args.work, args.threads)
         tenth_header = [f"{10 * k}-{10 * (k + 1)} %" for k in range(10)]
+        cells = f"{stats['cells']:,}".replace(",", " ")
         online_lines += [f"**{stats['slices']}-slice sweep, online: median update ms per tenth of the sweep** "
-                         f"(sum {sum(s['total_s'] for s in stats['steps']):.1f} s, {stats['cells']:,} cells "
+                         f"(sum {sum(s['total_s'] for s in stats['steps']):.1f} s, {cells} cells "
                          f"built, peak RSS {rss:.0f} MB, CPU time / (wall time x threads) "
-                         f"{stats['cpu_share']:.2f})".replace(",", " "), "",
+                         f"{stats['cpu_share']:.2f})", "",
                          "| " + " | ".join(tenth_header) + " |", "|" + "---|" * len(tenth_header),
                          "| " + " | ".join(tenths_row(stats)) + " |", ""]
         print(online_lines[-2], file=sys.stderr)
