@@ -18,6 +18,10 @@
 // full arrangement containing the point; it shares the faces its built neighbours have. Regions
 // do not share vertices (finding them again cost more than constructing them: the same three
 // planes give the same exact point), so a cell's faces may name one point by two ids.
+// Online, a plane inserted after cells were built reopens the built cells it crosses: each is a
+// region again (its faces with one id per point, the planes from the new one on still to try),
+// its faces the plane crosses are retired, the others are kept for whichever part is built next
+// to them; regions not refined yet meet the new plane when a query reaches them.
 #include <CGAL/Exact_predicates_exact_constructions_kernel.h>
 
 #include <cstdint>
