@@ -11,14 +11,24 @@ runs. Slices whose section of the mesh self-intersects are dropped (`slice --ski
 the 500 random planes), and the table says how many were kept. With --before BIN the same sets
 are also reconstructed by another binary (e.g. main's) and the table shows both.
 
+With --online the same sets are also fed slice by slice to the online engine (`reconstruct
+--online --stats`, one update per slice, one run: its figures are medians over many updates) and a
+second table gives the median update time over the updates that brought the set from 0.9 N to N
+slices, the median and 90th percentile over every update from the 10th, the sum of the updates and
+the peak RSS. --sweep-online K adds a K-slice simulated sweep (`slice --planes sweep --count K`,
+the probe moved along the horse rocking on two axes with a tremor) fed the same way, with the
+median update time of each tenth of the sweep: flat when the cost per slice does not grow.
+
 Usage: python3 bench/growth_table.py [--bin build/apps/sonoshape] [--before OTHER_BINARY]
        [--sets random,sweep] [--repeats 3] [--threads 0] [--full] [--write-doc]
+       [--online] [--sweep-online 600] [--offline-max N]
 Prints a Markdown table; --write-doc writes it into docs/benchmarks.md between
 `<!-- growth_table:begin -->` and `<!-- growth_table:end -->`.
 """
 import argparse
 import json
 import os
+import statistics
 import subprocess
 import sys
 import time
@@ -49,6 +59,45 @@ def reconstruct(binary, slices, work, threads):
         raise RuntimeError("failed: " + " ".join(args))
     with open(stats_path) as f:
         return json.load(f), usage.ru_maxrss / 1024.0
+
+
+def reconstruct_online(binary, slices, work, threads):
+    """One `reconstruct --online --stats` run: (stats dict with "steps", peak RSS MB)."""
+    stats_path = os.path.join(work, "online_stats.json")
+    args = [binary, "reconstruct", slices, "-o", os.path.join(work, "online_mesh"), "--online", "--stats",
+            stats_path, "--threads", str(threads), "-q"]
+    start = time.monotonic()
+    with subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True) as child:
+        _, status, usage = os.wait4(child.pid, 0)
+        child.returncode = os.waitstatus_to_exitcode(status)
+        if child.returncode != 0:
+            raise RuntimeError("failed: " + " ".join(args) + "\n" + child.stderr.read())
+    with open(stats_path) as f:
+        stats = json.load(f)
+    # The share of the run's wall time the process had a core for (per thread used): on a shared
+    # machine the updates' wall times are longer than they would be alone by about its inverse.
+    wall = time.monotonic() - start
+    stats["cpu_share"] = (usage.ru_utime + usage.ru_stime) / wall / max(1, threads or os.cpu_count())
+    return stats, max(step["peak_rss_mb"] for step in stats["steps"])
+
+
+def online_row(name, stats, rss):
+    """Median update ms near the end (last tenth), median / 90th percentile from the 10th update,
+    the sum of the updates, the cells built at the end, peak RSS."""
+    times = [step["total_s"] for step in stats["steps"]]
+    tail = times[int(0.9 * len(times)):]
+    later = times[9:] if len(times) > 10 else times
+    return [name, f"{1000 * statistics.median(tail):.0f}", f"{1000 * statistics.median(later):.0f}",
+            f"{1000 * statistics.quantiles(later, n=10)[8]:.0f}", f"{sum(times):.1f}",
+            f"{stats['cells']:,}".replace(",", " "), f"{rss:.0f}", f"{stats['cpu_share']:.2f}"]
+
+
+def tenths_row(stats):
+    """Median update ms of each tenth of the sequence."""
+    times = [step["total_s"] for step in stats["steps"]]
+    n = len(times)
+    return [f"{1000 * statistics.median(times[n * k // 10:max(n * (k + 1) // 10, n * k // 10 + 1)]):.0f}"
+            for k in range(10)]
 
 
 def best_of(binary, slices, work, repeats, threads):
@@ -94,6 +143,11 @@ def main():
     parser.add_argument("--before-max", type=int, default=200,
                         help="largest slice count given to --before (its cost grows with N^3)")
     parser.add_argument("--work", default="out/bench/growth")
+    parser.add_argument("--online", action="store_true", help="also feed each set to the online engine")
+    parser.add_argument("--sweep-online", type=int, default=0, metavar="K",
+                        help="also feed a K-slice simulated sweep to the online engine")
+    parser.add_argument("--offline-max", type=int, default=100000,
+                        help="largest slice count reconstructed offline (the online runs take all)")
     parser.add_argument("--write-doc", action="store_true", help="write the table into docs/benchmarks.md")
     args = parser.parse_args()
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -101,10 +155,39 @@ def main():
     counts = COUNTS + (FULL_COUNTS if args.full else [])
     header = ["slices", "total s", "arrangement s", "face images s", "evaluation s", "cells built", "peak RSS MB"]
     lines = []
+    online_lines = []
+    online_header = ["slices", "median update ms (last tenth)", "median update ms (from 10th)",
+                     "90th percentile ms", "sum of updates s", "cells built", "peak RSS MB",
+                     "CPU time / (wall time x threads)"]
     start = time.monotonic()
+    for planes in args.sets.split(","):
+        if not args.online:
+            continue
+        online_lines += [f"**{planes} planes, online (one update per slice)**", "",
+                         "| " + " | ".join(online_header) + " |", "|" + "---|" * len(online_header)]
+        for count in counts:
+            slices = make_set(args.bin, planes, count, args.work)
+            stats, rss = reconstruct_online(args.bin, slices, args.work, args.threads)
+            online_lines.append("| " + " | ".join(online_row(str(stats["slices"]), stats, rss)) + " |")
+            print(online_lines[-1], file=sys.stderr)
+        online_lines.append("")
+    if args.sweep_online:
+        slices = make_set(args.bin, "sweep", args.sweep_online, args.work)
+        stats, rss = reconstruct_online(args.bin, slices, args.work, args.threads)
+        tenth_header = [f"{10 * k}-{10 * (k + 1)} %" for k in range(10)]
+        cells = f"{stats['cells']:,}".replace(",", " ")
+        online_lines += [f"**{stats['slices']}-slice sweep, online: median update ms per tenth of the sweep** "
+                         f"(sum {sum(s['total_s'] for s in stats['steps']):.1f} s, {cells} cells "
+                         f"built, peak RSS {rss:.0f} MB, CPU time / (wall time x threads) "
+                         f"{stats['cpu_share']:.2f})", "",
+                         "| " + " | ".join(tenth_header) + " |", "|" + "---|" * len(tenth_header),
+                         "| " + " | ".join(tenths_row(stats)) + " |", ""]
+        print(online_lines[-2], file=sys.stderr)
     for planes in args.sets.split(","):
         lines += [f"**{planes} planes**", "", "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
         for count in counts:
+            if count > args.offline_max:
+                continue
             slices = make_set(args.bin, planes, count, args.work)
             for name, binary in ([("before", args.before)] if args.before else []) + [("after", args.bin)]:
                 stats = None
@@ -117,8 +200,11 @@ def main():
         lines.append("")
     command = "python3 bench/growth_table.py" + (f" --before {args.before}" if args.before else "") + \
         (f" --sets {args.sets}" if args.sets != "random" else "") + (" --full" if args.full else "") + \
-        f" --repeats {args.repeats}" + (f" --threads {args.threads}" if args.threads else "")
-    text = "\n".join(lines) + (f"\nBest of {args.repeats} runs per stage (2-core machine, shared); made by "
+        f" --repeats {args.repeats}" + (f" --threads {args.threads}" if args.threads else "") + \
+        (" --online" if args.online else "") + \
+        (f" --sweep-online {args.sweep_online}" if args.sweep_online else "") + \
+        (f" --offline-max {args.offline_max}" if args.offline_max < 100000 else "")
+    text = "\n".join(lines + online_lines) + (f"\nBest of {args.repeats} runs per stage (2-core machine, shared); made by "
                                f"`{command}` in {time.monotonic() - start:.0f} s.")
     print(text)
     if args.write_doc:

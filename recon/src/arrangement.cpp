@@ -329,8 +329,6 @@ std::vector<int> Arrangement::insert_plane(const Vec3& normal, double offset, in
   if (!(normal.allFinite() && std::isfinite(offset)) || normal.norm() == 0.0)
     throw GeometryError("arrangement: plane of slice " + std::to_string(slice) +
                         " has no valid normal");
-  if (on_demand_ && !cells_.empty())
-    throw std::logic_error("arrangement: a plane inserted after cells were built on demand");
   const Plane3 exact(normal.x(), normal.y(), normal.z(), offset);
   for (std::size_t p = 0; p < planes_.size(); ++p) {
     if (exact == planes_[p].exact || exact == planes_[p].exact.opposite()) {
@@ -342,7 +340,9 @@ std::vector<int> Arrangement::insert_plane(const Vec3& normal, double offset, in
   }
   const int plane_id = static_cast<int>(planes_.size());
   planes_.push_back({normal, offset, slice, exact});
-  if (on_demand_) return {};  // cells are split when construct_cell reaches them
+  // On demand, regions meet the plane when construct_cell reaches them; built cells it crosses
+  // are reopened now.
+  if (on_demand_) return reopen_crossed_cells(plane_id);
 
   edge_vertex_cache_.clear();
   face_split_cache_.clear();
@@ -547,16 +547,116 @@ std::pair<int, int> Arrangement::split_region(int id, int new_plane) {
     }
   }
   regions_[static_cast<std::size_t>(id)] = std::move(neg);
-  int pos_id;
+  return {id, allocate_region(std::move(pos))};
+}
+
+int Arrangement::allocate_region(Region region) {
   if (!free_regions_.empty()) {
-    pos_id = free_regions_.back();
+    const int id = free_regions_.back();
     free_regions_.pop_back();
-    regions_[static_cast<std::size_t>(pos_id)] = std::move(pos);
-  } else {
-    pos_id = static_cast<int>(regions_.size());
-    regions_.push_back(std::move(pos));
+    regions_[static_cast<std::size_t>(id)] = std::move(region);
+    return id;
   }
-  return {id, pos_id};
+  regions_.push_back(std::move(region));
+  return static_cast<int>(regions_.size()) - 1;
+}
+
+std::uint64_t Arrangement::face_key(int plane, std::vector<std::uint64_t>& keys) {
+  std::sort(keys.begin(), keys.end());
+  std::uint64_t key = static_cast<std::uint64_t>(plane) * 0x9E3779B97F4A7C15ull;
+  for (const std::uint64_t v : keys) key = (key ^ v) * 0x100000001B3ull;
+  return key;
+}
+
+std::vector<int> Arrangement::reopen_crossed_cells(int plane_id) {
+  // Quick rejection with each cell's double bounds, as insert_plane does for whole arrangements;
+  // the exact predicate decides the rest.
+  const ArrangementPlane& plane = planes_[static_cast<std::size_t>(plane_id)];
+  const double scale =
+      plane.normal.cwiseAbs().dot(box_.max.cwiseAbs().cwiseMax(box_.min.cwiseAbs())) +
+      std::abs(plane.offset);
+  std::vector<int> reopened;
+  for (std::size_t c = 0; c < cells_.size(); ++c) {
+    if (cells_[c].faces.empty()) continue;  // reopened before
+    const Box3& b = cell_bounds_[c];
+    const double center_value = plane.normal.dot(0.5 * (b.min + b.max)) + plane.offset;
+    const double reach = 0.5 * plane.normal.cwiseAbs().dot(b.max - b.min);
+    if (center_value - reach > 1e-9 * scale || center_value + reach < -1e-9 * scale) continue;
+    bool has_pos = false, has_neg = false;
+    for (const int f : cells_[c].faces)
+      for (const int v : faces_[static_cast<std::size_t>(f)].vertices) {
+        const int s = plane_side(plane.exact, v);
+        has_pos |= s > 0;
+        has_neg |= s < 0;
+      }
+    if (!(has_pos && has_neg)) continue;
+    reopen_cell(static_cast<int>(c), plane_id);
+    reopened.push_back(static_cast<int>(c));
+  }
+  reset_signs();
+  return reopened;
+}
+
+void Arrangement::reopen_cell(int cell, int plane_id) {
+  // The faces a cell shares with its built neighbours name their points by the neighbours'
+  // vertex ids, so one point may have two ids in the cell; a region's faces must agree on ids
+  // (split_region chains the cross-section by them). The same key is the same exact point;
+  // otherwise (four planes through a point) the exact points decide, for close doubles only.
+  const Plane3& q = planes_[static_cast<std::size_t>(plane_id)].exact;
+  std::vector<int> ids;
+  const double tolerance = 1e-5 * (box_.diagonal() + box_.max.cwiseAbs().maxCoeff() +
+                                   box_.min.cwiseAbs().maxCoeff());
+  auto canonical = [&](int v) {
+    for (const int w : ids)
+      if (w == v || vertex_keys_[static_cast<std::size_t>(w)] == vertex_keys_[static_cast<std::size_t>(v)])
+        return w;
+    for (const int w : ids)
+      if ((vertex(w) - vertex(v)).cwiseAbs().maxCoeff() <= tolerance &&
+          vertices_[static_cast<std::size_t>(w)] == vertices_[static_cast<std::size_t>(v)])
+        return w;
+    ids.push_back(v);
+    return v;
+  };
+  Region region;
+  region.bounds = cell_bounds_[static_cast<std::size_t>(cell)];
+  region.next = static_cast<std::size_t>(plane_id);
+  std::vector<std::uint64_t>& keys = sorted_scratch_;
+  for (const int f : cells_[static_cast<std::size_t>(cell)].faces) {
+    ArrangementFace& face = faces_[static_cast<std::size_t>(f)];
+    const int sigma = face.cell_positive == cell ? 1 : -1;
+    (sigma > 0 ? face.cell_positive : face.cell_negative) = -1;
+    region.faces.insert(region.faces.end(),
+                        {face.plane, sigma, static_cast<int>(face.vertices.size())});
+    bool has_pos = false, has_neg = false;
+    for (std::size_t i = 0; i < face.vertices.size(); ++i) {
+      const int s = plane_side(q, face.vertices[i]);
+      has_pos |= s > 0;
+      has_neg |= s < 0;
+      region.faces.insert(region.faces.end(), {canonical(face.vertices[i]), face.edge_planes[i]});
+    }
+    if (!(has_pos && has_neg)) continue;  // kept: the part of the region next to it reuses it
+    // Crossed: no cell of the arrangement has this face any more.
+    keys.clear();
+    for (const int v : face.vertices) keys.push_back(vertex_keys_[static_cast<std::size_t>(v)]);
+    const auto [first, last] = faces_by_key_.equal_range(face_key(face.plane, keys));
+    for (auto it = first; it != last; ++it)
+      if (it->second == f) {
+        faces_by_key_.erase(it);
+        retired_faces_.push_back(f);
+        break;
+      }
+    // Its polygon goes with the last cell on it (the other one, if built, is crossed too and
+    // copies it when it is reopened).
+    if (face.cell_positive < 0 && face.cell_negative < 0) {
+      std::vector<int>().swap(face.vertices);
+      std::vector<int>().swap(face.edge_planes);
+    }
+  }
+  std::vector<int>().swap(cells_[static_cast<std::size_t>(cell)].faces);
+  ++reopened_cells_;
+  const int leaf = leaf_of_cell_[static_cast<std::size_t>(cell)];
+  bsp_[static_cast<std::size_t>(leaf)] = {-1, -1, -1, -1, allocate_region(std::move(region))};
+  leaf_of_cell_[static_cast<std::size_t>(cell)] = -1;
 }
 
 int Arrangement::finish_region(int id) {
@@ -571,9 +671,7 @@ int Arrangement::finish_region(int id) {
     sorted.clear();
     for (int i = 0; i < face.count; ++i)
       sorted.push_back(vertex_keys_[static_cast<std::size_t>(face.vertex(i))]);
-    std::sort(sorted.begin(), sorted.end());
-    std::uint64_t key = static_cast<std::uint64_t>(face.plane) * 0x9E3779B97F4A7C15ull;
-    for (const std::uint64_t v : sorted) key = (key ^ v) * 0x100000001B3ull;
+    const std::uint64_t key = face_key(face.plane, sorted);
     int shared = -1;
     const auto [first, last] = faces_by_key_.equal_range(key);
     for (auto it = first; it != last && shared < 0; ++it) {
@@ -674,7 +772,7 @@ int Arrangement::locate(const Vec3& p) const {
 }
 
 bool Arrangement::clear_inside(const Vec3& p, int cell) const {
-  if (cell < 0 || static_cast<std::size_t>(cell) >= cells_.size()) return false;
+  if (cell < 0 || static_cast<std::size_t>(cell) >= cells_.size() || reopened(cell)) return false;
   // Inside the convex cell, farther from each of its faces' planes than rounding can move a
   // side-of-plane test (1e-9 of the box diagonal, against errors of about 1e-16 of it). Every
   // plane on the tree's path to the cell has the whole cell on one side, so it is at least as far

@@ -18,10 +18,15 @@
 // full arrangement containing the point; it shares the faces its built neighbours have. Regions
 // do not share vertices (finding them again cost more than constructing them: the same three
 // planes give the same exact point), so a cell's faces may name one point by two ids.
+// Online, a plane inserted after cells were built reopens the built cells it crosses: each is a
+// region again (its faces with one id per point, the planes from the new one on still to try),
+// its faces the plane crosses are retired, the others are kept for whichever part is built next
+// to them; regions not refined yet meet the new plane when a query reaches them.
 #include <CGAL/Exact_predicates_exact_constructions_kernel.h>
 
 #include <cstdint>
 #include <unordered_map>
+#include <utility>
 #include <vector>
 
 #include "sonoshape/core/geometry.hpp"
@@ -62,8 +67,9 @@ class Arrangement {
   /// The box as one region whose cells are built on demand (construct_cell) when `on_demand`.
   Arrangement(const Box3& box, bool on_demand);
 
-  /// True when cells are built on demand: insert_plane then only records the plane, cells and
-  /// faces exist only once construct_cell() built them, and locate() must not be used.
+  /// True when cells are built on demand: insert_plane then records the plane and reopens the
+  /// built cells it crosses (see insert_plane), cells and faces exist only once
+  /// construct_cell() built them, and locate() must not be used.
   bool on_demand() const { return on_demand_; }
   /// On demand: the cell of the full arrangement containing p (p inside the box), built with its
   /// faces on first use, found in O(depth) afterwards. Points on a plane may go to either side,
@@ -74,13 +80,25 @@ class Arrangement {
   int construct_cell(const Vec3& p, int guess);
   /// On demand: the leaves of the lazy BSP (built cells and regions not yet refined).
   std::size_t region_count() const {
-    return regions_.size() - free_regions_.size() + cells_.size();
+    return regions_.size() - free_regions_.size() + built_cell_count();
   }
+  /// On demand: the cells built and not reopened since (cell_count() also counts the ids of
+  /// reopened cells, which stay unused).
+  std::size_t built_cell_count() const { return cells_.size() - reopened_cells_; }
+  /// On demand: whether cell id `cell` was reopened by a later plane (its faces are gone).
+  bool reopened(int cell) const { return cells_[static_cast<std::size_t>(cell)].faces.empty(); }
+  /// On demand: the faces retired since the last call (crossed by a plane inserted after they
+  /// were built; no cell uses them again), cleared by the call.
+  std::vector<int> take_retired_faces() { return std::exchange(retired_faces_, {}); }
 
   /// Adds the plane n.x + d = 0 (exact doubles) carrying `slice`, splitting every cell it crosses.
   /// Returns the ids of the cells created or changed (both halves of every split cell). A plane
   /// that misses the interior of the box changes nothing. Throws GeometryError if the plane
   /// coincides with a plane already inserted.
+  /// On demand (online engine): every built cell the plane crosses is reopened, i.e. becomes a
+  /// region of the lazy BSP again that the next query reaching it splits (by this plane and any
+  /// later one), and its id is returned (it is never used again); cells it does not cross and
+  /// their faces are kept. Regions not refined yet meet the plane when first touched.
   std::vector<int> insert_plane(const Vec3& normal, double offset, int slice);
   /// The faces the last insert_plane split, by their old ids (each keeps its negative part
   /// under that id; the positive parts are new faces). Every other face kept its polygon.
@@ -162,6 +180,16 @@ class Arrangement {
   // On demand: turns a region no plane crosses into a cell; a face the neighbour across it
   // already built is shared.
   int finish_region(int id);
+  // On demand: the reopening of the built cells `plane` crosses (insert_plane).
+  std::vector<int> reopen_crossed_cells(int plane);
+  // On demand: turns built cell `cell` back into a region that the planes from `next` on may
+  // cross; its faces lose the cell (those `plane` crosses are retired).
+  void reopen_cell(int cell, int plane);
+  // On demand: the key under which faces_by_key_ holds a face on `plane` with these vertex keys
+  // (sorted in place).
+  static std::uint64_t face_key(int plane, std::vector<std::uint64_t>& keys);
+  // On demand: a new region slot.
+  int allocate_region(Region region);
   int split_vertex(int a, int b, int face_plane, int edge_plane, int new_plane);
   // The exact intersection of three planes as a new vertex (on the last: sign 0 cached).
   int plane_vertex(int face_plane, int edge_plane, int new_plane);
@@ -196,6 +224,8 @@ class Arrangement {
   std::vector<std::pair<std::uint64_t, int>> split_vertices_;  // per split: edge -> crossing vertex
   std::vector<DirectedEdge> section_scratch_;
   std::vector<std::uint64_t> sorted_scratch_;
+  std::size_t reopened_cells_ = 0;
+  std::vector<int> retired_faces_;
 
   // Per-insertion scratch state.
   std::vector<std::int8_t> sign_cache_;  // 2: not computed

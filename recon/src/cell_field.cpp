@@ -50,8 +50,10 @@ PreparedSlice prepare_slice(const LabeledSlice& slice, std::size_t s,
       }
     }
     p.ring_bounds.resize(p.rings_by_material.size());
+    p.ring_bands.resize(p.rings_by_material.size());
     for (std::size_t m = 0; m < p.rings_by_material.size(); ++m)
       for (const Ring2& ring : p.rings_by_material[m]) {
+        p.ring_bands[m].push_back(make_ring_bands(ring));
         Vec2 lo = ring[0], hi = ring[0];
         for (const Vec2& q : ring) {
           lo = lo.cwiseMin(q);
@@ -61,6 +63,69 @@ PreparedSlice prepare_slice(const LabeledSlice& slice, std::size_t s,
       }
     return p;
   }
+}
+
+std::size_t RingBands::band(double y) const {
+  const double b = std::floor((y - y0) / height);
+  const std::size_t last = offsets.size() - 2;
+  return !(b > 0.0) ? 0 : (b >= static_cast<double>(last) ? last : static_cast<std::size_t>(b));
+}
+
+RingBands make_ring_bands(const Ring2& ring) {
+  // Each edge's y-span grown by half its length (and a little more for the rounding of the
+  // tests), so that the bands hold every edge that can decide a test in them.
+  const std::size_t n = ring.size();
+  std::vector<std::pair<double, double>> spans(n);
+  double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+  for (std::size_t i = 0; i < n; ++i) {
+    const Vec2& a = ring[i];
+    const Vec2& b = ring[i + 1 < n ? i + 1 : 0];
+    const double grow = 0.5 * (b - a).norm() * (1.0 + 1e-6) +
+                        1e-9 * (std::abs(a.y()) + std::abs(b.y()) + 1.0);
+    spans[i] = {std::min(a.y(), b.y()) - grow, std::max(a.y(), b.y()) + grow};
+    lo = std::min(lo, spans[i].first);
+    hi = std::max(hi, spans[i].second);
+  }
+  RingBands bands;
+  const std::size_t count = std::clamp<std::size_t>(n / 4, 1, 256);
+  bands.y0 = lo;
+  bands.height = hi > lo ? (hi - lo) / static_cast<double>(count) : 1.0;
+  bands.offsets.assign(count + 1, 0);
+  // Two passes: the number of edges per band, then the edges in ring order.
+  for (int pass = 0; pass < 2; ++pass) {
+    std::vector<std::uint32_t> at(bands.offsets.begin(), bands.offsets.end() - 1);
+    for (std::size_t i = 0; i < n; ++i)
+      for (std::size_t b = bands.band(spans[i].first); b <= bands.band(spans[i].second); ++b) {
+        if (pass == 0) ++bands.offsets[b + 1];
+        else bands.edges[at[b]++] = static_cast<std::uint32_t>(i);
+      }
+    if (pass == 0) {
+      for (std::size_t b = 0; b < count; ++b) bands.offsets[b + 1] += bands.offsets[b];
+      bands.edges.resize(bands.offsets.back());
+    }
+  }
+  return bands;
+}
+
+int winding_number_in_bands(const Ring2& ring, const RingBands& bands, const Vec2& p) {
+  // winding_number's loop over the edges of p's band: the others neither cross p's row nor
+  // have p on them.
+  const std::size_t b = bands.band(p.y());
+  const std::size_t n = ring.size();
+  int winding = 0;
+  for (std::uint32_t k = bands.offsets[b]; k < bands.offsets[b + 1]; ++k) {
+    const std::size_t i = bands.edges[k];
+    const Vec2& a = ring[i];
+    const Vec2& c = ring[i + 1 < n ? i + 1 : 0];
+    const double side = (c.x() - a.x()) * (p.y() - a.y()) - (p.x() - a.x()) * (c.y() - a.y());
+    if (side == 0.0 && (p - a).dot(p - c) <= 0.0) return 1;  // on the edge
+    if (a.y() <= p.y()) {
+      if (c.y() > p.y() && side > 0.0) ++winding;
+    } else if (c.y() <= p.y() && side < 0.0) {
+      --winding;
+    }
+  }
+  return winding;
 }
 
 std::vector<PreparedSlice> prepare_slices(const SliceSet& set,
@@ -200,7 +265,17 @@ std::vector<int> CellField::refresh(const std::vector<int>& split_faces) {
   return completion_changed;
 }
 
+void CellField::release_images(const std::vector<int>& faces) {
+  for (const int f : faces)
+    if (static_cast<std::size_t>(f) < images_.size()) images_[static_cast<std::size_t>(f)] = FaceImage{};
+}
+
 void CellField::compact_points() {
+  // Counting the live points reads every image: on demand, with hundreds of thousands of faces
+  // and two refreshes per online update, that was a tenth of an update (perf). They are counted
+  // again once the points grew by a quarter since the last count.
+  if (points_.size() < next_compaction_check_) return;
+  next_compaction_check_ = points_.size() + points_.size() / 4 + 4096;
   std::size_t live = 0;
   for (const FaceImage& image : images_) {
     live += image.polygon_count;
@@ -239,6 +314,7 @@ void CellField::compact_points() {
   }
   points_ = std::move(compacted);
   tree_nodes_ = std::move(compacted_trees);
+  next_compaction_check_ = points_.size() + points_.size() / 4 + 4096;
 }
 
 void CellField::build_images(const std::vector<int>& faces) {
@@ -355,16 +431,26 @@ void CellField::build_face_image(int face_id, std::vector<Vec2>& points,
   // The part of one ring inside the face. Most faces lie wholly inside or outside a ring: when no
   // ring edge comes near the face's box, the part is the face itself (in the ring's orientation)
   // or nothing, which spares clipping the whole ring (most of the face-image time at 100 slices).
-  auto add_part = [&](const Ring2& ring, int material, std::vector<FaceImage::Part>& parts) {
+  // `bands` (null: none) limits both tests to the edges of the bands the face's box meets.
+  auto add_part = [&](const Ring2& ring, const RingBands* bands, int material,
+                      std::vector<FaceImage::Part>& parts) {
     bool edge_near = false;
-    for (std::size_t i = 0; i < ring.size() && !edge_near; ++i) {
+    auto test_edge = [&](std::size_t i) {
       const Vec2& a = ring[i];
       const Vec2& b = ring[i + 1 < ring.size() ? i + 1 : 0];
       edge_near = std::max(a.x(), b.x()) >= lo.x() - margin && std::min(a.x(), b.x()) <= hi.x() + margin &&
                   std::max(a.y(), b.y()) >= lo.y() - margin && std::min(a.y(), b.y()) <= hi.y() + margin;
+    };
+    if (bands != nullptr) {
+      const std::uint32_t first = bands->offsets[bands->band(lo.y() - margin)];
+      const std::uint32_t last = bands->offsets[bands->band(hi.y() + margin) + 1];
+      for (std::uint32_t k = first; k < last && !edge_near; ++k) test_edge(bands->edges[k]);
+    } else {
+      for (std::size_t i = 0; i < ring.size() && !edge_near; ++i) test_edge(i);
     }
     if (!edge_near) {
-      const int winding = winding_number(ring.data(), ring.size(), centre);
+      const int winding = bands != nullptr ? winding_number_in_bands(ring, *bands, centre)
+                                           : winding_number(ring.data(), ring.size(), centre);
       if (winding == 0) return;
       parts.push_back({material, static_cast<std::uint32_t>(points.size()),
                        static_cast<std::uint32_t>(polygon.size()), 0, 0, winding < 0 ? -1 : 1});
@@ -386,19 +472,21 @@ void CellField::build_face_image(int face_id, std::vector<Vec2>& points,
       const auto& [rlo, rhi] = slice.ring_bounds[m][r];
       if ((rlo.array() > hi.array() + margin).any() || (rhi.array() < lo.array() - margin).any())
         continue;
-      add_part(slice.rings_by_material[m][r], static_cast<int>(m), image.parts);
+      const bool banded = m < slice.ring_bands.size() && r < slice.ring_bands[m].size();
+      add_part(slice.rings_by_material[m][r], banded ? &slice.ring_bands[m][r] : nullptr,
+               static_cast<int>(m), image.parts);
     }
   }
   // The unknown set as clipped rings too: the completion needs only its integral (a few edges)
   // where the triangles would cost many.
   for (const UnknownComponent& component : slice.unknown)
-    for (const Ring2& ring : component.rings) add_part(ring, 0, image.unknown_parts);
+    for (const Ring2& ring : component.rings) add_part(ring, nullptr, 0, image.unknown_parts);
   // And the known set: the completion reads the known part of faces crossed by the unknown
   // boundary, which as the face minus its unknown part would cost both their edges (the edges
   // along the face's boundary cancel).
   if (!slice.unknown.empty()) {
     image.known_clipped = true;
-    for (const Ring2& ring : slice.known) add_part(ring, 0, image.known_parts);
+    for (const Ring2& ring : slice.known) add_part(ring, nullptr, 0, image.known_parts);
   }
   for (FaceImage::Part& part : image.parts) add_tree(part, points, trees);
   for (FaceImage::Part& part : image.unknown_parts) add_tree(part, points, trees);

@@ -305,8 +305,12 @@ UpdateStats Reconstructor::update() {
   try {
     arena.execute([&] {
       const Box3 next_box = s.slice_set_of(next).effective_bounds();
-      // Cells built on demand are only those of the last field: a new plane rebuilds them all.
-      const bool full = !s.built || s.arrangement->on_demand() || out.slices_removed > 0 ||
+      // A slice with unknown regions needs the whole arrangement (see cells_on_demand).
+      const bool unknown_on_demand =
+          s.built && s.arrangement->on_demand() &&
+          std::any_of(next.begin() + static_cast<std::ptrdiff_t>(s.entries.size()), next.end(),
+                      [](const State::Entry& e) { return has_unknown(e.slice); });
+      const bool full = !s.built || unknown_on_demand || out.slices_removed > 0 ||
                         s.materials_of(next) != s.material_ids || next_box.min != s.box.min ||
                         next_box.max != s.box.max;
       std::vector<int> changed_cells;
@@ -328,6 +332,9 @@ UpdateStats Reconstructor::update() {
         clock.reset();
         std::sort(split_faces.begin(), split_faces.end());
         split_faces.erase(std::unique(split_faces.begin(), split_faces.end()), split_faces.end());
+        // On demand: no face was split (crossed cells were reopened, their crossed faces
+        // retired); the images of new faces are built when their cells are.
+        if (s.arrangement->on_demand()) s.field->release_images(s.arrangement->take_retired_faces());
         const std::vector<int> completion_changed = s.field->refresh(split_faces);
         stats.face_images_s = clock.seconds();
         ++s.generation;
@@ -363,14 +370,17 @@ UpdateStats Reconstructor::update() {
   s.pending_adds.clear();
   s.pending_removes.clear();
 
-  // Contour vertices refine the octree; contour segments fix the smoothing next to them.
+  // Contour vertices refine the octree; contour segments fix the smoothing next to them. In the
+  // arena too: contour_keys sorts in parallel, and --threads bounds every stage.
   const std::vector<PreparedSlice>& slices = s.field->slices();
   const Grid grid = make_grid(s.box, s.octree.max_depth);
-  for (; s.contour_slices < slices.size(); ++s.contour_slices) {
-    const PreparedSlice& slice = slices[s.contour_slices];
-    merge_contour_keys(s.contours, contour_keys(grid, s.octree, contour_segments(slice)));
-    add_thin_region_samples(slice, grid.cell_size, s.region_samples);
-  }
+  arena.execute([&] {
+    for (; s.contour_slices < slices.size(); ++s.contour_slices) {
+      const PreparedSlice& slice = slices[s.contour_slices];
+      merge_contour_keys(s.contours, contour_keys(grid, s.octree, contour_segments(slice)));
+      add_thin_region_samples(slice, grid.cell_size, s.region_samples);
+    }
+  });
 
   const CellField& field = *s.field;
   const std::size_t fc = static_cast<std::size_t>(field.function_count());
@@ -394,6 +404,8 @@ UpdateStats Reconstructor::update() {
             (p.array() > box.min.array()).all() && (p.array() < box.max.array()).all();
         point_cells[n] = inside ? guess = s.arrangement->construct_cell(p, guess) : -1;
       }
+      // Values are tagged with the cells built now and this update (their generation).
+      s.cell_generation.resize(s.arrangement->cell_count(), s.generation);
       stats.arrangement_s += clock.seconds();
       clock.reset();
       arena.execute([&] { s.field->refresh({}); });  // the images of the new cells' faces
@@ -458,7 +470,8 @@ UpdateStats Reconstructor::update() {
   stats.mesh_s = clock.seconds();
 
   stats.slices = s.entries.size();
-  stats.cells = s.arrangement->cell_count();
+  stats.cells = s.arrangement->on_demand() ? s.arrangement->built_cell_count()
+                                            : s.arrangement->cell_count();
   if (out.full_rebuild && s.arrangement->on_demand()) out.cells_changed = stats.cells;
   stats.faces = s.arrangement->face_count();
   stats.field_evaluations = evaluations;

@@ -1,6 +1,7 @@
 // Face images: the slice's labelled regions clipped to its faces partition the regions exactly.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 #include <random>
@@ -12,6 +13,45 @@ namespace {
 
 double ring_area(const std::vector<Vec2>& points, std::uint32_t begin, std::uint32_t count) {
   return signed_area(Ring2(points.begin() + begin, points.begin() + begin + count));
+}
+
+// The bands give winding_number's answer from fewer edges: at random points, at the vertices,
+// on the edges and just off them, for a long star-shaped ring, one with horizontal edges and a
+// triangle (one band).
+TEST(FaceImages, RingBandsGiveTheWindingNumberOfTheWholeRing) {
+  std::vector<Ring2> rings(3);
+  for (int k = 0; k < 400; ++k) {
+    const double t = 2.0 * std::numbers::pi * k / 400;
+    const double r = 30.0 + 12.0 * std::sin(7.0 * t) + 3.0 * std::cos(31.0 * t);
+    rings[0].emplace_back(r * std::cos(t), r * std::sin(t));
+  }
+  for (int k = 0; k < 10; ++k) rings[1].emplace_back(2.0 * k, k % 2 ? 5.0 : 0.0);  // zigzag
+  rings[1].emplace_back(18.0, -10.0);
+  rings[1].emplace_back(0.0, -10.0);
+  std::reverse(rings[1].begin(), rings[1].end());  // clockwise: a hole
+  rings[2] = {Vec2(0, 0), Vec2(10, 0), Vec2(0, 10)};
+  std::mt19937 rng(4);
+  std::uniform_real_distribution<double> uniform(-50.0, 50.0), unit(0.0, 1.0);
+  int inside = 0;
+  for (const Ring2& ring : rings) {
+    const RingBands bands = make_ring_bands(ring);
+    std::vector<Vec2> points;
+    for (int k = 0; k < 4000; ++k) points.emplace_back(uniform(rng), uniform(rng));
+    for (std::size_t i = 0; i < ring.size(); ++i) {
+      const Vec2& a = ring[i];
+      const Vec2& b = ring[(i + 1) % ring.size()];
+      points.push_back(a);
+      points.push_back(a + unit(rng) * (b - a));
+      points.push_back(a + 0.5 * (b - a) + 1e-12 * Vec2(b.y() - a.y(), a.x() - b.x()));
+    }
+    for (const Vec2& p : points) {
+      const int whole = winding_number(ring.data(), ring.size(), p);
+      ASSERT_EQ(winding_number_in_bands(ring, bands, p), whole) << "at " << p.transpose();
+      inside += whole != 0;
+    }
+    EXPECT_LT(bands.edges.size(), 4 * ring.size());
+  }
+  EXPECT_GT(inside, 1000);
 }
 
 TEST(FaceImages, ClippedPartsPartitionTheRegionsAndTheUnknownSet) {

@@ -2,8 +2,13 @@
 // the whole arrangement's cell there (same planes, same exact vertices, closed), and the engine's
 // field and meshes are those of the whole arrangement on random, sweep and unknown-region sets.
 #include <gtest/gtest.h>
+#include <tbb/global_control.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_scheduler_observer.h>
 
+#include <algorithm>
 #include <array>
+#include <atomic>
 #include <cmath>
 #include <map>
 #include <numbers>
@@ -84,19 +89,44 @@ struct Plane {
 
 // Inserts `planes` into a whole and an on-demand arrangement, then compares the cells of
 // `points`: a point clear of every plane must get the same cell; a point on planes a cell whose
-// closure holds it.
-void expect_same_cells(const std::vector<Plane>& planes, const std::vector<Vec3>& points) {
+// closure holds it. With `built_after` > 0 the on-demand arrangement first builds the cells of
+// every point after that many planes (as the online engine does before its next plane): the
+// later planes reopen the built cells they cross, and only those.
+void expect_same_cells(const std::vector<Plane>& planes, const std::vector<Vec3>& points,
+                       std::size_t built_after = 0) {
   Arrangement whole(kUnitBox);
   Arrangement lazy(kUnitBox, true);
   ASSERT_TRUE(lazy.on_demand());
+  std::size_t reopened = 0;
   for (std::size_t i = 0; i < planes.size(); ++i) {
+    if (i == built_after && built_after > 0)
+      for (const Vec3& p : points) lazy.construct_cell(p);
+    const std::size_t built = lazy.built_cell_count();
+    std::vector<bool> was_reopened(lazy.cell_count());
+    for (std::size_t c = 0; c < lazy.cell_count(); ++c) was_reopened[c] = lazy.reopened(static_cast<int>(c));
     whole.insert_plane(planes[i].normal, planes[i].offset, static_cast<int>(i));
-    EXPECT_TRUE(lazy.insert_plane(planes[i].normal, planes[i].offset, static_cast<int>(i)).empty());
+    const std::vector<int> cells =
+        lazy.insert_plane(planes[i].normal, planes[i].offset, static_cast<int>(i));
+    if (i < built_after || built_after == 0) {
+      EXPECT_TRUE(cells.empty());
+    }
+    // Exactly the built cells with vertices strictly on both sides of the plane are reopened.
+    EXPECT_EQ(lazy.built_cell_count(), built - cells.size());
+    for (const int c : cells) {
+      EXPECT_FALSE(was_reopened[static_cast<std::size_t>(c)]);
+      EXPECT_TRUE(lazy.reopened(c));
+    }
+    reopened += cells.size();
   }
-  EXPECT_EQ(lazy.cell_count(), 0u);
+  if (built_after > 0) {
+    EXPECT_GT(reopened, 0u);
+  } else {
+    EXPECT_EQ(lazy.cell_count(), 0u);
+  }
   int compared = 0;
   for (const Vec3& p : points) {
     const int c = lazy.construct_cell(p);
+    ASSERT_FALSE(lazy.reopened(c));
     EXPECT_EQ(lazy.construct_cell(p), c) << "a second query must find the built cell";
     // A guess is taken only where the walk would end in it (points on planes take the walk).
     for (const int guess : {c, c - 1, c + 1, 0, -1, static_cast<int>(lazy.cell_count()) - 1})
@@ -118,7 +148,7 @@ void expect_same_cells(const std::vector<Plane>& planes, const std::vector<Vec3>
     }
   }
   EXPECT_GT(compared, 0);
-  EXPECT_LE(lazy.cell_count(), whole.cell_count());
+  EXPECT_LE(lazy.built_cell_count(), whole.cell_count());
 }
 
 std::vector<Vec3> random_points(std::mt19937_64& rng, int count) {
@@ -144,6 +174,25 @@ TEST(OnDemandArrangement, RandomPlanesGiveTheWholeArrangementsCells) {
   expect_same_cells(planes, random_points(rng, 400));
 }
 
+TEST(OnDemandArrangement, PlanesAfterBuiltCellsReopenOnlyTheCellsTheyCross) {
+  // The online engine: cells built after some planes, then more planes (which reopen the built
+  // cells they cross), then the cells of the points again: those of the whole arrangement.
+  std::mt19937_64 rng(8);
+  std::normal_distribution<double> gauss;
+  std::uniform_real_distribution<double> uniform(-0.8, 0.8);
+  std::vector<Plane> planes;
+  for (int i = 0; i < 16; ++i) {
+    const Vec3 n(gauss(rng), gauss(rng), gauss(rng));
+    const Vec3 p(uniform(rng), uniform(rng), uniform(rng));
+    planes.push_back({n, -n.dot(p)});
+  }
+  const std::vector<Vec3> points = random_points(rng, 400);
+  for (const std::size_t after : {1u, 5u, 11u}) {
+    SCOPED_TRACE("cells built after " + std::to_string(after) + " planes");
+    expect_same_cells(planes, points, after);
+  }
+}
+
 TEST(OnDemandArrangement, DegeneratePlanesGiveTheWholeArrangementsCells) {
   // Three planes through a line, more through a point, planes through vertices and edges of the
   // box and of each other, nearly parallel planes, and a sweep (a deep tree); then points on
@@ -166,6 +215,12 @@ TEST(OnDemandArrangement, DegeneratePlanesGiveTheWholeArrangementsCells) {
     for (const double y : {-1.0, 0.0, -0.5})
       for (const double z : {-1.2, -0.1, 0.0, 0.3, 0.7}) points.emplace_back(x, y, z);
   expect_same_cells(planes, points);
+  // The same planes inserted after cells were built: vertices of four planes, planes through
+  // built vertices and edges, and faces shared by cells built from different regions.
+  for (const std::size_t after : {3u, 9u, 14u}) {
+    SCOPED_TRACE("cells built after " + std::to_string(after) + " planes");
+    expect_same_cells(planes, points, after);
+  }
 }
 
 TEST(OnDemandArrangement, BuildsOnlyTheCellsItIsAskedFor) {
@@ -184,7 +239,14 @@ TEST(OnDemandArrangement, BuildsOnlyTheCellsItIsAskedFor) {
   EXPECT_GT(whole.cell_count(), 2000u);
   EXPECT_LT(lazy.cell_count(), 40u);
   EXPECT_LT(lazy.region_count(), 40u * 30u);
-  EXPECT_THROW(lazy.insert_plane(Vec3(0, 0, 1), 0.3, 30), std::logic_error);
+  // A later plane reopens only the built cells it crosses: the plane x = 0.2 crosses those in the
+  // middle of the segment (x from 0.1 to 0.3), the plane x = 0.9 none.
+  const std::size_t built = lazy.built_cell_count();
+  EXPECT_TRUE(lazy.insert_plane(Vec3(1, 0, 0), -0.9, 30).empty());
+  const std::vector<int> reopened = lazy.insert_plane(Vec3(1, 0, 0), -0.2, 31);
+  EXPECT_GT(reopened.size(), 0u);
+  EXPECT_LT(reopened.size(), built);
+  EXPECT_EQ(lazy.built_cell_count(), built - reopened.size());
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -358,6 +420,186 @@ TEST(OnDemandEngine, OneThreadGivesTheFieldAndMeshesOfTwo) {
     EXPECT_EQ(one->mesh().meshes[m].mesh.vertices, two->mesh().meshes[m].mesh.vertices);
     EXPECT_EQ(one->mesh().meshes[m].mesh.triangles, two->mesh().meshes[m].mesh.triangles);
   }
+}
+
+// ---------------------------------------------------------------------------------------------
+// The online engine on demand
+
+ReconstructorOptions engine_options(bool on_demand, int threads) {
+  ReconstructorOptions options;
+  options.bounds = kBox;
+  options.engine.max_depth = 5;
+  options.engine.threads = threads;
+  options.labels = {{1, "big"}, {2, "small"}};
+  options.cells_on_demand = on_demand;
+  return options;
+}
+
+// The field and meshes of `a` and `b` identical to the bit.
+void expect_identical(const Reconstructor& a, const Reconstructor& b) {
+  const auto fa = a.sampled_field();
+  const auto fb = b.sampled_field();
+  ASSERT_EQ(fa.size(), fb.size());
+  for (std::size_t n = 0; n < fa.size(); ++n) {
+    ASSERT_EQ(fa[n].first, fb[n].first);
+    ASSERT_EQ(fa[n].second, fb[n].second) << "row " << n;
+  }
+  ASSERT_EQ(a.mesh().meshes.size(), b.mesh().meshes.size());
+  for (std::size_t m = 0; m < a.mesh().meshes.size(); ++m) {
+    EXPECT_EQ(a.mesh().meshes[m].mesh.vertices, b.mesh().meshes[m].mesh.vertices);
+    EXPECT_EQ(a.mesh().meshes[m].mesh.triangles, b.mesh().meshes[m].mesh.triangles);
+  }
+}
+
+// Feeds `set` to an on-demand online engine: `first` slices in the first update, then one per
+// update. After every `check_every`-th update (and the last) its field is within 1e-9 of the
+// whole arrangement's one-shot field and its meshes are the same. Updates after the first are
+// incremental (no rebuild) unless a slice with unknown regions arrives; cells reopened by a new
+// plane are fewer than those built. `online` is the engine.
+void expect_online_matches_whole(const SliceSet& set, std::size_t first, std::size_t check_every,
+                                 std::unique_ptr<Reconstructor>& online, int threads = 2) {
+  online = std::make_unique<Reconstructor>(engine_options(true, threads));
+  std::size_t rebuilds = 0, incremental = 0;
+  for (std::size_t k = 0; k < set.slices.size(); ++k) {
+    online->add_slice(set.slices[k]);
+    if (k + 1 < first) continue;
+    const UpdateStats update = online->update();
+    const bool last = k + 1 == set.slices.size();
+    if (k + 1 > first) {
+      const auto& slice = set.slices[k];
+      const bool unknown =
+          slice.fov || std::any_of(slice.regions.begin(), slice.regions.end(),
+                                   [](const Region& r) { return r.label == kUnknownLabel; });
+      if (!unknown) {
+        EXPECT_FALSE(update.full_rebuild) << "update of slice " << k;
+      }
+      if (update.full_rebuild) {
+        ++rebuilds;
+      } else {
+        ++incremental;
+        EXPECT_LT(update.cells_changed, update.step.cells) << "update of slice " << k;
+      }
+    }
+    if ((k + 1 - first) % check_every != 0 && !last) continue;
+    SCOPED_TRACE("after slice " + std::to_string(k));
+    SliceSet so_far = online->slice_set();
+    auto whole = std::make_unique<Reconstructor>(engine_options(false, threads));
+    for (const LabeledSlice& s : so_far.slices) whole->add_slice(s);
+    const UpdateStats whole_update = whole->update();
+    const auto a = whole->sampled_field();
+    const auto b = online->sampled_field();
+    ASSERT_EQ(a.size(), b.size());
+    double worst = 0.0;
+    for (std::size_t n = 0; n < a.size(); ++n) {
+      ASSERT_EQ(a[n].first, b[n].first) << "sampled vertices differ at row " << n;
+      for (std::size_t l = 0; l < a[n].second.size(); ++l)
+        worst = std::max(worst, std::abs(a[n].second[l] - b[n].second[l]));
+    }
+    EXPECT_LE(worst, 1e-9);
+    const MeshSet& ma = whole->mesh();
+    const MeshSet& mb = online->mesh();
+    EXPECT_EQ(ma.meshes.size(), mb.meshes.size());
+    for (std::size_t m = 0; m < std::min(ma.meshes.size(), mb.meshes.size()); ++m) {
+      ASSERT_EQ(ma.meshes[m].mesh.vertices.size(), mb.meshes[m].mesh.vertices.size());
+      ASSERT_EQ(ma.meshes[m].mesh.triangles, mb.meshes[m].mesh.triangles);
+      for (std::size_t v = 0; v < ma.meshes[m].mesh.vertices.size(); ++v)
+        EXPECT_LE((ma.meshes[m].mesh.vertices[v] - mb.meshes[m].mesh.vertices[v]).norm(), 1e-9);
+    }
+    EXPECT_LE(online->totals().cells, whole_update.step.cells);
+  }
+  EXPECT_GT(incremental, 0u);
+  (void)rebuilds;
+}
+
+TEST(OnDemandOnline, RandomSetsGiveTheWholeArrangementsFieldAndMeshes) {
+  for (const unsigned seed : {31u, 32u}) {
+    SCOPED_TRACE("seed " + std::to_string(seed));
+    std::unique_ptr<Reconstructor> online;
+    expect_online_matches_whole(random_set(seed, 22), 3, 4, online);
+  }
+}
+
+TEST(OnDemandOnline, SweepSetsGiveTheWholeArrangementsFieldAndMeshes) {
+  std::unique_ptr<Reconstructor> online;
+  expect_online_matches_whole(sweep_set(20), 2, 4, online);
+}
+
+TEST(OnDemandOnline, AnUnknownRegionArrivingRebuildsOnTheWholeArrangement) {
+  // Slices without unknown regions on demand, then one with an unknown disc: the engine
+  // rebuilds on the whole arrangement (the completion reads the faces around the unknown
+  // regions) and goes on from there, still equal to the whole arrangement's reconstruction.
+  SliceSet set = random_set(33, 14);
+  for (std::size_t k = 9; k < set.slices.size(); k += 4) {
+    Ring2 fov;
+    for (int i = 0; i < 6; ++i) {
+      const double t = 2.0 * std::numbers::pi * i / 6;
+      fov.emplace_back(40.0 * std::cos(t), 40.0 * std::sin(t));
+    }
+    set.slices[k].fov = fov;
+  }
+  std::unique_ptr<Reconstructor> online;
+  expect_online_matches_whole(set, 4, 3, online);
+  ASSERT_TRUE(online);
+  EXPECT_GT(online->totals().unknown_triangles, 0u);
+}
+
+// `threads` bounds every stage of the online engine on demand, and its results do not depend
+// on it: the same field and meshes, to the bit, for 1, 2, 4 and 16 threads after each update.
+TEST(OnDemandOnline, ResultsAreIdenticalForAnyThreadCount) {
+  // TBB allows as many workers as cores by default: let 16 threads run on a smaller machine.
+  const tbb::global_control workers(tbb::global_control::max_allowed_parallelism, 16);
+  const SliceSet set = random_set(34, 16);
+  std::vector<std::unique_ptr<Reconstructor>> engines;
+  for (const int threads : {1, 2, 4, 16})
+    engines.push_back(std::make_unique<Reconstructor>(engine_options(true, threads)));
+  for (std::size_t k = 0; k < set.slices.size(); ++k) {
+    for (auto& engine : engines) {
+      engine->add_slice(set.slices[k]);
+      if (k >= 3) engine->update();
+    }
+    if (k < 3 || k % 4 != 3) continue;
+    SCOPED_TRACE("after slice " + std::to_string(k));
+    for (std::size_t e = 1; e < engines.size(); ++e) expect_identical(*engines[0], *engines[e]);
+  }
+  for (std::size_t e = 1; e < engines.size(); ++e) {
+    EXPECT_EQ(engines[0]->totals().cells, engines[e]->totals().cells);
+    expect_identical(*engines[0], *engines[e]);
+  }
+}
+
+// Counts the worker threads that join the calling thread's default arena: the engine's stages
+// run in its own arena of `threads` threads, so none should.
+class DefaultArenaWorkers : public tbb::task_scheduler_observer {
+ public:
+  DefaultArenaWorkers() { observe(true); }
+  ~DefaultArenaWorkers() override { observe(false); }
+  void on_scheduler_entry(bool worker) override {
+    if (worker) ++workers;
+  }
+  std::atomic<int> workers{0};
+};
+
+TEST(OnDemandOnline, EveryStageRunsInTheEnginesArena) {
+  const tbb::global_control allow(tbb::global_control::max_allowed_parallelism, 4);
+  const SliceSet set = random_set(35, 10);
+  {
+    DefaultArenaWorkers observer;
+    Reconstructor engine(engine_options(true, 1));
+    for (std::size_t k = 0; k < set.slices.size(); ++k) {
+      engine.add_slice(set.slices[k]);
+      if (k >= 3) engine.update();
+    }
+    EXPECT_EQ(observer.workers.load(), 0) << "a stage ran parallel work outside the engine's arena";
+  }
+  // The observer does see workers that join the default arena (else the check above is void).
+  DefaultArenaWorkers observer;
+  std::atomic<double> sink{0.0};
+  tbb::parallel_for(0, 256, [&](int i) {
+    double x = i;
+    for (int k = 0; k < 200000; ++k) x = std::sqrt(x + k);
+    sink = sink + x;
+  });
+  if (observer.workers.load() == 0) GTEST_SKIP() << "no worker joined a parallel loop here";
 }
 
 TEST(OnDemandEngine, TheOneShotReconstructionBuildsCellsOnDemand) {

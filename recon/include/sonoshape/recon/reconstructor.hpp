@@ -28,10 +28,11 @@ struct ReconstructorOptions {
   std::vector<LabelInfo> labels;
   /// Build the arrangement's cells and face images only where the field is evaluated (issue
   /// 24): the cost follows the surface instead of the cube of the slice count, with the same
-  /// field. Every update is then a full rebuild, so it suits one update (reconstruct()); the
-  /// online engine keeps the whole arrangement. Sets with unknown regions or fields of view use
-  /// the whole arrangement (their completion reads the faces around the unknown regions).
-  bool cells_on_demand = false;
+  /// field. An update's new plane reopens only the built cells it crosses (their values are
+  /// evaluated again in the cells they split into); the others keep their cells, faces, images
+  /// and values. Sets with unknown regions or fields of view use the whole arrangement (their
+  /// completion reads the faces around the unknown regions): the first such slice rebuilds.
+  bool cells_on_demand = true;
 };
 
 /// What one update() did.
