@@ -6,13 +6,21 @@ For every model and plane family (and for two-label pairs) this runs
 and prints two Markdown tables: accuracy against the ground-truth mesh beside the closest-point
 baseline, and per-stage seconds like Table II of Bermano et al. (2011).
 
+--write-doc puts the tables into docs/benchmarks.md between the markers `offline_accuracy` and
+`offline_stages` (with --unknowns: `unknown_regions` and `unknown_regions_stages`), each
+`<!-- NAME:begin -->` ... `<!-- NAME:end -->`, the first with the commit, machine and load.
+
 Usage: bench/accuracy_matrix.py [--binary build/apps/sonoshape] [--work out/bench] [--quick]
+                                [--unknowns] [--write-doc]
 """
 import argparse
 import json
 import os
 import subprocess
 import sys
+import time
+
+from doc_tables import provenance, write_between_markers
 
 MODELS = ["spot", "cow", "homer", "horse", "cheburashka", "fandisk", "rocker-arm"]
 EXT = {"horse": "ply"}
@@ -68,7 +76,10 @@ def main():
     parser.add_argument("--quick", action="store_true", help="one family per model")
     parser.add_argument("--unknowns", action="store_true",
                         help="unknown blobs (40%% of slices) and sector fields of view instead")
+    parser.add_argument("--write-doc", action="store_true",
+                        help="write the tables into docs/benchmarks.md between their markers")
     args = parser.parse_args()
+    args.start = (time.monotonic(), os.getloadavg()[0])
     if args.unknowns:
         unknown_tables(args, root)
         return
@@ -110,8 +121,13 @@ def main():
     print("\n".join(accuracy))
     print("\n### Per-stage seconds (Table II)\n")
     print("\n".join(timing))
-    print(f"\nSets failing a goal (closed/oriented, IoU above baseline, contour mean <= 0.5 %, max <= 2 %): "
-          f"{', '.join(failures) if failures else 'none'}")
+    failing = (f"Sets failing a goal (closed/oriented, IoU above baseline, contour mean <= 0.5 %, max <= 2 %): "
+               f"{', '.join(failures) if failures else 'none'}")
+    print("\n" + failing)
+    if args.write_doc:
+        line = provenance(root, args.start[1], time.monotonic() - args.start[0])
+        write_between_markers(root, "offline_accuracy", "\n".join(accuracy) + "\n\n" + line)
+        write_between_markers(root, "offline_stages", "\n".join(timing) + "\n\n" + line)
 
 
 def material_area(slices_path):
@@ -169,12 +185,17 @@ def unknown_tables(args, root):
             if share >= 0.2:
                 misses.append(f"{model} {label} (completion {100 * share:.1f} %)")
             sys.stderr.write(f"{name}: done\n")
-    print("\n".join(rows))
-    print(f"\nSets failing a goal (closed/oriented, IoU above baseline): {', '.join(failures) if failures else 'none'}")
-    print(f"\nSets more than 0.03 below the known set's IoU, or with completion at 20 % of the run or more: "
-          f"{', '.join(misses) if misses else 'none'}")
+    summary = "\n".join(rows) + (
+        f"\n\nSets failing a goal (closed/oriented, IoU above baseline): {', '.join(failures) if failures else 'none'}"
+        f"\n\nSets more than 0.03 below the known set's IoU, or with completion at 20 % of the run or more: "
+        f"{', '.join(misses) if misses else 'none'}")
+    print(summary)
     print("\nPer-stage seconds (`face images s` includes the completion):\n")
     print("\n".join(stage_rows))
+    if args.write_doc:
+        line = provenance(root, args.start[1], time.monotonic() - args.start[0])
+        write_between_markers(root, "unknown_regions", summary + "\n\n" + line)
+        write_between_markers(root, "unknown_regions_stages", "\n".join(stage_rows))
 
 
 if __name__ == "__main__":

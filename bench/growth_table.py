@@ -33,7 +33,7 @@ import subprocess
 import sys
 import time
 
-from doc_tables import write_between_markers
+from doc_tables import provenance, write_between_markers
 
 COUNTS = [30, 60, 100, 150, 200]
 FULL_COUNTS = [300, 500]
@@ -159,7 +159,7 @@ def main():
     online_header = ["slices", "median update ms (last tenth)", "median update ms (from 10th)",
                      "90th percentile ms", "sum of updates s", "cells built", "peak RSS MB",
                      "CPU time / (wall time x threads)"]
-    start = time.monotonic()
+    start, load_at_start = time.monotonic(), os.getloadavg()[0]
     for planes in args.sets.split(","):
         if not args.online:
             continue
@@ -208,7 +208,7 @@ def main():
                                f"`{command}` in {time.monotonic() - start:.0f} s.")
     print(text)
     if args.write_doc:
-        write_between_markers(root, "growth_table", text)
+        write_between_markers(root, "growth_table", text + "\n" + provenance(root, load_at_start, time.monotonic() - start))
     return 0
 
 

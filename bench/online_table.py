@@ -11,9 +11,11 @@ online sequence and every rebuild runs --repeats times (default 3; each repeat r
 sequence, then its rebuilds) and the tables take the median of each timing.
 
 Usage: python3 bench/online_table.py [--bin build/apps/sonoshape] [--models horse,spot] [--repeats 3]
-       [--plot docs/images/online_update_times.png] [--reuse]
-Prints Markdown tables on stdout (paste into docs/benchmarks.md); needs python3-matplotlib for
-the plot (skipped with a note when it is missing).
+       [--plot docs/images/online_update_times.png] [--reuse] [--quick] [--write-doc]
+Prints Markdown tables on stdout; --write-doc puts them, with the commit, machine and load, into
+docs/benchmarks.md between `<!-- online_table:begin -->` and `<!-- online_table:end -->`. Run it
+from the repository root. Needs python3-matplotlib for the plot (skipped with a note when it is
+missing). --quick: the horse only, one repeat, no plot.
 """
 import argparse
 import json
@@ -21,6 +23,9 @@ import os
 import statistics
 import subprocess
 import sys
+import time
+
+from doc_tables import provenance, write_between_markers
 
 MODELS = {"horse": "horse.ply", "spot": "spot.obj", "cheburashka": "cheburashka.obj"}
 # name suffix -> (planes, count, extra `slice` arguments). The sector sweep is the bedside case:
@@ -62,7 +67,14 @@ def main():
     parser.add_argument("--reuse", action="store_true",
                         help="keep the stats files a previous run left in --work and run only what is "
                              "missing (prints that run's tables again)")
+    parser.add_argument("--quick", action="store_true", help="the horse only, one repeat, no plot")
+    parser.add_argument("--write-doc", action="store_true",
+                        help="write the tables into docs/benchmarks.md between the online_table markers")
     options = parser.parse_args()
+    if options.quick:
+        options.models, options.repeats, options.plot = "horse", 1, ""
+    run_start = (time.monotonic(), os.getloadavg()[0])
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     os.makedirs(options.work, exist_ok=True)
 
     def run_for(path, args):
@@ -152,34 +164,45 @@ def main():
                 f"{statistics.median(evaluation_time_ratios):.2f} | {statistics.median(pass_shares):.2f} | "
                 f"{statistics.median(pass_ratios):.2f} |")
 
-    print("### Online additions (Table II of the paper, online)\n")
-    print("| set | slice | arrangement s | face images s | field s | smoothing s | mesh s | update total s "
+    lines = []
+
+    def emit(text=""):
+        lines.append(text)
+    emit("### Online additions (Table II of the paper, online)\n")
+    emit("| set | slice | arrangement s | face images s | field s | smoothing s | mesh s | update total s "
           "| cells changed / cells | field evaluations | full rebuild s | update / rebuild |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
-    print("\n".join(table_rows))
-    print("\n### Update time per set (slices 10 and later)\n")
-    print("| set | slices | median update ms | 90th percentile ms | max ms | median update / rebuild "
+    emit("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    emit("\n".join(table_rows))
+    emit("\n### Update time per set (slices 10 and later)\n")
+    emit("| set | slices | median update ms | 90th percentile ms | max ms | median update / rebuild "
           "(checkpoints) | median update / rebuild (every 5th slice from 10) | median field evaluations "
           "update / rebuild (same slices) | median update evaluation s / rebuild s (same slices) | "
           "peak RSS after 100 slices MB | all updates s |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
-    print("\n".join(summary_rows))
-    print("\n### Where an update's time goes, against a rebuild (every 5th slice from 10, medians)\n")
-    print("| set | update / rebuild | update evaluations s / rebuild s | update evaluations s / rebuild "
+    emit("|---|---|---|---|---|---|---|---|---|---|---|")
+    emit("\n".join(summary_rows))
+    emit("\n### Where an update's time goes, against a rebuild (every 5th slice from 10, medians)\n")
+    emit("| set | update / rebuild | update evaluations s / rebuild s | update evaluations s / rebuild "
           "evaluations s | update passes s / rebuild s | update passes s / rebuild passes s |")
-    print("|---|---|---|---|---|---|")
-    print("\n".join(split_rows))
-    print("\n### Time per slice against the slice count (mean of each block of 10 slices, ms)\n")
+    emit("|---|---|---|---|---|---|")
+    emit("\n".join(split_rows))
+    emit("\n### Time per slice against the slice count (mean of each block of 10 slices, ms)\n")
     names = list(growth)
-    print("| slices | " + " | ".join(names) + " |")
-    print("|---|" + "---|" * len(names))
+    emit("| slices | " + " | ".join(names) + " |")
+    emit("|---|" + "---|" * len(names))
     longest = max(len(v) for v in growth.values())
     for start in range(0, longest, 10):
         cells = []
         for n in names:
             block = growth[n][start:start + 10]
             cells.append(f"{1000 * statistics.mean(block):.0f}" if block else "")
-        print(f"| {start + 1}-{start + 10} | " + " | ".join(cells) + " |")
+        emit(f"| {start + 1}-{start + 10} | " + " | ".join(cells) + " |")
+    print("\n".join(lines))
+    if options.write_doc:
+        line = provenance(root, run_start[1], time.monotonic() - run_start[0])
+        write_between_markers(root, "online_table", "\n".join(lines) + "\n\n" + line +
+                              f" --repeats {options.repeats}.")
+    if not options.plot:
+        return
     try:
         import matplotlib
         matplotlib.use("Agg")

@@ -23,8 +23,9 @@ import os
 import re
 import subprocess
 import sys
+import time
 
-from doc_tables import write_between_markers
+from doc_tables import provenance, write_between_markers
 
 SPINE = "data/plus/PlusDeviceSet_SpinePhantomFreehandReconstructionOnly.xml"
 NWIRE = "data/plus/PlusDeviceSet_Server_Sim_NwirePhantom.xml"
@@ -93,6 +94,7 @@ def main():
     parser.add_argument("--write-doc", action="store_true",
                         help="write the table into docs/benchmarks.md")
     args = parser.parse_args()
+    start = (time.monotonic(), os.getloadavg()[0])
     os.makedirs(args.work, exist_ok=True)
     rows = []
     for name, recording, calibration in RECORDINGS:
@@ -105,7 +107,8 @@ def main():
                           f"{'byte-identical' if identical else 'DIFFERENT'} slice sets.")
     print(text)
     if args.write_doc:
-        write_between_markers(root, "plus_recordings", text)
+        write_between_markers(root, "plus_recordings", text + "\n\n" +
+                              provenance(root, start[1], time.monotonic() - start[0]))
     short = [r["name"] for r in rows
              if min(r["segment_slices"], r["scan_slices"]) < 0.95 * r["frames"]]
     if short or not identical:

@@ -26,7 +26,7 @@ import re
 import subprocess
 import sys
 
-from doc_tables import write_between_markers
+from doc_tables import provenance, write_between_markers
 import time
 
 # Reference surfaces whose name is not <csl name>_scaled.stl: the simplified lamp shares the
@@ -135,6 +135,7 @@ def main():
     parser.add_argument("--write-doc", action="store_true",
                         help="write the table into docs/benchmarks.md")
     args = parser.parse_args()
+    start = (time.monotonic(), os.getloadavg()[0])
     os.makedirs(args.work, exist_ok=True)
     csl, stl = find_files(args.dir)
     if not csl:
@@ -156,7 +157,8 @@ def main():
     text = table(rows)
     print(text)
     if args.write_doc:
-        write_between_markers(root, "public_csl", text)
+        write_between_markers(root, "public_csl", text + "\n\n" +
+                              provenance(root, start[1], time.monotonic() - start[0]))
     failed = [r["name"] for r in rows
               if r["exit"] != 0 or not r.get("closed", False) or "eval_error" in r]
     if failed:

@@ -231,13 +231,14 @@ def table(rows, failures):
     return "\n".join(lines)
 
 
-def provenance(args, seconds, cases):
+def provenance(args, seconds, cases, load_at_start):
     folder = os.path.dirname(os.path.abspath(args.binary))
     commit = subprocess.run(["git", "-C", folder, "rev-parse", "--short", "HEAD"],
                             capture_output=True, text=True).stdout.strip() or "unknown"
     return (f"{len(cases)} cases, --frames {args.frames} --every {args.every} "
             f"--depth {args.depth or 'default'} --seed {args.seed}; sonoshape at commit {commit}; "
-            f"{os.cpu_count()} cores ({platform.machine()}, {platform.system()}); "
+            f"{os.cpu_count()} cores ({platform.machine()}, {platform.system()}), load average "
+            f"{load_at_start:.1f} at the start and {os.getloadavg()[0]:.1f} at the end; "
             f"{seconds:.0f} s in all.")
 
 
@@ -264,7 +265,7 @@ def main():
         if not cases:
             raise SystemExit(f"no case named {' '.join(args.only)} (add --full for the grid?)")
     rows, failures = [], []
-    start = time.monotonic()
+    start, load_at_start = time.monotonic(), os.getloadavg()[0]
     for case in cases:
         case_start = time.monotonic()
         try:
@@ -275,7 +276,7 @@ def main():
         except RuntimeError as e:
             failures.append((case, str(e)))
             print(f"{case_name(case)}: {e}", file=sys.stderr)
-    text = table(rows, failures) + "\n\n" + provenance(args, time.monotonic() - start, cases)
+    text = table(rows, failures) + "\n\n" + provenance(args, time.monotonic() - start, cases, load_at_start)
     print(text)
     if args.write_doc:
         write_between_markers(root, "segmentation_table", text)
