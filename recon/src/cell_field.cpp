@@ -4,6 +4,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <limits>
 #include <span>
@@ -155,6 +156,9 @@ void CellField::update_frames() {
 }
 
 std::vector<int> CellField::refresh(const std::vector<int>& split_faces) {
+  // Unique across fields: a field made where an old one was never repeats its version.
+  static std::atomic<std::uint64_t> versions{0};
+  version_ = ++versions;
   update_frames();
   const std::size_t old_face_count = images_.size();
   images_.resize(arrangement_.face_count());
