@@ -107,16 +107,24 @@ void pack_field(const CellField& field, std::uint64_t generation, kernels::Field
 class OpenClEvaluator final : public FieldEvaluator {
  public:
   explicit OpenClEvaluator(std::unique_ptr<kernels::Device> device) : device_(std::move(device)) {}
+  ~OpenClEvaluator() override {
+    log_debug("OpenCL field: pack " + std::to_string(pack_s_) + " s, batches " + std::to_string(batch_s_) +
+              " s, upload " + std::to_string(device_->upload_seconds()) + " s, kernel " +
+              std::to_string(device_->kernel_seconds()) + " s, CPU fallback " + std::to_string(fallback_s_) + " s");
+  }
 
   void evaluate(const CellField& field, const std::vector<Vec3>& points, int* cells, bool cells_known,
                 double* values) override {
     if (!cells_known) locate_cells(field, points, cells);
     const CellField::Internals in = field.internals();
+    Stopwatch clock;
     if (&field != packed_field_ || in.version != packed_version_) {
       pack_field(field, ++generation_, data_);
       packed_field_ = &field;
       packed_version_ = in.version;
     }
+    pack_s_ += clock.seconds();
+    clock.reset();
     // The points inside the box go to the device, with their cells' face lists (the points come
     // in runs of one cell: a run shares its list).
     batch_.positions.clear();
@@ -138,12 +146,14 @@ class OpenClEvaluator final : public FieldEvaluator {
       batch_.point_faces.insert(batch_.point_faces.end(), {first, count});
       device_points_.push_back(n);
     }
+    batch_s_ += clock.seconds();
     const std::size_t fc = static_cast<std::size_t>(field.function_count());
     device_values_.resize(device_points_.size() * fc);
     status_.assign(device_points_.size(), 0);
     device_->evaluate_field(data_, batch_, device_values_.data(), status_.data());
     for (std::size_t k = 0; k < device_points_.size(); ++k)
       std::copy_n(device_values_.data() + k * fc, fc, values + device_points_[k] * fc);
+    clock.reset();
     // Outside the box, on a face, or a value to report: the CPU's evaluate_in.
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, points.size(), 256),
                       [&](const tbb::blocked_range<std::size_t>& r) {
@@ -155,6 +165,7 @@ class OpenClEvaluator final : public FieldEvaluator {
         const std::size_t n = device_points_[k];
         field.evaluate_in(cells[n], points[n], values + n * fc);
       }
+    fallback_s_ += clock.seconds();
   }
   std::string name() const override { return device_->info().device_name; }
 
@@ -167,6 +178,7 @@ class OpenClEvaluator final : public FieldEvaluator {
   std::vector<std::size_t> device_points_;
   std::vector<double> device_values_;
   std::vector<int> status_;
+  double pack_s_ = 0, batch_s_ = 0, fallback_s_ = 0;
 };
 
 }  // namespace
