@@ -76,10 +76,33 @@ struct Device::Impl {
   cl::Program program;
   cl::Kernel kernel;
   bool from_cache = false;
-  std::uint64_t uploaded_generation = 0;
+  // One buffer per field array, grown by half again when too small, so that an update that
+  // appends to an array copies only what it appended.
+  struct Slot {
+    cl::Buffer buffer;
+    std::size_t capacity_bytes = 0;
+  };
+  std::vector<Slot> slots;
   bool uploaded = false;
-  std::vector<cl::Buffer> field_buffers;
+  std::uint64_t uploaded_generation = 0;
+  std::size_t uploaded_bytes = 0;
   double upload_s = 0, kernel_s = 0;
+
+  // Brings slot `k` to `data`, whose first `clean` elements the buffer already holds.
+  template <typename T>
+  void sync(std::size_t k, const std::vector<T>& data, std::size_t clean) {
+    Slot& slot = slots[k];
+    const std::size_t bytes = std::max<std::size_t>(1, data.size()) * sizeof(T);
+    if (slot.capacity_bytes < bytes) {
+      slot.capacity_bytes = std::max<std::size_t>(4096, bytes + bytes / 2);
+      slot.buffer = cl::Buffer(context, CL_MEM_READ_ONLY, slot.capacity_bytes);
+      clean = 0;
+    }
+    if (data.size() <= clean) return;
+    const std::size_t offset = clean * sizeof(T), size = data.size() * sizeof(T) - offset;
+    queue.enqueueWriteBuffer(slot.buffer, CL_FALSE, offset, size, reinterpret_cast<const char*>(data.data()) + offset);
+    uploaded_bytes += size;
+  }
 };
 
 Device::Device(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
@@ -88,6 +111,7 @@ const DeviceInfo& Device::info() const { return impl_->info; }
 bool Device::program_from_cache() const { return impl_->from_cache; }
 double Device::upload_seconds() const { return impl_->upload_s; }
 double Device::kernel_seconds() const { return impl_->kernel_s; }
+std::size_t Device::uploaded_bytes() const { return impl_->uploaded_bytes; }
 
 std::vector<DeviceInfo> list_devices(std::string* error) {
   std::vector<DeviceInfo> out;
@@ -234,14 +258,27 @@ void Device::evaluate_field(const FieldData& field, const FieldBatch& batch, dou
   try {
     auto start = Clock::now();
     if (!d.uploaded || d.uploaded_generation != field.generation) {
-      d.field_buffers = {upload(d.context, field.frames),         upload(d.context, field.faces),
-                         upload(d.context, field.parts),          upload(d.context, field.points),
-                         upload(d.context, field.chain_d),        upload(d.context, field.chain_i),
-                         upload(d.context, field.triangle_faces), upload(d.context, field.triangles),
-                         upload(d.context, field.corner_values),  upload(d.context, field.tnode_d),
-                         upload(d.context, field.tnode_i),        upload(d.context, field.moments),
-                         upload(d.context, field.pairs),          upload(d.context, field.kernel_table),
-                         upload(d.context, field.truncation)};
+      // Appended arrays keep their clean prefix when this generation extends the uploaded one.
+      const bool extend = d.uploaded && field.extends_previous && field.generation == d.uploaded_generation + 1;
+      const std::size_t points_clean = extend ? field.points_clean : 0;
+      const std::size_t chain_clean = extend ? field.chain_clean : 0;
+      const std::size_t parts_clean = extend ? field.parts_clean : 0;
+      d.slots.resize(15);
+      d.sync(0, field.frames, 0);
+      d.sync(1, field.faces, 0);
+      d.sync(2, field.parts, parts_clean);
+      d.sync(3, field.points, points_clean);
+      d.sync(4, field.chain_d, chain_clean * 18);
+      d.sync(5, field.chain_i, chain_clean * 4);
+      d.sync(6, field.triangle_faces, 0);
+      d.sync(7, field.triangles, 0);
+      d.sync(8, field.corner_values, 0);
+      d.sync(9, field.tnode_d, 0);
+      d.sync(10, field.tnode_i, 0);
+      d.sync(11, field.moments, 0);
+      d.sync(12, field.pairs, d.uploaded ? field.pairs.size() : 0);  // constants: once
+      d.sync(13, field.kernel_table, d.uploaded ? field.kernel_table.size() : 0);
+      d.sync(14, field.truncation, d.uploaded ? field.truncation.size() : 0);
       d.uploaded = true;
       d.uploaded_generation = field.generation;
     }
@@ -260,7 +297,7 @@ void Device::evaluate_field(const FieldData& field, const FieldBatch& batch, dou
     k.setArg(arg++, positions);
     k.setArg(arg++, point_faces);
     k.setArg(arg++, face_list);
-    for (const cl::Buffer& buffer : d.field_buffers) k.setArg(arg++, buffer);
+    for (const Impl::Slot& slot : d.slots) k.setArg(arg++, slot.buffer);
     k.setArg(arg++, out);
     k.setArg(arg++, out_status);
     // The driver picks the work-group size (on PoCL, fixed sizes 1 to 128 were no faster).

@@ -28,6 +28,7 @@ const DeviceInfo& Device::info() const { throw Error("no OpenCL in this build");
 bool Device::program_from_cache() const { return false; }
 double Device::upload_seconds() const { return 0; }
 double Device::kernel_seconds() const { return 0; }
+std::size_t Device::uploaded_bytes() const { return 0; }
 void Device::evaluate_field(const FieldData&, const FieldBatch&, double*, int*) {
   throw Error("no OpenCL in this build");
 }

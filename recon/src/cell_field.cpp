@@ -242,6 +242,7 @@ void CellField::compact_points() {
     for (FaceImage::Part& part : image.known_parts) move_part(part);
   }
   points_ = std::move(compacted);
+  ++compactions_;
   tree_nodes_ = std::move(compacted_trees);
 }
 

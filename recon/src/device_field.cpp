@@ -42,74 +42,142 @@ class CpuEvaluator final : public FieldEvaluator {
   std::string name() const override { return "cpu"; }
 };
 
-// The CellField as kernels::FieldData (record layouts: kernels/cl/field.cl).
-void pack_field(const CellField& field, std::uint64_t generation, kernels::FieldData& out) {
-  const CellField::Internals in = field.internals();
-  out = kernels::FieldData{};
-  out.generation = generation;
-  out.function_count = field.function_count();
-  out.on_face_height = in.on_face_height;
-  for (const PlaneFrame& f : in.frames)
-    for (const Vec3* v : {&f.origin, &f.u, &f.v, &f.unit_normal}) out.frames.insert(out.frames.end(), {v->x(), v->y(), v->z()});
-  auto add_parts = [&](const std::vector<FaceImage::Part>& parts) {
-    for (const FaceImage::Part& p : parts)
-      out.parts.insert(out.parts.end(), {p.material, static_cast<int>(p.begin), static_cast<int>(p.count),
-                                         static_cast<int>(p.tree_root), static_cast<int>(p.tree_count)});
-  };
-  for (const FaceImage& image : in.images) {
-    const int parts_begin = static_cast<int>(out.parts.size() / 5);
-    add_parts(image.parts);
-    const int unknown_begin = static_cast<int>(out.parts.size() / 5);
-    add_parts(image.unknown_parts);
-    out.faces.insert(out.faces.end(), {image.frame, static_cast<int>(image.polygon_begin),
-                                       static_cast<int>(image.polygon_count), parts_begin,
-                                       static_cast<int>(image.parts.size()), unknown_begin,
-                                       static_cast<int>(image.unknown_parts.size()), 0});
-    int tree_root = -1;
-    if (image.triangle_tree != nullptr) {
-      // The face's tree (children relative to its root, moments per node) appended whole.
-      tree_root = static_cast<int>(out.tnode_i.size() / 4);
-      std::size_t nodes = 0;
-      std::vector<std::int32_t> stack{0};
-      while (!stack.empty()) {  // count the nodes: they are 0 .. max index
-        const TriangleNode& node = image.triangle_tree[stack.back()];
-        stack.pop_back();
-        nodes = std::max(nodes, static_cast<std::size_t>(std::max({0, node.left, node.right})) + 1);
-        if (node.left >= 0) stack.insert(stack.end(), {node.left, node.right});
-      }
-      const std::size_t stride = triangle_moment_stride(field.function_count());
-      for (std::size_t k = 0; k < nodes; ++k) {
-        const TriangleNode& node = image.triangle_tree[k];
-        out.tnode_d.insert(out.tnode_d.end(), {node.centre.x(), node.centre.y(), node.radius_sq});
-        out.tnode_i.insert(out.tnode_i.end(), {static_cast<int>(node.first), static_cast<int>(node.last), node.left, node.right});
-      }
-      out.moments.insert(out.moments.end(), image.triangle_tree_moments, image.triangle_tree_moments + nodes * stride);
+// The CellField as kernels::FieldData (record layouts: kernels/cl/field.cl), kept across
+// refreshes: the points and chain-tree nodes the field appended and the parts of the images it
+// rebuilt are appended to the arrays (the device copies only those), the face records and the
+// completed triangles are written again. A new field or a compaction packs everything anew.
+class FieldPacker {
+ public:
+  // Brings `out` to `field`; returns true when it changed (a new generation).
+  bool pack(const CellField& field, kernels::FieldData& out) {
+    const CellField::Internals in = field.internals();
+    if (&field == field_ && in.version == version_) return false;
+    const bool extend = &field == field_ && in.compactions == compactions_;
+    if (!extend) {
+      out = kernels::FieldData{};
+      face_generations_.clear();
+      triangle_tree_tables(out.pairs, out.kernel_table, out.truncation);
     }
-    out.triangle_faces.insert(out.triangle_faces.end(), {static_cast<int>(image.triangle_begin),
-                                                         static_cast<int>(image.triangle_count), tree_root,
-                                                         tree_root});
+    out.extends_previous = extend;
+    out.generation = ++generation_;
+    out.function_count = field.function_count();
+    out.on_face_height = in.on_face_height;
+    out.points_clean = out.points.size();
+    out.chain_clean = out.chain_i.size() / 4;
+    out.parts_clean = out.parts.size();
+    pack_frames(in, out);
+    pack_points(in, out);
+    pack_faces(in, out);
+    pack_triangles(in, field.function_count(), out);
+    field_ = &field;
+    version_ = in.version;
+    compactions_ = in.compactions;
+    return true;
   }
-  out.points.reserve(2 * in.points.size());
-  for (const Vec2& p : in.points) out.points.insert(out.points.end(), {p.x(), p.y()});
-  for (const ChainNode& n : in.tree_nodes) {
-    out.chain_d.insert(out.chain_d.end(), {n.centre.x(), n.centre.y(), n.radius_sq, n.area, n.m1x, n.m1y, n.m2xx,
-                                           n.m2xy, n.m2yy});
-    out.chain_d.insert(out.chain_d.end(), n.m3, n.m3 + 4);
-    out.chain_d.insert(out.chain_d.end(), n.m4, n.m4 + 5);
-    out.chain_i.insert(out.chain_i.end(), {static_cast<int>(n.first), static_cast<int>(n.last), n.left, n.right});
+
+ private:
+  static void pack_frames(const CellField::Internals& in, kernels::FieldData& out) {
+    out.frames.clear();
+    for (const PlaneFrame& f : in.frames)
+      for (const Vec3* v : {&f.origin, &f.u, &f.v, &f.unit_normal})
+        out.frames.insert(out.frames.end(), {v->x(), v->y(), v->z()});
   }
-  for (const UnknownTriangle& t : in.triangles)
-    for (const Vec2& c : t.corners) out.triangles.insert(out.triangles.end(), {c.x(), c.y()});
-  out.corner_values = in.corner_values;
-  triangle_tree_tables(out.pairs, out.kernel_table, out.truncation);
-}
+  // The points and chain-tree nodes past those already packed.
+  static void pack_points(const CellField::Internals& in, kernels::FieldData& out) {
+    for (std::size_t k = out.points.size() / 2; k < in.points.size(); ++k)
+      out.points.insert(out.points.end(), {in.points[k].x(), in.points[k].y()});
+    for (std::size_t k = out.chain_i.size() / 4; k < in.tree_nodes.size(); ++k) {
+      const ChainNode& n = in.tree_nodes[k];
+      out.chain_d.insert(out.chain_d.end(),
+                         {n.centre.x(), n.centre.y(), n.radius_sq, n.area, n.m1x, n.m1y, n.m2xx, n.m2xy, n.m2yy});
+      out.chain_d.insert(out.chain_d.end(), n.m3, n.m3 + 4);
+      out.chain_d.insert(out.chain_d.end(), n.m4, n.m4 + 5);
+      out.chain_i.insert(out.chain_i.end(), {static_cast<int>(n.first), static_cast<int>(n.last), n.left, n.right});
+    }
+  }
+  // The records of the faces built or rebuilt since the last pack, their parts appended.
+  void pack_faces(const CellField::Internals& in, kernels::FieldData& out) {
+    out.faces.resize(in.images.size() * 8);
+    face_generations_.resize(in.images.size(), 0);
+    auto add_parts = [&](const std::vector<FaceImage::Part>& parts) {
+      for (const FaceImage::Part& p : parts)
+        out.parts.insert(out.parts.end(), {p.material, static_cast<int>(p.begin), static_cast<int>(p.count),
+                                           static_cast<int>(p.tree_root), static_cast<int>(p.tree_count)});
+    };
+    for (std::size_t f = 0; f < in.images.size(); ++f) {
+      if (face_generations_[f] != 0 && face_generations_[f] == in.image_generations[f]) continue;
+      face_generations_[f] = in.image_generations[f];
+      const FaceImage& image = in.images[f];
+      const int parts_begin = static_cast<int>(out.parts.size() / 5);
+      add_parts(image.parts);
+      const int unknown_begin = static_cast<int>(out.parts.size() / 5);
+      add_parts(image.unknown_parts);
+      const int record[8] = {image.frame,
+                             static_cast<int>(image.polygon_begin),
+                             static_cast<int>(image.polygon_count),
+                             parts_begin,
+                             static_cast<int>(image.parts.size()),
+                             unknown_begin,
+                             static_cast<int>(image.unknown_parts.size()),
+                             0};
+      std::copy(record, record + 8, out.faces.begin() + static_cast<std::ptrdiff_t>(f * 8));
+    }
+  }
+  // The completed triangles, their values and every face's tree (rebuilt by each refresh).
+  static void pack_triangles(const CellField::Internals& in, int function_count, kernels::FieldData& out) {
+    out.triangle_faces.clear();
+    out.tnode_d.clear();
+    out.tnode_i.clear();
+    out.moments.clear();
+    out.triangles.clear();
+    const std::size_t stride = triangle_moment_stride(function_count);
+    for (const FaceImage& image : in.images) {
+      int tree_root = -1;
+      if (image.triangle_tree != nullptr) {
+        tree_root = static_cast<int>(out.tnode_i.size() / 4);
+        const std::size_t nodes = tree_size(image.triangle_tree);
+        for (std::size_t k = 0; k < nodes; ++k) {
+          const TriangleNode& node = image.triangle_tree[k];
+          out.tnode_d.insert(out.tnode_d.end(), {node.centre.x(), node.centre.y(), node.radius_sq});
+          out.tnode_i.insert(out.tnode_i.end(),
+                             {static_cast<int>(node.first), static_cast<int>(node.last), node.left, node.right});
+        }
+        out.moments.insert(out.moments.end(), image.triangle_tree_moments,
+                           image.triangle_tree_moments + nodes * stride);
+      }
+      out.triangle_faces.insert(out.triangle_faces.end(), {static_cast<int>(image.triangle_begin),
+                                                           static_cast<int>(image.triangle_count), tree_root,
+                                                           tree_root});
+    }
+    for (const UnknownTriangle& t : in.triangles)
+      for (const Vec2& c : t.corners) out.triangles.insert(out.triangles.end(), {c.x(), c.y()});
+    out.corner_values = in.corner_values;
+  }
+  // Nodes of a triangle tree: its nodes are 0 .. the largest child index.
+  static std::size_t tree_size(const TriangleNode* nodes) {
+    std::size_t count = 1;
+    std::vector<std::int32_t> stack{0};
+    while (!stack.empty()) {
+      const TriangleNode& node = nodes[stack.back()];
+      stack.pop_back();
+      if (node.left < 0) continue;
+      count = std::max(count, static_cast<std::size_t>(std::max(node.left, node.right)) + 1);
+      stack.insert(stack.end(), {node.left, node.right});
+    }
+    return count;
+  }
+
+  const CellField* field_ = nullptr;
+  std::uint64_t version_ = 0, compactions_ = 0, generation_ = 0;
+  std::vector<std::uint64_t> face_generations_;  // image generation of each packed face
+};
 
 class OpenClEvaluator final : public FieldEvaluator {
  public:
   explicit OpenClEvaluator(std::unique_ptr<kernels::Device> device) : device_(std::move(device)) {}
   ~OpenClEvaluator() override {
     log_debug("OpenCL field: pack " + std::to_string(pack_s_) + " s, batches " + std::to_string(batch_s_) +
-              " s, upload " + std::to_string(device_->upload_seconds()) + " s, kernel " +
+              " s, upload " + std::to_string(device_->upload_seconds()) + " s (" + std::to_string(device_->uploaded_bytes() >> 20) + " MiB), kernel " +
               std::to_string(device_->kernel_seconds()) + " s, CPU fallback " + std::to_string(fallback_s_) + " s");
   }
 
@@ -118,11 +186,7 @@ class OpenClEvaluator final : public FieldEvaluator {
     if (!cells_known) locate_cells(field, points, cells);
     const CellField::Internals in = field.internals();
     Stopwatch clock;
-    if (&field != packed_field_ || in.version != packed_version_) {
-      pack_field(field, ++generation_, data_);
-      packed_field_ = &field;
-      packed_version_ = in.version;
-    }
+    packer_.pack(field, data_);
     pack_s_ += clock.seconds();
     clock.reset();
     // The points inside the box go to the device, with their cells' face lists (the points come
@@ -171,8 +235,7 @@ class OpenClEvaluator final : public FieldEvaluator {
 
  private:
   std::unique_ptr<kernels::Device> device_;
-  const CellField* packed_field_ = nullptr;
-  std::uint64_t packed_version_ = 0, generation_ = 0;
+  FieldPacker packer_;
   kernels::FieldData data_;
   kernels::FieldBatch batch_;
   std::vector<std::size_t> device_points_;

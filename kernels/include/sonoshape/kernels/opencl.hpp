@@ -46,9 +46,14 @@ DeviceSpec device_spec_from(const std::string& option);
 
 /// The field of a CellField as flat arrays (recon/src/device_field.cpp packs them; the record
 /// layouts are those of kernels/cl/field.cl). `generation` changes whenever any array does: a
-/// device uploads the arrays again only then.
+/// device uploads the arrays again only then. With `extends_previous`, the first
+/// `points_clean` doubles of `points`, `chain_clean` nodes of the chain trees and `parts_clean`
+/// ints of `parts` are those of the previous generation, and only the rest is copied (an online
+/// update appends the images it rebuilt); the other arrays are copied whole.
 struct FieldData {
   std::uint64_t generation = 0;
+  bool extends_previous = false;
+  std::size_t points_clean = 0, chain_clean = 0, parts_clean = 0;
   int function_count = 2;  ///< at most kMaxFunctions
   double on_face_height = 0;
   std::vector<double> frames;          ///< 12 per arrangement plane: origin, u, v, unit normal
@@ -93,8 +98,10 @@ class Device {
   /// point lies on a face, 2: a value is not finite; the caller evaluates those itself).
   /// Throws sonoshape::Error on an OpenCL failure.
   void evaluate_field(const FieldData& field, const FieldBatch& batch, double* values, int* status);
-  /// Seconds spent uploading the field and running the kernel since the device was opened.
+  /// Seconds spent uploading the field and running the kernel since the device was opened, and
+  /// the bytes of field arrays copied to the device.
   double upload_seconds() const;
+  std::size_t uploaded_bytes() const;
   double kernel_seconds() const;
   struct Impl;
   Impl& impl() { return *impl_; }
