@@ -84,18 +84,65 @@ double edge_term(double2 a, double2 b, double h2) {
   return (cross / q_length) * angle;
 }
 
+// !(x > 0) lane by lane (true for NaN: _CMP_NGT_UQ).
+long4 isnotgreater4(double4 x) { return ~isgreater(x, (double4)(0.0)); }
+
+// ---- four edges at once (the lanes of mean_value.cpp's AVX2 code, as double4) ----
+// atan_small and fast_atan2 for y >= 0, lane by lane, both branches computed and the scalar
+// code's one selected (atan2_nonnegative_y_avx2): every lane equals fast_atan2 to the bit.
+double4 atan_small4(double4 x) {
+  const double4 z = x * x;
+  double4 p = (double4)(kAtanP[0]);
+  for (int k = 1; k < 5; ++k) p = p * z + kAtanP[k];
+  double4 q = z + kAtanQ[0];
+  for (int k = 1; k < 5; ++k) q = q * z + kAtanQ[k];
+  return x + x * (z * p / q);
+}
+
+double4 atan2_nonnegative_y4(double4 y, double4 x) {
+  const double4 ax = fabs(x);
+  const long4 steep = isgreater(y, ax);
+  const double4 numerator = select(y, ax, steep);
+  const double4 denominator = select(ax, y, steep);
+  const double4 t = select(numerator / denominator, (double4)(0.0), isequal(denominator, (double4)(0.0)));
+  const long4 large = isgreater(t, (double4)(0.66));
+  const double4 small_angle = atan_small4(select(t, (t - 1.0) / (t + 1.0), large));
+  const double4 unit_angle =
+      select(small_angle, 0.78539816339744830962 + (small_angle + 3.061616997868382943065e-17), large);
+  const double4 angle = select(unit_angle, 1.57079632679489661923 - unit_angle, steep);
+  return select(angle, 3.14159265358979323846 - angle, signbit(x));
+}
+
+// edge_term of four edges (0 in the lanes where it exits early), edge_terms_avx2.
+double4 edge_term4(double4 ax, double4 ay, double4 bx, double4 by, double h2) {
+  const double4 dx = bx - ax, dy = by - ay;
+  const double4 length_sq = dx * dx + dy * dy;
+  const double4 cross = ax * by - ay * bx;
+  const double4 big_q = cross * cross + h2 * length_sq;
+  const double4 q_length = sqrt(big_q);
+  const double4 a_dot_d = ax * dx + ay * dy;
+  const double4 b_dot_d = bx * dx + by * dy;
+  const double4 angle = atan2_nonnegative_y4(q_length * length_sq, big_q + a_dot_d * b_dot_d);
+  const double4 term = (cross / q_length) * angle;
+  const long4 skip = isequal(cross, (double4)(0.0)) | isnotgreater4(length_sq);
+  return select(term, (double4)(0.0), skip);
+}
+
 // projected_angle_plain: edge k (from point k - 1 to point k) in lane k mod 4, the lanes summed
-// pairwise (projected_angle_plain_avx2).
+// pairwise (projected_angle_plain_avx2, whose padding edges past the last are zero-length).
 double plain_sum(__global const double2* points, uint count, double2 foot, double height) {
   const double h2 = height * height;
-  double lanes[4] = {0.0, 0.0, 0.0, 0.0};
+  double4 sums = (double4)(0.0);
   double2 a = points[count - 1] - foot;
-  for (uint k = 0; k < count; ++k) {
-    const double2 b = points[k] - foot;
-    lanes[k & 3] += edge_term(a, b, h2);
-    a = b;
+  for (uint k = 0; k < count; k += 4) {
+    double2 p[5];
+    p[0] = a;
+    for (uint j = 1; j <= 4; ++j) p[j] = k + j <= count ? points[k + j - 1] - foot : p[j - 1];
+    sums += edge_term4((double4)(p[0].x, p[1].x, p[2].x, p[3].x), (double4)(p[0].y, p[1].y, p[2].y, p[3].y),
+                       (double4)(p[1].x, p[2].x, p[3].x, p[4].x), (double4)(p[1].y, p[2].y, p[3].y, p[4].y), h2);
+    a = p[4];
   }
-  return (lanes[0] + lanes[1]) + (lanes[2] + lanes[3]);
+  return (sums.s0 + sums.s1) + (sums.s2 + sums.s3);
 }
 
 // ---- chain trees (far field of long rings) ----
@@ -123,20 +170,40 @@ double region_term(__global const double* node, double dx, double dy, double s, 
 }
 
 // The edges summed exactly, in batches of EDGE_BATCH whose edge i goes to lane i mod 4
-// (edge_projected_angle_sum_avx2; a batch's lanes are summed pairwise into `edges`).
+// (edge_projected_angle_sum_avx2; a batch's lanes are summed pairwise into `edges`, its last
+// group padded with zero edges). Edges are gathered four at a time and computed as one double4.
 typedef struct {
-  double lanes[4];
-  uint pending;
+  double4 lanes;
+  double ax[4], ay[4], bx[4], by[4];
+  uint pending;  // edges in the batch
   double edges;
 } EdgeBatch;
 
+void batch_group(EdgeBatch* batch, double h2) {
+  batch->lanes += edge_term4(vload4(0, batch->ax), vload4(0, batch->ay), vload4(0, batch->bx), vload4(0, batch->by), h2);
+}
+
 void batch_push(EdgeBatch* batch, double2 a, double2 b, double h2) {
-  batch->lanes[batch->pending & 3] += edge_term(a, b, h2);
-  if (++batch->pending == EDGE_BATCH) {
-    batch->edges += (batch->lanes[0] + batch->lanes[1]) + (batch->lanes[2] + batch->lanes[3]);
-    batch->lanes[0] = batch->lanes[1] = batch->lanes[2] = batch->lanes[3] = 0.0;
+  const uint slot = batch->pending & 3;
+  batch->ax[slot] = a.x;
+  batch->ay[slot] = a.y;
+  batch->bx[slot] = b.x;
+  batch->by[slot] = b.y;
+  ++batch->pending;
+  if ((batch->pending & 3) == 0) batch_group(batch, h2);
+  if (batch->pending == EDGE_BATCH) {
+    batch->edges += (batch->lanes.s0 + batch->lanes.s1) + (batch->lanes.s2 + batch->lanes.s3);
+    batch->lanes = (double4)(0.0);
     batch->pending = 0;
   }
+}
+
+void batch_finish(EdgeBatch* batch, double h2) {
+  if (batch->pending == 0) return;
+  for (uint slot = batch->pending & 3; slot != 0 && slot < 4; ++slot)
+    batch->ax[slot] = batch->ay[slot] = batch->bx[slot] = batch->by[slot] = 0.0;
+  if ((batch->pending & 3) != 0) batch_group(batch, h2);
+  batch->edges += (batch->lanes.s0 + batch->lanes.s1) + (batch->lanes.s2 + batch->lanes.s3);
 }
 
 double chain_tree_plain(__global const double2* points, uint count, __global const double* chain_d,
@@ -144,7 +211,10 @@ double chain_tree_plain(__global const double2* points, uint count, __global con
   if (count < 2 || !(height > 0.0)) return 0.0;
   const double h2 = height * height;
   const double opening_sq = CHAIN_OPENING * CHAIN_OPENING;
-  EdgeBatch batch = {{0.0, 0.0, 0.0, 0.0}, 0, 0.0};
+  EdgeBatch batch;
+  batch.lanes = (double4)(0.0);
+  batch.pending = 0;
+  batch.edges = 0.0;
   double regions = 0.0;
   uint stack[64];
   int top = 0;
@@ -173,8 +243,7 @@ double chain_tree_plain(__global const double2* points, uint count, __global con
     stack[top++] = (uint)links[3];
     stack[top++] = (uint)links[2];
   }
-  if (batch.pending > 0)
-    batch.edges += (batch.lanes[0] + batch.lanes[1]) + (batch.lanes[2] + batch.lanes[3]);
+  batch_finish(&batch, h2);
   return batch.edges + regions;
 }
 
