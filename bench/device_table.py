@@ -5,12 +5,13 @@ For every set of Table II (seven models x parallel-20, orthogonal-30, random-40;
 orthogonal-30, random-30; sliced as accuracy_matrix.py slices them) this runs
   sonoshape reconstruct SET --device D --threads T --stats
 for each device D (cpu, opencl:P:D, ...), `--repeat` times, and prints one Markdown row per set:
-the median total seconds and evaluation seconds of each device, each device's total against the
+the total seconds and evaluation seconds of each device (the median of the runs, or with
+--best the fastest, for a machine shared with other work), each device's total against the
 first one's, and whether every device wrote the same meshes as the first (byte for byte).
 The OpenCL program is built (or read from its cache) once before the timed runs.
 
 Usage: bench/device_table.py [--binary build/apps/sonoshape] [--work out/bench/device]
-         [--devices cpu,opencl] [--threads 0] [--repeat 3] [--quick] [--sets horse-random-30]
+         [--devices cpu,opencl] [--threads 0] [--repeat 3] [--best] [--quick] [--sets a,b]
 """
 import argparse
 import filecmp
@@ -86,6 +87,7 @@ def main():
     parser.add_argument("--devices", default="cpu,opencl")
     parser.add_argument("--threads", type=int, default=0)
     parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--best", action="store_true", help="the fastest run instead of the median")
     parser.add_argument("--quick", action="store_true", help="one set per model family")
     parser.add_argument("--sets", default="", help="only these sets (comma-separated names)")
     parser.add_argument("--extra", default="", help="also these MODEL-FAMILY-COUNT sets")
@@ -114,8 +116,9 @@ def main():
         for device in devices:
             out = os.path.join(args.work, name, "recon-" + device.replace(":", "_"))
             runs = [reconstruct(args.binary, slices, out, device, args.threads) for _ in range(args.repeat)]
-            totals[device] = statistics.median(r["total_s"] for r in runs)
-            evals[device] = statistics.median(r["evaluation_s"] for r in runs)
+            pick = min if args.best else statistics.median
+            totals[device] = pick(r["total_s"] for r in runs)
+            evals[device] = pick(r["evaluation_s"] for r in runs)
             outs[device] = out
             stats = runs[0]
         cells = " | ".join(f"{totals[d]:.3f} | {evals[d]:.3f}" for d in devices)

@@ -1,40 +1,44 @@
 #!/usr/bin/env bash
 # A self-contained benchmark folder for a machine without our Debian libraries (the GPU machine:
-# Ubuntu 24.04 with CUDA, whose OpenCL loader finds PoCL and the NVIDIA driver): the sonoshape
-# binary, the shared libraries it needs that such a system lacks (ldd; glibc, libstdc++,
+# Ubuntu 24.04 with CUDA, whose OpenCL loader finds PoCL and the NVIDIA driver): the engine-only
+# bench/device_bench.cpp binary (the sonoshape command pulls in OpenCV's GDAL and codecs, about
+# 180 MiB), the shared libraries it needs that such a system lacks (ldd; glibc, libstdc++,
 # libgcc_s and libOpenCL stay the system's, newer there and the ones its OpenCL drivers need),
 # an $ORIGIN rpath, the slice sets of every figure (sliced here) and bench/gpu_run.sh. Refuses
 # to finish over 64 MiB.
-# Usage: bench/make_carry.sh [OUT (default shared/carry)] [BINARY (default build/apps/sonoshape)]
+# Usage: bench/make_carry.sh [OUT (default shared/carry)] [BUILD (default build)]
+# (build the targets sonoshape and sonoshape_device_bench first)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=${1:-shared/carry}
-bin=${2:-build/apps/sonoshape}
+build=${2:-build}
+bin=$build/apps/sonoshape  # slices the sets here
+bench=$build/bench/sonoshape_device_bench
 limit_mib=64
 rm -rf "$out"
 mkdir -p "$out/bin" "$out/lib" "$out/sets"
 
-cp "$bin" "$out/bin/sonoshape"
-strip "$out/bin/sonoshape"
+cp "$bench" "$out/bin/sonoshape_device_bench"
+strip "$out/bin/sonoshape_device_bench"
 # Libraries the target system has (and must keep: its drivers are built against them).
 system='^(linux-vdso|ld-linux|libc|libm|libdl|libpthread|librt|libresolv|libstdc\+\+|libgcc_s|libOpenCL)\.'
-ldd "$bin" | awk '/=> \//{print $1, $3}' | while read -r name path; do
+ldd "$bench" | awk '/=> \//{print $1, $3}' | while read -r name path; do
   if [[ "$name" =~ $system ]]; then continue; fi
   cp -L "$path" "$out/lib/$name"
   strip --strip-unneeded "$out/lib/$name" 2>/dev/null || true
 done
 # DT_RPATH (not RUNPATH): it also applies to the libraries' own dependencies.
-patchelf --force-rpath --set-rpath '$ORIGIN/../lib' "$out/bin/sonoshape"
+patchelf --force-rpath --set-rpath '$ORIGIN/../lib' "$out/bin/sonoshape_device_bench"
 for lib in "$out"/lib/*; do patchelf --force-rpath --set-rpath '$ORIGIN' "$lib"; done
 
 # The slice sets: Table II (bench/device_table.py's), the offline target (horse, 30 random planes,
 # seeds 1-5) and the online sets (horse, spot, cheburashka: 100 random planes, a 100-plane sweep).
 slice() {  # NAME FAMILY COUNT SEED LABEL:MODEL ...
-  local name=$1 family=$2 count=$3 seed=$4
+  local name=$1 family=$2 count=$3 seed=$4 m label model ext
   shift 4
   local args=()
   for m in "$@"; do
-    local label=${m%%:*} model=${m#*:} ext=obj
+    label=${m%%:*} model=${m#*:} ext=obj
     [[ $model == horse ]] && ext=ply
     args+=(--mesh "$label:data/models/$model.$ext:$model")
   done
