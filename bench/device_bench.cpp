@@ -43,10 +43,17 @@ std::string mesh_hash(const MeshSet& meshes) {
 }
 
 nlohmann::json stats_json(const recon::ReconstructionStats& s) {
-  return {{"total_s", s.total_s},           {"arrangement_s", s.arrangement_s}, {"face_images_s", s.face_images_s},
-          {"field_s", s.field_s},           {"smoothing_s", s.smoothing_s},     {"mesh_s", s.mesh_s},
-          {"evaluation_s", s.evaluation_s}, {"completion_s", s.completion_s},   {"cells", s.cells},
-          {"slices", s.slices},             {"field_evaluations", s.field_evaluations}};
+  return {{"total_s", s.total_s},
+          {"arrangement_s", s.arrangement_s},
+          {"face_images_s", s.face_images_s},
+          {"field_s", s.field_s},
+          {"smoothing_s", s.smoothing_s},
+          {"mesh_s", s.mesh_s},
+          {"evaluation_s", s.evaluation_s},
+          {"completion_s", s.completion_s},
+          {"cells", s.cells},
+          {"slices", s.slices},
+          {"field_evaluations", s.field_evaluations}};
 }
 
 int run(int argc, char** argv) {
@@ -62,19 +69,28 @@ int run(int argc, char** argv) {
     if (a == "--list-devices") {
       std::string error;
       for (const kernels::DeviceInfo& d : kernels::list_devices(&error))
-        std::cout << "opencl:" << d.platform << ":" << d.device << "\t" << (d.fp64 ? "fp64" : "no-fp64") << "\t"
-                  << (d.gpu ? "GPU" : "CPU") << "\t" << d.device_name << " (" << d.platform_name << ")\n";
+        std::cout << "opencl:" << d.platform << ":" << d.device << "\t"
+                  << (d.fp64 ? "fp64" : "no-fp64") << "\t" << (d.gpu ? "GPU" : "CPU") << "\t"
+                  << d.device_name << " (" << d.platform_name << ")\n";
       if (!error.empty()) std::cerr << error << "\n";
       return 0;
     }
-    if (a == "--device") device = value();
-    else if (a == "--online") online = true;
-    else if (a == "--threads") threads = std::stoi(value());
-    else if (a == "--repeat") repeat = std::stoi(value());
-    else if (!a.empty() && a[0] != '-' && path.empty()) path = a;
-    else throw Error("unknown argument " + a + "; usage: SET.slices.json [--device D] [--online] [--threads N] [--repeat R]");
+    if (a == "--device")
+      device = value();
+    else if (a == "--online")
+      online = true;
+    else if (a == "--threads")
+      threads = std::stoi(value());
+    else if (a == "--repeat")
+      repeat = std::stoi(value());
+    else if (!a.empty() && a[0] != '-' && path.empty())
+      path = a;
+    else
+      throw Error("unknown argument " + a +
+                  "; usage: SET.slices.json [--device D] [--online] [--threads N] [--repeat R]");
   }
-  if (path.empty()) throw Error("usage: SET.slices.json [--device D] [--online] [--threads N] [--repeat R]");
+  if (path.empty())
+    throw Error("usage: SET.slices.json [--device D] [--online] [--threads N] [--repeat R]");
   const Result<SliceSet> set = read_slice_set(path);
   if (!set) throw Error(set.message());
   recon::ReconstructorOptions setup;
@@ -85,7 +101,8 @@ int run(int argc, char** argv) {
   nlohmann::json out = {{"set", path}, {"device", device}, {"online", online}};
   if (device != "cpu") {
     const auto opened = kernels::open_device(kernels::parse_device_spec(device));
-    if (opened) out["device_name"] = opened->info().device_name + " (" + opened->info().platform_name + ")";
+    if (opened)
+      out["device_name"] = opened->info().device_name + " (" + opened->info().platform_name + ")";
   }
   nlohmann::json runs = nlohmann::json::array();
   std::string hash;

@@ -44,7 +44,8 @@ __constant double kAtanQ[5] = {2.485846490142306297962e+01, 1.650270098316988542
 double atan_small(double x) {
   const double z = x * x;
   const double p = (((kAtanP[0] * z + kAtanP[1]) * z + kAtanP[2]) * z + kAtanP[3]) * z + kAtanP[4];
-  const double q = ((((z + kAtanQ[0]) * z + kAtanQ[1]) * z + kAtanQ[2]) * z + kAtanQ[3]) * z + kAtanQ[4];
+  const double q =
+      ((((z + kAtanQ[0]) * z + kAtanQ[1]) * z + kAtanQ[2]) * z + kAtanQ[3]) * z + kAtanQ[4];
   return x + x * (z * p / q);
 }
 
@@ -56,8 +57,10 @@ double atan_unit(double t) {
 double fast_atan2(double y, double x) {
   const double ay = fabs(y), ax = fabs(x);
   double angle;
-  if (ay <= ax) angle = ax > 0.0 ? atan_unit(ay / ax) : 0.0;
-  else angle = 1.57079632679489661923 - atan_unit(ax / ay);
+  if (ay <= ax)
+    angle = ax > 0.0 ? atan_unit(ay / ax) : 0.0;
+  else
+    angle = 1.57079632679489661923 - atan_unit(ax / ay);
   if (signbit(x)) angle = 3.14159265358979323846 - angle;
   return copysign(angle, y);
 }
@@ -104,11 +107,12 @@ double4 atan2_nonnegative_y4(double4 y, double4 x) {
   const long4 steep = isgreater(y, ax);
   const double4 numerator = select(y, ax, steep);
   const double4 denominator = select(ax, y, steep);
-  const double4 t = select(numerator / denominator, (double4)(0.0), isequal(denominator, (double4)(0.0)));
+  const double4 t =
+      select(numerator / denominator, (double4)(0.0), isequal(denominator, (double4)(0.0)));
   const long4 large = isgreater(t, (double4)(0.66));
   const double4 small_angle = atan_small4(select(t, (t - 1.0) / (t + 1.0), large));
-  const double4 unit_angle =
-      select(small_angle, 0.78539816339744830962 + (small_angle + 3.061616997868382943065e-17), large);
+  const double4 unit_angle = select(
+      small_angle, 0.78539816339744830962 + (small_angle + 3.061616997868382943065e-17), large);
   const double4 angle = select(unit_angle, 1.57079632679489661923 - unit_angle, steep);
   return select(angle, 3.14159265358979323846 - angle, signbit(x));
 }
@@ -138,8 +142,9 @@ double plain_sum(__global const double2* points, uint count, double2 foot, doubl
     double2 p[5];
     p[0] = a;
     for (uint j = 1; j <= 4; ++j) p[j] = k + j <= count ? points[k + j - 1] - foot : p[j - 1];
-    sums += edge_term4((double4)(p[0].x, p[1].x, p[2].x, p[3].x), (double4)(p[0].y, p[1].y, p[2].y, p[3].y),
-                       (double4)(p[1].x, p[2].x, p[3].x, p[4].x), (double4)(p[1].y, p[2].y, p[3].y, p[4].y), h2);
+    sums += edge_term4(
+        (double4)(p[0].x, p[1].x, p[2].x, p[3].x), (double4)(p[0].y, p[1].y, p[2].y, p[3].y),
+        (double4)(p[1].x, p[2].x, p[3].x, p[4].x), (double4)(p[1].y, p[2].y, p[3].y, p[4].y), h2);
     a = p[4];
   }
   return (sums.s0 + sums.s1) + (sums.s2 + sums.s3);
@@ -157,9 +162,11 @@ double region_term(__global const double* node, double dx, double dy, double s, 
   const double d_z2 = dx2 * m2xx + 2.0 * dxy * m2xy + dy2 * m2yy;
   const double z2 = m2xx + m2yy;
   const double d_z_z2 = dx * (m3[0] + m3[2]) + dy * (m3[1] + m3[3]);
-  const double d_z3 = dx * dx2 * m3[0] + 3.0 * dx2 * dy * m3[1] + 3.0 * dx * dy2 * m3[2] + dy * dy2 * m3[3];
+  const double d_z3 =
+      dx * dx2 * m3[0] + 3.0 * dx2 * dy * m3[1] + 3.0 * dx * dy2 * m3[2] + dy * dy2 * m3[3];
   const double z4 = m4[0] + 2.0 * m4[2] + m4[4];
-  const double d_z2_z2 = dx2 * (m4[0] + m4[2]) + 2.0 * dxy * (m4[1] + m4[3]) + dy2 * (m4[2] + m4[4]);
+  const double d_z2_z2 =
+      dx2 * (m4[0] + m4[2]) + 2.0 * dxy * (m4[1] + m4[3]) + dy2 * (m4[2] + m4[4]);
   const double d_z4 = dx2 * dx2 * m4[0] + 4.0 * dx2 * dxy * m4[1] + 6.0 * dx2 * dy2 * m4[2] +
                       4.0 * dxy * dy2 * m4[3] + dy2 * dy2 * m4[4];
   const double series =
@@ -180,7 +187,8 @@ typedef struct {
 } EdgeBatch;
 
 void batch_group(EdgeBatch* batch, double h2) {
-  batch->lanes += edge_term4(vload4(0, batch->ax), vload4(0, batch->ay), vload4(0, batch->bx), vload4(0, batch->by), h2);
+  batch->lanes += edge_term4(vload4(0, batch->ax), vload4(0, batch->ay), vload4(0, batch->bx),
+                             vload4(0, batch->by), h2);
 }
 
 void batch_push(EdgeBatch* batch, double2 a, double2 b, double h2) {
@@ -248,8 +256,9 @@ double chain_tree_plain(__global const double2* points, uint count, __global con
 }
 
 // CellField::part_angle.
-double part_angle(__global const int* part, __global const double2* points, __global const double* chain_d,
-                  __global const int* chain_i, double2 foot, double height) {
+double part_angle(__global const int* part, __global const double2* points,
+                  __global const double* chain_d, __global const int* chain_i, double2 foot,
+                  double height) {
   const uint begin = (uint)part[1], count = (uint)part[2], tree_count = (uint)part[4];
   if (tree_count == 0) {
     if (count < 2 || !(height > 0.0)) return 0.0;
@@ -299,10 +308,11 @@ bool triangle_weights(const double2* corners, double2 foot, double height, doubl
   const double2 a = corners[0], b = corners[1], c = corners[2];
   const double2 ab = b - a, ac = c - a, bc = c - b, ca = a - c, fa = foot - a;
   const double twice_area = ab.x * ac.y - ab.y * ac.x;
-  const double longest_sq = fmax(fmax(ab.x * ab.x + ab.y * ab.y, bc.x * bc.x + bc.y * bc.y),
-                                 ca.x * ca.x + ca.y * ca.y);
+  const double longest_sq =
+      fmax(fmax(ab.x * ab.x + ab.y * ab.y, bc.x * bc.x + bc.y * bc.y), ca.x * ca.x + ca.y * ca.y);
   const double reach_sq = (fa.x * fa.x + fa.y * fa.y) + height * height;
-  if (!(fabs(twice_area) > 1e-12 * fmax(longest_sq, 1e-12 * reach_sq) && height > 0.0)) return false;
+  if (!(fabs(twice_area) > 1e-12 * fmax(longest_sq, 1e-12 * reach_sq) && height > 0.0))
+    return false;
   double2 ring[3];
   ring[0] = a;
   ring[1] = twice_area > 0 ? b : c;
@@ -322,7 +332,8 @@ bool triangle_weights(const double2* corners, double2 foot, double height, doubl
     mx += scale * d.y;
     my += scale * -d.x;
   }
-  if (fabs(projected) < SPLIT_BELOW && height * height < (SPLIT_HEIGHT_RATIO * SPLIT_HEIGHT_RATIO) * longest_sq)
+  if (fabs(projected) < SPLIT_BELOW &&
+      height * height < (SPLIT_HEIGHT_RATIO * SPLIT_HEIGHT_RATIO) * longest_sq)
     projected = triangle_split(ring, foot, height, projected);
   const double inverse_area = 1.0 / twice_area, projected_over_height = projected / height;
   for (int i = 0; i < 3; ++i) {
@@ -337,11 +348,12 @@ bool triangle_weights(const double2* corners, double2 foot, double height, doubl
 }
 
 // add_exact (triangle_tree.cpp): triangles [first, last) of a face in their order.
-void add_exact(__global const double* triangles, __global const double* values, uint first, uint last,
-               int fc, double2 foot, double height, double* w) {
+void add_exact(__global const double* triangles, __global const double* values, uint first,
+               uint last, int fc, double2 foot, double height, double* w) {
   for (uint t = first; t < last; ++t) {
     __global const double* c = triangles + (size_t)t * 6;
-    const double2 corners[3] = {(double2)(c[0], c[1]), (double2)(c[2], c[3]), (double2)(c[4], c[5])};
+    const double2 corners[3] = {(double2)(c[0], c[1]), (double2)(c[2], c[3]),
+                                (double2)(c[4], c[5])};
     double weights[3];
     if (!triangle_weights(corners, foot, height, weights)) continue;
     __global const double* v = values + (size_t)t * 3 * fc;
@@ -446,20 +458,19 @@ void triangle_tree(__global const double* triangles, __global const double* valu
 // 1 on a face (the CPU evaluates it), 2 a non-finite value (the CPU reports it).
 __kernel void evaluate_field(
     const uint point_count, const int fc, const double on_face_height,
-    __global const double* positions,    // 3 per point
-    __global const uint* point_faces,    // 2 per point
+    __global const double* positions,  // 3 per point
+    __global const uint* point_faces,  // 2 per point
     __global const int* face_list,
-    __global const double* frames,       // 12 per frame: origin, u, v, unit normal
-    __global const int* faces,           // FACE_INTS per face
-    __global const int* parts,           // PART_INTS per part
-    __global const double2* points,
-    __global const double* chain_d, __global const int* chain_i,
+    __global const double* frames,  // 12 per frame: origin, u, v, unit normal
+    __global const int* faces,      // FACE_INTS per face
+    __global const int* parts,      // PART_INTS per part
+    __global const double2* points, __global const double* chain_d, __global const int* chain_i,
     __global const int* triangle_faces,  // TFACE_INTS per face
     __global const double* triangles,    // 6 per triangle
-    __global const double* corner_values,
-    __global const double* tnode_d, __global const int* tnode_i, __global const double* moments,
-    __constant const int* pairs, __constant const double* table, __constant const double* truncation,
-    __global double* out, __global int* status) {
+    __global const double* corner_values, __global const double* tnode_d,
+    __global const int* tnode_i, __global const double* moments, __constant const int* pairs,
+    __constant const double* table, __constant const double* truncation, __global double* out,
+    __global int* status) {
   const uint n = get_global_id(0);
   if (n >= point_count) return;
   const double px = positions[3 * n], py = positions[3 * n + 1], pz = positions[3 * n + 2];

@@ -54,13 +54,15 @@ DeviceSpec parse_device_spec(const std::string& text) {
     const std::string rest = text.substr(prefix.size());
     const std::size_t colon = rest.find(':');
     if (colon == std::string::npos)
-      throw Error("device '" + text + "': name both indices, opencl:PLATFORM:DEVICE (e.g. opencl:0:0)");
+      throw Error("device '" + text +
+                  "': name both indices, opencl:PLATFORM:DEVICE (e.g. opencl:0:0)");
     spec.kind = DeviceSpec::Kind::opencl;
     spec.platform = parse_index(rest.substr(0, colon), text);
     spec.device = parse_index(rest.substr(colon + 1), text);
     return spec;
   }
-  throw Error("device '" + text + "' is not known; use cpu, auto, opencl or opencl:PLATFORM:DEVICE");
+  throw Error("device '" + text +
+              "' is not known; use cpu, auto, opencl or opencl:PLATFORM:DEVICE");
 }
 
 DeviceSpec device_spec_from(const std::string& option) {

@@ -3,8 +3,11 @@
 #define CL_HPP_ENABLE_EXCEPTIONS
 #define CL_HPP_TARGET_OPENCL_VERSION 120
 #define CL_HPP_MINIMUM_OPENCL_VERSION 120
-#include <CL/opencl.hpp>
+#include "sonoshape/kernels/opencl.hpp"
 
+#include <unistd.h>
+
+#include <CL/opencl.hpp>
 #include <chrono>
 #include <cstdlib>
 #include <filesystem>
@@ -12,11 +15,8 @@
 #include <functional>
 #include <sstream>
 
-#include <unistd.h>
-
 #include "sonoshape/core/errors.hpp"
 #include "sonoshape/core/log.hpp"
-#include "sonoshape/kernels/opencl.hpp"
 
 namespace sonoshape::kernels {
 
@@ -59,7 +59,8 @@ std::filesystem::path cache_dir() {
   const char* xdg = std::getenv("XDG_CACHE_HOME");
   if (xdg != nullptr && *xdg != '\0') return std::filesystem::path(xdg) / "sonoshape" / "opencl";
   const char* home = std::getenv("HOME");
-  if (home != nullptr && *home != '\0') return std::filesystem::path(home) / ".cache" / "sonoshape" / "opencl";
+  if (home != nullptr && *home != '\0')
+    return std::filesystem::path(home) / ".cache" / "sonoshape" / "opencl";
   return {};
 }
 
@@ -100,7 +101,8 @@ struct Device::Impl {
     }
     if (data.size() <= clean) return;
     const std::size_t offset = clean * sizeof(T), size = data.size() * sizeof(T) - offset;
-    queue.enqueueWriteBuffer(slot.buffer, CL_FALSE, offset, size, reinterpret_cast<const char*>(data.data()) + offset);
+    queue.enqueueWriteBuffer(slot.buffer, CL_FALSE, offset, size,
+                             reinterpret_cast<const char*>(data.data()) + offset);
     uploaded_bytes += size;
   }
 };
@@ -117,7 +119,9 @@ std::vector<DeviceInfo> list_devices(std::string* error) {
   std::vector<DeviceInfo> out;
   const std::vector<cl::Platform> platforms = platforms_or_empty();
   if (platforms.empty() && error != nullptr)
-    *error = "no OpenCL platform (install an ICD: Debian pocl-opencl-icd for the CPU, or the GPU's driver)";
+    *error =
+        "no OpenCL platform (install an ICD: Debian pocl-opencl-icd for the CPU, or the GPU's "
+        "driver)";
   for (std::size_t p = 0; p < platforms.size(); ++p) {
     std::vector<cl::Device> devices;
     try {
@@ -138,9 +142,10 @@ std::unique_ptr<Device::Impl> choose(const DeviceSpec& spec) {
   const std::vector<cl::Platform> platforms = platforms_or_empty();
   if (platforms.empty()) {
     if (spec.kind == DeviceSpec::Kind::automatic) return nullptr;
-    throw Error("--device " + spec.text() +
-                ": no OpenCL platform (install an ICD: Debian pocl-opencl-icd, or the GPU's driver), "
-                "or use --device cpu");
+    throw Error(
+        "--device " + spec.text() +
+        ": no OpenCL platform (install an ICD: Debian pocl-opencl-icd, or the GPU's driver), "
+        "or use --device cpu");
   }
   std::vector<DeviceInfo> infos = list_devices();
   const DeviceInfo* chosen = nullptr;
@@ -148,7 +153,8 @@ std::unique_ptr<Device::Impl> choose(const DeviceSpec& spec) {
     for (const DeviceInfo& info : infos)
       if (info.platform == spec.platform && info.device == spec.device) chosen = &info;
     if (chosen == nullptr)
-      throw Error("--device " + spec.text() + ": no such OpenCL device; `sonoshape devices` lists them");
+      throw Error("--device " + spec.text() +
+                  ": no such OpenCL device; `sonoshape devices` lists them");
     if (!chosen->fp64)
       throw Error("--device " + spec.text() + ": " + chosen->device_name +
                   " has no double precision (cl_khr_fp64), which the field kernels need; choose "
@@ -176,8 +182,9 @@ std::unique_ptr<Device::Impl> choose(const DeviceSpec& spec) {
 void build_program(Device::Impl& impl) {
   const std::string source = field_kernel_source();
   const std::string driver = impl.device.getInfo<CL_DRIVER_VERSION>();
-  const std::size_t key = std::hash<std::string>{}(impl.info.platform_name + "\n" + impl.info.device_name + "\n" +
-                                                   driver + "\n" + kBuildOptions + "\n" + source);
+  const std::size_t key =
+      std::hash<std::string>{}(impl.info.platform_name + "\n" + impl.info.device_name + "\n" +
+                               driver + "\n" + kBuildOptions + "\n" + source);
   std::ostringstream name;
   name << std::hex << key << ".bin";
   const std::filesystem::path dir = cache_dir();
@@ -185,7 +192,8 @@ void build_program(Device::Impl& impl) {
   if (!file.empty()) {
     std::ifstream in(file, std::ios::binary);
     if (in) {
-      std::vector<unsigned char> binary((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+      std::vector<unsigned char> binary((std::istreambuf_iterator<char>(in)),
+                                        std::istreambuf_iterator<char>());
       try {
         impl.program = cl::Program(impl.context, {impl.device}, cl::Program::Binaries{binary});
         impl.program.build({impl.device}, kBuildOptions);
@@ -200,8 +208,8 @@ void build_program(Device::Impl& impl) {
   try {
     impl.program.build({impl.device}, kBuildOptions);
   } catch (const cl::Error& e) {
-    throw Error("OpenCL: the field kernels do not build on " + impl.info.device_name + ": " + cl_error(e) +
-                "\n" + impl.program.getBuildInfo<CL_PROGRAM_BUILD_LOG>(impl.device) +
+    throw Error("OpenCL: the field kernels do not build on " + impl.info.device_name + ": " +
+                cl_error(e) + "\n" + impl.program.getBuildInfo<CL_PROGRAM_BUILD_LOG>(impl.device) +
                 "\nplease report this with `sonoshape devices`; --device cpu works meanwhile");
   }
   if (file.empty()) return;
@@ -222,7 +230,8 @@ void build_program(Device::Impl& impl) {
 }
 
 template <typename T>
-cl::Buffer upload(const cl::Context& context, const std::vector<T>& data, cl_mem_flags flags = CL_MEM_READ_ONLY) {
+cl::Buffer upload(const cl::Context& context, const std::vector<T>& data,
+                  cl_mem_flags flags = CL_MEM_READ_ONLY) {
   // OpenCL has no empty buffers: one element stands in.
   static const T zero{};
   const void* host = data.empty() ? &zero : data.data();
@@ -247,19 +256,22 @@ std::unique_ptr<Device> open_device(const DeviceSpec& spec) {
   return std::unique_ptr<Device>(new Device(std::move(impl)));
 }
 
-void Device::evaluate_field(const FieldData& field, const FieldBatch& batch, double* values, int* status) {
+void Device::evaluate_field(const FieldData& field, const FieldBatch& batch, double* values,
+                            int* status) {
   Impl& d = *impl_;
   const std::size_t n = batch.size();
   if (n == 0) return;
   if (field.function_count > kMaxFunctions)
-    throw Error("OpenCL field: " + std::to_string(field.function_count) + " functions, the kernels take at most " +
-                std::to_string(kMaxFunctions) + "; use --device cpu");
+    throw Error("OpenCL field: " + std::to_string(field.function_count) +
+                " functions, the kernels take at most " + std::to_string(kMaxFunctions) +
+                "; use --device cpu");
   using Clock = std::chrono::steady_clock;
   try {
     auto start = Clock::now();
     if (!d.uploaded || d.uploaded_generation != field.generation) {
       // Appended arrays keep their clean prefix when this generation extends the uploaded one.
-      const bool extend = d.uploaded && field.extends_previous && field.generation == d.uploaded_generation + 1;
+      const bool extend =
+          d.uploaded && field.extends_previous && field.generation == d.uploaded_generation + 1;
       const std::size_t points_clean = extend ? field.points_clean : 0;
       const std::size_t chain_clean = extend ? field.chain_clean : 0;
       const std::size_t parts_clean = extend ? field.parts_clean : 0;
@@ -285,7 +297,8 @@ void Device::evaluate_field(const FieldData& field, const FieldBatch& batch, dou
     const cl::Buffer positions = upload(d.context, batch.positions);
     const cl::Buffer point_faces = upload(d.context, batch.point_faces);
     const cl::Buffer face_list = upload(d.context, batch.face_list);
-    cl::Buffer out(d.context, CL_MEM_WRITE_ONLY, n * static_cast<std::size_t>(field.function_count) * sizeof(double));
+    cl::Buffer out(d.context, CL_MEM_WRITE_ONLY,
+                   n * static_cast<std::size_t>(field.function_count) * sizeof(double));
     cl::Buffer out_status(d.context, CL_MEM_WRITE_ONLY, n * sizeof(int));
     auto middle = Clock::now();
     d.upload_s += std::chrono::duration<double>(middle - start).count();
@@ -302,7 +315,8 @@ void Device::evaluate_field(const FieldData& field, const FieldBatch& batch, dou
     k.setArg(arg++, out_status);
     // The driver picks the work-group size (on PoCL, fixed sizes 1 to 128 were no faster).
     d.queue.enqueueNDRangeKernel(k, cl::NullRange, cl::NDRange(n), cl::NullRange);
-    d.queue.enqueueReadBuffer(out, CL_FALSE, 0, n * static_cast<std::size_t>(field.function_count) * sizeof(double),
+    d.queue.enqueueReadBuffer(out, CL_FALSE, 0,
+                              n * static_cast<std::size_t>(field.function_count) * sizeof(double),
                               values);
     d.queue.enqueueReadBuffer(out_status, CL_FALSE, 0, n * sizeof(int), status);
     d.queue.finish();

@@ -9,8 +9,9 @@ bool have_opencl() { return false; }
 
 std::vector<DeviceInfo> list_devices(std::string* error) {
   if (error != nullptr)
-    *error = "not built (install ocl-icd-opencl-dev and opencl-clhpp-headers and configure with "
-             "-DSONOSHAPE_WITH_OPENCL=ON)";
+    *error =
+        "not built (install ocl-icd-opencl-dev and opencl-clhpp-headers and configure with "
+        "-DSONOSHAPE_WITH_OPENCL=ON)";
   return {};
 }
 
@@ -20,8 +21,9 @@ Device::~Device() = default;
 
 std::unique_ptr<Device> open_device(const DeviceSpec& spec) {
   if (spec.kind != DeviceSpec::Kind::opencl) return nullptr;  // cpu, or auto without a GPU
-  throw Error("--device " + spec.text() +
-              ": this build has no OpenCL (configure with -DSONOSHAPE_WITH_OPENCL=ON); use --device cpu");
+  throw Error(
+      "--device " + spec.text() +
+      ": this build has no OpenCL (configure with -DSONOSHAPE_WITH_OPENCL=ON); use --device cpu");
 }
 
 const DeviceInfo& Device::info() const { throw Error("no OpenCL in this build"); }

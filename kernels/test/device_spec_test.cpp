@@ -1,6 +1,7 @@
 #include <gtest/gtest.h>
 
 #include <cstdlib>
+#include <filesystem>
 
 #include "sonoshape/core/errors.hpp"
 #include "sonoshape/kernels/opencl.hpp"
@@ -48,12 +49,42 @@ TEST(OpenClDevices, FieldProgramBuildsOnEveryFp64Device) {
   for (const DeviceInfo& info : devices) {
     if (!info.fp64) continue;
     any = true;
-    const auto device = open_device(parse_device_spec("opencl:" + std::to_string(info.platform) + ":" +
-                                                      std::to_string(info.device)));
+    const auto device = open_device(parse_device_spec("opencl:" + std::to_string(info.platform) +
+                                                      ":" + std::to_string(info.device)));
     ASSERT_NE(device, nullptr);
     EXPECT_EQ(device->info().device_name, info.device_name);
   }
-  if (!any) GTEST_SKIP() << "no OpenCL device with fp64: " << (error.empty() ? "none listed" : error);
+  if (!any)
+    GTEST_SKIP() << "no OpenCL device with fp64: " << (error.empty() ? "none listed" : error);
+}
+
+// The second start reads the program binary the first one stored under XDG_CACHE_HOME.
+TEST(OpenClDevices, ProgramBinaryIsCachedAndReadBack) {
+  std::string error;
+  std::string spec;
+  for (const DeviceInfo& info : list_devices(&error))
+    if (info.fp64 && spec.empty())
+      spec = "opencl:" + std::to_string(info.platform) + ":" + std::to_string(info.device);
+  if (spec.empty())
+    GTEST_SKIP() << "no OpenCL device with fp64: " << (error.empty() ? "none listed" : error);
+  const std::filesystem::path dir =
+      std::filesystem::temp_directory_path() / "sonoshape_kernels_cache_test";
+  std::filesystem::remove_all(dir);
+  const char* old = std::getenv("XDG_CACHE_HOME");
+  const std::string saved = old ? old : "";
+  ::setenv("XDG_CACHE_HOME", dir.c_str(), 1);
+  const bool first = open_device(parse_device_spec(spec))->program_from_cache();
+  const bool second = open_device(parse_device_spec(spec))->program_from_cache();
+  const bool stored = std::filesystem::exists(dir / "sonoshape" / "opencl") &&
+                      !std::filesystem::is_empty(dir / "sonoshape" / "opencl");
+  if (old)
+    ::setenv("XDG_CACHE_HOME", saved.c_str(), 1);
+  else
+    ::unsetenv("XDG_CACHE_HOME");
+  std::filesystem::remove_all(dir);
+  EXPECT_FALSE(first);
+  EXPECT_TRUE(second);
+  EXPECT_TRUE(stored);
 }
 
 }  // namespace

@@ -21,7 +21,8 @@ void locate_cells(const CellField& field, const std::vector<Vec3>& points, int* 
                       int guess = -1;
                       for (std::size_t n = r.begin(); n < r.end(); ++n) {
                         const Vec3& p = points[n];
-                        const bool inside = (p.array() > box.min.array()).all() && (p.array() < box.max.array()).all();
+                        const bool inside = (p.array() > box.min.array()).all() &&
+                                            (p.array() < box.max.array()).all();
                         cells[n] = inside ? guess = in.arrangement.locate(p, guess) : -1;
                       }
                     });
@@ -29,14 +30,15 @@ void locate_cells(const CellField& field, const std::vector<Vec3>& points, int* 
 
 class CpuEvaluator final : public FieldEvaluator {
  public:
-  void evaluate(const CellField& field, const std::vector<Vec3>& points, int* cells, bool cells_known,
-                double* values) override {
+  void evaluate(const CellField& field, const std::vector<Vec3>& points, int* cells,
+                bool cells_known, double* values) override {
     const std::size_t fc = static_cast<std::size_t>(field.function_count());
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, points.size(), 64),
                       [&](const tbb::blocked_range<std::size_t>& r) {
                         for (std::size_t n = r.begin(); n < r.end(); ++n)
-                          cells[n] = cells_known ? field.evaluate_in(cells[n], points[n], values + n * fc)
-                                                 : field.evaluate(points[n], values + n * fc);
+                          cells[n] = cells_known
+                                         ? field.evaluate_in(cells[n], points[n], values + n * fc)
+                                         : field.evaluate(points[n], values + n * fc);
                       });
   }
   std::string name() const override { return "cpu"; }
@@ -88,11 +90,12 @@ class FieldPacker {
       out.points.insert(out.points.end(), {in.points[k].x(), in.points[k].y()});
     for (std::size_t k = out.chain_i.size() / 4; k < in.tree_nodes.size(); ++k) {
       const ChainNode& n = in.tree_nodes[k];
-      out.chain_d.insert(out.chain_d.end(),
-                         {n.centre.x(), n.centre.y(), n.radius_sq, n.area, n.m1x, n.m1y, n.m2xx, n.m2xy, n.m2yy});
+      out.chain_d.insert(out.chain_d.end(), {n.centre.x(), n.centre.y(), n.radius_sq, n.area, n.m1x,
+                                             n.m1y, n.m2xx, n.m2xy, n.m2yy});
       out.chain_d.insert(out.chain_d.end(), n.m3, n.m3 + 4);
       out.chain_d.insert(out.chain_d.end(), n.m4, n.m4 + 5);
-      out.chain_i.insert(out.chain_i.end(), {static_cast<int>(n.first), static_cast<int>(n.last), n.left, n.right});
+      out.chain_i.insert(out.chain_i.end(),
+                         {static_cast<int>(n.first), static_cast<int>(n.last), n.left, n.right});
     }
   }
   // The records of the faces built or rebuilt since the last pack, their parts appended.
@@ -101,8 +104,9 @@ class FieldPacker {
     face_generations_.resize(in.images.size(), 0);
     auto add_parts = [&](const std::vector<FaceImage::Part>& parts) {
       for (const FaceImage::Part& p : parts)
-        out.parts.insert(out.parts.end(), {p.material, static_cast<int>(p.begin), static_cast<int>(p.count),
-                                           static_cast<int>(p.tree_root), static_cast<int>(p.tree_count)});
+        out.parts.insert(out.parts.end(),
+                         {p.material, static_cast<int>(p.begin), static_cast<int>(p.count),
+                          static_cast<int>(p.tree_root), static_cast<int>(p.tree_count)});
     };
     for (std::size_t f = 0; f < in.images.size(); ++f) {
       if (face_generations_[f] != 0 && face_generations_[f] == in.image_generations[f]) continue;
@@ -124,7 +128,8 @@ class FieldPacker {
     }
   }
   // The completed triangles, their values and every face's tree (rebuilt by each refresh).
-  static void pack_triangles(const CellField::Internals& in, int function_count, kernels::FieldData& out) {
+  static void pack_triangles(const CellField::Internals& in, int function_count,
+                             kernels::FieldData& out) {
     out.triangle_faces.clear();
     out.tnode_d.clear();
     out.tnode_i.clear();
@@ -139,15 +144,16 @@ class FieldPacker {
         for (std::size_t k = 0; k < nodes; ++k) {
           const TriangleNode& node = image.triangle_tree[k];
           out.tnode_d.insert(out.tnode_d.end(), {node.centre.x(), node.centre.y(), node.radius_sq});
-          out.tnode_i.insert(out.tnode_i.end(),
-                             {static_cast<int>(node.first), static_cast<int>(node.last), node.left, node.right});
+          out.tnode_i.insert(
+              out.tnode_i.end(),
+              {static_cast<int>(node.first), static_cast<int>(node.last), node.left, node.right});
         }
         out.moments.insert(out.moments.end(), image.triangle_tree_moments,
                            image.triangle_tree_moments + nodes * stride);
       }
-      out.triangle_faces.insert(out.triangle_faces.end(), {static_cast<int>(image.triangle_begin),
-                                                           static_cast<int>(image.triangle_count), tree_root,
-                                                           tree_root});
+      out.triangle_faces.insert(out.triangle_faces.end(),
+                                {static_cast<int>(image.triangle_begin),
+                                 static_cast<int>(image.triangle_count), tree_root, tree_root});
     }
     for (const UnknownTriangle& t : in.triangles)
       for (const Vec2& c : t.corners) out.triangles.insert(out.triangles.end(), {c.x(), c.y()});
@@ -176,13 +182,15 @@ class OpenClEvaluator final : public FieldEvaluator {
  public:
   explicit OpenClEvaluator(std::unique_ptr<kernels::Device> device) : device_(std::move(device)) {}
   ~OpenClEvaluator() override {
-    log_debug("OpenCL field: pack " + std::to_string(pack_s_) + " s, batches " + std::to_string(batch_s_) +
-              " s, upload " + std::to_string(device_->upload_seconds()) + " s (" + std::to_string(device_->uploaded_bytes() >> 20) + " MiB), kernel " +
-              std::to_string(device_->kernel_seconds()) + " s, CPU fallback " + std::to_string(fallback_s_) + " s");
+    log_debug("OpenCL field: pack " + std::to_string(pack_s_) + " s, batches " +
+              std::to_string(batch_s_) + " s, upload " + std::to_string(device_->upload_seconds()) +
+              " s (" + std::to_string(device_->uploaded_bytes() >> 20) + " MiB), kernel " +
+              std::to_string(device_->kernel_seconds()) + " s, CPU fallback " +
+              std::to_string(fallback_s_) + " s");
   }
 
-  void evaluate(const CellField& field, const std::vector<Vec3>& points, int* cells, bool cells_known,
-                double* values) override {
+  void evaluate(const CellField& field, const std::vector<Vec3>& points, int* cells,
+                bool cells_known, double* values) override {
     if (!cells_known) locate_cells(field, points, cells);
     const CellField::Internals in = field.internals();
     Stopwatch clock;
@@ -206,7 +214,8 @@ class OpenClEvaluator final : public FieldEvaluator {
         batch_.face_list.insert(batch_.face_list.end(), faces.begin(), faces.end());
         last_cell = cells[n];
       }
-      batch_.positions.insert(batch_.positions.end(), {points[n].x(), points[n].y(), points[n].z()});
+      batch_.positions.insert(batch_.positions.end(),
+                              {points[n].x(), points[n].y(), points[n].z()});
       batch_.point_faces.insert(batch_.point_faces.end(), {first, count});
       device_points_.push_back(n);
     }
@@ -250,7 +259,8 @@ std::unique_ptr<FieldEvaluator> make_field_evaluator(const std::string& device) 
   const kernels::DeviceSpec spec = kernels::parse_device_spec(device);
   std::unique_ptr<kernels::Device> opened = kernels::open_device(spec);
   if (!opened) return std::make_unique<CpuEvaluator>();
-  log_info("field on OpenCL device " + opened->info().device_name + " (" + opened->info().platform_name +
+  log_info("field on OpenCL device " + opened->info().device_name + " (" +
+           opened->info().platform_name +
            (opened->program_from_cache() ? ", program from cache)" : ")"));
   return std::make_unique<OpenClEvaluator>(std::move(opened));
 }

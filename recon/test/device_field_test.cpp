@@ -31,7 +31,8 @@ std::string why_no_device() {
   std::string error;
   for (const kernels::DeviceInfo& info : kernels::list_devices(&error))
     if (info.fp64) return {};
-  return "no OpenCL device with fp64 (" + (error.empty() ? std::string("none has cl_khr_fp64") : error) +
+  return "no OpenCL device with fp64 (" +
+         (error.empty() ? std::string("none has cl_khr_fp64") : error) +
          "); install pocl-opencl-icd to run these tests";
 }
 
@@ -59,7 +60,8 @@ LabeledSlice random_slice(std::mt19937& rng, bool fov) {
   auto add_sphere = [&](const Vec3& centre, double radius, int label) {
     const double d = n.dot(centre - s.origin_mm);
     if (std::abs(d) >= 0.95 * radius) return;
-    s.regions.push_back({label, circle(s.to_plane(centre - d * n), std::sqrt(radius * radius - d * d), 48), {}});
+    s.regions.push_back(
+        {label, circle(s.to_plane(centre - d * n), std::sqrt(radius * radius - d * d), 48), {}});
   };
   add_sphere(Vec3(-10, 0, 0), 0.5 * kRadius, 1);
   add_sphere(Vec3(16, 4, 2), 0.3 * kRadius, 2);
@@ -75,8 +77,10 @@ LabeledSlice sweep_slice(double height) {
   s.v = Vec3(0, std::cos(tilt), std::sin(tilt));
   s.origin_mm = Vec3(0, 0, height);
   const double d = s.normal().normalized().dot(Vec3(-10, 0, 0) - s.origin_mm);
-  s.regions.push_back(
-      {1, circle(s.to_plane(Vec3(-10, 0, 0) - d * s.normal().normalized()), std::sqrt(225.0 - d * d), 48), {}});
+  s.regions.push_back({1,
+                       circle(s.to_plane(Vec3(-10, 0, 0) - d * s.normal().normalized()),
+                              std::sqrt(225.0 - d * d), 48),
+                       {}});
   s.fov = sector_fan();
   return s;
 }
@@ -141,9 +145,9 @@ TEST_P(DeviceField, ValuesAgreeWithTheCpuWithin1e9) {
   if (std::string(GetParam()) != "random") {
     EXPECT_GT(field.unknown_triangle_count(), 0u);
   }
-  std::cout << GetParam() << ": " << points.size() << " points, worst |cpu - device| " << worst << ", "
-            << bitwise << " of " << cpu.size() << " values equal to the bit, " << field.unknown_triangle_count()
-            << " unknown triangles\n";
+  std::cout << GetParam() << ": " << points.size() << " points, worst |cpu - device| " << worst
+            << ", " << bitwise << " of " << cpu.size() << " values equal to the bit, "
+            << field.unknown_triangle_count() << " unknown triangles\n";
 }
 
 TEST_P(DeviceField, MeshesEqualTheCpuOnes) {

@@ -56,21 +56,21 @@ struct FieldData {
   std::size_t points_clean = 0, chain_clean = 0, parts_clean = 0;
   int function_count = 2;  ///< at most kMaxFunctions
   double on_face_height = 0;
-  std::vector<double> frames;          ///< 12 per arrangement plane: origin, u, v, unit normal
-  std::vector<int> faces;              ///< 8 per face (field.cl FACE_INTS)
-  std::vector<int> parts;              ///< 5 per part (PART_INTS)
-  std::vector<double> points;          ///< 2 per point of the face images
-  std::vector<double> chain_d;         ///< 18 per chain-tree node (CHAIN_DOUBLES)
-  std::vector<int> chain_i;            ///< 4 per chain-tree node
-  std::vector<int> triangle_faces;     ///< 4 per face (TFACE_INTS)
-  std::vector<double> triangles;       ///< 6 per completed unknown triangle
-  std::vector<double> corner_values;   ///< 3 x function_count per triangle
-  std::vector<double> tnode_d;         ///< 3 per triangle-tree node
-  std::vector<int> tnode_i;            ///< 4 per triangle-tree node
-  std::vector<double> moments;         ///< triangle_moment_stride per triangle-tree node
-  std::vector<int> pairs;              ///< (a, b) per moment pair
-  std::vector<double> kernel_table;    ///< 7 per moment pair
-  std::vector<double> truncation;      ///< per degree 0..12
+  std::vector<double> frames;         ///< 12 per arrangement plane: origin, u, v, unit normal
+  std::vector<int> faces;             ///< 8 per face (field.cl FACE_INTS)
+  std::vector<int> parts;             ///< 5 per part (PART_INTS)
+  std::vector<double> points;         ///< 2 per point of the face images
+  std::vector<double> chain_d;        ///< 18 per chain-tree node (CHAIN_DOUBLES)
+  std::vector<int> chain_i;           ///< 4 per chain-tree node
+  std::vector<int> triangle_faces;    ///< 4 per face (TFACE_INTS)
+  std::vector<double> triangles;      ///< 6 per completed unknown triangle
+  std::vector<double> corner_values;  ///< 3 x function_count per triangle
+  std::vector<double> tnode_d;        ///< 3 per triangle-tree node
+  std::vector<int> tnode_i;           ///< 4 per triangle-tree node
+  std::vector<double> moments;        ///< triangle_moment_stride per triangle-tree node
+  std::vector<int> pairs;             ///< (a, b) per moment pair
+  std::vector<double> kernel_table;   ///< 7 per moment pair
+  std::vector<double> truncation;     ///< per degree 0..12
 };
 constexpr int kMaxFunctions = 16;
 
@@ -103,8 +103,7 @@ class Device {
   double upload_seconds() const;
   std::size_t uploaded_bytes() const;
   double kernel_seconds() const;
-  struct Impl;
-  Impl& impl() { return *impl_; }
+  struct Impl;  ///< OpenCL objects (opencl.cpp)
 
  private:
   friend std::unique_ptr<Device> open_device(const DeviceSpec& spec);
