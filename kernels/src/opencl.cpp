@@ -77,6 +77,7 @@ struct Device::Impl {
   cl::Program program;
   cl::Kernel kernel;
   bool from_cache = false;
+  std::size_t local_size = 1;  // work-group size of every launch
   // One buffer per field array, grown by half again when too small, so that an update that
   // appends to an array copies only what it appended.
   struct Slot {
@@ -250,6 +251,9 @@ std::unique_ptr<Device> open_device(const DeviceSpec& spec) {
     impl->queue = cl::CommandQueue(impl->context, impl->device);
     build_program(*impl);
     impl->kernel = cl::Kernel(impl->program, "evaluate_field");
+    // 64 work-items (two warps on NVIDIA, vector lanes on PoCL) where the kernel allows it.
+    const std::size_t most = impl->kernel.getWorkGroupInfo<CL_KERNEL_WORK_GROUP_SIZE>(impl->device);
+    impl->local_size = std::max<std::size_t>(1, std::min<std::size_t>(64, most));
   } catch (const cl::Error& e) {
     throw Error("OpenCL: cannot open " + impl->info.device_name + ": " + cl_error(e));
   }
@@ -313,8 +317,11 @@ void Device::evaluate_field(const FieldData& field, const FieldBatch& batch, dou
     for (const Impl::Slot& slot : d.slots) k.setArg(arg++, slot.buffer);
     k.setArg(arg++, out);
     k.setArg(arg++, out_status);
-    // The driver picks the work-group size (on PoCL, fixed sizes 1 to 128 were no faster).
-    d.queue.enqueueNDRangeKernel(k, cl::NullRange, cl::NDRange(n), cl::NullRange);
+    // One work-group size for every batch: PoCL compiles the kernel again for each local size,
+    // and left to choose, it chose one per global size (an online scan spent minutes compiling).
+    const std::size_t local = d.local_size;
+    d.queue.enqueueNDRangeKernel(k, cl::NullRange, cl::NDRange((n + local - 1) / local * local),
+                                 cl::NDRange(local));
     d.queue.enqueueReadBuffer(out, CL_FALSE, 0,
                               n * static_cast<std::size_t>(field.function_count) * sizeof(double),
                               values);

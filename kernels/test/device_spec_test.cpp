@@ -58,6 +58,18 @@ TEST(OpenClDevices, FieldProgramBuildsOnEveryFp64Device) {
     GTEST_SKIP() << "no OpenCL device with fp64: " << (error.empty() ? "none listed" : error);
 }
 
+// auto: an fp64 GPU when one is listed, else nothing (the native CPU path).
+TEST(OpenClDevices, AutoTakesAGpuOrTheCpu) {
+  bool gpu = false;
+  for (const DeviceInfo& info : list_devices()) gpu |= info.gpu && info.fp64;
+  const auto device = open_device(parse_device_spec("auto"));
+  EXPECT_EQ(device != nullptr, gpu);
+  if (device) {
+    EXPECT_TRUE(device->info().gpu);
+  }
+  EXPECT_EQ(open_device(parse_device_spec("cpu")), nullptr);
+}
+
 // The second start reads the program binary the first one stored under XDG_CACHE_HOME.
 TEST(OpenClDevices, ProgramBinaryIsCachedAndReadBack) {
   std::string error;
