@@ -6,11 +6,11 @@
 # libgcc_s and libOpenCL stay the system's, newer there and the ones its OpenCL drivers need),
 # an $ORIGIN rpath, the slice sets of every figure (sliced here) and bench/gpu_run.sh. Refuses
 # to finish over 64 MiB.
-# Usage: bench/make_carry.sh [OUT (default shared/carry)] [BUILD (default build)]
+# Usage: bench/make_carry.sh [OUT (default out/carry, git-ignored)] [BUILD (default build)]
 # (build the targets sonoshape and sonoshape_device_bench first)
 set -euo pipefail
 cd "$(dirname "$0")/.."
-out=${1:-shared/carry}
+out=${1:-out/carry}
 build=${2:-build}
 bin=$build/apps/sonoshape  # slices the sets here
 bench=$build/bench/sonoshape_device_bench
