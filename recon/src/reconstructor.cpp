@@ -274,6 +274,8 @@ bool Reconstructor::remove_slice(int id) {
 
 UpdateStats Reconstructor::update() {
   State& s = *state_;
+  // The field's device first: a device that cannot be used leaves the engine as it was.
+  if (!s.evaluator) s.evaluator = make_field_evaluator(s.options.engine.device);
   UpdateStats out;
   if (s.built && s.pending_adds.empty() && s.pending_removes.empty()) {
     out.step = s.totals;
@@ -378,7 +380,6 @@ UpdateStats Reconstructor::update() {
   std::size_t evaluations = 0;
   double evaluation_seconds = 0.0;
   std::vector<int> point_cells;
-  if (!s.evaluator) s.evaluator = make_field_evaluator(s.options.engine.device);
   // The octree asks only for vertices the kept field has no valid value for: all are evaluated
   // (in parallel) and tagged with their cell and this update.
   const BatchEvaluator evaluate = [&](const std::vector<Vec3>& points, double* values,

@@ -197,6 +197,17 @@ TEST(DeviceFieldOnline, UpdatesOfASweepEqualTheCpuEngine) {
   }
 }
 
+TEST(DeviceFieldSpec, AnUnusableDeviceLeavesTheEngineAsItWas) {
+  ReconstructorOptions options;
+  options.bounds = kBox;
+  options.engine.max_depth = 4;
+  options.engine.device = "opencl:99:0";
+  Reconstructor engine(options);
+  engine.add_slice(sweep_slice(0.0));
+  EXPECT_THROW(engine.update(), Error);
+  EXPECT_EQ(engine.slice_count(), 0u);
+}
+
 TEST(DeviceFieldSpec, AMalformedDeviceIsRefusedWithTheAcceptedForms) {
   try {
     make_field_evaluator("gpu");
