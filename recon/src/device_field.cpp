@@ -191,6 +191,15 @@ class OpenClEvaluator final : public FieldEvaluator {
 
   void evaluate(const CellField& field, const std::vector<Vec3>& points, int* cells,
                 bool cells_known, double* values) override {
+    if (field.function_count() > kernels::kMaxFunctions) {
+      // The kernel keeps every function's weight in registers: more labels stay on the CPU.
+      if (!warned_)
+        log_warning("OpenCL field: " + std::to_string(field.function_count() - 1) +
+                    " materials, the kernels take at most " +
+                    std::to_string(kernels::kMaxFunctions - 1) + "; the field runs on the CPU");
+      warned_ = true;
+      return cpu_.evaluate(field, points, cells, cells_known, values);
+    }
     if (!cells_known) locate_cells(field, points, cells);
     const CellField::Internals in = field.internals();
     Stopwatch clock;
@@ -251,6 +260,8 @@ class OpenClEvaluator final : public FieldEvaluator {
   std::vector<double> device_values_;
   std::vector<int> status_;
   double pack_s_ = 0, batch_s_ = 0, fallback_s_ = 0;
+  CpuEvaluator cpu_;
+  bool warned_ = false;
 };
 
 }  // namespace

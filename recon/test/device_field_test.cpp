@@ -197,6 +197,34 @@ TEST(DeviceFieldOnline, UpdatesOfASweepEqualTheCpuEngine) {
   }
 }
 
+// More materials than the kernel's registers hold: the field stays on the CPU, same meshes.
+TEST(DeviceFieldOnline, SeventeenMaterialsFallBackToTheCpu) {
+  const std::string why = why_no_device();
+  if (!why.empty()) GTEST_SKIP() << why;
+  SliceSet set;
+  set.bounds = kBox;
+  for (int k = 0; k < 3; ++k) {
+    LabeledSlice s;
+    s.u = Vec3(1, 0, 0);
+    s.v = Vec3(0, 1, 0);
+    s.origin_mm = Vec3(0, 0, -10.0 + 10.0 * k);
+    for (int m = 0; m < 17; ++m)
+      s.regions.push_back({m + 1, circle(Vec2(-32.0 + 4.0 * m, 0.0), 1.8, 8), {}});
+    set.slices.push_back(s);
+  }
+  ReconstructionOptions options;
+  options.max_depth = 6;
+  const MeshSet a = reconstruct(set, options);
+  options.device = "opencl";
+  const MeshSet b = reconstruct(set, options);
+  ASSERT_EQ(a.meshes.size(), 17u);
+  ASSERT_EQ(b.meshes.size(), 17u);
+  for (std::size_t m = 0; m < a.meshes.size(); ++m) {
+    EXPECT_FALSE(a.meshes[m].mesh.triangles.empty()) << "material " << m + 1;
+    EXPECT_EQ(a.meshes[m].mesh.triangles, b.meshes[m].mesh.triangles);
+  }
+}
+
 TEST(DeviceFieldSpec, AnUnusableDeviceLeavesTheEngineAsItWas) {
   ReconstructorOptions options;
   options.bounds = kBox;
