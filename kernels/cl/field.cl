@@ -8,7 +8,7 @@
 //   fast_atan2               recon/src/atan2.hpp
 //   edge_term, plain_sum     mean_value.cpp (edge_terms_avx2, projected_angle_plain_avx2)
 //   chain_tree_plain         chain_tree.cpp (projected_angle_tree_plain, region_term)
-//   triangle_weights         mean_value.cpp (triangle_weights, triangle_epilogue)
+//   triangle_weights4        mean_value.cpp (triangle_weights4_avx2, triangle_weights)
 //   triangle_tree            triangle_tree.cpp (add_triangle_weights_tree, kernel_coefficients)
 // Points the CPU must take (on a face, or a non-finite value to report) get a status != 0.
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
@@ -303,63 +303,94 @@ double triangle_split(const double2* ring, double2 foot, double height, double p
   return round(planar / two_pi) != 0.0 ? plain : remainder;
 }
 
-// triangle_weights: false for a degenerate triangle (it adds nothing).
-bool triangle_weights(const double2* corners, double2 foot, double height, double* weights) {
-  const double2 a = corners[0], b = corners[1], c = corners[2];
-  const double2 ab = b - a, ac = c - a, bc = c - b, ca = a - c, fa = foot - a;
-  const double twice_area = ab.x * ac.y - ab.y * ac.x;
-  const double longest_sq =
-      fmax(fmax(ab.x * ab.x + ab.y * ab.y, bc.x * bc.x + bc.y * bc.y), ca.x * ca.x + ca.y * ca.y);
-  const double reach_sq = (fa.x * fa.x + fa.y * fa.y) + height * height;
-  if (!(fabs(twice_area) > 1e-12 * fmax(longest_sq, 1e-12 * reach_sq) && height > 0.0))
-    return false;
-  double2 ring[3];
-  ring[0] = a;
-  ring[1] = twice_area > 0 ? b : c;
-  ring[2] = twice_area > 0 ? c : b;
+// triangle_weights of `count` (1 to 4) triangles, their edge angles four at a time in double4
+// lanes (triangle_weights4_avx2; lanes past `count` repeat the last triangle), the rest lane by
+// lane: every weight is triangle_weights' to the bit. ok[t] as triangle_weights' result.
+void triangle_weights4(__global const double* triangles, uint count, double2 foot, double height,
+                       double weights[4][3], bool ok[4]) {
+  double2 corners[4][3], ring[4][3];
+  double twice_area[4], longest_sq[4];
+  bool valid[4];
+  for (uint t = 0; t < 4; ++t) {
+    __global const double* c = triangles + (size_t)min(t, count - 1) * 6;
+    corners[t][0] = (double2)(c[0], c[1]);
+    corners[t][1] = (double2)(c[2], c[3]);
+    corners[t][2] = (double2)(c[4], c[5]);
+    const double2 a = corners[t][0], b = corners[t][1], cc = corners[t][2];
+    const double2 ab = b - a, ac = cc - a, bc = cc - b, ca = a - cc, fa = foot - a;
+    twice_area[t] = ab.x * ac.y - ab.y * ac.x;
+    longest_sq[t] =
+        fmax(fmax(ab.x * ab.x + ab.y * ab.y, bc.x * bc.x + bc.y * bc.y), ca.x * ca.x + ca.y * ca.y);
+    const double reach_sq = (fa.x * fa.x + fa.y * fa.y) + height * height;
+    valid[t] = fabs(twice_area[t]) > 1e-12 * fmax(longest_sq[t], 1e-12 * reach_sq) && height > 0.0;
+    ring[t][0] = a;
+    ring[t][1] = twice_area[t] > 0 ? b : cc;
+    ring[t][2] = twice_area[t] > 0 ? cc : b;
+  }
   const double h2 = height * height;
-  double mx = 0.0, my = 0.0, projected = 0.0;
+  double4 sum = (double4)(0.0), mx = (double4)(0.0), my = (double4)(0.0);
   for (int k = 0; k < 3; ++k) {
-    const double2 p = ring[k] - foot;
-    const double2 q_end = ring[(k + 1) % 3] - foot;
-    const double2 d = q_end - p;
-    const double cross = p.x * q_end.y - p.y * q_end.x;
-    double q_length;
-    const double angle = edge_angle(p, q_end, d, cross, d.x * d.x + d.y * d.y, h2, &q_length);
-    const double angle_over_q_length = angle / q_length;
-    projected += cross * angle_over_q_length;
-    const double scale = (-0.5 * height) * angle_over_q_length;
-    mx += scale * d.y;
-    my += scale * -d.x;
+    const int k1 = (k + 1) % 3;
+    const double4 px = (double4)(ring[0][k].x, ring[1][k].x, ring[2][k].x, ring[3][k].x) - foot.x;
+    const double4 py = (double4)(ring[0][k].y, ring[1][k].y, ring[2][k].y, ring[3][k].y) - foot.y;
+    const double4 qx =
+        (double4)(ring[0][k1].x, ring[1][k1].x, ring[2][k1].x, ring[3][k1].x) - foot.x;
+    const double4 qy =
+        (double4)(ring[0][k1].y, ring[1][k1].y, ring[2][k1].y, ring[3][k1].y) - foot.y;
+    const double4 dx = qx - px, dy = qy - py;
+    const double4 length_sq = dx * dx + dy * dy;
+    const double4 cross = px * qy - py * qx;
+    const double4 big_q = cross * cross + h2 * length_sq;
+    const double4 q_length = sqrt(big_q);
+    const double4 a_dot_d = px * dx + py * dy;
+    const double4 b_dot_d = qx * dx + qy * dy;
+    const double4 angle = atan2_nonnegative_y4(q_length * length_sq, big_q + a_dot_d * b_dot_d);
+    const double4 angle_over_q_length = angle / q_length;
+    sum += cross * angle_over_q_length;
+    const double4 scale = (-0.5 * height) * angle_over_q_length;
+    mx += scale * dy;
+    my += scale * -dx;
   }
-  if (fabs(projected) < SPLIT_BELOW &&
-      height * height < (SPLIT_HEIGHT_RATIO * SPLIT_HEIGHT_RATIO) * longest_sq)
-    projected = triangle_split(ring, foot, height, projected);
-  const double inverse_area = 1.0 / twice_area, projected_over_height = projected / height;
-  for (int i = 0; i < 3; ++i) {
-    const double2 p1 = corners[(i + 1) % 3], p2 = corners[(i + 2) % 3];
-    const double2 e = p2 - p1;
-    const double gx = -e.y * inverse_area, gy = e.x * inverse_area;
-    const double2 f = foot - p1;
-    const double lambda_at_foot = gx * f.x + gy * f.y;
-    weights[i] = lambda_at_foot * projected_over_height + 2.0 * (gx * mx + gy * my);
+  const double lanes_sum[4] = {sum.s0, sum.s1, sum.s2, sum.s3};
+  const double lanes_mx[4] = {mx.s0, mx.s1, mx.s2, mx.s3};
+  const double lanes_my[4] = {my.s0, my.s1, my.s2, my.s3};
+  for (uint t = 0; t < count; ++t) {
+    ok[t] = false;
+    if (!valid[t]) continue;
+    double projected = lanes_sum[t];
+    if (fabs(projected) < SPLIT_BELOW &&
+        height * height < (SPLIT_HEIGHT_RATIO * SPLIT_HEIGHT_RATIO) * longest_sq[t])
+      projected = triangle_split(ring[t], foot, height, projected);
+    const double inverse_area = 1.0 / twice_area[t], projected_over_height = projected / height;
+    for (int i = 0; i < 3; ++i) {
+      const double2 p1 = corners[t][(i + 1) % 3], p2 = corners[t][(i + 2) % 3];
+      const double2 e = p2 - p1;
+      const double gx = -e.y * inverse_area, gy = e.x * inverse_area;
+      const double2 f = foot - p1;
+      const double lambda_at_foot = gx * f.x + gy * f.y;
+      weights[t][i] =
+          lambda_at_foot * projected_over_height + 2.0 * (gx * lanes_mx[t] + gy * lanes_my[t]);
+    }
+    ok[t] = isfinite(weights[t][0]) && isfinite(weights[t][1]) && isfinite(weights[t][2]);
   }
-  return isfinite(weights[0]) && isfinite(weights[1]) && isfinite(weights[2]);
 }
 
-// add_exact (triangle_tree.cpp): triangles [first, last) of a face in their order.
+// add_exact (triangle_tree.cpp): triangles [first, last) of a face in their order, four at a
+// time (triangle_weights4).
 void add_exact(__global const double* triangles, __global const double* values, uint first,
                uint last, int fc, double2 foot, double height, double* w) {
-  for (uint t = first; t < last; ++t) {
-    __global const double* c = triangles + (size_t)t * 6;
-    const double2 corners[3] = {(double2)(c[0], c[1]), (double2)(c[2], c[3]),
-                                (double2)(c[4], c[5])};
-    double weights[3];
-    if (!triangle_weights(corners, foot, height, weights)) continue;
-    __global const double* v = values + (size_t)t * 3 * fc;
-    for (int k = 0; k < 3; ++k) {
-      const double weight = weights[k];
-      for (int l = 0; l < fc; ++l) w[l] += 0.5 * weight * (1.0 + v[k * fc + l]);
+  for (uint block = first; block < last; block += 4) {
+    const uint count = min(4u, last - block);
+    double weights[4][3];
+    bool ok[4];
+    triangle_weights4(triangles + (size_t)block * 6, count, foot, height, weights, ok);
+    for (uint t = 0; t < count; ++t) {
+      if (!ok[t]) continue;
+      __global const double* v = values + (size_t)(block + t) * 3 * fc;
+      for (int k = 0; k < 3; ++k) {
+        const double weight = weights[t][k];
+        for (int l = 0; l < fc; ++l) w[l] += 0.5 * weight * (1.0 + v[k * fc + l]);
+      }
     }
   }
 }
