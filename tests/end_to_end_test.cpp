@@ -5,6 +5,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
@@ -190,6 +191,41 @@ TEST_F(EndToEnd, OnlineReconstructionEmitsStepsAndEqualsOffline) {
   r = run("reconstruct " + example + " -o " + path("x") + " --emit-every 2");
   EXPECT_NE(r.exit_code, 0);
   EXPECT_NE(r.output.find("--online"), std::string::npos) << r.output;
+}
+
+// --device: the OpenCL field (PoCL in CI) writes the same mesh file as the native CPU, byte for
+// byte; `devices` lists it; a malformed or missing device is refused before any work.
+TEST_F(EndToEnd, ReconstructOnOpenClWritesTheCpuMesh) {
+  auto r = run("devices");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("Field evaluation (OpenCL):"), std::string::npos) << r.output;
+  if (r.output.find("fp64, --device opencl:") == std::string::npos)
+    GTEST_SKIP() << "no OpenCL device with fp64 (install pocl-opencl-icd):\n" << r.output;
+  r = run("slice --mesh 1:" + model("spot.obj") + ":spot --planes random --count 12 --seed 2 --size-mm 150 -o " +
+          path("spot.slices.json"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  r = run("reconstruct " + path("spot.slices.json") + " --depth 6 -o " + path("cpu.ply") + " --device cpu");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  r = run("reconstruct " + path("spot.slices.json") + " --depth 6 -o " + path("opencl.ply") + " --device opencl");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  std::ifstream a(path("cpu.ply"), std::ios::binary), b(path("opencl.ply"), std::ios::binary);
+  const std::string bytes_a((std::istreambuf_iterator<char>(a)), std::istreambuf_iterator<char>());
+  const std::string bytes_b((std::istreambuf_iterator<char>(b)), std::istreambuf_iterator<char>());
+  EXPECT_GT(bytes_a.size(), 1000u);
+  EXPECT_TRUE(bytes_a == bytes_b) << "the OpenCL mesh differs from the CPU's";
+}
+
+TEST_F(EndToEnd, AMalformedOrMissingDeviceIsRefusedWithTheFix) {
+  auto r = run("reconstruct " + std::string(SONOSHAPE_DATA_DIR) + "/examples/two_labels.slices.json -o " +
+               path("x.ply") + " --device gpu");
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_NE(r.output.find("opencl:PLATFORM:DEVICE"), std::string::npos) << r.output;
+  r = run("reconstruct " + std::string(SONOSHAPE_DATA_DIR) + "/examples/two_labels.slices.json -o " +
+          path("x.ply") + " --device opencl:9:9");
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_TRUE(r.output.find("no such OpenCL device") != std::string::npos ||
+              r.output.find("no OpenCL") != std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(path("x.ply")));
 }
 
 }  // namespace

@@ -1,10 +1,14 @@
 // `sonoshape devices`: the acquisition devices attached to this machine, each usable mode as
 // the option a user pastes into `sonoshape scan`. One section per kind of device: V4L2 frame
-// grabbers (--source v4l2:...), then USB trackers (--tracker usb:...).
+// grabbers (--source v4l2:...), USB trackers (--tracker usb:...), then the OpenCL devices the
+// field can be evaluated on (--device opencl:P:D).
 #include <CLI/CLI.hpp>
+#include <iomanip>
 #include <iostream>
 
 #include "commands.hpp"
+#include "sonoshape/core/log.hpp"
+#include "sonoshape/kernels/opencl.hpp"
 #include "sonoshape/tracking/trakstar_source.hpp"
 
 #ifdef SONOSHAPE_WITH_V4L2
@@ -43,12 +47,47 @@ void print_trackers(std::ostream& out) {
     out << "  " << tracker.description << ":  --tracker " << tracker.spec << "\n";
 }
 
+// Every platform's devices, those without double precision marked unusable.
+void print_opencl(std::ostream& out) {
+  out << "Field evaluation (OpenCL):\n";
+  std::string error;
+  const auto devices = kernels::list_devices(&error);
+  if (!error.empty()) out << "  " << error << "\n";
+  for (const kernels::DeviceInfo& d : devices) {
+    out << "  " << d.platform_name << " / " << d.device_name << " (" << (d.gpu ? "GPU" : "CPU") << ", "
+        << d.compute_units << " compute units, " << std::fixed << std::setprecision(1)
+        << static_cast<double>(d.global_memory_bytes) / (1024.0 * 1024.0 * 1024.0) << " GiB, " << d.version << "): ";
+    if (d.fp64)
+      out << "fp64, --device opencl:" << d.platform << ":" << d.device << "\n";
+    else
+      out << "no fp64 (cl_khr_fp64): cannot run the field kernels\n";
+  }
+  out << "  --device cpu: the native CPU path (the default)\n";
+}
+
 }  // namespace
+
+const char* const kDeviceHelp =
+    "Where the field is evaluated: cpu (native, the default), opencl (the first OpenCL device with "
+    "fp64, a GPU if any), opencl:PLATFORM:DEVICE (`sonoshape devices` lists them) or auto (an fp64 "
+    "GPU if present, else cpu). Default: $SONOSHAPE_DEVICE, else cpu";
+
+std::string resolve_device(const std::string& option) {
+  const kernels::DeviceSpec spec = kernels::device_spec_from(option);
+  if (spec.kind == kernels::DeviceSpec::Kind::cpu) return "cpu";
+  const auto device = kernels::open_device(spec);
+  if (!device) {
+    log_info("--device auto: no OpenCL GPU with fp64, the field runs on the CPU");
+    return "cpu";
+  }
+  return "opencl:" + std::to_string(device->info().platform) + ":" + std::to_string(device->info().device);
+}
 
 CommandRunner add_devices_command(CLI::App&) {
   return [] {
     print_frame_grabbers(std::cout);
     print_trackers(std::cout);
+    print_opencl(std::cout);
     return 0;
   };
 }

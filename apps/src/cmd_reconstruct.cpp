@@ -159,6 +159,7 @@ CommandRunner add_reconstruct_command(CLI::App& app) {
     recon::ReconstructionOptions engine;
     bool online = false;
     bool strict = false;
+    std::string device;  // empty: SONOSHAPE_DEVICE, else cpu
     int emit_every = 0;
     std::string order = "file";
   };
@@ -180,6 +181,7 @@ CommandRunner add_reconstruct_command(CLI::App& app) {
                  "Threads for every stage of the reconstruction (0: all cores)")
       ->check(CLI::Range(0, 1024))
       ->capture_default_str();
+  app.add_option("--device", opt->device, kDeviceHelp);
   app.add_option("--stats", opt->stats_path, "Write per-stage seconds and counts as JSON (with "
                  "--online: totals and one entry per step)");
   app.add_flag("--strict", opt->strict,
@@ -195,6 +197,7 @@ CommandRunner add_reconstruct_command(CLI::App& app) {
       ->capture_default_str();
 
   return [opt]() -> int {
+    opt->engine.device = resolve_device(opt->device);
     const Result<SliceSet> slices = read_slice_set(opt->input, ReadOptions{opt->strict});
     if (!slices) {
       std::cerr << "error: " << slices.message() << '\n';

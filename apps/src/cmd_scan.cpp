@@ -67,6 +67,7 @@ struct ScanCommandOptions {
   std::size_t segmentation_queue = scan::ScanOptions{}.segmentation_queue;
   std::size_t reconstruction_queue = scan::ScanOptions{}.reconstruction_queue;
   int depth = -1;
+  std::string device;  // --device; empty: SONOSHAPE_DEVICE, else cpu
   int smoothing = 8;
   std::vector<double> bounds;
   // sim: only
@@ -397,6 +398,7 @@ int run_scan(const ScanCommandOptions& options, const Resume* resume) {
   recon::ReconstructorOptions engine;
   engine.engine.max_depth = options.depth;
   engine.engine.smoothing_iterations = options.smoothing;
+  engine.engine.device = resolve_device(options.device);
   engine.bounds = source->setup.bounds;
   engine.labels = source->setup.labels;
 
@@ -641,6 +643,7 @@ void add_scan_options(CLI::App& app, ScanCommandOptions& o) {
   app.add_option("--depth", options->depth,
                  "Octree depth of the reconstruction (-1: finest cells about 1/128 of the box)")
       ->capture_default_str();
+  app.add_option("--device", options->device, kDeviceHelp);
   app.add_option("--smoothing", options->smoothing, "Bi-Laplacian smoothing iterations")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();

@@ -27,4 +27,12 @@ CommandRunner add_listen_command(CLI::App& app);
 CommandRunner add_devices_command(CLI::App& app);
 CommandRunner add_view_command(CLI::App& app);
 
+/// The help text of --device (reconstruct, scan).
+extern const char* const kDeviceHelp;
+/// The device the engine uses for `option` (--device; empty: SONOSHAPE_DEVICE, else cpu), as
+/// ReconstructionOptions::device spells it: an OpenCL device is opened once here, so that a
+/// missing device or one without fp64 is reported before any work ("auto" without a GPU is
+/// "cpu"). Throws sonoshape::Error with the fix.
+std::string resolve_device(const std::string& option);
+
 }  // namespace sonoshape::apps

@@ -49,7 +49,7 @@ int main(int argc, char** argv) {
       sonoshape::apps::add_listen_command);
   add("view", "Show a live mesh stream in the browser: serves a page and relays the stream to it",
       sonoshape::apps::add_view_command);
-  add("devices", "List the frame grabbers attached, each mode as a --source to paste",
+  add("devices", "List the frame grabbers, trackers and OpenCL devices attached, each as the option to paste",
       sonoshape::apps::add_devices_command);
 
   try {

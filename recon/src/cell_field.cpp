@@ -4,6 +4,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <limits>
 #include <span>
@@ -220,6 +221,9 @@ void CellField::update_frames() {
 }
 
 std::vector<int> CellField::refresh(const std::vector<int>& split_faces) {
+  // Unique across fields: a field made where an old one was never repeats its version.
+  static std::atomic<std::uint64_t> versions{0};
+  version_ = ++versions;
   update_frames();
   const std::size_t old_face_count = images_.size();
   images_.resize(arrangement_.face_count());
@@ -313,6 +317,7 @@ void CellField::compact_points() {
     for (FaceImage::Part& part : image.known_parts) move_part(part);
   }
   points_ = std::move(compacted);
+  ++compactions_;
   tree_nodes_ = std::move(compacted_trees);
   next_compaction_check_ = points_.size() + points_.size() / 4 + 4096;
 }

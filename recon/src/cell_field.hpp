@@ -139,6 +139,29 @@ class CellField {
   const std::vector<Vec2>& points() const { return points_; }
   const std::vector<PreparedSlice>& slices() const { return slices_; }
 
+  /// What a device evaluator copies to its memory (device_field.cpp), read-only. `version`
+  /// changes at every refresh() and is unique across fields: the arrays are as they were while
+  /// it stays the same. Between two compactions `points` and `tree_nodes` only grow (a rebuilt
+  /// image appends its own), and `image_generations[f]` changes when face f's image is rebuilt:
+  /// a device copies what is new.
+  struct Internals {
+    const Arrangement& arrangement;
+    const std::vector<PlaneFrame>& frames;
+    const std::vector<FaceImage>& images;
+    const std::vector<std::uint64_t>& image_generations;
+    const std::vector<Vec2>& points;
+    const std::vector<ChainNode>& tree_nodes;
+    std::uint64_t compactions;
+    const std::vector<UnknownTriangle>& triangles;
+    const std::vector<double>& corner_values;
+    double on_face_height;
+    std::uint64_t version;
+  };
+  Internals internals() const {
+    return {arrangement_, frames_,    images_,         image_generations_, points_,  tree_nodes_,
+            compactions_, triangles_, corner_values_, on_face_height_,    version_};
+  }
+
  private:
   // The unknown triangles and completed values of one slice, and what they were computed from.
   struct SliceCompletion {
@@ -231,6 +254,8 @@ class CellField {
   std::uint64_t last_image_generation_ = 0;
   std::vector<SliceCompletion> slice_completions_;  // per slice
   std::size_t recompleted_slices_ = 0;
+  std::uint64_t version_ = 0;      // see Internals
+  std::uint64_t compactions_ = 0;  // compact_points() calls that moved the points
 };
 
 }  // namespace sonoshape::recon

@@ -11,6 +11,7 @@
 
 #include "arrangement.hpp"
 #include "cell_field.hpp"
+#include "field_evaluator.hpp"
 #include "mean_value.hpp"
 #include "mesher.hpp"
 #include "octree_field.hpp"
@@ -131,6 +132,7 @@ struct Reconstructor::State {
   std::vector<int> material_ids;
   std::unique_ptr<Arrangement> arrangement;
   std::unique_ptr<CellField> field;
+  std::unique_ptr<FieldEvaluator> evaluator;  // made at the first update (opens the device)
   std::vector<std::uint32_t> cell_generation;  // update count at which each cell last changed
   std::uint32_t generation = 0;
   // What the slices alone decide on the grid, for field->slices()[0, contour_slices): merged
@@ -272,6 +274,8 @@ bool Reconstructor::remove_slice(int id) {
 
 UpdateStats Reconstructor::update() {
   State& s = *state_;
+  // The field's device first: a device that cannot be used leaves the engine as it was.
+  if (!s.evaluator) s.evaluator = make_field_evaluator(s.options.engine.device);
   UpdateStats out;
   if (s.built && s.pending_adds.empty() && s.pending_removes.empty()) {
     out.step = s.totals;
@@ -383,7 +387,6 @@ UpdateStats Reconstructor::update() {
   });
 
   const CellField& field = *s.field;
-  const std::size_t fc = static_cast<std::size_t>(field.function_count());
   std::size_t evaluations = 0;
   double evaluation_seconds = 0.0;
   std::vector<int> point_cells;
@@ -410,28 +413,15 @@ UpdateStats Reconstructor::update() {
       clock.reset();
       arena.execute([&] { s.field->refresh({}); });  // the images of the new cells' faces
       stats.face_images_s += clock.seconds();
-      const Stopwatch evaluation_clock;
-      arena.execute([&] {
-        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, points.size(), 64),
-                          [&](const tbb::blocked_range<std::size_t>& r) {
-                            for (std::size_t n = r.begin(); n < r.end(); ++n)
-                              tags[n] = evaluation_tag(
-                                  field.evaluate_in(point_cells[n], points[n], values + n * fc),
-                                  s.generation);
-                          });
-      });
-      evaluations += points.size();
-      evaluation_seconds += evaluation_clock.seconds();
-      return;
+    } else {
+      point_cells.resize(points.size());
     }
+    // The native CPU or an OpenCL device (options.engine.device; field_evaluator.hpp).
     const Stopwatch evaluation_clock;
     arena.execute([&] {
-      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, points.size(), 64),
-                        [&](const tbb::blocked_range<std::size_t>& r) {
-                          for (std::size_t n = r.begin(); n < r.end(); ++n)
-                            tags[n] = evaluation_tag(field.evaluate(points[n], values + n * fc), s.generation);
-                        });
+      s.evaluator->evaluate(field, points, point_cells.data(), s.arrangement->on_demand(), values);
     });
+    for (std::size_t n = 0; n < points.size(); ++n) tags[n] = evaluation_tag(point_cells[n], s.generation);
     evaluations += points.size();
     evaluation_seconds += evaluation_clock.seconds();
   };

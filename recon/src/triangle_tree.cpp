@@ -431,6 +431,14 @@ void add_exact(const UnknownTriangle* triangles, const double* corner_values, st
   }
 }
 
+// The truncation error bound of each degree at the opening limit (add_triangle_weights_tree).
+std::array<double, kOrder + 1> truncation_bounds() {
+  std::array<double, kOrder + 1> t{};
+  for (int degree = 0; degree <= kOrder; ++degree)
+    t[static_cast<std::size_t>(degree)] = std::pow(kOpening, 2.0 * (kOrder + 1) / (degree + 1));
+  return t;
+}
+
 // Number of nodes Builder::build makes for `count` triangles (its split rule), so that the node
 // and moment arrays are sized once.
 std::size_t triangle_tree_node_count(std::size_t count) {
@@ -479,6 +487,19 @@ std::uint32_t build_triangle_tree(UnknownTriangle* triangles, double* corner_val
   return root;
 }
 
+void triangle_tree_tables(std::vector<int>& pairs, std::vector<double>& kernel_table,
+                          std::vector<double>& truncation) {
+  pairs.clear();
+  kernel_table.clear();
+  for (std::size_t p = 0; p < kPairs; ++p) {
+    pairs.push_back(kPairList[p].a);
+    pairs.push_back(kPairList[p].b);
+    kernel_table.insert(kernel_table.end(), kKernelTable[p].begin(), kKernelTable[p].end());
+  }
+  const auto bounds = truncation_bounds();
+  truncation.assign(bounds.begin(), bounds.end());
+}
+
 void add_triangle_weights(const UnknownTriangle* triangles, const double* corner_values,
                           std::size_t count, int function_count, const Vec2& foot, double height,
                           double* w) {
@@ -493,12 +514,7 @@ void add_triangle_weights_tree(const UnknownTriangle* triangles, const double* c
   const std::size_t stride = triangle_moment_stride(function_count);
   const double h2 = height * height;
   const double opening_sq = kOpening * kOpening;
-  static const auto truncation = [] {
-    std::array<double, kOrder + 1> t{};
-    for (int degree = 0; degree <= kOrder; ++degree)
-      t[static_cast<std::size_t>(degree)] = std::pow(kOpening, 2.0 * (kOrder + 1) / (degree + 1));
-    return t;
-  }();
+  static const auto truncation = truncation_bounds();
   std::uint32_t stack[64];
   int top = 0;
   stack[top++] = root;

@@ -93,4 +93,11 @@ void add_triangle_weights_tree(const UnknownTriangle* triangles, const double* c
                                int function_count, const TriangleNode* nodes, const double* moments,
                                std::uint32_t root, const Vec2& foot, double height, double* w);
 
+/// The constants of add_triangle_weights_tree for a device evaluator (kernels/cl/field.cl):
+/// (a, b) of each moment pair in triangle_moment_index order, the expansion's coefficients
+/// (kTriangleTreeOrder / 2 + 1 per pair) and the truncation bound of each degree (0 to
+/// kTriangleTreeOrder).
+void triangle_tree_tables(std::vector<int>& pairs, std::vector<double>& kernel_table,
+                          std::vector<double>& truncation);
+
 }  // namespace sonoshape::recon

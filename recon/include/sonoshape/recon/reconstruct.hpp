@@ -5,6 +5,7 @@
 // smoothing, and one closed manifold mesh per material.
 #include <cstddef>
 #include <map>
+#include <string>
 
 #include "sonoshape/core/mesh.hpp"
 #include "sonoshape/core/slice.hpp"
@@ -15,6 +16,10 @@ struct ReconstructionOptions {
   int max_depth = -1;             ///< octree depth; -1: finest cells about 1/128 of the diagonal
   int smoothing_iterations = 8;   ///< bi-Laplacian smoothing iterations (0: off)
   int threads = 0;                ///< threads for every stage; 0: all cores
+  /// Where the field is evaluated: "cpu" (native), "opencl" (the first fp64 OpenCL device, a GPU
+  /// if any), "opencl:PLATFORM:DEVICE", "auto" (an fp64 GPU if present, else cpu). The values
+  /// agree to 1e-9 (the kernels repeat the CPU's rounding). Errors: sonoshape::Error.
+  std::string device = "cpu";
 };
 
 /// Per-stage wall time in seconds and counts of one reconstruction.

@@ -67,7 +67,8 @@ class Reconstructor {
 
   /// Applies the queued additions and removals and refreshes the meshes. Cheap when nothing is
   /// queued. Throws GeometryError for slices the engine cannot use; the queued changes are then
-  /// dropped and the previous state and meshes are kept.
+  /// dropped and the previous state and meshes are kept. Throws sonoshape::Error, changing
+  /// nothing, when the first update cannot open the field's device (ReconstructionOptions::device).
   UpdateStats update();
 
   /// The meshes of the last update(): one per material (empty before the first update).
