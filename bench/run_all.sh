@@ -7,8 +7,8 @@
 #
 # Usage: bench/run_all.sh [--list] [--quick] [--no-build] [--only STEP]... [--skip STEP]...
 #   --list      print the steps in order with their commands, run nothing
-#   --quick     the quick mode of the scripts that have one (accuracy_matrix, growth_table,
-#               online_table); those steps then print their tables and leave the document alone
+#   --quick     the quick mode of the scripts that have one (accuracy_matrix, device_table,
+#               growth_table, online_table); those steps then print their tables and leave the document alone
 #   --no-build  do not build the steps' targets (use what build/ holds)
 #   --only STEP run only these steps (repeatable); --skip STEP leave these out (repeatable)
 # Data sonoshape does not ship: OREX_DATA (the Data/ folder of github.com/haimsaw/OReX) for
@@ -29,6 +29,10 @@ step offline "sonoshape" \
 
 step public_csl "sonoshape" \
   "python3 bench/public_csl.py \"\${OREX_DATA:?set OREX_DATA to the Data/ folder of a haimsaw/OReX checkout, or --skip public_csl}\" --write-doc"
+
+step devices "sonoshape" \
+  "python3 bench/device_table.py" \
+  "python3 bench/device_table.py --quick"
 
 step offline_target "sonoshape" \
   "bench/offline_target.sh --write-doc"
