@@ -31,7 +31,7 @@ step public_csl "sonoshape" \
   "python3 bench/public_csl.py \"\${OREX_DATA:?set OREX_DATA to the Data/ folder of a haimsaw/OReX checkout, or --skip public_csl}\" --write-doc"
 
 step devices "sonoshape" \
-  "python3 bench/device_table.py" \
+  "python3 bench/device_table.py --devices cpu,opencl:0:0 --repeat 5 --best" \
   "python3 bench/device_table.py --quick"
 
 step offline_target "sonoshape" \
