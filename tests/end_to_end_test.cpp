@@ -1,5 +1,6 @@
 // The `sonoshape` command end to end: slice a bundled model, reconstruct, evaluate.
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cstdlib>
@@ -20,8 +21,11 @@ namespace fs = std::filesystem;
 
 // Each test's command output goes to one log file in the temp directory.
 sonoshape::testing::CommandResult run(const std::string& arguments) {
-  const fs::path log = fs::temp_directory_path() /
-                       ("sonoshape_e2e_" + std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()) + ".log");
+  const fs::path log =
+      fs::temp_directory_path() /
+      ("sonoshape_e2e_" +
+       std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()) + "_" +
+       std::to_string(::getpid()) + ".log");
   return sonoshape::testing::run_command(SONOSHAPE_BINARY, arguments, log);
 }
 
@@ -29,13 +33,17 @@ class EndToEnd : public ::testing::Test {
  protected:
   void SetUp() override {
     dir_ = fs::temp_directory_path() /
-           ("sonoshape_e2e_" + std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()));
+           ("sonoshape_e2e_" +
+            std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()) + "_" +
+            std::to_string(::getpid()));
     fs::remove_all(dir_);
     fs::create_directories(dir_);
   }
   void TearDown() override { fs::remove_all(dir_); }
   std::string path(const std::string& name) const { return (dir_ / name).string(); }
-  static std::string model(const std::string& name) { return std::string(SONOSHAPE_DATA_DIR) + "/models/" + name; }
+  static std::string model(const std::string& name) {
+    return std::string(SONOSHAPE_DATA_DIR) + "/models/" + name;
+  }
 
   fs::path dir_;
 };
@@ -54,19 +62,22 @@ void expect_goals(const nlohmann::json& scores) {
 }
 
 TEST_F(EndToEnd, SliceReconstructEvaluateOneLabel) {
-  auto r = run("slice --mesh 1:" + model("spot.obj") + ":spot --planes random --count 24 --seed 3 --size-mm 150 -o " +
+  auto r = run("slice --mesh 1:" + model("spot.obj") +
+               ":spot --planes random --count 24 --seed 3 --size-mm 150 -o " +
                path("spot.slices.json") + " --truth " + path("truth"));
   ASSERT_EQ(r.exit_code, 0) << r.output;
-  r = run("reconstruct " + path("spot.slices.json") + " -o " + path("spot.ply") + " --stats " + path("stats.json"));
+  r = run("reconstruct " + path("spot.slices.json") + " -o " + path("spot.ply") + " --stats " +
+          path("stats.json"));
   ASSERT_EQ(r.exit_code, 0) << r.output;
   std::ifstream stats_file(path("stats.json"));
   const nlohmann::json stats = nlohmann::json::parse(stats_file);
-  for (const char* key : {"arrangement_s", "face_images_s", "field_s", "smoothing_s", "mesh_s", "total_s",
-                          "slices", "cells", "faces", "field_evaluations", "triangles", "peak_rss_mb"})
+  for (const char* key :
+       {"arrangement_s", "face_images_s", "field_s", "smoothing_s", "mesh_s", "total_s", "slices",
+        "cells", "faces", "field_evaluations", "triangles", "peak_rss_mb"})
     EXPECT_TRUE(stats.contains(key)) << key;
   EXPECT_EQ(stats["slices"].get<int>(), 24);
-  r = run("evaluate --recon " + path("spot.ply") + " --truth 1:" + path("truth/label_1.ply") + " --slices " +
-          path("spot.slices.json") + " --json " + path("eval.json"));
+  r = run("evaluate --recon " + path("spot.ply") + " --truth 1:" + path("truth/label_1.ply") +
+          " --slices " + path("spot.slices.json") + " --json " + path("eval.json"));
   ASSERT_EQ(r.exit_code, 0) << r.output;
   std::ifstream eval_file(path("eval.json"));
   expect_goals(nlohmann::json::parse(eval_file));
@@ -74,15 +85,16 @@ TEST_F(EndToEnd, SliceReconstructEvaluateOneLabel) {
 
 TEST_F(EndToEnd, TwoLabelsThroughCsl) {
   auto r = run("slice --mesh 1:" + model("spot.obj") + ":spot --mesh 2:" + model("rocker-arm.obj") +
-               ":rocker --planes orthogonal --count 27 --seed 2 --size-mm 120 -o " + path("pair.csl") +
-               " --truth " + path("truth"));
+               ":rocker --planes orthogonal --count 27 --seed 2 --size-mm 120 -o " +
+               path("pair.csl") + " --truth " + path("truth"));
   ASSERT_EQ(r.exit_code, 0) << r.output;
   r = run("reconstruct " + path("pair.csl") + " -o " + path("out"));
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_TRUE(fs::exists(path("out/label_1.ply")));
   EXPECT_TRUE(fs::exists(path("out/label_2.ply")));
-  r = run("evaluate --recon " + path("out") + " --truth 1:" + path("truth/label_1.ply") + " --truth 2:" +
-          path("truth/label_2.ply") + " --slices " + path("pair.csl") + " --json " + path("eval.json"));
+  r = run("evaluate --recon " + path("out") + " --truth 1:" + path("truth/label_1.ply") +
+          " --truth 2:" + path("truth/label_2.ply") + " --slices " + path("pair.csl") + " --json " +
+          path("eval.json"));
   ASSERT_EQ(r.exit_code, 0) << r.output;
   std::ifstream eval_file(path("eval.json"));
   expect_goals(nlohmann::json::parse(eval_file));
@@ -141,7 +153,8 @@ TEST_F(EndToEnd, MissingInputAndHelp) {
   EXPECT_NE(r.output.find("nope.slices.json"), std::string::npos) << r.output;
   r = run("--help");
   EXPECT_EQ(r.exit_code, 0);
-  for (const char* sub : {"reconstruct", "slice", "evaluate"}) EXPECT_NE(r.output.find(sub), std::string::npos);
+  for (const char* sub : {"reconstruct", "slice", "evaluate"})
+    EXPECT_NE(r.output.find(sub), std::string::npos);
 }
 
 TEST_F(EndToEnd, BundledExampleReconstructs) {
@@ -149,8 +162,9 @@ TEST_F(EndToEnd, BundledExampleReconstructs) {
   const auto r = run("reconstruct " + example + " -o " + path("out"));
   ASSERT_EQ(r.exit_code, 0) << r.output;
   const std::string truth = std::string(SONOSHAPE_DATA_DIR) + "/examples/two_labels_truth/";
-  const auto e = run("evaluate --recon " + path("out") + " --truth 1:" + truth + "label_1.ply --truth 2:" + truth +
-                     "label_2.ply --slices " + example + " --json " + path("eval.json"));
+  const auto e = run("evaluate --recon " + path("out") + " --truth 1:" + truth +
+                     "label_1.ply --truth 2:" + truth + "label_2.ply --slices " + example +
+                     " --json " + path("eval.json"));
   ASSERT_EQ(e.exit_code, 0) << e.output;
   std::ifstream eval_file(path("eval.json"));
   expect_goals(nlohmann::json::parse(eval_file));
@@ -158,8 +172,8 @@ TEST_F(EndToEnd, BundledExampleReconstructs) {
 
 TEST_F(EndToEnd, OnlineReconstructionEmitsStepsAndEqualsOffline) {
   const std::string example = std::string(SONOSHAPE_DATA_DIR) + "/examples/two_labels.slices.json";
-  auto r = run("reconstruct " + example + " -o " + path("online") + " --depth 5 --online --emit-every 3 --stats " +
-               path("online.json"));
+  auto r = run("reconstruct " + example + " -o " + path("online") +
+               " --depth 5 --online --emit-every 3 --stats " + path("online.json"));
   ASSERT_EQ(r.exit_code, 0) << r.output;
   r = run("reconstruct " + example + " -o " + path("offline") + " --depth 5");
   ASSERT_EQ(r.exit_code, 0) << r.output;
@@ -177,7 +191,8 @@ TEST_F(EndToEnd, OnlineReconstructionEmitsStepsAndEqualsOffline) {
   // its cells on demand: the same triangles, and vertices whose fields agree within 1e-9 may
   // round to neighbouring 32-bit floats in the PLY.
   for (const char* label : {"label_1.ply", "label_2.ply"}) {
-    const auto a = sonoshape::sim::read_mesh(path("online/") + label), b = sonoshape::sim::read_mesh(path("offline/") + label);
+    const auto a = sonoshape::sim::read_mesh(path("online/") + label),
+               b = sonoshape::sim::read_mesh(path("offline/") + label);
     ASSERT_TRUE(a) << a.message();
     ASSERT_TRUE(b) << b.message();
     EXPECT_FALSE(a->triangles.empty());
@@ -201,12 +216,14 @@ TEST_F(EndToEnd, ReconstructOnOpenClWritesTheCpuMesh) {
   EXPECT_NE(r.output.find("Field evaluation (OpenCL):"), std::string::npos) << r.output;
   if (r.output.find("fp64, --device opencl:") == std::string::npos)
     GTEST_SKIP() << "no OpenCL device with fp64 (install pocl-opencl-icd):\n" << r.output;
-  r = run("slice --mesh 1:" + model("spot.obj") + ":spot --planes random --count 12 --seed 2 --size-mm 150 -o " +
-          path("spot.slices.json"));
+  r = run("slice --mesh 1:" + model("spot.obj") +
+          ":spot --planes random --count 12 --seed 2 --size-mm 150 -o " + path("spot.slices.json"));
   ASSERT_EQ(r.exit_code, 0) << r.output;
-  r = run("reconstruct " + path("spot.slices.json") + " --depth 6 -o " + path("cpu.ply") + " --device cpu");
+  r = run("reconstruct " + path("spot.slices.json") + " --depth 6 -o " + path("cpu.ply") +
+          " --device cpu");
   ASSERT_EQ(r.exit_code, 0) << r.output;
-  r = run("reconstruct " + path("spot.slices.json") + " --depth 6 -o " + path("opencl.ply") + " --device opencl");
+  r = run("reconstruct " + path("spot.slices.json") + " --depth 6 -o " + path("opencl.ply") +
+          " --device opencl");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   std::ifstream a(path("cpu.ply"), std::ios::binary), b(path("opencl.ply"), std::ios::binary);
   const std::string bytes_a((std::istreambuf_iterator<char>(a)), std::istreambuf_iterator<char>());
@@ -216,15 +233,16 @@ TEST_F(EndToEnd, ReconstructOnOpenClWritesTheCpuMesh) {
 }
 
 TEST_F(EndToEnd, AMalformedOrMissingDeviceIsRefusedWithTheFix) {
-  auto r = run("reconstruct " + std::string(SONOSHAPE_DATA_DIR) + "/examples/two_labels.slices.json -o " +
-               path("x.ply") + " --device gpu");
+  auto r = run("reconstruct " + std::string(SONOSHAPE_DATA_DIR) +
+               "/examples/two_labels.slices.json -o " + path("x.ply") + " --device gpu");
   EXPECT_NE(r.exit_code, 0);
   EXPECT_NE(r.output.find("opencl:PLATFORM:DEVICE"), std::string::npos) << r.output;
-  r = run("reconstruct " + std::string(SONOSHAPE_DATA_DIR) + "/examples/two_labels.slices.json -o " +
-          path("x.ply") + " --device opencl:9:9");
+  r = run("reconstruct " + std::string(SONOSHAPE_DATA_DIR) +
+          "/examples/two_labels.slices.json -o " + path("x.ply") + " --device opencl:9:9");
   EXPECT_NE(r.exit_code, 0);
   EXPECT_TRUE(r.output.find("no such OpenCL device") != std::string::npos ||
-              r.output.find("no OpenCL") != std::string::npos) << r.output;
+              r.output.find("no OpenCL") != std::string::npos)
+      << r.output;
   EXPECT_FALSE(fs::exists(path("x.ply")));
 }
 

@@ -1,7 +1,6 @@
 // `sonoshape simulate` end to end: the built-in demo and a user phantom, written and read back.
 #include <gtest/gtest.h>
-
-#include "sonoshape/testing/command.hpp"
+#include <unistd.h>
 
 #include <cstdlib>
 #include <filesystem>
@@ -13,6 +12,7 @@
 #include "sonoshape/acquisition/plus_config.hpp"
 #include "sonoshape/acquisition/sequence_file.hpp"
 #include "sonoshape/core/slice_io.hpp"
+#include "sonoshape/testing/command.hpp"
 
 namespace {
 
@@ -32,7 +32,8 @@ class SimulateCommand : public ::testing::Test {
   void SetUp() override {
     dir_ = fs::temp_directory_path() /
            ("sonoshape_simulate_" +
-            std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()));
+            std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()) + "_" +
+            std::to_string(::getpid()));
     fs::remove_all(dir_);
     fs::create_directories(dir_);
   }
@@ -130,10 +131,10 @@ TEST_F(SimulateCommand, SegmentTurnsASimulatedSweepIntoAValidSliceSet) {
     std::ofstream config(dir_ / "big_regions.json");
     config << R"({"format": "sonoshape-segmentation", "version": 1, "min_region_mm2": 5000})";
   }
-  const auto lost = run("segment " + (dir_ / "s.igs.mha").string() + " --config " +
-                            (dir_ / "big_regions.json").string() + " -o " +
-                            (dir_ / "lost.slices.json").string(),
-                        dir_ / "log_lost");
+  const auto lost =
+      run("segment " + (dir_ / "s.igs.mha").string() + " --config " +
+              (dir_ / "big_regions.json").string() + " -o " + (dir_ / "lost.slices.json").string(),
+          dir_ / "log_lost");
   EXPECT_NE(lost.output.find("label 2 (cheburashka) is in no slice: no frame's pixels"),
             std::string::npos)
       << lost.output;
@@ -232,22 +233,23 @@ TEST_F(SimulateCommand, SegmentScoresAgainstTheTruthAndPerfectLabelsReconstruct)
   EXPECT_FALSE(fs::exists(dir_ / "x.slices.json"));
 
   // --seed names a material of the models in effect and three numbers.
-  const auto seeded = run("segment " + sweep + " --method graph-cut --prior none --seed "
-                          "1:-8,0.2,0.1 --seed 2:23,11.6,0.1 -o " +
+  const auto seeded = run("segment " + sweep +
+                              " --method graph-cut --prior none --seed "
+                              "1:-8,0.2,0.1 --seed 2:23,11.6,0.1 -o " +
                               (dir_ / "seeded.slices.json").string(),
                           dir_ / "log_seeded");
   EXPECT_EQ(seeded.exit_code, 0) << seeded.output;
-  const auto unknown_label = run("segment " + sweep + " --seed 9:1,2,3 -o " +
-                                     (dir_ / "x.slices.json").string(),
-                                 dir_ / "log_seed9");
+  const auto unknown_label =
+      run("segment " + sweep + " --seed 9:1,2,3 -o " + (dir_ / "x.slices.json").string(),
+          dir_ / "log_seed9");
   EXPECT_EQ(unknown_label.exit_code, 1);
   EXPECT_NE(unknown_label.output.find("--seed '9:1,2,3': label 9 is not among the "
                                       "segmentation's materials (1:spot"),
             std::string::npos)
       << unknown_label.output;
-  const auto two_numbers = run("segment " + sweep + " --seed 1:1,2 -o " +
-                                   (dir_ / "x.slices.json").string(),
-                               dir_ / "log_seed2");
+  const auto two_numbers =
+      run("segment " + sweep + " --seed 1:1,2 -o " + (dir_ / "x.slices.json").string(),
+          dir_ / "log_seed2");
   EXPECT_EQ(two_numbers.exit_code, 1);
   EXPECT_NE(two_numbers.output.find("three finite numbers"), std::string::npos)
       << two_numbers.output;

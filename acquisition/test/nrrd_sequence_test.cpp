@@ -3,12 +3,14 @@
 // guide, "Volume sequence file format (.seq.nrrd)"): 4D, `kinds: domain domain domain list`,
 // `axis 3 index type/values`, `DataNodeClassName`, gzip, plus the older list-first layout.
 #include <gtest/gtest.h>
+#include <unistd.h>
 #include <zlib.h>
 
 #include <filesystem>
 #include <fstream>
 #include <numeric>
 #include <random>
+#include <string>
 
 #include "sonoshape/acquisition/sequence_file.hpp"
 
@@ -18,7 +20,8 @@ namespace {
 const std::filesystem::path kPlusDir = std::filesystem::path(SONOSHAPE_DATA_DIR) / "plus";
 
 std::filesystem::path temp_path(const std::string& name) {
-  const auto dir = std::filesystem::temp_directory_path() / "sonoshape_nrrd_test";
+  const auto dir = std::filesystem::temp_directory_path() /
+                   ("sonoshape_nrrd_test_" + std::to_string(::getpid()));
   std::filesystem::create_directories(dir);
   return dir / name;
 }

@@ -1,10 +1,12 @@
 #include "sonoshape/acquisition/plus_config.hpp"
 
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <Eigen/LU>
 #include <filesystem>
 #include <fstream>
+#include <string>
 
 namespace sonoshape::acq {
 namespace {
@@ -44,7 +46,8 @@ TEST(PlusConfig, WrittenConfigurationReadsBack) {
   m.block<3, 3>(0, 0) *= 0.123456789012345;
   m(0, 3) = -31.25;
   config.transforms.push_back({"Image", "Probe", m, 0.5, "today"});
-  const auto path = std::filesystem::temp_directory_path() / "sonoshape_plus_config_test.xml";
+  const auto path = std::filesystem::temp_directory_path() /
+                    ("sonoshape_plus_config_test_" + std::to_string(::getpid()) + ".xml");
   ASSERT_TRUE(write_plus_config(config, path, "simulated probe"));
   const auto reread = read_image_to_probe(path);
   ASSERT_TRUE(reread) << reread.message();
@@ -52,7 +55,8 @@ TEST(PlusConfig, WrittenConfigurationReadsBack) {
 }
 
 TEST(PlusConfig, BrokenFilesGiveClearErrors) {
-  const auto path = std::filesystem::temp_directory_path() / "sonoshape_plus_config_bad.xml";
+  const auto path = std::filesystem::temp_directory_path() /
+                    ("sonoshape_plus_config_bad_" + std::to_string(::getpid()) + ".xml");
   {
     std::ofstream(path) << "<PlusConfiguration><CoordinateDefinitions>"
                            "<Transform From=\"Image\" To=\"Probe\" Matrix=\"1 2 3\"/>"

@@ -1,11 +1,13 @@
 #include "sonoshape/acquisition/sequence_file.hpp"
 
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <filesystem>
 #include <fstream>
 #include <numeric>
 #include <random>
+#include <string>
 
 namespace sonoshape::acq {
 namespace {
@@ -14,7 +16,8 @@ const std::filesystem::path kRealFile =
     std::filesystem::path(SONOSHAPE_DATA_DIR) / "plus" / "SpinePhantomFreehand.igs.mha";
 
 std::filesystem::path temp_path(const std::string& name) {
-  const auto dir = std::filesystem::temp_directory_path() / "sonoshape_acquisition_test";
+  const auto dir = std::filesystem::temp_directory_path() /
+                   ("sonoshape_acquisition_test_" + std::to_string(::getpid()));
   std::filesystem::create_directories(dir);
   return dir / name;
 }

@@ -1,7 +1,9 @@
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <cstdlib>
 #include <filesystem>
+#include <string>
 
 #include "sonoshape/core/errors.hpp"
 #include "sonoshape/kernels/opencl.hpp"
@@ -79,8 +81,8 @@ TEST(OpenClDevices, ProgramBinaryIsCachedAndReadBack) {
       spec = "opencl:" + std::to_string(info.platform) + ":" + std::to_string(info.device);
   if (spec.empty())
     GTEST_SKIP() << "no OpenCL device with fp64: " << (error.empty() ? "none listed" : error);
-  const std::filesystem::path dir =
-      std::filesystem::temp_directory_path() / "sonoshape_kernels_cache_test";
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() /
+                                    ("sonoshape_kernels_cache_test_" + std::to_string(::getpid()));
   std::filesystem::remove_all(dir);
   const char* old = std::getenv("XDG_CACHE_HOME");
   const std::string saved = old ? old : "";

@@ -1,6 +1,9 @@
 // The graph-cut labelling (grid alpha-expansion, the labeller over simulated frames), bone
 // sections from their surface band, and the overlay pictures.
+#include "sonoshape/segmentation/labeller.hpp"
+
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <filesystem>
 #include <opencv2/core.hpp>
@@ -10,7 +13,6 @@
 #include "reflectors.hpp"
 #include "small_sweep.hpp"
 #include "sonoshape/segmentation/config.hpp"
-#include "sonoshape/segmentation/labeller.hpp"
 #include "sonoshape/segmentation/overlay.hpp"
 #include "sonoshape/segmentation/scoring.hpp"
 #include "sonoshape/segmentation/sweep.hpp"
@@ -118,9 +120,9 @@ TEST(GraphCutLabeller, RefinesTheThresholdLabellingAndFollowsAPrior) {
   for (std::size_t k = 0; k < bmode.frame_count(); ++k) {
     const GreyImage image = bmode.image(k);
     const LabelImage truth = truth_frames.image(k);
-    threshold_total.add(compare_labels(
-        truth, segment_frame(image, setup->geometry, setup->config).labels,
-        setup->geometry.sector));
+    threshold_total.add(compare_labels(truth,
+                                       segment_frame(image, setup->geometry, setup->config).labels,
+                                       setup->geometry.sector));
     cut_total.add(compare_labels(truth, plain.segment(image).labels, setup->geometry.sector));
     guided_total.add(
         compare_labels(truth, guided.segment(image, &truth).labels, setup->geometry.sector));
@@ -153,8 +155,8 @@ TEST(GraphCutLabeller, NamesLookAlikeOrgansByPriorThenSeed) {
     for (int i = 0; i < w; ++i) {
       const bool in = std::hypot(i - left.x, j - left.y) < radius_px ||
                       std::hypot(i - right.x, j - right.y) < radius_px;
-      image.at(i, j) = static_cast<std::uint8_t>(
-          std::clamp((in ? 50.0 : 130.0) + speckle(rng), 0.0, 255.0));
+      image.at(i, j) =
+          static_cast<std::uint8_t>(std::clamp((in ? 50.0 : 130.0) + speckle(rng), 0.0, 255.0));
     }
   SegmentationConfig config;
   config.background = {0, "background", 130.0, 12.0};
@@ -201,22 +203,21 @@ TEST(GraphCutLabeller, NamesLookAlikeOrgansByPriorThenSeed) {
 // configuration gives it; 0 there turns the correction off.
 TEST(SweepSetup, BlurFromTheHeaderUnlessTheConfigurationGivesIt) {
   const test::SmallSweep small = test::organ_and_lesion_sweep(2);
-  const auto from_header =
-      prepare_sweep(small.sweep.bmode, "s.igs.mha", std::optional<SegmentationConfig>(),
-                    std::nullopt);
+  const auto from_header = prepare_sweep(small.sweep.bmode, "s.igs.mha",
+                                         std::optional<SegmentationConfig>(), std::nullopt);
   ASSERT_TRUE(from_header) << from_header.message();
   EXPECT_GT(from_header->config.psf_sigma_mm, 0.0);
   SegmentationConfig off;
   off.psf_sigma_mm = 0.0;
-  const auto without =
-      prepare_sweep(small.sweep.bmode, "s.igs.mha", std::optional<SegmentationConfig>(off),
-                    std::nullopt);
+  const auto without = prepare_sweep(small.sweep.bmode, "s.igs.mha",
+                                     std::optional<SegmentationConfig>(off), std::nullopt);
   ASSERT_TRUE(without) << without.message();
   EXPECT_EQ(without->config.psf_sigma_mm, 0.0);
 }
 
 TEST(Overlay, WritesAPictureAndNamesASizeMismatch) {
-  const auto dir = std::filesystem::temp_directory_path() / "sonoshape_overlay_test";
+  const auto dir = std::filesystem::temp_directory_path() /
+                   ("sonoshape_overlay_test_" + std::to_string(::getpid()));
   std::filesystem::create_directories(dir);
   GreyImage frame(32, 24, 100);
   LabelImage ours(32, 24, 0), truth(32, 24, 0);
@@ -251,10 +252,10 @@ TEST(SegmentationConfigMethod, ParsesAndRoundTrips) {
   EXPECT_EQ(*again->materials.at(0).seed_mm, Vec3(1.5, -2.0, 30.0));
   const auto bad_seed = parse_segmentation_config(
       R"({"format": "sonoshape-segmentation", "version": 1,
-          "labels": [{"id": 1, "grey_mean": 50, "seed_mm": [1, 2]}]})", "seed.json");
+          "labels": [{"id": 1, "grey_mean": 50, "seed_mm": [1, 2]}]})",
+      "seed.json");
   ASSERT_FALSE(bad_seed);
-  EXPECT_NE(bad_seed.message().find("labels[0].seed_mm"), std::string::npos)
-      << bad_seed.message();
+  EXPECT_NE(bad_seed.message().find("labels[0].seed_mm"), std::string::npos) << bad_seed.message();
   const auto bad = parse_segmentation_config(
       R"({"format": "sonoshape-segmentation", "version": 1, "method": "magic"})", "bad.json");
   ASSERT_FALSE(bad);

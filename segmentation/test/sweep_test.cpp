@@ -2,6 +2,7 @@
 #include "sonoshape/segmentation/sweep.hpp"
 
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <filesystem>
 #include <fstream>
@@ -160,7 +161,8 @@ TEST(SegmentSweep, SmallSimulatedFramesGiveSlices) {
 }
 
 TEST(SegmentSweep, CalibrationFromJson) {
-  const auto path = std::filesystem::temp_directory_path() / "sonoshape_seg_calibration.json";
+  const auto path = std::filesystem::temp_directory_path() /
+                    ("sonoshape_seg_calibration_" + std::to_string(::getpid()) + ".json");
   {
     std::ofstream out(path);
     out << R"({"ImageToProbe": [0.2, 0, 0, -20, 0, 0.2, 0, 0, 0, 0, 0.2, 0, 0, 0, 0, 1]})";

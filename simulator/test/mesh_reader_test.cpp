@@ -1,6 +1,7 @@
 #include "sonoshape/simulator/mesh_reader.hpp"
 
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <cstring>
 #include <filesystem>
@@ -17,7 +18,8 @@ namespace {
 namespace fs = std::filesystem;
 
 fs::path write_temp(const std::string& name, const std::string& content) {
-  const fs::path dir = fs::temp_directory_path() / "sonoshape_mesh_reader_test";
+  const fs::path dir =
+      fs::temp_directory_path() / ("sonoshape_mesh_reader_test_" + std::to_string(::getpid()));
   fs::create_directories(dir);
   const fs::path path = dir / name;
   std::ofstream(path, std::ios::binary) << content;
@@ -206,8 +208,7 @@ std::string obj_text(const TriangleMesh& mesh) {
 long long euler_characteristic(const TriangleMesh& mesh) {
   std::set<std::pair<std::uint32_t, std::uint32_t>> edges;
   for (const auto& t : mesh.triangles)
-    for (int k = 0; k < 3; ++k)
-      edges.insert(std::minmax(t[k], t[(k + 1) % 3]));
+    for (int k = 0; k < 3; ++k) edges.insert(std::minmax(t[k], t[(k + 1) % 3]));
   return static_cast<long long>(mesh.vertices.size()) - static_cast<long long>(edges.size()) +
          static_cast<long long>(mesh.triangles.size());
 }
@@ -298,8 +299,7 @@ TEST(MeshReader, StlErrorsNameFileFacetAndFix) {
   EXPECT_NE(no_facets.message().find("no faces"), std::string::npos) << no_facets.message();
   const auto unterminated = read_mesh(write_temp("open.stl", "solid x\n facet normal 0 0 1\n"));
   ASSERT_FALSE(unterminated);
-  EXPECT_NE(unterminated.message().find("truncated"), std::string::npos)
-      << unterminated.message();
+  EXPECT_NE(unterminated.message().find("truncated"), std::string::npos) << unterminated.message();
 }
 
 TEST(MeshReader, OrientOutwardFlipsInwardMeshesOnly) {

@@ -1,8 +1,10 @@
 #include "sonoshape/simulator/sweep.hpp"
 
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <filesystem>
+#include <string>
 
 namespace sonoshape::sim {
 namespace {
@@ -35,7 +37,8 @@ TEST(Sweep, SimulatedSweepRoundTripsThroughSequenceFiles) {
   ASSERT_TRUE(means);
   EXPECT_EQ(sweep.bmode.field("SonoshapeLabels"), "1:liver_lobe 2:lesion");
 
-  const auto dir = std::filesystem::temp_directory_path() / "sonoshape_sweep_test";
+  const auto dir = std::filesystem::temp_directory_path() /
+                   ("sonoshape_sweep_test_" + std::to_string(::getpid()));
   std::filesystem::create_directories(dir);
   for (const auto& [file, name] :
        {std::pair{&sweep.bmode, "sweep.igs.mha"}, std::pair{&sweep.truth, "labels.mha"}}) {
