@@ -200,6 +200,20 @@ CommandRunner add_reconstruct_command(CLI::App& app) {
       std::cerr << "error: " << slices.message() << '\n';
       return 2;
     }
+    // Nothing to reconstruct is an error, not exit 0 with no mesh written.
+    if (slices->slices.empty()) {
+      std::cerr << "error: " << opt->input
+                << ": slices: the set holds no slice, so there is nothing to reconstruct; "
+                   "give at least one slice with a labelled region\n";
+      return 2;
+    }
+    if (slices->material_ids().empty()) {
+      std::cerr << "error: " << opt->input
+                << ": no slice has a region of a material (every region is \"unknown\" or "
+                   "there are none), so there is no surface to reconstruct; label the organ's "
+                   "regions with a material id\n";
+      return 2;
+    }
     if (opt->emit_every > 0 && !opt->online) {
       std::cerr << "error: --emit-every needs --online\n";
       return 2;

@@ -170,7 +170,8 @@ Plane read_plane(Tokens& tokens, int n_labels) {
   plane.abc.y() = tokens.take_double("the plane coefficient B");
   plane.abc.z() = tokens.take_double("the plane coefficient C");
   plane.d = tokens.take_double("the plane coefficient D");
-  plane.vertices.reserve(static_cast<std::size_t>(n_vertices));
+  // A lying count (1e9) must not allocate before the vertices are read: the file ends early.
+  plane.vertices.reserve(static_cast<std::size_t>(std::min<long long>(n_vertices, 1 << 16)));
   for (long long k = 0; k < n_vertices; ++k) {
     Vec3 p;
     p.x() = tokens.take_double("a vertex x");
@@ -776,20 +777,27 @@ SliceSet parse_csl_text(const std::string& text, CslNaming& naming, detail::Repa
 
 // A note, not a repair: nothing in the data changes, and --strict has nothing to refuse.
 void warn_unused_labels(const SliceSet& set, int n_labels, const std::string& source_name) {
-  std::vector<long long> unused;
-  std::size_t next = 0;
-  for (int id = 1; id < n_labels; ++id) {
-    if (next < set.labels.size() && set.labels[next].id == id)
-      ++next;
-    else
-      unused.push_back(id);
+  // The gaps between the used ids, as ranges: a header may declare nLabels = 1e9, so the unused
+  // ids are never listed one by one.
+  std::string ranges;
+  long long unused = 0;
+  long long next = 1;
+  auto add_gap = [&](long long first, long long last) {
+    if (first > last) return;
+    unused += last - first + 1;
+    ranges += (ranges.empty() ? "" : ", ") + std::to_string(first);
+    if (last > first) ranges += ".." + std::to_string(last);
+  };
+  for (const LabelInfo& label : set.labels) {
+    add_gap(next, static_cast<long long>(label.id) - 1);
+    next = static_cast<long long>(label.id) + 1;
   }
-  if (unused.empty()) return;
+  add_gap(next, static_cast<long long>(n_labels) - 1);
+  if (unused == 0) return;
   log_warning(source_name + ": the header declares materials 1.." + std::to_string(n_labels - 1) +
               " (nLabels = " + std::to_string(n_labels) + ") but " +
-              (unused.size() == 1 ? "material " : "materials ") + index_ranges(unused) +
-              " never occur" + (unused.size() == 1 ? "s" : "") +
-              "; meshes are made only for the materials that do");
+              (unused == 1 ? "material " : "materials ") + ranges + " never occur" +
+              (unused == 1 ? "s" : "") + "; meshes are made only for the materials that do");
 }
 
 }  // namespace

@@ -1002,6 +1002,39 @@ void merge_identical_slices(SliceSet& set, const SlicePairs& identical, const Sl
   set.slices = std::move(slices);
 }
 
+namespace {
+
+// The octree has at most 2^11 cells a side: bounds more than 1000 times larger than the regions
+// they hold leave every region inside a cell or two, and the surface comes out empty. Such
+// bounds (1e308, or a box in metres around contours in mm) are an error, not an empty mesh.
+constexpr double kMaxBoundsToRegionsRatio = 1000.0;
+
+Status check_bounds_resolvable(const SliceSet& set, const std::string& source_name) {
+  if (!set.bounds) return Status::ok();
+  Box3 seen{Vec3::Constant(std::numeric_limits<double>::infinity()),
+            Vec3::Constant(-std::numeric_limits<double>::infinity())};
+  for (const LabeledSlice& s : set.slices)
+    for (const Region& r : s.regions)
+      for (const Vec2& p : r.outer) {
+        const Vec3 w = s.to_world(p);
+        seen.min = seen.min.cwiseMin(w);
+        seen.max = seen.max.cwiseMax(w);
+      }
+  if (!seen.min.allFinite()) return Status::ok();  // no regions: nothing to resolve
+  const double regions_side = (seen.max - seen.min).maxCoeff();
+  const double bounds_side = (set.bounds->max - set.bounds->min).maxCoeff();
+  if (std::isfinite(bounds_side) && bounds_side <= kMaxBoundsToRegionsRatio * regions_side)
+    return Status::ok();
+  return Status::error(
+      source_name + ": bounds: the box (largest side " + format_double(bounds_side) +
+      ") is more than " + format_double(kMaxBoundsToRegionsRatio) +
+      " times the extent of the regions (" + format_double(regions_side) +
+      "), finer than the octree can resolve, so the surface would be empty; give bounds "
+      "that fit the regions (check the units), or leave bounds out");
+}
+
+}  // namespace
+
 Result<SliceSet> finish_parsed_set(SliceSet set, const std::string& source_name,
                                    const SliceNaming& naming, RepairLog& repairs) {
   // Rounding slivers are snapped once the set is otherwise valid (the snap needs valid
@@ -1023,6 +1056,8 @@ Result<SliceSet> finish_parsed_set(SliceSet set, const std::string& source_name,
                                       round + 1 < kSnapRounds ? &thin : nullptr);
   }
   if (!status) return status;
+  if (Status resolvable = check_bounds_resolvable(set, source_name); !resolvable)
+    return resolvable;
   try {
     merge_identical_slices(set, identical, naming, repairs);
   } catch (const RepairRefused& refused) {
@@ -1364,6 +1399,12 @@ SliceSet parse_document(const json& doc, const std::string& source_name,
   SliceSet set;
   if (const auto units = doc.find("units"); units != doc.end()) {
     if (!units->is_string()) fail_at("units", "expected a string such as \"mm\"");
+    // Every length in sonoshape is millimetres; a file in another unit read as mm would give a
+    // surface 1000 times too small or large without a word, so it is refused instead.
+    if (units->get<std::string>() != "mm")
+      fail_at("units", short_dump(*units) +
+                           " is not supported: sonoshape reads lengths in millimetres only; "
+                           "convert the file's lengths to mm and write \"units\": \"mm\"");
     set.units = units->get<std::string>();
   }
   bool normalize = false;
