@@ -9,6 +9,7 @@
 #include <sstream>
 #include <iostream>
 #include <memory>
+#include <set>
 #include <nlohmann/json.hpp>
 
 #include "commands.hpp"
@@ -229,11 +230,22 @@ CommandRunner add_reconstruct_command(CLI::App& app) {
       return 2;
     }
     for (const auto& path : *written) log_info("wrote " + path.string());
-    for (const auto& entry : meshes.meshes)
-      if (entry.mesh.empty())
+    std::set<int> used;
+    for (const LabeledSlice& slice : slices->slices)
+      for (const Region& region : slice.regions) used.insert(region.label);
+    std::string unused;
+    for (const auto& entry : meshes.meshes) {
+      if (!entry.mesh.empty()) continue;
+      if (!used.count(entry.label))
+        unused += (unused.empty() ? "" : ", ") + std::to_string(entry.label);
+      else
         log_warning("label " + std::to_string(entry.label) + " (" + entry.name +
                     ") produced an empty surface: its regions may be smaller than the octree cells"
                     " (try a larger --depth)");
+    }
+    if (!unused.empty())
+      log_warning("label(s) " + unused + " declared but no region uses them: their meshes "
+                  "are empty");
     log_info("reconstructed " + std::to_string(stats.slices) + " slices, " +
              std::to_string(stats.cells) + " cells, " + std::to_string(stats.field_evaluations) +
              " field evaluations in " + std::to_string(stats.total_s) + " s");
