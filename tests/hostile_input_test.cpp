@@ -155,6 +155,39 @@ TEST_F(HostileInput, CslHoleWhoseParentIndexEqualsTheComponentCountIsAnError) {
                      "components are 0..1"});
 }
 
+// --- Messages that blamed the wrong thing. ---
+
+TEST_F(HostileInput, CoordinatesOf1e200AreBlamedOnTheUnitsNotOnTooFewPoints) {
+  Outcome out = run("reconstruct " + corpus("coordinates_1e200.slices.json") + " -o " + path("o"));
+  expect_error(out, {"coordinates_1e200.slices.json", "slice 0, region 0", "point 0",
+                     "beyond 1e12 mm", "check the units"});
+  EXPECT_EQ(out.output.find("fewer than 3 distinct points"), std::string::npos) << out.output;
+  out = run("reconstruct " + corpus("coordinate_1e200.csl") + " -o " + path("o"));
+  expect_error(out, {"coordinate_1e200.csl", "line 6", "plane 1, vertex 1", "beyond 1e12 mm"});
+}
+
+TEST_F(HostileInput, AHundredThousandDigitNumberIsQuotedShort) {
+  const std::string digits(100000, '9');
+  std::ofstream(path("n.slices.json"))
+      << R"({"format": "sonoshape-slices", "version": )" << digits << R"(, "slices": []})";
+  std::ofstream(path("n.csl")) << "CSLC\n1 " << digits << "\n";
+  for (const std::string name : {"n.slices.json", "n.csl"}) {
+    const Outcome out = run("reconstruct " + path(name) + " -o " + path("o"));
+    expect_error(out, {name, "(100000 characters)"});
+    EXPECT_LT(out.output.size(), 1000u) << name;
+  }
+}
+
+TEST_F(HostileInput, ABadPerFrameProbePoseIsBlamedOnTheFrameNotTheCalibration) {
+  simulate_sweep();
+  const std::string sweep = patched_sweep(
+      "pose.igs.mha", "Seq_Frame0001_ProbeToTrackerTransform = [^\n]*",
+      "Seq_Frame0001_ProbeToTrackerTransform = 1 2 3");
+  const Outcome out = run("segment " + sweep + " -o " + path("s.json"));
+  expect_error(out, {"pose.igs.mha", "frame 1: ProbeToTrackerTransform is not 16 numbers"});
+  EXPECT_EQ(out.output.find("calibration"), std::string::npos) << out.output;
+}
+
 // --- Silent wrong output: now a clear error or the right result. ---
 
 TEST_F(HostileInput, AnEmptySliceListIsAnErrorNotAnEmptySuccess) {

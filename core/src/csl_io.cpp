@@ -32,6 +32,16 @@ struct Token {
 };
 
 // Whitespace-separated tokens with their line numbers; blank lines are simply skipped.
+// Lengths beyond 1e12 mm (1000 km) are no anatomy; their squares would overflow the geometry.
+constexpr double kMaxCoordinateMm = 1e12;
+
+// A token as a message quotes it: a 100000-digit number is cut to its first 40 characters so
+// that the message stays a line, not 100 KB.
+std::string excerpt(std::string_view text) {
+  if (text.size() <= 40) return std::string(text);
+  return std::string(text.substr(0, 37)) + "... (" + std::to_string(text.size()) + " characters)";
+}
+
 class Tokens {
  public:
   explicit Tokens(const std::string& text) {
@@ -69,7 +79,7 @@ class Tokens {
     const auto [end, ec] = std::from_chars(t.text.data(), t.text.data() + t.text.size(), value);
     if (ec != std::errc() || end != t.text.data() + t.text.size())
       fail(t.line,
-           std::string("expected ") + what + " (an integer), got \"" + std::string(t.text) + "\"");
+           std::string("expected ") + what + " (an integer), got \"" + excerpt(t.text) + "\"");
     return value;
   }
 
@@ -81,7 +91,7 @@ class Tokens {
     const auto [end, ec] = std::from_chars(first, t.text.data() + t.text.size(), value);
     if (ec != std::errc() || end != t.text.data() + t.text.size() || !std::isfinite(value))
       fail(t.line, std::string("expected ") + what + " (a finite number), got \"" +
-                       std::string(t.text) + "\"");
+                       excerpt(t.text) + "\"");
     return value;
   }
 
@@ -177,6 +187,11 @@ Plane read_plane(Tokens& tokens, int n_labels) {
     p.x() = tokens.take_double("a vertex x");
     p.y() = tokens.take_double("a vertex y");
     p.z() = tokens.take_double("a vertex z");
+    if (p.cwiseAbs().maxCoeff() > kMaxCoordinateMm)
+      fail(tokens.line(), "plane " + std::to_string(plane.index) + ", vertex " +
+                              std::to_string(k) + ": a coordinate beyond 1e12 mm (" +
+                              detail::format_double(p.cwiseAbs().maxCoeff()) +
+                              "), where lengths lose their precision; check the units");
     plane.vertices.push_back(p);
   }
   const std::string plane_name = "plane " + std::to_string(plane.index);
@@ -202,7 +217,7 @@ Plane read_plane(Tokens& tokens, int n_labels) {
     }
     if (!ok)
       fail(component.line, where + ": expected a point count like \"25\" or \"25h3\", got \"" +
-                               std::string(text) + "\"");
+                               excerpt(text) + "\"");
     if (count < 0) fail(component.line, where + ": negative point count");
     if (h != std::string_view::npos) {
       if (parent < 0 || parent >= n_components || parent == c)
@@ -742,7 +757,7 @@ SliceSet parse_csl_text(const std::string& text, CslNaming& naming, detail::Repa
   Tokens tokens(text);
   const Token& magic = tokens.take("the header \"CSLC\"");
   if (magic.text != "CSLC")
-    fail(magic.line, "expected the header \"CSLC\", got \"" + std::string(magic.text) +
+    fail(magic.line, "expected the header \"CSLC\", got \"" + excerpt(magic.text) +
                          "\"; this is not a .csl contour file");
   const std::size_t counts_line = tokens.line();
   const long long n_planes = tokens.take_int("the plane count");

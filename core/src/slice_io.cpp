@@ -1143,6 +1143,18 @@ double read_number(const json& j, const std::string& where) {
   return value;
 }
 
+// Lengths beyond 1e12 mm (1000 km) are no anatomy: their squares in the geometry overflow and
+// the polygon then reads as "fewer than 3 distinct points", which blames the wrong thing.
+constexpr double kMaxCoordinateMm = 1e12;
+
+double read_coordinate(const json& j, const std::string& where) {
+  const double value = read_number(j, where);
+  if (std::abs(value) > kMaxCoordinateMm)
+    fail_at(where, "coordinate " + short_dump(j) +
+                       " is beyond 1e12 mm, where lengths lose their precision; check the units");
+  return value;
+}
+
 Vec3 read_vec3(const json& j, const std::string& where) {
   if (!j.is_array() || j.size() != 3) fail_at(where, "expected [x, y, z], got " + short_dump(j));
   return Vec3(read_number(j[0], where), read_number(j[1], where), read_number(j[2], where));
@@ -1157,7 +1169,7 @@ Ring2 read_ring(const json& j, const std::string& where) {
     const json& p = j[k];
     if (!p.is_array() || p.size() != 2)
       fail_at(point_where, "expected [x, y], got " + short_dump(p));
-    ring.emplace_back(read_number(p[0], point_where), read_number(p[1], point_where));
+    ring.emplace_back(read_coordinate(p[0], point_where), read_coordinate(p[1], point_where));
   }
   return ring;
 }
@@ -1322,6 +1334,9 @@ LabeledSlice parse_slice_object(const json& js, std::size_t i, bool normalize,
     if (!js.contains(key)) fail_at(where, std::string("\"") + key + "\" is missing");
   LabeledSlice s;
   s.origin_mm = read_vec3(js["origin"], where + ", origin");
+  if (s.origin_mm.cwiseAbs().maxCoeff() > kMaxCoordinateMm)
+    fail_at(where + ", origin",
+            "a coordinate beyond 1e12 mm, where lengths lose their precision; check the units");
   s.u = read_vec3(js["u"], where + ", u");
   s.v = read_vec3(js["v"], where + ", v");
   if (normalize) {
@@ -1533,6 +1548,13 @@ Result<SliceSet> parse_slice_set_json(const std::string& text, const std::string
     if (const auto bracket = what.find("] ");
         what.rfind("[json.exception", 0) == 0 && bracket != std::string::npos)
       what = what.substr(bracket + 2);
+    // The quoted token ("number overflow parsing '1111...'") cut to 40 characters.
+    if (const auto open = what.find(" '"); open != std::string::npos) {
+      const auto close = what.rfind('\'');
+      if (close > open + 2 + 40)
+        what = what.substr(0, open + 2 + 37) + "... (" + std::to_string(close - open - 2) +
+               " characters)" + what.substr(close);
+    }
     return Status::error(source_name + ": not valid JSON (" + what +
                          "); a slice set is a JSON document, see docs/formats/slices.md");
   }
