@@ -168,7 +168,8 @@ TEST_F(EndToEnd, SmoothingKeepsTheSurfaceOnTheContours) {
   const auto smoothed = contour_scores(8);
   const double raw_mean = raw["contour_mean_percent"].get<double>();
   const double smoothed_mean = smoothed["contour_mean_percent"].get<double>();
-  EXPECT_LE(smoothed_mean, 1.02 * raw_mean) << "raw " << raw_mean << " %, smoothed " << smoothed_mean;
+  EXPECT_LE(smoothed_mean, 1.02 * raw_mean)
+      << "raw " << raw_mean << " %, smoothed " << smoothed_mean;
   EXPECT_LE(smoothed["contour_max_percent"].get<double>(),
             1.02 * raw["contour_max_percent"].get<double>());
   // The smoothing did act: the surface away from the contours moved.

@@ -47,8 +47,7 @@ Outcome run_limited(const std::string& arguments, const fs::path& log, double li
   }
   Outcome out;
   out.exit_code = sonoshape::testing::wait_exit(pid, limit_s);
-  out.seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   out.output = file_text(log);
   return out;
 }
@@ -74,13 +73,16 @@ class HostileInput : public ::testing::Test {
     EXPECT_NE(out.output.find("error:"), std::string::npos) << out.output;
     EXPECT_EQ(out.output.find("bad_alloc"), std::string::npos) << out.output;
     for (const std::string& w : words)
-      EXPECT_NE(out.output.find(w), std::string::npos) << "missing '" << w << "' in\n" << out.output;
+      EXPECT_NE(out.output.find(w), std::string::npos) << "missing '" << w << "' in\n"
+                                                       << out.output;
   }
 
   // A small simulated sweep (8 frames of 64x64) and its calibration, to patch.
   void simulate_sweep() const {
-    const Outcome out = run("simulate --width-px 64 --height-px 64 --frames 8 --drop 0 "
-                            "--invalid 0 -o " + path("sw.igs.mha"));
+    const Outcome out =
+        run("simulate --width-px 64 --height-px 64 --frames 8 --drop 0 "
+            "--invalid 0 -o " +
+            path("sw.igs.mha"));
     ASSERT_EQ(out.exit_code, 0) << out.output;
   }
   // Writes a copy of the simulated sweep with `from` replaced by `to` in its header.
@@ -102,45 +104,43 @@ class HostileInput : public ::testing::Test {
 // --- Lying counts: checked against the bytes present, no spin, no allocation first. ---
 
 TEST_F(HostileInput, PlyElementWithoutPropertiesAndCount2e63IsSkippedNotLoopedOver) {
-  const Outcome out = run("evaluate --recon " + corpus("edge_count_2e63.ply") + " --truth 1:" +
-                          corpus("edge_count_2e63.ply"), 20.0);
+  const Outcome out = run("evaluate --recon " + corpus("edge_count_2e63.ply") +
+                              " --truth 1:" + corpus("edge_count_2e63.ply"),
+                          20.0);
   ASSERT_NE(out.exit_code, -1) << "killed after " << out.seconds << " s: " << out.output;
   EXPECT_EQ(out.exit_code, 0) << out.output;  // the triangle is read; the edges hold nothing
   EXPECT_LT(out.seconds, 10.0);
 }
 
 TEST_F(HostileInput, OffVertexCount1e9EndsEarlyNamingFileAndVertex) {
-  const Outcome out = run("evaluate --recon " + corpus("vertex_count_1e9.off") + " --truth 1:" +
-                          corpus("vertex_count_1e9.off"));
+  const Outcome out = run("evaluate --recon " + corpus("vertex_count_1e9.off") +
+                          " --truth 1:" + corpus("vertex_count_1e9.off"));
   expect_error(out, {"vertex_count_1e9.off", "vertex 4", "file ends early"});
 }
 
 TEST_F(HostileInput, MhaDimSizeAMillionFramesOverFourBytesIsRefusedBeforeAllocating) {
-  const Outcome out = run("segment " + corpus("dimsize_512x512x1e6.mha") + " -o " +
-                          path("s.json"));
-  expect_error(out, {"dimsize_512x512x1e6.mha", "DimSize needs 512x512x1000000",
-                     "DimSize is wrong"});
+  const Outcome out = run("segment " + corpus("dimsize_512x512x1e6.mha") + " -o " + path("s.json"));
+  expect_error(out,
+               {"dimsize_512x512x1e6.mha", "DimSize needs 512x512x1000000", "DimSize is wrong"});
 }
 
 TEST_F(HostileInput, CslVertexCount1e9EndsEarlyNamingLineAndCounts) {
-  const Outcome out = run("reconstruct " + corpus("vertex_count_1e9.csl") + " -o " +
-                          path("o.ply"));
+  const Outcome out = run("reconstruct " + corpus("vertex_count_1e9.csl") + " -o " + path("o.ply"));
   expect_error(out, {"vertex_count_1e9.csl", "line", "ends early", "check the counts"});
 }
 
 TEST_F(HostileInput, CslDeclaring1e9LabelsWithOneUsedReconstructsThatOneQuickly) {
-  const Outcome out = run("reconstruct " + corpus("nlabels_1e9.csl") + " -o " + path("o.ply"),
-                          20.0);
+  const Outcome out =
+      run("reconstruct " + corpus("nlabels_1e9.csl") + " -o " + path("o.ply"), 20.0);
   ASSERT_EQ(out.exit_code, 0) << "after " << out.seconds << " s: " << out.output;
-  EXPECT_NE(out.output.find("materials 2..999999999 never occur"), std::string::npos)
-      << out.output;
+  EXPECT_NE(out.output.find("materials 2..999999999 never occur"), std::string::npos) << out.output;
   EXPECT_LT(out.seconds, 10.0);
 }
 
 TEST_F(HostileInput, SliceSetDeclaring1000LabelsWithOneUsedCostsOneField) {
   // At ed734b2: 108 s and 5.3 GB (a field per declared label).
-  const Outcome out = run("reconstruct " + corpus("labels_1000_one_used.slices.json") + " -o " +
-                          path("out"), 30.0);
+  const Outcome out =
+      run("reconstruct " + corpus("labels_1000_one_used.slices.json") + " -o " + path("out"), 30.0);
   ASSERT_EQ(out.exit_code, 0) << "after " << out.seconds << " s: " << out.output;
   EXPECT_LT(out.seconds, 15.0);
   ASSERT_TRUE(fs::exists(path("out/label_1.ply")));
@@ -149,8 +149,8 @@ TEST_F(HostileInput, SliceSetDeclaring1000LabelsWithOneUsedCostsOneField) {
 
 TEST_F(HostileInput, CslHoleWhoseParentIndexEqualsTheComponentCountIsAnError) {
   // The boundary of "parent < n_components": parent 2 of components 0..1.
-  const Outcome out = run("reconstruct " + corpus("hole_parent_equals_count.csl") + " -o " +
-                          path("o.ply"));
+  const Outcome out =
+      run("reconstruct " + corpus("hole_parent_equals_count.csl") + " -o " + path("o.ply"));
   expect_error(out, {"hole_parent_equals_count.csl", "component 1", "names component 2",
                      "components are 0..1"});
 }
@@ -180,9 +180,9 @@ TEST_F(HostileInput, AHundredThousandDigitNumberIsQuotedShort) {
 
 TEST_F(HostileInput, ABadPerFrameProbePoseIsBlamedOnTheFrameNotTheCalibration) {
   simulate_sweep();
-  const std::string sweep = patched_sweep(
-      "pose.igs.mha", "Seq_Frame0001_ProbeToTrackerTransform = [^\n]*",
-      "Seq_Frame0001_ProbeToTrackerTransform = 1 2 3");
+  const std::string sweep =
+      patched_sweep("pose.igs.mha", "Seq_Frame0001_ProbeToTrackerTransform = [^\n]*",
+                    "Seq_Frame0001_ProbeToTrackerTransform = 1 2 3");
   const Outcome out = run("segment " + sweep + " -o " + path("s.json"));
   expect_error(out, {"pose.igs.mha", "frame 1: ProbeToTrackerTransform is not 16 numbers"});
   EXPECT_EQ(out.output.find("calibration"), std::string::npos) << out.output;
@@ -196,14 +196,12 @@ TEST_F(HostileInput, AnEmptySliceListIsAnErrorNotAnEmptySuccess) {
 }
 
 TEST_F(HostileInput, BoundsOf1e308AreRefusedNamingBounds) {
-  const Outcome out = run("reconstruct " + corpus("bounds_1e308.slices.json") + " -o " +
-                          path("o"));
+  const Outcome out = run("reconstruct " + corpus("bounds_1e308.slices.json") + " -o " + path("o"));
   expect_error(out, {"bounds_1e308.slices.json", "bounds", "leave bounds out"});
 }
 
 TEST_F(HostileInput, AllUnknownSlicesAreAnErrorNotSilence) {
-  const Outcome out = run("reconstruct " + corpus("all_unknown.slices.json") + " -o " +
-                          path("o"));
+  const Outcome out = run("reconstruct " + corpus("all_unknown.slices.json") + " -o " + path("o"));
   expect_error(out, {"all_unknown.slices.json", "no slice has a region of a material"});
   EXPECT_FALSE(fs::exists(path("o")));
 }
@@ -216,8 +214,8 @@ TEST_F(HostileInput, UnitsOtherThanMillimetresAreRefused) {
 }
 
 TEST_F(HostileInput, EvaluateGivesNoIoUOfOneForACube1e15Away) {
-  const Outcome out = run("evaluate --recon " + corpus("cube_1e15_away.obj") + " --truth 1:" +
-                          corpus("cube.obj") + " --json " + path("e.json"));
+  const Outcome out = run("evaluate --recon " + corpus("cube_1e15_away.obj") +
+                          " --truth 1:" + corpus("cube.obj") + " --json " + path("e.json"));
   ASSERT_EQ(out.exit_code, 0) << out.output;
   EXPECT_NE(out.output.find("IoU is undefined"), std::string::npos) << out.output;
   const auto scores = nlohmann::json::parse(file_text(path("e.json")));
@@ -226,8 +224,8 @@ TEST_F(HostileInput, EvaluateGivesNoIoUOfOneForACube1e15Away) {
 }
 
 TEST_F(HostileInput, EvaluateCallsAMeshOfZeroAreaTrianglesUnhealthy) {
-  const Outcome out = run("evaluate --recon " + corpus("zero_area.obj") + " --truth 1:" +
-                          corpus("cube.obj") + " --json " + path("e.json"));
+  const Outcome out = run("evaluate --recon " + corpus("zero_area.obj") +
+                          " --truth 1:" + corpus("cube.obj") + " --json " + path("e.json"));
   ASSERT_EQ(out.exit_code, 0) << out.output;
   const auto scores = nlohmann::json::parse(file_text(path("e.json")));
   const auto& health = scores["labels"][0]["health"];
@@ -254,9 +252,8 @@ TEST_F(HostileInput, SegmentRefusesASweepWhoseFramesAreAllInvalid) {
 
 TEST_F(HostileInput, SegmentRefusesANaNTimestampNamingTheFrame) {
   simulate_sweep();
-  const std::string sweep =
-      patched_sweep("nan.igs.mha", "Seq_Frame0003_Timestamp = [0-9.e+-]+",
-                    "Seq_Frame0003_Timestamp = nan");
+  const std::string sweep = patched_sweep("nan.igs.mha", "Seq_Frame0003_Timestamp = [0-9.e+-]+",
+                                          "Seq_Frame0003_Timestamp = nan");
   const Outcome out = run("segment " + sweep + " -o " + path("s.json"));
   expect_error(out, {"nan.igs.mha", "frame 3: Timestamp = 'nan'", "seconds"});
 }
@@ -268,8 +265,8 @@ TEST_F(HostileInput, SegmentRefusesANonRigidPoseNamingFrameAndTransform) {
       "scaled.igs.mha", "Seq_Frame0002_ProbeToTrackerTransform = ([-0-9.e]+) ([-0-9.e]+) ",
       "Seq_Frame0002_ProbeToTrackerTransform = 2 0.5 ");
   const Outcome out = run("segment " + sweep + " -o " + path("s.json"));
-  expect_error(out, {"scaled.igs.mha", "frame 2: ProbeToTrackerTransform",
-                     "not a rotation", "TransformStatus = INVALID"});
+  expect_error(out, {"scaled.igs.mha", "frame 2: ProbeToTrackerTransform", "not a rotation",
+                     "TransformStatus = INVALID"});
 }
 
 TEST_F(HostileInput, SegmentRefusesACalibrationFileWithTwoConflictingTransforms) {
@@ -288,9 +285,8 @@ TEST_F(HostileInput, SegmentRefusesACalibrationFileWithTwoConflictingTransforms)
   ASSERT_NE(first, second);
   xml.replace(static_cast<std::size_t>(found.position()), first.size(), first + second);
   std::ofstream(path("two.plus.xml")) << xml;
-  const Outcome out =
-      run("segment " + path("sw.igs.mha") + " --calibration " + path("two.plus.xml") + " -o " +
-          path("s.json"));
+  const Outcome out = run("segment " + path("sw.igs.mha") + " --calibration " +
+                          path("two.plus.xml") + " -o " + path("s.json"));
   expect_error(out, {"two.plus.xml", "defines ImageToProbe twice with different matrices",
                      "delete the other"});
 }

@@ -126,8 +126,9 @@ TEST(SliceJsonErrors, NotJsonReportsThePosition) {
 // bounds of +-1e308 an empty mesh, both with exit 0. Now errors naming the field and the fix.
 TEST(SliceJsonErrors, UnitsOtherThanMillimetresAreRefused) {
   for (const std::string units : {"m", "cm", "furlongs", "MM"}) {
-    const Result<SliceSet> set = parse(R"({"format": "sonoshape-slices", "version": 1, "units": ")" +
-                                       units + R"(", "slices": []})");
+    const Result<SliceSet> set =
+        parse(R"({"format": "sonoshape-slices", "version": 1, "units": ")" + units +
+              R"(", "slices": []})");
     ASSERT_FALSE(set.is_ok()) << units;
     EXPECT_TRUE(contains(set.message(), "units")) << set.message();
     EXPECT_TRUE(contains(set.message(), "\"units\": \"mm\"")) << set.message();
@@ -585,7 +586,8 @@ TEST(SliceFiles, JsonRoundTripIsExact) {
   EXPECT_EQ(back->bounds->max, set.bounds->max);
   EXPECT_EQ(back->units, set.units);
   ASSERT_EQ(back->labels.size(), set.labels.size());
-  for (std::size_t k = 0; k < set.labels.size(); ++k) EXPECT_EQ(back->labels[k].id, set.labels[k].id);
+  for (std::size_t k = 0; k < set.labels.size(); ++k)
+    EXPECT_EQ(back->labels[k].id, set.labels[k].id);
   ASSERT_EQ(back->slices.size(), set.slices.size());
   const LabeledSlice& a = set.slices[0];
   const LabeledSlice& b = back->slices[0];
