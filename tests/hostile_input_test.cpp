@@ -124,6 +124,18 @@ TEST_F(HostileInput, MhaDimSizeAMillionFramesOverFourBytesIsRefusedBeforeAllocat
                {"dimsize_512x512x1e6.mha", "DimSize needs 512x512x1000000", "DimSize is wrong"});
 }
 
+TEST_F(HostileInput, NrrdSizesAreCheckedAgainstTheDataBeforeAllocating) {
+  // 2.6e11 samples: refused by the sample limit (already at ed734b2).
+  Outcome out = run("segment " + corpus("sizes_512x512x1e6.igs.nrrd") + " -o " + path("s.json"));
+  expect_error(out, {"sizes_512x512x1e6.igs.nrrd", "more than 2^36 samples"});
+  // 262 MB over 4 gzip bytes: refused before allocating them (ed734b2 allocated, then called
+  // the data corrupt).
+  out = run("segment " + corpus("sizes_512x512x1000_over_4_gzip_bytes.igs.nrrd") + " -o " +
+            path("s.json"));
+  expect_error(out, {"sizes_512x512x1000_over_4_gzip_bytes.igs.nrrd", "262144000 bytes",
+                     "only 4 gzip bytes", "'sizes' is wrong"});
+}
+
 TEST_F(HostileInput, CslVertexCount1e9EndsEarlyNamingLineAndCounts) {
   const Outcome out = run("reconstruct " + corpus("vertex_count_1e9.csl") + " -o " + path("o.ply"));
   expect_error(out, {"vertex_count_1e9.csl", "line", "ends early", "check the counts"});
