@@ -57,7 +57,8 @@ class HostileInput : public ::testing::Test {
   void SetUp() override {
     dir_ = fs::temp_directory_path() /
            ("sonoshape_hostile_" +
-            std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()));
+            std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()) + "_" +
+            std::to_string(::getpid()));  // two checkouts may run the suite at once
     fs::remove_all(dir_);
     fs::create_directories(dir_);
   }
