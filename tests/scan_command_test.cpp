@@ -63,6 +63,27 @@ TEST(ScanCommand, FastSimulatedScanWritesMeshesSlicesAndSummary) {
   ASSERT_TRUE(slices) << slices.message();
   EXPECT_EQ(slices->slices.size(), summary["slices"].get<std::size_t>());
   EXPECT_GT(slices->slices.size(), 5u);
+  // The meshes are the surfaces of those slices: closed, oriented, enclosing a volume, and the
+  // same as the offline engine makes from the recorded slices (design.md: online == one-shot).
+  const auto offline = sonoshape::testing::run_command(
+      SONOSHAPE_BINARY,
+      "reconstruct " + (dir.path() / "out" / "slices.json").string() + " --depth 5 -o " +
+          (dir.path() / "offline").string(),
+      dir.path() / "offline.log");
+  ASSERT_EQ(offline.exit_code, 0) << offline.output;
+  for (const char* name : {"label_1.ply", "label_2.ply"}) {
+    SCOPED_TRACE(name);
+    const auto mesh = sonoshape::sim::read_mesh(dir.path() / "out" / name);
+    ASSERT_TRUE(mesh) << mesh.message();
+    ASSERT_FALSE(mesh->triangles.empty());
+    EXPECT_TRUE(sonoshape::check_mesh_health(*mesh).closed_manifold_oriented());
+    const double volume = sonoshape::signed_volume(*mesh);
+    EXPECT_GT(volume, 0.0);
+    const auto again = sonoshape::sim::read_mesh(dir.path() / "offline" / name);
+    ASSERT_TRUE(again) << again.message();
+    // Equal up to the float32 rounding of the PLY coordinates (equal to the bit at 11ecf1b).
+    EXPECT_NEAR(sonoshape::signed_volume(*again), volume, 1e-6 * volume);
+  }
 }
 
 TEST(ScanCommand, RealPlusRecordingReplaysIntoValidSlicesWithARepairsList) {

@@ -278,6 +278,15 @@ Result<std::vector<std::uint8_t>> decode_gzip(const std::filesystem::path& path,
                                               std::string_view source,
                                               const std::filesystem::path& source_path,
                                               std::size_t total) {
+  // zlib expands at most 1032 times: a 'sizes' the data cannot hold is refused before the
+  // samples are allocated (sizes: 512 512 1000000 over a few bytes).
+  constexpr std::size_t kMaxInflateRatio = 1032;
+  if (total > source.size() * kMaxInflateRatio + 64)
+    return fail(path,
+                "'sizes' and type need " + std::to_string(total) + " bytes but only " +
+                    std::to_string(source.size()) + " gzip bytes are in " + source_path.string() +
+                    ", which cannot hold them",
+                "the file is truncated or 'sizes' is wrong");
   // One spare byte tells "exactly sizes" from "more than sizes".
   std::vector<std::uint8_t> samples(total + 1);
   const auto [rc, produced] =
@@ -304,7 +313,9 @@ Result<std::vector<std::uint8_t>> decode_text(const std::filesystem::path& path,
                                               std::string_view source, std::size_t sample_count,
                                               int sample_bytes, bool big_endian) {
   std::vector<std::uint8_t> samples;
-  samples.reserve(sample_count * static_cast<std::size_t>(sample_bytes));
+  // At most one sample per two characters ("1 "): a lying 'sizes' must not allocate.
+  samples.reserve(std::min(sample_count, source.size() / 2 + 1) *
+                  static_cast<std::size_t>(sample_bytes));
   std::string text(source);
   for (char& c : text)
     if (c == '\n' || c == '\r' || c == ',') c = ' ';

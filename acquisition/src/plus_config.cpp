@@ -2,14 +2,46 @@
 
 #include <Eigen/LU>
 #include <pugixml.hpp>
+#include <algorithm>
 #include <sstream>
 
 #include "sonoshape/acquisition/sequence_file.hpp"
 
 namespace sonoshape::acq {
 
+namespace {
+
+// Two definitions of one transform that disagree: the configuration does not say which is
+// right, so neither is taken (the first one silently was, before).
+Status check_single_definition(const std::vector<PlusTransform>& transforms,
+                               const std::string& from, const std::string& to) {
+  const PlusTransform* first = nullptr;
+  for (const PlusTransform& t : transforms) {
+    const bool direct = t.from == from && t.to == to;
+    const bool reverse = t.from == to && t.to == from;
+    if (!direct && !reverse) continue;
+    const Eigen::Matrix4d m = direct ? t.matrix : Eigen::Matrix4d(t.matrix.inverse());
+    if (!first) {
+      first = &t;
+      continue;
+    }
+    const Eigen::Matrix4d f =
+        first->from == from ? first->matrix : Eigen::Matrix4d(first->matrix.inverse());
+    if ((m - f).cwiseAbs().maxCoeff() > 1e-9 * std::max(1.0, f.cwiseAbs().maxCoeff()))
+      return Status::error("PLUS configuration defines " + from + "To" + to +
+                           " twice with different matrices (<Transform From=\"" + first->from +
+                           "\" To=\"" + first->to + "\"> and <Transform From=\"" + t.from +
+                           "\" To=\"" + t.to +
+                           "\">); keep the one that is right and delete the other");
+  }
+  return Status::ok();
+}
+
+}  // namespace
+
 Result<Eigen::Matrix4d> PlusConfig::transform(const std::string& from,
                                               const std::string& to) const {
+  if (Status single = check_single_definition(transforms, from, to); !single) return single;
   for (const PlusTransform& t : transforms)
     if (t.from == from && t.to == to) return t.matrix;
   for (const PlusTransform& t : transforms)

@@ -305,11 +305,28 @@ Result<SequenceFile> read_sequence_file(const std::filesystem::path& path) {
                 "per-frame field of frame " + std::to_string(frame_fields.rbegin()->first) +
                     " but DimSize says " + std::to_string(n) + " frames",
                 "fix DimSize or remove the fields of the missing frames");
-  const std::size_t frame_bytes = w * h;
-  const std::size_t total = frame_bytes * n;
-  std::vector<std::uint8_t> pixels(total);
+  const std::size_t frame_bytes = w * h;  // below 2^62: W and H are at most 2^31 - 1
   const std::size_t available = data.size() - pos;
   const bool compressed = is_true(file.field("CompressedData").value_or("False"));
+  // The pixels DimSize asks for are checked against the bytes present before anything is
+  // allocated: zlib's deflate expands at most 1032 times.
+  constexpr std::size_t kMaxInflateRatio = 1032;
+  if (compressed && n > 0 && frame_bytes > (available * kMaxInflateRatio + 64) / n)
+    return fail(path,
+                "DimSize = '" + *dim_text + "' needs " + std::to_string(w) + "x" +
+                    std::to_string(h) + "x" + std::to_string(n) + " bytes but only " +
+                    std::to_string(available) +
+                    " compressed bytes follow the header, which cannot hold them",
+                "the file is truncated or DimSize is wrong");
+  if (!compressed && n > 0 && frame_bytes > available / n)  // division: W*H*N may overflow
+    return fail(path,
+                "the raw pixel data has " + std::to_string(available) + " bytes, DimSize needs " +
+                    std::to_string(w) + "x" + std::to_string(h) + "x" + std::to_string(n) +
+                    " (frame " + std::to_string(available / frame_bytes) +
+                    " is incomplete)",
+                "the file is truncated or DimSize is wrong");
+  const std::size_t total = frame_bytes * n;
+  std::vector<std::uint8_t> pixels(total);
   if (compressed) {
     std::size_t compressed_size = available;
     if (const auto text = file.field("CompressedDataSize")) {
@@ -343,12 +360,6 @@ Result<SequenceFile> read_sequence_file(const std::filesystem::path& path) {
                       std::to_string(produced / frame_bytes) + " is incomplete)",
                   "the file is truncated or DimSize is wrong");
   } else {
-    if (available < total)
-      return fail(path,
-                  "the raw pixel data has " + std::to_string(available) + " bytes, DimSize needs " +
-                      std::to_string(total) + " (frame " + std::to_string(available / frame_bytes) +
-                      " is incomplete)",
-                  "the file is truncated or DimSize is wrong");
     std::copy_n(reinterpret_cast<const std::uint8_t*>(data.data() + pos), total, pixels.begin());
   }
 
@@ -467,6 +478,76 @@ Status require_tracking(const SequenceFile& file, const std::filesystem::path& p
               "a tracked sweep needs the probe's pose per frame: record it with the tracker "
               "(PLUS Seq_FrameNNNN_" +
                   field + ")");
+}
+
+namespace {
+
+// PLUS's 2D orientation codes (US_IMG_ORIENT_*): how the image's x and y run against the
+// transducer's marked side and the far field. sonoshape implements MF, PLUS's default.
+bool is_plus_orientation(std::string_view code) {
+  if (code.size() != 2 && code.size() != 3) return false;
+  if (code[0] != 'M' && code[0] != 'U') return false;
+  if (code[1] != 'F' && code[1] != 'N') return false;
+  return code.size() == 2 || code[2] == 'A' || code[2] == 'D';
+}
+
+// A tracker pose maps rigidly: rotation part orthonormal with determinant +1 (to 1e-3, what
+// six-digit matrices in files keep), last row 0 0 0 1.
+std::optional<std::string> rigid_problem(const Eigen::Matrix4d& m) {
+  if (!m.allFinite()) return "it holds NaN or infinite numbers";
+  if ((m.row(3) - Eigen::RowVector4d(0, 0, 0, 1)).cwiseAbs().maxCoeff() > 1e-9)
+    return "its last row is not 0 0 0 1";
+  const Eigen::Matrix3d r = m.block<3, 3>(0, 0);
+  const double off = (r.transpose() * r - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
+  if (off > 1e-3 || r.determinant() < 0.0) {
+    std::ostringstream text;
+    text << "its rotation part is not a rotation (R^T R differs from the identity by " << off
+         << ", determinant " << r.determinant() << ")";
+    return text.str();
+  }
+  return std::nullopt;
+}
+
+}  // namespace
+
+Status check_tracked_sweep(const SequenceFile& file, const std::filesystem::path& path,
+                           std::string_view probe_transform) {
+  if (const auto orientation = file.field("UltrasoundImageOrientation")) {
+    const std::string code(trim(*orientation));
+    if (!is_plus_orientation(code))
+      return fail(path, "UltrasoundImageOrientation = '" + code + "' is not a PLUS orientation",
+                  "write MF (or MFA), the orientation of PLUS recordings: x from the marked "
+                  "side, y into the far field");
+    if (code.substr(0, 2) != "MF")
+      return fail(path, "UltrasoundImageOrientation = " + code + " is not supported",
+                  "sonoshape reads MF images only; reorient the frames to MF with PLUS "
+                  "EditSequenceFile");
+  }
+  const std::string probe_name(probe_transform);
+  for (std::size_t k = 0; k < file.frame_count(); ++k) {
+    const std::string frame = "frame " + std::to_string(k);
+    if (const auto text = file.frame_field(k, "Timestamp")) {
+      const auto t = parse_number<double>(*text);
+      if (!t || !std::isfinite(*t))
+        return fail(path,
+                    frame + ": Timestamp = '" + std::string(trim(*text)) +
+                        "' is not a finite number",
+                    "write the frame's acquisition time in seconds");
+    }
+    for (const std::string& name : {probe_name, std::string("ReferenceToTracker")}) {
+      if (!file.frame_field(k, name + std::string(kTransformSuffix))) continue;
+      if (file.transform_status(name, k) != TrackingStatus::kValid) continue;  // not used
+      const auto matrix = file.transform(name, k);
+      if (!matrix)
+        return fail(path, frame + ": " + name + std::string(kTransformSuffix) +
+                              " is not 16 numbers", "write a row-major 4x4 matrix");
+      if (const auto problem = rigid_problem(*matrix))
+        return fail(path, frame + ": " + name + std::string(kTransformSuffix) + ": " + *problem,
+                    "a tracker pose is a rotation and a translation: fix the matrix, or mark "
+                    "the frame's " + name + "TransformStatus = INVALID to skip it");
+    }
+  }
+  return Status::ok();
 }
 
 }  // namespace sonoshape::acq

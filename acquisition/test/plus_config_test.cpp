@@ -75,5 +75,35 @@ TEST(PlusConfig, BrokenFilesGiveClearErrors) {
   EXPECT_NE(result.message().find("PlusConfiguration"), std::string::npos) << result.message();
 }
 
+// Two definitions of one transform: equal ones are one definition; different ones (directly or
+// as the inverse) are an error naming both, not the first one taken (issue 27).
+TEST(PlusConfig, ConflictingDefinitionsOfATransformAreRefused) {
+  Eigen::Matrix4d a = Eigen::Matrix4d::Identity();
+  a.block<3, 3>(0, 0) *= 0.2;
+  Eigen::Matrix4d b = a;
+  b(0, 3) = 5.0;
+  PlusConfig same;
+  same.transforms = {{"Image", "Probe", a, 0.0, ""}, {"Image", "Probe", a, 0.0, ""}};
+  const auto ok = same.transform("Image", "Probe");
+  ASSERT_TRUE(ok) << ok.message();
+  EXPECT_EQ(*ok, a);
+  PlusConfig direct;
+  direct.transforms = {{"Image", "Probe", a, 0.0, ""}, {"Image", "Probe", b, 0.0, ""}};
+  auto refused = direct.transform("Image", "Probe");
+  ASSERT_FALSE(refused);
+  EXPECT_NE(refused.message().find("defines ImageToProbe twice"), std::string::npos)
+      << refused.message();
+  PlusConfig inverse;
+  inverse.transforms = {{"Image", "Probe", a, 0.0, ""},
+                        {"Probe", "Image", Eigen::Matrix4d(b.inverse()), 0.0, ""}};
+  refused = inverse.transform("Image", "Probe");
+  ASSERT_FALSE(refused);
+  EXPECT_NE(refused.message().find("<Transform From=\"Probe\" To=\"Image\">"), std::string::npos)
+      << refused.message();
+  // The inverse of the same matrix is the same definition.
+  inverse.transforms[1].matrix = a.inverse();
+  EXPECT_TRUE(inverse.transform("Image", "Probe"));
+}
+
 }  // namespace
 }  // namespace sonoshape::acq

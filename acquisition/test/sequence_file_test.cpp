@@ -202,5 +202,49 @@ TEST(SequenceFile, MalformedHeadersGiveClearErrors) {
   contains(missing.message(), "cannot open");
 }
 
+// What `segment` checks before using a sweep (issue 27): orientation, timestamps, rigid poses.
+TEST(CheckTrackedSweep, OrientationTimestampsAndRigidPoses) {
+  auto sweep = [] {
+    SequenceFile file;
+    for (int k = 0; k < 3; ++k) {
+      file.add_frame(GreyImage(4, 4));
+      Eigen::Matrix4d pose = Eigen::Matrix4d::Identity();
+      pose(2, 3) = k;
+      file.set_transform("ProbeToTracker", static_cast<std::size_t>(k), pose,
+                         TrackingStatus::kValid);
+      file.set_frame_field(static_cast<std::size_t>(k), "Timestamp", std::to_string(0.1 * k));
+    }
+    return file;
+  };
+  EXPECT_TRUE(check_tracked_sweep(sweep(), "s.igs.mha"));
+  for (const char* code : {"MF", "MFA"}) {
+    SequenceFile file = sweep();
+    file.set_field("UltrasoundImageOrientation", code);
+    EXPECT_TRUE(check_tracked_sweep(file, "s.igs.mha")) << code;
+  }
+  auto message = [](const SequenceFile& file) {
+    const Status status = check_tracked_sweep(file, "s.igs.mha");
+    EXPECT_FALSE(status);
+    return status ? std::string() : status.message();
+  };
+  SequenceFile file = sweep();
+  file.set_field("UltrasoundImageOrientation", "UN");
+  EXPECT_NE(message(file).find("UltrasoundImageOrientation = UN is not supported"),
+            std::string::npos);
+  file.set_field("UltrasoundImageOrientation", "XYZ");
+  EXPECT_NE(message(file).find("'XYZ' is not a PLUS orientation"), std::string::npos);
+  file = sweep();
+  file.set_frame_field(1, "Timestamp", "inf");
+  EXPECT_NE(message(file).find("frame 1: Timestamp = 'inf'"), std::string::npos);
+  file = sweep();
+  Eigen::Matrix4d sheared = Eigen::Matrix4d::Identity();
+  sheared(0, 1) = 0.01;  // 1e-2 off orthonormal: beyond the 1e-3 that file rounding explains
+  file.set_transform("ProbeToTracker", 2, sheared, TrackingStatus::kValid);
+  EXPECT_NE(message(file).find("frame 2: ProbeToTrackerTransform"), std::string::npos);
+  // The same pose marked INVALID is not used, so not checked.
+  file.set_transform("ProbeToTracker", 2, sheared, TrackingStatus::kInvalid);
+  EXPECT_TRUE(check_tracked_sweep(file, "s.igs.mha"));
+}
+
 }  // namespace
 }  // namespace sonoshape::acq

@@ -64,6 +64,7 @@ struct Tally {
   std::map<int, std::uint64_t> meshes;
   std::optional<std::string> last_state;
   std::string stopped_by = "signal";
+  std::optional<std::string> setup_error;  // why the subscription failed (stopped_by setup_error)
 };
 
 // Replaces a file only once the new one is complete: a viewer of DIR never reads half a mesh.
@@ -106,6 +107,7 @@ Status write_summary(const ListenOptions& options, const Tally& tally, double du
   summary["write_errors"] = tally.write_errors;
   summary["duration_s"] = duration_s;
   summary["stopped_by"] = tally.stopped_by;
+  if (tally.setup_error) summary["error"] = *tally.setup_error;
   const std::filesystem::path path = options.output / "summary.json";
   std::ofstream out(path, std::ios::trunc);
   out << summary.dump(2) << '\n';
@@ -144,6 +146,12 @@ int run_listen(const ListenOptions& options) {
       return written ? 0 : 1;
     }
     std::cerr << "error: " << subscriber.message() << '\n';
+    // The summary is promised whatever happens once the folder exists: a failed setup is one.
+    Tally failed;
+    failed.stopped_by = "setup_error";
+    failed.setup_error = subscriber.message();
+    if (const Status written = write_summary(options, failed, 0.0); !written)
+      std::cerr << "error: " << written.message() << '\n';
     return 1;
   }
   log_info("listen: subscribed to " + options.endpoint +
@@ -189,7 +197,13 @@ int run_listen(const ListenOptions& options) {
         tally.scans.push_back(message.scan);
         expected_seq = 0;
       }
-      if (is_end) {
+      if (is_end && !in_snapshot) {
+        // `end` closes a snapshot; on the live stream it is a publisher's error.
+        ++tally.invalid;
+        log_warning("listen: invalid message: end seq " + std::to_string(message.seq) +
+                    " on the live stream; \"end\" only closes a snapshot (see "
+                    "docs/formats/mesh-stream.md)");
+      } else if (is_end) {
         in_snapshot = false;
         tally.snapshot_seq = message.seq;
         expected_seq = message.seq + 1;

@@ -9,6 +9,7 @@
 #include <sstream>
 #include <iostream>
 #include <memory>
+#include <set>
 #include <nlohmann/json.hpp>
 
 #include "commands.hpp"
@@ -203,6 +204,20 @@ CommandRunner add_reconstruct_command(CLI::App& app) {
       std::cerr << "error: " << slices.message() << '\n';
       return 2;
     }
+    // Nothing to reconstruct is an error, not exit 0 with no mesh written.
+    if (slices->slices.empty()) {
+      std::cerr << "error: " << opt->input
+                << ": slices: the set holds no slice, so there is nothing to reconstruct; "
+                   "give at least one slice with a labelled region\n";
+      return 2;
+    }
+    if (slices->material_ids().empty()) {
+      std::cerr << "error: " << opt->input
+                << ": no slice has a region of a material (every region is \"unknown\" or "
+                   "there are none), so there is no surface to reconstruct; label the organ's "
+                   "regions with a material id\n";
+      return 2;
+    }
     if (opt->emit_every > 0 && !opt->online) {
       std::cerr << "error: --emit-every needs --online\n";
       return 2;
@@ -218,11 +233,22 @@ CommandRunner add_reconstruct_command(CLI::App& app) {
       return 2;
     }
     for (const auto& path : *written) log_info("wrote " + path.string());
-    for (const auto& entry : meshes.meshes)
-      if (entry.mesh.empty())
+    std::set<int> used;
+    for (const LabeledSlice& slice : slices->slices)
+      for (const Region& region : slice.regions) used.insert(region.label);
+    std::string unused;
+    for (const auto& entry : meshes.meshes) {
+      if (!entry.mesh.empty()) continue;
+      if (!used.count(entry.label))
+        unused += (unused.empty() ? "" : ", ") + std::to_string(entry.label);
+      else
         log_warning("label " + std::to_string(entry.label) + " (" + entry.name +
                     ") produced an empty surface: its regions may be smaller than the octree cells"
                     " (try a larger --depth)");
+    }
+    if (!unused.empty())
+      log_warning("label(s) " + unused + " declared but no region uses them: their meshes "
+                  "are empty");
     log_info("reconstructed " + std::to_string(stats.slices) + " slices, " +
              std::to_string(stats.cells) + " cells, " + std::to_string(stats.field_evaluations) +
              " field evaluations in " + std::to_string(stats.total_s) + " s");

@@ -134,6 +134,10 @@ int run_segment(const SegmentOptions& options) {
     std::cerr << "error: " << tracked.message() << '\n';
     return 1;
   }
+  if (const Status sound = acq::check_tracked_sweep(*file, options.input); !sound) {
+    std::cerr << "error: " << sound.message() << '\n';
+    return 1;
+  }
   auto optional_path = [](const std::filesystem::path& p) {
     return p.empty() ? std::nullopt : std::optional<std::filesystem::path>(p);
   };

@@ -32,6 +32,16 @@ struct Token {
 };
 
 // Whitespace-separated tokens with their line numbers; blank lines are simply skipped.
+// Lengths beyond 1e12 mm (1000 km) are no anatomy; their squares would overflow the geometry.
+constexpr double kMaxCoordinateMm = 1e12;
+
+// A token as a message quotes it: a 100000-digit number is cut to its first 40 characters so
+// that the message stays a line, not 100 KB.
+std::string excerpt(std::string_view text) {
+  if (text.size() <= 40) return std::string(text);
+  return std::string(text.substr(0, 37)) + "... (" + std::to_string(text.size()) + " characters)";
+}
+
 class Tokens {
  public:
   explicit Tokens(const std::string& text) {
@@ -69,7 +79,7 @@ class Tokens {
     const auto [end, ec] = std::from_chars(t.text.data(), t.text.data() + t.text.size(), value);
     if (ec != std::errc() || end != t.text.data() + t.text.size())
       fail(t.line,
-           std::string("expected ") + what + " (an integer), got \"" + std::string(t.text) + "\"");
+           std::string("expected ") + what + " (an integer), got \"" + excerpt(t.text) + "\"");
     return value;
   }
 
@@ -81,7 +91,7 @@ class Tokens {
     const auto [end, ec] = std::from_chars(first, t.text.data() + t.text.size(), value);
     if (ec != std::errc() || end != t.text.data() + t.text.size() || !std::isfinite(value))
       fail(t.line, std::string("expected ") + what + " (a finite number), got \"" +
-                       std::string(t.text) + "\"");
+                       excerpt(t.text) + "\"");
     return value;
   }
 
@@ -170,12 +180,18 @@ Plane read_plane(Tokens& tokens, int n_labels) {
   plane.abc.y() = tokens.take_double("the plane coefficient B");
   plane.abc.z() = tokens.take_double("the plane coefficient C");
   plane.d = tokens.take_double("the plane coefficient D");
-  plane.vertices.reserve(static_cast<std::size_t>(n_vertices));
+  // A lying count (1e9) must not allocate before the vertices are read: the file ends early.
+  plane.vertices.reserve(static_cast<std::size_t>(std::min<long long>(n_vertices, 1 << 16)));
   for (long long k = 0; k < n_vertices; ++k) {
     Vec3 p;
     p.x() = tokens.take_double("a vertex x");
     p.y() = tokens.take_double("a vertex y");
     p.z() = tokens.take_double("a vertex z");
+    if (p.cwiseAbs().maxCoeff() > kMaxCoordinateMm)
+      fail(tokens.line(), "plane " + std::to_string(plane.index) + ", vertex " +
+                              std::to_string(k) + ": a coordinate beyond 1e12 mm (" +
+                              detail::format_double(p.cwiseAbs().maxCoeff()) +
+                              "), where lengths lose their precision; check the units");
     plane.vertices.push_back(p);
   }
   const std::string plane_name = "plane " + std::to_string(plane.index);
@@ -201,7 +217,7 @@ Plane read_plane(Tokens& tokens, int n_labels) {
     }
     if (!ok)
       fail(component.line, where + ": expected a point count like \"25\" or \"25h3\", got \"" +
-                               std::string(text) + "\"");
+                               excerpt(text) + "\"");
     if (count < 0) fail(component.line, where + ": negative point count");
     if (h != std::string_view::npos) {
       if (parent < 0 || parent >= n_components || parent == c)
@@ -741,7 +757,7 @@ SliceSet parse_csl_text(const std::string& text, CslNaming& naming, detail::Repa
   Tokens tokens(text);
   const Token& magic = tokens.take("the header \"CSLC\"");
   if (magic.text != "CSLC")
-    fail(magic.line, "expected the header \"CSLC\", got \"" + std::string(magic.text) +
+    fail(magic.line, "expected the header \"CSLC\", got \"" + excerpt(magic.text) +
                          "\"; this is not a .csl contour file");
   const std::size_t counts_line = tokens.line();
   const long long n_planes = tokens.take_int("the plane count");
@@ -776,20 +792,27 @@ SliceSet parse_csl_text(const std::string& text, CslNaming& naming, detail::Repa
 
 // A note, not a repair: nothing in the data changes, and --strict has nothing to refuse.
 void warn_unused_labels(const SliceSet& set, int n_labels, const std::string& source_name) {
-  std::vector<long long> unused;
-  std::size_t next = 0;
-  for (int id = 1; id < n_labels; ++id) {
-    if (next < set.labels.size() && set.labels[next].id == id)
-      ++next;
-    else
-      unused.push_back(id);
+  // The gaps between the used ids, as ranges: a header may declare nLabels = 1e9, so the unused
+  // ids are never listed one by one.
+  std::string ranges;
+  long long unused = 0;
+  long long next = 1;
+  auto add_gap = [&](long long first, long long last) {
+    if (first > last) return;
+    unused += last - first + 1;
+    ranges += (ranges.empty() ? "" : ", ") + std::to_string(first);
+    if (last > first) ranges += ".." + std::to_string(last);
+  };
+  for (const LabelInfo& label : set.labels) {
+    add_gap(next, static_cast<long long>(label.id) - 1);
+    next = static_cast<long long>(label.id) + 1;
   }
-  if (unused.empty()) return;
+  add_gap(next, static_cast<long long>(n_labels) - 1);
+  if (unused == 0) return;
   log_warning(source_name + ": the header declares materials 1.." + std::to_string(n_labels - 1) +
               " (nLabels = " + std::to_string(n_labels) + ") but " +
-              (unused.size() == 1 ? "material " : "materials ") + index_ranges(unused) +
-              " never occur" + (unused.size() == 1 ? "s" : "") +
-              "; meshes are made only for the materials that do");
+              (unused == 1 ? "material " : "materials ") + ranges + " never occur" +
+              (unused == 1 ? "s" : "") + "; meshes are made only for the materials that do");
 }
 
 }  // namespace

@@ -21,6 +21,20 @@ namespace {
 std::uint64_t edge_key(std::uint32_t a, std::uint32_t b) {
   return (static_cast<std::uint64_t>(a) << 32) | b;
 }
+// Zero area relative to the triangle's size: |cross| at most 1e-12 of the longest edge squared
+// (rounding of collinear points), or any vertex index out of range / non-finite.
+bool zero_area(const TriangleMesh& mesh, const std::array<std::uint32_t, 3>& t) {
+  if (t[0] >= mesh.vertices.size() || t[1] >= mesh.vertices.size() ||
+      t[2] >= mesh.vertices.size())
+    return false;  // the index is the defect, not the area; other checks see it
+  const Vec3& a = mesh.vertices[t[0]];
+  const Vec3& b = mesh.vertices[t[1]];
+  const Vec3& c = mesh.vertices[t[2]];
+  const double longest =
+      std::max({(b - a).squaredNorm(), (c - b).squaredNorm(), (a - c).squaredNorm()});
+  return (b - a).cross(c - a).norm() <= 1e-12 * longest;
+}
+
 }  // namespace
 
 MeshHealth check_mesh_health(const TriangleMesh& mesh) {
@@ -34,6 +48,9 @@ MeshHealth check_mesh_health(const TriangleMesh& mesh) {
       ++health.degenerate_triangles;
       continue;
     }
+    // A triangle of three distinct but collinear (or coincident) points has no area: a mesh
+    // of such triangles encloses nothing, however well its edges pair up.
+    if (zero_area(mesh, t)) ++health.degenerate_triangles;
     for (int k = 0; k < 3; ++k) ++directed[edge_key(t[k], t[(k + 1) % 3])];
   }
   for (const auto& [key, count] : directed) {

@@ -1002,6 +1002,39 @@ void merge_identical_slices(SliceSet& set, const SlicePairs& identical, const Sl
   set.slices = std::move(slices);
 }
 
+namespace {
+
+// The octree has at most 2^11 cells a side: bounds more than 1000 times larger than the regions
+// they hold leave every region inside a cell or two, and the surface comes out empty. Such
+// bounds (1e308, or a box in metres around contours in mm) are an error, not an empty mesh.
+constexpr double kMaxBoundsToRegionsRatio = 1000.0;
+
+Status check_bounds_resolvable(const SliceSet& set, const std::string& source_name) {
+  if (!set.bounds) return Status::ok();
+  Box3 seen{Vec3::Constant(std::numeric_limits<double>::infinity()),
+            Vec3::Constant(-std::numeric_limits<double>::infinity())};
+  for (const LabeledSlice& s : set.slices)
+    for (const Region& r : s.regions)
+      for (const Vec2& p : r.outer) {
+        const Vec3 w = s.to_world(p);
+        seen.min = seen.min.cwiseMin(w);
+        seen.max = seen.max.cwiseMax(w);
+      }
+  if (!seen.min.allFinite()) return Status::ok();  // no regions: nothing to resolve
+  const double regions_side = (seen.max - seen.min).maxCoeff();
+  const double bounds_side = (set.bounds->max - set.bounds->min).maxCoeff();
+  if (std::isfinite(bounds_side) && bounds_side <= kMaxBoundsToRegionsRatio * regions_side)
+    return Status::ok();
+  return Status::error(
+      source_name + ": bounds: the box (largest side " + format_double(bounds_side) +
+      ") is more than " + format_double(kMaxBoundsToRegionsRatio) +
+      " times the extent of the regions (" + format_double(regions_side) +
+      "), finer than the octree can resolve, so the surface would be empty; give bounds "
+      "that fit the regions (check the units), or leave bounds out");
+}
+
+}  // namespace
+
 Result<SliceSet> finish_parsed_set(SliceSet set, const std::string& source_name,
                                    const SliceNaming& naming, RepairLog& repairs) {
   // Rounding slivers are snapped once the set is otherwise valid (the snap needs valid
@@ -1023,6 +1056,8 @@ Result<SliceSet> finish_parsed_set(SliceSet set, const std::string& source_name,
                                       round + 1 < kSnapRounds ? &thin : nullptr);
   }
   if (!status) return status;
+  if (Status resolvable = check_bounds_resolvable(set, source_name); !resolvable)
+    return resolvable;
   try {
     merge_identical_slices(set, identical, naming, repairs);
   } catch (const RepairRefused& refused) {
@@ -1108,6 +1143,18 @@ double read_number(const json& j, const std::string& where) {
   return value;
 }
 
+// Lengths beyond 1e12 mm (1000 km) are no anatomy: their squares in the geometry overflow and
+// the polygon then reads as "fewer than 3 distinct points", which blames the wrong thing.
+constexpr double kMaxCoordinateMm = 1e12;
+
+double read_coordinate(const json& j, const std::string& where) {
+  const double value = read_number(j, where);
+  if (std::abs(value) > kMaxCoordinateMm)
+    fail_at(where, "coordinate " + short_dump(j) +
+                       " is beyond 1e12 mm, where lengths lose their precision; check the units");
+  return value;
+}
+
 Vec3 read_vec3(const json& j, const std::string& where) {
   if (!j.is_array() || j.size() != 3) fail_at(where, "expected [x, y, z], got " + short_dump(j));
   return Vec3(read_number(j[0], where), read_number(j[1], where), read_number(j[2], where));
@@ -1122,7 +1169,7 @@ Ring2 read_ring(const json& j, const std::string& where) {
     const json& p = j[k];
     if (!p.is_array() || p.size() != 2)
       fail_at(point_where, "expected [x, y], got " + short_dump(p));
-    ring.emplace_back(read_number(p[0], point_where), read_number(p[1], point_where));
+    ring.emplace_back(read_coordinate(p[0], point_where), read_coordinate(p[1], point_where));
   }
   return ring;
 }
@@ -1287,6 +1334,9 @@ LabeledSlice parse_slice_object(const json& js, std::size_t i, bool normalize,
     if (!js.contains(key)) fail_at(where, std::string("\"") + key + "\" is missing");
   LabeledSlice s;
   s.origin_mm = read_vec3(js["origin"], where + ", origin");
+  if (s.origin_mm.cwiseAbs().maxCoeff() > kMaxCoordinateMm)
+    fail_at(where + ", origin",
+            "a coordinate beyond 1e12 mm, where lengths lose their precision; check the units");
   s.u = read_vec3(js["u"], where + ", u");
   s.v = read_vec3(js["v"], where + ", v");
   if (normalize) {
@@ -1364,6 +1414,12 @@ SliceSet parse_document(const json& doc, const std::string& source_name,
   SliceSet set;
   if (const auto units = doc.find("units"); units != doc.end()) {
     if (!units->is_string()) fail_at("units", "expected a string such as \"mm\"");
+    // Every length in sonoshape is millimetres; a file in another unit read as mm would give a
+    // surface 1000 times too small or large without a word, so it is refused instead.
+    if (units->get<std::string>() != "mm")
+      fail_at("units", short_dump(*units) +
+                           " is not supported: sonoshape reads lengths in millimetres only; "
+                           "convert the file's lengths to mm and write \"units\": \"mm\"");
     set.units = units->get<std::string>();
   }
   bool normalize = false;
@@ -1492,6 +1548,13 @@ Result<SliceSet> parse_slice_set_json(const std::string& text, const std::string
     if (const auto bracket = what.find("] ");
         what.rfind("[json.exception", 0) == 0 && bracket != std::string::npos)
       what = what.substr(bracket + 2);
+    // The quoted token ("number overflow parsing '1111...'") cut to 40 characters.
+    if (const auto open = what.find(" '"); open != std::string::npos) {
+      const auto close = what.rfind('\'');
+      if (close > open + 2 + 40)
+        what = what.substr(0, open + 2 + 37) + "... (" + std::to_string(close - open - 2) +
+               " characters)" + what.substr(close);
+    }
     return Status::error(source_name + ": not valid JSON (" + what +
                          "); a slice set is a JSON document, see docs/formats/slices.md");
   }

@@ -228,8 +228,28 @@ TEST(CslErrors, StructuralProblems) {
                        "the normal (A, B, C) is zero"));
   EXPECT_TRUE(contains(parse_error("CSLC\n1 2\n1 3 1 0 0 1 0\n0 0 0\n1 0 0\n0 1 0\n3h0 1 0 1 2\n"),
                        "cannot be its own parent"));
+  // The boundary: a parent index equal to the component count (2 of components 0..1) reads
+  // past the plane's components unless refused (issue 27's surviving mutation).
+  EXPECT_TRUE(contains(parse_error("CSLC\n1 2\n1 8 2 0 0 1 0\n0 0 0\n10 0 0\n10 10 0\n0 10 0\n"
+                                   "2 2 0\n8 2 0\n8 8 0\n2 8 0\n4 1 0 1 2 3\n4h2 1 7 6 5 4\n"),
+                       "names component 2 as the parent of this hole, but the plane's "
+                       "components are 0..1"));
+  // One below the boundary is a hole of the last component: accepted.
+  EXPECT_TRUE(parse("CSLC\n1 2\n1 8 2 0 0 1 0\n0 0 0\n10 0 0\n10 10 0\n0 10 0\n2 2 0\n8 2 0\n"
+                    "8 8 0\n2 8 0\n4 1 0 1 2 3\n4h0 1 7 6 5 4\n")
+                  .is_ok());
   EXPECT_TRUE(contains(parse_error("CSLC\n1 2\n1 0 0 0 0 1 0\n2 0 0 0 0 1 0\n"),
                        "unexpected text after the last of the 1 planes"));
+}
+
+// A header declaring 1e9 materials with one used (issue 27): read at once, one label, and the
+// warning names the unused ids as a range, not one by one.
+TEST(CslErrors, HugeNLabelsWithOneMaterialUsedIsReadAtOnce) {
+  const Result<SliceSet> set =
+      parse("CSLC\n1 1000000000\n1 3 1 0 0 1 0\n0 0 0\n1 0 0\n0 1 0\n3 1 0 1 2\n");
+  ASSERT_TRUE(set.is_ok()) << set.message();
+  ASSERT_EQ(set->labels.size(), 1u);
+  EXPECT_EQ(set->labels[0].id, 1);
 }
 
 TEST(CslErrors, StrictRefusesASelfIntersectingComponentNamingPlaneComponentAndLine) {

@@ -2,6 +2,8 @@
 #include "sonoshape/core/slice_io.hpp"
 
 #include <gtest/gtest.h>
+
+#include <sstream>
 #include <unistd.h>
 
 #include <atomic>
@@ -118,6 +120,40 @@ TEST(SliceJsonErrors, NotJsonReportsThePosition) {
       parse_error("{\"format\": \"sonoshape-slices\",\n  \"version\": 1,\n  oops }");
   EXPECT_TRUE(contains(message, "not valid JSON"));
   EXPECT_TRUE(contains(message, "line 3"));
+}
+
+// Issue 27: a file in metres or furlongs read as millimetres gave a surface 1000 times off, and
+// bounds of +-1e308 an empty mesh, both with exit 0. Now errors naming the field and the fix.
+TEST(SliceJsonErrors, UnitsOtherThanMillimetresAreRefused) {
+  for (const std::string units : {"m", "cm", "furlongs", "MM"}) {
+    const Result<SliceSet> set =
+        parse(R"({"format": "sonoshape-slices", "version": 1, "units": ")" + units +
+              R"(", "slices": []})");
+    ASSERT_FALSE(set.is_ok()) << units;
+    EXPECT_TRUE(contains(set.message(), "units")) << set.message();
+    EXPECT_TRUE(contains(set.message(), "\"units\": \"mm\"")) << set.message();
+  }
+  EXPECT_TRUE(parse(R"({"format": "sonoshape-slices", "version": 1, "units": "mm", "slices": []})")
+                  .is_ok());
+}
+
+TEST(SliceJsonErrors, BoundsFarLargerThanTheRegionsAreRefused) {
+  auto with_bounds = [](double half) {
+    std::ostringstream text;
+    text.precision(17);
+    text << R"({"format": "sonoshape-slices", "version": 1, "bounds": {"min": [)" << -half << ","
+         << -half << "," << -half << R"(], "max": [)" << half << "," << half << "," << half
+         << R"(]}, "slices": [{"origin": [0, 0, 0], "u": [1, 0, 0], "v": [0, 1, 0], "regions": [)"
+         << R"({"label": 1, "polygon": [[-5, -5], [5, -5], [5, 5], [-5, 5]]}]}]})";
+    return parse(text.str());
+  };
+  const Result<SliceSet> huge = with_bounds(1e308);
+  ASSERT_FALSE(huge.is_ok());
+  EXPECT_TRUE(contains(huge.message(), "t.slices.json: bounds:")) << huge.message();
+  EXPECT_TRUE(contains(huge.message(), "leave bounds out")) << huge.message();
+  // 1000 times the regions' extent (10) is the limit: 5000 either side fails, 4000 passes.
+  EXPECT_FALSE(with_bounds(5001.0).is_ok());
+  EXPECT_TRUE(with_bounds(4000.0).is_ok()) << with_bounds(4000.0).message();
 }
 
 TEST(SliceJsonErrors, WrongFormat) {
@@ -538,16 +574,26 @@ TEST(SliceFiles, JsonRoundTripIsExact) {
   set.slices[0].origin_mm = Vec3(1.0 / 3.0, 0.1 + 0.2, -2.0 / 7.0);
   set.slices[0].regions[0].outer[0] = Vec2(-10.000000000000002, 5.123456789012345);
   set.labels[0].name = "li\"ver";
+  // Directions turned by 0.3 rad in their plane: both need all 17 digits too.
+  set.slices[0].u = Vec3(std::cos(0.3), std::sin(0.3), 0.0);
+  set.slices[0].v = Vec3(-std::sin(0.3), std::cos(0.3), 0.0);
   const auto path = dir.path() / "set.slices.json";
   ASSERT_TRUE(write_slice_set(set, path).is_ok());
   const Result<SliceSet> back = read_slice_set(path);
   ASSERT_TRUE(back.is_ok()) << back.message();
   EXPECT_EQ(back->labels[0].name, "li\"ver");
   EXPECT_EQ(back->bounds->min, set.bounds->min);
+  EXPECT_EQ(back->bounds->max, set.bounds->max);
+  EXPECT_EQ(back->units, set.units);
+  ASSERT_EQ(back->labels.size(), set.labels.size());
+  for (std::size_t k = 0; k < set.labels.size(); ++k)
+    EXPECT_EQ(back->labels[k].id, set.labels[k].id);
+  ASSERT_EQ(back->slices.size(), set.slices.size());
   const LabeledSlice& a = set.slices[0];
   const LabeledSlice& b = back->slices[0];
   EXPECT_EQ(a.origin_mm, b.origin_mm);
   EXPECT_EQ(a.u, b.u);
+  EXPECT_EQ(a.v, b.v);
   EXPECT_EQ(a.timestamp_s, b.timestamp_s);
   EXPECT_EQ(*a.fov, *b.fov);
   ASSERT_EQ(a.regions.size(), b.regions.size());

@@ -285,6 +285,8 @@ const json& required(const json& header, const char* key) {
   return *it;
 }
 
+constexpr std::uint64_t kMaxSeq = (std::uint64_t{1} << 53) - 1;
+
 std::uint64_t read_count(const json& header, const char* key) {
   const json& j = required(header, key);
   if (!j.is_number_unsigned())
@@ -409,6 +411,9 @@ MeshUpdate decode_mesh(const Frames& frames, const json& header, int topic_label
     if (vertex_count > 0) invalid("\"bounds\" is null but the mesh has vertices");
     return update;
   }
+  if (vertex_count == 0)
+    invalid("\"bounds\" is " + short_dump(bounds) +
+            " but the mesh is empty; an empty mesh has \"bounds\": null");
   if (!bounds.is_object() || !bounds.contains("min") || !bounds.contains("max"))
     invalid("\"bounds\" must be {\"min\": [x, y, z], \"max\": [x, y, z]}, got " +
             short_dump(bounds));
@@ -578,6 +583,12 @@ Result<StreamMessage> decode_message(const Frames& frames) {
     message.seq = read_count(header, "seq");
     where += " seq " + std::to_string(message.seq);
     if (message.seq == 0 && !is_end) invalid("seq 0: seq starts at 1");
+    // A seq counts messages from 1: it never nears 2^53, the largest integer the page's
+    // JavaScript keeps exactly. A larger one is a lie that would make a late joiner drop every
+    // live message as covered by the snapshot.
+    if (message.seq > kMaxSeq)
+      invalid("seq " + std::to_string(message.seq) + " is above 2^53 - 1 = " +
+              std::to_string(kMaxSeq) + "; seq counts the scan's messages from 1");
     if (!is_end || header.contains("scan")) {
       message.scan = read_string(header, "scan");
       if (message.scan.empty()) invalid("\"scan\" is empty; it names the scan by its uuid");

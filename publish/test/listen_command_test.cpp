@@ -257,6 +257,43 @@ TEST(ListenCommand, BadEndpointIsAnErrorThatSaysHowToFix) {
                        dir.path() / "listen.txt");
   EXPECT_EQ(listen.wait(30s), 1);
   EXPECT_TRUE(contains(listen.output(), "not a valid ZeroMQ endpoint")) << listen.output();
+  // The summary is promised even after a failed setup (issue 27).
+  const json summary = read_json(dir.path() / "out" / "summary.json");
+  EXPECT_EQ(summary["stopped_by"], "setup_error");
+  EXPECT_TRUE(contains(summary["error"].get<std::string>(), "not a valid ZeroMQ endpoint"));
+  EXPECT_EQ(summary["messages"], 0);
+}
+
+// `end` closes a snapshot; one on the live stream is a publisher's error (issue 27).
+TEST(ListenCommand, ALiveEndMessageIsInvalid) {
+  TempDir dir;
+  const auto out = dir.path() / "out";
+  zmq::context_t context;
+  zmq::socket_t pub(context, zmq::socket_type::pub);
+  pub.set(zmq::sockopt::linger, 1000);
+  pub.bind("tcp://127.0.0.1:*");
+  std::uint64_t seq = 0;
+  const std::string scan = random_uuid();
+  auto send = [&](const Frames& frames) {
+    std::vector<zmq::const_buffer> parts;
+    for (const std::string& f : frames) parts.push_back(zmq::buffer(f));
+    ASSERT_TRUE(zmq::send_multipart(pub, parts));
+  };
+  auto status = [&](ScanState state) {
+    return *encode_message(StreamMessage{++seq, scan, status_of(state, 0)});
+  };
+  ListenProcess listen({pub.get(zmq::sockopt::last_endpoint), "-o", out.string(), "--until-idle",
+                        "--duration", "60"},
+                       dir.path() / "listen.txt");
+  warm_up(out / "log.jsonl", [&] { send(status(ScanState::kScanning)); });
+  send(*encode_message(StreamMessage{++seq, scan, SnapshotEnd{}}));
+  send(status(ScanState::kIdle));
+  ASSERT_EQ(listen.wait(30s), 1) << listen.output();
+  EXPECT_TRUE(contains(listen.output(), "only closes a snapshot")) << listen.output();
+  const json summary = read_json(out / "summary.json");
+  EXPECT_EQ(summary["invalid"], 1);
+  EXPECT_EQ(summary["stopped_by"], "idle");
+  EXPECT_TRUE(summary["snapshot_seq"].is_null());
 }
 
 }  // namespace

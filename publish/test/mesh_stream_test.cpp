@@ -491,6 +491,32 @@ TEST(MeshStreamDecode, RejectsIndicesOutOfRangeAndBadNumbers) {
                   {"\"bounds\" min must be [x, y, z]"});
 }
 
+// Issue 27: an empty mesh that claims a box, and seqs no counter from 1 reaches (a snapshot
+// `end` with seq 2^64-1 made a late joiner drop every later message as covered, silently).
+TEST(MeshStreamDecode, RejectsAnEmptyMeshWithBounds) {
+  StreamMessage message = mesh_message();
+  std::get<MeshUpdate>(message.body).mesh = TriangleMesh{};
+  const Frames empty = encoded(message);
+  expect_rejected(with_header(empty,
+                              [](json& h) {
+                                h["bounds"] = {{"min", {0, 0, 0}}, {"max", {1, 1, 1}}};
+                              }),
+                  {"but the mesh is empty", "\"bounds\": null"});
+}
+
+TEST(MeshStreamDecode, RejectsSeqsAbove2To53) {
+  const std::string max = std::to_string(std::numeric_limits<std::uint64_t>::max());
+  expect_rejected(Frames{"end", "{\"seq\": " + max + "}"}, {"seq " + max, "above 2^53 - 1"});
+  expect_rejected(with_header(encoded(mesh_message()),
+                              [](json& h) { h["seq"] = std::uint64_t{1} << 53; }),
+                  {"above 2^53 - 1"});
+  // The largest accepted seq.
+  Result<StreamMessage> edge =
+      decode_message(Frames{"end", "{\"seq\": " + std::to_string((std::uint64_t{1} << 53) - 1) +
+                                      "}"});
+  EXPECT_TRUE(edge.is_ok()) << edge.message();
+}
+
 TEST(MeshStreamDecode, RejectsInvalidSlices) {
   const Frames good = encoded(StreamMessage{5, kScan, SliceUpdate{2, sample_slice()}});
   expect_rejected(with_header(good,

@@ -1,5 +1,7 @@
 #include "sonoshape/recon/reconstruct.hpp"
 
+#include <algorithm>
+#include <set>
 #include <stdexcept>
 
 #include "sonoshape/core/errors.hpp"
@@ -16,7 +18,19 @@ MeshSet reconstruct(const SliceSet& set, const ReconstructionOptions& options,
   setup.engine = options;
   setup.bounds = set.effective_bounds();
   setup.cells_on_demand = true;  // one update: only the cells the octree reaches are built
-  for (const int id : set.material_ids()) setup.labels.push_back({id, set.label_name(id)});
+  // A declared material that no region uses has an empty surface: it gets its (empty) entry
+  // without a field of its own, so 1000 declared labels with one used cost one field, not 1000.
+  std::set<int> used;
+  for (const LabeledSlice& slice : set.slices)
+    for (const Region& region : slice.regions)
+      if (region.label >= 1) used.insert(region.label);
+  std::vector<MeshSet::Entry> unused;
+  for (const int id : set.material_ids()) {
+    if (used.count(id))
+      setup.labels.push_back({id, set.label_name(id)});
+    else
+      unused.push_back({id, set.label_name(id), {}});
+  }
   Reconstructor reconstructor(setup);
   try {
     for (const LabeledSlice& slice : set.slices) reconstructor.add_slice(slice);
@@ -25,7 +39,11 @@ MeshSet reconstruct(const SliceSet& set, const ReconstructionOptions& options,
   }
   const UpdateStats update = reconstructor.update();
   if (stats_out) *stats_out = update.step;
-  return reconstructor.mesh();
+  MeshSet meshes = reconstructor.mesh();
+  for (MeshSet::Entry& entry : unused) meshes.meshes.push_back(std::move(entry));
+  std::sort(meshes.meshes.begin(), meshes.meshes.end(),
+            [](const MeshSet::Entry& a, const MeshSet::Entry& b) { return a.label < b.label; });
+  return meshes;
 }
 
 }  // namespace sonoshape::recon

@@ -56,12 +56,14 @@ TEST(Reconstruct, SphereFromOrthogonalSlicesIsClosedAndClose) {
   const double volume = signed_volume(mesh);
   const double sphere_volume = 4.0 / 3.0 * std::numbers::pi * r * r * r;
   EXPECT_GT(volume, 0.0);
-  EXPECT_NEAR(volume / sphere_volume, 1.0, 0.15);
+  // 9 slices give 0.988 of the sphere's volume (1.2 % short, at ed734b2 and 11ecf1b); 3 % allows
+  // for the octree's rounding, not for a wrong surface (the test read +-15 % before issue 27).
+  EXPECT_NEAR(volume / sphere_volume, 1.0, 0.03);
   // Every contour point lies close to the surface: check the slice circles' points against the
   // mesh vertices' distance from the centre (a sphere reconstructed well stays near radius r).
   double max_radius_error = 0.0;
   for (const Vec3& p : mesh.vertices) max_radius_error = std::max(max_radius_error, std::abs(p.norm() - r));
-  EXPECT_LT(max_radius_error, 0.2 * r);
+  EXPECT_LT(max_radius_error, 0.1 * r);  // 2.6 mm = 0.065 r measured (was: 0.2 r)
   EXPECT_GT(stats.cells, 9u);
   EXPECT_GT(stats.field_evaluations, 1000u);
 }

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <stdexcept>
@@ -46,12 +47,32 @@ TEST(SegmentSweep, SimulatedSweepFromItsHeaderAlone) {
   ASSERT_GT(result.slices.slices.size(), 0u);
   EXPECT_TRUE(validate_slice_set(result.slices, "sweep"))
       << validate_slice_set(result.slices, "sweep").message();
-  // Every slice sees the organ: a label-1 region whose world points lie near the sphere.
+  // Every slice sees the organ: a label-1 region whose world points lie near the sphere (radius
+  // 12 mm about (-5, 25, 0)): none outside it by more than `tolerance_mm`, and its outline
+  // follows the sphere (median distance from the surface within `tolerance_mm` too).
+  const Vec3 centre(-5, 25, 0);
+  const double radius_mm = 12.0;
+  const double tolerance_mm = 1.0;  // measured: at most 0.36 outside, medians at most 0.25
   for (const LabeledSlice& s : result.slices.slices) {
     bool organ = false;
-    for (const Region& r : s.regions) organ |= r.label == 1;
+    double worst_outside_mm = 0.0;
+    std::vector<double> off_surface_mm;
+    for (const Region& r : s.regions) {
+      if (r.label != 1) continue;
+      organ = true;
+      for (const Vec2& p : r.outer) {
+        const double d = (s.to_world(p) - centre).norm() - radius_mm;
+        worst_outside_mm = std::max(worst_outside_mm, d);
+        off_surface_mm.push_back(std::abs(d));
+      }
+    }
     EXPECT_TRUE(organ);
     EXPECT_TRUE(s.timestamp_s);
+    if (!organ) continue;
+    std::nth_element(off_surface_mm.begin(), off_surface_mm.begin() + off_surface_mm.size() / 2,
+                     off_surface_mm.end());
+    EXPECT_LT(worst_outside_mm, tolerance_mm);
+    EXPECT_LT(off_surface_mm[off_surface_mm.size() / 2], tolerance_mm);
   }
 
   // --every keeps every K-th frame.
@@ -62,6 +83,10 @@ TEST(SegmentSweep, SimulatedSweepFromItsHeaderAlone) {
 TEST(SegmentSweep, RealPlusSweepRunsThrough) {
   const auto file = acq::read_sequence_file(kData / "plus" / "SpinePhantomFreehand.igs.mha");
   ASSERT_TRUE(file) << file.message();
+  // A real recording passes the checks `segment` makes first (orientation MF, finite
+  // timestamps, rigid poses to 1e-3).
+  const Status sound = acq::check_tracked_sweep(*file, "SpinePhantomFreehand.igs.mha");
+  EXPECT_TRUE(sound) << sound.message();
   const auto xml = kData / "plus" / "PlusDeviceSet_SpinePhantomFreehandReconstructionOnly.xml";
   // Without a calibration it fails with a message that says how to give one.
   const auto missing =

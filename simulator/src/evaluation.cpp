@@ -15,6 +15,7 @@
 #include <memory>
 #include <numbers>
 #include <random>
+#include <sstream>
 
 #include "sonoshape/core/errors.hpp"
 #include "sonoshape/core/log.hpp"
@@ -189,13 +190,22 @@ int component_count(const std::vector<std::uint8_t>& inside, int n) {
   return components;
 }
 
+std::string format_length(double mm) {
+  std::ostringstream text;
+  text << mm << " mm";
+  return text.str();
+}
+
 double iou_of(const std::vector<std::uint8_t>& a, const std::vector<std::uint8_t>& b) {
   std::size_t both = 0, either = 0;
   for (std::size_t i = 0; i < a.size(); ++i) {
     both += a[i] & b[i];
     either += a[i] | b[i];
   }
-  return either == 0 ? 1.0 : static_cast<double>(both) / static_cast<double>(either);
+  // No sample inside either mesh says nothing about their overlap (two small meshes far apart
+  // in a huge box): undefined, not a perfect 1.
+  return either == 0 ? std::numeric_limits<double>::quiet_NaN()
+                     : static_cast<double>(both) / static_cast<double>(either);
 }
 
 // ---- Closest-point baseline ------------------------------------------------------------
@@ -514,6 +524,12 @@ std::vector<LabelScore> evaluate(const MeshSet& reconstruction, const MeshSet& t
     score.health = check_mesh_health(*recon);
     const std::vector<std::uint8_t> recon_inside = classify(*recon, grid);
     score.iou = iou_of(recon_inside, truth_inside);
+    if (std::isnan(score.iou))
+      log_warning("evaluate: label " + std::to_string(entry.label) +
+                  ": no grid sample falls inside the reconstruction or the truth, so the IoU is "
+                  "undefined; the evaluation box (diagonal " + format_length(diagonal) +
+                  ") is too large for these meshes: give --slices for a box around the data, "
+                  "or check that the two meshes are in the same place and units");
     score.components = component_count(recon_inside, grid.n);
 
     const SurfaceDistance to_recon(*recon);

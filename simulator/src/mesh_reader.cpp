@@ -163,7 +163,9 @@ TriangleMesh parse_off(std::string_view text) {
   if (vertex_count < 0 || face_count < 0) throw ParseError{where(t) + ": negative element count"};
   const bool colored = tokens[0] == "COFF";
   const bool with_normals = tokens[0] == "NOFF";
-  mesh.vertices.reserve(static_cast<std::size_t>(vertex_count));
+  // A corrupt count must not reserve more than the file can hold.
+  mesh.vertices.reserve(
+      std::min<std::size_t>(static_cast<std::size_t>(vertex_count), text.size() / 3));
   for (long long i = 0; i < vertex_count; ++i) {
     Vec3 p;
     for (int k = 0; k < 3; ++k) {
@@ -375,6 +377,10 @@ TriangleMesh parse_ply(std::string_view text) {
     }
     if (is_face && index_list < 0)
       throw ParseError{"header: element face lacks a vertex_indices list"};
+    // An element without properties occupies no bytes, so its count cannot be checked against
+    // the file and there is nothing to read: `element edge 9223372036854775807` alone would
+    // otherwise be a loop of 2^63 empty steps.
+    if (element.properties.empty()) continue;
     for (std::size_t i = 0; i < element.count; ++i) {
       const std::string where = element.name + " " + std::to_string(i);
       Vec3 p = Vec3::Zero();

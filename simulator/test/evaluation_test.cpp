@@ -132,6 +132,38 @@ TEST(Evaluation, BaselineIsExactForABoxAndLossyForASphere) {
   EXPECT_DOUBLE_EQ(sphere_scores[0].iou, 1.0);
 }
 
+// The contour figures measure the slices' contours against the reconstruction, where the right
+// answer is not 0: contours of the unit sphere against a sphere grown to 1.1 lie 0.1 off it.
+// (Measured against the truth instead, which the contours were cut from, they would read 0.)
+TEST(Evaluation, ContourDistanceIsMeasuredToTheReconstructionNotTheTruth) {
+  const TriangleMesh truth = test::uv_sphere(1.0, Vec3::Zero(), 128, 64);
+  const TriangleMesh recon = test::uv_sphere(1.1, Vec3::Zero(), 128, 64);
+  const SliceSet slices = slice_at({{1, "", truth}}, {-0.5, 0.0, 0.5});
+  EvaluationOptions options;
+  options.grid_resolution = 32;
+  options.surface_samples = 500;
+  const auto scores = evaluate(one_label(recon), one_label(truth), &slices, kBox, options);
+  ASSERT_EQ(scores.size(), 1u);
+  const double gap_percent = 0.1 / kBox.diagonal() * 100.0;
+  EXPECT_NEAR(scores[0].contour_mean, gap_percent, 0.05 * gap_percent);
+  EXPECT_NEAR(scores[0].contour_max, gap_percent, 0.05 * gap_percent);
+}
+
+// Two small meshes far apart in a box too large to resolve them: no grid sample falls inside
+// either, and the IoU is undefined (NaN), not the 1.0 it read at ed734b2 (issue 27).
+TEST(Evaluation, IouIsUndefinedWhenNoSampleFallsInsideEitherMesh) {
+  const TriangleMesh near = test::uv_sphere(1.0);
+  TriangleMesh far = near;
+  for (Vec3& p : far.vertices) p.x() += 1e15;
+  const Box3 huge{Vec3::Constant(-2e15), Vec3::Constant(2e15)};
+  EvaluationOptions options;
+  options.grid_resolution = 16;
+  options.surface_samples = 100;
+  const auto scores = evaluate(one_label(far), one_label(near), nullptr, huge, options);
+  ASSERT_EQ(scores.size(), 1u);
+  EXPECT_TRUE(std::isnan(scores[0].iou)) << scores[0].iou;
+}
+
 TEST(Evaluation, BaselineRespectsHolesAndLabels) {
   // A ball with a cubic cavity (label 1) holding a smaller cube (label 2): the slices show an
   // annulus with a square hole and a square; the baseline must keep them apart.

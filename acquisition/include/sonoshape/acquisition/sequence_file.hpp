@@ -138,6 +138,14 @@ Result<SequenceFile> read_sequence_file(const std::filesystem::path& path);
 Status require_tracking(const SequenceFile& file, const std::filesystem::path& path,
                         std::string_view probe_transform = "ProbeToTracker");
 
+/// Checks what `segment` takes from a tracked sweep before it is used: an
+/// `UltrasoundImageOrientation` that is MF/MFA (a PLUS code sonoshape does not implement, or
+/// one that is no PLUS code such as XYZ, is an error), every frame's `Timestamp` a finite
+/// number, and every valid `<probe_transform>` / `ReferenceToTracker` pose rigid (rotation to
+/// 1e-3, last row 0 0 0 1). Fails naming the file, the frame and the field, with the fix.
+Status check_tracked_sweep(const SequenceFile& file, const std::filesystem::path& path,
+                           std::string_view probe_transform = "ProbeToTracker");
+
 struct SequenceWriteOptions {
   bool compress = true;       ///< zlib stream (CompressedData = True) or raw pixels
   int compression_level = 1;  ///< zlib level 1..9; speckle barely compresses, so fast wins

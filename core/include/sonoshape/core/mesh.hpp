@@ -35,14 +35,14 @@ struct MeshHealth {
   std::size_t non_manifold_edges = 0;   ///< edges used by more than two triangles
   std::size_t misoriented_edges = 0;    ///< edges used twice in the same direction
   std::size_t non_manifold_vertices = 0;///< vertices whose triangle fan is not one disc
-  std::size_t degenerate_triangles = 0; ///< triangles repeating a vertex index
+  std::size_t degenerate_triangles = 0; ///< triangles repeating a vertex index or of zero area
   bool closed_manifold_oriented() const {
     return boundary_edges == 0 && non_manifold_edges == 0 && misoriented_edges == 0 &&
            non_manifold_vertices == 0 && degenerate_triangles == 0;
   }
 };
 
-/// Counts the defects above (combinatorial: vertex indices, not positions).
+/// Counts the defects above (combinatorial, by vertex indices, except zero-area triangles).
 MeshHealth check_mesh_health(const TriangleMesh& mesh);
 
 /// Enclosed volume (divergence theorem); positive for an outward-oriented closed mesh.
