@@ -56,9 +56,10 @@ TEST(StreamAccessCommand, ScanRefusesAReachableEndpointWithoutAllowRemoteAndAKey
     std::string extra;
     const char* says;
   };
-  for (const Case& c : {Case{"", "add --allow-remote and --curve-secret-key FILE"},
-                        Case{"--allow-remote", "add --curve-secret-key FILE"},
-                        Case{"--curve-secret-key " + base.string() + ".key", "add --allow-remote ("}}) {
+  for (const Case& c :
+       {Case{"", "add --allow-remote and --curve-secret-key FILE"},
+        Case{"--allow-remote", "add --curve-secret-key FILE"},
+        Case{"--curve-secret-key " + base.string() + ".key", "add --allow-remote ("}}) {
     const auto refused = run_command(
         SONOSHAPE_BINARY, kSmallSim + "--sweep-s 1 --fast --publish tcp://*:5651 " + c.extra,
         dir.path() / "scan.log");
@@ -83,13 +84,13 @@ TEST(StreamAccessCommand, OnlyTheListenerWithTheServerKeyReadsAnEncryptedScan) {
   sonoshape::testing::TempDir dir;
   const std::string bin = SONOSHAPE_BINARY;
   for (const char* name : {"scanner", "other"})
-    ASSERT_EQ(run_command(bin, "keys -o " + (dir.path() / name).string(), dir.path() / "k").exit_code,
-              0);
+    ASSERT_EQ(
+        run_command(bin, "keys -o " + (dir.path() / name).string(), dir.path() / "k").exit_code, 0);
   const std::string pub = "tcp://127.0.0.1:5655", snapshot = "tcp://127.0.0.1:5656";
   const pid_t scan =
       spawn(bin + " " + kSmallSim + "--sweep-s 3 --realtime --publish " + pub + " --snapshot " +
-                snapshot + " --curve-secret-key " + (dir.path() / "scanner.key").string() +
-                " -o " + (dir.path() / "out").string(),
+                snapshot + " --curve-secret-key " + (dir.path() / "scanner.key").string() + " -o " +
+                (dir.path() / "out").string(),
             dir.path() / "scan.log");
   for (int k = 0; k < 400 && !contains(file_text(dir.path() / "scan.log"), "publishing scan"); ++k)
     std::this_thread::sleep_for(std::chrono::milliseconds(25));
@@ -104,9 +105,9 @@ TEST(StreamAccessCommand, OnlyTheListenerWithTheServerKeyReadsAnEncryptedScan) {
   const pid_t plain = listen("plain", "--duration 60");
   const pid_t wrong =
       listen("wrong", "--duration 60 --server-key " + (dir.path() / "other.pub").string());
-  const pid_t wrong_snapshot = listen("wrong_snapshot", "--snapshot " + snapshot +
-                                                            " --duration 60 --server-key " +
-                                                            (dir.path() / "other.pub").string());
+  const pid_t wrong_snapshot =
+      listen("wrong_snapshot", "--snapshot " + snapshot + " --duration 60 --server-key " +
+                                   (dir.path() / "other.pub").string());
 
   ASSERT_EQ(wait_exit(scan, 60.0), 0) << file_text(dir.path() / "scan.log");
   EXPECT_EQ(wait_exit(keyed, 20.0), 0) << file_text(dir.path() / "keyed.log");

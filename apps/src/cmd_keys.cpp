@@ -23,8 +23,11 @@ int run_keys(const std::filesystem::path& base) {
     std::cerr << "error: " << written.message() << '\n';
     return 1;
   }
-  log_info("keys: wrote " + base.string() + ".key (secret, mode 0600: for scan "
-           "--curve-secret-key) and " + base.string() + ".pub (public: for listen/view "
+  log_info("keys: wrote " + base.string() +
+           ".key (secret, mode 0600: for scan "
+           "--curve-secret-key) and " +
+           base.string() +
+           ".pub (public: for listen/view "
            "--server-key)");
   return 0;
 }

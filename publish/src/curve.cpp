@@ -4,12 +4,12 @@
 #include <fcntl.h>
 #include <sys/stat.h>
 #include <unistd.h>
+#include <zmq.h>
 
 #include <array>
 #include <cerrno>
 #include <cstring>
 #include <fstream>
-#include <zmq.h>
 
 namespace sonoshape::publish {
 namespace {
@@ -54,8 +54,10 @@ bool is_loopback_host(const std::string& host) {
   if (host.rfind("127.", 0) != 0) return false;
   int dots = 0;
   for (char c : host) {
-    if (c == '.') ++dots;
-    else if (c < '0' || c > '9') return false;
+    if (c == '.')
+      ++dots;
+    else if (c < '0' || c > '9')
+      return false;
   }
   return dots == 3;
 }
@@ -107,7 +109,8 @@ Result<std::string> read_curve_key(const std::filesystem::path& file, const std:
                                            : "give the scan's NAME.pub file (from `sonoshape keys "
                                              "-o NAME`)";
   std::ifstream in(file);
-  if (!in) return Status::error("cannot read the CURVE " + what + " key " + file.string() + "; " + fix);
+  if (!in)
+    return Status::error("cannot read the CURVE " + what + " key " + file.string() + "; " + fix);
   std::string line;
   std::string key;
   int number = 0;

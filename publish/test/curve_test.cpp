@@ -137,13 +137,13 @@ TEST(CurveKeys, BadKeyFilesAreErrorsNamingTheFile) {
 }
 
 TEST(StreamAccess, OnlyLoopbackIpcAndInprocAreLocal) {
-  for (const char* local :
-       {"tcp://127.0.0.1:5556", "tcp://127.8.9.10:*", "tcp://localhost:5556", "tcp://[::1]:5556",
-        "ipc:///tmp/stream", "inproc://stream"})
+  for (const char* local : {"tcp://127.0.0.1:5556", "tcp://127.8.9.10:*", "tcp://localhost:5556",
+                            "tcp://[::1]:5556", "ipc:///tmp/stream", "inproc://stream"})
     EXPECT_TRUE(is_local_endpoint(local)) << local;
-  for (const char* remote : {"tcp://*:5556", "tcp://0.0.0.0:5556", "tcp://192.168.1.4:5556",
-                             "tcp://eth0:5556", "tcp://[::]:5556", "tcp://128.0.0.1:5556",
-                             "tcp://127.0.0.1.evil:5556", "ws://*:5556", "pgm://eth0;239.1.1.1:5555"})
+  for (const char* remote :
+       {"tcp://*:5556", "tcp://0.0.0.0:5556", "tcp://192.168.1.4:5556", "tcp://eth0:5556",
+        "tcp://[::]:5556", "tcp://128.0.0.1:5556", "tcp://127.0.0.1.evil:5556", "ws://*:5556",
+        "pgm://eth0;239.1.1.1:5555"})
     EXPECT_FALSE(is_local_endpoint(remote)) << remote;
 }
 
@@ -211,8 +211,10 @@ TEST(StreamAccess, SubscriberWithTheServerKeyReceivesEveryMessage) {
 
   constexpr std::uint64_t kLive = 200;
   for (std::uint64_t k = 1; k <= kLive; ++k) {
-    if (k % 2) ASSERT_TRUE(publisher.publish_slice(square_slice(double(k)), k));
-    else ASSERT_TRUE(publisher.publish_status(status_of(k)));
+    if (k % 2)
+      ASSERT_TRUE(publisher.publish_slice(square_slice(double(k)), k));
+    else
+      ASSERT_TRUE(publisher.publish_status(status_of(k)));
   }
   const std::vector<StreamMessage> messages = drain(*subscriber, 1s);
   // The snapshot (the first slice, then its end at seq 1), then every live message in order.
@@ -282,7 +284,8 @@ TEST(StreamAccess, SubscribersWithoutTheRightKeyReceiveNothing) {
   }
   ASSERT_GT(first, 0u);
   constexpr std::uint64_t kLive = 100;
-  for (std::uint64_t k = 0; k < kLive; ++k) ASSERT_TRUE(publisher.publish_slice(square_slice(k), k));
+  for (std::uint64_t k = 0; k < kLive; ++k)
+    ASSERT_TRUE(publisher.publish_slice(square_slice(k), k));
   const std::vector<StreamMessage> received = drain(*insider, 1s);
   ASSERT_EQ(received.size(), publisher.last_seq() - first);
   for (std::size_t k = 0; k < received.size(); ++k) EXPECT_EQ(received[k].seq, first + 1 + k);
@@ -362,7 +365,7 @@ TEST(StreamAccess, SnapshotFloodGetsBusyRepliesAndLiveUpdatesGoOnWithoutGaps) {
   const std::vector<StreamMessage> received = drain(*keeping_up, 1s);
   ASSERT_EQ(received.size(), publisher.last_seq() - first);
   for (std::size_t k = 0; k < received.size(); ++k) ASSERT_EQ(received[k].seq, first + 1 + k);
-  EXPECT_LT(slowest_s, 0.25);
+  EXPECT_LT(slowest_s, 0.5);  // sub-millisecond unloaded; room for sanitizer builds
   // Snapshots: the burst and the rate, no more; the rest were told to wait.
   EXPECT_GT(sent.load(), 100u);
   EXPECT_LE(publisher.snapshots_served(), 4 + static_cast<std::uint64_t>(5.0 * flood_s) + 2);
