@@ -16,6 +16,7 @@
 
 #include "commands.hpp"
 #include "sonoshape/core/log.hpp"
+#include "sonoshape/publish/curve.hpp"
 #include "sonoshape/publish/mesh_writer.hpp"
 #include "sonoshape/publish/subscriber.hpp"
 
@@ -37,6 +38,7 @@ struct ListenOptions {
   std::string endpoint;
   std::filesystem::path output;
   std::string snapshot;
+  std::filesystem::path server_key;  // --server-key: the publisher's CURVE public key file
   double duration_s = 0.0;  // 0: no limit
   std::uint64_t count = 0;  // 0: no limit
   int slow_ms = 0;
@@ -138,6 +140,14 @@ int run_listen(const ListenOptions& options) {
   subscriber_options.snapshot_endpoint = options.snapshot;
   subscriber_options.snapshot_timeout_ms = kSnapshotTimeoutMs;
   subscriber_options.receive_hwm = options.receive_hwm;
+  if (!options.server_key.empty()) {
+    Result<std::string> key = publish::read_curve_key(options.server_key, "public");
+    if (!key) {
+      std::cerr << "error: --server-key: " << key.message() << '\n';
+      return 1;
+    }
+    subscriber_options.server_public_key = *key;
+  }
   auto subscriber = publish::MeshSubscriber::connect(subscriber_options);
   if (!subscriber) {
     if (g_stop_signal) {
@@ -294,6 +304,9 @@ CommandRunner add_listen_command(CLI::App& app) {
   app.add_option("--snapshot", options->snapshot,
                  "Snapshot endpoint (usually the PUB port + 1): join a running scan with its "
                  "current meshes and status");
+  app.add_option("--server-key", options->server_key,
+                 "The publisher's CURVE public key file (NAME.pub of its --curve-secret-key "
+                 "NAME.key): needed to read an encrypted stream");
   app.add_option("--duration", options->duration_s, "Stop after S seconds")
       ->check(CLI::PositiveNumber);
   app.add_option("--count", options->count,

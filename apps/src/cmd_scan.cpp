@@ -21,6 +21,7 @@
 #include "seed_option.hpp"
 #include "sim_options.hpp"
 #include "sonoshape/core/log.hpp"
+#include "sonoshape/publish/curve.hpp"
 #include "sonoshape/scan/journal.hpp"
 #include "sonoshape/scan/pipeline.hpp"
 #include "sonoshape/scan/publish_sink.hpp"
@@ -54,6 +55,8 @@ struct ScanCommandOptions {
   std::size_t max_slices = 0;
   std::string publish;
   std::string snapshot;
+  std::filesystem::path curve_secret_key;  ///< --curve-secret-key: the stream's CURVE key file
+  bool allow_remote = false;               ///< --allow-remote: bind where others can reach
   std::string igtl_serve;
   std::optional<std::string> view;  ///< --view [ADDR]: the browser view's HOST:PORT
   bool view_hold = false;
@@ -216,11 +219,14 @@ bool igtl_serve_available(const std::string& spec) {
 #ifdef SONOSHAPE_WITH_VIEWER
 // `--view`: the same server as `sonoshape view`, following this scan's own stream through its
 // snapshot, so that a page opened at any time shows the whole scan so far.
+// `server_key`: the stream's CURVE public key, empty for a plain stream.
 Result<std::unique_ptr<publish::StreamView>> start_view(const std::string& address,
-                                                        const scan::PublishSink& sink) {
+                                                        const scan::PublishSink& sink,
+                                                        const std::string& server_key) {
   publish::StreamViewOptions view;
   view.stream.endpoint = sink.endpoint();
   view.stream.snapshot_endpoint = sink.snapshot_endpoint();
+  view.stream.server_public_key = server_key;
   view.server.http = address;
   view.server.web_root = SONOSHAPE_VIEWER_DIR;
   Result<publish::StreamView> started = publish::StreamView::start(view);
@@ -458,7 +464,17 @@ int run_scan(const ScanCommandOptions& options, const Resume* resume) {
     // 5 a second unless told otherwise (a 256 px grey picture: about 50 KB each).
     scan::FramePreviewOptions previews;
     previews.rate_hz = options.publish_frames_hz.value_or(options.view ? 5.0 : 0.0);
-    auto sink = scan::PublishSink::bind(publish_endpoint, options.snapshot, previews);
+    scan::StreamAccess access;
+    access.allow_remote = options.allow_remote;
+    if (!options.curve_secret_key.empty()) {
+      Result<std::string> key = publish::read_curve_key(options.curve_secret_key, "secret");
+      if (!key) {
+        std::cerr << "error: --curve-secret-key: " << key.message() << '\n';
+        return 1;
+      }
+      access.curve_secret_key = *key;
+    }
+    auto sink = scan::PublishSink::bind(publish_endpoint, options.snapshot, previews, access);
     if (!sink) {
       std::cerr << "error: " << sink.message() << '\n';
       return 1;
@@ -469,7 +485,11 @@ int run_scan(const ScanCommandOptions& options, const Resume* resume) {
 #ifdef SONOSHAPE_WITH_VIEWER
     if (options.view) {
       const std::string address = options.view->empty() ? kDefaultViewAddress : *options.view;
-      auto started = start_view(address, **sink);
+      // The view is a subscriber like any other: a keyed stream needs the key's public half.
+      std::string server_key;
+      if (!access.curve_secret_key.empty())
+        server_key = *publish::curve_public_key_of(access.curve_secret_key);
+      auto started = start_view(address, **sink, server_key);
       if (!started) {
         std::cerr << "error: --view: " << started.message() << '\n';
         return 1;
@@ -590,6 +610,13 @@ void add_scan_options(CLI::App& app, ScanCommandOptions& o) {
                  "e.g. tcp://127.0.0.1:5556");
   app.add_option("--snapshot", options->snapshot,
                  "Snapshot endpoint for late joiners (default: the --publish port + 1)");
+  app.add_option("--curve-secret-key", options->curve_secret_key,
+                 "The stream's CURVE secret key file (NAME.key from `sonoshape keys -o NAME`): "
+                 "encrypts the stream, and only subscribers given NAME.pub (--server-key) can "
+                 "read it; needed, with --allow-remote, for an endpoint other machines can reach");
+  app.add_flag("--allow-remote", options->allow_remote,
+               "Allow --publish/--snapshot on an endpoint other machines can reach (not "
+               "127.0.0.0/8, ::1, ipc:// or inproc://); needs --curve-secret-key");
   app.add_option("--view", options->view,
                  "Show the scan live in the browser: serve the page on HOST:PORT (default " +
                      std::string(kDefaultViewAddress) +

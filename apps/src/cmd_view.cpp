@@ -9,6 +9,7 @@
 
 #include "commands.hpp"
 #include "sonoshape/core/log.hpp"
+#include "sonoshape/publish/curve.hpp"
 #include "view_options.hpp"
 #ifdef SONOSHAPE_WITH_VIEWER
 #include "sonoshape/publish/stream_view.hpp"
@@ -27,6 +28,7 @@ struct ViewCommandOptions {
   std::string endpoint = "tcp://127.0.0.1:5556";
   std::string snapshot;  // empty: the PUB port + 1
   bool no_snapshot = false;
+  std::filesystem::path server_key;  // --server-key: the publisher's CURVE public key file
   std::string http = kDefaultViewAddress;
   std::filesystem::path web_root = SONOSHAPE_VIEWER_DIR;
   double duration_s = 0.0;  // 0: until Ctrl-C
@@ -36,6 +38,14 @@ int run_view(const ViewCommandOptions& options) {
 #ifdef SONOSHAPE_WITH_VIEWER
   publish::StreamViewOptions view;
   view.stream.endpoint = options.endpoint;
+  if (!options.server_key.empty()) {
+    Result<std::string> key = publish::read_curve_key(options.server_key, "public");
+    if (!key) {
+      std::cerr << "error: --server-key: " << key.message() << '\n';
+      return 1;
+    }
+    view.stream.server_public_key = *key;
+  }
   if (!options.no_snapshot) {
     Result<std::string> snapshot = options.snapshot.empty() ? next_port_endpoint(options.endpoint)
                                                             : Result<std::string>(options.snapshot);
@@ -89,6 +99,9 @@ CommandRunner add_view_command(CLI::App& app) {
                  "the PUB port + 1)");
   app.add_flag("--no-snapshot", options->no_snapshot,
                "Do not ask for a snapshot: show only what is published from now on");
+  app.add_option("--server-key", options->server_key,
+                 "The publisher's CURVE public key file (NAME.pub of its --curve-secret-key "
+                 "NAME.key): needed to show an encrypted stream");
   app.add_option("--http", options->http,
                  "HOST:PORT the page is served on (loopback unless you name another interface; "
                  "port 0 picks a free one)")

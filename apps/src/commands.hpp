@@ -26,6 +26,7 @@ CommandRunner add_scan_command(CLI::App& app);
 CommandRunner add_listen_command(CLI::App& app);
 CommandRunner add_devices_command(CLI::App& app);
 CommandRunner add_view_command(CLI::App& app);
+CommandRunner add_keys_command(CLI::App& app);
 
 /// The help text of --device (reconstruct, scan).
 extern const char* const kDeviceHelp;

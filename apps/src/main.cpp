@@ -49,6 +49,8 @@ int main(int argc, char** argv) {
       sonoshape::apps::add_listen_command);
   add("view", "Show a live mesh stream in the browser: serves a page and relays the stream to it",
       sonoshape::apps::add_view_command);
+  add("keys", "Make a CURVE key pair (NAME.key, NAME.pub) that encrypts a mesh stream",
+      sonoshape::apps::add_keys_command);
   add("devices", "List the frame grabbers, trackers and OpenCL devices attached, each as the option to paste",
       sonoshape::apps::add_devices_command);
 

@@ -1,8 +1,11 @@
 // MeshPublisher: PUB socket, stored newest state, and the snapshot thread.
 #include "sonoshape/publish/publisher.hpp"
 
+#include <algorithm>
 #include <array>
 #include <atomic>
+#include <cmath>
+#include <optional>
 #include <cstdio>
 #include <deque>
 #include <map>
@@ -11,7 +14,10 @@
 #include <set>
 #include <thread>
 
+#include <nlohmann/json.hpp>
+
 #include "sonoshape/core/log.hpp"
+#include "sonoshape/publish/curve.hpp"
 #include "zmq_support.hpp"
 
 namespace sonoshape::publish {
@@ -22,6 +28,64 @@ constexpr const char* kStopEndpoint = "inproc://sonoshape-publisher-stop";
 // Snapshot replies queued per client before dropping: every slice kept, and room for many
 // labels (a ROUTER drops what is over its high-water mark, the end included).
 constexpr int kSnapshotSendHwm = static_cast<int>(kMaxSnapshotSlices) + 1024;
+
+using Clock = std::chrono::steady_clock;
+
+// Snapshot requests answered: `burst` at once, then `rate_hz` a second. One bucket for every
+// client together: a client that floods (or reconnects to get a fresh routing id) cannot make
+// the snapshot thread take the state lock, or fill the network, more often than this.
+class TokenBucket {
+ public:
+  TokenBucket(int burst, double rate_hz)
+      : burst_(std::max(1, burst)), rate_hz_(rate_hz), tokens_(burst_), last_(Clock::now()) {}
+
+  // Takes a token if there is one; otherwise the milliseconds until the next.
+  std::optional<std::int64_t> take() {
+    const Clock::time_point now = Clock::now();
+    tokens_ = std::min<double>(burst_, tokens_ + rate_hz_ * std::chrono::duration<double>(
+                                                                now - last_)
+                                                                .count());
+    last_ = now;
+    if (tokens_ >= 1.0) {
+      tokens_ -= 1.0;
+      return std::nullopt;
+    }
+    const double wait_s = rate_hz_ > 0.0 ? (1.0 - tokens_) / rate_hz_ : 1.0;
+    return static_cast<std::int64_t>(std::ceil(wait_s * 1000.0));
+  }
+
+ private:
+  int burst_;
+  double rate_hz_;
+  double tokens_;
+  Clock::time_point last_;
+};
+
+// Refuses an endpoint other machines can reach unless the user asked for it and it is
+// encrypted: the stream carries a patient's anatomy.
+Status check_reachable(const PublisherOptions& options, const std::string& endpoint,
+                       const std::string& option) {
+  if (is_local_endpoint(endpoint)) return Status::ok();
+  const bool keyed = !options.curve_secret_key.empty();
+  if (options.allow_remote && keyed) return Status::ok();
+  const std::string missing =
+      !options.allow_remote && !keyed ? "--allow-remote and --curve-secret-key FILE"
+      : !keyed                        ? "--curve-secret-key FILE"
+                                      : "--allow-remote";
+  return Status::error(
+      "refusing to publish on " + endpoint + " (" + option +
+      "): other machines can reach it, and the stream carries the patient's anatomy; add " +
+      missing +
+      " (CURVE encryption: make a key pair with `sonoshape keys -o NAME`, give NAME.key here "
+      "and NAME.pub to each subscriber's --server-key), or bind loopback only "
+      "(tcp://127.0.0.1:PORT)");
+}
+
+// Makes `socket` a CURVE server with `secret_key` (before it binds).
+void make_curve_server(zmq::socket_t& socket, const std::string& secret_key) {
+  socket.set(zmq::sockopt::curve_server, true);
+  socket.set(zmq::sockopt::curve_secretkey, secret_key);
+}
 
 }  // namespace
 
@@ -79,6 +143,8 @@ struct MeshPublisher::Impl {
   std::deque<std::shared_ptr<const Frames>> slices;  // the scan's, the newest kMaxSnapshotSlices
   std::uint64_t last_seq = 0;
   std::atomic<std::uint64_t> snapshots_served{0};
+  std::atomic<std::uint64_t> snapshots_refused{0};
+  std::optional<TokenBucket> snapshot_budget;  // the snapshot thread's only
 
   ~Impl() {
     if (snapshot_thread.joinable()) {
@@ -123,6 +189,20 @@ struct MeshPublisher::Impl {
       detail::send_frames(router,
                           std::make_shared<const Frames>(Frames{std::string(kErrorTopic), reply}),
                           envelope);
+      return;
+    }
+    if (const std::optional<std::int64_t> wait_ms = snapshot_budget->take()) {
+      // Over the rate: a small reply instead of a snapshot, no lock taken.
+      nlohmann::ordered_json busy;
+      busy["v"] = 1;
+      busy["busy"] = true;
+      busy["retry_after_ms"] = *wait_ms;
+      busy["message"] = "busy: too many snapshot requests; retry in " + std::to_string(*wait_ms) +
+                        " ms";
+      ++snapshots_refused;
+      detail::send_frames(
+          router, std::make_shared<const Frames>(Frames{std::string(kErrorTopic), busy.dump()}),
+          envelope);
       return;
     }
     std::vector<std::shared_ptr<const Frames>> messages;
@@ -188,14 +268,27 @@ MeshPublisher::~MeshPublisher() = default;
 Result<MeshPublisher> MeshPublisher::bind(const PublisherOptions& options) {
   if (options.send_hwm < 1)
     return Status::error("mesh stream: the send high-water mark must be at least 1 message");
+  if (!(options.snapshot_rate_hz >= 0.0) || options.snapshot_burst < 1)
+    return Status::error("mesh stream: the snapshot rate must be >= 0 a second and the burst >= 1");
+  if (Status reachable = check_reachable(options, options.endpoint, options.endpoint_option);
+      !reachable)
+    return reachable;
+  const bool curve = !options.curve_secret_key.empty();
+  if (curve) {
+    if (Status available = curve_available(); !available) return available;
+    if (Result<std::string> valid = curve_public_key_of(options.curve_secret_key); !valid)
+      return Status::error("mesh stream: " + valid.message());
+  }
   auto impl = std::make_unique<Impl>();
   impl->options = options;
+  impl->snapshot_budget.emplace(options.snapshot_burst, options.snapshot_rate_hz);
   zmq::socket_t router;
   zmq::socket_t stop_in;
   try {
     impl->pub = zmq::socket_t(impl->context, zmq::socket_type::pub);
     impl->pub.set(zmq::sockopt::sndhwm, options.send_hwm);
     impl->pub.set(zmq::sockopt::linger, options.linger_ms);
+    if (curve) make_curve_server(impl->pub, options.curve_secret_key);
     try {
       impl->pub.bind(options.endpoint);
     } catch (const zmq::error_t& e) {
@@ -211,7 +304,10 @@ Result<MeshPublisher> MeshPublisher::bind(const PublisherOptions& options) {
       if (!next) return next.status();
       snapshot = *next;
     }
+    if (Status reachable = check_reachable(options, snapshot, options.snapshot_option); !reachable)
+      return reachable;
     router = zmq::socket_t(impl->context, zmq::socket_type::router);
+    if (curve) make_curve_server(router, options.curve_secret_key);
     router.set(zmq::sockopt::sndhwm, kSnapshotSendHwm);
     router.set(zmq::sockopt::linger, 0);  // a snapshot nobody reads is worth no wait at exit
     try {
@@ -294,5 +390,9 @@ const std::string& MeshPublisher::endpoint() const { return impl_->endpoint; }
 const std::string& MeshPublisher::snapshot_endpoint() const { return impl_->snapshot_endpoint; }
 
 std::uint64_t MeshPublisher::snapshots_served() const { return impl_->snapshots_served.load(); }
+
+std::uint64_t MeshPublisher::snapshots_refused() const {
+  return impl_->snapshots_refused.load();
+}
 
 }  // namespace sonoshape::publish

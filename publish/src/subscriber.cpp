@@ -1,9 +1,14 @@
 // MeshSubscriber: SUB socket, late-joiner snapshot over a DEALER, validation of every message.
 #include "sonoshape/publish/subscriber.hpp"
 
+#include <algorithm>
+#include <array>
 #include <cstring>
 #include <deque>
+#include <nlohmann/json.hpp>
+#include <thread>
 
+#include "sonoshape/publish/curve.hpp"
 #include "zmq_support.hpp"
 
 namespace sonoshape::publish {
@@ -26,6 +31,36 @@ bool topic_wanted(const std::string& topic, const std::vector<std::string>& pref
   return false;
 }
 
+// A `busy` reply's wait (docs/formats/mesh-stream.md); none for any other error reply.
+std::optional<std::chrono::milliseconds> busy_retry_after(const Frames& frames) {
+  if (frames.size() < 2) return std::nullopt;
+  const auto reply = nlohmann::json::parse(frames[1], nullptr, false);
+  if (!reply.is_object() || !reply.value("busy", false)) return std::nullopt;
+  const auto wait_ms = reply.value("retry_after_ms", std::int64_t{100});
+  return std::chrono::milliseconds(std::clamp<std::int64_t>(wait_ms, 1, 10000));
+}
+
+// A server key that libzmq would refuse with a bare EINVAL.
+Status check_server_key(const std::string& key) {
+  std::array<std::uint8_t, 32> binary{};
+  if (key.size() != 40 || zmq_z85_decode(binary.data(), key.c_str()) == nullptr)
+    return Status::error("the server key is not a CURVE public key (40 Z85 characters); give "
+                         "the scan's NAME.pub file (--server-key)");
+  return Status::ok();
+}
+
+// Why a handshake failed, from a monitor event id; empty for events that are no failure.
+std::string handshake_failure(std::uint16_t id, const SubscriberOptions& options) {
+  const bool keyed = !options.server_public_key.empty();
+  if (id != ZMQ_EVENT_HANDSHAKE_FAILED_NO_DETAIL && id != ZMQ_EVENT_HANDSHAKE_FAILED_PROTOCOL &&
+      id != ZMQ_EVENT_HANDSHAKE_FAILED_AUTH)
+    return {};
+  return "the publisher at " + options.endpoint + " refused the handshake: " +
+         (keyed ? "--server-key is not its public key (or it publishes without CURVE); give the "
+                  "NAME.pub of the scan's --curve-secret-key NAME.key"
+                : "it requires CURVE encryption; give its public key with --server-key FILE");
+}
+
 }  // namespace
 
 // Fresh snapshots a late joiner asks for when live messages resume past the snapshot's end.
@@ -42,6 +77,15 @@ struct MeshSubscriber::Impl {
   SubscriberOptions options;    // kept to ask for a fresh snapshot
   bool awaiting_first_live = false;  // the first live message after a snapshot is checked
   int resyncs = 0;
+  CurveKeyPair client_keys;  // empty without a server key
+
+  // Makes `socket` a CURVE client of the publisher (before it connects).
+  void secure(zmq::socket_t& socket) const {
+    if (options.server_public_key.empty()) return;
+    socket.set(zmq::sockopt::curve_serverkey, options.server_public_key);
+    socket.set(zmq::sockopt::curve_publickey, client_keys.public_key);
+    socket.set(zmq::sockopt::curve_secretkey, client_keys.secret_key);
+  }
 
   // Waits until the SUB connection has finished its handshake: the subscription goes out right
   // after it, ahead of the snapshot request, which has a connection and handshake of its own to
@@ -49,24 +93,34 @@ struct MeshSubscriber::Impl {
   Status wait_for_handshake(zmq::socket_t& monitor, const std::string& endpoint,
                             Clock::time_point deadline) {
     Frames event;
+    bool dropped = false;  // a connection closed before its handshake ended
     while (true) {
       while (detail::receive_frames(monitor, event)) {
         std::uint16_t id = 0;
         if (!event.empty() && event[0].size() >= sizeof id)
           std::memcpy(&id, event[0].data(), sizeof id);
         if (id == ZMQ_EVENT_HANDSHAKE_SUCCEEDED) return Status::ok();
+        if (std::string failure = handshake_failure(id, options); !failure.empty())
+          return Status::error(failure);
+        dropped = dropped || id == ZMQ_EVENT_DISCONNECTED;
       }
-      if (!detail::wait_readable(monitor, remaining(deadline)))
+      if (!detail::wait_readable(monitor, remaining(deadline))) {
+        // A publisher whose security differs closes the connection mid-handshake, and says no
+        // more (the mechanism or the key did not match).
+        if (dropped)
+          return Status::error(handshake_failure(ZMQ_EVENT_HANDSHAKE_FAILED_PROTOCOL, options));
         return Status::error("no mesh-stream publisher answered at " + endpoint +
                              " in time; check that sonoshape is publishing there (its "
                              "--publish endpoint), or leave out the snapshot to wait for a scan "
                              "that has not started");
+      }
     }
   }
 
   Status fetch_snapshot(const SubscriberOptions& options, Clock::time_point deadline) {
     zmq::socket_t dealer(context, zmq::socket_type::dealer);
     dealer.set(zmq::sockopt::linger, 0);
+    secure(dealer);
     try {
       dealer.connect(options.snapshot_endpoint);
     } catch (const zmq::error_t& e) {
@@ -83,9 +137,16 @@ struct MeshSubscriber::Impl {
                                "(--snapshot, by default the PUB port + 1)");
         continue;
       }
-      if (!frames.empty() && frames[0] == kErrorTopic)
+      if (!frames.empty() && frames[0] == kErrorTopic) {
+        // Over the publisher's snapshot rate: ask again after the wait it names, in time.
+        if (const auto wait = busy_retry_after(frames); wait && *wait < remaining(deadline)) {
+          std::this_thread::sleep_for(*wait);
+          dealer.send(zmq::buffer(kSnapshotRequest), zmq::send_flags::dontwait);
+          continue;
+        }
         return Status::error("the snapshot server at " + options.snapshot_endpoint +
                              " refused the request: " + (frames.size() > 1 ? frames[1] : ""));
+      }
       if (!frames.empty() && frames[0] == kEndTopic) {
         Result<StreamMessage> end = decode_message(frames);
         if (!end)
@@ -113,10 +174,18 @@ Result<MeshSubscriber> MeshSubscriber::connect(const SubscriberOptions& options)
   const Clock::time_point deadline =
       Clock::now() + std::chrono::milliseconds(options.snapshot_timeout_ms);
   const bool snapshot = !options.snapshot_endpoint.empty();
+  impl->options = options;
+  if (!options.server_public_key.empty()) {
+    if (Status valid = check_server_key(options.server_public_key); !valid) return valid;
+    Result<CurveKeyPair> keys = generate_curve_keypair();
+    if (!keys) return keys.status();
+    impl->client_keys = std::move(*keys);
+  }
   try {
     impl->sub = zmq::socket_t(impl->context, zmq::socket_type::sub);
     impl->sub.set(zmq::sockopt::linger, 0);
     impl->sub.set(zmq::sockopt::rcvhwm, options.receive_hwm);
+    impl->secure(impl->sub);
     // Subscriptions set before connecting travel with the handshake.
     if (options.topics.empty()) impl->sub.set(zmq::sockopt::subscribe, "");
     for (const std::string& topic : options.topics) impl->sub.set(zmq::sockopt::subscribe, topic);
@@ -124,8 +193,10 @@ Result<MeshSubscriber> MeshSubscriber::connect(const SubscriberOptions& options)
     // inproc connections have no handshake to wait for: they are complete once connected.
     zmq::socket_t monitor;
     if (snapshot && options.endpoint.rfind("inproc://", 0) != 0) {
-      if (zmq_socket_monitor(impl->sub.handle(), kMonitorEndpoint, ZMQ_EVENT_HANDSHAKE_SUCCEEDED) !=
-          0)
+      constexpr int kEvents = ZMQ_EVENT_HANDSHAKE_SUCCEEDED | ZMQ_EVENT_HANDSHAKE_FAILED_NO_DETAIL |
+                              ZMQ_EVENT_HANDSHAKE_FAILED_PROTOCOL | ZMQ_EVENT_HANDSHAKE_FAILED_AUTH |
+                              ZMQ_EVENT_DISCONNECTED;
+      if (zmq_socket_monitor(impl->sub.handle(), kMonitorEndpoint, kEvents) != 0)
         throw zmq::error_t();
       monitor = zmq::socket_t(impl->context, zmq::socket_type::pair);
       monitor.set(zmq::sockopt::linger, 0);
@@ -146,7 +217,6 @@ Result<MeshSubscriber> MeshSubscriber::connect(const SubscriberOptions& options)
       if (Status fetched = impl->fetch_snapshot(options, deadline); !fetched) return fetched;
       impl->awaiting_first_live = true;
     }
-    impl->options = options;
   } catch (const zmq::error_t& e) {
     return Status::error(std::string("mesh stream: cannot set up the subscriber: ") + e.what());
   }

@@ -79,7 +79,8 @@ publish::StatusReport report_of(const ScanStatus& status) {
 
 Result<std::shared_ptr<PublishSink>> PublishSink::bind(const std::string& endpoint,
                                                        const std::string& snapshot_endpoint,
-                                                       const FramePreviewOptions& previews) {
+                                                       const FramePreviewOptions& previews,
+                                                       const StreamAccess& access) {
   if (!(previews.rate_hz >= 0.0) || previews.max_side_px < 1 ||
       previews.max_side_px > publish::kMaxFrameImageSide)
     return Status::error("frame previews: the rate must be >= 0 per second and the side 1 to " +
@@ -87,6 +88,8 @@ Result<std::shared_ptr<PublishSink>> PublishSink::bind(const std::string& endpoi
   publish::PublisherOptions options;
   options.endpoint = endpoint;
   options.snapshot_endpoint = snapshot_endpoint;
+  options.curve_secret_key = access.curve_secret_key;
+  options.allow_remote = access.allow_remote;
   Result<publish::MeshPublisher> publisher = publish::MeshPublisher::bind(options);
   if (!publisher) return publisher.status();
   auto impl = std::make_unique<Impl>(Impl{std::move(*publisher), previews, std::nullopt});

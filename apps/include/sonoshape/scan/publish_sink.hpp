@@ -17,16 +17,26 @@ struct FramePreviewOptions {
   int max_side_px = 256;
 };
 
+/// Who may read the stream (docs/formats/mesh-stream.md, "Who may read the stream").
+struct StreamAccess {
+  /// The server's CURVE secret key (Z85 text, from --curve-secret-key); empty: plain ZeroMQ.
+  std::string curve_secret_key;
+  /// --allow-remote: an endpoint other machines can reach may be bound (with a CURVE key).
+  bool allow_remote = false;
+};
+
 /// Publishes a scan on `endpoint` (PUB) with its snapshot server on `snapshot_endpoint`
 /// (empty: the PUB port + 1). Sending never blocks the pipeline: a slow subscriber only misses
 /// intermediate updates.
 class PublishSink final : public ScanSink {
  public:
-  /// Binds both sockets; fails with a message naming the endpoint and how to fix it.
+  /// Binds both sockets; fails with a message naming the endpoint and how to fix it (an
+  /// endpoint other machines can reach needs `access` to allow it and hold a CURVE key).
   /// `previews`: which posed frames are also published as `frame` messages.
   static Result<std::shared_ptr<PublishSink>> bind(const std::string& endpoint,
                                                    const std::string& snapshot_endpoint = {},
-                                                   const FramePreviewOptions& previews = {});
+                                                   const FramePreviewOptions& previews = {},
+                                                   const StreamAccess& access = {});
   ~PublishSink() override;
 
   /// Publishes a downsampled copy of the frame on its plane, at most previews.rate_hz a second.

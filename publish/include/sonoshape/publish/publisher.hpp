@@ -33,6 +33,16 @@ struct PublisherOptions {
   /// Option names quoted by bind errors, so that they point at what the user typed.
   std::string endpoint_option = "--publish";
   std::string snapshot_option = "--snapshot";
+  /// The server's CURVE secret key (Z85, 40 characters; read_curve_key): both sockets become
+  /// CURVE servers, and only clients that know the matching public key can connect. Empty:
+  /// plain ZeroMQ, allowed on loopback only (is_local_endpoint).
+  std::string curve_secret_key;
+  /// Binding an endpoint other machines can reach needs this (--allow-remote) and a CURVE key.
+  bool allow_remote = false;
+  /// Snapshot requests answered, all clients together: a burst of this many, then this many a
+  /// second; the others get a `busy` error reply (docs/formats/mesh-stream.md) and no snapshot.
+  int snapshot_burst = 16;
+  double snapshot_rate_hz = 4.0;
 };
 
 /// The most slices a snapshot carries: the scan's newest (a slice message is a few kilobytes).
@@ -49,7 +59,9 @@ constexpr std::size_t kMaxSnapshotSlices = 4096;
 class MeshPublisher {
  public:
   /// Binds the PUB and snapshot sockets and starts the snapshot thread. Errors (address in use,
-  /// invalid endpoint, host not of this machine) say which socket, where, and how to fix it.
+  /// invalid endpoint, host not of this machine; an endpoint other machines can reach without
+  /// allow_remote and a CURVE key; a libzmq without CURVE) say which socket, where, and how to
+  /// fix it.
   static Result<MeshPublisher> bind(const PublisherOptions& options = {});
 
   MeshPublisher(MeshPublisher&&) noexcept;
@@ -87,6 +99,8 @@ class MeshPublisher {
   const std::string& snapshot_endpoint() const;
   /// How many snapshot requests have been answered (for tests and statistics).
   std::uint64_t snapshots_served() const;
+  /// How many snapshot requests got a `busy` reply (over the rate) instead of a snapshot.
+  std::uint64_t snapshots_refused() const;
 
  private:
   struct Impl;

@@ -27,6 +27,10 @@ struct SubscriberOptions {
   /// publisher's: a slow reader then loses intermediate updates at the publisher instead of
   /// working through a long backlog of stale ones.
   int receive_hwm = 16;
+  /// The publisher's CURVE public key (Z85, 40 characters; read_curve_key), for a publisher
+  /// that has a CURVE secret key: both connections are then encrypted, with a key pair of this
+  /// subscriber's own drawn per connect(). Empty: plain ZeroMQ, which a CURVE publisher refuses.
+  std::string server_public_key;
 };
 
 /// Subscribes to a mesh stream. With a snapshot endpoint it follows the late-joiner protocol:
@@ -35,7 +39,9 @@ struct SubscriberOptions {
 class MeshSubscriber {
  public:
   /// Connects (and, with a snapshot endpoint, fetches the snapshot). Fails for an invalid
-  /// endpoint, or when no snapshot arrives within snapshot_timeout_ms (no publisher there).
+  /// endpoint, when no snapshot arrives within snapshot_timeout_ms (no publisher there), when
+  /// the publisher refuses the handshake (a wrong or missing server key), or for a server key
+  /// on a libzmq without CURVE. A `busy` reply is retried after the time it names.
   static Result<MeshSubscriber> connect(const SubscriberOptions& options);
 
   MeshSubscriber(MeshSubscriber&&) noexcept;
