@@ -16,6 +16,7 @@
 #include "sonoshape/core/slice_io.hpp"
 #include "sonoshape/simulator/mesh_reader.hpp"
 #include "sonoshape/testing/command.hpp"
+#include "sonoshape/testing/json_file.hpp"
 #include "sonoshape/testing/temp_dir.hpp"
 
 namespace {
@@ -23,17 +24,13 @@ namespace {
 namespace fs = std::filesystem;
 using sonoshape::testing::contains;
 using sonoshape::testing::file_text;
+using sonoshape::testing::read_json;
 using sonoshape::testing::spawn;
 using sonoshape::testing::wait_exit;
 
 // A small, quick simulated scan (160 x 160 px, 5 fps, coarse reconstruction).
 const std::string kSmallSim =
     "scan --source sim:default --width-px 160 --height-px 160 --frame-rate 5 --depth 5 ";
-
-nlohmann::json read_json(const fs::path& path) {
-  std::ifstream in(path);
-  return nlohmann::json::parse(in);
-}
 
 TEST(ScanCommand, FastSimulatedScanWritesMeshesSlicesAndSummary) {
   sonoshape::testing::TempDir dir;
@@ -172,12 +169,14 @@ TEST(ScanCommand, PublishesToListenersThatKeepUpJoinLateAreSlowOrDie) {
                            dir.path() / "scan.log");
   for (int k = 0; k < 400 && !contains(file_text(dir.path() / "scan.log"), "publishing scan"); ++k)
     std::this_thread::sleep_for(std::chrono::milliseconds(25));
-  ASSERT_TRUE(contains(file_text(dir.path() / "scan.log"), "publishing scan")) << file_text(dir.path() / "scan.log");
+  ASSERT_TRUE(contains(file_text(dir.path() / "scan.log"), "publishing scan"))
+      << file_text(dir.path() / "scan.log");
   auto listen = [&](const std::string& name, const std::string& extra) {
     return spawn(bin + " listen " + pub + " -o " + (dir.path() / name).string() + " " + extra,
                  dir.path() / (name + ".log"));
   };
-  const pid_t keeps_up = listen("keeps_up", "--snapshot " + snapshot + " --until-idle --duration 120");
+  const pid_t keeps_up =
+      listen("keeps_up", "--snapshot " + snapshot + " --until-idle --duration 120");
   const pid_t slow = listen("slow", "--slow-ms 250 --receive-hwm 4 --until-idle --duration 120");
   const pid_t dies = listen("dies", "--duration 120");
   std::this_thread::sleep_for(std::chrono::milliseconds(1500));
@@ -198,7 +197,8 @@ TEST(ScanCommand, PublishesToListenersThatKeepUpJoinLateAreSlowOrDie) {
     EXPECT_EQ(summary["invalid"], 0);  // every message passed the format check
     EXPECT_EQ(summary["seq_gaps"], 0);
     EXPECT_EQ(summary["last_state"], "idle");
-    EXPECT_TRUE(summary["meshes"].contains("1") && summary["meshes"].contains("2")) << summary.dump();
+    EXPECT_TRUE(summary["meshes"].contains("1") && summary["meshes"].contains("2"))
+        << summary.dump();
     // The meshes received equal those written to --out (float32 on the wire).
     for (const char* label : {"label_1.ply", "label_2.ply"}) {
       const auto received = sonoshape::sim::read_mesh(dir.path() / name / label);
@@ -219,24 +219,29 @@ TEST(ScanCommand, PublishesToListenersThatKeepUpJoinLateAreSlowOrDie) {
   EXPECT_GT(slow_summary["messages"].get<int>(), 0);
   // Not slowed down: a 4 s sweep played in real time ends in about that (engine time included).
   EXPECT_LT(scan_summary["duration_s"].get<double>(), 60.0);
-  std::cout << "scan " << scan_summary["duration_s"] << " s, slow subscriber: "
-            << slow_summary["messages"] << " messages, " << slow_summary["missed"] << " missed\n";
+  std::cout << "scan " << scan_summary["duration_s"]
+            << " s, slow subscriber: " << slow_summary["messages"] << " messages, "
+            << slow_summary["missed"] << " missed\n";
 
   // evaluate scores what the subscriber received against the phantom (simulate writes the same
   // default phantom, placed the same way, as ground truth).
   const auto truth = sonoshape::testing::run_command(
-      bin, "simulate --frames 2 --width-px 64 --height-px 64 -q --truth " + (dir.path() / "truth").string() +
-               " -o " + (dir.path() / "x.igs.mha").string(),
+      bin,
+      "simulate --frames 2 --width-px 64 --height-px 64 -q --truth " +
+          (dir.path() / "truth").string() + " -o " + (dir.path() / "x.igs.mha").string(),
       dir.path() / "simulate.log");
   ASSERT_EQ(truth.exit_code, 0) << truth.output;
   const auto scores = sonoshape::testing::run_command(
-      bin, "evaluate -q --recon " + (dir.path() / "keeps_up").string() + " --truth 1:" +
-               (dir.path() / "truth" / "label_1.ply").string() + " --truth 2:" +
-               (dir.path() / "truth" / "label_2.ply").string() + " --json " + (dir.path() / "eval.json").string(),
+      bin,
+      "evaluate -q --recon " + (dir.path() / "keeps_up").string() +
+          " --truth 1:" + (dir.path() / "truth" / "label_1.ply").string() +
+          " --truth 2:" + (dir.path() / "truth" / "label_2.ply").string() + " --json " +
+          (dir.path() / "eval.json").string(),
       dir.path() / "evaluate.log");
   ASSERT_EQ(scores.exit_code, 0) << scores.output;
   const auto evaluation = read_json(dir.path() / "eval.json");
-  const double iou_1 = evaluation["labels"][0]["iou"].get<double>(), iou_2 = evaluation["labels"][1]["iou"].get<double>();
+  const double iou_1 = evaluation["labels"][0]["iou"].get<double>(),
+               iou_2 = evaluation["labels"][1]["iou"].get<double>();
   std::cout << "IoU of the received meshes (160 px, 5 fps, 4 s sweep, depth 5): spot " << iou_1
             << ", cheburashka " << iou_2 << '\n';
   // About 0.70 and 0.36 at this small setting; far lower means misplaced or broken meshes.

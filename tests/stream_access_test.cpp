@@ -13,6 +13,7 @@
 #include <thread>
 
 #include "sonoshape/testing/command.hpp"
+#include "sonoshape/testing/json_file.hpp"
 #include "sonoshape/testing/temp_dir.hpp"
 
 namespace {
@@ -20,6 +21,7 @@ namespace {
 namespace fs = std::filesystem;
 using sonoshape::testing::contains;
 using sonoshape::testing::file_text;
+using sonoshape::testing::read_json;
 using sonoshape::testing::run_command;
 using sonoshape::testing::spawn;
 using sonoshape::testing::wait_exit;
@@ -27,11 +29,6 @@ using sonoshape::testing::wait_exit;
 // A small, quick simulated scan (160 x 160 px, 5 fps, coarse reconstruction).
 const std::string kSmallSim =
     "scan --source sim:default --width-px 160 --height-px 160 --frame-rate 5 --depth 5 ";
-
-nlohmann::json read_json(const fs::path& path) {
-  std::ifstream in(path);
-  return nlohmann::json::parse(in);
-}
 
 TEST(StreamAccessCommand, KeysWritesAPairAndNeverReplacesIt) {
   sonoshape::testing::TempDir dir;

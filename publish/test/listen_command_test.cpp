@@ -17,8 +17,8 @@
 
 #include "sonoshape/publish/publisher.hpp"
 #include "sonoshape/testing/child_process.hpp"
+#include "sonoshape/testing/json_file.hpp"
 #include "sonoshape/testing/temp_dir.hpp"
-
 
 namespace sonoshape::publish {
 namespace {
@@ -26,6 +26,7 @@ namespace {
 using namespace std::chrono_literals;
 using nlohmann::json;
 using sonoshape::testing::contains;
+using sonoshape::testing::read_json;
 using sonoshape::testing::TempDir;
 using Clock = std::chrono::steady_clock;
 
@@ -42,11 +43,6 @@ class ListenProcess : public sonoshape::testing::ChildProcess {
     return argv;
   }
 };
-
-json read_json(const std::filesystem::path& path) {
-  std::ifstream in(path);
-  return json::parse(in);
-}
 
 std::vector<json> read_lines(const std::filesystem::path& path) {
   std::vector<json> lines;
