@@ -3,7 +3,11 @@
 // this table (docs/benchmarks.md, "Keyframes").
 //
 //   sonoshape_keyframe_bench [--trajectory sweep|fan] [--duration-s 60] [--fps 30] [--depth 6]
-//                            [--every K ...] [ANGLE_DEG:DISTANCE_MM ...]
+//                            [--passes 1] [--every K ...] [ANGLE_DEG:DISTANCE_MM ...]
+//
+// --passes N: the hand goes back and forth N times in the duration, as in a long examination;
+// a second table then gives the slices kept by the end of each minute (does the count level off
+// once the anatomy is covered?).
 //
 // The built-in demo phantom is swept by the default 512x512 convex probe (the `scan` defaults:
 // smooth speed, hand tremor and drift, a 40 Hz tracker with noise, drops and INVALID bursts).
@@ -12,6 +16,7 @@
 // view, so the table isolates the effect of the selection from segmentation and tracking
 // errors. Each row reconstructs its slices offline (recon::reconstruct) and scores the meshes
 // against the phantom (IoU on a 100^3 grid over the phantom's box).
+#include <algorithm>
 #include <charconv>
 #include <cstdio>
 #include <iostream>
@@ -47,7 +52,7 @@ double to_double(const std::string& text) {
 int main(int argc, char** argv) {
   std::string trajectory = "sweep";
   double duration_s = 60.0, fps = 30.0;
-  int depth = 6;
+  int depth = 6, passes = 1;
   std::vector<int> every;
   std::vector<std::pair<double, double>> thresholds;
   for (int i = 1; i < argc; ++i) {
@@ -61,13 +66,15 @@ int main(int argc, char** argv) {
       fps = to_double(next());
     else if (arg == "--depth")
       depth = static_cast<int>(to_double(next()));
+    else if (arg == "--passes")
+      passes = std::max(1, static_cast<int>(to_double(next())));
     else if (arg == "--every")
       every.push_back(static_cast<int>(to_double(next())));
     else if (const auto colon = arg.find(':'); colon != std::string::npos)
       thresholds.emplace_back(to_double(arg.substr(0, colon)), to_double(arg.substr(colon + 1)));
     else {
       std::cerr << "usage: sonoshape_keyframe_bench [--trajectory sweep|fan] [--duration-s S] "
-                   "[--fps F] [--depth D] [--every K ...] [ANGLE_DEG:DISTANCE_MM ...]\n";
+                   "[--fps F] [--depth D] [--passes N] [--every K ...] [ANGLE_DEG:DISTANCE_MM ...]\n";
       return 2;
     }
   }
@@ -85,6 +92,7 @@ int main(int argc, char** argv) {
   sim::TrajectoryOptions motion;
   motion.motion = sim::parse_sweep_motion(trajectory);
   motion.duration_s = duration_s;
+  motion.passes = passes;
   motion.T_reference_probe_centre.translation() = Vec3(
       0.5 * (box.min.x() + box.max.x()), box.min.y() - 10.0, 0.5 * (box.min.z() + box.max.z()));
   motion.sweep_length_mm = box.size().z() + 20.0;
@@ -119,6 +127,24 @@ int main(int argc, char** argv) {
       if (acquisition.tracked_poses[static_cast<std::size_t>(f)].status == TrackingStatus::kValid)
         row.frames.push_back(static_cast<std::size_t>(f));
     rows.push_back(std::move(row));
+  }
+
+  if (passes > 1) {
+    // Slices kept by the end of each minute, per rule.
+    std::printf("| rule |");
+    for (int minute = 1; minute * 60.0 <= duration_s + 1e-9; ++minute) std::printf(" %d min |", minute);
+    std::printf("\n");
+    for (const Row& row : rows) {
+      std::printf("| %s |", row.rule.c_str());
+      for (int minute = 1; minute * 60.0 <= duration_s + 1e-9; ++minute) {
+        const auto last = static_cast<std::size_t>(minute * 60.0 * fps);
+        std::printf(" %zu |", static_cast<std::size_t>(std::count_if(
+                                 row.frames.begin(), row.frames.end(),
+                                 [&](std::size_t k) { return k <= last; })));
+      }
+      std::printf("\n");
+    }
+    std::printf("\n");
   }
 
   const MeshSet truth = phantom->mesh_set();

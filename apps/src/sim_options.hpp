@@ -50,6 +50,11 @@ inline void add_sim_scenario_options(CLI::App& app, scan::SimScenarioOptions& op
   app.add_option("--sweep-angle-deg", options.sweep_angle_deg,
                  "Total angle of fan / rock / rotate (default 60 / 30 / 180)")
       ->check(CLI::PositiveNumber);
+  app.add_option("--passes", options.passes,
+                 "Go over the anatomy this many times, back and forth, within the sweep's "
+                 "duration (a long examination revisiting the same planes)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
   app.add_option("--tracker-rate", options.tracker_rate_hz, "Tracker samples per second")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();

@@ -52,6 +52,7 @@ SweepMotion parse_sweep_motion(const std::string& name) {
 Trajectory::Trajectory(const TrajectoryOptions& options) : options_(options) {
   if (!(options.duration_s > 0.0))
     throw std::invalid_argument("trajectory: duration_s must be positive");
+  if (options.passes < 1) throw std::invalid_argument("trajectory: passes must be at least 1");
   Random random(options.seed);
   // Integer harmonics of the duration keep progress(0) = 0 and progress(duration) = 1; the
   // amplitudes sum below 1 so the speed never reverses.
@@ -73,7 +74,14 @@ Trajectory::Trajectory(const TrajectoryOptions& options) : options_(options) {
 }
 
 double Trajectory::progress(double t_s) const {
-  const double x = std::clamp(t_s / options_.duration_s, 0.0, 1.0);
+  // Which pass, and how far through it; the speed profile shapes every pass alike.
+  const double total = std::clamp(t_s / options_.duration_s, 0.0, 1.0) * options_.passes;
+  const int pass = std::min(static_cast<int>(total), options_.passes - 1);
+  const double p = pass_progress(total - pass);
+  return pass % 2 == 0 ? p : 1.0 - p;
+}
+
+double Trajectory::pass_progress(double x) const {
   switch (options_.speed) {
     case SpeedProfile::kConstant:
       return x;

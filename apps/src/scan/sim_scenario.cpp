@@ -92,6 +92,7 @@ Result<SimScenario> make_sim_scenario(const SimScenarioOptions& options, double 
                  : options.speed == "irregular" ? sim::SpeedProfile::kIrregular
                                                 : sim::SpeedProfile::kSmooth;
   motion.duration_s = duration_s;
+  motion.passes = options.passes;
   motion.seed = options.seed;
   const double standoff =
       scenario.probe.type == sim::ProbeType::kConvex ? kConvexStandoffMm : kLinearStandoffMm;

@@ -27,6 +27,7 @@ struct SimScenarioOptions {
   std::uint64_t seed = 1;
   double sweep_length_mm = 0.0;  ///< 0: the phantom's length plus margins
   double sweep_angle_deg = 0.0;  ///< 0: per trajectory (fan 60, rock 30, rotate 180)
+  int passes = 1;                ///< back-and-forth passes over the sweep's duration
   double tracker_rate_hz = 40.0;
   double latency_ms = 0.0;  ///< the simulated tracker's latency
   double position_noise_mm = 0.1;

@@ -37,6 +37,9 @@ struct TrajectoryOptions {
   /// Probe pose halfway through the sweep (probe -> reference).
   Eigen::Isometry3d T_reference_probe_centre = Eigen::Isometry3d::Identity();
   double duration_s = 10.0;
+  /// The hand goes over the anatomy this many times, back and forth, each pass taking
+  /// duration_s / passes (a long examination revisits the same planes); 1: one sweep.
+  int passes = 1;
   double sweep_length_mm = 80.0;  ///< kTranslate: total travel along z
   double sweep_angle_deg = 60.0;  ///< kFan, kRock, kRotate: total angle
   SpeedProfile speed = SpeedProfile::kSmooth;
@@ -52,18 +55,21 @@ struct TrajectoryOptions {
 /// The true probe pose as a function of time, deterministic for the options' seed.
 class Trajectory {
  public:
-  /// Throws std::invalid_argument for a non-positive duration.
+  /// Throws std::invalid_argument for a non-positive duration or fewer than one pass.
   explicit Trajectory(const TrajectoryOptions& options);
 
   const TrajectoryOptions& options() const { return options_; }
   double duration_s() const { return options_.duration_s; }
-  /// Sweep progress in [0, 1] at time t (clamped outside [0, duration]).
+  /// Sweep progress in [0, 1] at time t (clamped outside [0, duration]); with several passes
+  /// it runs 0 -> 1 on even passes and 1 -> 0 on odd ones.
   double progress(double t_s) const;
   /// The probe's true pose at time t (s); before 0 and after the duration the sweep holds
   /// still but the hand keeps trembling.
   Eigen::Isometry3d T_reference_probe(double t_s) const;
 
  private:
+  /// Progress through one pass at x in [0, 1] of it, shaped by the speed profile.
+  double pass_progress(double x) const;
   struct Wave {
     double amplitude = 0.0, frequency_hz = 0.0, phase = 0.0;
   };
