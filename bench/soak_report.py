@@ -35,6 +35,33 @@ def slope(points):
     return sum((x - mx) * (y - my) for x, y in points) / sxx if sxx > 0 else math.nan
 
 
+def least_squares(rows, targets):
+    """Coefficients x minimising |A x - b| for rows of A (normal equations, Gauss-Jordan)."""
+    n = len(rows[0])
+    m = [[sum(r[i] * r[j] for r in rows) for j in range(n)] +
+         [sum(r[i] * t for r, t in zip(rows, targets))] for i in range(n)]
+    for c in range(n):
+        pivot = max(range(c, n), key=lambda r: abs(m[r][c]))
+        m[c], m[pivot] = m[pivot], m[c]
+        if abs(m[c][c]) < 1e-12:
+            return [math.nan] * n
+        for r in range(n):
+            if r != c:
+                f = m[r][c] / m[c][c]
+                m[r] = [a - f * b for a, b in zip(m[r], m[c])]
+    return [m[i][n] / m[i][i] for i in range(n)]
+
+
+def slices_at(updates, t_s):
+    """Slices the scan held at time t_s (the newest update before it)."""
+    held = 0
+    for u in updates:
+        if u[0] > t_s:
+            break
+        held = u[1]
+    return held
+
+
 def percentile(values, q):
     if not values:
         return math.nan
@@ -81,6 +108,15 @@ def main():
     rss_at_warmup = after[0][1] if after else math.nan
     updates = read_updates(root / "fast" / "log.jsonl")
     scan = summary(root / "scan" / "scan.json")
+    # Memory follows the slices the scan holds (each adds planes, cells and octree nodes); a leak
+    # grows with time. RSS = a + b * slices + c * minutes over the samples after the warm-up
+    # separates the two: c is the growth at a constant slice count.
+    late = [(t, mb) for t, mb, _ in rss if t / 60.0 >= warmup_min]
+    per_slice_mb, per_min_mb = math.nan, math.nan
+    if len(late) >= 3 and updates:
+        rows = [(1.0, float(slices_at(updates, t)), t / 60.0) for t, _ in late]
+        if len(set(r[1] for r in rows)) >= 2:
+            _, per_slice_mb, per_min_mb = least_squares(rows, [mb for _, mb in late])
 
     lines = [f"Soak of {minutes:.0f} min (bench/soak.sh {minutes:.0f}); warm-up {warmup_min:.0f} min.", ""]
     lines += ["| quantity | value |", "|---|---|"]
@@ -89,6 +125,13 @@ def main():
                      f"{rss[-1][1]:.0f} MB (peak {max(mb for _, mb, _ in rss):.0f} MB) |")
         lines.append(f"| RSS slope after the warm-up (least squares) | {rss_slope:+.2f} MB/min "
                      f"({100.0 * rss_slope / rss_at_warmup:+.3f} % of the warm-up RSS per min) |")
+        last = [(t / 60.0, mb) for t, mb, _ in rss if t / 60.0 >= minutes * 2.0 / 3.0]
+        lines.append(f"| RSS slope over the last third ({minutes * 2 / 3:.0f}-{minutes:.0f} min; "
+                     f"{slices_at(updates, minutes * 40.0)} -> {slices_at(updates, minutes * 60.0)} "
+                     f"slices) | {slope(last):+.2f} MB/min |")
+        if not math.isnan(per_min_mb):
+            lines.append(f"| the same, slice count held constant (RSS = a + b slices + c min) | "
+                         f"c = {per_min_mb:+.2f} MB/min; b = {per_slice_mb:.2f} MB per slice |")
         cpu = [c for _, _, c in rss if not math.isnan(c)]
         if len(cpu) >= 2:
             lines.append(f"| scan CPU time | {cpu[-1]:.0f} s in {rss[-1][0]:.0f} s "
