@@ -8,6 +8,7 @@
 #include <atomic>
 #include <chrono>
 #include <filesystem>
+#include <functional>
 #include <fstream>
 #include <iostream>
 #include <map>
@@ -109,8 +110,10 @@ class FinalMeshes final : public ScanSink {
 // Runs a scan until `frames` frames are in and each has been dealt with (a slice, a
 // near-duplicate, or a drop), then stops it: a live source never ends, and stopping as soon as
 // the last frame is in would cut its wait for the tracker sample after it.
+// `before_teardown` runs after the scan finished and before the pipeline (and the sources it
+// owns) is destroyed: the place to read a source's own counters.
 ScanSummary run_scan(ScanSource source, const std::shared_ptr<ScanSink>& sink, std::size_t frames,
-                     ScanOptions options) {
+                     ScanOptions options, const std::function<void()>& before_teardown = {}) {
   recon::ReconstructorOptions engine;
   engine.engine.max_depth = 5;
   engine.bounds = source.setup.bounds;
@@ -131,7 +134,9 @@ ScanSummary run_scan(ScanSource source, const std::shared_ptr<ScanSink>& sink, s
   while (!dealt_with() && std::chrono::steady_clock::now() < deadline && !pipeline.wait_for(0.01)) {
   }
   pipeline.request_stop();
-  return pipeline.finish();
+  ScanSummary summary = pipeline.finish();
+  if (before_teardown) before_teardown();
+  return summary;
 }
 
 // Runs a scan as fast as it goes (queued work is still finished).
@@ -341,6 +346,7 @@ TEST(ScanV4l2, SimulatedSweepThroughEmulatedGrabberAndTrackerReconstructsAsThrou
   auto trakstar = std::make_unique<tracking::TrakstarPoseSource>(tracker_options,
                                                                  tracking::test::opener(tracker));
   const tracking::TrakstarPoseSource* tracker_view = trakstar.get();  // owned by the pipeline
+  tracking::TrakstarCounts counts;  // read before the pipeline destroys the source
   source->poses = std::move(trakstar);
   source->tracker_latency_s = 0.0;  // the trakSTAR source stamps its samples itself
 
@@ -355,7 +361,8 @@ TEST(ScanV4l2, SimulatedSweepThroughEmulatedGrabberAndTrackerReconstructsAsThrou
   ScanSummary summary;
   {
     RealTimeGrabber grabber(driver, std::move(buffers), 0.02);
-    summary = run_scan(std::move(*source), emulated, 11, ScanOptions{});  // real time
+    summary = run_scan(std::move(*source), emulated, 11, ScanOptions{},  // real time
+                       [&] { counts = tracker_view->counts(); });
   }
 
   EXPECT_EQ(summary.counters.frames_received, 11u);
@@ -363,7 +370,6 @@ TEST(ScanV4l2, SimulatedSweepThroughEmulatedGrabberAndTrackerReconstructsAsThrou
   EXPECT_EQ(summary.counters.dropped.source, 0u);
   EXPECT_LE(summary.counters.dropped.total(), expected.counters.dropped.total() + 1);
   EXPECT_NEAR(double(summary.counters.slices), double(expected.counters.slices), 1.0);
-  const tracking::TrakstarCounts counts = tracker_view->counts();
   EXPECT_GT(counts.valid, 150u);  // 100 Hz over the sweep's 2 s and more
   EXPECT_EQ(counts.timeouts + counts.skipped_bytes + counts.unplugged, 0u);
   EXPECT_EQ(counts.not_attached + counts.bad_rotation, 0u);
