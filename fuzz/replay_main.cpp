@@ -1,0 +1,62 @@
+// A plain main for the fuzz targets' sources outside libFuzzer (any compiler): calls
+// LLVMFuzzerTestOneInput on every file of the folders (or files) named on the command line, so
+// that the seeds and every input a fuzzer once found run as a regression test in the default
+// suite. A crash or a sanitizer report fails the test; an error Status from a reader does not.
+#include <algorithm>
+#include <cstddef>
+#include <cstdint>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <iterator>
+#include <vector>
+
+extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size);
+
+namespace {
+
+int replay(const std::filesystem::path& file) {
+  std::ifstream in(file, std::ios::binary);
+  if (!in) {
+    std::cerr << file.string() << ": cannot be read\n";
+    return 1;
+  }
+  const std::vector<char> bytes((std::istreambuf_iterator<char>(in)),
+                                std::istreambuf_iterator<char>());
+  std::cerr << "replaying " << file.string() << " (" << bytes.size() << " bytes)\n";
+  LLVMFuzzerTestOneInput(reinterpret_cast<const std::uint8_t*>(bytes.data()), bytes.size());
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  int failures = 0;
+  std::size_t count = 0;
+  for (int i = 1; i < argc; ++i) {
+    const std::filesystem::path arg = argv[i];
+    if (!std::filesystem::is_directory(arg)) {
+      // A folder without findings yet need not exist; a named file must.
+      if (std::filesystem::exists(arg)) {
+        failures += replay(arg);
+        ++count;
+      }
+      continue;
+    }
+    std::vector<std::filesystem::path> files;
+    for (const auto& entry : std::filesystem::directory_iterator(arg)) {
+      if (entry.is_regular_file()) files.push_back(entry.path());
+    }
+    std::sort(files.begin(), files.end());  // the same order on every run
+    for (const auto& file : files) {
+      failures += replay(file);
+      ++count;
+    }
+  }
+  if (count == 0) {
+    std::cerr << "no inputs found in the folders given\n";
+    return 1;
+  }
+  std::cerr << count << " inputs replayed\n";
+  return failures == 0 ? 0 : 1;
+}
