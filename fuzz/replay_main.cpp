@@ -2,6 +2,8 @@
 // LLVMFuzzerTestOneInput on every file of the folders (or files) named on the command line, so
 // that the seeds and every input a fuzzer once found run as a regression test in the default
 // suite. A crash or a sanitizer report fails the test; an error Status from a reader does not.
+#include <sys/resource.h>
+
 #include <algorithm>
 #include <cstddef>
 #include <cstdint>
@@ -14,6 +16,28 @@
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size);
 
 namespace {
+
+#if defined(__SANITIZE_ADDRESS__)
+constexpr bool kAddressSanitizer = true;
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer)
+constexpr bool kAddressSanitizer = true;
+#else
+constexpr bool kAddressSanitizer = false;
+#endif
+#else
+constexpr bool kAddressSanitizer = false;
+#endif
+
+// libFuzzer stops an input at 2 GB (-rss_limit_mb=2048); here an address-space limit does, so
+// that an input that once allocated without bound fails as std::bad_alloc instead of taking the
+// machine's memory. ASan reserves terabytes of address space, so it is not limited there.
+void limit_memory() {
+  if (kAddressSanitizer) return;
+  const rlim_t limit = rlim_t{4} << 30;
+  const rlimit value{limit, limit};
+  setrlimit(RLIMIT_AS, &value);
+}
 
 int replay(const std::filesystem::path& file) {
   std::ifstream in(file, std::ios::binary);
@@ -31,6 +55,7 @@ int replay(const std::filesystem::path& file) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  limit_memory();
   int failures = 0;
   std::size_t count = 0;
   for (int i = 1; i < argc; ++i) {
