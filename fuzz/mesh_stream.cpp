@@ -2,12 +2,13 @@
 // (docs/formats/mesh-stream.md). The input is a sequence of frames, each a 4-byte little-endian
 // length and that many bytes; the last frame takes what is left when its length runs past the
 // end, so any input is some message.
+#include "sonoshape/publish/mesh_stream.hpp"
+
 #include <algorithm>
 #include <cstddef>
 #include <cstdint>
 
 #include "fuzz_support.hpp"
-#include "sonoshape/publish/mesh_stream.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   sonoshape::publish::Frames frames;

@@ -1,9 +1,10 @@
 // Fuzz target: PLUS configuration XML (<CoordinateDefinitions>, ImageToProbe).
+#include "sonoshape/acquisition/plus_config.hpp"
+
 #include <cstddef>
 #include <cstdint>
 
 #include "fuzz_support.hpp"
-#include "sonoshape/acquisition/plus_config.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   sonoshape::fuzz::quiet_logs();
