@@ -365,6 +365,13 @@ Result<std::vector<std::uint8_t>> read_samples(const std::filesystem::path& path
                   "only one detached data file is read; join the parts into one file");
     source_path = std::filesystem::path(std::string(words[0]));
     if (source_path.is_relative()) source_path = path.parent_path() / source_path;
+    // A device or a pipe (/dev/zero, /dev/stdin) would be read without end or block forever.
+    std::error_code ec;
+    if (std::filesystem::exists(source_path, ec) &&
+        !std::filesystem::is_regular_file(source_path, ec))
+      return fail(path, where(*data_file) + ": " + source_path.string() +
+                            " is not a regular file (a device, a pipe or a folder)",
+                  "name the file that holds the samples");
     std::ifstream in(source_path, std::ios::binary);
     if (!in)
       return fail(path, where(*data_file) + ": cannot open " + source_path.string(),

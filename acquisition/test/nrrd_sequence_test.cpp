@@ -394,6 +394,10 @@ TEST(NrrdSequence, UnsupportedOrMalformedFilesGiveClearErrors) {
   expect_contains(nrrd_error("many.nhdr", slicer_header(kListLast + "encoding: raw\n") +
                                               "data file: part%03d.raw 0 3 1\n"),
                   "several files");
+  // A device would be read without end (found by fuzzing: tests/data/fuzz/sequence_nrrd/).
+  expect_contains(nrrd_error("device.nhdr", slicer_header(kListLast + "encoding: raw\n") +
+                                                "data file: /dev/zero\n"),
+                  "/dev/zero is not a regular file");
   expect_contains(
       nrrd_error("frames.seq.nrrd",
                  with(kListLast + "encoding: raw\n", "Seq_Frame0009_Timestamp:=1\n"), raw),

@@ -26,6 +26,7 @@
 #include <sstream>
 #include <tuple>
 
+#include "polygon_validity.hpp"
 #include "slice_io_internal.hpp"
 #include "sonoshape/core/log.hpp"
 
@@ -149,6 +150,11 @@ struct Box2 {
   bool interiors_overlap(const Box2& other) const {
     return lo.x() < other.hi.x() && other.lo.x() < hi.x() && lo.y() < other.hi.y() &&
            other.lo.y() < hi.y();
+  }
+  // Closed boxes meet: boxes that touch can hold polygons that touch.
+  bool meets(const Box2& other) const {
+    return lo.x() <= other.hi.x() && other.lo.x() <= hi.x() && lo.y() <= other.hi.y() &&
+           other.lo.y() <= hi.y();
   }
 };
 
@@ -504,7 +510,9 @@ EK::Point_2 point_inside(const ExactPolygonWithHoles& polygon) {
 std::optional<OverlapMeasure> measure_overlap(const ExactPolygonWithHoles& a,
                                               const ExactPolygonWithHoles& b) {
   std::vector<ExactPolygonWithHoles> parts;
-  CGAL::intersection(a, b, std::back_inserter(parts));
+  // Tag_false: the segment traits, whose precondition valid_for_boolean_ops checks (the default
+  // polyline traits reject, and crash on, holes that meet in corners).
+  CGAL::intersection(a, b, std::back_inserter(parts), CGAL::Tag_false());
   if (parts.empty()) return std::nullopt;
   OverlapMeasure overlap;
   double largest = -1.0;
@@ -672,8 +680,10 @@ std::optional<std::size_t> snap_sliver(Region& a, Region& b, const OverlapMeasur
   const std::optional<Region> clean_a = clean_region(snapped_a);
   const std::optional<Region> clean_b = clean_region(snapped_b);
   if (changed == 0 || !clean_a || !clean_b) return std::nullopt;
-  if (measure_overlap(to_exact(clean_a->outer, clean_a->holes),
-                      to_exact(clean_b->outer, clean_b->holes)))
+  const ExactPolygonWithHoles exact_a = to_exact(clean_a->outer, clean_a->holes);
+  const ExactPolygonWithHoles exact_b = to_exact(clean_b->outer, clean_b->holes);
+  if (!valid_for_boolean_ops(exact_a) || !valid_for_boolean_ops(exact_b) ||
+      measure_overlap(exact_a, exact_b))
     return std::nullopt;
   a = *clean_a;
   b = *clean_b;
@@ -689,7 +699,10 @@ void snap_pair(LabeledSlice& slice, std::size_t index, std::size_t a, std::size_
   // An earlier snap of this slice may have removed this overlap already.
   const ExactPolygonWithHoles exact_a = to_exact(clean_a->outer, clean_a->holes);
   const ExactPolygonWithHoles exact_b = to_exact(clean_b->outer, clean_b->holes);
-  if (!CGAL::do_intersect(exact_a, exact_b)) return;  // cheaper than measuring
+  // An earlier snap may have left a region CGAL cannot take; the validation then reports it.
+  if (!valid_for_boolean_ops(exact_a) || !valid_for_boolean_ops(exact_b)) return;
+  // Cheaper than measuring. Tag_false: the segment traits, whose precondition was checked.
+  if (!CGAL::do_intersect(exact_a, exact_b, CGAL::Tag_false())) return;
   const auto overlap = measure_overlap(exact_a, exact_b);
   const double tol = kRoundingOverlapRelTol * slice_extent(slice);
   if (!overlap || overlap->width > tol) return;
@@ -851,8 +864,11 @@ Status validate_slice_set_named(const SliceSet& set, const std::string& source_n
         add_segments(rings.holes.back(), rings.segments);
       }
       const Segments outer_segments = segments_of(rings.outer);
+      bool boundaries_touch = false;  // a hole's boundary meets the outer ring's or another's
       for (std::size_t k = 0; k < holes.size(); ++k) {
-        const bool inside = boundaries_meet(hole_segments[k], outer_segments)
+        const bool meets_outer = boundaries_meet(hole_segments[k], outer_segments);
+        boundaries_touch = boundaries_touch || meets_outer;
+        const bool inside = meets_outer
                                 ? exact_inside(to_exact(holes[k], CGAL::COUNTERCLOCKWISE),
                                                to_exact(outer, CGAL::COUNTERCLOCKWISE))
                                 : strictly_inside(rings.holes[k].front(), rings.outer);
@@ -874,7 +890,13 @@ Status validate_slice_set_named(const SliceSet& set, const std::string& source_n
       for (const Ring2& hole : holes) hole_boxes.push_back(box_of(hole));
       for (std::size_t a = 0; a < holes.size(); ++a)
         for (std::size_t b = a + 1; b < holes.size(); ++b) {
-          if (!hole_boxes[a].interiors_overlap(hole_boxes[b])) continue;
+          if (!hole_boxes[a].interiors_overlap(hole_boxes[b])) {
+            // Boxes that touch: the holes may meet at a corner, which is no overlap.
+            if (hole_boxes[a].meets(hole_boxes[b]))
+              boundaries_touch =
+                  boundaries_touch || boundaries_meet(hole_segments[a], hole_segments[b]);
+            continue;
+          }
           const bool overlap = boundaries_meet(hole_segments[a], hole_segments[b])
                                    ? CGAL::do_intersect(to_exact(holes[a], CGAL::COUNTERCLOCKWISE),
                                                         to_exact(holes[b], CGAL::COUNTERCLOCKWISE))
@@ -891,6 +913,18 @@ Status validate_slice_set_named(const SliceSet& set, const std::string& source_n
         regions_ok = false;
         continue;
       }
+      // Holes inside and apart from each other make a valid polygon with holes; where their
+      // boundaries touch, CGAL decides whether its overlap tests below (segment traits) can
+      // take the region.
+      if (boundaries_touch && !valid_for_boolean_ops(to_exact(outer, holes))) {
+        fail(region_where,
+             "its holes meet the outer ring or each other along an edge, or in corners that cut "
+             "the region apart, so it is not a valid polygon with holes; a hole may touch the "
+             "outer ring or another hole only at single corners: cut such a hole into the outer "
+             "ring, or merge the holes");
+        regions_ok = false;
+        continue;
+      }
       cleaned[j] = {std::move(outer), std::move(holes)};
       boxes[j] = box_of(cleaned[j].outer);
     }
@@ -903,7 +937,7 @@ Status validate_slice_set_named(const SliceSet& set, const std::string& source_n
           const ExactPolygonWithHoles exact_b = to_exact(cleaned[b].outer, cleaned[b].holes);
           const bool overlapping =
               boundaries_meet(region_rings[a].segments, region_rings[b].segments)
-                  ? CGAL::do_intersect(exact_a, exact_b)
+                  ? CGAL::do_intersect(exact_a, exact_b, CGAL::Tag_false())
                   : disjoint_boundaries_overlap(region_rings[a], region_rings[b]);
           // Measured only when there is something to report: the intersection costs more.
           const std::optional<OverlapMeasure> overlap =

@@ -414,6 +414,39 @@ TEST(SliceJsonErrors, OverlappingHoles) {
                        "slice 0, region 0 (label 1), hole 0: overlaps hole 1"));
 }
 
+// Found by fuzzing (tests/data/fuzz/slices_json/, tests/data/fuzz/csl/): holes that CGAL's Boolean
+// operations cannot take crashed the overlap test between regions.
+TEST(SliceJsonErrors, HoleSharingAnEdgeWithTheOuterRing) {
+  const std::string region = R"({"label": 1, "polygon": [[0,0],[10,0],[10,10],[0,10]],
+      "holes": [[[2,0],[8,0],[5,4]]]})";
+  EXPECT_TRUE(contains(parse_error(doc(slice_at(0, region))),
+                       "slice 0, region 0 (label 1): its holes meet the outer ring or each other "
+                       "along an edge"));
+}
+
+TEST(SliceJson, HolesMeetingInCornersAcrossTheRegionAreRead) {
+  // The holes touch each other and the outer ring in corners: the shape of the fuzzed input
+  // whose overlap test crashed with CGAL's default (polyline) traits.
+  const std::string region = R"({"label": 1,
+      "polygon": [[0,0],[10,0],[10,5],[10,10],[0,10],[0,5]],
+      "holes": [[[0,5],[4,4],[5,5],[4,6]], [[5,5],[6,4],[10,5],[6,6]]]})";
+  const std::string filling = R"({"label": 2, "polygon": [[0,5],[4,4],[5,5],[4,6]]})";
+  const auto set = parse(doc(slice_at(0, region + "," + filling)));
+  EXPECT_TRUE(set.is_ok()) << set.message();
+  const std::string overlapping = R"({"label": 2, "polygon": [[1,1],[3,1],[3,3],[1,3]]})";
+  EXPECT_TRUE(contains(parse_error(doc(slice_at(0, region + "," + overlapping))),
+                       "region 0 (label 1) and region 1 (label 2) overlap"));
+}
+
+TEST(SliceJson, HoleTouchingTheOuterRingAtOneCornerIsFine) {
+  const std::string region = R"({"label": 1,
+      "polygon": [[0,0],[10,0],[10,10],[0,10],[0,5]], "holes": [[[0,5],[4,4],[4,6]]]})";
+  // A second material fills the hole, so the overlap test between the regions runs.
+  const std::string filling = R"({"label": 2, "polygon": [[0,5],[4,4],[4,6]]})";
+  const auto set = parse(doc(slice_at(0, region + "," + filling)));
+  EXPECT_TRUE(set.is_ok()) << set.message();
+}
+
 TEST(SliceJsonErrors, UndeclaredLabel) {
   const std::string labels = R"("labels": [{"id": 1, "name": "a"}, {"id": 2, "name": "b"}], )";
   const std::string message = parse_error(doc(slice_at(0, square_region(7, 0, 0, 1)), labels));

@@ -2,7 +2,9 @@
 
 #include <algorithm>
 #include <array>
+#include <climits>
 #include <cmath>
+#include <cstdint>
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
@@ -31,14 +33,23 @@ double number_at(const json& j, const std::string& where) {
   return value;
 }
 
+// An integer field as int: a value beyond int's range would otherwise wrap into a valid one.
+int integer_at(const json& j, const std::string& where) {
+  if (!j.is_number_integer()) throw ConfigProblem{where, "expected an integer"};
+  const bool in_range = j.is_number_unsigned()
+                            ? j.get<std::uint64_t>() <= std::uint64_t{INT_MAX}
+                            : j.get<std::int64_t>() >= INT_MIN && j.get<std::int64_t>() <= INT_MAX;
+  if (!in_range) throw ConfigProblem{where, "integer " + j.dump() + " is out of range"};
+  return j.get<int>();
+}
+
 LabelModel read_model(const json& j, const std::string& where, bool is_background) {
   if (!j.is_object()) throw ConfigProblem{where, "expected an object"};
   LabelModel model;
   model.label = 0;
   for (const auto& [key, value] : j.items()) {
     if (key == "id" && !is_background) {
-      if (!value.is_number_integer()) throw ConfigProblem{where + ".id", "expected an integer"};
-      model.label = value.get<int>();
+      model.label = integer_at(value, where + ".id");
     } else if (key == "name") {
       if (!value.is_string()) throw ConfigProblem{where + ".name", "expected a string"};
       model.name = value.get<std::string>();
@@ -143,15 +154,18 @@ Result<SegmentationConfig> parse_segmentation_config(const std::string& json_tex
   json doc;
   try {
     doc = json::parse(json_text);
-  } catch (const json::parse_error& e) {
+  } catch (const json::exception& e) {  // parse_error, or out_of_range for a number overflow
     return Status::error(source_name + ": not valid JSON (" + e.what() + ")");
   }
   SegmentationConfig config;
   try {
     if (!doc.is_object()) throw ConfigProblem{"top level", "expected an object"};
-    if (doc.value("format", std::string()) != kFormat)
+    // find, not value(): value() throws when the key holds another type.
+    const auto format = doc.find("format");
+    if (format == doc.end() || !format->is_string() || *format != kFormat)
       throw ConfigProblem{"format", std::string("must be \"") + kFormat + "\""};
-    if (doc.value("version", 0) != kVersion)
+    const auto version = doc.find("version");
+    if (version == doc.end() || !version->is_number_integer() || *version != kVersion)
       throw ConfigProblem{"version", "must be " + std::to_string(kVersion)};
     for (const auto& [key, value] : doc.items()) {
       if (key == "format" || key == "version") continue;
@@ -163,8 +177,7 @@ Result<SegmentationConfig> parse_segmentation_config(const std::string& json_tex
           config.materials.push_back(
               read_model(value[k], "labels[" + std::to_string(k) + "]", false));
       } else if (key == "median_px") {
-        if (!value.is_number_integer()) throw ConfigProblem{key, "expected an integer"};
-        config.median_px = value.get<int>();
+        config.median_px = integer_at(value, key);
       } else if (key == "depth_compensation") {
         if (!value.is_boolean()) throw ConfigProblem{key, "expected true or false"};
         config.depth_compensation = value.get<bool>();

@@ -308,5 +308,25 @@ TEST(Config, JsonRoundTripAndErrors) {
   ASSERT_FALSE(twice);
 }
 
+// Found by fuzzing (tests/data/fuzz/segmentation_config/): each was an uncaught exception or a
+// value wrapped into a valid one, now an error naming the field.
+TEST(Config, OverflowingNumbersAndMistypedHeaderFieldsAreErrors) {
+  auto error_of = [](const std::string& text) {
+    const auto parsed = parse_segmentation_config(text, "seg.json");
+    EXPECT_FALSE(parsed) << text;
+    return parsed ? std::string() : parsed.message();
+  };
+  EXPECT_NE(error_of("1e99999").find("not valid JSON"), std::string::npos);
+  EXPECT_NE(error_of(R"({"format": 1, "version": 1})").find("format"), std::string::npos);
+  EXPECT_NE(error_of(R"({"format": "sonoshape-segmentation", "version": "1"})").find("version"),
+            std::string::npos);
+  const std::string header = R"({"format": "sonoshape-segmentation", "version": 1, )";
+  EXPECT_NE(error_of(header + R"("median_px": 4294967297})").find("median_px: integer"),
+            std::string::npos);
+  EXPECT_NE(error_of(header + R"("labels": [{"id": 4294967297, "grey_mean": 50}]})")
+                .find("labels[0].id: integer 4294967297 is out of range"),
+            std::string::npos);
+}
+
 }  // namespace
 }  // namespace sonoshape::seg

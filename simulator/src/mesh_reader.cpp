@@ -63,7 +63,7 @@ class LineReader {
     if (end == std::string_view::npos) end = text_.size();
     line = text_.substr(pos_, end - pos_);
     if (!line.empty() && line.back() == '\r') line.remove_suffix(1);
-    pos_ = end + 1;
+    pos_ = end < text_.size() ? end + 1 : end;  // a last line without '\n' ends at the end
     ++number_;
     return true;
   }

@@ -1,0 +1,29 @@
+#pragma once
+// The sequence-file targets: read the scratch file, then use what a caller would (frames,
+// timestamps, transforms and the checks `segment` runs), so the fields' parsers are reached too.
+#include <cstddef>
+#include <string_view>
+
+#include "fuzz_support.hpp"
+#include "sonoshape/acquisition/sequence_file.hpp"
+
+namespace sonoshape::fuzz {
+
+inline void read_sequence(std::string_view bytes, std::string_view extension) {
+  quiet_logs();
+  const auto path = write_scratch_file(bytes, extension);
+  auto file = acq::read_sequence_file(path);
+  if (!file) return;
+  for (std::size_t k = 0; k < file->frame_count(); ++k) {
+    (void)file->timestamp_s(k);
+    (void)file->frame(k);
+    for (const auto& name : file->transform_names()) {
+      (void)file->transform(name, k);
+      (void)file->transform_status(name, k);
+    }
+  }
+  (void)acq::require_tracking(*file, path);
+  (void)acq::check_tracked_sweep(*file, path);
+}
+
+}  // namespace sonoshape::fuzz
