@@ -11,6 +11,7 @@
 #include <algorithm>
 #include <cerrno>
 #include <chrono>
+#include <cstdint>
 #include <cstring>
 #include <sstream>
 #include <thread>
@@ -101,6 +102,18 @@ struct IgtlConnection::Impl {
     if (fd >= 0) ::close(fd);
   }
 
+  // The timestamp field of a raw header (big-endian, bytes 34-41: seconds in the high 32 bits,
+  // the fraction of a second in the low 32). Read from the bytes rather than through
+  // MessageHeader::GetTimeStamp(): for a header whose timestamp is 0 the 1.11 library returned
+  // uninitialised memory (0xbebebebe seconds under AddressSanitizer's malloc fill), not 0.
+  static double header_timestamp_s(const std::uint8_t* header) {
+    constexpr std::size_t kTimestampOffset = 2 + 12 + 20;  // version, type name, device name
+    std::uint64_t raw = 0;
+    for (std::size_t i = 0; i < 8; ++i) raw = (raw << 8) | header[kTimestampOffset + i];
+    return static_cast<double>(raw >> 32) +
+           static_cast<double>(raw & 0xffffffffu) / 4294967296.0;
+  }
+
   // The first whole message in the buffer, removed from it; none when incomplete.
   Result<std::optional<IgtlMessage>> take() {
     if (buffer.size() < IGTL_HEADER_SIZE) return std::optional<IgtlMessage>();
@@ -116,9 +129,7 @@ struct IgtlConnection::Impl {
     IgtlMessage message;
     message.type = header->GetDeviceType();
     message.device = header->GetDeviceName();
-    igtl::TimeStamp::Pointer stamp = igtl::TimeStamp::New();
-    header->GetTimeStamp(stamp);
-    message.timestamp_s = stamp->GetTimeStamp();
+    message.timestamp_s = header_timestamp_s(buffer.data());
     if (message.timestamp_s == 0.0) {
       // No timestamp (Debian's ImagerServer sets none): the arrival time on the wall clock, the
       // clock senders stamp with, so that it stays comparable with stamped messages.
