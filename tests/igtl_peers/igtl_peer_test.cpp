@@ -20,6 +20,7 @@
 #include "sonoshape/publish/igtl_server.hpp"
 #include "sonoshape/testing/command.hpp"
 #include "sonoshape/testing/igtl_client.hpp"
+#include "sonoshape/testing/sanitizer_slowdown.hpp"
 #include "sonoshape/testing/temp_dir.hpp"
 
 namespace {
@@ -29,6 +30,8 @@ using sonoshape::testing::contains;
 using sonoshape::testing::file_text;
 using sonoshape::testing::spawn;
 using sonoshape::testing::wait_exit;
+// Scans and peers run several times slower in sanitizer builds: their time bounds scale.
+constexpr double kSlowdown = sonoshape::testing::kSanitizerSlowdown;
 using sonoshape::testing::IgtlClient;
 using sonoshape::testing::Received;
 
@@ -93,7 +96,7 @@ TEST(IgtlPeers, DebiansReceiveClientAndALibraryClientGetEveryLabelAndTheImageDur
   sonoshape::testing::TempDir dir;
   const fs::path scan_log = dir.path() / "scan.log", client_log = dir.path() / "client.log";
   const pid_t scan = spawn(kScan + "--igtl-serve 0 -o " + (dir.path() / "out").string(), scan_log);
-  const int port = announced_port(scan_log, 30.0);
+  const int port = announced_port(scan_log, 30.0 * kSlowdown);
   ASSERT_GT(port, 0) << file_text(scan_log);
   // Debian's example prints what it receives and exits when the server closes the connection.
   const pid_t receiver =
@@ -101,8 +104,8 @@ TEST(IgtlPeers, DebiansReceiveClientAndALibraryClientGetEveryLabelAndTheImageDur
   IgtlClient library_client(port);
   ASSERT_TRUE(library_client.connected());
   const Watched watched = watch(library_client);
-  ASSERT_EQ(wait_exit(scan, 60.0), 0) << file_text(scan_log);
-  EXPECT_EQ(wait_exit(receiver, 10.0), 0);
+  ASSERT_EQ(wait_exit(scan, 60.0 * kSlowdown), 0) << file_text(scan_log);
+  EXPECT_EQ(wait_exit(receiver, 10.0 * kSlowdown), 0);
   const std::string scan_text = file_text(scan_log), received = file_text(client_log);
 
   // Every label of the scan (slices.json names them) arrived as a POLYDATA named after it; in
@@ -134,11 +137,11 @@ TEST(IgtlPeers, AClientThatVanishesMidScanChangesNothingForTheScan) {
   sonoshape::testing::TempDir dir;
   // The same sweep without any client: --fast makes its slices deterministic.
   const fs::path alone_log = dir.path() / "alone.log";
-  ASSERT_EQ(wait_exit(spawn(kScan, alone_log), 60.0), 0) << file_text(alone_log);
+  ASSERT_EQ(wait_exit(spawn(kScan, alone_log), 60.0 * kSlowdown), 0) << file_text(alone_log);
 
   const fs::path scan_log = dir.path() / "scan.log", client_log = dir.path() / "client.log";
   const pid_t scan = spawn(kScan + "--igtl-serve 0", scan_log);
-  const int port = announced_port(scan_log, 30.0);
+  const int port = announced_port(scan_log, 30.0 * kSlowdown);
   ASSERT_GT(port, 0) << file_text(scan_log);
   const pid_t receiver =
       spawn(std::string(RECEIVE_CLIENT) + " 127.0.0.1 " + std::to_string(port), client_log);
@@ -152,7 +155,7 @@ TEST(IgtlPeers, AClientThatVanishesMidScanChangesNothingForTheScan) {
   kill(receiver, SIGKILL);
   waitpid(receiver, nullptr, 0);
 
-  ASSERT_EQ(wait_exit(scan, 60.0), 0) << file_text(scan_log);
+  ASSERT_EQ(wait_exit(scan, 60.0 * kSlowdown), 0) << file_text(scan_log);
   const std::string scan_text = file_text(scan_log);
   EXPECT_TRUE(contains(scan_text, "scan summary (source ended"));
   EXPECT_EQ(summary_slices(scan_text), summary_slices(file_text(alone_log))) << scan_text;
@@ -180,7 +183,7 @@ TEST(IgtlPeers, DebiansPolyDataClientGetsTheSurfacesItAsksFor) {
   const pid_t client =
       spawn(std::string(POLYDATA_CLIENT) + " 127.0.0.1 " + std::to_string(server->port()), log);
   // Its first read is the surface the server sends on connection; its requests are answered.
-  ASSERT_EQ(wait_exit(client, 20.0), 0) << file_text(log);
+  ASSERT_EQ(wait_exit(client, 20.0 * kSlowdown), 0) << file_text(log);
   const std::string text = file_text(log);
   EXPECT_EQ(count(text, "Receiving POLYDATA data type."), 10u) << text;
   EXPECT_FALSE(contains(text, "Invalid response"));

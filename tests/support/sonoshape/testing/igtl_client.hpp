@@ -8,6 +8,7 @@
 #include "igtlMessageHeader.h"
 #include "igtlPolyDataMessage.h"
 #include "igtlStatusMessage.h"
+#include "sonoshape/testing/sanitizer_slowdown.hpp"
 
 namespace sonoshape::testing {
 
@@ -29,7 +30,8 @@ class IgtlClient {
   explicit IgtlClient(int port) : socket_(igtl::ClientSocket::New()) {
     connected_ = socket_->ConnectToServer("127.0.0.1", port) == 0;
     // Bounded: a missing message fails the test instead of hanging it.
-    socket_->SetReceiveTimeout(5000);
+    // 5 s without a message ends a watch (scaled in sanitizer builds, whose scans are slower).
+    socket_->SetReceiveTimeout(static_cast<int>(5000 * kSanitizerSlowdown));
   }
   ~IgtlClient() { close(); }
   bool connected() const { return connected_; }
