@@ -125,10 +125,12 @@ def main():
                      f"{rss[-1][1]:.0f} MB (peak {max(mb for _, mb, _ in rss):.0f} MB) |")
         lines.append(f"| RSS slope after the warm-up (least squares) | {rss_slope:+.2f} MB/min "
                      f"({100.0 * rss_slope / rss_at_warmup:+.3f} % of the warm-up RSS per min) |")
-        last = [(t / 60.0, mb) for t, mb, _ in rss if t / 60.0 >= minutes * 2.0 / 3.0]
-        lines.append(f"| RSS slope over the last third ({minutes * 2 / 3:.0f}-{minutes:.0f} min; "
-                     f"{slices_at(updates, minutes * 40.0)} -> {slices_at(updates, minutes * 60.0)} "
-                     f"slices) | {slope(last):+.2f} MB/min |")
+        third_min = minutes * 2.0 / 3.0  # the last third starts here
+        last = [(t / 60.0, mb) for t, mb, _ in rss if t / 60.0 >= third_min]
+        slices_then = slices_at(updates, third_min * 60.0)
+        slices_end = slices_at(updates, minutes * 60.0)
+        lines.append(f"| RSS slope over the last third ({third_min:.0f}-{minutes:.0f} min; "
+                     f"{slices_then} -> {slices_end} slices) | {slope(last):+.2f} MB/min |")
         if not math.isnan(per_min_mb):
             lines.append(f"| the same, slice count held constant (RSS = a + b slices + c min) | "
                          f"c = {per_min_mb:+.2f} MB/min; b = {per_slice_mb:.2f} MB per slice |")
