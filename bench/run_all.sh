@@ -74,7 +74,7 @@ step plus_spine_replay "sonoshape sonoshape_render" \
 build/bench/sonoshape_render -o docs/images/plus_spine_replay.png --slices out/plus/slices.json out/plus/label_1.ply"
 
 step segmentation "sonoshape" \
-  "python3 bench/segmentation_table.py --write-doc"
+  "python3 bench/segmentation_table.py --seeds 1,2,3 --write-doc"
 
 step patient "sonoshape" \
   "mkdir -p out/bench/patient && cd out/bench/patient

@@ -24,12 +24,16 @@ Phantoms: "default" (spot, cheburashka and a rib, as `simulate` makes it), "nest
 copy of itself at 30 % inside it, written to WORK/phantoms/), "similar" (the default layout with
 cheburashka as hypoechoic as spot). Noise levels are the tracker's: "low" (the simulator's default,
 0.1 mm / 0.05 deg) and "high" (0.5 mm / 0.3 deg). The default set is quick (4 cases); `--full`
-runs every phantom x probe x trajectory x noise level (48 cases).
+runs every phantom x probe x trajectory x noise level (48 cases). With `--seeds 1,2,3` every case
+is simulated with each seed (in WORK/seedS/) and the table gives the means over the seeds and the
+range of the last method's gap: one sweep's IoU moves by a few hundredths with the speckle and the
+tracker noise of its seed, as much as the differences between labellings, so single-seed gaps
+are not worth comparing at that level.
 The exit status is non-zero when a command fails.
 
 Usage: bench/segmentation_table.py [--binary build/apps/sonoshape] [--work out/bench/segmentation]
                                    [--full] [--only CASE ...] [--frames 200] [--every 4]
-                                   [--depth 7] [--seed 1] [--write-doc]
+                                   [--depth 7] [--seeds 1,2,3] [--write-doc]
 """
 import argparse
 import itertools
@@ -207,27 +211,54 @@ def cell(value):
     return "no mesh" if value is None else f"{value:.3f}"
 
 
-def table(rows, failures):
+def mean(values):
+    return sum(values) / len(values)
+
+
+def table(rows, failures, seeds):
+    """One line per case and label. With several seeds, `rows` holds one row per seed and label
+    and every figure is the mean over the seeds (an IoU without a mesh counting as 0 where the
+    perfect labels have one), with the range of the last method's gap beside it."""
     methods = list(METHODS)
+    several = len(seeds) > 1
     header = (["phantom", "probe", "trajectory", "noise", "label"] +
               [f"Dice {m}" for m in methods] + [f"IoU {m}" for m in methods] +
               ["IoU perfect labels"] + [f"gap {m}" for m in methods])
+    if several:
+        header.append(f"gap {methods[-1]}, range over seeds")
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    groups = {}
     for r in rows:
-        perfect = iou(r["perfect"])
-        dices, scans, gaps = [], [], []
-        for method in METHODS:
-            ours = iou(r[method]["scan"])
+        groups.setdefault((r["case"], r["label"]), []).append(r)
+    for (case, label), group in groups.items():
+        perfects = [iou(r["perfect"]) for r in group]
+        has_perfect = all(p is not None for p in perfects)
+        dices, scans, gaps, last_gaps = [], [], [], []
+        for method in methods:
             # A label missing from the report is in no truth frame (nor in ours).
-            dice = r[method]["dice"]
-            dices.append("not in frames" if dice is None else f"{dice:.3f}")
-            scans.append(cell(ours))
-            gaps.append(f"{perfect - (ours or 0.0):.3f}" if perfect is not None else "–")
-        lines.append(f"| {' | '.join(r['case'])} | {r['label']} {r['name']} | "
-                     f"{' | '.join(dices)} | {' | '.join(scans)} | {cell(perfect)} | "
-                     f"{' | '.join(gaps)} |")
-    for case, error in failures:
-        lines.append(f"| {' | '.join(case)} | FAILED: {error} |" + " |" * (len(header) - 5))
+            dice = [r[method]["dice"] for r in group if r[method]["dice"] is not None]
+            dices.append(f"{mean(dice):.3f}" if dice else "not in frames")
+            ours = [iou(r[method]["scan"]) for r in group]
+            if all(o is None for o in ours):
+                scans.append("no mesh")
+            else:
+                scans.append(f"{mean([o or 0.0 for o in ours]):.3f}")
+            if has_perfect:
+                per_seed = [p - (o or 0.0) for p, o in zip(perfects, ours)]
+                gaps.append(f"{mean(per_seed):.3f}")
+                last_gaps = per_seed
+            else:
+                gaps.append("–")
+        perfect = f"{mean(perfects):.3f}" if has_perfect else cell(None)
+        extra = ""
+        if several:
+            extra = (f" | {min(last_gaps):.3f} – {max(last_gaps):.3f}" if last_gaps else " | –")
+        lines.append(f"| {' | '.join(case)} | {label} {group[0]['name']} | "
+                     f"{' | '.join(dices)} | {' | '.join(scans)} | {perfect} | "
+                     f"{' | '.join(gaps)}{extra} |")
+    for case, seed, error in failures:
+        lines.append(f"| {' | '.join(case)} | FAILED (seed {seed}): {error} |" +
+                     " |" * (len(header) - 5))
     return "\n".join(lines)
 
 
@@ -236,7 +267,9 @@ def provenance(args, seconds, cases, load_at_start):
     commit = subprocess.run(["git", "-C", folder, "rev-parse", "--short", "HEAD"],
                             capture_output=True, text=True).stdout.strip() or "unknown"
     return (f"{len(cases)} cases, --frames {args.frames} --every {args.every} "
-            f"--depth {args.depth or 'default'} --seed {args.seed}; sonoshape at commit {commit}; "
+            f"--depth {args.depth or 'default'} --seeds {','.join(map(str, args.seeds))}"
+            f"{' (figures: means over the seeds)' if len(args.seeds) > 1 else ''}; "
+            f"sonoshape at commit {commit}; "
             f"{os.cpu_count()} cores ({platform.machine()}, {platform.system()}), load average "
             f"{load_at_start:.1f} at the start and {os.getloadavg()[0]:.1f} at the end; "
             f"{seconds:.0f} s in all.")
@@ -253,7 +286,9 @@ def main():
     parser.add_argument("--frames", type=int, default=200, help="frames per simulated sweep")
     parser.add_argument("--every", type=int, default=4, help="segment every K-th frame")
     parser.add_argument("--depth", type=int, default=7, help="octree depth (0: the default)")
-    parser.add_argument("--seed", type=int, default=1, help="seed of the simulator")
+    parser.add_argument("--seeds", default="1",
+                        help="simulator seeds, comma-separated; with several, the table gives "
+                             "the means over them and the range of the last method's gap")
     parser.add_argument("--write-doc", action="store_true",
                         help="write the table into docs/benchmarks.md")
     args = parser.parse_args()
@@ -264,19 +299,27 @@ def main():
         cases = [c for c in cases if case_name(c) in args.only]
         if not cases:
             raise SystemExit(f"no case named {' '.join(args.only)} (add --full for the grid?)")
+    args.seeds = [int(x) for x in args.seeds.split(",")]
     rows, failures = [], []
     start, load_at_start = time.monotonic(), os.getloadavg()[0]
+    work = args.work
     for case in cases:
-        case_start = time.monotonic()
-        try:
-            case_rows, unknown = one_case(args, root, case)
-            rows += case_rows
-            print(f"{case_name(case)}: {time.monotonic() - case_start:.1f} s (unknown area "
-                  f"precision {unknown['precision']}, recall {unknown['recall']})", file=sys.stderr)
-        except RuntimeError as e:
-            failures.append((case, str(e)))
-            print(f"{case_name(case)}: {e}", file=sys.stderr)
-    text = table(rows, failures) + "\n\n" + provenance(args, time.monotonic() - start, cases, load_at_start)
+        for seed in args.seeds:
+            case_start = time.monotonic()
+            args.seed = seed
+            args.work = work if len(args.seeds) == 1 else os.path.join(work, f"seed{seed}")
+            os.makedirs(args.work, exist_ok=True)
+            try:
+                case_rows, unknown = one_case(args, root, case)
+                rows += case_rows
+                print(f"{case_name(case)} seed {seed}: {time.monotonic() - case_start:.1f} s "
+                      f"(unknown area precision {unknown['precision']}, recall "
+                      f"{unknown['recall']})", file=sys.stderr)
+            except RuntimeError as e:
+                failures.append((case, seed, str(e)))
+                print(f"{case_name(case)} seed {seed}: {e}", file=sys.stderr)
+    args.work = work
+    text = table(rows, failures, args.seeds) + "\n\n" + provenance(args, time.monotonic() - start, cases, load_at_start)
     print(text)
     if args.write_doc:
         write_between_markers(root, "segmentation_table", text)

@@ -238,6 +238,10 @@ struct GraphCutLabeller::Impl {
       }
     std::optional<PriorCells> predicted;
     if (prior) predicted = prior_cells(*prior, count, start);
+    // The cut starts from the threshold labelling without its speckle grains; a cell whose
+    // label differs from the threshold labelling's at the end moves its pixels.
+    const std::vector<std::uint8_t> threshold_start = start;
+    drop_small_start_regions(start, count, reflector_cell, predicted);
     // Only cells near a boundary of the starting labelling, or where the prior disagrees with
     // it, can change at an optimum of reasonable weights: the cut runs on that band, and the
     // cells outside it enter as fixed neighbours (their Potts terms become unary ones). Costs
@@ -266,12 +270,13 @@ struct GraphCutLabeller::Impl {
     detail::GridLabelling cut(grid_w, grid_h, band, static_cast<int>(labels));
     const std::vector<std::uint8_t> initial = start;
     cut.minimise(cost, right, down, start, options.cycles);
+    revert_new_regions(start, initial, predicted);
 
     // The cut decides cells; where it keeps a cell's starting label the threshold labelling's
     // pixels stay (their boundaries are finer than a cell), elsewhere the cell's pixels move.
     const int reflector_value = reflector >= 0 ? values[static_cast<std::size_t>(reflector)] : -1;
     for (std::size_t c = 0; c < cells; ++c) {
-      if (start[c] == initial[c] || count[c] == 0.0) continue;
+      if (start[c] == threshold_start[c] || count[c] == 0.0) continue;
       const int ci = static_cast<int>(c % static_cast<std::size_t>(grid_w));
       const int cj = static_cast<int>(c / static_cast<std::size_t>(grid_w));
       const int i_end = std::min(map.cols, (ci + 1) * block_px);
@@ -514,6 +519,82 @@ struct GraphCutLabeller::Impl {
             std::min(1.0, distance.at<float>(cj, ci) * cell_mm / options.prior_margin_mm));
       }
     return out;
+  }
+
+  // Material regions of the starting labelling smaller than min_region_mm2 that the prior does
+  // not predict start as the label around them. They are speckle grains the threshold's cleaning
+  // would remove; left in, the cut's smoothness merges neighbouring grains into regions larger
+  // than that (dark speckle at depth came out as 24-30 mm2 pieces of a hypoechoic organ in frames
+  // where no organ is), and the cleaning after the cut no longer removes them. Without a
+  // boundary there the cut leaves such areas alone.
+  void drop_small_start_regions(std::vector<std::uint8_t>& start, const std::vector<double>& count,
+                                const std::vector<std::uint8_t>& reflector_cell,
+                                const std::optional<PriorCells>& predicted) const {
+    const double min_px = config.min_region_mm2 / (geometry.spacing_mm * geometry.spacing_mm);
+    const cv::Mat start_grid(grid_h, grid_w, CV_8U, start.data());
+    for (std::size_t l = 1; l < values.size(); ++l) {
+      if (static_cast<int>(l) == reflector) continue;
+      cv::Mat regions;
+      const int n = cv::connectedComponents(start_grid == static_cast<int>(l), regions, 8, CV_32S);
+      if (n <= 1) continue;
+      std::vector<double> area_px(static_cast<std::size_t>(n), 0.0);
+      std::vector<double> predicted_px(static_cast<std::size_t>(n), 0.0);
+      for (std::size_t c = 0; c < start.size(); ++c) {
+        const int r = regions.at<int>(static_cast<int>(c / grid_w), static_cast<int>(c % grid_w));
+        if (r == 0) continue;
+        area_px[static_cast<std::size_t>(r)] += count[c];
+        if (predicted && predicted->expected[c] == static_cast<int>(l))
+          predicted_px[static_cast<std::size_t>(r)] += count[c];
+      }
+      // Each small region takes the most common label among the cells around it.
+      std::vector<std::array<int, 256>> around(static_cast<std::size_t>(n));
+      for (auto& a : around) a.fill(0);
+      for (int cj = 0; cj < grid_h; ++cj)
+        for (int ci = 0; ci < grid_w; ++ci) {
+          const int r = regions.at<int>(cj, ci);
+          if (r == 0) continue;
+          const auto count_neighbour = [&](int i, int j) {
+            if (i < 0 || j < 0 || i >= grid_w || j >= grid_h || regions.at<int>(j, i) == r) return;
+            const std::size_t d = static_cast<std::size_t>(j) * grid_w + i;
+            if (count[d] > 0.0 && !reflector_cell[d]) ++around[static_cast<std::size_t>(r)][start[d]];
+          };
+          count_neighbour(ci - 1, cj);
+          count_neighbour(ci + 1, cj);
+          count_neighbour(ci, cj - 1);
+          count_neighbour(ci, cj + 1);
+        }
+      for (std::size_t c = 0; c < start.size(); ++c) {
+        const auto r = static_cast<std::size_t>(
+            regions.at<int>(static_cast<int>(c / grid_w), static_cast<int>(c % grid_w)));
+        if (r == 0 || area_px[r] >= min_px || 2.0 * predicted_px[r] >= area_px[r]) continue;
+        const auto& a = around[r];
+        const auto most = std::max_element(a.begin(), a.end());
+        if (*most > 0) start[c] = static_cast<std::uint8_t>(most - a.begin());
+      }
+    }
+  }
+
+  // The cut refines the boundaries of the regions the starting labelling found and the prior
+  // predicts; it does not make new ones. A region of a material in `cut` that holds no cell of
+  // that material in `start` and none the prior predicts as it goes back to `start`: summed over
+  // a cell's pixels, the likelihood of dark speckle can outweigh the smoothness, and the cut
+  // grew speckle grains at depth into pieces of a hypoechoic organ.
+  void revert_new_regions(std::vector<std::uint8_t>& cut, const std::vector<std::uint8_t>& start,
+                          const std::optional<PriorCells>& predicted) const {
+    const cv::Mat cut_grid(grid_h, grid_w, CV_8U, cut.data());
+    for (std::size_t l = 1; l < values.size(); ++l) {
+      if (static_cast<int>(l) == reflector) continue;
+      cv::Mat regions;
+      const int n = cv::connectedComponents(cut_grid == static_cast<int>(l), regions, 8, CV_32S);
+      if (n <= 1) continue;
+      std::vector<std::uint8_t> anchored(static_cast<std::size_t>(n), 0);
+      const int* r = regions.ptr<int>(0);  // continuous: one row after another
+      for (std::size_t c = 0; c < cut.size(); ++c)
+        if (r[c] > 0 && (start[c] == l || (predicted && predicted->expected[c] == static_cast<int>(l))))
+          anchored[static_cast<std::size_t>(r[c])] = 1;
+      for (std::size_t c = 0; c < cut.size(); ++c)
+        if (r[c] > 0 && !anchored[static_cast<std::size_t>(r[c])]) cut[c] = start[c];
+    }
   }
 
   // Disagreeing with the prediction costs prior_weight per pixel, scaled by its confidence.

@@ -101,7 +101,10 @@ TEST(IgtlPeers, DebiansReceiveClientAndALibraryClientGetEveryLabelAndTheImageDur
   // Debian's example prints what it receives and exits when the server closes the connection.
   const pid_t receiver =
       spawn(std::string(RECEIVE_CLIENT) + " 127.0.0.1 " + std::to_string(port), client_log);
-  IgtlClient library_client(port);
+  // The watch ends when the scan closes the connection; its bound must outlast the scan's
+  // longest silence, the final full-depth update after the last frame (a few seconds; 47 s in an
+  // ASan build, longer than the 5 s x 10 it had, so the client stopped before the final status).
+  IgtlClient library_client(port, 30.0);
   ASSERT_TRUE(library_client.connected());
   const Watched watched = watch(library_client);
   ASSERT_EQ(wait_exit(scan, 60.0 * kSlowdown), 0) << file_text(scan_log);

@@ -27,11 +27,12 @@ inline unsigned triangles(const Received& r) {
 
 class IgtlClient {
  public:
-  explicit IgtlClient(int port) : socket_(igtl::ClientSocket::New()) {
+  /// `receive_timeout_s` without a message ends a watch (scaled in sanitizer builds, whose scans
+  /// are slower): bounded, so that a missing message fails the test instead of hanging it.
+  explicit IgtlClient(int port, double receive_timeout_s = 5.0)
+      : socket_(igtl::ClientSocket::New()) {
     connected_ = socket_->ConnectToServer("127.0.0.1", port) == 0;
-    // Bounded: a missing message fails the test instead of hanging it.
-    // 5 s without a message ends a watch (scaled in sanitizer builds, whose scans are slower).
-    socket_->SetReceiveTimeout(static_cast<int>(5000 * kSanitizerSlowdown));
+    socket_->SetReceiveTimeout(static_cast<int>(1000.0 * receive_timeout_s * kSanitizerSlowdown));
   }
   ~IgtlClient() { close(); }
   bool connected() const { return connected_; }

@@ -1,0 +1,111 @@
+#!/usr/bin/env python3
+"""Where a label's gap to its perfect-label bound comes from, in one case of the segmentation table.
+
+`bench/segmentation_table.py` leaves in its work folder, per case, the slices of every labelling
+(WORK/CASE.METHOD.slices.json), the perfect-label slices (WORK/CASE.perfect.slices.json, the truth
+label frames through the same contour and placement code, one slice per kept frame in the same
+order) and the truth meshes (WORK/CASE_truth/label_L.ply). This script turns the labelling's slices
+into the perfect ones in three steps, replacing whole slices (so that every intermediate set is a
+valid slice set), reconstructs and scores label L after each step, and prints how much of the gap
+each step closes:
+
+  1. missed     the slices whose truth holds L but whose labelling has no region of L
+                (slivers of an organ's ends below what the image resolves, organs in shadow);
+  2. outlines   the slices where both hold L (the outline of the organ as segmented);
+  3. elsewhere  every other slice (the other organs' outlines and the unknown areas, which
+                shape L's field too: the unknown-region completion and the shared octree).
+
+The steps telescope: their sum is the whole gap. The order matters (the steps do not add up
+independently), so the figures say how much each part of the slice set holds given the ones
+before it.
+
+    python3 bench/segmentation_gap.py --work out/bench/segmentation --case default_convex_sweep_low \
+        --method graphcut_prior --label 2 [--depth 7] [--binary build/apps/sonoshape]
+
+METHOD is the file name's method: threshold, graphcut or graphcut_prior.
+"""
+import argparse
+import json
+import os
+import subprocess
+import sys
+
+
+def run(cmd, what):
+    result = subprocess.run(cmd, capture_output=True, text=True)
+    if result.returncode != 0:
+        lines = result.stderr.strip().splitlines()
+        raise RuntimeError(f"{what} failed: {lines[-1] if lines else result.returncode}")
+
+
+def scan_iou(args, slices_path, label, truth_mesh):
+    """Reconstructs `slices_path` and returns label's volume IoU (0 without a mesh)."""
+    base = slices_path[:-len(".slices.json")]
+    cmd = [args.binary, "reconstruct", slices_path, "-o", base + "_recon", "-q"]
+    if args.depth:
+        cmd += ["--depth", str(args.depth)]
+    run(cmd, f"reconstruct {slices_path}")
+    run([args.binary, "evaluate", "--recon", base + "_recon", "--truth", f"{label}:{truth_mesh}",
+         "--slices", slices_path, "--json", base + ".eval.json", "-q"], f"evaluate {base}_recon")
+    with open(base + ".eval.json") as f:
+        for entry in json.load(f)["labels"]:
+            if entry["label"] == label:
+                return entry["iou"] if entry.get("reconstructed") and entry.get("iou") else 0.0
+    return 0.0
+
+
+def holds(slice_, label):
+    return any(region["label"] == label for region in slice_["regions"])
+
+
+def main():
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--work", default=os.path.join(root, "out", "bench", "segmentation"))
+    parser.add_argument("--case", required=True, help="e.g. default_convex_sweep_low")
+    parser.add_argument("--method", default="graphcut_prior",
+                        help="threshold, graphcut or graphcut_prior")
+    parser.add_argument("--label", type=int, required=True)
+    parser.add_argument("--depth", type=int, default=7)
+    parser.add_argument("--binary", default=os.path.join(root, "build", "apps", "sonoshape"))
+    args = parser.parse_args()
+
+    base = os.path.join(args.work, args.case)
+    truth_mesh = os.path.join(base + "_truth", f"label_{args.label}.ply")
+    with open(f"{base}.{args.method}.slices.json") as f:
+        ours = json.load(f)
+    with open(base + ".perfect.slices.json") as f:
+        perfect = json.load(f)
+    if len(ours["slices"]) != len(perfect["slices"]) or any(
+            a["timestamp"] != b["timestamp"] for a, b in zip(ours["slices"], perfect["slices"])):
+        sys.exit(f"{base}: the {args.method} and perfect slice sets do not hold the same frames "
+                 "(rerun bench/segmentation_table.py for this case)")
+
+    missed = [i for i, (a, b) in enumerate(zip(ours["slices"], perfect["slices"]))
+              if holds(b, args.label) and not holds(a, args.label)]
+    both = [i for i, (a, b) in enumerate(zip(ours["slices"], perfect["slices"]))
+            if holds(b, args.label) and holds(a, args.label)]
+    steps = [("missed", missed), ("outlines", both),
+             ("elsewhere", [i for i in range(len(ours["slices"])) if i not in missed + both])]
+
+    work = f"{base}.gap{args.label}"
+    start = scan_iou(args, f"{base}.{args.method}.slices.json", args.label, truth_mesh)
+    bound = scan_iou(args, base + ".perfect.slices.json", args.label, truth_mesh)
+    print(f"{args.case}, label {args.label}, {args.method}: IoU {start:.3f}, perfect labels "
+          f"{bound:.3f}, gap {bound - start:.3f}")
+    print("| step | slices replaced | IoU after | gap closed |")
+    print("|---|---|---|---|")
+    current, previous = ours, start
+    for name, indices in steps:
+        for i in indices:
+            current["slices"][i] = perfect["slices"][i]
+        path = f"{work}.{name}.slices.json"
+        with open(path, "w") as f:
+            json.dump(current, f)
+        value = scan_iou(args, path, args.label, truth_mesh)
+        print(f"| {name} | {len(indices)} | {value:.3f} | {value - previous:+.3f} |")
+        previous = value
+
+
+if __name__ == "__main__":
+    main()
