@@ -232,7 +232,10 @@ class TrakstarTestbed {
 TrakstarOptions fast_options() {
   TrakstarOptions options;
   options.rate_hz = 200.0;
-  options.reply_timeout_s = 0.2;  // generous: umockdev answers through a socket
+  // Generous: umockdev answers through a socket, and these tests failed once under a parallel
+  // ctest on a loaded machine with 0.2 s, where a late reply counts as a timeout the tests do
+  // not expect. A planted stall costs one whole timeout.
+  options.reply_timeout_s = 1.0;
   options.reopen_interval_s = 0.02;
   return options;
 }
