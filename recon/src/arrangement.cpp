@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
@@ -645,6 +646,33 @@ int Arrangement::allocate_region(Region region) {
   return static_cast<int>(regions_.size()) - 1;
 }
 
+void Arrangement::FaceTable::insert(std::uint64_t key, int face) {
+  if (2 * (used_ + 1) > slots_.size()) {
+    // Twice as many slots (at least 1024), the erased ones dropped.
+    std::vector<Slot> old = std::move(slots_);
+    slots_.assign(std::max<std::size_t>(1024, 2 * old.size()), Slot{});
+    shift_ = 64 - std::countr_zero(slots_.size());
+    used_ = 0;
+    for (const Slot& slot : old)
+      if (slot.face >= 0) insert(slot.key, slot.face);
+  }
+  std::size_t i = slot_of(key);
+  while (slots_[i].face != kEmpty) i = (i + 1) & (slots_.size() - 1);
+  slots_[i] = {key, face};
+  ++used_;
+}
+
+bool Arrangement::FaceTable::erase(std::uint64_t key, int face) {
+  if (slots_.empty()) return false;
+  for (std::size_t i = slot_of(key); slots_[i].face != kEmpty; i = (i + 1) & (slots_.size() - 1)) {
+    if (slots_[i].key == key && slots_[i].face == face) {
+      slots_[i].face = kErased;  // still used: later faces of the probe sequence stay found
+      return true;
+    }
+  }
+  return false;
+}
+
 std::uint64_t Arrangement::face_key(int plane, std::vector<std::uint64_t>& keys) {
   std::sort(keys.begin(), keys.end());
   std::uint64_t key = static_cast<std::uint64_t>(plane) * 0x9E3779B97F4A7C15ull;
@@ -720,13 +748,7 @@ void Arrangement::reopen_cell(int cell, int plane_id) {
     // Crossed: no cell of the arrangement has this face any more.
     keys.clear();
     for (const int v : face.vertices) keys.push_back(vertex_keys_[static_cast<std::size_t>(v)]);
-    const auto [first, last] = faces_by_key_.equal_range(face_key(face.plane, keys));
-    for (auto it = first; it != last; ++it)
-      if (it->second == f) {
-        faces_by_key_.erase(it);
-        retired_faces_.push_back(f);
-        break;
-      }
+    if (faces_by_key_.erase(face_key(face.plane, keys), f)) retired_faces_.push_back(f);
     // Its polygon goes with the last cell on it (the other one, if built, is crossed too and
     // copies it when it is reopened).
     if (face.cell_positive < 0 && face.cell_negative < 0) {
@@ -755,24 +777,24 @@ int Arrangement::finish_region(int id) {
       sorted.push_back(vertex_keys_[static_cast<std::size_t>(face.vertex(i))]);
     const std::uint64_t key = face_key(face.plane, sorted);
     int shared = -1;
-    const auto [first, last] = faces_by_key_.equal_range(key);
-    for (auto it = first; it != last && shared < 0; ++it) {
-      ArrangementFace& f = faces_[static_cast<std::size_t>(it->second)];
+    faces_by_key_.find(key, [&](int candidate) {
+      ArrangementFace& f = faces_[static_cast<std::size_t>(candidate)];
       int& side = face.sigma > 0 ? f.cell_positive : f.cell_negative;
-      if (f.plane != face.plane || side >= 0 || f.vertices.size() != sorted.size()) continue;
+      if (f.plane != face.plane || side >= 0 || f.vertices.size() != sorted.size()) return false;
       if (!std::all_of(f.vertices.begin(), f.vertices.end(), [&](int v) {
             return std::binary_search(sorted.begin(), sorted.end(),
                                       vertex_keys_[static_cast<std::size_t>(v)]);
           }))
-        continue;
+        return false;
       side = cell;
-      shared = it->second;
-    }
+      shared = candidate;
+      return true;
+    });
     if (shared >= 0) {
       cells_.back().faces.push_back(shared);
       continue;
     }
-    faces_by_key_.emplace(key, static_cast<int>(faces_.size()));
+    faces_by_key_.insert(key, static_cast<int>(faces_.size()));
     cells_.back().faces.push_back(static_cast<int>(faces_.size()));
     // Starting at the vertex of smallest coordinates: the face's polygon, and so its image, are
     // the same whichever of its two cells was built first.
