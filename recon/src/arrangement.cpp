@@ -1,7 +1,10 @@
 #include "arrangement.hpp"
 
+#include <CGAL/FPU.h>
+
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
@@ -23,8 +26,27 @@ std::uint64_t pair_key(int a, int b) {
          static_cast<std::uint32_t>(b);
 }
 
-Vec3 to_vec3(const Point3& p) {
-  return Vec3(CGAL::to_double(p.x()), CGAL::to_double(p.y()), CGAL::to_double(p.z()));
+using IntervalPoint3 = IntervalKernel::Point_3;
+
+Point3 exact_intersection(const Plane3& a, const Plane3& b, const Plane3& c) {
+  const auto result = CGAL::intersection(a, b, c);
+  const Point3* point = result ? boost::get<Point3>(&*result) : nullptr;
+  if (point == nullptr) throw GeometryError("arrangement: three planes do not meet in one point");
+  return *point;
+}
+
+// A coordinate's double as ExactKernel's to_double gives it: the middle of its interval when
+// that is narrow (relative width 1e-5, ExactKernel's default), of the exact value's otherwise.
+template <typename ExactPoint>
+double coordinate_double(const CGAL::Interval_nt<false>& approximation, const ExactPoint& exact,
+                         int axis) {
+  if (CGAL::has_smaller_relative_precision(approximation, 1e-5))
+    return CGAL::to_double(approximation);
+  return CGAL::to_double(CGAL::Interval_nt<false>(CGAL::to_interval(exact().exact()[axis])));
+}
+
+int to_side(CGAL::Oriented_side s) {
+  return s == CGAL::ON_POSITIVE_SIDE ? 1 : (s == CGAL::ON_NEGATIVE_SIDE ? -1 : 0);
 }
 
 }  // namespace
@@ -38,13 +60,16 @@ Arrangement::Arrangement(const Box3& box) : box_(box) {
       Vec3 n = Vec3::Zero();
       n[axis] = upper ? -1.0 : 1.0;
       const double d = upper ? box.max[axis] : -box.min[axis];
-      planes_.push_back({n, d, -1, Plane3(n.x(), n.y(), n.z(), d)});
+      planes_.push_back({n, d, -1, Plane3(n.x(), n.y(), n.z(), d),
+                         IntervalKernel::Plane_3(n.x(), n.y(), n.z(), d)});
     }
   }
   // Corner c has coordinate bit k set when it sits at the box maximum along axis k.
   for (int c = 0; c < 8; ++c) {
-    add_vertex(Point3((c & 1) ? box.max.x() : box.min.x(), (c & 2) ? box.max.y() : box.min.y(),
-                      (c & 4) ? box.max.z() : box.min.z()));
+    add_vertex(
+        IntervalPoint3((c & 1) ? box.max.x() : box.min.x(), (c & 2) ? box.max.y() : box.min.y(),
+                       (c & 4) ? box.max.z() : box.min.z()),
+        {(c & 1) ? 1 : 0, (c & 2) ? 3 : 2, (c & 4) ? 5 : 4});
   }
   cells_.push_back({});
   for (int axis = 0; axis < 3; ++axis) {
@@ -96,27 +121,68 @@ Arrangement::Arrangement(const Box3& box, bool on_demand) : Arrangement(box) {
   bsp_.assign(1, BspNode{-1, -1, -1, -1, 0});
 }
 
-int Arrangement::add_vertex(const Point3& p) {
-  vertices_.push_back(p);
-  vertex_approx_.push_back(to_vec3(p));
+int Arrangement::add_vertex(const IntervalPoint3& approximation, const std::array<int, 3>& planes) {
+  const int id = static_cast<int>(vertex_planes_.size());
+  vertex_intervals_.push_back(approximation);
+  vertex_planes_.push_back(planes);
+  // The double point: the intervals' middles, or the exact point's where an interval is wide.
+  Vec3 approx;
+  for (int axis = 0; axis < 3; ++axis)
+    approx[axis] = coordinate_double(
+        approximation.cartesian(axis), [&] { return exact_vertex(id); }, axis);
+  vertex_approx_.push_back(approx);
   sign_cache_.push_back(kUnknownSign);
-  vertex_keys_.push_back(std::uint64_t{1} << 63 | vertices_.size());  // a box corner: itself
-  return static_cast<int>(vertices_.size()) - 1;
+  vertex_keys_.push_back(std::uint64_t{1} << 63 | vertex_planes_.size());  // a box corner: itself
+  return id;
+}
+
+Point3 Arrangement::exact_vertex(int id) const {
+  const std::array<int, 3>& t = vertex_planes_[static_cast<std::size_t>(id)];
+  return exact_intersection(planes_[static_cast<std::size_t>(t[0])].exact,
+                            planes_[static_cast<std::size_t>(t[1])].exact,
+                            planes_[static_cast<std::size_t>(t[2])].exact);
 }
 
 int Arrangement::side(int plane_id, int vertex_id) const {
-  const CGAL::Oriented_side s =
-      planes_[static_cast<std::size_t>(plane_id)].exact.oriented_side(
-                          vertices_[static_cast<std::size_t>(vertex_id)]);
-  return s == CGAL::ON_POSITIVE_SIDE ? 1 : (s == CGAL::ON_NEGATIVE_SIDE ? -1 : 0);
+  // ExactKernel's filtered predicate, by hand: the interval test decides unless the point's
+  // interval box touches the plane; then CGAL's exact predicate on the exact point does.
+  const ArrangementPlane& plane = planes_[static_cast<std::size_t>(plane_id)];
+  try {
+    const CGAL::Protect_FPU_rounding<true> upward;
+    const CGAL::Uncertain<CGAL::Oriented_side> s = IntervalKernel().oriented_side_3_object()(
+        plane.interval, vertex_intervals_[static_cast<std::size_t>(vertex_id)]);
+    if (CGAL::is_certain(s)) return to_side(CGAL::get_certain(s));
+  } catch (const CGAL::Uncertain_conversion_exception&) {
+    // Undecided by the intervals.
+  }
+  return to_side(plane.exact.oriented_side(exact_vertex(vertex_id)));
 }
 
-int Arrangement::plane_side(const Plane3& plane, int vertex_id) {
+bool Arrangement::same_point(int a, int b) const {
+  if (a == b ||
+      vertex_planes_[static_cast<std::size_t>(a)] == vertex_planes_[static_cast<std::size_t>(b)])
+    return true;
+  try {
+    const CGAL::Protect_FPU_rounding<true> upward;
+    bool all_equal = true;
+    for (int axis = 0; axis < 3; ++axis) {
+      const CGAL::Uncertain<bool> equal =
+          vertex_intervals_[static_cast<std::size_t>(a)].cartesian(axis) ==
+          vertex_intervals_[static_cast<std::size_t>(b)].cartesian(axis);
+      if (CGAL::is_certain(equal) && !CGAL::get_certain(equal)) return false;
+      all_equal = all_equal && CGAL::is_certain(equal);
+    }
+    if (all_equal) return true;
+  } catch (const CGAL::Uncertain_conversion_exception&) {
+    // Undecided by the intervals.
+  }
+  return exact_vertex(a) == exact_vertex(b);
+}
+
+int Arrangement::plane_side(int plane_id, int vertex_id) {
   std::int8_t& cached = sign_cache_[static_cast<std::size_t>(vertex_id)];
   if (cached == kUnknownSign) {
-    const CGAL::Oriented_side s =
-        plane.oriented_side(vertices_[static_cast<std::size_t>(vertex_id)]);
-    cached = s == CGAL::ON_POSITIVE_SIDE ? 1 : (s == CGAL::ON_NEGATIVE_SIDE ? -1 : 0);
+    cached = static_cast<std::int8_t>(side(plane_id, vertex_id));
     touched_vertices_.push_back(vertex_id);
   }
   return cached;
@@ -131,17 +197,35 @@ int Arrangement::edge_vertex(int a, int b, int face_plane, int edge_plane, int n
 
 int Arrangement::plane_vertex(int face_plane, int edge_plane, int new_plane) {
   // The edge lies exactly on its face's plane and its edge plane, so the crossing point is the
-  // exact intersection of three input planes: a construction of depth one, cheap to make exact.
-  const auto result =
-      CGAL::intersection(planes_[static_cast<std::size_t>(face_plane)].exact,
-                         planes_[static_cast<std::size_t>(edge_plane)].exact,
-                         planes_[static_cast<std::size_t>(new_plane)].exact);
-  const Point3* point = result ? boost::get<Point3>(&*result) : nullptr;
-  if (point == nullptr)
-    throw GeometryError("arrangement: planes " + std::to_string(face_plane) + ", " +
-                        std::to_string(edge_plane) + ", " + std::to_string(new_plane) +
-                        " do not meet in one point where an edge crosses the new plane");
-  const int id = add_vertex(*point);
+  // exact intersection of three input planes: a construction of depth one, kept as its interval
+  // approximation (as ExactKernel computes it) and the three planes.
+  const ArrangementPlane& a = planes_[static_cast<std::size_t>(face_plane)];
+  const ArrangementPlane& b = planes_[static_cast<std::size_t>(edge_plane)];
+  const ArrangementPlane& c = planes_[static_cast<std::size_t>(new_plane)];
+  IntervalPoint3 approximation;
+  bool approximated = false;
+  try {
+    const CGAL::Protect_FPU_rounding<true> upward;
+    const auto result = CGAL::intersection(a.interval, b.interval, c.interval);
+    if (const IntervalPoint3* point = result ? boost::get<IntervalPoint3>(&*result) : nullptr) {
+      approximation = *point;
+      approximated = true;
+    }
+  } catch (const CGAL::Uncertain_conversion_exception&) {
+    // Intervals too wide to tell whether the planes meet in a point: the exact point decides.
+  }
+  if (!approximated) {
+    const auto result = CGAL::intersection(a.exact, b.exact, c.exact);
+    const Point3* point = result ? boost::get<Point3>(&*result) : nullptr;
+    if (point == nullptr)
+      throw GeometryError("arrangement: planes " + std::to_string(face_plane) + ", " +
+                          std::to_string(edge_plane) + ", " + std::to_string(new_plane) +
+                          " do not meet in one point where an edge crosses the new plane");
+    const auto& e = point->exact();
+    approximation = IntervalPoint3(CGAL::to_interval(e.x()), CGAL::to_interval(e.y()),
+                                   CGAL::to_interval(e.z()));
+  }
+  const int id = add_vertex(approximation, {face_plane, edge_plane, new_plane});
   sign_cache_[static_cast<std::size_t>(id)] = 0;
   touched_vertices_.push_back(id);
   if (on_demand_) {
@@ -159,7 +243,7 @@ Arrangement::FaceSplit Arrangement::split_face(int face_id, int new_plane) {
   if (cached != face_split_cache_.end()) return cached->second;
 
   const ArrangementFace old = faces_[static_cast<std::size_t>(face_id)];
-  const Plane3& q = planes_[static_cast<std::size_t>(new_plane)].exact;
+  const int q = new_plane;
   const std::size_t n = old.vertices.size();
   ArrangementFace pos, neg;
   pos.plane = neg.plane = old.plane;
@@ -227,7 +311,7 @@ void Arrangement::split_cell(int cell_id, int new_plane, std::vector<int>& chang
   faces_.back().cell_negative = cell_neg;
   const std::vector<int> old_faces = cells_[static_cast<std::size_t>(cell_id)].faces;
   cells_.push_back({});
-  const Plane3& q = planes_[static_cast<std::size_t>(new_plane)].exact;
+  const int q = new_plane;
 
   std::vector<int> pos_faces, neg_faces;
   struct DirectedEdge {
@@ -330,6 +414,7 @@ std::vector<int> Arrangement::insert_plane(const Vec3& normal, double offset, in
     throw GeometryError("arrangement: plane of slice " + std::to_string(slice) +
                         " has no valid normal");
   const Plane3 exact(normal.x(), normal.y(), normal.z(), offset);
+  const IntervalKernel::Plane_3 interval(normal.x(), normal.y(), normal.z(), offset);
   for (std::size_t p = 0; p < planes_.size(); ++p) {
     if (exact == planes_[p].exact || exact == planes_[p].exact.opposite()) {
       throw GeometryError(
@@ -339,7 +424,7 @@ std::vector<int> Arrangement::insert_plane(const Vec3& normal, double offset, in
     }
   }
   const int plane_id = static_cast<int>(planes_.size());
-  planes_.push_back({normal, offset, slice, exact});
+  planes_.push_back({normal, offset, slice, exact, interval});
   // On demand, regions meet the plane when construct_cell reaches them; built cells it crosses
   // are reopened now.
   if (on_demand_) return reopen_crossed_cells(plane_id);
@@ -367,7 +452,7 @@ std::vector<int> Arrangement::insert_plane(const Vec3& normal, double offset, in
         break;
       }
       for (const int v : faces_[static_cast<std::size_t>(f)].vertices) {
-        const int s = plane_side(exact, v);
+        const int s = plane_side(plane_id, v);
         has_pos |= s > 0;
         has_neg |= s < 0;
       }
@@ -397,7 +482,7 @@ bool Arrangement::region_crossed(const Region& region, int plane_id) {
   for (std::size_t at = 0; at < region.faces.size() && !(has_pos && has_neg);) {
     const RegionFace face = region_face(region.faces, at);
     for (int i = 0; i < face.count; ++i) {
-      const int s = plane_side(plane.exact, face.vertex(i));
+      const int s = plane_side(plane_id, face.vertex(i));
       has_pos |= s > 0;
       has_neg |= s < 0;
     }
@@ -426,7 +511,7 @@ Arrangement::DirectedEdge Arrangement::split_region_face(const RegionFace& face,
   // The polygon's two parts, as split_face: each kept vertex is pushed with the plane of the
   // edge leaving it in the new polygon; the part on a side leaves it at one crossing point and
   // re-enters at another, and the edge between them is the chord on the new plane.
-  const Plane3& q = planes_[static_cast<std::size_t>(new_plane)].exact;
+  const int q = new_plane;
   const int n = face.count;
   const std::size_t pos_at = pos.size(), neg_at = neg.size();
   pos.insert(pos.end(), {face.plane, face.sigma, 0});
@@ -496,7 +581,7 @@ void Arrangement::close_section(const std::vector<DirectedEdge>& section, int ne
 
 std::pair<int, int> Arrangement::split_region(int id, int new_plane) {
   Region old = std::move(regions_[static_cast<std::size_t>(id)]);
-  const Plane3& q = planes_[static_cast<std::size_t>(new_plane)].exact;
+  const int q = new_plane;
   split_vertices_.clear();
   Region pos, neg;
   pos.next = neg.next = old.next;
@@ -561,6 +646,33 @@ int Arrangement::allocate_region(Region region) {
   return static_cast<int>(regions_.size()) - 1;
 }
 
+void Arrangement::FaceTable::insert(std::uint64_t key, int face) {
+  if (2 * (used_ + 1) > slots_.size()) {
+    // Twice as many slots (at least 1024), the erased ones dropped.
+    std::vector<Slot> old = std::move(slots_);
+    slots_.assign(std::max<std::size_t>(1024, 2 * old.size()), Slot{});
+    shift_ = 64 - std::countr_zero(slots_.size());
+    used_ = 0;
+    for (const Slot& slot : old)
+      if (slot.face >= 0) insert(slot.key, slot.face);
+  }
+  std::size_t i = slot_of(key);
+  while (slots_[i].face != kEmpty) i = (i + 1) & (slots_.size() - 1);
+  slots_[i] = {key, face};
+  ++used_;
+}
+
+bool Arrangement::FaceTable::erase(std::uint64_t key, int face) {
+  if (slots_.empty()) return false;
+  for (std::size_t i = slot_of(key); slots_[i].face != kEmpty; i = (i + 1) & (slots_.size() - 1)) {
+    if (slots_[i].key == key && slots_[i].face == face) {
+      slots_[i].face = kErased;  // still used: later faces of the probe sequence stay found
+      return true;
+    }
+  }
+  return false;
+}
+
 std::uint64_t Arrangement::face_key(int plane, std::vector<std::uint64_t>& keys) {
   std::sort(keys.begin(), keys.end());
   std::uint64_t key = static_cast<std::uint64_t>(plane) * 0x9E3779B97F4A7C15ull;
@@ -585,7 +697,7 @@ std::vector<int> Arrangement::reopen_crossed_cells(int plane_id) {
     bool has_pos = false, has_neg = false;
     for (const int f : cells_[c].faces)
       for (const int v : faces_[static_cast<std::size_t>(f)].vertices) {
-        const int s = plane_side(plane.exact, v);
+        const int s = plane_side(plane_id, v);
         has_pos |= s > 0;
         has_neg |= s < 0;
       }
@@ -602,7 +714,7 @@ void Arrangement::reopen_cell(int cell, int plane_id) {
   // vertex ids, so one point may have two ids in the cell; a region's faces must agree on ids
   // (split_region chains the cross-section by them). The same key is the same exact point;
   // otherwise (four planes through a point) the exact points decide, for close doubles only.
-  const Plane3& q = planes_[static_cast<std::size_t>(plane_id)].exact;
+  const int q = plane_id;
   std::vector<int> ids;
   const double tolerance = 1e-5 * (box_.diagonal() + box_.max.cwiseAbs().maxCoeff() +
                                    box_.min.cwiseAbs().maxCoeff());
@@ -611,9 +723,7 @@ void Arrangement::reopen_cell(int cell, int plane_id) {
       if (w == v || vertex_keys_[static_cast<std::size_t>(w)] == vertex_keys_[static_cast<std::size_t>(v)])
         return w;
     for (const int w : ids)
-      if ((vertex(w) - vertex(v)).cwiseAbs().maxCoeff() <= tolerance &&
-          vertices_[static_cast<std::size_t>(w)] == vertices_[static_cast<std::size_t>(v)])
-        return w;
+      if ((vertex(w) - vertex(v)).cwiseAbs().maxCoeff() <= tolerance && same_point(w, v)) return w;
     ids.push_back(v);
     return v;
   };
@@ -638,13 +748,7 @@ void Arrangement::reopen_cell(int cell, int plane_id) {
     // Crossed: no cell of the arrangement has this face any more.
     keys.clear();
     for (const int v : face.vertices) keys.push_back(vertex_keys_[static_cast<std::size_t>(v)]);
-    const auto [first, last] = faces_by_key_.equal_range(face_key(face.plane, keys));
-    for (auto it = first; it != last; ++it)
-      if (it->second == f) {
-        faces_by_key_.erase(it);
-        retired_faces_.push_back(f);
-        break;
-      }
+    if (faces_by_key_.erase(face_key(face.plane, keys), f)) retired_faces_.push_back(f);
     // Its polygon goes with the last cell on it (the other one, if built, is crossed too and
     // copies it when it is reopened).
     if (face.cell_positive < 0 && face.cell_negative < 0) {
@@ -673,24 +777,24 @@ int Arrangement::finish_region(int id) {
       sorted.push_back(vertex_keys_[static_cast<std::size_t>(face.vertex(i))]);
     const std::uint64_t key = face_key(face.plane, sorted);
     int shared = -1;
-    const auto [first, last] = faces_by_key_.equal_range(key);
-    for (auto it = first; it != last && shared < 0; ++it) {
-      ArrangementFace& f = faces_[static_cast<std::size_t>(it->second)];
+    faces_by_key_.find(key, [&](int candidate) {
+      ArrangementFace& f = faces_[static_cast<std::size_t>(candidate)];
       int& side = face.sigma > 0 ? f.cell_positive : f.cell_negative;
-      if (f.plane != face.plane || side >= 0 || f.vertices.size() != sorted.size()) continue;
+      if (f.plane != face.plane || side >= 0 || f.vertices.size() != sorted.size()) return false;
       if (!std::all_of(f.vertices.begin(), f.vertices.end(), [&](int v) {
             return std::binary_search(sorted.begin(), sorted.end(),
                                       vertex_keys_[static_cast<std::size_t>(v)]);
           }))
-        continue;
+        return false;
       side = cell;
-      shared = it->second;
-    }
+      shared = candidate;
+      return true;
+    });
     if (shared >= 0) {
       cells_.back().faces.push_back(shared);
       continue;
     }
-    faces_by_key_.emplace(key, static_cast<int>(faces_.size()));
+    faces_by_key_.insert(key, static_cast<int>(faces_.size()));
     cells_.back().faces.push_back(static_cast<int>(faces_.size()));
     // Starting at the vertex of smallest coordinates: the face's polygon, and so its image, are
     // the same whichever of its two cells was built first.

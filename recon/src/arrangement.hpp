@@ -3,10 +3,14 @@
 // Section 4.1), built by splitting convex cells plane by plane, which is also how the online
 // engine adds one more plane.
 //
-// Robustness: every vertex is the exact intersection of three input planes (CGAL Epeck lazy
-// exact construction of depth one), and every side-of-plane decision is CGAL's exact predicate,
-// so near-parallel planes, three planes through a line, four through a point and planes through
-// existing vertices all give a consistent cell complex. Doubles are used only after the
+// Robustness: every vertex is the exact intersection of three input planes (a construction of
+// depth one), and every side-of-plane decision is exact, so near-parallel planes, three planes
+// through a line, four through a point and planes through existing vertices all give a
+// consistent cell complex. A vertex keeps its three planes and the interval approximation of
+// the point that CGAL's Epeck kernel would compute; side() is Epeck's filtered predicate: the
+// interval test, and CGAL's exact predicate on the exact point, constructed from the planes,
+// when the intervals touch the plane (a lazy Epeck point kept two DAG nodes, ~290 bytes, per
+// vertex: a third of the peak memory at 200 random slices). Doubles are used only after the
 // combinatorics is fixed (evaluation, face images).
 //
 // On demand (issue 24): the full arrangement of k planes has O(k^3) cells, of which the octree
@@ -15,15 +19,24 @@
 // whose leaves are convex regions with the planes that may still cross them; a query splits its
 // leaf by those planes in turn (the same exact predicates and depth-one vertex constructions),
 // following the point's side, until no plane crosses the region. That region is the cell of the
-// full arrangement containing the point; it shares the faces its built neighbours have. Regions
-// do not share vertices (finding them again cost more than constructing them: the same three
-// planes give the same exact point), so a cell's faces may name one point by two ids.
+// full arrangement containing the point; it shares the faces its built neighbours have (found
+// by their planes and vertex keys in an open-addressing table). Regions do not share vertices
+// (finding them again cost more than constructing them: the same three planes give the same
+// exact point), so a cell's faces may name one point by two ids.
 // Online, a plane inserted after cells were built reopens the built cells it crosses: each is a
 // region again (its faces with one id per point, the planes from the new one on still to try),
 // its faces the plane crosses are retired, the others are kept for whichever part is built next
 // to them; regions not refined yet meet the new plane when a query reaches them.
+// Left: cells are built on one thread, and each split builds both halves of a region though
+// most siblings are never asked for. Refining the regions a batch of points reaches in
+// parallel (per BSP leaf, ids fixed by the batch order) cost 35-45 % more time on one thread
+// and 10-30 MB more at 200 random slices than this serial refinement, and keeping a parent
+// instead of its unasked half costs memory.
 #include <CGAL/Exact_predicates_exact_constructions_kernel.h>
+#include <CGAL/Interval_nt.h>
+#include <CGAL/Simple_cartesian.h>
 
+#include <array>
 #include <cstdint>
 #include <unordered_map>
 #include <utility>
@@ -34,6 +47,9 @@
 namespace sonoshape::recon {
 
 using ExactKernel = CGAL::Exact_predicates_exact_constructions_kernel;
+/// The kernel of ExactKernel's approximations (its filter): interval arithmetic, valid only
+/// with the FPU rounding upward (CGAL::Protect_FPU_rounding).
+using IntervalKernel = CGAL::Simple_cartesian<CGAL::Interval_nt<false>>;
 
 /// A plane n.x + d = 0 with its origin: a slice (slice >= 0) or a face of the box (slice = -1,
 /// normal pointing into the box).
@@ -42,6 +58,7 @@ struct ArrangementPlane {
   double offset = 0;   ///< d
   int slice = -1;      ///< slice index, or -1 for a box face
   ExactKernel::Plane_3 exact;
+  IntervalKernel::Plane_3 interval;  ///< the same plane (its coefficients are exact doubles)
   double signed_distance(const Vec3& p) const { return (normal.dot(p) + offset) / normal.norm(); }
 };
 
@@ -115,16 +132,16 @@ class Arrangement {
   const Box3& box() const { return box_; }
   std::size_t cell_count() const { return cells_.size(); }
   std::size_t face_count() const { return faces_.size(); }
-  std::size_t vertex_count() const { return vertices_.size(); }
+  std::size_t vertex_count() const { return vertex_planes_.size(); }
   std::size_t plane_count() const { return planes_.size(); }
   const ArrangementCell& cell(int id) const { return cells_[static_cast<std::size_t>(id)]; }
   const ArrangementFace& face(int id) const { return faces_[static_cast<std::size_t>(id)]; }
   const ArrangementPlane& plane(int id) const { return planes_[static_cast<std::size_t>(id)]; }
   /// Double approximation of a vertex (rounded from the exact point).
   const Vec3& vertex(int id) const { return vertex_approx_[static_cast<std::size_t>(id)]; }
-  const ExactKernel::Point_3& exact_vertex(int id) const {
-    return vertices_[static_cast<std::size_t>(id)];
-  }
+  /// The exact point of a vertex, constructed again on each call (vertices keep an interval
+  /// approximation and the three planes they lie on, not the point).
+  ExactKernel::Point_3 exact_vertex(int id) const;
   /// Exact side of a vertex w.r.t. a plane: -1, 0 or +1.
   int side(int plane_id, int vertex_id) const;
 
@@ -152,6 +169,37 @@ class Arrangement {
   };
   struct DirectedEdge {
     int from, to, plane;
+  };
+  // On demand: face ids by 64-bit key, several per key; open addressing with linear probing (a
+  // std::unordered_multimap spent a tenth of the run at 200 random slices in its node chains).
+  class FaceTable {
+   public:
+    // Calls visit(face) for the faces under `key` until it returns true.
+    template <typename Visit>
+    void find(std::uint64_t key, Visit&& visit) const {
+      if (slots_.empty()) return;
+      for (std::size_t i = slot_of(key);; i = (i + 1) & (slots_.size() - 1)) {
+        const Slot& slot = slots_[i];
+        if (slot.face == kEmpty) return;
+        if (slot.key == key && slot.face >= 0 && visit(slot.face)) return;
+      }
+    }
+    void insert(std::uint64_t key, int face);
+    // Removes `face` from under `key`; false if it is not there.
+    bool erase(std::uint64_t key, int face);
+
+   private:
+    static constexpr int kEmpty = -1, kErased = -2;
+    struct Slot {
+      std::uint64_t key = 0;
+      int face = kEmpty;
+    };
+    std::size_t slot_of(std::uint64_t key) const {
+      return static_cast<std::size_t>((key * 0x9E3779B97F4A7C15ull) >> shift_);
+    }
+    std::vector<Slot> slots_;  // a power of two, at most half used (erased slots count)
+    std::size_t used_ = 0;
+    int shift_ = 64;
   };
   // On demand: the record of a face starting at faces[at]: `count` corners from `corners`.
   struct RegionFace {
@@ -196,15 +244,25 @@ class Arrangement {
   void reset_signs();
   // Whether p lies inside `cell` (any id) farther from its faces' planes than rounding reaches.
   bool clear_inside(const Vec3& p, int cell) const;
-  int add_vertex(const ExactKernel::Point_3& p);
-  int plane_side(const ExactKernel::Plane_3& plane, int vertex_id);
+  // A vertex at the intersection of three planes; `approximation` encloses the exact point.
+  int add_vertex(const IntervalKernel::Point_3& approximation, const std::array<int, 3>& planes);
+  // side(), cached per vertex until reset_signs().
+  int plane_side(int plane_id, int vertex_id);
+  // Whether two vertices are the same exact point.
+  bool same_point(int a, int b) const;
   int edge_vertex(int a, int b, int face_plane, int edge_plane, int new_plane);
   FaceSplit split_face(int face_id, int new_plane);
   void split_cell(int cell_id, int new_plane, std::vector<int>& changed);
 
   Box3 box_;
   std::vector<ArrangementPlane> planes_;
-  std::vector<ExactKernel::Point_3> vertices_;
+  // Each vertex is the intersection of three planes (box corners: three box faces); it keeps
+  // the interval approximation of that point, which decides nearly every side-of-plane test,
+  // and the planes, from which the exact point is constructed when the interval cannot decide.
+  // A lazy exact point (ExactKernel) kept two nodes of ~290 bytes per vertex: a third of the
+  // peak memory at 200 random slices.
+  std::vector<IntervalKernel::Point_3> vertex_intervals_;
+  std::vector<std::array<int, 3>> vertex_planes_;
   std::vector<Vec3> vertex_approx_;
   std::vector<ArrangementFace> faces_;
   std::vector<ArrangementCell> cells_;
@@ -220,7 +278,7 @@ class Arrangement {
   std::vector<std::uint64_t> vertex_keys_;
   // Built faces by a hash of their plane and sorted vertex keys: the two cells on a face share
   // it (and its image) when both are built.
-  std::unordered_multimap<std::uint64_t, int> faces_by_key_;
+  FaceTable faces_by_key_;
   std::vector<std::pair<std::uint64_t, int>> split_vertices_;  // per split: edge -> crossing vertex
   std::vector<DirectedEdge> section_scratch_;
   std::vector<std::uint64_t> sorted_scratch_;
