@@ -6,6 +6,7 @@
 #include <stdexcept>
 
 #include "mean_value.hpp"
+#include "sonoshape/core/target_clones.hpp"
 
 namespace sonoshape::recon {
 namespace {
@@ -121,8 +122,8 @@ constexpr auto kBinomial = make_binomials();
 // them; every element sees the same operations in the same order as a plain double loop).
 // Building the trees is up to a fifth of the completion on the 80 mm sector sets (rocker-arm's,
 // by timers not committed).
-__attribute__((target_clones("avx2", "default"))) void add_translated(const double* in, std::size_t densities,
-                                                                     const Vec2& shift, double* out) {
+SONOSHAPE_AVX2_CLONES void add_translated(const double* in, std::size_t densities,
+                                          const Vec2& shift, double* out) {
   constexpr int kSide = kOrder + 1;
   const Complex delta{shift.x(), shift.y()};
   Complex powers[kSide];
@@ -227,8 +228,7 @@ struct UniformMoments {
   // Z_ab for any a, b (conjugate symmetry).
   Complex at(int a, int b) const { return a >= b ? Complex{re[b][a], im[b][a]} : Complex{re[a][b], -im[a][b]}; }
 };
-__attribute__((target_clones("avx2", "default"))) void uniform_moments(const Complex (&corners)[3],
-                                                                       UniformMoments& out) {
+SONOSHAPE_AVX2_CLONES void uniform_moments(const Complex (&corners)[3], UniformMoments& out) {
   constexpr int kDegree = kOrder + 1;
   constexpr int kPoints = 3 * kGauss;  // along the three edges
   const GaussRule& rule = gauss_rule();

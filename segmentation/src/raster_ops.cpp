@@ -10,6 +10,8 @@
 #include <optional>
 #include <vector>
 
+#include "sonoshape/core/target_clones.hpp"
+
 namespace sonoshape::seg::detail {
 namespace {
 
@@ -41,9 +43,8 @@ std::optional<std::vector<int>> row_half_widths(const cv::Mat& kernel) {
 
 // hits[x] |= distance[x] <= reach: the inner loop of morph_runs, compiled for AVX2 as well
 // (chosen at run time) since it is most of the time.
-__attribute__((target_clones("avx2", "default"))) void mark_within(std::uint8_t* hits,
-                                                                   const std::uint8_t* distance,
-                                                                   std::uint8_t reach, int n) {
+SONOSHAPE_AVX2_CLONES void mark_within(std::uint8_t* hits, const std::uint8_t* distance,
+                                       std::uint8_t reach, int n) {
   for (int x = 0; x < n; ++x) hits[x] |= static_cast<std::uint8_t>(distance[x] <= reach);
 }
 
