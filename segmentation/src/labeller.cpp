@@ -531,12 +531,7 @@ struct GraphCutLabeller::Impl {
                                 const std::vector<std::uint8_t>& reflector_cell,
                                 const std::optional<PriorCells>& predicted) const {
     const double min_px = config.min_region_mm2 / (geometry.spacing_mm * geometry.spacing_mm);
-    const cv::Mat start_grid(grid_h, grid_w, CV_8U, start.data());
-    for (std::size_t l = 1; l < values.size(); ++l) {
-      if (static_cast<int>(l) == reflector) continue;
-      cv::Mat regions;
-      const int n = cv::connectedComponents(start_grid == static_cast<int>(l), regions, 8, CV_32S);
-      if (n <= 1) continue;
+    for_each_material_regions(start, [&](std::size_t l, const cv::Mat& regions, int n) {
       std::vector<double> area_px(static_cast<std::size_t>(n), 0.0);
       std::vector<double> predicted_px(static_cast<std::size_t>(n), 0.0);
       for (std::size_t c = 0; c < start.size(); ++c) {
@@ -571,7 +566,7 @@ struct GraphCutLabeller::Impl {
         const auto most = std::max_element(a.begin(), a.end());
         if (*most > 0) start[c] = static_cast<std::uint8_t>(most - a.begin());
       }
-    }
+    });
   }
 
   // The cut refines the boundaries of the regions the starting labelling found and the prior
@@ -581,12 +576,7 @@ struct GraphCutLabeller::Impl {
   // grew speckle grains at depth into pieces of a hypoechoic organ.
   void revert_new_regions(std::vector<std::uint8_t>& cut, const std::vector<std::uint8_t>& start,
                           const std::optional<PriorCells>& predicted) const {
-    const cv::Mat cut_grid(grid_h, grid_w, CV_8U, cut.data());
-    for (std::size_t l = 1; l < values.size(); ++l) {
-      if (static_cast<int>(l) == reflector) continue;
-      cv::Mat regions;
-      const int n = cv::connectedComponents(cut_grid == static_cast<int>(l), regions, 8, CV_32S);
-      if (n <= 1) continue;
+    for_each_material_regions(cut, [&](std::size_t l, const cv::Mat& regions, int n) {
       std::vector<std::uint8_t> anchored(static_cast<std::size_t>(n), 0);
       const int* r = regions.ptr<int>(0);  // continuous: one row after another
       for (std::size_t c = 0; c < cut.size(); ++c)
@@ -594,6 +584,20 @@ struct GraphCutLabeller::Impl {
           anchored[static_cast<std::size_t>(r[c])] = 1;
       for (std::size_t c = 0; c < cut.size(); ++c)
         if (r[c] > 0 && !anchored[static_cast<std::size_t>(r[c])]) cut[c] = start[c];
+    });
+  }
+
+  // Calls visit(l, regions, n) for every material label l but the reflector whose cells in
+  // `labels` form regions: `regions` numbers each cell's 8-connected region of l (1..n-1, 0
+  // elsewhere). `labels` may change in a visit; later labels see the change.
+  template <typename Visit>
+  void for_each_material_regions(std::vector<std::uint8_t>& labels, Visit&& visit) const {
+    const cv::Mat grid(grid_h, grid_w, CV_8U, labels.data());
+    for (std::size_t l = 1; l < values.size(); ++l) {
+      if (static_cast<int>(l) == reflector) continue;
+      cv::Mat regions;
+      const int n = cv::connectedComponents(grid == static_cast<int>(l), regions, 8, CV_32S);
+      if (n > 1) visit(l, regions, n);
     }
   }
 
