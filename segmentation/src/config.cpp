@@ -121,6 +121,17 @@ Status SegmentationConfig::validate() const {
       return Status::error("segmentation config: label " + std::to_string(m.label) +
                            " has thickness_mm " + std::to_string(m.thickness_mm) +
                            "; give a length in mm >= 0 (0: unknown)");
+  if (!(graph_cut.cell_mm > 0.0) || !std::isfinite(graph_cut.cell_mm))
+    return Status::error("segmentation config: graph_cut.cell_mm must be a length in mm > 0");
+  for (const auto& [name, value] : std::array<std::pair<const char*, double>, 3>{
+           {{"smoothness", graph_cut.smoothness},
+            {"prior_weight", graph_cut.prior_weight},
+            {"prior_margin_mm", graph_cut.prior_margin_mm}}})
+    if (!(value >= 0.0) || !std::isfinite(value))
+      return Status::error(std::string("segmentation config: graph_cut.") + name +
+                           " must be a finite number >= 0");
+  if (!(graph_cut.model_update >= 0.0 && graph_cut.model_update <= 1.0))
+    return Status::error("segmentation config: graph_cut.model_update must be in 0..1");
   if (median_px < 1 || median_px % 2 == 0 || median_px > 31)
     return Status::error("segmentation config: median_px must be odd, 1..31 (got " +
                          std::to_string(median_px) + ")");
@@ -204,6 +215,21 @@ Result<SegmentationConfig> parse_segmentation_config(const std::string& json_tex
         } else {
           throw ConfigProblem{key, "expected a string or a polygon [[column, row], ...]"};
         }
+      } else if (key == "graph_cut") {
+        if (!value.is_object()) throw ConfigProblem{key, "expected an object of graph-cut weights"};
+        GraphCutOptions& g = config.graph_cut;
+        for (const auto& [name, weight] : value.items()) {
+          const std::string where = key + "." + name;
+          double* target = name == "cell_mm"           ? &g.cell_mm
+                           : name == "smoothness"      ? &g.smoothness
+                           : name == "prior_weight"    ? &g.prior_weight
+                           : name == "prior_margin_mm" ? &g.prior_margin_mm
+                           : name == "model_update"    ? &g.model_update
+                                                       : nullptr;
+          if (!target)
+            throw ConfigProblem{where, "unknown key; see docs/segmentation.md for the fields"};
+          *target = number_at(weight, where);
+        }
       } else if (key == "method") {
         const std::string name = value.is_string() ? value.get<std::string>() : "";
         if (name == "threshold") config.method = LabellingMethod::kThreshold;
@@ -264,6 +290,11 @@ std::string to_json(const SegmentationConfig& c) {
   doc["psf_sigma_mm"] = c.psf_sigma_mm;
   doc["dynamic_range_db"] = c.dynamic_range_db;
   doc["method"] = c.method == LabellingMethod::kGraphCut ? "graph_cut" : "threshold";
+  doc["graph_cut"] = {{"cell_mm", c.graph_cut.cell_mm},
+                      {"smoothness", c.graph_cut.smoothness},
+                      {"prior_weight", c.graph_cut.prior_weight},
+                      {"prior_margin_mm", c.graph_cut.prior_margin_mm},
+                      {"model_update", c.graph_cut.model_update}};
   doc["opening_mm"] = c.opening_mm;
   doc["min_region_mm2"] = c.min_region_mm2;
   doc["simplify_mm"] = c.simplify_mm;

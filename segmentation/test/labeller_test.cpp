@@ -306,5 +306,37 @@ TEST(SegmentationConfigMethod, ParsesAndRoundTrips) {
   EXPECT_NE(bad.message().find("method"), std::string::npos) << bad.message();
 }
 
+// The graph cut's weights come from the configuration's "graph_cut" object, round-trip, and a
+// wrong one is an error naming it.
+TEST(SegmentationConfigMethod, GraphCutWeightsParseRoundTripAndAreChecked) {
+  const std::string head = R"({"format": "sonoshape-segmentation", "version": 1, "graph_cut": )";
+  const auto config = parse_segmentation_config(
+      head + R"({"cell_mm": 0.3, "smoothness": 0.75, "prior_weight": 2, "prior_margin_mm": 1,
+                 "model_update": 0.5}})",
+      "weights.json");
+  ASSERT_TRUE(config) << config.message();
+  const auto again = parse_segmentation_config(to_json(*config), "round trip");
+  ASSERT_TRUE(again) << again.message();
+  for (const SegmentationConfig* c : {&*config, &*again}) {
+    EXPECT_DOUBLE_EQ(c->graph_cut.cell_mm, 0.3);
+    EXPECT_DOUBLE_EQ(c->graph_cut.smoothness, 0.75);
+    EXPECT_DOUBLE_EQ(c->graph_cut.prior_weight, 2.0);
+    EXPECT_DOUBLE_EQ(c->graph_cut.prior_margin_mm, 1.0);
+    EXPECT_DOUBLE_EQ(c->graph_cut.model_update, 0.5);
+  }
+  for (const auto& [body, named] : std::vector<std::pair<std::string, std::string>>{
+           {R"({"cell_mm": 0})", "graph_cut.cell_mm"},
+           {R"({"smoothness": -1})", "graph_cut.smoothness"},
+           {R"({"model_update": 1.5})", "graph_cut.model_update"},
+           {R"({"cells": 2})", "graph_cut.cells"},
+           {R"({"cell_mm": "fine"})", "graph_cut.cell_mm"},
+           {R"(0.6)", "graph_cut"}}) {
+    const auto wrong = parse_segmentation_config(head + body + "}", "weights.json");
+    ASSERT_FALSE(wrong) << body;
+    EXPECT_NE(wrong.message().find("weights.json"), std::string::npos) << wrong.message();
+    EXPECT_NE(wrong.message().find(named), std::string::npos) << wrong.message();
+  }
+}
+
 }  // namespace
 }  // namespace sonoshape::seg
