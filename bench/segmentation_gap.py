@@ -15,6 +15,9 @@ each step closes:
   3. elsewhere  every other slice (the other organs' outlines and the unknown areas, which
                 shape L's field too: the unknown-region completion and the shared octree).
 
+It also prints, from the labelling's frame-by-frame report (WORK/CASE.METHOD.seg.json), how many
+pixels of L lie in frames whose truth has none of L.
+
 The steps telescope: their sum is the whole gap. The order matters (the steps do not add up
 independently), so the figures say how much each part of the slice set holds given the ones
 before it.
@@ -93,6 +96,17 @@ def main():
     bound = scan_iou(args, base + ".perfect.slices.json", args.label, truth_mesh)
     print(f"{args.case}, label {args.label}, {args.method}: IoU {start:.3f}, perfect labels "
           f"{bound:.3f}, gap {bound - start:.3f}")
+    # From the labelling's frame-by-frame report (segment --report): the label where the truth
+    # frame has none of it (an organ made of speckle, or the label given to the wrong organ).
+    report_path = f"{base}.{args.method}.seg.json"
+    if os.path.exists(report_path):
+        with open(report_path) as f:
+            frames = json.load(f)["frames"]
+        stray = [fr["labels"][str(args.label)]["ours_px"] for fr in frames
+                 if fr["labels"].get(str(args.label), {}).get("ours_px", 0) > 0
+                 and fr["labels"][str(args.label)].get("truth_px", 0) == 0]
+        print(f"pixels of label {args.label} in frames whose truth has none of it: {sum(stray)} "
+              f"in {len(stray)} of {len(frames)} frames")
     print("| step | slices replaced | IoU after | gap closed |")
     print("|---|---|---|---|")
     current, previous = ours, start

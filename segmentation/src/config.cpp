@@ -6,11 +6,14 @@
 #include <cmath>
 #include <cstdint>
 #include <fstream>
+#include <initializer_list>
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
 #include <set>
 #include <sstream>
 #include <stdexcept>
+#include <string_view>
+#include <utility>
 
 namespace sonoshape::seg {
 namespace {
@@ -31,6 +34,18 @@ double number_at(const json& j, const std::string& where) {
   const double value = j.get<double>();
   if (!std::isfinite(value)) throw ConfigProblem{where, "not a finite number"};
   return value;
+}
+
+// Sets the number field called `name` among `fields` from `value`; any other name is an error at
+// `where`.
+void set_number_field(std::initializer_list<std::pair<std::string_view, double*>> fields,
+                      const std::string& name, const json& value, const std::string& where) {
+  for (const auto& [field, target] : fields)
+    if (field == name) {
+      *target = number_at(value, where);
+      return;
+    }
+  throw ConfigProblem{where, "unknown key; see docs/segmentation.md for the fields"};
 }
 
 // An integer field as int: a value beyond int's range would otherwise wrap into a valid one.
@@ -97,6 +112,21 @@ double SegmentationConfig::effective_shadow_grey() const {
   return std::clamp(0.4 * darkest, 6.0, 50.0);
 }
 
+Status GraphCutOptions::validate() const {
+  if (!(cell_mm > 0.0) || !std::isfinite(cell_mm))
+    return Status::error("graph_cut.cell_mm must be a length in mm > 0");
+  for (const auto& [name, value] : std::array<std::pair<const char*, double>, 3>{
+           {{"smoothness", smoothness},
+            {"prior_weight", prior_weight},
+            {"prior_margin_mm", prior_margin_mm}}})
+    if (!(value >= 0.0) || !std::isfinite(value))
+      return Status::error(std::string("graph_cut.") + name + " must be a finite number >= 0");
+  if (!(model_update >= 0.0 && model_update <= 1.0))
+    return Status::error("graph_cut.model_update must be in 0..1");
+  if (cycles < 1) return Status::error("graph_cut.cycles must be >= 1");
+  return Status::ok();
+}
+
 Status SegmentationConfig::validate() const {
   std::set<int> ids;
   for (const LabelModel& m : materials) {
@@ -121,17 +151,8 @@ Status SegmentationConfig::validate() const {
       return Status::error("segmentation config: label " + std::to_string(m.label) +
                            " has thickness_mm " + std::to_string(m.thickness_mm) +
                            "; give a length in mm >= 0 (0: unknown)");
-  if (!(graph_cut.cell_mm > 0.0) || !std::isfinite(graph_cut.cell_mm))
-    return Status::error("segmentation config: graph_cut.cell_mm must be a length in mm > 0");
-  for (const auto& [name, value] : std::array<std::pair<const char*, double>, 3>{
-           {{"smoothness", graph_cut.smoothness},
-            {"prior_weight", graph_cut.prior_weight},
-            {"prior_margin_mm", graph_cut.prior_margin_mm}}})
-    if (!(value >= 0.0) || !std::isfinite(value))
-      return Status::error(std::string("segmentation config: graph_cut.") + name +
-                           " must be a finite number >= 0");
-  if (!(graph_cut.model_update >= 0.0 && graph_cut.model_update <= 1.0))
-    return Status::error("segmentation config: graph_cut.model_update must be in 0..1");
+  if (Status valid = graph_cut.validate(); !valid)
+    return Status::error("segmentation config: " + valid.message());
   if (median_px < 1 || median_px % 2 == 0 || median_px > 31)
     return Status::error("segmentation config: median_px must be odd, 1..31 (got " +
                          std::to_string(median_px) + ")");
@@ -219,16 +240,12 @@ Result<SegmentationConfig> parse_segmentation_config(const std::string& json_tex
         if (!value.is_object()) throw ConfigProblem{key, "expected an object of graph-cut weights"};
         GraphCutOptions& g = config.graph_cut;
         for (const auto& [name, weight] : value.items()) {
-          const std::string where = key + "." + name;
-          double* target = name == "cell_mm"           ? &g.cell_mm
-                           : name == "smoothness"      ? &g.smoothness
-                           : name == "prior_weight"    ? &g.prior_weight
-                           : name == "prior_margin_mm" ? &g.prior_margin_mm
-                           : name == "model_update"    ? &g.model_update
-                                                       : nullptr;
-          if (!target)
-            throw ConfigProblem{where, "unknown key; see docs/segmentation.md for the fields"};
-          *target = number_at(weight, where);
+          set_number_field({{"cell_mm", &g.cell_mm},
+                            {"smoothness", &g.smoothness},
+                            {"prior_weight", &g.prior_weight},
+                            {"prior_margin_mm", &g.prior_margin_mm},
+                            {"model_update", &g.model_update}},
+                           name, weight, key + "." + name);
         }
       } else if (key == "method") {
         const std::string name = value.is_string() ? value.get<std::string>() : "";
@@ -236,22 +253,19 @@ Result<SegmentationConfig> parse_segmentation_config(const std::string& json_tex
         else if (name == "graph_cut") config.method = LabellingMethod::kGraphCut;
         else throw ConfigProblem{key, "expected \"threshold\" or \"graph_cut\""};
       } else {
-        double* target = key == "smoothing_mm"           ? &config.smoothing_mm
-                         : key == "confidence_window_mm" ? &config.confidence_window_mm
-                         : key == "shadow_grey"          ? &config.shadow_grey
-                         : key == "shadow_fraction"      ? &config.shadow_fraction
-                         : key == "shadow_margin_mm"     ? &config.shadow_margin_mm
-                         : key == "max_depth_mm"         ? &config.max_depth_mm
-                         : key == "opening_mm"           ? &config.opening_mm
-                         : key == "min_region_mm2"       ? &config.min_region_mm2
-                         : key == "simplify_mm"          ? &config.simplify_mm
-                         : key == "sector_signal_grey"   ? &config.sector_signal_grey
-                         : key == "psf_sigma_mm"         ? &config.psf_sigma_mm
-                         : key == "dynamic_range_db"     ? &config.dynamic_range_db
-                                                         : nullptr;
-        if (!target)
-          throw ConfigProblem{key, "unknown key; see docs/segmentation.md for the fields"};
-        *target = number_at(value, key);
+        set_number_field({{"smoothing_mm", &config.smoothing_mm},
+                          {"confidence_window_mm", &config.confidence_window_mm},
+                          {"shadow_grey", &config.shadow_grey},
+                          {"shadow_fraction", &config.shadow_fraction},
+                          {"shadow_margin_mm", &config.shadow_margin_mm},
+                          {"max_depth_mm", &config.max_depth_mm},
+                          {"opening_mm", &config.opening_mm},
+                          {"min_region_mm2", &config.min_region_mm2},
+                          {"simplify_mm", &config.simplify_mm},
+                          {"sector_signal_grey", &config.sector_signal_grey},
+                          {"psf_sigma_mm", &config.psf_sigma_mm},
+                          {"dynamic_range_db", &config.dynamic_range_db}},
+                         key, value, key);
       }
     }
   } catch (const ConfigProblem& p) {

@@ -55,9 +55,8 @@ struct GraphCutLabeller::Impl {
     geometry.check();
     if (const Status valid = config.validate(); !valid)
       throw std::invalid_argument(valid.message());
-    if (!(options.cell_mm > 0.0) || options.smoothness < 0.0 || options.prior_weight < 0.0 ||
-        options.cycles < 1 || !(options.model_update >= 0.0 && options.model_update <= 1.0))
-      throw std::invalid_argument("GraphCutLabeller: invalid options");
+    if (const Status valid = options.validate(); !valid)
+      throw std::invalid_argument("GraphCutLabeller: " + valid.message());
     block_px = std::max(1, static_cast<int>(std::lround(options.cell_mm / geometry.spacing_mm)));
     grid_w = (geometry.width_px + block_px - 1) / block_px;
     grid_h = (geometry.height_px + block_px - 1) / block_px;

@@ -49,6 +49,9 @@ struct GraphCutOptions {
   double model_update = 0.3;      ///< weight of each frame in the running appearance models
   int cycles = 1;                 ///< expansion passes over all labels (a second pass changed no
                                   ///< pixel of the benchmark sweeps: it is off)
+
+  /// Errors name the field as the configuration's "graph_cut" object does.
+  Status validate() const;
 };
 
 /// How a frame's pixels get their labels.
