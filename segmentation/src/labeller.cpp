@@ -17,9 +17,11 @@ namespace {
 
 // Fewer interior pixels than this in a frame leave a label's appearance model as it was.
 constexpr int kMinModelPixels = 200;
-// Before any frame has taught a label's model, its spread in the median-filtered grey is this
-// share of the raw grey's spread (the median averages several speckle cells).
-constexpr double kMedianSpreadShare = 0.5;
+// Before any frame has taught a label's model, its spread in the smoothed grey is this share of
+// the raw grey's spread: the median and the Gaussian average several speckle cells (0.3 to 0.4
+// inside the simulator's organs, 0.5 in its background); the larger share keeps the first
+// frames from trusting a model that no frame has checked yet.
+constexpr double kSmoothedSpreadShare = 0.5;
 // The cost that keeps a cell off a label (a reflector's cells on it, the others off it).
 constexpr float kExcluded = detail::kExcludedCost;
 // Cells this far (in cells) from a boundary of the starting labelling take part in the cut.
@@ -64,7 +66,7 @@ struct GraphCutLabeller::Impl {
     for (const LabelModel& m : config.materials) all.push_back(&m);
     for (const LabelModel* m : all) {
       values.push_back(static_cast<std::uint8_t>(m->label));
-      const double s = m->grey_std * kMedianSpreadShare;
+      const double s = m->grey_std * kSmoothedSpreadShare;
       models.push_back({m->grey_mean, s * s});
     }
     std::vector<std::size_t> order(all.size());
@@ -97,7 +99,7 @@ struct GraphCutLabeller::Impl {
         m.grey_mean = mean;
         m.grey_std = std::sqrt(variance);
         models[static_cast<std::size_t>(k)] = {mean,
-                                               variance * kMedianSpreadShare * kMedianSpreadShare};
+                                               variance * kSmoothedSpreadShare * kSmoothedSpreadShare};
       }
     }
   }

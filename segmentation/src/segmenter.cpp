@@ -670,9 +670,11 @@ Segmentation detail::segment_frame(const GreyImage& image, const ImageGeometry& 
             whole_map, in_image(median_f, 0), sector_in_image, by_mean[0].value,
             m.thickness_mm / px_mm,
             std::max(3, static_cast<int>(std::lround(kMinReflectorWidthMm / px_mm))));
+  cv::Mat compensated = smoothed - (trend.a + trend.b * depth);
   if (refine) {
-    cv::Mat compensated_median = median_f - (trend.a + trend.b * depth);
-    refine(whole_map, in_image(compensated_median, 0), in_image(low, 0), sector_in_image, keep);
+    // The graph cut reads the grey the classification read (median, then Gaussian): on the
+    // median alone, dark speckle inside a bright organ outweighed the smoothness and bit into it.
+    refine(whole_map, in_image(compensated, 0), in_image(low, 0), sector_in_image, keep);
     if (!keep.empty() && cropped) keep = keep(roi);
   }
   clock.lap(detail::Stage::kClassify);
@@ -699,7 +701,6 @@ Segmentation detail::segment_frame(const GreyImage& image, const ImageGeometry& 
   };
   Segmentation result;
   result.labels = whole(map, kLabelPixelUnknown);
-  cv::Mat compensated = smoothed - (trend.a + trend.b * depth);
   compensated.setTo(0.0, ~sector);
   cv::Mat compensated_u8;
   compensated.convertTo(compensated_u8, CV_8U);  // saturates to 0..255
