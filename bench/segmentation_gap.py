@@ -18,17 +18,26 @@ each step closes:
 It also prints, from the labelling's frame-by-frame report (WORK/CASE.METHOD.seg.json), how many
 pixels of L lie in frames whose truth has none of L.
 
+With --missed-as-unknown M1,M2,... it asks whether a labelling that cannot see L in the missed
+slices should call the place unknown rather than background: starting from the perfect slices, it
+leaves L out of the missed slices (background), then instead replaces each of L's regions there
+by an unknown disc about the region's vertex centroid, reaching M mm beyond its farthest vertex,
+and reconstructs each set.
+
 The steps telescope: their sum is the whole gap. The order matters (the steps do not add up
 independently), so the figures say how much each part of the slice set holds given the ones
 before it.
 
     python3 bench/segmentation_gap.py --work out/bench/segmentation --case default_convex_sweep_low \
-        --method graphcut_prior --label 2 [--depth 7] [--binary build/apps/sonoshape]
+        --method graphcut_prior --label 2 [--depth 7] [--binary build/apps/sonoshape] \
+        [--missed-as-unknown 1,2,4]
 
 METHOD is the file name's method: threshold, graphcut or graphcut_prior.
 """
 import argparse
+import copy
 import json
+import math
 import os
 import subprocess
 import sys
@@ -57,6 +66,18 @@ def scan_iou(args, slices_path, label, truth_mesh):
     return 0.0
 
 
+def unknown_disc(region, margin_mm, corners=32):
+    """An unknown region: a disc about the region's vertex centroid, margin_mm beyond its
+    farthest vertex."""
+    points = region["polygon"]
+    cx = sum(p[0] for p in points) / len(points)
+    cy = sum(p[1] for p in points) / len(points)
+    radius = max(math.hypot(p[0] - cx, p[1] - cy) for p in points) + margin_mm
+    return {"label": "unknown",
+            "polygon": [[cx + radius * math.cos(2 * math.pi * k / corners),
+                         cy + radius * math.sin(2 * math.pi * k / corners)] for k in range(corners)]}
+
+
 def holds(slice_, label):
     return any(region["label"] == label for region in slice_["regions"])
 
@@ -71,6 +92,8 @@ def main():
     parser.add_argument("--label", type=int, required=True)
     parser.add_argument("--depth", type=int, default=7)
     parser.add_argument("--binary", default=os.path.join(root, "build", "apps", "sonoshape"))
+    parser.add_argument("--missed-as-unknown", default="",
+                        help="margins in mm, e.g. 1,2,4 (see the module's docstring)")
     args = parser.parse_args()
 
     base = os.path.join(args.work, args.case)
@@ -119,6 +142,25 @@ def main():
         value = scan_iou(args, path, args.label, truth_mesh)
         print(f"| {name} | {len(indices)} | {value:.3f} | {value - previous:+.3f} |")
         previous = value
+
+    if args.missed_as_unknown and missed:
+        print(f"\nperfect slices, label {args.label} in the {len(missed)} missed slices as:")
+        print("| missed slivers become | IoU |")
+        print("|---|---|")
+        variants = [("background", None)] + [
+            (f"unknown, disc {m} mm beyond", float(m)) for m in args.missed_as_unknown.split(",")]
+        for name, margin in variants:
+            changed = copy.deepcopy(perfect)
+            for i in missed:
+                regions = changed["slices"][i]["regions"]
+                kept = [r for r in regions if r["label"] != args.label]
+                if margin is not None:
+                    kept += [unknown_disc(r, margin) for r in regions if r["label"] == args.label]
+                changed["slices"][i]["regions"] = kept
+            path = f"{work}.missed_{'background' if margin is None else f'unknown{margin:g}'}.slices.json"
+            with open(path, "w") as f:
+                json.dump(changed, f)
+            print(f"| {name} | {scan_iou(args, path, args.label, truth_mesh):.3f} |")
 
 
 if __name__ == "__main__":

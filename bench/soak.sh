@@ -2,7 +2,7 @@
 # Soak test (issue 27): a real-time simulated scan for MINUTES with three subscribers on its mesh
 # stream, recording the scan's memory, update time and frame-to-mesh latency over time.
 #
-#   bench/soak.sh MINUTES [--out DIR] [--plot PNG] [--no-build]
+#   bench/soak.sh MINUTES [--out DIR] [--plot PNG] [--no-build] [--binary PATH]
 #
 # The simulated hand goes back and forth over the default phantom, one pass every 20 s, as in a
 # long examination that revisits the same anatomy (scan --passes). Subscribers:
@@ -13,19 +13,23 @@
 # The scan's RSS and CPU time are sampled every 5 s from /proc. At the end bench/soak_report.py
 # writes DIR/soak.md (tables: RSS slope after warm-up, update time and latency per 5 minutes,
 # drops by reason, each subscriber's tally) and the plot (default DIR/soak.png).
-# Default DIR: out/soak. Needs python3 with matplotlib for the plot (Debian python3-matplotlib).
+# Default DIR: out/soak. --binary runs another build's sonoshape (a copy, so that the build folder
+# can change during the soak); it implies --no-build. Needs python3 with matplotlib for the plot
+# (Debian python3-matplotlib).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-minutes="${1:?usage: bench/soak.sh MINUTES [--out DIR] [--plot PNG] [--no-build]}"
+minutes="${1:?usage: bench/soak.sh MINUTES [--out DIR] [--plot PNG] [--no-build] [--binary PATH]}"
 shift
 out=out/soak
 plot=""
 build=1
+bin="$PWD/build/apps/sonoshape"
 while [ $# -gt 0 ]; do
   case "$1" in
     --out) out="$2"; shift 2 ;;
     --plot) plot="$2"; shift 2 ;;
     --no-build) build=0; shift ;;
+    --binary) bin="$(realpath "$2")"; build=0; shift 2 ;;
     *) echo "bench/soak.sh: unknown argument '$1'" >&2; exit 2 ;;
   esac
 done
@@ -34,7 +38,6 @@ if [ "$build" = 1 ]; then
   cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE=Release >/dev/null
   cmake --build build -j "$(nproc)" --target sonoshape >/dev/null
 fi
-bin="$PWD/build/apps/sonoshape"
 rm -rf "$out"
 mkdir -p "$out/restart"
 
