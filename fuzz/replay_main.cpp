@@ -17,23 +17,24 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
 
 namespace {
 
-#if defined(__SANITIZE_ADDRESS__)
-constexpr bool kAddressSanitizer = true;
+// ASan and TSan map terabytes of shadow memory, which an address-space limit would refuse.
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+constexpr bool kShadowMemory = true;
 #elif defined(__has_feature)
-#if __has_feature(address_sanitizer)
-constexpr bool kAddressSanitizer = true;
+#if __has_feature(address_sanitizer) || __has_feature(thread_sanitizer)
+constexpr bool kShadowMemory = true;
 #else
-constexpr bool kAddressSanitizer = false;
+constexpr bool kShadowMemory = false;
 #endif
 #else
-constexpr bool kAddressSanitizer = false;
+constexpr bool kShadowMemory = false;
 #endif
 
 // libFuzzer stops an input at 2 GB (-rss_limit_mb=2048); here an address-space limit does, so
 // that an input that once allocated without bound fails as std::bad_alloc instead of taking the
-// machine's memory. ASan reserves terabytes of address space, so it is not limited there.
+// machine's memory. Not under a sanitizer with shadow memory (see above).
 void limit_memory() {
-  if (kAddressSanitizer) return;
+  if (kShadowMemory) return;
   const rlim_t limit = rlim_t{4} << 30;
   const rlimit value{limit, limit};
   setrlimit(RLIMIT_AS, &value);

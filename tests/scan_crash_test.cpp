@@ -22,6 +22,7 @@
 #include "sonoshape/simulator/mesh_reader.hpp"
 #include "sonoshape/testing/child_process.hpp"
 #include "sonoshape/testing/command.hpp"
+#include "sonoshape/testing/sanitizer_slowdown.hpp"
 #include "sonoshape/testing/temp_dir.hpp"
 
 namespace {
@@ -51,11 +52,18 @@ std::string bytes_of(const fs::path& path) {
   return text.str();
 }
 
+// A bound on a wall time, longer in sanitizer builds (an update of the instrumented engine takes
+// seconds).
+std::chrono::seconds bound_s(int seconds) {
+  return std::chrono::seconds(
+      static_cast<long>(seconds * sonoshape::testing::kSanitizerSlowdown));
+}
+
 // Runs `argv` to its end; its exit code, with its output in `output`.
 int run(const std::vector<std::string>& argv, const fs::path& log, std::string& output) {
   ChildProcess child(argv, log);
   if (!child.started()) return -1;
-  const int code = child.wait(std::chrono::seconds(120));
+  const int code = child.wait(bound_s(120));
   output = child.output();
   return code;
 }
@@ -163,14 +171,14 @@ TEST_P(ScanKilled, AtARandomMomentLeavesReadableOutputAndResumesToTheSameMeshes)
     // The moment is drawn over the reconstruction, which starts once the journal exists (the
     // models are learnt before; a loaded machine makes that take longer): from before the first
     // keyframe to about the end of the uninterrupted scan.
-    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+    const auto deadline = std::chrono::steady_clock::now() + bound_s(60);
     while (!fs::exists(journal) && std::chrono::steady_clock::now() < deadline)
       std::this_thread::sleep_for(std::chrono::milliseconds(2));
     ASSERT_TRUE(fs::exists(journal)) << child.output();
     kill_after_ms = std::uniform_int_distribution<int>(0, 800)(random);
     std::this_thread::sleep_for(std::chrono::milliseconds(kill_after_ms));
     child.signal(SIGKILL);
-    child.wait(std::chrono::seconds(10));
+    child.wait(bound_s(10));
   }
   expect_readable(out(dir));
   const auto before = sonoshape::scan::read_journal(journal);

@@ -13,6 +13,7 @@
 #include <string>
 #include <unordered_set>
 
+#include "parallel.hpp"
 #include "sonoshape/core/errors.hpp"
 #include "sonoshape/core/slice_io.hpp"
 
@@ -225,7 +226,7 @@ std::vector<Region> label_map_regions(const LabelImage& labels, const ImageU8& s
   // The labels are traced apart (on OpenCV's threads), each in its own bounding box grown by a
   // pixel (the upsampled mask of the whole frame was most of the time), and collected in order.
   std::vector<std::vector<PixelRegion>> traced(values.size());
-  cv::parallel_for_(cv::Range(0, static_cast<int>(values.size())), [&](const cv::Range& range) {
+  detail::parallel_for(cv::Range(0, static_cast<int>(values.size())), [&](const cv::Range& range) {
     for (int k = range.start; k < range.end; ++k) {
       const int value = values[static_cast<std::size_t>(k)];
       // Outside the sector is unknown through the fov; only unknown inside it needs regions.

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "graph_cut.hpp"
+#include "parallel.hpp"
 #include "segmenter_internal.hpp"
 
 namespace sonoshape::seg {
@@ -157,7 +158,7 @@ struct GraphCutLabeller::Impl {
       cell_of_column[static_cast<std::size_t>(i)] = static_cast<std::size_t>(i / block_px);
     const int reflector_value = reflector >= 0 ? values[static_cast<std::size_t>(reflector)] : -1;
     // Rows of cells in parallel: each writes only its own cells.
-    cv::parallel_for_(cv::Range(0, grid_h), [&](const cv::Range& cell_rows) {
+    detail::parallel_for(cv::Range(0, grid_h), [&](const cv::Range& cell_rows) {
       const int j_end = std::min(map.rows, cell_rows.end * block_px);
       for (int j = cell_rows.start * block_px; j < j_end; ++j) {
         const float* g = grey.ptr<float>(j);

@@ -10,6 +10,7 @@
 #include <optional>
 #include <vector>
 
+#include "parallel.hpp"
 #include "sonoshape/core/target_clones.hpp"
 
 namespace sonoshape::seg::detail {
@@ -59,7 +60,7 @@ cv::Mat morph_runs(const cv::Mat& mask, const std::vector<int>& half, bool erode
   std::vector<std::uint8_t> distance(static_cast<std::size_t>(w) * static_cast<std::size_t>(h));
   std::vector<char> row_has_set(static_cast<std::size_t>(h));
   // Rows are independent in both steps: they are spread over OpenCV's threads.
-  cv::parallel_for_(cv::Range(0, h), [&](const cv::Range& rows) {
+  detail::parallel_for(cv::Range(0, h), [&](const cv::Range& rows) {
     for (int y = rows.start; y < rows.end; ++y) {
       const std::uint8_t* src = mask.ptr<std::uint8_t>(y);
       std::uint8_t* d = distance.data() + static_cast<std::ptrdiff_t>(y) * w;
@@ -82,7 +83,7 @@ cv::Mat morph_runs(const cv::Mat& mask, const std::vector<int>& half, bool erode
   });
   cv::Mat out(h, w, CV_8U);
   const std::uint8_t reached = erode ? 0 : 255, missed = erode ? 255 : 0;
-  cv::parallel_for_(cv::Range(0, h), [&](const cv::Range& rows) {
+  detail::parallel_for(cv::Range(0, h), [&](const cv::Range& rows) {
     std::vector<std::uint8_t> hit(static_cast<std::size_t>(w));
     for (int y = rows.start; y < rows.end; ++y) {
       std::fill(hit.begin(), hit.end(), std::uint8_t{0});
@@ -197,7 +198,7 @@ cv::Mat gaussian_blur_rows(const cv::Mat& src, double sigma, cv::Rect region, bo
   // reflected into the image), each padded by r reflected pixels on both sides.
   const int top = region.y - r, bottom = region.y + region.height + r;
   cv::Mat across(bottom - top, w, CV_32F);
-  cv::parallel_for_(cv::Range(top, bottom), [&](const cv::Range& rows) {
+  detail::parallel_for(cv::Range(top, bottom), [&](const cv::Range& rows) {
     std::vector<float> padded(static_cast<std::size_t>(w + 2 * r));
     for (int t = rows.start; t < rows.end; ++t) {
       const float* row = src.ptr<float>(cv::borderInterpolate(t, h, cv::BORDER_REFLECT_101));
@@ -216,7 +217,7 @@ cv::Mat gaussian_blur_rows(const cv::Mat& src, double sigma, cv::Rect region, bo
   // in the first-level cache from one output row to the next.
   constexpr int kBlock = 64;
   const int blocks = (region.width + kBlock - 1) / kBlock;
-  cv::parallel_for_(cv::Range(0, blocks), [&](const cv::Range& range) {
+  detail::parallel_for(cv::Range(0, blocks), [&](const cv::Range& range) {
     for (int b = range.start; b < range.end; ++b) {
       const int x = region.x + b * kBlock, n = std::min(kBlock, region.x + region.width - x);
       for (int y = region.y; y < region.y + region.height; ++y)

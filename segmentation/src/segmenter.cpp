@@ -10,6 +10,7 @@
 #include <stdexcept>
 
 #include "blooming.hpp"
+#include "parallel.hpp"
 #include "raster_ops.hpp"
 #include "reflectors.hpp"
 #include "segmenter_internal.hpp"
@@ -581,7 +582,7 @@ Segmentation detail::segment_frame(const GreyImage& image, const ImageGeometry& 
     }
   };
   auto classify_all = [&] {
-    cv::parallel_for_(cv::Range(0, h), [&](const cv::Range& rows) {
+    detail::parallel_for(cv::Range(0, h), [&](const cv::Range& rows) {
       for (int j = rows.start; j < rows.end; ++j) classify_row(j, 0, 1);
     });
   };

@@ -21,6 +21,7 @@
 
 #include "sonoshape/acquisition/igtl_frame_source.hpp"
 #include "sonoshape/publish/igtl_server.hpp"
+#include "sonoshape/testing/sanitizer_slowdown.hpp"
 #include "sonoshape/tracking/igtl_pose_source.hpp"
 
 namespace sonoshape {
@@ -293,7 +294,9 @@ TEST(IgtlSources, AScanReconstructsFromImagerServerFramesAndTrackerServerPoses) 
   std::ofstream(calibration) << R"({"ImageToProbe": [0.5,0,0,0, 0,0.5,0,0, 0,0,1,0, 0,0,0,1]})";
   int code = 0;
   const std::string out =
-      run("timeout 60 " + std::string(SONOSHAPE_BINARY) +
+      run("timeout " +
+              std::to_string(static_cast<int>(60 * sonoshape::testing::kSanitizerSlowdown)) +
+              " " + std::string(SONOSHAPE_BINARY) +
               " scan --source igtl:127.0.0.1:" + std::to_string(imager.port()) +
               " --igtl-tracker 127.0.0.1:" + std::to_string(tracker.port()) +
               " --igtl-transform Tracker --calibration " + calibration + " --duration 1.5",
