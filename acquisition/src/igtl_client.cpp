@@ -106,6 +106,9 @@ struct IgtlConnection::Impl {
   // the fraction of a second in the low 32). Read from the bytes rather than through
   // MessageHeader::GetTimeStamp(): for a header whose timestamp is 0 the 1.11 library returned
   // uninitialised memory (0xbebebebe seconds under AddressSanitizer's malloc fill), not 0.
+  // A sender's stamp further ahead of this machine's clock than this is not a clock offset.
+  static constexpr double kMaxStampAheadS = 86400.0;
+
   static double header_timestamp_s(const std::uint8_t* header) {
     constexpr std::size_t kTimestampOffset = 2 + 12 + 20;  // version, type name, device name
     std::uint64_t raw = 0;
@@ -130,12 +133,15 @@ struct IgtlConnection::Impl {
     message.type = header->GetDeviceType();
     message.device = header->GetDeviceName();
     message.timestamp_s = header_timestamp_s(buffer.data());
-    if (message.timestamp_s == 0.0) {
-      // No timestamp (Debian's ImagerServer sets none): the arrival time on the wall clock, the
-      // clock senders stamp with, so that it stays comparable with stamped messages.
-      message.timestamp_s =
-          std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch())
-              .count();
+    const double now_s =
+        std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+    // No timestamp (Debian's ImagerServer sets none), or one from beyond tomorrow, which no
+    // clock offset explains: OpenIGTLink 1.11's servers send their message object's unset
+    // timestamp field, 0 from fresh pages but any bytes from reused ones (0xbebebebe s, the year
+    // 2071, under AddressSanitizer's malloc fill). Either way the arrival time on the wall
+    // clock, the clock senders stamp with, so that it stays comparable with stamped messages.
+    if (message.timestamp_s == 0.0 || message.timestamp_s > now_s + kMaxStampAheadS) {
+      message.timestamp_s = now_s;
       message.stamped_on_arrival = true;
     }
     const auto end = buffer.begin() + static_cast<std::ptrdiff_t>(IGTL_HEADER_SIZE + body);

@@ -19,6 +19,8 @@
 #include <thread>
 #include <vector>
 
+#include <igtlTransformMessage.h>
+
 #include "sonoshape/acquisition/igtl_frame_source.hpp"
 #include "sonoshape/publish/igtl_server.hpp"
 #include "sonoshape/testing/sanitizer_slowdown.hpp"
@@ -175,6 +177,52 @@ TEST(IgtlSources, PosesFromDebiansTrackingDataServerAreOneToolOfItsTdataStream) 
     }
   }
   EXPECT_EQ(channel0.dropped(), 0u);
+}
+
+// A sender whose timestamp field holds stray bytes (OpenIGTLink 1.11's servers send their message
+// object's unset field: 0xbebebebe s, the year 2071, under AddressSanitizer's malloc fill) gets
+// the arrival time; a plausible stamp, even an old one, is kept.
+TEST(IgtlSources, AStampFromBeyondTomorrowIsReplacedByTheArrivalTime) {
+  const int listener = ::socket(AF_INET, SOCK_STREAM, 0);
+  ASSERT_GE(listener, 0);
+  sockaddr_in address{};
+  address.sin_family = AF_INET;
+  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  ASSERT_EQ(::bind(listener, reinterpret_cast<sockaddr*>(&address), sizeof address), 0);
+  ASSERT_EQ(::listen(listener, 1), 0);
+  socklen_t length = sizeof address;
+  ::getsockname(listener, reinterpret_cast<sockaddr*>(&address), &length);
+  const int port = ntohs(address.sin_port);
+  constexpr double kStray = 3200171710.0;  // 0xbebebebe s
+  constexpr double kOld = 1.5e9;           // 2017: a recorded stream's stamp
+  std::thread sender([&] {
+    const int peer = ::accept(listener, nullptr, nullptr);
+    for (const double stamp : {kStray, kOld}) {
+      igtl::TransformMessage::Pointer message = igtl::TransformMessage::New();
+      message->SetDeviceName("Tracker");
+      igtl::TimeStamp::Pointer time = igtl::TimeStamp::New();
+      time->SetTime(stamp);
+      message->SetTimeStamp(time);
+      igtl::Matrix4x4 matrix;
+      igtl::IdentityMatrix(matrix);
+      message->SetMatrix(matrix);
+      message->Pack();
+      ::send(peer, message->GetPackPointer(), message->GetPackSize(), MSG_NOSIGNAL);
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(500));
+    ::close(peer);
+  });
+  tracking::IgtlPoseSource source({"127.0.0.1", port}, "Tracker", tracking::IgtlPoseFrom::kTransform);
+  ASSERT_TRUE(source.start());
+  const double before_s = wall_clock_s();
+  const std::vector<Pose> poses = take<tracking::IgtlPoseSource, Pose>(source, 2, 5.0);
+  const double after_s = wall_clock_s();
+  sender.join();
+  ::close(listener);
+  ASSERT_EQ(poses.size(), 2u) << source.message();
+  EXPECT_GE(poses[0].timestamp_s, before_s - 1.0);
+  EXPECT_LE(poses[0].timestamp_s, after_s);
+  EXPECT_NEAR(poses[1].timestamp_s, kOld, 1e-3);
 }
 
 TEST(IgtlSources, AnImagesOwnPoseAndPixelsSurviveTheRoundTripThroughOurServer) {

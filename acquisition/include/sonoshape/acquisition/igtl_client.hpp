@@ -29,8 +29,9 @@ Result<IgtlEndpoint> parse_igtl_endpoint(const std::string& text, const std::str
 struct IgtlMessage {
   std::string type;    ///< "IMAGE", "TRANSFORM", ...
   std::string device;  ///< the device name
-  /// The header's timestamp (s since 1970 on the sender's clock); when the sender set none,
-  /// the arrival time on this machine's wall clock (and stamped_on_arrival).
+  /// The header's timestamp (s since 1970 on the sender's clock); when the sender set none (0)
+  /// or one more than a day ahead of this machine's clock (an unset field's stray bytes), the
+  /// arrival time on this machine's wall clock (and stamped_on_arrival).
   double timestamp_s = 0.0;
   bool stamped_on_arrival = false;
   std::vector<std::uint8_t> bytes;
