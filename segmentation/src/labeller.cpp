@@ -99,8 +99,8 @@ struct GraphCutLabeller::Impl {
         LabelModel& m = config.materials[static_cast<std::size_t>(k) - 1];
         m.grey_mean = mean;
         m.grey_std = std::sqrt(variance);
-        models[static_cast<std::size_t>(k)] = {mean,
-                                               variance * kSmoothedSpreadShare * kSmoothedSpreadShare};
+        const double share = kSmoothedSpreadShare * kSmoothedSpreadShare;
+        models[static_cast<std::size_t>(k)] = {mean, variance * share};
       }
     }
   }

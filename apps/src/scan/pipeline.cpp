@@ -36,8 +36,7 @@ namespace {
 // An update frees most of what it allocated (the new cells' face images, the octree's levels,
 // the mesher's buffers), but glibc keeps freed pages mapped, so the scan's RSS would follow the
 // largest update so far rather than what the scan holds (the soak's RSS rose in steps at single
-// updates). Handing them back after each update costs a walk of the free lists, a few ms at
-// most, once per update.
+// updates). Handing them back costs one walk of the free lists per update.
 void release_free_heap() {
 #ifdef __GLIBC__
   malloc_trim(0);
