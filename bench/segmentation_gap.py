@@ -39,31 +39,17 @@ import copy
 import json
 import math
 import os
-import subprocess
 import sys
 
-
-def run(cmd, what):
-    result = subprocess.run(cmd, capture_output=True, text=True)
-    if result.returncode != 0:
-        lines = result.stderr.strip().splitlines()
-        raise RuntimeError(f"{what} failed: {lines[-1] if lines else result.returncode}")
+# The same reconstruct-and-evaluate step as the table's.
+from segmentation_table import iou, scan_scores
 
 
 def scan_iou(args, slices_path, label, truth_mesh):
     """Reconstructs `slices_path` and returns label's volume IoU (0 without a mesh)."""
-    base = slices_path[:-len(".slices.json")]
-    cmd = [args.binary, "reconstruct", slices_path, "-o", base + "_recon", "-q"]
-    if args.depth:
-        cmd += ["--depth", str(args.depth)]
-    run(cmd, f"reconstruct {slices_path}")
-    run([args.binary, "evaluate", "--recon", base + "_recon", "--truth", f"{label}:{truth_mesh}",
-         "--slices", slices_path, "--json", base + ".eval.json", "-q"], f"evaluate {base}_recon")
-    with open(base + ".eval.json") as f:
-        for entry in json.load(f)["labels"]:
-            if entry["label"] == label:
-                return entry["iou"] if entry.get("reconstructed") and entry.get("iou") else 0.0
-    return 0.0
+    scores = scan_scores(args, slices_path[:-len(".slices.json")], slices_path,
+                         [(label, truth_mesh)])
+    return iou(scores.get(label)) or 0.0
 
 
 def unknown_disc(region, margin_mm, corners=32):

@@ -534,10 +534,11 @@ struct GraphCutLabeller::Impl {
                                 const std::optional<PriorCells>& predicted) const {
     const double min_px = config.min_region_mm2 / (geometry.spacing_mm * geometry.spacing_mm);
     for_each_material_regions(start, [&](std::size_t l, const cv::Mat& regions, int n) {
+      const int* region_of = regions.ptr<int>(0);  // continuous: one row after another
       std::vector<double> area_px(static_cast<std::size_t>(n), 0.0);
       std::vector<double> predicted_px(static_cast<std::size_t>(n), 0.0);
       for (std::size_t c = 0; c < start.size(); ++c) {
-        const int r = regions.at<int>(static_cast<int>(c / grid_w), static_cast<int>(c % grid_w));
+        const int r = region_of[c];
         if (r == 0) continue;
         area_px[static_cast<std::size_t>(r)] += count[c];
         if (predicted && predicted->expected[c] == static_cast<int>(l))
@@ -561,8 +562,7 @@ struct GraphCutLabeller::Impl {
           count_neighbour(ci, cj + 1);
         }
       for (std::size_t c = 0; c < start.size(); ++c) {
-        const auto r = static_cast<std::size_t>(
-            regions.at<int>(static_cast<int>(c / grid_w), static_cast<int>(c % grid_w)));
+        const auto r = static_cast<std::size_t>(region_of[c]);
         if (r == 0 || area_px[r] >= min_px || 2.0 * predicted_px[r] >= area_px[r]) continue;
         const auto& a = around[r];
         const auto most = std::max_element(a.begin(), a.end());
