@@ -6,10 +6,25 @@
 # libgcc_s and libOpenCL stay the system's, newer there and the ones its OpenCL drivers need),
 # an $ORIGIN rpath, the slice sets of every figure (sliced here) and bench/gpu_run.sh. Refuses
 # to finish over 64 MiB.
-# Usage: bench/make_carry.sh [OUT (default out/carry, git-ignored)] [BUILD (default build)]
+# Usage: bench/make_carry.sh [--scaling [--before BIN]] [OUT (default out/carry, git-ignored)]
+#                            [BUILD (default build)]
 # (build the targets sonoshape and sonoshape_device_bench first)
+#   --scaling: the thread-scaling sets of issue 24 instead (horse, random and sweep planes,
+#              30-500, and 100 random planes with sector fields of view) and bench/scaling_run.sh;
+#   --before BIN: a sonoshape_device_bench of another commit beside ours (bin/before_bench),
+#              measured on the same machine in the same run (same libraries: build it here).
 set -euo pipefail
 cd "$(dirname "$0")/.."
+scaling=0
+before=
+while [[ $# -gt 0 && $1 == --* ]]; do
+  case $1 in
+    --scaling) scaling=1 ;;
+    --before) before=$2; shift ;;
+    *) echo "usage: make_carry.sh [--scaling [--before BIN]] [OUT] [BUILD]" >&2; exit 2 ;;
+  esac
+  shift
+done
 out=${1:-out/carry}
 build=${2:-build}
 bin=$build/apps/sonoshape  # slices the sets here
@@ -20,6 +35,10 @@ mkdir -p "$out/bin" "$out/lib" "$out/sets"
 
 cp "$bench" "$out/bin/sonoshape_device_bench"
 strip "$out/bin/sonoshape_device_bench"
+if [[ -n $before ]]; then
+  cp "$before" "$out/bin/before_bench"
+  strip "$out/bin/before_bench"
+fi
 # Libraries the target system has (and must keep: its drivers are built against them).
 system='^(linux-vdso|ld-linux|libc|libm|libdl|libpthread|librt|libresolv|libstdc\+\+|libgcc_s|libOpenCL)\.'
 ldd "$bench" | awk '/=> \//{print $1, $3}' | while read -r name path; do
@@ -28,7 +47,7 @@ ldd "$bench" | awk '/=> \//{print $1, $3}' | while read -r name path; do
   strip --strip-unneeded "$out/lib/$name" 2>/dev/null || true
 done
 # DT_RPATH (not RUNPATH): it also applies to the libraries' own dependencies.
-patchelf --force-rpath --set-rpath '$ORIGIN/../lib' "$out/bin/sonoshape_device_bench"
+for b in "$out"/bin/*; do patchelf --force-rpath --set-rpath '$ORIGIN/../lib' "$b"; done
 for lib in "$out"/lib/*; do patchelf --force-rpath --set-rpath '$ORIGIN' "$lib"; done
 
 # The slice sets: Table II (bench/device_table.py's), the offline target (horse, 30 random planes,
@@ -42,9 +61,21 @@ slice() {  # NAME FAMILY COUNT SEED LABEL:MODEL ...
     [[ $model == horse ]] && ext=ply
     args+=(--mesh "$label:data/models/$model.$ext:$model")
   done
-  "$bin" slice --planes "$family" --count "$count" --seed "$seed" --size-mm 150 --skip-invalid -q \
-    -o "$out/sets/$name.slices.json" "${args[@]}"
+  "$bin" slice --planes "$family" --count "$count" --seed "$seed" --size-mm "${size_mm:-150}" \
+    --skip-invalid -q -o "$out/sets/$name.slices.json" "${args[@]}" ${extra:-}
 }
+if (( scaling )); then
+  # The growth table's sets (bench/growth_table.py: horse, seed 3, 200 mm box) and one with a
+  # sector field of view on every slice (these still build the whole arrangement).
+  size_mm=200
+  for n in 30 100 200 500; do slice "random-$n" random "$n" 3 1:horse; done
+  for n in 100 500; do slice "sweep-$n" sweep "$n" 3 1:horse; done
+  extra="--fov sector --fov-aim cover" slice "sector-random-100" random 100 3 1:horse
+  cp bench/scaling_run.sh "$out/"
+  git rev-parse --short HEAD > "$out/COMMIT"
+  du -sh "$out"
+  exit 0
+fi
 for m in spot cow homer horse cheburashka fandisk rocker-arm; do
   slice "table2-$m-parallel-20" parallel 20 1 "1:$m"
   slice "table2-$m-orthogonal-30" orthogonal 30 1 "1:$m"

@@ -1,12 +1,15 @@
 #include "arrangement.hpp"
 
 #include <CGAL/FPU.h>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <array>
 #include <bit>
 #include <cmath>
 #include <limits>
+#include <optional>
 #include <stdexcept>
 #include <string>
 
@@ -27,6 +30,14 @@ std::uint64_t pair_key(int a, int b) {
 }
 
 using IntervalPoint3 = IntervalKernel::Point_3;
+
+// The key of a vertex on demand: its three planes, sorted, 21 bits each (the same key is the
+// same exact point).
+std::uint64_t point_key(std::array<int, 3> planes) {
+  std::sort(planes.begin(), planes.end());
+  return (static_cast<std::uint64_t>(planes[0]) << 42) |
+         (static_cast<std::uint64_t>(planes[1]) << 21) | static_cast<std::uint64_t>(planes[2]);
+}
 
 Point3 exact_intersection(const Plane3& a, const Plane3& b, const Plane3& c) {
   const auto result = CGAL::intersection(a, b, c);
@@ -66,10 +77,10 @@ Arrangement::Arrangement(const Box3& box) : box_(box) {
   }
   // Corner c has coordinate bit k set when it sits at the box maximum along axis k.
   for (int c = 0; c < 8; ++c) {
-    add_vertex(
-        IntervalPoint3((c & 1) ? box.max.x() : box.min.x(), (c & 2) ? box.max.y() : box.min.y(),
-                       (c & 4) ? box.max.z() : box.min.z()),
-        {(c & 1) ? 1 : 0, (c & 2) ? 3 : 2, (c & 4) ? 5 : 4});
+    const Vec3 corner((c & 1) ? box.max.x() : box.min.x(), (c & 2) ? box.max.y() : box.min.y(),
+                      (c & 4) ? box.max.z() : box.min.z());
+    add_vertex(IntervalPoint3(corner.x(), corner.y(), corner.z()),
+               {(c & 1) ? 1 : 0, (c & 2) ? 3 : 2, (c & 4) ? 5 : 4}, corner);
   }
   cells_.push_back({});
   for (int axis = 0; axis < 3; ++axis) {
@@ -121,19 +132,19 @@ Arrangement::Arrangement(const Box3& box, bool on_demand) : Arrangement(box) {
   bsp_.assign(1, BspNode{-1, -1, -1, -1, 0});
 }
 
-int Arrangement::add_vertex(const IntervalPoint3& approximation, const std::array<int, 3>& planes) {
-  const int id = static_cast<int>(vertex_planes_.size());
+int Arrangement::add_vertex(const IntervalPoint3& approximation, const std::array<int, 3>& planes,
+                            const Vec3& approx) {
   vertex_intervals_.push_back(approximation);
   vertex_planes_.push_back(planes);
-  // The double point: the intervals' middles, or the exact point's where an interval is wide.
-  Vec3 approx;
-  for (int axis = 0; axis < 3; ++axis)
-    approx[axis] = coordinate_double(
-        approximation.cartesian(axis), [&] { return exact_vertex(id); }, axis);
   vertex_approx_.push_back(approx);
   sign_cache_.push_back(kUnknownSign);
-  vertex_keys_.push_back(std::uint64_t{1} << 63 | vertex_planes_.size());  // a box corner: itself
-  return id;
+  if (on_demand_) {
+    // Box corners, made before, are keyed by themselves.
+    vertex_keys_.push_back(point_key(planes));
+  } else {
+    vertex_keys_.push_back(std::uint64_t{1} << 63 | vertex_planes_.size());
+  }
+  return static_cast<int>(vertex_planes_.size()) - 1;
 }
 
 Point3 Arrangement::exact_vertex(int id) const {
@@ -144,18 +155,27 @@ Point3 Arrangement::exact_vertex(int id) const {
 }
 
 int Arrangement::side(int plane_id, int vertex_id) const {
+  return point_side(plane_id, vertex_intervals_[static_cast<std::size_t>(vertex_id)],
+                    vertex_planes_[static_cast<std::size_t>(vertex_id)]);
+}
+
+int Arrangement::point_side(int plane_id, const IntervalPoint3& interval,
+                            const std::array<int, 3>& planes) const {
   // ExactKernel's filtered predicate, by hand: the interval test decides unless the point's
   // interval box touches the plane; then CGAL's exact predicate on the exact point does.
   const ArrangementPlane& plane = planes_[static_cast<std::size_t>(plane_id)];
   try {
     const CGAL::Protect_FPU_rounding<true> upward;
-    const CGAL::Uncertain<CGAL::Oriented_side> s = IntervalKernel().oriented_side_3_object()(
-        plane.interval, vertex_intervals_[static_cast<std::size_t>(vertex_id)]);
+    const CGAL::Uncertain<CGAL::Oriented_side> s =
+        IntervalKernel().oriented_side_3_object()(plane.interval, interval);
     if (CGAL::is_certain(s)) return to_side(CGAL::get_certain(s));
   } catch (const CGAL::Uncertain_conversion_exception&) {
     // Undecided by the intervals.
   }
-  return to_side(plane.exact.oriented_side(exact_vertex(vertex_id)));
+  return to_side(plane.exact.oriented_side(
+      exact_intersection(planes_[static_cast<std::size_t>(planes[0])].exact,
+                         planes_[static_cast<std::size_t>(planes[1])].exact,
+                         planes_[static_cast<std::size_t>(planes[2])].exact)));
 }
 
 bool Arrangement::same_point(int a, int b) const {
@@ -195,13 +215,14 @@ int Arrangement::edge_vertex(int a, int b, int face_plane, int edge_plane, int n
   return it->second;
 }
 
-int Arrangement::plane_vertex(int face_plane, int edge_plane, int new_plane) {
-  // The edge lies exactly on its face's plane and its edge plane, so the crossing point is the
-  // exact intersection of three input planes: a construction of depth one, kept as its interval
-  // approximation (as ExactKernel computes it) and the three planes.
-  const ArrangementPlane& a = planes_[static_cast<std::size_t>(face_plane)];
-  const ArrangementPlane& b = planes_[static_cast<std::size_t>(edge_plane)];
-  const ArrangementPlane& c = planes_[static_cast<std::size_t>(new_plane)];
+std::pair<IntervalPoint3, Vec3> Arrangement::intersection_point(int plane_a, int plane_b,
+                                                                int plane_c) const {
+  // The crossing point of an edge is the exact intersection of three input planes (the edge's
+  // two and the new one): a construction of depth one, kept as its interval approximation (as
+  // ExactKernel computes it) and the three planes.
+  const ArrangementPlane& a = planes_[static_cast<std::size_t>(plane_a)];
+  const ArrangementPlane& b = planes_[static_cast<std::size_t>(plane_b)];
+  const ArrangementPlane& c = planes_[static_cast<std::size_t>(plane_c)];
   IntervalPoint3 approximation;
   bool approximated = false;
   try {
@@ -214,27 +235,35 @@ int Arrangement::plane_vertex(int face_plane, int edge_plane, int new_plane) {
   } catch (const CGAL::Uncertain_conversion_exception&) {
     // Intervals too wide to tell whether the planes meet in a point: the exact point decides.
   }
+  std::optional<Point3> exact;
   if (!approximated) {
     const auto result = CGAL::intersection(a.exact, b.exact, c.exact);
     const Point3* point = result ? boost::get<Point3>(&*result) : nullptr;
     if (point == nullptr)
-      throw GeometryError("arrangement: planes " + std::to_string(face_plane) + ", " +
-                          std::to_string(edge_plane) + ", " + std::to_string(new_plane) +
+      throw GeometryError("arrangement: planes " + std::to_string(plane_a) + ", " +
+                          std::to_string(plane_b) + ", " + std::to_string(plane_c) +
                           " do not meet in one point where an edge crosses the new plane");
+    exact = *point;
     const auto& e = point->exact();
     approximation = IntervalPoint3(CGAL::to_interval(e.x()), CGAL::to_interval(e.y()),
                                    CGAL::to_interval(e.z()));
   }
-  const int id = add_vertex(approximation, {face_plane, edge_plane, new_plane});
+  // The double point: the intervals' middles, or the exact point's where an interval is wide.
+  auto exact_point = [&] {
+    if (!exact) exact = exact_intersection(a.exact, b.exact, c.exact);
+    return *exact;
+  };
+  Vec3 approx;
+  for (int axis = 0; axis < 3; ++axis)
+    approx[axis] = coordinate_double(approximation.cartesian(axis), exact_point, axis);
+  return {approximation, approx};
+}
+
+int Arrangement::plane_vertex(int face_plane, int edge_plane, int new_plane) {
+  const auto [interval, approx] = intersection_point(face_plane, edge_plane, new_plane);
+  const int id = add_vertex(interval, {face_plane, edge_plane, new_plane}, approx);
   sign_cache_[static_cast<std::size_t>(id)] = 0;
   touched_vertices_.push_back(id);
-  if (on_demand_) {
-    std::array<int, 3> t{face_plane, edge_plane, new_plane};
-    std::sort(t.begin(), t.end());
-    vertex_keys_.back() = (static_cast<std::uint64_t>(t[0]) << 42) |
-                          (static_cast<std::uint64_t>(t[1]) << 21) |
-                          static_cast<std::uint64_t>(t[2]);
-  }
   return id;
 }
 
@@ -468,7 +497,8 @@ void Arrangement::reset_signs() {
   touched_vertices_.clear();
 }
 
-bool Arrangement::region_crossed(const Region& region, int plane_id) {
+bool Arrangement::region_crossed(const Region& region, int plane_id, RefineJob& job,
+                                 RefineScratch& scratch) const {
   // Quick rejection with the region's double bounds, as insert_plane does for cells.
   const ArrangementPlane& plane = planes_[static_cast<std::size_t>(plane_id)];
   const Box3& b = region.bounds;
@@ -482,32 +512,67 @@ bool Arrangement::region_crossed(const Region& region, int plane_id) {
   for (std::size_t at = 0; at < region.faces.size() && !(has_pos && has_neg);) {
     const RegionFace face = region_face(region.faces, at);
     for (int i = 0; i < face.count; ++i) {
-      const int s = plane_side(plane_id, face.vertex(i));
+      const int s = job_side(plane_id, face.vertex(i), job, scratch);
       has_pos |= s > 0;
       has_neg |= s < 0;
     }
     at += face.size();
   }
-  reset_signs();
+  reset_signs(job, scratch);
   return has_pos && has_neg;
 }
 
-int Arrangement::split_vertex(int a, int b, int face_plane, int edge_plane, int new_plane) {
+int Arrangement::job_side(int plane_id, int vertex_id, RefineJob& job,
+                          RefineScratch& scratch) const {
+  std::int8_t* cached;
+  if (vertex_id >= kJobVertex) {
+    cached = &job.vertex_signs[static_cast<std::size_t>(vertex_id - kJobVertex)];
+  } else {
+    if (static_cast<std::size_t>(vertex_id) >= scratch.signs.size())
+      scratch.signs.resize(vertex_planes_.size(), kUnknownSign);
+    cached = &scratch.signs[static_cast<std::size_t>(vertex_id)];
+  }
+  if (*cached == kUnknownSign) {
+    if (vertex_id >= kJobVertex) {
+      const JobVertex& v = job.vertices[static_cast<std::size_t>(vertex_id - kJobVertex)];
+      *cached = static_cast<std::int8_t>(point_side(plane_id, v.interval, v.planes));
+    } else {
+      *cached = static_cast<std::int8_t>(side(plane_id, vertex_id));
+    }
+    scratch.touched.push_back(vertex_id);
+  }
+  return *cached;
+}
+
+void Arrangement::reset_signs(RefineJob& job, RefineScratch& scratch) {
+  for (const int v : scratch.touched) {
+    if (v >= kJobVertex) job.vertex_signs[static_cast<std::size_t>(v - kJobVertex)] = kUnknownSign;
+    else scratch.signs[static_cast<std::size_t>(v)] = kUnknownSign;
+  }
+  scratch.touched.clear();
+}
+
+int Arrangement::split_vertex(int a, int b, int face_plane, int edge_plane, int new_plane,
+                              RefineJob& job, RefineScratch& scratch) const {
   // One vertex per edge within a split (the two faces on an edge must agree: a few entries,
   // searched in order). Regions do not share vertices: a vertex met again in another region is
   // constructed again (the same exact point), which costs less than finding it in a table of
   // a million; faces are matched by their vertices' planes instead (finish_region).
   const std::uint64_t edge = pair_key(a, b);
-  for (const auto& [key, id] : split_vertices_)
+  for (const auto& [key, id] : scratch.split_vertices)
     if (key == edge) return id;
-  const int id = plane_vertex(face_plane, edge_plane, new_plane);
-  split_vertices_.emplace_back(edge, id);
+  const auto [interval, approx] = intersection_point(face_plane, edge_plane, new_plane);
+  const int id = kJobVertex + static_cast<int>(job.vertices.size());
+  job.vertices.push_back({interval, {face_plane, edge_plane, new_plane}, approx});
+  job.vertex_signs.push_back(kUnknownSign);
+  scratch.split_vertices.emplace_back(edge, id);
   return id;
 }
 
 Arrangement::DirectedEdge Arrangement::split_region_face(const RegionFace& face, int new_plane,
                                                          std::vector<int>& pos,
-                                                         std::vector<int>& neg) {
+                                                         std::vector<int>& neg, RefineJob& job,
+                                                         RefineScratch& scratch) const {
   // The polygon's two parts, as split_face: each kept vertex is pushed with the plane of the
   // edge leaving it in the new polygon; the part on a side leaves it at one crossing point and
   // re-enters at another, and the edge between them is the chord on the new plane.
@@ -518,11 +583,11 @@ Arrangement::DirectedEdge Arrangement::split_region_face(const RegionFace& face,
   neg.insert(neg.end(), {face.plane, face.sigma, 0});
   for (int i = 0; i < n; ++i) {
     const int vi = face.vertex(i), vj = face.vertex((i + 1) % n);
-    const int si = plane_side(q, vi), sj = plane_side(q, vj);
+    const int si = job_side(q, vi, job, scratch), sj = job_side(q, vj, job, scratch);
     const int edge_plane = face.edge_plane(i);
     int crossing = -1;
     if ((si > 0 && sj < 0) || (si < 0 && sj > 0))
-      crossing = split_vertex(vi, vj, face.plane, edge_plane, new_plane);
+      crossing = split_vertex(vi, vj, face.plane, edge_plane, new_plane, job, scratch);
     for (const int side : {1, -1}) {
       std::vector<int>& part = side > 0 ? pos : neg;
       if (si * side >= 0) {
@@ -579,32 +644,32 @@ void Arrangement::close_section(const std::vector<DirectedEdge>& section, int ne
   out[at + 2] = count;
 }
 
-std::pair<int, int> Arrangement::split_region(int id, int new_plane) {
-  Region old = std::move(regions_[static_cast<std::size_t>(id)]);
+std::pair<Arrangement::Region, Arrangement::Region> Arrangement::split_region(
+    const Region& old, int new_plane, RefineJob& job, RefineScratch& scratch) const {
   const int q = new_plane;
-  split_vertices_.clear();
+  scratch.split_vertices.clear();
   Region pos, neg;
   pos.next = neg.next = old.next;
   pos.faces.reserve(old.faces.size() + 32);
   neg.faces.reserve(old.faces.size() + 32);
-  std::vector<DirectedEdge>& section = section_scratch_;  // boundary of the new face
+  std::vector<DirectedEdge>& section = scratch.section;  // boundary of the new face
   section.clear();
   for (std::size_t at = 0; at < old.faces.size();) {
     const RegionFace face = region_face(old.faces, at);
     at += face.size();
     bool has_pos = false, has_neg = false;
     for (int i = 0; i < face.count; ++i) {
-      const int s = plane_side(q, face.vertex(i));
+      const int s = job_side(q, face.vertex(i), job, scratch);
       has_pos |= s > 0;
       has_neg |= s < 0;
     }
     if (has_pos && has_neg) {
-      section.push_back(split_region_face(face, new_plane, pos.faces, neg.faces));
+      section.push_back(split_region_face(face, new_plane, pos.faces, neg.faces, job, scratch));
     } else if (has_pos || has_neg) {
       // An edge of this face lying on the new plane bounds the new face too.
       for (int i = 0; i < face.count; ++i) {
         const int a = face.vertex(i), b = face.vertex((i + 1) % face.count);
-        if (plane_side(q, a) != 0 || plane_side(q, b) != 0) continue;
+        if (job_side(q, a, job, scratch) != 0 || job_side(q, b, job, scratch) != 0) continue;
         const bool forward = has_pos ? face.sigma < 0 : face.sigma > 0;
         section.push_back(forward ? DirectedEdge{a, b, face.plane}
                                   : DirectedEdge{b, a, face.plane});
@@ -615,24 +680,23 @@ std::pair<int, int> Arrangement::split_region(int id, int new_plane) {
       throw GeometryError("arrangement: a face of a crossed region lies on the new plane");
     }
   }
+  reset_signs(job, scratch);
   if (section.empty()) throw GeometryError("arrangement: a crossed region has no cross-section");
   close_section(section, new_plane, -1, neg.faces);
   close_section(section, new_plane, 1, pos.faces);
-  reset_signs();
   for (Region* r : {&neg, &pos}) {
     r->bounds = {Vec3::Constant(std::numeric_limits<double>::infinity()),
                  Vec3::Constant(-std::numeric_limits<double>::infinity())};
     for (std::size_t at = 0; at < r->faces.size();) {
       const RegionFace face = region_face(r->faces, at);
       for (int i = 0; i < face.count; ++i) {
-        r->bounds.min = r->bounds.min.cwiseMin(vertex(face.vertex(i)));
-        r->bounds.max = r->bounds.max.cwiseMax(vertex(face.vertex(i)));
+        r->bounds.min = r->bounds.min.cwiseMin(job_vertex(face.vertex(i), job));
+        r->bounds.max = r->bounds.max.cwiseMax(job_vertex(face.vertex(i), job));
       }
       at += face.size();
     }
   }
-  regions_[static_cast<std::size_t>(id)] = std::move(neg);
-  return {id, allocate_region(std::move(pos))};
+  return {std::move(neg), std::move(pos)};
 }
 
 int Arrangement::allocate_region(Region region) {
@@ -763,98 +827,263 @@ void Arrangement::reopen_cell(int cell, int plane_id) {
   leaf_of_cell_[static_cast<std::size_t>(cell)] = -1;
 }
 
-int Arrangement::finish_region(int id) {
-  Region& region = regions_[static_cast<std::size_t>(id)];
-  const int cell = static_cast<int>(cells_.size());
-  cells_.push_back({});
-  std::vector<std::uint64_t>& sorted = sorted_scratch_;
-  for (std::size_t at = 0; at < region.faces.size();) {
-    const RegionFace face = region_face(region.faces, at);
-    at += face.size();
-    // The face's identity: its plane and its vertices' planes (the same exact points).
-    sorted.clear();
-    for (int i = 0; i < face.count; ++i)
-      sorted.push_back(vertex_keys_[static_cast<std::size_t>(face.vertex(i))]);
-    const std::uint64_t key = face_key(face.plane, sorted);
-    int shared = -1;
-    faces_by_key_.find(key, [&](int candidate) {
-      ArrangementFace& f = faces_[static_cast<std::size_t>(candidate)];
-      int& side = face.sigma > 0 ? f.cell_positive : f.cell_negative;
-      if (f.plane != face.plane || side >= 0 || f.vertices.size() != sorted.size()) return false;
-      if (!std::all_of(f.vertices.begin(), f.vertices.end(), [&](int v) {
-            return std::binary_search(sorted.begin(), sorted.end(),
-                                      vertex_keys_[static_cast<std::size_t>(v)]);
-          }))
-        return false;
-      side = cell;
-      shared = candidate;
-      return true;
-    });
-    if (shared >= 0) {
-      cells_.back().faces.push_back(shared);
-      continue;
-    }
-    faces_by_key_.insert(key, static_cast<int>(faces_.size()));
-    cells_.back().faces.push_back(static_cast<int>(faces_.size()));
-    // Starting at the vertex of smallest coordinates: the face's polygon, and so its image, are
-    // the same whichever of its two cells was built first.
-    int start = 0;
-    for (int i = 1; i < face.count; ++i) {
-      const Vec3& a = vertex(face.vertex(i));
-      const Vec3& b = vertex(face.vertex(start));
-      if (std::lexicographical_compare(a.data(), a.data() + 3, b.data(), b.data() + 3)) start = i;
-    }
-    ArrangementFace f;
-    f.plane = face.plane;
-    f.vertices.reserve(static_cast<std::size_t>(face.count));
-    f.edge_planes.reserve(static_cast<std::size_t>(face.count));
-    for (int k = 0; k < face.count; ++k) {
-      f.vertices.push_back(face.vertex((start + k) % face.count));
-      f.edge_planes.push_back(face.edge_plane((start + k) % face.count));
-    }
-    // The neighbour across is not built yet: it takes this face when it is.
-    (face.sigma > 0 ? f.cell_positive : f.cell_negative) = cell;
-    faces_.push_back(std::move(f));
-  }
-  cell_bounds_.push_back(region.bounds);
-  region = Region{};
-  free_regions_.push_back(id);
-  return cell;
-}
-
 int Arrangement::construct_cell(const Vec3& p) {
   if (!on_demand_) return locate(p);
-  int node = 0;
-  for (;;) {
-    BspNode n = bsp_[static_cast<std::size_t>(node)];
-    if (n.plane >= 0) {
-      const ArrangementPlane& plane = planes_[static_cast<std::size_t>(n.plane)];
-      node = plane.normal.dot(p) + plane.offset >= 0.0 ? n.positive : n.negative;
-      continue;
+  return construct_cells({p}, {1}).front();
+}
+
+std::vector<int> Arrangement::construct_cells(const std::vector<Vec3>& points,
+                                              const std::vector<char>& wanted) {
+  std::vector<int> cells(points.size(), -1);
+  // Each point's BSP leaf (in parallel; the walk only reads the tree): the points in built cells
+  // are done, the others are grouped by the region they reach, one refinement job per region,
+  // in the order of their first points.
+  std::vector<int> leaves(points.size(), -1);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, points.size(), 256),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      int guess = -1;  // the points come in runs of neighbours
+                      for (std::size_t n = r.begin(); n < r.end(); ++n) {
+                        if (!wanted[n]) continue;
+                        const Vec3& p = points[n];
+                        if (clear_inside(p, guess)) {
+                          cells[n] = guess;
+                          continue;
+                        }
+                        int node = 0;
+                        while (bsp_[static_cast<std::size_t>(node)].plane >= 0) {
+                          const BspNode& b = bsp_[static_cast<std::size_t>(node)];
+                          const ArrangementPlane& plane = planes_[static_cast<std::size_t>(b.plane)];
+                          node = plane.normal.dot(p) + plane.offset >= 0.0 ? b.positive : b.negative;
+                        }
+                        const BspNode& leaf = bsp_[static_cast<std::size_t>(node)];
+                        if (!on_demand_ || leaf.cell >= 0) cells[n] = guess = leaf.cell;
+                        else leaves[n] = node;
+                      }
+                    });
+  std::vector<RefineJob> jobs;
+  std::unordered_map<int, std::size_t> job_of_leaf;
+  for (std::size_t n = 0; n < points.size(); ++n) {
+    const int node = leaves[n];
+    if (node < 0) continue;
+    const auto [it, inserted] = job_of_leaf.try_emplace(node, jobs.size());
+    if (inserted) {
+      const int region = bsp_[static_cast<std::size_t>(node)].region;
+      RefineJob& job = jobs.emplace_back();
+      job.leaf = node;
+      job.regions.push_back(std::move(regions_[static_cast<std::size_t>(region)]));
+      regions_[static_cast<std::size_t>(region)] = Region{};
+      free_regions_.push_back(region);
+      job.nodes.push_back({-1, -1, -1, 0, false, 0, 0});
     }
-    if (n.cell >= 0) return n.cell;
-    // A region not refined yet: the first plane still crossing it splits it; with none left it
-    // is a cell of the full arrangement.
-    Region& region = regions_[static_cast<std::size_t>(n.region)];
+    jobs[it->second].points.push_back(static_cast<int>(n));
+  }
+  // The jobs in parallel: each reads the arrangement and writes only itself.
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, jobs.size(), 1),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      RefineScratch& scratch = refine_scratch_.local();
+                      for (std::size_t j = r.begin(); j < r.end(); ++j)
+                        refine(jobs[j], points, scratch);
+                    });
+  // Then into the tree: ids in job order, so they do not depend on which thread refined what;
+  // the jobs' vertices, nodes and cells are written in parallel (each job its own ids), their
+  // faces shared with the cells across in job order.
+  number(jobs);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, jobs.size(), 1),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      std::vector<std::uint64_t> sorted;
+                      for (std::size_t j = r.begin(); j < r.end(); ++j) place(jobs[j], cells, sorted);
+                    });
+  for (RefineJob& job : jobs) link(job);
+  return cells;
+}
+
+void Arrangement::refine(RefineJob& job, const std::vector<Vec3>& points,
+                         RefineScratch& scratch) const {
+  job.nodes[0].points_end = job.points.size();
+  std::vector<int> pending{0};  // nodes with points and a region to refine
+  while (!pending.empty()) {
+    const auto k = static_cast<std::size_t>(pending.back());
+    pending.pop_back();
+    // The first plane still crossing the region splits it; with none left it is a cell of the
+    // full arrangement.
+    Region& region = job.regions[static_cast<std::size_t>(job.nodes[k].region)];
     int crossing = -1;
     for (; region.next < planes_.size(); ++region.next) {
-      if (region_crossed(region, static_cast<int>(region.next))) {
+      if (region_crossed(region, static_cast<int>(region.next), job, scratch)) {
         crossing = static_cast<int>(region.next++);
         break;
       }
     }
     if (crossing < 0) {
-      const int cell = finish_region(n.region);
-      bsp_[static_cast<std::size_t>(node)].cell = cell;
-      bsp_[static_cast<std::size_t>(node)].region = -1;
-      leaf_of_cell_.push_back(node);
-      return cell;
+      job.nodes[k].cell = true;
+      continue;
     }
-    const auto [neg, pos] = split_region(n.region, crossing);
-    const int first = static_cast<int>(bsp_.size());
-    bsp_.push_back({-1, -1, -1, -1, neg});
-    bsp_.push_back({-1, -1, -1, -1, pos});
-    bsp_[static_cast<std::size_t>(node)] = {crossing, first, first + 1, -1, -1};
+    auto [neg, pos] = split_region(region, crossing, job, scratch);
+    // The negative part takes the parent's slot; each point takes the side the walk down the
+    // tree takes (construct_cell, locate).
+    const int neg_region = job.nodes[k].region;
+    const int pos_region = static_cast<int>(job.regions.size());
+    job.regions[static_cast<std::size_t>(neg_region)] = std::move(neg);
+    job.regions.push_back(std::move(pos));
+    const ArrangementPlane& plane = planes_[static_cast<std::size_t>(crossing)];
+    const auto begin = job.points.begin() + static_cast<std::ptrdiff_t>(job.nodes[k].points_begin);
+    const auto end = job.points.begin() + static_cast<std::ptrdiff_t>(job.nodes[k].points_end);
+    const auto middle = std::partition(begin, end, [&](int n) {
+      const Vec3& p = points[static_cast<std::size_t>(n)];
+      return !(plane.normal.dot(p) + plane.offset >= 0.0);
+    });
+    const std::size_t mid = static_cast<std::size_t>(middle - job.points.begin());
+    const int negative = static_cast<int>(job.nodes.size());
+    job.nodes.push_back({-1, -1, -1, neg_region, false, job.nodes[k].points_begin, mid});
+    job.nodes.push_back({-1, -1, -1, pos_region, false, mid, job.nodes[k].points_end});
+    RefineJob::Node& node = job.nodes[k];
+    node.plane = crossing;
+    node.negative = negative;
+    node.positive = negative + 1;
+    node.region = -1;
+    // A part no point reached stays a region.
+    if (job.nodes[static_cast<std::size_t>(negative) + 1].points_end > mid)
+      pending.push_back(negative + 1);
+    if (mid > node.points_begin) pending.push_back(negative);
+  }
+}
+
+void Arrangement::number(std::vector<RefineJob>& jobs) {
+  // In job order, after the arrangement's: vertices, BSP nodes (node 0 of a job is the leaf it
+  // refined) and cells.
+  std::size_t vertices = vertex_planes_.size(), nodes = bsp_.size(), cells = cells_.size();
+  for (RefineJob& job : jobs) {
+    job.vertex_base = static_cast<int>(vertices);
+    job.node_base = static_cast<int>(nodes) - 1;
+    job.cell_base = static_cast<int>(cells);
+    vertices += job.vertices.size();
+    nodes += job.nodes.size() - 1;
+    cells += static_cast<std::size_t>(std::count_if(job.nodes.begin(), job.nodes.end(),
+                                                    [](const RefineJob::Node& n) { return n.cell; }));
+  }
+  vertex_intervals_.resize(vertices);
+  vertex_planes_.resize(vertices);
+  vertex_approx_.resize(vertices);
+  sign_cache_.resize(vertices, kUnknownSign);
+  vertex_keys_.resize(vertices);
+  bsp_.resize(nodes);
+  cells_.resize(cells);
+  cell_bounds_.resize(cells);
+  leaf_of_cell_.resize(cells);
+}
+
+void Arrangement::place(RefineJob& job, std::vector<int>& cells,
+                        std::vector<std::uint64_t>& sorted) {
+  for (std::size_t i = 0; i < job.vertices.size(); ++i) {
+    const JobVertex& v = job.vertices[i];
+    const std::size_t id = static_cast<std::size_t>(job.vertex_base) + i;
+    vertex_intervals_[id] = v.interval;
+    vertex_planes_[id] = v.planes;
+    vertex_approx_[id] = v.approx;
+    vertex_keys_[id] = point_key(v.planes);
+  }
+  auto bsp_id = [&](int k) { return k == 0 ? job.leaf : job.node_base + k; };
+  int cell = job.cell_base;
+  for (std::size_t k = 0; k < job.nodes.size(); ++k) {
+    const RefineJob::Node& node = job.nodes[k];
+    BspNode& b = bsp_[static_cast<std::size_t>(bsp_id(static_cast<int>(k)))];
+    if (node.plane >= 0) {
+      b = {node.plane, bsp_id(node.negative), bsp_id(node.positive), -1, -1};
+      continue;
+    }
+    Region& region = job.regions[static_cast<std::size_t>(node.region)];
+    for (std::size_t at = 0; at < region.faces.size();) {
+      const RegionFace face = region_face(region.faces, at);
+      for (int i = 0; i < face.count; ++i) {
+        int& v = region.faces[at + 3 + 2 * static_cast<std::size_t>(i)];
+        if (v >= kJobVertex) v = job.vertex_base + (v - kJobVertex);
+      }
+      at += face.size();
+    }
+    if (!node.cell) continue;  // stays a region: link() gives it a slot
+    // A cell: its faces with their keys, ready for link() to share with the cells across.
+    b = {-1, -1, -1, cell, -1};
+    leaf_of_cell_[static_cast<std::size_t>(cell)] = bsp_id(static_cast<int>(k));
+    cell_bounds_[static_cast<std::size_t>(cell)] = region.bounds;
+    for (std::size_t n = node.points_begin; n < node.points_end; ++n)
+      cells[static_cast<std::size_t>(job.points[n])] = cell;
+    for (std::size_t at = 0; at < region.faces.size();) {
+      const RegionFace face = region_face(region.faces, at);
+      at += face.size();
+      // The face's identity: its plane and its vertices' planes (the same exact points).
+      sorted.clear();
+      for (int i = 0; i < face.count; ++i)
+        sorted.push_back(vertex_keys_[static_cast<std::size_t>(face.vertex(i))]);
+      RefineJob::CellFace& out = job.cell_faces.emplace_back();
+      out.key = face_key(face.plane, sorted);
+      out.sigma = face.sigma;
+      out.keys_at = job.sorted_keys.size();
+      job.sorted_keys.insert(job.sorted_keys.end(), sorted.begin(), sorted.end());
+      // Starting at the vertex of smallest coordinates: the face's polygon, and so its image,
+      // are the same whichever of its two cells was built first.
+      int start = 0;
+      for (int i = 1; i < face.count; ++i) {
+        const Vec3& p = vertex(face.vertex(i));
+        const Vec3& q = vertex(face.vertex(start));
+        if (std::lexicographical_compare(p.data(), p.data() + 3, q.data(), q.data() + 3)) start = i;
+      }
+      ArrangementFace& f = out.face;
+      f.plane = face.plane;
+      f.vertices.reserve(static_cast<std::size_t>(face.count));
+      f.edge_planes.reserve(static_cast<std::size_t>(face.count));
+      for (int i = 0; i < face.count; ++i) {
+        f.vertices.push_back(face.vertex((start + i) % face.count));
+        f.edge_planes.push_back(face.edge_plane((start + i) % face.count));
+      }
+      (face.sigma > 0 ? f.cell_positive : f.cell_negative) = cell;
+    }
+    job.cell_faces_end.push_back(job.cell_faces.size());
+    region = Region{};
+    ++cell;
+  }
+}
+
+void Arrangement::link(RefineJob& job) {
+  auto bsp_id = [&](int k) { return k == 0 ? job.leaf : job.node_base + k; };
+  for (std::size_t k = 0; k < job.nodes.size(); ++k) {
+    const RefineJob::Node& node = job.nodes[k];
+    if (node.plane < 0 && !node.cell)
+      bsp_[static_cast<std::size_t>(bsp_id(static_cast<int>(k)))] = {
+          -1, -1, -1, -1, allocate_region(std::move(job.regions[static_cast<std::size_t>(node.region)]))};
+  }
+  // The cells' faces, in order: a face the cell across already has is shared (its side set).
+  std::size_t begin = 0;
+  for (std::size_t c = 0; c < job.cell_faces_end.size(); ++c) {
+    const int cell = job.cell_base + static_cast<int>(c);
+    std::vector<int>& cell_faces = cells_[static_cast<std::size_t>(cell)].faces;
+    for (std::size_t i = begin; i < job.cell_faces_end[c]; ++i) {
+      RefineJob::CellFace& face = job.cell_faces[i];
+      const auto keys_begin = job.sorted_keys.begin() + static_cast<std::ptrdiff_t>(face.keys_at);
+      const auto keys_end = keys_begin + static_cast<std::ptrdiff_t>(face.face.vertices.size());
+      int shared = -1;
+      faces_by_key_.find(face.key, [&](int candidate) {
+        ArrangementFace& f = faces_[static_cast<std::size_t>(candidate)];
+        int& side = face.sigma > 0 ? f.cell_positive : f.cell_negative;
+        if (f.plane != face.face.plane || side >= 0 || f.vertices.size() != face.face.vertices.size())
+          return false;
+        if (!std::all_of(f.vertices.begin(), f.vertices.end(), [&](int v) {
+              return std::binary_search(keys_begin, keys_end,
+                                        vertex_keys_[static_cast<std::size_t>(v)]);
+            }))
+          return false;
+        side = cell;
+        shared = candidate;
+        return true;
+      });
+      if (shared >= 0) {
+        cell_faces.push_back(shared);
+        continue;
+      }
+      faces_by_key_.insert(face.key, static_cast<int>(faces_.size()));
+      cell_faces.push_back(static_cast<int>(faces_.size()));
+      faces_.push_back(std::move(face.face));
+    }
+    begin = job.cell_faces_end[c];
   }
 }
 

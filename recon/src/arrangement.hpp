@@ -27,14 +27,20 @@
 // region again (its faces with one id per point, the planes from the new one on still to try),
 // its faces the plane crosses are retired, the others are kept for whichever part is built next
 // to them; regions not refined yet meet the new plane when a query reaches them.
-// Left: cells are built on one thread, and each split builds both halves of a region though
-// most siblings are never asked for. Refining the regions a batch of points reaches in
-// parallel (per BSP leaf, ids fixed by the batch order) cost 35-45 % more time on one thread
-// and 10-30 MB more at 200 random slices than this serial refinement, and keeping a parent
-// instead of its unasked half costs memory.
+// In parallel (construct_cells): the points of a batch are walked down the tree, grouped by the
+// region they reach, and each region is refined for its points on one thread into a job of its
+// own (its vertices, regions and nodes; the arrangement is only read). The jobs are then put
+// into the tree with ids in job order, so that cells, faces, vertices and their ids are the
+// same for any number of threads: the ids are counted first, the jobs' vertices, nodes and cell
+// faces written in parallel, and the faces shared with the cells across them in job order on
+// one thread (link(): about a seventh of the cell construction at 100 random slices).
+// Left: each split builds both halves of a region though most siblings are never asked for,
+// and the first batch of an update reaches one region, refined on one thread.
 #include <CGAL/Exact_predicates_exact_constructions_kernel.h>
 #include <CGAL/Interval_nt.h>
 #include <CGAL/Simple_cartesian.h>
+
+#include <tbb/enumerable_thread_specific.h>
 
 #include <array>
 #include <cstdint>
@@ -90,8 +96,15 @@ class Arrangement {
   bool on_demand() const { return on_demand_; }
   /// On demand: the cell of the full arrangement containing p (p inside the box), built with its
   /// faces on first use, found in O(depth) afterwards. Points on a plane may go to either side,
-  /// as locate(). Not thread-safe: call it from one thread, then read cells concurrently.
+  /// as locate(). Not thread-safe (nor is construct_cells): call it from one thread, then read
+  /// cells concurrently.
   int construct_cell(const Vec3& p);
+  /// construct_cell for every point with wanted[n] != 0 (the others get -1). The regions the
+  /// points reach are refined in parallel on the calling task arena's threads, each with its
+  /// points on one thread; the results are then put into the tree in the order of the batch, so
+  /// cells, faces, vertices and their ids do not depend on the number of threads. Without
+  /// on-demand cells, the points are located.
+  std::vector<int> construct_cells(const std::vector<Vec3>& points, const std::vector<char>& wanted);
   /// construct_cell(p) from a guess (a built cell or -1): the guess when p lies inside it clear
   /// of its faces' planes, as locate(p, guess). Sweeps make the tree as deep as the planes.
   int construct_cell(const Vec3& p, int guess);
@@ -170,6 +183,55 @@ class Arrangement {
   struct DirectedEdge {
     int from, to, plane;
   };
+  // On demand: a vertex a refinement job made (construct_cells): its region faces name it
+  // kJobVertex + its index in the job until the job's vertices are numbered after the others.
+  static constexpr int kJobVertex = 1 << 30;
+  struct JobVertex {
+    IntervalKernel::Point_3 interval;
+    std::array<int, 3> planes;
+    Vec3 approx;
+  };
+  // On demand: the refinement of one BSP leaf for the points of a batch that reach it, done on
+  // one thread: it only reads the arrangement. nodes[0] is the leaf; a node is split by `plane`
+  // (children `negative`, `positive`) or is a leaf: a cell, with the points
+  // points[points_begin, points_end), or a region no point reached.
+  struct RefineJob {
+    struct Node {
+      int plane = -1;
+      int negative = -1, positive = -1;
+      int region = -1;  // index in `regions`
+      bool cell = false;
+      std::size_t points_begin = 0, points_end = 0;
+    };
+    int leaf = -1;  // the BSP node
+    std::vector<int> points;
+    std::vector<Node> nodes;
+    std::vector<Region> regions;
+    std::vector<JobVertex> vertices;
+    std::vector<std::int8_t> vertex_signs;  // side-of-plane cache of `vertices`
+    // Set by number(): the ids of its first vertex, BSP node (minus one: node 0 is `leaf`) and
+    // cell in the arrangement.
+    int vertex_base = 0, node_base = 0, cell_base = 0;
+    // Set by place(): the faces of its cells in node order, each with its key and its vertices'
+    // keys (sorted, in sorted_keys from keys_at), and where each cell's faces end.
+    struct CellFace {
+      std::uint64_t key = 0;
+      int sigma = 0;
+      std::size_t keys_at = 0;
+      ArrangementFace face;
+    };
+    std::vector<CellFace> cell_faces;
+    std::vector<std::size_t> cell_faces_end;
+    std::vector<std::uint64_t> sorted_keys;
+  };
+  // On demand: one thread's scratch: side-of-plane signs of the arrangement's vertices (reset
+  // after each test) and a split's working lists.
+  struct RefineScratch {
+    std::vector<std::int8_t> signs;
+    std::vector<int> touched;
+    std::vector<std::pair<std::uint64_t, int>> split_vertices;  // per split: edge -> crossing
+    std::vector<DirectedEdge> section;
+  };
   // On demand: face ids by 64-bit key, several per key; open addressing with linear probing (a
   // std::unordered_multimap spent a tenth of the run at 200 random slices in its node chains).
   class FaceTable {
@@ -212,22 +274,41 @@ class Arrangement {
   static RegionFace region_face(const std::vector<int>& faces, std::size_t at) {
     return {faces[at], faces[at + 1], faces[at + 2], faces.data() + at + 3};
   }
+  // On demand: refines job.nodes[0] until each of its points is in a cell (a region no plane
+  // crosses); const but for the job and the thread's scratch.
+  void refine(RefineJob& job, const std::vector<Vec3>& points, RefineScratch& scratch) const;
+  // On demand: side(plane, v) for the arrangement's vertices and the job's, cached until
+  // reset_signs(job, scratch).
+  int job_side(int plane_id, int vertex_id, RefineJob& job, RefineScratch& scratch) const;
+  static void reset_signs(RefineJob& job, RefineScratch& scratch);
+  const Vec3& job_vertex(int vertex_id, const RefineJob& job) const {
+    return vertex_id >= kJobVertex ? job.vertices[static_cast<std::size_t>(vertex_id - kJobVertex)].approx
+                                   : vertex(vertex_id);
+  }
   // On demand: whether `plane` has vertices of `region` strictly on both sides.
-  bool region_crossed(const Region& region, int plane);
-  // On demand: splits region `id` by `plane` into two regions (ids returned as negative,
-  // positive); the parent's slot is reused for the negative part.
-  std::pair<int, int> split_region(int id, int plane);
+  bool region_crossed(const Region& region, int plane, RefineJob& job,
+                      RefineScratch& scratch) const;
+  // On demand: the parts (negative, positive) of `old` on each side of `plane`.
+  std::pair<Region, Region> split_region(const Region& old, int plane, RefineJob& job,
+                                         RefineScratch& scratch) const;
   // On demand: appends the parts of `face` on each side of `new_plane` to `pos` and `neg`;
   // returns the chord as an edge of the cross-section (counter-clockwise about the new plane).
   DirectedEdge split_region_face(const RegionFace& face, int new_plane, std::vector<int>& pos,
-                                 std::vector<int>& neg);
+                                 std::vector<int>& neg, RefineJob& job,
+                                 RefineScratch& scratch) const;
+  // On demand: puts refined jobs into the tree in three steps. number(): ids in job order after
+  // the arrangement's (vertices, BSP nodes, cells; node order within a job), the arrays grown
+  // to hold them. place() (in parallel, one job per thread, writing only the job's ids): the
+  // vertices, the nodes, the cells' bounds and faces, cells[n] for the job's points. link() (in
+  // job order): the leaves no point reached become regions, and each cell's faces are shared
+  // with the cell across when that one is built (by key), added otherwise.
+  void number(std::vector<RefineJob>& jobs);
+  void place(RefineJob& job, std::vector<int>& cells, std::vector<std::uint64_t>& sorted);
+  void link(RefineJob& job);
   // On demand: the cross-section's edges chained into the new face, appended to `out` with
   // side `sigma`.
   void close_section(const std::vector<DirectedEdge>& section, int new_plane, int sigma,
                      std::vector<int>& out) const;
-  // On demand: turns a region no plane crosses into a cell; a face the neighbour across it
-  // already built is shared.
-  int finish_region(int id);
   // On demand: the reopening of the built cells `plane` crosses (insert_plane).
   std::vector<int> reopen_crossed_cells(int plane);
   // On demand: turns built cell `cell` back into a region that the planes from `next` on may
@@ -238,14 +319,23 @@ class Arrangement {
   static std::uint64_t face_key(int plane, std::vector<std::uint64_t>& keys);
   // On demand: a new region slot.
   int allocate_region(Region region);
-  int split_vertex(int a, int b, int face_plane, int edge_plane, int new_plane);
+  int split_vertex(int a, int b, int face_plane, int edge_plane, int new_plane, RefineJob& job,
+                   RefineScratch& scratch) const;
+  // The interval approximation of the intersection of three planes (as ExactKernel computes
+  // it) and its double point. Throws GeometryError when the planes do not meet in one point.
+  std::pair<IntervalKernel::Point_3, Vec3> intersection_point(int a, int b, int c) const;
+  // The exact side of the point with this approximation on these three planes.
+  int point_side(int plane_id, const IntervalKernel::Point_3& interval,
+                 const std::array<int, 3>& planes) const;
   // The exact intersection of three planes as a new vertex (on the last: sign 0 cached).
   int plane_vertex(int face_plane, int edge_plane, int new_plane);
   void reset_signs();
   // Whether p lies inside `cell` (any id) farther from its faces' planes than rounding reaches.
   bool clear_inside(const Vec3& p, int cell) const;
-  // A vertex at the intersection of three planes; `approximation` encloses the exact point.
-  int add_vertex(const IntervalKernel::Point_3& approximation, const std::array<int, 3>& planes);
+  // A vertex at the intersection of three planes; `approximation` encloses the exact point,
+  // `approx` is its double point.
+  int add_vertex(const IntervalKernel::Point_3& approximation, const std::array<int, 3>& planes,
+                 const Vec3& approx);
   // side(), cached per vertex until reset_signs().
   int plane_side(int plane_id, int vertex_id);
   // Whether two vertices are the same exact point.
@@ -279,8 +369,7 @@ class Arrangement {
   // Built faces by a hash of their plane and sorted vertex keys: the two cells on a face share
   // it (and its image) when both are built.
   FaceTable faces_by_key_;
-  std::vector<std::pair<std::uint64_t, int>> split_vertices_;  // per split: edge -> crossing vertex
-  std::vector<DirectedEdge> section_scratch_;
+  tbb::enumerable_thread_specific<RefineScratch> refine_scratch_;
   std::vector<std::uint64_t> sorted_scratch_;
   std::size_t reopened_cells_ = 0;
   std::vector<int> retired_faces_;

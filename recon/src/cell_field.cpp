@@ -345,28 +345,43 @@ void CellField::build_images(const std::vector<int>& faces) {
                           build_face_image(f, buffers[c].points, buffers[c].trees);
                         }
                     });
+  // Appended in parallel too: each chunk's place follows from the sizes of those before it.
+  std::vector<std::size_t> point_bases(chunks + 1, points_.size());
+  std::vector<std::size_t> tree_bases(chunks + 1, tree_nodes_.size());
   for (std::size_t c = 0; c < chunks; ++c) {
-    const auto point_base = static_cast<std::uint32_t>(points_.size());
-    const auto tree_base = static_cast<std::int32_t>(tree_nodes_.size());
-    points_.insert(points_.end(), buffers[c].points.begin(), buffers[c].points.end());
-    for (ChainNode node : buffers[c].trees) {
-      if (node.left >= 0) node.left += tree_base;
-      if (node.right >= 0) node.right += tree_base;
-      tree_nodes_.push_back(node);
-    }
-    buffers[c] = Buffers{};
-    auto shift = [&](FaceImage::Part& part) {
-      part.begin += point_base;
-      if (part.tree_count != 0) part.tree_root += static_cast<std::uint32_t>(tree_base);
-    };
-    for (const int f : chunk_faces(c)) {
-      FaceImage& image = images_[static_cast<std::size_t>(f)];
-      image.polygon_begin += point_base;
-      for (FaceImage::Part& part : image.parts) shift(part);
-      for (FaceImage::Part& part : image.unknown_parts) shift(part);
-      for (FaceImage::Part& part : image.known_parts) shift(part);
-    }
+    point_bases[c + 1] = point_bases[c] + buffers[c].points.size();
+    tree_bases[c + 1] = tree_bases[c] + buffers[c].trees.size();
   }
+  points_.resize(point_bases[chunks]);
+  tree_nodes_.resize(tree_bases[chunks]);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunks, 1),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      for (std::size_t c = r.begin(); c < r.end(); ++c) {
+                        const auto point_base = static_cast<std::uint32_t>(point_bases[c]);
+                        const auto tree_base = static_cast<std::int32_t>(tree_bases[c]);
+                        std::copy(buffers[c].points.begin(), buffers[c].points.end(),
+                                  points_.begin() + static_cast<std::ptrdiff_t>(point_base));
+                        auto tree = tree_nodes_.begin() + tree_base;
+                        for (ChainNode node : buffers[c].trees) {
+                          if (node.left >= 0) node.left += tree_base;
+                          if (node.right >= 0) node.right += tree_base;
+                          *tree++ = node;
+                        }
+                        buffers[c] = Buffers{};
+                        auto shift = [&](FaceImage::Part& part) {
+                          part.begin += point_base;
+                          if (part.tree_count != 0)
+                            part.tree_root += static_cast<std::uint32_t>(tree_base);
+                        };
+                        for (const int f : chunk_faces(c)) {
+                          FaceImage& image = images_[static_cast<std::size_t>(f)];
+                          image.polygon_begin += point_base;
+                          for (FaceImage::Part& part : image.parts) shift(part);
+                          for (FaceImage::Part& part : image.unknown_parts) shift(part);
+                          for (FaceImage::Part& part : image.known_parts) shift(part);
+                        }
+                      }
+                    });
 }
 
 void CellField::add_tree(FaceImage::Part& part, const std::vector<Vec2>& points,

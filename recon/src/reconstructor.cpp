@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <exception>
 #include <set>
 #include <stdexcept>
 
@@ -170,11 +171,11 @@ struct Reconstructor::State {
     return "label_" + std::to_string(id);
   }
 
-  // Inserts one entry's plane (prepared against the current box and materials); returns the
-  // cells it created or split and adds the older faces it split to `split_faces`.
-  std::vector<int> insert(const Entry& entry, std::vector<int>& split_faces) {
+  // Inserts one slice's plane (prepared against the current box and materials, as the field's
+  // next slice); returns the cells it created or split and adds the older faces it split to
+  // `split_faces`.
+  std::vector<int> insert(PreparedSlice prepared, std::vector<int>& split_faces) {
     const std::size_t index = field->slices().size();
-    PreparedSlice prepared = prepare_slice(entry.slice, index, material_ids, box);
     const Vec3 normal = prepared.u.cross(prepared.v);
     const double offset = -normal.dot(prepared.origin);
     field->add_slice(std::move(prepared));
@@ -197,11 +198,27 @@ struct Reconstructor::State {
     arrangement = std::make_unique<Arrangement>(box, on_demand);
     field = std::make_unique<CellField>(*arrangement, static_cast<int>(material_ids.size()));
     {
-      Progress progress("arrangement", list.size());
+      // The slices are prepared in parallel (each depends on itself alone; the first error in
+      // slice order is thrown), their planes inserted in order.
+      std::vector<const Entry*> kept;
+      for (const Entry& e : list)
+        if (!e.duplicate) kept.push_back(&e);
+      std::vector<PreparedSlice> prepared(kept.size());
+      std::vector<std::exception_ptr> errors(kept.size());
+      tbb::parallel_for(std::size_t{0}, kept.size(), [&](std::size_t k) {
+        try {
+          prepared[k] = prepare_slice(kept[k]->slice, k, material_ids, box);
+        } catch (...) {
+          errors[k] = std::current_exception();
+        }
+      });
+      for (const std::exception_ptr& error : errors)
+        if (error) std::rethrow_exception(error);
+      Progress progress("arrangement", prepared.size());
       std::size_t done = 0;
       std::vector<int> split_faces;  // all faces are new to the field below
-      for (const Entry& e : list) {
-        if (!e.duplicate) insert(e, split_faces);
+      for (PreparedSlice& slice : prepared) {
+        insert(std::move(slice), split_faces);
         progress.update(++done);
       }
     }
@@ -327,7 +344,9 @@ UpdateStats Reconstructor::update() {
         std::vector<int> changed, split_faces;
         for (std::size_t k = s.entries.size(); k < next.size(); ++k) {
           if (next[k].duplicate) continue;
-          const std::vector<int> cells = s.insert(next[k], split_faces);
+          const std::vector<int> cells = s.insert(
+              prepare_slice(next[k].slice, s.field->slices().size(), s.material_ids, s.box),
+              split_faces);
           changed.insert(changed.end(), cells.begin(), cells.end());
         }
         std::sort(changed.begin(), changed.end());
@@ -378,12 +397,26 @@ UpdateStats Reconstructor::update() {
   // arena too: contour_keys sorts in parallel, and --threads bounds every stage.
   const std::vector<PreparedSlice>& slices = s.field->slices();
   const Grid grid = make_grid(s.box, s.octree.max_depth);
+  // The new slices' keys and samples in parallel (each depends on its slice alone), then merged:
+  // the keys pairwise in a tree (a union of sorted sets: the same whatever the order), the
+  // samples in slice order.
   arena.execute([&] {
-    for (; s.contour_slices < slices.size(); ++s.contour_slices) {
-      const PreparedSlice& slice = slices[s.contour_slices];
-      merge_contour_keys(s.contours, contour_keys(grid, s.octree, contour_segments(slice)));
-      add_thin_region_samples(slice, grid.cell_size, s.region_samples);
-    }
+    const std::size_t first = s.contour_slices, count = slices.size() - first;
+    std::vector<ContourKeys> keys(count);
+    std::vector<std::vector<RegionSample>> samples(count);
+    tbb::parallel_for(std::size_t{0}, count, [&](std::size_t k) {
+      keys[k] = contour_keys(grid, s.octree, contour_segments(slices[first + k]));
+      add_thin_region_samples(slices[first + k], grid.cell_size, samples[k]);
+    });
+    for (std::size_t width = 1; width < count; width *= 2)
+      tbb::parallel_for(std::size_t{0}, (count + 2 * width - 1) / (2 * width), [&](std::size_t i) {
+        const std::size_t a = 2 * width * i;
+        if (a + width < count) merge_contour_keys(keys[a], keys[a + width]);
+      });
+    if (count > 0) merge_contour_keys(s.contours, keys[0]);
+    for (const std::vector<RegionSample>& more : samples)
+      s.region_samples.insert(s.region_samples.end(), more.begin(), more.end());
+    s.contour_slices = slices.size();
   });
 
   const CellField& field = *s.field;
@@ -395,18 +428,15 @@ UpdateStats Reconstructor::update() {
   const BatchEvaluator evaluate = [&](const std::vector<Vec3>& points, double* values,
                                       std::uint64_t* tags) {
     if (s.arrangement->on_demand()) {
-      // The cells of the points are built first (one thread: the lazy tree changes), then
-      // evaluated in parallel like those of the whole arrangement.
+      // The cells of the points are built first (their regions refined in parallel, the cells
+      // made in a fixed order), then evaluated in parallel like those of the whole arrangement.
       Stopwatch clock;
-      point_cells.resize(points.size());
       const Box3& box = s.box;
-      int guess = -1;  // the points come in runs of neighbours
-      for (std::size_t n = 0; n < points.size(); ++n) {
-        const Vec3& p = points[n];
-        const bool inside =
-            (p.array() > box.min.array()).all() && (p.array() < box.max.array()).all();
-        point_cells[n] = inside ? guess = s.arrangement->construct_cell(p, guess) : -1;
-      }
+      std::vector<char> inside(points.size());
+      for (std::size_t n = 0; n < points.size(); ++n)
+        inside[n] = (points[n].array() > box.min.array()).all() &&
+                    (points[n].array() < box.max.array()).all();
+      arena.execute([&] { point_cells = s.arrangement->construct_cells(points, inside); });
       // Values are tagged with the cells built now and this update (their generation).
       s.cell_generation.resize(s.arrangement->cell_count(), s.generation);
       stats.arrangement_s += clock.seconds();

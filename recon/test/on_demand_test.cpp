@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
 #include <tbb/task_scheduler_observer.h>
 
 #include <algorithm>
@@ -11,8 +12,11 @@
 #include <atomic>
 #include <cmath>
 #include <map>
+#include <memory>
 #include <numbers>
 #include <random>
+#include <string>
+#include <vector>
 
 #include "arrangement.hpp"
 #include "sonoshape/recon/reconstruct.hpp"
@@ -172,6 +176,87 @@ TEST(OnDemandArrangement, RandomPlanesGiveTheWholeArrangementsCells) {
     planes.push_back({n, -n.dot(p)});
   }
   expect_same_cells(planes, random_points(rng, 400));
+}
+
+// construct_cells refines the regions a batch of points reaches in parallel: the cells, faces
+// and vertices, ids included, are the same for any number of threads, and each point's cell is
+// the one construct_cell builds for it alone (and so the whole arrangement's).
+TEST(OnDemandArrangement, BatchesGiveTheSameCellsForAnyThreadCount) {
+  // TBB allows as many workers as cores by default: let 16 threads run on a smaller machine.
+  const tbb::global_control workers(tbb::global_control::max_allowed_parallelism, 16);
+  std::mt19937_64 rng(11);
+  std::normal_distribution<double> gauss;
+  std::uniform_real_distribution<double> uniform(-0.8, 0.8);
+  std::vector<Plane> planes;
+  for (int i = 0; i < 24; ++i) {
+    const Vec3 n(gauss(rng), gauss(rng), gauss(rng));
+    const Vec3 p(uniform(rng), uniform(rng), uniform(rng));
+    planes.push_back({n, -n.dot(p)});
+  }
+  // Three batches, the later ones partly in cells built before; every seventh point not wanted.
+  std::vector<std::vector<Vec3>> batches;
+  for (int b = 0; b < 3; ++b) batches.push_back(random_points(rng, 500));
+  batches[2].insert(batches[2].end(), batches[0].begin(), batches[0].begin() + 100);
+  auto wanted = [](const std::vector<Vec3>& batch) {
+    std::vector<char> w(batch.size(), 1);
+    for (std::size_t n = 0; n < w.size(); n += 7) w[n] = 0;
+    return w;
+  };
+  const std::vector<int> thread_counts{1, 2, 4, 16};
+  std::vector<std::unique_ptr<Arrangement>> arrangements;
+  std::vector<std::vector<std::vector<int>>> cells(thread_counts.size());
+  for (std::size_t t = 0; t < thread_counts.size(); ++t) {
+    arrangements.push_back(std::make_unique<Arrangement>(kUnitBox, true));
+    Arrangement& arr = *arrangements.back();
+    for (std::size_t i = 0; i < planes.size(); ++i)
+      arr.insert_plane(planes[i].normal, planes[i].offset, static_cast<int>(i));
+    tbb::task_arena arena(thread_counts[t]);
+    for (const std::vector<Vec3>& batch : batches)
+      arena.execute([&] { cells[t].push_back(arr.construct_cells(batch, wanted(batch))); });
+  }
+  const Arrangement& one = *arrangements.front();
+  for (std::size_t t = 1; t < thread_counts.size(); ++t) {
+    SCOPED_TRACE(std::to_string(thread_counts[t]) + " threads");
+    const Arrangement& arr = *arrangements[t];
+    EXPECT_EQ(cells[t], cells[0]);
+    ASSERT_EQ(arr.cell_count(), one.cell_count());
+    ASSERT_EQ(arr.face_count(), one.face_count());
+    ASSERT_EQ(arr.vertex_count(), one.vertex_count());
+    ASSERT_EQ(arr.region_count(), one.region_count());
+    for (std::size_t c = 0; c < one.cell_count(); ++c)
+      EXPECT_EQ(arr.cell(static_cast<int>(c)).faces, one.cell(static_cast<int>(c)).faces);
+    for (std::size_t f = 0; f < one.face_count(); ++f) {
+      const ArrangementFace& a = arr.face(static_cast<int>(f));
+      const ArrangementFace& b = one.face(static_cast<int>(f));
+      EXPECT_EQ(a.plane, b.plane);
+      EXPECT_EQ(a.vertices, b.vertices);
+      EXPECT_EQ(a.edge_planes, b.edge_planes);
+      EXPECT_EQ(a.cell_positive, b.cell_positive);
+      EXPECT_EQ(a.cell_negative, b.cell_negative);
+    }
+    for (std::size_t v = 0; v < one.vertex_count(); ++v)
+      EXPECT_EQ(arr.vertex(static_cast<int>(v)), one.vertex(static_cast<int>(v)));
+  }
+  // One point at a time: the same cell for each point.
+  Arrangement single(kUnitBox, true);
+  for (std::size_t i = 0; i < planes.size(); ++i)
+    single.insert_plane(planes[i].normal, planes[i].offset, static_cast<int>(i));
+  for (std::size_t b = 0; b < batches.size(); ++b) {
+    const std::vector<char> w = wanted(batches[b]);
+    for (std::size_t n = 0; n < batches[b].size(); ++n) {
+      if (!w[n]) {
+        EXPECT_EQ(cells[0][b][n], -1);
+        continue;
+      }
+      const int c = cells[0][b][n];
+      ASSERT_GE(c, 0);
+      EXPECT_FALSE(one.reopened(c));
+      expect_closed(one, c);
+      EXPECT_EQ(shape_of(one, c), shape_of(single, single.construct_cell(batches[b][n])))
+          << "at " << batches[b][n].transpose();
+    }
+  }
+  EXPECT_EQ(one.built_cell_count(), single.built_cell_count());
 }
 
 TEST(OnDemandArrangement, PlanesAfterBuiltCellsReopenOnlyTheCellsTheyCross) {
