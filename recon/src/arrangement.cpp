@@ -3,6 +3,7 @@
 #include <CGAL/FPU.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
 
 #include <algorithm>
 #include <array>
@@ -710,16 +711,21 @@ int Arrangement::allocate_region(Region region) {
   return static_cast<int>(regions_.size()) - 1;
 }
 
+void Arrangement::FaceTable::reserve(std::size_t more) {
+  // Twice as many slots (at least 1024) until they are enough, the erased ones dropped.
+  std::size_t size = std::max<std::size_t>(1024, slots_.size());
+  while (2 * (used_ + more) > size) size *= 2;
+  if (size == slots_.size()) return;
+  std::vector<Slot> old = std::move(slots_);
+  slots_.assign(size, Slot{});
+  shift_ = 64 - std::countr_zero(slots_.size());
+  used_ = 0;
+  for (const Slot& slot : old)
+    if (slot.face >= 0) insert(slot.key, slot.face);
+}
+
 void Arrangement::FaceTable::insert(std::uint64_t key, int face) {
-  if (2 * (used_ + 1) > slots_.size()) {
-    // Twice as many slots (at least 1024), the erased ones dropped.
-    std::vector<Slot> old = std::move(slots_);
-    slots_.assign(std::max<std::size_t>(1024, 2 * old.size()), Slot{});
-    shift_ = 64 - std::countr_zero(slots_.size());
-    used_ = 0;
-    for (const Slot& slot : old)
-      if (slot.face >= 0) insert(slot.key, slot.face);
-  }
+  if (2 * (used_ + 1) > slots_.size()) reserve(1);
   std::size_t i = slot_of(key);
   while (slots_[i].face != kEmpty) i = (i + 1) & (slots_.size() - 1);
   slots_[i] = {key, face};
@@ -893,7 +899,7 @@ std::vector<int> Arrangement::construct_cells(const std::vector<Vec3>& points,
                       std::vector<std::uint64_t> sorted;
                       for (std::size_t j = r.begin(); j < r.end(); ++j) place(jobs[j], cells, sorted);
                     });
-  for (RefineJob& job : jobs) link(job);
+  link(jobs);
   return cells;
 }
 
@@ -1017,6 +1023,7 @@ void Arrangement::place(RefineJob& job, std::vector<int>& cells,
       RefineJob::CellFace& out = job.cell_faces.emplace_back();
       out.key = face_key(face.plane, sorted);
       out.sigma = face.sigma;
+      out.cell = cell;
       out.keys_at = job.sorted_keys.size();
       job.sorted_keys.insert(job.sorted_keys.end(), sorted.begin(), sorted.end());
       // Starting at the vertex of smallest coordinates: the face's polygon, and so its image,
@@ -1043,48 +1050,133 @@ void Arrangement::place(RefineJob& job, std::vector<int>& cells,
   }
 }
 
-void Arrangement::link(RefineJob& job) {
-  auto bsp_id = [&](int k) { return k == 0 ? job.leaf : job.node_base + k; };
-  for (std::size_t k = 0; k < job.nodes.size(); ++k) {
-    const RefineJob::Node& node = job.nodes[k];
-    if (node.plane < 0 && !node.cell)
-      bsp_[static_cast<std::size_t>(bsp_id(static_cast<int>(k)))] = {
-          -1, -1, -1, -1, allocate_region(std::move(job.regions[static_cast<std::size_t>(node.region)]))};
-  }
-  // The cells' faces, in order: a face the cell across already has is shared (its side set).
-  std::size_t begin = 0;
-  for (std::size_t c = 0; c < job.cell_faces_end.size(); ++c) {
-    const int cell = job.cell_base + static_cast<int>(c);
-    std::vector<int>& cell_faces = cells_[static_cast<std::size_t>(cell)].faces;
-    for (std::size_t i = begin; i < job.cell_faces_end[c]; ++i) {
-      RefineJob::CellFace& face = job.cell_faces[i];
-      const auto keys_begin = job.sorted_keys.begin() + static_cast<std::ptrdiff_t>(face.keys_at);
-      const auto keys_end = keys_begin + static_cast<std::ptrdiff_t>(face.face.vertices.size());
-      int shared = -1;
-      faces_by_key_.find(face.key, [&](int candidate) {
-        ArrangementFace& f = faces_[static_cast<std::size_t>(candidate)];
+void Arrangement::link(std::vector<RefineJob>& jobs) {
+  // The leaves no point reached become regions again.
+  for (RefineJob& job : jobs)
+    for (std::size_t k = 0; k < job.nodes.size(); ++k) {
+      const RefineJob::Node& node = job.nodes[k];
+      if (node.plane >= 0 || node.cell) continue;
+      const int id = allocate_region(std::move(job.regions[static_cast<std::size_t>(node.region)]));
+      bsp_[static_cast<std::size_t>(k == 0 ? job.leaf : job.node_base + static_cast<int>(k))] = {
+          -1, -1, -1, -1, id};
+    }
+  // The cells' faces, numbered g in job order. What adding them one after the other would do
+  // (find a face under the key whose side towards the cell is free and whose vertices have the
+  // same keys, and share it; else add the face and its key), in four steps:
+  std::vector<std::size_t> face_base(jobs.size() + 1, 0);
+  for (std::size_t j = 0; j < jobs.size(); ++j)
+    face_base[j + 1] = face_base[j] + jobs[j].cell_faces.size();
+  const std::size_t count = face_base.back();
+  auto job_face = [&](std::size_t g, std::size_t j) -> RefineJob::CellFace& {
+    return jobs[j].cell_faces[g - face_base[j]];
+  };
+  auto keys_of = [&](const RefineJob& job, const RefineJob::CellFace& face) {
+    const auto begin = job.sorted_keys.begin() + static_cast<std::ptrdiff_t>(face.keys_at);
+    return std::pair{begin, begin + static_cast<std::ptrdiff_t>(face.face.vertices.size())};
+  };
+  // 1. (in parallel; only reads) the faces built before that each face shares: one cell per
+  //    side of a face, so no two new faces take the same side.
+  std::vector<int> shares_old(count, -1);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, jobs.size(), 1),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      for (std::size_t j = r.begin(); j < r.end(); ++j)
+                        for (std::size_t i = 0; i < jobs[j].cell_faces.size(); ++i) {
+                          const RefineJob::CellFace& face = jobs[j].cell_faces[i];
+                          const auto [keys_begin, keys_end] = keys_of(jobs[j], face);
+                          faces_by_key_.find(face.key, [&](int candidate) {
+                            const ArrangementFace& f = faces_[static_cast<std::size_t>(candidate)];
+                            const int side = face.sigma > 0 ? f.cell_positive : f.cell_negative;
+                            if (f.plane != face.face.plane || side >= 0 ||
+                                f.vertices.size() != face.face.vertices.size())
+                              return false;
+                            if (!std::all_of(f.vertices.begin(), f.vertices.end(), [&](int v) {
+                                  return std::binary_search(
+                                      keys_begin, keys_end, vertex_keys_[static_cast<std::size_t>(v)]);
+                                }))
+                              return false;
+                            shares_old[face_base[j] + i] = candidate;
+                            return true;
+                          });
+                        }
+                    });
+  // 2. The others by key (a parallel sort): within a key, in order, a face shares the first
+  //    earlier one that it would have found (its side free, the same plane and vertex keys),
+  //    which gets the cell on that side.
+  struct Keyed {
+    std::uint64_t key;
+    std::uint32_t job;
+    std::uint32_t g;
+    bool operator<(const Keyed& o) const { return key != o.key ? key < o.key : g < o.g; }
+  };
+  std::vector<Keyed> keyed;
+  for (std::size_t j = 0; j < jobs.size(); ++j)
+    for (std::size_t i = 0; i < jobs[j].cell_faces.size(); ++i)
+      if (shares_old[face_base[j] + i] < 0)
+        keyed.push_back({jobs[j].cell_faces[i].key, static_cast<std::uint32_t>(j),
+                         static_cast<std::uint32_t>(face_base[j] + i)});
+  tbb::parallel_sort(keyed.begin(), keyed.end());
+  std::vector<std::int64_t> shares_new(count, -1);  // g of the face shared
+  for (std::size_t a = 0; a < keyed.size();) {
+    std::size_t b = a + 1;
+    while (b < keyed.size() && keyed[b].key == keyed[a].key) ++b;
+    for (std::size_t later = a + 1; later < b; ++later) {
+      RefineJob::CellFace& face = job_face(keyed[later].g, keyed[later].job);
+      const auto [keys_begin, keys_end] = keys_of(jobs[keyed[later].job], face);
+      for (std::size_t earlier = a; earlier < later; ++earlier) {
+        if (shares_new[keyed[earlier].g] >= 0) continue;  // not added: not found
+        RefineJob::CellFace& other = job_face(keyed[earlier].g, keyed[earlier].job);
+        ArrangementFace& f = other.face;
         int& side = face.sigma > 0 ? f.cell_positive : f.cell_negative;
         if (f.plane != face.face.plane || side >= 0 || f.vertices.size() != face.face.vertices.size())
-          return false;
-        if (!std::all_of(f.vertices.begin(), f.vertices.end(), [&](int v) {
-              return std::binary_search(keys_begin, keys_end,
-                                        vertex_keys_[static_cast<std::size_t>(v)]);
-            }))
-          return false;
-        side = cell;
-        shared = candidate;
-        return true;
-      });
-      if (shared >= 0) {
-        cell_faces.push_back(shared);
-        continue;
+          continue;
+        const auto [other_begin, other_end] = keys_of(jobs[keyed[earlier].job], other);
+        if (!std::all_of(other_begin, other_end,
+                         [&](std::uint64_t k) { return std::binary_search(keys_begin, keys_end, k); }))
+          continue;
+        side = face.cell;
+        shares_new[keyed[later].g] = keyed[earlier].g;
+        break;
       }
-      faces_by_key_.insert(face.key, static_cast<int>(faces_.size()));
-      cell_faces.push_back(static_cast<int>(faces_.size()));
-      faces_.push_back(std::move(face.face));
     }
-    begin = job.cell_faces_end[c];
+    a = b;
   }
+  // 3. Ids of the added faces in order, and their keys in the table.
+  faces_by_key_.reserve(keyed.size() - static_cast<std::size_t>(std::count_if(
+                                          shares_new.begin(), shares_new.end(),
+                                          [](std::int64_t g) { return g >= 0; })));
+  std::vector<int> face_id(count, -1);
+  int next = static_cast<int>(faces_.size());
+  for (std::size_t j = 0; j < jobs.size(); ++j)
+    for (std::size_t i = 0; i < jobs[j].cell_faces.size(); ++i) {
+      const std::size_t g = face_base[j] + i;
+      if (shares_old[g] >= 0 || shares_new[g] >= 0) continue;
+      face_id[g] = next++;
+      faces_by_key_.insert(jobs[j].cell_faces[i].key, face_id[g]);
+    }
+  // 4. (in parallel, a job's cells and added faces each) the faces into place and into their
+  //    cells; a face built before gets the cell on its free side (one new face per side).
+  faces_.resize(static_cast<std::size_t>(next));
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, jobs.size(), 1),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      for (std::size_t j = r.begin(); j < r.end(); ++j) {
+                        RefineJob& job = jobs[j];
+                        for (std::size_t i = 0; i < job.cell_faces.size(); ++i) {
+                          RefineJob::CellFace& face = job.cell_faces[i];
+                          const std::size_t g = face_base[j] + i;
+                          int id = face_id[g];
+                          if (shares_old[g] >= 0) {
+                            id = shares_old[g];
+                            ArrangementFace& f = faces_[static_cast<std::size_t>(id)];
+                            (face.sigma > 0 ? f.cell_positive : f.cell_negative) = face.cell;
+                          } else if (shares_new[g] >= 0) {
+                            id = face_id[static_cast<std::size_t>(shares_new[g])];
+                          } else {
+                            faces_[static_cast<std::size_t>(id)] = std::move(face.face);
+                          }
+                          cells_[static_cast<std::size_t>(face.cell)].faces.push_back(id);
+                        }
+                      }
+                    });
 }
 
 std::vector<int> Arrangement::faces_split_by_last_plane() const {

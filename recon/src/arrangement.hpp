@@ -217,6 +217,7 @@ class Arrangement {
     struct CellFace {
       std::uint64_t key = 0;
       int sigma = 0;
+      int cell = -1;
       std::size_t keys_at = 0;
       ArrangementFace face;
     };
@@ -247,6 +248,8 @@ class Arrangement {
       }
     }
     void insert(std::uint64_t key, int face);
+    // Room for `more` insertions without growing.
+    void reserve(std::size_t more);
     // Removes `face` from under `key`; false if it is not there.
     bool erase(std::uint64_t key, int face);
 
@@ -304,7 +307,7 @@ class Arrangement {
   // with the cell across when that one is built (by key), added otherwise.
   void number(std::vector<RefineJob>& jobs);
   void place(RefineJob& job, std::vector<int>& cells, std::vector<std::uint64_t>& sorted);
-  void link(RefineJob& job);
+  void link(std::vector<RefineJob>& jobs);
   // On demand: the cross-section's edges chained into the new face, appended to `out` with
   // side `sigma`.
   void close_section(const std::vector<DirectedEdge>& section, int new_plane, int sigma,
