@@ -7,18 +7,24 @@
 # Writes machine.txt, results.jsonl (one JSON object per run) and summary.md to $OUT (the
 # device machine's output folder) or ./scaling_results.
 # Usage: scaling_run.sh [--repeat N] [--threads "1 2 4 8 16"] [--before-threads "1 16"]
-# (bin/before_bench, where the carry has one, runs on --before-threads only)
+#                       [--sets "random-100 ..."] [--no-online]
+# (bin/before_bench, where the carry has one, runs on --before-threads only; --sets: these of
+# sets/ only)
 set -euo pipefail
 here=$(cd "$(dirname "$0")" && pwd)
 out=${OUT:-$PWD/scaling_results}
 repeat=3
 threads="1 2 4 8 16"
 before_threads="1 16"
+only_sets=
+online=1
 while [[ $# -gt 0 ]]; do
   case $1 in
     --repeat) repeat=$2; shift ;;
     --threads) threads=$2; shift ;;
     --before-threads) before_threads=$2; shift ;;
+    --sets) only_sets=$2; shift ;;
+    --no-online) online=0 ;;
     *) echo "usage: scaling_run.sh [--repeat N] [--threads LIST]" >&2; exit 2 ;;
   esac
   shift
@@ -39,6 +45,7 @@ binaries=(sonoshape_device_bench)
 for b in "${binaries[@]}"; do
   for set in "$here"/sets/*.slices.json; do
     name=$(basename "$set" .slices.json)
+    [[ -n $only_sets && " $only_sets " != *" $name "* ]] && continue
     r=$repeat
     [[ $name == random-500 || $name == sector-* ]] && r=$(( repeat > 1 ? repeat - 1 : 1 ))
     list=$threads
@@ -52,6 +59,7 @@ for b in "${binaries[@]}"; do
   done
   list="1 2 16"
   [[ $b == before_bench ]] && list=$before_threads
+  (( online )) || list=
   for t in $list; do
     line=$("$here/bin/$b" "$here/sets/random-200.slices.json" --online --threads "$t")
     echo "{\"binary\": \"$b\", \"name\": \"online-random-200\", \"threads\": $t, \"result\": $line}" >> "$results"
@@ -65,7 +73,14 @@ import json, statistics, sys
 out = sys.argv[1]
 rows = [json.loads(l) for l in open(f"{out}/results.jsonl")]
 print(open(f"{out}/machine.txt").read())
-stages = ["arrangement_s", "face_images_s", "evaluation_s", "completion_s", "smoothing_s", "mesh_s"]
+stages = ["arrangement_s", "face_images_s", "evaluation_s", "completion_s", "smoothing_s", "mesh_s",
+          "outside_octree_s"]
+# What the stats time outside the octree's sampling, its smoothing and the mesher: the slices'
+# preparation and planes (the first update's arrangement and face images) and the contour keys.
+for r in rows:
+    for run in r["result"].get("runs", []):
+        if "total_s" in run:
+            run["outside_octree_s"] = run["total_s"] - run["field_s"] - run["smoothing_s"] - run["mesh_s"]
 for binary in sorted({r["binary"] for r in rows}):
     print(f"\n## {binary}\n")
     print("| set | threads | total s (best) | speed-up | " + " | ".join(s[:-2] + " s" for s in stages) +

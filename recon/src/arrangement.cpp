@@ -841,6 +841,44 @@ int Arrangement::construct_cell(const Vec3& p) {
 std::vector<int> Arrangement::construct_cells(const std::vector<Vec3>& points,
                                               const std::vector<char>& wanted) {
   std::vector<int> cells(points.size(), -1);
+  std::vector<char> todo = wanted;
+  // Few regions reached (the first batch of a reconstruction reaches the root alone): each is
+  // refined by a bounded number of splits, breadth first, and the points still in regions go
+  // round again, so that every thread has regions to refine. The bounds are constants: the
+  // rounds, and so the ids, do not depend on the number of threads.
+  constexpr std::size_t kFewJobs = 32, kRoundSplits = 64;
+  for (;;) {
+    std::vector<RefineJob> jobs = group_points(points, todo, cells);
+    if (jobs.empty()) break;
+    const bool bounded = jobs.size() < kFewJobs;
+    // The jobs in parallel: each reads the arrangement and writes only itself.
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, jobs.size(), 1),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        RefineScratch& scratch = refine_scratch_.local();
+                        for (std::size_t j = r.begin(); j < r.end(); ++j)
+                          refine(jobs[j], points, scratch,
+                                 bounded ? kRoundSplits : std::numeric_limits<std::size_t>::max());
+                      });
+    // Then into the tree: ids in job order, so they do not depend on which thread refined what;
+    // the jobs' vertices, nodes and cells are written in parallel (each job its own ids), their
+    // faces shared with the cells across in job order.
+    number(jobs);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, jobs.size(), 1),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        std::vector<std::uint64_t> sorted;
+                        for (std::size_t j = r.begin(); j < r.end(); ++j)
+                          place(jobs[j], cells, sorted);
+                      });
+    link(jobs);
+    if (!bounded) break;
+    for (std::size_t n = 0; n < points.size(); ++n) todo[n] = todo[n] && cells[n] < 0;
+  }
+  return cells;
+}
+
+std::vector<Arrangement::RefineJob> Arrangement::group_points(const std::vector<Vec3>& points,
+                                                              const std::vector<char>& wanted,
+                                                              std::vector<int>& cells) {
   // Each point's BSP leaf (in parallel; the walk only reads the tree): the points in built cells
   // are done, the others are grouped by the region they reach, one refinement job per region,
   // in the order of their first points.
@@ -867,12 +905,13 @@ std::vector<int> Arrangement::construct_cells(const std::vector<Vec3>& points,
                       }
                     });
   std::vector<RefineJob> jobs;
-  std::unordered_map<int, std::size_t> job_of_leaf;
+  std::vector<int> job_of_leaf(bsp_.size(), -1);  // a table: a hash map cost more
   for (std::size_t n = 0; n < points.size(); ++n) {
     const int node = leaves[n];
     if (node < 0) continue;
-    const auto [it, inserted] = job_of_leaf.try_emplace(node, jobs.size());
-    if (inserted) {
+    int& job_id = job_of_leaf[static_cast<std::size_t>(node)];
+    if (job_id < 0) {
+      job_id = static_cast<int>(jobs.size());
       const int region = bsp_[static_cast<std::size_t>(node)].region;
       RefineJob& job = jobs.emplace_back();
       job.leaf = node;
@@ -881,35 +920,18 @@ std::vector<int> Arrangement::construct_cells(const std::vector<Vec3>& points,
       free_regions_.push_back(region);
       job.nodes.push_back({-1, -1, -1, 0, false, 0, 0});
     }
-    jobs[it->second].points.push_back(static_cast<int>(n));
+    jobs[static_cast<std::size_t>(job_id)].points.push_back(static_cast<int>(n));
   }
-  // The jobs in parallel: each reads the arrangement and writes only itself.
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, jobs.size(), 1),
-                    [&](const tbb::blocked_range<std::size_t>& r) {
-                      RefineScratch& scratch = refine_scratch_.local();
-                      for (std::size_t j = r.begin(); j < r.end(); ++j)
-                        refine(jobs[j], points, scratch);
-                    });
-  // Then into the tree: ids in job order, so they do not depend on which thread refined what;
-  // the jobs' vertices, nodes and cells are written in parallel (each job its own ids), their
-  // faces shared with the cells across in job order.
-  number(jobs);
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, jobs.size(), 1),
-                    [&](const tbb::blocked_range<std::size_t>& r) {
-                      std::vector<std::uint64_t> sorted;
-                      for (std::size_t j = r.begin(); j < r.end(); ++j) place(jobs[j], cells, sorted);
-                    });
-  link(jobs);
-  return cells;
+  return jobs;
 }
 
-void Arrangement::refine(RefineJob& job, const std::vector<Vec3>& points,
-                         RefineScratch& scratch) const {
+void Arrangement::refine(RefineJob& job, const std::vector<Vec3>& points, RefineScratch& scratch,
+                         std::size_t max_splits) const {
   job.nodes[0].points_end = job.points.size();
-  std::vector<int> pending{0};  // nodes with points and a region to refine
-  while (!pending.empty()) {
-    const auto k = static_cast<std::size_t>(pending.back());
-    pending.pop_back();
+  std::vector<int> pending{0};  // nodes with points and a region to refine, breadth first
+  std::size_t splits = 0;
+  for (std::size_t next = 0; next < pending.size() && splits < max_splits; ++next) {
+    const auto k = static_cast<std::size_t>(pending[next]);
     // The first plane still crossing the region splits it; with none left it is a cell of the
     // full arrangement.
     Region& region = job.regions[static_cast<std::size_t>(job.nodes[k].region)];
@@ -925,6 +947,7 @@ void Arrangement::refine(RefineJob& job, const std::vector<Vec3>& points,
       continue;
     }
     auto [neg, pos] = split_region(region, crossing, job, scratch);
+    ++splits;
     // The negative part takes the parent's slot; each point takes the side the walk down the
     // tree takes (construct_cell, locate).
     const int neg_region = job.nodes[k].region;
@@ -948,9 +971,9 @@ void Arrangement::refine(RefineJob& job, const std::vector<Vec3>& points,
     node.positive = negative + 1;
     node.region = -1;
     // A part no point reached stays a region.
+    if (mid > node.points_begin) pending.push_back(negative);
     if (job.nodes[static_cast<std::size_t>(negative) + 1].points_end > mid)
       pending.push_back(negative + 1);
-    if (mid > node.points_begin) pending.push_back(negative);
   }
 }
 
@@ -1051,15 +1074,41 @@ void Arrangement::place(RefineJob& job, std::vector<int>& cells,
 }
 
 void Arrangement::link(std::vector<RefineJob>& jobs) {
-  // The leaves no point reached become regions again.
-  for (RefineJob& job : jobs)
-    for (std::size_t k = 0; k < job.nodes.size(); ++k) {
-      const RefineJob::Node& node = job.nodes[k];
-      if (node.plane >= 0 || node.cell) continue;
-      const int id = allocate_region(std::move(job.regions[static_cast<std::size_t>(node.region)]));
-      bsp_[static_cast<std::size_t>(k == 0 ? job.leaf : job.node_base + static_cast<int>(k))] = {
-          -1, -1, -1, -1, id};
+  // The leaves no point reached become regions again, in slots that allocate_region would give
+  // them one after the other (the free ones last freed first, then new ones), moved in parallel.
+  auto is_region = [](const RefineJob::Node& node) { return node.plane < 0 && !node.cell; };
+  std::vector<std::size_t> region_base(jobs.size() + 1, 0);
+  for (std::size_t j = 0; j < jobs.size(); ++j)
+    region_base[j + 1] = region_base[j] + static_cast<std::size_t>(std::count_if(
+                                              jobs[j].nodes.begin(), jobs[j].nodes.end(), is_region));
+  std::vector<int> slots(region_base.back());
+  std::size_t fresh = regions_.size();
+  for (int& slot : slots) {
+    if (free_regions_.empty()) {
+      slot = static_cast<int>(fresh++);
+      continue;
     }
+    slot = free_regions_.back();
+    free_regions_.pop_back();
+  }
+  regions_.resize(fresh);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, jobs.size(), 1),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      for (std::size_t j = r.begin(); j < r.end(); ++j) {
+                        RefineJob& job = jobs[j];
+                        std::size_t slot = region_base[j];
+                        for (std::size_t k = 0; k < job.nodes.size(); ++k) {
+                          const RefineJob::Node& node = job.nodes[k];
+                          if (!is_region(node)) continue;
+                          const int id = slots[slot++];
+                          regions_[static_cast<std::size_t>(id)] =
+                              std::move(job.regions[static_cast<std::size_t>(node.region)]);
+                          bsp_[static_cast<std::size_t>(k == 0 ? job.leaf
+                                                               : job.node_base + static_cast<int>(k))] =
+                              {-1, -1, -1, -1, id};
+                        }
+                      }
+                    });
   // The cells' faces, numbered g in job order. What adding them one after the other would do
   // (find a face under the key whose side towards the cell is free and whose vertices have the
   // same keys, and share it; else add the face and its key), in four steps:

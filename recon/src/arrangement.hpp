@@ -277,9 +277,15 @@ class Arrangement {
   static RegionFace region_face(const std::vector<int>& faces, std::size_t at) {
     return {faces[at], faces[at + 1], faces[at + 2], faces.data() + at + 3};
   }
-  // On demand: refines job.nodes[0] until each of its points is in a cell (a region no plane
-  // crosses); const but for the job and the thread's scratch.
-  void refine(RefineJob& job, const std::vector<Vec3>& points, RefineScratch& scratch) const;
+  // On demand: the jobs of construct_cells: the points with wanted[n] != 0 walked down the tree
+  // (cells[n] set for those in built cells), the others grouped by the region they reach.
+  std::vector<RefineJob> group_points(const std::vector<Vec3>& points,
+                                      const std::vector<char>& wanted, std::vector<int>& cells);
+  // On demand: refines job.nodes[0] breadth first until each of its points is in a cell (a
+  // region no plane crosses) or `max_splits` splits are made (the points left in regions keep
+  // no cell); const but for the job and the thread's scratch.
+  void refine(RefineJob& job, const std::vector<Vec3>& points, RefineScratch& scratch,
+              std::size_t max_splits) const;
   // On demand: side(plane, v) for the arrangement's vertices and the job's, cached until
   // reset_signs(job, scratch).
   int job_side(int plane_id, int vertex_id, RefineJob& job, RefineScratch& scratch) const;

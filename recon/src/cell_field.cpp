@@ -2,10 +2,12 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
 
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <span>
 
@@ -280,13 +282,19 @@ void CellField::compact_points() {
   // again once the points grew by a quarter since the last count.
   if (points_.size() < next_compaction_check_) return;
   next_compaction_check_ = points_.size() + points_.size() / 4 + 4096;
-  std::size_t live = 0;
-  for (const FaceImage& image : images_) {
-    live += image.polygon_count;
-    for (const FaceImage::Part& part : image.parts) live += part.count;
-    for (const FaceImage::Part& part : image.unknown_parts) live += part.count;
-    for (const FaceImage::Part& part : image.known_parts) live += part.count;
-  }
+  const std::size_t live = tbb::parallel_reduce(
+      tbb::blocked_range<std::size_t>(0, images_.size(), 4096), std::size_t{0},
+      [&](const tbb::blocked_range<std::size_t>& r, std::size_t sum) {
+        for (std::size_t f = r.begin(); f < r.end(); ++f) {
+          const FaceImage& image = images_[f];
+          sum += image.polygon_count;
+          for (const FaceImage::Part& part : image.parts) sum += part.count;
+          for (const FaceImage::Part& part : image.unknown_parts) sum += part.count;
+          for (const FaceImage::Part& part : image.known_parts) sum += part.count;
+        }
+        return sum;
+      },
+      std::plus<>());
   // Rebuilt images leave their old points and trees behind; copy the live ones once they are
   // the minority.
   if (points_.size() < 2 * live + 4096) return;
