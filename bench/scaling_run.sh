@@ -4,8 +4,8 @@
 # sets/): every set reconstructed offline on 1, 2, 4, 8 and 16 threads (best of --repeat runs
 # per stage), the 200-slice random set online on 1, 2 and 16 threads, and whether the meshes
 # are the same bit for bit whatever the thread count (a hash of vertices and triangles).
-# Writes machine.txt, results.jsonl (one JSON object per run) and summary.md to $OUT (the
-# device machine's output folder) or ./scaling_results.
+# Writes machine.txt, results.jsonl (one JSON object per run) and summary.md (the tables of
+# bench/scaling_table.py) to $OUT (the device machine's output folder) or ./scaling_results.
 # Usage: scaling_run.sh [--repeat N] [--threads "1 2 4 8 16"] [--before-threads "1 16"]
 #                       [--sets "random-100 ..."] [--no-online]
 # (bin/before_bench, where the carry has one, runs on --before-threads only; --sets: these of
@@ -68,43 +68,5 @@ for b in "${binaries[@]}"; do
 done
 echo "load at end: $(cut -d' ' -f1-3 /proc/loadavg)" >> "$out/machine.txt"
 
-python3 - "$out" > "$out/summary.md" <<'PY'
-import json, statistics, sys
-out = sys.argv[1]
-rows = [json.loads(l) for l in open(f"{out}/results.jsonl")]
-print(open(f"{out}/machine.txt").read())
-stages = ["arrangement_s", "face_images_s", "evaluation_s", "completion_s", "smoothing_s", "mesh_s",
-          "outside_octree_s"]
-# What the stats time outside the octree's sampling, its smoothing and the mesher: the slices'
-# preparation and planes (the first update's arrangement and face images) and the contour keys.
-for r in rows:
-    for run in r["result"].get("runs", []):
-        if "total_s" in run:
-            run["outside_octree_s"] = run["total_s"] - run["field_s"] - run["smoothing_s"] - run["mesh_s"]
-for binary in sorted({r["binary"] for r in rows}):
-    print(f"\n## {binary}\n")
-    print("| set | threads | total s (best) | speed-up | " + " | ".join(s[:-2] + " s" for s in stages) +
-          " | cells | mesh hash |")
-    print("|---" * (6 + len(stages)) + "|")
-    base = {}
-    for r in rows:
-        if r["binary"] != binary or r["name"].startswith("online-"):
-            continue
-        runs = r["result"]["runs"]
-        best = {k: min(run[k] for run in runs) for k in ["total_s"] + stages}
-        base.setdefault(r["name"], best["total_s"])
-        print(f"| {r['name']} | {r['threads']} | {best['total_s']:.3f} | "
-              f"{base[r['name']] / best['total_s']:.2f} | " +
-              " | ".join(f"{best[s]:.3f}" for s in stages) +
-              f" | {runs[0]['cells']} | {r['result']['mesh_hash']} |")
-    print("\n| online set | threads | median update ms (from the 10th) | median ms (last tenth) | mesh hash |")
-    print("|---|---|---|---|---|")
-    for r in rows:
-        if r["binary"] != binary or not r["name"].startswith("online-"):
-            continue
-        steps = [s["total_s"] for s in r["result"]["runs"][0]["steps"]]
-        tenth = max(1, len(steps) // 10)
-        print(f"| {r['name']} | {r['threads']} | {1e3 * statistics.median(steps[9:]):.1f} | "
-              f"{1e3 * statistics.median(steps[-tenth:]):.1f} | {r['result']['mesh_hash']} |")
-PY
+python3 "$here/scaling_table.py" "$out" > "$out/summary.md"
 cat "$out/summary.md"
