@@ -212,14 +212,16 @@ class Arrangement {
     // Set by number(): the ids of its first vertex, BSP node (minus one: node 0 is `leaf`) and
     // cell in the arrangement.
     int vertex_base = 0, node_base = 0, cell_base = 0;
-    // Set by place(): the faces of its cells in node order, each with its key and its vertices'
-    // keys (sorted, in sorted_keys from keys_at), and where each cell's faces end.
+    // Set by place(): the faces of its cells in node order, each with its key, its vertices'
+    // keys (sorted, in sorted_keys from keys_at), its polygon (the record at `at` in the faces
+    // of regions[region]) and the corner it starts from; and where each cell's faces end.
     struct CellFace {
       std::uint64_t key = 0;
       int sigma = 0;
       int cell = -1;
+      int other_cell = -1;  // link(): the cell across that shares it, when built in this batch
+      int region = -1, at = 0, start = 0;
       std::size_t keys_at = 0;
-      ArrangementFace face;
     };
     std::vector<CellFace> cell_faces;
     std::vector<std::size_t> cell_faces_end;
