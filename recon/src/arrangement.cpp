@@ -856,38 +856,46 @@ std::vector<int> Arrangement::construct_cells(const std::vector<Vec3>& points,
   // refined by a bounded number of splits, breadth first, and the points still in regions go
   // round again, so that every thread has regions to refine. The bounds are constants: the
   // rounds, and so the ids, do not depend on the number of threads.
-  constexpr std::size_t kFewJobs = 32, kRoundSplits = 64, kTrimCells = 1024;
+  // The jobs go in passes of at most kJobsPerPass, in order: the same ids as all at once, with
+  // the storage of fewer jobs at a time (their regions, vertices and faces until linked).
+  constexpr std::size_t kFewJobs = 32, kRoundSplits = 64, kJobsPerPass = 2048, kTrimCells = 1024;
   for (;;) {
-    const std::size_t cells_before = cells_.size();
-    std::vector<RefineJob> jobs = group_points(points, todo, cells);
-    if (jobs.empty()) break;
-    const bool bounded = jobs.size() < kFewJobs;
-    // The jobs in parallel: each reads the arrangement and writes only itself.
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, jobs.size(), 1),
-                      [&](const tbb::blocked_range<std::size_t>& r) {
-                        RefineScratch& scratch = refine_scratch_.local();
-                        for (std::size_t j = r.begin(); j < r.end(); ++j)
-                          refine(jobs[j], points, scratch,
-                                 bounded ? kRoundSplits : std::numeric_limits<std::size_t>::max());
-                      });
-    // Then into the tree: ids in job order, so they do not depend on which thread refined what;
-    // the jobs' vertices, nodes and cells are written in parallel (each job its own ids), their
-    // faces shared with the cells across in job order.
-    number(jobs);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, jobs.size(), 1),
-                      [&](const tbb::blocked_range<std::size_t>& r) {
-                        std::vector<std::uint64_t> sorted;
-                        for (std::size_t j = r.begin(); j < r.end(); ++j)
-                          place(jobs[j], cells, sorted);
-                      });
-    link(jobs);
-    // The jobs' storage goes back to the system after a large round: left in the allocator's
-    // free lists it stayed resident, and the peak of 200 random slices was 318-323 MB instead
-    // of 307-308 MB (`reconstruct`, one or two threads). Rounds of fewer cells (online updates)
-    // skip the walk of the free lists: after each, it cost the last updates 6 ms more.
-    const std::size_t built = cells_.size() - cells_before;
-    jobs = {};
-    if (built >= kTrimCells) release_free_heap();
+    std::vector<RefineJob> all = group_points(points, todo, cells);
+    if (all.empty()) break;
+    const bool bounded = all.size() < kFewJobs;
+    for (std::size_t first = 0; first < all.size(); first += kJobsPerPass) {
+      std::vector<RefineJob> jobs(
+          std::make_move_iterator(all.begin() + static_cast<std::ptrdiff_t>(first)),
+          std::make_move_iterator(all.begin() + static_cast<std::ptrdiff_t>(
+                                                    std::min(all.size(), first + kJobsPerPass))));
+      const std::size_t cells_before = cells_.size();
+      // The jobs in parallel: each reads the arrangement and writes only itself.
+      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, jobs.size(), 1),
+                        [&](const tbb::blocked_range<std::size_t>& r) {
+                          RefineScratch& scratch = refine_scratch_.local();
+                          for (std::size_t j = r.begin(); j < r.end(); ++j)
+                            refine(jobs[j], points, scratch,
+                                   bounded ? kRoundSplits : std::numeric_limits<std::size_t>::max());
+                        });
+      // Then into the tree: ids in job order, so they do not depend on which thread refined
+      // what; the jobs' vertices, nodes and cells are written in parallel (each job its own
+      // ids), their faces shared with the cells across in job order.
+      number(jobs);
+      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, jobs.size(), 1),
+                        [&](const tbb::blocked_range<std::size_t>& r) {
+                          std::vector<std::uint64_t> sorted;
+                          for (std::size_t j = r.begin(); j < r.end(); ++j)
+                            place(jobs[j], cells, sorted);
+                        });
+      link(jobs);
+      // The jobs' storage goes back to the system after a large pass: left in the allocator's
+      // free lists it stayed resident, and the peak of 200 random slices was 318-323 MB instead
+      // of 307-308 MB (`reconstruct`, one or two threads). Passes of fewer cells (online
+      // updates) skip the walk of the free lists: after each, it cost the last updates 6 ms.
+      const std::size_t built = cells_.size() - cells_before;
+      jobs = {};
+      if (built >= kTrimCells) release_free_heap();
+    }
     if (!bounded) break;
     for (std::size_t n = 0; n < points.size(); ++n) todo[n] = todo[n] && cells[n] < 0;
   }
