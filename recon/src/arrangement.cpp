@@ -849,25 +849,27 @@ int Arrangement::construct_cell(const Vec3& p) {
 }
 
 std::vector<int> Arrangement::construct_cells(const std::vector<Vec3>& points,
-                                              const std::vector<char>& wanted) {
+                                              const std::vector<char>& wanted,
+                                              std::size_t jobs_per_pass) {
   std::vector<int> cells(points.size(), -1);
   std::vector<char> todo = wanted;
   // Few regions reached (the first batch of a reconstruction reaches the root alone): each is
   // refined by a bounded number of splits, breadth first, and the points still in regions go
   // round again, so that every thread has regions to refine. The bounds are constants: the
   // rounds, and so the ids, do not depend on the number of threads.
-  // The jobs go in passes of at most kJobsPerPass, in order: the same ids as all at once, with
+  // The jobs go in passes of at most jobs_per_pass, in order: the same ids as all at once, with
   // the storage of fewer jobs at a time (their regions, vertices and faces until linked).
-  constexpr std::size_t kFewJobs = 32, kRoundSplits = 64, kJobsPerPass = 2048, kTrimCells = 1024;
+  constexpr std::size_t kFewJobs = 32, kRoundSplits = 64, kTrimCells = 1024;
+  jobs_per_pass = std::max<std::size_t>(1, jobs_per_pass);
   for (;;) {
     std::vector<RefineJob> all = group_points(points, todo, cells);
     if (all.empty()) break;
     const bool bounded = all.size() < kFewJobs;
-    for (std::size_t first = 0; first < all.size(); first += kJobsPerPass) {
+    for (std::size_t first = 0; first < all.size(); first += jobs_per_pass) {
       std::vector<RefineJob> jobs(
           std::make_move_iterator(all.begin() + static_cast<std::ptrdiff_t>(first)),
           std::make_move_iterator(all.begin() + static_cast<std::ptrdiff_t>(
-                                                    std::min(all.size(), first + kJobsPerPass))));
+                                                    std::min(all.size(), first + jobs_per_pass))));
       const std::size_t cells_before = cells_.size();
       // The jobs in parallel: each reads the arrangement and writes only itself.
       tbb::parallel_for(tbb::blocked_range<std::size_t>(0, jobs.size(), 1),

@@ -102,9 +102,12 @@ class Arrangement {
   /// construct_cell for every point with wanted[n] != 0 (the others get -1). The regions the
   /// points reach are refined in parallel on the calling task arena's threads, each with its
   /// points on one thread; the results are then put into the tree in the order of the batch, so
-  /// cells, faces, vertices and their ids do not depend on the number of threads. Without
-  /// on-demand cells, the points are located.
-  std::vector<int> construct_cells(const std::vector<Vec3>& points, const std::vector<char>& wanted);
+  /// cells, faces, vertices and their ids do not depend on the number of threads. The regions
+  /// are refined and linked in passes of at most `jobs_per_pass` (which bounds the memory they
+  /// hold and changes no id). Without on-demand cells, the points are located.
+  static constexpr std::size_t kJobsPerPass = 2048;
+  std::vector<int> construct_cells(const std::vector<Vec3>& points, const std::vector<char>& wanted,
+                                   std::size_t jobs_per_pass = kJobsPerPass);
   /// construct_cell(p) from a guess (a built cell or -1): the guess when p lies inside it clear
   /// of its faces' planes, as locate(p, guess). Sweeps make the tree as deep as the planes.
   int construct_cell(const Vec3& p, int guess);

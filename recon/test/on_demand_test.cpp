@@ -165,16 +165,22 @@ std::vector<Vec3> random_points(std::mt19937_64& rng, int count) {
   return points;
 }
 
-TEST(OnDemandArrangement, RandomPlanesGiveTheWholeArrangementsCells) {
-  std::mt19937_64 rng(7);
+// `count` planes of random normals through random points of the inner 80 % of the unit box.
+std::vector<Plane> random_planes(std::mt19937_64& rng, int count) {
   std::normal_distribution<double> gauss;
   std::uniform_real_distribution<double> uniform(-0.8, 0.8);
   std::vector<Plane> planes;
-  for (int i = 0; i < 14; ++i) {
+  for (int i = 0; i < count; ++i) {
     const Vec3 n(gauss(rng), gauss(rng), gauss(rng));
     const Vec3 p(uniform(rng), uniform(rng), uniform(rng));
     planes.push_back({n, -n.dot(p)});
   }
+  return planes;
+}
+
+TEST(OnDemandArrangement, RandomPlanesGiveTheWholeArrangementsCells) {
+  std::mt19937_64 rng(7);
+  const std::vector<Plane> planes = random_planes(rng, 14);
   expect_same_cells(planes, random_points(rng, 400));
 }
 
@@ -185,14 +191,7 @@ TEST(OnDemandArrangement, BatchesGiveTheSameCellsForAnyThreadCount) {
   // TBB allows as many workers as cores by default: let 16 threads run on a smaller machine.
   const tbb::global_control workers(tbb::global_control::max_allowed_parallelism, 16);
   std::mt19937_64 rng(11);
-  std::normal_distribution<double> gauss;
-  std::uniform_real_distribution<double> uniform(-0.8, 0.8);
-  std::vector<Plane> planes;
-  for (int i = 0; i < 24; ++i) {
-    const Vec3 n(gauss(rng), gauss(rng), gauss(rng));
-    const Vec3 p(uniform(rng), uniform(rng), uniform(rng));
-    planes.push_back({n, -n.dot(p)});
-  }
+  const std::vector<Plane> planes = random_planes(rng, 24);
   // Three batches, the later ones partly in cells built before; every seventh point not wanted.
   std::vector<std::vector<Vec3>> batches;
   for (int b = 0; b < 3; ++b) batches.push_back(random_points(rng, 500));
@@ -202,7 +201,8 @@ TEST(OnDemandArrangement, BatchesGiveTheSameCellsForAnyThreadCount) {
     for (std::size_t n = 0; n < w.size(); n += 7) w[n] = 0;
     return w;
   };
-  const std::vector<int> thread_counts{1, 2, 4, 16};
+  // Passes of 5 jobs (one-thread only) must give the ids of one pass.
+  const std::vector<int> thread_counts{1, 2, 4, 16, 1};
   std::vector<std::unique_ptr<Arrangement>> arrangements;
   std::vector<std::vector<std::vector<int>>> cells(thread_counts.size());
   for (std::size_t t = 0; t < thread_counts.size(); ++t) {
@@ -212,11 +212,15 @@ TEST(OnDemandArrangement, BatchesGiveTheSameCellsForAnyThreadCount) {
       arr.insert_plane(planes[i].normal, planes[i].offset, static_cast<int>(i));
     tbb::task_arena arena(thread_counts[t]);
     for (const std::vector<Vec3>& batch : batches)
-      arena.execute([&] { cells[t].push_back(arr.construct_cells(batch, wanted(batch))); });
+      arena.execute([&] {
+        const std::size_t passes = t + 1 == thread_counts.size() ? 5 : Arrangement::kJobsPerPass;
+        cells[t].push_back(arr.construct_cells(batch, wanted(batch), passes));
+      });
   }
   const Arrangement& one = *arrangements.front();
   for (std::size_t t = 1; t < thread_counts.size(); ++t) {
-    SCOPED_TRACE(std::to_string(thread_counts[t]) + " threads");
+    SCOPED_TRACE(std::to_string(thread_counts[t]) + " threads" +
+                 (t + 1 == thread_counts.size() ? ", passes of 5 jobs" : ""));
     const Arrangement& arr = *arrangements[t];
     EXPECT_EQ(cells[t], cells[0]);
     ASSERT_EQ(arr.cell_count(), one.cell_count());
