@@ -72,7 +72,7 @@ if (( scaling )); then
   for n in 100 500; do slice "sweep-$n" sweep "$n" 3 1:horse; done
   extra="--fov sector --fov-aim cover" slice "sector-random-100" random 100 3 1:horse
   cp bench/scaling_run.sh bench/scaling_table.py "$out/"
-  git rev-parse --short HEAD > "$out/COMMIT"
+  echo "$(git rev-parse --short HEAD)${before:+ (before_bench: $before)}" > "$out/COMMIT"
   du -sh "$out"
   exit 0
 fi

@@ -25,7 +25,8 @@ while [[ $# -gt 0 ]]; do
     --before-threads) before_threads=$2; shift ;;
     --sets) only_sets=$2; shift ;;
     --no-online) online=0 ;;
-    *) echo "usage: scaling_run.sh [--repeat N] [--threads LIST]" >&2; exit 2 ;;
+    *) echo "usage: scaling_run.sh [--repeat N] [--threads LIST] [--before-threads LIST]" \
+            "[--sets LIST] [--no-online]" >&2; exit 2 ;;
   esac
   shift
 done
