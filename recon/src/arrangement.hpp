@@ -29,13 +29,16 @@
 // to them; regions not refined yet meet the new plane when a query reaches them.
 // In parallel (construct_cells): the points of a batch are walked down the tree, grouped by the
 // region they reach, and each region is refined for its points on one thread into a job of its
-// own (its vertices, regions and nodes; the arrangement is only read). The jobs are then put
-// into the tree with ids in job order, so that cells, faces, vertices and their ids are the
-// same for any number of threads: the ids are counted first, the jobs' vertices, nodes and cell
-// faces written in parallel, and the faces shared with the cells across them in job order on
-// one thread (link(): about a seventh of the cell construction at 100 random slices).
-// Left: each split builds both halves of a region though most siblings are never asked for,
-// and the first batch of an update reaches one region, refined on one thread.
+// own (its vertices, regions and nodes; the arrangement is only read). A batch that reaches few
+// regions (the first one reaches the root) is refined in bounded breadth-first rounds until it
+// reaches more. The jobs are then put into the tree with ids in job order, so that cells, faces,
+// vertices and their ids are the same for any number of threads: the ids are counted first, the
+// jobs' vertices, nodes and cells written in parallel, and their faces shared with the cells
+// across them as one-after-the-other building would (link()). The serial steps left (counting,
+// growing the arrays, the face table's inserts) and the per-region storage cost a third more
+// than the serial construction on one thread at 200 random slices, and give 4.3x on 16 threads
+// at 100 (docs/benchmarks.md, "Thread scaling on 16 cores").
+// Left: each split builds both halves of a region though most siblings are never asked for.
 #include <CGAL/Exact_predicates_exact_constructions_kernel.h>
 #include <CGAL/Interval_nt.h>
 #include <CGAL/Simple_cartesian.h>

@@ -361,8 +361,8 @@ void CellField::build_images(const std::vector<int>& faces) {
     point_bases[c + 1] = point_bases[c] + buffers[c].points.size();
     tree_bases[c + 1] = tree_bases[c] + buffers[c].trees.size();
   }
-  points_.resize(point_bases[chunks]);
-  tree_nodes_.resize(tree_bases[chunks]);
+  grow(points_, point_bases[chunks]);
+  grow(tree_nodes_, tree_bases[chunks]);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunks, 1),
                     [&](const tbb::blocked_range<std::size_t>& r) {
                       for (std::size_t c = r.begin(); c < r.end(); ++c) {
