@@ -891,9 +891,10 @@ std::vector<int> Arrangement::construct_cells(const std::vector<Vec3>& points,
                         });
       link(jobs);
       // The jobs' storage goes back to the system after a large pass: left in the allocator's
-      // free lists it stayed resident, and the peak of 200 random slices was 318-323 MB instead
-      // of 307-308 MB (`reconstruct`, one or two threads). Passes of fewer cells (online
-      // updates) skip the walk of the free lists: after each, it cost the last updates 6 ms.
+      // free lists it stayed resident, and the peak of `reconstruct` on 200 random slices was
+      // 301-308 MB instead of 289-293 MB (one or two threads; /usr/bin/time). Passes of fewer
+      // cells (online updates) skip the walk of the free lists: after each, it cost the last
+      // updates 6 ms.
       const std::size_t built = cells_.size() - cells_before;
       jobs = {};
       if (built >= kTrimCells) release_free_heap();
@@ -1308,8 +1309,5 @@ int Arrangement::locate(const Vec3& p, int guess) const {
   return clear_inside(p, guess) ? guess : locate(p);
 }
 
-int Arrangement::construct_cell(const Vec3& p, int guess) {
-  return on_demand_ && clear_inside(p, guess) ? guess : construct_cell(p);
-}
 
 }  // namespace sonoshape::recon

@@ -111,9 +111,6 @@ class Arrangement {
   static constexpr std::size_t kJobsPerPass = 2048;
   std::vector<int> construct_cells(const std::vector<Vec3>& points, const std::vector<char>& wanted,
                                    std::size_t jobs_per_pass = kJobsPerPass);
-  /// construct_cell(p) from a guess (a built cell or -1): the guess when p lies inside it clear
-  /// of its faces' planes, as locate(p, guess). Sweeps make the tree as deep as the planes.
-  int construct_cell(const Vec3& p, int guess);
   /// On demand: the leaves of the lazy BSP (built cells and regions not yet refined).
   std::size_t region_count() const {
     return regions_.size() - free_regions_.size() + built_cell_count();
