@@ -568,7 +568,7 @@ int Arrangement::split_vertex(int a, int b, int face_plane, int edge_plane, int 
   // One vertex per edge within a split (the two faces on an edge must agree: a few entries,
   // searched in order). Regions do not share vertices: a vertex met again in another region is
   // constructed again (the same exact point), which costs less than finding it in a table of
-  // a million; faces are matched by their vertices' planes instead (finish_region).
+  // a million; faces are matched by their vertices' planes instead (place(), link()).
   const std::uint64_t edge = pair_key(a, b);
   for (const auto& [key, id] : scratch.split_vertices)
     if (key == edge) return id;
