@@ -2,13 +2,11 @@
 
 #include <algorithm>
 #include <chrono>
-#ifdef __GLIBC__
-#include <malloc.h>
-#endif
 #include <stdexcept>
 #include <utility>
 
 #include "sonoshape/core/errors.hpp"
+#include "sonoshape/core/heap.hpp"
 #include "sonoshape/core/log.hpp"
 
 namespace sonoshape::scan {
@@ -32,16 +30,6 @@ struct ScanPipeline::SliceItem {
 };
 
 namespace {
-
-// An update frees most of what it allocated (the new cells' face images, the octree's levels,
-// the mesher's buffers), but glibc keeps freed pages mapped, so the scan's RSS would follow the
-// largest update so far rather than what the scan holds (the soak's RSS rose in steps at single
-// updates). Handing them back costs one walk of the free lists per update.
-void release_free_heap() {
-#ifdef __GLIBC__
-  malloc_trim(0);
-#endif
-}
 
 // Every material of `labels` without a mesh in `meshes`, with why: none of the slices holds it,
 // or its regions were thinner than the octree's cells.
@@ -652,6 +640,9 @@ void ScanPipeline::reconstruction_loop() {
       each_sink("meshes",
                 [&](ScanSink& sink) { return sink.on_meshes(reconstruction_->meshes(), info); });
       each_sink("status", [&](ScanSink& sink) { return sink.on_status(status); });
+      // An update frees most of what it allocated (the new cells' face images, the octree's
+      // levels, the mesher's buffers): without this the scan's RSS followed the largest update
+      // so far (the soak's RSS rose in steps at single updates).
       release_free_heap();
     }
   } catch (const std::exception& e) {
