@@ -62,7 +62,12 @@ class UsbDeviceHandler {
     std::lock_guard lock(mutex_);
     const unsigned long request = umockdev_ioctl_client_get_request(client);
     UMockdevIoctlData* arg = umockdev_ioctl_client_get_arg(client);
-    if (gone && request != USBDEVFS_RELEASEINTERFACE) {
+    // A vanished device answers ENODEV, but for the reaps: as the kernel's usbfs, it still hands
+    // back the URBs it had (those in flight killed), then ENODEV. Answering ENODEV to a reap too
+    // left a transfer submitted before the unplug in flight for good (libusb waits for it and
+    // cannot cancel it), which hung the unplug test under load.
+    const bool reap_request = request == USBDEVFS_REAPURB || request == USBDEVFS_REAPURBNDELAY;
+    if (gone && request != USBDEVFS_RELEASEINTERFACE && !reap_request) {
       umockdev_ioctl_client_complete(client, -1, ENODEV);
       return TRUE;
     }
@@ -143,9 +148,19 @@ class UsbDeviceHandler {
   }
 
   gboolean reap(UMockdevIoctlClient* client, UMockdevIoctlData* arg) {
-    fill_in();
+    if (gone) {
+      // Unplugged: the URBs in flight end with ESHUTDOWN, as the kernel kills them.
+      for (Urb& u : in_) {
+        fields(u)->status = -ESHUTDOWN;
+        fields(u)->actual_length = 0;
+        done_.push_back(u);
+      }
+      in_.clear();
+    } else {
+      fill_in();
+    }
     if (done_.empty()) {
-      umockdev_ioctl_client_complete(client, -1, EAGAIN);
+      umockdev_ioctl_client_complete(client, -1, gone ? ENODEV : EAGAIN);
       return TRUE;
     }
     Urb u = done_.front();
