@@ -10,7 +10,8 @@
 #                            [BUILD (default build)]
 # (build the targets sonoshape and sonoshape_device_bench first)
 #   --scaling: the thread-scaling sets of issue 24 instead (horse, random and sweep planes,
-#              30-500, and 100 random planes with sector fields of view) and bench/scaling_run.sh;
+#              30-500, 200 random planes with unknown blobs on 40 % of the slices, and 100 random
+#              planes with sector fields of view) and bench/scaling_run.sh;
 #   --before BIN: a sonoshape_device_bench of another commit beside ours (bin/before_bench),
 #              measured on the same machine in the same run (same libraries: build it here).
 set -euo pipefail
@@ -65,11 +66,13 @@ slice() {  # NAME FAMILY COUNT SEED LABEL:MODEL ...
     --skip-invalid -q -o "$out/sets/$name.slices.json" "${args[@]}" ${extra:-}
 }
 if (( scaling )); then
-  # The growth table's sets (bench/growth_table.py: horse, seed 3, 200 mm box) and one with a
-  # sector field of view on every slice (these still build the whole arrangement).
+  # The growth table's sets (bench/growth_table.py: horse, seed 3, 200 mm box), one with unknown
+  # blobs and one with a sector field of view on every slice (whose cells are nearly all built:
+  # the completion reads the faces around the unknown sets).
   size_mm=200
   for n in 30 100 200 500; do slice "random-$n" random "$n" 3 1:horse; done
   for n in 100 500; do slice "sweep-$n" sweep "$n" 3 1:horse; done
+  extra="--unknown 0.4" slice "blobs-random-200" random 200 3 1:horse
   extra="--fov sector --fov-aim cover" slice "sector-random-100" random 100 3 1:horse
   cp bench/scaling_run.sh bench/scaling_table.py "$out/"
   echo "$(git rev-parse --short HEAD)${before:+ (before_bench: $before)}" > "$out/COMMIT"

@@ -14,12 +14,13 @@ import json
 import os
 import statistics
 
-STAGES = [("arrangement_s", "arrangement"), ("face_images_s", "face images"),
+STAGES = [("arrangement_s", "arrangement"),
+          ("arrangement_serial_s", "of which serial steps"), ("face_images_s", "face images"),
           ("evaluation_s", "evaluation"), ("completion_s", "completion"),
           ("smoothing_s", "smoothing"), ("mesh_s", "mesh"),
           ("outside_octree_s", "before the octree")]
 SET_ORDER = ["random-30", "random-100", "random-200", "random-500", "sweep-100", "sweep-500",
-             "sector-random-100"]
+             "blobs-random-200", "sector-random-100"]
 
 
 def best(runs, key):
@@ -93,8 +94,10 @@ def tables(rows, machine):
             if t not in by:
                 continue
             runs = by[t]["runs"]
+            # Stages an older binary does not report are left empty.
             out.append(f"| {name} | {t} | {best(runs, 'total_s'):.3f} | " +
-                       " | ".join(f"{best(runs, key):.3f}" for key, _ in STAGES) + " |")
+                       " | ".join(f"{best(runs, key):.3f}" if all(key in run for run in runs) else ""
+                                  for key, _ in STAGES) + " |")
 
     if online:
         out.append("")

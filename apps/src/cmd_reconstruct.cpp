@@ -38,6 +38,7 @@ nlohmann::json stats_json(const recon::ReconstructionStats& stats) {
   j["depth"] = stats.depth;
   j["snapped_vertices"] = stats.snapped_vertices;
   j["completion_s"] = stats.completion_s;
+  j["arrangement_serial_s"] = stats.arrangement_serial_s;
   j["evaluation_s"] = stats.evaluation_s;
   j["unknown_triangles"] = stats.unknown_triangles;
   j["cell_groups"] = stats.cell_groups;

@@ -17,6 +17,7 @@
 #include "grow.hpp"
 #include "sonoshape/core/errors.hpp"
 #include "sonoshape/core/heap.hpp"
+#include "sonoshape/core/log.hpp"
 
 namespace sonoshape::recon {
 namespace {
@@ -840,13 +841,11 @@ int Arrangement::construct_cell(const Vec3& p) {
   return construct_cells({p}, {1}).front();
 }
 
-std::vector<int> Arrangement::construct_cells(const std::vector<Vec3>& points,
-                                              const std::vector<char>& wanted,
-                                              std::size_t jobs_per_pass) {
-  std::vector<int> cells(points.size(), -1);
-  std::vector<char> todo = wanted;
+template <typename Group>
+void Arrangement::refine_in_passes(Group&& group, const std::vector<Vec3>& points,
+                                   std::vector<int>& cells, std::size_t jobs_per_pass) {
   // Few regions reached (the first batch of a reconstruction reaches the root alone): each is
-  // refined by a bounded number of splits, breadth first, and the points still in regions go
+  // refined by a bounded number of splits, breadth first, and what is still in regions goes
   // round again, so that every thread has regions to refine. The bounds are constants: the
   // rounds, and so the ids, do not depend on the number of threads.
   // The jobs go in passes of at most jobs_per_pass, in order: the same ids as all at once, with
@@ -854,7 +853,9 @@ std::vector<int> Arrangement::construct_cells(const std::vector<Vec3>& points,
   constexpr std::size_t kFewJobs = 32, kRoundSplits = 64, kTrimCells = 1024;
   jobs_per_pass = std::max<std::size_t>(1, jobs_per_pass);
   for (;;) {
-    std::vector<RefineJob> all = group_points(points, todo, cells);
+    Stopwatch serial_clock;
+    std::vector<RefineJob> all = group();
+    serial_seconds_ += serial_clock.seconds();
     if (all.empty()) break;
     const bool bounded = all.size() < kFewJobs;
     for (std::size_t first = 0; first < all.size(); first += jobs_per_pass) {
@@ -874,14 +875,18 @@ std::vector<int> Arrangement::construct_cells(const std::vector<Vec3>& points,
       // Then into the tree: ids in job order, so they do not depend on which thread refined
       // what; the jobs' vertices, nodes and cells are written in parallel (each job its own
       // ids), their faces shared with the cells across in job order.
+      serial_clock.reset();
       number(jobs);
+      serial_seconds_ += serial_clock.seconds();
       tbb::parallel_for(tbb::blocked_range<std::size_t>(0, jobs.size(), 1),
                         [&](const tbb::blocked_range<std::size_t>& r) {
                           std::vector<std::uint64_t> sorted;
                           for (std::size_t j = r.begin(); j < r.end(); ++j)
                             place(jobs[j], cells, sorted);
                         });
+      serial_clock.reset();
       link(jobs);
+      serial_seconds_ += serial_clock.seconds();
       // The jobs' storage goes back to the system after a large pass: left in the allocator's
       // free lists it stayed resident, and the peak of `reconstruct` on 200 random slices was
       // 301-308 MB instead of 289-293 MB (one or two threads; /usr/bin/time). Passes of fewer
@@ -892,9 +897,88 @@ std::vector<int> Arrangement::construct_cells(const std::vector<Vec3>& points,
       if (built >= kTrimCells) release_free_heap();
     }
     if (!bounded) break;
-    for (std::size_t n = 0; n < points.size(); ++n) todo[n] = todo[n] && cells[n] < 0;
   }
+}
+
+std::vector<int> Arrangement::construct_cells(const std::vector<Vec3>& points,
+                                              const std::vector<char>& wanted,
+                                              std::size_t jobs_per_pass) {
+  std::vector<int> cells(points.size(), -1);
+  std::vector<char> todo(points.size());
+  refine_in_passes(
+      [&] {
+        // The points still in regions (after a bounded round) go round again.
+        for (std::size_t n = 0; n < points.size(); ++n) todo[n] = wanted[n] && cells[n] < 0;
+        return group_points(points, todo, cells);
+      },
+      points, cells, jobs_per_pass);
   return cells;
+}
+
+void Arrangement::construct_cells_meeting(const std::vector<std::vector<Vec3>>& polygons,
+                                          std::size_t jobs_per_pass) {
+  if (!on_demand_ || polygons.empty()) return;
+  std::vector<int> no_cells;
+  refine_in_passes([&] { return group_polygons(polygons); }, {}, no_cells, jobs_per_pass);
+}
+
+void Arrangement::clip_to_side(const std::vector<Vec3>& polygon, int plane_id, int sigma,
+                               std::vector<Vec3>& out) const {
+  // Sutherland-Hodgman against one half-space, widened by the margin: a part that rounding
+  // might put on the wrong side goes to both.
+  const ArrangementPlane& plane = planes_[static_cast<std::size_t>(plane_id)];
+  const double margin =
+      1e-9 * (plane.normal.cwiseAbs().dot(box_.max.cwiseAbs().cwiseMax(box_.min.cwiseAbs())) +
+              std::abs(plane.offset));
+  const auto value = [&](const Vec3& p) {
+    return sigma * (plane.normal.dot(p) + plane.offset) + margin;
+  };
+  out.clear();
+  for (std::size_t i = 0; i < polygon.size(); ++i) {
+    const Vec3& a = polygon[i];
+    const Vec3& b = polygon[(i + 1) % polygon.size()];
+    const double fa = value(a), fb = value(b);
+    if (fa >= 0.0) out.push_back(a);
+    if ((fa >= 0.0) != (fb >= 0.0)) out.push_back(a + (b - a) * (fa / (fa - fb)));
+  }
+}
+
+std::vector<Arrangement::RefineJob> Arrangement::group_polygons(
+    const std::vector<std::vector<Vec3>>& polygons) {
+  // Depth first, negative side first: the jobs' order does not depend on the threads.
+  std::vector<RefineJob> jobs;
+  struct Visit {
+    int node;
+    std::vector<std::vector<Vec3>> parts;
+  };
+  std::vector<Visit> stack{{0, polygons}};
+  std::vector<Vec3> clipped;
+  while (!stack.empty()) {
+    Visit visit = std::move(stack.back());
+    stack.pop_back();
+    const BspNode& b = bsp_[static_cast<std::size_t>(visit.node)];
+    if (b.plane < 0) {
+      if (b.cell >= 0) continue;  // built
+      RefineJob& job = jobs.emplace_back();
+      job.leaf = visit.node;
+      job.regions.push_back(std::move(regions_[static_cast<std::size_t>(b.region)]));
+      regions_[static_cast<std::size_t>(b.region)] = Region{};
+      free_regions_.push_back(b.region);
+      job.nodes.push_back({-1, -1, -1, 0, false, 0, 0, 0});
+      job.targets.push_back(std::move(visit.parts));
+      continue;
+    }
+    Visit negative{b.negative, {}}, positive{b.positive, {}};
+    for (const std::vector<Vec3>& part : visit.parts) {
+      for (Visit* side : {&negative, &positive}) {
+        clip_to_side(part, b.plane, side == &positive ? 1 : -1, clipped);
+        if (!clipped.empty()) side->parts.push_back(clipped);
+      }
+    }
+    if (!positive.parts.empty()) stack.push_back(std::move(positive));
+    if (!negative.parts.empty()) stack.push_back(std::move(negative));
+  }
+  return jobs;
 }
 
 std::vector<Arrangement::RefineJob> Arrangement::group_points(const std::vector<Vec3>& points,
@@ -939,7 +1023,7 @@ std::vector<Arrangement::RefineJob> Arrangement::group_points(const std::vector<
       job.regions.push_back(std::move(regions_[static_cast<std::size_t>(region)]));
       regions_[static_cast<std::size_t>(region)] = Region{};
       free_regions_.push_back(region);
-      job.nodes.push_back({-1, -1, -1, 0, false, 0, 0});
+      job.nodes.push_back({-1, -1, -1, 0, false, 0, 0, -1});
     }
     jobs[static_cast<std::size_t>(job_id)].points.push_back(static_cast<int>(n));
   }
@@ -983,17 +1067,41 @@ void Arrangement::refine(RefineJob& job, const std::vector<Vec3>& points, Refine
       return !(plane.normal.dot(p) + plane.offset >= 0.0);
     });
     const std::size_t mid = static_cast<std::size_t>(middle - job.points.begin());
+    // The target polygons' parts, clipped to each side (the negative side takes the slot).
+    int neg_targets = -1, pos_targets = -1;
+    if (job.nodes[k].targets >= 0) {
+      const std::vector<std::vector<Vec3>> parts =
+          std::move(job.targets[static_cast<std::size_t>(job.nodes[k].targets)]);
+      std::vector<std::vector<Vec3>> neg_parts, pos_parts;
+      for (const std::vector<Vec3>& part : parts) {
+        clip_to_side(part, crossing, -1, scratch.clipped);
+        if (!scratch.clipped.empty()) neg_parts.push_back(scratch.clipped);
+        clip_to_side(part, crossing, 1, scratch.clipped);
+        if (!scratch.clipped.empty()) pos_parts.push_back(scratch.clipped);
+      }
+      if (!neg_parts.empty()) {
+        neg_targets = job.nodes[k].targets;
+        job.targets[static_cast<std::size_t>(neg_targets)] = std::move(neg_parts);
+      }
+      if (!pos_parts.empty()) {
+        pos_targets = static_cast<int>(job.targets.size());
+        job.targets.push_back(std::move(pos_parts));
+      }
+    }
     const int negative = static_cast<int>(job.nodes.size());
-    job.nodes.push_back({-1, -1, -1, neg_region, false, job.nodes[k].points_begin, mid});
-    job.nodes.push_back({-1, -1, -1, pos_region, false, mid, job.nodes[k].points_end});
+    job.nodes.push_back(
+        {-1, -1, -1, neg_region, false, job.nodes[k].points_begin, mid, neg_targets});
+    job.nodes.push_back(
+        {-1, -1, -1, pos_region, false, mid, job.nodes[k].points_end, pos_targets});
     RefineJob::Node& node = job.nodes[k];
     node.plane = crossing;
     node.negative = negative;
     node.positive = negative + 1;
     node.region = -1;
-    // A part no point reached stays a region.
-    if (mid > node.points_begin) pending.push_back(negative);
-    if (job.nodes[static_cast<std::size_t>(negative) + 1].points_end > mid)
+    node.targets = -1;
+    // A part no point or polygon reached stays a region.
+    if (mid > node.points_begin || neg_targets >= 0) pending.push_back(negative);
+    if (job.nodes[static_cast<std::size_t>(negative) + 1].points_end > mid || pos_targets >= 0)
       pending.push_back(negative + 1);
   }
 }

@@ -111,6 +111,18 @@ class Arrangement {
   static constexpr std::size_t kJobsPerPass = 2048;
   std::vector<int> construct_cells(const std::vector<Vec3>& points, const std::vector<char>& wanted,
                                    std::size_t jobs_per_pass = kJobsPerPass);
+  /// On demand: builds every cell that may meet one of `polygons` (each convex and planar, its
+  /// corners in order; a slice's unknown set, whose faces the completion reads with both their
+  /// cells, completion.cpp). Conservative: a cell is built unless the polygon, clipped in doubles
+  /// by the planes that bound the cell with a margin of 1e-9 of the box's extent, is empty; the
+  /// cells themselves are the exact ones construct_cell builds. Cells built before are kept. The
+  /// regions the polygons reach are refined in parallel and put into the tree as in
+  /// construct_cells: the same ids for any number of threads.
+  void construct_cells_meeting(const std::vector<std::vector<Vec3>>& polygons,
+                               std::size_t jobs_per_pass = kJobsPerPass);
+  /// On demand: seconds spent since the last call in the serial steps of building cells
+  /// (grouping, numbering, linking: see ReconstructionStats::arrangement_serial_s).
+  double take_serial_seconds() { return std::exchange(serial_seconds_, 0.0); }
   /// On demand: the leaves of the lazy BSP (built cells and regions not yet refined).
   std::size_t region_count() const {
     return regions_.size() - free_regions_.size() + built_cell_count();
@@ -205,9 +217,12 @@ class Arrangement {
       int region = -1;  // index in `regions`
       bool cell = false;
       std::size_t points_begin = 0, points_end = 0;
+      int targets = -1;  // index in `targets`: the polygons that reach it (construct_cells_meeting)
     };
     int leaf = -1;  // the BSP node
     std::vector<int> points;
+    // construct_cells_meeting: per node, the parts of the polygons that may meet its region.
+    std::vector<std::vector<std::vector<Vec3>>> targets;
     std::vector<Node> nodes;
     std::vector<Region> regions;
     std::vector<JobVertex> vertices;
@@ -237,6 +252,7 @@ class Arrangement {
     std::vector<int> touched;
     std::vector<std::pair<std::uint64_t, int>> split_vertices;  // per split: edge -> crossing
     std::vector<DirectedEdge> section;
+    std::vector<Vec3> clipped;  // a target polygon's part on one side (refine)
   };
   // On demand: face ids by 64-bit key, several per key; open addressing with linear probing (a
   // std::unordered_multimap spent a tenth of the run at 200 random slices in its node chains).
@@ -286,9 +302,23 @@ class Arrangement {
   // (cells[n] set for those in built cells), the others grouped by the region they reach.
   std::vector<RefineJob> group_points(const std::vector<Vec3>& points,
                                       const std::vector<char>& wanted, std::vector<int>& cells);
-  // On demand: refines job.nodes[0] breadth first until each of its points is in a cell (a
-  // region no plane crosses) or `max_splits` splits are made (the points left in regions keep
-  // no cell); const but for the job and the thread's scratch.
+  // On demand: the jobs of construct_cells_meeting: the polygons walked down the tree, clipped
+  // by each node's plane (with a margin) and sent to the sides they may reach; a region reached
+  // becomes a job with the parts that reach it, in the order of a depth-first walk.
+  std::vector<RefineJob> group_polygons(const std::vector<std::vector<Vec3>>& polygons);
+  // The part of convex `polygon` on the `sigma` side of `plane_id` (+1: value >= -margin,
+  // -1: value <= margin, margin 1e-9 of the box's extent), into `out`.
+  void clip_to_side(const std::vector<Vec3>& polygon, int plane_id, int sigma,
+                    std::vector<Vec3>& out) const;
+  // On demand: construct_cells' passes over the jobs `group` returns (refine, number, place,
+  // link), until a round leaves nothing to refine.
+  template <typename Group>
+  void refine_in_passes(Group&& group, const std::vector<Vec3>& points, std::vector<int>& cells,
+                        std::size_t jobs_per_pass);
+  // On demand: refines job.nodes[0] breadth first until each of its points, and each part of
+  // its target polygons, is in a cell (a region no plane crosses) or `max_splits` splits are
+  // made (the points left in regions keep no cell); const but for the job and the thread's
+  // scratch.
   void refine(RefineJob& job, const std::vector<Vec3>& points, RefineScratch& scratch,
               std::size_t max_splits) const;
   // On demand: side(plane, v) for the arrangement's vertices and the job's, cached until
@@ -386,6 +416,7 @@ class Arrangement {
   tbb::enumerable_thread_specific<RefineScratch> refine_scratch_;
   std::vector<std::uint64_t> sorted_scratch_;
   std::size_t reopened_cells_ = 0;
+  double serial_seconds_ = 0.0;  // take_serial_seconds()
   std::vector<int> retired_faces_;
 
   // Per-insertion scratch state.

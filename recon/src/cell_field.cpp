@@ -244,7 +244,37 @@ std::vector<int> CellField::refresh(const std::vector<int>& split_faces) {
   std::vector<int> completion_changed;
   bool any_unknown = false;
   for (const PreparedSlice& s : slices_) any_unknown |= !s.unknown.empty();
-  if (any_unknown) {
+  // A slice's completion reads the faces with unknown parts and the known faces of their cells
+  // and of those cells' neighbours across such faces: cells that all have a face with an
+  // unknown part. On demand, every octree batch adds faces; when none of them is on such a cell
+  // (nor was an image split or released), no completion can change and the bookkeeping below,
+  // over all the faces, is skipped.
+  bool completion_inputs_changed = images_released_ || !split_faces.empty();
+  images_released_ = false;
+  if (any_unknown && !completion_inputs_changed) {
+    const auto touches_unknown = [&](int cell) {
+      if (cell < 0) return false;
+      for (const int g : arrangement_.cell(cell).faces)
+        if (!images_[static_cast<std::size_t>(g)].unknown_parts.empty()) return true;
+      return false;
+    };
+    completion_inputs_changed = tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(old_face_count, images_.size(), 1024), false,
+        [&](const tbb::blocked_range<std::size_t>& r, bool any) {
+          for (std::size_t f = r.begin(); f < r.end() && !any; ++f) {
+            const ArrangementFace& face = arrangement_.face(static_cast<int>(f));
+            any = touches_unknown(face.cell_positive) || touches_unknown(face.cell_negative);
+          }
+          return any;
+        },
+        std::logical_or<>());
+    if (!completion_inputs_changed) {
+      face_completion_hashes_.resize(images_.size(), 0);
+      completion_seconds_ = 0.0;
+      recompleted_slices_ = 0;
+    }
+  }
+  if (any_unknown && completion_inputs_changed) {
     // Slices whose inputs changed are completed again (build_unknown_images); the cells on both
     // sides of a face whose completed triangles changed must be evaluated again (an unchanged
     // face of a split cell counts too: its other cell is not in the arrangement's zone).
@@ -273,6 +303,7 @@ std::vector<int> CellField::refresh(const std::vector<int>& split_faces) {
 }
 
 void CellField::release_images(const std::vector<int>& faces) {
+  images_released_ |= !faces.empty();
   for (const int f : faces)
     if (static_cast<std::size_t>(f) < images_.size()) images_[static_cast<std::size_t>(f)] = FaceImage{};
 }
@@ -408,10 +439,21 @@ void CellField::build_face_image(int face_id, std::vector<Vec2>& points,
   FaceImage& image = images_[static_cast<std::size_t>(face_id)];
   image.frame = face.plane;
   const PlaneFrame& frame = frames_[static_cast<std::size_t>(face.plane)];
+  // From the vertex of smallest coordinates, as cells on demand store their faces: the order of
+  // the edges decides where the clipped rings below start, and so their far-field trees, whose
+  // approximations differed by 1e-7 between the whole arrangement and cells on demand otherwise.
+  const std::size_t n = face.vertices.size();
+  std::size_t start = 0;
+  for (std::size_t k = 1; k < n; ++k) {
+    const Vec3& p = arrangement_.vertex(face.vertices[k]);
+    const Vec3& q = arrangement_.vertex(face.vertices[start]);
+    if (std::lexicographical_compare(p.data(), p.data() + 3, q.data(), q.data() + 3)) start = k;
+  }
+  const auto vertex_at = [&](std::size_t i) { return face.vertices[(start + i) % n]; };
   Ring2 polygon;
-  polygon.reserve(face.vertices.size());
-  for (const int v : face.vertices) {
-    const Vec3 d = arrangement_.vertex(v) - frame.origin;
+  polygon.reserve(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const Vec3 d = arrangement_.vertex(vertex_at(i)) - frame.origin;
     polygon.emplace_back(d.dot(frame.u), d.dot(frame.v));
   }
   image.polygon_begin = static_cast<std::uint32_t>(points.size());
@@ -424,8 +466,8 @@ void CellField::build_face_image(int face_id, std::vector<Vec2>& points,
   // edge plane, so thin faces never get a flipped half-plane.
   std::vector<Eigen::Vector3d> half_planes;
   std::vector<int> seen;
-  for (std::size_t i = 0; i < face.vertices.size(); ++i) {
-    const int edge_plane_id = face.edge_planes[i];
+  for (std::size_t i = 0; i < n; ++i) {
+    const int edge_plane_id = face.edge_planes[(start + i) % n];
     if (std::find(seen.begin(), seen.end(), edge_plane_id) != seen.end()) continue;
     seen.push_back(edge_plane_id);
     // Ask the exact predicate about the vertex farthest from the edge plane: its interval

@@ -254,6 +254,7 @@ class CellField {
   std::uint64_t last_image_generation_ = 0;
   std::vector<SliceCompletion> slice_completions_;  // per slice
   std::size_t recompleted_slices_ = 0;
+  bool images_released_ = false;  // release_images() since the last refresh
   std::uint64_t version_ = 0;      // see Internals
   std::uint64_t compactions_ = 0;  // compact_points() calls that moved the points
 };

@@ -417,7 +417,38 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
   // Neighbouring faces share most edges: each is inserted once (a second insertion of the same
   // constraint changes nothing but costs its walk through the triangulation).
   std::unordered_set<std::array<double, 4>, DoublesHash> face_edges;
+  // In an order of their own, not by id: the whole arrangement and cells on demand number the
+  // same faces differently, and the insertions' order decides the refinement below (which
+  // triangles CGAL lists first). By each face's vertex mean, then from its least vertex, both
+  // on a grid of 1e-9 of the box's diagonal: the two arrangements may round a vertex
+  // differently in its last bits (its three planes in another order).
+  const double quantum = 1e-9 * diagonal;
+  const auto grid_point = [&](const Vec2& p) {
+    return std::array<std::int64_t, 2>{std::llround(p.x() / quantum), std::llround(p.y() / quantum)};
+  };
+  struct OrderedFace {
+    std::array<std::int64_t, 2> mean;
+    int id;
+    std::uint32_t first;  // the polygon's least vertex
+  };
+  std::vector<OrderedFace> ordered_faces;
   for (const int f : slice_faces) {
+    const FaceImage& image = images_[static_cast<std::size_t>(f)];
+    if (image.polygon_count == 0) continue;
+    Vec2 sum = Vec2::Zero();
+    std::uint32_t first = 0;
+    for (std::uint32_t k = 0; k < image.polygon_count; ++k) {
+      sum += points_[image.polygon_begin + k];
+      if (grid_point(points_[image.polygon_begin + k]) < grid_point(points_[image.polygon_begin + first]))
+        first = k;
+    }
+    ordered_faces.push_back({grid_point(sum / image.polygon_count), f, first});
+  }
+  std::sort(ordered_faces.begin(), ordered_faces.end(), [](const OrderedFace& a, const OrderedFace& b) {
+    return a.mean != b.mean ? a.mean < b.mean : a.id < b.id;
+  });
+  for (const OrderedFace& ordered : ordered_faces) {
+    const int f = ordered.id;
     const FaceImage& image = images_[static_cast<std::size_t>(f)];
     SliceFace face{f, points_[image.polygon_begin], points_[image.polygon_begin]};
     for (std::uint32_t k = 0; k < image.polygon_count; ++k) {
@@ -426,7 +457,8 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
     }
     if ((face.lo.array() > hi.array()).any() || (face.hi.array() < lo.array()).any()) continue;
     faces.push_back(face);
-    for (std::uint32_t k = 0; k < image.polygon_count; ++k) {
+    for (std::uint32_t i = 0; i < image.polygon_count; ++i) {
+      const std::uint32_t k = (ordered.first + i) % image.polygon_count;
       const Vec2& a = points_[image.polygon_begin + k];
       const Vec2& b = points_[image.polygon_begin + (k + 1) % image.polygon_count];
       if (a == b) continue;

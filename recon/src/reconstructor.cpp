@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <exception>
+#include <limits>
 #include <set>
 #include <stdexcept>
 
@@ -82,12 +83,6 @@ bool same_slice(const LabeledSlice& a, const LabeledSlice& b) {
         a.regions[r].holes != b.regions[r].holes)
       return false;
   return true;
-}
-
-// Whether the engine completes unknown regions on `slice` (as prepare_slice decides).
-bool has_unknown(const LabeledSlice& slice) {
-  return slice.fov || std::any_of(slice.regions.begin(), slice.regions.end(),
-                                  [](const Region& r) { return r.label == kUnknownLabel; });
 }
 
 bool same_plane(const LabeledSlice& a, const LabeledSlice& b, double scale) {
@@ -185,6 +180,33 @@ struct Reconstructor::State {
     return cells;
   }
 
+  // On demand: the cells around the slices' unknown sets, built before the face images. The
+  // completion reads every face with an unknown part, with the faces of its two cells and of
+  // their neighbours across other such faces (build_unknown_images); all those cells meet an
+  // unknown set. One rectangle per unknown component: its bounds in the slice's plane, widened
+  // by a millionth of the box's diagonal. Cells built before are kept (online, this walks down
+  // to them and rebuilds only those a new plane reopened).
+  void build_unknown_cells() {
+    if (!arrangement->on_demand()) return;
+    const double widen = 1e-6 * box.diagonal();
+    std::vector<std::vector<Vec3>> rectangles;
+    for (const PreparedSlice& slice : field->slices())
+      for (const UnknownComponent& component : slice.unknown) {
+        Vec2 lo = Vec2::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+        for (const Ring2& ring : component.rings)
+          for (const Vec2& p : ring) {
+            lo = lo.cwiseMin(p);
+            hi = hi.cwiseMax(p);
+          }
+        lo.array() -= widen;
+        hi.array() += widen;
+        const auto corner = [&](double x, double y) { return Vec3(slice.origin + x * slice.u + y * slice.v); };
+        rectangles.push_back({corner(lo.x(), lo.y()), corner(hi.x(), lo.y()), corner(hi.x(), hi.y()),
+                              corner(lo.x(), hi.y())});
+      }
+    arrangement->construct_cells_meeting(rectangles);
+  }
+
   // Rebuilds everything for `list` (first update, removals, a grown box, a new material).
   void rebuild(const std::vector<Entry>& list, ReconstructionStats& stats) {
     const SliceSet set = slice_set_of(list);
@@ -192,10 +214,7 @@ struct Reconstructor::State {
     material_ids = materials_of(list);
     depth = options.engine.max_depth > 0 ? options.engine.max_depth : default_depth(box);
     Stopwatch clock;
-    const bool on_demand =
-        options.cells_on_demand &&
-        std::none_of(list.begin(), list.end(), [](const Entry& e) { return has_unknown(e.slice); });
-    arrangement = std::make_unique<Arrangement>(box, on_demand);
+    arrangement = std::make_unique<Arrangement>(box, options.cells_on_demand);
     field = std::make_unique<CellField>(*arrangement, static_cast<int>(material_ids.size()));
     {
       // The slices are prepared in parallel (each depends on itself alone; the first error in
@@ -222,7 +241,9 @@ struct Reconstructor::State {
         progress.update(++done);
       }
     }
+    build_unknown_cells();
     stats.arrangement_s += clock.seconds();
+    stats.arrangement_serial_s += arrangement->take_serial_seconds();
     clock.reset();
     field->refresh({});
     stats.face_images_s += clock.seconds();
@@ -297,7 +318,8 @@ UpdateStats Reconstructor::update() {
   if (s.built && s.pending_adds.empty() && s.pending_removes.empty()) {
     out.step = s.totals;
     out.step.arrangement_s = out.step.face_images_s = out.step.field_s = out.step.smoothing_s =
-        out.step.mesh_s = out.step.total_s = out.step.completion_s = out.step.evaluation_s = 0.0;
+        out.step.mesh_s = out.step.total_s = out.step.completion_s = out.step.evaluation_s =
+            out.step.arrangement_serial_s = 0.0;
     out.step.field_evaluations = 0;
     return out;
   }
@@ -326,12 +348,7 @@ UpdateStats Reconstructor::update() {
   try {
     arena.execute([&] {
       const Box3 next_box = s.slice_set_of(next).effective_bounds();
-      // A slice with unknown regions needs the whole arrangement (see cells_on_demand).
-      const bool unknown_on_demand =
-          s.built && s.arrangement->on_demand() &&
-          std::any_of(next.begin() + static_cast<std::ptrdiff_t>(s.entries.size()), next.end(),
-                      [](const State::Entry& e) { return has_unknown(e.slice); });
-      const bool full = !s.built || unknown_on_demand || out.slices_removed > 0 ||
+      const bool full = !s.built || out.slices_removed > 0 ||
                         s.materials_of(next) != s.material_ids || next_box.min != s.box.min ||
                         next_box.max != s.box.max;
       std::vector<int> changed_cells;
@@ -349,9 +366,11 @@ UpdateStats Reconstructor::update() {
               split_faces);
           changed.insert(changed.end(), cells.begin(), cells.end());
         }
+        s.build_unknown_cells();  // around the new slices' unknown sets and the reopened cells
         std::sort(changed.begin(), changed.end());
         changed.erase(std::unique(changed.begin(), changed.end()), changed.end());
         stats.arrangement_s = clock.seconds();
+        stats.arrangement_serial_s = s.arrangement->take_serial_seconds();
         clock.reset();
         std::sort(split_faces.begin(), split_faces.end());
         split_faces.erase(std::unique(split_faces.begin(), split_faces.end()), split_faces.end());
@@ -440,6 +459,7 @@ UpdateStats Reconstructor::update() {
       // Values are tagged with the cells built now and this update (their generation).
       s.cell_generation.resize(s.arrangement->cell_count(), s.generation);
       stats.arrangement_s += clock.seconds();
+      stats.arrangement_serial_s += s.arrangement->take_serial_seconds();
       clock.reset();
       arena.execute([&] { s.field->refresh({}); });  // the images of the new cells' faces
       stats.face_images_s += clock.seconds();
@@ -502,6 +522,7 @@ UpdateStats Reconstructor::update() {
 
   ReconstructionStats& totals = s.totals;
   totals.arrangement_s += stats.arrangement_s;
+  totals.arrangement_serial_s += stats.arrangement_serial_s;
   totals.face_images_s += stats.face_images_s;
   totals.field_s += stats.field_s;
   totals.smoothing_s += stats.smoothing_s;

@@ -33,6 +33,9 @@ struct ReconstructionStats {
   std::size_t unknown_triangles = 0, cell_groups = 0;  ///< unknown-region completion
   std::size_t completed_slices = 0;  ///< slices whose unknown regions were (re)completed
   double completion_s = 0;  ///< part of face_images_s spent completing unknown regions
+  /// Part of arrangement_s (cells on demand) outside the parallel refinement and placement of
+  /// regions: grouping the points by region, numbering, and sharing the new faces (link).
+  double arrangement_serial_s = 0;
   /// Part of field_s and smoothing_s spent evaluating the field at grid vertices (the rest: the
   /// octree, band and smoothing passes).
   double evaluation_s = 0;

@@ -30,8 +30,10 @@ struct ReconstructorOptions {
   /// 24): the cost follows the surface instead of the cube of the slice count, with the same
   /// field. An update's new plane reopens only the built cells it crosses (their values are
   /// evaluated again in the cells they split into); the others keep their cells, faces, images
-  /// and values. Sets with unknown regions or fields of view use the whole arrangement (their
-  /// completion reads the faces around the unknown regions): the first such slice rebuilds.
+  /// and values. With unknown regions or fields of view, the cells that meet the unknown sets
+  /// are built first, every update (the completion reads the faces around them); with a sector
+  /// on every slice that is nearly the whole arrangement. false: the whole arrangement, built
+  /// plane by plane (the reference the invariant tests compare with).
   bool cells_on_demand = true;
 };
 
