@@ -834,6 +834,7 @@ void Arrangement::reopen_cell(int cell, int plane_id) {
   const int leaf = leaf_of_cell_[static_cast<std::size_t>(cell)];
   bsp_[static_cast<std::size_t>(leaf)] = {-1, -1, -1, -1, allocate_region(std::move(region))};
   leaf_of_cell_[static_cast<std::size_t>(cell)] = -1;
+  reopened_leaves_.push_back(leaf);
 }
 
 int Arrangement::construct_cell(const Vec3& p) {
@@ -919,7 +920,47 @@ void Arrangement::construct_cells_meeting(const std::vector<std::vector<Vec3>>& 
                                           std::size_t jobs_per_pass) {
   if (!on_demand_ || polygons.empty()) return;
   std::vector<int> no_cells;
-  refine_in_passes([&] { return group_polygons(polygons); }, {}, no_cells, jobs_per_pass);
+  const std::vector<std::pair<int, PolygonParts>> root{{0, polygons}};
+  refine_in_passes([&] { return group_polygons(root); }, {}, no_cells, jobs_per_pass);
+}
+
+void Arrangement::construct_reopened_cells_meeting(const std::vector<std::vector<Vec3>>& polygons,
+                                                   std::size_t jobs_per_pass) {
+  std::vector<int> leaves = std::exchange(reopened_leaves_, {});
+  if (!on_demand_ || polygons.empty()) return;
+  // Each reopened region (a leaf still: nothing refined it since) with the parts of the
+  // polygons inside it: those whose bounds meet the region's, clipped by its faces' planes.
+  std::vector<std::pair<int, PolygonParts>> starts;
+  std::vector<Vec3> part, clipped;
+  const double reach = 1e-9 * (box_.max.cwiseAbs().cwiseMax(box_.min.cwiseAbs()).sum() + box_.diagonal());
+  for (const int leaf : leaves) {
+    const BspNode& b = bsp_[static_cast<std::size_t>(leaf)];
+    if (b.plane >= 0 || b.cell >= 0) continue;
+    const Region& region = regions_[static_cast<std::size_t>(b.region)];
+    PolygonParts parts;
+    for (const std::vector<Vec3>& polygon : polygons) {
+      Box3 bounds{polygon.front(), polygon.front()};
+      for (const Vec3& q : polygon) {
+        bounds.min = bounds.min.cwiseMin(q);
+        bounds.max = bounds.max.cwiseMax(q);
+      }
+      if ((bounds.min.array() > region.bounds.max.array() + reach).any() ||
+          (bounds.max.array() < region.bounds.min.array() - reach).any())
+        continue;
+      part = polygon;
+      for (std::size_t at = 0; at < region.faces.size() && !part.empty();) {
+        const RegionFace face = region_face(region.faces, at);
+        at += face.size();
+        clip_to_side(part, face.plane, face.sigma, clipped);
+        std::swap(part, clipped);
+      }
+      if (!part.empty()) parts.push_back(part);
+    }
+    if (!parts.empty()) starts.emplace_back(leaf, std::move(parts));
+  }
+  if (starts.empty()) return;
+  std::vector<int> no_cells;
+  refine_in_passes([&] { return group_polygons(starts); }, {}, no_cells, jobs_per_pass);
 }
 
 void Arrangement::clip_to_side(const std::vector<Vec3>& polygon, int plane_id, int sigma,
@@ -944,15 +985,18 @@ void Arrangement::clip_to_side(const std::vector<Vec3>& polygon, int plane_id, i
 }
 
 std::vector<Arrangement::RefineJob> Arrangement::group_polygons(
-    const std::vector<std::vector<Vec3>>& polygons) {
-  // Depth first, negative side first: the jobs' order does not depend on the threads.
+    const std::vector<std::pair<int, PolygonParts>>& starts) {
+  // From each start in turn, depth first, negative side first: the jobs' order does not depend
+  // on the threads.
   std::vector<RefineJob> jobs;
   struct Visit {
     int node;
-    std::vector<std::vector<Vec3>> parts;
+    PolygonParts parts;
   };
-  std::vector<Visit> stack{{0, polygons}};
+  std::vector<Visit> stack;
   std::vector<Vec3> clipped;
+  for (auto start = starts.rbegin(); start != starts.rend(); ++start)
+    stack.push_back({start->first, start->second});
   while (!stack.empty()) {
     Visit visit = std::move(stack.back());
     stack.pop_back();

@@ -120,6 +120,13 @@ class Arrangement {
   /// construct_cells: the same ids for any number of threads.
   void construct_cells_meeting(const std::vector<std::vector<Vec3>>& polygons,
                                std::size_t jobs_per_pass = kJobsPerPass);
+  /// On demand: construct_cells_meeting within the cells insert_plane reopened since the last
+  /// call only (the online engine: the cells meeting `polygons` were all built before the new
+  /// planes, and only the reopened ones are missing). Each reopened region takes the parts of
+  /// the polygons inside it (clipped by its faces' planes with the margin); the list of
+  /// reopened regions is cleared.
+  void construct_reopened_cells_meeting(const std::vector<std::vector<Vec3>>& polygons,
+                                        std::size_t jobs_per_pass = kJobsPerPass);
   /// On demand: seconds spent since the last call in the serial steps of building cells
   /// (grouping, numbering, linking: see ReconstructionStats::arrangement_serial_s).
   double take_serial_seconds() { return std::exchange(serial_seconds_, 0.0); }
@@ -163,6 +170,8 @@ class Arrangement {
   std::size_t vertex_count() const { return vertex_planes_.size(); }
   std::size_t plane_count() const { return planes_.size(); }
   const ArrangementCell& cell(int id) const { return cells_[static_cast<std::size_t>(id)]; }
+  /// Double bounds of a cell's vertices (a reopened cell keeps its last ones).
+  const Box3& cell_bounds(int id) const { return cell_bounds_[static_cast<std::size_t>(id)]; }
   const ArrangementFace& face(int id) const { return faces_[static_cast<std::size_t>(id)]; }
   const ArrangementPlane& plane(int id) const { return planes_[static_cast<std::size_t>(id)]; }
   /// Double approximation of a vertex (rounded from the exact point).
@@ -305,7 +314,9 @@ class Arrangement {
   // On demand: the jobs of construct_cells_meeting: the polygons walked down the tree, clipped
   // by each node's plane (with a margin) and sent to the sides they may reach; a region reached
   // becomes a job with the parts that reach it, in the order of a depth-first walk.
-  std::vector<RefineJob> group_polygons(const std::vector<std::vector<Vec3>>& polygons);
+  // `starts`: the nodes to walk from, each with the polygons' parts that may reach it.
+  using PolygonParts = std::vector<std::vector<Vec3>>;
+  std::vector<RefineJob> group_polygons(const std::vector<std::pair<int, PolygonParts>>& starts);
   // The part of convex `polygon` on the `sigma` side of `plane_id` (+1: value >= -margin,
   // -1: value <= margin, margin 1e-9 of the box's extent), into `out`.
   void clip_to_side(const std::vector<Vec3>& polygon, int plane_id, int sigma,
@@ -417,6 +428,7 @@ class Arrangement {
   std::vector<std::uint64_t> sorted_scratch_;
   std::size_t reopened_cells_ = 0;
   double serial_seconds_ = 0.0;  // take_serial_seconds()
+  std::vector<int> reopened_leaves_;  // construct_reopened_cells_meeting()
   std::vector<int> retired_faces_;
 
   // Per-insertion scratch state.
