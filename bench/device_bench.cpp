@@ -63,7 +63,8 @@ nlohmann::json stats_json(const recon::ReconstructionStats& s) {
           {"cells", s.cells},
           {"slices", s.slices},
           {"field_evaluations", s.field_evaluations},
-          {"unknown_triangles", s.unknown_triangles}};
+          {"unknown_triangles", s.unknown_triangles},
+          {"completed_slices", s.completed_slices}};
 }
 
 // One update of every slice of `set`, with cells on demand or on the whole arrangement.
@@ -71,7 +72,7 @@ std::unique_ptr<recon::Reconstructor> reconstruct_with(const SliceSet& set,
                                                        recon::ReconstructorOptions setup,
                                                        bool on_demand,
                                                        recon::ReconstructionStats& stats) {
-  setup.cells_on_demand = on_demand;
+  setup.engine.cells_on_demand = on_demand;
   auto engine = std::make_unique<recon::Reconstructor>(setup);
   for (const LabeledSlice& slice : set.slices) engine->add_slice(slice);
   stats = engine->update().step;

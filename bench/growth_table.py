@@ -9,7 +9,11 @@ the best (smallest) time of each stage: the machine is shared, and the best of a
 figure least moved by the others' load. Peak RSS is the child's own (os.wait4), the largest of the
 runs. Slices whose section of the mesh self-intersects are dropped (`slice --skip-invalid`: one of
 the 500 random planes), and the table says how many were kept. With --before BIN the same sets
-are also reconstructed by another binary (e.g. main's) and the table shows both.
+are also reconstructed by another binary (e.g. main's) and the table shows both; with
+--before-whole, by the same binary building the whole arrangement (`reconstruct
+--whole-arrangement`, the engine before cells on demand), up to --before-max slices. Families:
+random, sweep, and blobs (the random planes with unknown blobs on 40 % of the slices, `slice
+--unknown 0.4`).
 
 With --online the same sets are also fed slice by slice to the online engine (`reconstruct
 --online --stats`, one update per slice, one run: its figures are medians over many updates) and a
@@ -18,10 +22,13 @@ slices, the median and 90th percentile over every update from the 10th, the sum 
 the peak RSS. --sweep-online K adds a K-slice simulated sweep (`slice --planes sweep --count K`,
 the probe moved along the horse rocking on two axes with a tremor) fed the same way, with the
 median update time of each tenth of the sweep: flat when the cost per slice does not grow.
+--sweep-online-fov gives each slice of that sweep a 60-degree sector field of view aimed to cover
+the horse (`slice --fov sector --fov-aim cover`; the rest of the plane unknown), as every slice of
+a scan has.
 
-Usage: python3 bench/growth_table.py [--bin build/apps/sonoshape] [--before OTHER_BINARY]
-       [--sets random,sweep] [--repeats 3] [--threads 0] [--full] [--write-doc]
-       [--online] [--sweep-online 600] [--offline-max N]
+Usage: python3 bench/growth_table.py [--bin build/apps/sonoshape] [--before OTHER_BINARY | --before-whole]
+       [--before-max 200] [--sets random,sweep,blobs] [--repeats 3] [--threads 0] [--full] [--write-doc]
+       [--online] [--sweep-online 600 [--sweep-online-fov]] [--offline-max N]
 Prints a Markdown table; --write-doc writes it into docs/benchmarks.md between
 `<!-- growth_table:begin -->` and `<!-- growth_table:end -->`.
 """
@@ -38,13 +45,15 @@ from doc_tables import provenance, write_between_markers
 COUNTS = [30, 60, 100, 150, 200]
 FULL_COUNTS = [300, 500]
 STAGES = ["total_s", "arrangement_s", "face_images_s", "evaluation_s"]
+# family -> (`slice --planes`, extra `slice` arguments)
+FAMILIES = {"random": ("random", []), "sweep": ("sweep", []), "blobs": ("random", ["--unknown", "0.4"])}
 
 
-def reconstruct(binary, slices, work, threads):
+def reconstruct(binary, slices, work, threads, extra=()):
     """One `reconstruct --stats` run: (stats dict, peak RSS MB)."""
     stats_path = os.path.join(work, "stats.json")
     args = [binary, "reconstruct", slices, "-o", os.path.join(work, "mesh.ply"), "--stats", stats_path,
-            "--threads", str(threads), "-q"]
+            "--threads", str(threads), "-q"] + list(extra)
     pid = os.fork()
     if pid == 0:  # the child: exec the engine with its output discarded
         devnull = os.open(os.devnull, os.O_WRONLY)
@@ -100,11 +109,11 @@ def tenths_row(stats):
             for k in range(10)]
 
 
-def best_of(binary, slices, work, repeats, threads):
+def best_of(binary, slices, work, repeats, threads, extra=()):
     """Best time of each stage over `repeats` runs, the cells of the last, the largest peak RSS."""
     best, rss = None, 0.0
     for _ in range(repeats):
-        stats, peak = reconstruct(binary, slices, work, threads)
+        stats, peak = reconstruct(binary, slices, work, threads, extra)
         rss = max(rss, peak)
         if best is None:
             best = dict(stats)
@@ -114,12 +123,15 @@ def best_of(binary, slices, work, repeats, threads):
     return best
 
 
-def make_set(binary, planes, count, work):
-    path = os.path.join(work, f"horse_{planes}{count}.slices.json")
+def make_set(binary, family, count, work, extra=()):
+    planes, family_extra = FAMILIES[family]
+    extra = family_extra + list(extra)
+    suffix = "".join(a.strip("-") for a in extra)
+    path = os.path.join(work, f"horse_{family}{count}{suffix}.slices.json")
     if not os.path.exists(path):
         subprocess.run([binary, "slice", "--mesh", "1:data/models/horse.ply:horse", "--planes", planes,
                         "--count", str(count), "--seed", "3", "--size-mm", "200", "-o", path, "-q",
-                        "--skip-invalid"],
+                        "--skip-invalid"] + extra,
                        check=True, capture_output=True)
     return path
 
@@ -136,7 +148,10 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--bin", default="build/apps/sonoshape", help="the engine measured")
     parser.add_argument("--before", help="another binary to measure on the same sets (e.g. main's)")
-    parser.add_argument("--sets", default="random", help="plane families, comma-separated (random, sweep)")
+    parser.add_argument("--before-whole", action="store_true",
+                        help="measure the same binary building the whole arrangement as `before`")
+    parser.add_argument("--sets", default="random",
+                        help="plane families, comma-separated (random, sweep, blobs)")
     parser.add_argument("--repeats", type=int, default=3, help="runs of each reconstruction (best kept)")
     parser.add_argument("--threads", type=int, default=0, help="--threads of reconstruct (0: all cores)")
     parser.add_argument("--full", action="store_true", help=f"also {FULL_COUNTS} slices")
@@ -146,6 +161,8 @@ def main():
     parser.add_argument("--online", action="store_true", help="also feed each set to the online engine")
     parser.add_argument("--sweep-online", type=int, default=0, metavar="K",
                         help="also feed a K-slice simulated sweep to the online engine")
+    parser.add_argument("--sweep-online-fov", action="store_true",
+                        help="give the --sweep-online sweep's slices a sector field of view")
     parser.add_argument("--offline-max", type=int, default=100000,
                         help="largest slice count reconstructed offline (the online runs take all)")
     parser.add_argument("--write-doc", action="store_true", help="write the table into docs/benchmarks.md")
@@ -172,11 +189,13 @@ def main():
             print(online_lines[-1], file=sys.stderr)
         online_lines.append("")
     if args.sweep_online:
-        slices = make_set(args.bin, "sweep", args.sweep_online, args.work)
+        fov = ["--fov", "sector", "--fov-aim", "cover"] if args.sweep_online_fov else []
+        slices = make_set(args.bin, "sweep", args.sweep_online, args.work, fov)
         stats, rss = reconstruct_online(args.bin, slices, args.work, args.threads)
         tenth_header = [f"{10 * k}-{10 * (k + 1)} %" for k in range(10)]
         cells = f"{stats['cells']:,}".replace(",", " ")
-        online_lines += [f"**{stats['slices']}-slice sweep, online: median update ms per tenth of the sweep** "
+        online_lines += [f"**{stats['slices']}-slice sweep{' with sector fields of view' if fov else ''}, "
+                         f"online: median update ms per tenth of the sweep** "
                          f"(sum {sum(s['total_s'] for s in stats['steps']):.1f} s, {cells} cells "
                          f"built, peak RSS {rss:.0f} MB, CPU time / (wall time x threads) "
                          f"{stats['cpu_share']:.2f})", "",
@@ -189,20 +208,26 @@ def main():
             if count > args.offline_max:
                 continue
             slices = make_set(args.bin, planes, count, args.work)
-            for name, binary in ([("before", args.before)] if args.before else []) + [("after", args.bin)]:
+            before = [("before", args.before, [])] if args.before else []
+            if args.before_whole:
+                before = [("whole arrangement", args.bin, ["--whole-arrangement"])]
+            for name, binary, extra in before + [("after", args.bin, [])]:
                 stats = None
                 if name == "after" or count <= args.before_max:
-                    stats = best_of(binary, slices, args.work, args.repeats, args.threads)
+                    stats = best_of(binary, slices, args.work, args.repeats, args.threads, extra)
                     stats["requested"] = count
-                label = f"{count} ({name})" if args.before else str(count)
+                label = f"{count} ({name})" if before else str(count)
                 lines.append("| " + " | ".join(row_cells(label, stats)) + " |")
                 print(lines[-1], file=sys.stderr)
         lines.append("")
     command = "python3 bench/growth_table.py" + (f" --before {args.before}" if args.before else "") + \
+        (" --before-whole" if args.before_whole else "") + \
+        (f" --before-max {args.before_max}" if (args.before or args.before_whole) and args.before_max != 200 else "") + \
         (f" --sets {args.sets}" if args.sets != "random" else "") + (" --full" if args.full else "") + \
         f" --repeats {args.repeats}" + (f" --threads {args.threads}" if args.threads else "") + \
         (" --online" if args.online else "") + \
         (f" --sweep-online {args.sweep_online}" if args.sweep_online else "") + \
+        (" --sweep-online-fov" if args.sweep_online_fov else "") + \
         (f" --offline-max {args.offline_max}" if args.offline_max < 100000 else "")
     text = "\n".join(lines + online_lines) + (f"\nBest of {args.repeats} runs per stage (2-core machine, shared); made by "
                                f"`{command}` in {time.monotonic() - start:.0f} s.")

@@ -189,6 +189,9 @@ CommandRunner add_reconstruct_command(CLI::App& app) {
   app.add_flag("--strict", opt->strict,
                "Refuse input that needs repairs (pinched contours, a flipped plane equation, "
                "rounding overlaps, ...) instead of repairing it with a warning");
+  app.add_flag("--whole-arrangement", [opt](std::int64_t) { opt->engine.cells_on_demand = false; },
+               "Build every cell of the slices' arrangement instead of those the surface needs (the "
+               "same field, at a cost that grows with the cube of the slice count; for comparisons)");
   app.add_flag("--online", opt->online,
                "Feed the slices one by one to the online engine (an update per slice)");
   app.add_option("--emit-every", opt->emit_every,

@@ -17,7 +17,6 @@ MeshSet reconstruct(const SliceSet& set, const ReconstructionOptions& options,
   ReconstructorOptions setup;
   setup.engine = options;
   setup.bounds = set.effective_bounds();
-  setup.cells_on_demand = true;  // one update: only the cells the octree reaches are built
   // A declared material that no region uses has an empty surface: it gets its (empty) entry
   // without a field of its own, so 1000 declared labels with one used cost one field, not 1000.
   std::set<int> used;

@@ -226,7 +226,7 @@ struct Reconstructor::State {
     material_ids = materials_of(list);
     depth = options.engine.max_depth > 0 ? options.engine.max_depth : default_depth(box);
     Stopwatch clock;
-    arrangement = std::make_unique<Arrangement>(box, options.cells_on_demand);
+    arrangement = std::make_unique<Arrangement>(box, options.engine.cells_on_demand);
     field = std::make_unique<CellField>(*arrangement, static_cast<int>(material_ids.size()));
     {
       // The slices are prepared in parallel (each depends on itself alone; the first error in

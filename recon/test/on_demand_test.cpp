@@ -400,7 +400,7 @@ std::unique_ptr<Reconstructor> reconstruct_with(const SliceSet& set, bool on_dem
   options.engine.max_depth = 5;
   options.engine.threads = threads;
   options.labels = {{1, "big"}, {2, "small"}};
-  options.cells_on_demand = on_demand;
+  options.engine.cells_on_demand = on_demand;
   auto r = std::make_unique<Reconstructor>(options);
   for (const LabeledSlice& s : set.slices) r->add_slice(s);
   const UpdateStats update = r->update();
@@ -564,7 +564,7 @@ ReconstructorOptions engine_options(bool on_demand, int threads) {
   options.engine.max_depth = 5;
   options.engine.threads = threads;
   options.labels = {{1, "big"}, {2, "small"}};
-  options.cells_on_demand = on_demand;
+  options.engine.cells_on_demand = on_demand;
   return options;
 }
 

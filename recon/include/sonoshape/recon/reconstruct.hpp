@@ -20,6 +20,16 @@ struct ReconstructionOptions {
   /// if any), "opencl:PLATFORM:DEVICE", "auto" (an fp64 GPU if present, else cpu). The values
   /// agree to 1e-9 (the kernels repeat the CPU's rounding). Errors: sonoshape::Error.
   std::string device = "cpu";
+  /// Build the arrangement's cells and face images only where the field is evaluated (issue
+  /// 24): the cost follows the surface instead of the cube of the slice count, with the same
+  /// field. An update's new plane reopens only the built cells it crosses (their values are
+  /// evaluated again in the cells they split into); the others keep their cells, faces, images
+  /// and values. With unknown regions or fields of view, the cells that meet the unknown sets
+  /// are built first, every update (the completion reads the faces around them); with a sector
+  /// on every slice that is nearly the whole arrangement. false: the whole arrangement, built
+  /// plane by plane (the reference the invariant tests compare with; `reconstruct
+  /// --whole-arrangement`).
+  bool cells_on_demand = true;
 };
 
 /// Per-stage wall time in seconds and counts of one reconstruction.

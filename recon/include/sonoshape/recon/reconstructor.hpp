@@ -26,15 +26,6 @@ struct ReconstructorOptions {
   std::optional<Box3> bounds;
   /// Materials known up front (ids and names); materials first seen in a slice are added.
   std::vector<LabelInfo> labels;
-  /// Build the arrangement's cells and face images only where the field is evaluated (issue
-  /// 24): the cost follows the surface instead of the cube of the slice count, with the same
-  /// field. An update's new plane reopens only the built cells it crosses (their values are
-  /// evaluated again in the cells they split into); the others keep their cells, faces, images
-  /// and values. With unknown regions or fields of view, the cells that meet the unknown sets
-  /// are built first, every update (the completion reads the faces around them); with a sector
-  /// on every slice that is nearly the whole arrangement. false: the whole arrangement, built
-  /// plane by plane (the reference the invariant tests compare with).
-  bool cells_on_demand = true;
 };
 
 /// What one update() did.
