@@ -48,7 +48,7 @@ for b in "${binaries[@]}"; do
     name=$(basename "$set" .slices.json)
     [[ -n $only_sets && " $only_sets " != *" $name "* ]] && continue
     r=$repeat
-    [[ $name == random-500 || $name == sector-* ]] && r=$(( repeat > 1 ? repeat - 1 : 1 ))
+    [[ $name == random-500 || $name == sector-* || $name == blobs-* ]] && r=$(( repeat > 1 ? repeat - 1 : 1 ))
     list=$threads
     [[ $b == before_bench ]] && list=$before_threads
     for t in $list; do
