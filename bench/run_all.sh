@@ -46,8 +46,8 @@ build/bench/sonoshape_render --slices out/bench/offline_target/horse_1.slices.js
 build/bench/sonoshape_render -o docs/images/horse_truth.png out/bench/horse-random-40/truth/label_1.ply"
 
 step growth "sonoshape" \
-  "python3 bench/growth_table.py --sets random,sweep --full --write-doc" \
-  "python3 bench/growth_table.py --sets random,sweep --repeats 1"
+  "python3 bench/growth_table.py --sets random,sweep,blobs --before-whole --full --threads 2 --write-doc" \
+  "python3 bench/growth_table.py --sets random,sweep,blobs --repeats 1"
 
 step unknowns "sonoshape" \
   "python3 bench/accuracy_matrix.py --unknowns --write-doc"
