@@ -38,6 +38,12 @@
 // growing the arrays, the face table's inserts) and the per-region storage cost a third more
 // than the serial construction on one thread at 200 random slices, and give 4.3x on 16 threads
 // at 100 (docs/benchmarks.md, "Thread scaling on 16 cores").
+// Unknown regions (construct_cells_meeting): the completion reads the faces around a slice's
+// unknown set with both their cells, so every cell that may meet a rectangle around it is built
+// up front: the rectangles are walked down the tree like the points, clipped in doubles by each
+// node's plane with a margin (conservative; the cells are the exact ones), and every region a
+// part reaches is refined in the same jobs. Online, the older rectangles are walked only within
+// the cells a new plane reopened.
 // Left: each split builds both halves of a region though most siblings are never asked for.
 #include <CGAL/Exact_predicates_exact_constructions_kernel.h>
 #include <CGAL/Interval_nt.h>
