@@ -506,9 +506,7 @@ bool Arrangement::region_crossed(const Region& region, int plane_id, RefineJob& 
   // Quick rejection with the region's double bounds, as insert_plane does for cells.
   const ArrangementPlane& plane = planes_[static_cast<std::size_t>(plane_id)];
   const Box3& b = region.bounds;
-  const double scale =
-      plane.normal.cwiseAbs().dot(box_.max.cwiseAbs().cwiseMax(box_.min.cwiseAbs())) +
-      std::abs(plane.offset);
+  const double scale = value_scale(plane);
   const double center_value = plane.normal.dot(0.5 * (b.min + b.max)) + plane.offset;
   const double reach = 0.5 * plane.normal.cwiseAbs().dot(b.max - b.min);
   if (center_value - reach > 1e-9 * scale || center_value + reach < -1e-9 * scale) return false;
@@ -757,9 +755,7 @@ std::vector<int> Arrangement::reopen_crossed_cells(int plane_id) {
   // Quick rejection with each cell's double bounds, as insert_plane does for whole arrangements;
   // the exact predicate decides the rest.
   const ArrangementPlane& plane = planes_[static_cast<std::size_t>(plane_id)];
-  const double scale =
-      plane.normal.cwiseAbs().dot(box_.max.cwiseAbs().cwiseMax(box_.min.cwiseAbs())) +
-      std::abs(plane.offset);
+  const double scale = value_scale(plane);
   std::vector<int> reopened;
   for (std::size_t c = 0; c < cells_.size(); ++c) {
     if (cells_[c].faces.empty()) continue;  // reopened before
@@ -933,17 +929,22 @@ void Arrangement::construct_reopened_cells_meeting(const std::vector<std::vector
   std::vector<std::pair<int, PolygonParts>> starts;
   std::vector<Vec3> part, clipped;
   const double reach = 1e-9 * (box_.max.cwiseAbs().cwiseMax(box_.min.cwiseAbs()).sum() + box_.diagonal());
+  std::vector<Box3> polygon_bounds;
+  for (const std::vector<Vec3>& polygon : polygons) {
+    Box3& bounds = polygon_bounds.emplace_back(Box3{polygon.front(), polygon.front()});
+    for (const Vec3& q : polygon) {
+      bounds.min = bounds.min.cwiseMin(q);
+      bounds.max = bounds.max.cwiseMax(q);
+    }
+  }
   for (const int leaf : leaves) {
     const BspNode& b = bsp_[static_cast<std::size_t>(leaf)];
     if (b.plane >= 0 || b.cell >= 0) continue;
     const Region& region = regions_[static_cast<std::size_t>(b.region)];
     PolygonParts parts;
-    for (const std::vector<Vec3>& polygon : polygons) {
-      Box3 bounds{polygon.front(), polygon.front()};
-      for (const Vec3& q : polygon) {
-        bounds.min = bounds.min.cwiseMin(q);
-        bounds.max = bounds.max.cwiseMax(q);
-      }
+    for (std::size_t i = 0; i < polygons.size(); ++i) {
+      const std::vector<Vec3>& polygon = polygons[i];
+      const Box3& bounds = polygon_bounds[i];
       if ((bounds.min.array() > region.bounds.max.array() + reach).any() ||
           (bounds.max.array() < region.bounds.min.array() - reach).any())
         continue;
@@ -968,9 +969,7 @@ void Arrangement::clip_to_side(const std::vector<Vec3>& polygon, int plane_id, i
   // Sutherland-Hodgman against one half-space, widened by the margin: a part that rounding
   // might put on the wrong side goes to both.
   const ArrangementPlane& plane = planes_[static_cast<std::size_t>(plane_id)];
-  const double margin =
-      1e-9 * (plane.normal.cwiseAbs().dot(box_.max.cwiseAbs().cwiseMax(box_.min.cwiseAbs())) +
-              std::abs(plane.offset));
+  const double margin = 1e-9 * value_scale(plane);
   const auto value = [&](const Vec3& p) {
     return sigma * (plane.normal.dot(p) + plane.offset) + margin;
   };
@@ -984,6 +983,27 @@ void Arrangement::clip_to_side(const std::vector<Vec3>& polygon, int plane_id, i
   }
 }
 
+void Arrangement::split_parts(const PolygonParts& parts, int plane_id, PolygonParts& negative,
+                              PolygonParts& positive, std::vector<Vec3>& scratch) const {
+  for (const std::vector<Vec3>& part : parts) {
+    clip_to_side(part, plane_id, -1, scratch);
+    if (!scratch.empty()) negative.push_back(scratch);
+    clip_to_side(part, plane_id, 1, scratch);
+    if (!scratch.empty()) positive.push_back(scratch);
+  }
+}
+
+Arrangement::RefineJob& Arrangement::start_job(std::vector<RefineJob>& jobs, int leaf) {
+  const int region = bsp_[static_cast<std::size_t>(leaf)].region;
+  RefineJob& job = jobs.emplace_back();
+  job.leaf = leaf;
+  job.regions.push_back(std::move(regions_[static_cast<std::size_t>(region)]));
+  regions_[static_cast<std::size_t>(region)] = Region{};
+  free_regions_.push_back(region);
+  job.nodes.push_back({-1, -1, -1, 0, false, 0, 0, -1});
+  return job;
+}
+
 std::vector<Arrangement::RefineJob> Arrangement::group_polygons(
     const std::vector<std::pair<int, PolygonParts>>& starts) {
   // From each start in turn, depth first, negative side first: the jobs' order does not depend
@@ -994,7 +1014,7 @@ std::vector<Arrangement::RefineJob> Arrangement::group_polygons(
     PolygonParts parts;
   };
   std::vector<Visit> stack;
-  std::vector<Vec3> clipped;
+  std::vector<Vec3> clipped;  // split_parts' scratch
   for (auto start = starts.rbegin(); start != starts.rend(); ++start)
     stack.push_back({start->first, start->second});
   while (!stack.empty()) {
@@ -1003,22 +1023,13 @@ std::vector<Arrangement::RefineJob> Arrangement::group_polygons(
     const BspNode& b = bsp_[static_cast<std::size_t>(visit.node)];
     if (b.plane < 0) {
       if (b.cell >= 0) continue;  // built
-      RefineJob& job = jobs.emplace_back();
-      job.leaf = visit.node;
-      job.regions.push_back(std::move(regions_[static_cast<std::size_t>(b.region)]));
-      regions_[static_cast<std::size_t>(b.region)] = Region{};
-      free_regions_.push_back(b.region);
-      job.nodes.push_back({-1, -1, -1, 0, false, 0, 0, 0});
+      RefineJob& job = start_job(jobs, visit.node);
+      job.nodes[0].targets = 0;
       job.targets.push_back(std::move(visit.parts));
       continue;
     }
     Visit negative{b.negative, {}}, positive{b.positive, {}};
-    for (const std::vector<Vec3>& part : visit.parts) {
-      for (Visit* side : {&negative, &positive}) {
-        clip_to_side(part, b.plane, side == &positive ? 1 : -1, clipped);
-        if (!clipped.empty()) side->parts.push_back(clipped);
-      }
-    }
+    split_parts(visit.parts, b.plane, negative.parts, positive.parts, clipped);
     if (!positive.parts.empty()) stack.push_back(std::move(positive));
     if (!negative.parts.empty()) stack.push_back(std::move(negative));
   }
@@ -1061,13 +1072,7 @@ std::vector<Arrangement::RefineJob> Arrangement::group_points(const std::vector<
     int& job_id = job_of_leaf[static_cast<std::size_t>(node)];
     if (job_id < 0) {
       job_id = static_cast<int>(jobs.size());
-      const int region = bsp_[static_cast<std::size_t>(node)].region;
-      RefineJob& job = jobs.emplace_back();
-      job.leaf = node;
-      job.regions.push_back(std::move(regions_[static_cast<std::size_t>(region)]));
-      regions_[static_cast<std::size_t>(region)] = Region{};
-      free_regions_.push_back(region);
-      job.nodes.push_back({-1, -1, -1, 0, false, 0, 0, -1});
+      start_job(jobs, node);
     }
     jobs[static_cast<std::size_t>(job_id)].points.push_back(static_cast<int>(n));
   }
@@ -1114,15 +1119,9 @@ void Arrangement::refine(RefineJob& job, const std::vector<Vec3>& points, Refine
     // The target polygons' parts, clipped to each side (the negative side takes the slot).
     int neg_targets = -1, pos_targets = -1;
     if (job.nodes[k].targets >= 0) {
-      const std::vector<std::vector<Vec3>> parts =
-          std::move(job.targets[static_cast<std::size_t>(job.nodes[k].targets)]);
-      std::vector<std::vector<Vec3>> neg_parts, pos_parts;
-      for (const std::vector<Vec3>& part : parts) {
-        clip_to_side(part, crossing, -1, scratch.clipped);
-        if (!scratch.clipped.empty()) neg_parts.push_back(scratch.clipped);
-        clip_to_side(part, crossing, 1, scratch.clipped);
-        if (!scratch.clipped.empty()) pos_parts.push_back(scratch.clipped);
-      }
+      const PolygonParts parts = std::move(job.targets[static_cast<std::size_t>(job.nodes[k].targets)]);
+      PolygonParts neg_parts, pos_parts;
+      split_parts(parts, crossing, neg_parts, pos_parts, scratch.clipped);
       if (!neg_parts.empty()) {
         neg_targets = job.nodes[k].targets;
         job.targets[static_cast<std::size_t>(neg_targets)] = std::move(neg_parts);

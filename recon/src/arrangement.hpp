@@ -323,6 +323,18 @@ class Arrangement {
   // `starts`: the nodes to walk from, each with the polygons' parts that may reach it.
   using PolygonParts = std::vector<std::vector<Vec3>>;
   std::vector<RefineJob> group_polygons(const std::vector<std::pair<int, PolygonParts>>& starts);
+  // The largest |n.x + d| of `plane` over the box: 1e-9 of it bounds the rounding of a value.
+  double value_scale(const ArrangementPlane& plane) const {
+    return plane.normal.cwiseAbs().dot(box_.max.cwiseAbs().cwiseMax(box_.min.cwiseAbs())) +
+           std::abs(plane.offset);
+  }
+  // The parts of each of `parts` on the negative and positive side of `plane_id` (clip_to_side),
+  // appended to `negative` and `positive`; `scratch` holds one part at a time.
+  void split_parts(const PolygonParts& parts, int plane_id, PolygonParts& negative,
+                   PolygonParts& positive, std::vector<Vec3>& scratch) const;
+  // On demand: a job for region leaf `leaf` (its region moved into the job, its slot freed),
+  // appended to `jobs`.
+  RefineJob& start_job(std::vector<RefineJob>& jobs, int leaf);
   // The part of convex `polygon` on the `sigma` side of `plane_id` (+1: value >= -margin,
   // -1: value <= margin, margin 1e-9 of the box's extent), into `out`.
   void clip_to_side(const std::vector<Vec3>& polygon, int plane_id, int sigma,
