@@ -3,11 +3,13 @@
 // this table (docs/benchmarks.md, "Keyframes").
 //
 //   sonoshape_keyframe_bench [--trajectory sweep|fan] [--duration-s 60] [--fps 30] [--depth 6]
-//                            [--passes 1] [--every K ...] [ANGLE_DEG:DISTANCE_MM ...]
+//                            [--passes 1] [--slice-budget N] [--every K ...]
+//                            [ANGLE_DEG:DISTANCE_MM ...]
 //
 // --passes N: the hand goes back and forth N times in the duration, as in a long examination;
 // a second table then gives the slices kept by the end of each minute (does the count level off
-// once the anatomy is covered?).
+// once the anatomy is covered?). --slice-budget N selects with KeyframeOptions::slice_budget
+// (scan --slice-budget): past N slices, only planes beyond twice the thresholds are new.
 //
 // The built-in demo phantom is swept by the default 512x512 convex probe (the `scan` defaults:
 // smooth speed, hand tremor and drift, a 40 Hz tracker with noise, drops and INVALID bursts).
@@ -53,6 +55,7 @@ int main(int argc, char** argv) {
   std::string trajectory = "sweep";
   double duration_s = 60.0, fps = 30.0;
   int depth = 6, passes = 1;
+  std::size_t slice_budget = 0;
   std::vector<int> every;
   std::vector<std::pair<double, double>> thresholds;
   for (int i = 1; i < argc; ++i) {
@@ -68,13 +71,16 @@ int main(int argc, char** argv) {
       depth = static_cast<int>(to_double(next()));
     else if (arg == "--passes")
       passes = std::max(1, static_cast<int>(to_double(next())));
+    else if (arg == "--slice-budget")
+      slice_budget = static_cast<std::size_t>(to_double(next()));
     else if (arg == "--every")
       every.push_back(static_cast<int>(to_double(next())));
     else if (const auto colon = arg.find(':'); colon != std::string::npos)
       thresholds.emplace_back(to_double(arg.substr(0, colon)), to_double(arg.substr(colon + 1)));
     else {
       std::cerr << "usage: sonoshape_keyframe_bench [--trajectory sweep|fan] [--duration-s S] "
-                   "[--fps F] [--depth D] [--passes N] [--every K ...] [ANGLE_DEG:DISTANCE_MM ...]\n";
+                   "[--fps F] [--depth D] [--passes N] [--slice-budget N] [--every K ...] "
+                   "[ANGLE_DEG:DISTANCE_MM ...]\n";
       return 2;
     }
   }
@@ -108,9 +114,11 @@ int main(int argc, char** argv) {
 
   std::vector<Row> rows;
   for (const auto& [angle, distance] : thresholds) {
-    tracking::KeyframeSelector selector({angle, distance});
+    tracking::KeyframeOptions keyframes{angle, distance};
+    keyframes.slice_budget = slice_budget;
+    tracking::KeyframeSelector selector(keyframes);
     Row row{std::to_string(angle).substr(0, 4) + " deg / " + std::to_string(distance).substr(0, 4) +
-                " mm",
+                " mm" + (slice_budget > 0 ? ", budget " + std::to_string(slice_budget) : ""),
             {}};
     for (int k = 0; k < frame_count; ++k) {
       const Pose& tracked = acquisition.tracked_poses[static_cast<std::size_t>(k)];

@@ -29,11 +29,17 @@ is simulated with each seed (in WORK/seedS/) and the table gives the means over 
 range of the last method's gap: one sweep's IoU moves by a few hundredths with the speckle and the
 tracker noise of its seed, as much as the differences between labellings, so single-seed gaps
 are not worth comparing at that level.
+`--issue-baseline OLD/build/apps/sonoshape` adds, as the first labelling, the segmenter of
+another build (the one the segmentation issue measured, ed734b2: `segment --every K` with its
+defaults, before the graph cut, the bone sections, the blooming correction and the depth trend's
+second start); its slices are reconstructed and scored by this build, so that only the labelling
+differs. That build's `segment` cannot score its label maps, so its Dice columns show "–".
 The exit status is non-zero when a command fails.
 
 Usage: bench/segmentation_table.py [--binary build/apps/sonoshape] [--work out/bench/segmentation]
                                    [--full] [--only CASE ...] [--frames 200] [--every 4]
-                                   [--depth 7] [--seeds 1,2,3] [--write-doc]
+                                   [--depth 7] [--seeds 1,2,3] [--issue-baseline OLD_BINARY]
+                                   [--write-doc]
 """
 import argparse
 import itertools
@@ -175,6 +181,11 @@ def one_case(args, root, case):
                           if (m := re.fullmatch(r"label_(\d+)\.ply", name)))
     totals, scans = {}, {}
     seeds = seed_args(base + ".igs.mha", truth_meshes)
+    if args.issue_baseline:
+        out = f"{base}.issue_baseline"
+        run([args.issue_baseline, "segment", base + ".igs.mha", "--every", str(args.every),
+             "-o", out + ".slices.json"], f"segment ({args.baseline_name})")
+        scans[args.baseline_name] = scan_scores(args, out, out + ".slices.json", truth_meshes)
     for method, options in METHODS.items():
         out = f"{base}.{method.replace(' ', '').replace('+', '_')}"
         if "graph-cut" in options:
@@ -196,6 +207,8 @@ def one_case(args, root, case):
             dice = totals[method]["labels"].get(str(label), {})
             row["name"] = dice.get("name") or names.get(label, f"label_{label}")
             row[method] = {"dice": dice.get("dice"), "scan": scans[method].get(label)}
+        if args.issue_baseline:
+            row[args.baseline_name] = {"dice": None, "scan": scans[args.baseline_name].get(label)}
         rows.append(row)
     return rows, totals[list(METHODS)[-1]]["unknown"]
 
@@ -215,11 +228,12 @@ def mean(values):
     return sum(values) / len(values)
 
 
-def table(rows, failures, seeds):
+def table(rows, failures, seeds, baseline_name=None):
     """One line per case and label. With several seeds, `rows` holds one row per seed and label
     and every figure is the mean over the seeds (an IoU without a mesh counting as 0 where the
-    perfect labels have one), with the range of the last method's gap beside it."""
-    methods = list(METHODS)
+    perfect labels have one), with the range of the last method's gap beside it. With
+    `baseline_name`, that labelling (another build's, without Dice) comes first."""
+    methods = ([baseline_name] if baseline_name else []) + list(METHODS)
     several = len(seeds) > 1
     header = (["phantom", "probe", "trajectory", "noise", "label"] +
               [f"Dice {m}" for m in methods] + [f"IoU {m}" for m in methods] +
@@ -237,7 +251,10 @@ def table(rows, failures, seeds):
         for method in methods:
             # A label missing from the report is in no truth frame (nor in ours).
             dice = [r[method]["dice"] for r in group if r[method]["dice"] is not None]
-            dices.append(f"{mean(dice):.3f}" if dice else "not in frames")
+            if method == baseline_name:
+                dices.append("–")
+            else:
+                dices.append(f"{mean(dice):.3f}" if dice else "not in frames")
             ours = [iou(r[method]["scan"]) for r in group]
             if all(o is None for o in ours):
                 scans.append("no mesh")
@@ -262,14 +279,21 @@ def table(rows, failures, seeds):
     return "\n".join(lines)
 
 
+def commit_of(binary):
+    """The commit of the checkout a sonoshape binary was built in."""
+    folder = os.path.dirname(os.path.abspath(binary))
+    return subprocess.run(["git", "-C", folder, "rev-parse", "--short", "HEAD"],
+                          capture_output=True, text=True).stdout.strip() or "unknown"
+
+
 def provenance(args, seconds, cases, load_at_start):
-    folder = os.path.dirname(os.path.abspath(args.binary))
-    commit = subprocess.run(["git", "-C", folder, "rev-parse", "--short", "HEAD"],
-                            capture_output=True, text=True).stdout.strip() or "unknown"
+    commit = commit_of(args.binary)
+    baseline = (f" (the first labelling: `segment` of the build at {commit_of(args.issue_baseline)})"
+                if args.issue_baseline else "")
     return (f"{len(cases)} cases, --frames {args.frames} --every {args.every} "
             f"--depth {args.depth or 'default'} --seeds {','.join(map(str, args.seeds))}"
             f"{' (figures: means over the seeds)' if len(args.seeds) > 1 else ''}; "
-            f"sonoshape at commit {commit}; "
+            f"sonoshape at commit {commit}{baseline}; "
             f"{os.cpu_count()} cores ({platform.machine()}, {platform.system()}), load average "
             f"{load_at_start:.1f} at the start and {os.getloadavg()[0]:.1f} at the end; "
             f"{seconds:.0f} s in all.")
@@ -289,9 +313,16 @@ def main():
     parser.add_argument("--seeds", default="1",
                         help="simulator seeds, comma-separated; with several, the table gives "
                              "the means over them and the range of the last method's gap")
+    parser.add_argument("--issue-baseline", default="",
+                        help="another build's sonoshape whose segment is the first labelling "
+                             "(the one the segmentation issue measured)")
     parser.add_argument("--write-doc", action="store_true",
                         help="write the table into docs/benchmarks.md")
     args = parser.parse_args()
+    args.baseline_name = None
+    if args.issue_baseline:
+        args.baseline_name = f"at {commit_of(args.issue_baseline)}"
+
     os.makedirs(args.work, exist_ok=True)
     cases = (list(itertools.product(["default", "nested", "similar"], PROBES, TRAJECTORIES,
                                     list(NOISE))) if args.full else QUICK)
@@ -319,7 +350,7 @@ def main():
                 failures.append((case, seed, str(e)))
                 print(f"{case_name(case)} seed {seed}: {e}", file=sys.stderr)
     args.work = work
-    text = table(rows, failures, args.seeds) + "\n\n" + provenance(args, time.monotonic() - start, cases, load_at_start)
+    text = table(rows, failures, args.seeds, args.baseline_name) + "\n\n" + provenance(args, time.monotonic() - start, cases, load_at_start)
     print(text)
     if args.write_doc:
         write_between_markers(root, "segmentation_table", text)

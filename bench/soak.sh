@@ -2,10 +2,11 @@
 # Soak test (issue 27): a real-time simulated scan for MINUTES with three subscribers on its mesh
 # stream, recording the scan's memory, update time and frame-to-mesh latency over time.
 #
-#   bench/soak.sh MINUTES [--out DIR] [--plot PNG] [--no-build] [--binary PATH]
+#   bench/soak.sh MINUTES [--out DIR] [--plot PNG] [--no-build] [--binary PATH] [--slice-budget N]
 #
 # The simulated hand goes back and forth over the default phantom, one pass every 20 s, as in a
-# long examination that revisits the same anatomy (scan --passes). Subscribers:
+# long examination that revisits the same anatomy (scan --passes), with the slice budget a long
+# examination should use (scan --slice-budget, default here 240; 0: none). Subscribers:
 #   fast     `listen` keeping up with every message;
 #   slow     `listen --slow-ms 250 --receive-hwm 50`: takes 4 messages a second, so the publisher
 #            drops for it (counted as sequence gaps on its side);
@@ -18,18 +19,20 @@
 # (Debian python3-matplotlib).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-minutes="${1:?usage: bench/soak.sh MINUTES [--out DIR] [--plot PNG] [--no-build] [--binary PATH]}"
+minutes="${1:?usage: bench/soak.sh MINUTES [--out DIR] [--plot PNG] [--no-build] [--binary PATH] [--slice-budget N]}"
 shift
 out=out/soak
 plot=""
 build=1
 bin="$PWD/build/apps/sonoshape"
+slice_budget=240
 while [ $# -gt 0 ]; do
   case "$1" in
     --out) out="$2"; shift 2 ;;
     --plot) plot="$2"; shift 2 ;;
     --no-build) build=0; shift ;;
     --binary) bin="$(realpath "$2")"; build=0; shift 2 ;;
+    --slice-budget) slice_budget="$2"; shift 2 ;;
     *) echo "bench/soak.sh: unknown argument '$1'" >&2; exit 2 ;;
   esac
 done
@@ -54,6 +57,7 @@ cleanup() { for p in "${pids[@]}"; do kill "$p" 2>/dev/null || true; done; }
 trap cleanup EXIT
 
 "$bin" scan --source sim:default --realtime --sweep-s "$seconds" --passes "$passes" \
+  --slice-budget "$slice_budget" \
   --duration "$seconds" --publish "$endpoint" --snapshot "$snapshot" --publish-frames 5 \
   -o "$out/scan" >"$out/scan.log" 2>&1 &
 scan_pid=$!

@@ -67,6 +67,7 @@ struct ScanCommandOptions {
   double pose_wait_ms = 500.0;
   double keyframe_angle_deg = tracking::KeyframeOptions{}.min_angle_deg;
   double keyframe_distance_mm = tracking::KeyframeOptions{}.min_distance_mm;
+  std::size_t slice_budget = tracking::KeyframeOptions{}.slice_budget;
   std::size_t segmentation_queue = scan::ScanOptions{}.segmentation_queue;
   std::size_t reconstruction_queue = scan::ScanOptions{}.reconstruction_queue;
   int depth = -1;
@@ -391,6 +392,7 @@ int run_scan(const ScanCommandOptions& options, const Resume* resume) {
   scan_options.sync.max_extrapolation_s = 1e-3 * options.max_extrapolation_ms;
   scan_options.keyframes.min_angle_deg = options.keyframe_angle_deg;
   scan_options.keyframes.min_distance_mm = options.keyframe_distance_mm;
+  scan_options.keyframes.slice_budget = options.slice_budget;
   scan_options.real_time = !options.fast;
   // Played fast, nothing needs dropping: every stage waits for the next (deterministic).
   scan_options.drop_when_behind = !options.fast;
@@ -658,6 +660,11 @@ void add_scan_options(CLI::App& app, ScanCommandOptions& o) {
   app.add_option("--keyframe-distance-mm", options->keyframe_distance_mm,
                  "...or an image corner moves at least this far out of every slice's plane")
       ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  app.add_option("--slice-budget", options->slice_budget,
+                 "Long examinations: past this many slices a frame must differ by twice both "
+                 "keyframe thresholds, so that memory stops growing once the anatomy is covered "
+                 "(0: no budget)")
       ->capture_default_str();
   app.add_option("--segmentation-queue", options->segmentation_queue,
                  "Keyframes waiting for segmentation")

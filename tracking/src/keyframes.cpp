@@ -53,9 +53,14 @@ KeyframeSelector::KeyframeSelector(const KeyframeOptions& options) : options_(op
 }
 
 std::optional<int> KeyframeSelector::offer(const FramePlane& plane) {
+  const bool past_budget =
+      options_.slice_budget > 0 && accepted_.size() >= options_.slice_budget;
+  const double scale = past_budget ? kPastBudgetScale : 1.0;
+  const double min_angle_deg = scale * options_.min_angle_deg;
+  const double min_distance_mm = scale * options_.min_distance_mm;
   for (const auto& [key, accepted] : accepted_) {
     const PlaneDifference d = plane_difference(plane, accepted);
-    if (d.angle_deg < options_.min_angle_deg && d.distance_mm < options_.min_distance_mm) {
+    if (d.angle_deg < min_angle_deg && d.distance_mm < min_distance_mm) {
       ++skipped_;
       return std::nullopt;
     }

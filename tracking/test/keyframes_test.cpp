@@ -85,6 +85,35 @@ TEST(Keyframes, WithdrawnPlanesCanBeTakenAgain) {
   EXPECT_EQ(selector.accepted(), 1u);
 }
 
+TEST(Keyframes, PastTheSliceBudgetOnlyPlanesBeyondTwiceTheThresholdsAreNew) {
+  KeyframeOptions options{5.0, 2.0};
+  options.slice_budget = 3;
+  KeyframeSelector selector(options);
+  // Within the budget: slices 2 mm apart, as without one.
+  EXPECT_EQ(selector.offer(plane_at(slide(0.0))), 0);
+  EXPECT_EQ(selector.offer(plane_at(slide(2.0))), 1);
+  EXPECT_EQ(selector.offer(plane_at(slide(4.0))), 2);
+  // Three accepted: a plane must now lie 4 mm (or 10 degrees and 4 mm at a corner) from all.
+  EXPECT_FALSE(selector.offer(plane_at(slide(7.0))));  // 3 mm from slice 2
+  EXPECT_FALSE(selector.offer(plane_at(slide(-3.0))));
+  EXPECT_EQ(selector.offer(plane_at(slide(8.0))), 3);  // new anatomy still gets a slice
+  EXPECT_EQ(selector.offer(plane_at(slide(-4.0))), 4);
+  // A tilt of 3.5 degrees (3.1 mm at the deep corners) is new under the thresholds, not past
+  // them.
+  EXPECT_FALSE(selector.offer(plane_at(tilt(3.5))));
+  EXPECT_EQ(selector.accepted(), 5u);
+  EXPECT_EQ(selector.skipped(), 3u);
+  // Withdrawing below the budget brings the thresholds back.
+  KeyframeSelector small(options);
+  ASSERT_TRUE(small.offer(plane_at(slide(0.0))));
+  ASSERT_TRUE(small.offer(plane_at(slide(2.0))));
+  const auto third = small.offer(plane_at(slide(4.0)));
+  ASSERT_TRUE(third);
+  EXPECT_FALSE(small.offer(plane_at(slide(7.0))));
+  EXPECT_TRUE(small.withdraw(*third));
+  EXPECT_TRUE(small.offer(plane_at(slide(7.0))));
+}
+
 TEST(Keyframes, RejectsBadInput) {
   EXPECT_THROW(KeyframeSelector(KeyframeOptions{-1.0, 1.0}), std::invalid_argument);
   EXPECT_THROW(bounding_corners({}), std::invalid_argument);

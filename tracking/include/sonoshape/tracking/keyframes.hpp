@@ -27,7 +27,20 @@ namespace sonoshape::tracking {
 struct KeyframeOptions {
   double min_angle_deg = 4.0;
   double min_distance_mm = 2.5;
+  /// Long examinations: once this many planes are accepted, a frame must differ from every one
+  /// by kPastBudgetScale times both thresholds (0: no budget). Every slice costs memory for as
+  /// long as the scan runs, and a hand that keeps returning to the same anatomy with a slow
+  /// drift keeps showing planes that differ by just over the thresholds: the count (and the
+  /// memory) then grows for as long as the examination lasts, ever more slowly. Past the budget
+  /// anatomy already covered at the thresholds' density gets no more slices, while a move to
+  /// anatomy not yet covered still does, at a coarser density.
+  std::size_t slice_budget = 0;
 };
+
+/// How much coarser keyframes are past KeyframeOptions::slice_budget: a plane must lie beyond
+/// twice the thresholds from every slice, so that a region sampled at the thresholds' density
+/// (neighbouring slices about one threshold apart) offers no plane that is new.
+inline constexpr double kPastBudgetScale = 2.0;
 
 /// The plane of a frame for keyframe selection: its image corners in the reference frame.
 struct FramePlane {
@@ -62,7 +75,8 @@ class KeyframeSelector {
 
   const KeyframeOptions& options() const { return options_; }
 
-  /// Accepts `plane` when it differs enough from every accepted plane and returns its key
+  /// Accepts `plane` when it differs enough from every accepted plane (by the thresholds, or by
+  /// kPastBudgetScale times them once slice_budget planes are accepted) and returns its key
   /// (0, 1, 2, ... in acceptance order); none, counted as skipped, for a near-duplicate.
   std::optional<int> offer(const FramePlane& plane);
   /// Forgets an accepted plane (its frame was dropped or failed later), so that a later frame
