@@ -24,13 +24,20 @@ leaves L out of the missed slices (background), then instead replaces each of L'
 by an unknown disc about the region's vertex centroid, reaching M mm beyond its farthest vertex,
 and reconstructs each set.
 
+With --grow-perfect D1,D2,... it asks whether the perfect labels are the best input the engine can
+get: it moves every outline of L in the perfect slices outwards by D mm (inwards for D < 0; each
+vertex along the bisector of its edges' normals, and the hole of a region around L with it), and
+reconstructs each set. Every slice from `segment` (the perfect ones included) runs its outlines a
+quarter pixel inside the edges of the label's pixels (docs/segmentation.md, "Necks"), and the
+engine's interpolation and smoothing round a small organ off between its slices.
+
 The steps telescope: their sum is the whole gap. The order matters (the steps do not add up
 independently), so the figures say how much each part of the slice set holds given the ones
 before it.
 
     python3 bench/segmentation_gap.py --work out/bench/segmentation --case default_convex_sweep_low \
         --method graphcut_prior --label 2 [--depth 7] [--binary build/apps/sonoshape] \
-        [--missed-as-unknown 1,2,4]
+        [--missed-as-unknown 1,2,4] [--grow-perfect=-0.1,0.1,0.2]
 
 METHOD is the file name's method: threshold, graphcut or graphcut_prior.
 """
@@ -64,6 +71,55 @@ def unknown_disc(region, margin_mm, corners=32):
                          cy + radius * math.sin(2 * math.pi * k / corners)] for k in range(corners)]}
 
 
+def signed_area(ring):
+    return 0.5 * sum(ring[i - 1][0] * ring[i][1] - ring[i][0] * ring[i - 1][1]
+                     for i in range(len(ring)))
+
+
+def grown_ring(ring, distance_mm):
+    """`ring` moved outwards by distance_mm (inwards when negative): each vertex along the
+    bisector of its two edges' outward normals, by distance / cos(half the turn), the turn's
+    factor capped at 1/0.9 so that sharp corners do not shoot out (an approximation for small
+    distances, not an exact offset curve)."""
+    sign = 1.0 if signed_area(ring) > 0 else -1.0  # outward normal of an edge: right of it
+    out = []
+    for i, b in enumerate(ring):
+        a, c = ring[i - 1], ring[(i + 1) % len(ring)]
+        normals = []
+        for u, v in ((a, b), (b, c)):
+            ex, ey = v[0] - u[0], v[1] - u[1]
+            length = math.hypot(ex, ey) or 1.0
+            normals.append((sign * ey / length, -sign * ex / length))
+        mx, my = normals[0][0] + normals[1][0], normals[0][1] + normals[1][1]
+        length = math.hypot(mx, my) or 1.0
+        mx, my = mx / length, my / length
+        step = distance_mm / max(mx * normals[0][0] + my * normals[0][1], 0.9)
+        out.append([b[0] + step * mx, b[1] + step * my])
+    return out
+
+
+def grow_label(slice_set, label, distance_mm):
+    """Moves every outline of `label` by distance_mm; a hole of another region that holds one of
+    them (its vertex centroid within 3 mm) becomes the moved outline, so the regions still only
+    share edges."""
+    def centroid(ring):
+        return (sum(p[0] for p in ring) / len(ring), sum(p[1] for p in ring) / len(ring))
+    for slice_ in slice_set["slices"]:
+        moved = []
+        for region in slice_["regions"]:
+            if region["label"] == label:
+                region["polygon"] = grown_ring(region["polygon"], distance_mm)
+                moved.append(region["polygon"])
+        for region in slice_["regions"]:
+            if region["label"] == label or not region.get("holes") or not moved:
+                continue
+            holes = []
+            for hole in region["holes"]:
+                nearest = min(moved, key=lambda ring: math.dist(centroid(ring), centroid(hole)))
+                holes.append(nearest if math.dist(centroid(nearest), centroid(hole)) < 3.0 else hole)
+            region["holes"] = holes
+
+
 def holds(slice_, label):
     return any(region["label"] == label for region in slice_["regions"])
 
@@ -80,6 +136,8 @@ def main():
     parser.add_argument("--binary", default=os.path.join(root, "build", "apps", "sonoshape"))
     parser.add_argument("--missed-as-unknown", default="",
                         help="margins in mm, e.g. 1,2,4 (see the module's docstring)")
+    parser.add_argument("--grow-perfect", default="",
+                        help="distances in mm, e.g. -0.1,0.1,0.2 (see the module's docstring)")
     args = parser.parse_args()
 
     base = os.path.join(args.work, args.case)
@@ -147,6 +205,18 @@ def main():
             with open(path, "w") as f:
                 json.dump(changed, f)
             print(f"| {name} | {scan_iou(args, path, args.label, truth_mesh):.3f} |")
+
+    if args.grow_perfect:
+        print(f"\nperfect slices (IoU {bound:.3f}) with every outline of label {args.label} moved:")
+        print("| outwards by | IoU |")
+        print("|---|---|")
+        for distance in (float(d) for d in args.grow_perfect.split(",")):
+            changed = copy.deepcopy(perfect)
+            grow_label(changed, args.label, distance)
+            path = f"{work}.grown{distance:+g}.slices.json"
+            with open(path, "w") as f:
+                json.dump(changed, f)
+            print(f"| {distance:+g} mm | {scan_iou(args, path, args.label, truth_mesh):.3f} |")
 
 
 if __name__ == "__main__":
