@@ -207,6 +207,7 @@ class RecordingSink final : public ScanSink {
     ++finishes;
     final_triangles = meshes.meshes.empty() ? 0 : meshes.meshes[0].mesh.triangles.size();
     final_slices = slices.slices.size();
+    final_slice_set = slices;
     final_summary = summary;
     return Status::ok();
   }
@@ -215,6 +216,7 @@ class RecordingSink final : public ScanSink {
   std::vector<ScanStatus> statuses;
   int finishes = 0;
   std::size_t final_triangles = 0, final_slices = 0;
+  SliceSet final_slice_set;
   ScanSummary final_summary;
 };
 
@@ -477,6 +479,34 @@ TEST(ScanPipeline, MaxSlicesAndDurationStopTheScan) {
   const ScanSummary ended = limited.finish();
   EXPECT_EQ(ended.stop_reason, StopReason::kDuration);
   EXPECT_LT(ended.duration_s, 2.0);
+}
+
+TEST(ScanPipeline, PastTheSliceBudgetKeyframesComeAtHalfTheDensity) {
+  // 60 frames 1.18 mm apart, keyframe distance 1 mm: every frame is a slice. With a budget of
+  // 10, the frames after the tenth slice must lie 2 mm from every slice: every other one.
+  const double mm_per_s = 36.0 * 33.0 / 33.333, frame_mm = mm_per_s * 0.033;
+  auto scan = [&](std::size_t budget) {
+    ScanOptions options = fast_options();
+    options.keyframes.slice_budget = budget;
+    ScanPipeline pipeline(fake_source(std::make_unique<FakeFrames>(60, 33),
+                                      sliding_poses(mm_per_s, -100, 2100, 25)),
+                          std::make_unique<FakeSegmentation>(),
+                          std::make_unique<FakeReconstruction>(), options);
+    auto sink = std::make_shared<RecordingSink>();
+    pipeline.add_sink(sink);
+    EXPECT_TRUE(pipeline.start());
+    const ScanSummary summary = pipeline.finish();
+    EXPECT_EQ(summary.counters.dropped.total(), 0u);
+    return sink;
+  };
+  EXPECT_EQ(scan(0)->final_slices, 60u);
+  const auto budgeted = scan(10);
+  ASSERT_EQ(budgeted->final_slices, 35u);  // 10, then frames 11, 13, ..., 59
+  const std::vector<LabeledSlice>& slices = budgeted->final_slice_set.slices;
+  for (std::size_t k = 1; k < slices.size(); ++k) {
+    const double step_mm = slices[k].origin_mm.z() - slices[k - 1].origin_mm.z();
+    EXPECT_NEAR(step_mm, k < 10 ? frame_mm : 2.0 * frame_mm, 1e-9) << k;
+  }
 }
 
 TEST(ScanPipeline, RejectsMissingParts) {

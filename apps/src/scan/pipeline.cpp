@@ -144,7 +144,8 @@ Status ScanPipeline::restore(const std::vector<JournalKeyframe>& keyframes) {
                            std::to_string(keyframes[i].frame_index) +
                            ") was refused by the reconstruction: " + e.what());
     }
-    // Accepted once against a superset of these planes, each is accepted again.
+    // Accepted once against a superset of these planes, each is accepted again (and the slice
+    // budget's coarser thresholds apply here only from as many planes on as when it was first).
     selector_.offer(keyframes[i].plane);
   }
   try {
