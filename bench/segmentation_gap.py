@@ -39,7 +39,10 @@ before it.
         --method graphcut_prior --label 2 [--depth 7] [--binary build/apps/sonoshape] \
         [--missed-as-unknown 1,2,4] [--grow-perfect=-0.1,0.1,0.2]
 
-METHOD is the file name's method: threshold, graphcut or graphcut_prior.
+METHOD is the file name's method: threshold, graphcut, graphcut_prior, or issue_baseline (the
+table's --issue-baseline build). The script also prints the label's area summed over the slices of
+the labelling and of the perfect labels, beside its pixels in the truth frames: the perfect slices
+come out smaller than those pixels by the quarter pixel their outlines run inside them.
 """
 import argparse
 import copy
@@ -49,7 +52,7 @@ import os
 import sys
 
 # The same reconstruct-and-evaluate step as the table's.
-from segmentation_table import iou, scan_scores
+from segmentation_table import header_field, iou, scan_scores
 
 
 def scan_iou(args, slices_path, label, truth_mesh):
@@ -96,6 +99,14 @@ def grown_ring(ring, distance_mm):
         step = distance_mm / max(mx * normals[0][0] + my * normals[0][1], 0.9)
         out.append([b[0] + step * mx, b[1] + step * my])
     return out
+
+
+def label_area_mm2(slice_set, label):
+    """The area of `label`'s regions (holes cut out) summed over every slice."""
+    return sum(abs(signed_area(region["polygon"])) -
+               sum(abs(signed_area(hole)) for hole in region.get("holes", []))
+               for slice_ in slice_set["slices"] for region in slice_["regions"]
+               if region["label"] == label)
 
 
 def grow_label(slice_set, label, distance_mm):
@@ -174,6 +185,17 @@ def main():
                  and fr["labels"][str(args.label)].get("truth_px", 0) == 0]
         print(f"pixels of label {args.label} in frames whose truth has none of it: {sum(stray)} "
               f"in {len(stray)} of {len(frames)} frames")
+    # The areas the slices give the label, beside its pixels in the truth frames (from any of the
+    # table's reports: every labelling's report counts the same truth pixels).
+    areas = f"area of label {args.label} over all slices: {label_area_mm2(ours, args.label):.1f} mm² " \
+            f"({args.method}), {label_area_mm2(perfect, args.label):.1f} mm² (perfect labels)"
+    spacing = header_field(base + ".igs.mha", "SonoshapePixelSpacingMm")
+    if spacing and os.path.exists(base + ".threshold.seg.json"):
+        with open(base + ".threshold.seg.json") as f:
+            frames = json.load(f)["frames"]
+        truth_px = sum(fr["labels"].get(str(args.label), {}).get("truth_px", 0) for fr in frames)
+        areas += f", {truth_px * float(spacing) ** 2:.1f} mm² (its pixels in the truth frames)"
+    print(areas)
     print("| step | slices replaced | IoU after | gap closed |")
     print("|---|---|---|---|")
     current, previous = ours, start

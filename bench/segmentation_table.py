@@ -109,22 +109,25 @@ def case_name(case):
     return "_".join(case)
 
 
-def header_label_names(sweep):
-    """{label: name} from the `SonoshapeLabels = 1:spot 2:...` line `simulate` writes in the
-    sequence header (the names of labels that no frame shows are nowhere else)."""
+def header_field(sweep, key):
+    """The value of `key = ...` in the sequence header `simulate` writes, or "" without one."""
     with open(sweep, "rb") as f:
         header = f.read(65536).split(b"ElementDataFile", 1)[0].decode("latin-1")
-    m = re.search(r"^SonoshapeLabels = (.*)$", header, re.MULTILINE)
-    pairs = (item.split(":", 1) for item in (m.group(1).split() if m else []))
+    m = re.search(rf"^{key} = (.*)$", header, re.MULTILINE)
+    return m.group(1) if m else ""
+
+
+def header_label_names(sweep):
+    """{label: name} from the `SonoshapeLabels = 1:spot 2:...` line (the names of labels that no
+    frame shows are nowhere else)."""
+    pairs = (item.split(":", 1) for item in header_field(sweep, "SonoshapeLabels").split())
     return {int(label): name for label, name in pairs}
 
 
 def header_models(sweep):
     """The labels with a grey model in the sequence header (`SonoshapeLabelGreyMean`)."""
-    with open(sweep, "rb") as f:
-        header = f.read(65536).split(b"ElementDataFile", 1)[0].decode("latin-1")
-    m = re.search(r"^SonoshapeLabelGreyMean = (.*)$", header, re.MULTILINE)
-    return {int(item.split(":", 1)[0]) for item in (m.group(1).split() if m else [])}
+    return {int(item.split(":", 1)[0])
+            for item in header_field(sweep, "SonoshapeLabelGreyMean").split()}
 
 
 def vertex_centroid(ply):
