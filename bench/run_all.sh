@@ -7,12 +7,12 @@
 #
 # Usage: bench/run_all.sh [--list] [--quick] [--no-build] [--only STEP]... [--skip STEP]...
 #   --list      print the steps in order with their commands, run nothing
-#   --quick     the quick mode of the scripts that have one (accuracy_matrix, device_table,
-#               growth_table, online_table); those steps then print their tables and leave the document alone
+#   --quick     the quick mode of the scripts that have one (accuracy_matrix, field_table,
+#               device_table, growth_table, online_table); those steps then print their tables and leave the document alone
 #   --no-build  do not build the steps' targets (use what build/ holds)
 #   --only STEP run only these steps (repeatable); --skip STEP leave these out (repeatable)
 # Data sonoshape does not ship: OREX_DATA (the Data/ folder of github.com/haimsaw/OReX) for
-# public_csl, PLUS_LIB_DATA (a github.com/PlusToolkit/PlusLibData checkout) for plus_recordings.
+# public_csl and field_table, PLUS_LIB_DATA (a github.com/PlusToolkit/PlusLibData checkout) for plus_recordings.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -29,6 +29,10 @@ step offline "sonoshape" \
 
 step public_csl "sonoshape" \
   "python3 bench/public_csl.py \"\${OREX_DATA:?set OREX_DATA to the Data/ folder of a haimsaw/OReX checkout, or --skip public_csl}\" --write-doc"
+
+step field_table "sonoshape" \
+  "python3 bench/field_table.py \"\${OREX_DATA:?set OREX_DATA to the Data/ folder of a haimsaw/OReX checkout, or --skip field_table}\" --write-doc" \
+  "python3 bench/field_table.py \"\${OREX_DATA:-}\" --quick"
 
 step devices "sonoshape" \
   "python3 bench/device_table.py --devices cpu,opencl:0:0 --repeat 5 --best" \

@@ -242,6 +242,36 @@ TEST_F(EndToEnd, OnlineReconstructionEmitsStepsAndEqualsOffline) {
   EXPECT_NE(r.output.find("--online"), std::string::npos) << r.output;
 }
 
+// --field thin-plate through the command: online and offline agree to the solver's tolerance
+// (not to the bit: the online solves start from the last solution); an unknown field is refused.
+TEST_F(EndToEnd, ThinPlateFieldOnlineAndOfflineAgree) {
+  const std::string example = std::string(SONOSHAPE_DATA_DIR) + "/examples/two_labels.slices.json";
+  auto r = run("reconstruct " + example + " -o " + path("online") +
+               " --depth 5 --field thin-plate --online --stats " + path("online.json"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  r = run("reconstruct " + example + " -o " + path("offline") + " --depth 5 --field thin-plate --stats " +
+          path("offline.json"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  std::ifstream stats_file(path("offline.json"));
+  const nlohmann::json stats = nlohmann::json::parse(stats_file);
+  EXPECT_GT(stats["solve_iterations"].get<int>(), 0);
+  EXPECT_GT(stats["solve_nodes"].get<int>(), 0);
+  EXPECT_EQ(stats["cells"].get<int>(), 0);  // no arrangement
+  for (const char* label : {"label_1.ply", "label_2.ply"}) {
+    const auto a = sonoshape::sim::read_mesh(path("online/") + label),
+               b = sonoshape::sim::read_mesh(path("offline/") + label);
+    ASSERT_TRUE(a) << a.message();
+    ASSERT_TRUE(b) << b.message();
+    ASSERT_FALSE(a->triangles.empty());
+    EXPECT_TRUE(sonoshape::check_mesh_health(*a).closed_manifold_oriented());
+    EXPECT_NEAR(sonoshape::signed_volume(*a), sonoshape::signed_volume(*b), 1e-3 * sonoshape::signed_volume(*b))
+        << label;
+  }
+  r = run("reconstruct " + example + " -o " + path("x") + " --field harmonic");
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_NE(r.output.find("thin-plate"), std::string::npos) << r.output;
+}
+
 // --device: the OpenCL field (PoCL in CI) writes the same mesh file as the native CPU, byte for
 // byte; `devices` lists it; a malformed or missing device is refused before any work.
 TEST_F(EndToEnd, ReconstructOnOpenClWritesTheCpuMesh) {

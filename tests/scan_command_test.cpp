@@ -83,6 +83,35 @@ TEST(ScanCommand, FastSimulatedScanWritesMeshesSlicesAndSummary) {
   }
 }
 
+// The thin-plate field in the live pipeline: the same scan, closed meshes, and the offline
+// engine's thin-plate meshes of the recorded slices within the solver's tolerance (the online
+// solves start from the last solution, the offline one from scratch).
+TEST(ScanCommand, ThinPlateFieldScansAndAgreesWithItsOfflineReconstruction) {
+  sonoshape::testing::TempDir dir;
+  const auto result = sonoshape::testing::run_command(
+      SONOSHAPE_BINARY, kSmallSim + "--sweep-s 2 --fast --field thin-plate -o " + (dir.path() / "out").string(),
+      dir.path() / "log");
+  ASSERT_EQ(result.exit_code, 0) << result.output;
+  const auto offline = sonoshape::testing::run_command(
+      SONOSHAPE_BINARY,
+      "reconstruct " + (dir.path() / "out" / "slices.json").string() + " --depth 5 --field thin-plate -o " +
+          (dir.path() / "offline").string(),
+      dir.path() / "offline.log");
+  ASSERT_EQ(offline.exit_code, 0) << offline.output;
+  for (const char* name : {"label_1.ply", "label_2.ply"}) {
+    SCOPED_TRACE(name);
+    const auto mesh = sonoshape::sim::read_mesh(dir.path() / "out" / name);
+    ASSERT_TRUE(mesh) << mesh.message();
+    ASSERT_FALSE(mesh->triangles.empty());
+    EXPECT_TRUE(sonoshape::check_mesh_health(*mesh).closed_manifold_oriented());
+    const auto again = sonoshape::sim::read_mesh(dir.path() / "offline" / name);
+    ASSERT_TRUE(again) << again.message();
+    const double volume = sonoshape::signed_volume(*mesh);
+    EXPECT_GT(volume, 0.0);
+    EXPECT_NEAR(sonoshape::signed_volume(*again), volume, 1e-3 * volume);
+  }
+}
+
 TEST(ScanCommand, RealPlusRecordingReplaysIntoValidSlicesWithARepairsList) {
   // The fCal recording (820x616) used to give no slice; every frame offered as a keyframe.
   sonoshape::testing::TempDir dir;

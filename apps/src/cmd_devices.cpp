@@ -67,6 +67,13 @@ void print_opencl(std::ostream& out) {
 
 }  // namespace
 
+const char* const kFieldHelp =
+    "Interpolant between the slices: mean-value (the paper's mean-value blend of each label's "
+    "indicator per arrangement cell) or thin-plate (a biharmonic fill of each label's in-plane "
+    "signed distance on a grid; keeps thin structures crossed by far-apart slices whole; see "
+    "docs/engine.md)";
+const char* const kDefaultField = "mean-value";
+
 const char* const kDeviceHelp =
     "Where the field is evaluated: cpu (native, the default), opencl (the first OpenCL device with "
     "fp64, a GPU if any), opencl:PLATFORM:DEVICE (`sonoshape devices` lists them) or auto (an fp64 "

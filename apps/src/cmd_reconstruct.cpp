@@ -43,6 +43,10 @@ nlohmann::json stats_json(const recon::ReconstructionStats& stats) {
   j["unknown_triangles"] = stats.unknown_triangles;
   j["cell_groups"] = stats.cell_groups;
   j["completed_slices"] = stats.completed_slices;
+  j["data_s"] = stats.data_s;
+  j["solve_s"] = stats.solve_s;
+  j["solve_iterations"] = stats.solve_iterations;
+  j["solve_nodes"] = stats.solve_nodes;
   nlohmann::json triangles = nlohmann::json::object();
   for (const auto& [label, count] : stats.triangles) triangles[std::to_string(label)] = count;
   j["triangles"] = triangles;
@@ -162,6 +166,7 @@ CommandRunner add_reconstruct_command(CLI::App& app) {
     bool online = false;
     bool strict = false;
     std::string device;  // empty: SONOSHAPE_DEVICE, else cpu
+    std::string field = kDefaultField;
     int emit_every = 0;
     std::string order = "file";
   };
@@ -183,6 +188,9 @@ CommandRunner add_reconstruct_command(CLI::App& app) {
                  "Threads for every stage of the reconstruction (0: all cores)")
       ->check(CLI::Range(0, 1024))
       ->capture_default_str();
+  app.add_option("--field", opt->field, kFieldHelp)
+      ->check(CLI::IsMember({"mean-value", "thin-plate"}))
+      ->capture_default_str();
   app.add_option("--device", opt->device, kDeviceHelp);
   app.add_option("--stats", opt->stats_path, "Write per-stage seconds and counts as JSON (with "
                  "--online: totals and one entry per step)");
@@ -202,6 +210,7 @@ CommandRunner add_reconstruct_command(CLI::App& app) {
       ->capture_default_str();
 
   return [opt]() -> int {
+    opt->engine.field = *recon::parse_field_name(opt->field);
     opt->engine.device = resolve_device(opt->device);
     const Result<SliceSet> slices = read_slice_set(opt->input, ReadOptions{opt->strict});
     if (!slices) {

@@ -73,6 +73,7 @@ struct ScanCommandOptions {
   int depth = -1;
   std::string device;  // --device; empty: SONOSHAPE_DEVICE, else cpu
   int smoothing = 8;
+  std::string field = kDefaultField;
   std::vector<double> bounds;
   // sim: only
   scan::SimScenarioOptions sim;
@@ -406,6 +407,7 @@ int run_scan(const ScanCommandOptions& options, const Resume* resume) {
   recon::ReconstructorOptions engine;
   engine.engine.max_depth = options.depth;
   engine.engine.smoothing_iterations = options.smoothing;
+  engine.engine.field = *recon::parse_field_name(options.field);
   engine.engine.device = resolve_device(options.device);
   engine.bounds = source->setup.bounds;
   engine.labels = source->setup.labels;
@@ -676,6 +678,9 @@ void add_scan_options(CLI::App& app, ScanCommandOptions& o) {
       ->capture_default_str();
   app.add_option("--depth", options->depth,
                  "Octree depth of the reconstruction (-1: finest cells about 1/128 of the box)")
+      ->capture_default_str();
+  app.add_option("--field", options->field, kFieldHelp)
+      ->check(CLI::IsMember({"mean-value", "thin-plate"}))
       ->capture_default_str();
   app.add_option("--device", options->device, kDeviceHelp);
   app.add_option("--smoothing", options->smoothing, "Bi-Laplacian smoothing iterations")

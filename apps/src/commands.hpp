@@ -28,6 +28,10 @@ CommandRunner add_devices_command(CLI::App& app);
 CommandRunner add_view_command(CLI::App& app);
 CommandRunner add_keys_command(CLI::App& app);
 
+/// The help text of --field (reconstruct, scan) and the field a command uses by default.
+extern const char* const kFieldHelp;
+extern const char* const kDefaultField;
+
 /// The help text of --device (reconstruct, scan).
 extern const char* const kDeviceHelp;
 /// The device the engine uses for `option` (--device; empty: SONOSHAPE_DEVICE, else cpu), as

@@ -9,6 +9,16 @@
 
 namespace sonoshape::recon {
 
+const char* field_name(FieldKind field) {
+  return field == FieldKind::thin_plate ? "thin-plate" : "mean-value";
+}
+
+std::optional<FieldKind> parse_field_name(const std::string& name) {
+  if (name == "mean-value") return FieldKind::mean_value;
+  if (name == "thin-plate") return FieldKind::thin_plate;
+  return std::nullopt;
+}
+
 // The one-shot reconstruction is the online engine given every slice in one update, so that
 // the two agree by construction (design.md); the invariant tests check that the field of a
 // sequence of updates equals this one's.

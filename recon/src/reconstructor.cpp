@@ -20,9 +20,14 @@
 #include "sonoshape/core/errors.hpp"
 #include "sonoshape/core/log.hpp"
 #include "sonoshape/core/slice_io.hpp"
+#include "thin_plate.hpp"
 
 namespace sonoshape::recon {
 namespace {
+
+// The thin-plate field is rebuilt when a material's extent grows beyond this factor of the one
+// its truncation was set from (thin_plate.hpp).
+constexpr double kOutgrown = 1.25;
 
 // Two slice planes closer than this (relative, as the slice-set validation) are the same plane.
 constexpr double kCoincidentTolerance = 1e-9;
@@ -126,8 +131,10 @@ struct Reconstructor::State {
   Box3 box;
   int depth = 0;
   std::vector<int> material_ids;
-  std::unique_ptr<Arrangement> arrangement;
-  std::unique_ptr<CellField> field;
+  std::unique_ptr<Arrangement> arrangement;  // mean-value field
+  std::unique_ptr<CellField> field;          // mean-value field
+  std::unique_ptr<ThinPlateField> thin_plate;  // thin-plate field
+  std::vector<Box3> thin_plate_boxes;  // per material, the box of its contours in the field's slices
   std::unique_ptr<FieldEvaluator> evaluator;  // made at the first update (opens the device)
   std::vector<std::uint32_t> cell_generation;  // update count at which each cell last changed
   std::uint32_t generation = 0;
@@ -220,32 +227,91 @@ struct Reconstructor::State {
         {unknown_rectangles.begin() + static_cast<std::ptrdiff_t>(old_count), unknown_rectangles.end()});
   }
 
+  bool thin_plate_field() const { return options.engine.field == FieldKind::thin_plate; }
+
+  // The slices of list[first, end) that are not duplicates, prepared in parallel (each depends
+  // on itself alone; the first error in slice order is thrown). `index` names the first in errors.
+  std::vector<PreparedSlice> prepare(const std::vector<Entry>& list, std::size_t first, std::size_t index) const {
+    std::vector<const Entry*> kept;
+    for (std::size_t k = first; k < list.size(); ++k)
+      if (!list[k].duplicate) kept.push_back(&list[k]);
+    std::vector<PreparedSlice> prepared(kept.size());
+    std::vector<std::exception_ptr> errors(kept.size());
+    tbb::parallel_for(std::size_t{0}, kept.size(), [&](std::size_t k) {
+      try {
+        prepared[k] = prepare_slice(kept[k]->slice, index + k, material_ids, box);
+      } catch (...) {
+        errors[k] = std::current_exception();
+      }
+    });
+    for (const std::exception_ptr& error : errors)
+      if (error) std::rethrow_exception(error);
+    return prepared;
+  }
+
   // Rebuilds everything for `list` (first update, removals, a grown box, a new material).
   void rebuild(const std::vector<Entry>& list, ReconstructionStats& stats) {
     const SliceSet set = slice_set_of(list);
     box = set.effective_bounds();
     material_ids = materials_of(list);
     depth = options.engine.max_depth > 0 ? options.engine.max_depth : default_depth(box);
+    octree = OctreeOptions{};
+    octree.max_depth = depth;
+    octree.smoothing_iterations = options.engine.smoothing_iterations;
+    contours = ContourKeys{};
+    region_samples.clear();
+    contour_slices = 0;
+    sampled_tags_current = false;
+    if (thin_plate_field())
+      rebuild_thin_plate(list, stats);
+    else
+      rebuild_mean_value(list, stats);
+    built = true;
+  }
+
+  void rebuild_thin_plate(const std::vector<Entry>& list, ReconstructionStats& stats) {
+    arrangement.reset();
+    field.reset();
+    const ThinPlateOptions tp;
     Stopwatch clock;
+    std::vector<PreparedSlice> prepared = prepare(list, 0, 0);
+    const int materials = static_cast<int>(material_ids.size());
+    thin_plate_boxes = material_boxes(prepared, materials);
+    thin_plate = std::make_unique<ThinPlateField>(box, make_grid(box, depth).cell_size, materials, tp,
+                                                  box_extents(thin_plate_boxes));
+    thin_plate->add_slices(std::move(prepared));
+    stats.data_s += clock.seconds();
+  }
+
+  // Adds the data of list[first, end) to the thin-plate field, unless they make a material's
+  // extent outgrow what its truncation was set from by a quarter: false then (the caller
+  // rebuilds, so that every slice's data have the same truncation).
+  bool add_thin_plate_slices(const std::vector<Entry>& list, std::size_t first, ReconstructionStats& stats) {
+    Stopwatch clock;
+    std::vector<PreparedSlice> added = prepare(list, first, thin_plate->slices().size());
+    std::vector<Box3> boxes = material_boxes(added, static_cast<int>(material_ids.size()));
+    for (std::size_t m = 0; m < boxes.size(); ++m) {
+      boxes[m].min = boxes[m].min.cwiseMin(thin_plate_boxes[m].min);
+      boxes[m].max = boxes[m].max.cwiseMax(thin_plate_boxes[m].max);
+    }
+    const std::vector<double> grown = box_extents(boxes);
+    const std::vector<double>& basis = thin_plate->extents();
+    for (std::size_t m = 0; m < basis.size(); ++m)
+      if (grown[m] > kOutgrown * basis[m]) return false;
+    thin_plate_boxes = std::move(boxes);
+    thin_plate->add_slices(std::move(added));
+    stats.data_s += clock.seconds();
+    return true;
+  }
+
+  void rebuild_mean_value(const std::vector<Entry>& list, ReconstructionStats& stats) {
+    Stopwatch clock;
+    thin_plate.reset();
     arrangement = std::make_unique<Arrangement>(box, options.engine.cells_on_demand);
     field = std::make_unique<CellField>(*arrangement, static_cast<int>(material_ids.size()));
     {
-      // The slices are prepared in parallel (each depends on itself alone; the first error in
-      // slice order is thrown), their planes inserted in order.
-      std::vector<const Entry*> kept;
-      for (const Entry& e : list)
-        if (!e.duplicate) kept.push_back(&e);
-      std::vector<PreparedSlice> prepared(kept.size());
-      std::vector<std::exception_ptr> errors(kept.size());
-      tbb::parallel_for(std::size_t{0}, kept.size(), [&](std::size_t k) {
-        try {
-          prepared[k] = prepare_slice(kept[k]->slice, k, material_ids, box);
-        } catch (...) {
-          errors[k] = std::current_exception();
-        }
-      });
-      for (const std::exception_ptr& error : errors)
-        if (error) std::rethrow_exception(error);
+      // The planes are inserted in order.
+      std::vector<PreparedSlice> prepared = prepare(list, 0, 0);
       Progress progress("arrangement", prepared.size());
       std::size_t done = 0;
       std::vector<int> split_faces;  // all faces are new to the field below
@@ -262,16 +328,8 @@ struct Reconstructor::State {
     clock.reset();
     field->refresh({});
     stats.face_images_s += clock.seconds();
-    sampled_tags_current = false;
-    octree = OctreeOptions{};
-    octree.max_depth = depth;
-    octree.smoothing_iterations = options.engine.smoothing_iterations;
-    contours = ContourKeys{};
-    region_samples.clear();
-    contour_slices = 0;
     ++generation;
     cell_generation.assign(arrangement->cell_count(), generation);
-    built = true;
   }
 };
 
@@ -328,13 +386,15 @@ bool Reconstructor::remove_slice(int id) {
 UpdateStats Reconstructor::update() {
   State& s = *state_;
   // The field's device first: a device that cannot be used leaves the engine as it was.
-  if (!s.evaluator) s.evaluator = make_field_evaluator(s.options.engine.device);
+  const bool thin_plate = s.thin_plate_field();
+  if (!s.evaluator && !thin_plate) s.evaluator = make_field_evaluator(s.options.engine.device);
   UpdateStats out;
   if (s.built && s.pending_adds.empty() && s.pending_removes.empty()) {
     out.step = s.totals;
     out.step.arrangement_s = out.step.face_images_s = out.step.field_s = out.step.smoothing_s =
         out.step.mesh_s = out.step.total_s = out.step.completion_s = out.step.evaluation_s =
-            out.step.arrangement_serial_s = 0.0;
+            out.step.arrangement_serial_s = out.step.data_s = out.step.solve_s = 0.0;
+    out.step.solve_iterations = 0;
     out.step.field_evaluations = 0;
     return out;
   }
@@ -366,7 +426,18 @@ UpdateStats Reconstructor::update() {
       const bool full = !s.built || out.slices_removed > 0 ||
                         s.materials_of(next) != s.material_ids || next_box.min != s.box.min ||
                         next_box.max != s.box.max;
-      std::vector<int> changed_cells;
+      if (thin_plate) {
+        // An added slice changes only its data; the solve starts from the last solution.
+        if (full || !s.add_thin_plate_slices(next, s.entries.size(), stats)) {
+          s.rebuild(next, stats);
+          out.full_rebuild = true;
+        }
+        const ThinPlateSolveStats solved = s.thin_plate->solve();
+        stats.solve_s = solved.solve_s;
+        stats.solve_iterations = static_cast<std::size_t>(solved.iterations);
+        stats.solve_nodes = solved.nodes;
+        return;
+      }
       if (full) {
         s.rebuild(next, stats);
         out.full_rebuild = true;
@@ -429,7 +500,7 @@ UpdateStats Reconstructor::update() {
 
   // Contour vertices refine the octree; contour segments fix the smoothing next to them. In the
   // arena too: contour_keys sorts in parallel, and --threads bounds every stage.
-  const std::vector<PreparedSlice>& slices = s.field->slices();
+  const std::vector<PreparedSlice>& slices = thin_plate ? s.thin_plate->slices() : s.field->slices();
   const Grid grid = make_grid(s.box, s.octree.max_depth);
   // The new slices' keys and samples in parallel (each depends on its slice alone), then merged:
   // the keys pairwise in a tree (a union of sorted sets: the same whatever the order), the
@@ -453,7 +524,6 @@ UpdateStats Reconstructor::update() {
     s.contour_slices = slices.size();
   });
 
-  const CellField& field = *s.field;
   std::size_t evaluations = 0;
   double evaluation_seconds = 0.0;
   std::vector<int> point_cells;
@@ -461,6 +531,14 @@ UpdateStats Reconstructor::update() {
   // (in parallel) and tagged with their cell and this update.
   const BatchEvaluator evaluate = [&](const std::vector<Vec3>& points, double* values,
                                       std::uint64_t* tags) {
+    if (thin_plate) {
+      const Stopwatch evaluation_clock;
+      arena.execute([&] { s.thin_plate->evaluate(points, values); });
+      std::fill(tags, tags + points.size(), std::uint64_t{0});
+      evaluations += points.size();
+      evaluation_seconds += evaluation_clock.seconds();
+      return;
+    }
     if (s.arrangement->on_demand()) {
       // The cells of the points are built first (their regions refined in parallel, the cells
       // made in a fixed order), then evaluated in parallel like those of the whole arrangement.
@@ -484,7 +562,7 @@ UpdateStats Reconstructor::update() {
     // The native CPU or an OpenCL device (options.engine.device; field_evaluator.hpp).
     const Stopwatch evaluation_clock;
     arena.execute([&] {
-      s.evaluator->evaluate(field, points, point_cells.data(), s.arrangement->on_demand(), values);
+      s.evaluator->evaluate(*s.field, points, point_cells.data(), s.arrangement->on_demand(), values);
     });
     for (std::size_t n = 0; n < points.size(); ++n) tags[n] = evaluation_tag(point_cells[n], s.generation);
     evaluations += points.size();
@@ -493,7 +571,10 @@ UpdateStats Reconstructor::update() {
   Stopwatch clock;
   // In the arena: the octree's parallel loops use the same threads as the evaluation.
   // The last field is kept: its rows whose cells did not change still hold their values.
-  if (s.sampled_tags_current) {
+  // The thin-plate field changes everywhere at every update: every row is evaluated again (an
+  // interpolation, not a field evaluation), and only the workspace's tables are kept.
+  if (thin_plate) s.octree_workspace.previous_valid.clear();
+  if (s.sampled_tags_current && !thin_plate) {
     std::vector<char>& valid = s.octree_workspace.previous_valid;
     valid.assign(s.sampled.keys.size(), 0);
     arena.execute([&] {
@@ -506,7 +587,8 @@ UpdateStats Reconstructor::update() {
   }
   s.octree_workspace.previous = std::move(s.sampled);
   arena.execute([&] {
-    s.sampled = sample_field(s.box, field.function_count(), evaluate, s.contours, s.region_samples,
+    const int function_count = static_cast<int>(s.material_ids.size()) + 1;
+    s.sampled = sample_field(s.box, function_count, evaluate, s.contours, s.region_samples,
                              s.octree, s.octree_workspace);
   });
   s.sampled_tags_current = true;
@@ -525,10 +607,12 @@ UpdateStats Reconstructor::update() {
   stats.mesh_s = clock.seconds();
 
   stats.slices = s.entries.size();
-  stats.cells = s.arrangement->on_demand() ? s.arrangement->built_cell_count()
-                                            : s.arrangement->cell_count();
-  if (out.full_rebuild && s.arrangement->on_demand()) out.cells_changed = stats.cells;
-  stats.faces = s.arrangement->face_count();
+  if (s.arrangement) {
+    stats.cells = s.arrangement->on_demand() ? s.arrangement->built_cell_count()
+                                              : s.arrangement->cell_count();
+    if (out.full_rebuild && s.arrangement->on_demand()) out.cells_changed = stats.cells;
+    stats.faces = s.arrangement->face_count();
+  }
   stats.field_evaluations = evaluations;
   stats.evaluation_s = evaluation_seconds;
   stats.snapped_vertices = s.sampled.snapped_vertices;
@@ -545,6 +629,10 @@ UpdateStats Reconstructor::update() {
   totals.total_s += stats.total_s;
   totals.completion_s += stats.completion_s;
   totals.evaluation_s += stats.evaluation_s;
+  totals.data_s += stats.data_s;
+  totals.solve_s += stats.solve_s;
+  totals.solve_iterations += stats.solve_iterations;
+  totals.solve_nodes = stats.solve_nodes;
   totals.field_evaluations += stats.field_evaluations;
   totals.slices = stats.slices;
   totals.cells = stats.cells;

@@ -5,6 +5,7 @@
 // smoothing, and one closed manifold mesh per material.
 #include <cstddef>
 #include <map>
+#include <optional>
 #include <string>
 
 #include "sonoshape/core/mesh.hpp"
@@ -12,13 +13,30 @@
 
 namespace sonoshape::recon {
 
+/// Which interpolant fills the space between the slices.
+enum class FieldKind {
+  /// The paper's: a mean-value blend of each label's +-1 indicator inside every arrangement cell.
+  mean_value,
+  /// A biharmonic (thin-plate) fill of each label's in-plane signed distance, solved on a grid
+  /// over the box (docs/engine.md): keeps thin structures crossed by far-apart slices whole.
+  thin_plate,
+};
+
+/// "mean-value" / "thin-plate".
+const char* field_name(FieldKind field);
+/// The field named `name` ("mean-value" or "thin-plate"); none for any other name.
+std::optional<FieldKind> parse_field_name(const std::string& name);
+
 struct ReconstructionOptions {
+  FieldKind field = FieldKind::mean_value;  ///< the interpolant (the others are ignored by it
+                                            ///< where they say so)
   int max_depth = -1;             ///< octree depth; -1: finest cells about 1/128 of the diagonal
   int smoothing_iterations = 8;   ///< bi-Laplacian smoothing iterations (0: off)
   int threads = 0;                ///< threads for every stage; 0: all cores
   /// Where the field is evaluated: "cpu" (native), "opencl" (the first fp64 OpenCL device, a GPU
   /// if any), "opencl:PLATFORM:DEVICE", "auto" (an fp64 GPU if present, else cpu). The values
   /// agree to 1e-9 (the kernels repeat the CPU's rounding). Errors: sonoshape::Error.
+  /// The thin-plate field runs on the CPU whatever this says.
   std::string device = "cpu";
   /// Build the arrangement's cells and face images only where the field is evaluated (issue
   /// 24): the cost follows the surface instead of the cube of the slice count, with the same
@@ -46,6 +64,10 @@ struct ReconstructionStats {
   /// Part of arrangement_s (cells on demand) outside the parallel refinement and placement of
   /// regions: grouping the points by region, numbering, and sharing the new faces (link).
   double arrangement_serial_s = 0;
+  /// Thin-plate field: seconds of the new slices' data and of the solve, conjugate-gradient
+  /// iterations (summed over materials) and the solve grid's nodes.
+  double data_s = 0, solve_s = 0;
+  std::size_t solve_iterations = 0, solve_nodes = 0;
   /// Part of field_s and smoothing_s spent evaluating the field at grid vertices (the rest: the
   /// octree, band and smoothing passes).
   double evaluation_s = 0;

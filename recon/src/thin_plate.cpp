@@ -1,0 +1,774 @@
+#include "thin_plate.hpp"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "sonoshape/core/errors.hpp"
+#include "sonoshape/core/log.hpp"
+
+namespace sonoshape::recon {
+namespace {
+
+// ---------------------------------------------------------------------------------------------
+// Slice data: the in-plane signed distance of each material.
+
+// A slice's labels and true boundaries, ready for point queries.
+class SliceDistances {
+ public:
+  /// `truncation[m - 1]`: material m's clamp (mm).
+  SliceDistances(const PreparedSlice& slice, int materials, const std::vector<double>& truncation)
+      : slice_(slice), materials_(materials), truncation_(truncation) {
+    for (const Ring2& ring : slice.known) known_bands_.push_back(make_ring_bands(ring));
+    // An edge of a material's ring is a true boundary when the point just across it is known
+    // and of another material: edges along an unknown region or the field of view's edge are
+    // where the slice stops seeing, not a surface (they were cut there by the partition).
+    double extent = 1.0;
+    for (std::size_t m = 1; m < slice.ring_bounds.size(); ++m)
+      for (const auto& [lo, hi] : slice.ring_bounds[m]) extent = std::max(extent, (hi - lo).norm());
+    const double probe = 1e-7 * extent;
+    edges_.resize(static_cast<std::size_t>(materials) + 1);
+    for (int m = 1; m <= materials && static_cast<std::size_t>(m) < slice.rings_by_material.size();
+         ++m)
+      for (const Ring2& ring : slice.rings_by_material[static_cast<std::size_t>(m)])
+        for (std::size_t i = 0; i < ring.size(); ++i) {
+          const Vec2& a = ring[i];
+          const Vec2& b = ring[(i + 1) % ring.size()];
+          const Vec2 d = b - a;
+          const double length = d.norm();
+          if (!(length > 0.0)) continue;
+          // Outer rings run counter-clockwise and holes clockwise: the material is on the left.
+          const Vec2 across = 0.5 * (a + b) + probe / length * Vec2(d.y(), -d.x());
+          if (!known(across) || label(across) == m) continue;
+          edges_[static_cast<std::size_t>(m)].push_back({a, b});
+        }
+    // Buckets of the truncation's size: a query reads the 3 x 3 around its own.
+    Vec2 lo = Vec2::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+    for (const auto& list : edges_)
+      for (const auto& [a, b] : list) {
+        lo = lo.cwiseMin(a.cwiseMin(b));
+        hi = hi.cwiseMax(a.cwiseMax(b));
+      }
+    if (!(lo.x() <= hi.x())) return;
+    bucket_size_ = *std::min_element(truncation_.begin(), truncation_.end());
+    origin_ = lo;
+    const Vec2 cells = ((hi - lo) / bucket_size_).array().floor() + 1.0;
+    // A truncation tiny against the slice would make too many buckets: grow them instead.
+    const double count = cells.x() * cells.y();
+    if (count > 1 << 20) bucket_size_ *= std::sqrt(count / static_cast<double>(1 << 20));
+    nx_ = static_cast<int>(std::floor((hi.x() - lo.x()) / bucket_size_)) + 1;
+    ny_ = static_cast<int>(std::floor((hi.y() - lo.y()) / bucket_size_)) + 1;
+    buckets_.assign(static_cast<std::size_t>(nx_) * static_cast<std::size_t>(ny_) * (materials + 1),
+                    {});
+    for (int m = 1; m <= materials; ++m) {
+      const auto& list = edges_[static_cast<std::size_t>(m)];
+      for (std::uint32_t e = 0; e < list.size(); ++e) {
+        const auto& [a, b] = list[e];
+        const int x0 = cell_x(std::min(a.x(), b.x())), x1 = cell_x(std::max(a.x(), b.x()));
+        const int y0 = cell_y(std::min(a.y(), b.y())), y1 = cell_y(std::max(a.y(), b.y()));
+        for (int y = y0; y <= y1; ++y)
+          for (int x = x0; x <= x1; ++x) bucket(m, x, y).push_back(e);
+      }
+    }
+  }
+
+  bool known(const Vec2& p) const {
+    if (slice_.unknown.empty()) return true;
+    int winding = 0;
+    for (std::size_t r = 0; r < slice_.known.size(); ++r)
+      winding += winding_number_in_bands(slice_.known[r], known_bands_[r], p);
+    return winding > 0;
+  }
+
+  // The material at a known point (0: outside).
+  int label(const Vec2& p) const {
+    for (int m = 1;
+         m <= materials_ && static_cast<std::size_t>(m) < slice_.rings_by_material.size(); ++m) {
+      const auto& rings = slice_.rings_by_material[static_cast<std::size_t>(m)];
+      int winding = 0;
+      for (std::size_t r = 0; r < rings.size(); ++r) {
+        const auto& [lo, hi] = slice_.ring_bounds[static_cast<std::size_t>(m)][r];
+        if (p.x() < lo.x() || p.y() < lo.y() || p.x() > hi.x() || p.y() > hi.y()) continue;
+        winding +=
+            winding_number_in_bands(rings[r], slice_.ring_bands[static_cast<std::size_t>(m)][r], p);
+      }
+      if (winding > 0) return m;
+    }
+    return 0;
+  }
+
+  // Signed distances of every material at p into out[0, K): false where p is unknown.
+  bool distances(const Vec2& p, double* out) const {
+    if (!known(p)) return false;
+    const int at = label(p);
+    for (int m = 1; m <= materials_; ++m) {
+      const double d = unsigned_distance(m, p);
+      out[m - 1] = at == m ? d : -d;
+    }
+    return true;
+  }
+
+ private:
+  double unsigned_distance(int m, const Vec2& p) const {
+    const double truncation = truncation_[static_cast<std::size_t>(m - 1)];
+    if (buckets_.empty()) return truncation;
+    const auto& list = edges_[static_cast<std::size_t>(m)];
+    if (list.empty()) return truncation;
+    double best2 = truncation * truncation;
+    const int cx = cell_x(p.x()), cy = cell_y(p.y());
+    const int rx = static_cast<int>(std::ceil(truncation / bucket_size_));
+    for (int y = std::max(0, cy - rx); y <= std::min(ny_ - 1, cy + rx); ++y)
+      for (int x = std::max(0, cx - rx); x <= std::min(nx_ - 1, cx + rx); ++x)
+        for (const std::uint32_t e : bucket(m, x, y)) {
+          const auto& [a, b] = list[e];
+          const Vec2 d = b - a;
+          const double t = std::clamp((p - a).dot(d) / d.squaredNorm(), 0.0, 1.0);
+          best2 = std::min(best2, (a + t * d - p).squaredNorm());
+        }
+    return std::sqrt(best2);
+  }
+  int cell_x(double x) const {
+    return std::clamp(static_cast<int>(std::floor((x - origin_.x()) / bucket_size_)), 0, nx_ - 1);
+  }
+  int cell_y(double y) const {
+    return std::clamp(static_cast<int>(std::floor((y - origin_.y()) / bucket_size_)), 0, ny_ - 1);
+  }
+  std::vector<std::uint32_t>& bucket(int m, int x, int y) {
+    return buckets_[(static_cast<std::size_t>(m) * ny_ + y) * nx_ + x];
+  }
+  const std::vector<std::uint32_t>& bucket(int m, int x, int y) const {
+    return buckets_[(static_cast<std::size_t>(m) * ny_ + y) * nx_ + x];
+  }
+
+  const PreparedSlice& slice_;
+  int materials_;
+  std::vector<double> truncation_;
+  std::vector<RingBands> known_bands_;
+  std::vector<std::vector<std::pair<Vec2, Vec2>>> edges_;  // per material: true boundaries
+  Vec2 origin_ = Vec2::Zero();
+  double bucket_size_ = 1.0;
+  int nx_ = 0, ny_ = 0;
+  std::vector<std::vector<std::uint32_t>> buckets_;  // per material, row-major
+};
+
+// ---------------------------------------------------------------------------------------------
+// The grid hierarchy and its operator A = s L^2 + D (s = 2^-level: the coarse grid's L^2 seen
+// from the fine one). On the finest level D is the data's exact quadratic form: each sample lies
+// where a plane crosses a grid edge and constrains the linear interpolation of the edge's two
+// nodes, (1 - t) x0 + t x1 = d, so the data fix the field on the plane and leave its slope across
+// the plane free (nodes next to a plane fixed to its value would extrude each slice over a
+// slab). Its 2 x 2 blocks are summed per edge: diagonal `data_diagonal` and per axis the edge
+// (n, n + axis) in `data_edge[axis][n]`. Coarser levels lump it: `weight` is its row sums,
+// restricted.
+
+struct Level {
+  int nx = 0, ny = 0, nz = 0;
+  double scale = 1.0;                 // s
+  std::vector<double> weight;         // lumped data weights (finest: the row sums of its D)
+  std::vector<double> data_diagonal;  // finest level only
+  std::array<std::vector<double>, 3> data_edge;  // finest level only
+  std::vector<double>
+      inverse;  // 1 / (s * l1 bound of L^2's row + row sum of D): the smoother's diagonal
+  std::vector<double> x, b, r, d, ad, laplacian;  // V-cycle work
+  std::size_t size() const { return static_cast<std::size_t>(nx) * ny * nz; }
+  std::size_t index(int i, int j, int k) const {
+    return (static_cast<std::size_t>(k) * ny + j) * nx + i;
+  }
+};
+
+int degree(const Level& g, int i, int j, int k) {
+  return (i > 0) + (i < g.nx - 1) + (j > 0) + (j < g.ny - 1) + (k > 0) + (k < g.nz - 1);
+}
+
+template <typename Body>
+void for_planes(int nz, const Body& body) {
+  tbb::parallel_for(tbb::blocked_range<int>(0, nz, 1), [&](const tbb::blocked_range<int>& range) {
+    for (int k = range.begin(); k < range.end(); ++k) body(k);
+  });
+}
+
+// Calls body(n, laplacian of `in` at n) for every node, rows in parallel. The graph Laplacian
+// sums in[m] - in[n] over the grid neighbours m; a missing neighbour (at the grid's faces) reads
+// the node itself, so the inner loop has no branches and vectorises.
+template <typename Body>
+void for_laplacian(const Level& g, const double* in, const Body& body) {
+  const std::size_t sy = static_cast<std::size_t>(g.nx), sz = sy * static_cast<std::size_t>(g.ny);
+  for_planes(g.nz, [&](int k) {
+    for (int j = 0; j < g.ny; ++j) {
+      const std::size_t row = g.index(0, j, k);
+      const double* c = in + row;
+      const double* ym = j > 0 ? c - sy : c;
+      const double* yp = j < g.ny - 1 ? c + sy : c;
+      const double* zm = k > 0 ? c - sz : c;
+      const double* zp = k < g.nz - 1 ? c + sz : c;
+      auto across = [&](int i) { return ym[i] + yp[i] + zm[i] + zp[i] - 4.0 * c[i]; };
+      body(row, across(0) + (g.nx > 1 ? c[1] - c[0] : 0.0));
+      for (int i = 1; i < g.nx - 1; ++i)
+        body(row + static_cast<std::size_t>(i), across(i) + c[i - 1] + c[i + 1] - 2.0 * c[i]);
+      if (g.nx > 1)
+        body(row + static_cast<std::size_t>(g.nx - 1),
+             across(g.nx - 1) + c[g.nx - 2] - c[g.nx - 1]);
+    }
+  });
+}
+
+// The data's form on the finest level at node n (0 elsewhere).
+inline double data_term(const Level& g, const double* in, std::size_t n,
+                        const std::size_t (&stride)[3]) {
+  double value = g.data_diagonal[n] * in[n];
+  for (int a = 0; a < 3; ++a) {
+    const std::vector<double>& edge = g.data_edge[static_cast<std::size_t>(a)];
+    // Edges are stored at their first node: the last node along an axis has none, and the
+    // first none before it (its weight is 0, and the index is guarded).
+    value += edge[n] * in[std::min(n + stride[a], g.size() - 1)];
+    if (n >= stride[a]) value += edge[n - stride[a]] * in[n - stride[a]];
+  }
+  return value;
+}
+
+// out = A in; `scratch` holds L in.
+void apply_operator(const Level& g, const double* in, double* out, double* scratch) {
+  for_laplacian(g, in, [&](std::size_t n, double laplacian) { scratch[n] = laplacian; });
+  if (g.data_diagonal.empty()) {
+    for_laplacian(g, scratch, [&](std::size_t n, double laplacian) {
+      out[n] = g.scale * laplacian + g.weight[n] * in[n];
+    });
+    return;
+  }
+  const std::size_t stride[3] = {1, static_cast<std::size_t>(g.nx),
+                                 static_cast<std::size_t>(g.nx) * static_cast<std::size_t>(g.ny)};
+  for_laplacian(g, scratch, [&](std::size_t n, double laplacian) {
+    out[n] = g.scale * laplacian + data_term(g, in, n, stride);
+  });
+}
+
+template <typename Body>
+void for_nodes(std::size_t count, const Body& body) {
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 1 << 14),
+                    [&](const tbb::blocked_range<std::size_t>& range) {
+                      for (std::size_t n = range.begin(); n < range.end(); ++n) body(n);
+                    });
+}
+
+// The finest level's row sums of D into `weight` (all its entries are non-negative).
+void lump_finest_data(Level& g) {
+  const std::size_t stride[3] = {1, static_cast<std::size_t>(g.nx),
+                                 static_cast<std::size_t>(g.nx) * static_cast<std::size_t>(g.ny)};
+  const int dims[3] = {g.nx, g.ny, g.nz};
+  for_planes(g.nz, [&](int k) {
+    for (int j = 0; j < g.ny; ++j)
+      for (int i = 0; i < g.nx; ++i) {
+        const std::size_t n = g.index(i, j, k);
+        const int at[3] = {i, j, k};
+        double sum = g.data_diagonal[n];
+        for (int a = 0; a < 3; ++a) {
+          if (at[a] + 1 < dims[a]) sum += g.data_edge[a][n];
+          if (at[a] > 0) sum += g.data_edge[a][n - stride[a]];
+        }
+        g.weight[n] = sum;
+      }
+  });
+}
+
+void update_inverse_diagonal(Level& g) {
+  g.inverse.resize(g.size());
+  for_planes(g.nz, [&](int k) {
+    for (int j = 0; j < g.ny; ++j)
+      for (int i = 0; i < g.nx; ++i) {
+        // Row sum of |L^2| bounded by sum over k in N(n) u {n} of |L_nk| * 2 deg(k): exact inside
+        // the grid (144), an upper bound at its faces, so the smoother's D^-1 A has spectrum in (0,
+        // 1].
+        const int dn = degree(g, i, j, k);
+        double bound = 2.0 * dn * dn;
+        if (i > 0) bound += 2.0 * degree(g, i - 1, j, k);
+        if (i < g.nx - 1) bound += 2.0 * degree(g, i + 1, j, k);
+        if (j > 0) bound += 2.0 * degree(g, i, j - 1, k);
+        if (j < g.ny - 1) bound += 2.0 * degree(g, i, j + 1, k);
+        if (k > 0) bound += 2.0 * degree(g, i, j, k - 1);
+        if (k < g.nz - 1) bound += 2.0 * degree(g, i, j, k + 1);
+        const std::size_t n = g.index(i, j, k);
+        g.inverse[n] = 1.0 / (g.scale * bound + g.weight[n]);
+      }
+  });
+}
+
+// Chebyshev smoothing of A x = b from x (r = b - A x on entry, updated), `degree` steps, aimed
+// at the eigenvalues of D^-1 A in [lower, 1]: the bi-Laplacian's modes that the next coarser
+// grid cannot represent have eigenvalues from about 1/36 up (Jacobi damps those barely).
+void chebyshev(Level& g, int steps, double lower) {
+  const double upper = 1.0;
+  const double theta = 0.5 * (upper + lower), delta = 0.5 * (upper - lower);
+  const double sigma = theta / delta;
+  double rho = 1.0 / sigma;
+  const std::size_t count = g.size();
+  std::vector<double>& d = g.d;
+  d.resize(count);
+  for_nodes(count, [&](std::size_t n) {
+    d[n] = g.inverse[n] * g.r[n] / theta;
+    g.x[n] += d[n];
+  });
+  std::vector<double>& ad = g.ad;
+  ad.resize(count);
+  for (int step = 0; step < steps; ++step) {
+    apply_operator(g, d.data(), ad.data(), g.laplacian.data());
+    if (step + 1 == steps) {
+      for_nodes(count, [&](std::size_t n) { g.r[n] -= ad[n]; });
+      break;
+    }
+    const double rho_next = 1.0 / (2.0 * sigma - rho);
+    const double keep = rho_next * rho, push = 2.0 * rho_next / delta;
+    for_nodes(count, [&](std::size_t n) {
+      g.r[n] -= ad[n];
+      d[n] = keep * d[n] + push * g.inverse[n] * g.r[n];
+      g.x[n] += d[n];
+    });
+    rho = rho_next;
+  }
+}
+
+// Trilinear interpolation weights from coarse node N to fine node n = 2N + o, o in {-1, 0, 1}.
+inline double prolongation_weight(int o) { return o == 0 ? 1.0 : 0.5; }
+
+// out = P^T in, from fine to coarse nodes (full weighting): the residual's restriction, and the
+// lumped data weights' (each fine row sum shared among the coarse nodes it interpolates from).
+void restrict_to_coarse(const Level& fine, const std::vector<double>& in, const Level& coarse,
+                        std::vector<double>& out) {
+  for_planes(coarse.nz, [&](int K) {
+    for (int J = 0; J < coarse.ny; ++J)
+      for (int I = 0; I < coarse.nx; ++I) {
+        double sum = 0.0;
+        for (int oz = -1; oz <= 1; ++oz) {
+          const int k = 2 * K + oz;
+          if (k < 0 || k >= fine.nz) continue;
+          for (int oy = -1; oy <= 1; ++oy) {
+            const int j = 2 * J + oy;
+            if (j < 0 || j >= fine.ny) continue;
+            const double wzy = prolongation_weight(oz) * prolongation_weight(oy);
+            for (int ox = -1; ox <= 1; ++ox) {
+              const int i = 2 * I + ox;
+              if (i < 0 || i >= fine.nx) continue;
+              sum += wzy * prolongation_weight(ox) * in[fine.index(i, j, k)];
+            }
+          }
+        }
+        out[coarse.index(I, J, K)] = sum;
+      }
+  });
+}
+
+// fine.x += P coarse.x (trilinear).
+void prolong_correction(const Level& coarse, Level& fine) {
+  for_planes(fine.nz, [&](int k) {
+    for (int j = 0; j < fine.ny; ++j)
+      for (int i = 0; i < fine.nx; ++i) {
+        const int I0 = i / 2, J0 = j / 2, K0 = k / 2;
+        const int I1 = I0 + (i & 1), J1 = J0 + (j & 1), K1 = K0 + (k & 1);
+        const double value =
+            0.125 * (coarse.x[coarse.index(I0, J0, K0)] + coarse.x[coarse.index(I1, J0, K0)] +
+                     coarse.x[coarse.index(I0, J1, K0)] + coarse.x[coarse.index(I1, J1, K0)] +
+                     coarse.x[coarse.index(I0, J0, K1)] + coarse.x[coarse.index(I1, J0, K1)] +
+                     coarse.x[coarse.index(I0, J1, K1)] + coarse.x[coarse.index(I1, J1, K1)]);
+        fine.x[fine.index(i, j, k)] += value;
+      }
+  });
+}
+
+constexpr double kChebyshevLower = 1.0 / 36.0;
+constexpr int kSmoothingSteps = 3;
+// The coarsest grid (a few hundred nodes) is solved approximately by a long Chebyshev sweep
+// aimed at nearly its whole spectrum; the conjugate gradients around the cycle absorb the rest.
+constexpr int kCoarsestSteps = 40;
+constexpr double kCoarsestLower = 1e-3;
+
+// One V-cycle on levels[l..]: levels[l].x ~ A^-1 levels[l].b from zero. The same polynomial
+// smoother before and after, so the cycle is a symmetric preconditioner.
+void v_cycle(std::vector<Level>& levels, std::size_t l) {
+  Level& g = levels[l];
+  std::fill(g.x.begin(), g.x.end(), 0.0);
+  g.r = g.b;
+  if (l + 1 == levels.size()) {
+    chebyshev(g, kCoarsestSteps, kCoarsestLower);
+    return;
+  }
+  chebyshev(g, kSmoothingSteps, kChebyshevLower);
+  Level& coarse = levels[l + 1];
+  restrict_to_coarse(g, g.r, coarse, coarse.b);
+  v_cycle(levels, l + 1);
+  prolong_correction(coarse, g);
+  apply_operator(g, g.x.data(), g.d.data(), g.laplacian.data());
+  for_nodes(g.size(), [&](std::size_t n) { g.r[n] = g.b[n] - g.d[n]; });
+  chebyshev(g, kSmoothingSteps, kChebyshevLower);
+}
+
+double dot(const std::vector<double>& a, const std::vector<double>& b) {
+  return tbb::parallel_reduce(
+      tbb::blocked_range<std::size_t>(0, a.size(), 1 << 14), 0.0,
+      [&](const tbb::blocked_range<std::size_t>& range, double sum) {
+        for (std::size_t n = range.begin(); n < range.end(); ++n) sum += a[n] * b[n];
+        return sum;
+      },
+      [](double x, double y) { return x + y; });
+}
+
+}  // namespace
+
+std::vector<double> slice_signed_distances(const PreparedSlice& slice, int materials,
+                                           double truncation, const std::vector<Vec2>& points) {
+  const SliceDistances distances(
+      slice, materials, std::vector<double>(static_cast<std::size_t>(materials), truncation));
+  std::vector<double> out(points.size() * static_cast<std::size_t>(materials),
+                          std::numeric_limits<double>::quiet_NaN());
+  for (std::size_t p = 0; p < points.size(); ++p)
+    distances.distances(points[p], out.data() + p * static_cast<std::size_t>(materials));
+  return out;
+}
+
+// A relative residual at which the solve stops whatever its steps (rounding dominates below).
+constexpr double kSolvedResidual = 1e-13;
+
+// No truncation below this many solve-grid spacings: the data would not reach a grid node.
+constexpr double kMinimumTruncation = 2.0;
+
+struct ThinPlateField::Impl {
+  std::vector<double> extents_mm;  // per material, what the truncations were set from
+  Box3 box;
+  int materials = 0;
+  ThinPlateOptions options;
+  double spacing = 1.0;
+  std::vector<double> truncation_mm;  // per material
+  std::vector<Level> levels;
+  std::vector<double> weighted_targets;       // per material, level 0: the data's right-hand side
+  std::vector<std::vector<double>> solution;  // per material, level 0
+  std::vector<PreparedSlice> slices;
+  bool weights_dirty = true;
+
+  // The data of one slice: the points where its plane crosses the grid's edges along the axis
+  // nearest its normal (one per line of nodes along that axis), each with the edge's first node,
+  // the position t along it, a weight and the signed distances there.
+  struct Contribution {
+    int axis = 0;
+    std::vector<std::uint32_t> nodes;
+    std::vector<double> positions;
+    double weight = 0.0;
+    std::vector<double> targets;  // materials per sample
+  };
+
+  Contribution slice_data(const PreparedSlice& slice) const {
+    Contribution out;
+    const Level& g = levels[0];
+    const SliceDistances distances(slice, materials, truncation_mm);
+    const Vec3 n = slice.unit_normal;
+    int a = 0;
+    for (int axis = 1; axis < 3; ++axis)
+      if (std::abs(n[axis]) > std::abs(n[a])) a = axis;
+    const int b = (a + 1) % 3, c = (a + 2) % 3;
+    const int dims[3] = {g.nx, g.ny, g.nz};
+    const double margin = 1e-9 * box.diagonal();
+    out.axis = a;
+    // One sample per spacing^2 of the plane's shadow on the other two axes, so per area of the
+    // plane the weight is the same whatever its tilt.
+    out.weight = options.data_weight / std::abs(n[a]);
+    std::vector<double> values(static_cast<std::size_t>(materials));
+    for (int jc = 0; jc < dims[c]; ++jc)
+      for (int jb = 0; jb < dims[b]; ++jb) {
+        Vec3 p = box.min;
+        p[b] += jb * spacing;
+        p[c] += jc * spacing;
+        // Where the plane crosses this line along axis a.
+        p[a] = slice.origin[a] -
+               (n[b] * (p[b] - slice.origin[b]) + n[c] * (p[c] - slice.origin[c])) / n[a];
+        if (((p.array() < box.min.array() - margin) || (p.array() > box.max.array() + margin))
+                .any())
+          continue;
+        const double along = (p[a] - box.min[a]) / spacing;
+        int first = std::clamp(static_cast<int>(std::floor(along)), 0, dims[a] - 2);
+        const double t = std::clamp(along - first, 0.0, 1.0);
+        const Vec2 q((p - slice.origin).dot(slice.u), (p - slice.origin).dot(slice.v));
+        if (!distances.distances(q, values.data())) continue;
+        int idx[3];
+        idx[a] = first;
+        idx[b] = jb;
+        idx[c] = jc;
+        out.nodes.push_back(static_cast<std::uint32_t>(g.index(idx[0], idx[1], idx[2])));
+        out.positions.push_back(t);
+        out.targets.insert(out.targets.end(), values.begin(), values.end());
+      }
+    return out;
+  }
+
+  void add(const Contribution& data) {
+    Level& g = levels[0];
+    const std::size_t k = static_cast<std::size_t>(materials);
+    const std::size_t stride = data.axis == 0   ? 1
+                               : data.axis == 1 ? static_cast<std::size_t>(g.nx)
+                                                : static_cast<std::size_t>(g.nx) * g.ny;
+    const double w = data.weight;
+    for (std::size_t e = 0; e < data.nodes.size(); ++e) {
+      const std::size_t n0 = data.nodes[e], n1 = n0 + stride;
+      const double t = data.positions[e];
+      g.data_diagonal[n0] += w * (1.0 - t) * (1.0 - t);
+      g.data_diagonal[n1] += w * t * t;
+      g.data_edge[static_cast<std::size_t>(data.axis)][n0] += w * t * (1.0 - t);
+      for (std::size_t m = 0; m < k; ++m) {
+        const double target = data.targets[e * k + m];
+        weighted_targets[m * g.size() + n0] += w * (1.0 - t) * target;
+        weighted_targets[m * g.size() + n1] += w * t * target;
+      }
+    }
+    weights_dirty = true;
+  }
+
+  // The closing condition: f = -truncation at and beyond the box's faces, weakly.
+  void add_closing() {
+    Level& g = levels[0];
+    const double margin = 1e-9 * box.diagonal();
+    for (int k = 0; k < g.nz; ++k)
+      for (int j = 0; j < g.ny; ++j)
+        for (int i = 0; i < g.nx; ++i) {
+          const Vec3 p = box.min + spacing * Vec3(i, j, k);
+          const bool interior =
+              ((p.array() > box.min.array() + margin) && (p.array() < box.max.array() - margin))
+                  .all();
+          if (interior) continue;
+          const std::size_t node = g.index(i, j, k);
+          g.data_diagonal[node] += options.closing_weight;
+          for (int m = 0; m < materials; ++m)
+            weighted_targets[static_cast<std::size_t>(m) * g.size() + node] -=
+                options.closing_weight * truncation_mm[static_cast<std::size_t>(m)];
+        }
+  }
+
+  void refresh_weights() {
+    if (!weights_dirty) return;
+    lump_finest_data(levels[0]);
+    for (std::size_t l = 1; l < levels.size(); ++l)
+      restrict_to_coarse(levels[l - 1], levels[l - 1].weight, levels[l], levels[l].weight);
+    for (Level& level : levels) update_inverse_diagonal(level);
+    weights_dirty = false;
+  }
+
+  // Conjugate gradients on A x = b, preconditioned by one V-cycle, from x.
+  std::pair<int, double> solve_one(std::vector<double>& x, const double* b_values) {
+    Level& g = levels[0];
+    const std::size_t count = g.size();
+    std::vector<double> b(b_values, b_values + count), r(count), z(count), p(count), q(count);
+    apply_operator(g, x.data(), q.data(), g.laplacian.data());
+    for_nodes(count, [&](std::size_t n) { r[n] = b[n] - q[n]; });
+    const double norm_b = std::sqrt(dot(b, b));
+    if (!(norm_b > 0.0)) {
+      std::fill(x.begin(), x.end(), 0.0);
+      return {0, 0.0};
+    }
+    double residual = std::sqrt(dot(r, r)) / norm_b;
+    int iteration = 0;
+    double rz = 0.0;
+    // Converged when an iteration moves no node by more than the tolerance (a fraction of the
+    // grid spacing): the iterations converge geometrically, so what is left is of that order.
+    const double step_tolerance_mm = options.tolerance * spacing;
+    double step_mm = std::numeric_limits<double>::infinity();
+    while (step_mm > step_tolerance_mm && residual > kSolvedResidual &&
+           iteration < options.max_iterations) {
+      g.b = r;
+      v_cycle(levels, 0);
+      z = g.x;
+      const double rz_next = dot(r, z);
+      const double beta = iteration == 0 ? 0.0 : rz_next / rz;
+      for_nodes(count, [&](std::size_t n) { p[n] = z[n] + beta * p[n]; });
+      rz = rz_next;
+      apply_operator(g, p.data(), q.data(), g.laplacian.data());
+      const double alpha = rz / dot(p, q);
+      step_mm = tbb::parallel_reduce(
+          tbb::blocked_range<std::size_t>(0, count, 1 << 14), 0.0,
+          [&](const tbb::blocked_range<std::size_t>& range, double largest) {
+            for (std::size_t n = range.begin(); n < range.end(); ++n) {
+              x[n] += alpha * p[n];
+              r[n] -= alpha * q[n];
+              largest = std::max(largest, std::abs(alpha * p[n]));
+            }
+            return largest;
+          },
+          [](double a, double b) { return std::max(a, b); });
+      residual = std::sqrt(dot(r, r)) / norm_b;
+      ++iteration;
+    }
+    return {iteration, residual};
+  }
+};
+
+std::vector<Box3> material_boxes(const std::vector<PreparedSlice>& slices, int materials) {
+  std::vector<Box3> boxes(static_cast<std::size_t>(materials),
+                          Box3{Vec3::Constant(std::numeric_limits<double>::infinity()),
+                               Vec3::Constant(-std::numeric_limits<double>::infinity())});
+  for (const PreparedSlice& slice : slices)
+    for (int m = 1; m <= materials && static_cast<std::size_t>(m) < slice.rings_by_material.size();
+         ++m)
+      for (const Ring2& ring : slice.rings_by_material[static_cast<std::size_t>(m)])
+        for (const Vec2& p : ring) {
+          const Vec3 q = slice.origin + p.x() * slice.u + p.y() * slice.v;
+          Box3& box = boxes[static_cast<std::size_t>(m - 1)];
+          box.min = box.min.cwiseMin(q);
+          box.max = box.max.cwiseMax(q);
+        }
+  return boxes;
+}
+
+std::vector<double> box_extents(const std::vector<Box3>& boxes) {
+  std::vector<double> extents;
+  for (const Box3& box : boxes)
+    extents.push_back(box.min.x() <= box.max.x() ? box.diagonal() : 0.0);
+  return extents;
+}
+
+ThinPlateField::ThinPlateField(const Box3& box, double finest_cell_mm, int materials,
+                               ThinPlateOptions options, std::vector<double> extents_mm)
+    : impl_(std::make_unique<Impl>()) {
+  Impl& s = *impl_;
+  s.box = box;
+  s.materials = materials;
+  s.options = options;
+  s.spacing = finest_cell_mm * std::ldexp(1.0, std::max(0, options.coarsening));
+  extents_mm.resize(static_cast<std::size_t>(materials), 0.0);
+  for (const double extent : extents_mm)
+    s.truncation_mm.push_back(
+        std::max(options.truncation * extent, kMinimumTruncation * s.spacing));
+  s.extents_mm = std::move(extents_mm);
+  // Cells per axis, rounded up to a multiple of 2^coarsenings so that every level's nodes are
+  // every other node of the finer one; the coarsest keeps at least 4 cells on its shortest axis.
+  std::array<int, 3> cells{};
+  for (int a = 0; a < 3; ++a)
+    cells[static_cast<std::size_t>(a)] =
+        std::max(1, static_cast<int>(std::ceil(box.size()[a] / s.spacing - 1e-9)));
+  const int shortest = *std::min_element(cells.begin(), cells.end());
+  int coarsenings = 0;
+  while (coarsenings < 8 && (shortest >> (coarsenings + 1)) >= 4) ++coarsenings;
+  const int multiple = 1 << coarsenings;
+  for (int& c : cells) c = (c + multiple - 1) / multiple * multiple;
+  for (int l = 0; l <= coarsenings; ++l) {
+    Level level;
+    level.nx = (cells[0] >> l) + 1;
+    level.ny = (cells[1] >> l) + 1;
+    level.nz = (cells[2] >> l) + 1;
+    level.scale = std::ldexp(1.0, -l);
+    const std::size_t size = level.size();
+    level.weight.assign(size, 0.0);
+    if (l == 0) {
+      level.data_diagonal.assign(size, 0.0);
+      for (auto& edges : level.data_edge) edges.assign(size, 0.0);
+    }
+    level.x.assign(size, 0.0);
+    level.b.assign(size, 0.0);
+    level.r.assign(size, 0.0);
+    level.d.assign(size, 0.0);
+    level.laplacian.assign(size, 0.0);
+    s.levels.push_back(std::move(level));
+  }
+  const std::size_t nodes = s.levels[0].size();
+  s.weighted_targets.assign(nodes * static_cast<std::size_t>(materials), 0.0);
+  for (int m = 0; m < materials; ++m)
+    s.solution.emplace_back(nodes, -s.truncation_mm[static_cast<std::size_t>(m)]);
+  s.add_closing();
+}
+
+ThinPlateField::~ThinPlateField() = default;
+ThinPlateField::ThinPlateField(ThinPlateField&&) noexcept = default;
+ThinPlateField& ThinPlateField::operator=(ThinPlateField&&) noexcept = default;
+
+void ThinPlateField::add_slice(PreparedSlice slice) {
+  Impl& s = *impl_;
+  s.add(s.slice_data(slice));
+  s.slices.push_back(std::move(slice));
+}
+
+void ThinPlateField::add_slices(std::vector<PreparedSlice> slices) {
+  Impl& s = *impl_;
+  // Each slice's data in parallel, added in slice order (the same sums whatever the threads).
+  std::vector<Impl::Contribution> data(slices.size());
+  tbb::parallel_for(std::size_t{0}, slices.size(),
+                    [&](std::size_t k) { data[k] = s.slice_data(slices[k]); });
+  for (std::size_t k = 0; k < slices.size(); ++k) {
+    s.add(data[k]);
+    s.slices.push_back(std::move(slices[k]));
+  }
+}
+
+ThinPlateSolveStats ThinPlateField::solve() {
+  Impl& s = *impl_;
+  ThinPlateSolveStats stats;
+  Stopwatch clock;
+  s.refresh_weights();
+  const std::size_t count = s.levels[0].size();
+  for (int m = 0; m < s.materials; ++m) {
+    const auto [iterations, residual] =
+        s.solve_one(s.solution[static_cast<std::size_t>(m)],
+                    s.weighted_targets.data() + static_cast<std::size_t>(m) * count);
+    stats.iterations += iterations;
+    stats.relative_residual = std::max(stats.relative_residual, residual);
+  }
+  stats.solve_s = clock.seconds();
+  stats.nodes = count;
+  return stats;
+}
+
+void ThinPlateField::evaluate(const std::vector<Vec3>& points, double* values) const {
+  const Impl& s = *impl_;
+  const Level& g = s.levels[0];
+  const std::size_t fc = static_cast<std::size_t>(s.materials) + 1;
+  tbb::parallel_for(
+      tbb::blocked_range<std::size_t>(0, points.size(), 1024),
+      [&](const tbb::blocked_range<std::size_t>& range) {
+        for (std::size_t p = range.begin(); p < range.end(); ++p) {
+          const Vec3 q = (points[p] - s.box.min) / s.spacing;
+          const int dims[3] = {g.nx, g.ny, g.nz};
+          int i0[3];
+          double t[3];
+          for (int a = 0; a < 3; ++a) {
+            const double clamped = std::clamp(q[a], 0.0, static_cast<double>(dims[a] - 1));
+            i0[a] = std::min(static_cast<int>(std::floor(clamped)), dims[a] - 2);
+            i0[a] = std::max(i0[a], 0);
+            t[a] = dims[a] > 1 ? clamped - i0[a] : 0.0;
+          }
+          double* out = values + p * fc;
+          double best = -std::numeric_limits<double>::infinity();
+          for (int m = 0; m < s.materials; ++m) {
+            const std::vector<double>& f = s.solution[static_cast<std::size_t>(m)];
+            double value = 0.0;
+            for (int corner = 0; corner < 8; ++corner) {
+              const int dx = corner & 1, dy = (corner >> 1) & 1, dz = (corner >> 2) & 1;
+              const int i = std::min(i0[0] + dx, g.nx - 1), j = std::min(i0[1] + dy, g.ny - 1),
+                        k = std::min(i0[2] + dz, g.nz - 1);
+              const double w =
+                  (dx ? t[0] : 1.0 - t[0]) * (dy ? t[1] : 1.0 - t[1]) * (dz ? t[2] : 1.0 - t[2]);
+              if (w != 0.0) value += w * f[g.index(i, j, k)];
+            }
+            out[m + 1] = value;
+            best = std::max(best, value);
+          }
+          out[0] = s.materials > 0 ? -best : 0.0;
+        }
+      });
+}
+
+int ThinPlateField::function_count() const { return impl_->materials + 1; }
+const std::vector<double>& ThinPlateField::extents() const { return impl_->extents_mm; }
+const std::vector<double>& ThinPlateField::truncations() const { return impl_->truncation_mm; }
+const std::vector<PreparedSlice>& ThinPlateField::slices() const { return impl_->slices; }
+double ThinPlateField::spacing() const { return impl_->spacing; }
+std::array<int, 3> ThinPlateField::node_counts() const {
+  const Level& g = impl_->levels[0];
+  return {g.nx, g.ny, g.nz};
+}
+std::size_t ThinPlateField::memory_bytes() const {
+  const Impl& s = *impl_;
+  std::size_t bytes = 0;
+  for (const Level& l : s.levels)
+    bytes += l.size() * sizeof(double) * (l.data_diagonal.empty() ? 8 : 12);
+  bytes += s.weighted_targets.size() * sizeof(double);
+  for (const auto& f : s.solution) bytes += f.size() * sizeof(double);
+  return bytes;
+}
+
+}  // namespace sonoshape::recon

@@ -1,0 +1,330 @@
+// The thin-plate field (issue 38): its data, its solve, and the properties the engine promises
+// for it (interpolation of the contours, thin structures kept whole, nesting, unknown regions
+// and fields of view carrying no data, online updates equal to the one-shot result).
+#include "thin_plate.hpp"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+#include <numeric>
+
+#include "cell_field.hpp"
+#include "sonoshape/recon/reconstruct.hpp"
+#include "sonoshape/recon/reconstructor.hpp"
+#include "test_shapes.hpp"
+
+namespace sonoshape::recon {
+namespace {
+
+using test::circle;
+
+ReconstructionOptions thin_plate_options() {
+  ReconstructionOptions options;
+  options.field = FieldKind::thin_plate;
+  return options;
+}
+
+// Connected parts of a mesh (triangles sharing a vertex).
+std::size_t component_count(const TriangleMesh& mesh) {
+  std::vector<std::uint32_t> parent(mesh.vertices.size());
+  std::iota(parent.begin(), parent.end(), 0u);
+  auto find = [&](std::uint32_t v) {
+    while (parent[v] != v) v = parent[v] = parent[parent[v]];
+    return v;
+  };
+  for (const auto& t : mesh.triangles) {
+    parent[find(t[1])] = find(t[0]);
+    parent[find(t[2])] = find(t[0]);
+  }
+  std::vector<char> used(mesh.vertices.size(), 0);
+  for (const auto& t : mesh.triangles) used[t[0]] = 1;
+  std::size_t parts = 0;
+  for (std::uint32_t v = 0; v < parent.size(); ++v)
+    if (used[v] && find(v) == v) ++parts;
+  return parts;
+}
+
+LabeledSlice z_slice(double z) {
+  LabeledSlice s;
+  s.origin_mm = Vec3(0, 0, z);
+  return s;
+}
+
+// A slice of a sphere (radius r, centre c) through the plane z = const, as circle rings.
+Ring2 sphere_section(const Vec3& c, double r, double z) {
+  const double d = z - c.z();
+  if (std::abs(d) >= r) return {};
+  return circle(Vec2(c.x(), c.y()), std::sqrt(r * r - d * d), 96);
+}
+
+SliceSet sphere_stack(double r, const std::vector<double>& heights) {
+  SliceSet set;
+  set.bounds = Box3{Vec3::Constant(-1.5 * r), Vec3::Constant(1.5 * r)};
+  for (const double z : heights) {
+    LabeledSlice s = z_slice(z);
+    if (Ring2 ring = sphere_section(Vec3::Zero(), r, z); !ring.empty())
+      s.regions.push_back({1, ring, {}});
+    set.slices.push_back(s);
+  }
+  // Two vertical slices through the centre, so the field is pinned in every direction.
+  for (int axis = 0; axis < 2; ++axis) {
+    LabeledSlice s;
+    s.origin_mm = Vec3::Zero();
+    s.u = axis == 0 ? Vec3::UnitX() : Vec3::UnitY();
+    s.v = Vec3::UnitZ();
+    s.regions.push_back({1, circle(Vec2(0, 0), r, 96), {}});
+    set.slices.push_back(s);
+  }
+  return set;
+}
+
+TEST(ThinPlateData, SignedDistanceIsPositiveInsideAndIgnoresEdgesAlongUnknownRegions) {
+  // A square of material 1 on [0, 10]^2 whose right edge borders an unknown region.
+  LabeledSlice slice = z_slice(0.0);
+  slice.regions.push_back({1, Ring2{{0, 0}, {10, 0}, {10, 10}, {0, 10}}, {}});
+  slice.regions.push_back({kUnknownLabel, Ring2{{10, 0}, {20, 0}, {20, 10}, {10, 10}}, {}});
+  const Box3 box{Vec3(-60, -60, -10), Vec3(60, 60, 10)};
+  const PreparedSlice prepared = prepare_slice(slice, 0, {1}, box);
+  const double truncation = 10.0;
+  const std::vector<Vec2> points{{8, 5}, {5, 5}, {-3, 5}, {15, 5}, {-50, 5}, {5, 12}};
+  const std::vector<double> d = slice_signed_distances(prepared, 1, truncation, points);
+  // (8, 5): 5 mm from the top and bottom edges; the right edge (2 mm away) is where the slice
+  // stops seeing, not a boundary.
+  EXPECT_NEAR(d[0], 5.0, 1e-9);
+  EXPECT_NEAR(d[1], 5.0, 1e-9);
+  EXPECT_NEAR(d[2], -3.0, 1e-9);
+  EXPECT_TRUE(std::isnan(d[3]));         // inside the unknown region: no data
+  EXPECT_NEAR(d[4], -truncation, 1e-9);  // far away: truncated
+  EXPECT_NEAR(d[5], -2.0, 1e-9);
+}
+
+TEST(ThinPlateData, AMaterialAbsentFromASliceIsFarOutsideEverywhere) {
+  LabeledSlice slice = z_slice(0.0);
+  slice.regions.push_back({2, circle(Vec2(0, 0), 5.0, 32), {}});
+  const Box3 box{Vec3(-30, -30, -10), Vec3(30, 30, 10)};
+  const PreparedSlice prepared = prepare_slice(slice, 0, {1, 2}, box);
+  const std::vector<double> d = slice_signed_distances(prepared, 2, 4.0, {{0, 0}, {8, 0}});
+  // Two values per point: materials 1 and 2.
+  EXPECT_NEAR(d[0], -4.0, 1e-12);  // material 1 at the centre of material 2's disc
+  EXPECT_NEAR(d[1], 4.0, 1e-12);   // material 2 there: 5 mm inside, clamped at 4
+  EXPECT_NEAR(d[2], -4.0, 1e-12);
+  EXPECT_NEAR(d[3], -3.0, 0.02);  // material 2: 3 mm outside its disc (a 32-gon)
+}
+
+TEST(ThinPlateField, SolveConvergesInAFewPreconditionedIterations) {
+  const SliceSet set = sphere_stack(40.0, {-30, -15, 0, 15, 30});
+  ReconstructionStats stats;
+  const MeshSet meshes = reconstruct(set, thin_plate_options(), &stats);
+  ASSERT_EQ(meshes.meshes.size(), 1u);
+  EXPECT_GT(stats.solve_nodes, 10000u);
+  // A multigrid-preconditioned solve: tens of iterations, not the thousands plain conjugate
+  // gradients need on a bi-Laplacian of this size.
+  EXPECT_GT(stats.solve_iterations, 0u);
+  EXPECT_LT(stats.solve_iterations, 40u);
+}
+
+TEST(ThinPlateField, SurfacePassesThroughTheInputContours) {
+  const double r = 40.0;
+  const SliceSet set = sphere_stack(r, {-30, -15, 0, 15, 30});
+  ReconstructionStats stats;
+  const MeshSet meshes = reconstruct(set, thin_plate_options(), &stats);
+  const TriangleMesh& mesh = meshes.meshes[0].mesh;
+  ASSERT_FALSE(mesh.empty());
+  EXPECT_TRUE(check_mesh_health(mesh).closed_manifold_oriented());
+  EXPECT_EQ(component_count(mesh), 1u);
+  // Every contour point has a mesh vertex near it: within a finest cell (120 mm / 2^7 = 0.94
+  // mm) and a half, the grid's resolution.
+  const double cell = 3.0 * r / 128.0;
+  double worst = 0.0;
+  for (const LabeledSlice& slice : set.slices)
+    for (const Region& region : slice.regions)
+      for (const Vec2& p : region.outer) {
+        const Vec3 q = slice.to_world(p);
+        double best = std::numeric_limits<double>::infinity();
+        for (const Vec3& v : mesh.vertices) best = std::min(best, (v - q).norm());
+        worst = std::max(worst, best);
+      }
+  EXPECT_LT(worst, 1.5 * cell);
+  const double volume = signed_volume(mesh) / (4.0 / 3.0 * std::numbers::pi * r * r * r);
+  EXPECT_NEAR(volume, 1.0, 0.04);
+}
+
+// A rod of radius 2.5 mm slanted 15 degrees from z, cut by planes 10 mm apart: four times its
+// radius, so the paper's field gives one bead per plane, while the signed distance's extrusion
+// overlaps from plane to plane and the thin-plate fill keeps one tube.
+SliceSet slanted_rod() {
+  SliceSet set;
+  set.bounds = Box3{Vec3(-30, -30, -50), Vec3(30, 30, 50)};
+  const double slope = std::tan(15.0 * std::numbers::pi / 180.0), radius = 2.5;
+  for (int k = -4; k <= 4; ++k) {
+    const double z = 10.0 * k;
+    LabeledSlice s = z_slice(z);
+    Ring2 ellipse;
+    for (int i = 0; i < 64; ++i) {
+      const double t = 2.0 * std::numbers::pi * i / 64;
+      ellipse.emplace_back(
+          slope * z + radius / std::cos(15.0 * std::numbers::pi / 180.0) * std::cos(t),
+          radius * std::sin(t));
+    }
+    s.regions.push_back({1, ellipse, {}});
+    set.slices.push_back(s);
+  }
+  return set;
+}
+
+TEST(ThinPlateField, ASlantedRodCrossedByFarApartPlanesIsOneTube) {
+  const SliceSet set = slanted_rod();
+  const MeshSet thin = reconstruct(set, thin_plate_options());
+  ASSERT_FALSE(thin.meshes[0].mesh.empty());
+  EXPECT_TRUE(check_mesh_health(thin.meshes[0].mesh).closed_manifold_oriented());
+  EXPECT_EQ(component_count(thin.meshes[0].mesh), 1u);
+  // It spans the planes: from below the first to above the last.
+  const Box3 bounds = thin.meshes[0].mesh.bounds();
+  EXPECT_LT(bounds.min.z(), -40.0);
+  EXPECT_GT(bounds.max.z(), 40.0);
+  // The paper's field on the same slices: beads (what issue 38 set out to change).
+  const MeshSet beads = reconstruct(set, ReconstructionOptions{});
+  EXPECT_GT(component_count(beads.meshes[0].mesh), 1u);
+}
+
+TEST(ThinPlateField, AnOrganInsideAnotherStaysInside) {
+  // Material 1: a sphere of radius 30 minus a sphere of radius 12 (material 2) at (4, 0, 0).
+  SliceSet set;
+  set.bounds = Box3{Vec3::Constant(-45), Vec3::Constant(45)};
+  const Vec3 inner_centre(4, 0, 0);
+  for (double z = -27; z <= 27; z += 6) {
+    LabeledSlice s = z_slice(z);
+    Region outer{1, sphere_section(Vec3::Zero(), 30, z), {}};
+    if (Ring2 hole = sphere_section(inner_centre, 12, z); !hole.empty()) {
+      outer.holes.push_back(hole);
+      s.regions.push_back({2, hole, {}});
+    }
+    s.regions.insert(s.regions.begin(), outer);
+    set.slices.push_back(s);
+  }
+  const MeshSet meshes = reconstruct(set, thin_plate_options());
+  ASSERT_EQ(meshes.meshes.size(), 2u);
+  const TriangleMesh& outer = meshes.meshes[0].mesh;
+  const TriangleMesh& inner = meshes.meshes[1].mesh;
+  ASSERT_FALSE(inner.empty());
+  EXPECT_TRUE(check_mesh_health(outer).closed_manifold_oriented());
+  EXPECT_TRUE(check_mesh_health(inner).closed_manifold_oriented());
+  EXPECT_EQ(component_count(inner), 1u);
+  // Material 1's mesh bounds the shell: the outer sphere and the inner cavity.
+  EXPECT_EQ(component_count(outer), 2u);
+  for (const Vec3& p : inner.vertices) EXPECT_LT((p - inner_centre).norm(), 14.0);
+  const double inner_volume = signed_volume(inner) / (4.0 / 3.0 * std::numbers::pi * 12 * 12 * 12);
+  EXPECT_NEAR(inner_volume, 1.0, 0.15);
+}
+
+TEST(ThinPlateField, UnknownPatchesCarryNoDataAndCompleteFromTheNeighbours) {
+  const double r = 40.0;
+  SliceSet set = sphere_stack(r, {-30, -15, 0, 15, 30});
+  // An unknown hole in the middle of the z = 0 disc: no cavity may grow there.
+  Region& disc = set.slices[2].regions[0];
+  const Ring2 patch = circle(Vec2(0, 0), 0.5 * r, 24);
+  disc.holes.push_back(patch);
+  set.slices[2].regions.push_back({kUnknownLabel, patch, {}});
+  const MeshSet meshes = reconstruct(set, thin_plate_options());
+  const TriangleMesh& mesh = meshes.meshes[0].mesh;
+  EXPECT_TRUE(check_mesh_health(mesh).closed_manifold_oriented());
+  EXPECT_EQ(component_count(mesh), 1u);
+  for (const Vec3& p : mesh.vertices) EXPECT_GT(p.norm(), 0.8 * r);
+}
+
+TEST(ThinPlateField, AFieldOfViewsEdgeIsNoSurface) {
+  // Horizontal sections of a sphere seen through a field of view that stops at x = 10 mm (the
+  // sphere reaches x = 40): the fov's edge cuts the discs, and must neither end the organ there
+  // nor make "inside" blobs beside it. Two vertical slices see the whole sphere.
+  const double r = 40.0;
+  SliceSet set = sphere_stack(r, {-30, -15, 0, 15, 30});
+  for (std::size_t k = 0; k < 5; ++k)
+    set.slices[k].fov = Ring2{{-60, -60}, {10, -60}, {10, 60}, {-60, 60}};
+  const MeshSet meshes = reconstruct(set, thin_plate_options());
+  const TriangleMesh& mesh = meshes.meshes[0].mesh;
+  EXPECT_TRUE(check_mesh_health(mesh).closed_manifold_oriented());
+  EXPECT_EQ(component_count(mesh), 1u);
+  double worst = 0.0;
+  for (const Vec3& p : mesh.vertices) worst = std::max(worst, std::abs(p.norm() - r));
+  EXPECT_LT(worst, 0.15 * r);
+  const Box3 bounds = mesh.bounds();
+  EXPECT_GT(bounds.max.x(), 0.85 * r);  // the organ goes on beyond the fov's edge
+}
+
+// The online engine adds each slice's data and solves from the last solution; the one-shot
+// solve starts from the closing value. Both stop at the same tolerance, so they agree to the
+// solver's tolerance, not to the bit.
+TEST(ThinPlateOnline, UpdatesAgreeWithTheOneShotFieldToTheSolversTolerance) {
+  const SliceSet set = sphere_stack(40.0, {-30, -15, 0, 15, 30});
+  ReconstructorOptions setup;
+  setup.engine = thin_plate_options();
+  setup.bounds = set.bounds;
+  Reconstructor online(setup);
+  for (const LabeledSlice& slice : set.slices) {
+    online.add_slice(slice);
+    const UpdateStats update = online.update();
+    EXPECT_GT(update.step.solve_iterations, 0u);
+  }
+  Reconstructor once(setup);
+  for (const LabeledSlice& slice : set.slices) once.add_slice(slice);
+  once.update();
+  const auto a = online.sampled_field();
+  const auto b = once.sampled_field();
+  ASSERT_GT(a.size(), 1000u);
+  // The same vertices where the labels agree; compare the values where both sampled.
+  std::size_t compared = 0;
+  double worst = 0.0;
+  std::size_t i = 0, j = 0;
+  auto less = [](const Vec3& p, const Vec3& q) {
+    return std::lexicographical_compare(p.data(), p.data() + 3, q.data(), q.data() + 3);
+  };
+  std::vector<std::pair<Vec3, std::vector<double>>> sa = a, sb = b;
+  std::sort(sa.begin(), sa.end(),
+            [&](const auto& x, const auto& y) { return less(x.first, y.first); });
+  std::sort(sb.begin(), sb.end(),
+            [&](const auto& x, const auto& y) { return less(x.first, y.first); });
+  while (i < sa.size() && j < sb.size()) {
+    if (less(sa[i].first, sb[j].first)) {
+      ++i;
+    } else if (less(sb[j].first, sa[i].first)) {
+      ++j;
+    } else {
+      for (std::size_t f = 0; f < sa[i].second.size(); ++f)
+        worst = std::max(worst, std::abs(sa[i].second[f] - sb[j].second[f]));
+      ++compared;
+      ++i;
+      ++j;
+    }
+  }
+  EXPECT_GT(compared, a.size() * 9 / 10);
+  // The solve stops when an iteration moves no value by more than 1e-3 of its grid spacing
+  // (2 finest cells of 120 / 2^7 mm): each result is within about that of the exact solution.
+  const double spacing = 2.0 * 120.0 / 128.0;
+  EXPECT_LT(worst, 2.0 * 1e-3 * spacing);  // 7.1e-4 mm measured
+  const double va = signed_volume(online.mesh().meshes[0].mesh),
+               vb = signed_volume(once.mesh().meshes[0].mesh);
+  EXPECT_NEAR(va / vb, 1.0, 1e-4);
+}
+
+TEST(ThinPlateOnline, RemovingASliceGivesTheFieldOfTheOthers) {
+  const SliceSet set = sphere_stack(40.0, {-30, -15, 0, 15, 30});
+  ReconstructorOptions setup;
+  setup.engine = thin_plate_options();
+  setup.bounds = set.bounds;
+  Reconstructor online(setup);
+  for (const LabeledSlice& slice : set.slices) online.add_slice(slice);
+  online.update();
+  ASSERT_TRUE(online.remove_slice(2));
+  const UpdateStats update = online.update();
+  EXPECT_TRUE(update.full_rebuild);
+  SliceSet rest = set;
+  rest.slices.erase(rest.slices.begin() + 2);
+  const MeshSet expected = reconstruct(rest, thin_plate_options());
+  EXPECT_NEAR(signed_volume(online.mesh().meshes[0].mesh) / signed_volume(expected.meshes[0].mesh),
+              1.0, 1e-9);
+}
+
+}  // namespace
+}  // namespace sonoshape::recon
