@@ -277,8 +277,12 @@ struct Reconstructor::State {
     std::vector<PreparedSlice> prepared = prepare(list, 0, 0);
     const int materials = static_cast<int>(material_ids.size());
     thin_plate_boxes = material_boxes(prepared, materials);
-    thin_plate = std::make_unique<ThinPlateField>(box, make_grid(box, depth).cell_size, materials, tp,
-                                                  box_extents(thin_plate_boxes));
+    auto rebuilt = std::make_unique<ThinPlateField>(box, make_grid(box, depth).cell_size, materials, tp,
+                                                    box_extents(thin_plate_boxes));
+    // A rebuild on the same grid (a removal, a material's extent outgrown) starts its solve from
+    // the last field: far fewer iterations than from the closing value.
+    if (thin_plate) rebuilt->start_from(*thin_plate);
+    thin_plate = std::move(rebuilt);
     thin_plate->add_slices(std::move(prepared));
     stats.data_s += clock.seconds();
   }

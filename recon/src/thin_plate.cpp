@@ -752,6 +752,16 @@ void ThinPlateField::evaluate(const std::vector<Vec3>& points, double* values) c
       });
 }
 
+bool ThinPlateField::start_from(const ThinPlateField& other) {
+  Impl& s = *impl_;
+  const Impl& o = *other.impl_;
+  if (s.materials != o.materials || s.spacing != o.spacing || s.box.min != o.box.min ||
+      node_counts() != other.node_counts())
+    return false;
+  s.solution = o.solution;
+  return true;
+}
+
 int ThinPlateField::function_count() const { return impl_->materials + 1; }
 const std::vector<double>& ThinPlateField::extents() const { return impl_->extents_mm; }
 const std::vector<double>& ThinPlateField::truncations() const { return impl_->truncation_mm; }

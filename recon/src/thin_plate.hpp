@@ -34,8 +34,9 @@ struct ThinPlateOptions {
   /// The solve grid is the octree's finest grid coarsened this many times (0: the finest).
   int coarsening = 1;
   /// Conjugate gradients stop when an iteration moves no grid value by more than this fraction
-  /// of the grid spacing (the field is in mm of signed distance).
-  double tolerance = 1e-3;
+  /// of the grid spacing (the field is in mm of signed distance): a hundredth of a cell moves
+  /// the surface by about that, far below what the grid resolves.
+  double tolerance = 1e-2;
   int max_iterations = 200;
 };
 
@@ -65,7 +66,10 @@ class ThinPlateField {
   void add_slice(PreparedSlice slice);
   /// Adds several slices' data, computed in parallel and summed in slice order.
   void add_slices(std::vector<PreparedSlice> slices);
-  /// Solves for every material from the last solution (zero at first).
+  /// Starts the next solve from `other`'s solution when both have the same grid and materials
+  /// (a rebuild: the data changed, the field mostly not). Returns whether it did.
+  bool start_from(const ThinPlateField& other);
+  /// Solves for every material from the last solution (-truncation at first).
   ThinPlateSolveStats solve();
   /// Values of the K + 1 functions at `points` (world mm), function_count() per point, in
   /// parallel: f_m interpolated trilinearly from the solve grid, f_0 = -max_m f_m.

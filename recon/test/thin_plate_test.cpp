@@ -299,13 +299,13 @@ TEST(ThinPlateOnline, UpdatesAgreeWithTheOneShotFieldToTheSolversTolerance) {
     }
   }
   EXPECT_GT(compared, a.size() * 9 / 10);
-  // The solve stops when an iteration moves no value by more than 1e-3 of its grid spacing
+  // The solve stops when an iteration moves no value by more than 1e-2 of its grid spacing
   // (2 finest cells of 120 / 2^7 mm): each result is within about that of the exact solution.
   const double spacing = 2.0 * 120.0 / 128.0;
-  EXPECT_LT(worst, 2.0 * 1e-3 * spacing);  // 7.1e-4 mm measured
+  EXPECT_LT(worst, 2.0 * 1e-2 * spacing);  // 8.1e-3 mm measured
   const double va = signed_volume(online.mesh().meshes[0].mesh),
                vb = signed_volume(once.mesh().meshes[0].mesh);
-  EXPECT_NEAR(va / vb, 1.0, 1e-4);
+  EXPECT_NEAR(va / vb, 1.0, 1e-3);
 }
 
 TEST(ThinPlateOnline, RemovingASliceGivesTheFieldOfTheOthers) {
@@ -322,8 +322,9 @@ TEST(ThinPlateOnline, RemovingASliceGivesTheFieldOfTheOthers) {
   SliceSet rest = set;
   rest.slices.erase(rest.slices.begin() + 2);
   const MeshSet expected = reconstruct(rest, thin_plate_options());
+  // The rebuild starts its solve from the last field: equal to the solver's tolerance.
   EXPECT_NEAR(signed_volume(online.mesh().meshes[0].mesh) / signed_volume(expected.meshes[0].mesh),
-              1.0, 1e-9);
+              1.0, 1e-3);
 }
 
 }  // namespace
