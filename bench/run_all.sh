@@ -34,6 +34,10 @@ step field_table "sonoshape" \
   "python3 bench/field_table.py \"\${OREX_DATA:?set OREX_DATA to the Data/ folder of a haimsaw/OReX checkout, or --skip field_table}\" --write-doc" \
   "python3 bench/field_table.py \"\${OREX_DATA:-}\" --quick"
 
+step field_speed "sonoshape" \
+  "python3 bench/field_speed.py --write-doc" \
+  "python3 bench/field_speed.py --repeats 1"
+
 step devices "sonoshape" \
   "python3 bench/device_table.py --devices cpu,opencl:0:0 --repeat 5 --best" \
   "python3 bench/device_table.py --quick"
