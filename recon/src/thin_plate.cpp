@@ -430,6 +430,9 @@ std::vector<double> slice_signed_distances(const PreparedSlice& slice, int mater
 // A relative residual at which the solve stops whatever its steps (rounding dominates below).
 constexpr double kSolvedResidual = 1e-13;
 
+// The largest solve grid: about 2.5 GB with one material (the default depth gives ~0.3 M).
+constexpr double kMaxNodes = 32.0 * 1024 * 1024;
+
 // No truncation below this many solve-grid spacings: the data would not reach a grid node.
 constexpr double kMinimumTruncation = 2.0;
 
@@ -647,6 +650,13 @@ ThinPlateField::ThinPlateField(const Box3& box, double finest_cell_mm, int mater
   while (coarsenings < 8 && (shortest >> (coarsenings + 1)) >= 4) ++coarsenings;
   const int multiple = 1 << coarsenings;
   for (int& c : cells) c = (c + multiple - 1) / multiple * multiple;
+  const double node_count = (cells[0] + 1.0) * (cells[1] + 1.0) * (cells[2] + 1.0);
+  if (node_count > kMaxNodes)
+    throw UnsupportedInput("thin-plate field: its grid over the box would have " +
+                           std::to_string(static_cast<long long>(node_count)) + " nodes (at most " +
+                           std::to_string(static_cast<long long>(kMaxNodes)) +
+                           "); reconstruct at a smaller depth (--depth; the default gives finest "
+                           "cells of 1/128 of the box diagonal)");
   for (int l = 0; l <= coarsenings; ++l) {
     Level level;
     level.nx = (cells[0] >> l) + 1;

@@ -11,6 +11,7 @@
 #include <numeric>
 
 #include "cell_field.hpp"
+#include "sonoshape/core/errors.hpp"
 #include "sonoshape/recon/reconstruct.hpp"
 #include "sonoshape/recon/reconstructor.hpp"
 #include "test_shapes.hpp"
@@ -111,6 +112,16 @@ TEST(ThinPlateData, AMaterialAbsentFromASliceIsFarOutsideEverywhere) {
   EXPECT_NEAR(d[1], 4.0, 1e-12);   // material 2 there: 5 mm inside, clamped at 4
   EXPECT_NEAR(d[2], -4.0, 1e-12);
   EXPECT_NEAR(d[3], -3.0, 0.02);  // material 2: 3 mm outside its disc (a 32-gon)
+}
+
+TEST(ThinPlateField, AGridTooLargeForMemoryIsRefusedWithTheFix) {
+  const Box3 box{Vec3::Zero(), Vec3::Constant(100.0)};
+  try {
+    ThinPlateField field(box, 0.05, 1, ThinPlateOptions{}, {50.0});  // 1000^3 nodes
+    FAIL() << "a grid of a billion nodes was allocated";
+  } catch (const UnsupportedInput& e) {
+    EXPECT_NE(std::string(e.what()).find("--depth"), std::string::npos) << e.what();
+  }
 }
 
 TEST(ThinPlateField, SolveConvergesInAFewPreconditionedIterations) {
