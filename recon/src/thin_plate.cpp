@@ -743,17 +743,28 @@ void ThinPlateField::evaluate(const std::vector<Vec3>& points, double* values) c
           }
           double* out = values + p * fc;
           double best = -std::numeric_limits<double>::infinity();
+          // Catmull-Rom weights per axis over nodes i0 - 1 .. i0 + 2 (clamped at the faces):
+          // cubic between the nodes, so the fine vertices see the solution's curvature.
+          double w[3][4];
+          int at[3][4];
+          for (int a = 0; a < 3; ++a) {
+            const double x = t[a], x2 = x * x, x3 = x2 * x;
+            w[a][0] = 0.5 * (-x3 + 2.0 * x2 - x);
+            w[a][1] = 0.5 * (3.0 * x3 - 5.0 * x2 + 2.0);
+            w[a][2] = 0.5 * (-3.0 * x3 + 4.0 * x2 + x);
+            w[a][3] = 0.5 * (x3 - x2);
+            for (int o = 0; o < 4; ++o) at[a][o] = std::clamp(i0[a] - 1 + o, 0, dims[a] - 1);
+          }
           for (int m = 0; m < s.materials; ++m) {
             const std::vector<double>& f = s.solution[static_cast<std::size_t>(m)];
             double value = 0.0;
-            for (int corner = 0; corner < 8; ++corner) {
-              const int dx = corner & 1, dy = (corner >> 1) & 1, dz = (corner >> 2) & 1;
-              const int i = std::min(i0[0] + dx, g.nx - 1), j = std::min(i0[1] + dy, g.ny - 1),
-                        k = std::min(i0[2] + dz, g.nz - 1);
-              const double w =
-                  (dx ? t[0] : 1.0 - t[0]) * (dy ? t[1] : 1.0 - t[1]) * (dz ? t[2] : 1.0 - t[2]);
-              if (w != 0.0) value += w * f[g.index(i, j, k)];
-            }
+            for (int c = 0; c < 4; ++c)
+              for (int b = 0; b < 4; ++b) {
+                const double wcb = w[2][c] * w[1][b];
+                const std::size_t row = g.index(0, at[1][b], at[2][c]);
+                for (int a = 0; a < 4; ++a)
+                  value += wcb * w[0][a] * f[row + static_cast<std::size_t>(at[0][a])];
+              }
             out[m + 1] = value;
             best = std::max(best, value);
           }

@@ -72,7 +72,7 @@ class ThinPlateField {
   /// Solves for every material from the last solution (-truncation at first).
   ThinPlateSolveStats solve();
   /// Values of the K + 1 functions at `points` (world mm), function_count() per point, in
-  /// parallel: f_m interpolated trilinearly from the solve grid, f_0 = -max_m f_m.
+  /// parallel: f_m interpolated from the solve grid (tricubic Catmull-Rom), f_0 = -max_m f_m.
   void evaluate(const std::vector<Vec3>& points, double* values) const;
   int function_count() const;
   /// Per material: the extent the field was set up with, and its truncation (mm).
