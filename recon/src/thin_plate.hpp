@@ -24,13 +24,13 @@ struct ThinPlateOptions {
   /// diagonal of the box of its contours; at least two solve-grid spacings), so that far contours
   /// do not weigh in. Relative to the organ, not the box: a small organ in a large scan volume
   /// needs the same reach as a large one filling its box.
-  double truncation = 0.12;
+  double truncation = 0.1;
   /// Weight of a data sample (one per grid spacing squared of plane), relative to the
   /// bi-Laplacian's diagonal (42 inside the grid): large, so the field interpolates the data.
   double data_weight = 100.0;
   /// Weight of the closing condition (f = -truncation at and beyond the box's faces): weak, it
   /// only decides where an object ends beyond its last slice.
-  double closing_weight = 0.05;
+  double closing_weight = 0.3;
   /// The solve grid is the octree's finest grid coarsened this many times (0: the finest).
   int coarsening = 1;
   /// Conjugate gradients stop when an iteration moves no grid value by more than this fraction
