@@ -25,10 +25,6 @@
 namespace sonoshape::recon {
 namespace {
 
-// The thin-plate field is rebuilt when a material's extent grows beyond this factor of the one
-// its truncation was set from (thin_plate.hpp).
-constexpr double kOutgrown = 1.25;
-
 // Two slice planes closer than this (relative, as the slice-set validation) are the same plane.
 constexpr double kCoincidentTolerance = 1e-9;
 
@@ -287,9 +283,9 @@ struct Reconstructor::State {
     stats.data_s += clock.seconds();
   }
 
-  // Adds the data of list[first, end) to the thin-plate field, unless they make a material's
-  // extent outgrow what its truncation was set from by a quarter: false then (the caller
-  // rebuilds, so that every slice's data have the same truncation).
+  // Adds the data of list[first, end) to the thin-plate field, unless they change a material's
+  // truncation (truncation_extent of its extent): false then, and the caller rebuilds, so that
+  // every slice's data have the truncation a one-shot reconstruction gives them.
   bool add_thin_plate_slices(const std::vector<Entry>& list, std::size_t first, ReconstructionStats& stats) {
     Stopwatch clock;
     std::vector<PreparedSlice> added = prepare(list, first, thin_plate->slices().size());
@@ -301,7 +297,7 @@ struct Reconstructor::State {
     const std::vector<double> grown = box_extents(boxes);
     const std::vector<double>& basis = thin_plate->extents();
     for (std::size_t m = 0; m < basis.size(); ++m)
-      if (grown[m] > kOutgrown * basis[m]) return false;
+      if (truncation_extent(grown[m]) != truncation_extent(basis[m])) return false;
     thin_plate_boxes = std::move(boxes);
     thin_plate->add_slices(std::move(added));
     stats.data_s += clock.seconds();

@@ -602,6 +602,11 @@ struct ThinPlateField::Impl {
   }
 };
 
+double truncation_extent(double extent_mm) {
+  if (!(extent_mm > 0.0)) return 0.0;
+  return std::exp2(std::ceil(4.0 * std::log2(extent_mm) - 1e-9) / 4.0);
+}
+
 std::vector<Box3> material_boxes(const std::vector<PreparedSlice>& slices, int materials) {
   std::vector<Box3> boxes(static_cast<std::size_t>(materials),
                           Box3{Vec3::Constant(std::numeric_limits<double>::infinity()),
@@ -637,7 +642,7 @@ ThinPlateField::ThinPlateField(const Box3& box, double finest_cell_mm, int mater
   extents_mm.resize(static_cast<std::size_t>(materials), 0.0);
   for (const double extent : extents_mm)
     s.truncation_mm.push_back(
-        std::max(options.truncation * extent, kMinimumTruncation * s.spacing));
+        std::max(options.truncation * truncation_extent(extent), kMinimumTruncation * s.spacing));
   s.extents_mm = std::move(extents_mm);
   // Cells per axis, rounded up to a multiple of 2^coarsenings so that every level's nodes are
   // every other node of the finer one; the coarsest keeps at least 4 cells on its shortest axis.

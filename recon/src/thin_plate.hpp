@@ -21,9 +21,9 @@ namespace sonoshape::recon {
 
 struct ThinPlateOptions {
   /// Each material's signed distances are clamped to +-this fraction of its extent (the
-  /// diagonal of the box of its contours; at least two solve-grid spacings), so that far contours
-  /// do not weigh in. Relative to the organ, not the box: a small organ in a large scan volume
-  /// needs the same reach as a large one filling its box.
+  /// diagonal of the box of its contours, rounded up by truncation_extent; at least two
+  /// solve-grid spacings), so that far contours do not weigh in. Relative to the organ, not the
+  /// box: a small organ in a large scan volume needs the same reach as a large one filling its box.
   double truncation = 0.1;
   /// Weight of a data sample (one per grid spacing squared of plane), relative to the
   /// bi-Laplacian's diagonal (42 inside the grid): large, so the field interpolates the data.
@@ -93,6 +93,12 @@ class ThinPlateField {
 /// Per material 1..K (index m - 1), the box of its contour points in `slices` (world mm; empty,
 /// min > max, where it does not occur).
 std::vector<Box3> material_boxes(const std::vector<PreparedSlice>& slices, int materials);
+/// The extent a truncation is set from: `extent_mm` rounded up to a power of 2^(1/4) (0 for 0).
+/// An online engine rebuilds the field when this changes, so that its truncations are those a
+/// one-shot reconstruction of the same slices computes, and rebuilds at most four times per
+/// doubling of an organ's extent.
+double truncation_extent(double extent_mm);
+
 /// The diagonals of `boxes` (0 for an empty box): the extents ThinPlateField takes.
 std::vector<double> box_extents(const std::vector<Box3>& boxes);
 

@@ -114,6 +114,20 @@ TEST(ThinPlateData, AMaterialAbsentFromASliceIsFarOutsideEverywhere) {
   EXPECT_NEAR(d[3], -3.0, 0.02);  // material 2: 3 mm outside its disc (a 32-gon)
 }
 
+// The online engine rebuilds when a label's truncation_extent changes, and a one-shot
+// reconstruction computes it from the same extent: both truncate alike.
+TEST(ThinPlateData, TruncationExtentsRoundUpToQuarterOctaves) {
+  EXPECT_EQ(truncation_extent(0.0), 0.0);
+  EXPECT_EQ(truncation_extent(128.0), 128.0);
+  EXPECT_NEAR(truncation_extent(120.0), 128.0, 1e-9);
+  EXPECT_EQ(truncation_extent(121.8), truncation_extent(120.0));  // a slice grew it by 1.5 %
+  EXPECT_NEAR(truncation_extent(129.0), 128.0 * std::exp2(0.25), 1e-9);
+  for (double e = 1.0; e < 1000.0; e *= 1.07) {
+    EXPECT_GE(truncation_extent(e), e * (1.0 - 1e-9));
+    EXPECT_LT(truncation_extent(e), e * std::exp2(0.25));
+  }
+}
+
 TEST(ThinPlateField, AGridTooLargeForMemoryIsRefusedWithTheFix) {
   const Box3 box{Vec3::Zero(), Vec3::Constant(100.0)};
   try {
