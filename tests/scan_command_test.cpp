@@ -32,6 +32,30 @@ using sonoshape::testing::wait_exit;
 const std::string kSmallSim =
     "scan --source sim:default --width-px 160 --height-px 160 --frame-rate 5 --depth 5 ";
 
+// The meshes a scan wrote to DIR/out are closed, oriented, enclose a volume, and have the volume
+// (within `relative` of it) of `reconstruct DIR/out/slices.json --depth 5 EXTRA`.
+void expect_meshes_of_offline_reconstruction(const fs::path& dir, const std::string& extra,
+                                             double relative) {
+  const auto offline = sonoshape::testing::run_command(
+      SONOSHAPE_BINARY,
+      "reconstruct " + (dir / "out" / "slices.json").string() + " --depth 5" + extra + " -o " +
+          (dir / "offline").string(),
+      dir / "offline.log");
+  ASSERT_EQ(offline.exit_code, 0) << offline.output;
+  for (const char* name : {"label_1.ply", "label_2.ply"}) {
+    SCOPED_TRACE(name);
+    const auto mesh = sonoshape::sim::read_mesh(dir / "out" / name);
+    ASSERT_TRUE(mesh) << mesh.message();
+    ASSERT_FALSE(mesh->triangles.empty());
+    EXPECT_TRUE(sonoshape::check_mesh_health(*mesh).closed_manifold_oriented());
+    const double volume = sonoshape::signed_volume(*mesh);
+    EXPECT_GT(volume, 0.0);
+    const auto again = sonoshape::sim::read_mesh(dir / "offline" / name);
+    ASSERT_TRUE(again) << again.message();
+    EXPECT_NEAR(sonoshape::signed_volume(*again), volume, relative * volume);
+  }
+}
+
 TEST(ScanCommand, FastSimulatedScanWritesMeshesSlicesAndSummary) {
   sonoshape::testing::TempDir dir;
   const auto result = sonoshape::testing::run_command(
@@ -61,26 +85,9 @@ TEST(ScanCommand, FastSimulatedScanWritesMeshesSlicesAndSummary) {
   EXPECT_EQ(slices->slices.size(), summary["slices"].get<std::size_t>());
   EXPECT_GT(slices->slices.size(), 5u);
   // The meshes are the surfaces of those slices: closed, oriented, enclosing a volume, and the
-  // same as the offline engine makes from the recorded slices (design.md: online == one-shot).
-  const auto offline = sonoshape::testing::run_command(
-      SONOSHAPE_BINARY,
-      "reconstruct " + (dir.path() / "out" / "slices.json").string() + " --depth 5 -o " +
-          (dir.path() / "offline").string(),
-      dir.path() / "offline.log");
-  ASSERT_EQ(offline.exit_code, 0) << offline.output;
-  for (const char* name : {"label_1.ply", "label_2.ply"}) {
-    SCOPED_TRACE(name);
-    const auto mesh = sonoshape::sim::read_mesh(dir.path() / "out" / name);
-    ASSERT_TRUE(mesh) << mesh.message();
-    ASSERT_FALSE(mesh->triangles.empty());
-    EXPECT_TRUE(sonoshape::check_mesh_health(*mesh).closed_manifold_oriented());
-    const double volume = sonoshape::signed_volume(*mesh);
-    EXPECT_GT(volume, 0.0);
-    const auto again = sonoshape::sim::read_mesh(dir.path() / "offline" / name);
-    ASSERT_TRUE(again) << again.message();
-    // Equal up to the float32 rounding of the PLY coordinates (equal to the bit at 11ecf1b).
-    EXPECT_NEAR(sonoshape::signed_volume(*again), volume, 1e-6 * volume);
-  }
+  // same as the offline engine makes from the recorded slices (design.md: online == one-shot),
+  // up to the float32 rounding of the PLY coordinates (equal to the bit at 11ecf1b).
+  expect_meshes_of_offline_reconstruction(dir.path(), "", 1e-6);
 }
 
 // The thin-plate field in the live pipeline: the same scan, closed meshes, and the offline
@@ -89,27 +96,11 @@ TEST(ScanCommand, FastSimulatedScanWritesMeshesSlicesAndSummary) {
 TEST(ScanCommand, ThinPlateFieldScansAndAgreesWithItsOfflineReconstruction) {
   sonoshape::testing::TempDir dir;
   const auto result = sonoshape::testing::run_command(
-      SONOSHAPE_BINARY, kSmallSim + "--sweep-s 2 --fast --field thin-plate -o " + (dir.path() / "out").string(),
+      SONOSHAPE_BINARY,
+      kSmallSim + "--sweep-s 2 --fast --field thin-plate -o " + (dir.path() / "out").string(),
       dir.path() / "log");
   ASSERT_EQ(result.exit_code, 0) << result.output;
-  const auto offline = sonoshape::testing::run_command(
-      SONOSHAPE_BINARY,
-      "reconstruct " + (dir.path() / "out" / "slices.json").string() + " --depth 5 --field thin-plate -o " +
-          (dir.path() / "offline").string(),
-      dir.path() / "offline.log");
-  ASSERT_EQ(offline.exit_code, 0) << offline.output;
-  for (const char* name : {"label_1.ply", "label_2.ply"}) {
-    SCOPED_TRACE(name);
-    const auto mesh = sonoshape::sim::read_mesh(dir.path() / "out" / name);
-    ASSERT_TRUE(mesh) << mesh.message();
-    ASSERT_FALSE(mesh->triangles.empty());
-    EXPECT_TRUE(sonoshape::check_mesh_health(*mesh).closed_manifold_oriented());
-    const auto again = sonoshape::sim::read_mesh(dir.path() / "offline" / name);
-    ASSERT_TRUE(again) << again.message();
-    const double volume = sonoshape::signed_volume(*mesh);
-    EXPECT_GT(volume, 0.0);
-    EXPECT_NEAR(sonoshape::signed_volume(*again), volume, 1e-3 * volume);
-  }
+  expect_meshes_of_offline_reconstruction(dir.path(), " --field thin-plate", 1e-3);
 }
 
 TEST(ScanCommand, RealPlusRecordingReplaysIntoValidSlicesWithARepairsList) {

@@ -171,8 +171,8 @@ struct Level {
   std::vector<double> weight;         // lumped data weights (finest: the row sums of its D)
   std::vector<double> data_diagonal;  // finest level only
   std::array<std::vector<double>, 3> data_edge;  // finest level only
-  std::vector<double>
-      inverse;  // 1 / (s * l1 bound of L^2's row + row sum of D): the smoother's diagonal
+  // The smoother's diagonal: 1 / (s * l1 bound of L^2's row + row sum of D).
+  std::vector<double> inverse;
   std::vector<double> x, b, r, d, ad, laplacian;  // V-cycle work
   std::size_t size() const { return static_cast<std::size_t>(nx) * ny * nz; }
   std::size_t index(int i, int j, int k) const {
@@ -404,9 +404,9 @@ void v_cycle(std::vector<Level>& levels, std::size_t l) {
   chebyshev(g, kSmoothingSteps, kChebyshevLower);
 }
 
-double dot(const std::vector<double>& a, const std::vector<double>& b) {
+double dot(const double* a, const double* b, std::size_t count) {
   return tbb::parallel_reduce(
-      tbb::blocked_range<std::size_t>(0, a.size(), 1 << 14), 0.0,
+      tbb::blocked_range<std::size_t>(0, count, 1 << 14), 0.0,
       [&](const tbb::blocked_range<std::size_t>& range, double sum) {
         for (std::size_t n = range.begin(); n < range.end(); ++n) sum += a[n] * b[n];
         return sum;
@@ -448,6 +448,7 @@ struct ThinPlateField::Impl {
   std::vector<std::vector<double>> solution;  // per material, level 0
   std::vector<PreparedSlice> slices;
   bool weights_dirty = true;
+  std::vector<double> pcg_residual, pcg_direction, pcg_product;  // solve_one's work vectors
 
   // The data of one slice: the points where its plane crosses the grid's edges along the axis
   // nearest its normal (one per line of nodes along that axis), each with the edge's first node,
@@ -554,19 +555,26 @@ struct ThinPlateField::Impl {
     weights_dirty = false;
   }
 
-  // Conjugate gradients on A x = b, preconditioned by one V-cycle, from x.
-  std::pair<int, double> solve_one(std::vector<double>& x, const double* b_values) {
+  // Conjugate gradients on A x = b, preconditioned by one V-cycle, from x. Returns the
+  // iterations.
+  int solve_one(std::vector<double>& x, const double* b) {
     Level& g = levels[0];
     const std::size_t count = g.size();
-    std::vector<double> b(b_values, b_values + count), r(count), z(count), p(count), q(count);
+    // The work vectors are kept across solves (an online update solves every material again).
+    std::vector<double>& r = pcg_residual;
+    std::vector<double>& p = pcg_direction;
+    std::vector<double>& q = pcg_product;
+    r.resize(count);
+    p.resize(count);
+    q.resize(count);
     apply_operator(g, x.data(), q.data(), g.laplacian.data());
     for_nodes(count, [&](std::size_t n) { r[n] = b[n] - q[n]; });
-    const double norm_b = std::sqrt(dot(b, b));
+    const double norm_b = std::sqrt(dot(b, b, count));
     if (!(norm_b > 0.0)) {
       std::fill(x.begin(), x.end(), 0.0);
-      return {0, 0.0};
+      return 0;
     }
-    double residual = std::sqrt(dot(r, r)) / norm_b;
+    double residual = std::sqrt(dot(r.data(), r.data(), count)) / norm_b;
     int iteration = 0;
     double rz = 0.0;
     // Converged when an iteration moves no node by more than the tolerance (a fraction of the
@@ -577,13 +585,13 @@ struct ThinPlateField::Impl {
            iteration < options.max_iterations) {
       g.b = r;
       v_cycle(levels, 0);
-      z = g.x;
-      const double rz_next = dot(r, z);
+      const std::vector<double>& z = g.x;  // the preconditioned residual
+      const double rz_next = dot(r.data(), z.data(), count);
       const double beta = iteration == 0 ? 0.0 : rz_next / rz;
       for_nodes(count, [&](std::size_t n) { p[n] = z[n] + beta * p[n]; });
       rz = rz_next;
       apply_operator(g, p.data(), q.data(), g.laplacian.data());
-      const double alpha = rz / dot(p, q);
+      const double alpha = rz / dot(p.data(), q.data(), count);
       step_mm = tbb::parallel_reduce(
           tbb::blocked_range<std::size_t>(0, count, 1 << 14), 0.0,
           [&](const tbb::blocked_range<std::size_t>& range, double largest) {
@@ -595,10 +603,14 @@ struct ThinPlateField::Impl {
             return largest;
           },
           [](double a, double b) { return std::max(a, b); });
-      residual = std::sqrt(dot(r, r)) / norm_b;
+      residual = std::sqrt(dot(r.data(), r.data(), count)) / norm_b;
       ++iteration;
     }
-    return {iteration, residual};
+    if (step_mm > step_tolerance_mm && residual > kSolvedResidual)
+      log_warning("thin-plate field: the solve stopped after " + std::to_string(iteration) +
+                  " iterations with steps of " + std::to_string(step_mm) + " mm (tolerance " +
+                  std::to_string(step_tolerance_mm) + " mm); the surface may be off by about that");
+    return iteration;
   }
 };
 
@@ -692,12 +704,6 @@ ThinPlateField::~ThinPlateField() = default;
 ThinPlateField::ThinPlateField(ThinPlateField&&) noexcept = default;
 ThinPlateField& ThinPlateField::operator=(ThinPlateField&&) noexcept = default;
 
-void ThinPlateField::add_slice(PreparedSlice slice) {
-  Impl& s = *impl_;
-  s.add(s.slice_data(slice));
-  s.slices.push_back(std::move(slice));
-}
-
 void ThinPlateField::add_slices(std::vector<PreparedSlice> slices) {
   Impl& s = *impl_;
   // Each slice's data in parallel, added in slice order (the same sums whatever the threads).
@@ -717,11 +723,9 @@ ThinPlateSolveStats ThinPlateField::solve() {
   s.refresh_weights();
   const std::size_t count = s.levels[0].size();
   for (int m = 0; m < s.materials; ++m) {
-    const auto [iterations, residual] =
+    stats.iterations +=
         s.solve_one(s.solution[static_cast<std::size_t>(m)],
                     s.weighted_targets.data() + static_cast<std::size_t>(m) * count);
-    stats.iterations += iterations;
-    stats.relative_residual = std::max(stats.relative_residual, residual);
   }
   stats.solve_s = clock.seconds();
   stats.nodes = count;
@@ -790,21 +794,10 @@ bool ThinPlateField::start_from(const ThinPlateField& other) {
 
 int ThinPlateField::function_count() const { return impl_->materials + 1; }
 const std::vector<double>& ThinPlateField::extents() const { return impl_->extents_mm; }
-const std::vector<double>& ThinPlateField::truncations() const { return impl_->truncation_mm; }
 const std::vector<PreparedSlice>& ThinPlateField::slices() const { return impl_->slices; }
-double ThinPlateField::spacing() const { return impl_->spacing; }
 std::array<int, 3> ThinPlateField::node_counts() const {
   const Level& g = impl_->levels[0];
   return {g.nx, g.ny, g.nz};
-}
-std::size_t ThinPlateField::memory_bytes() const {
-  const Impl& s = *impl_;
-  std::size_t bytes = 0;
-  for (const Level& l : s.levels)
-    bytes += l.size() * sizeof(double) * (l.data_diagonal.empty() ? 8 : 12);
-  bytes += s.weighted_targets.size() * sizeof(double);
-  for (const auto& f : s.solution) bytes += f.size() * sizeof(double);
-  return bytes;
 }
 
 }  // namespace sonoshape::recon

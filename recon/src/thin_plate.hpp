@@ -42,11 +42,9 @@ struct ThinPlateOptions {
 
 /// What one solve did.
 struct ThinPlateSolveStats {
-  double data_s = 0.0;             ///< data of the new slices
-  double solve_s = 0.0;            ///< conjugate gradients, every material
-  int iterations = 0;              ///< summed over materials
-  double relative_residual = 0.0;  ///< the largest over materials
-  std::size_t nodes = 0;           ///< solve grid nodes
+  double solve_s = 0.0;   ///< conjugate gradients, every material
+  int iterations = 0;     ///< summed over materials
+  std::size_t nodes = 0;  ///< solve grid nodes
 };
 
 /// The thin-plate field of K materials over a box. Not thread-safe; evaluate() may be called
@@ -55,16 +53,15 @@ class ThinPlateField {
  public:
   /// `finest_cell_mm`: the octree's finest cell size; the solve grid's spacing is that times
   /// 2^options.coarsening. `materials`: K (function 0 is the outside). `extents_mm`: per
-  /// material, the extent the truncation is a fraction of (material_extents of the slices).
+  /// material, the extent the truncation is a fraction of (box_extents of material_boxes).
   ThinPlateField(const Box3& box, double finest_cell_mm, int materials, ThinPlateOptions options,
                  std::vector<double> extents_mm);
   ~ThinPlateField();
   ThinPlateField(ThinPlateField&&) noexcept;
   ThinPlateField& operator=(ThinPlateField&&) noexcept;
 
-  /// Adds a prepared slice's data. The slice is kept (slices()).
-  void add_slice(PreparedSlice slice);
-  /// Adds several slices' data, computed in parallel and summed in slice order.
+  /// Adds slices' data, computed in parallel and summed in slice order. The slices are kept
+  /// (slices()).
   void add_slices(std::vector<PreparedSlice> slices);
   /// Starts the next solve from `other`'s solution when both have the same grid and materials
   /// (a rebuild: the data changed, the field mostly not). Returns whether it did.
@@ -75,15 +72,11 @@ class ThinPlateField {
   /// parallel: f_m interpolated from the solve grid (tricubic Catmull-Rom), f_0 = -max_m f_m.
   void evaluate(const std::vector<Vec3>& points, double* values) const;
   int function_count() const;
-  /// Per material: the extent the field was set up with, and its truncation (mm).
+  /// Per material: the extent the field was set up with (mm).
   const std::vector<double>& extents() const;
-  const std::vector<double>& truncations() const;
   const std::vector<PreparedSlice>& slices() const;
-  /// Grid spacing (mm) and node counts of the solve grid.
-  double spacing() const;
+  /// Node counts of the solve grid.
   std::array<int, 3> node_counts() const;
-  /// Bytes held by the grid hierarchy and the data.
-  std::size_t memory_bytes() const;
 
  private:
   struct Impl;
