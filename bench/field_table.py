@@ -37,7 +37,8 @@ FAILED.
 
 Usage: bench/field_table.py [DIR] [--binary build/apps/sonoshape] [--work out/bench/field_table]
                             [--only NAME]... [--quick] [--fields mean-value,thin-plate]
-                            [--depth D] [--nwire REC] [--no-nwire] [--keep-inputs] [--write-doc]
+                            [--depth D] [--reconstruct-args "ARGS"] [--nwire REC] [--no-nwire]
+                            [--keep-inputs] [--write-doc]
 """
 import argparse
 import json
@@ -580,6 +581,7 @@ def one_row(args, root, name, kind, extra):
             cmd += ["--field", field]
         if args.depth:
             cmd += ["--depth", str(args.depth)]
+        cmd += args.reconstruct_args.split()
         entry = row["fields"][field] = {}
         try:
             entry["seconds"], entry["rss_mb"] = run_measured(
@@ -749,6 +751,9 @@ def main():
     parser.add_argument("--fields", default=",".join(FIELDS),
                         help="fields to run, comma-separated (mean-value, thin-plate)")
     parser.add_argument("--depth", type=int, default=0, help="octree depth (0: the default)")
+    parser.add_argument("--reconstruct-args", default="",
+                        help="more `reconstruct` options, space-separated (experiments; not "
+                             "with --write-doc)")
     parser.add_argument("--nwire", default=os.path.join(root, NWIRE_RECORDING),
                         help="the fCal 3-N-wire recording (PlusLibData TestImages/)")
     parser.add_argument("--nwire-calibration", default=os.path.join(root, NWIRE_CALIBRATION))
@@ -759,8 +764,9 @@ def main():
     parser.add_argument("--write-doc", action="store_true",
                         help="write the table into docs/benchmarks.md")
     args = parser.parse_args()
-    if args.write_doc and (args.quick or args.only):
-        raise SystemExit("--write-doc takes the whole table (no --quick, no --only)")
+    if args.write_doc and (args.quick or args.only or args.reconstruct_args):
+        raise SystemExit("--write-doc takes the whole table with the defaults (no --quick, "
+                         "--only or --reconstruct-args)")
     start = (time.monotonic(), os.getloadavg()[0])
     args.fields = [f for f in args.fields.split(",") if f]
     if any(f not in FIELDS for f in args.fields):

@@ -74,6 +74,11 @@ const char* const kFieldHelp =
     "docs/engine.md)";
 const char* const kDefaultField = "mean-value";
 
+const char* const kSmoothingHelp =
+    "Bi-Laplacian smoothing iterations of the octree's samples, 0 to 1000 (0: off). Default: 8 "
+    "with the mean-value field, 0 with thin-plate (that field already minimises the "
+    "bi-Laplacian energy)";
+
 const char* const kDeviceHelp =
     "Where the field is evaluated: cpu (native, the default), opencl (the first OpenCL device with "
     "fp64, a GPU if any), opencl:PLATFORM:DEVICE (`sonoshape devices` lists them) or auto (an fp64 "

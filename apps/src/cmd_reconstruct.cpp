@@ -180,10 +180,8 @@ CommandRunner add_reconstruct_command(CLI::App& app) {
                  "Octree depth (finest cells = largest box side / 2^depth); default: about 1/128 "
                  "of the box diagonal")
       ->check(CLI::Range(1, 11));
-  app.add_option("--smooth", opt->engine.smoothing_iterations,
-                 "Bi-Laplacian smoothing iterations (0 turns smoothing off)")
-      ->check(CLI::Range(0, 1000))
-      ->capture_default_str();
+  app.add_option("--smooth", opt->engine.smoothing_iterations, kSmoothingHelp)
+      ->check(CLI::Range(0, 1000));
   app.add_option("--threads", opt->engine.threads,
                  "Threads for every stage of the reconstruction (0: all cores)")
       ->check(CLI::Range(0, 1024))

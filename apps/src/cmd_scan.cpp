@@ -72,7 +72,7 @@ struct ScanCommandOptions {
   std::size_t reconstruction_queue = scan::ScanOptions{}.reconstruction_queue;
   int depth = -1;
   std::string device;  // --device; empty: SONOSHAPE_DEVICE, else cpu
-  int smoothing = 8;
+  int smoothing = -1;  // the field's default
   std::string field = kDefaultField;
   std::vector<double> bounds;
   // sim: only
@@ -683,9 +683,8 @@ void add_scan_options(CLI::App& app, ScanCommandOptions& o) {
       ->check(CLI::IsMember({"mean-value", "thin-plate"}))
       ->capture_default_str();
   app.add_option("--device", options->device, kDeviceHelp);
-  app.add_option("--smoothing", options->smoothing, "Bi-Laplacian smoothing iterations")
-      ->check(CLI::NonNegativeNumber)
-      ->capture_default_str();
+  app.add_option("--smoothing", options->smoothing, kSmoothingHelp)
+      ->check(CLI::Range(0, 1000));
   app.add_option("--bounds", options->bounds,
                  "Scan volume xmin ymin zmin xmax ymax zmax (mm, reference frame). Default: "
                  "sim: the phantom's box + 10%; replay: grown from the slices")

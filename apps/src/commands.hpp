@@ -32,6 +32,9 @@ CommandRunner add_keys_command(CLI::App& app);
 extern const char* const kFieldHelp;
 extern const char* const kDefaultField;
 
+/// The help text of --smooth (reconstruct) and --smoothing (scan).
+extern const char* const kSmoothingHelp;
+
 /// The help text of --device (reconstruct, scan).
 extern const char* const kDeviceHelp;
 /// The device the engine uses for `option` (--device; empty: SONOSHAPE_DEVICE, else cpu), as

@@ -253,7 +253,10 @@ struct Reconstructor::State {
     depth = options.engine.max_depth > 0 ? options.engine.max_depth : default_depth(box);
     octree = OctreeOptions{};
     octree.max_depth = depth;
-    octree.smoothing_iterations = options.engine.smoothing_iterations;
+    octree.smoothing_iterations = options.engine.smoothing_iterations >= 0
+                                      ? options.engine.smoothing_iterations
+                                  : thin_plate_field() ? 0
+                                                       : kMeanValueSmoothing;
     contours = ContourKeys{};
     region_samples.clear();
     contour_slices = 0;

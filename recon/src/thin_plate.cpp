@@ -165,15 +165,24 @@ class SliceDistances {
 // (n, n + axis) in `data_edge[axis][n]`. Coarser levels lump it: `weight` is its row sums,
 // restricted.
 
+// The V-cycle runs in single precision: it only preconditions the conjugate gradients, which
+// keep their vectors in double, and it is memory-bound, so halving its bytes nearly halves its
+// time. The operator's weights are single-precision copies of the data's double sums, the same
+// in the conjugate gradients' products, so that both see one matrix.
+using Real = float;
+
 struct Level {
   int nx = 0, ny = 0, nz = 0;
   double scale = 1.0;                 // s
-  std::vector<double> weight;         // lumped data weights (finest: the row sums of its D)
-  std::vector<double> data_diagonal;  // finest level only
+  std::vector<Real> weight;           // lumped data weights (finest: the row sums of its D)
+  std::vector<double> data_diagonal;  // finest level only: D's sums
   std::array<std::vector<double>, 3> data_edge;  // finest level only
+  std::vector<Real> operator_diagonal;           // finest level only: data_diagonal as Real
+  std::array<std::vector<Real>, 3> operator_edge;  // finest level only
+  std::vector<Real> zero_row;                      // finest level only: nx zeros
   // The smoother's diagonal: 1 / (s * l1 bound of L^2's row + row sum of D).
-  std::vector<double> inverse;
-  std::vector<double> x, b, r, d, ad, laplacian;  // V-cycle work
+  std::vector<Real> inverse;
+  std::vector<Real> x, b, r, d, ad, laplacian;  // V-cycle work
   std::size_t size() const { return static_cast<std::size_t>(nx) * ny * nz; }
   std::size_t index(int i, int j, int k) const {
     return (static_cast<std::size_t>(k) * ny + j) * nx + i;
@@ -194,21 +203,21 @@ void for_planes(int nz, const Body& body) {
 // Calls body(n, laplacian of `in` at n) for every node, rows in parallel. The graph Laplacian
 // sums in[m] - in[n] over the grid neighbours m; a missing neighbour (at the grid's faces) reads
 // the node itself, so the inner loop has no branches and vectorises.
-template <typename Body>
-void for_laplacian(const Level& g, const double* in, const Body& body) {
+template <typename T, typename Body>
+void for_laplacian(const Level& g, const T* in, const Body& body) {
   const std::size_t sy = static_cast<std::size_t>(g.nx), sz = sy * static_cast<std::size_t>(g.ny);
   for_planes(g.nz, [&](int k) {
     for (int j = 0; j < g.ny; ++j) {
       const std::size_t row = g.index(0, j, k);
-      const double* c = in + row;
-      const double* ym = j > 0 ? c - sy : c;
-      const double* yp = j < g.ny - 1 ? c + sy : c;
-      const double* zm = k > 0 ? c - sz : c;
-      const double* zp = k < g.nz - 1 ? c + sz : c;
-      auto across = [&](int i) { return ym[i] + yp[i] + zm[i] + zp[i] - 4.0 * c[i]; };
-      body(row, across(0) + (g.nx > 1 ? c[1] - c[0] : 0.0));
+      const T* c = in + row;
+      const T* ym = j > 0 ? c - sy : c;
+      const T* yp = j < g.ny - 1 ? c + sy : c;
+      const T* zm = k > 0 ? c - sz : c;
+      const T* zp = k < g.nz - 1 ? c + sz : c;
+      auto across = [&](int i) { return ym[i] + yp[i] + zm[i] + zp[i] - T(4) * c[i]; };
+      body(row, across(0) + (g.nx > 1 ? c[1] - c[0] : T(0)));
       for (int i = 1; i < g.nx - 1; ++i)
-        body(row + static_cast<std::size_t>(i), across(i) + c[i - 1] + c[i + 1] - 2.0 * c[i]);
+        body(row + static_cast<std::size_t>(i), across(i) + c[i - 1] + c[i + 1] - T(2) * c[i]);
       if (g.nx > 1)
         body(row + static_cast<std::size_t>(g.nx - 1),
              across(g.nx - 1) + c[g.nx - 2] - c[g.nx - 1]);
@@ -216,34 +225,69 @@ void for_laplacian(const Level& g, const double* in, const Body& body) {
   });
 }
 
-// The data's form on the finest level at node n (0 elsewhere).
-inline double data_term(const Level& g, const double* in, std::size_t n,
-                        const std::size_t (&stride)[3]) {
-  double value = g.data_diagonal[n] * in[n];
-  for (int a = 0; a < 3; ++a) {
-    const std::vector<double>& edge = g.data_edge[static_cast<std::size_t>(a)];
-    // Edges are stored at their first node: the last node along an axis has none, and the
-    // first none before it (its weight is 0, and the index is guarded).
-    value += edge[n] * in[std::min(n + stride[a], g.size() - 1)];
-    if (n >= stride[a]) value += edge[n - stride[a]] * in[n - stride[a]];
-  }
-  return value;
+// The finest level's second pass: out = s L(lap) + D in, where lap = L in. D's edge terms read
+// their neighbours through row pointers (a row of zeros stands in for the edges before the
+// first row or plane, and the last node along an axis has no edge), so that the inner loop has
+// no branches and vectorises like the Laplacian's.
+template <typename T>
+void apply_finest(const Level& g, const T* in, T* out, const T* lap) {
+  const std::size_t sy = static_cast<std::size_t>(g.nx), sz = sy * static_cast<std::size_t>(g.ny);
+  const T s = static_cast<T>(g.scale);
+  const Real* zero = g.zero_row.data();
+  const Real* edge_x = g.operator_edge[0].data();
+  const Real* edge_y = g.operator_edge[1].data();
+  const Real* edge_z = g.operator_edge[2].data();
+  const int nx = g.nx;
+  for_planes(g.nz, [&](int k) {
+    for (int j = 0; j < g.ny; ++j) {
+      const std::size_t row = g.index(0, j, k);
+      const T* c = lap + row;
+      const T* ym = j > 0 ? c - sy : c;
+      const T* yp = j < g.ny - 1 ? c + sy : c;
+      const T* zm = k > 0 ? c - sz : c;
+      const T* zp = k < g.nz - 1 ? c + sz : c;
+      const T* x = in + row;
+      const Real* diagonal = g.operator_diagonal.data() + row;
+      const Real* ex = edge_x + row;
+      const Real* ey = edge_y + row;
+      const Real* ey_before = j > 0 ? ey - sy : zero;
+      const T* x_yp = j < g.ny - 1 ? x + sy : x;
+      const T* x_ym = j > 0 ? x - sy : x;
+      const Real* ez = edge_z + row;
+      const Real* ez_before = k > 0 ? ez - sz : zero;
+      const T* x_zp = k < g.nz - 1 ? x + sz : x;
+      const T* x_zm = k > 0 ? x - sz : x;
+      T* o = out + row;
+      auto across = [&](int i) {
+        return s * (ym[i] + yp[i] + zm[i] + zp[i] - T(4) * c[i]) + diagonal[i] * x[i] +
+               ey[i] * x_yp[i] + ey_before[i] * x_ym[i] + ez[i] * x_zp[i] +
+               ez_before[i] * x_zm[i];
+      };
+      if (nx == 1) {
+        o[0] = across(0);
+        continue;
+      }
+      o[0] = across(0) + s * (c[1] - c[0]) + ex[0] * x[1];
+      for (int i = 1; i < nx - 1; ++i)
+        o[i] = across(i) + s * (c[i - 1] + c[i + 1] - T(2) * c[i]) + ex[i] * x[i + 1] +
+               ex[i - 1] * x[i - 1];
+      o[nx - 1] = across(nx - 1) + s * (c[nx - 2] - c[nx - 1]) + ex[nx - 2] * x[nx - 2];
+    }
+  });
 }
 
-// out = A in; `scratch` holds L in.
-void apply_operator(const Level& g, const double* in, double* out, double* scratch) {
-  for_laplacian(g, in, [&](std::size_t n, double laplacian) { scratch[n] = laplacian; });
+// out = A in; `scratch` holds L in. T: Real in the V-cycle, double in the conjugate gradients.
+template <typename T>
+void apply_operator(const Level& g, const T* in, T* out, T* scratch) {
+  for_laplacian(g, in, [&](std::size_t n, T laplacian) { scratch[n] = laplacian; });
   if (g.data_diagonal.empty()) {
-    for_laplacian(g, scratch, [&](std::size_t n, double laplacian) {
-      out[n] = g.scale * laplacian + g.weight[n] * in[n];
+    const T scale = static_cast<T>(g.scale);
+    for_laplacian(g, scratch, [&](std::size_t n, T laplacian) {
+      out[n] = scale * laplacian + g.weight[n] * in[n];
     });
     return;
   }
-  const std::size_t stride[3] = {1, static_cast<std::size_t>(g.nx),
-                                 static_cast<std::size_t>(g.nx) * static_cast<std::size_t>(g.ny)};
-  for_laplacian(g, scratch, [&](std::size_t n, double laplacian) {
-    out[n] = g.scale * laplacian + data_term(g, in, n, stride);
-  });
+  apply_finest(g, in, out, scratch);
 }
 
 template <typename Body>
@@ -269,9 +313,12 @@ void lump_finest_data(Level& g) {
           if (at[a] + 1 < dims[a]) sum += g.data_edge[a][n];
           if (at[a] > 0) sum += g.data_edge[a][n - stride[a]];
         }
-        g.weight[n] = sum;
+        g.weight[n] = static_cast<Real>(sum);
       }
   });
+  g.operator_diagonal.assign(g.data_diagonal.begin(), g.data_diagonal.end());
+  for (int a = 0; a < 3; ++a)
+    g.operator_edge[a].assign(g.data_edge[a].begin(), g.data_edge[a].end());
 }
 
 void update_inverse_diagonal(Level& g) {
@@ -291,7 +338,7 @@ void update_inverse_diagonal(Level& g) {
         if (k > 0) bound += 2.0 * degree(g, i, j, k - 1);
         if (k < g.nz - 1) bound += 2.0 * degree(g, i, j, k + 1);
         const std::size_t n = g.index(i, j, k);
-        g.inverse[n] = 1.0 / (g.scale * bound + g.weight[n]);
+        g.inverse[n] = static_cast<Real>(1.0 / (g.scale * bound + g.weight[n]));
       }
   });
 }
@@ -305,13 +352,14 @@ void chebyshev(Level& g, int steps, double lower) {
   const double sigma = theta / delta;
   double rho = 1.0 / sigma;
   const std::size_t count = g.size();
-  std::vector<double>& d = g.d;
+  std::vector<Real>& d = g.d;
   d.resize(count);
+  const Real first = static_cast<Real>(1.0 / theta);
   for_nodes(count, [&](std::size_t n) {
-    d[n] = g.inverse[n] * g.r[n] / theta;
+    d[n] = g.inverse[n] * g.r[n] * first;
     g.x[n] += d[n];
   });
-  std::vector<double>& ad = g.ad;
+  std::vector<Real>& ad = g.ad;
   ad.resize(count);
   for (int step = 0; step < steps; ++step) {
     apply_operator(g, d.data(), ad.data(), g.laplacian.data());
@@ -320,7 +368,8 @@ void chebyshev(Level& g, int steps, double lower) {
       break;
     }
     const double rho_next = 1.0 / (2.0 * sigma - rho);
-    const double keep = rho_next * rho, push = 2.0 * rho_next / delta;
+    const Real keep = static_cast<Real>(rho_next * rho);
+    const Real push = static_cast<Real>(2.0 * rho_next / delta);
     for_nodes(count, [&](std::size_t n) {
       g.r[n] -= ad[n];
       d[n] = keep * d[n] + push * g.inverse[n] * g.r[n];
@@ -331,23 +380,23 @@ void chebyshev(Level& g, int steps, double lower) {
 }
 
 // Trilinear interpolation weights from coarse node N to fine node n = 2N + o, o in {-1, 0, 1}.
-inline double prolongation_weight(int o) { return o == 0 ? 1.0 : 0.5; }
+inline Real prolongation_weight(int o) { return o == 0 ? Real(1) : Real(0.5); }
 
 // out = P^T in, from fine to coarse nodes (full weighting): the residual's restriction, and the
 // lumped data weights' (each fine row sum shared among the coarse nodes it interpolates from).
-void restrict_to_coarse(const Level& fine, const std::vector<double>& in, const Level& coarse,
-                        std::vector<double>& out) {
+void restrict_to_coarse(const Level& fine, const std::vector<Real>& in, const Level& coarse,
+                        std::vector<Real>& out) {
   for_planes(coarse.nz, [&](int K) {
     for (int J = 0; J < coarse.ny; ++J)
       for (int I = 0; I < coarse.nx; ++I) {
-        double sum = 0.0;
+        Real sum = 0;
         for (int oz = -1; oz <= 1; ++oz) {
           const int k = 2 * K + oz;
           if (k < 0 || k >= fine.nz) continue;
           for (int oy = -1; oy <= 1; ++oy) {
             const int j = 2 * J + oy;
             if (j < 0 || j >= fine.ny) continue;
-            const double wzy = prolongation_weight(oz) * prolongation_weight(oy);
+            const Real wzy = prolongation_weight(oz) * prolongation_weight(oy);
             for (int ox = -1; ox <= 1; ++ox) {
               const int i = 2 * I + ox;
               if (i < 0 || i >= fine.nx) continue;
@@ -367,8 +416,8 @@ void prolong_correction(const Level& coarse, Level& fine) {
       for (int i = 0; i < fine.nx; ++i) {
         const int I0 = i / 2, J0 = j / 2, K0 = k / 2;
         const int I1 = I0 + (i & 1), J1 = J0 + (j & 1), K1 = K0 + (k & 1);
-        const double value =
-            0.125 * (coarse.x[coarse.index(I0, J0, K0)] + coarse.x[coarse.index(I1, J0, K0)] +
+        const Real value =
+            Real(0.125) * (coarse.x[coarse.index(I0, J0, K0)] + coarse.x[coarse.index(I1, J0, K0)] +
                      coarse.x[coarse.index(I0, J1, K0)] + coarse.x[coarse.index(I1, J1, K0)] +
                      coarse.x[coarse.index(I0, J0, K1)] + coarse.x[coarse.index(I1, J0, K1)] +
                      coarse.x[coarse.index(I0, J1, K1)] + coarse.x[coarse.index(I1, J1, K1)]);
@@ -388,7 +437,7 @@ constexpr double kCoarsestLower = 1e-3;
 // smoother before and after, so the cycle is a symmetric preconditioner.
 void v_cycle(std::vector<Level>& levels, std::size_t l) {
   Level& g = levels[l];
-  std::fill(g.x.begin(), g.x.end(), 0.0);
+  std::fill(g.x.begin(), g.x.end(), Real(0));
   g.r = g.b;
   if (l + 1 == levels.size()) {
     chebyshev(g, kCoarsestSteps, kCoarsestLower);
@@ -404,11 +453,13 @@ void v_cycle(std::vector<Level>& levels, std::size_t l) {
   chebyshev(g, kSmoothingSteps, kChebyshevLower);
 }
 
-double dot(const double* a, const double* b, std::size_t count) {
+template <typename A, typename B>
+double dot(const A* a, const B* b, std::size_t count) {
   return tbb::parallel_reduce(
       tbb::blocked_range<std::size_t>(0, count, 1 << 14), 0.0,
       [&](const tbb::blocked_range<std::size_t>& range, double sum) {
-        for (std::size_t n = range.begin(); n < range.end(); ++n) sum += a[n] * b[n];
+        for (std::size_t n = range.begin(); n < range.end(); ++n)
+          sum += static_cast<double>(a[n]) * static_cast<double>(b[n]);
         return sum;
       },
       [](double x, double y) { return x + y; });
@@ -448,7 +499,8 @@ struct ThinPlateField::Impl {
   std::vector<std::vector<double>> solution;  // per material, level 0
   std::vector<PreparedSlice> slices;
   bool weights_dirty = true;
-  std::vector<double> pcg_residual, pcg_direction, pcg_product;  // solve_one's work vectors
+  // solve_one's work vectors.
+  std::vector<double> pcg_residual, pcg_direction, pcg_product, pcg_laplacian;
 
   // The data of one slice: the points where its plane crosses the grid's edges along the axis
   // nearest its normal (one per line of nodes along that axis), each with the edge's first node,
@@ -564,10 +616,12 @@ struct ThinPlateField::Impl {
     std::vector<double>& r = pcg_residual;
     std::vector<double>& p = pcg_direction;
     std::vector<double>& q = pcg_product;
+    std::vector<double>& laplacian = pcg_laplacian;
     r.resize(count);
     p.resize(count);
     q.resize(count);
-    apply_operator(g, x.data(), q.data(), g.laplacian.data());
+    laplacian.resize(count);
+    apply_operator(g, x.data(), q.data(), laplacian.data());
     for_nodes(count, [&](std::size_t n) { r[n] = b[n] - q[n]; });
     const double norm_b = std::sqrt(dot(b, b, count));
     if (!(norm_b > 0.0)) {
@@ -583,14 +637,14 @@ struct ThinPlateField::Impl {
     double step_mm = std::numeric_limits<double>::infinity();
     while (step_mm > step_tolerance_mm && residual > kSolvedResidual &&
            iteration < options.max_iterations) {
-      g.b = r;
+      g.b.assign(r.begin(), r.end());
       v_cycle(levels, 0);
-      const std::vector<double>& z = g.x;  // the preconditioned residual
+      const std::vector<Real>& z = g.x;  // the preconditioned residual
       const double rz_next = dot(r.data(), z.data(), count);
       const double beta = iteration == 0 ? 0.0 : rz_next / rz;
       for_nodes(count, [&](std::size_t n) { p[n] = z[n] + beta * p[n]; });
       rz = rz_next;
-      apply_operator(g, p.data(), q.data(), g.laplacian.data());
+      apply_operator(g, p.data(), q.data(), laplacian.data());
       const double alpha = rz / dot(p.data(), q.data(), count);
       step_mm = tbb::parallel_reduce(
           tbb::blocked_range<std::size_t>(0, count, 1 << 14), 0.0,
@@ -685,6 +739,7 @@ ThinPlateField::ThinPlateField(const Box3& box, double finest_cell_mm, int mater
     if (l == 0) {
       level.data_diagonal.assign(size, 0.0);
       for (auto& edges : level.data_edge) edges.assign(size, 0.0);
+      level.zero_row.assign(static_cast<std::size_t>(level.nx), 0.0);
     }
     level.x.assign(size, 0.0);
     level.b.assign(size, 0.0);

@@ -27,11 +27,18 @@ const char* field_name(FieldKind field);
 /// The field named `name` ("mean-value" or "thin-plate"); none for any other name.
 std::optional<FieldKind> parse_field_name(const std::string& name);
 
+/// The mean-value field's default bi-Laplacian smoothing iterations.
+inline constexpr int kMeanValueSmoothing = 8;
+
 struct ReconstructionOptions {
   FieldKind field = FieldKind::mean_value;  ///< the interpolant (the others are ignored by it
                                             ///< where they say so)
   int max_depth = -1;             ///< octree depth; -1: finest cells about 1/128 of the diagonal
-  int smoothing_iterations = 8;   ///< bi-Laplacian smoothing iterations (0: off)
+  /// Bi-Laplacian smoothing iterations of the octree's samples (0: off); -1: the field's own
+  /// default, kMeanValueSmoothing for mean-value and 0 for thin-plate (that field already
+  /// minimises the bi-Laplacian energy, and smoothing its samples moves no IoU by 0.002 on the
+  /// field table while costing about a seventh of an online update).
+  int smoothing_iterations = -1;
   int threads = 0;                ///< threads for every stage; 0: all cores
   /// Where the field is evaluated: "cpu" (native), "opencl" (the first fp64 OpenCL device, a GPU
   /// if any), "opencl:PLATFORM:DEVICE", "auto" (an fp64 GPU if present, else cpu). The values
