@@ -142,11 +142,11 @@ def vertex_centroid(ply):
 
 
 def seed_args(sweep, truth_meshes):
-    """`--seed L:X,Y,Z` for every organ with a grey model: its truth mesh's vertex centroid,
+    """`--organ-seed L:X,Y,Z` for every organ with a grey model: its truth mesh's vertex centroid,
     standing in for the clinician's one click on each organ that tells look-alikes apart."""
     models = header_models(sweep)
     return [arg for label, path in truth_meshes if label in models
-            for arg in ("--seed", f"{label}:" + ",".join(f"{c:.2f}" for c in vertex_centroid(path)))]
+            for arg in ("--organ-seed", f"{label}:" + ",".join(f"{c:.2f}" for c in vertex_centroid(path)))]
 
 
 def run(cmd, what):

@@ -5,6 +5,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <filesystem>
 #include <fstream>
@@ -12,6 +13,7 @@
 #include <sstream>
 #include <string>
 #include <thread>
+#include <vector>
 
 #include "sonoshape/core/slice_io.hpp"
 #include "sonoshape/simulator/mesh_reader.hpp"
@@ -267,6 +269,83 @@ TEST(ScanCommand, PublishesToListenersThatKeepUpJoinLateAreSlowOrDie) {
   // About 0.70 and 0.36 at this small setting; far lower means misplaced or broken meshes.
   EXPECT_GT(iou_1, 0.5);
   EXPECT_GT(iou_2, 0.2);
+}
+
+}  // namespace
+
+namespace {
+
+// The option names a command's --help lists: every name on a line that starts with a dash after
+// two spaces ("  -o,--output TEXT ...") or, in an option group, four.
+std::vector<std::string> option_names(const std::string& command, const fs::path& log) {
+  const auto help = sonoshape::testing::run_command(SONOSHAPE_BINARY, command + " --help", log);
+  EXPECT_EQ(help.exit_code, 0) << help.output;
+  std::vector<std::string> names;
+  std::istringstream lines(help.output);
+  for (std::string line; std::getline(lines, line);) {
+    const std::size_t indent = line.find_first_not_of(' ');
+    if ((indent != 2 && indent != 4) || line[indent] != '-') continue;
+    const std::string first = line.substr(indent, line.find(' ', indent) - indent);
+    std::istringstream parts(first);
+    for (std::string name; std::getline(parts, name, ',');) names.push_back(name);
+  }
+  return names;
+}
+
+TEST(CommandOptions, NoCommandRegistersANameTwice) {
+  // CLI11 refuses a name twice within one group, not across a command and its option groups:
+  // `scan` once had --seed and --speed of its own and again in its simulator group.
+  sonoshape::testing::TempDir dir;
+  for (const char* command : {"reconstruct", "slice", "evaluate", "simulate", "segment", "scan",
+                              "listen", "view", "keys", "devices"}) {
+    SCOPED_TRACE(command);
+    std::vector<std::string> names = option_names(command, dir.path() / "help");
+    EXPECT_GT(names.size(), 1u);
+    std::sort(names.begin(), names.end());
+    const auto twice = std::adjacent_find(names.begin(), names.end());
+    EXPECT_EQ(twice, names.end()) << *twice << " is registered twice";
+  }
+}
+
+TEST(CommandOptions, ScanTakesEverySimulatorOptionOfSimulate) {
+  sonoshape::testing::TempDir dir;
+  const std::vector<std::string> scan = option_names("scan", dir.path() / "scan_help");
+  // simulate's own: the phantom (scan names it in sim:SPEC), the frame count (scan runs for
+  // --sweep-s or --duration) and its outputs.
+  const std::vector<std::string> simulate_only = {"-h",      "--help",  "--phantom", "--frames",
+                                                  "-o",      "--output", "--truth",  "--raw"};
+  for (const std::string& name : option_names("simulate", dir.path() / "simulate_help")) {
+    if (std::find(simulate_only.begin(), simulate_only.end(), name) != simulate_only.end())
+      continue;
+    EXPECT_NE(std::find(scan.begin(), scan.end(), name), scan.end())
+        << "scan lacks simulate's " << name;
+  }
+  // --seed reaches the simulator: another seed, another hand, other planes.
+  std::string planes[2];
+  for (int seed : {5, 6}) {
+    const fs::path out = dir.path() / ("seed" + std::to_string(seed));
+    const auto result = sonoshape::testing::run_command(
+        SONOSHAPE_BINARY,
+        kSmallSim + "--sweep-s 1 --fast --speed smooth --seed " + std::to_string(seed) + " -o " +
+            out.string(),
+        dir.path() / "log");
+    ASSERT_EQ(result.exit_code, 0) << result.output;
+    const auto slices = sonoshape::read_slice_set(out / "slices.json");
+    ASSERT_TRUE(slices) << slices.message();
+    ASSERT_FALSE(slices->slices.empty());
+    const auto& first = slices->slices.front();
+    planes[seed - 5] = std::to_string(first.origin_mm.x()) + std::to_string(first.origin_mm.y());
+  }
+  EXPECT_NE(planes[0], planes[1]);
+  // The old meanings get the new names.
+  const auto organ = sonoshape::testing::run_command(
+      SONOSHAPE_BINARY, kSmallSim + "--seed 1:2,3,4", dir.path() / "organ");
+  EXPECT_NE(organ.exit_code, 0);
+  EXPECT_TRUE(contains(organ.output, "--organ-seed LABEL:X,Y,Z")) << organ.output;
+  const auto playback = sonoshape::testing::run_command(
+      SONOSHAPE_BINARY, kSmallSim + "--speed 2", dir.path() / "playback");
+  EXPECT_NE(playback.exit_code, 0);
+  EXPECT_TRUE(contains(playback.output, "--playback-speed")) << playback.output;
 }
 
 }  // namespace

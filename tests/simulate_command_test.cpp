@@ -243,7 +243,7 @@ TEST_F(SimulateCommand, SegmentScoresAgainstTheTruthAndPerfectLabelsReconstruct)
       run("segment " + sweep + " --seed 9:1,2,3 -o " + (dir_ / "x.slices.json").string(),
           dir_ / "log_seed9");
   EXPECT_EQ(unknown_label.exit_code, 1);
-  EXPECT_NE(unknown_label.output.find("--seed '9:1,2,3': label 9 is not among the "
+  EXPECT_NE(unknown_label.output.find("--organ-seed '9:1,2,3': label 9 is not among the "
                                       "segmentation's materials (1:spot"),
             std::string::npos)
       << unknown_label.output;

@@ -583,7 +583,7 @@ void add_scan_options(CLI::App& app, ScanCommandOptions& o) {
                  "prior is the surfaces reconstructed so far, cut by each new frame's plane); "
                  "default: the configuration's `method`, else threshold")
       ->check(CLI::IsMember({"threshold", "graph-cut"}));
-  app.add_option("--seed", options->seeds,
+  app.add_option("--organ-seed", options->seeds,
                  "LABEL:X,Y,Z (mm, reference frame; repeatable): a point inside that organ; with "
                  "--method graph-cut it tells apart organs whose grey models look alike");
   app.add_option("-o,--out", options->out,
@@ -603,7 +603,8 @@ void add_scan_options(CLI::App& app, ScanCommandOptions& o) {
                             "Play recorded and simulated sources as fast as the pipeline goes; "
                             "nothing is dropped for being late");
   realtime->excludes(fast);
-  app.add_option("--speed", options->speed, "Real-time factor of --realtime playback")
+  app.add_option("--playback-speed", options->speed,
+                 "Real-time factor of --realtime playback (2: twice as fast as recorded)")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
   app.add_option("--max-slices", options->max_slices,
@@ -691,7 +692,7 @@ void add_scan_options(CLI::App& app, ScanCommandOptions& o) {
       ->expected(6);
 
   CLI::Option_group* sim = app.add_option_group("Simulated source (sim:)");
-  add_sim_scenario_options(*sim, options->sim, false);
+  add_sim_scenario_options(*sim, options->sim, SimOptionsFor::scan);
   sim->add_option("--sweep-s", options->sweep_s, "Length of the simulated sweep (s)")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();

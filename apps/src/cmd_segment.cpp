@@ -322,7 +322,8 @@ CommandRunner add_segment_command(CLI::App& app) {
                  "Octree depth of the prior's reconstruction (coarser is faster)")
       ->check(CLI::Range(3, 10))
       ->capture_default_str();
-  app.add_option("--seed", options->seeds,
+  // --seed is the old spelling (elsewhere --seed is a random seed); kept for scripts.
+  app.add_option("--organ-seed,--seed", options->seeds,
                  "LABEL:X,Y,Z (mm, reference frame; repeatable): a point inside that organ. With "
                  "--method graph-cut, organs whose grey models look alike are told apart by "
                  "where they are: a region the reconstruction does not predict takes the label "

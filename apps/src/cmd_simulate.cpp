@@ -128,7 +128,7 @@ int run_simulate(const SimulateOptions& options) {
 
 CommandRunner add_simulate_command(CLI::App& app) {
   auto options = std::make_shared<SimulateOptions>();
-  add_sim_scenario_options(app, options->scenario, true);
+  add_sim_scenario_options(app, options->scenario, SimOptionsFor::simulate);
   app.add_option("--frames", options->frames, "Number of frames")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();

@@ -1,5 +1,5 @@
 #pragma once
-// The --seed LABEL:X,Y,Z arguments of `segment` and `scan`: a point inside an organ, in the
+// The --organ-seed LABEL:X,Y,Z arguments of `segment` and `scan`: a point inside an organ, in the
 // reference frame (mm), that names it among organs the image cannot tell apart.
 #include <charconv>
 #include <cmath>
@@ -17,7 +17,7 @@ inline Status apply_seeds(const std::vector<std::string>& arguments,
                           seg::SegmentationConfig& config) {
   for (const std::string& text : arguments) {
     const auto fail = [&](const std::string& why) {
-      return Status::error("--seed '" + text + "': " + why +
+      return Status::error("--organ-seed '" + text + "': " + why +
                            " (expected LABEL:X,Y,Z in mm in the reference frame, e.g. "
                            "2:10.5,-3,40)");
     };

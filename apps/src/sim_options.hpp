@@ -7,10 +7,34 @@
 
 namespace sonoshape::apps {
 
-/// Registers the options of `options` on `app` (an app or an option group). `with_phantom`:
-/// also --phantom (scan takes the phantom from its sim:PHANTOM_SPEC instead).
+/// Where the simulator's options are registered: `simulate` (with --phantom) or the `sim:`
+/// source of `scan` (the phantom comes from sim:PHANTOM_SPEC; --seed and --speed say where
+/// that command's other seeds and speeds went).
+enum class SimOptionsFor { simulate, scan };
+
+/// Registers the options of `options` on `app` (an app or an option group).
 inline void add_sim_scenario_options(CLI::App& app, scan::SimScenarioOptions& options,
-                                     bool with_phantom) {
+                                     SimOptionsFor command) {
+  const bool with_phantom = command == SimOptionsFor::simulate;
+  // `scan` once read --seed as an organ point and --speed as the playback factor: a value of
+  // that shape gets the new name instead of a bare conversion error.
+  const CLI::Validator not_an_organ_seed(
+      [command](std::string& value) -> std::string {
+        if (command == SimOptionsFor::scan && value.find(':') != std::string::npos)
+          return "--seed is the simulator's random seed; a point inside an organ is "
+                 "--organ-seed LABEL:X,Y,Z";
+        return {};
+      },
+      "");
+  const CLI::Validator not_a_playback_factor(
+      [command](std::string& value) -> std::string {
+        if (command == SimOptionsFor::scan && !value.empty() &&
+            value.find_first_not_of("0123456789.eE+-") == std::string::npos)
+          return "--speed is the simulated hand's speed profile (constant, smooth, irregular); "
+                 "the real-time factor of playback is --playback-speed";
+        return {};
+      },
+      "");
   if (with_phantom)
     app.add_option("--phantom", options.phantoms,
                    "Closed organ mesh, LABEL:PATH[:NAME] (.obj, .ply, .off, .stl); repeat for more "
@@ -31,6 +55,7 @@ inline void add_sim_scenario_options(CLI::App& app, scan::SimScenarioOptions& op
       ->check(CLI::IsMember({"sweep", "fan", "rock", "rotate"}))
       ->capture_default_str();
   app.add_option("--speed", options.speed, "Speed profile of the hand")
+      ->check(not_a_playback_factor)
       ->check(CLI::IsMember({"constant", "smooth", "irregular"}))
       ->capture_default_str();
   app.add_option("--frame-rate", options.frame_rate_hz, "Frames per second")
@@ -43,6 +68,7 @@ inline void add_sim_scenario_options(CLI::App& app, scan::SimScenarioOptions& op
       ->check(CLI::Range(16, 4096))
       ->capture_default_str();
   app.add_option("--seed", options.seed, "Seed of the hand, tracker and speckle")
+      ->check(not_an_organ_seed)
       ->capture_default_str();
   app.add_option("--sweep-length-mm", options.sweep_length_mm,
                  "Travel of a sweep (default: the phantom's length + 20 mm)")
