@@ -307,6 +307,33 @@ TEST(CommandOptions, NoCommandRegistersANameTwice) {
   }
 }
 
+TEST(CommandOptions, ReconstructAndScanShareTheEngineOptions) {
+  // One name, one meaning, one range: the same help line (names, type, range, text) in both.
+  sonoshape::testing::TempDir dir;
+  auto engine_lines = [&](const std::string& command) {
+    const auto help =
+        sonoshape::testing::run_command(SONOSHAPE_BINARY, command + " --help", dir.path() / "h");
+    std::vector<std::string> lines;
+    std::istringstream in(help.output);
+    for (std::string line; std::getline(in, line);) {
+      const std::size_t at = line.find_first_not_of(' ');
+      if (at == std::string::npos) continue;
+      for (const char* name : {"--depth ", "--smoothing,", "--field ", "--device "})
+        if (line.compare(at, std::string(name).size(), name) == 0) lines.push_back(line.substr(at));
+    }
+    return lines;
+  };
+  const std::vector<std::string> reconstruct = engine_lines("reconstruct");
+  EXPECT_EQ(reconstruct.size(), 4u);
+  EXPECT_EQ(reconstruct, engine_lines("scan"));
+  // scan used to take any depth (--depth 100 crashed it).
+  const auto deep =
+      sonoshape::testing::run_command(SONOSHAPE_BINARY, kSmallSim + "--depth 100", dir.path() / "d");
+  // (the last --depth is checked: "Value 100 not in range 1 to 11")
+  EXPECT_NE(deep.exit_code, 0);
+  EXPECT_TRUE(contains(deep.output, "not in range 1 to 11")) << deep.output;
+}
+
 TEST(CommandOptions, ScanTakesEverySimulatorOptionOfSimulate) {
   sonoshape::testing::TempDir dir;
   const std::vector<std::string> scan = option_names("scan", dir.path() / "scan_help");

@@ -13,6 +13,7 @@
 #include <nlohmann/json.hpp>
 
 #include "commands.hpp"
+#include "engine_options.hpp"
 #include "sonoshape/core/log.hpp"
 #include "sonoshape/core/mesh.hpp"
 #include "sonoshape/core/slice_io.hpp"
@@ -176,20 +177,12 @@ CommandRunner add_reconstruct_command(CLI::App& app) {
   app.add_option("-o,--output", opt->output,
                  "Output: a .ply/.obj/.off file (one label) or a directory of label_<id>.ply")
       ->required();
-  app.add_option("--depth", opt->engine.max_depth,
-                 "Octree depth (finest cells = largest box side / 2^depth); default: about 1/128 "
-                 "of the box diagonal")
-      ->check(CLI::Range(1, 11));
-  app.add_option("--smooth", opt->engine.smoothing_iterations, kSmoothingHelp)
-      ->check(CLI::Range(0, 1000));
+  add_engine_options(app, {opt->engine.max_depth, opt->engine.smoothing_iterations, opt->field,
+                          opt->device});
   app.add_option("--threads", opt->engine.threads,
                  "Threads for every stage of the reconstruction (0: all cores)")
       ->check(CLI::Range(0, 1024))
       ->capture_default_str();
-  app.add_option("--field", opt->field, kFieldHelp)
-      ->check(CLI::IsMember({"mean-value", "thin-plate"}))
-      ->capture_default_str();
-  app.add_option("--device", opt->device, kDeviceHelp);
   app.add_option("--stats", opt->stats_path, "Write per-stage seconds and counts as JSON (with "
                  "--online: totals and one entry per step)");
   app.add_flag("--strict", opt->strict,

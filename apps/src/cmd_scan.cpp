@@ -19,6 +19,7 @@
 
 #include "commands.hpp"
 #include "seed_option.hpp"
+#include "engine_options.hpp"
 #include "sim_options.hpp"
 #include "sonoshape/core/log.hpp"
 #include "sonoshape/publish/curve.hpp"
@@ -586,7 +587,8 @@ void add_scan_options(CLI::App& app, ScanCommandOptions& o) {
   app.add_option("--organ-seed", options->seeds,
                  "LABEL:X,Y,Z (mm, reference frame; repeatable): a point inside that organ; with "
                  "--method graph-cut it tells apart organs whose grey models look alike");
-  app.add_option("-o,--out", options->out,
+  // --out: the old spelling; every other command says -o,--output.
+  app.add_option("-o,--output,--out", options->out,
                  "Directory for the meshes (label_<id>.ply), slices.json and scan.json, written "
                  "at the end (also after Ctrl-C or a failing source), and the journal of the "
                  "keyframes (scan.journal), written as they are accepted: see --resume");
@@ -677,15 +679,7 @@ void add_scan_options(CLI::App& app, ScanCommandOptions& o) {
                  "Slices waiting for the reconstruction")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
-  app.add_option("--depth", options->depth,
-                 "Octree depth of the reconstruction (-1: finest cells about 1/128 of the box)")
-      ->capture_default_str();
-  app.add_option("--field", options->field, kFieldHelp)
-      ->check(CLI::IsMember({"mean-value", "thin-plate"}))
-      ->capture_default_str();
-  app.add_option("--device", options->device, kDeviceHelp);
-  app.add_option("--smoothing", options->smoothing, kSmoothingHelp)
-      ->check(CLI::Range(0, 1000));
+  add_engine_options(app, {options->depth, options->smoothing, options->field, options->device});
   app.add_option("--bounds", options->bounds,
                  "Scan volume xmin ymin zmin xmax ymax zmax (mm, reference frame). Default: "
                  "sim: the phantom's box + 10%; replay: grown from the slices")
