@@ -1,8 +1,10 @@
 // The `sonoshape` command end to end: slice a bundled model, reconstruct, evaluate.
 #include <gtest/gtest.h>
+#include <sys/resource.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <csignal>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -162,6 +164,40 @@ TEST_F(EndToEnd, MissingInputAndHelp) {
 // error with 8 smoothing passes stays at its level without smoothing (24 random slices of
 // spot: 0.0634 % both); with the contour nodes smoothed too it rose (issue 27's surviving
 // mutation: 0.30 % -> 0.52 % on another set), while the smoothing still changes the surface.
+TEST_F(EndToEnd, AFileSizeLimitFailsEachCommandsWritesWithTheFileNamed) {
+  // Under ulimit -f these commands died of SIGXFSZ without a word (only scan ignored it).
+  ASSERT_EQ(run("simulate --frames 6 --width-px 160 --height-px 160 -q -o " + path("in.igs.mha"))
+                .exit_code,
+            0);
+  rlimit old{};
+  ASSERT_EQ(getrlimit(RLIMIT_FSIZE, &old), 0);
+  rlimit small = old;
+  small.rlim_cur = 16 * 1024;  // above each command's log, below each command's output
+  // The children inherit the limit and the default SIGXFSZ (which kills): the command itself
+  // must ignore the signal. This process writes nothing while the limit holds.
+  const auto previous = std::signal(SIGXFSZ, SIG_DFL);
+  ASSERT_EQ(setrlimit(RLIMIT_FSIZE, &small), 0);
+  const std::string example = std::string(SONOSHAPE_DATA_DIR) + "/examples/two_labels.slices.json";
+  const std::vector<std::pair<std::string, std::string>> commands = {
+      {"reconstruct " + example + " -o " + path("out"), path("out") + "/label_1.ply"},
+      {"slice --mesh 1:" + model("spot.obj") + " --planes random --count 40 --seed 1 -o " +
+           path("cut.slices.json"),
+       path("cut.slices.json")},
+      {"simulate --frames 20 -o " + path("sweep.igs.mha"), path("sweep.igs.mha")},
+      {"segment " + path("in.igs.mha") + " -o " + path("seg.slices.json"),
+       path("seg.slices.json")}};
+  std::vector<sonoshape::testing::CommandResult> results;
+  for (const auto& [command, file] : commands) results.push_back(run(command + " -q"));
+  setrlimit(RLIMIT_FSIZE, &old);
+  std::signal(SIGXFSZ, previous);
+  for (std::size_t k = 0; k < commands.size(); ++k) {
+    SCOPED_TRACE(commands[k].first);
+    EXPECT_GT(results[k].exit_code, 0) << results[k].output;  // -1: killed by a signal
+    EXPECT_NE(results[k].output.find("cannot write"), std::string::npos) << results[k].output;
+    EXPECT_NE(results[k].output.find(commands[k].second), std::string::npos) << results[k].output;
+  }
+}
+
 TEST_F(EndToEnd, SmoothingKeepsTheSurfaceOnTheContours) {
   auto r = run("slice --mesh 1:" + model("spot.obj") + ":spot --planes random --count 24 --seed 3 "
                "--size-mm 150 -o " + path("spot.slices.json") + " --truth " + path("truth"));

@@ -3,6 +3,8 @@
 #include <zlib.h>
 
 #include <algorithm>
+#include <cerrno>
+#include <cstring>
 #include <array>
 #include <charconv>
 #include <cmath>
@@ -450,7 +452,10 @@ Status write_sequence_file(const SequenceFile& file, const std::filesystem::path
                 static_cast<std::streamsize>(frame_bytes));
   }
   out.close();
-  if (!out) return fail(path, "write error", "check the free disk space");
+  // errno says which limit it was: ENOSPC (a full disk) or EFBIG (ulimit -f).
+  if (!out)
+    return fail(path, std::string("cannot write it: ") + std::strerror(errno),
+                "free disk space or raise the file-size limit, then run again");
   return Status::ok();
 }
 

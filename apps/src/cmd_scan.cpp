@@ -336,8 +336,7 @@ int resume_scan(const fs::path& directory) {
 int run_scan(const ScanCommandOptions& options, const Resume* resume) {
   // From the start: a Ctrl-C while the source opens stops the scan as soon as it starts.
   const InterruptGuard interrupts;
-  // A file-size limit (ulimit -f) must fail a write like a full disk, not kill the scan.
-  std::signal(SIGXFSZ, SIG_IGN);
+  // (SIGXFSZ is ignored by main(): a file-size limit fails writes like a full disk.)
   if (!igtl_serve_available(options.igtl_serve)) return 1;
   std::shared_ptr<scan::KeyframeJournal> journal;
   if (!resume && !options.out.empty() && !create_journal(options.out, journal)) return 1;

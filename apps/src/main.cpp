@@ -1,6 +1,7 @@
 // The `sonoshape` command: parses options and dispatches to one subcommand.
 #include <CLI/CLI.hpp>
 
+#include <csignal>
 #include <exception>
 #include <iostream>
 
@@ -16,6 +17,9 @@ const std::vector<std::string>& command_line() { return g_command_line; }
 
 int main(int argc, char** argv) {
   sonoshape::apps::g_command_line.assign(argv, argv + argc);
+  // A file-size limit (ulimit -f) must fail a write like a full disk, with the writer's message
+  // naming the file, instead of killing the command without a word.
+  std::signal(SIGXFSZ, SIG_IGN);
   CLI::App app{"sonoshape: reconstruction of 3D surfaces from arbitrary cross-sections"};
   app.require_subcommand(1);
   app.fallthrough();  // global flags may follow the subcommand

@@ -121,7 +121,10 @@ Status write_text_file(const std::filesystem::path& path, const std::string& tex
                          "; check that the folder exists and is writable");
   out << text;
   out.flush();
-  if (!out) return Status::error("cannot write " + path.string() + ": write failed (disk full?)");
+  // errno says which limit it was: ENOSPC (a full disk) or EFBIG (ulimit -f).
+  if (!out)
+    return Status::error("cannot write " + path.string() + ": " + std::strerror(errno) +
+                         "; free disk space or raise the file-size limit, then run again");
   return Status::ok();
 }
 

@@ -116,7 +116,10 @@ Status write_mesh(const TriangleMesh& mesh, const std::filesystem::path& path) {
                          "; check that the folder exists and is writable");
   out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
   out.flush();
-  if (!out) return Status::error("cannot write " + path.string() + ": write failed (disk full?)");
+  // errno says which limit it was: ENOSPC (a full disk) or EFBIG (ulimit -f).
+  if (!out)
+    return Status::error("cannot write " + path.string() + ": " + std::strerror(errno) +
+                         "; free disk space or raise the file-size limit, then run again");
   return Status::ok();
 }
 
