@@ -10,6 +10,7 @@
 #include <unistd.h>
 
 #include <atomic>
+#include <cerrno>
 #include <chrono>
 #include <cstring>
 #include <random>
@@ -304,10 +305,27 @@ class RawClient {
   }
   ~RawClient() { ::close(fd_); }
   bool connected() const { return connected_; }
-  // Sends all of `bytes` (blocking); false once the server closed the connection.
+  // Sends all of `bytes`, waiting for room until `stopped()`; false once the server closed the
+  // connection or the sender was stopped (a server that stops reading cannot hang the test).
+  template <typename Stopped>
+  bool send(const Bytes& bytes, const Stopped& stopped) {
+    std::size_t sent = 0;
+    while (sent < bytes.size()) {
+      if (stopped()) return false;
+      const ssize_t n =
+          ::send(fd_, bytes.data() + sent, bytes.size() - sent, MSG_NOSIGNAL | MSG_DONTWAIT);
+      if (n > 0) {
+        sent += static_cast<std::size_t>(n);
+        continue;
+      }
+      if (n < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR) return false;
+      pollfd p{fd_, POLLOUT, 0};
+      ::poll(&p, 1, 50);
+    }
+    return true;
+  }
   bool send(const Bytes& bytes) {
-    return ::send(fd_, bytes.data(), bytes.size(), MSG_NOSIGNAL) ==
-           static_cast<ssize_t>(bytes.size());
+    return send(bytes, [] { return false; });
   }
   // Whether the server closes the connection within `timeout_s` (what it sent is skipped).
   bool closed_within(double timeout_s) {
@@ -342,11 +360,26 @@ GreyImage test_image() {
   return image;
 }
 
+// Whether an attack should end: the test is done with it, or its time is up (so that a server
+// that stalls the publisher fails the test instead of hanging it).
+class Stop {
+ public:
+  explicit Stop(double duration_s)
+      : give_up_(Clock::now() + std::chrono::duration_cast<Clock::duration>(
+                                    std::chrono::duration<double>(duration_s + 2.0))) {}
+  explicit operator bool() const { return stop_ || Clock::now() > give_up_; }
+  void set() { stop_ = true; }
+
+ private:
+  std::atomic<bool> stop_{false};
+  Clock::time_point give_up_;
+};
+
 // Publishes images for `duration_s` as a scan does (every 10 ms), while `attack` runs on its own
-// thread; the longest publish_image() in seconds.
+// thread until told to stop; the longest publish_image() in seconds.
 template <typename Attack>
 double longest_publish_during(publish::IgtlServer& server, double duration_s, Attack attack) {
-  std::atomic<bool> stop{false};
+  Stop stop(duration_s);
   std::thread attacker([&] { attack(stop); });
   const GreyImage image = test_image();
   const Eigen::Matrix4d T = Eigen::Matrix4d::Identity();
@@ -358,7 +391,7 @@ double longest_publish_during(publish::IgtlServer& server, double duration_s, At
     longest_s = std::max(longest_s, std::chrono::duration<double>(Clock::now() - before).count());
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
-  stop = true;
+  stop.set();
   attacker.join();
   return longest_s;
 }
@@ -380,7 +413,8 @@ publish::IgtlServer start_server(std::size_t max_clients = 16) {
 TEST(IgtlHostileClient, AClientAnnouncingAMegabyteAndSendingNoiseNeverStallsThePublisher) {
   publish::IgtlServer server = start_server();
   ::testing::internal::CaptureStderr();
-  const double longest_s = longest_publish_during(server, 1.5, [&](std::atomic<bool>& stop) {
+  const double longest_s = longest_publish_during(server, 1.5, [&](const Stop& stop) {
+    const auto stopped = [&stop] { return static_cast<bool>(stop); };
     RawClient client(server.port());
     ASSERT_TRUE(client.connected());
     Bytes header = request("IMAGE", "noise");
@@ -390,7 +424,8 @@ TEST(IgtlHostileClient, AClientAnnouncingAMegabyteAndSendingNoiseNeverStallsTheP
     Bytes noise(16384);
     while (!stop) {
       for (auto& b : noise) b = static_cast<std::uint8_t>(random());
-      if (!client.send(noise)) break;  // closed by the server: a noise header over the limit
+      if (!client.send(noise, stopped))
+        break;  // closed by the server: a noise header over the limit
     }
   });
   const std::string said = ::testing::internal::GetCapturedStderr();
@@ -406,13 +441,35 @@ TEST(IgtlHostileClient, AClientAnnouncingAMegabyteAndSendingNoiseNeverStallsTheP
   EXPECT_NE(said.find("with a body of"), std::string::npos) << said;
 }
 
+TEST(IgtlHostileClient, MegabyteMessagesBackToBackNeverStallThePublisherNorFillItsMemory) {
+  // Each message just under the limit, its body noise: the old server buffered them all and
+  // erased each from the front of its inbox, under the publisher's lock.
+  publish::IgtlServer server = start_server();
+  constexpr std::uint64_t kBody = (1u << 20) - 1;
+  const double longest_s = longest_publish_during(server, 1.5, [&](const Stop& stop) {
+    const auto stopped = [&stop] { return static_cast<bool>(stop); };
+    RawClient client(server.port());
+    ASSERT_TRUE(client.connected());
+    Bytes header = request("IMAGE", "noise");
+    put_u64(header, kBodySizeOffset, kBody);
+    std::mt19937 random(41);
+    Bytes body(kBody);
+    for (auto& b : body) b = static_cast<std::uint8_t>(random());
+    while (!stop && client.send(header, stopped) && client.send(body, stopped)) {
+    }
+  });
+  EXPECT_LT(longest_s, kMaxPublishS);
+  EXPECT_EQ(server.stats().clients_expelled, 0u) << "well-framed messages closed the client";
+}
+
 TEST(IgtlHostileClient, AFloodOfGetPolydataNeverStallsThePublisher) {
   publish::IgtlServer server = start_server();
   MeshSet meshes;
   meshes.meshes.push_back(
       {1, "Liver", TriangleMesh{{Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0)}, {{0u, 1u, 2u}}}});
   ASSERT_TRUE(server.publish_meshes(meshes));
-  const double longest_s = longest_publish_during(server, 1.5, [&](std::atomic<bool>& stop) {
+  const double longest_s = longest_publish_during(server, 1.5, [&](const Stop& stop) {
+    const auto stopped = [&stop] { return static_cast<bool>(stop); };
     RawClient client(server.port());  // never reads what it asks for
     ASSERT_TRUE(client.connected());
     Bytes burst;
@@ -420,7 +477,7 @@ TEST(IgtlHostileClient, AFloodOfGetPolydataNeverStallsThePublisher) {
       const Bytes one = request("GET_POLYDATA", k % 2 ? "Liver" : "Client");
       burst.insert(burst.end(), one.begin(), one.end());
     }
-    while (!stop && client.send(burst)) {
+    while (!stop && client.send(burst, stopped)) {
     }
   });
   EXPECT_LT(longest_s, kMaxPublishS);
