@@ -372,7 +372,140 @@ TEST_F(ScanCrash, ResumeTakesNoOtherOptions) {
   EXPECT_EQ(run({SONOSHAPE_BINARY, "scan", "--resume", reference().string(), "--depth", "6"},
                 dir.path() / "log", output),
             1);
-  EXPECT_NE(output.find("--resume DIR takes no other scan options"), std::string::npos) << output;
+  EXPECT_NE(output.find("--resume DIR takes --depth from the journal in DIR"), std::string::npos)
+      << output;
+}
+
+// Issue 40, S5: a journal is a file in DIR, and whoever could write DIR could have crafted it.
+// CRC-32 (IEEE, as zlib's) of a journal record's payload.
+std::uint32_t crc32_of(const std::string& bytes) {
+  std::uint32_t crc = 0xFFFFFFFFu;
+  for (const char c : bytes) {
+    crc ^= static_cast<unsigned char>(c);
+    for (int bit = 0; bit < 8; ++bit) crc = (crc >> 1) ^ (0xEDB88320u & (0u - (crc & 1u)));
+  }
+  return ~crc;
+}
+
+void put_u32(std::string& out, std::uint32_t value) {
+  for (int i = 0; i < 4; ++i) out.push_back(static_cast<char>((value >> (8 * i)) & 0xFFu));
+}
+
+// A journal of one scan record, as an attacker writes it (docs/formats/scan-journal.md).
+void write_crafted_journal(const fs::path& out, const nlohmann::json& record) {
+  std::string bytes = "SNSHJRNL";
+  put_u32(bytes, 1);
+  put_u32(bytes, 0);
+  const std::string payload = record.dump();
+  put_u32(bytes, static_cast<std::uint32_t>(payload.size()));
+  put_u32(bytes, crc32_of(payload));
+  fs::create_directories(out);
+  std::ofstream(out / sonoshape::scan::kJournalName, std::ios::binary) << bytes + payload;
+}
+
+const std::vector<std::string> kQuickSim = {
+    "--source", "sim:default", "--width-px", "160",     "--height-px", "160",   "--frame-rate",
+    "5",        "--sweep-s",   "3",          "--depth", "4",           "--fast"};
+
+TEST(ScanResume, AJournalNeverOpensTheScanToOtherMachines) {
+  TempDir dir;
+  std::vector<std::string> arguments = kQuickSim;
+  for (const char* option : {"--view", "0.0.0.0:0", "--igtl-serve", "0.0.0.0:0", "--publish",
+                             "tcp://0.0.0.0:0", "--allow-remote"})
+    arguments.push_back(option);
+  write_crafted_journal(dir.path() / "out",
+                        {{"type", "scan"}, {"version", 1}, {"arguments", arguments}});
+  std::string output;
+  ASSERT_EQ(run({SONOSHAPE_BINARY, "-v", "scan", "--resume", (dir.path() / "out").string()},
+                dir.path() / "log", output),
+            0)
+      << output;
+  // What the resume takes from the file is said, and each exposure dropped with how to ask.
+  EXPECT_NE(output.find("the scan's options from its journal: --source sim:default"),
+            std::string::npos)
+      << output;
+  for (const std::string option : {"--view 0.0.0.0:0", "--igtl-serve 0.0.0.0:0",
+                                   "--publish tcp://0.0.0.0:0", "--allow-remote"})
+    EXPECT_NE(output.find("the journal asks for " + option +
+                          ", which other machines could reach; a resume never takes that from a "
+                          "file: pass it on the command line"),
+              std::string::npos)
+        << option << "\n"
+        << output;
+  EXPECT_EQ(output.find("OpenIGTLink server on"), std::string::npos) << output;
+  EXPECT_EQ(output.find("http://0.0.0.0"), std::string::npos) << output;
+}
+
+TEST(ScanResume, NetworkOptionsGivenWithResumeAreTaken) {
+  TempDir dir;
+  write_crafted_journal(dir.path() / "out",
+                        {{"type", "scan"}, {"version", 1}, {"arguments", kQuickSim}});
+  std::string output;
+  ASSERT_EQ(run({SONOSHAPE_BINARY, "-v", "scan", "--resume", (dir.path() / "out").string(),
+                 "--igtl-serve", "127.0.0.1:0"},
+                dir.path() / "log", output),
+            0)
+      << output;
+  EXPECT_NE(output.find("OpenIGTLink server on 127.0.0.1:"), std::string::npos) << output;
+}
+
+TEST(ScanResume, TheJournalsRelativePathsAreReadWhereTheScanWasStarted) {
+  // The scan was started in `started` with relative names; the resume runs elsewhere (the
+  // test's working directory), where those names mean nothing, or something else.
+  const fs::path plus = fs::path(SONOSHAPE_DATA_DIR) / "plus";
+  TempDir dir;
+  const fs::path started = dir.path() / "started";
+  fs::create_directories(started);
+  fs::copy_file(plus / "fCal_Test_Calibration_3NWires.igs.mha", started / "sweep.igs.mha");
+  fs::copy_file(plus / "PlusDeviceSet_Server_Sim_NwirePhantom.xml", started / "calibration.xml");
+  const std::vector<std::string> arguments = {"--source",
+                                              "replay:sweep.igs.mha",
+                                              "--calibration",
+                                              "calibration.xml",
+                                              "--fast",
+                                              "--keyframe-angle-deg",
+                                              "0",
+                                              "--keyframe-distance-mm",
+                                              "0",
+                                              "--max-slices",
+                                              "2",
+                                              "--depth",
+                                              "4"};
+  ASSERT_FALSE(fs::exists("sweep.igs.mha"));
+  write_crafted_journal(dir.path() / "out", {{"type", "scan"},
+                                             {"version", 1},
+                                             {"arguments", arguments},
+                                             {"working_directory", started.string()}});
+  std::string output;
+  ASSERT_EQ(run({SONOSHAPE_BINARY, "scan", "--resume", (dir.path() / "out").string()},
+                dir.path() / "log", output),
+            0)
+      << output;
+  EXPECT_NE(output.find("their relative paths are read from " + started.string()),
+            std::string::npos)
+      << output;
+  EXPECT_TRUE(fs::exists(dir.path() / "out" / "slices.json")) << output;
+
+  // A journal a scan writes records where it was started.
+  const fs::path path = dir.path() / "written.journal";
+  ASSERT_TRUE(sonoshape::scan::KeyframeJournal::create(path, {"--source", "sim:default"}));
+  const auto written = sonoshape::scan::read_journal(path);
+  ASSERT_TRUE(written) << written.message();
+  ASSERT_TRUE(written->working_directory);
+  EXPECT_EQ(*written->working_directory, fs::current_path());
+}
+
+TEST(ScanResume, AJournalsWorkingDirectoryMustBeAnAbsolutePath) {
+  TempDir dir;
+  write_crafted_journal(dir.path() / "out", {{"type", "scan"},
+                                             {"version", 1},
+                                             {"arguments", kQuickSim},
+                                             {"working_directory", "relative/folder"}});
+  const auto read =
+      sonoshape::scan::read_journal(dir.path() / "out" / sonoshape::scan::kJournalName);
+  ASSERT_FALSE(read);
+  EXPECT_NE(read.message().find("\"working_directory\" is not an absolute path"), std::string::npos)
+      << read.message();
 }
 
 }  // namespace

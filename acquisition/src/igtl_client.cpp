@@ -22,6 +22,11 @@
 #include "igtlTrackingDataMessage.h"
 #include "igtlTransformMessage.h"
 #include "igtl_header.h"
+#include "igtl_image.h"
+#include "igtl_tdata.h"
+#include "igtl_transform.h"
+#include "igtl_util.h"
+#include "sonoshape/core/log.hpp"
 
 namespace sonoshape::acq {
 namespace {
@@ -55,19 +60,55 @@ int connect_one(const addrinfo& a, double timeout_s) {
   return fd;
 }
 
+// A big-endian u64 field of a raw header.
+std::uint64_t header_u64(const std::uint8_t* header, std::size_t offset) {
+  std::uint64_t value = 0;
+  for (std::size_t i = 0; i < 8; ++i) value = (value << 8) | header[offset + i];
+  return value;
+}
+
+// Offsets in the 58-byte header: version (2), type name (12), device name (20), timestamp (8),
+// body size (8), CRC-64 of the body (8).
+constexpr std::size_t kBodySizeOffset = 2 + 12 + 20 + 8;
+constexpr std::size_t kCrcOffset = kBodySizeOffset + 8;
+
+// The body size a header announces, read whole: the 1.11 library's GetBodySizeToRead() is an
+// int, which reads 2^63 as 0 and 2^31 as negative.
+std::uint64_t header_body_size(const std::uint8_t* header) {
+  return header_u64(header, kBodySizeOffset);
+}
+
+// Unpacks `raw` into `message` when its body is `min_body` to `max_body` bytes and its CRC is
+// right. Checked before the library sees the body: 1.11 converts a body's fixed part (the
+// IMAGE's 72-byte image header, a TRANSFORM's 48 bytes) in place without looking at its size,
+// so a short body would be read and written past its end. Errors (all kDamaged) name the field.
 template <typename Message>
-bool unpack(Message& message, const IgtlMessage& raw) {
+Status unpack(Message& message, const IgtlMessage& raw, const std::string& what,
+              std::uint64_t min_body, std::uint64_t max_body, const std::string& fixed_part) {
+  if (raw.bytes.size() < IGTL_HEADER_SIZE ||
+      header_body_size(raw.bytes.data()) != raw.bytes.size() - IGTL_HEADER_SIZE)
+    return Status::error(what + ": the header's body size does not match the message");
+  const std::uint64_t body = raw.bytes.size() - IGTL_HEADER_SIZE;
+  if (body < min_body || body > max_body)
+    return Status::error(what + ": a body of " + std::to_string(body) + " bytes; " + fixed_part);
+  auto* body_bytes = const_cast<std::uint8_t*>(raw.bytes.data()) + IGTL_HEADER_SIZE;
+  if (::crc64(body_bytes, body, 0) != header_u64(raw.bytes.data(), kCrcOffset))
+    return Status::error(what + ": the header's CRC does not match the body (damaged in transit)");
   igtl::MessageHeader::Pointer header = igtl::MessageHeader::New();
   header->InitPack();
   std::memcpy(header->GetPackPointer(), raw.bytes.data(), IGTL_HEADER_SIZE);
   header->Unpack();
   message->SetMessageHeader(header);
   message->AllocatePack();
-  if (raw.bytes.size() != IGTL_HEADER_SIZE + static_cast<std::size_t>(message->GetPackBodySize()))
-    return false;
-  std::memcpy(message->GetPackBodyPointer(), raw.bytes.data() + IGTL_HEADER_SIZE,
-              raw.bytes.size() - IGTL_HEADER_SIZE);
-  return (message->Unpack(1) & igtl::MessageHeader::UNPACK_BODY) != 0;
+  std::memcpy(message->GetPackBodyPointer(), body_bytes, body);
+  if ((message->Unpack(0) & igtl::MessageHeader::UNPACK_BODY) == 0)
+    return Status::error(what + ": the body does not unpack (an unknown content version)");
+  return Status::ok();
+}
+
+Status refuse(IgtlDrop reason, IgtlDrop* why, const std::string& message) {
+  if (why) *why = reason;
+  return Status::error(message);
 }
 
 }  // namespace
@@ -124,7 +165,7 @@ struct IgtlConnection::Impl {
     header->InitPack();
     std::memcpy(header->GetPackPointer(), buffer.data(), IGTL_HEADER_SIZE);
     header->Unpack();
-    const auto body = static_cast<std::uint64_t>(header->GetBodySizeToRead());
+    const std::uint64_t body = header_body_size(buffer.data());
     if (body > kMaxBody)
       return Status::error("OpenIGTLink " + where + ": a message announces " +
                            std::to_string(body) + " bytes; not an OpenIGTLink stream?");
@@ -293,12 +334,38 @@ std::vector<std::uint8_t> igtl_start_tracking_data(int interval_ms) {
   return std::vector<std::uint8_t>(begin, begin + start->GetPackSize());
 }
 
+const char* to_string(IgtlDrop reason) {
+  return reason == IgtlDrop::kDamaged ? "damaged" : "unsupported";
+}
+
+void IgtlDrops::count(IgtlDrop reason, const std::string& message) {
+  std::size_t seen = 0;
+  {
+    std::lock_guard lock(mutex_);
+    seen = counts_[to_string(reason)]++;
+  }
+  if (seen == 0)
+    log_warning(peer_ + ": " + message + "; such messages are dropped and counted as '" +
+                to_string(reason) + "' (said once)");
+}
+
+std::map<std::string, std::size_t> IgtlDrops::counts() const {
+  std::lock_guard lock(mutex_);
+  return counts_;
+}
+
 Result<std::optional<Eigen::Matrix4d>> decode_igtl_tracking_data(const IgtlMessage& message,
                                                                  const std::string& element) {
   igtl::TrackingDataMessage::Pointer data = igtl::TrackingDataMessage::New();
-  if (message.type != "TDATA" || !unpack(data, message))
-    return Status::error("OpenIGTLink TDATA '" + message.device +
-                         "': damaged message (size or CRC)");
+  const std::string what = "OpenIGTLink TDATA '" + message.device + "'";
+  if (message.type != "TDATA") return Status::error(what + ": not a TDATA message");
+  if (Status unpacked = unpack(data, message, what, 0, kMaxBody, "expected 70-byte elements");
+      !unpacked)
+    return unpacked;
+  const std::size_t body = message.bytes.size() - IGTL_HEADER_SIZE;
+  if (body % IGTL_TDATA_ELEMENT_SIZE != 0)
+    return Status::error(what + ": a body of " + std::to_string(body) +
+                         " bytes is not a whole number of 70-byte elements");
   for (int k = 0; k < data->GetNumberOfTrackingDataElements(); ++k) {
     igtl::TrackingDataElement::Pointer e;
     data->GetTrackingDataElement(k, e);
@@ -313,23 +380,48 @@ Result<std::optional<Eigen::Matrix4d>> decode_igtl_tracking_data(const IgtlMessa
   return std::optional<Eigen::Matrix4d>();
 }
 
-Result<IgtlImage> decode_igtl_image(const IgtlMessage& message) {
+Result<IgtlImage> decode_igtl_image(const IgtlMessage& message, IgtlDrop* why) {
   igtl::ImageMessage::Pointer image = igtl::ImageMessage::New();
   const std::string what = "OpenIGTLink IMAGE '" + message.device + "'";
-  if (message.type != "IMAGE" || !unpack(image, message))
-    return Status::error(what + ": damaged message (size or CRC)");
+  if (message.type != "IMAGE")
+    return refuse(IgtlDrop::kUnsupported, why, what + ": not an IMAGE message");
+  if (Status unpacked = unpack(image, message, what, IGTL_IMAGE_HEADER_SIZE, kMaxBody,
+                               "an IMAGE needs at least 72 (its image header)");
+      !unpacked)
+    return refuse(IgtlDrop::kDamaged, why, unpacked.message());
+  // The scalar type first: the library's scalar sizes are a table indexed by it.
+  if (image->GetScalarType() != igtl::ImageMessage::TYPE_UINT8 || image->GetNumComponents() != 1)
+    return refuse(IgtlDrop::kUnsupported, why,
+                  what + ": scalar type " + std::to_string(image->GetScalarType()) + " with " +
+                      std::to_string(image->GetNumComponents()) +
+                      " components; only 8-bit grey (uint8, 1 component) B-mode frames are read");
   int size[3];
+  int sub_size[3];
+  int sub_offset[3];
   float spacing[3];
   image->GetDimensions(size);
+  image->GetSubVolume(sub_size, sub_offset);
   image->GetSpacing(spacing);
-  if (image->GetScalarType() != igtl::ImageMessage::TYPE_UINT8 || image->GetNumComponents() != 1)
-    return Status::error(
-        what + ": scalar type " + std::to_string(image->GetScalarType()) + " with " +
-        std::to_string(image->GetNumComponents()) +
-        " components; only 8-bit grey (uint8, 1 component) B-mode frames are read");
+  // The pixels the header declares (each size is 16 bits: no overflow) against those the body
+  // holds after the image header: never trusted, never read past.
+  const std::uint64_t declared =
+      std::uint64_t(sub_size[0]) * std::uint64_t(sub_size[1]) * std::uint64_t(sub_size[2]);
+  const std::uint64_t held = message.bytes.size() - IGTL_HEADER_SIZE - IGTL_IMAGE_HEADER_SIZE;
+  const std::string dimensions =
+      std::to_string(size[0]) + "x" + std::to_string(size[1]) + "x" + std::to_string(size[2]);
+  if (declared != held)
+    return refuse(IgtlDrop::kDamaged, why,
+                  what + ": the image header declares " + std::to_string(sub_size[0]) + "x" +
+                      std::to_string(sub_size[1]) + "x" + std::to_string(sub_size[2]) +
+                      " pixels (" + std::to_string(declared) + " bytes), the body holds " +
+                      std::to_string(held) + " after the image header");
+  if (sub_size[0] != size[0] || sub_size[1] != size[1] || sub_size[2] != size[2] ||
+      sub_offset[0] != 0 || sub_offset[1] != 0 || sub_offset[2] != 0)
+    return refuse(IgtlDrop::kUnsupported, why,
+                  what + ": a sub-volume of " + dimensions + "; whole frames are read");
   if (size[2] != 1 || size[0] < 1 || size[1] < 1)
-    return Status::error(what + ": " + std::to_string(size[0]) + "x" + std::to_string(size[1]) +
-                         "x" + std::to_string(size[2]) + "; a 2D frame (depth 1) is expected");
+    return refuse(IgtlDrop::kUnsupported, why,
+                  what + ": " + dimensions + "; a 2D frame (depth 1) is expected");
   IgtlImage out;
   out.image = GreyImage(size[0], size[1]);
   const auto* pixels = static_cast<const std::uint8_t*>(image->GetScalarPointer());
@@ -353,9 +445,12 @@ Result<IgtlImage> decode_igtl_image(const IgtlMessage& message) {
 
 Result<Eigen::Matrix4d> decode_igtl_transform(const IgtlMessage& message) {
   igtl::TransformMessage::Pointer transform = igtl::TransformMessage::New();
-  if (message.type != "TRANSFORM" || !unpack(transform, message))
-    return Status::error("OpenIGTLink TRANSFORM '" + message.device +
-                         "': damaged message (size or CRC)");
+  const std::string what = "OpenIGTLink TRANSFORM '" + message.device + "'";
+  if (message.type != "TRANSFORM") return Status::error(what + ": not a TRANSFORM message");
+  if (Status unpacked = unpack(transform, message, what, IGTL_TRANSFORM_SIZE, IGTL_TRANSFORM_SIZE,
+                               "a TRANSFORM has 48 (12 floats)");
+      !unpacked)
+    return unpacked;
   igtl::Matrix4x4 m;
   transform->GetMatrix(m);
   Eigen::Matrix4d T = Eigen::Matrix4d::Identity();

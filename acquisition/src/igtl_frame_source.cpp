@@ -5,13 +5,16 @@
 namespace sonoshape::acq {
 
 IgtlFrameSource::IgtlFrameSource(IgtlEndpoint endpoint, std::string image_device)
-    : link_(std::move(endpoint)), image_device_(std::move(image_device)) {}
+    : link_(std::move(endpoint)),
+      image_device_(std::move(image_device)),
+      drops_("igtl:" + link_.endpoint().text()) {}
 
 IgtlFrameSource::IgtlFrameSource(IgtlEndpoint endpoint, std::string image_device,
                                  IgtlConnection connection, std::optional<IgtlMessage> first)
     : link_(std::move(endpoint), std::move(connection)),
       image_device_(std::move(image_device)),
-      pending_(std::move(first)) {}
+      pending_(std::move(first)),
+      drops_("igtl:" + link_.endpoint().text()) {}
 
 IgtlFrameSource::~IgtlFrameSource() { stop(); }
 
@@ -23,8 +26,10 @@ Result<Polled> IgtlFrameSource::poll(Frame& frame) {
   set_condition(link_.trouble());
   if (!message || message->type != "IMAGE") return Polled::kNothing;
   if (!image_device_.empty() && message->device != image_device_) return Polled::kNothing;
-  auto image = decode_igtl_image(*message);
+  IgtlDrop why = IgtlDrop::kDamaged;
+  auto image = decode_igtl_image(*message, &why);
   if (!image) {
+    drops_.count(why, image.message());
     count_lost(1);
     return Polled::kNothing;
   }

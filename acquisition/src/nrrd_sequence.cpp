@@ -311,7 +311,8 @@ Result<std::vector<std::uint8_t>> decode_gzip(const std::filesystem::path& path,
 // Text samples -> `sample_bytes` bytes each, in the byte order to_grey expects.
 Result<std::vector<std::uint8_t>> decode_text(const std::filesystem::path& path,
                                               std::string_view source, std::size_t sample_count,
-                                              int sample_bytes, bool big_endian) {
+                                              int sample_bytes, bool big_endian,
+                                              bool quote_samples) {
   std::vector<std::uint8_t> samples;
   // At most one sample per two characters ("1 "): a lying 'sizes' must not allocate.
   samples.reserve(std::min(sample_count, source.size() / 2 + 1) *
@@ -324,8 +325,9 @@ Result<std::vector<std::uint8_t>> decode_text(const std::filesystem::path& path,
     const auto value = parse_number<long long>(word);
     if (!value || *value < -32768 || *value > 65535)
       return fail(path,
-                  "text sample " + std::to_string(count) + " '" + std::string(word.substr(0, 20)) +
-                      "' is not an integer sample",
+                  "text sample " + std::to_string(count) +
+                      (quote_samples ? " '" + std::string(word.substr(0, 20)) + "'" : "") +
+                      " is not an integer sample",
                   "the data does not match 'type'");
     const auto bits = static_cast<std::uint16_t>(*value);
     const auto lo = static_cast<std::uint8_t>(bits & 0xff);
@@ -346,8 +348,50 @@ Result<std::vector<std::uint8_t>> decode_text(const std::filesystem::path& path,
   return samples;
 }
 
+// The detached data file `name` of the header `path`: only a file in the header's own folder or
+// below it. A sequence file comes from anyone (a colleague, a download); followed anywhere, its
+// `data file` would turn /etc/passwd or /proc/self/environ into pixels that the scan segments
+// and streams. Absolute names and '..' are refused as written; a symbolic link that leads out
+// of the folder is refused by comparing canonical paths.
+Result<std::filesystem::path> detached_data_path(const std::filesystem::path& path,
+                                                 const HeaderEntry& field,
+                                                 const std::string& name) {
+  namespace fs = std::filesystem;
+  const std::string fix = "keep the data file in the header's folder and name it relative to it";
+  const fs::path relative(name);
+  if (relative.is_absolute() || relative.has_root_name() || relative.has_root_directory())
+    return fail(path, where(field) + " '" + name + "' is an absolute path",
+                fix + " (a detached file is read only from there)");
+  for (const fs::path& part : relative)
+    if (part == "..")
+      return fail(path, where(field) + " '" + name + "' leads out of the header's folder ('..')",
+                  fix);
+  std::error_code ec;
+  const fs::path folder = fs::canonical(fs::absolute(path, ec).parent_path(), ec);
+  if (ec)
+    return fail(path, "cannot resolve the header's folder (" + ec.message() + ")",
+                "check that the folder exists and can be read");
+  const fs::path joined = folder / relative;
+  if (!fs::exists(joined, ec))
+    return fail(path, where(field) + ": cannot open " + joined.string(),
+                "keep the data file next to the header, or fix the name");
+  const fs::path resolved = fs::canonical(joined, ec);
+  if (ec)
+    return fail(path,
+                where(field) + ": cannot resolve " + joined.string() + " (" + ec.message() + ")",
+                fix);
+  const auto [end, unused] =
+      std::mismatch(folder.begin(), folder.end(), resolved.begin(), resolved.end());
+  if (end != folder.end()) {
+    const std::string escape = " '" + name + "' is a link that leads out of the header's folder";
+    return fail(path, where(field) + escape + " (to " + resolved.string() + ")", fix);
+  }
+  return resolved;
+}
+
 // Reads the bytes that hold the samples: after the header, or from `data file`, after the
-// line skip, decoded. Fails naming the field.
+// line skip, decoded. Fails naming the field; never quotes a detached file's content (the
+// file may not be the user's to read out).
 Result<std::vector<std::uint8_t>> read_samples(const std::filesystem::path& path,
                                                const NrrdHeader& header, const std::string& data,
                                                std::size_t sample_count, int sample_bytes,
@@ -363,12 +407,12 @@ Result<std::vector<std::uint8_t>> read_samples(const std::filesystem::path& path
         data_file->value.rfind("LIST", 0) == 0)
       return fail(path, where(*data_file) + " '" + data_file->value + "' names several files",
                   "only one detached data file is read; join the parts into one file");
-    source_path = std::filesystem::path(std::string(words[0]));
-    if (source_path.is_relative()) source_path = path.parent_path() / source_path;
+    auto resolved = detached_data_path(path, *data_file, std::string(words[0]));
+    if (!resolved) return resolved.status();
+    source_path = *resolved;
     // A device or a pipe (/dev/zero, /dev/stdin) would be read without end or block forever.
     std::error_code ec;
-    if (std::filesystem::exists(source_path, ec) &&
-        !std::filesystem::is_regular_file(source_path, ec))
+    if (!std::filesystem::is_regular_file(source_path, ec))
       return fail(path, where(*data_file) + ": " + source_path.string() +
                             " is not a regular file (a device, a pipe or a folder)",
                   "name the file that holds the samples");
@@ -432,7 +476,8 @@ Result<std::vector<std::uint8_t>> read_samples(const std::filesystem::path& path
     if (!decoded) return decoded.status();
     samples = std::move(*decoded);
   } else if (encoding == "text" || encoding == "txt" || encoding == "ascii") {
-    auto decoded = decode_text(path, source, sample_count, sample_bytes, big_endian);
+    auto decoded = decode_text(path, source, sample_count, sample_bytes, big_endian,
+                               /*quote_samples=*/source_path == path);
     if (!decoded) return decoded.status();
     samples = std::move(*decoded);
   } else {

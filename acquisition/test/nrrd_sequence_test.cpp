@@ -287,6 +287,67 @@ TEST(NrrdSequence, DetachedRawBigEndian16BitSamplesRead) {
   expect_frames(*from_end, f);
 }
 
+// Issue 40, S4: a sequence file is someone else's; its `data file` must not read this machine's
+// files (they would become pixels, segmented and streamed), nor an error quote them.
+TEST(NrrdSequence, DetachedDataIsReadOnlyFromTheHeadersOwnFolder) {
+  namespace fs = std::filesystem;
+  const SyntheticFrames f = make_frames();
+  const std::string samples = frames_last(f);
+  const std::string secret = "root:$6$secret-hash-of-a-password:19000:0:99999:7:::\n";
+  // The header's folder, and a secret beside it (outside it).
+  const fs::path base = temp_path("s4");
+  const fs::path folder = base / "sequence";
+  fs::create_directories(folder);
+  const fs::path outside = base / "shadow";
+  write_file(outside, secret + std::string(samples.size(), 'x'));
+  const std::string header = slicer_header(kListLast + "encoding: raw\n", kTimes);
+  const auto refused = [&](const std::string& name, const std::string& data_file) {
+    const fs::path path = folder / name;
+    write_file(path, header + "data file: " + data_file + "\n");
+    const auto result = read_sequence_file(path);
+    EXPECT_FALSE(result) << data_file << " was read";
+    if (result) return std::string();
+    expect_contains(result.message(), path.string());
+    expect_contains(result.message(), "'data file'");
+    EXPECT_EQ(result.message().find("secret-hash"), std::string::npos) << result.message();
+    return result.message();
+  };
+  expect_contains(refused("absolute.nhdr", outside.string()), "is an absolute path");
+  expect_contains(refused("up.nhdr", "../shadow"), "leads out of the header's folder ('..')");
+  expect_contains(refused("up-inside.nhdr", "sub/../../shadow"), "('..')");
+  fs::create_symlink(outside, folder / "frames.raw");
+  expect_contains(refused("link.nhdr", "frames.raw"), "is a link that leads out of the header's");
+  fs::create_directory_symlink(base, folder / "up");
+  expect_contains(refused("dir-link.nhdr", "up/shadow"), "is a link that leads out");
+
+  // A file in the folder, or below it, reads; so does a link that stays inside.
+  fs::create_directories(folder / "data");
+  write_file(folder / "data" / "frames.raw", samples);
+  fs::create_symlink("data/frames.raw", folder / "inside-link.raw");
+  for (const std::string name : {"data/frames.raw", "./data/frames.raw", "inside-link.raw"}) {
+    const fs::path path = folder / "good.nhdr";
+    write_file(path, header + "data file: " + name + "\n");
+    const auto file = read_sequence_file(path);
+    ASSERT_TRUE(file) << name << ": " << file.message();
+    expect_frames(*file, f);
+  }
+}
+
+TEST(NrrdSequence, ATextDecodingErrorQuotesNoDetachedFilesContent) {
+  namespace fs = std::filesystem;
+  const fs::path folder = temp_path("s4-text");
+  fs::create_directories(folder);
+  write_file(folder / "frames.txt", "root:$6$secret-hash:19000\n");
+  const fs::path path = folder / "text.nhdr";
+  write_file(path,
+             slicer_header(kListLast + "encoding: ascii\n", kTimes) + "data file: frames.txt\n");
+  const auto result = read_sequence_file(path);
+  ASSERT_FALSE(result);
+  expect_contains(result.message(), "text sample 0 is not an integer sample");
+  EXPECT_EQ(result.message().find("secret"), std::string::npos) << result.message();
+  EXPECT_EQ(result.message().find("root"), std::string::npos) << result.message();
+}
+
 TEST(NrrdSequence, TextEncodingReads) {
   const SyntheticFrames f = make_frames();
   std::string text;
@@ -397,7 +458,7 @@ TEST(NrrdSequence, UnsupportedOrMalformedFilesGiveClearErrors) {
   // A device would be read without end (found by fuzzing: tests/data/fuzz/sequence_nrrd/).
   expect_contains(nrrd_error("device.nhdr", slicer_header(kListLast + "encoding: raw\n") +
                                                 "data file: /dev/zero\n"),
-                  "/dev/zero is not a regular file");
+                  "'/dev/zero' is an absolute path");
   expect_contains(
       nrrd_error("frames.seq.nrrd",
                  with(kListLast + "encoding: raw\n", "Seq_Frame0009_Timestamp:=1\n"), raw),

@@ -295,13 +295,117 @@ bool create_journal(const fs::path& out, std::shared_ptr<scan::KeyframeJournal>&
 int run_scan(const ScanCommandOptions& options, const Resume* resume);
 void add_scan_options(CLI::App& app, ScanCommandOptions& options);
 
+// --resume reads its options from a file in DIR, which anyone who could write there may have
+// crafted (issue 40, S5): its relative paths are read where the scan was started, and it never
+// opens this machine to the network. These options a resume takes from its own command line
+// only when they reach beyond loopback.
+const std::vector<std::string> kResumeCommandLineOptions = {
+    "--resume",   "--view",         "--igtl-serve",      "--publish",
+    "--snapshot", "--allow-remote", "--curve-secret-key"};
+
+// A relative path of the journal, read against the folder the scan was started in.
+fs::path from_scan_folder(const fs::path& path, const fs::path& folder) {
+  return path.empty() || path.is_absolute() ? path : folder / path;
+}
+
+// "PREFIX:PATH..." (replay:FILE, LABEL:PATH[:NAME]) with a relative PATH read from `folder`.
+std::string spec_from_scan_folder(const std::string& spec, const std::string& prefix,
+                                  const fs::path& folder) {
+  if (spec.rfind(prefix, 0) != 0 || spec.size() == prefix.size()) return spec;
+  return prefix + from_scan_folder(spec.substr(prefix.size()), folder).string();
+}
+
+// LABEL:PATH[:NAME] meshes separated by commas (sim:'s phantom spec, --phantom).
+std::string meshes_from_scan_folder(const std::string& meshes, const fs::path& folder) {
+  std::string out;
+  std::size_t start = 0;
+  while (start <= meshes.size()) {
+    const std::size_t comma = std::min(meshes.find(',', start), meshes.size());
+    const std::string mesh = meshes.substr(start, comma - start);
+    const std::size_t colon = mesh.find(':');
+    out += (start == 0 ? "" : ",") +
+           (colon == std::string::npos
+                ? mesh
+                : spec_from_scan_folder(mesh, mesh.substr(0, colon + 1), folder));
+    start = comma + 1;
+  }
+  return out;
+}
+
+void resolve_journal_paths(ScanCommandOptions& options, const fs::path& folder) {
+  if (options.source.rfind("sim:", 0) == 0)
+    options.source = "sim:" + meshes_from_scan_folder(options.source.substr(4), folder);
+  options.calibration = from_scan_folder(options.calibration, folder);
+  options.segmentation = from_scan_folder(options.segmentation, folder);
+  options.curve_secret_key = from_scan_folder(options.curve_secret_key, folder);
+  options.source = spec_from_scan_folder(options.source, "replay:", folder);
+  options.tracker = spec_from_scan_folder(options.tracker, "replay:", folder);
+  for (std::string& phantom : options.sim.phantoms)
+    phantom = meshes_from_scan_folder(phantom, folder);
+}
+
+// Drops the journal's options that other machines could reach (a bind beyond loopback, and
+// --allow-remote); returns them as they would be typed.
+std::vector<std::string> drop_remote_exposure(ScanCommandOptions& options) {
+  std::vector<std::string> dropped;
+  const auto reachable = [](const std::string& address) {
+    return !publish::is_local_endpoint("tcp://" + address);
+  };
+  if (options.view) {
+    const std::string address = options.view->empty() ? kDefaultViewAddress : *options.view;
+    if (reachable(address)) {
+      dropped.push_back("--view " + address);
+      options.view.reset();
+    }
+  }
+  // [HOST:]PORT: a bare port is served on loopback.
+  if (options.igtl_serve.find(':') != std::string::npos && reachable(options.igtl_serve)) {
+    dropped.push_back("--igtl-serve " + options.igtl_serve);
+    options.igtl_serve.clear();
+  }
+  for (std::string* endpoint : {&options.publish, &options.snapshot}) {
+    if (endpoint->empty() || publish::is_local_endpoint(*endpoint)) continue;
+    dropped.push_back((endpoint == &options.publish ? "--publish " : "--snapshot ") + *endpoint);
+    endpoint->clear();
+  }
+  if (options.allow_remote) {
+    dropped.push_back("--allow-remote");
+    options.allow_remote = false;
+  }
+  return dropped;
+}
+
+std::string joined(const std::vector<std::string>& words) {
+  std::string out;
+  for (const std::string& word : words) out += (out.empty() ? "" : " ") + word;
+  return out;
+}
+
 // --resume DIR: the journal's scan again, with its own arguments, going on after its keyframes.
 int resume_scan(const fs::path& directory) {
-  const std::vector<std::string> given = scan_arguments();
-  if (!(given.size() == 2 && given[0] == "--resume") &&
-      !(given.size() == 1 && given[0].rfind("--resume=", 0) == 0)) {
-    std::cerr << "error: --resume DIR takes no other scan options: they come from the journal "
-                 "in DIR (the scan goes on as it was started)\n";
+  // The command line: --resume and, to expose the resumed scan again, the network options.
+  std::vector<std::string> given_arguments = scan_arguments();
+  for (const std::string& word : given_arguments) {
+    const std::string name = word.substr(0, word.find('='));
+    if (name.empty() || name[0] != '-' ||
+        std::find(kResumeCommandLineOptions.begin(), kResumeCommandLineOptions.end(), name) !=
+            kResumeCommandLineOptions.end())
+      continue;
+    std::cerr << "error: --resume DIR takes " << name
+              << " from the journal in DIR (the scan goes on as it was started); on the command "
+                 "line it takes only the network options "
+              << joined({kResumeCommandLineOptions.begin() + 1, kResumeCommandLineOptions.end()})
+              << '\n';
+    return 1;
+  }
+  ScanCommandOptions given;
+  CLI::App given_app;
+  add_scan_options(given_app, given);
+  std::reverse(given_arguments.begin(), given_arguments.end());  // CLI11 takes them last first
+  try {
+    given_app.parse(given_arguments);
+  } catch (const CLI::ParseError& e) {
+    std::cerr << "error: --resume: " << e.what() << '\n';
     return 1;
   }
   auto journal = scan::read_journal(directory / scan::kJournalName);
@@ -321,13 +425,54 @@ int resume_scan(const fs::path& directory) {
   add_scan_options(app, options);
   std::vector<std::string> arguments = journal->arguments;
   std::reverse(arguments.begin(), arguments.end());  // CLI11 takes them last first
-  try {
-    app.parse(arguments);
-  } catch (const CLI::ParseError& e) {
-    std::cerr << "error: --resume " << directory.string() << ": the journal's options no longer "
-              << "parse (" << e.what() << "); was it written by another sonoshape?\n";
-    return 1;
+  {
+    // Parsed where the scan was started, where its relative paths mean what they meant (the
+    // parser checks that files exist), then made absolute (resolve_journal_paths).
+    const fs::path here = fs::current_path();
+    std::error_code ec;
+    if (journal->working_directory) fs::current_path(*journal->working_directory, ec);
+    if (ec) {
+      std::cerr << "error: --resume " << directory.string() << ": the scan was started in "
+                << journal->working_directory->string() << ", which cannot be entered now ("
+                << ec.message() << "); its relative paths are read from there\n";
+      return 1;
+    }
+    std::string refused;
+    try {
+      app.parse(arguments);
+    } catch (const CLI::ParseError& e) {
+      refused = e.what();
+    }
+    fs::current_path(here, ec);
+    if (!refused.empty()) {
+      std::cerr << "error: --resume " << directory.string() << ": the journal's options no "
+                << "longer parse (" << refused << "); was it written by another sonoshape?\n";
+      return 1;
+    }
   }
+  // Said every time: the options come from a file, and the user should see what it asks for.
+  std::cerr << "scan: --resume " << directory.string()
+            << ": the scan's options from its journal: " << joined(journal->arguments) << '\n';
+  if (journal->working_directory) {
+    resolve_journal_paths(options, *journal->working_directory);
+    std::cerr << "scan: --resume: their relative paths are read from "
+              << journal->working_directory->string() << ", where the scan was started\n";
+  } else {
+    std::cerr << "scan: --resume: the journal does not record where the scan was started (an "
+                 "older sonoshape wrote it): its relative paths are read from here\n";
+  }
+  for (const std::string& option : drop_remote_exposure(options))
+    std::cerr << "note: --resume: the journal asks for " << option
+              << ", which other machines could reach; a resume never takes that from a file: "
+                 "pass it on the command line if you mean it (sonoshape scan --resume "
+              << directory.string() << " " << option << ")\n";
+  // The network options given with --resume, as given.
+  if (given_app.count("--view")) options.view = given.view;
+  if (given_app.count("--igtl-serve")) options.igtl_serve = given.igtl_serve;
+  if (given_app.count("--publish")) options.publish = given.publish;
+  if (given_app.count("--snapshot")) options.snapshot = given.snapshot;
+  if (given_app.count("--allow-remote")) options.allow_remote = given.allow_remote;
+  if (given_app.count("--curve-secret-key")) options.curve_secret_key = given.curve_secret_key;
   options.out = directory;
   const Resume state{std::move(*journal)};
   return run_scan(options, &state);

@@ -8,8 +8,11 @@
 
 #include <array>
 #include <cerrno>
+#include <cstdio>
 #include <cstring>
 #include <fstream>
+
+#include "sonoshape/core/log.hpp"
 
 namespace sonoshape::publish {
 namespace {
@@ -102,6 +105,21 @@ Status write_curve_keypair(const std::filesystem::path& base, const CurveKeyPair
   return write_new_file(public_path, key_file_text("public", keys.public_key), 0644);
 }
 
+std::optional<std::string> secret_key_file_exposure(const std::filesystem::path& file) {
+  struct stat info {};
+  if (::stat(file.c_str(), &info) != 0) return std::nullopt;
+  const mode_t shared = info.st_mode & (S_IRWXG | S_IRWXO);
+  if (shared == 0) return std::nullopt;
+  char mode[8];
+  std::snprintf(mode, sizeof mode, "%04o", static_cast<unsigned>(info.st_mode & 07777));
+  const bool written = (shared & (S_IWGRP | S_IWOTH)) != 0;
+  const bool read = (shared & (S_IRGRP | S_IROTH)) != 0;
+  const std::string how = read && written ? "read and change" : written ? "change" : "read";
+  return "the CURVE secret key " + file.string() + " has mode " + mode + ": other users of this " +
+         "machine can " + how + " it (whoever holds the key can pose as the scan); make it " +
+         "private: chmod 600 " + file.string();
+}
+
 Result<std::string> read_curve_key(const std::filesystem::path& file, const std::string& what) {
   const std::string other = what == "secret" ? "public" : "secret";
   const std::string fix = what == "secret" ? "give the NAME.key file that `sonoshape keys -o NAME` "
@@ -147,6 +165,9 @@ Result<std::string> read_curve_key(const std::filesystem::path& file, const std:
   std::array<std::uint8_t, 32> binary{};
   if (zmq_z85_decode(binary.data(), key.c_str()) == nullptr)
     return Status::error(where + ": the key does not decode as Z85; " + fix);
+  // Used all the same (the user may know the machine is theirs alone), but never silently.
+  if (what == "secret")
+    if (const auto exposed = secret_key_file_exposure(file)) log_warning(*exposed);
   return key;
 }
 

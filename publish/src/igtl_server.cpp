@@ -11,6 +11,7 @@
 
 #include <Eigen/Geometry>
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <cerrno>
 #include <chrono>
@@ -22,6 +23,7 @@
 #include <optional>
 #include <sstream>
 #include <thread>
+#include <tuple>
 #include <vector>
 
 #include "igtlImageMessage.h"
@@ -29,6 +31,7 @@
 #include "igtlPolyDataMessage.h"
 #include "igtlStatusMessage.h"
 #include "igtl_header.h"
+#include "sonoshape/core/log.hpp"
 
 namespace sonoshape::publish {
 namespace {
@@ -40,8 +43,13 @@ struct Packed {
 };
 using PackedPtr = std::shared_ptr<const Packed>;
 
-// Requests are small (a header and an empty body); anything larger is not a client of ours.
-constexpr std::size_t kMaxRequestBody = 1 << 20;
+// Bytes read from one client per turn of the server's loop: a client that sends without pause
+// is served in turns with the others and the publisher, never for good.
+constexpr std::size_t kMaxReadPerTurnBytes = 64 << 10;
+// The body size field of a header (big-endian u64, after the version, type name, device name
+// and timestamp), read whole: the 1.11 library's GetBodySizeToRead() is an int, which reads a
+// 2^63-byte body as 0.
+constexpr std::size_t kBodySizeOffset = 2 + 12 + 20 + 8;
 
 template <typename Message>
 PackedPtr pack(Message& message, const std::string& type) {
@@ -139,15 +147,52 @@ PackedPtr pack_status(const std::string& name, const StatusReport& status) {
   return pack(message, "STATUS");
 }
 
-// One connection: its socket, what is queued for it (the front possibly half sent) and the bytes
-// of a request not yet complete.
+// A request's type and device name (its body, if any, is skipped).
+struct Request {
+  std::string type, name;
+  bool operator<(const Request& other) const {
+    return std::tie(type, name) < std::tie(other.type, other.name);
+  }
+};
+
+// One connection. The queue is the publishers' and the server thread's (under Impl::mutex);
+// the rest only the server thread touches.
 struct Client {
   int fd = -1;
+  std::string peer;  // "address:port", for the messages
+  // Guarded by Impl::mutex: what is queued (the front possibly half sent), and whether the
+  // server thread is sending the front right now (then it is not replaced or evicted).
   std::deque<PackedPtr> queue;
   std::size_t front_sent = 0;  // bytes of queue.front() already written
-  std::vector<std::uint8_t> inbox;
+  bool sending = false;
+  // The server thread's: the header being read, and the body bytes still to skip.
+  std::array<std::uint8_t, IGTL_HEADER_SIZE> header{};
+  std::size_t header_have = 0;
+  std::uint64_t body_left = 0;
   bool closing = false;
 };
+
+std::string peer_of(const sockaddr_in& address) {
+  char text[INET_ADDRSTRLEN] = "?";
+  ::inet_ntop(AF_INET, &address.sin_addr, text, sizeof text);
+  return std::string(text) + ":" + std::to_string(ntohs(address.sin_port));
+}
+
+std::uint64_t body_size_of(const std::array<std::uint8_t, IGTL_HEADER_SIZE>& header) {
+  std::uint64_t size = 0;
+  for (std::size_t i = 0; i < 8; ++i) size = (size << 8) | header[kBodySizeOffset + i];
+  return size;
+}
+
+// A fixed-width, possibly unterminated name field of a header; bytes that are not printable
+// ASCII shown as '?', so that a peer's noise never reaches the terminal as control codes.
+std::string field_text(const std::uint8_t* field, std::size_t width) {
+  const auto* begin = reinterpret_cast<const char*>(field);
+  std::string text(begin, std::find(begin, begin + width, '\0'));
+  for (char& c : text)
+    if (c < 0x20 || c > 0x7e) c = '?';
+  return text;
+}
 
 }  // namespace
 
@@ -159,8 +204,10 @@ struct IgtlServer::Impl {
   std::thread thread;
   std::atomic<bool> stopping{false};
 
-  mutable std::mutex mutex;  // guards everything below
-  std::vector<std::unique_ptr<Client>> clients;
+  // Guards everything below and each client's queue: held only to queue or take a message,
+  // never across a system call or a parse, so that publishing never waits on a client.
+  mutable std::mutex mutex;
+  std::vector<std::unique_ptr<Client>> clients;  // added and removed by the server thread only
   std::map<std::string, PackedPtr> surfaces;  // by device name: the newest of every label
   std::vector<std::string> surface_order;     // device names in label order
   PackedPtr image, status;
@@ -187,7 +234,7 @@ struct IgtlServer::Impl {
   // Queues `message` for `client` (mutex held): replaces an unsent one of the same device, and
   // evicts the oldest unsent one beyond the bound.
   void enqueue(Client& client, const PackedPtr& message) {
-    const std::size_t first_unsent = client.front_sent > 0 ? 1 : 0;
+    const std::size_t first_unsent = client.front_sent > 0 || client.sending ? 1 : 0;
     for (std::size_t k = first_unsent; k < client.queue.size(); ++k) {
       if (client.queue[k]->key == message->key) {
         client.queue[k] = message;
@@ -217,47 +264,118 @@ struct IgtlServer::Impl {
     if (status) enqueue(client, status);
   }
 
+  // Accepts what is pending; beyond max_clients a connection is closed at once (said once).
   void accept_clients() {
     while (true) {
-      const int fd = ::accept4(listen_fd, nullptr, nullptr, SOCK_NONBLOCK | SOCK_CLOEXEC);
+      sockaddr_in address{};
+      socklen_t length = sizeof address;
+      const int fd = ::accept4(listen_fd, reinterpret_cast<sockaddr*>(&address), &length,
+                               SOCK_NONBLOCK | SOCK_CLOEXEC);
       if (fd < 0) return;  // EAGAIN: none left; other errors: try again on the next poll
+      std::unique_lock lock(mutex);
+      if (clients.size() >= options.max_clients) {
+        const bool first = stats.clients_refused++ == 0;
+        lock.unlock();
+        ::close(fd);
+        if (first)
+          log_warning("OpenIGTLink " + options.option + ": " + std::to_string(options.max_clients) +
+                      " clients connected, the most served at once; refused " + peer_of(address) +
+                      " (said once; later refusals are counted)");
+        continue;
+      }
+      lock.unlock();
       const int one = 1;
       ::setsockopt(fd, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
       auto client = std::make_unique<Client>();
       client->fd = fd;
-      std::lock_guard lock(mutex);
+      client->peer = peer_of(address);
+      lock.lock();
       send_state(*client);
       clients.push_back(std::move(client));
       ++stats.clients_accepted;
     }
   }
 
-  // Answers the complete requests in the client's inbox (mutex held).
-  void handle_requests(Client& client) {
-    while (client.inbox.size() >= IGTL_HEADER_SIZE) {
-      igtl::MessageHeader::Pointer header = igtl::MessageHeader::New();
-      header->InitPack();
-      std::memcpy(header->GetPackPointer(), client.inbox.data(), IGTL_HEADER_SIZE);
-      header->Unpack();
-      const auto body = static_cast<std::size_t>(header->GetBodySizeToRead());
-      if (body > kMaxRequestBody) {
-        client.closing = true;  // not an OpenIGTLink client, or a confused one
-        return;
+  // Closes `client` for a message it should not have sent, saying so.
+  void expel(Client& client, const std::string& why) {
+    client.closing = true;
+    {
+      std::lock_guard lock(mutex);
+      ++stats.clients_expelled;
+    }
+    log_warning("OpenIGTLink " + options.option + ": client " + client.peer + " " + why +
+                "; closed its connection");
+  }
+
+  // Parses `n` bytes from `client` into whole requests (server thread, no lock): only a header
+  // is kept; a body is counted down and its bytes dropped as they come.
+  void parse(Client& client, const std::uint8_t* data, std::size_t n, std::vector<Request>& out) {
+    while (!client.closing) {
+      if (client.header_have < IGTL_HEADER_SIZE) {
+        const std::size_t take = std::min(n, IGTL_HEADER_SIZE - client.header_have);
+        std::memcpy(client.header.data() + client.header_have, data, take);
+        client.header_have += take;
+        data += take;
+        n -= take;
+        if (client.header_have < IGTL_HEADER_SIZE) return;
+        client.body_left = body_size_of(client.header);
+        if (client.body_left > kIgtlMaxClientBodyBytes)
+          return expel(client, "announced a " + field_text(client.header.data() + 2, 12) +
+                                   " message with a body of " + std::to_string(client.body_left) +
+                                   " bytes (the header's body size; at most " +
+                                   std::to_string(kIgtlMaxClientBodyBytes) + " are read)");
       }
-      if (client.inbox.size() < IGTL_HEADER_SIZE + body) return;
-      const std::string type = header->GetDeviceType();
-      const std::string name = header->GetDeviceName();
-      client.inbox.erase(client.inbox.begin(), client.inbox.begin() + static_cast<std::ptrdiff_t>(
-                                                                          IGTL_HEADER_SIZE + body));
-      if (type == "GET_POLYDATA") {
-        if (const auto it = surfaces.find(name); it != surfaces.end()) {
+      const auto skipped = static_cast<std::size_t>(std::min<std::uint64_t>(n, client.body_left));
+      data += skipped;
+      n -= skipped;
+      client.body_left -= skipped;
+      if (client.body_left > 0) return;
+      out.push_back(
+          {field_text(client.header.data() + 2, 12), field_text(client.header.data() + 14, 20)});
+      client.header_have = 0;
+      if (n == 0) return;
+    }
+  }
+
+  // Reads up to kMaxReadPerTurnBytes from `client` (server thread, no lock): its requests.
+  std::vector<Request> read_from(Client& client) {
+    std::vector<Request> requests;
+    std::uint8_t buffer[4096];
+    std::size_t read = 0;
+    while (read < kMaxReadPerTurnBytes && !client.closing) {
+      const ssize_t n = ::recv(client.fd, buffer, sizeof buffer, MSG_DONTWAIT);
+      if (n > 0) {
+        read += static_cast<std::size_t>(n);
+        parse(client, buffer, static_cast<std::size_t>(n), requests);
+        continue;
+      }
+      if (n < 0 && (errno == EAGAIN || errno == EWOULDBLOCK)) break;
+      if (n < 0 && errno == EINTR) continue;
+      client.closing = true;  // closed by the peer, or reset
+    }
+    return requests;
+  }
+
+  // Queues the answers to `requests` (takes the lock): a burst of the same request is answered
+  // once, which is all a client can see anyway (a newer copy replaces a queued one).
+  void answer(Client& client, std::vector<Request> requests) {
+    if (requests.empty()) return;
+    std::sort(requests.begin(), requests.end());
+    requests.erase(
+        std::unique(requests.begin(), requests.end(),
+                    [](const Request& a, const Request& b) { return !(a < b) && !(b < a); }),
+        requests.end());
+    std::lock_guard lock(mutex);
+    for (const Request& request : requests) {
+      if (request.type == "GET_POLYDATA") {
+        if (const auto it = surfaces.find(request.name); it != surfaces.end()) {
           enqueue(client, it->second);
         } else {
           for (const std::string& n : surface_order) enqueue(client, surfaces.at(n));
         }
-      } else if (type == "GET_IMAGE" && image) {
+      } else if (request.type == "GET_IMAGE" && image) {
         enqueue(client, image);
-      } else if (type == "GET_STATUS" && status) {
+      } else if (request.type == "GET_STATUS" && status) {
         enqueue(client, status);
       } else {
         continue;  // other messages (Slicer's own STATUS, capabilities) need no answer
@@ -266,34 +384,31 @@ struct IgtlServer::Impl {
     }
   }
 
-  void read_from(Client& client) {
-    std::uint8_t buffer[4096];
-    while (true) {
-      const ssize_t n = ::recv(client.fd, buffer, sizeof buffer, MSG_DONTWAIT);
-      if (n > 0) {
-        client.inbox.insert(client.inbox.end(), buffer, buffer + n);
-        continue;
-      }
-      if (n < 0 && (errno == EAGAIN || errno == EWOULDBLOCK)) break;
-      if (n < 0 && errno == EINTR) continue;
-      client.closing = true;  // closed by the peer, or reset
-      return;
-    }
-    handle_requests(client);
-  }
-
+  // Sends what is queued for `client` until the socket is full. The send itself runs without
+  // the lock: the front is marked as being sent, so that no publisher replaces it meanwhile.
   void write_to(Client& client) {
-    while (!client.queue.empty()) {
-      const Packed& front = *client.queue.front();
-      const ssize_t n = ::send(client.fd, front.bytes.data() + client.front_sent,
-                               front.bytes.size() - client.front_sent, MSG_DONTWAIT | MSG_NOSIGNAL);
+    while (!client.closing) {
+      PackedPtr front;
+      std::size_t offset = 0;
+      {
+        std::lock_guard lock(mutex);
+        if (client.queue.empty()) return;
+        front = client.queue.front();
+        offset = client.front_sent;
+        client.sending = true;
+      }
+      const ssize_t n = ::send(client.fd, front->bytes.data() + offset,
+                               front->bytes.size() - offset, MSG_DONTWAIT | MSG_NOSIGNAL);
+      const int error = errno;
+      std::lock_guard lock(mutex);
+      client.sending = false;
       if (n < 0) {
-        if (errno == EINTR) continue;
-        if (errno != EAGAIN && errno != EWOULDBLOCK) client.closing = true;
+        if (error == EINTR) continue;
+        if (error != EAGAIN && error != EWOULDBLOCK) client.closing = true;
         return;
       }
       client.front_sent += static_cast<std::size_t>(n);
-      if (client.front_sent == front.bytes.size()) {
+      if (client.front_sent == front->bytes.size()) {
         client.queue.pop_front();
         client.front_sent = 0;
         ++stats.messages_sent;
@@ -327,19 +442,24 @@ struct IgtlServer::Impl {
         [[maybe_unused]] const auto got = ::read(wake_fd, &count, sizeof count);
       }
       if (fds[1].revents & POLLIN) accept_clients();
-      std::lock_guard lock(mutex);
+      // Only this thread adds or removes clients: it reads `clients` without the lock.
       // Clients accepted during this poll are not in `fds`: they are served from the next one.
       for (std::size_t k = 2; k < fds.size(); ++k) {
         Client& client = *clients[k - 2];
-        if (fds[k].revents & (POLLIN | POLLHUP | POLLERR)) read_from(client);
-        if (!client.closing && !client.queue.empty()) write_to(client);
+        if (fds[k].revents & (POLLIN | POLLHUP | POLLERR)) answer(client, read_from(client));
+        write_to(client);
       }
-      std::erase_if(clients, [](const std::unique_ptr<Client>& c) {
-        if (!c->closing) return false;
-        ::close(c->fd);
-        return true;
-      });
-      stats.clients = clients.size();
+      std::vector<int> closed;
+      {
+        std::lock_guard lock(mutex);
+        std::erase_if(clients, [&closed](const std::unique_ptr<Client>& c) {
+          if (!c->closing) return false;
+          closed.push_back(c->fd);
+          return true;
+        });
+        stats.clients = clients.size();
+      }
+      for (const int fd : closed) ::close(fd);
     }
     std::lock_guard lock(mutex);
     for (const auto& c : clients) ::close(c->fd);
@@ -352,6 +472,8 @@ Result<IgtlServer> IgtlServer::start(const IgtlServerOptions& options) {
   const std::string where = options.host + ":" + std::to_string(options.port);
   if (options.max_queued_messages < 1)
     return Status::error("OpenIGTLink: the per-client queue must hold at least 1 message");
+  if (options.max_clients < 1)
+    return Status::error("OpenIGTLink: the server must serve at least 1 client");
   if (options.port < 0 || options.port > 65535)
     return Status::error(options.option + " " + std::to_string(options.port) +
                          ": not a TCP port (0 to 65535; 0 picks a free one)");

@@ -129,6 +129,52 @@ std::optional<std::filesystem::path> resolve_target(const std::filesystem::path&
   return std::nullopt;
 }
 
+// The names under which the server is reached (DNS rebinding): a page of another site whose
+// name is rebound to this machine's address reaches the server with that name in Host (and in
+// Origin, for its WebSocket). Only this machine's own names are answered: the loopback names,
+// the bound address and, when bound to every interface (0.0.0.0, ::), any IP address, which no
+// rebinding can produce; each with the server's port (or none for port 80).
+struct ServedNames {
+  std::vector<std::string> names;  // lower-case hosts, IPv6 in brackets
+  bool any_address = false;
+  unsigned short port = 0;
+
+  bool allows(std::string_view authority) const {
+    std::string text = lower(authority);
+    std::string host = text;
+    std::string port_text;
+    const std::size_t colon = text.rfind(':');
+    if (colon != std::string::npos && text.find(']', colon) == std::string::npos) {
+      host = text.substr(0, colon);
+      port_text = text.substr(colon + 1);
+    }
+    if (port_text.empty() ? port != 80 : port_text != std::to_string(port)) return false;
+    if (std::find(names.begin(), names.end(), host) != names.end()) return true;
+    if (!any_address) return false;
+    std::string bare = host;
+    if (bare.size() > 2 && bare.front() == '[' && bare.back() == ']')
+      bare = bare.substr(1, bare.size() - 2);
+    else if (bare.find(':') != std::string::npos)
+      return false;  // an IPv6 address must be in brackets
+    beast::error_code ec;
+    asio::ip::make_address(bare, ec);
+    return !ec;
+  }
+
+  // An Origin header ("http://HOST:PORT"): the page must be one this server served.
+  bool allows_origin(std::string_view origin) const {
+    constexpr std::string_view kScheme = "http://";
+    if (origin.substr(0, kScheme.size()) != kScheme) return false;
+    return allows(origin.substr(kScheme.size()));
+  }
+
+  static std::string lower(std::string_view text) {
+    std::string out(text);
+    for (char& c : out) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+    return out;
+  }
+};
+
 }  // namespace
 
 std::string pack_frames(const Frames& frames) {
@@ -153,6 +199,7 @@ class WsSession;
 struct ServerCore {
   std::filesystem::path web_root;
   std::string url;
+  ServedNames served;
   std::atomic<std::size_t> open_connections{0};
   std::atomic<std::uint64_t> replaced{0};
 
@@ -263,13 +310,23 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
 
  private:
   void on_request(http::request<http::string_body> request) {
+    const std::string host(request[http::field::host]);
+    if (!server_.served.allows(host))
+      return respond(request, http::status::misdirected_request, "text/plain",
+                     "this sonoshape view answers only for its own addresses (" + server_.url +
+                         ", or localhost with the same port), not for Host '" +
+                         host.substr(0, 100) +
+                         "': a page of another site may not read the scan through a name "
+                         "rebound to this machine\n");
     if (websocket::is_upgrade(request)) {
       // A page of another site open in the same browser must not read the scan: browsers
-      // always send Origin with a WebSocket, and ours is this server's own address.
+      // always send Origin with a WebSocket, and it must be a page this server served.
       const std::string origin(request[http::field::origin]);
-      if (!origin.empty() && origin != "http://" + std::string(request[http::field::host]))
+      if (!server_.served.allows_origin(origin))
         return respond(request, http::status::forbidden, "text/plain",
-                       "the viewer's WebSocket serves only its own page\n");
+                       "the viewer's WebSocket serves only its own page (Origin " + server_.url +
+                           " or localhost with the same port), not Origin '" +
+                           origin.substr(0, 100) + "'\n");
       stream_.expires_never();
       std::make_shared<WsSession>(stream_.release_socket(), server_)->run(std::move(request));
       return;
@@ -400,6 +457,9 @@ Result<ViewServer> ViewServer::start(const ViewServerOptions& options) {
   const tcp::endpoint bound = impl->acceptor.local_endpoint();
   const std::string shown = ip.is_v6() ? "[" + host + "]" : host;
   impl->url = "http://" + shown + ":" + std::to_string(bound.port()) + "/";
+  impl->served.port = bound.port();
+  impl->served.names = {"127.0.0.1", "localhost", "[::1]", ServedNames::lower(shown)};
+  impl->served.any_address = ip.is_unspecified();
   impl->accept();
   Impl* raw = impl.get();
   impl->thread = std::thread([raw] { raw->ioc.run(); });

@@ -101,6 +101,38 @@ TEST(CurveKeys, KeyFilesRoundTripAndTheSecretIsPrivate) {
   EXPECT_EQ(*read_curve_key(dir.path() / "scanner.key", "secret"), keys.secret_key);
 }
 
+// Issue 40, S6: a secret key others can read or write is used, but never without a warning.
+TEST(CurveKeys, ASecretKeyFileOthersCanReadOrWriteIsReadWithAWarningNamingTheFix) {
+  TempDir dir;
+  const CurveKeyPair keys = keys_or_fail();
+  ASSERT_TRUE(write_curve_keypair(dir.path() / "scanner", keys));
+  const std::filesystem::path key = dir.path() / "scanner.key";
+  ::testing::internal::CaptureStderr();
+  EXPECT_EQ(*read_curve_key(key, "secret"), keys.secret_key);
+  EXPECT_EQ(::testing::internal::GetCapturedStderr(), "") << "a 0600 key warned";
+  EXPECT_FALSE(secret_key_file_exposure(key));
+
+  ASSERT_EQ(::chmod(key.c_str(), 0644), 0);
+  ::testing::internal::CaptureStderr();
+  EXPECT_EQ(*read_curve_key(key, "secret"), keys.secret_key);
+  const std::string said = ::testing::internal::GetCapturedStderr();
+  EXPECT_TRUE(contains(said, "warning: the CURVE secret key " + key.string() + " has mode 0644"))
+      << said;
+  EXPECT_TRUE(contains(said, "can read it")) << said;
+  EXPECT_TRUE(contains(said, "chmod 600 " + key.string())) << said;
+
+  ASSERT_EQ(::chmod(key.c_str(), 0620), 0);  // writable by the group
+  const auto writable = secret_key_file_exposure(key);
+  ASSERT_TRUE(writable);
+  EXPECT_TRUE(contains(*writable, "mode 0620")) << *writable;
+  EXPECT_TRUE(contains(*writable, "can change it")) << *writable;
+
+  // A public key is for sharing: no warning.
+  ::testing::internal::CaptureStderr();
+  EXPECT_TRUE(read_curve_key(dir.path() / "scanner.pub", "public"));
+  EXPECT_EQ(::testing::internal::GetCapturedStderr(), "");
+}
+
 TEST(CurveKeys, BadKeyFilesAreErrorsNamingTheFile) {
   TempDir dir;
   const CurveKeyPair keys = keys_or_fail();

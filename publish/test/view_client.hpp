@@ -55,12 +55,15 @@ struct Reply {
   std::string body;
 };
 
-inline Reply http_get(const std::string& url, const std::string& target) {
+/// GET `target` as a browser that opened `url` asks for it (Host 127.0.0.1:PORT), or with
+/// another `host` (DNS rebinding tests).
+inline Reply http_get(const std::string& url, const std::string& target,
+                      const std::string& host = {}) {
   asio::io_context ioc;
   tcp::socket socket(ioc);
   socket.connect(tcp::endpoint(asio::ip::make_address("127.0.0.1"), port_of(url)));
   http::request<http::empty_body> request(http::verb::get, target, 11);
-  request.set(http::field::host, "127.0.0.1");
+  request.set(http::field::host, host.empty() ? "127.0.0.1:" + std::to_string(port_of(url)) : host);
   http::write(socket, request);
   beast::flat_buffer buffer;
   http::response<http::string_body> response;
@@ -71,13 +74,14 @@ inline Reply http_get(const std::string& url, const std::string& target) {
 // A page's WebSocket, with reads that give up after a while instead of hanging a test.
 class Page {
  public:
+  /// Connects as the server's own page does (Origin http://127.0.0.1:PORT), or with another
+  /// `origin`.
   explicit Page(const std::string& url, const std::string& origin = {}) : ws_(ioc_) {
     ws_.next_layer().connect(tcp::endpoint(asio::ip::make_address("127.0.0.1"), port_of(url)));
     const std::string host = "127.0.0.1:" + std::to_string(port_of(url));
-    if (!origin.empty())
-      ws_.set_option(websocket::stream_base::decorator([origin](websocket::request_type& request) {
-        request.set(http::field::origin, origin);
-      }));
+    const std::string sent = origin.empty() ? "http://" + host : origin;
+    ws_.set_option(websocket::stream_base::decorator(
+        [sent](websocket::request_type& request) { request.set(http::field::origin, sent); }));
     ws_.handshake(host, "/stream");
   }
 

@@ -166,6 +166,73 @@ TEST(ViewServer, RefusesAWebSocketFromAnotherSitesPage) {
   EXPECT_THROW(Page(server.url(), "http://evil.example"), boost::system::system_error);
 }
 
+// The status of a WebSocket upgrade sent with `host` and `origin` (empty: no Origin header).
+unsigned upgrade_status(const std::string& url, const std::string& host, const std::string& origin,
+                        std::string* body = nullptr) {
+  asio::io_context ioc;
+  tcp::socket socket(ioc);
+  socket.connect(tcp::endpoint(asio::ip::make_address("127.0.0.1"), port_of(url)));
+  http::request<http::empty_body> request(http::verb::get, "/stream", 11);
+  request.set(http::field::host, host);
+  request.set(http::field::upgrade, "websocket");
+  request.set(http::field::connection, "upgrade");
+  request.set(http::field::sec_websocket_key, "dGhlIHNhbXBsZSBub25jZQ==");
+  request.set(http::field::sec_websocket_version, "13");
+  if (!origin.empty()) request.set(http::field::origin, origin);
+  http::write(socket, request);
+  beast::flat_buffer buffer;
+  http::response<http::string_body> response;  // a 101 has no body: Beast reads none
+  http::read(socket, buffer, response);
+  if (body) *body = response.body();
+  return response.result_int();
+}
+
+// Issue 40, S3: a page of evil.example whose name is rebound to 127.0.0.1 reaches the server
+// with Host evil.example:PORT and, for its WebSocket, Origin http://evil.example:PORT (the pair
+// that passed the old check, which compared Origin with "http://" + Host).
+TEST(ViewServer, ARebindingPagesHostAndOriginAreRefusedAndTheOwnNamesServed) {
+  ViewServer server = start_server();
+  const std::string port = std::to_string(port_of(server.url()));
+  const std::string evil = "evil.example:" + port;
+  const Reply page = http_get(server.url(), "/", evil);
+  EXPECT_EQ(page.status, 421u);
+  EXPECT_NE(page.body.find("not for Host 'evil.example:" + port + "'"), std::string::npos)
+      << page.body;
+  EXPECT_NE(page.body.find(server.url()), std::string::npos) << page.body;
+  std::string why;
+  EXPECT_EQ(upgrade_status(server.url(), evil, "http://" + evil, &why), 421u);
+  EXPECT_NE(why.find("rebound"), std::string::npos) << why;
+  // The right Host with another site's Origin, or none (a browser always sends one).
+  EXPECT_EQ(upgrade_status(server.url(), "127.0.0.1:" + port, "http://" + evil, &why), 403u);
+  EXPECT_NE(why.find("not Origin 'http://evil.example:" + port + "'"), std::string::npos) << why;
+  EXPECT_EQ(upgrade_status(server.url(), "127.0.0.1:" + port, ""), 403u);
+  // Another port on this machine is another site too.
+  EXPECT_EQ(http_get(server.url(), "/", "127.0.0.1:1").status, 421u);
+  EXPECT_EQ(upgrade_status(server.url(), "127.0.0.1:" + port, "http://127.0.0.1:1"), 403u);
+  EXPECT_EQ(http_get(server.url(), "/", "10.1.2.3:" + port).status, 421u);  // bound to loopback
+
+  // This machine's own names are served.
+  for (const std::string& host :
+       {"127.0.0.1:" + port, "localhost:" + port, "LocalHost:" + port, "[::1]:" + port}) {
+    EXPECT_EQ(http_get(server.url(), "/", host).status, 200u) << host;
+    EXPECT_EQ(upgrade_status(server.url(), host, "http://" + host), 101u) << host;
+  }
+}
+
+TEST(ViewServer, BoundToEveryInterfaceItAnswersAnyAddressButNoName) {
+  ViewServerOptions options;
+  options.http = "0.0.0.0:0";
+  options.web_root = web_root();
+  auto server = ViewServer::start(options);
+  ASSERT_TRUE(server) << server.message();
+  const std::string port = std::to_string(port_of(server->url()));
+  EXPECT_EQ(http_get(server->url(), "/", "192.168.1.20:" + port).status, 200u);
+  EXPECT_EQ(http_get(server->url(), "/", "0.0.0.0:" + port).status, 200u);
+  EXPECT_EQ(http_get(server->url(), "/", "scanner.example:" + port).status, 421u);
+  EXPECT_EQ(upgrade_status(server->url(), "192.168.1.20:" + port, "http://evil.example:" + port),
+            403u);
+}
+
 TEST(ViewServer, ALatePageGetsTheNewestOfEveryTopicAndANewScanDropsTheOld) {
   ViewServer server = start_server();
   server.post(mesh_frames("scan-a", 1, 1, 10.0));

@@ -12,7 +12,8 @@ IgtlPoseSource::IgtlPoseSource(acq::IgtlEndpoint endpoint, std::string device, I
                 ? acq::IgtlLink::OnConnect([](acq::IgtlConnection& connection) {
                     return connection.send(acq::igtl_start_tracking_data(20));
                   })
-                : acq::IgtlLink::OnConnect()) {}
+                : acq::IgtlLink::OnConnect()),
+      drops_("igtl:" + link_.endpoint().text()) {}
 
 IgtlPoseSource::~IgtlPoseSource() { stop(); }
 
@@ -47,6 +48,7 @@ Result<acq::Polled> IgtlPoseSource::poll(Pose& pose) {
   if (from_ == IgtlPoseFrom::kTransform && m.type == "TRANSFORM" && named) {
     auto T = acq::decode_igtl_transform(m);
     if (!T) {
+      drops_.count(acq::IgtlDrop::kDamaged, T.message());
       count_lost(1);
       return acq::Polled::kNothing;
     }
@@ -56,6 +58,7 @@ Result<acq::Polled> IgtlPoseSource::poll(Pose& pose) {
   if (from_ == IgtlPoseFrom::kTrackingData && m.type == "TDATA") {
     auto T = acq::decode_igtl_tracking_data(m, device_);
     if (!T) {
+      drops_.count(acq::IgtlDrop::kDamaged, T.message());
       count_lost(1);
       return acq::Polled::kNothing;
     }
@@ -64,8 +67,10 @@ Result<acq::Polled> IgtlPoseSource::poll(Pose& pose) {
     return acq::Polled::kItem;
   }
   if (from_ == IgtlPoseFrom::kImage && m.type == "IMAGE" && named) {
-    auto image = acq::decode_igtl_image(m);
+    acq::IgtlDrop why = acq::IgtlDrop::kDamaged;
+    auto image = acq::decode_igtl_image(m, &why);
     if (!image) {
+      drops_.count(why, image.message());
       count_lost(1);
       return acq::Polled::kNothing;
     }

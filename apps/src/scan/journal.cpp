@@ -163,6 +163,12 @@ Status apply_record(const std::string& payload, const std::string& where,
     } catch (const std::exception& e) {
       return Status::error(where + ": \"arguments\": " + e.what());
     }
+    if (const auto it = record.find("working_directory"); it != record.end()) {
+      if (!it->is_string() || it->get<std::string>().empty() ||
+          !fs::path(it->get<std::string>()).is_absolute())
+        return Status::error(where + ": \"working_directory\" is not an absolute path");
+      contents.working_directory = it->get<std::string>();
+    }
   } else if (type == "keyframe") {
     auto keyframe = keyframe_of(record, where);
     if (!keyframe) return keyframe.status();
@@ -242,9 +248,13 @@ KeyframeJournal::~KeyframeJournal() {
 
 Result<std::unique_ptr<KeyframeJournal>> KeyframeJournal::create(
     const fs::path& path, const std::vector<std::string>& arguments, JournalIo io) {
-  const std::string start =
-      header_bytes() +
-      encode_record({{"type", "scan"}, {"version", kVersion}, {"arguments", arguments}});
+  // The working directory: a resume reads the arguments' relative paths from there, wherever
+  // it is started.
+  std::error_code ec;
+  const fs::path working_directory = fs::current_path(ec);
+  json record = {{"type", "scan"}, {"version", kVersion}, {"arguments", arguments}};
+  if (!ec) record["working_directory"] = working_directory.string();
+  const std::string start = header_bytes() + encode_record(record);
   if (Status written = write_file_atomically(path, start); !written) return written;
   const int fd = ::open(path.c_str(), O_WRONLY | O_CLOEXEC);
   if (fd < 0)

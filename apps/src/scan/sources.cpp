@@ -338,7 +338,7 @@ Result<ScanSource> open_igtl(const SourceRequest& request, const std::string& en
                          "OutputChannel)?");
   }
   auto image = acq::decode_igtl_image(*first);
-  if (!image) return image.status();
+  if (!image) return Status::error("--source igtl:" + endpoint->text() + ": " + image.message());
 
   ScanSource source;
   ScanSetup& setup = source.setup;

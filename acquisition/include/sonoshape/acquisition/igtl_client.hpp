@@ -5,7 +5,9 @@
 #include <Eigen/Core>
 #include <cstdint>
 #include <functional>
+#include <map>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <string>
 #include <vector>
@@ -97,6 +99,31 @@ class IgtlLink {
   double next_try_s_ = 0.0;
 };
 
+/// Why a received message was dropped: the key a source counts it under in losses().
+enum class IgtlDrop {
+  kDamaged,      ///< "damaged": bad CRC, or a body too short for what it declares
+  kUnsupported,  ///< "unsupported": well formed, but not what sonoshape reads (16-bit, RGB, 3D)
+};
+const char* to_string(IgtlDrop reason);
+
+/// The drops of one source, by reason; the first drop of each reason is logged (a warning
+/// naming the peer and the field), the later ones only counted, so that a peer sending nothing
+/// but bad messages neither goes unnoticed nor floods the terminal. Thread-safe.
+class IgtlDrops {
+ public:
+  /// `peer`: how the messages name the server, e.g. "igtl:127.0.0.1:18944".
+  explicit IgtlDrops(std::string peer) : peer_(std::move(peer)) {}
+  /// Counts one drop; logs `message` the first time `reason` occurs.
+  void count(IgtlDrop reason, const std::string& message);
+  /// Drops so far by reason ("damaged", "unsupported"); reasons not seen are absent.
+  std::map<std::string, std::size_t> counts() const;
+
+ private:
+  std::string peer_;
+  mutable std::mutex mutex_;
+  std::map<std::string, std::size_t> counts_;
+};
+
 /// An IMAGE message's content: an 8-bit single-channel 2D image and its matrix.
 struct IgtlImage {
   GreyImage image;
@@ -106,19 +133,21 @@ struct IgtlImage {
   double spacing_mm[2] = {1.0, 1.0};  ///< column and row spacing
 };
 
-/// Decodes an IMAGE (CRC checked). Refuses other scalar types, several components and 3D
-/// volumes with a message naming the device and what it sent.
-Result<IgtlImage> decode_igtl_image(const IgtlMessage& message);
+/// Decodes an IMAGE (CRC checked). The body must hold the image header and the W*H*D pixels it
+/// declares (a peer's sizes are never trusted). Refuses other scalar types, several components,
+/// sub-volumes and 3D volumes. Errors name the device and the field; `why`, when given, says
+/// whether the message was damaged or unsupported.
+Result<IgtlImage> decode_igtl_image(const IgtlMessage& message, IgtlDrop* why = nullptr);
 
-/// Decodes a TRANSFORM (CRC checked): the 4x4 matrix, mm.
+/// Decodes a TRANSFORM (CRC checked, a body of exactly 12 floats): the 4x4 matrix, mm.
 Result<Eigen::Matrix4d> decode_igtl_transform(const IgtlMessage& message);
 
 /// A packed STT_TDATA request: asks a server to stream TDATA every `interval_ms` (PlusServer
 /// and Debian's TrackingDataServer stream TDATA only after one).
 std::vector<std::uint8_t> igtl_start_tracking_data(int interval_ms);
 
-/// The matrix (mm) of the element named `element` in a TDATA message (CRC checked); none when
-/// the message has no such element.
+/// The matrix (mm) of the element named `element` in a TDATA message (CRC checked, a body of
+/// whole 70-byte elements); none when the message has no such element.
 Result<std::optional<Eigen::Matrix4d>> decode_igtl_tracking_data(const IgtlMessage& message,
                                                                  const std::string& element);
 

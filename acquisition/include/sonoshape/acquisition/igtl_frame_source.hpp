@@ -12,7 +12,9 @@ namespace sonoshape::acq {
 /// Receives the IMAGE messages named `image_device` ("" : any) from an OpenIGTLink server;
 /// every other message is skipped. Frame::timestamp_s is the message's timestamp (the
 /// sender's clock, as PlusServer stamps its frames), Frame::index counts the frames kept.
-/// Images that cannot be read (not 8-bit grey 2D, damaged) are dropped and counted. A server
+/// Images that cannot be read are dropped and counted in losses() as "damaged" (a bad CRC, a
+/// body that does not hold the pixels it declares) or "unsupported" (not 8-bit grey 2D); the
+/// first of each is logged with its reason. A server
 /// that is not there at start fails the source with its address; one that goes away later is
 /// the source's condition() while it is connected to again (IgtlLink), and frames resume when
 /// it is back.
@@ -26,6 +28,7 @@ class IgtlFrameSource final : public FrameSource {
   ~IgtlFrameSource() override;
 
   std::string describe() const override { return "igtl:" + link_.endpoint().text(); }
+  std::map<std::string, std::size_t> losses() const override { return drops_.counts(); }
 
  protected:
   Status open() override;
@@ -36,6 +39,7 @@ class IgtlFrameSource final : public FrameSource {
   IgtlLink link_;
   std::string image_device_;
   std::optional<IgtlMessage> pending_;
+  IgtlDrops drops_;
   std::int64_t next_index_ = 0;
 };
 

@@ -32,6 +32,9 @@ struct JournalKeyframe {
 struct JournalContents {
   /// The arguments of the scan command that started the journal (after `scan`).
   std::vector<std::string> arguments;
+  /// The working directory of that command, against which its relative paths were read; none
+  /// in journals written before it was recorded.
+  std::optional<std::filesystem::path> working_directory;
   std::vector<JournalKeyframe> keyframes;  ///< in acceptance order
   bool finished = false;    ///< the scan wrote its end record (it was not interrupted)
   std::size_t resumes = 0;  ///< how many times it was resumed

@@ -2,6 +2,7 @@
 // Who may read the mesh stream (docs/formats/mesh-stream.md, "Who may read the stream"): ZeroMQ
 // CURVE keys in files, and which endpoints other machines can reach.
 #include <filesystem>
+#include <optional>
 #include <string>
 
 #include "sonoshape/core/status.hpp"
@@ -32,8 +33,14 @@ Status write_curve_keypair(const std::filesystem::path& base, const CurveKeyPair
 
 /// Reads one key file (`what`: "secret" or "public", for the messages and to refuse the other
 /// kind of file). Errors name the file and what is wrong: missing, no key line, more than one,
-/// wrong length, a character outside Z85, a file of the other kind.
+/// wrong length, a character outside Z85, a file of the other kind. A secret key file that
+/// others may read or write is still read, with a warning (secret_key_file_exposure).
 Result<std::string> read_curve_key(const std::filesystem::path& file, const std::string& what);
+
+/// Why a secret key file is exposed, when its mode lets its group or others read or write it
+/// (they could copy the scan's identity, or replace it with theirs): a warning naming the file,
+/// its mode and the fix (chmod 600). None for a private file or one that cannot be examined.
+std::optional<std::string> secret_key_file_exposure(const std::filesystem::path& file);
 
 /// Whether only this machine can reach `endpoint`: ipc://, inproc://, or tcp on 127.0.0.0/8,
 /// ::1 or localhost. False for every other tcp host (an interface, "*", 0.0.0.0, another

@@ -26,6 +26,10 @@ struct IgtlServerOptions {
   /// Messages queued per client before the oldest unsent ones are dropped for it: a slow client
   /// misses intermediate updates, it never holds back the publisher.
   std::size_t max_queued_messages = 32;
+  /// Clients served at once; a connection beyond them is closed as soon as it is accepted
+  /// (counted in IgtlServerStats::clients_refused): a flood of connections cannot take the
+  /// server's memory or its thread's time from the clients it serves.
+  std::size_t max_clients = 16;
   /// How long closing the server waits to deliver what is still queued, in ms.
   int linger_ms = 1000;
   /// Device names of the IMAGE and STATUS messages (POLYDATA carry the label's name).
@@ -42,7 +46,14 @@ struct IgtlServerStats {
   std::uint64_t messages_sent = 0;      ///< messages written whole to a client
   std::uint64_t messages_dropped = 0;   ///< messages a slow client missed (replaced or evicted)
   std::uint64_t requests_answered = 0;  ///< GET_POLYDATA / GET_IMAGE / GET_STATUS answered
+  std::size_t clients_refused = 0;      ///< connections closed at once: max_clients reached
+  std::size_t clients_expelled = 0;     ///< clients closed for a message over the size limit
 };
+
+/// The largest message body a client may announce (1 MiB): requests have empty bodies and the
+/// messages 3D Slicer sends unasked (STATUS, capabilities) a few hundred bytes. A client that
+/// announces more is closed, with a warning naming it and the size.
+inline constexpr std::uint64_t kIgtlMaxClientBodyBytes = 1u << 20;
 
 /// Serves one scan over OpenIGTLink. Each connected client gets, on connection, the newest
 /// surface of every label, the newest image and status, and then every update as it is
@@ -56,6 +67,12 @@ struct IgtlServerStats {
 /// thread of the server's own writes them with non-blocking sends. A queued, unsent message is
 /// replaced by a newer one of the same device, and beyond max_queued_messages the oldest unsent
 /// ones are dropped (counted). A client that disconnects or fails is closed and forgotten.
+///
+/// Clients are not trusted (docs/security.md): the server thread reads, parses and writes
+/// without the lock the publish functions take (it takes it only to queue), keeps at most one
+/// message header per client (bodies are skipped, never stored), reads at most 64 KiB per
+/// client per turn, answers a burst of identical requests once, closes a client announcing a
+/// body over kIgtlMaxClientBodyBytes, and serves at most max_clients at once.
 ///
 /// Thread safety: the publish functions may be called from any one thread at a time (or
 /// serialised); stats() and port() from any thread.

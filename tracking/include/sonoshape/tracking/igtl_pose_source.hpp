@@ -2,6 +2,7 @@
 // `--source igtl:HOST:PORT`, poses: TRANSFORM messages of an OpenIGTLink server (PlusServer's
 // ProbeToReference / ProbeToTracker), or the pose an IMAGE message carries. Built only with
 // SONOSHAPE_WITH_OPENIGTLINK.
+#include <map>
 #include <optional>
 #include <string>
 
@@ -23,12 +24,15 @@ enum class IgtlPoseFrom {
 /// timestamp. A matrix that is not finite or not rigid (rotation part off by more than 1e-3)
 /// is an INVALID sample, never used as a pose. A server that goes away after the first
 /// connection is the source's condition() while it is connected to again (acq::IgtlLink).
+/// Messages that cannot be read (a bad CRC, a body of the wrong size) are dropped and counted
+/// in losses() by reason, the first of each logged.
 class IgtlPoseSource final : public PoseSource {
  public:
   IgtlPoseSource(acq::IgtlEndpoint endpoint, std::string device, IgtlPoseFrom from);
   ~IgtlPoseSource() override;
 
   std::string describe() const override;
+  std::map<std::string, std::size_t> losses() const override { return drops_.counts(); }
 
  protected:
   Status open() override;
@@ -39,6 +43,7 @@ class IgtlPoseSource final : public PoseSource {
   std::string device_;
   IgtlPoseFrom from_;
   acq::IgtlLink link_;
+  acq::IgtlDrops drops_;
 };
 
 /// A sample from a matrix: rigid within 1e-3 -> valid, else kInvalid (identity pose).
