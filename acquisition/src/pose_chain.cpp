@@ -226,6 +226,10 @@ Result<PoseChain> find_pose_chain(const SequenceFile& file, const std::filesyste
     if (!split)
       return fail(path, by + " '" + std::string(text) + "' is not a transform name",
                   "write it as <From>To<To>, e.g. ProbeToReference or ToolToTracker");
+    // PLUS's placeholder IdentityToIdentity (timing test data) is no pose.
+    if (split->first == split->second)
+      return fail(path, by + " '" + std::string(text) + "' maps a frame onto itself, no pose",
+                  "name the probe's transform with --pose-transform FROMToTO");
     if (auto chain = chain_of(split->first, split->second, by)) return *chain;
     return no_chain(name, by);
   };

@@ -145,6 +145,11 @@ TEST(PoseChain, AHeaderDefaultWithoutAChainIsRefusedNotGuessed) {
   EXPECT_TRUE(contains(chain.message(), "DefaultFrameTransformName = DefaultTransformToTracker"))
       << chain.message();
   EXPECT_TRUE(contains(chain.message(), "CustomToTracker")) << chain.message();
+  // PLUS's timing test data names a placeholder that maps a frame onto itself.
+  file.set_field("DefaultFrameTransformName", "IdentityToIdentityTransform");
+  const auto identity = find_pose_chain(file, "f.igs.mha");
+  ASSERT_FALSE(identity);
+  EXPECT_TRUE(contains(identity.message(), "maps a frame onto itself")) << identity.message();
   // Without a header default and without Probe or Tool, the default search says what it tried.
   SequenceFile plain;
   plain.add_frame(GreyImage(4, 4));
@@ -220,7 +225,7 @@ TEST(MetaImage, MhdReadsItsRawFromItsOwnFolderOnly) {
     EXPECT_TRUE(contains(refused.message(), "is not a file name in the header's folder"))
         << refused.message();
   }
-  const auto missing = header("h.ra");  // PLUS's Prostate10_video.igs.mhd names its .raw so
+  const auto missing = header("h.ra");  // a misspelt name: the message lists what is there
   ASSERT_FALSE(missing);
   EXPECT_TRUE(contains(missing.message(), "ElementDataFile = h.ra: cannot open"))
       << missing.message();

@@ -104,6 +104,9 @@ std::filesystem::path sidecar_path(const std::filesystem::path& sequence) {
   return sequence.parent_path() / (name + ".plus.xml");
 }
 
+// Frames smaller than this hold no image to segment.
+constexpr int kMinFramePx = 8;
+
 bool has_extension(const std::filesystem::path& path, std::string_view wanted) {
   std::string ext = path.extension().string();
   std::transform(ext.begin(), ext.end(), ext.begin(),
@@ -362,6 +365,12 @@ std::optional<Eigen::Matrix4d> reference_from_probe(const acq::SequenceFile& fil
 }
 
 Status normalise_recording(acq::SequenceFile& file, const std::filesystem::path& path) {
+  // PLUS saves a tracker's buffer with 1x1 dummy images: poses, no B-mode.
+  if (file.frame_count() && (file.width() < kMinFramePx || file.height() < kMinFramePx))
+    return Status::error("sequence file " + path.string() + ": the frames are " +
+                         std::to_string(file.width()) + "x" + std::to_string(file.height()) +
+                         " pixels, no B-mode images (a tracker-only buffer); give the recording "
+                         "of the video (PLUS saves tracker and video buffers separately)");
   const std::string orientation = file.field("UltrasoundImageOrientation").value_or("MF");
   auto flipped = acq::reorient_to_mf(file, path);
   if (!flipped) return flipped.status();

@@ -246,5 +246,19 @@ TEST(SegmentSweep, CroppedRecordingIsPlacedWhereTheUncroppedOneIs) {
   EXPECT_LT(worst_mm, 1e-6);
 }
 
+// PLUS saves a tracker's buffer with 1x1 dummy frames: refused, not reconstructed from nothing.
+TEST(SegmentSweep, TrackerOnlyBufferIsRefused) {
+  acq::SequenceFile file;
+  for (std::size_t k = 0; k < 3; ++k) {
+    file.add_frame(GreyImage(1, 1));
+    file.set_transform("ProbeToTracker", k, Eigen::Matrix4d::Identity(), TrackingStatus::kValid);
+  }
+  const Status refused = normalise_recording(file, "tracker.igs.mha");
+  ASSERT_FALSE(refused);
+  EXPECT_NE(refused.message().find("tracker.igs.mha: the frames are 1x1 pixels"),
+            std::string::npos)
+      << refused.message();
+}
+
 }  // namespace
 }  // namespace sonoshape::seg
