@@ -86,13 +86,18 @@ def main():
     listing = git(args.mirror, "ls-tree", "-r", "--name-only", "HEAD", "TestImages", text=True)
     names = [p for p in listing.stdout.split() if re.search(r"\.igs\.(mha|mhd|nrrd)$", p)]
     rows = []
+
+    def report(*row):
+        rows.append(row)
+        print("\t".join(str(x) for x in row), flush=True)
+
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
         for path in names:
             name = Path(path).name
             local = extract(args.mirror, path, work)
             if local is None:
-                rows.append((name, "absent", "", "", "the mirror lacks this object"))
+                report(name, "absent", "", "", "the mirror lacks this object")
                 continue
             head = local.read_bytes()[:65536].decode("latin-1", "replace")
             m = re.search(r"ElementDataFile\s*=\s*(\S+)", head)
@@ -114,16 +119,16 @@ def main():
             if run.returncode == 0:
                 summary = re.search(r"segment: (\d+) slices from (\d+) frames", log)
                 what = f"{summary.group(1)} slices (every {every})" if summary else ""
-                rows.append((name, "read", summary.group(2) if summary else frames, chain_text,
-                             f"{what}; calibration: {calibration_from}"))
+                report(name, "read", summary.group(2) if summary else frames, chain_text,
+                       f"{what}; calibration: {calibration_from}")
             else:
                 error = next((l for l in log.splitlines() if l.startswith("error")), log[-300:])
-                rows.append((name, "refused", frames, chain_text, error.strip()))
+                error = error.replace(str(work) + "/", "")
+                report(name, "refused", frames, chain_text, error.strip())
             local.unlink()
     read = sum(1 for r in rows if r[1] == "read")
-    for name, state, frames, chain, detail in rows:
-        print(f"{name}\t{state}\t{frames}\t{chain}\t{detail}")
-    print(f"{read} of {len(rows)} sequences read")
+    absent = sum(1 for r in rows if r[1] == "absent")
+    print(f"{read} of {len(rows)} sequences read ({absent} absent from the mirror)")
     return 0
 
 
