@@ -110,7 +110,8 @@ int main(int argc, char** argv) {
   }
   std::vector<std::pair<std::size_t, Eigen::Matrix4d>> frames;
   for (std::size_t k = 0; k < file->frame_count(); ++k)
-    if (const auto pose = seg::reference_from_probe(*file, k)) frames.emplace_back(k, *pose);
+    if (const auto pose = seg::reference_from_probe(*file, k, *setup))
+      frames.emplace_back(k, *pose);
   if (frames.empty()) {
     std::cerr << options.sweep << ": no frame with a valid pose\n";
     return 1;

@@ -5,6 +5,7 @@
 #include <string_view>
 
 #include "fuzz_support.hpp"
+#include "sonoshape/acquisition/pose_chain.hpp"
 #include "sonoshape/acquisition/sequence_file.hpp"
 
 namespace sonoshape::fuzz {
@@ -24,6 +25,14 @@ inline void read_sequence(std::string_view bytes, std::string_view extension) {
   }
   (void)acq::require_tracking(*file, path);
   (void)acq::check_tracked_sweep(*file, path);
+  // What `segment` and `replay:` do next: the pose chain, the crop, the orientation, the timing.
+  if (const auto chain = acq::find_pose_chain(*file, path); chain) {
+    for (std::size_t k = 0; k < file->frame_count(); ++k) (void)chain->pose(*file, k);
+    (void)acq::check_tracked_sweep(*file, path, chain->per_frame_names());
+  }
+  (void)acq::image_to_cropped_image(*file, path);
+  (void)acq::reorient_to_mf(*file, path);
+  (void)acq::fill_missing_timestamps(*file);
 }
 
 }  // namespace sonoshape::fuzz

@@ -129,4 +129,101 @@ TEST(PlusFormats, ImageOnlySlicerSequenceIsRefusedWithTheReason) {
   EXPECT_FALSE(fs::exists(dir.path() / "s.json"));
 }
 
+// Poses as PLUS names them (issue 39), through the commands.
+std::size_t count(const std::string& text, const std::string& part) {
+  std::size_t n = 0;
+  for (auto at = text.find(part); at != std::string::npos; at = text.find(part, at + 1)) ++n;
+  return n;
+}
+
+// A nominal calibration (0.2 mm pixels) for the recordings PlusLibData has none for.
+fs::path nominal_calibration(const fs::path& dir) {
+  const fs::path path = dir / "nominal.json";
+  std::ofstream(path) << R"({"ImageToProbe": [0.2,0,0,0, 0,0.2,0,0, 0,0,0.2,0, 0,0,0,1]})";
+  return path;
+}
+
+// An older PLUS recording: ToolToTracker named by DefaultFrameTransformName, no Timestamp on any
+// frame. `segment` and `scan --source replay:` must see the same frames (the replay used to put
+// them all at one instant and made 1 slice), and say once that the timing is made up.
+TEST(PlusFormats, ToolToTrackerWithoutTimestampsGivesTheSameSlicesThroughSegmentAndReplay) {
+  sonoshape::testing::TempDir dir;
+  const fs::path sweep = kPlus / "SegmentationTest_VLCUS_RandomStepperMotionData2_6frames.igs.mha";
+  const fs::path calibration = nominal_calibration(dir.path());
+  const auto segmented = run("segment " + sweep.string() + " --calibration " +
+                                 calibration.string() + " -o " + (dir.path() / "s.json").string(),
+                             dir.path() / "segment.log");
+  ASSERT_EQ(segmented.exit_code, 0) << segmented.output;
+  EXPECT_EQ(count(segmented.output, "no frame has a Timestamp"), 1u) << segmented.output;
+  EXPECT_NE(segmented.output.find("pose ToolToTracker = ToolToTracker (per frame), chosen by "
+                                  "the header's DefaultFrameTransformName"),
+            std::string::npos)
+      << segmented.output;
+  const auto replayed =
+      run("scan --source replay:" + sweep.string() + " --calibration " + calibration.string() +
+              " --fast --keyframe-angle-deg 0 --keyframe-distance-mm 0 "
+              "--depth 4 -o " +
+              (dir.path() / "out").string(),
+          dir.path() / "scan.log");
+  ASSERT_EQ(replayed.exit_code, 0) << replayed.output;
+  EXPECT_EQ(count(replayed.output, "no frame has a Timestamp"), 1u) << replayed.output;
+  EXPECT_NE(replayed.output.find("pose ToolToTracker = ToolToTracker"), std::string::npos)
+      << replayed.output;
+  const auto from_segment = sonoshape::read_slice_set(dir.path() / "s.json");
+  ASSERT_TRUE(from_segment) << from_segment.message();
+  const auto from_replay = sonoshape::read_slice_set(dir.path() / "out" / "slices.json");
+  ASSERT_TRUE(from_replay) << from_replay.message();
+  EXPECT_GE(from_segment->slices.size(), 4u);
+  EXPECT_EQ(from_replay->slices.size(), from_segment->slices.size());
+}
+
+const fs::path kStepper = kPlus / "USTC_3NWires_ProbeRotation_3frames.igs.mha";
+const fs::path kFrameGrabber = kPlus / "USTC_FrameGrabber_ProbeRotationData_4frames.igs.mha";
+
+// A TRUS stepper recording with its PLUS calibration result: ProbeToTemplate through the
+// stepper's home, the calibration read from <ProbeCalibrationResult>.
+TEST(PlusFormats, StepperRecordingWithItsCalibrationResultSegments) {
+  sonoshape::testing::TempDir dir;
+  const fs::path calibration = kPlus / "UsTemplateCalibration_3NWires.results.xml";
+  const auto result = run("segment " + kStepper.string() + " --calibration " +
+                              calibration.string() + " -o " + (dir.path() / "s.json").string(),
+                          dir.path() / "log");
+  ASSERT_EQ(result.exit_code, 0) << result.output;
+  EXPECT_NE(result.output.find("pose ProbeToTemplate = TemplateToStepperHome^-1 * "
+                               "ProbeToStepperHome (per frame), chosen by default"),
+            std::string::npos)
+      << result.output;
+  EXPECT_NE(result.output.find("calibration from " + calibration.string()), std::string::npos)
+      << result.output;
+  // Asked for another chain that the file does not have: refused, naming what it has.
+  const auto refused =
+      run("segment " + kStepper.string() + " --calibration " + calibration.string() +
+              " --pose-transform ProbeToTracker -o " + (dir.path() / "t.json").string(),
+          dir.path() / "log2");
+  EXPECT_EQ(refused.exit_code, 1);
+  EXPECT_NE(refused.output.find("--pose-transform asks for the pose ProbeToTracker"),
+            std::string::npos)
+      << refused.output;
+  EXPECT_NE(refused.output.find("frames reachable from Probe: StepperEncoderValues, StepperHome, "
+                                "Template"),
+            std::string::npos)
+      << refused.output;
+}
+
+// A ProbeToReference recording with MN frames (a TRUS frame grabber): flipped to MF on reading.
+TEST(PlusFormats, MnFramesAreFlippedAndProbeToReferenceUsed) {
+  sonoshape::testing::TempDir dir;
+  const auto result =
+      run("segment " + kFrameGrabber.string() + " --calibration " +
+              nominal_calibration(dir.path()).string() + " -o " + (dir.path() / "s.json").string(),
+          dir.path() / "log");
+  ASSERT_EQ(result.exit_code, 0) << result.output;
+  EXPECT_NE(result.output.find("UltrasoundImageOrientation = MN: frames flipped to MF"),
+            std::string::npos)
+      << result.output;
+  EXPECT_NE(result.output.find("pose ProbeToReference = ProbeToReference (per frame)"),
+            std::string::npos)
+      << result.output;
+}
+
 }  // namespace

@@ -71,21 +71,32 @@ Result<PlusConfig> read_plus_config(const std::filesystem::path& path) {
     return Status::error(where + ": " + parsed.description() + " at byte " +
                          std::to_string(parsed.offset) +
                          "; check that the file exists and is well-formed XML");
-  const pugi::xml_node root = doc.child("PlusConfiguration");
-  if (!root)
-    return Status::error(where +
-                         ": no <PlusConfiguration> root element; is this a PLUS "
-                         "device-set configuration file?");
+  // A device set keeps its transforms in <CoordinateDefinitions>; fCal's and the TRUS template
+  // calibration's result file (*.results.xml) in <CalibrationResults>.
+  pugi::xml_node transforms = doc.child("PlusConfiguration").child("CoordinateDefinitions");
+  if (!doc.child("PlusConfiguration")) {
+    transforms = doc.child("ProbeCalibrationResult").child("CalibrationResults");
+    if (!transforms)
+      return Status::error(where + ": the root element is <" +
+                           std::string(doc.first_child().name()) +
+                           ">, neither a PLUS device set (<PlusConfiguration> with "
+                           "<CoordinateDefinitions>) nor a PLUS calibration result "
+                           "(<ProbeCalibrationResult> with <CalibrationResults>); give one of "
+                           "those");
+  }
   PlusConfig config;
   int index = 0;
-  for (const pugi::xml_node node : root.child("CoordinateDefinitions").children("Transform")) {
+  for (const pugi::xml_node node : transforms.children("Transform")) {
     const std::string element = where + ": <Transform> #" + std::to_string(index++);
     PlusTransform t;
     t.from = node.attribute("From").as_string();
     t.to = node.attribute("To").as_string();
     if (t.from.empty() || t.to.empty())
       return Status::error(element + " needs both From and To attributes");
-    const auto matrix = parse_matrix(node.attribute("Matrix").as_string());
+    // Result files spread the matrix over lines, tab-separated.
+    std::string text = node.attribute("Matrix").as_string();
+    std::replace_if(text.begin(), text.end(), [](char c) { return c == '\n' || c == '\r'; }, ' ');
+    const auto matrix = parse_matrix(text);
     if (!matrix)
       return Status::error(element + " (" + t.from + "To" + t.to +
                            "): Matrix must be 16 numbers, a row-major 4x4");

@@ -220,6 +220,42 @@ InflateResult inflate_buffer(const std::uint8_t* in, std::size_t in_size, std::u
 
 }  // namespace detail
 
+
+namespace detail {
+
+Result<std::string> read_element_data_file(const std::filesystem::path& header,
+                                           const std::string& name) {
+  const std::string what = "ElementDataFile = " + name;
+  // Only a plain file name: a header must not reach outside its own folder.
+  if (name.empty() || name == "LIST" || name.find_first_of("/\\%") != std::string::npos ||
+      name == "." || name == ".." || std::filesystem::path(name).is_absolute())
+    return fail(header, what + " is not a file name in the header's folder",
+                "sonoshape reads the pixels from one file next to the header (e.g. "
+                "'ElementDataFile = sweep.raw'), or after it ('ElementDataFile = LOCAL'); lists, "
+                "patterns and paths are not read");
+  const std::filesystem::path data_path = header.parent_path() / name;
+  std::ifstream in(data_path, std::ios::binary);
+  if (!in) {
+    std::string similar;
+    std::error_code ec;
+    const std::string stem = std::filesystem::path(name).stem().string();
+    for (const auto& entry : std::filesystem::directory_iterator(
+             header.parent_path().empty() ? std::filesystem::path(".") : header.parent_path(), ec))
+      if (entry.path().stem().string() == stem && entry.path() != header)
+        similar += (similar.empty() ? "" : ", ") + entry.path().filename().string();
+    return fail(header, what + ": cannot open " + data_path.string(),
+                similar.empty() ? "copy the pixel file next to the header"
+                                : "files there with that stem: " + similar +
+                                      "; if one is the pixel file, write its name in "
+                                      "ElementDataFile");
+  }
+  std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  if (in.bad()) return fail(header, what + ": read error in " + data_path.string(), "");
+  return bytes;
+}
+
+}  // namespace detail
+
 Result<SequenceFile> read_sequence_file(const std::filesystem::path& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) return fail(path, "cannot open it", "check the path and that the file is readable");
@@ -260,16 +296,22 @@ Result<SequenceFile> read_sequence_file(const std::filesystem::path& path) {
     set_field(file.fields_, key, value);
     if (key == "ElementDataFile") {
       found_data_file = true;
-      if (value != "LOCAL")
-        return fail(path, "ElementDataFile = " + value + " (pixels in a separate file)",
-                    "only 'ElementDataFile = LOCAL' (pixels after the header, as PLUS writes "
-                    ".igs.mha/.seq.mha) is supported; merge it into one .mha");
       break;
     }
   }
   if (!found_data_file)
     return fail(path, "the header has no 'ElementDataFile = LOCAL' line",
                 "the file is truncated or not a MetaImage sequence");
+  // A .mhd names its pixel file (.raw, or .zraw when compressed) beside it.
+  std::string external;
+  const std::string data_file = file.field("ElementDataFile").value_or("LOCAL");
+  if (data_file != "LOCAL") {
+    auto read = detail::read_element_data_file(path, data_file);
+    if (!read) return read.status();
+    external = std::move(*read);
+  }
+  const std::string_view pixel_data =
+      data_file == "LOCAL" ? std::string_view(data).substr(pos) : std::string_view(external);
 
   const auto ndims = parse_number<int>(file.field("NDims").value_or(""));
   if (!ndims || (*ndims != 2 && *ndims != 3))
@@ -308,7 +350,7 @@ Result<SequenceFile> read_sequence_file(const std::filesystem::path& path) {
                     " but DimSize says " + std::to_string(n) + " frames",
                 "fix DimSize or remove the fields of the missing frames");
   const std::size_t frame_bytes = w * h;  // below 2^62: W and H are at most 2^31 - 1
-  const std::size_t available = data.size() - pos;
+  const std::size_t available = pixel_data.size();
   const bool compressed = is_true(file.field("CompressedData").value_or("False"));
   // The pixels DimSize asks for are checked against the bytes present before anything is
   // allocated: zlib's deflate expands at most 1032 times.
@@ -344,7 +386,7 @@ Result<SequenceFile> read_sequence_file(const std::filesystem::path& path) {
     // One spare output byte tells "exactly DimSize" from "more than DimSize".
     pixels.resize(total + 1);
     const auto [rc, produced] =
-        detail::inflate_buffer(reinterpret_cast<const std::uint8_t*>(data.data() + pos),
+        detail::inflate_buffer(reinterpret_cast<const std::uint8_t*>(pixel_data.data()),
                                compressed_size, pixels.data(), pixels.size(), MAX_WBITS);
     pixels.resize(total);
     if (rc != Z_STREAM_END && rc != Z_BUF_ERROR)
@@ -362,7 +404,7 @@ Result<SequenceFile> read_sequence_file(const std::filesystem::path& path) {
                       std::to_string(produced / frame_bytes) + " is incomplete)",
                   "the file is truncated or DimSize is wrong");
   } else {
-    std::copy_n(reinterpret_cast<const std::uint8_t*>(data.data() + pos), total, pixels.begin());
+    std::copy_n(reinterpret_cast<const std::uint8_t*>(pixel_data.data()), total, pixels.begin());
   }
 
   file.width_ = static_cast<int>(w);
@@ -517,6 +559,13 @@ std::optional<std::string> rigid_problem(const Eigen::Matrix4d& m) {
 
 Status check_tracked_sweep(const SequenceFile& file, const std::filesystem::path& path,
                            std::string_view probe_transform) {
+  return check_tracked_sweep(file, path,
+                             std::vector<std::string>{std::string(probe_transform),
+                                                      std::string("ReferenceToTracker")});
+}
+
+Status check_tracked_sweep(const SequenceFile& file, const std::filesystem::path& path,
+                           const std::vector<std::string>& pose_transforms) {
   if (const auto orientation = file.field("UltrasoundImageOrientation")) {
     const std::string code(trim(*orientation));
     if (!is_plus_orientation(code))
@@ -525,10 +574,9 @@ Status check_tracked_sweep(const SequenceFile& file, const std::filesystem::path
                   "side, y into the far field");
     if (code.substr(0, 2) != "MF")
       return fail(path, "UltrasoundImageOrientation = " + code + " is not supported",
-                  "sonoshape reads MF images only; reorient the frames to MF with PLUS "
-                  "EditSequenceFile");
+                  "the frames must be flipped to MF first (sonoshape segment and scan do "
+                  "this on reading: acq::reorient_to_mf)");
   }
-  const std::string probe_name(probe_transform);
   for (std::size_t k = 0; k < file.frame_count(); ++k) {
     const std::string frame = "frame " + std::to_string(k);
     if (const auto text = file.frame_field(k, "Timestamp")) {
@@ -539,7 +587,7 @@ Status check_tracked_sweep(const SequenceFile& file, const std::filesystem::path
                         "' is not a finite number",
                     "write the frame's acquisition time in seconds");
     }
-    for (const std::string& name : {probe_name, std::string("ReferenceToTracker")}) {
+    for (const std::string& name : pose_transforms) {
       if (!file.frame_field(k, name + std::string(kTransformSuffix))) continue;
       if (file.transform_status(name, k) != TrackingStatus::kValid) continue;  // not used
       const auto matrix = file.transform(name, k);

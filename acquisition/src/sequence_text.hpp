@@ -83,6 +83,11 @@ struct InflateResult {
 InflateResult inflate_buffer(const std::uint8_t* in, std::size_t in_size, std::uint8_t* out,
                              std::size_t out_size, int window_bits);
 
+/// The bytes of a MetaImage header's `ElementDataFile = name`: a plain file name in the header's
+/// folder (no path, no list or pattern). Fails naming the header, the field and the fix.
+Result<std::string> read_element_data_file(const std::filesystem::path& header,
+                                           const std::string& name);
+
 /// The NRRD reader behind read_sequence_file: `data` is the whole file at `path`, beginning with
 /// "NRRD000". See sequence_file.hpp for what it reads.
 Result<SequenceFile> read_nrrd_sequence(const std::filesystem::path& path, const std::string& data);

@@ -43,6 +43,7 @@ struct ScanCommandOptions {
   std::string source;
   std::string tracker;  ///< --tracker: a live tracker replaces the source's poses
   std::filesystem::path calibration;
+  std::string pose_transform;  ///< --pose-transform (replay): FROMToTO
   std::filesystem::path segmentation;
   std::string method;  // "", "threshold" or "graph-cut": overrides the configuration
   std::vector<std::string> seeds;  // LABEL:X,Y,Z, see seed_option.hpp
@@ -495,6 +496,7 @@ int run_scan(const ScanCommandOptions& options, const Resume* resume) {
   request.spec = options.source;
   request.tracker = options.tracker;
   if (!options.calibration.empty()) request.calibration = options.calibration;
+  request.pose_transform = options.pose_transform;
   if (!options.segmentation.empty()) request.segmentation = options.segmentation;
   if (!options.bounds.empty()) {
     if (options.bounds.size() != 6) {
@@ -715,10 +717,16 @@ void add_scan_options(CLI::App& app, ScanCommandOptions& o) {
                  "rate=HZ,range=36|72,latency_ms=MS,product=0xID] (NDI/Ascension trakSTAR, "
                  "driveBAY over USB; defaults sensor=1, rate=80, range=36, latency_ms=0)");
   app.add_option("--calibration", options->calibration,
-                 "ImageToProbe calibration: PLUS device-set XML or JSON {\"ImageToProbe\": [16 "
-                 "numbers]}. Default: sim: the simulated probe's; replay: the header's, else "
+                 "ImageToProbe calibration: PLUS device-set XML, PLUS calibration result "
+                 "(.results.xml) or JSON {\"ImageToProbe\": [16 numbers]}. Default: sim: the "
+                 "simulated probe's; replay: the header's, else "
                  "<name>.plus.xml next to the file")
       ->check(CLI::ExistingFile);
+  app.add_option("--pose-transform", options->pose_transform,
+                 "replay: the probe's pose as PLUS names it, FROMToTO (e.g. ProbeToReference, "
+                 "ToolToTracker), composed along any chain of the file's and the calibration "
+                 "device set's transforms. Default: the header's DefaultFrameTransformName, "
+                 "else Probe (or Tool) to Reference, Tracker, Template or StepperHome");
   app.add_option("--segmentation", options->segmentation,
                  "Segmentation config JSON (docs/segmentation.md). Default: sim: models learnt "
                  "from simulated frames; replay: the header's, else a two-class split")

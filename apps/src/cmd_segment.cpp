@@ -28,6 +28,7 @@ struct SegmentOptions {
   std::filesystem::path input;
   std::filesystem::path config;
   std::filesystem::path calibration;
+  std::string pose_transform;  ///< --pose-transform FROMToTO; empty: the header's or default
   int every = 1;
   bool strict = false;
   std::filesystem::path output = "slices.json";
@@ -47,7 +48,7 @@ struct SegmentOptions {
 std::optional<Box3> sweep_box(const acq::SequenceFile& file, const seg::SweepSetup& setup) {
   std::optional<Box3> box;
   for (std::size_t k = 0; k < file.frame_count(); ++k) {
-    const auto pose = seg::reference_from_probe(file, k);
+    const auto pose = seg::reference_from_probe(file, k, setup);
     if (!pose) continue;
     const Eigen::Matrix4d T_reference_image = *pose * setup.T_probe_image;
     for (const Vec2& p : setup.geometry.sector_px) {
@@ -125,28 +126,41 @@ int report_comparison(const seg::SweepSegmentation& result, const seg::SweepSetu
 
 int run_segment(const SegmentOptions& options) {
   Stopwatch clock;
-  const auto file = acq::read_sequence_file(options.input);
+  auto file = acq::read_sequence_file(options.input);
   if (!file) {
     std::cerr << "error: " << file.message() << '\n';
     return 1;
   }
-  if (const Status tracked = acq::require_tracking(*file, options.input); !tracked) {
-    std::cerr << "error: " << tracked.message() << '\n';
-    return 1;
-  }
-  if (const Status sound = acq::check_tracked_sweep(*file, options.input); !sound) {
-    std::cerr << "error: " << sound.message() << '\n';
+  // A file without any per-frame transform: the image-only and untracked cases explained.
+  if (file->transform_names().empty())
+    if (const Status tracked = acq::require_tracking(*file, options.input); !tracked) {
+      std::cerr << "error: " << tracked.message() << '\n';
+      return 1;
+    }
+  if (const Status normal = seg::normalise_recording(*file, options.input); !normal) {
+    std::cerr << "error: " << normal.message() << '\n';
     return 1;
   }
   auto optional_path = [](const std::filesystem::path& p) {
     return p.empty() ? std::nullopt : std::optional<std::filesystem::path>(p);
   };
   auto setup = seg::prepare_sweep(*file, options.input, optional_path(options.config),
-                                        optional_path(options.calibration));
+                                  optional_path(options.calibration), options.pose_transform);
   if (!setup) {
     std::cerr << "error: " << setup.message() << '\n';
     return 1;
   }
+  if (const Status sound =
+          acq::check_tracked_sweep(*file, options.input, setup->pose_chain->per_frame_names());
+      !sound) {
+    std::cerr << "error: " << sound.message() << '\n';
+    return 1;
+  }
+  const acq::PoseChain& chain = *setup->pose_chain;
+  log_info("segment: pose " + chain.describe() + ", chosen by " + chain.chosen_by +
+           (chain.from != "Probe"
+                ? "; " + chain.from + " is taken as the probe that ImageToProbe maps into"
+                : ""));
   if (!options.method.empty())
     setup->config.method = options.method == "graph-cut" ? seg::LabellingMethod::kGraphCut
                                                          : seg::LabellingMethod::kThreshold;
@@ -287,10 +301,16 @@ CommandRunner add_segment_command(CLI::App& app) {
                  "header, else a two-class split of the data")
       ->check(CLI::ExistingFile);
   app.add_option("--calibration", options->calibration,
-                 "ImageToProbe calibration: PLUS device-set XML or JSON {\"ImageToProbe\": [16 "
-                 "numbers]}. Default: the header's ImageToProbeTransform, else <name>.plus.xml "
-                 "next to the sweep")
+                 "ImageToProbe calibration: PLUS device-set XML, PLUS calibration result "
+                 "(.results.xml) or JSON {\"ImageToProbe\": [16 numbers]}. Default: the "
+                 "header's ImageToProbeTransform, else <name>.plus.xml next to the sweep")
       ->check(CLI::ExistingFile);
+  app.add_option("--pose-transform", options->pose_transform,
+                 "The probe's pose as PLUS names it, FROMToTO (e.g. ProbeToReference, "
+                 "ToolToTracker, ProbeToTemplate): composed from the frames' transforms and "
+                 "the calibration device set's <CoordinateDefinitions> along any chain. "
+                 "Default: the header's DefaultFrameTransformName, else Probe (or Tool) to the "
+                 "first of Reference, Tracker, Template, StepperHome that a chain reaches");
   app.add_option("--every", options->every, "Keep every K-th frame (from the first)")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();

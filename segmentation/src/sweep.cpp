@@ -95,13 +95,26 @@ std::optional<std::pair<LabelModel, std::vector<LabelModel>>> header_models(
 std::filesystem::path sidecar_path(const std::filesystem::path& sequence) {
   std::string name = sequence.filename().string();
   for (const std::string ext :
-       {".igs.mha", ".seq.mha", ".mha", ".igs.nrrd", ".seq.nrrd", ".nrrd", ".nhdr"})
+       {".igs.mha", ".seq.mha", ".mha", ".igs.mhd", ".mhd", ".igs.nrrd", ".seq.nrrd", ".nrrd",
+        ".nhdr"})
     if (name.size() > ext.size() && name.ends_with(ext)) {
       name.resize(name.size() - ext.size());
       break;
     }
   return sequence.parent_path() / (name + ".plus.xml");
 }
+
+// Frames smaller than this hold no image to segment.
+constexpr int kMinFramePx = 8;
+
+bool has_extension(const std::filesystem::path& path, std::string_view wanted) {
+  std::string ext = path.extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char c) { return std::tolower(c); });
+  return ext == wanted;
+}
+
+bool is_xml(const std::filesystem::path& path) { return has_extension(path, ".xml"); }
 
 double calibration_spacing_mm(const Eigen::Matrix4d& T_probe_image) {
   return std::sqrt(T_probe_image.block<3, 1>(0, 0).norm() * T_probe_image.block<3, 1>(0, 1).norm());
@@ -161,14 +174,12 @@ Result<ImageGeometry> geometry_from_header(const acq::FieldList& fields) {
 }
 
 Result<Eigen::Matrix4d> read_calibration(const std::filesystem::path& path) {
-  std::string ext = path.extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(),
-                 [](unsigned char c) { return std::tolower(c); });
-  if (ext == ".xml") return acq::read_image_to_probe(path);
-  if (ext != ".json")
+  if (is_xml(path)) return acq::read_image_to_probe(path);
+  if (!has_extension(path, ".json"))
     return Status::error("calibration " + path.string() +
-                         ": give a PLUS device-set .xml (Transform From=\"Image\" To=\"Probe\") or "
-                         "a .json {\"ImageToProbe\": [16 numbers, row-major]}");
+                         ": give a PLUS device-set .xml or calibration result .results.xml "
+                         "(Transform From=\"Image\" To=\"Probe\") or a .json {\"ImageToProbe\": "
+                         "[16 numbers, row-major]}");
   std::ifstream in(path);
   if (!in)
     return Status::error("cannot read the calibration " + path.string() + ": check the path");
@@ -196,7 +207,8 @@ Result<Eigen::Matrix4d> read_calibration(const std::filesystem::path& path) {
 Result<SweepSetup> prepare_sweep(const acq::SequenceFile& file,
                                  const std::filesystem::path& sequence_path,
                                  const std::optional<std::filesystem::path>& config_path,
-                                 const std::optional<std::filesystem::path>& calibration_path) {
+                                 const std::optional<std::filesystem::path>& calibration_path,
+                                 std::string_view pose_transform) {
   std::optional<SegmentationConfig> config;
   if (config_path) {
     auto read = read_segmentation_config(*config_path);
@@ -204,24 +216,32 @@ Result<SweepSetup> prepare_sweep(const acq::SequenceFile& file,
     config = std::move(*read);
   }
   std::optional<Eigen::Matrix4d> calibration;
+  acq::PlusConfig coordinates;
   if (calibration_path) {
     auto read = read_calibration(*calibration_path);
     if (!read) return read.status();
     calibration = *read;
+    if (is_xml(*calibration_path))
+      if (auto device_set = acq::read_plus_config(*calibration_path)) coordinates = *device_set;
   }
-  auto setup = prepare_sweep(file, sequence_path, config, calibration);
+  auto setup = prepare_sweep(file, sequence_path, config, calibration, pose_transform, coordinates);
   if (setup && config_path) setup->models_from += " (" + config_path->string() + ")";
-  if (setup && calibration_path) setup->calibration_from = calibration_path->string();
+  // "given" (and a crop note) from the in-memory overload: name the file instead.
+  if (setup && calibration_path)
+    setup->calibration_from = calibration_path->string() + setup->calibration_from.substr(5);
   return setup;
 }
 
 Result<SweepSetup> prepare_sweep(const acq::SequenceFile& file,
                                  const std::filesystem::path& sequence_path,
                                  const std::optional<SegmentationConfig>& config,
-                                 const std::optional<Eigen::Matrix4d>& T_probe_image) {
+                                 const std::optional<Eigen::Matrix4d>& T_probe_image,
+                                 std::string_view pose_transform,
+                                 const acq::PlusConfig& coordinates) {
   if (file.frame_count() == 0)
     return Status::error(sequence_path.string() + ": the sequence has no frames");
   SweepSetup setup;
+  acq::PlusConfig fixed = coordinates;
   setup.config = config.value_or(SegmentationConfig{});
   setup.models_from = config ? "config" : "defaults";
 
@@ -238,12 +258,24 @@ Result<SweepSetup> prepare_sweep(const acq::SequenceFile& file,
     if (!read) return read.status();
     setup.T_probe_image = *read;
     setup.calibration_from = sidecar.string();
+    if (auto device_set = acq::read_plus_config(sidecar)) fixed = *device_set;
   } else {
     return Status::error(sequence_path.string() +
                          ": no calibration (no ImageToProbeTransform in the header and no " +
                          sidecar.string() +
                          "); give one with --calibration PLUS.xml or a JSON {\"ImageToProbe\": "
                          "[16 numbers]}");
+  }
+  // The pose: the chain of transforms from the probe to the reconstruction's frame.
+  auto chain = acq::find_pose_chain(file, sequence_path, pose_transform, fixed);
+  if (!chain) return chain.status();
+  setup.pose_chain = std::move(*chain);
+  // A cropped recording's pixels start at the crop's corner (PLUS ImageToCroppedImage).
+  auto crop = acq::image_to_cropped_image(file, sequence_path);
+  if (!crop) return crop.status();
+  if (*crop) {
+    setup.T_probe_image = setup.T_probe_image * (*crop)->inverse();
+    setup.calibration_from += " * ImageToCroppedImage^-1 (the crop)";
   }
   const double spacing_mm = calibration_spacing_mm(setup.T_probe_image);
   if (!(spacing_mm > 0.0) || !std::isfinite(spacing_mm))
@@ -332,6 +364,38 @@ std::optional<Eigen::Matrix4d> reference_from_probe(const acq::SequenceFile& fil
   return Eigen::Matrix4d(reference->inverse() * *probe);
 }
 
+Status normalise_recording(acq::SequenceFile& file, const std::filesystem::path& path) {
+  // PLUS saves a tracker's buffer with 1x1 dummy images: poses, no B-mode.
+  if (file.frame_count() && (file.width() < kMinFramePx || file.height() < kMinFramePx))
+    return Status::error("sequence file " + path.string() + ": the frames are " +
+                         std::to_string(file.width()) + "x" + std::to_string(file.height()) +
+                         " pixels, no B-mode images (a tracker-only buffer); give the recording "
+                         "of the video (PLUS saves tracker and video buffers separately)");
+  const std::string orientation = file.field("UltrasoundImageOrientation").value_or("MF");
+  auto flipped = acq::reorient_to_mf(file, path);
+  if (!flipped) return flipped.status();
+  if (*flipped)
+    log_info(path.string() + ": UltrasoundImageOrientation = " + orientation +
+             ": frames flipped to MF as PLUS does on reading");
+  if (const auto rate_hz = acq::fill_missing_timestamps(file)) {
+    std::ostringstream text;
+    text << path.string() << ": no frame has a Timestamp; frame k is taken at k / " << *rate_hz
+         << " s (" << *rate_hz << " Hz, "
+         << (file.field("AcquisitionFrameRate") ? "the header's AcquisitionFrameRate"
+                                                : "a nominal rate")
+         << ") so that every frame is replayed; give the frames their Timestamp (or the header "
+            "an AcquisitionFrameRate) for the real timing";
+    log_warning(text.str());
+  }
+  return Status::ok();
+}
+
+std::optional<Eigen::Matrix4d> reference_from_probe(const acq::SequenceFile& file, std::size_t k,
+                                                    const SweepSetup& setup) {
+  if (!setup.pose_chain) return reference_from_probe(file, k);
+  return setup.pose_chain->pose(file, k);
+}
+
 SweepSegmentation segment_sweep(const acq::SequenceFile& file, const SweepSetup& setup, int every,
                                 const SweepProgress& progress, const ReadOptions& options,
                                 const SweepLabels& labels) {
@@ -356,7 +420,7 @@ SweepSegmentation segment_sweep(const acq::SequenceFile& file, const SweepSetup&
     labeller.emplace(setup.config, setup.geometry, setup.config.graph_cut);
   for (std::size_t k = 0; k < file.frame_count(); k += static_cast<std::size_t>(every)) {
     ++out.considered;
-    const auto pose = reference_from_probe(file, k);
+    const auto pose = reference_from_probe(file, k, setup);
     if (!pose) {
       ++out.invalid_pose;
       if (progress) progress(out.considered);

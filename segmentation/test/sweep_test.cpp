@@ -198,5 +198,67 @@ TEST(SegmentSweep, CalibrationFromJson) {
   EXPECT_FALSE(read_calibration(path.parent_path() / "nope.txt"));
 }
 
+// PLUS cropped the N-wire recording (NwirePhantomFreehandCropped: 200x150 pixels from
+// (335, 285) of the 820x616 frames, per-frame ImageToCroppedImage): with the crop folded into
+// the calibration, each cropped pixel lands where the same pixel of the full recording does, so
+// the wires are placed where the uncropped recording places them (they were ~26 x 22 mm off).
+TEST(SegmentSweep, CroppedRecordingIsPlacedWhereTheUncroppedOneIs) {
+  const auto full_path = kData / "plus" / "NwirePhantomFreehand.igs.mha";
+  const auto cropped_path = kData / "plus" / "NwirePhantomFreehandCropped.igs.mha";
+  const auto full = acq::read_sequence_file(full_path);
+  ASSERT_TRUE(full) << full.message();
+  const auto cropped = acq::read_sequence_file(cropped_path);
+  ASSERT_TRUE(cropped) << cropped.message();
+  const auto calibration =
+      read_calibration(kData / "plus" / "PlusDeviceSet_Server_Sim_NwirePhantom.xml");
+  ASSERT_TRUE(calibration) << calibration.message();
+  SegmentationConfig config;
+  config.sector = SectorSource::kFull;
+  const auto full_setup = prepare_sweep(*full, full_path, config, *calibration);
+  ASSERT_TRUE(full_setup) << full_setup.message();
+  const auto cropped_setup = prepare_sweep(*cropped, cropped_path, config, *calibration);
+  ASSERT_TRUE(cropped_setup) << cropped_setup.message();
+  EXPECT_NE(cropped_setup->calibration_from.find("ImageToCroppedImage^-1"), std::string::npos);
+  constexpr int kX0 = 335, kY0 = 285;  // the crop's corner in the full image
+  double worst_mm = 0.0;
+  std::size_t bright = 0;
+  for (std::size_t k = 0; k < cropped->frame_count(); ++k) {
+    // The same acquisition: frame k of both files, same timestamp and pose.
+    ASSERT_EQ(cropped->timestamp_s(k), full->timestamp_s(k)) << k;
+    const auto pose_cropped = reference_from_probe(*cropped, k, *cropped_setup);
+    const auto pose_full = reference_from_probe(*full, k, *full_setup);
+    ASSERT_TRUE(pose_cropped && pose_full) << k;
+    const Eigen::Matrix4d T_cropped = *pose_cropped * cropped_setup->T_probe_image;
+    const Eigen::Matrix4d T_full = *pose_full * full_setup->T_probe_image;
+    for (int j = 0; j < cropped->height(); ++j)
+      for (int i = 0; i < cropped->width(); ++i) {
+        // The pixels are the full frame's, shifted by the crop's corner...
+        ASSERT_EQ(cropped->image(k).at(i, j), full->image(k).at(i + kX0, j + kY0)) << k;
+        // ...and a wire's echo (bright) is placed where the full frame places it.
+        if (cropped->image(k).at(i, j) < 128) continue;
+        ++bright;
+        const Eigen::Vector4d a = T_cropped * Eigen::Vector4d(i, j, 0, 1);
+        const Eigen::Vector4d b = T_full * Eigen::Vector4d(i + kX0, j + kY0, 0, 1);
+        worst_mm = std::max(worst_mm, (a - b).norm());
+      }
+  }
+  EXPECT_GT(bright, 100u);
+  EXPECT_LT(worst_mm, 1e-6);
+}
+
+// PLUS saves a tracker's buffer with 1x1 dummy frames: refused, not reconstructed from nothing.
+TEST(SegmentSweep, TrackerOnlyBufferIsRefused) {
+  acq::SequenceFile file;
+  for (std::size_t k = 0; k < 3; ++k) {
+    file.add_frame(GreyImage(1, 1));
+    file.set_transform("ProbeToTracker", k, Eigen::Matrix4d::Identity(), TrackingStatus::kValid);
+  }
+  const Status refused = normalise_recording(file, "tracker.igs.mha");
+  ASSERT_FALSE(refused);
+  EXPECT_NE(refused.message().find("tracker.igs.mha: the frames are 1x1 pixels"),
+            std::string::npos)
+      << refused.message();
+}
+
 }  // namespace
 }  // namespace sonoshape::seg

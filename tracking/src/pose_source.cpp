@@ -85,11 +85,28 @@ ReplayPoseSource::ReplayPoseSource(std::shared_ptr<const acq::SequenceFile> file
       probe_(std::move(probe_transform)),
       reference_(std::move(reference_transform)) {}
 
+ReplayPoseSource::ReplayPoseSource(std::shared_ptr<const acq::SequenceFile> file, std::string name,
+                                   acq::PoseChain chain)
+    : file_(std::move(file)), name_(std::move(name)), chain_(std::move(chain)) {}
+
+Pose replay_pose(const acq::SequenceFile& file, std::size_t k, const acq::PoseChain& chain) {
+  Pose pose;
+  pose.timestamp_s = file.timestamp_s(k).value_or(0.0);
+  pose.status = TrackingStatus::kInvalid;
+  if (const auto T_to_from = chain.pose(file, k)) {
+    pose.T_reference_probe = nearest_rigid(*T_to_from);
+    pose.status = TrackingStatus::kValid;
+  }
+  return pose;
+}
+
 ReplayPoseSource::~ReplayPoseSource() { stop(); }
 
 Status ReplayPoseSource::open() {
   if (!file_ || file_->frame_count() == 0)
     return Status::error(describe() + ": the sequence has no frames");
+  next_ = 0;
+  if (chain_) return Status::ok();
   if (!has_transform(*file_, probe_)) {
     const auto names = file_->transform_names();
     std::string known;
@@ -105,7 +122,8 @@ Status ReplayPoseSource::open() {
 
 Result<acq::Polled> ReplayPoseSource::poll(Pose& pose) {
   if (next_ >= file_->frame_count()) return acq::Polled::kEnd;
-  pose = pose_of_frame(*file_, next_++, probe_, reference_, has_reference_);
+  pose = chain_ ? replay_pose(*file_, next_++, *chain_)
+                : pose_of_frame(*file_, next_++, probe_, reference_, has_reference_);
   return acq::Polled::kItem;
 }
 

@@ -37,10 +37,17 @@ Result<ScanSource> open_replay(const SourceRequest& request, const std::string& 
   const std::filesystem::path path(path_text);
   auto file = acq::read_sequence_file(path);
   if (!file) return file.status();
-  if (const Status tracked = acq::require_tracking(*file, path); !tracked) return tracked;
+  if (file->transform_names().empty())
+    if (const Status tracked = acq::require_tracking(*file, path); !tracked) return tracked;
+  if (const Status normal = seg::normalise_recording(*file, path); !normal) return normal;
   auto shared = std::make_shared<const acq::SequenceFile>(std::move(*file));
-  auto prepared = seg::prepare_sweep(*shared, path, request.segmentation, request.calibration);
+  auto prepared = seg::prepare_sweep(*shared, path, request.segmentation, request.calibration,
+                                     request.pose_transform);
   if (!prepared) return prepared.status();
+  if (const Status sound =
+          acq::check_tracked_sweep(*shared, path, prepared->pose_chain->per_frame_names());
+      !sound)
+    return sound;
 
   ScanSource source;
   ScanSetup& setup = source.setup;
@@ -64,7 +71,8 @@ Result<ScanSource> open_replay(const SourceRequest& request, const std::string& 
                            " frames: is it the file the scan was started with?");
   }
   source.frames = std::make_unique<acq::ReplayFrameSource>(shared, path.string(), first_frame);
-  source.poses = std::make_unique<tracking::ReplayPoseSource>(shared, path.string());
+  source.poses =
+      std::make_unique<tracking::ReplayPoseSource>(shared, path.string(), *prepared->pose_chain);
   source.device_origin_s =
       first_frame == 0 ? acq::first_timestamp_s(*shared) : shared->frame(first_frame).timestamp_s;
   // PLUS stores the tracker already interpolated at each frame's time.
@@ -72,7 +80,12 @@ Result<ScanSource> open_replay(const SourceRequest& request, const std::string& 
   std::ostringstream text;
   text << "replay of " << path.string() << ": " << shared->frame_count() << " frames of "
        << shared->width() << "x" << shared->height() << "; calibration from "
-       << setup.calibration_from << "; models from " << setup.models_from << "; sector from "
+       << setup.calibration_from << "; pose " << prepared->pose_chain->describe()
+       << " (chosen by " << prepared->pose_chain->chosen_by
+       << (prepared->pose_chain->from != "Probe"
+               ? "; " + prepared->pose_chain->from + " taken as the probe of ImageToProbe"
+               : "")
+       << "); models from " << setup.models_from << "; sector from "
        << setup.sector_from;
   source.description = text.str();
   return source;

@@ -1,6 +1,7 @@
 #pragma once
 // PLUS device-set configuration XML: the calibration transforms of <CoordinateDefinitions>
-// (`<Transform From="Image" To="Probe" Matrix="16 numbers"/>`), read and written.
+// (`<Transform From="Image" To="Probe" Matrix="16 numbers"/>`), read and written; a PLUS
+// calibration result (*.results.xml) is read the same way.
 #include <Eigen/Core>
 #include <filesystem>
 #include <optional>
@@ -30,9 +31,11 @@ struct PlusConfig {
   Result<Eigen::Matrix4d> transform(const std::string& from, const std::string& to) const;
 };
 
-/// Reads the <CoordinateDefinitions> of a PLUS configuration (root <PlusConfiguration>). Fails
-/// with the file and element on XML syntax errors, a missing root, and Transform elements
-/// without From/To or whose Matrix is not 16 numbers.
+/// Reads the <CoordinateDefinitions> of a PLUS configuration (root <PlusConfiguration>), or the
+/// <CalibrationResults> of a PLUS calibration result (root <ProbeCalibrationResult>, the
+/// `*.results.xml` of fCal and the TRUS template calibration). Fails with the file and element
+/// on XML syntax errors, another root, and Transform elements without From/To or whose Matrix
+/// is not 16 numbers.
 Result<PlusConfig> read_plus_config(const std::filesystem::path& path);
 
 /// Shortcut: the `ImageToProbe` calibration of a configuration file.

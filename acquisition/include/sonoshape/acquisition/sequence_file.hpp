@@ -97,8 +97,10 @@ class SequenceFile {
 /// Reads a sequence file; the content picks the format: a first line `NRRD0001`..`NRRD0005` is
 /// NRRD, anything else is read as MetaImage.
 ///
-/// MetaImage: NDims 2 (one frame) or 3, ElementType MET_UCHAR with one channel,
-/// `ElementDataFile = LOCAL`, compressed (zlib) or raw.
+/// MetaImage: NDims 2 (one frame) or 3, ElementType MET_UCHAR with one channel, compressed
+/// (zlib) or raw, after the header (`ElementDataFile = LOCAL`) or in one file beside it (a .mhd's
+/// `ElementDataFile = sweep.raw`: a plain name in the header's folder; paths, `..`, LIST and
+/// patterns are refused).
 ///
 /// NRRD (docs/formats/sequences.md has the details):
 /// - axes: two image axes (kind `domain`/`space`, the first two longer than one sample; a third
@@ -145,6 +147,11 @@ Status require_tracking(const SequenceFile& file, const std::filesystem::path& p
 /// 1e-3, last row 0 0 0 1). Fails naming the file, the frame and the field, with the fix.
 Status check_tracked_sweep(const SequenceFile& file, const std::filesystem::path& path,
                            std::string_view probe_transform = "ProbeToTracker");
+/// The same for the per-frame transforms a pose chain reads (PoseChain::per_frame_names): each
+/// valid one must be rigid. Frames of another orientation are flipped to MF first by
+/// reorient_to_mf (pose_chain.hpp).
+Status check_tracked_sweep(const SequenceFile& file, const std::filesystem::path& path,
+                           const std::vector<std::string>& pose_transforms);
 
 struct SequenceWriteOptions {
   bool compress = true;       ///< zlib stream (CompressedData = True) or raw pixels

@@ -23,6 +23,9 @@ struct SourceRequest {
   /// the simulated probe's exact calibration; replay: the file's header, else the sidecar
   /// <name>.plus.xml.
   std::optional<std::filesystem::path> calibration;
+  /// replay: the probe's pose as PLUS names it (acq::find_pose_chain); empty: the header's
+  /// DefaultFrameTransformName, else the default search.
+  std::string pose_transform;
   /// Segmentation configuration JSON (docs/segmentation.md). Default: sim: label models
   /// learnt from a few rendered frames and their ground truth (a preset of the simulated
   /// probe); replay: the file's header models, else a two-class split of its frames.

@@ -10,6 +10,8 @@
 #include <optional>
 #include <string>
 
+#include "sonoshape/acquisition/plus_config.hpp"
+#include "sonoshape/acquisition/pose_chain.hpp"
 #include "sonoshape/acquisition/sequence_file.hpp"
 #include "sonoshape/core/repairs.hpp"
 #include "sonoshape/core/slice.hpp"
@@ -25,7 +27,13 @@ namespace sonoshape::seg {
 struct SweepSetup {
   SegmentationConfig config;
   ImageGeometry geometry;
-  Eigen::Matrix4d T_probe_image = Eigen::Matrix4d::Identity();  ///< PLUS ImageToProbe
+  /// PLUS ImageToProbe of the frames as stored: a cropped recording's crop is folded in
+  /// (ImageToProbe * ImageToCroppedImage^-1), so that pixel (i, j) of a cropped frame lands
+  /// where pixel (i + x0, j + y0) of the full frame does.
+  Eigen::Matrix4d T_probe_image = Eigen::Matrix4d::Identity();
+  /// How each frame's pose is found (the probe's frame to the reconstruction's); none: the
+  /// classic ReferenceToTracker^-1 * ProbeToTracker (legacy_pose_chain).
+  std::optional<acq::PoseChain> pose_chain;
   std::string models_from;       ///< "config", "header", "two-class k-means"
   std::string calibration_from;  ///< where T_probe_image came from
   std::string sector_from;       ///< "header probe", "auto", "full", "config polygon"
@@ -36,8 +44,9 @@ struct SweepSetup {
 /// missing or invalid field.
 Result<ImageGeometry> geometry_from_header(const acq::FieldList& fields);
 
-/// Reads the calibration ImageToProbe from a PLUS device-set XML (<Transform From="Image"
-/// To="Probe">) or a JSON file ({"ImageToProbe": [16 numbers, row-major]}).
+/// Reads the calibration ImageToProbe from a PLUS device-set XML or a PLUS calibration result
+/// (*.results.xml; <Transform From="Image" To="Probe">) or a JSON file ({"ImageToProbe": [16
+/// numbers, row-major]}).
 Result<Eigen::Matrix4d> read_calibration(const std::filesystem::path& path);
 
 /// Resolves the setup of a sweep read from `sequence_path`:
@@ -45,21 +54,37 @@ Result<Eigen::Matrix4d> read_calibration(const std::filesystem::path& path);
 ///   header's SonoshapeLabelGreyMean/Std, else auto_two_class on the frames;
 /// - calibration: `calibration_path`, else the header's ImageToProbeTransform, else the
 ///   sidecar `<name>.plus.xml` next to the file; fails saying how to give one;
-/// - sector: the config's choice; by default the header's probe, else found from the frames.
+/// - sector: the config's choice; by default the header's probe, else found from the frames;
+/// - pose: acq::find_pose_chain with `pose_transform` (empty: the header's or the default) over
+///   the file's transforms and those of the calibration's device set (or sidecar);
+/// - crop: a per-frame ImageToCroppedImage folded into T_probe_image (fails when it moves).
 Result<SweepSetup> prepare_sweep(const acq::SequenceFile& file,
                                  const std::filesystem::path& sequence_path,
                                  const std::optional<std::filesystem::path>& config_path,
-                                 const std::optional<std::filesystem::path>& calibration_path);
+                                 const std::optional<std::filesystem::path>& calibration_path,
+                                 std::string_view pose_transform = {});
 /// The same from an in-memory configuration (no file), for tests and tools; `config` replaces
-/// the defaults but its empty materials are still taken from the header.
+/// the defaults but its empty materials are still taken from the header. `coordinates`: fixed
+/// transforms for the pose chain (a device set's).
 Result<SweepSetup> prepare_sweep(const acq::SequenceFile& file,
                                  const std::filesystem::path& sequence_path,
                                  const std::optional<SegmentationConfig>& config,
-                                 const std::optional<Eigen::Matrix4d>& T_probe_image);
+                                 const std::optional<Eigen::Matrix4d>& T_probe_image,
+                                 std::string_view pose_transform = {},
+                                 const acq::PlusConfig& coordinates = {});
+
+/// Brings a PLUS recording read from `path` to what a sweep expects, as PLUS does on reading:
+/// frames flipped to MF (acq::reorient_to_mf, logged), and every frame a Timestamp when none
+/// has one (acq::fill_missing_timestamps, one warning), so that `segment` and `scan --source
+/// replay:` get the same frames. Fails as reorient_to_mf does.
+Status normalise_recording(acq::SequenceFile& file, const std::filesystem::path& path);
 
 /// The pose of frame k: ReferenceToTracker^-1 * ProbeToTracker (ProbeToTracker alone when the
 /// file has no ReferenceToTracker); none when a status is not OK or a transform is unreadable.
 std::optional<Eigen::Matrix4d> reference_from_probe(const acq::SequenceFile& file, std::size_t k);
+/// The pose of frame k along `setup`'s pose chain (the legacy one when it has none).
+std::optional<Eigen::Matrix4d> reference_from_probe(const acq::SequenceFile& file, std::size_t k,
+                                                    const SweepSetup& setup);
 
 /// A repair the segmenter made in one frame (see make_slice).
 struct FrameRepair {

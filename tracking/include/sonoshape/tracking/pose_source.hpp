@@ -3,9 +3,11 @@
 // samples (simulated trackers, tests) and the replay of the poses of a PLUS sequence file.
 // Hardware backends (trakSTAR, OpenIGTLink) derive from PoseSource too.
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
+#include "sonoshape/acquisition/pose_chain.hpp"
 #include "sonoshape/acquisition/sequence_file.hpp"
 #include "sonoshape/acquisition/stream_source.hpp"
 #include "sonoshape/core/frame.hpp"
@@ -53,6 +55,10 @@ class ReplayPoseSource final : public PoseSource {
   ReplayPoseSource(std::shared_ptr<const acq::SequenceFile> file, std::string name,
                    std::string probe_transform = "ProbeToTracker",
                    std::string reference_transform = "ReferenceToTracker");
+  /// Replays the poses `chain` composes (acq::find_pose_chain): T_reference_probe is the
+  /// chain's T_to_from, kInvalid when a per-frame transform of it is not OK.
+  ReplayPoseSource(std::shared_ptr<const acq::SequenceFile> file, std::string name,
+                   acq::PoseChain chain);
   ~ReplayPoseSource() override;
 
   std::string describe() const override { return "replay:" + name_ + " (poses)"; }
@@ -68,8 +74,12 @@ class ReplayPoseSource final : public PoseSource {
   std::string probe_;
   std::string reference_;
   bool has_reference_ = false;
+  std::optional<acq::PoseChain> chain_;
   std::size_t next_ = 0;
 };
+
+/// The pose sample of frame k along `chain`, as ReplayPoseSource delivers it.
+Pose replay_pose(const acq::SequenceFile& file, std::size_t k, const acq::PoseChain& chain);
 
 /// The pose sample of frame k of a sequence file as ReplayPoseSource delivers it.
 Pose replay_pose(const acq::SequenceFile& file, std::size_t k,
