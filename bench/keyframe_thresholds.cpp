@@ -140,15 +140,16 @@ int main(int argc, char** argv) {
   if (passes > 1) {
     // Slices kept by the end of each minute, per rule.
     std::printf("| rule |");
-    for (int minute = 1; minute * 60.0 <= duration_s + 1e-9; ++minute) std::printf(" %d min |", minute);
+    for (int minute = 1; minute * 60.0 <= duration_s + 1e-9; ++minute)
+      std::printf(" %d min |", minute);
     std::printf("\n");
     for (const Row& row : rows) {
       std::printf("| %s |", row.rule.c_str());
       for (int minute = 1; minute * 60.0 <= duration_s + 1e-9; ++minute) {
         const auto last = static_cast<std::size_t>(minute * 60.0 * fps);
-        std::printf(" %zu |", static_cast<std::size_t>(std::count_if(
-                                 row.frames.begin(), row.frames.end(),
-                                 [&](std::size_t k) { return k <= last; })));
+        std::printf(" %zu |", static_cast<std::size_t>(
+                                  std::count_if(row.frames.begin(), row.frames.end(),
+                                                [&](std::size_t k) { return k <= last; })));
       }
       std::printf("\n");
     }

@@ -2,12 +2,11 @@
 // checking a reconstruction by eye. Orthographic z-buffer rendering with Lambert shading.
 //
 //   sonoshape_render -o view.png [--view iso|x|y|z] [--slices S.slices.json] MESH [MESH ...]
-#include <opencv2/imgcodecs.hpp>
-#include <opencv2/imgproc.hpp>
-
 #include <cmath>
 #include <iostream>
 #include <limits>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 #include <string>
 #include <vector>
 
@@ -35,10 +34,14 @@ int main(int argc, char** argv) {
   std::vector<std::string> meshes;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
-    if (a == "-o" && i + 1 < argc) output = argv[++i];
-    else if (a == "--view" && i + 1 < argc) view = argv[++i];
-    else if (a == "--slices" && i + 1 < argc) slices_path = argv[++i];
-    else meshes.push_back(a);
+    if (a == "-o" && i + 1 < argc)
+      output = argv[++i];
+    else if (a == "--view" && i + 1 < argc)
+      view = argv[++i];
+    else if (a == "--slices" && i + 1 < argc)
+      slices_path = argv[++i];
+    else
+      meshes.push_back(a);
   }
   if (meshes.empty()) {
     std::cerr << "usage: sonoshape_render -o view.png [--view iso|x|y|z] [--slices S] MESH...\n";
@@ -64,11 +67,14 @@ int main(int argc, char** argv) {
   const double scale = 0.9 * size / std::max(hi.x() - lo.x(), hi.y() - lo.y());
   const Vec3 center = 0.5 * (lo + hi);
   auto to_image = [&](const Vec3& p) {
-    return Eigen::Vector2d(0.5 * size + (p.x() - center.x()) * scale, 0.5 * size - (p.y() - center.y()) * scale);
+    return Eigen::Vector2d(0.5 * size + (p.x() - center.x()) * scale,
+                           0.5 * size - (p.y() - center.y()) * scale);
   };
   cv::Mat image(size, size, CV_8UC3, cv::Scalar(255, 255, 255));
-  std::vector<double> depth(static_cast<std::size_t>(size * size), -std::numeric_limits<double>::infinity());
-  const std::vector<cv::Vec3d> colours{{90, 150, 230}, {120, 200, 120}, {220, 160, 90}, {200, 120, 200}};
+  std::vector<double> depth(static_cast<std::size_t>(size * size),
+                            -std::numeric_limits<double>::infinity());
+  const std::vector<cv::Vec3d> colours{
+      {90, 150, 230}, {120, 200, 120}, {220, 160, 90}, {200, 120, 200}};
   const Vec3 light = Vec3(0.3, 0.5, 1.0).normalized();
   for (std::size_t m = 0; m < loaded.size(); ++m) {
     const auto& mesh = loaded[m];
@@ -82,9 +88,11 @@ int main(int argc, char** argv) {
       const double shade = 0.25 + 0.75 * std::abs(n.dot(light));
       const Eigen::Vector2d pa = to_image(a), pb = to_image(b), pc = to_image(c);
       const int x0 = std::max(0, static_cast<int>(std::floor(std::min({pa.x(), pb.x(), pc.x()}))));
-      const int x1 = std::min(size - 1, static_cast<int>(std::ceil(std::max({pa.x(), pb.x(), pc.x()}))));
+      const int x1 =
+          std::min(size - 1, static_cast<int>(std::ceil(std::max({pa.x(), pb.x(), pc.x()}))));
       const int y0 = std::max(0, static_cast<int>(std::floor(std::min({pa.y(), pb.y(), pc.y()}))));
-      const int y1 = std::min(size - 1, static_cast<int>(std::ceil(std::max({pa.y(), pb.y(), pc.y()}))));
+      const int y1 =
+          std::min(size - 1, static_cast<int>(std::ceil(std::max({pa.y(), pb.y(), pc.y()}))));
       const double area = (pb - pa).x() * (pc - pa).y() - (pb - pa).y() * (pc - pa).x();
       if (area == 0.0) continue;
       for (int y = y0; y <= y1; ++y)
@@ -119,7 +127,8 @@ int main(int argc, char** argv) {
           for (std::size_t i = 0; i < ring.size(); ++i) {
             const Eigen::Vector2d p = to_image(rotation * s.to_world(ring[i]));
             const Eigen::Vector2d q = to_image(rotation * s.to_world(ring[(i + 1) % ring.size()]));
-            cv::line(image, cv::Point2d(p.x(), p.y()), cv::Point2d(q.x(), q.y()), cv::Scalar(30, 30, 200), 1, cv::LINE_AA);
+            cv::line(image, cv::Point2d(p.x(), p.y()), cv::Point2d(q.x(), q.y()),
+                     cv::Scalar(30, 30, 200), 1, cv::LINE_AA);
           }
         };
         draw(r.outer);

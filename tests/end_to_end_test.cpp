@@ -199,8 +199,10 @@ TEST_F(EndToEnd, AFileSizeLimitFailsEachCommandsWritesWithTheFileNamed) {
 }
 
 TEST_F(EndToEnd, SmoothingKeepsTheSurfaceOnTheContours) {
-  auto r = run("slice --mesh 1:" + model("spot.obj") + ":spot --planes random --count 24 --seed 3 "
-               "--size-mm 150 -o " + path("spot.slices.json") + " --truth " + path("truth"));
+  auto r = run("slice --mesh 1:" + model("spot.obj") +
+               ":spot --planes random --count 24 --seed 3 "
+               "--size-mm 150 -o " +
+               path("spot.slices.json") + " --truth " + path("truth"));
   ASSERT_EQ(r.exit_code, 0) << r.output;
   auto contour_scores = [&](int smooth) {
     const std::string mesh = path("spot" + std::to_string(smooth) + ".ply");
@@ -208,8 +210,8 @@ TEST_F(EndToEnd, SmoothingKeepsTheSurfaceOnTheContours) {
                   std::to_string(smooth));
     EXPECT_EQ(rr.exit_code, 0) << rr.output;
     const std::string json = path("eval" + std::to_string(smooth) + ".json");
-    rr = run("evaluate --recon " + mesh + " --truth 1:" + path("truth/label_1.ply") +
-             " --slices " + path("spot.slices.json") + " --json " + json);
+    rr = run("evaluate --recon " + mesh + " --truth 1:" + path("truth/label_1.ply") + " --slices " +
+             path("spot.slices.json") + " --json " + json);
     EXPECT_EQ(rr.exit_code, 0) << rr.output;
     std::ifstream in(json);
     return nlohmann::json::parse(in)["labels"][0];
@@ -285,8 +287,8 @@ TEST_F(EndToEnd, ThinPlateFieldOnlineAndOfflineAgree) {
   auto r = run("reconstruct " + example + " -o " + path("online") +
                " --depth 5 --field thin-plate --online --stats " + path("online.json"));
   ASSERT_EQ(r.exit_code, 0) << r.output;
-  r = run("reconstruct " + example + " -o " + path("offline") + " --depth 5 --field thin-plate --stats " +
-          path("offline.json"));
+  r = run("reconstruct " + example + " -o " + path("offline") +
+          " --depth 5 --field thin-plate --stats " + path("offline.json"));
   ASSERT_EQ(r.exit_code, 0) << r.output;
   std::ifstream stats_file(path("offline.json"));
   const nlohmann::json stats = nlohmann::json::parse(stats_file);
@@ -300,7 +302,8 @@ TEST_F(EndToEnd, ThinPlateFieldOnlineAndOfflineAgree) {
     ASSERT_TRUE(b) << b.message();
     ASSERT_FALSE(a->triangles.empty());
     EXPECT_TRUE(sonoshape::check_mesh_health(*a).closed_manifold_oriented());
-    EXPECT_NEAR(sonoshape::signed_volume(*a), sonoshape::signed_volume(*b), 1e-3 * sonoshape::signed_volume(*b))
+    EXPECT_NEAR(sonoshape::signed_volume(*a), sonoshape::signed_volume(*b),
+                1e-3 * sonoshape::signed_volume(*b))
         << label;
   }
   r = run("reconstruct " + example + " -o " + path("x") + " --field harmonic");

@@ -327,8 +327,8 @@ TEST(CommandOptions, ReconstructAndScanShareTheEngineOptions) {
   EXPECT_EQ(reconstruct.size(), 4u);
   EXPECT_EQ(reconstruct, engine_lines("scan"));
   // scan used to take any depth (--depth 100 crashed it).
-  const auto deep =
-      sonoshape::testing::run_command(SONOSHAPE_BINARY, kSmallSim + "--depth 100", dir.path() / "d");
+  const auto deep = sonoshape::testing::run_command(SONOSHAPE_BINARY, kSmallSim + "--depth 100",
+                                                    dir.path() / "d");
   // (the last --depth is checked: "Value 100 not in range 1 to 11")
   EXPECT_NE(deep.exit_code, 0);
   EXPECT_TRUE(contains(deep.output, "not in range 1 to 11")) << deep.output;
@@ -339,8 +339,8 @@ TEST(CommandOptions, ScanTakesEverySimulatorOptionOfSimulate) {
   const std::vector<std::string> scan = option_names("scan", dir.path() / "scan_help");
   // simulate's own: the phantom (scan names it in sim:SPEC), the frame count (scan runs for
   // --sweep-s or --duration) and its outputs.
-  const std::vector<std::string> simulate_only = {"-h",      "--help",  "--phantom", "--frames",
-                                                  "-o",      "--output", "--truth",  "--raw"};
+  const std::vector<std::string> simulate_only = {"-h", "--help",   "--phantom", "--frames",
+                                                  "-o", "--output", "--truth",   "--raw"};
   for (const std::string& name : option_names("simulate", dir.path() / "simulate_help")) {
     if (std::find(simulate_only.begin(), simulate_only.end(), name) != simulate_only.end())
       continue;
@@ -351,11 +351,11 @@ TEST(CommandOptions, ScanTakesEverySimulatorOptionOfSimulate) {
   std::string planes[2];
   for (int seed : {5, 6}) {
     const fs::path out = dir.path() / ("seed" + std::to_string(seed));
-    const auto result = sonoshape::testing::run_command(
-        SONOSHAPE_BINARY,
-        kSmallSim + "--sweep-s 1 --fast --speed smooth --seed " + std::to_string(seed) + " -o " +
-            out.string(),
-        dir.path() / "log");
+    const auto result =
+        sonoshape::testing::run_command(SONOSHAPE_BINARY,
+                                        kSmallSim + "--sweep-s 1 --fast --speed smooth --seed " +
+                                            std::to_string(seed) + " -o " + out.string(),
+                                        dir.path() / "log");
     ASSERT_EQ(result.exit_code, 0) << result.output;
     const auto slices = sonoshape::read_slice_set(out / "slices.json");
     ASSERT_TRUE(slices) << slices.message();
@@ -365,12 +365,12 @@ TEST(CommandOptions, ScanTakesEverySimulatorOptionOfSimulate) {
   }
   EXPECT_NE(planes[0], planes[1]);
   // The old meanings get the new names.
-  const auto organ = sonoshape::testing::run_command(
-      SONOSHAPE_BINARY, kSmallSim + "--seed 1:2,3,4", dir.path() / "organ");
+  const auto organ = sonoshape::testing::run_command(SONOSHAPE_BINARY, kSmallSim + "--seed 1:2,3,4",
+                                                     dir.path() / "organ");
   EXPECT_NE(organ.exit_code, 0);
   EXPECT_TRUE(contains(organ.output, "--organ-seed LABEL:X,Y,Z")) << organ.output;
-  const auto playback = sonoshape::testing::run_command(
-      SONOSHAPE_BINARY, kSmallSim + "--speed 2", dir.path() / "playback");
+  const auto playback = sonoshape::testing::run_command(SONOSHAPE_BINARY, kSmallSim + "--speed 2",
+                                                        dir.path() / "playback");
   EXPECT_NE(playback.exit_code, 0);
   EXPECT_TRUE(contains(playback.output, "--playback-speed")) << playback.output;
 }

@@ -55,8 +55,7 @@ std::string bytes_of(const fs::path& path) {
 // A bound on a wall time, longer in sanitizer builds (an update of the instrumented engine takes
 // seconds).
 std::chrono::seconds bound_s(int seconds) {
-  return std::chrono::seconds(
-      static_cast<long>(seconds * sonoshape::testing::kSanitizerSlowdown));
+  return std::chrono::seconds(static_cast<long>(seconds * sonoshape::testing::kSanitizerSlowdown));
 }
 
 // Runs `argv` to its end; its exit code, with its output in `output`.

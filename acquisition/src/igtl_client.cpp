@@ -154,8 +154,7 @@ struct IgtlConnection::Impl {
     constexpr std::size_t kTimestampOffset = 2 + 12 + 20;  // version, type name, device name
     std::uint64_t raw = 0;
     for (std::size_t i = 0; i < 8; ++i) raw = (raw << 8) | header[kTimestampOffset + i];
-    return static_cast<double>(raw >> 32) +
-           static_cast<double>(raw & 0xffffffffu) / 4294967296.0;
+    return static_cast<double>(raw >> 32) + static_cast<double>(raw & 0xffffffffu) / 4294967296.0;
   }
 
   // The first whole message in the buffer, removed from it; none when incomplete.
@@ -270,8 +269,7 @@ Status IgtlConnection::send(const std::vector<std::uint8_t>& bytes, double timeo
 IgtlLink::IgtlLink(IgtlEndpoint endpoint, OnConnect on_connect, double retry_s)
     : endpoint_(std::move(endpoint)), on_connect_(std::move(on_connect)), retry_s_(retry_s) {}
 
-IgtlLink::IgtlLink(IgtlEndpoint endpoint, IgtlConnection open, OnConnect on_connect,
-                   double retry_s)
+IgtlLink::IgtlLink(IgtlEndpoint endpoint, IgtlConnection open, OnConnect on_connect, double retry_s)
     : IgtlLink(std::move(endpoint), std::move(on_connect), retry_s) {
   connection_.emplace(std::move(open));
 }

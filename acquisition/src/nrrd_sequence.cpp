@@ -413,8 +413,9 @@ Result<std::vector<std::uint8_t>> read_samples(const std::filesystem::path& path
     // A device or a pipe (/dev/zero, /dev/stdin) would be read without end or block forever.
     std::error_code ec;
     if (!std::filesystem::is_regular_file(source_path, ec))
-      return fail(path, where(*data_file) + ": " + source_path.string() +
-                            " is not a regular file (a device, a pipe or a folder)",
+      return fail(path,
+                  where(*data_file) + ": " + source_path.string() +
+                      " is not a regular file (a device, a pipe or a folder)",
                   "name the file that holds the samples");
     std::ifstream in(source_path, std::ios::binary);
     if (!in)

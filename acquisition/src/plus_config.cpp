@@ -1,8 +1,8 @@
 #include "sonoshape/acquisition/plus_config.hpp"
 
 #include <Eigen/LU>
-#include <pugixml.hpp>
 #include <algorithm>
+#include <pugixml.hpp>
 #include <sstream>
 
 #include "sonoshape/acquisition/sequence_file.hpp"
@@ -95,7 +95,8 @@ Result<PlusConfig> read_plus_config(const std::filesystem::path& path) {
       return Status::error(element + " needs both From and To attributes");
     // Result files spread the matrix over lines, tab-separated.
     std::string text = node.attribute("Matrix").as_string();
-    std::replace_if(text.begin(), text.end(), [](char c) { return c == '\n' || c == '\r'; }, ' ');
+    std::replace_if(
+        text.begin(), text.end(), [](char c) { return c == '\n' || c == '\r'; }, ' ');
     const auto matrix = parse_matrix(text);
     if (!matrix)
       return Status::error(element + " (" + t.from + "To" + t.to +

@@ -3,11 +3,11 @@
 #include <zlib.h>
 
 #include <algorithm>
-#include <cerrno>
-#include <cstring>
 #include <array>
+#include <cerrno>
 #include <charconv>
 #include <cmath>
+#include <cstring>
 #include <fstream>
 #include <limits>
 #include <map>
@@ -21,8 +21,8 @@ namespace {
 
 using detail::fail;
 using detail::kFramePrefix;
-using detail::split_frame_key;
 using detail::parse_number;
+using detail::split_frame_key;
 using detail::split_words;
 using detail::trim;
 
@@ -220,7 +220,6 @@ InflateResult inflate_buffer(const std::uint8_t* in, std::size_t in_size, std::u
 
 }  // namespace detail
 
-
 namespace detail {
 
 Result<std::string> read_element_data_file(const std::filesystem::path& header,
@@ -366,8 +365,7 @@ Result<SequenceFile> read_sequence_file(const std::filesystem::path& path) {
     return fail(path,
                 "the raw pixel data has " + std::to_string(available) + " bytes, DimSize needs " +
                     std::to_string(w) + "x" + std::to_string(h) + "x" + std::to_string(n) +
-                    " (frame " + std::to_string(available / frame_bytes) +
-                    " is incomplete)",
+                    " (frame " + std::to_string(available / frame_bytes) + " is incomplete)",
                 "the file is truncated or DimSize is wrong");
   const std::size_t total = frame_bytes * n;
   std::vector<std::uint8_t> pixels(total);
@@ -559,9 +557,9 @@ std::optional<std::string> rigid_problem(const Eigen::Matrix4d& m) {
 
 Status check_tracked_sweep(const SequenceFile& file, const std::filesystem::path& path,
                            std::string_view probe_transform) {
-  return check_tracked_sweep(file, path,
-                             std::vector<std::string>{std::string(probe_transform),
-                                                      std::string("ReferenceToTracker")});
+  return check_tracked_sweep(
+      file, path,
+      std::vector<std::string>{std::string(probe_transform), std::string("ReferenceToTracker")});
 }
 
 Status check_tracked_sweep(const SequenceFile& file, const std::filesystem::path& path,
@@ -582,22 +580,23 @@ Status check_tracked_sweep(const SequenceFile& file, const std::filesystem::path
     if (const auto text = file.frame_field(k, "Timestamp")) {
       const auto t = parse_number<double>(*text);
       if (!t || !std::isfinite(*t))
-        return fail(path,
-                    frame + ": Timestamp = '" + std::string(trim(*text)) +
-                        "' is not a finite number",
-                    "write the frame's acquisition time in seconds");
+        return fail(
+            path, frame + ": Timestamp = '" + std::string(trim(*text)) + "' is not a finite number",
+            "write the frame's acquisition time in seconds");
     }
     for (const std::string& name : pose_transforms) {
       if (!file.frame_field(k, name + std::string(kTransformSuffix))) continue;
       if (file.transform_status(name, k) != TrackingStatus::kValid) continue;  // not used
       const auto matrix = file.transform(name, k);
       if (!matrix)
-        return fail(path, frame + ": " + name + std::string(kTransformSuffix) +
-                              " is not 16 numbers", "write a row-major 4x4 matrix");
+        return fail(path,
+                    frame + ": " + name + std::string(kTransformSuffix) + " is not 16 numbers",
+                    "write a row-major 4x4 matrix");
       if (const auto problem = rigid_problem(*matrix))
         return fail(path, frame + ": " + name + std::string(kTransformSuffix) + ": " + *problem,
                     "a tracker pose is a rotation and a translation: fix the matrix, or mark "
-                    "the frame's " + name + "TransformStatus = INVALID to skip it");
+                    "the frame's " +
+                        name + "TransformStatus = INVALID to skip it");
     }
   }
   return Status::ok();

@@ -54,9 +54,10 @@ void print_opencl(std::ostream& out) {
   const auto devices = kernels::list_devices(&error);
   if (!error.empty()) out << "  " << error << "\n";
   for (const kernels::DeviceInfo& d : devices) {
-    out << "  " << d.platform_name << " / " << d.device_name << " (" << (d.gpu ? "GPU" : "CPU") << ", "
-        << d.compute_units << " compute units, " << std::fixed << std::setprecision(1)
-        << static_cast<double>(d.global_memory_bytes) / (1024.0 * 1024.0 * 1024.0) << " GiB, " << d.version << "): ";
+    out << "  " << d.platform_name << " / " << d.device_name << " (" << (d.gpu ? "GPU" : "CPU")
+        << ", " << d.compute_units << " compute units, " << std::fixed << std::setprecision(1)
+        << static_cast<double>(d.global_memory_bytes) / (1024.0 * 1024.0 * 1024.0) << " GiB, "
+        << d.version << "): ";
     if (d.fp64)
       out << "fp64, --device opencl:" << d.platform << ":" << d.device << "\n";
     else
@@ -92,7 +93,8 @@ std::string resolve_device(const std::string& option) {
     log_info("--device auto: no OpenCL GPU with fp64, the field runs on the CPU");
     return "cpu";
   }
-  return "opencl:" + std::to_string(device->info().platform) + ":" + std::to_string(device->info().device);
+  return "opencl:" + std::to_string(device->info().platform) + ":" +
+         std::to_string(device->info().device);
 }
 
 CommandRunner add_devices_command(CLI::App&) {

@@ -115,7 +115,8 @@ void print_table(const std::vector<sim::LabelScore>& scores,
   std::printf("\nconnected parts (6-connected inside samples of the grid)\n");
   std::printf("%-6s %9s %9s %9s\n", "label", "recon", "baseline", "truth");
   for (const auto& s : scores)
-    std::printf("%-6d %9s %9s %9d\n", s.label, s.reconstructed ? std::to_string(s.components).c_str() : "-",
+    std::printf("%-6d %9s %9s %9d\n", s.label,
+                s.reconstructed ? std::to_string(s.components).c_str() : "-",
                 s.baseline_components < 0 ? "-" : std::to_string(s.baseline_components).c_str(),
                 s.truth_components);
   std::printf("\nmesh health of the reconstruction\n");
@@ -147,7 +148,8 @@ nlohmann::json to_json(const std::vector<sim::LabelScore>& scores,
         {"iou", value(s.iou)},
         {"baseline_iou", value(s.baseline_iou)},
         {"components", s.components},
-        {"baseline_components", s.baseline_components < 0 ? nlohmann::json(nullptr) : nlohmann::json(s.baseline_components)},
+        {"baseline_components", s.baseline_components < 0 ? nlohmann::json(nullptr)
+                                                          : nlohmann::json(s.baseline_components)},
         {"truth_components", s.truth_components},
         {"mean_surface_distance_percent", value(s.mean_surface_distance)},
         {"hausdorff_distance_percent", value(s.hausdorff_distance)},

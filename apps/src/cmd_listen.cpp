@@ -39,8 +39,8 @@ struct ListenOptions {
   std::filesystem::path output;
   std::string snapshot;
   std::filesystem::path server_key;  // --server-key: the publisher's CURVE public key file
-  double duration_s = 0.0;  // 0: no limit
-  std::uint64_t count = 0;  // 0: no limit
+  double duration_s = 0.0;           // 0: no limit
+  std::uint64_t count = 0;           // 0: no limit
   int slow_ms = 0;
   bool until_idle = false;
   // A recorder wants every message: a deep receive queue lets ZeroMQ's I/O thread drain the

@@ -1,16 +1,15 @@
 // `sonoshape reconstruct INPUT -o OUT [--online]`: reconstruction of a slice set, at once or
 // slice by slice through the online engine (recon::Reconstructor).
 #include <CLI/CLI.hpp>
-
 #include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
-#include <sstream>
 #include <iostream>
 #include <memory>
-#include <set>
 #include <nlohmann/json.hpp>
+#include <set>
+#include <sstream>
 
 #include "commands.hpp"
 #include "engine_options.hpp"
@@ -70,13 +69,13 @@ nlohmann::json meshes_json(const MeshSet& meshes) {
   nlohmann::json list = nlohmann::json::array();
   for (const MeshSet::Entry& entry : meshes.meshes) {
     const MeshHealth health = check_mesh_health(entry.mesh);
-    list.push_back({{"label", entry.label},
-                    {"name", entry.name},
-                    {"vertices", entry.mesh.vertices.size()},
-                    {"triangles", entry.mesh.triangles.size()},
-                    {"volume", signed_volume(entry.mesh)},
-                    {"closed_manifold_oriented", !entry.mesh.empty() &&
-                                                     health.closed_manifold_oriented()}});
+    list.push_back(
+        {{"label", entry.label},
+         {"name", entry.name},
+         {"vertices", entry.mesh.vertices.size()},
+         {"triangles", entry.mesh.triangles.size()},
+         {"volume", signed_volume(entry.mesh)},
+         {"closed_manifold_oriented", !entry.mesh.empty() && health.closed_manifold_oriented()}});
   }
   return list;
 }
@@ -131,8 +130,8 @@ int run_online(const SliceSet& set, const std::string& output, const std::string
     if (emit_every > 0 && (step + 1) % static_cast<std::size_t>(emit_every) == 0) {
       std::ostringstream name;
       name << "step_" << std::setw(4) << std::setfill('0') << step + 1;
-      const auto written = publish::write_mesh_set(reconstructor.mesh(),
-                                                   std::filesystem::path(output) / name.str());
+      const auto written =
+          publish::write_mesh_set(reconstructor.mesh(), std::filesystem::path(output) / name.str());
       if (!written) {
         std::cerr << "error: " << written.message() << '\n';
         return 2;
@@ -172,25 +171,28 @@ CommandRunner add_reconstruct_command(CLI::App& app) {
     std::string order = "file";
   };
   auto opt = std::make_shared<Options>();
-  app.add_option("input", opt->input, "Slice set: .slices.json (see docs/formats/slices.md) or .csl")
+  app.add_option("input", opt->input,
+                 "Slice set: .slices.json (see docs/formats/slices.md) or .csl")
       ->required();
   app.add_option("-o,--output", opt->output,
                  "Output: a .ply/.obj/.off file (one label) or a directory of label_<id>.ply")
       ->required();
-  add_engine_options(app, {opt->engine.max_depth, opt->engine.smoothing_iterations, opt->field,
-                          opt->device});
+  add_engine_options(
+      app, {opt->engine.max_depth, opt->engine.smoothing_iterations, opt->field, opt->device});
   app.add_option("--threads", opt->engine.threads,
                  "Threads for every stage of the reconstruction (0: all cores)")
       ->check(CLI::Range(0, 1024))
       ->capture_default_str();
-  app.add_option("--stats", opt->stats_path, "Write per-stage seconds and counts as JSON (with "
+  app.add_option("--stats", opt->stats_path,
+                 "Write per-stage seconds and counts as JSON (with "
                  "--online: totals and one entry per step)");
   app.add_flag("--strict", opt->strict,
                "Refuse input that needs repairs (pinched contours, a flipped plane equation, "
                "rounding overlaps, ...) instead of repairing it with a warning");
-  app.add_flag("--whole-arrangement", [opt](std::int64_t) { opt->engine.cells_on_demand = false; },
-               "Build every cell of the slices' arrangement instead of those the surface needs (the "
-               "same field, at a cost that grows with the cube of the slice count; for comparisons)");
+  app.add_flag(
+      "--whole-arrangement", [opt](std::int64_t) { opt->engine.cells_on_demand = false; },
+      "Build every cell of the slices' arrangement instead of those the surface needs (the "
+      "same field, at a cost that grows with the cube of the slice count; for comparisons)");
   app.add_flag("--online", opt->online,
                "Feed the slices one by one to the online engine (an update per slice)");
   app.add_option("--emit-every", opt->emit_every,
@@ -251,7 +253,8 @@ CommandRunner add_reconstruct_command(CLI::App& app) {
                     " (try a larger --depth)");
     }
     if (!unused.empty())
-      log_warning("label(s) " + unused + " declared but no region uses them: their meshes "
+      log_warning("label(s) " + unused +
+                  " declared but no region uses them: their meshes "
                   "are empty");
     log_info("reconstructed " + std::to_string(stats.slices) + " slices, " +
              std::to_string(stats.cells) + " cells, " + std::to_string(stats.field_evaluations) +

@@ -18,8 +18,8 @@
 #include <thread>
 
 #include "commands.hpp"
-#include "seed_option.hpp"
 #include "engine_options.hpp"
+#include "seed_option.hpp"
 #include "sim_options.hpp"
 #include "sonoshape/core/log.hpp"
 #include "sonoshape/publish/curve.hpp"
@@ -45,7 +45,7 @@ struct ScanCommandOptions {
   std::filesystem::path calibration;
   std::string pose_transform;  ///< --pose-transform (replay): FROMToTO
   std::filesystem::path segmentation;
-  std::string method;  // "", "threshold" or "graph-cut": overrides the configuration
+  std::string method;              // "", "threshold" or "graph-cut": overrides the configuration
   std::vector<std::string> seeds;  // LABEL:X,Y,Z, see seed_option.hpp
   std::filesystem::path out;
   std::filesystem::path resume;  ///< --resume DIR: the scan whose journal is in DIR goes on

@@ -13,10 +13,10 @@
 #include <sstream>
 
 #include "commands.hpp"
+#include "seed_option.hpp"
 #include "sonoshape/acquisition/sequence_file.hpp"
 #include "sonoshape/core/log.hpp"
 #include "sonoshape/core/slice_io.hpp"
-#include "seed_option.hpp"
 #include "sonoshape/scan/label_prior.hpp"
 #include "sonoshape/segmentation/overlay.hpp"
 #include "sonoshape/segmentation/sweep.hpp"

@@ -55,9 +55,8 @@ int run_simulate(const SimulateOptions& options) {
   const sim::Probe probe(scenario->probe);
   const sim::TrackerOptions& tracker = scenario->tracker;
 
-  const sim::SimulatedAcquisition acquisition =
-      sim::acquire(sim::Trajectory(scenario->motion), tracker, options.frames,
-                   scenario_options.frame_rate_hz);
+  const sim::SimulatedAcquisition acquisition = sim::acquire(
+      sim::Trajectory(scenario->motion), tracker, options.frames, scenario_options.frame_rate_hz);
   const sim::BModeSimulator simulator(*phantom, probe);
   sim::SimulatedSweep sweep;
   {

@@ -15,8 +15,8 @@
 #include "sonoshape/publish/mesh_writer.hpp"
 #include "sonoshape/simulator/mesh_reader.hpp"
 #include "sonoshape/simulator/mesh_slicer.hpp"
-#include "sonoshape/simulator/unknowns.hpp"
 #include "sonoshape/simulator/plane_generator.hpp"
+#include "sonoshape/simulator/unknowns.hpp"
 
 namespace sonoshape::apps {
 namespace {
@@ -140,7 +140,8 @@ int run_slice(const SliceOptions& options) {
     unknowns.seed = options.seed + 1;
     sim::add_unknowns(set, unknowns);
     if (const Status valid = validate_slice_set(set, options.output.string()); !valid) {
-      std::cerr << "error: the unknown regions made an invalid slice set: " << valid.message() << '\n';
+      std::cerr << "error: the unknown regions made an invalid slice set: " << valid.message()
+                << '\n';
       return 1;
     }
   }

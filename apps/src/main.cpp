@@ -1,6 +1,5 @@
 // The `sonoshape` command: parses options and dispatches to one subcommand.
 #include <CLI/CLI.hpp>
-
 #include <csignal>
 #include <exception>
 #include <iostream>
@@ -55,7 +54,8 @@ int main(int argc, char** argv) {
       sonoshape::apps::add_view_command);
   add("keys", "Make a CURVE key pair (NAME.key, NAME.pub) that encrypts a mesh stream",
       sonoshape::apps::add_keys_command);
-  add("devices", "List the frame grabbers, trackers and OpenCL devices attached, each as the option to paste",
+  add("devices",
+      "List the frame grabbers, trackers and OpenCL devices attached, each as the option to paste",
       sonoshape::apps::add_devices_command);
 
   try {

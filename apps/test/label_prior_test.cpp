@@ -1,11 +1,12 @@
 // The reconstruction as the segmentation's prior: meshes cut by a frame's plane, drawn into its
 // pixels; and a prior built from slices of a sphere predicting the next frame.
+#include "sonoshape/scan/label_prior.hpp"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <numbers>
 
-#include "sonoshape/scan/label_prior.hpp"
 #include "sonoshape/simulator/phantom.hpp"
 
 namespace sonoshape::scan {
@@ -32,7 +33,7 @@ MeshSet nested_spheres() {
 TEST(PredictLabelMap, DrawsNestedSectionsWherePixelsAre) {
   const seg::ImageGeometry geometry = seg::full_image_geometry(100, 80, 0.5);
   const LabelImage map = predict_label_map(nested_spheres(), plane_at(0.0), geometry);
-  EXPECT_EQ(map.at(50, 40), 2);  // (25, 20) mm: the lesion, drawn over the organ's hole
+  EXPECT_EQ(map.at(50, 40), 2);       // (25, 20) mm: the lesion, drawn over the organ's hole
   EXPECT_EQ(map.at(50 + 20, 40), 1);  // 10 mm off the centre: the organ
   EXPECT_EQ(map.at(50 + 34, 40), 0);  // 17 mm off: outside both
   EXPECT_EQ(map.at(2, 2), 0);
@@ -74,7 +75,7 @@ TEST(ReconstructionPrior, PredictsNothingFirstThenTheOrganBetweenItsSlices) {
   }
   const auto predicted = prior.predict(plane_at(0.0), geometry);
   ASSERT_TRUE(predicted);
-  EXPECT_EQ(predicted->at(50, 40), 1);      // the organ's centre between its slices
+  EXPECT_EQ(predicted->at(50, 40), 1);       // the organ's centre between its slices
   EXPECT_EQ(predicted->at(50 + 36, 40), 0);  // well outside it
 }
 

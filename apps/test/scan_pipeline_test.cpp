@@ -296,8 +296,8 @@ TEST(ScanPipeline, FastPlaybackLosesNothingAndBatchesBehindASlowReconstruction) 
 }
 
 TEST(ScanPipeline, TheSummarySaysWhyAMaterialOfTheSetupHasNoMesh) {
-  ScanSource source = fake_source(std::make_unique<FakeFrames>(20, 33),
-                                  sliding_poses(18.0, -100, 800, 25));
+  ScanSource source =
+      fake_source(std::make_unique<FakeFrames>(20, 33), sliding_poses(18.0, -100, 800, 25));
   source.setup.labels = {{1, "organ"}, {2, "lesion"}};  // the segmentation only finds the organ
   ScanPipeline pipeline(std::move(source), std::make_unique<FakeSegmentation>(),
                         std::make_unique<FakeReconstruction>(0), fast_options());
@@ -488,10 +488,9 @@ TEST(ScanPipeline, PastTheSliceBudgetKeyframesComeAtHalfTheDensity) {
   auto scan = [&](std::size_t budget) {
     ScanOptions options = fast_options();
     options.keyframes.slice_budget = budget;
-    ScanPipeline pipeline(fake_source(std::make_unique<FakeFrames>(60, 33),
-                                      sliding_poses(mm_per_s, -100, 2100, 25)),
-                          std::make_unique<FakeSegmentation>(),
-                          std::make_unique<FakeReconstruction>(), options);
+    ScanPipeline pipeline(
+        fake_source(std::make_unique<FakeFrames>(60, 33), sliding_poses(mm_per_s, -100, 2100, 25)),
+        std::make_unique<FakeSegmentation>(), std::make_unique<FakeReconstruction>(), options);
     auto sink = std::make_shared<RecordingSink>();
     pipeline.add_sink(sink);
     EXPECT_TRUE(pipeline.start());

@@ -237,9 +237,7 @@ TEST(ScanSources, SimulatedScanReconstructsTheTwoOrgans) {
 class CountingSegmenter final : public SegmentationStage {
  public:
   explicit CountingSegmenter(ScanSetup setup) : inner_(std::move(setup)) {}
-  Result<LabeledSlice> segment(const TrackedFrame& frame) override {
-    return inner_.segment(frame);
-  }
+  Result<LabeledSlice> segment(const TrackedFrame& frame) override { return inner_.segment(frame); }
   void on_meshes(const MeshSet& meshes) override {
     inner_.on_meshes(meshes);
     if (!meshes.meshes.empty()) ++*meshes_seen;

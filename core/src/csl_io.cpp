@@ -90,8 +90,8 @@ class Tokens {
     if (!t.text.empty() && t.text.front() == '+') ++first;  // from_chars refuses a leading '+'
     const auto [end, ec] = std::from_chars(first, t.text.data() + t.text.size(), value);
     if (ec != std::errc() || end != t.text.data() + t.text.size() || !std::isfinite(value))
-      fail(t.line, std::string("expected ") + what + " (a finite number), got \"" +
-                       excerpt(t.text) + "\"");
+      fail(t.line,
+           std::string("expected ") + what + " (a finite number), got \"" + excerpt(t.text) + "\"");
     return value;
   }
 
@@ -188,8 +188,8 @@ Plane read_plane(Tokens& tokens, int n_labels) {
     p.y() = tokens.take_double("a vertex y");
     p.z() = tokens.take_double("a vertex z");
     if (p.cwiseAbs().maxCoeff() > kMaxCoordinateMm)
-      fail(tokens.line(), "plane " + std::to_string(plane.index) + ", vertex " +
-                              std::to_string(k) + ": a coordinate beyond 1e12 mm (" +
+      fail(tokens.line(), "plane " + std::to_string(plane.index) + ", vertex " + std::to_string(k) +
+                              ": a coordinate beyond 1e12 mm (" +
                               detail::format_double(p.cwiseAbs().maxCoeff()) +
                               "), where lengths lose their precision; check the units");
     plane.vertices.push_back(p);

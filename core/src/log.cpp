@@ -29,7 +29,9 @@ void log_debug(const std::string& m) {
 }
 
 Progress::Progress(std::string label, std::size_t total)
-    : label_(std::move(label)), total_(total), start_(std::chrono::steady_clock::now()),
+    : label_(std::move(label)),
+      total_(total),
+      start_(std::chrono::steady_clock::now()),
       last_print_(start_) {}
 
 Progress::~Progress() { finish(); }

@@ -24,8 +24,7 @@ std::uint64_t edge_key(std::uint32_t a, std::uint32_t b) {
 // Zero area relative to the triangle's size: |cross| at most 1e-12 of the longest edge squared
 // (rounding of collinear points), or any vertex index out of range / non-finite.
 bool zero_area(const TriangleMesh& mesh, const std::array<std::uint32_t, 3>& t) {
-  if (t[0] >= mesh.vertices.size() || t[1] >= mesh.vertices.size() ||
-      t[2] >= mesh.vertices.size())
+  if (t[0] >= mesh.vertices.size() || t[1] >= mesh.vertices.size() || t[2] >= mesh.vertices.size())
     return false;  // the index is the defect, not the area; other checks see it
   const Vec3& a = mesh.vertices[t[0]];
   const Vec3& b = mesh.vertices[t[1]];
@@ -60,9 +59,12 @@ MeshHealth check_mesh_health(const TriangleMesh& mesh) {
     const int reverse_count = reverse == directed.end() ? 0 : reverse->second;
     if (a < b || reverse_count == 0) {  // visit each undirected edge once
       const int total = count + reverse_count;
-      if (total == 1) ++health.boundary_edges;
-      else if (total > 2) ++health.non_manifold_edges;
-      else if (count == 2 || reverse_count == 2) ++health.misoriented_edges;
+      if (total == 1)
+        ++health.boundary_edges;
+      else if (total > 2)
+        ++health.non_manifold_edges;
+      else if (count == 2 || reverse_count == 2)
+        ++health.misoriented_edges;
     }
   }
   // Vertex fans: the triangles around a manifold vertex form a single cycle. Count the

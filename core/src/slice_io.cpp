@@ -19,8 +19,8 @@
 #include <cstring>
 #include <fstream>
 #include <iterator>
-#include <map>
 #include <limits>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <set>
 #include <sstream>
@@ -470,7 +470,7 @@ namespace {
 struct OverlapMeasure {
   double area = 0.0;   // all components together, in the file's units squared
   double width = 0.0;  // the widest component's 2·area/perimeter: the thickness of a sliver
-  Vec2 location = Vec2::Zero();  // a point inside the largest component (slice coordinates)
+  Vec2 location = Vec2::Zero();          // a point inside the largest component (slice coordinates)
   Box2 box{Vec2::Zero(), Vec2::Zero()};  // box of every component
 };
 
@@ -536,9 +536,9 @@ std::optional<OverlapMeasure> measure_overlap(const ExactPolygonWithHoles& a,
     }
     const CGAL::Bbox_2 box = part.outer_boundary().bbox();
     const Box2 part_box{Vec2(box.xmin(), box.ymin()), Vec2(box.xmax(), box.ymax())};
-    overlap.box = first ? part_box
-                        : Box2{overlap.box.lo.cwiseMin(part_box.lo),
-                               overlap.box.hi.cwiseMax(part_box.hi)};
+    overlap.box =
+        first ? part_box
+              : Box2{overlap.box.lo.cwiseMin(part_box.lo), overlap.box.hi.cwiseMax(part_box.hi)};
     first = false;
   }
   return overlap;
@@ -564,8 +564,8 @@ std::string overlap_text(const LabeledSlice& slice, const OverlapMeasure& overla
   text << overlap.area << " " << units << "² around (";
   text.precision(7);
   const Vec3 world = slice.to_world(overlap.location);
-  text << overlap.location.x() << ", " << overlap.location.y() << "), world (" << world.x()
-       << ", " << world.y() << ", " << world.z() << ")";
+  text << overlap.location.x() << ", " << overlap.location.y() << "), world (" << world.x() << ", "
+       << world.y() << ", " << world.z() << ")";
   return text.str();
 }
 
@@ -716,15 +716,15 @@ void snap_pair(LabeledSlice& slice, std::size_t index, std::size_t a, std::size_
   std::ostringstream width;
   width.precision(2);
   width << overlap->width;
-  repairs.add(naming.slice(index),
-              {"rounding_overlap",
-               naming.slice(index) + ", " + naming.region(index, a, slice.regions[a].label) +
-                   " and " + naming.region(index, b, slice.regions[b].label),
-               "overlap of " + overlap_text(slice, *overlap, units) + ", " + width.str() +
-                   " thick, is a shared edge that rounding moved apart (" +
-                   std::to_string(*changed) + (*changed == 1 ? " vertex" : " vertices") +
-                   " snapped onto the shared boundary)",
-               overlap->area});
+  repairs.add(
+      naming.slice(index),
+      {"rounding_overlap",
+       naming.slice(index) + ", " + naming.region(index, a, slice.regions[a].label) + " and " +
+           naming.region(index, b, slice.regions[b].label),
+       "overlap of " + overlap_text(slice, *overlap, units) + ", " + width.str() +
+           " thick, is a shared edge that rounding moved apart (" + std::to_string(*changed) +
+           (*changed == 1 ? " vertex" : " vertices") + " snapped onto the shared boundary)",
+       overlap->area});
   for (auto [k, snapped] : {std::pair{a, &snapped_a}, std::pair{b, &snapped_b}}) {
     slice.regions[k].outer = std::move(snapped->outer);
     slice.regions[k].holes = std::move(snapped->holes);
@@ -871,10 +871,9 @@ Status validate_slice_set_named(const SliceSet& set, const std::string& source_n
       for (std::size_t k = 0; k < holes.size(); ++k) {
         const bool meets_outer = boundaries_meet(hole_segments[k], outer_segments);
         boundaries_touch = boundaries_touch || meets_outer;
-        const bool inside = meets_outer
-                                ? exact_inside(to_exact(holes[k], CGAL::COUNTERCLOCKWISE),
-                                               to_exact(outer, CGAL::COUNTERCLOCKWISE))
-                                : strictly_inside(rings.holes[k].front(), rings.outer);
+        const bool inside = meets_outer ? exact_inside(to_exact(holes[k], CGAL::COUNTERCLOCKWISE),
+                                                       to_exact(outer, CGAL::COUNTERCLOCKWISE))
+                                        : strictly_inside(rings.holes[k].front(), rings.outer);
         if (!inside) {
           fail(naming.hole(i, j, r.label, k),
                "hole is not inside the region's outer ring; a hole must lie within its polygon "
@@ -1093,8 +1092,7 @@ Result<SliceSet> finish_parsed_set(SliceSet set, const std::string& source_name,
                                       round + 1 < kSnapRounds ? &thin : nullptr);
   }
   if (!status) return status;
-  if (Status resolvable = check_bounds_resolvable(set, source_name); !resolvable)
-    return resolvable;
+  if (Status resolvable = check_bounds_resolvable(set, source_name); !resolvable) return resolvable;
   try {
     merge_identical_slices(set, identical, naming, repairs);
   } catch (const RepairRefused& refused) {
@@ -1122,10 +1120,9 @@ std::vector<Repair> RepairLog::finish() {
     if (first) order.push_back(slice);
     std::string item = repair.detail;
     if (!repair.where.empty() && repair.where != slice) {
-      const std::string element =
-          repair.where.rfind(slice + ", ", 0) == 0 && !slice.empty()
-              ? repair.where.substr(slice.size() + 2)
-              : repair.where;
+      const std::string element = repair.where.rfind(slice + ", ", 0) == 0 && !slice.empty()
+                                      ? repair.where.substr(slice.size() + 2)
+                                      : repair.where;
       item = element + ": " + item;
     }
     it->second += (first ? "" : "; ") + item;
@@ -1497,7 +1494,8 @@ SliceSet parse_document(const json& doc, const std::string& source_name,
     fail_at("slices", "\"slices\" must be an array of slice objects");
   const detail::SliceNaming naming;
   for (std::size_t i = 0; i < slices->size(); ++i)
-    set.slices.push_back(parse_slice_object((*slices)[i], i, normalize, source_name, naming, repairs));
+    set.slices.push_back(
+        parse_slice_object((*slices)[i], i, normalize, source_name, naming, repairs));
   return set;
 }
 

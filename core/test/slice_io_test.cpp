@@ -2,14 +2,13 @@
 #include "sonoshape/core/slice_io.hpp"
 
 #include <gtest/gtest.h>
-
-#include <sstream>
 #include <unistd.h>
 
 #include <atomic>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <sstream>
 #include <string>
 #include <utility>
 
@@ -403,8 +402,9 @@ TEST(SliceJsonErrors, HoleThatIsTheWholeOuterRing) {
       R"({"label": 1, "polygon": )" + square + R"(, "holes": [)" + square + "]}";
   const std::string message =
       parse_error(doc(slice_at(0, region + "," + square_region(2, 0, 0, 1))));
-  EXPECT_TRUE(contains(message, "slice 0, region 0 (label 1), hole 0: hole is the region's whole "
-                                "outer ring"));
+  EXPECT_TRUE(contains(message,
+                       "slice 0, region 0 (label 1), hole 0: hole is the region's whole "
+                       "outer ring"));
 }
 
 TEST(SliceJsonErrors, OverlappingHoles) {

@@ -208,8 +208,8 @@ struct IgtlServer::Impl {
   // never across a system call or a parse, so that publishing never waits on a client.
   mutable std::mutex mutex;
   std::vector<std::unique_ptr<Client>> clients;  // added and removed by the server thread only
-  std::map<std::string, PackedPtr> surfaces;  // by device name: the newest of every label
-  std::vector<std::string> surface_order;     // device names in label order
+  std::map<std::string, PackedPtr> surfaces;     // by device name: the newest of every label
+  std::vector<std::string> surface_order;        // device names in label order
   PackedPtr image, status;
   IgtlServerStats stats;
 

@@ -79,7 +79,6 @@ std::vector<Vec3> f32_to_vec3s(const std::string& bytes) {
 // ---------------------------------------------------------------------------------------------
 // Encoding
 
-
 ordered_json vec3_json(const Vec3& v) { return ordered_json::array({v.x(), v.y(), v.z()}); }
 
 Result<Frames> encode_mesh(const StreamMessage& message, const MeshUpdate& update) {

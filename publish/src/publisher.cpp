@@ -5,16 +5,15 @@
 #include <array>
 #include <atomic>
 #include <cmath>
-#include <optional>
 #include <cstdio>
 #include <deque>
 #include <map>
 #include <mutex>
+#include <nlohmann/json.hpp>
+#include <optional>
 #include <random>
 #include <set>
 #include <thread>
-
-#include <nlohmann/json.hpp>
 
 #include "sonoshape/core/log.hpp"
 #include "sonoshape/publish/curve.hpp"
@@ -42,9 +41,8 @@ class TokenBucket {
   // Takes a token if there is one; otherwise the milliseconds until the next.
   std::optional<std::int64_t> take() {
     const Clock::time_point now = Clock::now();
-    tokens_ = std::min<double>(burst_, tokens_ + rate_hz_ * std::chrono::duration<double>(
-                                                                now - last_)
-                                                                .count());
+    tokens_ = std::min<double>(
+        burst_, tokens_ + rate_hz_ * std::chrono::duration<double>(now - last_).count());
     last_ = now;
     if (tokens_ >= 1.0) {
       tokens_ -= 1.0;
@@ -68,10 +66,10 @@ Status check_reachable(const PublisherOptions& options, const std::string& endpo
   if (is_local_endpoint(endpoint)) return Status::ok();
   const bool keyed = !options.curve_secret_key.empty();
   if (options.allow_remote && keyed) return Status::ok();
-  const std::string missing =
-      !options.allow_remote && !keyed ? "--allow-remote and --curve-secret-key FILE"
-      : !keyed                        ? "--curve-secret-key FILE"
-                                      : "--allow-remote";
+  const std::string missing = !options.allow_remote && !keyed
+                                  ? "--allow-remote and --curve-secret-key FILE"
+                              : !keyed ? "--curve-secret-key FILE"
+                                       : "--allow-remote";
   return Status::error(
       "refusing to publish on " + endpoint + " (" + option +
       "): other machines can reach it, and the stream carries the patient's anatomy; add " +
@@ -197,8 +195,8 @@ struct MeshPublisher::Impl {
       busy["v"] = 1;
       busy["busy"] = true;
       busy["retry_after_ms"] = *wait_ms;
-      busy["message"] = "busy: too many snapshot requests; retry in " + std::to_string(*wait_ms) +
-                        " ms";
+      busy["message"] =
+          "busy: too many snapshot requests; retry in " + std::to_string(*wait_ms) + " ms";
       ++snapshots_refused;
       detail::send_frames(
           router, std::make_shared<const Frames>(Frames{std::string(kErrorTopic), busy.dump()}),
@@ -391,8 +389,6 @@ const std::string& MeshPublisher::snapshot_endpoint() const { return impl_->snap
 
 std::uint64_t MeshPublisher::snapshots_served() const { return impl_->snapshots_served.load(); }
 
-std::uint64_t MeshPublisher::snapshots_refused() const {
-  return impl_->snapshots_refused.load();
-}
+std::uint64_t MeshPublisher::snapshots_refused() const { return impl_->snapshots_refused.load(); }
 
 }  // namespace sonoshape::publish

@@ -44,8 +44,9 @@ std::optional<std::chrono::milliseconds> busy_retry_after(const Frames& frames) 
 Status check_server_key(const std::string& key) {
   std::array<std::uint8_t, 32> binary{};
   if (key.size() != 40 || zmq_z85_decode(binary.data(), key.c_str()) == nullptr)
-    return Status::error("the server key is not a CURVE public key (40 Z85 characters); give "
-                         "the scan's NAME.pub file (--server-key)");
+    return Status::error(
+        "the server key is not a CURVE public key (40 Z85 characters); give "
+        "the scan's NAME.pub file (--server-key)");
   return Status::ok();
 }
 
@@ -74,7 +75,7 @@ struct MeshSubscriber::Impl {
   std::optional<std::uint64_t> snapshot_seq;
   std::string snapshot_scan;
   std::uint64_t covered = 0;
-  SubscriberOptions options;    // kept to ask for a fresh snapshot
+  SubscriberOptions options;         // kept to ask for a fresh snapshot
   bool awaiting_first_live = false;  // the first live message after a snapshot is checked
   int resyncs = 0;
   CurveKeyPair client_keys;  // empty without a server key
@@ -194,8 +195,8 @@ Result<MeshSubscriber> MeshSubscriber::connect(const SubscriberOptions& options)
     zmq::socket_t monitor;
     if (snapshot && options.endpoint.rfind("inproc://", 0) != 0) {
       constexpr int kEvents = ZMQ_EVENT_HANDSHAKE_SUCCEEDED | ZMQ_EVENT_HANDSHAKE_FAILED_NO_DETAIL |
-                              ZMQ_EVENT_HANDSHAKE_FAILED_PROTOCOL | ZMQ_EVENT_HANDSHAKE_FAILED_AUTH |
-                              ZMQ_EVENT_DISCONNECTED;
+                              ZMQ_EVENT_HANDSHAKE_FAILED_PROTOCOL |
+                              ZMQ_EVENT_HANDSHAKE_FAILED_AUTH | ZMQ_EVENT_DISCONNECTED;
       if (zmq_socket_monitor(impl->sub.handle(), kMonitorEndpoint, kEvents) != 0)
         throw zmq::error_t();
       monitor = zmq::socket_t(impl->context, zmq::socket_type::pair);
@@ -257,12 +258,15 @@ Result<std::optional<StreamMessage>> MeshSubscriber::receive(std::chrono::millis
         if (message->seq > *impl.snapshot_seq + 1 && impl.resyncs < kMaxResyncs) {
           ++impl.resyncs;
           if (Status fetched = impl.fetch_snapshot(
-                  impl.options, Clock::now() + std::chrono::milliseconds(impl.options.snapshot_timeout_ms));
+                  impl.options,
+                  Clock::now() + std::chrono::milliseconds(impl.options.snapshot_timeout_ms));
               !fetched)
             return fetched;
           impl.awaiting_first_live = true;
-          if (message->seq <= *impl.snapshot_seq) ++impl.covered;
-          else impl.pending.push_back(impl.last_frames);
+          if (message->seq <= *impl.snapshot_seq)
+            ++impl.covered;
+          else
+            impl.pending.push_back(impl.last_frames);
           return receive(timeout);
         }
       }

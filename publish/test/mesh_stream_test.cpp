@@ -507,13 +507,12 @@ TEST(MeshStreamDecode, RejectsAnEmptyMeshWithBounds) {
 TEST(MeshStreamDecode, RejectsSeqsAbove2To53) {
   const std::string max = std::to_string(std::numeric_limits<std::uint64_t>::max());
   expect_rejected(Frames{"end", "{\"seq\": " + max + "}"}, {"seq " + max, "above 2^53 - 1"});
-  expect_rejected(with_header(encoded(mesh_message()),
-                              [](json& h) { h["seq"] = std::uint64_t{1} << 53; }),
-                  {"above 2^53 - 1"});
+  expect_rejected(
+      with_header(encoded(mesh_message()), [](json& h) { h["seq"] = std::uint64_t{1} << 53; }),
+      {"above 2^53 - 1"});
   // The largest accepted seq.
-  Result<StreamMessage> edge =
-      decode_message(Frames{"end", "{\"seq\": " + std::to_string((std::uint64_t{1} << 53) - 1) +
-                                      "}"});
+  Result<StreamMessage> edge = decode_message(
+      Frames{"end", "{\"seq\": " + std::to_string((std::uint64_t{1} << 53) - 1) + "}"});
   EXPECT_TRUE(edge.is_ok()) << edge.message();
 }
 

@@ -2,8 +2,6 @@
 #include "sonoshape/publish/mesh_writer.hpp"
 
 #include <gtest/gtest.h>
-
-#include "sonoshape/testing/temp_dir.hpp"
 #include <unistd.h>
 
 #include <atomic>
@@ -12,6 +10,8 @@
 #include <fstream>
 #include <sstream>
 #include <string>
+
+#include "sonoshape/testing/temp_dir.hpp"
 
 namespace sonoshape::publish {
 namespace {

@@ -68,7 +68,8 @@ int to_side(CGAL::Oriented_side s) {
 
 Arrangement::Arrangement(const Box3& box) : box_(box) {
   if (!((box.max.array() > box.min.array()).all()))
-    throw GeometryError("reconstruction box is empty or inverted: min must be below max on every axis");
+    throw GeometryError(
+        "reconstruction box is empty or inverted: min must be below max on every axis");
   // Six box planes, normals pointing inwards: plane 2k bounds axis k from below, 2k+1 from above.
   for (int axis = 0; axis < 3; ++axis) {
     for (int upper = 0; upper < 2; ++upper) {
@@ -353,8 +354,10 @@ void Arrangement::split_cell(int cell_id, int new_plane, std::vector<int>& chang
   std::vector<DirectedEdge> section;  // boundary of the new face, counter-clockwise about q
   auto move_face = [&](int f, int to_cell) {
     ArrangementFace& face = faces_[static_cast<std::size_t>(f)];
-    if (face.cell_positive == cell_id) face.cell_positive = to_cell;
-    else if (face.cell_negative == cell_id) face.cell_negative = to_cell;
+    if (face.cell_positive == cell_id)
+      face.cell_positive = to_cell;
+    else if (face.cell_negative == cell_id)
+      face.cell_negative = to_cell;
   };
   for (const int f : old_faces) {
     // sigma: +1 when this cell lies on the positive side of face f's plane. The face's stored
@@ -375,8 +378,10 @@ void Arrangement::split_cell(int cell_id, int new_plane, std::vector<int>& chang
       move_face(split.positive, cell_pos);
       pos_faces.push_back(split.positive);
       neg_faces.push_back(split.negative);
-      if (sigma < 0) section.push_back({split.chord_from, split.chord_to, face_plane});
-      else section.push_back({split.chord_to, split.chord_from, face_plane});
+      if (sigma < 0)
+        section.push_back({split.chord_from, split.chord_to, face_plane});
+      else
+        section.push_back({split.chord_to, split.chord_from, face_plane});
     } else if (has_pos || has_neg) {
       move_face(f, has_pos ? cell_pos : cell_neg);
       (has_pos ? pos_faces : neg_faces).push_back(f);
@@ -386,7 +391,8 @@ void Arrangement::split_cell(int cell_id, int new_plane, std::vector<int>& chang
         const int a = vs[i], b = vs[(i + 1) % vs.size()];
         if (plane_side(q, a) != 0 || plane_side(q, b) != 0) continue;
         const bool forward = has_pos ? sigma < 0 : sigma > 0;
-        section.push_back(forward ? DirectedEdge{a, b, face_plane} : DirectedEdge{b, a, face_plane});
+        section.push_back(forward ? DirectedEdge{a, b, face_plane}
+                                  : DirectedEdge{b, a, face_plane});
       }
     } else {
       throw GeometryError("arrangement: a face of a crossed cell lies on the new plane");
@@ -467,8 +473,8 @@ std::vector<int> Arrangement::insert_plane(const Vec3& normal, double offset, in
   std::vector<int> changed;
   // Quick rejection with the double bounds of each cell; the tolerance covers the rounding of
   // the vertex approximations, everything closer is decided by the exact predicate.
-  const double scale = normal.cwiseAbs().dot(box_.max.cwiseAbs().cwiseMax(box_.min.cwiseAbs())) +
-                       std::abs(offset);
+  const double scale =
+      normal.cwiseAbs().dot(box_.max.cwiseAbs().cwiseMax(box_.min.cwiseAbs())) + std::abs(offset);
   const double tolerance = 1e-9 * scale;
   const std::size_t cells_before = cells_.size();
   for (std::size_t c = 0; c < cells_before; ++c) {
@@ -548,8 +554,10 @@ int Arrangement::job_side(int plane_id, int vertex_id, RefineJob& job,
 
 void Arrangement::reset_signs(RefineJob& job, RefineScratch& scratch) {
   for (const int v : scratch.touched) {
-    if (v >= kJobVertex) job.vertex_signs[static_cast<std::size_t>(v - kJobVertex)] = kUnknownSign;
-    else scratch.signs[static_cast<std::size_t>(v)] = kUnknownSign;
+    if (v >= kJobVertex)
+      job.vertex_signs[static_cast<std::size_t>(v - kJobVertex)] = kUnknownSign;
+    else
+      scratch.signs[static_cast<std::size_t>(v)] = kUnknownSign;
   }
   scratch.touched.clear();
 }
@@ -785,11 +793,12 @@ void Arrangement::reopen_cell(int cell, int plane_id) {
   // otherwise (four planes through a point) the exact points decide, for close doubles only.
   const int q = plane_id;
   std::vector<int> ids;
-  const double tolerance = 1e-5 * (box_.diagonal() + box_.max.cwiseAbs().maxCoeff() +
-                                   box_.min.cwiseAbs().maxCoeff());
+  const double tolerance =
+      1e-5 * (box_.diagonal() + box_.max.cwiseAbs().maxCoeff() + box_.min.cwiseAbs().maxCoeff());
   auto canonical = [&](int v) {
     for (const int w : ids)
-      if (w == v || vertex_keys_[static_cast<std::size_t>(w)] == vertex_keys_[static_cast<std::size_t>(v)])
+      if (w == v ||
+          vertex_keys_[static_cast<std::size_t>(w)] == vertex_keys_[static_cast<std::size_t>(v)])
         return w;
     for (const int w : ids)
       if ((vertex(w) - vertex(v)).cwiseAbs().maxCoeff() <= tolerance && same_point(w, v)) return w;
@@ -866,8 +875,9 @@ void Arrangement::refine_in_passes(Group&& group, const std::vector<Vec3>& point
                         [&](const tbb::blocked_range<std::size_t>& r) {
                           RefineScratch& scratch = refine_scratch_.local();
                           for (std::size_t j = r.begin(); j < r.end(); ++j)
-                            refine(jobs[j], points, scratch,
-                                   bounded ? kRoundSplits : std::numeric_limits<std::size_t>::max());
+                            refine(
+                                jobs[j], points, scratch,
+                                bounded ? kRoundSplits : std::numeric_limits<std::size_t>::max());
                         });
       // Then into the tree: ids in job order, so they do not depend on which thread refined
       // what; the jobs' vertices, nodes and cells are written in parallel (each job its own
@@ -928,7 +938,8 @@ void Arrangement::construct_reopened_cells_meeting(const std::vector<std::vector
   // polygons inside it: those whose bounds meet the region's, clipped by its faces' planes.
   std::vector<std::pair<int, PolygonParts>> starts;
   std::vector<Vec3> part, clipped;
-  const double reach = 1e-9 * (box_.max.cwiseAbs().cwiseMax(box_.min.cwiseAbs()).sum() + box_.diagonal());
+  const double reach =
+      1e-9 * (box_.max.cwiseAbs().cwiseMax(box_.min.cwiseAbs()).sum() + box_.diagonal());
   std::vector<Box3> polygon_bounds;
   for (const std::vector<Vec3>& polygon : polygons) {
     Box3& bounds = polygon_bounds.emplace_back(Box3{polygon.front(), polygon.front()});
@@ -1043,27 +1054,30 @@ std::vector<Arrangement::RefineJob> Arrangement::group_points(const std::vector<
   // are done, the others are grouped by the region they reach, one refinement job per region,
   // in the order of their first points.
   std::vector<int> leaves(points.size(), -1);
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, points.size(), 256),
-                    [&](const tbb::blocked_range<std::size_t>& r) {
-                      int guess = -1;  // the points come in runs of neighbours
-                      for (std::size_t n = r.begin(); n < r.end(); ++n) {
-                        if (!wanted[n]) continue;
-                        const Vec3& p = points[n];
-                        if (clear_inside(p, guess)) {
-                          cells[n] = guess;
-                          continue;
-                        }
-                        int node = 0;
-                        while (bsp_[static_cast<std::size_t>(node)].plane >= 0) {
-                          const BspNode& b = bsp_[static_cast<std::size_t>(node)];
-                          const ArrangementPlane& plane = planes_[static_cast<std::size_t>(b.plane)];
-                          node = plane.normal.dot(p) + plane.offset >= 0.0 ? b.positive : b.negative;
-                        }
-                        const BspNode& leaf = bsp_[static_cast<std::size_t>(node)];
-                        if (!on_demand_ || leaf.cell >= 0) cells[n] = guess = leaf.cell;
-                        else leaves[n] = node;
-                      }
-                    });
+  tbb::parallel_for(
+      tbb::blocked_range<std::size_t>(0, points.size(), 256),
+      [&](const tbb::blocked_range<std::size_t>& r) {
+        int guess = -1;  // the points come in runs of neighbours
+        for (std::size_t n = r.begin(); n < r.end(); ++n) {
+          if (!wanted[n]) continue;
+          const Vec3& p = points[n];
+          if (clear_inside(p, guess)) {
+            cells[n] = guess;
+            continue;
+          }
+          int node = 0;
+          while (bsp_[static_cast<std::size_t>(node)].plane >= 0) {
+            const BspNode& b = bsp_[static_cast<std::size_t>(node)];
+            const ArrangementPlane& plane = planes_[static_cast<std::size_t>(b.plane)];
+            node = plane.normal.dot(p) + plane.offset >= 0.0 ? b.positive : b.negative;
+          }
+          const BspNode& leaf = bsp_[static_cast<std::size_t>(node)];
+          if (!on_demand_ || leaf.cell >= 0)
+            cells[n] = guess = leaf.cell;
+          else
+            leaves[n] = node;
+        }
+      });
   std::vector<RefineJob> jobs;
   std::vector<int> job_of_leaf(bsp_.size(), -1);  // a table: a hash map cost more
   for (std::size_t n = 0; n < points.size(); ++n) {
@@ -1119,7 +1133,8 @@ void Arrangement::refine(RefineJob& job, const std::vector<Vec3>& points, Refine
     // The target polygons' parts, clipped to each side (the negative side takes the slot).
     int neg_targets = -1, pos_targets = -1;
     if (job.nodes[k].targets >= 0) {
-      const PolygonParts parts = std::move(job.targets[static_cast<std::size_t>(job.nodes[k].targets)]);
+      const PolygonParts parts =
+          std::move(job.targets[static_cast<std::size_t>(job.nodes[k].targets)]);
       PolygonParts neg_parts, pos_parts;
       split_parts(parts, crossing, neg_parts, pos_parts, scratch.clipped);
       if (!neg_parts.empty()) {
@@ -1134,8 +1149,7 @@ void Arrangement::refine(RefineJob& job, const std::vector<Vec3>& points, Refine
     const int negative = static_cast<int>(job.nodes.size());
     job.nodes.push_back(
         {-1, -1, -1, neg_region, false, job.nodes[k].points_begin, mid, neg_targets});
-    job.nodes.push_back(
-        {-1, -1, -1, pos_region, false, mid, job.nodes[k].points_end, pos_targets});
+    job.nodes.push_back({-1, -1, -1, pos_region, false, mid, job.nodes[k].points_end, pos_targets});
     RefineJob::Node& node = job.nodes[k];
     node.plane = crossing;
     node.negative = negative;
@@ -1159,8 +1173,8 @@ void Arrangement::number(std::vector<RefineJob>& jobs) {
     job.cell_base = static_cast<int>(cells);
     vertices += job.vertices.size();
     nodes += job.nodes.size() - 1;
-    cells += static_cast<std::size_t>(std::count_if(job.nodes.begin(), job.nodes.end(),
-                                                    [](const RefineJob::Node& n) { return n.cell; }));
+    cells += static_cast<std::size_t>(std::count_if(
+        job.nodes.begin(), job.nodes.end(), [](const RefineJob::Node& n) { return n.cell; }));
   }
   grow(vertex_intervals_, vertices);
   grow(vertex_planes_, vertices);
@@ -1247,8 +1261,9 @@ void Arrangement::link(std::vector<RefineJob>& jobs) {
   auto is_region = [](const RefineJob::Node& node) { return node.plane < 0 && !node.cell; };
   std::vector<std::size_t> region_base(jobs.size() + 1, 0);
   for (std::size_t j = 0; j < jobs.size(); ++j)
-    region_base[j + 1] = region_base[j] + static_cast<std::size_t>(std::count_if(
-                                              jobs[j].nodes.begin(), jobs[j].nodes.end(), is_region));
+    region_base[j + 1] =
+        region_base[j] + static_cast<std::size_t>(
+                             std::count_if(jobs[j].nodes.begin(), jobs[j].nodes.end(), is_region));
   std::vector<int> slots(region_base.back());
   std::size_t fresh = regions_.size();
   for (int& slot : slots) {
@@ -1271,9 +1286,9 @@ void Arrangement::link(std::vector<RefineJob>& jobs) {
                           const int id = slots[slot++];
                           regions_[static_cast<std::size_t>(id)] =
                               std::move(job.regions[static_cast<std::size_t>(node.region)]);
-                          bsp_[static_cast<std::size_t>(k == 0 ? job.leaf
-                                                               : job.node_base + static_cast<int>(k))] =
-                              {-1, -1, -1, -1, id};
+                          bsp_[static_cast<std::size_t>(
+                              k == 0 ? job.leaf : job.node_base + static_cast<int>(k))] = {
+                              -1, -1, -1, -1, id};
                         }
                       }
                     });
@@ -1313,7 +1328,8 @@ void Arrangement::link(std::vector<RefineJob>& jobs) {
                               return false;
                             if (!std::all_of(f.vertices.begin(), f.vertices.end(), [&](int v) {
                                   return std::binary_search(
-                                      keys_begin, keys_end, vertex_keys_[static_cast<std::size_t>(v)]);
+                                      keys_begin, keys_end,
+                                      vertex_keys_[static_cast<std::size_t>(v)]);
                                 }))
                               return false;
                             shares_old[face_base[j] + i] = candidate;
@@ -1353,8 +1369,9 @@ void Arrangement::link(std::vector<RefineJob>& jobs) {
             q.count != p.count)
           continue;
         const auto [other_begin, other_end] = keys_of(jobs[keyed[earlier].job], other);
-        if (!std::all_of(other_begin, other_end,
-                         [&](std::uint64_t k) { return std::binary_search(keys_begin, keys_end, k); }))
+        if (!std::all_of(other_begin, other_end, [&](std::uint64_t k) {
+              return std::binary_search(keys_begin, keys_end, k);
+            }))
           continue;
         other.other_cell = face.cell;
         shares_new[keyed[later].g] = keyed[earlier].g;
@@ -1364,9 +1381,9 @@ void Arrangement::link(std::vector<RefineJob>& jobs) {
     a = b;
   }
   // 3. Ids of the added faces in order, and their keys in the table.
-  faces_by_key_.reserve(keyed.size() - static_cast<std::size_t>(std::count_if(
-                                          shares_new.begin(), shares_new.end(),
-                                          [](std::int64_t g) { return g >= 0; })));
+  faces_by_key_.reserve(keyed.size() - static_cast<std::size_t>(
+                                           std::count_if(shares_new.begin(), shares_new.end(),
+                                                         [](std::int64_t g) { return g >= 0; })));
   std::vector<int> face_id(count, -1);
   int next = static_cast<int>(faces_.size());
   for (std::size_t j = 0; j < jobs.size(); ++j)
@@ -1400,7 +1417,8 @@ void Arrangement::link(std::vector<RefineJob>& jobs) {
                             f.vertices.resize(static_cast<std::size_t>(p.count));
                             f.edge_planes.resize(static_cast<std::size_t>(p.count));
                             for (int k = 0; k < p.count; ++k) {
-                              f.vertices[static_cast<std::size_t>(k)] = p.vertex((face.start + k) % p.count);
+                              f.vertices[static_cast<std::size_t>(k)] =
+                                  p.vertex((face.start + k) % p.count);
                               f.edge_planes[static_cast<std::size_t>(k)] =
                                   p.edge_plane((face.start + k) % p.count);
                             }
@@ -1452,6 +1470,5 @@ bool Arrangement::clear_inside(const Vec3& p, int cell) const {
 int Arrangement::locate(const Vec3& p, int guess) const {
   return clear_inside(p, guess) ? guess : locate(p);
 }
-
 
 }  // namespace sonoshape::recon

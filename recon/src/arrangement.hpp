@@ -48,7 +48,6 @@
 #include <CGAL/Exact_predicates_exact_constructions_kernel.h>
 #include <CGAL/Interval_nt.h>
 #include <CGAL/Simple_cartesian.h>
-
 #include <tbb/enumerable_thread_specific.h>
 
 #include <array>
@@ -69,9 +68,9 @@ using IntervalKernel = CGAL::Simple_cartesian<CGAL::Interval_nt<false>>;
 /// A plane n.x + d = 0 with its origin: a slice (slice >= 0) or a face of the box (slice = -1,
 /// normal pointing into the box).
 struct ArrangementPlane {
-  Vec3 normal;         ///< as given (not necessarily unit); exact input of the predicates
-  double offset = 0;   ///< d
-  int slice = -1;      ///< slice index, or -1 for a box face
+  Vec3 normal;        ///< as given (not necessarily unit); exact input of the predicates
+  double offset = 0;  ///< d
+  int slice = -1;     ///< slice index, or -1 for a box face
   ExactKernel::Plane_3 exact;
   IntervalKernel::Plane_3 interval;  ///< the same plane (its coefficients are exact doubles)
   double signed_distance(const Vec3& p) const { return (normal.dot(p) + offset) / normal.norm(); }
@@ -355,8 +354,9 @@ class Arrangement {
   int job_side(int plane_id, int vertex_id, RefineJob& job, RefineScratch& scratch) const;
   static void reset_signs(RefineJob& job, RefineScratch& scratch);
   const Vec3& job_vertex(int vertex_id, const RefineJob& job) const {
-    return vertex_id >= kJobVertex ? job.vertices[static_cast<std::size_t>(vertex_id - kJobVertex)].approx
-                                   : vertex(vertex_id);
+    return vertex_id >= kJobVertex
+               ? job.vertices[static_cast<std::size_t>(vertex_id - kJobVertex)].approx
+               : vertex(vertex_id);
   }
   // On demand: whether `plane` has vertices of `region` strictly on both sides.
   bool region_crossed(const Region& region, int plane, RefineJob& job,
@@ -445,7 +445,7 @@ class Arrangement {
   tbb::enumerable_thread_specific<RefineScratch> refine_scratch_;
   std::vector<std::uint64_t> sorted_scratch_;
   std::size_t reopened_cells_ = 0;
-  double serial_seconds_ = 0.0;  // take_serial_seconds()
+  double serial_seconds_ = 0.0;       // take_serial_seconds()
   std::vector<int> reopened_leaves_;  // construct_reopened_cells_meeting()
   std::vector<int> retired_faces_;
 

@@ -46,8 +46,10 @@ inline double fast_atan2(double y, double x) {
   constexpr double kPi = 3.14159265358979323846, kHalfPi = 1.57079632679489661923;
   const double ay = std::abs(y), ax = std::abs(x);
   double angle;  // of (|x|, |y|), in [0, pi/2]
-  if (ay <= ax) angle = ax > 0.0 ? atan_detail::atan_unit(ay / ax) : 0.0;
-  else angle = kHalfPi - atan_detail::atan_unit(ax / ay);
+  if (ay <= ax)
+    angle = ax > 0.0 ? atan_detail::atan_unit(ay / ax) : 0.0;
+  else
+    angle = kHalfPi - atan_detail::atan_unit(ax / ay);
   if (std::signbit(x)) angle = kPi - angle;
   return std::copysign(angle, y);
 }

@@ -84,8 +84,8 @@ RingBands make_ring_bands(const Ring2& ring) {
   for (std::size_t i = 0; i < n; ++i) {
     const Vec2& a = ring[i];
     const Vec2& b = ring[i + 1 < n ? i + 1 : 0];
-    const double grow = 0.5 * (b - a).norm() * (1.0 + 1e-6) +
-                        1e-9 * (std::abs(a.y()) + std::abs(b.y()) + 1.0);
+    const double grow =
+        0.5 * (b - a).norm() * (1.0 + 1e-6) + 1e-9 * (std::abs(a.y()) + std::abs(b.y()) + 1.0);
     spans[i] = {std::min(a.y(), b.y()) - grow, std::max(a.y(), b.y()) + grow};
     lo = std::min(lo, spans[i].first);
     hi = std::max(hi, spans[i].second);
@@ -100,8 +100,10 @@ RingBands make_ring_bands(const Ring2& ring) {
     std::vector<std::uint32_t> at(bands.offsets.begin(), bands.offsets.end() - 1);
     for (std::size_t i = 0; i < n; ++i)
       for (std::size_t b = bands.band(spans[i].first); b <= bands.band(spans[i].second); ++b) {
-        if (pass == 0) ++bands.offsets[b + 1];
-        else bands.edges[at[b]++] = static_cast<std::uint32_t>(i);
+        if (pass == 0)
+          ++bands.offsets[b + 1];
+        else
+          bands.edges[at[b]++] = static_cast<std::uint32_t>(i);
       }
     if (pass == 0) {
       for (std::size_t b = 0; b < count; ++b) bands.offsets[b + 1] += bands.offsets[b];
@@ -132,8 +134,8 @@ int winding_number_in_bands(const Ring2& ring, const RingBands& bands, const Vec
   return winding;
 }
 
-std::vector<PreparedSlice> prepare_slices(const SliceSet& set,
-                                          const std::vector<int>& material_ids, const Box3& box) {
+std::vector<PreparedSlice> prepare_slices(const SliceSet& set, const std::vector<int>& material_ids,
+                                          const Box3& box) {
   std::vector<PreparedSlice> out;
   out.reserve(set.slices.size());
   for (std::size_t s = 0; s < set.slices.size(); ++s)
@@ -305,7 +307,8 @@ std::vector<int> CellField::refresh(const std::vector<int>& split_faces) {
 void CellField::release_images(const std::vector<int>& faces) {
   images_released_ |= !faces.empty();
   for (const int f : faces)
-    if (static_cast<std::size_t>(f) < images_.size()) images_[static_cast<std::size_t>(f)] = FaceImage{};
+    if (static_cast<std::size_t>(f) < images_.size())
+      images_[static_cast<std::size_t>(f)] = FaceImage{};
 }
 
 void CellField::compact_points() {
@@ -476,7 +479,8 @@ void CellField::build_face_image(int face_id, std::vector<Vec2>& points,
     std::size_t farthest = 0;
     double farthest_distance = -1.0;
     for (std::size_t k = 0; k < face.vertices.size(); ++k) {
-      const double distance = std::abs(e.normal.dot(arrangement_.vertex(face.vertices[k])) + e.offset);
+      const double distance =
+          std::abs(e.normal.dot(arrangement_.vertex(face.vertices[k])) + e.offset);
       if (distance > farthest_distance) {
         farthest_distance = distance;
         farthest = k;
@@ -509,8 +513,9 @@ void CellField::build_face_image(int face_id, std::vector<Vec2>& points,
     auto test_edge = [&](std::size_t i) {
       const Vec2& a = ring[i];
       const Vec2& b = ring[i + 1 < ring.size() ? i + 1 : 0];
-      edge_near = std::max(a.x(), b.x()) >= lo.x() - margin && std::min(a.x(), b.x()) <= hi.x() + margin &&
-                  std::max(a.y(), b.y()) >= lo.y() - margin && std::min(a.y(), b.y()) <= hi.y() + margin;
+      edge_near =
+          std::max(a.x(), b.x()) >= lo.x() - margin && std::min(a.x(), b.x()) <= hi.x() + margin &&
+          std::max(a.y(), b.y()) >= lo.y() - margin && std::min(a.y(), b.y()) <= hi.y() + margin;
     };
     if (bands != nullptr) {
       const std::uint32_t first = bands->offsets[bands->band(lo.y() - margin)];
@@ -613,13 +618,15 @@ int CellField::evaluate_in(int cell, const Vec3& p, double* out) const {
       // unknown triangle, else the slice's label. The slice's whole rings decide, not the
       // face's clipped parts: a foot on the line between two faces then gets the same label
       // from both, whatever the rounding of the clip.
-      for (std::uint32_t t = image.triangle_begin; t < image.triangle_begin + image.triangle_count; ++t) {
+      for (std::uint32_t t = image.triangle_begin; t < image.triangle_begin + image.triangle_count;
+           ++t) {
         const UnknownTriangle& tri = triangles_[t];
         if (!in_triangle(tri.corners, foot)) continue;
         double bary[3];
         barycentric(tri.corners, foot, bary);
         for (int l = 0; l < n; ++l)
-          out[l] = bary[0] * corner_value(t, 0, l) + bary[1] * corner_value(t, 1, l) + bary[2] * corner_value(t, 2, l);
+          out[l] = bary[0] * corner_value(t, 0, l) + bary[1] * corner_value(t, 1, l) +
+                   bary[2] * corner_value(t, 2, l);
         return cell;
       }
       int label = 0;
@@ -638,7 +645,8 @@ int CellField::evaluate_in(int cell, const Vec3& p, double* out) const {
     }
     const double inv_height = 1.0 / height;
     total += projected_angle_plain(points_.data() + image.polygon_begin, image.polygon_count, foot,
-                                   height) * inv_height;  // see part_angle
+                                   height) *
+             inv_height;  // see part_angle
     for (const FaceImage::Part& part : image.parts) {
       const double weight = part_angle(part, foot, height) * inv_height;
       w[part.material] += weight;
@@ -649,8 +657,8 @@ int CellField::evaluate_in(int cell, const Vec3& p, double* out) const {
     const double* values = corner_values_.data() + image.triangle_begin * 3 * fc;
     std::fill(face_w, face_w + n, 0.0);
     if (image.triangle_tree != nullptr) {
-      add_triangle_weights_tree(triangles, values, n, image.triangle_tree, image.triangle_tree_moments, 0,
-                                foot, height, face_w);
+      add_triangle_weights_tree(triangles, values, n, image.triangle_tree,
+                                image.triangle_tree_moments, 0, foot, height, face_w);
     } else {
       add_triangle_weights(triangles, values, image.triangle_count, n, foot, height, face_w);
     }

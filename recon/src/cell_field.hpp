@@ -40,9 +40,9 @@ struct PreparedSlice {
   Vec3 origin;
   Vec3 u, v;
   Vec3 unit_normal;
-  std::vector<std::vector<Ring2>> rings_by_material;  ///< index 0 unused (outside)
+  std::vector<std::vector<Ring2>> rings_by_material;            ///< index 0 unused (outside)
   std::vector<std::vector<std::pair<Vec2, Vec2>>> ring_bounds;  ///< (min, max) of each ring
-  std::vector<std::vector<RingBands>> ring_bands;  ///< the edges of each ring by band
+  std::vector<std::vector<RingBands>> ring_bands;               ///< the edges of each ring by band
   std::vector<UnknownComponent> unknown;  ///< unknown set (regions and outside the fov)
   std::vector<Ring2> known;  ///< the known set when `unknown` is not empty (SlicePartition::known)
 };
@@ -66,7 +66,7 @@ struct FaceImage {
   std::uint32_t polygon_begin = 0, polygon_count = 0;  ///< in points (counter-clockwise)
   struct Part {
     int material = 0;
-    std::uint32_t begin = 0, count = 0;  ///< one ring in points
+    std::uint32_t begin = 0, count = 0;           ///< one ring in points
     std::uint32_t tree_root = 0, tree_count = 0;  ///< far-field tree in tree_nodes (count 0: none)
     /// +1 / -1: the ring is the face polygon itself (reversed for -1, a hole around the face),
     /// so its integral is +/- the polygon's; 0: a clipped ring.
@@ -78,7 +78,7 @@ struct FaceImage {
   /// slice has an unknown set (known_clipped); otherwise the whole face is known.
   std::vector<Part> known_parts;
   bool known_clipped = false;
-  bool fully_unknown = false;        ///< no known data on the face at all
+  bool fully_unknown = false;                            ///< no known data on the face at all
   std::uint32_t triangle_begin = 0, triangle_count = 0;  ///< completed unknown triangles
   /// Far-field tree of the triangles (root first) and its moments, held by the slice's
   /// completion (null: none, summed directly).
@@ -131,7 +131,8 @@ class CellField {
   std::size_t recompleted_slice_count() const { return recompleted_slices_; }
   /// Completed value of function l at corner k of unknown triangle t.
   double corner_value(std::size_t t, int k, int l) const {
-    return corner_values_[(t * 3 + static_cast<std::size_t>(k)) * static_cast<std::size_t>(function_count()) +
+    return corner_values_[(t * 3 + static_cast<std::size_t>(k)) *
+                              static_cast<std::size_t>(function_count()) +
                           static_cast<std::size_t>(l)];
   }
   const std::vector<UnknownTriangle>& unknown_triangles() const { return triangles_; }
@@ -158,17 +159,17 @@ class CellField {
     std::uint64_t version;
   };
   Internals internals() const {
-    return {arrangement_, frames_,    images_,         image_generations_, points_,  tree_nodes_,
+    return {arrangement_, frames_,    images_,        image_generations_, points_, tree_nodes_,
             compactions_, triangles_, corner_values_, on_face_height_,    version_};
   }
 
  private:
   // The unknown triangles and completed values of one slice, and what they were computed from.
   struct SliceCompletion {
-    std::vector<std::pair<int, std::uint64_t>> inputs;  // (face, image generation) read
-    std::vector<int> faces;                              // faces that got triangles
+    std::vector<std::pair<int, std::uint64_t>> inputs;    // (face, image generation) read
+    std::vector<int> faces;                               // faces that got triangles
     std::vector<std::vector<UnknownTriangle>> triangles;  // per entry of faces
-    std::vector<std::vector<double>> values;             // 3 x function_count() per triangle
+    std::vector<std::vector<double>> values;              // 3 x function_count() per triangle
     // Per entry of faces: the far-field tree of its triangles (empty: too few for one; the
     // triangles and values are in its order) and an order-independent hash of the triangles
     // and values, which tells a refresh whose completion changed.
@@ -199,10 +200,11 @@ class CellField {
                                       part.tree_root, foot, height);
   }
   // part_angle from four (foot, height) at once (heights > 0), each result part_angle's to the bit.
-  void part_angle4(const FaceImage::Part& part, const double (&foot_x)[4], const double (&foot_y)[4],
-                   const double (&height)[4], double (&out)[4]) const {
+  void part_angle4(const FaceImage::Part& part, const double (&foot_x)[4],
+                   const double (&foot_y)[4], const double (&height)[4], double (&out)[4]) const {
     if (part.tree_count != 0) {
-      for (std::size_t k = 0; k < 4; ++k) out[k] = part_angle(part, Vec2(foot_x[k], foot_y[k]), height[k]);
+      for (std::size_t k = 0; k < 4; ++k)
+        out[k] = part_angle(part, Vec2(foot_x[k], foot_y[k]), height[k]);
     } else if (part.count < 2) {
       std::fill(out, out + 4, 0.0);
     } else {
@@ -218,33 +220,35 @@ class CellField {
   // every triangle (values: 3 x function_count() per triangle); `local_faces[f]`: the known
   // faces around face f, sorted (a corner reads those of all the faces it lies on).
   void triangulate_unknown(int slice, const std::vector<int>& slice_faces,
-                           const std::vector<std::vector<int>>& local_faces, SliceCompletion& out) const;
+                           const std::vector<std::vector<int>>& local_faces,
+                           SliceCompletion& out) const;
   // The parts of formula 7 at the corners of one slice (completion.cpp).
   struct CornerCache;
   // Computes the parts of formula 7 that `cache` lists for this refinement round of slice s, in
   // parallel; the j-th 3D part reads the union of the sorted lists of known faces corner_faces[j].
-  void complete_round(const PreparedSlice& s, const std::vector<std::vector<std::span<const int>>>& corner_faces,
+  void complete_round(const PreparedSlice& s,
+                      const std::vector<std::vector<std::span<const int>>>& corner_faces,
                       CornerCache& cache) const;
   // Known weights of face f seen from up to four points at once (`count`, 1 to 4; units of
   // projected_angle / height): the known part of the face and each material's part (added to
   // materials[k * function_count() + material] for point k). ok[k] is false where point k is on
   // f's plane (or k >= count); those lanes' outputs are meaningless.
-  void known_weights4(int face, const Vec3 (&points)[4], std::size_t count, double (&known)[4], double* materials,
-                      bool (&ok)[4]) const;
+  void known_weights4(int face, const Vec3 (&points)[4], std::size_t count, double (&known)[4],
+                      double* materials, bool (&ok)[4]) const;
   // Prefetches the records of the faces after faces[i] that known_weights4 will read.
   void prefetch_known_reads(std::span<const int> faces, std::size_t i) const;
 
   const Arrangement& arrangement_;
   std::vector<PreparedSlice> slices_;
   int material_count_;
-  double on_face_height_;  // below this height a point is on the face
+  double on_face_height_;                  // below this height a point is on the face
   std::size_t next_compaction_check_ = 0;  // compact_points counts live points from this size
-  std::vector<PlaneFrame> frames_;  // one per arrangement plane
+  std::vector<PlaneFrame> frames_;         // one per arrangement plane
   std::vector<Vec2> points_;
   std::vector<ChainNode> tree_nodes_;  // far-field trees of the long parts
   std::vector<FaceImage> images_;
   std::vector<UnknownTriangle> triangles_;
-  std::vector<double> corner_values_;  // 3 corners x function_count() per triangle
+  std::vector<double> corner_values_;                  // 3 corners x function_count() per triangle
   std::vector<std::uint64_t> face_completion_hashes_;  // per face (0: no triangles)
   std::size_t group_count_ = 0;
   double completion_seconds_ = 0.0;
@@ -254,7 +258,7 @@ class CellField {
   std::uint64_t last_image_generation_ = 0;
   std::vector<SliceCompletion> slice_completions_;  // per slice
   std::size_t recompleted_slices_ = 0;
-  bool images_released_ = false;  // release_images() since the last refresh
+  bool images_released_ = false;   // release_images() since the last refresh
   std::uint64_t version_ = 0;      // see Internals
   std::uint64_t compactions_ = 0;  // compact_points() calls that moved the points
 };

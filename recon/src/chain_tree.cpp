@@ -27,7 +27,8 @@ double edge_moment(const double* px, const double* py, const double* qx, const d
   double sum = 0.0;
   for (int k = 0; k <= A; ++k)
     for (int l = 0; l <= B; ++l)
-      sum += kBinomial[k + l][l] * kBinomial[A + B - k - l][B - l] * qx[k] * px[A - k] * qy[l] * py[B - l];
+      sum += kBinomial[k + l][l] * kBinomial[A + B - k - l][B - l] * qx[k] * px[A - k] * qy[l] *
+             py[B - l];
   constexpr double kScale = 1.0 / ((A + B + 2) * (A + B + 1) * kBinomial[A + B][A]);
   return kScale * sum;
 }
@@ -79,7 +80,8 @@ std::uint32_t build(const Vec2* points, std::size_t count, std::uint32_t first, 
     node.m1y += (p.y() + q.y()) * cross / 6.0;
     node.m2xx += (p.x() * p.x() + p.x() * q.x() + q.x() * q.x()) * cross / 12.0;
     node.m2yy += (p.y() * p.y() + p.y() * q.y() + q.y() * q.y()) * cross / 12.0;
-    node.m2xy += (p.x() * q.y() + 2.0 * p.x() * p.y() + 2.0 * q.x() * q.y() + q.x() * p.y()) * cross / 24.0;
+    node.m2xy +=
+        (p.x() * q.y() + 2.0 * p.x() * p.y() + 2.0 * q.x() * q.y() + q.x() * p.y()) * cross / 24.0;
     add_high_moments(p, q, node);
   }
   if (last - first > kLeafEdges) {
@@ -107,17 +109,18 @@ double region_term(const ChainNode& node, const Vec2& d, double s, double h2) {
   const double d_z2 = dx2 * node.m2xx + 2.0 * dxy * node.m2xy + dy2 * node.m2yy;
   const double z2 = node.m2xx + node.m2yy;
   const double d_z_z2 = dx * (m3[0] + m3[2]) + dy * (m3[1] + m3[3]);
-  const double d_z3 = dx * dx2 * m3[0] + 3.0 * dx2 * dy * m3[1] + 3.0 * dx * dy2 * m3[2] + dy * dy2 * m3[3];
+  const double d_z3 =
+      dx * dx2 * m3[0] + 3.0 * dx2 * dy * m3[1] + 3.0 * dx * dy2 * m3[2] + dy * dy2 * m3[3];
   const double z4 = m4[0] + 2.0 * m4[2] + m4[4];
-  const double d_z2_z2 = dx2 * (m4[0] + m4[2]) + 2.0 * dxy * (m4[1] + m4[3]) + dy2 * (m4[2] + m4[4]);
-  const double d_z4 = dx2 * dx2 * m4[0] + 4.0 * dx2 * dxy * m4[1] + 6.0 * dx2 * dy2 * m4[2] + 4.0 * dxy * dy2 * m4[3] +
-                      dy2 * dy2 * m4[4];
+  const double d_z2_z2 =
+      dx2 * (m4[0] + m4[2]) + 2.0 * dxy * (m4[1] + m4[3]) + dy2 * (m4[2] + m4[4]);
+  const double d_z4 = dx2 * dx2 * m4[0] + 4.0 * dx2 * dxy * m4[1] + 6.0 * dx2 * dy2 * m4[2] +
+                      4.0 * dxy * dy2 * m4[3] + dy2 * dy2 * m4[4];
   // The terms of the series over powers of 1 / s (a carries 2 / s, b 1 / s).
   const double series =
-      node.area +
-      inv_s * (-4.0 * d_z - 2.0 * z2 +
-               inv_s * (12.0 * d_z2 + 12.0 * d_z_z2 + 3.0 * z4 +
-                        inv_s * (-32.0 * d_z3 - 48.0 * d_z2_z2 + inv_s * 80.0 * d_z4)));
+      node.area + inv_s * (-4.0 * d_z - 2.0 * z2 +
+                           inv_s * (12.0 * d_z2 + 12.0 * d_z_z2 + 3.0 * z4 +
+                                    inv_s * (-32.0 * d_z3 - 48.0 * d_z2_z2 + inv_s * 80.0 * d_z4)));
   return 2.0 * h2 * inv_s * inv_s * series;
 }
 
@@ -155,7 +158,8 @@ bool visit(const Vec2* points, std::size_t count, const ChainNode* nodes, std::u
 
 }  // namespace
 
-std::uint32_t build_chain_tree(const Vec2* points, std::size_t count, std::vector<ChainNode>& nodes) {
+std::uint32_t build_chain_tree(const Vec2* points, std::size_t count,
+                               std::vector<ChainNode>& nodes) {
   return build(points, count, 0, static_cast<std::uint32_t>(count), nodes);
 }
 
@@ -173,7 +177,9 @@ double projected_angle_tree(const Vec2* points, std::size_t count, const ChainNo
         return edge_projected_angle_split(points[node.first % count] - foot,
                                           points[node.last % count] - foot, h2, planar, remainder);
       },
-      [&](const Vec2& a, const Vec2& b) { return edge_projected_angle_split(a, b, h2, planar, remainder); });
+      [&](const Vec2& a, const Vec2& b) {
+        return edge_projected_angle_split(a, b, h2, planar, remainder);
+      });
   return split ? split_result(planar, remainder, plain) : plain;
 }
 
@@ -199,12 +205,13 @@ double projected_angle_tree_plain(const Vec2* points, std::size_t count, const C
     }
     return true;
   };
-  visit(points, count, nodes, root, foot, h2,
-        [&](const ChainNode& node, const Vec2& d, double s) {
-          regions += region_term(node, d, s, h2);
-          return push(points[node.first % count] - foot, points[node.last % count] - foot);
-        },
-        push);
+  visit(
+      points, count, nodes, root, foot, h2,
+      [&](const ChainNode& node, const Vec2& d, double s) {
+        regions += region_term(node, d, s, h2);
+        return push(points[node.first % count] - foot, points[node.last % count] - foot);
+      },
+      push);
   if (pending > 0) edges += edge_projected_angle_sum(ax, ay, bx, by, pending, h2);
   return edges + regions;
 }

@@ -27,13 +27,13 @@ namespace sonoshape::recon {
 /// wrapping): its chord, bounding circle and the moments of the region between chain and chord.
 struct ChainNode {
   Vec2 centre;
-  double radius_sq = 0;   ///< bounding circle of the chain's points, squared
+  double radius_sq = 0;  ///< bounding circle of the chain's points, squared
   std::uint32_t first = 0, last = 0;
-  std::int32_t left = -1, right = -1;  ///< children (-1: a leaf, summed edge by edge)
-  double area = 0;                       ///< signed area between chain and chord
-  double m1x = 0, m1y = 0;               ///< first moments about `centre`
-  double m2xx = 0, m2xy = 0, m2yy = 0;   ///< second moments about `centre`
-  double m3[4] = {};  ///< third moments about `centre`: x^3, x^2 y, x y^2, y^3
+  std::int32_t left = -1, right = -1;   ///< children (-1: a leaf, summed edge by edge)
+  double area = 0;                      ///< signed area between chain and chord
+  double m1x = 0, m1y = 0;              ///< first moments about `centre`
+  double m2xx = 0, m2xy = 0, m2yy = 0;  ///< second moments about `centre`
+  double m3[4] = {};                    ///< third moments about `centre`: x^3, x^2 y, x y^2, y^3
   double m4[5] = {};  ///< fourth moments about `centre`: x^4, x^3 y, x^2 y^2, x y^3, y^4
 };
 
@@ -42,7 +42,8 @@ constexpr std::size_t kChainTreeMinEdges = 32;
 
 /// Appends the tree of the ring `points[0..count)` to `nodes` (root first); returns the root's
 /// index.
-std::uint32_t build_chain_tree(const Vec2* points, std::size_t count, std::vector<ChainNode>& nodes);
+std::uint32_t build_chain_tree(const Vec2* points, std::size_t count,
+                               std::vector<ChainNode>& nodes);
 
 /// projected_angle (mean_value.hpp) of the ring through its tree `root`: exact edge terms near
 /// the point, chords plus fourth-order region terms where the node's bounding circle is seen

@@ -4,6 +4,8 @@
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
 #include <CGAL/Triangulation_face_base_with_info_2.h>
 #include <CGAL/Triangulation_vertex_base_with_info_2.h>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <cstring>
@@ -13,9 +15,6 @@
 #include <span>
 #include <unordered_map>
 #include <unordered_set>
-
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
 
 #include "cell_field.hpp"
 #include "mean_value.hpp"
@@ -59,8 +58,8 @@ constexpr double kRefinedTriangleMin = 0.015;
 constexpr int kMaxRefinementRounds = 8;
 
 // The completion reads the known faces of the cells within this many group-adjacency steps of the
-// faces around a corner. With fields of view every slice has unknown parts and groups grow to the whole
-// arrangement; the nearby faces carry the weight (it falls off with distance), and the bound
+// faces around a corner. With fields of view every slice has unknown parts and groups grow to the
+// whole arrangement; the nearby faces carry the weight (it falls off with distance), and the bound
 // keeps completion linear in the number of triangles.
 constexpr int kGroupHops = 1;
 
@@ -70,7 +69,8 @@ constexpr double kOnBoundaryTolerance = 1e-9;
 
 int find_root(std::vector<int>& parent, int x) {
   while (parent[static_cast<std::size_t>(x)] != x) {
-    parent[static_cast<std::size_t>(x)] = parent[static_cast<std::size_t>(parent[static_cast<std::size_t>(x)])];
+    parent[static_cast<std::size_t>(x)] =
+        parent[static_cast<std::size_t>(parent[static_cast<std::size_t>(x)])];
     x = parent[static_cast<std::size_t>(x)];
   }
   return x;
@@ -78,8 +78,8 @@ int find_root(std::vector<int>& parent, int x) {
 
 // Order-independent hash of one face's completed triangles and their corner values: equal
 // completions give equal hashes whatever the order of the triangles and of their corners.
-std::uint64_t completion_hash(const std::vector<UnknownTriangle>& triangles, const std::vector<double>& values,
-                              std::size_t function_count) {
+std::uint64_t completion_hash(const std::vector<UnknownTriangle>& triangles,
+                              const std::vector<double>& values, std::size_t function_count) {
   auto mix = [](std::uint64_t h, double x) {
     std::uint64_t bits;
     std::memcpy(&bits, &x, sizeof bits);
@@ -99,7 +99,8 @@ std::uint64_t completion_hash(const std::vector<UnknownTriangle>& triangles, con
     for (int n = 0; n < 3; ++n) {
       const std::size_t k = static_cast<std::size_t>((first + n) % 3);
       h = mix(mix(h, triangle.corners[k].x()), triangle.corners[k].y());
-      for (std::size_t l = 0; l < function_count; ++l) h = mix(h, values[(t * 3 + k) * function_count + l]);
+      for (std::size_t l = 0; l < function_count; ++l)
+        h = mix(h, values[(t * 3 + k) * function_count + l]);
     }
     sum += h;
   }
@@ -204,7 +205,8 @@ class FaceReaders {
   }
   std::span<const int> faces() const { return faces_; }
   std::span<const std::uint32_t> readers(std::size_t i) const {
-    return std::span<const std::uint32_t>(readers_).subspan(begins_[i], begins_[i + 1] - begins_[i]);
+    return std::span<const std::uint32_t>(readers_).subspan(begins_[i],
+                                                            begins_[i + 1] - begins_[i]);
   }
   void finish() {
     for (const int face : faces_) position_[static_cast<std::size_t>(face)] = kUnseen;
@@ -230,8 +232,8 @@ bool in_convex_ccw(const Vec2* polygon, std::size_t count, const Vec2& p) {
 // the known labels across its boundary, added to n2 (function_count numerators, then the
 // denominator). With stop_on_boundary, false (and n2 partly written) when p is on the boundary,
 // where the edge weights are singular.
-bool add_part_2d(const UnknownComponent& component, std::size_t function_count, const Vec2& p, bool stop_on_boundary,
-                 double* n2) {
+bool add_part_2d(const UnknownComponent& component, std::size_t function_count, const Vec2& p,
+                 bool stop_on_boundary, double* n2) {
   for (std::size_t r = 0; r < component.rings.size(); ++r) {
     const Ring2& ring = component.rings[r];
     for (std::size_t i = 0; i < ring.size(); ++i) {
@@ -243,7 +245,8 @@ bool add_part_2d(const UnknownComponent& component, std::size_t function_count, 
         const double length_sq = ab.squaredNorm();
         const double cross = ab.x() * ap.y() - ab.y() * ap.x();
         const double along = ab.dot(ap);
-        if (std::abs(cross) <= kOnBoundaryTolerance * length_sq && along >= -kOnBoundaryTolerance * length_sq &&
+        if (std::abs(cross) <= kOnBoundaryTolerance * length_sq &&
+            along >= -kOnBoundaryTolerance * length_sq &&
             along <= (1.0 + kOnBoundaryTolerance) * length_sq)
           return false;
       }
@@ -292,9 +295,10 @@ struct CellField::CornerCache {
     return next;
   }
   // The slot of (owner, corner) in `parts`, listing a job when it is new.
-  std::size_t slot(std::unordered_map<Key, std::size_t, DoublesHash>& parts, std::vector<Job>& jobs, int owner,
-                   const Vec2& corner) {
-    auto [it, inserted] = parts.try_emplace({static_cast<double>(owner), corner.x(), corner.y()}, on_boundary.size());
+  std::size_t slot(std::unordered_map<Key, std::size_t, DoublesHash>& parts, std::vector<Job>& jobs,
+                   int owner, const Vec2& corner) {
+    auto [it, inserted] =
+        parts.try_emplace({static_cast<double>(owner), corner.x(), corner.y()}, on_boundary.size());
     if (inserted) add(jobs, owner, corner);
     return it->second;
   }
@@ -334,8 +338,9 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
   const auto vertex = [&](const Vec2& p, const Cdt::Vertex_handle& near) {
     auto [it, is_new] = vertex_at.try_emplace({p.x(), p.y()});
     if (is_new)
-      it->second = near == Cdt::Vertex_handle() ? cdt.insert(Kernel::Point_2(p.x(), p.y()))
-                                                : cdt.insert(Kernel::Point_2(p.x(), p.y()), near->face());
+      it->second = near == Cdt::Vertex_handle()
+                       ? cdt.insert(Kernel::Point_2(p.x(), p.y()))
+                       : cdt.insert(Kernel::Point_2(p.x(), p.y()), near->face());
     return it->second;
   };
   const auto insert_constraint = [&](const Vec2& a, const Vec2& b) {
@@ -391,7 +396,8 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
   const auto component_of = [&](const Vec2& p) {
     for (std::size_t c = 0; c < s.unknown.size(); ++c) {
       int winding = 0;
-      for (const Ring2& ring : s.unknown[c].rings) winding += winding_number(ring.data(), ring.size(), p);
+      for (const Ring2& ring : s.unknown[c].rings)
+        winding += winding_number(ring.data(), ring.size(), p);
       if (winding > 0) return static_cast<int>(c);
     }
     return -1;
@@ -424,7 +430,8 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
   // differently in its last bits (its three planes in another order).
   const double quantum = 1e-9 * diagonal;
   const auto grid_point = [&](const Vec2& p) {
-    return std::array<std::int64_t, 2>{std::llround(p.x() / quantum), std::llround(p.y() / quantum)};
+    return std::array<std::int64_t, 2>{std::llround(p.x() / quantum),
+                                       std::llround(p.y() / quantum)};
   };
   struct OrderedFace {
     std::array<std::int64_t, 2> mean;
@@ -439,14 +446,16 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
     std::uint32_t first = 0;
     for (std::uint32_t k = 0; k < image.polygon_count; ++k) {
       sum += points_[image.polygon_begin + k];
-      if (grid_point(points_[image.polygon_begin + k]) < grid_point(points_[image.polygon_begin + first]))
+      if (grid_point(points_[image.polygon_begin + k]) <
+          grid_point(points_[image.polygon_begin + first]))
         first = k;
     }
     ordered_faces.push_back({grid_point(sum / image.polygon_count), f, first});
   }
-  std::sort(ordered_faces.begin(), ordered_faces.end(), [](const OrderedFace& a, const OrderedFace& b) {
-    return a.mean != b.mean ? a.mean < b.mean : a.id < b.id;
-  });
+  std::sort(ordered_faces.begin(), ordered_faces.end(),
+            [](const OrderedFace& a, const OrderedFace& b) {
+              return a.mean != b.mean ? a.mean < b.mean : a.id < b.id;
+            });
   for (const OrderedFace& ordered : ordered_faces) {
     const int f = ordered.id;
     const FaceImage& image = images_[static_cast<std::size_t>(f)];
@@ -465,17 +474,18 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
       const bool forward = a.x() < b.x() || (a.x() == b.x() && a.y() < b.y());
       const std::array<double, 4> key = forward ? std::array<double, 4>{a.x(), a.y(), b.x(), b.y()}
                                                 : std::array<double, 4>{b.x(), b.y(), a.x(), a.y()};
-      if (face_edges.insert(key).second)
-        insert_constraint(a, b);
+      if (face_edges.insert(key).second) insert_constraint(a, b);
     }
   }
   // A slice holds hundreds of faces: a uniform grid over the unknown set's box lists the faces
   // whose boxes reach each cell (in the order of `faces`, so the first face containing a point
   // is the same as by a scan).
-  const int grid_side = std::max(1, static_cast<int>(std::ceil(std::sqrt(static_cast<double>(faces.size())))));
+  const int grid_side =
+      std::max(1, static_cast<int>(std::ceil(std::sqrt(static_cast<double>(faces.size())))));
   const Vec2 grid_cell = ((hi - lo) / grid_side).cwiseMax(Vec2::Constant(1e-300));
   const auto grid_index = [&](const Vec2& p, int axis) {
-    return std::clamp(static_cast<int>(std::floor((p[axis] - lo[axis]) / grid_cell[axis])), 0, grid_side - 1);
+    return std::clamp(static_cast<int>(std::floor((p[axis] - lo[axis]) / grid_cell[axis])), 0,
+                      grid_side - 1);
   };
   std::vector<std::vector<int>> faces_in_cell(static_cast<std::size_t>(grid_side * grid_side));
   for (std::size_t i = 0; i < faces.size(); ++i)
@@ -483,7 +493,8 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
       for (int gx = grid_index(faces[i].lo, 0); gx <= grid_index(faces[i].hi, 0); ++gx)
         faces_in_cell[static_cast<std::size_t>(gy * grid_side + gx)].push_back(static_cast<int>(i));
   const auto face_of = [&](const Vec2& p) {
-    for (const int i : faces_in_cell[static_cast<std::size_t>(grid_index(p, 1) * grid_side + grid_index(p, 0))]) {
+    for (const int i :
+         faces_in_cell[static_cast<std::size_t>(grid_index(p, 1) * grid_side + grid_index(p, 0))]) {
       const SliceFace& face = faces[static_cast<std::size_t>(i)];
       if ((p.array() < face.lo.array()).any() || (p.array() > face.hi.array()).any()) continue;
       const FaceImage& image = images_[static_cast<std::size_t>(face.id)];
@@ -540,12 +551,15 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
       UnknownTriangle& triangle = entry.triangle;
       for (int k = 0; k < 3; ++k)
         triangle.corners[k] = Vec2(it->vertex(k)->point().x(), it->vertex(k)->point().y());
-      const double area = signed_area(Ring2{triangle.corners[0], triangle.corners[1], triangle.corners[2]});
+      const double area =
+          signed_area(Ring2{triangle.corners[0], triangle.corners[1], triangle.corners[2]});
       // Slivers from constraint intersections rounded onto each other cover nothing.
-      const double longest_sq = std::max({(triangle.corners[1] - triangle.corners[0]).squaredNorm(),
-                                          (triangle.corners[2] - triangle.corners[1]).squaredNorm(),
-                                          (triangle.corners[0] - triangle.corners[2]).squaredNorm()});
-      entry.skipped = !(std::abs(area) > 1e-12 * longest_sq) || std::abs(area) < 1e-14 * diagonal * diagonal;
+      const double longest_sq =
+          std::max({(triangle.corners[1] - triangle.corners[0]).squaredNorm(),
+                    (triangle.corners[2] - triangle.corners[1]).squaredNorm(),
+                    (triangle.corners[0] - triangle.corners[2]).squaredNorm()});
+      entry.skipped =
+          !(std::abs(area) > 1e-12 * longest_sq) || std::abs(area) < 1e-14 * diagonal * diagonal;
       if (area < 0.0) {  // counter-clockwise
         std::swap(triangle.corners[1], triangle.corners[2]);
         std::swap(entry.vertices[1], entry.vertices[2]);
@@ -559,17 +573,20 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
       for (int k = 0; k < 3; ++k) {
         VertexInfo& point = entry.vertices[k]->info();
         if (point.slot_3d < 0) {
-          point.slot_3d = static_cast<std::int64_t>(cache.add(cache.jobs_3d, -1, triangle.corners[k]));
+          point.slot_3d =
+              static_cast<std::int64_t>(cache.add(cache.jobs_3d, -1, triangle.corners[k]));
           job_vertices.push_back(entry.vertices[k]);
         }
         entry.slots_3d[k] = static_cast<std::size_t>(point.slot_3d);
         if (point.component < 0) {
           point.component = triangle.component;
-          point.slot_2d = static_cast<std::int64_t>(cache.add(cache.jobs_2d, triangle.component, triangle.corners[k]));
+          point.slot_2d = static_cast<std::int64_t>(
+              cache.add(cache.jobs_2d, triangle.component, triangle.corners[k]));
         }
-        entry.slots_2d[k] = point.component == triangle.component
-                                ? static_cast<std::size_t>(point.slot_2d)
-                                : cache.slot(cache.part_2d, cache.jobs_2d, triangle.component, triangle.corners[k]);
+        entry.slots_2d[k] =
+            point.component == triangle.component
+                ? static_cast<std::size_t>(point.slot_2d)
+                : cache.slot(cache.part_2d, cache.jobs_2d, triangle.component, triangle.corners[k]);
       }
       fresh_faces.push_back(it);
     };
@@ -604,10 +621,12 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
       do {
         if (cdt.is_infinite(around)) continue;
         const Completed& e = entries[static_cast<std::size_t>(around->info().entry)];
-        if (!e.skipped && std::find(faces_around.begin(), faces_around.end(), e.face_index) == faces_around.end())
+        if (!e.skipped &&
+            std::find(faces_around.begin(), faces_around.end(), e.face_index) == faces_around.end())
           faces_around.push_back(e.face_index);
       } while (++around != done);
-      for (const int face_index : faces_around) corner_faces[j].push_back(local_faces_of(face_index));
+      for (const int face_index : faces_around)
+        corner_faces[j].push_back(local_faces_of(face_index));
     });
     complete_round(s, corner_faces, cache);
     entry_values.resize(entries.size() * 3 * fc);
@@ -633,7 +652,8 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
         const double denominator = n3w[fc] + n2[fc];
         double* value = entry_corner_values + static_cast<std::size_t>(k) * fc;
         for (std::size_t l = 0; l < fc; ++l)
-          value[l] = denominator > 0.0 ? 2.0 * (n3w[l] + n2[l]) / denominator - 1.0 : (l == 0 ? 1.0 : -1.0);
+          value[l] = denominator > 0.0 ? 2.0 * (n3w[l] + n2[l]) / denominator - 1.0
+                                       : (l == 0 ? 1.0 : -1.0);
       }
     });
     // Longest edges of the triangles to split, by their end vertices. Only new triangles can
@@ -645,9 +665,10 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
       const Completed& c = entries[entry_index];
       if (c.skipped) continue;
       const UnknownTriangle& triangle = c.triangle;
-      const double longest_sq = std::max({(triangle.corners[1] - triangle.corners[0]).squaredNorm(),
-                                          (triangle.corners[2] - triangle.corners[1]).squaredNorm(),
-                                          (triangle.corners[0] - triangle.corners[2]).squaredNorm()});
+      const double longest_sq =
+          std::max({(triangle.corners[1] - triangle.corners[0]).squaredNorm(),
+                    (triangle.corners[2] - triangle.corners[1]).squaredNorm(),
+                    (triangle.corners[0] - triangle.corners[2]).squaredNorm()});
       // A triangle whose corners complete to different labels holds part of the surface: split
       // it until it is as fine as the octree that will sample the field. At the midpoint of its
       // longest edge, not at its centroid: that edge is often a face edge (a constraint), which
@@ -666,8 +687,8 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
         int longest = 0;
         double longest_edge_sq = -1.0;
         for (int k = 0; k < 3; ++k) {
-          const double length_sq =
-              CGAL::squared_distance(it->vertex(Cdt::cw(k))->point(), it->vertex(Cdt::ccw(k))->point());
+          const double length_sq = CGAL::squared_distance(it->vertex(Cdt::cw(k))->point(),
+                                                          it->vertex(Cdt::ccw(k))->point());
           if (length_sq > longest_edge_sq) {
             longest_edge_sq = length_sq;
             longest = k;
@@ -684,15 +705,18 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
       const Kernel::Point_2& pb = b->point();
       // Both triangles along an edge may ask for its split.
       std::array<double, 4> key{pa.x(), pa.y(), pb.x(), pb.y()};
-      if (std::make_pair(pb.x(), pb.y()) < std::make_pair(pa.x(), pa.y())) key = {pb.x(), pb.y(), pa.x(), pa.y()};
+      if (std::make_pair(pb.x(), pb.y()) < std::make_pair(pa.x(), pa.y()))
+        key = {pb.x(), pb.y(), pa.x(), pa.y()};
       if (!split_edges.insert(key).second) continue;
       const Kernel::Point_2 middle(0.5 * (pa.x() + pb.x()), 0.5 * (pa.y() + pb.y()));
       Cdt::Face_handle face;
       int index = 0;
       // On the edge itself (a constraint is split there), even where rounding puts the midpoint
       // a hair off its line.
-      if (cdt.is_edge(a, b, face, index)) inserted.push_back(cdt.insert(middle, Cdt::EDGE, face, index));
-      else inserted.push_back(cdt.insert(middle));
+      if (cdt.is_edge(a, b, face, index))
+        inserted.push_back(cdt.insert(middle, Cdt::EDGE, face, index));
+      else
+        inserted.push_back(cdt.insert(middle));
     }
   }
   // The final triangles, in the order of their corner coordinates (not the triangulation's).
@@ -703,11 +727,12 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
     const Completed& entry = entries[entry_index];
     if (entry.skipped) continue;
     const Vec2* corners = entry.triangle.corners;
-    ordered.emplace_back(TriangleKey{corners[0].x(), corners[0].y(), corners[1].x(), corners[1].y(), corners[2].x(),
-                                     corners[2].y()},
+    ordered.emplace_back(TriangleKey{corners[0].x(), corners[0].y(), corners[1].x(), corners[1].y(),
+                                     corners[2].x(), corners[2].y()},
                          entry_index);
   }
-  std::sort(ordered.begin(), ordered.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  std::sort(ordered.begin(), ordered.end(),
+            [](const auto& a, const auto& b) { return a.first < b.first; });
   std::map<int, std::size_t> entry_of_face;  // face index -> position in out
   for (const auto& [key, entry_index] : ordered) {
     const Completed& entry = entries[entry_index];
@@ -719,7 +744,8 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
     }
     out.triangles[it->second].push_back(entry.triangle);
     const double* corner_values = values_of(entry_index);
-    out.values[it->second].insert(out.values[it->second].end(), corner_values, corner_values + 3 * fc);
+    out.values[it->second].insert(out.values[it->second].end(), corner_values,
+                                  corner_values + 3 * fc);
   }
 }
 
@@ -812,12 +838,13 @@ void CellField::prefetch_known_reads(std::span<const int> faces, std::size_t i) 
     const FaceImage& next = images_[static_cast<std::size_t>(faces[i + 1])];
     for (const FaceImage::Part& part : next.parts) __builtin_prefetch(points_.data() + part.begin);
     if (next.known_clipped)
-      for (const FaceImage::Part& part : next.known_parts) __builtin_prefetch(points_.data() + part.begin);
+      for (const FaceImage::Part& part : next.known_parts)
+        __builtin_prefetch(points_.data() + part.begin);
   }
 }
 
-void CellField::known_weights4(int face, const Vec3 (&points)[4], std::size_t count, double (&known)[4],
-                               double* materials, bool (&ok)[4]) const {
+void CellField::known_weights4(int face, const Vec3 (&points)[4], std::size_t count,
+                               double (&known)[4], double* materials, bool (&ok)[4]) const {
   const FaceImage& image = images_[static_cast<std::size_t>(face)];
   const PlaneFrame& frame = frames_[static_cast<std::size_t>(image.frame)];
   double foot_x[4], foot_y[4], height[4], inv_height[4];
@@ -850,8 +877,8 @@ void CellField::known_weights4(int face, const Vec3 (&points)[4], std::size_t co
   bool polygon_done = false;
   const auto polygon_angle = [&]() -> const double(&)[4] {
     if (!polygon_done)
-      projected_angle_plain4(points_.data() + image.polygon_begin, image.polygon_count, foot_x, foot_y, height,
-                             polygon);
+      projected_angle_plain4(points_.data() + image.polygon_begin, image.polygon_count, foot_x,
+                             foot_y, height, polygon);
     polygon_done = true;
     return polygon;
   };
@@ -877,7 +904,8 @@ void CellField::known_weights4(int face, const Vec3 (&points)[4], std::size_t co
   const std::size_t fc = static_cast<std::size_t>(function_count());
   for (const FaceImage::Part& part : image.parts) {
     copy_or_angle(part);
-    for (std::size_t k = 0; k < 4; ++k) materials[k * fc + static_cast<std::size_t>(part.material)] += angle[k] * inv_height[k];
+    for (std::size_t k = 0; k < 4; ++k)
+      materials[k * fc + static_cast<std::size_t>(part.material)] += angle[k] * inv_height[k];
   }
 }
 
@@ -893,14 +921,16 @@ void CellField::build_unknown_images() {
   std::vector<int> parent(arrangement_.cell_count());
   std::iota(parent.begin(), parent.end(), 0);
   std::vector<std::vector<int>> unknown_neighbours(arrangement_.cell_count());
-  std::vector<char> next_to_unknown(arrangement_.cell_count(), 0);  // a cell with a face with unknown parts
+  std::vector<char> next_to_unknown(arrangement_.cell_count(),
+                                    0);  // a cell with a face with unknown parts
   for (std::size_t f = 0; f < images_.size(); ++f) {
     if (images_[f].unknown_parts.empty()) continue;
     const ArrangementFace& face = arrangement_.face(static_cast<int>(f));
     for (const int c : {face.cell_positive, face.cell_negative})
       if (c >= 0) next_to_unknown[static_cast<std::size_t>(c)] = 1;
     if (face.cell_positive < 0 || face.cell_negative < 0) continue;
-    parent[static_cast<std::size_t>(find_root(parent, face.cell_positive))] = find_root(parent, face.cell_negative);
+    parent[static_cast<std::size_t>(find_root(parent, face.cell_positive))] =
+        find_root(parent, face.cell_negative);
     unknown_neighbours[static_cast<std::size_t>(face.cell_positive)].push_back(face.cell_negative);
     unknown_neighbours[static_cast<std::size_t>(face.cell_negative)].push_back(face.cell_positive);
   }
@@ -927,7 +957,8 @@ void CellField::build_unknown_images() {
   std::vector<std::vector<int>> cell_known_faces(arrangement_.cell_count());
   tbb::parallel_for(std::size_t{0}, cell_known_faces.size(), [&](std::size_t start) {
     if (!next_to_unknown[start]) return;
-    std::vector<int> cells{static_cast<int>(start)};  // a few dozen: a linear search is the fastest set
+    std::vector<int> cells{
+        static_cast<int>(start)};  // a few dozen: a linear search is the fastest set
     std::size_t frontier_begin = 0;
     for (int hop = 0; hop < kGroupHops; ++hop) {
       const std::size_t frontier_end = cells.size();
@@ -940,7 +971,8 @@ void CellField::build_unknown_images() {
     FaceMarks& collected = FaceMarks::start(images_.size());
     for (const int c : cells)
       for (const int g : arrangement_.cell(c).faces)
-        if (collected.insert(g) && known_plane[static_cast<std::size_t>(g)] >= 0) faces.push_back(g);
+        if (collected.insert(g) && known_plane[static_cast<std::size_t>(g)] >= 0)
+          faces.push_back(g);
     std::sort(faces.begin(), faces.end());
   });
   tbb::parallel_for(std::size_t{0}, images_.size(), [&](std::size_t f) {
@@ -959,9 +991,12 @@ void CellField::build_unknown_images() {
     std::size_t i = 0, j = 0;
     while (i < a.size() || j < b.size()) {
       int g;
-      if (j == b.size() || (i < a.size() && a[i] < b[j])) g = a[i++];
-      else if (i == a.size() || b[j] < a[i]) g = b[j++];
-      else g = (++i, b[j++]);  // in both
+      if (j == b.size() || (i < a.size() && a[i] < b[j]))
+        g = a[i++];
+      else if (i == a.size() || b[j] < a[i])
+        g = b[j++];
+      else
+        g = (++i, b[j++]);  // in both
       if (known_plane[static_cast<std::size_t>(g)] != face.plane) faces.push_back(g);
     }
   });
@@ -971,7 +1006,8 @@ void CellField::build_unknown_images() {
   std::vector<std::vector<int>> slice_faces(slices_.size());
   for (std::size_t f = 0; f < images_.size(); ++f)
     if (!images_[f].unknown_parts.empty())
-      slice_faces[static_cast<std::size_t>(arrangement_.plane(images_[f].frame).slice)].push_back(static_cast<int>(f));
+      slice_faces[static_cast<std::size_t>(arrangement_.plane(images_[f].frame).slice)].push_back(
+          static_cast<int>(f));
   slice_completions_.resize(slices_.size());
   std::vector<std::vector<std::pair<int, std::uint64_t>>> inputs(slices_.size());
   std::vector<char> is_stale(slices_.size(), 0);
@@ -1008,9 +1044,10 @@ void CellField::build_unknown_images() {
     for (std::size_t i = 0; i < face_count; ++i) {
       if (completion.triangles[i].size() >= kTriangleTreeMinTriangles)
         build_triangle_tree(completion.triangles[i].data(), completion.values[i].data(),
-                            completion.triangles[i].size(), function_count(), completion.tree_nodes[i],
-                            completion.tree_moments[i]);
-      completion.hashes.push_back(completion_hash(completion.triangles[i], completion.values[i], fc));
+                            completion.triangles[i].size(), function_count(),
+                            completion.tree_nodes[i], completion.tree_moments[i]);
+      completion.hashes.push_back(
+          completion_hash(completion.triangles[i], completion.values[i], fc));
     }
   });
   for (const int slice : slices_with_unknown) {
@@ -1019,8 +1056,10 @@ void CellField::build_unknown_images() {
       FaceImage& image = images_[static_cast<std::size_t>(completion.faces[i])];
       image.triangle_begin = static_cast<std::uint32_t>(triangles_.size());
       image.triangle_count = static_cast<std::uint32_t>(completion.triangles[i].size());
-      triangles_.insert(triangles_.end(), completion.triangles[i].begin(), completion.triangles[i].end());
-      corner_values_.insert(corner_values_.end(), completion.values[i].begin(), completion.values[i].end());
+      triangles_.insert(triangles_.end(), completion.triangles[i].begin(),
+                        completion.triangles[i].end());
+      corner_values_.insert(corner_values_.end(), completion.values[i].begin(),
+                            completion.values[i].end());
       if (!completion.tree_nodes[i].empty()) {
         image.triangle_tree = completion.tree_nodes[i].data();
         image.triangle_tree_moments = completion.tree_moments[i].data();

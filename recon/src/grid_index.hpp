@@ -133,8 +133,8 @@ class GridIndex {
   std::size_t size_ = 0;    // keys in both tables
   std::size_t hashed_ = 0;  // keys in the hash table
   std::size_t mask_ = 0;
-  std::size_t direct_side_ = 0;  // 0: no direct table
-  std::vector<std::uint32_t> direct_;  // row per slot, kNone where absent
+  std::size_t direct_side_ = 0;           // 0: no direct table
+  std::vector<std::uint32_t> direct_;     // row per slot, kNone where absent
   std::vector<std::size_t> direct_used_;  // occupied slots, for clear()
 };
 

@@ -4,15 +4,15 @@
 // a few word operations per row, and where a key lies in the sorted result is a count of the set
 // bits before it. Same keys in the same order, and the same positions, as union_of_shifts, whose
 // merge of seven or eight shifted copies (a compare and a store per copy and key) was, by per-pass
-// timers (not committed), the largest part of an online update's smoothing set-up. Used where the keys'
-// bounding box needs at most kMaxMaskWords words (the whole finest grid up to depth 9; the default
-// depth is 7); union_of_shifts otherwise.
+// timers (not committed), the largest part of an online update's smoothing set-up. Used where the
+// keys' bounding box needs at most kMaxMaskWords words (the whole finest grid up to depth 9; the
+// default depth is 7); union_of_shifts otherwise.
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <bit>
 #include <cstdint>
 #include <vector>
-
-#include <tbb/parallel_for.h>
 
 #include "octree_field.hpp"
 #include "sorted_keys.hpp"
@@ -50,8 +50,11 @@ class KeyMask {
       size_[a] = hi[a] - lo[a] + 1 + 2 * pad;
     }
     words_ = static_cast<std::size_t>((size_[2] + 63) / 64);
-    if (static_cast<std::size_t>(size_[0]) * static_cast<std::size_t>(size_[1]) * words_ > max_words) return;
-    bits_.assign(static_cast<std::size_t>(size_[0]) * static_cast<std::size_t>(size_[1]) * words_, 0);
+    if (static_cast<std::size_t>(size_[0]) * static_cast<std::size_t>(size_[1]) * words_ >
+        max_words)
+      return;
+    bits_.assign(static_cast<std::size_t>(size_[0]) * static_cast<std::size_t>(size_[1]) * words_,
+                 0);
     for (const std::uint64_t key : sorted) {
       int i, j, k;
       grid_unkey(key, i, j, k);
@@ -91,7 +94,8 @@ class KeyMask {
         shift_up(from, up.data());
         shift_down(from, down.data());
         for (std::size_t w = 0; w < words_; ++w) to[w] = from[w] | up[w] | down[w];
-        for (const auto& [ni, nj] : {std::pair{i - 1, j}, std::pair{i + 1, j}, std::pair{i, j - 1}, std::pair{i, j + 1}}) {
+        for (const auto& [ni, nj] :
+             {std::pair{i - 1, j}, std::pair{i + 1, j}, std::pair{i, j - 1}, std::pair{i, j + 1}}) {
           if (ni < 0 || nj < 0 || ni >= size_[0] || nj >= size_[1]) continue;
           const std::uint64_t* neighbour = row(ni, nj);
           for (std::size_t w = 0; w < words_; ++w) to[w] |= neighbour[w];
@@ -109,22 +113,28 @@ class KeyMask {
     std::vector<std::uint32_t> plane_start(static_cast<std::size_t>(size_[0]) + 1, 0);
     tbb::parallel_for(0, size_[0], [&](int i) {
       std::uint32_t count = 0;
-      for (std::size_t w = static_cast<std::size_t>(i) * plane_words; w < static_cast<std::size_t>(i + 1) * plane_words; ++w) {
+      for (std::size_t w = static_cast<std::size_t>(i) * plane_words;
+           w < static_cast<std::size_t>(i + 1) * plane_words; ++w) {
         word_start_[w] = count;
         count += bit_count(bits_[w]);
       }
       plane_start[static_cast<std::size_t>(i) + 1] = count;
     });
-    for (std::size_t i = 0; i < static_cast<std::size_t>(size_[0]); ++i) plane_start[i + 1] += plane_start[i];
+    for (std::size_t i = 0; i < static_cast<std::size_t>(size_[0]); ++i)
+      plane_start[i + 1] += plane_start[i];
     word_start_.back() = plane_start.back();
     tbb::parallel_for(0, size_[0], [&](int i) {
-      for (std::size_t w = static_cast<std::size_t>(i) * plane_words; w < static_cast<std::size_t>(i + 1) * plane_words; ++w)
+      for (std::size_t w = static_cast<std::size_t>(i) * plane_words;
+           w < static_cast<std::size_t>(i + 1) * plane_words; ++w)
         word_start_[w] += plane_start[static_cast<std::size_t>(i)];
     });
     std::vector<std::uint64_t> out(word_start_.back());
     tbb::parallel_for(0, size_[0], [&](int i) {
       for (int j = 0; j < size_[1]; ++j) {
-        const std::size_t first = (static_cast<std::size_t>(i) * static_cast<std::size_t>(size_[1]) + static_cast<std::size_t>(j)) * words_;
+        const std::size_t first =
+            (static_cast<std::size_t>(i) * static_cast<std::size_t>(size_[1]) +
+             static_cast<std::size_t>(j)) *
+            words_;
         std::uint32_t n = word_start_[first];
         for (std::size_t w = 0; w < words_; ++w)
           for (std::uint64_t word = bits_[first + w]; word != 0; word &= word - 1) {
@@ -138,8 +148,11 @@ class KeyMask {
   /// Where the key (i, j, k), which must be in the set, lies in keys() (called before this).
   std::uint32_t position(int i, int j, int k) const {
     const std::size_t b = static_cast<std::size_t>(k - low_[2]);
-    const std::size_t w = (static_cast<std::size_t>(i - low_[0]) * static_cast<std::size_t>(size_[1]) +
-                           static_cast<std::size_t>(j - low_[1])) * words_ + b / 64;
+    const std::size_t w =
+        (static_cast<std::size_t>(i - low_[0]) * static_cast<std::size_t>(size_[1]) +
+         static_cast<std::size_t>(j - low_[1])) *
+            words_ +
+        b / 64;
     return word_start_[w] + bit_count(bits_[w] & ((std::uint64_t{1} << (b % 64)) - 1));
   }
 
@@ -155,17 +168,22 @@ class KeyMask {
     return out;
   }
   std::uint64_t* row(int i, int j) {
-    return &bits_[(static_cast<std::size_t>(i) * static_cast<std::size_t>(size_[1]) + static_cast<std::size_t>(j)) * words_];
+    return &bits_[(static_cast<std::size_t>(i) * static_cast<std::size_t>(size_[1]) +
+                   static_cast<std::size_t>(j)) *
+                  words_];
   }
   const std::uint64_t* row(int i, int j) const {
-    return &bits_[(static_cast<std::size_t>(i) * static_cast<std::size_t>(size_[1]) + static_cast<std::size_t>(j)) * words_];
+    return &bits_[(static_cast<std::size_t>(i) * static_cast<std::size_t>(size_[1]) +
+                   static_cast<std::size_t>(j)) *
+                  words_];
   }
   // Bits moved one place up (k + 1) and down (k - 1) along the row.
   void shift_up(const std::uint64_t* from, std::uint64_t* to) const {
     for (std::size_t w = words_; w-- > 0;) to[w] = (from[w] << 1) | (w > 0 ? from[w - 1] >> 63 : 0);
   }
   void shift_down(const std::uint64_t* from, std::uint64_t* to) const {
-    for (std::size_t w = 0; w < words_; ++w) to[w] = (from[w] >> 1) | (w + 1 < words_ ? from[w + 1] << 63 : 0);
+    for (std::size_t w = 0; w < words_; ++w)
+      to[w] = (from[w] >> 1) | (w + 1 < words_ ? from[w + 1] << 63 : 0);
   }
   int low_[3] = {0, 0, 0};
   int size_[3] = {0, 0, 0};
@@ -182,57 +200,60 @@ constexpr std::size_t kMaxMaskWords = std::size_t{1} << 22;
 // per key `width` positions filled by fill(mask, i, j, k, p); the merge of `shifts` where the
 // box is too large for masks.
 template <typename Shifts, typename Dilate, typename Fill>
-std::vector<std::uint64_t> masked_union(const std::vector<std::uint64_t>& sorted, const Shifts& shifts,
-                                        Dilate dilate, std::size_t width, const Fill& fill,
-                                        std::vector<std::uint32_t>* positions) {
+std::vector<std::uint64_t> masked_union(const std::vector<std::uint64_t>& sorted,
+                                        const Shifts& shifts, Dilate dilate, std::size_t width,
+                                        const Fill& fill, std::vector<std::uint32_t>* positions) {
   KeyMask mask(sorted, 1, kMaxMaskWords);
   if (!mask.valid()) return union_of_shifts(sorted, shifts, positions);
   KeyMask dilated = (mask.*dilate)();
   std::vector<std::uint64_t> out = dilated.keys();
   if (positions != nullptr) {
     positions->resize(sorted.size() * width);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, sorted.size(), 1024), [&](const tbb::blocked_range<std::size_t>& r) {
-      for (std::size_t n = r.begin(); n < r.end(); ++n) {
-        int i, j, k;
-        grid_unkey(sorted[n], i, j, k);
-        fill(dilated, i, j, k, &(*positions)[n * width]);
-      }
-    });
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, sorted.size(), 1024),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t n = r.begin(); n < r.end(); ++n) {
+                          int i, j, k;
+                          grid_unkey(sorted[n], i, j, k);
+                          fill(dilated, i, j, k, &(*positions)[n * width]);
+                        }
+                      });
   }
   return out;
 }
 
 /// union_of_shifts(sorted, kCubeCornerShifts, positions) on masks where they fit.
-inline std::vector<std::uint64_t> cube_corner_union(const std::vector<std::uint64_t>& sorted,
-                                                    std::vector<std::uint32_t>* positions = nullptr) {
-  return masked_union(sorted, kCubeCornerShifts, &KeyMask::cube_corners, 8,
-                      [](const KeyMask& corners, int i, int j, int k, std::uint32_t* p) {
-                        // Corner c has offset (c & 1, (c >> 1) & 1, (c >> 2) & 1); (i, j, k + 1)
-                        // follows (i, j, k).
-                        for (int c = 0; c < 4; ++c) {
-                          p[c] = corners.position(i + (c & 1), j + ((c >> 1) & 1), k);
-                          p[c + 4] = p[c] + 1;
-                        }
-                      },
-                      positions);
+inline std::vector<std::uint64_t> cube_corner_union(
+    const std::vector<std::uint64_t>& sorted, std::vector<std::uint32_t>* positions = nullptr) {
+  return masked_union(
+      sorted, kCubeCornerShifts, &KeyMask::cube_corners, 8,
+      [](const KeyMask& corners, int i, int j, int k, std::uint32_t* p) {
+        // Corner c has offset (c & 1, (c >> 1) & 1, (c >> 2) & 1); (i, j, k + 1)
+        // follows (i, j, k).
+        for (int c = 0; c < 4; ++c) {
+          p[c] = corners.position(i + (c & 1), j + ((c >> 1) & 1), k);
+          p[c + 4] = p[c] + 1;
+        }
+      },
+      positions);
 }
 
 /// union_of_shifts(sorted, kStencilShifts, positions) on masks where they fit.
 inline std::vector<std::uint64_t> stencil_union(const std::vector<std::uint64_t>& sorted,
                                                 std::vector<std::uint32_t>* positions = nullptr) {
-  return masked_union(sorted, kStencilShifts, &KeyMask::stencil, 7,
-                      [](const KeyMask& dilated, int i, int j, int k, std::uint32_t* p) {
-                        // kStencilShifts: centre, -i, +i, -j, +j, -k, +k; the k neighbours lie
-                        // beside the centre.
-                        p[0] = dilated.position(i, j, k);
-                        p[1] = dilated.position(i - 1, j, k);
-                        p[2] = dilated.position(i + 1, j, k);
-                        p[3] = dilated.position(i, j - 1, k);
-                        p[4] = dilated.position(i, j + 1, k);
-                        p[5] = p[0] - 1;
-                        p[6] = p[0] + 1;
-                      },
-                      positions);
+  return masked_union(
+      sorted, kStencilShifts, &KeyMask::stencil, 7,
+      [](const KeyMask& dilated, int i, int j, int k, std::uint32_t* p) {
+        // kStencilShifts: centre, -i, +i, -j, +j, -k, +k; the k neighbours lie
+        // beside the centre.
+        p[0] = dilated.position(i, j, k);
+        p[1] = dilated.position(i - 1, j, k);
+        p[2] = dilated.position(i + 1, j, k);
+        p[3] = dilated.position(i, j - 1, k);
+        p[4] = dilated.position(i, j + 1, k);
+        p[5] = p[0] - 1;
+        p[6] = p[0] + 1;
+      },
+      positions);
 }
 
 }  // namespace sonoshape::recon

@@ -26,7 +26,8 @@ namespace sonoshape::recon {
 double projected_angle(const Vec2* points, std::size_t count, const Vec2& foot, double height);
 
 /// The plain edge sum behind projected_angle (no treatment of cancellation; for tests).
-double projected_angle_plain(const Vec2* points, std::size_t count, const Vec2& foot, double height);
+double projected_angle_plain(const Vec2* points, std::size_t count, const Vec2& foot,
+                             double height);
 
 /// projected_angle_plain of one ring from four feet (foot_x[k], foot_y[k]) at heights height[k],
 /// each result equal to projected_angle_plain's to the bit (count >= 1).
@@ -37,8 +38,8 @@ void projected_angle_plain4(const Vec2* points, std::size_t count, const double 
 /// (bx[i], by[i]), coordinates relative to the foot, h2 = height^2: four edges at a time in AVX2
 /// lanes where the CPU has them (each term equal to edge_projected_angle's to the bit, summed in
 /// four lanes).
-double edge_projected_angle_sum(const double* ax, const double* ay, const double* bx, const double* by,
-                                std::size_t count, double h2);
+double edge_projected_angle_sum(const double* ax, const double* ay, const double* bx,
+                                const double* by, std::size_t count, double h2);
 
 /// projected_angle takes the cancellation-free split form below this magnitude of the plain sum.
 constexpr double kSplitBelow = 1e-2;
@@ -60,8 +61,8 @@ struct EdgeAngle {
   double angle;
   double q_length;
 };
-inline EdgeAngle edge_angle(const Vec2& a, const Vec2& b, const Vec2& d, double cross, double length_sq,
-                            double h2) {
+inline EdgeAngle edge_angle(const Vec2& a, const Vec2& b, const Vec2& d, double cross,
+                            double length_sq, double h2) {
   const double big_q = cross * cross + h2 * length_sq;
   const double q_length = std::sqrt(big_q);
   return {fast_atan2(q_length * length_sq, big_q + a.dot(d) * b.dot(d)), q_length};
@@ -131,8 +132,8 @@ bool triangle_weights(const Vec2& a, const Vec2& b, const Vec2& c, const Vec2& f
 /// triangle_weights of `count` (1 to 4) triangles, corners[t] pointing to the three corners of
 /// triangle t: ok[t] and weights[t] are triangle_weights' result and weights, to the bit. Four
 /// triangles at a time in AVX2 lanes where the CPU has them.
-void triangle_weights4(const Vec2* const corners[4], std::size_t count, const Vec2& foot, double height,
-                       double weights[4][3], bool ok[4]);
+void triangle_weights4(const Vec2* const corners[4], std::size_t count, const Vec2& foot,
+                       double height, double weights[4][3], bool ok[4]);
 
 /// The same weights by the spherical formula of Ju et al. (2005), for a point x and a triangle
 /// in 3D (the reference the tests compare against).

@@ -1,12 +1,12 @@
 #include "mesher.hpp"
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <array>
 #include <cstdint>
 #include <limits>
-
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
 
 #include "key_masks.hpp"
 #include "sorted_keys.hpp"
@@ -43,7 +43,8 @@ struct CaseTable {
     for (std::size_t t = 0; t < 6; ++t) {
       for (int mask = 1; mask < 15; ++mask) {
         std::vector<int> in, out;
-        for (int v = 0; v < 4; ++v) ((mask >> v) & 1 ? in : out).push_back(tets[t][static_cast<std::size_t>(v)]);
+        for (int v = 0; v < 4; ++v)
+          ((mask >> v) & 1 ? in : out).push_back(tets[t][static_cast<std::size_t>(v)]);
         std::vector<Triangle> tris;
         if (in.size() == 1) {
           tris.push_back({{{{in[0], out[0]}, {in[0], out[1]}, {in[0], out[2]}}}});
@@ -60,8 +61,9 @@ struct CaseTable {
         for (Triangle& tri : tris) {
           std::array<Vec3, 3> p;
           for (int k = 0; k < 3; ++k)
-            p[static_cast<std::size_t>(k)] = 0.5 * (corner_offset(tri.edges[static_cast<std::size_t>(k)][0]) +
-                                                    corner_offset(tri.edges[static_cast<std::size_t>(k)][1]));
+            p[static_cast<std::size_t>(k)] =
+                0.5 * (corner_offset(tri.edges[static_cast<std::size_t>(k)][0]) +
+                       corner_offset(tri.edges[static_cast<std::size_t>(k)][1]));
           const Vec3 normal = (p[1] - p[0]).cross(p[2] - p[0]);
           if (normal.dot(out_center - in_center) < 0.0) std::swap(tri.edges[1], tri.edges[2]);
         }
@@ -93,7 +95,8 @@ std::vector<TriangleMesh> extract_label_surfaces(const SampledField& field) {
                     [&](const tbb::blocked_range<std::size_t>& r) {
                       for (std::size_t n = r.begin(); n < r.end(); ++n) {
                         corner_rows[n] = field.index.at(corners[n]);
-                        corner_labels[n] = static_cast<std::uint16_t>(field.row_label(corner_rows[n]));
+                        corner_labels[n] =
+                            static_cast<std::uint16_t>(field.row_label(corner_rows[n]));
                       }
                     });
   // Per material, the triangles of each cell are listed in parallel, in chunks of cells of a
@@ -102,7 +105,8 @@ std::vector<TriangleMesh> extract_label_surfaces(const SampledField& field) {
   // cell and, per vertex, the cube corners of its edge (inside, outside), 3 bits each.
   struct CellTriangle {
     std::uint32_t cell;
-    std::uint32_t edge_corners;  // vertex e: inside corner at bits 6e, outside corner at bits 6e + 3
+    std::uint32_t
+        edge_corners;  // vertex e: inside corner at bits 6e, outside corner at bits 6e + 3
   };
   constexpr std::size_t kChunk = 1024;
   const std::size_t chunk_count = (cells.size() + kChunk - 1) / kChunk;
@@ -116,30 +120,36 @@ std::vector<TriangleMesh> extract_label_surfaces(const SampledField& field) {
   for (int material = 1; material < fc; ++material) {
     TriangleMesh& mesh = meshes[static_cast<std::size_t>(material - 1)];
     std::fill(vertex_of_edge.begin(), vertex_of_edge.end(), kNoVertex);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunk_count, 1), [&](const tbb::blocked_range<std::size_t>& r) {
-      for (std::size_t chunk = r.begin(); chunk < r.end(); ++chunk) {
-        std::vector<CellTriangle>& out = chunk_triangles[chunk];
-        out.clear();
-        for (std::size_t n = chunk * kChunk; n < std::min(cells.size(), (chunk + 1) * kChunk); ++n) {
-          int inside = 0;  // bit per cube corner
-          for (int c = 0; c < 8; ++c)
-            if (corner_labels[cell_corners[n * 8 + static_cast<std::size_t>(c)]] == static_cast<std::uint16_t>(material))
-              inside |= 1 << c;
-          if (inside == 0 || inside == 0xff) continue;
-          for (std::size_t t = 0; t < 6; ++t) {
-            int mask = 0;
-            for (int v = 0; v < 4; ++v)
-              if ((inside >> tets[t][static_cast<std::size_t>(v)]) & 1) mask |= 1 << v;
-            for (const Triangle& tri : table.cases[t][static_cast<std::size_t>(mask)]) {
-              std::uint32_t edge_corners = 0;
-              for (std::size_t e = 0; e < 3; ++e)
-                edge_corners |= static_cast<std::uint32_t>(tri.edges[e][0] | (tri.edges[e][1] << 3)) << (6 * e);
-              out.push_back({static_cast<std::uint32_t>(n), edge_corners});
+    tbb::parallel_for(
+        tbb::blocked_range<std::size_t>(0, chunk_count, 1),
+        [&](const tbb::blocked_range<std::size_t>& r) {
+          for (std::size_t chunk = r.begin(); chunk < r.end(); ++chunk) {
+            std::vector<CellTriangle>& out = chunk_triangles[chunk];
+            out.clear();
+            for (std::size_t n = chunk * kChunk; n < std::min(cells.size(), (chunk + 1) * kChunk);
+                 ++n) {
+              int inside = 0;  // bit per cube corner
+              for (int c = 0; c < 8; ++c)
+                if (corner_labels[cell_corners[n * 8 + static_cast<std::size_t>(c)]] ==
+                    static_cast<std::uint16_t>(material))
+                  inside |= 1 << c;
+              if (inside == 0 || inside == 0xff) continue;
+              for (std::size_t t = 0; t < 6; ++t) {
+                int mask = 0;
+                for (int v = 0; v < 4; ++v)
+                  if ((inside >> tets[t][static_cast<std::size_t>(v)]) & 1) mask |= 1 << v;
+                for (const Triangle& tri : table.cases[t][static_cast<std::size_t>(mask)]) {
+                  std::uint32_t edge_corners = 0;
+                  for (std::size_t e = 0; e < 3; ++e)
+                    edge_corners |=
+                        static_cast<std::uint32_t>(tri.edges[e][0] | (tri.edges[e][1] << 3))
+                        << (6 * e);
+                  out.push_back({static_cast<std::uint32_t>(n), edge_corners});
+                }
+              }
             }
           }
-        }
-      }
-    });
+        });
     // g = f_m - max_{k != m} f_k per corner, positive inside the label's region: computed in
     // parallel and read in corner order below (reading the field's rows there, scattered over
     // memory, was most of the serial pass).
@@ -154,7 +164,8 @@ std::vector<TriangleMesh> extract_label_surfaces(const SampledField& field) {
                         }
                       });
     std::size_t triangle_count = 0;
-    for (const std::vector<CellTriangle>& triangles : chunk_triangles) triangle_count += triangles.size();
+    for (const std::vector<CellTriangle>& triangles : chunk_triangles)
+      triangle_count += triangles.size();
     mesh.triangles.reserve(triangle_count);
     // The serial pass only numbers the vertices (first use in cell order) and records each new
     // vertex's cell and edge; their positions, which the numbering does not need, are computed
@@ -172,7 +183,8 @@ std::vector<TriangleMesh> extract_label_surfaces(const SampledField& field) {
         for (std::size_t e = 0; e < 3; ++e) {
           const std::uint32_t edge = (triangle.edge_corners >> (6 * e)) & 63u;
           const std::uint32_t ca = edge & 7u, cb = edge >> 3;  // inside, outside corner
-          std::uint32_t& vertex = vertex_of_edge[static_cast<std::size_t>(cube[ca & cb]) * 8 + (ca ^ cb)];
+          std::uint32_t& vertex =
+              vertex_of_edge[static_cast<std::size_t>(cube[ca & cb]) * 8 + (ca ^ cb)];
           if (vertex == kNoVertex) {
             vertex = static_cast<std::uint32_t>(new_vertices.size());
             new_vertices.push_back({triangle.cell, edge});
@@ -182,22 +194,25 @@ std::vector<TriangleMesh> extract_label_surfaces(const SampledField& field) {
         mesh.triangles.push_back(ids);
       }
     mesh.vertices.resize(new_vertices.size());
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, new_vertices.size(), 4096),
-                      [&](const tbb::blocked_range<std::size_t>& r) {
-                        for (std::size_t v = r.begin(); v < r.end(); ++v) {
-                          const NewVertex& nv = new_vertices[v];
-                          const std::uint32_t* cube = &cell_corners[static_cast<std::size_t>(nv.cell) * 8];
-                          const int ca = static_cast<int>(nv.edge & 7u), cb = static_cast<int>(nv.edge >> 3);
-                          const double ga = std::max(0.0, corner_g[cube[ca]]);
-                          const double gb = std::min(0.0, corner_g[cube[cb]]);
-                          const double t_param = ga - gb > 0.0 ? ga / (ga - gb) : 0.5;
-                          int i, j, k;
-                          grid_unkey(cells[nv.cell], i, j, k);
-                          const Vec3 pa = field.grid.position(i + (ca & 1), j + ((ca >> 1) & 1), k + ((ca >> 2) & 1));
-                          const Vec3 pb = field.grid.position(i + (cb & 1), j + ((cb >> 1) & 1), k + ((cb >> 2) & 1));
-                          mesh.vertices[v] = pa + t_param * (pb - pa);
-                        }
-                      });
+    tbb::parallel_for(
+        tbb::blocked_range<std::size_t>(0, new_vertices.size(), 4096),
+        [&](const tbb::blocked_range<std::size_t>& r) {
+          for (std::size_t v = r.begin(); v < r.end(); ++v) {
+            const NewVertex& nv = new_vertices[v];
+            const std::uint32_t* cube = &cell_corners[static_cast<std::size_t>(nv.cell) * 8];
+            const int ca = static_cast<int>(nv.edge & 7u), cb = static_cast<int>(nv.edge >> 3);
+            const double ga = std::max(0.0, corner_g[cube[ca]]);
+            const double gb = std::min(0.0, corner_g[cube[cb]]);
+            const double t_param = ga - gb > 0.0 ? ga / (ga - gb) : 0.5;
+            int i, j, k;
+            grid_unkey(cells[nv.cell], i, j, k);
+            const Vec3 pa =
+                field.grid.position(i + (ca & 1), j + ((ca >> 1) & 1), k + ((ca >> 2) & 1));
+            const Vec3 pb =
+                field.grid.position(i + (cb & 1), j + ((cb >> 1) & 1), k + ((cb >> 2) & 1));
+            mesh.vertices[v] = pa + t_param * (pb - pa);
+          }
+        });
   }
   return meshes;
 }

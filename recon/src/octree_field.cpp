@@ -1,5 +1,9 @@
 #include "octree_field.hpp"
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
+
 #include <algorithm>
 #include <array>
 #include <atomic>
@@ -11,12 +15,8 @@
 #include <type_traits>
 #include <unordered_set>
 
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
-#include <tbb/parallel_sort.h>
-
-#include "sonoshape/core/log.hpp"
 #include "key_masks.hpp"
+#include "sonoshape/core/log.hpp"
 #include "sorted_keys.hpp"
 
 namespace sonoshape::recon {
@@ -53,7 +53,8 @@ class Sampler {
  public:
   /// `pending_keys` is scratch space, emptied here; `valid` says per row of `field` whether its
   /// value is current (rows kept from an earlier pass may not be).
-  Sampler(SampledField& field, const BatchEvaluator& evaluate, GridIndex& pending_keys, std::vector<char> valid)
+  Sampler(SampledField& field, const BatchEvaluator& evaluate, GridIndex& pending_keys,
+          std::vector<char> valid)
       : field_(field), evaluate_(evaluate), pending_keys_(pending_keys), valid_(std::move(valid)) {
     pending_keys_.reset(1 << field.grid.depth);
   }
@@ -63,13 +64,15 @@ class Sampler {
   std::uint32_t valid_row(std::uint64_t key) const {
     const std::uint32_t row = field_.index.find(key);
     if (row == GridIndex::kNone || !valid_[row]) return GridIndex::kNone;
-    std::atomic_ref<std::uint32_t>(field_.row_pass[row]).store(field_.pass, std::memory_order_relaxed);
+    std::atomic_ref<std::uint32_t>(field_.row_pass[row])
+        .store(field_.pass, std::memory_order_relaxed);
     return row;
   }
   bool has_value(std::uint64_t key) const { return valid_row(key) != GridIndex::kNone; }
   /// Counts a row as read in this pass without looking it up (its value is current).
   void mark_read(std::uint32_t row) const {
-    std::atomic_ref<std::uint32_t>(field_.row_pass[row]).store(field_.pass, std::memory_order_relaxed);
+    std::atomic_ref<std::uint32_t>(field_.row_pass[row])
+        .store(field_.pass, std::memory_order_relaxed);
   }
   /// Queues a vertex for evaluation unless it has a value or is queued.
   void request(int i, int j, int k) {
@@ -86,19 +89,23 @@ class Sampler {
   void request_each(std::size_t count, const Generate& generate) {
     constexpr std::size_t kChunk = 512;
     std::vector<std::vector<std::uint64_t>> missing((count + kChunk - 1) / kChunk);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, missing.size(), 1), [&](const tbb::blocked_range<std::size_t>& r) {
-      for (std::size_t chunk = r.begin(); chunk < r.end(); ++chunk) {
-        std::vector<std::uint64_t>& local = missing[chunk];
-        // Returns the vertex's row, or GridIndex::kNone when it is queued for evaluation.
-        const auto request_one = [&](int i, int j, int k) {
-          const std::uint64_t key = grid_key(i, j, k);
-          const std::uint32_t row = valid_row(key);
-          if (row == GridIndex::kNone) local.push_back(key);
-          return row;
-        };
-        for (std::size_t n = chunk * kChunk; n < std::min(count, (chunk + 1) * kChunk); ++n) generate(n, request_one);
-      }
-    });
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, missing.size(), 1),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t chunk = r.begin(); chunk < r.end(); ++chunk) {
+                          std::vector<std::uint64_t>& local = missing[chunk];
+                          // Returns the vertex's row, or GridIndex::kNone when it is queued for
+                          // evaluation.
+                          const auto request_one = [&](int i, int j, int k) {
+                            const std::uint64_t key = grid_key(i, j, k);
+                            const std::uint32_t row = valid_row(key);
+                            if (row == GridIndex::kNone) local.push_back(key);
+                            return row;
+                          };
+                          for (std::size_t n = chunk * kChunk;
+                               n < std::min(count, (chunk + 1) * kChunk); ++n)
+                            generate(n, request_one);
+                        }
+                      });
     for (const std::vector<std::uint64_t>& local : missing)
       for (const std::uint64_t key : local) queue(key);
   }
@@ -154,7 +161,7 @@ class Sampler {
   const BatchEvaluator& evaluate_;
   std::vector<std::uint64_t> pending_;
   GridIndex& pending_keys_;  // the keys of pending_, for de-duplication
-  std::vector<char> valid_;   // per row of the field
+  std::vector<char> valid_;  // per row of the field
 };
 
 // Sorts and de-duplicates keys: the sets of the octree stages are built in bulk, then queried,
@@ -172,11 +179,12 @@ bool contains(const std::vector<std::uint64_t>& sorted, std::uint64_t key) {
 // pass found them: fills those it left at GridIndex::kNone (evaluated since), and tells whether
 // the corners' labels differ. The mixed tests of the refinement and the band closure read these
 // rows instead of looking every corner up a second time.
-bool corners_mixed(const SampledField& f, std::array<std::uint32_t, 8>& rows, int i, int j, int k, int step) {
+bool corners_mixed(const SampledField& f, std::array<std::uint32_t, 8>& rows, int i, int j, int k,
+                   int step) {
   for (int corner = 0; corner < 8; ++corner)
     if (rows[static_cast<std::size_t>(corner)] == GridIndex::kNone)
-      rows[static_cast<std::size_t>(corner)] = f.index.at(
-          grid_key(i + (corner & 1) * step, j + ((corner >> 1) & 1) * step, k + ((corner >> 2) & 1) * step));
+      rows[static_cast<std::size_t>(corner)] = f.index.at(grid_key(
+          i + (corner & 1) * step, j + ((corner >> 1) & 1) * step, k + ((corner >> 2) & 1) * step));
   const int first = f.row_label(rows[0]);
   for (std::size_t corner = 1; corner < 8; ++corner)
     if (f.row_label(rows[corner]) != first) return true;
@@ -185,8 +193,8 @@ bool corners_mixed(const SampledField& f, std::array<std::uint32_t, 8>& rows, in
 
 // The corners of a finest cell on its face towards kFaceNeighbours[d]: corner c has offset
 // (c & 1, (c >> 1) & 1, (c >> 2) & 1).
-constexpr std::array<std::array<int, 4>, 6> kFaceCorners{{{0, 2, 4, 6}, {1, 3, 5, 7}, {0, 1, 4, 5},
-                                                          {2, 3, 6, 7}, {0, 1, 2, 3}, {4, 5, 6, 7}}};
+constexpr std::array<std::array<int, 4>, 6> kFaceCorners{
+    {{0, 2, 4, 6}, {1, 3, 5, 7}, {0, 1, 4, 5}, {2, 3, 6, 7}, {0, 1, 2, 3}, {4, 5, 6, 7}}};
 
 // Keeps the mixed cells among `seeds` (they may repeat; with `seed_rows`, all are mixed, with
 // current corner values, as the refinement's finest cells, and those are their corner rows) and
@@ -213,7 +221,8 @@ void close_band(SampledField& field, Sampler& sampler, const std::vector<std::ui
     }
   // The mixed cells of `cells` and their corner rows, in their order, their corners evaluated
   // first where they have no value (the tests run in parallel).
-  const auto requested_mixed_of = [&](const std::vector<std::uint64_t>& cells, std::vector<std::uint64_t>& kept,
+  const auto requested_mixed_of = [&](const std::vector<std::uint64_t>& cells,
+                                      std::vector<std::uint64_t>& kept,
                                       std::vector<CornerRows>& kept_rows) {
     std::vector<CornerRows> corner_rows(cells.size());
     sampler.request_each(cells.size(), [&](std::size_t n, const auto& request) {
@@ -262,7 +271,8 @@ void close_band(SampledField& field, Sampler& sampler, const std::vector<std::ui
       for (std::size_t c = 0; c < 8; ++c) labels[c] = field.row_label(frontier_rows[n][c]);
       std::uint8_t bits = 0;
       for (std::size_t d = 0; d < kFaceNeighbours.size(); ++d) {
-        const int ni = i + kFaceNeighbours[d][0], nj = j + kFaceNeighbours[d][1], nk = k + kFaceNeighbours[d][2];
+        const int ni = i + kFaceNeighbours[d][0], nj = j + kFaceNeighbours[d][1],
+                  nk = k + kFaceNeighbours[d][2];
         if (ni < 0 || nj < 0 || nk < 0 || ni >= resolution || nj >= resolution || nk >= resolution)
           continue;
         const std::array<int, 4>& face = kFaceCorners[d];
@@ -282,7 +292,8 @@ void close_band(SampledField& field, Sampler& sampler, const std::vector<std::ui
       grid_unkey(frontier[n], i, j, k);
       for (std::size_t d = 0; d < kFaceNeighbours.size(); ++d) {
         if (!((across[n] >> d) & 1u)) continue;
-        const std::uint64_t nkey = grid_key(i + kFaceNeighbours[d][0], j + kFaceNeighbours[d][1], k + kFaceNeighbours[d][2]);
+        const std::uint64_t nkey = grid_key(i + kFaceNeighbours[d][0], j + kFaceNeighbours[d][1],
+                                            k + kFaceNeighbours[d][2]);
         if (in_band.insert(nkey, 0)) candidates.push_back(nkey);
       }
     }
@@ -308,8 +319,8 @@ void close_band(SampledField& field, Sampler& sampler, const std::vector<std::ui
 void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64_t>& fixed,
             int iterations, GridIndex& scratch, const std::vector<char>* valid_at_start,
             const OctreeWorkspace::SmoothingInputs& last, OctreeWorkspace::SmoothingInputs& next);
-void snap_thin_regions(SampledField& field, Sampler& sampler, const std::vector<RegionSample>& samples,
-                       GridIndex& scratch);
+void snap_thin_regions(SampledField& field, Sampler& sampler,
+                       const std::vector<RegionSample>& samples, GridIndex& scratch);
 
 }  // namespace
 
@@ -348,12 +359,13 @@ ContourKeys contour_keys(const Grid& grid, const OctreeOptions& options,
           grid_key(idx[0] >> shift, idx[1] >> shift, idx[2] >> shift));
     }
     // Samples at half a cell find every cell the segment crosses.
-    const int steps = std::max(1, static_cast<int>(std::ceil((b - a).norm() / (0.5 * grid.cell_size))));
+    const int steps =
+        std::max(1, static_cast<int>(std::ceil((b - a).norm() / (0.5 * grid.cell_size))));
     for (int s = 0; s <= steps; ++s) {
       const auto cell = fine_index(a + (b - a) * (static_cast<double>(s) / steps));
       for (int corner = 0; corner < 8; ++corner)
-        keys.fixed_vertices.push_back(grid_key(cell[0] + (corner & 1), cell[1] + ((corner >> 1) & 1),
-                                               cell[2] + ((corner >> 2) & 1)));
+        keys.fixed_vertices.push_back(grid_key(
+            cell[0] + (corner & 1), cell[1] + ((corner >> 1) & 1), cell[2] + ((corner >> 2) & 1)));
     }
   }
   for (auto& cells : keys.cells_by_level) sort_unique(cells);
@@ -375,14 +387,16 @@ void merge_contour_keys(ContourKeys& keys, const ContourKeys& more) {
 }
 
 SampledField sample_field(const Box3& box, int function_count, const BatchEvaluator& evaluate,
-                          const ContourKeys& contours, const std::vector<RegionSample>& region_samples,
+                          const ContourKeys& contours,
+                          const std::vector<RegionSample>& region_samples,
                           const OctreeOptions& options) {
   OctreeWorkspace workspace;
   return sample_field(box, function_count, evaluate, contours, region_samples, options, workspace);
 }
 
 SampledField sample_field(const Box3& box, int function_count, const BatchEvaluator& evaluate,
-                          const ContourKeys& contours, const std::vector<RegionSample>& region_samples,
+                          const ContourKeys& contours,
+                          const std::vector<RegionSample>& region_samples,
                           const OctreeOptions& options, OctreeWorkspace& workspace) {
   if (function_count < 1 || function_count > 65536)
     throw std::invalid_argument("sample_field: " + std::to_string(function_count) +
@@ -393,17 +407,19 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
   SampledField field;
   SampledField& previous = workspace.previous;
   std::vector<char> valid;
-  const bool kept =
-      !workspace.previous_valid.empty() && workspace.previous_valid.size() == previous.keys.size() &&
-      previous.function_count == function_count && previous.grid.depth == grid.depth &&
-      previous.grid.origin == grid.origin && previous.grid.cell_size == grid.cell_size;
+  const bool kept = !workspace.previous_valid.empty() &&
+                    workspace.previous_valid.size() == previous.keys.size() &&
+                    previous.function_count == function_count &&
+                    previous.grid.depth == grid.depth && previous.grid.origin == grid.origin &&
+                    previous.grid.cell_size == grid.cell_size;
   if (kept) {
     // Keep it: its rows go back to their values before the smoothing and the snap (latest
     // change first), and its out-of-date rows are evaluated again when read.
     field = std::move(previous);
     const std::size_t fc = static_cast<std::size_t>(function_count);
     for (std::size_t n = field.changed_rows.size(); n-- > 0;)
-      copy_row(field.changed_values.data() + n * fc, fc, field.values.data() + field.changed_rows[n] * fc);
+      copy_row(field.changed_values.data() + n * fc, fc,
+               field.values.data() + field.changed_rows[n] * fc);
     for (const std::uint32_t row : field.changed_rows) field.set_row_label(row);
     field.changed_rows.clear();
     field.changed_values.clear();
@@ -420,7 +436,8 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
   }
   previous = SampledField{};
   workspace.previous_valid.clear();
-  const std::vector<char> valid_at_start = valid;  // the rows of the kept field that kept their values
+  const std::vector<char> valid_at_start =
+      valid;  // the rows of the kept field that kept their values
   Sampler sampler(field, evaluate, workspace.pending, std::move(valid));
   const int start = std::min(options.start_depth, depth);
 
@@ -436,7 +453,8 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
   workspace.refinement.clear();
   std::vector<std::array<int, 3>> cells;
   std::vector<CornerRows> finest_mixed_rows;  // of the finest mixed cells, in order
-  std::vector<std::uint32_t> before_index;  // per cell, its index in the last pass's level, or kNone
+  std::vector<std::uint32_t>
+      before_index;  // per cell, its index in the last pass's level, or kNone
   {
     const int step = 1 << (depth - start);
     for (int i = 0; i < resolution; i += step)
@@ -445,12 +463,14 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
     const bool same_start = !before.empty() && before.front().cells == cells;
     before_index.resize(cells.size(), GridIndex::kNone);
     if (same_start)
-      for (std::size_t n = 0; n < cells.size(); ++n) before_index[n] = static_cast<std::uint32_t>(n);
+      for (std::size_t n = 0; n < cells.size(); ++n)
+        before_index[n] = static_cast<std::uint32_t>(n);
   }
   for (int level = start;; ++level) {
     const int step = 1 << (depth - level);
     const std::size_t level_index = static_cast<std::size_t>(level - start);
-    const OctreeWorkspace::RefinementLevel* last = level_index < before.size() ? &before[level_index] : nullptr;
+    const OctreeWorkspace::RefinementLevel* last =
+        level_index < before.size() ? &before[level_index] : nullptr;
     OctreeWorkspace::RefinementLevel now;
     now.corner_rows.resize(cells.size());
     now.mixed.resize(cells.size());
@@ -477,7 +497,8 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
       std::array<std::uint32_t, 8>& rows = now.corner_rows[tested[m]];
       for (int corner = 0; corner < 8; ++corner)
         rows[static_cast<std::size_t>(corner)] =
-            request(c[0] + (corner & 1) * step, c[1] + ((corner >> 1) & 1) * step, c[2] + ((corner >> 2) & 1) * step);
+            request(c[0] + (corner & 1) * step, c[1] + ((corner >> 1) & 1) * step,
+                    c[2] + ((corner >> 2) & 1) * step);
     });
     sampler.flush();
     // Mixed cells, and above the finest level cells holding contour vertices: split further.
@@ -485,7 +506,8 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
     const bool contours_here = level < depth && contour_level < contours.cells_by_level.size();
     for_rows(tested.size(), [&](std::size_t m) {
       const auto& c = cells[tested[m]];
-      now.mixed[tested[m]] = corners_mixed(field, now.corner_rows[tested[m]], c[0], c[1], c[2], step);
+      now.mixed[tested[m]] =
+          corners_mixed(field, now.corner_rows[tested[m]], c[0], c[1], c[2], step);
     });
     // Which cells of this level hold contour vertices, as a bit per cell where the level is
     // coarse enough, instead of a binary search in the level's contour cells for every cell.
@@ -507,11 +529,13 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
     const auto contour_cell = [&](const std::array<int, 3>& c) {
       if (!contours_here) return false;
       if (contour_bits.empty())
-        return contains(contours.cells_by_level[contour_level], grid_key(c[0] / step, c[1] / step, c[2] / step));
+        return contains(contours.cells_by_level[contour_level],
+                        grid_key(c[0] / step, c[1] / step, c[2] / step));
       const std::size_t bit = bit_of(c[0] / step, c[1] / step, c[2] / step);
       return ((contour_bits[bit / 64] >> (bit % 64)) & 1u) != 0;
     };
-    for_rows(cells.size(), [&](std::size_t n) { now.split[n] = now.mixed[n] || contour_cell(cells[n]); });
+    for_rows(cells.size(),
+             [&](std::size_t n) { now.split[n] = now.mixed[n] || contour_cell(cells[n]); });
     if (level == depth) {
       for (std::size_t n = 0; n < cells.size(); ++n)
         if (now.split[n]) {
@@ -544,8 +568,9 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
       for (int child = 0; child < 8; ++child) {
         refined.push_back({c[0] + (child & 1) * half, c[1] + ((child >> 1) & 1) * half,
                            c[2] + ((child >> 2) & 1) * half});
-        refined_before.push_back(had_children ? last_child_start[q] + static_cast<std::uint32_t>(child)
-                                              : GridIndex::kNone);
+        refined_before.push_back(had_children
+                                     ? last_child_start[q] + static_cast<std::uint32_t>(child)
+                                     : GridIndex::kNone);
       }
     }
     now.cells = std::move(cells);
@@ -578,7 +603,8 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
   const std::vector<std::uint64_t> nodes = cube_corner_union(field.surface_cells);
   std::vector<std::uint64_t> moving;
   moving.reserve(nodes.size());
-  std::set_difference(nodes.begin(), nodes.end(), fixed.begin(), fixed.end(), std::back_inserter(moving));
+  std::set_difference(nodes.begin(), nodes.end(), fixed.begin(), fixed.end(),
+                      std::back_inserter(moving));
   // Laplacian domain: the moving nodes and their six neighbours, sorted; moving_stencil: per
   // moving node, its 7-point stencil's positions in laplacian_nodes (kStencilShifts). Only the
   // moving nodes' bi-Laplacians are computed, so only their stencils are sampled. On a dense
@@ -594,7 +620,8 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
   // first evaluated) scattered every stencil over memory. The bit masks that build the sets give
   // each stencil's positions (key_masks.hpp); looking up the seven vertices of every Laplacian
   // and bi-Laplacian stencil in the grid index cost more than the sweeps.
-  std::vector<std::uint32_t> lap_stencil;  // per Laplacian node, as moving_stencil in stencil_vertices
+  std::vector<std::uint32_t>
+      lap_stencil;  // per Laplacian node, as moving_stencil in stencil_vertices
   std::vector<std::uint64_t> stencil_vertices = stencil_union(laplacian_nodes, &lap_stencil);
   const std::size_t fc = static_cast<std::size_t>(function_count);
   // Per stencil vertex, its row and its value before the sweeps (in `smoothed`), in one parallel
@@ -608,14 +635,18 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
   constexpr std::size_t kChunk = 4096;
   std::vector<std::vector<std::uint32_t>> missing((stencil_vertices.size() + kChunk - 1) / kChunk);
   tbb::parallel_for(std::size_t{0}, missing.size(), [&](std::size_t chunk) {
-    const std::size_t begin = chunk * kChunk, end = std::min(stencil_vertices.size(), begin + kChunk);
-    std::size_t m = from_last ? static_cast<std::size_t>(std::lower_bound(last.keys.begin(), last.keys.end(),
-                                                                          stencil_vertices[begin]) - last.keys.begin())
-                              : 0;
+    const std::size_t begin = chunk * kChunk,
+                      end = std::min(stencil_vertices.size(), begin + kChunk);
+    std::size_t m =
+        from_last ? static_cast<std::size_t>(std::lower_bound(last.keys.begin(), last.keys.end(),
+                                                              stencil_vertices[begin]) -
+                                             last.keys.begin())
+                  : 0;
     for (std::size_t n = begin; n < end; ++n) {
       if (from_last) {
         while (m < last.keys.size() && last.keys[m] < stencil_vertices[n]) ++m;
-        if (m < last.keys.size() && last.keys[m] == stencil_vertices[n] && (*valid_at_start)[last.rows[m]]) {
+        if (m < last.keys.size() && last.keys[m] == stencil_vertices[n] &&
+            (*valid_at_start)[last.rows[m]]) {
           stencil_rows[n] = last.rows[m];
           sampler.mark_read(stencil_rows[n]);
           copy_row(&last.values[m * fc], fc, &smoothed[n * fc]);
@@ -623,12 +654,15 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
         }
       }
       stencil_rows[n] = sampler.valid_row(stencil_vertices[n]);
-      if (stencil_rows[n] == GridIndex::kNone) missing[chunk].push_back(static_cast<std::uint32_t>(n));
-      else copy_row(field.values.data() + stencil_rows[n] * fc, fc, &smoothed[n * fc]);
+      if (stencil_rows[n] == GridIndex::kNone)
+        missing[chunk].push_back(static_cast<std::uint32_t>(n));
+      else
+        copy_row(field.values.data() + stencil_rows[n] * fc, fc, &smoothed[n * fc]);
     }
   });
   std::vector<std::uint32_t> evaluated;  // positions, ascending
-  for (const std::vector<std::uint32_t>& chunk : missing) evaluated.insert(evaluated.end(), chunk.begin(), chunk.end());
+  for (const std::vector<std::uint32_t>& chunk : missing)
+    evaluated.insert(evaluated.end(), chunk.begin(), chunk.end());
   for (const std::uint32_t n : evaluated) sampler.queue(stencil_vertices[n]);
   sampler.flush();
   double* values = field.values.data();  // the flush may have grown the field
@@ -685,9 +719,12 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
       });
     }
   };
-  if (fc == 2) sweeps(std::integral_constant<std::size_t, 2>{});
-  else if (fc == 3) sweeps(std::integral_constant<std::size_t, 3>{});
-  else sweeps(fc);
+  if (fc == 2)
+    sweeps(std::integral_constant<std::size_t, 2>{});
+  else if (fc == 3)
+    sweeps(std::integral_constant<std::size_t, 3>{});
+  else
+    sweeps(fc);
   // The smoothed values go to the field's rows, and `smoothed` gets the rows' values before the
   // sweeps back (saved in changed_values; they are what `smoothed` held): this pass's inputs, kept
   // for the next pass (a copy of all of them before the sweeps cost more).
@@ -725,8 +762,8 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
   field.smoothing_seconds = smoothing_clock.seconds();
 }
 
-void snap_thin_regions(SampledField& field, Sampler& sampler, const std::vector<RegionSample>& samples,
-                       GridIndex& scratch) {
+void snap_thin_regions(SampledField& field, Sampler& sampler,
+                       const std::vector<RegionSample>& samples, GridIndex& scratch) {
   // A region narrower than the finest cells may have no grid vertex of its label, and would
   // vanish from the mesh; its nearest grid vertices take the slice's own value (as on the face).
   const Grid& grid = field.grid;
@@ -736,7 +773,8 @@ void snap_thin_regions(SampledField& field, Sampler& sampler, const std::vector<
     const Vec3 q = (sample.position - grid.origin) / grid.cell_size;
     const int i = static_cast<int>(std::lround(q.x())), j = static_cast<int>(std::lround(q.y())),
               k = static_cast<int>(std::lround(q.z()));
-    if (i <= 0 || j <= 0 || k <= 0 || i >= resolution || j >= resolution || k >= resolution) continue;
+    if (i <= 0 || j <= 0 || k <= 0 || i >= resolution || j >= resolution || k >= resolution)
+      continue;
     sampler.request(i, j, k);
     targets.emplace_back(grid_key(i, j, k), sample.function);
   }

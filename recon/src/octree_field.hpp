@@ -25,8 +25,8 @@ struct Grid {
 /// Packs grid indices (each in [-2^20, 2^20)) into one key.
 inline std::uint64_t grid_key(int i, int j, int k) {
   constexpr std::int64_t kBias = 1 << 20;
-  return (static_cast<std::uint64_t>(i + kBias) << 42) | (static_cast<std::uint64_t>(j + kBias) << 21) |
-         static_cast<std::uint64_t>(k + kBias);
+  return (static_cast<std::uint64_t>(i + kBias) << 42) |
+         (static_cast<std::uint64_t>(j + kBias) << 21) | static_cast<std::uint64_t>(k + kBias);
 }
 inline void grid_unkey(std::uint64_t key, int& i, int& j, int& k) {
   constexpr std::int64_t kBias = 1 << 20;
@@ -52,10 +52,11 @@ struct OctreeOptions {
 struct SampledField {
   Grid grid;
   int function_count = 2;
-  GridIndex index;  ///< vertex key -> row in values
-  std::vector<double> values;                               ///< row-major, function_count each
+  GridIndex index;                  ///< vertex key -> row in values
+  std::vector<double> values;       ///< row-major, function_count each
   std::vector<std::uint64_t> keys;  ///< vertex key of each row
-  std::vector<std::uint64_t> row_tags;  ///< per row, the evaluator's tag of its value (BatchEvaluator)
+  std::vector<std::uint64_t>
+      row_tags;  ///< per row, the evaluator's tag of its value (BatchEvaluator)
   std::vector<std::uint64_t> surface_cells;  ///< finest cells (key of their min corner) with
                                              ///< corners of different labels; closed under
                                              ///< face adjacency
@@ -78,7 +79,8 @@ struct SampledField {
   std::vector<std::uint16_t> row_labels;
 
   const double* at(std::uint64_t key) const {
-    return values.data() + static_cast<std::size_t>(index.at(key)) * static_cast<std::size_t>(function_count);
+    return values.data() +
+           static_cast<std::size_t>(index.at(key)) * static_cast<std::size_t>(function_count);
   }
   /// Argmax label of a vertex's values.
   int label(std::uint64_t key) const { return row_label(index.at(key)); }
@@ -86,7 +88,8 @@ struct SampledField {
   int row_label(std::uint32_t row) const { return row_labels[row]; }
   /// Labels a row from its values, after they were written.
   void set_row_label(std::uint32_t row) {
-    const double* row_values = values.data() + static_cast<std::size_t>(row) * static_cast<std::size_t>(function_count);
+    const double* row_values =
+        values.data() + static_cast<std::size_t>(row) * static_cast<std::size_t>(function_count);
     int best = 0;
     for (int l = 1; l < function_count; ++l)
       if (row_values[l] > row_values[best]) best = l;
@@ -141,10 +144,10 @@ struct OctreeWorkspace {
   /// and tests only the cells with a corner in a changed arrangement cell (it looked up all eight
   /// corners of every cell of every level: the largest of its octree passes).
   struct RefinementLevel {
-    std::vector<std::array<int, 3>> cells;                 ///< min corners, finest units
+    std::vector<std::array<int, 3>> cells;                  ///< min corners, finest units
     std::vector<std::array<std::uint32_t, 8>> corner_rows;  ///< rows of `previous`
-    std::vector<char> mixed;                               ///< corners of different labels
-    std::vector<char> split;                               ///< refined (mixed or contour cell)
+    std::vector<char> mixed;                                ///< corners of different labels
+    std::vector<char> split;                                ///< refined (mixed or contour cell)
   };
   std::vector<RefinementLevel> refinement;
   /// The smoothing's stencil vertices of the pass that made `previous` (sorted keys), their rows
@@ -164,10 +167,12 @@ struct OctreeWorkspace {
 /// the octree and fix the smoothing next to the contours (see ContourKeys); `region_samples`
 /// snap thin regions to their nearest grid vertices after smoothing.
 SampledField sample_field(const Box3& box, int function_count, const BatchEvaluator& evaluate,
-                          const ContourKeys& contours, const std::vector<RegionSample>& region_samples,
+                          const ContourKeys& contours,
+                          const std::vector<RegionSample>& region_samples,
                           const OctreeOptions& options, OctreeWorkspace& workspace);
 SampledField sample_field(const Box3& box, int function_count, const BatchEvaluator& evaluate,
-                          const ContourKeys& contours, const std::vector<RegionSample>& region_samples,
+                          const ContourKeys& contours,
+                          const std::vector<RegionSample>& region_samples,
                           const OctreeOptions& options);
 
 /// The default octree depth: the coarsest whose finest cells are at most 1/128 of the box diagonal.

@@ -30,7 +30,8 @@ constexpr double kCoincidentTolerance = 1e-9;
 
 // Appends the points of every region of `slice` too thin for grid cells of `cell_size`: its
 // interior point and a lattice of half the cell size over it (see snap_thin_regions).
-void add_thin_region_samples(const PreparedSlice& slice, double cell_size, std::vector<RegionSample>& samples) {
+void add_thin_region_samples(const PreparedSlice& slice, double cell_size,
+                             std::vector<RegionSample>& samples) {
   for (std::size_t m = 1; m < slice.rings_by_material.size(); ++m) {
     const std::vector<Ring2>& rings = slice.rings_by_material[m];
     auto inside = [&](const Vec2& p) {
@@ -127,11 +128,12 @@ struct Reconstructor::State {
   Box3 box;
   int depth = 0;
   std::vector<int> material_ids;
-  std::unique_ptr<Arrangement> arrangement;  // mean-value field
-  std::unique_ptr<CellField> field;          // mean-value field
+  std::unique_ptr<Arrangement> arrangement;    // mean-value field
+  std::unique_ptr<CellField> field;            // mean-value field
   std::unique_ptr<ThinPlateField> thin_plate;  // thin-plate field
-  std::vector<Box3> thin_plate_boxes;  // per material, the box of its contours in the field's slices
-  std::unique_ptr<FieldEvaluator> evaluator;  // made at the first update (opens the device)
+  std::vector<Box3>
+      thin_plate_boxes;  // per material, the box of its contours in the field's slices
+  std::unique_ptr<FieldEvaluator> evaluator;   // made at the first update (opens the device)
   std::vector<std::uint32_t> cell_generation;  // update count at which each cell last changed
   std::uint32_t generation = 0;
   // What the slices alone decide on the grid, for field->slices()[0, contour_slices): merged
@@ -141,7 +143,8 @@ struct Reconstructor::State {
   std::vector<RegionSample> region_samples;
   std::size_t contour_slices = 0;
   SampledField sampled;
-  bool sampled_tags_current = false;  // `sampled`'s row tags name this arrangement's cells (false after a rebuild)
+  bool sampled_tags_current =
+      false;  // `sampled`'s row tags name this arrangement's cells (false after a rebuild)
   OctreeWorkspace octree_workspace;  // kept across updates (see OctreeWorkspace)
   MeshSet mesh;
   ReconstructionStats totals;
@@ -213,21 +216,25 @@ struct Reconstructor::State {
           }
         lo.array() -= widen;
         hi.array() += widen;
-        const auto corner = [&](double x, double y) { return Vec3(slice.origin + x * slice.u + y * slice.v); };
+        const auto corner = [&](double x, double y) {
+          return Vec3(slice.origin + x * slice.u + y * slice.v);
+        };
         unknown_rectangles.push_back({corner(lo.x(), lo.y()), corner(hi.x(), lo.y()),
                                       corner(hi.x(), hi.y()), corner(lo.x(), hi.y())});
       }
     }
     rectangle_slices = slices.size();
     arrangement->construct_cells_meeting(
-        {unknown_rectangles.begin() + static_cast<std::ptrdiff_t>(old_count), unknown_rectangles.end()});
+        {unknown_rectangles.begin() + static_cast<std::ptrdiff_t>(old_count),
+         unknown_rectangles.end()});
   }
 
   bool thin_plate_field() const { return options.engine.field == FieldKind::thin_plate; }
 
   // The slices of list[first, end) that are not duplicates, prepared in parallel (each depends
   // on itself alone; the first error in slice order is thrown). `index` names the first in errors.
-  std::vector<PreparedSlice> prepare(const std::vector<Entry>& list, std::size_t first, std::size_t index) const {
+  std::vector<PreparedSlice> prepare(const std::vector<Entry>& list, std::size_t first,
+                                     std::size_t index) const {
     std::vector<const Entry*> kept;
     for (std::size_t k = first; k < list.size(); ++k)
       if (!list[k].duplicate) kept.push_back(&list[k]);
@@ -276,8 +283,8 @@ struct Reconstructor::State {
     std::vector<PreparedSlice> prepared = prepare(list, 0, 0);
     const int materials = static_cast<int>(material_ids.size());
     thin_plate_boxes = material_boxes(prepared, materials);
-    auto rebuilt = std::make_unique<ThinPlateField>(box, make_grid(box, depth).cell_size, materials, tp,
-                                                    box_extents(thin_plate_boxes));
+    auto rebuilt = std::make_unique<ThinPlateField>(box, make_grid(box, depth).cell_size, materials,
+                                                    tp, box_extents(thin_plate_boxes));
     // A rebuild on the same grid (a removal, a material's extent outgrown) starts its solve from
     // the last field: far fewer iterations than from the closing value.
     if (thin_plate) rebuilt->start_from(*thin_plate);
@@ -289,7 +296,8 @@ struct Reconstructor::State {
   // Adds the data of list[first, end) to the thin-plate field, unless they change a material's
   // truncation (truncation_extent of its extent): false then, and the caller rebuilds, so that
   // every slice's data have the truncation a one-shot reconstruction gives them.
-  bool add_thin_plate_slices(const std::vector<Entry>& list, std::size_t first, ReconstructionStats& stats) {
+  bool add_thin_plate_slices(const std::vector<Entry>& list, std::size_t first,
+                             ReconstructionStats& stats) {
     Stopwatch clock;
     std::vector<PreparedSlice> added = prepare(list, first, thin_plate->slices().size());
     std::vector<Box3> boxes = material_boxes(added, static_cast<int>(material_ids.size()));
@@ -350,20 +358,22 @@ int Reconstructor::add_slice(LabeledSlice slice) {
   if (const Status valid = validate_slice_set(single, "added slice"); !valid)
     throw std::invalid_argument(valid.message());
   State::Entry entry{s.next_id, std::move(slice), false};
-  const double scale =
-      std::max(1.0, s.options.bounds ? s.options.bounds->diagonal() : single.effective_bounds().diagonal());
+  const double scale = std::max(
+      1.0, s.options.bounds ? s.options.bounds->diagonal() : single.effective_bounds().diagonal());
   auto check = [&](const State::Entry& other) {
     if (other.duplicate || !same_plane(other.slice, entry.slice, scale)) return;
     if (same_slice(other.slice, entry.slice)) {
       entry.duplicate = true;
       return;
     }
-    throw std::invalid_argument("added slice lies in the plane of slice " + std::to_string(other.id) +
+    throw std::invalid_argument("added slice lies in the plane of slice " +
+                                std::to_string(other.id) +
                                 " but its content differs; remove that slice first or merge both "
                                 "into one slice");
   };
   for (const State::Entry& e : s.entries)
-    if (std::find(s.pending_removes.begin(), s.pending_removes.end(), e.id) == s.pending_removes.end())
+    if (std::find(s.pending_removes.begin(), s.pending_removes.end(), e.id) ==
+        s.pending_removes.end())
       check(e);
   for (const State::Entry& e : s.pending_adds) check(e);
   s.pending_adds.push_back(std::move(entry));
@@ -380,7 +390,8 @@ bool Reconstructor::remove_slice(int id) {
   }
   const bool present = std::any_of(s.entries.begin(), s.entries.end(),
                                    [&](const State::Entry& e) { return e.id == id; });
-  if (!present || std::find(s.pending_removes.begin(), s.pending_removes.end(), id) != s.pending_removes.end())
+  if (!present ||
+      std::find(s.pending_removes.begin(), s.pending_removes.end(), id) != s.pending_removes.end())
     return false;
   s.pending_removes.push_back(id);
   return true;
@@ -406,7 +417,8 @@ UpdateStats Reconstructor::update() {
 
   std::vector<State::Entry> next;
   for (const State::Entry& e : s.entries)
-    if (std::find(s.pending_removes.begin(), s.pending_removes.end(), e.id) == s.pending_removes.end())
+    if (std::find(s.pending_removes.begin(), s.pending_removes.end(), e.id) ==
+        s.pending_removes.end())
       next.push_back(e);
   out.slices_removed = s.entries.size() - next.size();
   out.slices_added = s.pending_adds.size();
@@ -465,7 +477,8 @@ UpdateStats Reconstructor::update() {
         split_faces.erase(std::unique(split_faces.begin(), split_faces.end()), split_faces.end());
         // On demand: no face was split (crossed cells were reopened, their crossed faces
         // retired); the images of new faces are built when their cells are.
-        if (s.arrangement->on_demand()) s.field->release_images(s.arrangement->take_retired_faces());
+        if (s.arrangement->on_demand())
+          s.field->release_images(s.arrangement->take_retired_faces());
         const std::vector<int> completion_changed = s.field->refresh(split_faces);
         stats.face_images_s = clock.seconds();
         ++s.generation;
@@ -503,7 +516,8 @@ UpdateStats Reconstructor::update() {
 
   // Contour vertices refine the octree; contour segments fix the smoothing next to them. In the
   // arena too: contour_keys sorts in parallel, and --threads bounds every stage.
-  const std::vector<PreparedSlice>& slices = thin_plate ? s.thin_plate->slices() : s.field->slices();
+  const std::vector<PreparedSlice>& slices =
+      thin_plate ? s.thin_plate->slices() : s.field->slices();
   const Grid grid = make_grid(s.box, s.octree.max_depth);
   // The new slices' keys and samples in parallel (each depends on its slice alone), then merged:
   // the keys pairwise in a tree (a union of sorted sets: the same whatever the order), the
@@ -565,9 +579,11 @@ UpdateStats Reconstructor::update() {
     // The native CPU or an OpenCL device (options.engine.device; field_evaluator.hpp).
     const Stopwatch evaluation_clock;
     arena.execute([&] {
-      s.evaluator->evaluate(*s.field, points, point_cells.data(), s.arrangement->on_demand(), values);
+      s.evaluator->evaluate(*s.field, points, point_cells.data(), s.arrangement->on_demand(),
+                            values);
     });
-    for (std::size_t n = 0; n < points.size(); ++n) tags[n] = evaluation_tag(point_cells[n], s.generation);
+    for (std::size_t n = 0; n < points.size(); ++n)
+      tags[n] = evaluation_tag(point_cells[n], s.generation);
     evaluations += points.size();
     evaluation_seconds += evaluation_clock.seconds();
   };
@@ -612,7 +628,7 @@ UpdateStats Reconstructor::update() {
   stats.slices = s.entries.size();
   if (s.arrangement) {
     stats.cells = s.arrangement->on_demand() ? s.arrangement->built_cell_count()
-                                              : s.arrangement->cell_count();
+                                             : s.arrangement->cell_count();
     if (out.full_rebuild && s.arrangement->on_demand()) out.cells_changed = stats.cells;
     stats.faces = s.arrangement->face_count();
   }
@@ -673,15 +689,17 @@ std::vector<std::pair<Vec3, std::vector<double>>> Reconstructor::sampled_field()
   std::vector<std::size_t> rows;  // those the last update read (the field keeps older ones)
   for (std::size_t r = 0; r < f.keys.size(); ++r)
     if (f.row_pass[r] == f.pass) rows.push_back(r);
-  std::sort(rows.begin(), rows.end(), [&](std::size_t a, std::size_t b) { return f.keys[a] < f.keys[b]; });
+  std::sort(rows.begin(), rows.end(),
+            [&](std::size_t a, std::size_t b) { return f.keys[a] < f.keys[b]; });
   std::vector<std::pair<Vec3, std::vector<double>>> out;
   out.reserve(rows.size());
   for (const std::size_t r : rows) {
     int i, j, k;
     grid_unkey(f.keys[r], i, j, k);
-    out.emplace_back(f.grid.position(i, j, k),
-                     std::vector<double>(f.values.begin() + static_cast<std::ptrdiff_t>(r * fc),
-                                         f.values.begin() + static_cast<std::ptrdiff_t>((r + 1) * fc)));
+    out.emplace_back(
+        f.grid.position(i, j, k),
+        std::vector<double>(f.values.begin() + static_cast<std::ptrdiff_t>(r * fc),
+                            f.values.begin() + static_cast<std::ptrdiff_t>((r + 1) * fc)));
   }
   return out;
 }

@@ -3,14 +3,14 @@
 // (i, j, k), so a list shifted by a constant stays sorted: the octree smoothing and the mesher
 // build their neighbour sets, and find every element's neighbours in them, by merging shifted
 // copies in linear time, where hashing every stencil's vertices cost more than the work on them.
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <array>
 #include <cstdint>
 #include <initializer_list>
 #include <stdexcept>
 #include <vector>
-
-#include <tbb/parallel_for.h>
 
 namespace sonoshape::recon {
 
@@ -22,10 +22,11 @@ namespace sonoshape::recon {
 // shifted key lies in the result: positions[n * shifts.size() + c] for key n shifted by shift c,
 // so that stencils are found without a search.
 template <typename Shifts = std::initializer_list<std::int64_t>>
-std::vector<std::uint64_t> union_of_shifts(const std::vector<std::uint64_t>& sorted, const Shifts& shifts,
+std::vector<std::uint64_t> union_of_shifts(const std::vector<std::uint64_t>& sorted,
+                                           const Shifts& shifts,
                                            std::vector<std::uint32_t>* positions = nullptr) {
   constexpr std::uint64_t kDone = ~std::uint64_t{0};  // the head of a copy that is used up
-  std::array<std::uint64_t, 8> offset{};  // per copy
+  std::array<std::uint64_t, 8> offset{};              // per copy
   std::size_t copies = 0;
   for (const std::int64_t shift : shifts) {
     if (copies == offset.size()) throw std::length_error("union_of_shifts: more than eight shifts");
@@ -44,14 +45,16 @@ std::vector<std::uint64_t> union_of_shifts(const std::vector<std::uint64_t>& sor
   split[0] = 0;
   split[part_count] = kDone;
   for (std::size_t p = 1; p < part_count; ++p) split[p] = sorted[count * p / part_count];
-  std::vector<std::array<std::size_t, 8>> first(part_count + 1);  // per part and copy, its first key
+  std::vector<std::array<std::size_t, 8>> first(part_count +
+                                                1);  // per part and copy, its first key
   for (std::size_t p = 0; p <= part_count; ++p)
     for (std::size_t c = 0; c < copies; ++c)
       first[p][c] = p == 0 ? 0
                     : p == part_count
                         ? count
-                        : static_cast<std::size_t>(std::lower_bound(sorted.begin(), sorted.end(), split[p] - offset[c]) -
-                                                   sorted.begin());
+                        : static_cast<std::size_t>(
+                              std::lower_bound(sorted.begin(), sorted.end(), split[p] - offset[c]) -
+                              sorted.begin());
   std::vector<std::vector<std::uint64_t>> parts(part_count);
   tbb::parallel_for(std::size_t{0}, part_count, [&](std::size_t p) {
     std::vector<std::uint64_t>& out = parts[p];
@@ -75,7 +78,8 @@ std::vector<std::uint64_t> union_of_shifts(const std::vector<std::uint64_t>& sor
       out.push_back(least);
       for (std::size_t c = 0; c < copies; ++c) {
         const bool here = head[c] == least;
-        if (positions != nullptr) *(here ? &(*positions)[next[c] * copies + c] : &unused) = position;
+        if (positions != nullptr)
+          *(here ? &(*positions)[next[c] * copies + c] : &unused) = position;
         next[c] += here ? 1 : 0;
         load(c);
       }
@@ -85,7 +89,8 @@ std::vector<std::uint64_t> union_of_shifts(const std::vector<std::uint64_t>& sor
   for (std::size_t p = 0; p < part_count; ++p) base[p + 1] = base[p] + parts[p].size();
   std::vector<std::uint64_t> result(base[part_count]);
   tbb::parallel_for(std::size_t{0}, part_count, [&](std::size_t p) {
-    std::copy(parts[p].begin(), parts[p].end(), result.begin() + static_cast<std::ptrdiff_t>(base[p]));
+    std::copy(parts[p].begin(), parts[p].end(),
+              result.begin() + static_cast<std::ptrdiff_t>(base[p]));
     if (positions == nullptr || p == 0) return;
     for (std::size_t c = 0; c < copies; ++c)
       for (std::size_t n = first[p][c]; n < first[p + 1][c]; ++n)
@@ -94,15 +99,22 @@ std::vector<std::uint64_t> union_of_shifts(const std::vector<std::uint64_t>& sor
   return result;
 }
 /// The key steps of one grid step along k, j and i (see grid_key).
-inline constexpr std::int64_t kKeyStepK = 1, kKeyStepJ = std::int64_t{1} << 21, kKeyStepI = std::int64_t{1} << 42;
+inline constexpr std::int64_t kKeyStepK = 1, kKeyStepJ = std::int64_t{1} << 21,
+                              kKeyStepI = std::int64_t{1} << 42;
 
 // The key shifts of a 7-point stencil: centre, then the face neighbours along -i, +i, -j, +j,
 // -k, +k.
-inline constexpr std::array<std::int64_t, 7> kStencilShifts{0,          -kKeyStepI, kKeyStepI, -kKeyStepJ,
-                                                            kKeyStepJ, -kKeyStepK, kKeyStepK};
-/// The key shifts from a cell's min corner to its corner c, offset (c & 1, (c >> 1) & 1, (c >> 2) & 1).
-inline constexpr std::array<std::int64_t, 8> kCubeCornerShifts{
-    0, kKeyStepI, kKeyStepJ, kKeyStepI + kKeyStepJ, kKeyStepK, kKeyStepI + kKeyStepK, kKeyStepJ + kKeyStepK,
-    kKeyStepI + kKeyStepJ + kKeyStepK};
+inline constexpr std::array<std::int64_t, 7> kStencilShifts{
+    0, -kKeyStepI, kKeyStepI, -kKeyStepJ, kKeyStepJ, -kKeyStepK, kKeyStepK};
+/// The key shifts from a cell's min corner to its corner c, offset (c & 1, (c >> 1) & 1, (c >> 2) &
+/// 1).
+inline constexpr std::array<std::int64_t, 8> kCubeCornerShifts{0,
+                                                               kKeyStepI,
+                                                               kKeyStepJ,
+                                                               kKeyStepI + kKeyStepJ,
+                                                               kKeyStepK,
+                                                               kKeyStepI + kKeyStepK,
+                                                               kKeyStepJ + kKeyStepK,
+                                                               kKeyStepI + kKeyStepJ + kKeyStepK};
 
 }  // namespace sonoshape::recon

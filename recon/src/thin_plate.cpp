@@ -176,8 +176,8 @@ struct Level {
   double scale = 1.0;                 // s
   std::vector<Real> weight;           // lumped data weights (finest: the row sums of its D)
   std::vector<double> data_diagonal;  // finest level only: D's sums
-  std::array<std::vector<double>, 3> data_edge;  // finest level only
-  std::vector<Real> operator_diagonal;           // finest level only: data_diagonal as Real
+  std::array<std::vector<double>, 3> data_edge;    // finest level only
+  std::vector<Real> operator_diagonal;             // finest level only: data_diagonal as Real
   std::array<std::vector<Real>, 3> operator_edge;  // finest level only
   std::vector<Real> zero_row;                      // finest level only: nx zeros
   // The smoother's diagonal: 1 / (s * l1 bound of L^2's row + row sum of D).
@@ -203,17 +203,28 @@ void for_planes(int nz, const Body& body) {
 // Calls body(n, laplacian of `in` at n) for every node, rows in parallel. The graph Laplacian
 // sums in[m] - in[n] over the grid neighbours m; a missing neighbour (at the grid's faces) reads
 // the node itself, so the inner loop has no branches and vectorises.
+template <typename T>
+struct RowNeighbours {
+  const T *c, *ym, *yp, *zm, *zp;  // row (j, k) of a field, and rows j -+ 1 and planes k -+ 1
+};
+
+// Row (j, k) of `in` and its neighbours; a neighbour beyond the grid's faces is the row itself.
+template <typename T>
+RowNeighbours<T> row_neighbours(const Level& g, const T* in, int j, int k) {
+  const std::size_t sy = static_cast<std::size_t>(g.nx), sz = sy * static_cast<std::size_t>(g.ny);
+  const T* c = in + g.index(0, j, k);
+  return {c, j > 0 ? c - sy : c, j < g.ny - 1 ? c + sy : c, k > 0 ? c - sz : c,
+          k < g.nz - 1 ? c + sz : c};
+}
+
 template <typename T, typename Body>
 void for_laplacian(const Level& g, const T* in, const Body& body) {
-  const std::size_t sy = static_cast<std::size_t>(g.nx), sz = sy * static_cast<std::size_t>(g.ny);
   for_planes(g.nz, [&](int k) {
     for (int j = 0; j < g.ny; ++j) {
       const std::size_t row = g.index(0, j, k);
-      const T* c = in + row;
-      const T* ym = j > 0 ? c - sy : c;
-      const T* yp = j < g.ny - 1 ? c + sy : c;
-      const T* zm = k > 0 ? c - sz : c;
-      const T* zp = k < g.nz - 1 ? c + sz : c;
+      // Plain pointers, not structured bindings: lambdas capture those only from clang 16 on.
+      const RowNeighbours<T> n = row_neighbours(g, in, j, k);
+      const T *c = n.c, *ym = n.ym, *yp = n.yp, *zm = n.zm, *zp = n.zp;
       auto across = [&](int i) { return ym[i] + yp[i] + zm[i] + zp[i] - T(4) * c[i]; };
       body(row, across(0) + (g.nx > 1 ? c[1] - c[0] : T(0)));
       for (int i = 1; i < g.nx - 1; ++i)
@@ -241,27 +252,19 @@ void apply_finest(const Level& g, const T* in, T* out, const T* lap) {
   for_planes(g.nz, [&](int k) {
     for (int j = 0; j < g.ny; ++j) {
       const std::size_t row = g.index(0, j, k);
-      const T* c = lap + row;
-      const T* ym = j > 0 ? c - sy : c;
-      const T* yp = j < g.ny - 1 ? c + sy : c;
-      const T* zm = k > 0 ? c - sz : c;
-      const T* zp = k < g.nz - 1 ? c + sz : c;
-      const T* x = in + row;
+      const RowNeighbours<T> l = row_neighbours(g, lap, j, k), f = row_neighbours(g, in, j, k);
+      const T *c = l.c, *ym = l.ym, *yp = l.yp, *zm = l.zm, *zp = l.zp;
+      const T *x = f.c, *x_ym = f.ym, *x_yp = f.yp, *x_zm = f.zm, *x_zp = f.zp;
       const Real* diagonal = g.operator_diagonal.data() + row;
       const Real* ex = edge_x + row;
       const Real* ey = edge_y + row;
       const Real* ey_before = j > 0 ? ey - sy : zero;
-      const T* x_yp = j < g.ny - 1 ? x + sy : x;
-      const T* x_ym = j > 0 ? x - sy : x;
       const Real* ez = edge_z + row;
       const Real* ez_before = k > 0 ? ez - sz : zero;
-      const T* x_zp = k < g.nz - 1 ? x + sz : x;
-      const T* x_zm = k > 0 ? x - sz : x;
       T* o = out + row;
       auto across = [&](int i) {
         return s * (ym[i] + yp[i] + zm[i] + zp[i] - T(4) * c[i]) + diagonal[i] * x[i] +
-               ey[i] * x_yp[i] + ey_before[i] * x_ym[i] + ez[i] * x_zp[i] +
-               ez_before[i] * x_zm[i];
+               ey[i] * x_yp[i] + ey_before[i] * x_ym[i] + ez[i] * x_zp[i] + ez_before[i] * x_zm[i];
       };
       if (nx == 1) {
         o[0] = across(0);

@@ -66,8 +66,8 @@ constexpr std::array<std::array<double, kMaxK>, kPairs> make_kernel_table() {
     const auto [a, b] = kPairList[p];
     for (int k = 0; k <= b; ++k) {
       const int n = a + b - k;
-      table[p][static_cast<std::size_t>(k)] =
-          (n % 2 == 0 ? 1.0 : -1.0) * (n + 1) * factorial(n) / (factorial(a - k) * factorial(b - k) * factorial(k));
+      table[p][static_cast<std::size_t>(k)] = (n % 2 == 0 ? 1.0 : -1.0) * (n + 1) * factorial(n) /
+                                              (factorial(a - k) * factorial(b - k) * factorial(k));
     }
   }
   return table;
@@ -196,7 +196,7 @@ void kernel_coefficients(const Vec2& d, double s, int degree, double* out) {
   const double inv_s = 1.0 / s;
   const Complex w_bar_over_s{d.x() * inv_s, -d.y() * inv_s};
   const double ratio = d.squaredNorm() * inv_s;  // |w|^2 / s < 1
-  Complex power[kOrder + 1];  // (conj(w) / s)^m
+  Complex power[kOrder + 1];                     // (conj(w) / s)^m
   double inv_s_power[kOrder / 2 + 1];
   power[0] = {1.0, 0.0};
   for (int m = 1; m <= degree; ++m) power[m] = power[m - 1] * w_bar_over_s;
@@ -226,7 +226,9 @@ struct UniformMoments {
   alignas(32) double re[kUniformSide][kUniformSide];
   alignas(32) double im[kUniformSide][kUniformSide];
   // Z_ab for any a, b (conjugate symmetry).
-  Complex at(int a, int b) const { return a >= b ? Complex{re[b][a], im[b][a]} : Complex{re[a][b], -im[a][b]}; }
+  Complex at(int a, int b) const {
+    return a >= b ? Complex{re[b][a], im[b][a]} : Complex{re[a][b], -im[a][b]};
+  }
 };
 SONOSHAPE_AVX2_CLONES void uniform_moments(const Complex (&corners)[3], UniformMoments& out) {
   constexpr int kDegree = kOrder + 1;
@@ -275,11 +277,12 @@ SONOSHAPE_AVX2_CLONES void uniform_moments(const Complex (&corners)[3], UniformM
       }
     }
   // Divide by 2i (b + 1): (x + iy) / 2i = (y - ix) / 2; a clockwise contour counts negative.
-  const double orientation = (corners[1].re - corners[0].re) * (corners[2].im - corners[0].im) -
-                                     (corners[1].im - corners[0].im) * (corners[2].re - corners[0].re) <
-                                 0.0
-                             ? -1.0
-                             : 1.0;
+  const double orientation =
+      (corners[1].re - corners[0].re) * (corners[2].im - corners[0].im) -
+                  (corners[1].im - corners[0].im) * (corners[2].re - corners[0].re) <
+              0.0
+          ? -1.0
+          : 1.0;
   for (int b = 0; 2 * b <= kDegree; ++b) {
     const double scale = orientation * 0.5 / (b + 1);
     for (int a = b; a + b <= kDegree; ++a) {
@@ -299,12 +302,14 @@ void add_linear_moments(const Complex (&corners)[3], const UniformMoments& unifo
   const Complex e2{corners[2].re - corners[0].re, corners[2].im - corners[0].im};
   const double twice_area = e1.re * e2.im - e1.im * e2.re;
   // Slivers contribute nothing, as in triangle_weights (their gradient would overflow).
-  const double longest_sq = std::max({e1.re * e1.re + e1.im * e1.im, e2.re * e2.re + e2.im * e2.im,
-                                      (e2.re - e1.re) * (e2.re - e1.re) + (e2.im - e1.im) * (e2.im - e1.im)});
+  const double longest_sq =
+      std::max({e1.re * e1.re + e1.im * e1.im, e2.re * e2.re + e2.im * e2.im,
+                (e2.re - e1.re) * (e2.re - e1.re) + (e2.im - e1.im) * (e2.im - e1.im)});
   if (!(std::abs(twice_area) > 1e-12 * longest_sq)) return;
   // The linear interpolant through (corner k, values k), at t = 0 and its gradient.
   const double d1 = values[1] - values[0], d2 = values[2] - values[0];
-  const double gx = (d1 * e2.im - d2 * e1.im) / twice_area, gy = (d2 * e1.re - d1 * e2.re) / twice_area;
+  const double gx = (d1 * e2.im - d2 * e1.im) / twice_area,
+               gy = (d2 * e1.re - d1 * e2.re) / twice_area;
   const double alpha = values[0] - (gx * corners[0].re + gy * corners[0].im);
   const Complex half_b{0.5 * gx, 0.5 * gy}, half_b_conj = conj(half_b);
   for (std::size_t p = 0; p < kPairs; ++p) {
@@ -322,11 +327,12 @@ void add_linear_moments(const Complex (&corners)[3], const UniformMoments& unifo
 using TriangleKey = std::array<double, 8>;
 TriangleKey triangle_key(const UnknownTriangle& triangle) {
   std::array<Vec2, 3> corners{triangle.corners[0], triangle.corners[1], triangle.corners[2]};
-  std::sort(corners.begin(), corners.end(),
-            [](const Vec2& a, const Vec2& b) { return a.x() < b.x() || (a.x() == b.x() && a.y() < b.y()); });
+  std::sort(corners.begin(), corners.end(), [](const Vec2& a, const Vec2& b) {
+    return a.x() < b.x() || (a.x() == b.x() && a.y() < b.y());
+  });
   const Vec2 centroid = (corners[0] + corners[1] + corners[2]) / 3.0;
-  return {centroid.x(), centroid.y(), corners[0].x(), corners[0].y(), corners[1].x(),
-          corners[1].y(), corners[2].x(), corners[2].y()};
+  return {centroid.x(),   centroid.y(),   corners[0].x(), corners[0].y(),
+          corners[1].x(), corners[1].y(), corners[2].x(), corners[2].y()};
 }
 
 struct Builder {
@@ -336,9 +342,9 @@ struct Builder {
   std::size_t stride;
   std::vector<TriangleKey> keys;
   std::vector<std::uint32_t> order;  // position -> triangle on entry
-  TriangleNode* nodes;  // room for triangle_tree_node_count nodes from `next` on
-  double* moments;      // the nodes' moments (stride each), zero on entry
-  std::uint32_t next;   // index of the next node
+  TriangleNode* nodes;               // room for triangle_tree_node_count nodes from `next` on
+  double* moments;                   // the nodes' moments (stride each), zero on entry
+  std::uint32_t next;                // index of the next node
 
   bool less(int axis, std::uint32_t a, std::uint32_t b) const {
     const TriangleKey& ka = keys[a];
@@ -354,7 +360,8 @@ struct Builder {
     node.first = first;
     node.last = last;
     Vec2 lo = triangles[order[first]].corners[0], hi = lo;
-    Vec2 centroid_lo = Vec2(keys[order[first]][0], keys[order[first]][1]), centroid_hi = centroid_lo;
+    Vec2 centroid_lo = Vec2(keys[order[first]][0], keys[order[first]][1]),
+         centroid_hi = centroid_lo;
     for (std::uint32_t i = first; i < last; ++i) {
       for (const Vec2& corner : triangles[order[i]].corners) {
         lo = lo.cwiseMin(corner);
@@ -379,7 +386,8 @@ struct Builder {
       node.right = static_cast<std::int32_t>(build(middle, last));
       for (const std::int32_t child : {node.left, node.right})
         add_translated(&moments[static_cast<std::size_t>(child) * stride], function_count,
-                       nodes[static_cast<std::size_t>(child)].centre - node.centre, &moments[index * stride]);
+                       nodes[static_cast<std::size_t>(child)].centre - node.centre,
+                       &moments[index * stride]);
     } else {
       // Leaves in the key order too, so that the whole layout is canonical.
       std::sort(order.begin() + first, order.begin() + last,
@@ -395,7 +403,8 @@ struct Builder {
         }
         uniform_moments(corners, uniform);
         // Density l is 0.5 (1 + g_l).
-        const double* values = corner_values + static_cast<std::size_t>(order[i]) * 3 * function_count;
+        const double* values =
+            corner_values + static_cast<std::size_t>(order[i]) * 3 * function_count;
         for (std::size_t l = 0; l < function_count; ++l) {
           const double half[3] = {0.5 * (1.0 + values[l]), 0.5 * (1.0 + values[function_count + l]),
                                   0.5 * (1.0 + values[2 * function_count + l])};
@@ -410,8 +419,8 @@ struct Builder {
 
 // Adds the weights of triangles [first, last) in their order, computed four at a time
 // (triangle_weights4: the same weights as one at a time, to the bit).
-void add_exact(const UnknownTriangle* triangles, const double* corner_values, std::size_t first, std::size_t last,
-               int function_count, const Vec2& foot, double height, double* w) {
+void add_exact(const UnknownTriangle* triangles, const double* corner_values, std::size_t first,
+               std::size_t last, int function_count, const Vec2& foot, double height, double* w) {
   const std::size_t fc = static_cast<std::size_t>(function_count);
   for (std::size_t block = first; block < last; block += 4) {
     const std::size_t count = std::min<std::size_t>(4, last - block);
@@ -457,15 +466,22 @@ void add_triangle_moments(const Vec2 (&corners)[3], const double (&density)[3], 
   add_linear_moments(z, uniform, density, out);
 }
 
-std::uint32_t build_triangle_tree(UnknownTriangle* triangles, double* corner_values, std::size_t count,
-                                  int function_count, std::vector<TriangleNode>& nodes,
-                                  std::vector<double>& moments) {
+std::uint32_t build_triangle_tree(UnknownTriangle* triangles, double* corner_values,
+                                  std::size_t count, int function_count,
+                                  std::vector<TriangleNode>& nodes, std::vector<double>& moments) {
   const std::size_t fc = static_cast<std::size_t>(function_count);
   const std::size_t stride = triangle_moment_stride(function_count);
   const std::size_t first = nodes.size();
   nodes.resize(first + triangle_tree_node_count(count));
   moments.resize(nodes.size() * stride, 0.0);
-  Builder builder{triangles, corner_values, fc, stride, {}, {}, nodes.data(), moments.data(),
+  Builder builder{triangles,
+                  corner_values,
+                  fc,
+                  stride,
+                  {},
+                  {},
+                  nodes.data(),
+                  moments.data(),
                   static_cast<std::uint32_t>(first)};
   builder.keys.reserve(count);
   builder.order.resize(count);

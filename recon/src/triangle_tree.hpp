@@ -35,7 +35,7 @@ struct UnknownTriangle {
 /// build_triangle_tree).
 struct TriangleNode {
   Vec2 centre;
-  double radius_sq = 0;  ///< bounding circle of the corners, squared
+  double radius_sq = 0;                ///< bounding circle of the corners, squared
   std::uint32_t first = 0, last = 0;   ///< relative to the face's first triangle
   std::int32_t left = -1, right = -1;  ///< children (-1: a leaf, summed triangle by triangle)
 };
@@ -76,15 +76,16 @@ void add_triangle_moments(const Vec2 (&corners)[3], const double (&density)[3], 
 /// size of nodes times the stride). Reorders the triangles and their corner values (3 corners x
 /// function_count per triangle, as in CellField) into the tree's order, which depends only on
 /// the set of triangles, not on their order on entry. Returns the root's index.
-std::uint32_t build_triangle_tree(UnknownTriangle* triangles, double* corner_values, std::size_t count,
-                                  int function_count, std::vector<TriangleNode>& nodes,
-                                  std::vector<double>& moments);
+std::uint32_t build_triangle_tree(UnknownTriangle* triangles, double* corner_values,
+                                  std::size_t count, int function_count,
+                                  std::vector<TriangleNode>& nodes, std::vector<double>& moments);
 
 /// The exact sums over `count` triangles seen from (foot, height): w[l] += sum of
 /// 0.5 w_k (1 + v_kl) (units of projected_angle / height). For completed values (a partition of
 /// unity) the triangles' total weight is the sum of the w[l].
 void add_triangle_weights(const UnknownTriangle* triangles, const double* corner_values,
-                          std::size_t count, int function_count, const Vec2& foot, double height, double* w);
+                          std::size_t count, int function_count, const Vec2& foot, double height,
+                          double* w);
 
 /// The sums w[l] of add_triangle_weights through the tree `root` (build_triangle_tree): exact
 /// over the leaves near the point, expansions over the nodes seen under a small angle. No

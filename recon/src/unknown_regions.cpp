@@ -77,7 +77,8 @@ std::optional<Vec2> interior_point(const Ring2& ring) {
   for (std::size_t i = 0; i < ring.size(); ++i) {
     const Vec2& a = ring[i];
     const Vec2& b = ring[(i + 1) % ring.size()];
-    if ((a.y() <= y) != (b.y() <= y)) xs.push_back(a.x() + (y - a.y()) / (b.y() - a.y()) * (b.x() - a.x()));
+    if ((a.y() <= y) != (b.y() <= y))
+      xs.push_back(a.x() + (y - a.y()) / (b.y() - a.y()) * (b.x() - a.x()));
   }
   std::sort(xs.begin(), xs.end());
   std::optional<Vec2> best;
@@ -90,7 +91,6 @@ std::optional<Vec2> interior_point(const Ring2& ring) {
   }
   return best;
 }
-
 
 Ring2 plane_box_polygon(const Vec3& origin, const Vec3& u, const Vec3& v, const Box3& box) {
   // A square covering the box's projection, clipped by the six box faces.
@@ -131,7 +131,8 @@ SlicePartition partition_slice(const LabeledSlice& slice, const std::vector<int>
     if (region.label == kUnknownLabel) continue;
     const auto it = std::find(material_ids.begin(), material_ids.end(), region.label);
     if (it == material_ids.end())
-      throw GeometryError("label " + std::to_string(region.label) + " is not a material of the set");
+      throw GeometryError("label " + std::to_string(region.label) +
+                          " is not a material of the set");
     material_sets[static_cast<std::size_t>(it - material_ids.begin()) + 1].join(region_set(region));
   }
   for (std::size_t m = 1; m < material_sets.size(); ++m) {
@@ -151,7 +152,8 @@ SlicePartition partition_slice(const LabeledSlice& slice, const std::vector<int>
   auto known_label = [&](const Vec2& q) {
     for (std::size_t m = 1; m < out.materials.size(); ++m) {
       int winding = 0;
-      for (const Ring2& ring : out.materials[m]) winding += winding_number(ring.data(), ring.size(), q);
+      for (const Ring2& ring : out.materials[m])
+        winding += winding_number(ring.data(), ring.size(), q);
       if (winding > 0) return static_cast<int>(m);
     }
     return 0;

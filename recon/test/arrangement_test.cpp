@@ -1,11 +1,12 @@
 // The arrangement must stay a consistent cell complex on generic and degenerate planes.
+#include "arrangement.hpp"
+
 #include <gtest/gtest.h>
 
 #include <algorithm>
 #include <map>
 #include <random>
 
-#include "arrangement.hpp"
 #include "sonoshape/core/errors.hpp"
 
 namespace sonoshape::recon {
@@ -92,8 +93,8 @@ TEST(Arrangement, RandomPlanesGiveClosedCellsFillingTheBox) {
   // Point location agrees with the exact cell sides.
   std::uniform_real_distribution<double> inside(0.0, 1.0);
   for (int k = 0; k < 200; ++k) {
-    const Vec3 p = kBox.min + (kBox.max - kBox.min).cwiseProduct(
-                                  Vec3(inside(rng), inside(rng), inside(rng)));
+    const Vec3 p =
+        kBox.min + (kBox.max - kBox.min).cwiseProduct(Vec3(inside(rng), inside(rng), inside(rng)));
     const int c = arr.locate(p);
     for (const int f : arr.cell(c).faces) {
       const ArrangementFace& face = arr.face(f);
@@ -117,7 +118,8 @@ TEST(Arrangement, LocateFromAGuessAgreesWithTheTree) {
   std::vector<Vec3> points;
   std::uniform_real_distribution<double> inside(0.0, 1.0);
   for (int k = 0; k < 300; ++k)
-    points.push_back(kBox.min + (kBox.max - kBox.min).cwiseProduct(Vec3(inside(rng), inside(rng), inside(rng))));
+    points.push_back(
+        kBox.min + (kBox.max - kBox.min).cwiseProduct(Vec3(inside(rng), inside(rng), inside(rng))));
   for (const double x : {-0.5, 0.0, 0.5, 0.25})
     for (const double y : {-1.0, 0.0, -0.5})
       for (const double z : {-1.2, -0.9, 0.0, 0.3, 0.7}) points.emplace_back(x, y, z);
@@ -146,13 +148,15 @@ TEST(Arrangement, ReportsTheFacesANewPlaneSplits) {
   Arrangement arr(kBox);
   for (int i = 0; i < 10; ++i) {
     std::vector<std::vector<int>> before;
-    for (std::size_t f = 0; f < arr.face_count(); ++f) before.push_back(arr.face(static_cast<int>(f)).vertices);
+    for (std::size_t f = 0; f < arr.face_count(); ++f)
+      before.push_back(arr.face(static_cast<int>(f)).vertices);
     planes.insert_next(arr, i);
     const std::vector<int> split = arr.faces_split_by_last_plane();
     EXPECT_FALSE(split.empty());  // the plane passes through the box's interior
     for (std::size_t f = 0; f < before.size(); ++f) {
       const bool listed = std::find(split.begin(), split.end(), static_cast<int>(f)) != split.end();
-      EXPECT_EQ(listed, arr.face(static_cast<int>(f)).vertices != before[f]) << "plane " << i << ", face " << f;
+      EXPECT_EQ(listed, arr.face(static_cast<int>(f)).vertices != before[f])
+          << "plane " << i << ", face " << f;
     }
   }
 }
@@ -166,7 +170,8 @@ TEST(Arrangement, ThreePlanesThroughOneLineAndFourThroughOnePoint) {
   arr.insert_plane(Vec3(0, 0, 1), 0.0, 3);
   arr.insert_plane(Vec3(1, -1, 1), 0.0, 4);
   expect_consistent(arr, kBox);
-  EXPECT_EQ(arr.cell_count(), 20u);  // 6 wedges, halved by z = 0, 8 of the 12 crossed by the last plane
+  EXPECT_EQ(arr.cell_count(),
+            20u);  // 6 wedges, halved by z = 0, 8 of the 12 crossed by the last plane
 }
 
 TEST(Arrangement, NearlyParallelPlanesStayConsistent) {

@@ -1,18 +1,19 @@
 // fast_atan2 against std::atan2: within 2 ulp everywhere, the same signs and zeros.
+#include "atan2.hpp"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <limits>
 #include <random>
 
-#include "atan2.hpp"
-
 namespace sonoshape::recon {
 namespace {
 
 double ulps_apart(double a, double b) {
   if (a == b) return 0.0;
-  const double ulp = std::nextafter(std::abs(a), std::numeric_limits<double>::infinity()) - std::abs(a);
+  const double ulp =
+      std::nextafter(std::abs(a), std::numeric_limits<double>::infinity()) - std::abs(a);
   return std::abs(a - b) / ulp;
 }
 

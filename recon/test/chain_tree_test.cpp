@@ -1,11 +1,12 @@
 // The far-field tree against the exact edge-by-edge projected angle.
+#include "chain_tree.hpp"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <numbers>
 #include <random>
 
-#include "chain_tree.hpp"
 #include "mean_value.hpp"
 
 namespace sonoshape::recon {
@@ -35,12 +36,16 @@ TEST(ChainTree, MatchesTheExactSumNearAndFar) {
       double worst = 0.0, worst_relative = 0.0;
       for (int k = 0; k < 4000; ++k) {
         Vec2 foot(coordinate(rng), coordinate(rng));
-        if (k % 4 == 0) foot = ring[static_cast<std::size_t>(k) % ring.size()] + Vec2(0.01, -0.02);  // on the contour
+        if (k % 4 == 0)
+          foot = ring[static_cast<std::size_t>(k) % ring.size()] +
+                 Vec2(0.01, -0.02);  // on the contour
         const double height = std::pow(10.0, log_height(rng));
         const double exact = projected_angle(ring.data(), ring.size(), foot, height);
-        const double tree = projected_angle_tree(ring.data(), ring.size(), nodes.data(), root, foot, height);
+        const double tree =
+            projected_angle_tree(ring.data(), ring.size(), nodes.data(), root, foot, height);
         worst = std::max(worst, std::abs(tree - exact));
-        if (std::abs(exact) > 1e-12) worst_relative = std::max(worst_relative, std::abs(tree - exact) / std::abs(exact));
+        if (std::abs(exact) > 1e-12)
+          worst_relative = std::max(worst_relative, std::abs(tree - exact) / std::abs(exact));
       }
       // The field is a ratio of such angles (each up to 2 pi): 2e-5 rad moves a surface by far
       // less than a micrometre where the field's gradient is one over a few mm.
@@ -83,8 +88,10 @@ TEST(ChainTree, HighMomentsMatchQuadrature) {
       for (int k = 0; k < 4; ++k) m3[k] += us[3 - k] * vs[k] * area;
       for (int k = 0; k < 5; ++k) m4[k] += us[4 - k] * vs[k] * area;
     }
-  for (int k = 0; k < 4; ++k) EXPECT_NEAR(nodes[0].m3[k], m3[k], 2e-3) << "x^" << 3 - k << " y^" << k;
-  for (int k = 0; k < 5; ++k) EXPECT_NEAR(nodes[0].m4[k], m4[k], 3e-3) << "x^" << 4 - k << " y^" << k;
+  for (int k = 0; k < 4; ++k)
+    EXPECT_NEAR(nodes[0].m3[k], m3[k], 2e-3) << "x^" << 3 - k << " y^" << k;
+  for (int k = 0; k < 5; ++k)
+    EXPECT_NEAR(nodes[0].m4[k], m4[k], 3e-3) << "x^" << 4 - k << " y^" << k;
   // Not all zero (a symmetric shape would test little).
   EXPECT_GT(std::abs(m3[0]) + std::abs(m3[3]), 0.1);
 }

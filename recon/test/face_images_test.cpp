@@ -102,9 +102,12 @@ TEST(FaceImages, ClippedPartsPartitionTheRegionsAndTheUnknownSet) {
     ++faces_on_slice;
     const FaceImage& image = field.face_image(static_cast<int>(f));
     faces_area += ring_area(field.points(), image.polygon_begin, image.polygon_count);
-    for (const FaceImage::Part& part : image.parts) clipped_material += ring_area(field.points(), part.begin, part.count);
-    for (const FaceImage::Part& part : image.unknown_parts) clipped_unknown += ring_area(field.points(), part.begin, part.count);
-    for (std::uint32_t t = image.triangle_begin; t < image.triangle_begin + image.triangle_count; ++t) {
+    for (const FaceImage::Part& part : image.parts)
+      clipped_material += ring_area(field.points(), part.begin, part.count);
+    for (const FaceImage::Part& part : image.unknown_parts)
+      clipped_unknown += ring_area(field.points(), part.begin, part.count);
+    for (std::uint32_t t = image.triangle_begin; t < image.triangle_begin + image.triangle_count;
+         ++t) {
       const UnknownTriangle& tri = field.unknown_triangles()[t];
       triangles_area += signed_area(Ring2{tri.corners[0], tri.corners[1], tri.corners[2]});
     }

@@ -383,8 +383,10 @@ Ring2 random_ring(std::size_t count, bool repeats, std::mt19937& random) {
   std::uniform_real_distribution<double> coordinate(-2.0, 2.0);
   Ring2 ring;
   for (std::size_t i = 0; i < count; ++i) {
-    if (i > 0 && repeats && i % 4 == 0) ring.push_back(ring.back());
-    else ring.emplace_back(coordinate(random), coordinate(random));
+    if (i > 0 && repeats && i % 4 == 0)
+      ring.push_back(ring.back());
+    else
+      ring.emplace_back(coordinate(random), coordinate(random));
   }
   return ring;
 }
@@ -400,7 +402,7 @@ TEST(MeanValueAlgebra, PlainSumIsTheSumOfItsEdgeTerms) {
     for (int trial = 0; trial < 20; ++trial) {
       const Ring2 ring = random_ring(count, trial % 3 == 0, random);
       Vec2 foot(coordinate(random), coordinate(random));
-      if (trial % 5 == 1) foot = ring[count / 2];                          // on a vertex
+      if (trial % 5 == 1) foot = ring[count / 2];                               // on a vertex
       if (trial % 5 == 2 && count > 1) foot = 0.25 * ring[0] + 0.75 * ring[1];  // on an edge's line
       const double height = trial % 4 == 0 ? 1e-7 : std::abs(coordinate(random)) + 1e-3;
       double sum = 0.0, magnitude = 0.0;
@@ -439,7 +441,8 @@ TEST(MeanValueAlgebra, FourFeetAtOnceGiveEachFootsPlainSum) {
       }
       projected_angle_plain4(ring.data(), ring.size(), foot_x, foot_y, height, out);
       for (int k = 0; k < 4; ++k)
-        EXPECT_EQ(out[k], projected_angle_plain(ring.data(), ring.size(), Vec2(foot_x[k], foot_y[k]), height[k]))
+        EXPECT_EQ(out[k], projected_angle_plain(ring.data(), ring.size(),
+                                                Vec2(foot_x[k], foot_y[k]), height[k]))
             << ring.size() << " points, trial " << trial << ", lane " << k;
     }
   }
@@ -456,13 +459,15 @@ TEST(MeanValueAlgebra, FourTrianglesAtOnceGiveEachTrianglesWeights) {
     std::array<std::array<Vec2, 3>, 4> triangles;
     for (std::size_t t = 0; t < 4; ++t) {
       for (Vec2& corner : triangles[t]) corner = Vec2(coordinate(random), coordinate(random));
-      if ((trial + t) % 7 == 0) triangles[t][2] = triangles[t][1];                          // a sliver
-      if ((trial + t) % 11 == 0) triangles[t][2] = 0.5 * (triangles[t][0] + triangles[t][1]);  // flat
+      if ((trial + t) % 7 == 0) triangles[t][2] = triangles[t][1];  // a sliver
+      if ((trial + t) % 11 == 0)
+        triangles[t][2] = 0.5 * (triangles[t][0] + triangles[t][1]);  // flat
     }
     Vec2 foot(coordinate(random), coordinate(random));
-    if (trial % 5 == 1) foot = triangles[0][1];                                // on a corner
+    if (trial % 5 == 1) foot = triangles[0][1];                                  // on a corner
     if (trial % 5 == 2) foot = 0.25 * triangles[1][0] + 0.75 * triangles[1][2];  // on an edge
-    const double height = trial % 4 == 0 ? 1e-7 : (trial % 4 == 1 ? 1e-3 : std::abs(coordinate(random)) + 1e-3);
+    const double height =
+        trial % 4 == 0 ? 1e-7 : (trial % 4 == 1 ? 1e-3 : std::abs(coordinate(random)) + 1e-3);
     const std::size_t count = 1 + static_cast<std::size_t>(trial % 4);
     const Vec2* corners[4];
     for (std::size_t t = 0; t < 4; ++t) corners[t] = triangles[t].data();
@@ -471,13 +476,14 @@ TEST(MeanValueAlgebra, FourTrianglesAtOnceGiveEachTrianglesWeights) {
     triangle_weights4(corners, count, foot, height, weights, ok);
     for (std::size_t t = 0; t < count; ++t) {
       double expected[3];
-      const bool expected_ok =
-          triangle_weights(triangles[t][0], triangles[t][1], triangles[t][2], foot, height, expected);
+      const bool expected_ok = triangle_weights(triangles[t][0], triangles[t][1], triangles[t][2],
+                                                foot, height, expected);
       ASSERT_EQ(ok[t], expected_ok) << "trial " << trial << ", triangle " << t;
       if (!expected_ok) continue;
       ++compared;
       for (int k = 0; k < 3; ++k)
-        EXPECT_EQ(weights[t][k], expected[k]) << "trial " << trial << ", triangle " << t << ", corner " << k;
+        EXPECT_EQ(weights[t][k], expected[k])
+            << "trial " << trial << ", triangle " << t << ", corner " << k;
     }
   }
   EXPECT_GT(compared, 600);

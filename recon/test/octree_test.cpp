@@ -9,8 +9,8 @@
 #include <random>
 
 #include "grid_index.hpp"
-#include "octree_field.hpp"
 #include "key_masks.hpp"
+#include "octree_field.hpp"
 #include "sorted_keys.hpp"
 
 namespace sonoshape::recon {
@@ -33,7 +33,8 @@ TEST(Octree, DirectGridIndexAgreesWithTheHashInsideAndOutsideTheGrid) {
   for (int i = -7; i <= kResolution + 7; ++i)
     for (int j = -7; j <= kResolution + 7; ++j)
       for (int k = -7; k <= kResolution + 7; ++k)
-        ASSERT_EQ(direct.find(grid_key(i, j, k)), hashed.find(grid_key(i, j, k))) << i << " " << j << " " << k;
+        ASSERT_EQ(direct.find(grid_key(i, j, k)), hashed.find(grid_key(i, j, k)))
+            << i << " " << j << " " << k;
   direct.clear();
   EXPECT_EQ(direct.size(), 0u);
   for (const std::uint64_t key : keys) EXPECT_EQ(direct.find(key), GridIndex::kNone);
@@ -76,13 +77,16 @@ TEST(Octree, BandStaysClosedAfterSnappingThinRegions) {
   const Box3 box{Vec3::Constant(-10.0), Vec3::Constant(10.0)};
   OctreeOptions options;
   options.max_depth = 5;  // cells of 0.625 mm; the sheet's mid-plane z = 5.3 is 0.3 from a vertex
-  const BatchEvaluator evaluate = [](const std::vector<Vec3>& points, double* values, std::uint64_t*) {
+  const BatchEvaluator evaluate = [](const std::vector<Vec3>& points, double* values,
+                                     std::uint64_t*) {
     for (std::size_t n = 0; n < points.size(); ++n) {
       const Vec3& p = points[n];
       values[3 * n] = 0.0;
       values[3 * n + 1] = 6.0 - (p - Vec3(0, 0, -2)).norm();
-      const double sheet = std::abs(p.x()) < 6 && std::abs(p.y()) < 6 ? 0.2 - std::abs(p.z() - 5.3) : -1.0;
-      values[3 * n + 2] = std::max(sheet, 0.3 - (p - Vec3(-6.875, 6.875, -3.75)).norm());  // vertex (5, 27, 10)
+      const double sheet =
+          std::abs(p.x()) < 6 && std::abs(p.y()) < 6 ? 0.2 - std::abs(p.z() - 5.3) : -1.0;
+      values[3 * n + 2] =
+          std::max(sheet, 0.3 - (p - Vec3(-6.875, 6.875, -3.75)).norm());  // vertex (5, 27, 10)
     }
   };
   std::vector<RegionSample> samples;
@@ -98,7 +102,8 @@ TEST(Octree, BandStaysClosedAfterSnappingThinRegions) {
     int i, j, k;
     grid_unkey(cell, i, j, k);
     std::vector<int> corners;
-    for (int c = 0; c < 8; ++c) corners.push_back(label(i + (c & 1), j + ((c >> 1) & 1), k + ((c >> 2) & 1)));
+    for (int c = 0; c < 8; ++c)
+      corners.push_back(label(i + (c & 1), j + ((c >> 1) & 1), k + ((c >> 2) & 1)));
     EXPECT_NE(std::count(corners.begin(), corners.end(), corners[0]), 8) << "band cell not mixed";
     sheet_cells += std::count(corners.begin(), corners.end(), 2) > 0;
     // Every face with mixed corners leads to a band cell.
@@ -107,7 +112,8 @@ TEST(Octree, BandStaysClosedAfterSnappingThinRegions) {
         std::array<int, 3> base{i, j, k}, neighbour{i, j, k};
         base[static_cast<std::size_t>(axis)] += side;
         neighbour[static_cast<std::size_t>(axis)] += side ? 1 : -1;
-        if (neighbour[static_cast<std::size_t>(axis)] < 0 || neighbour[static_cast<std::size_t>(axis)] >= resolution)
+        if (neighbour[static_cast<std::size_t>(axis)] < 0 ||
+            neighbour[static_cast<std::size_t>(axis)] >= resolution)
           continue;
         std::vector<int> face;
         for (int c = 0; c < 4; ++c) {
@@ -124,7 +130,8 @@ TEST(Octree, BandStaysClosedAfterSnappingThinRegions) {
   }
   EXPECT_GT(sheet_cells, 0u);
   // The speck's cells on the far side from the snapped vertex come only from the expansion.
-  EXPECT_TRUE(std::binary_search(field.surface_cells.begin(), field.surface_cells.end(), grid_key(4, 26, 9)));
+  EXPECT_TRUE(std::binary_search(field.surface_cells.begin(), field.surface_cells.end(),
+                                 grid_key(4, 26, 9)));
 }
 
 // The online engine keeps the last field and marks the rows whose cells changed: sampling again
@@ -141,7 +148,8 @@ TEST(Octree, AKeptFieldSampledAgainEqualsAFreshField) {
         const Vec3 centre(0.0, p.x() > 2.0 ? shift : 0.0, -2.0);
         values[3 * n] = 0.0;
         values[3 * n + 1] = 6.0 - (p - centre).norm();
-        values[3 * n + 2] = std::abs(p.x()) < 6 && std::abs(p.y()) < 6 ? 0.2 - std::abs(p.z() - 5.3) : -1.0;
+        values[3 * n + 2] =
+            std::abs(p.x()) < 6 && std::abs(p.y()) < 6 ? 0.2 - std::abs(p.z() - 5.3) : -1.0;
       }
     });
   };
@@ -149,7 +157,8 @@ TEST(Octree, AKeptFieldSampledAgainEqualsAFreshField) {
   for (double x = -5.5; x <= 5.5; x += 0.3)
     for (double y = -5.5; y <= 5.5; y += 0.3) samples.push_back({Vec3(x, y, 5.3), 2});
   OctreeWorkspace workspace;
-  SampledField kept = sample_field(box, 3, evaluator(0.0), ContourKeys{}, samples, options, workspace);
+  SampledField kept =
+      sample_field(box, 3, evaluator(0.0), ContourKeys{}, samples, options, workspace);
   std::vector<char> valid(kept.keys.size());
   for (std::size_t r = 0; r < valid.size(); ++r) {
     int i, j, k;
@@ -158,7 +167,8 @@ TEST(Octree, AKeptFieldSampledAgainEqualsAFreshField) {
   }
   workspace.previous = std::move(kept);
   workspace.previous_valid = std::move(valid);
-  const SampledField again = sample_field(box, 3, evaluator(1.5), ContourKeys{}, samples, options, workspace);
+  const SampledField again =
+      sample_field(box, 3, evaluator(1.5), ContourKeys{}, samples, options, workspace);
   const SampledField fresh = sample_field(box, 3, evaluator(1.5), ContourKeys{}, samples, options);
   EXPECT_LT(again.evaluations, fresh.evaluations / 2);
   EXPECT_EQ(again.surface_cells, fresh.surface_cells);
@@ -169,7 +179,8 @@ TEST(Octree, AKeptFieldSampledAgainEqualsAFreshField) {
   for (std::size_t r = 0; r < again.keys.size(); ++r) {
     if (again.row_pass[r] != again.pass) continue;
     ++read;
-    ASSERT_NE(fresh.index.find(again.keys[r]), GridIndex::kNone) << "a row the fresh field does not have";
+    ASSERT_NE(fresh.index.find(again.keys[r]), GridIndex::kNone)
+        << "a row the fresh field does not have";
     const double* a = again.values.data() + r * 3;
     const double* b = fresh.at(again.keys[r]);
     for (int l = 0; l < 3; ++l) ASSERT_EQ(a[l], b[l]) << "row " << r << " function " << l;
@@ -186,13 +197,15 @@ TEST(Octree, UnionOfShiftsListsEveryShiftedKeyAndWhereItLies) {
   for (int n = 0; n < 80000; ++n) keys.push_back(grid_key(index(rng), index(rng), index(rng)));
   std::sort(keys.begin(), keys.end());
   keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
-  for (const auto& shifts : {std::vector<std::int64_t>(kStencilShifts.begin(), kStencilShifts.end()),
-                             std::vector<std::int64_t>(kCubeCornerShifts.begin(), kCubeCornerShifts.end())}) {
+  for (const auto& shifts :
+       {std::vector<std::int64_t>(kStencilShifts.begin(), kStencilShifts.end()),
+        std::vector<std::int64_t>(kCubeCornerShifts.begin(), kCubeCornerShifts.end())}) {
     std::vector<std::uint32_t> positions;
     const std::vector<std::uint64_t> merged = union_of_shifts(keys, shifts, &positions);
     std::vector<std::uint64_t> expected;
     for (const std::uint64_t key : keys)
-      for (const std::int64_t shift : shifts) expected.push_back(key + static_cast<std::uint64_t>(shift));
+      for (const std::int64_t shift : shifts)
+        expected.push_back(key + static_cast<std::uint64_t>(shift));
     std::sort(expected.begin(), expected.end());
     expected.erase(std::unique(expected.begin(), expected.end()), expected.end());
     EXPECT_EQ(merged, expected);
@@ -200,7 +213,8 @@ TEST(Octree, UnionOfShiftsListsEveryShiftedKeyAndWhereItLies) {
     ASSERT_EQ(positions.size(), keys.size() * shifts.size());
     for (std::size_t n = 0; n < keys.size(); ++n)
       for (std::size_t c = 0; c < shifts.size(); ++c)
-        ASSERT_EQ(merged[positions[n * shifts.size() + c]], keys[n] + static_cast<std::uint64_t>(shifts[c]))
+        ASSERT_EQ(merged[positions[n * shifts.size() + c]],
+                  keys[n] + static_cast<std::uint64_t>(shifts[c]))
             << "key " << n << " shift " << c;
   }
   // An empty band has no neighbours.
@@ -222,21 +236,26 @@ TEST(Octree, MaskedUnionsEqualTheMerges) {
   for (int i = 0; i < 128; ++i)
     for (int j = 0; j < 128; ++j)
       for (int k = 0; k < 128; ++k) {
-        const double r = std::sqrt((i - 64.0) * (i - 64.0) + (j - 60.0) * (j - 60.0) + (k - 70.0) * (k - 70.0));
+        const double r =
+            std::sqrt((i - 64.0) * (i - 64.0) + (j - 60.0) * (j - 60.0) + (k - 70.0) * (k - 70.0));
         if (std::abs(r - 50.0) < 1.0) shell.push_back(grid_key(i, j, k));
       }
-  const std::vector<std::uint64_t> huge = {grid_key(0, 0, 0), grid_key(3, 5, 7), grid_key(400000, 2, 2)};
+  const std::vector<std::uint64_t> huge = {grid_key(0, 0, 0), grid_key(3, 5, 7),
+                                           grid_key(400000, 2, 2)};
   for (auto* set : {&scattered, &small, &shell}) {
     std::sort(set->begin(), set->end());
     set->erase(std::unique(set->begin(), set->end()), set->end());
   }
   for (const std::vector<std::uint64_t>* set :
-       std::initializer_list<const std::vector<std::uint64_t>*>{&scattered, &small, &shell, &huge}) {
+       std::initializer_list<const std::vector<std::uint64_t>*>{&scattered, &small, &shell,
+                                                                &huge}) {
     std::vector<std::uint32_t> merged_positions, masked_positions;
-    EXPECT_EQ(cube_corner_union(*set, &masked_positions), union_of_shifts(*set, kCubeCornerShifts, &merged_positions));
+    EXPECT_EQ(cube_corner_union(*set, &masked_positions),
+              union_of_shifts(*set, kCubeCornerShifts, &merged_positions));
     EXPECT_EQ(masked_positions, merged_positions);
     EXPECT_EQ(cube_corner_union(*set), union_of_shifts(*set, kCubeCornerShifts));
-    EXPECT_EQ(stencil_union(*set, &masked_positions), union_of_shifts(*set, kStencilShifts, &merged_positions));
+    EXPECT_EQ(stencil_union(*set, &masked_positions),
+              union_of_shifts(*set, kStencilShifts, &merged_positions));
     EXPECT_EQ(masked_positions, merged_positions);
   }
   ASSERT_GT(shell.size(), 10000u);

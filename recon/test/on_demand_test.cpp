@@ -21,7 +21,6 @@
 #include "arrangement.hpp"
 #include "sonoshape/recon/reconstruct.hpp"
 #include "sonoshape/recon/reconstructor.hpp"
-
 #include "test_shapes.hpp"
 
 namespace sonoshape::recon {
@@ -107,7 +106,8 @@ void expect_same_cells(const std::vector<Plane>& planes, const std::vector<Vec3>
       for (const Vec3& p : points) lazy.construct_cell(p);
     const std::size_t built = lazy.built_cell_count();
     std::vector<bool> was_reopened(lazy.cell_count());
-    for (std::size_t c = 0; c < lazy.cell_count(); ++c) was_reopened[c] = lazy.reopened(static_cast<int>(c));
+    for (std::size_t c = 0; c < lazy.cell_count(); ++c)
+      was_reopened[c] = lazy.reopened(static_cast<int>(c));
     whole.insert_plane(planes[i].normal, planes[i].offset, static_cast<int>(i));
     const std::vector<int> cells =
         lazy.insert_plane(planes[i].normal, planes[i].offset, static_cast<int>(i));
@@ -358,7 +358,9 @@ LabeledSlice spheres_slice(const Vec3& origin, const Vec3& u, const Vec3& v, int
     const double d = n.dot(centre - s.origin_mm);
     if (std::abs(d) >= 0.95 * radius) return;
     s.regions.push_back(
-        {label, circle(s.to_plane(centre - d * n), std::sqrt(radius * radius - d * d), segments), {}});
+        {label,
+         circle(s.to_plane(centre - d * n), std::sqrt(radius * radius - d * d), segments),
+         {}});
   };
   add_sphere(Vec3(-10, 0, 0), 0.5 * kRadius, 1);
   add_sphere(Vec3(16, 4, 2), 0.3 * kRadius, 2);
@@ -465,7 +467,6 @@ TEST(OnDemandEngine, LongContoursGiveTheWholeArrangementsFieldAndMeshes) {
 TEST(OnDemandEngine, SweepSetsGiveTheWholeArrangementsFieldAndMeshes) {
   expect_same_reconstruction(sweep_set(20), true);
 }
-
 
 // Adds an unknown disc of radius 8 to every `every`-th slice from `first`, clear of its
 // sections (circles: centroid and radius); returns how many slices took one.

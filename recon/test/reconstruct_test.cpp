@@ -1,12 +1,12 @@
 // End-to-end checks of the engine on analytic shapes.
+#include "sonoshape/recon/reconstruct.hpp"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <numbers>
 
 #include "sonoshape/core/errors.hpp"
-#include "sonoshape/recon/reconstruct.hpp"
-
 #include "test_shapes.hpp"
 
 namespace sonoshape::recon {
@@ -34,10 +34,19 @@ SliceSet sphere_set(double r) {
   SliceSet set;
   set.bounds = Box3{Vec3::Constant(-1.5 * r), Vec3::Constant(1.5 * r)};
   const double offsets[] = {-0.55, -0.1, 0.35, 0.7};
-  for (double o : offsets) set.slices.push_back(sphere_slice(Vec3(0, 0, o * r), Vec3::UnitX(), Vec3::UnitY(), r, 1));
-  for (double o : {-0.4, 0.25}) set.slices.push_back(sphere_slice(Vec3(o * r, 0, 0), Vec3::UnitY(), Vec3::UnitZ(), r, 1));
-  for (double o : {-0.3, 0.45}) set.slices.push_back(sphere_slice(Vec3(0, o * r, 0), Vec3::UnitZ(), Vec3::UnitX(), r, 1));
-  set.slices.push_back(sphere_slice(Vec3(0.1, 0.05, 0), Vec3(1, 1, 0.3), Vec3(-1, 1, 0).normalized().cross(Vec3(1, 1, 0.3).normalized()).cross(Vec3(1, 1, 0.3).normalized()) * -1, r, 1));
+  for (double o : offsets)
+    set.slices.push_back(sphere_slice(Vec3(0, 0, o * r), Vec3::UnitX(), Vec3::UnitY(), r, 1));
+  for (double o : {-0.4, 0.25})
+    set.slices.push_back(sphere_slice(Vec3(o * r, 0, 0), Vec3::UnitY(), Vec3::UnitZ(), r, 1));
+  for (double o : {-0.3, 0.45})
+    set.slices.push_back(sphere_slice(Vec3(0, o * r, 0), Vec3::UnitZ(), Vec3::UnitX(), r, 1));
+  set.slices.push_back(sphere_slice(Vec3(0.1, 0.05, 0), Vec3(1, 1, 0.3),
+                                    Vec3(-1, 1, 0)
+                                            .normalized()
+                                            .cross(Vec3(1, 1, 0.3).normalized())
+                                            .cross(Vec3(1, 1, 0.3).normalized()) *
+                                        -1,
+                                    r, 1));
   return set;
 }
 
@@ -51,8 +60,8 @@ TEST(Reconstruct, SphereFromOrthogonalSlicesIsClosedAndClose) {
   ASSERT_FALSE(mesh.empty());
   const MeshHealth health = check_mesh_health(mesh);
   EXPECT_TRUE(health.closed_manifold_oriented())
-      << health.boundary_edges << " " << health.non_manifold_edges << " " << health.misoriented_edges
-      << " " << health.non_manifold_vertices;
+      << health.boundary_edges << " " << health.non_manifold_edges << " "
+      << health.misoriented_edges << " " << health.non_manifold_vertices;
   const double volume = signed_volume(mesh);
   const double sphere_volume = 4.0 / 3.0 * std::numbers::pi * r * r * r;
   EXPECT_GT(volume, 0.0);
@@ -62,7 +71,8 @@ TEST(Reconstruct, SphereFromOrthogonalSlicesIsClosedAndClose) {
   // Every contour point lies close to the surface: check the slice circles' points against the
   // mesh vertices' distance from the centre (a sphere reconstructed well stays near radius r).
   double max_radius_error = 0.0;
-  for (const Vec3& p : mesh.vertices) max_radius_error = std::max(max_radius_error, std::abs(p.norm() - r));
+  for (const Vec3& p : mesh.vertices)
+    max_radius_error = std::max(max_radius_error, std::abs(p.norm() - r));
   EXPECT_LT(max_radius_error, 0.1 * r);  // 2.6 mm = 0.065 r measured (was: 0.2 r)
   EXPECT_GT(stats.cells, 9u);
   EXPECT_GT(stats.field_evaluations, 1000u);

@@ -1,5 +1,7 @@
 // The online engine against the one-shot reconstruction: after any sequence of additions and
 // removals, the sampled field and the meshes equal those of reconstructing the same slices at once.
+#include "sonoshape/recon/reconstructor.hpp"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -8,8 +10,6 @@
 
 #include "sonoshape/core/errors.hpp"
 #include "sonoshape/recon/reconstruct.hpp"
-#include "sonoshape/recon/reconstructor.hpp"
-
 #include "test_shapes.hpp"
 
 namespace sonoshape::recon {
@@ -46,7 +46,8 @@ LabeledSlice random_slice(std::mt19937& rng, bool two_labels, bool fov) {
   auto add_sphere = [&](const Vec3& centre, double radius, int label) {
     const double d = n.dot(centre - s.origin_mm);
     if (std::abs(d) >= 0.95 * radius) return;
-    s.regions.push_back({label, circle(s.to_plane(centre - d * n), std::sqrt(radius * radius - d * d), 48), {}});
+    s.regions.push_back(
+        {label, circle(s.to_plane(centre - d * n), std::sqrt(radius * radius - d * d), 48), {}});
   };
   add_sphere(Vec3(-10, 0, 0), 0.5 * kRadius, 1);
   if (two_labels) add_sphere(Vec3(16, 4, 2), 0.3 * kRadius, 2);
@@ -110,12 +111,14 @@ TEST_P(RandomSequences, EqualTheOneShotReconstructionAfterEveryUpdate) {
   for (int step = 0; step < steps; ++step) {
     // Mostly one addition per update, sometimes two, sometimes a removal (undo).
     if (step > 2 && coin(rng) < 0.25 && !ids.empty()) {
-      const std::size_t k = static_cast<std::size_t>(coin(rng) * static_cast<double>(ids.size())) % ids.size();
+      const std::size_t k =
+          static_cast<std::size_t>(coin(rng) * static_cast<double>(ids.size())) % ids.size();
       EXPECT_TRUE(online.remove_slice(ids[k]));
       ids.erase(ids.begin() + static_cast<std::ptrdiff_t>(k));
     }
     const int additions = coin(rng) < 0.2 ? 2 : 1;
-    for (int a = 0; a < additions; ++a) ids.push_back(online.add_slice(random_slice(rng, scenario.two_labels, scenario.fov)));
+    for (int a = 0; a < additions; ++a)
+      ids.push_back(online.add_slice(random_slice(rng, scenario.two_labels, scenario.fov)));
     const UpdateStats stats = online.update();
     EXPECT_EQ(online.slice_ids(), ids);
     if (step > 0 && stats.slices_removed == 0) {
@@ -124,7 +127,8 @@ TEST_P(RandomSequences, EqualTheOneShotReconstructionAfterEveryUpdate) {
     // The evaluations' seconds are part of the field and smoothing stages, and there are some
     // whenever vertices were evaluated.
     EXPECT_EQ(stats.step.evaluation_s > 0.0, stats.step.field_evaluations > 0) << "step " << step;
-    EXPECT_LE(stats.step.evaluation_s, stats.step.field_s + stats.step.smoothing_s) << "step " << step;
+    EXPECT_LE(stats.step.evaluation_s, stats.step.field_s + stats.step.smoothing_s)
+        << "step " << step;
     const auto offline = one_shot(online.slice_set(), options);
     SCOPED_TRACE("step " + std::to_string(step));
     expect_same_field(online, *offline);
@@ -214,8 +218,10 @@ LabeledSlice sweep_slice(double height) {
   s.v = Vec3(0, std::cos(tilt), std::sin(tilt));
   s.origin_mm = Vec3(0, 0, height);
   const double d = s.normal().normalized().dot(Vec3(-10, 0, 0) - s.origin_mm);
-  s.regions.push_back({1, circle(s.to_plane(Vec3(-10, 0, 0) - d * s.normal().normalized()),
-                                 std::sqrt(225.0 - d * d), 48), {}});
+  s.regions.push_back({1,
+                       circle(s.to_plane(Vec3(-10, 0, 0) - d * s.normal().normalized()),
+                              std::sqrt(225.0 - d * d), 48),
+                       {}});
   s.fov = sector_fan();
   return s;
 }
@@ -252,7 +258,7 @@ TEST(Reconstructor, QueriesAndUndo) {
   const int b = online.add_slice(random_slice(rng, false, false));
   EXPECT_EQ(a, 0);
   EXPECT_EQ(b, 1);
-  EXPECT_TRUE(online.remove_slice(b));   // a queued addition is simply dropped
+  EXPECT_TRUE(online.remove_slice(b));  // a queued addition is simply dropped
   EXPECT_FALSE(online.remove_slice(b));
   EXPECT_FALSE(online.remove_slice(42));
   online.update();

@@ -1,4 +1,6 @@
 // The far-field tree of the unknown triangles against the exact triangle-by-triangle sums.
+#include "triangle_tree.hpp"
+
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -7,22 +9,28 @@
 #include <random>
 #include <vector>
 
-#include "triangle_tree.hpp"
-
 namespace sonoshape::recon {
 namespace {
 
 // Reference moments: the triangle split into n^2 similar pieces, each integrated with the
 // 7-point degree-5 rule of Strang and Fix (an independent rule in barycentric coordinates).
-std::vector<double> reference_moments(const Vec2 (&c)[3], const double (&r)[3], const Vec2& centre, int n) {
+std::vector<double> reference_moments(const Vec2 (&c)[3], const double (&r)[3], const Vec2& centre,
+                                      int n) {
   static const double kA = 0.059715871789770, kB = 0.470142064105115, kC = 0.797426985353087,
-                      kD = 0.101286507323456, kW0 = 0.225, kW1 = 0.132394152788506, kW2 = 0.125939180544827;
-  const double bary[7][3] = {{1.0 / 3, 1.0 / 3, 1.0 / 3}, {kA, kB, kB}, {kB, kA, kB}, {kB, kB, kA},
-                             {kC, kD, kD}, {kD, kC, kD}, {kD, kD, kC}};
+                      kD = 0.101286507323456, kW0 = 0.225, kW1 = 0.132394152788506,
+                      kW2 = 0.125939180544827;
+  const double bary[7][3] = {{1.0 / 3, 1.0 / 3, 1.0 / 3},
+                             {kA, kB, kB},
+                             {kB, kA, kB},
+                             {kB, kB, kA},
+                             {kC, kD, kD},
+                             {kD, kC, kD},
+                             {kD, kD, kC}};
   const double weight[7] = {kW0, kW1, kW1, kW1, kW2, kW2, kW2};
   std::vector<double> out(kTriangleMomentCount, 0.0);
-  const double area = 0.5 * std::abs((c[1] - c[0]).x() * (c[2] - c[0]).y() - (c[1] - c[0]).y() * (c[2] - c[0]).x());
-  auto piece = [&](const double (&l)[3][2]) {
+  const double area =
+      0.5 * std::abs((c[1] - c[0]).x() * (c[2] - c[0]).y() - (c[1] - c[0]).y() * (c[2] - c[0]).x());
+  auto piece = [&](const double(&l)[3][2]) {
     for (int q = 0; q < 7; ++q) {
       double s = 0, t = 0;
       for (int k = 0; k < 3; ++k) {
@@ -50,7 +58,8 @@ std::vector<double> reference_moments(const Vec2 (&c)[3], const double (&r)[3], 
       const double up[3][2] = {{i * a, j * a}, {(i + 1) * a, j * a}, {i * a, (j + 1) * a}};
       piece(up);
       if (i + j + 1 < n) {
-        const double down[3][2] = {{(i + 1) * a, j * a}, {(i + 1) * a, (j + 1) * a}, {i * a, (j + 1) * a}};
+        const double down[3][2] = {
+            {(i + 1) * a, j * a}, {(i + 1) * a, (j + 1) * a}, {i * a, (j + 1) * a}};
         piece(down);
       }
     }
@@ -78,7 +87,8 @@ TEST(TriangleTree, MomentsOfALinearDensityAreExact) {
   // The closed forms up to degree 2 (integrals of products of barycentrics), in Cartesian form:
   // Z_10 = Mx + i My, Z_11 = Mxx + Myy, Z_20 = Mxx - Myy + 2 i Mxy.
   const Vec2 p[3] = {c[0] - centre, c[1] - centre, c[2] - centre};
-  const double area = 0.5 * std::abs((c[1] - c[0]).x() * (c[2] - c[0]).y() - (c[1] - c[0]).y() * (c[2] - c[0]).x());
+  const double area =
+      0.5 * std::abs((c[1] - c[0]).x() * (c[2] - c[0]).y() - (c[1] - c[0]).y() * (c[2] - c[0]).x());
   EXPECT_NEAR(moments[0], area * (r[0] + r[1] + r[2]) / 3.0, 1e-12 * area);
   const Vec2 sum = p[0] + p[1] + p[2];
   Vec2 first = Vec2::Zero();
@@ -89,9 +99,9 @@ TEST(TriangleTree, MomentsOfALinearDensityAreExact) {
   for (int i = 0; i < 3; ++i)
     for (int j = 0; j < 3; ++j)
       for (int k = 0; k < 3; ++k) {
-        const double integral = (i == j && j == k) ? area / 10.0
+        const double integral = (i == j && j == k)             ? area / 10.0
                                 : (i == j || j == k || i == k) ? area / 30.0
-                                                              : area / 60.0;
+                                                               : area / 60.0;
         second += r[i] * integral * p[j] * p[k].transpose();
       }
   EXPECT_NEAR(moments[2 * triangle_moment_index(1, 1)], second(0, 0) + second(1, 1), 1e-10 * area);
@@ -146,12 +156,13 @@ TEST(TriangleTree, MatchesTheExactSumsNearAndFar) {
   double worst_total = 0.0, worst_ratio = 0.0;
   for (int k = 0; k < 600; ++k) {
     const bool far = k % 3 == 2;
-    const Vec2 foot = far ? Vec2(far_foot(rng), far_foot(rng)) : Vec2(near_foot(rng), near_foot(rng));
+    const Vec2 foot =
+        far ? Vec2(far_foot(rng), far_foot(rng)) : Vec2(near_foot(rng), near_foot(rng));
     const double height = std::pow(10.0, far ? far_log_height(rng) : log_height(rng));
     double exact_w[kFunctions] = {}, tree_w[kFunctions] = {};
     // The reference on the triangles' order on entry: the sums do not depend on the layout.
-    add_triangle_weights(original.triangles.data(), original.values.data(), original.triangles.size(),
-                         kFunctions, foot, height, exact_w);
+    add_triangle_weights(original.triangles.data(), original.values.data(),
+                         original.triangles.size(), kFunctions, foot, height, exact_w);
     add_triangle_weights_tree(mesh.triangles.data(), mesh.values.data(), kFunctions, nodes.data(),
                               moments.data(), root, foot, height, tree_w);
     double exact_total = 0.0, tree_total = 0.0;
@@ -161,7 +172,8 @@ TEST(TriangleTree, MatchesTheExactSumsNearAndFar) {
     }
     for (int l = 0; l < kFunctions; ++l) {
       worst_total = std::max(worst_total, std::abs(tree_w[l] - exact_w[l]) / exact_w[l]);
-      worst_ratio = std::max(worst_ratio, std::abs(tree_w[l] / tree_total - exact_w[l] / exact_total));
+      worst_ratio =
+          std::max(worst_ratio, std::abs(tree_w[l] / tree_total - exact_w[l] / exact_total));
     }
   }
   EXPECT_LT(worst_total, 1e-5);
@@ -187,14 +199,17 @@ TEST(TriangleTree, LayoutDependsOnlyOnTheSetOfTriangles) {
       const int from = (k + shift) % 3;
       triangle.corners[k] = a.triangles[t].corners[from];
       for (int l = 0; l < kFunctions; ++l)
-        b.values.push_back(a.values[(t * 3 + static_cast<std::size_t>(from)) * kFunctions + static_cast<std::size_t>(l)]);
+        b.values.push_back(a.values[(t * 3 + static_cast<std::size_t>(from)) * kFunctions +
+                                    static_cast<std::size_t>(l)]);
     }
     b.triangles.push_back(triangle);
   }
   std::vector<TriangleNode> nodes_a, nodes_b;
   std::vector<double> moments_a, moments_b;
-  build_triangle_tree(a.triangles.data(), a.values.data(), a.triangles.size(), kFunctions, nodes_a, moments_a);
-  build_triangle_tree(b.triangles.data(), b.values.data(), b.triangles.size(), kFunctions, nodes_b, moments_b);
+  build_triangle_tree(a.triangles.data(), a.values.data(), a.triangles.size(), kFunctions, nodes_a,
+                      moments_a);
+  build_triangle_tree(b.triangles.data(), b.values.data(), b.triangles.size(), kFunctions, nodes_b,
+                      moments_b);
   ASSERT_EQ(nodes_a.size(), nodes_b.size());
   for (std::size_t n = 0; n < nodes_a.size(); ++n) {
     EXPECT_EQ(nodes_a[n].first, nodes_b[n].first);
@@ -209,8 +224,10 @@ TEST(TriangleTree, LayoutDependsOnlyOnTheSetOfTriangles) {
       for (int a = 0; a <= kTriangleTreeOrder; ++a)
         for (int b = 0; b <= a && a + b <= kTriangleTreeOrder; ++b)
           for (std::size_t part = 0; part < 2; ++part) {
-            const std::size_t m = n * stride + density * kTriangleMomentCount + 2 * triangle_moment_index(a, b) + part;
-            const double scale = moments_a[n * stride] * std::pow(nodes_a[n].radius_sq, 0.5 * (a + b));
+            const std::size_t m = n * stride + density * kTriangleMomentCount +
+                                  2 * triangle_moment_index(a, b) + part;
+            const double scale =
+                moments_a[n * stride] * std::pow(nodes_a[n].radius_sq, 0.5 * (a + b));
             EXPECT_NEAR(moments_a[m], moments_b[m], 1e-13 * scale);
           }
   // Same triangle at every position (up to the corner rotation).

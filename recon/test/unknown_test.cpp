@@ -40,7 +40,8 @@ double adaptive_simpson(const std::function<double(double)>& f, double a, double
 double integrate(const std::function<double(double)>& f, double a, double b, double tolerance) {
   const double fa = f(a), fb = f(b), fm = f(0.5 * (a + b));
   const double whole = (b - a) / 6.0 * (fa + 4.0 * fm + fb);
-  return adaptive_simpson(f, a, b, fa, fm, fb, whole, tolerance * std::max(1.0, std::abs(whole)), 30);
+  return adaptive_simpson(f, a, b, fa, fm, fb, whole, tolerance * std::max(1.0, std::abs(whole)),
+                          30);
 }
 
 // For a foot outside the triangle the signed fans cancel; there the reference is an adaptive
@@ -49,11 +50,18 @@ double integrate(const std::function<double(double)>& f, double a, double b, dou
 void triangle_rule(const Vec2 (&t)[3], const Vec2 (&corner)[3], const Vec2& foot, double h,
                    double (&out)[3]) {
   static const double kA = 0.059715871789770, kB = 0.470142064105115, kC = 0.797426985353087,
-                      kD = 0.101286507323456, kW0 = 0.225, kW1 = 0.132394152788506, kW2 = 0.125939180544827;
-  const double bary[7][3] = {{1.0 / 3, 1.0 / 3, 1.0 / 3}, {kA, kB, kB}, {kB, kA, kB}, {kB, kB, kA},
-                             {kC, kD, kD}, {kD, kC, kD}, {kD, kD, kC}};
+                      kD = 0.101286507323456, kW0 = 0.225, kW1 = 0.132394152788506,
+                      kW2 = 0.125939180544827;
+  const double bary[7][3] = {{1.0 / 3, 1.0 / 3, 1.0 / 3},
+                             {kA, kB, kB},
+                             {kB, kA, kB},
+                             {kB, kB, kA},
+                             {kC, kD, kD},
+                             {kD, kC, kD},
+                             {kD, kD, kC}};
   const double weight[7] = {kW0, kW1, kW1, kW1, kW2, kW2, kW2};
-  const double area = 0.5 * std::abs((t[1] - t[0]).x() * (t[2] - t[0]).y() - (t[1] - t[0]).y() * (t[2] - t[0]).x());
+  const double area =
+      0.5 * std::abs((t[1] - t[0]).x() * (t[2] - t[0]).y() - (t[1] - t[0]).y() * (t[2] - t[0]).x());
   const double big_area = (corner[1] - corner[0]).x() * (corner[2] - corner[0]).y() -
                           (corner[1] - corner[0]).y() * (corner[2] - corner[0]).x();
   out[0] = out[1] = out[2] = 0.0;
@@ -100,8 +108,10 @@ bool foot_inside(const Vec2 (&t)[3], const Vec2& foot) {
   for (int k = 0; k < 3; ++k) {
     const Vec2 a = t[k] - foot, b = t[(k + 1) % 3] - foot;
     const double c = a.x() * b.y() - a.y() * b.x();
-    if (sign == 0.0) sign = c;
-    else if (sign * c < 0.0) return false;
+    if (sign == 0.0)
+      sign = c;
+    else if (sign * c < 0.0)
+      return false;
   }
   return true;
 }
@@ -113,7 +123,8 @@ void reference_weights(const Vec2 (&t)[3], const Vec2& foot, double h, double (&
     adaptive_triangle(t, t, foot, h, whole, 9, w);
     return;
   }
-  const double twice_area = (t[1] - t[0]).x() * (t[2] - t[0]).y() - (t[1] - t[0]).y() * (t[2] - t[0]).x();
+  const double twice_area =
+      (t[1] - t[0]).x() * (t[2] - t[0]).y() - (t[1] - t[0]).y() * (t[2] - t[0]).x();
   for (int i = 0; i < 3; ++i) {
     const Vec2& p1 = t[(i + 1) % 3];
     const Vec2 e = t[(i + 2) % 3] - p1;
@@ -151,8 +162,10 @@ TEST(TriangleWeights, AgreeWithQuadratureAndJu) {
   std::uniform_real_distribution<double> coord(-1.0, 1.0);
   double worst_reference = 0.0, worst_ju = 0.0;
   for (int trial = 0; trial < 60; ++trial) {
-    Vec2 t[3] = {Vec2(coord(rng), coord(rng)), Vec2(coord(rng), coord(rng)), Vec2(coord(rng), coord(rng))};
-    const double area = 0.5 * std::abs((t[1] - t[0]).x() * (t[2] - t[0]).y() - (t[1] - t[0]).y() * (t[2] - t[0]).x());
+    Vec2 t[3] = {Vec2(coord(rng), coord(rng)), Vec2(coord(rng), coord(rng)),
+                 Vec2(coord(rng), coord(rng))};
+    const double area = 0.5 * std::abs((t[1] - t[0]).x() * (t[2] - t[0]).y() -
+                                       (t[1] - t[0]).y() * (t[2] - t[0]).x());
     if (area < 0.05) continue;
     const Vec2 foot(1.5 * coord(rng), 1.5 * coord(rng));
     for (const double h : {2.0, 0.3, 1e-2, 1e-4, 1e-7}) {
@@ -255,7 +268,9 @@ TEST(Completion, GroupWithOneKnownLabelCompletesToIt) {
 int component_count(const TriangleMesh& mesh) {
   std::vector<int> parent(mesh.vertices.size());
   for (std::size_t i = 0; i < parent.size(); ++i) parent[i] = static_cast<int>(i);
-  std::function<int(int)> find = [&](int x) { return parent[x] == x ? x : parent[x] = find(parent[x]); };
+  std::function<int(int)> find = [&](int x) {
+    return parent[x] == x ? x : parent[x] = find(parent[x]);
+  };
   for (const auto& t : mesh.triangles) {
     parent[find(static_cast<int>(t[0]))] = find(static_cast<int>(t[1]));
     parent[find(static_cast<int>(t[1]))] = find(static_cast<int>(t[2]));
@@ -291,7 +306,7 @@ TEST(Completion, TwoCylindersWithANoisyMiddleSliceStaySeparate) {
   const Ring2 left_part = arc(left, 60.0, 300.0), right_part = arc(right, -120.0, 120.0);
   // The blob shares the chords' end points with the disc parts.
   const Ring2 blob{Vec2(-12, -10), Vec2(12, -10), right_part.front(), right_part.back(),
-                   Vec2(12, 10), Vec2(-12, 10), left_part.front(), left_part.back()};
+                   Vec2(12, 10),   Vec2(-12, 10), left_part.front(),  left_part.back()};
   SliceSet set;
   set.bounds = Box3{Vec3(-40, -25, -30), Vec3(40, 25, 30)};
   for (const double z : {-15.0, 0.0, 15.0}) {
@@ -400,10 +415,10 @@ TEST(TriangleWeights, SliversContributeNothing) {
   EXPECT_FALSE(triangle_weights(a, b, c, Vec2(10.0, 3.0), 8.0, w));
   EXPECT_FALSE(triangle_weights(a, a, c, Vec2(10.0, 3.0), 8.0, w));
   // A whole triangle within 1e-14 mm, seen from 40 mm (found on a sector fov set).
-  EXPECT_FALSE(triangle_weights(Vec2(42.545796336203757, 1.0883589852497786),
-                                Vec2(42.545796336203757, 1.088358985249781),
-                                Vec2(42.545796336203772, 1.0883589852497959),
-                                Vec2(38.650125921168197, 17.435219456682546), 15.711425339673877, w));
+  EXPECT_FALSE(triangle_weights(
+      Vec2(42.545796336203757, 1.0883589852497786), Vec2(42.545796336203757, 1.088358985249781),
+      Vec2(42.545796336203772, 1.0883589852497959), Vec2(38.650125921168197, 17.435219456682546),
+      15.711425339673877, w));
   ASSERT_TRUE(triangle_weights(a, Vec2(3.5, -50.0), c, Vec2(10.0, 3.0), 8.0, w));
   for (const double x : w) EXPECT_TRUE(std::isfinite(x));
 }
@@ -433,11 +448,13 @@ TEST(Completion, KnownAndUnknownPartsMakeUpEachFace) {
     const FaceImage& image = c.field->face_image(f);
     if (!image.known_clipped) continue;
     Vec2 centre = Vec2::Zero();
-    for (std::uint32_t k = 0; k < image.polygon_count; ++k) centre += points[image.polygon_begin + k];
+    for (std::uint32_t k = 0; k < image.polygon_count; ++k)
+      centre += points[image.polygon_begin + k];
     centre /= image.polygon_count;
     const std::pair<Vec2, double> views[] = {{centre, 3.0}, {centre + Vec2(40.0, -25.0), 10.0}};
     for (const auto& [foot, height] : views) {
-      const double face = projected_angle(points.data() + image.polygon_begin, image.polygon_count, foot, height);
+      const double face =
+          projected_angle(points.data() + image.polygon_begin, image.polygon_count, foot, height);
       double parts = 0.0;
       for (const auto* list : {&image.known_parts, &image.unknown_parts})
         for (const FaceImage::Part& part : *list)
@@ -479,7 +496,8 @@ TEST(Completion, InnerCornersAgreeAndMixedTrianglesAreFine) {
       return false;
     };
     const double plane = c.arrangement.face(f).plane;
-    for (std::size_t t = image.triangle_begin; t < image.triangle_begin + image.triangle_count; ++t) {
+    for (std::size_t t = image.triangle_begin; t < image.triangle_begin + image.triangle_count;
+         ++t) {
       const UnknownTriangle& triangle = field.unknown_triangles()[t];
       int labels[3];
       for (int k = 0; k < 3; ++k) {

@@ -39,15 +39,13 @@ cv::Mat within_distance(const cv::Mat& mask, double limit_px) {
 
 double blooming_shift_mm(double dark_grey, double bright_grey, double psf_sigma_mm,
                          double dynamic_range_db) {
-  if (!(bright_grey > dark_grey) || !(psf_sigma_mm > 0.0) || !(dynamic_range_db > 0.0))
-    return 0.0;
+  if (!(bright_grey > dark_grey) || !(psf_sigma_mm > 0.0) || !(dynamic_range_db > 0.0)) return 0.0;
   const double ratio = std::pow(10.0, (bright_grey - dark_grey) * dynamic_range_db / 255.0 / 10.0);
   return -psf_sigma_mm * inverse_normal(1.0 / (std::sqrt(ratio) + 1.0));
 }
 
 void undo_blooming(cv::Mat& map, const cv::Mat& sector, const std::vector<GreyClass>& classes,
-                   double psf_sigma_mm, double dynamic_range_db, double spacing_mm,
-                   int excluded) {
+                   double psf_sigma_mm, double dynamic_range_db, double spacing_mm, int excluded) {
   if (!(psf_sigma_mm > 0.0)) return;
   const cv::Mat original = map.clone();
   for (const GreyClass& bright : classes) {

@@ -25,7 +25,6 @@ double blooming_shift_mm(double dark_grey, double bright_grey, double psf_sigma_
 /// shift of a darker class's pixel back to that darker class (the nearest darker class first).
 /// `map` CV_8U; only pixels where `sector` is non-zero change.
 void undo_blooming(cv::Mat& map, const cv::Mat& sector, const std::vector<GreyClass>& classes,
-                   double psf_sigma_mm, double dynamic_range_db, double spacing_mm,
-                   int excluded);
+                   double psf_sigma_mm, double dynamic_range_db, double spacing_mm, int excluded);
 
 }  // namespace sonoshape::seg::detail

@@ -115,10 +115,10 @@ double SegmentationConfig::effective_shadow_grey() const {
 Status GraphCutOptions::validate() const {
   if (!(cell_mm > 0.0) || !std::isfinite(cell_mm))
     return Status::error("graph_cut.cell_mm must be a length in mm > 0");
-  for (const auto& [name, value] : std::array<std::pair<const char*, double>, 3>{
-           {{"smoothness", smoothness},
-            {"prior_weight", prior_weight},
-            {"prior_margin_mm", prior_margin_mm}}})
+  for (const auto& [name, value] :
+       std::array<std::pair<const char*, double>, 3>{{{"smoothness", smoothness},
+                                                      {"prior_weight", prior_weight},
+                                                      {"prior_margin_mm", prior_margin_mm}}})
     if (!(value >= 0.0) || !std::isfinite(value))
       return Status::error(std::string("graph_cut.") + name + " must be a finite number >= 0");
   if (!(model_update >= 0.0 && model_update <= 1.0))
@@ -170,8 +170,9 @@ Status SegmentationConfig::validate() const {
       return Status::error(std::string("segmentation config: ") + name +
                            " must be a finite number >= 0");
   if (!std::isfinite(psf_sigma_mm))
-    return Status::error("segmentation config: psf_sigma_mm must be a finite number (mm; "
-                         "negative: from the sweep's header; 0: no blooming correction)");
+    return Status::error(
+        "segmentation config: psf_sigma_mm must be a finite number (mm; "
+        "negative: from the sweep's header; 0: no blooming correction)");
   if (shadow_fraction > 1.0)
     return Status::error("segmentation config: shadow_fraction must be in 0..1");
   if (!(confidence_window_mm > 0.0))
@@ -249,9 +250,12 @@ Result<SegmentationConfig> parse_segmentation_config(const std::string& json_tex
         }
       } else if (key == "method") {
         const std::string name = value.is_string() ? value.get<std::string>() : "";
-        if (name == "threshold") config.method = LabellingMethod::kThreshold;
-        else if (name == "graph_cut") config.method = LabellingMethod::kGraphCut;
-        else throw ConfigProblem{key, "expected \"threshold\" or \"graph_cut\""};
+        if (name == "threshold")
+          config.method = LabellingMethod::kThreshold;
+        else if (name == "graph_cut")
+          config.method = LabellingMethod::kGraphCut;
+        else
+          throw ConfigProblem{key, "expected \"threshold\" or \"graph_cut\""};
       } else {
         set_number_field({{"smoothing_mm", &config.smoothing_mm},
                           {"confidence_window_mm", &config.confidence_window_mm},

@@ -9,9 +9,9 @@
 #pragma GCC diagnostic ignored "-Warray-bounds"
 #endif
 
+#include <algorithm>
 #include <boost/graph/boykov_kolmogorov_max_flow.hpp>
 #include <boost/graph/compressed_sparse_row_graph.hpp>
-#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <stdexcept>

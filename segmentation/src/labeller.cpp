@@ -554,7 +554,8 @@ struct GraphCutLabeller::Impl {
           const auto count_neighbour = [&](int i, int j) {
             if (i < 0 || j < 0 || i >= grid_w || j >= grid_h || regions.at<int>(j, i) == r) return;
             const std::size_t d = static_cast<std::size_t>(j) * grid_w + i;
-            if (count[d] > 0.0 && !reflector_cell[d]) ++around[static_cast<std::size_t>(r)][start[d]];
+            if (count[d] > 0.0 && !reflector_cell[d])
+              ++around[static_cast<std::size_t>(r)][start[d]];
           };
           count_neighbour(ci - 1, cj);
           count_neighbour(ci + 1, cj);
@@ -582,7 +583,8 @@ struct GraphCutLabeller::Impl {
       std::vector<std::uint8_t> anchored(static_cast<std::size_t>(n), 0);
       const int* r = regions.ptr<int>(0);  // continuous: one row after another
       for (std::size_t c = 0; c < cut.size(); ++c)
-        if (r[c] > 0 && (start[c] == l || (predicted && predicted->expected[c] == static_cast<int>(l))))
+        if (r[c] > 0 &&
+            (start[c] == l || (predicted && predicted->expected[c] == static_cast<int>(l))))
           anchored[static_cast<std::size_t>(r[c])] = 1;
       for (std::size_t c = 0; c < cut.size(); ++c)
         if (r[c] > 0 && !anchored[static_cast<std::size_t>(r[c])]) cut[c] = start[c];

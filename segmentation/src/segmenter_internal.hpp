@@ -13,9 +13,9 @@ namespace sonoshape::seg::detail {
 constexpr double kReflectorGapGrey = 60.0;
 
 /// Called with the classified label map (CV_8U, changed in place), the smoothed (median, then
-/// Gaussian) and depth-compensated grey that the classification read (CV_32F), the low-confidence mask and the sector mask (CV_8U, 255 =
-/// set), before the morphological cleaning; it may set `keep` (CV_8U) to the pixels whose
-/// small components the cleaning must keep.
+/// Gaussian) and depth-compensated grey that the classification read (CV_32F), the low-confidence
+/// mask and the sector mask (CV_8U, 255 = set), before the morphological cleaning; it may set
+/// `keep` (CV_8U) to the pixels whose small components the cleaning must keep.
 using RefineStep = std::function<void(cv::Mat& map, const cv::Mat& grey, const cv::Mat& low,
                                       const cv::Mat& sector, cv::Mat& keep)>;
 

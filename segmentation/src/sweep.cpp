@@ -94,9 +94,8 @@ std::optional<std::pair<LabelModel, std::vector<LabelModel>>> header_models(
 
 std::filesystem::path sidecar_path(const std::filesystem::path& sequence) {
   std::string name = sequence.filename().string();
-  for (const std::string ext :
-       {".igs.mha", ".seq.mha", ".mha", ".igs.mhd", ".mhd", ".igs.nrrd", ".seq.nrrd", ".nrrd",
-        ".nhdr"})
+  for (const std::string ext : {".igs.mha", ".seq.mha", ".mha", ".igs.mhd", ".mhd", ".igs.nrrd",
+                                ".seq.nrrd", ".nrrd", ".nhdr"})
     if (name.size() > ext.size() && name.ends_with(ext)) {
       name.resize(name.size() - ext.size());
       break;
@@ -323,8 +322,7 @@ Result<SweepSetup> prepare_sweep(const acq::SequenceFile& file,
     if (const auto sigma = file.field("SonoshapePsfSigmaMm")) {
       setup.config.psf_sigma_mm = std::max(0.0, to_number(*sigma).value_or(0.0));
       if (const auto range = file.field("SonoshapeDynamicRangeDb"))
-        setup.config.dynamic_range_db =
-            to_number(*range).value_or(setup.config.dynamic_range_db);
+        setup.config.dynamic_range_db = to_number(*range).value_or(setup.config.dynamic_range_db);
     }
 
   // Label models: the config's, the header's, or two classes found in the data.
@@ -503,8 +501,8 @@ SweepSegmentation segment_sweep(const acq::SequenceFile& file, const SweepSetup&
                       [&](const LabelInfo& l) { return l.id == r.label; }))
         continue;
       const auto name = names.find(r.label);
-      declared.push_back({r.label, name != names.end() ? name->second
-                                                      : "label_" + std::to_string(r.label)});
+      declared.push_back(
+          {r.label, name != names.end() ? name->second : "label_" + std::to_string(r.label)});
     }
   return out;
 }

@@ -169,8 +169,8 @@ TEST(GraphCutLabeller, MakesNoOrganOutOfSpeckle) {
     GreyImage image(w, h, 0);
     for (int j = 0; j < h; ++j)
       for (int i = 0; i < w; ++i)
-        image.at(i, j) = static_cast<std::uint8_t>(std::clamp(
-            87.0 + 25.0 * (field.at<float>(j, i) - mean[0]) / spread[0], 0.0, 255.0));
+        image.at(i, j) = static_cast<std::uint8_t>(
+            std::clamp(87.0 + 25.0 * (field.at<float>(j, i) - mean[0]) / spread[0], 0.0, 255.0));
     const LabelImage threshold = segment_frame(image, geometry, config).labels;
     const LabelImage cut = GraphCutLabeller(config, geometry).segment(image).labels;
     for (int j = 0; j < h; ++j)
@@ -179,8 +179,8 @@ TEST(GraphCutLabeller, MakesNoOrganOutOfSpeckle) {
         organ_px_cut += cut.at(i, j) == 1;
       }
   }
-  std::cout << "organ pixels in pure background: threshold " << organ_px_threshold
-            << ", graph cut " << organ_px_cut << '\n';
+  std::cout << "organ pixels in pure background: threshold " << organ_px_threshold << ", graph cut "
+            << organ_px_cut << '\n';
   EXPECT_LE(organ_px_cut, 1.2 * organ_px_threshold);
 }
 

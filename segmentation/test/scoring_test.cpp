@@ -124,8 +124,9 @@ TEST(SegmentSweepLabels, PerfectLabelsScoreOneAndTheSegmenterBelowOne) {
 
   acq::SequenceFile short_truth;
   short_truth.add_frame(sweep.truth.image(0));
-  EXPECT_THROW(segment_sweep(sweep.bmode, *setup, 1, {}, {}, SweepLabels{&short_truth, nullptr, {}}),
-               std::invalid_argument);
+  EXPECT_THROW(
+      segment_sweep(sweep.bmode, *setup, 1, {}, {}, SweepLabels{&short_truth, nullptr, {}}),
+      std::invalid_argument);
 }
 
 }  // namespace

@@ -255,8 +255,7 @@ TEST(SegmentSweep, TrackerOnlyBufferIsRefused) {
   }
   const Status refused = normalise_recording(file, "tracker.igs.mha");
   ASSERT_FALSE(refused);
-  EXPECT_NE(refused.message().find("tracker.igs.mha: the frames are 1x1 pixels"),
-            std::string::npos)
+  EXPECT_NE(refused.message().find("tracker.igs.mha: the frames are 1x1 pixels"), std::string::npos)
       << refused.message();
 }
 

@@ -527,7 +527,8 @@ std::vector<LabelScore> evaluate(const MeshSet& reconstruction, const MeshSet& t
     if (std::isnan(score.iou))
       log_warning("evaluate: label " + std::to_string(entry.label) +
                   ": no grid sample falls inside the reconstruction or the truth, so the IoU is "
-                  "undefined; the evaluation box (diagonal " + format_length(diagonal) +
+                  "undefined; the evaluation box (diagonal " +
+                  format_length(diagonal) +
                   ") is too large for these meshes: give --slices for a box around the data, "
                   "or check that the two meshes are in the same place and units");
     score.components = component_count(recon_inside, grid.n);

@@ -439,9 +439,8 @@ class StlWelder {
 
  private:
   std::uint32_t vertex(const Vec3& p) {
-    const auto [it, added] = index_.try_emplace(
-        std::array<double, 3>{p.x(), p.y(), p.z()},
-        static_cast<std::uint32_t>(mesh_.vertices.size()));
+    const auto [it, added] = index_.try_emplace(std::array<double, 3>{p.x(), p.y(), p.z()},
+                                                static_cast<std::uint32_t>(mesh_.vertices.size()));
     if (added) mesh_.vertices.push_back(p);
     return it->second;
   }
@@ -464,8 +463,7 @@ std::uint32_t stl_declared_facets(std::string_view data) {
 // binary exporters start their 80-byte header with it.
 bool is_binary_stl(std::string_view data) {
   if (data.size() < kStlHeaderBytes) return false;
-  return kStlHeaderBytes + kStlFacetBytes * std::uint64_t{stl_declared_facets(data)} ==
-         data.size();
+  return kStlHeaderBytes + kStlFacetBytes * std::uint64_t{stl_declared_facets(data)} == data.size();
 }
 
 std::string_view trim_left(std::string_view text) {

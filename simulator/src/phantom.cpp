@@ -153,8 +153,7 @@ Result<Phantom> make_default_phantom(const std::filesystem::path& models_dir, do
   rib.translation() =
       Vec3(spot_mm.min.x() + 0.35 * spot_mm.size().x(), organs.min.y() - 2.0 * rib_radius,
            0.5 * (organs.min.z() + organs.max.z()));
-  phantom.add(3, "rib", make_cylinder(rib_radius, organs.size().z()), rib,
-              tissue_preset("bone"));
+  phantom.add(3, "rib", make_cylinder(rib_radius, organs.size().z()), rib, tissue_preset("bone"));
   return phantom;
 }
 

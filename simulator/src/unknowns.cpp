@@ -63,8 +63,10 @@ void apply_to_materials(LabeledSlice& slice, const Polygon& shape, bool keep_ins
       continue;
     }
     PolygonSet set = to_set(region);
-    if (keep_inside) set.intersection(shape);
-    else set.difference(shape);
+    if (keep_inside)
+      set.intersection(shape);
+    else
+      set.difference(shape);
     for (Region& r : to_regions(set, region.label)) out.push_back(std::move(r));
   }
   slice.regions = std::move(out);
@@ -93,7 +95,8 @@ void insert_touching_vertices(Ring2& ring, const std::vector<Region>& others, do
       if (t <= 0.0 || t >= 1.0) continue;
       if ((a + t * d - c).norm() <= tolerance) on_edge.emplace_back(t, c);
     }
-    std::sort(on_edge.begin(), on_edge.end(), [](const auto& x, const auto& y) { return x.first < y.first; });
+    std::sort(on_edge.begin(), on_edge.end(),
+              [](const auto& x, const auto& y) { return x.first < y.first; });
     for (const auto& [t, c] : on_edge)
       if (out.back() != c) out.push_back(c);
   }
@@ -106,7 +109,8 @@ FovShape parse_fov_shape(const std::string& name) {
   if (name == "none") return FovShape::kNone;
   if (name == "sector") return FovShape::kSector;
   if (name == "rect") return FovShape::kRect;
-  throw std::invalid_argument("unknown field of view '" + name + "' (expected none, sector or rect)");
+  throw std::invalid_argument("unknown field of view '" + name +
+                              "' (expected none, sector or rect)");
 }
 
 void add_unknowns(SliceSet& set, const UnknownOptions& options) {
@@ -163,7 +167,8 @@ void add_unknowns(SliceSet& set, const UnknownOptions& options) {
         }
       } else {
         const double w = 0.5 * rect_width;
-        fov = {apex - w * side, apex - w * side + depth * axis, apex + w * side + depth * axis, apex + w * side};
+        fov = {apex - w * side, apex - w * side + depth * axis, apex + w * side + depth * axis,
+               apex + w * side};
       }
       if (signed_area(fov) < 0.0) std::reverse(fov.begin(), fov.end());
       apply_to_materials(slice, to_polygon(fov, true), true);
@@ -173,9 +178,11 @@ void add_unknowns(SliceSet& set, const UnknownOptions& options) {
     // A blob over a random contour vertex (inside the fov when there is one).
     std::vector<Vec2> candidates;
     for (const Region& r : slice.regions)
-      if (r.label != kUnknownLabel) candidates.insert(candidates.end(), r.outer.begin(), r.outer.end());
+      if (r.label != kUnknownLabel)
+        candidates.insert(candidates.end(), r.outer.begin(), r.outer.end());
     if (candidates.empty()) continue;
-    const Vec2 center = candidates[static_cast<std::size_t>(unit(rng) * candidates.size()) % candidates.size()];
+    const Vec2 center =
+        candidates[static_cast<std::size_t>(unit(rng) * candidates.size()) % candidates.size()];
     const double radius = options.blob_radius * (0.67 + 0.66 * unit(rng)) * diagonal;
     Ring2 blob;
     for (int k = 0; k < 16; ++k) {

@@ -194,7 +194,8 @@ TEST(Evaluation, CountsConnectedParts) {
   const TriangleMesh right = test::uv_sphere(0.5, Vec3(0.8, 0, 0), 48, 24);
   const std::uint32_t offset = static_cast<std::uint32_t>(two.vertices.size());
   two.vertices.insert(two.vertices.end(), right.vertices.begin(), right.vertices.end());
-  for (auto t : right.triangles) two.triangles.push_back({t[0] + offset, t[1] + offset, t[2] + offset});
+  for (auto t : right.triangles)
+    two.triangles.push_back({t[0] + offset, t[1] + offset, t[2] + offset});
   const SliceSet slices = slice_at({{1, "", two}}, {-0.25, 0.0, 0.25});
   EvaluationOptions options;
   options.grid_resolution = 48;

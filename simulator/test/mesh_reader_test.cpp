@@ -128,14 +128,16 @@ TEST(MeshReader, TruncatedBinaryPlyNamesTheElement) {
 // Found by fuzzing (tests/data/fuzz/mesh/): a header whose last line had no newline read past
 // the end of the text and ended the program with std::out_of_range.
 TEST(MeshReader, PlyHeaderEndingWithoutNewlineReadsOrFailsClearly) {
-  const auto empty = read_mesh(
-      write_temp("end.ply", "ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\n"
-                            "property float y\nproperty float z\nend_header"),
-      true);
+  const auto empty =
+      read_mesh(write_temp("end.ply",
+                           "ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\n"
+                           "property float y\nproperty float z\nend_header"),
+                true);
   ASSERT_TRUE(empty) << empty.message();
   EXPECT_EQ(empty->vertices.size(), 0u);
-  const auto cut = read_mesh(write_temp(
-      "cut.ply", "ply\nformat binary_little_endian 1.0\nelement vertex 8\nproperty float x\n"
+  const auto cut = read_mesh(
+      write_temp("cut.ply",
+                 "ply\nformat binary_little_endian 1.0\nelement vertex 8\nproperty float x\n"
                  "property float y\nproperty float z\nend_header"));
   ASSERT_FALSE(cut);
   EXPECT_NE(cut.message().find("cut.ply"), std::string::npos) << cut.message();

@@ -34,11 +34,11 @@ TEST(Trajectory, PassesGoBackAndForthOverTheSameExtent) {
   options.passes = 3;
   const Trajectory trajectory(options);
   EXPECT_DOUBLE_EQ(trajectory.progress(0.0), 0.0);
-  EXPECT_DOUBLE_EQ(trajectory.progress(2.0), 0.5);   // half of the first pass, going out
+  EXPECT_DOUBLE_EQ(trajectory.progress(2.0), 0.5);    // half of the first pass, going out
   EXPECT_NEAR(trajectory.progress(4.0), 1.0, 1e-12);  // turns at the far end
-  EXPECT_DOUBLE_EQ(trajectory.progress(6.0), 0.5);   // coming back
+  EXPECT_DOUBLE_EQ(trajectory.progress(6.0), 0.5);    // coming back
   EXPECT_NEAR(trajectory.progress(8.0), 0.0, 1e-12);  // back at the start
-  EXPECT_DOUBLE_EQ(trajectory.progress(12.0), 1.0);  // the third pass ends at the far end
+  EXPECT_DOUBLE_EQ(trajectory.progress(12.0), 1.0);   // the third pass ends at the far end
   options.passes = 0;
   EXPECT_THROW(Trajectory{options}, std::invalid_argument);
 }

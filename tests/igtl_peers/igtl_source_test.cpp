@@ -2,6 +2,7 @@
 // TrackerServer examples (built from their shipped sources), and against sonoshape's own server
 // for the pose an IMAGE carries. Loopback only; every wait bounded.
 #include <gtest/gtest.h>
+#include <igtlTransformMessage.h>
 #include <netinet/in.h>
 #include <poll.h>
 #include <signal.h>
@@ -19,8 +20,6 @@
 #include <string>
 #include <thread>
 #include <vector>
-
-#include <igtlTransformMessage.h>
 
 #include "sonoshape/acquisition/igtl_frame_source.hpp"
 #include "sonoshape/publish/igtl_server.hpp"
@@ -345,14 +344,13 @@ TEST(IgtlSources, AScanReconstructsFromImagerServerFramesAndTrackerServerPoses) 
   const std::string calibration = ::testing::TempDir() + "igtl_calibration.json";
   std::ofstream(calibration) << R"({"ImageToProbe": [0.5,0,0,0, 0,0.5,0,0, 0,0,1,0, 0,0,0,1]})";
   int code = 0;
-  const std::string out =
-      run("timeout " +
-              std::to_string(static_cast<int>(60 * sonoshape::testing::kSanitizerSlowdown)) +
-              " " + std::string(SONOSHAPE_BINARY) +
-              " scan --source igtl:127.0.0.1:" + std::to_string(imager.port()) +
-              " --igtl-tracker 127.0.0.1:" + std::to_string(tracker.port()) +
-              " --igtl-transform Tracker --calibration " + calibration + " --duration 1.5",
-          code);
+  const std::string out = run(
+      "timeout " + std::to_string(static_cast<int>(60 * sonoshape::testing::kSanitizerSlowdown)) +
+          " " + std::string(SONOSHAPE_BINARY) +
+          " scan --source igtl:127.0.0.1:" + std::to_string(imager.port()) +
+          " --igtl-tracker 127.0.0.1:" + std::to_string(tracker.port()) +
+          " --igtl-transform Tracker --calibration " + calibration + " --duration 1.5",
+      code);
   ASSERT_EQ(code, 0) << out;
   EXPECT_NE(out.find("OpenIGTLink 127.0.0.1:" + std::to_string(imager.port()) + ": 256x256 frames"),
             std::string::npos)

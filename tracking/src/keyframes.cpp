@@ -53,8 +53,7 @@ KeyframeSelector::KeyframeSelector(const KeyframeOptions& options) : options_(op
 }
 
 std::optional<int> KeyframeSelector::offer(const FramePlane& plane) {
-  const bool past_budget =
-      options_.slice_budget > 0 && accepted_.size() >= options_.slice_budget;
+  const bool past_budget = options_.slice_budget > 0 && accepted_.size() >= options_.slice_budget;
   const double scale = past_budget ? kPastBudgetScale : 1.0;
   const double min_angle_deg = scale * options_.min_angle_deg;
   const double min_distance_mm = scale * options_.min_distance_mm;

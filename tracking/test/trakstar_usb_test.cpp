@@ -214,7 +214,8 @@ class TrakstarTestbed {
 
   void plug() {
     GError* error = nullptr;
-    if (!umockdev_testbed_add_from_string(testbed_, sonoshape::testing::kTrakstarUsbRecord, &error)) {
+    if (!umockdev_testbed_add_from_string(testbed_, sonoshape::testing::kTrakstarUsbRecord,
+                                          &error)) {
       ADD_FAILURE() << "umockdev record: " << error->message;
       g_error_free(error);
     }

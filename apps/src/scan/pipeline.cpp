@@ -606,8 +606,8 @@ void ScanPipeline::reconstruction_loop() {
                   std::to_string(st.completion_s) + " s), field " + std::to_string(st.field_s) +
                   " s, smoothing " + std::to_string(st.smoothing_s) + " s, mesh " +
                   std::to_string(st.mesh_s) + " s" +
-                  (st.solve_nodes > 0 ? "; thin-plate data " + std::to_string(st.data_s) + " s, solve " +
-                                            std::to_string(st.solve_s) + " s (" +
+                  (st.solve_nodes > 0 ? "; thin-plate data " + std::to_string(st.data_s) +
+                                            " s, solve " + std::to_string(st.solve_s) + " s (" +
                                             std::to_string(st.solve_iterations) + " iterations, " +
                                             std::to_string(st.solve_nodes) + " nodes)"
                                       : std::string()));

@@ -1,7 +1,7 @@
 #include "sonoshape/scan/sources.hpp"
 
-#include <array>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <sstream>
 
@@ -80,13 +80,12 @@ Result<ScanSource> open_replay(const SourceRequest& request, const std::string& 
   std::ostringstream text;
   text << "replay of " << path.string() << ": " << shared->frame_count() << " frames of "
        << shared->width() << "x" << shared->height() << "; calibration from "
-       << setup.calibration_from << "; pose " << prepared->pose_chain->describe()
-       << " (chosen by " << prepared->pose_chain->chosen_by
+       << setup.calibration_from << "; pose " << prepared->pose_chain->describe() << " (chosen by "
+       << prepared->pose_chain->chosen_by
        << (prepared->pose_chain->from != "Probe"
                ? "; " + prepared->pose_chain->from + " taken as the probe of ImageToProbe"
                : "")
-       << "); models from " << setup.models_from << "; sector from "
-       << setup.sector_from;
+       << "); models from " << setup.models_from << "; sector from " << setup.sector_from;
   source.description = text.str();
   return source;
 }
@@ -318,7 +317,6 @@ Result<ScanSource> open_v4l2(const SourceRequest& request, const std::string& sp
 }
 #endif
 
-
 #ifdef SONOSHAPE_WITH_OPENIGTLINK
 // Connects to the frames' server and waits for the first IMAGE: its size (and, for poses from
 // the image, its spacing) sets up the segmentation before the scan starts.
@@ -327,9 +325,10 @@ Result<ScanSource> open_igtl(const SourceRequest& request, const std::string& en
   if (!endpoint) return endpoint.status();
   const bool pose_from_image = request.igtl_transform == "image";
   if (!pose_from_image && !request.calibration)
-    return Status::error("--source igtl: needs --calibration (ImageToProbe) for the poses of "
-                         "TRANSFORM '" + request.igtl_transform +
-                         "', or --igtl-transform image to take each IMAGE's own pose");
+    return Status::error(
+        "--source igtl: needs --calibration (ImageToProbe) for the poses of "
+        "TRANSFORM '" +
+        request.igtl_transform + "', or --igtl-transform image to take each IMAGE's own pose");
   auto connection = acq::IgtlConnection::connect(*endpoint);
   if (!connection) return connection.status();
   std::optional<acq::IgtlMessage> first;
@@ -361,8 +360,8 @@ Result<ScanSource> open_igtl(const SourceRequest& request, const std::string& en
     setup.T_probe_image = *read;
     setup.calibration_from = request.calibration->string();
   } else {
-    setup.T_probe_image = Eigen::Vector4d(image->spacing_mm[0], image->spacing_mm[1], 1.0, 1.0)
-                              .asDiagonal();
+    setup.T_probe_image =
+        Eigen::Vector4d(image->spacing_mm[0], image->spacing_mm[1], 1.0, 1.0).asDiagonal();
     setup.calibration_from = "the IMAGE's pixel spacing (poses from the IMAGE)";
   }
   const double spacing_mm = std::sqrt(setup.T_probe_image.col(0).head<3>().norm() *
@@ -390,8 +389,8 @@ Result<ScanSource> open_igtl(const SourceRequest& request, const std::string& en
     if (!parsed) return parsed.status();
     tracker = *parsed;
   }
-  const std::string size = std::to_string(image->image.width) + "x" +
-                           std::to_string(image->image.height);
+  const std::string size =
+      std::to_string(image->image.width) + "x" + std::to_string(image->image.height);
   source.frames = std::make_unique<acq::IgtlFrameSource>(*endpoint, request.igtl_image,
                                                          std::move(*connection), std::move(first));
   const std::string tdata = "tdata:";
@@ -409,12 +408,11 @@ Result<ScanSource> open_igtl(const SourceRequest& request, const std::string& en
   source.device_origin_s = 0.0;
   source.tracker_latency_s = 0.0;  // both stamped by the server (PlusServer: one clock)
   source.description = "OpenIGTLink " + endpoint->text() + ": " + size + " frames; poses from " +
-                       source.poses->describe() + "; calibration from " +
-                       setup.calibration_from + "; models " + setup.models_from;
+                       source.poses->describe() + "; calibration from " + setup.calibration_from +
+                       "; models " + setup.models_from;
   return source;
 }
 #endif
-
 
 Result<ScanSource> open_frames_and_poses(const SourceRequest& request) {
   const std::size_t colon = request.spec.find(':');
@@ -426,9 +424,10 @@ Result<ScanSource> open_frames_and_poses(const SourceRequest& request) {
   if (prefix == "igtl") return open_igtl(request, rest);
 #else
   if (prefix == "igtl")
-    return Status::error("--source igtl: this sonoshape was built without OpenIGTLink; install "
-                         "libopenigtlink-dev (scripts/install-deps) and configure with "
-                         "-DSONOSHAPE_WITH_OPENIGTLINK=ON");
+    return Status::error(
+        "--source igtl: this sonoshape was built without OpenIGTLink; install "
+        "libopenigtlink-dev (scripts/install-deps) and configure with "
+        "-DSONOSHAPE_WITH_OPENIGTLINK=ON");
 #endif
 #ifdef SONOSHAPE_WITH_V4L2
   if (prefix == "v4l2") return open_v4l2(request, rest);

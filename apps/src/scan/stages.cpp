@@ -15,7 +15,7 @@ SegmenterStage::SegmenterStage(ScanSetup setup) : setup_(std::move(setup)) {
     throw std::invalid_argument("segmentation configuration: " + valid.message());
   if (setup_.segmentation.method == seg::LabellingMethod::kGraphCut)
     labeller_ = std::make_unique<seg::GraphCutLabeller>(setup_.segmentation, setup_.geometry,
-                                                         setup_.segmentation.graph_cut);
+                                                        setup_.segmentation.graph_cut);
 }
 
 SegmenterStage::~SegmenterStage() = default;

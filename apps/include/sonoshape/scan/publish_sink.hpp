@@ -44,7 +44,8 @@ class PublishSink final : public ScanSink {
   Status on_slice(const LabeledSlice& slice, std::size_t index) override;
   Status on_meshes(const MeshSet& meshes, const MeshUpdateInfo& info) override;
   Status on_status(const ScanStatus& status) override;
-  Status on_finish(const MeshSet& meshes, const SliceSet& slices, const ScanSummary& summary) override;
+  Status on_finish(const MeshSet& meshes, const SliceSet& slices,
+                   const ScanSummary& summary) override;
 
   /// The endpoints as bound (a port "*" resolved) and the scan's uuid.
   std::string endpoint() const;

@@ -94,8 +94,8 @@ const char* to_string(StopReason reason);
 struct ScanSummary {
   ScanCounters counters;
   StopReason stop_reason = StopReason::kSourceEnded;
-  std::string frame_source;         ///< the frame source's final state and message
-  std::string pose_source;          ///< the pose source's final state and message
+  std::string frame_source;  ///< the frame source's final state and message
+  std::string pose_source;   ///< the pose source's final state and message
   /// Frames the frame source lost, by reason (StreamSource::losses; empty: no breakdown).
   std::map<std::string, std::size_t> frame_source_losses;
   std::vector<std::string> errors;  ///< everything reported as kError, in order

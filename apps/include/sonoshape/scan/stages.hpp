@@ -60,7 +60,7 @@ class SegmenterStage final : public SegmentationStage {
   seg::LabelComparison scores_;
   std::size_t scored_frames_ = 0;
   ScanSetup setup_;
-  std::vector<Repair> repairs_;  // of the last segment()
+  std::vector<Repair> repairs_;                      // of the last segment()
   std::unique_ptr<seg::GraphCutLabeller> labeller_;  // with the graph-cut method
   std::mutex meshes_mutex_;
   std::shared_ptr<const MeshSet> meshes_;  // of the latest update, for the prior

@@ -31,11 +31,11 @@ struct MeshSet {
 
 /// Topological health of a triangle mesh, as `sonoshape evaluate` reports it.
 struct MeshHealth {
-  std::size_t boundary_edges = 0;       ///< edges used by one triangle
-  std::size_t non_manifold_edges = 0;   ///< edges used by more than two triangles
-  std::size_t misoriented_edges = 0;    ///< edges used twice in the same direction
-  std::size_t non_manifold_vertices = 0;///< vertices whose triangle fan is not one disc
-  std::size_t degenerate_triangles = 0; ///< triangles repeating a vertex index or of zero area
+  std::size_t boundary_edges = 0;         ///< edges used by one triangle
+  std::size_t non_manifold_edges = 0;     ///< edges used by more than two triangles
+  std::size_t misoriented_edges = 0;      ///< edges used twice in the same direction
+  std::size_t non_manifold_vertices = 0;  ///< vertices whose triangle fan is not one disc
+  std::size_t degenerate_triangles = 0;   ///< triangles repeating a vertex index or of zero area
   bool closed_manifold_oriented() const {
     return boundary_edges == 0 && non_manifold_edges == 0 && misoriented_edges == 0 &&
            non_manifold_vertices == 0 && degenerate_triangles == 0;

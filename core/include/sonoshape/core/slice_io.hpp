@@ -14,8 +14,7 @@ namespace sonoshape {
 /// slices.md is reported with the file, the slice index and the region index, and the fix.
 /// What can be repaired (merged duplicate planes, projected vertices, ...) is, with one warning
 /// per slice on stderr and a record in SliceSet::repairs; with `options.strict` it is an error.
-Result<SliceSet> read_slice_set(const std::filesystem::path& path,
-                                const ReadOptions& options = {});
+Result<SliceSet> read_slice_set(const std::filesystem::path& path, const ReadOptions& options = {});
 
 /// Parses slice-set JSON text; `source_name` names the input in messages.
 Result<SliceSet> parse_slice_set_json(const std::string& text, const std::string& source_name,

@@ -33,13 +33,13 @@ inline constexpr int kMeanValueSmoothing = 8;
 struct ReconstructionOptions {
   FieldKind field = FieldKind::mean_value;  ///< the interpolant (the others are ignored by it
                                             ///< where they say so)
-  int max_depth = -1;             ///< octree depth; -1: finest cells about 1/128 of the diagonal
+  int max_depth = -1;  ///< octree depth; -1: finest cells about 1/128 of the diagonal
   /// Bi-Laplacian smoothing iterations of the octree's samples (0: off); -1: the field's own
   /// default, kMeanValueSmoothing for mean-value and 0 for thin-plate (that field already
   /// minimises the bi-Laplacian energy, and smoothing its samples moves no IoU by 0.002 on the
   /// field table while costing about a seventh of an online update).
   int smoothing_iterations = -1;
-  int threads = 0;                ///< threads for every stage; 0: all cores
+  int threads = 0;  ///< threads for every stage; 0: all cores
   /// Where the field is evaluated: "cpu" (native), "opencl" (the first fp64 OpenCL device, a GPU
   /// if any), "opencl:PLATFORM:DEVICE", "auto" (an fp64 GPU if present, else cpu). The values
   /// agree to 1e-9 (the kernels repeat the CPU's rounding). Errors: sonoshape::Error.
@@ -62,12 +62,13 @@ struct ReconstructionOptions {
 /// first evaluates a point in them: arrangement_s and face_images_s are then parts of field_s and
 /// smoothing_s, and `cells` / `faces` count those built.
 struct ReconstructionStats {
-  double arrangement_s = 0, face_images_s = 0, field_s = 0, smoothing_s = 0, mesh_s = 0, total_s = 0;
+  double arrangement_s = 0, face_images_s = 0, field_s = 0, smoothing_s = 0, mesh_s = 0,
+         total_s = 0;
   std::size_t slices = 0, cells = 0, faces = 0, field_evaluations = 0;
   std::size_t snapped_vertices = 0;  ///< grid vertices given a thin region's label
   std::size_t unknown_triangles = 0, cell_groups = 0;  ///< unknown-region completion
   std::size_t completed_slices = 0;  ///< slices whose unknown regions were (re)completed
-  double completion_s = 0;  ///< part of face_images_s spent completing unknown regions
+  double completion_s = 0;           ///< part of face_images_s spent completing unknown regions
   /// Part of arrangement_s (cells on demand) outside the parallel refinement and placement of
   /// regions: grouping the points by region, numbering, and sharing the new faces (link).
   double arrangement_serial_s = 0;

@@ -41,14 +41,14 @@ enum class SectorSource {
 
 /// Parameters of the graph-cut labelling (nats: natural-log likelihood units per pixel).
 struct GraphCutOptions {
-  double cell_mm = 0.6;           ///< grid cell size (a cell is a block of pixels)
-  double smoothness = 1.5;        ///< Potts weight per pixel of boundary between equal greys
-  double prior_weight = 1.0;      ///< cost per pixel of disagreeing with a confident prior
-  double prior_margin_mm = 2.0;   ///< the prior's confidence grows over this distance from its
-                                  ///< own boundaries (the reconstruction is least sure there)
-  double model_update = 0.3;      ///< weight of each frame in the running appearance models
-  int cycles = 1;                 ///< expansion passes over all labels (a second pass changed no
-                                  ///< pixel of the benchmark sweeps: it is off)
+  double cell_mm = 0.6;          ///< grid cell size (a cell is a block of pixels)
+  double smoothness = 1.5;       ///< Potts weight per pixel of boundary between equal greys
+  double prior_weight = 1.0;     ///< cost per pixel of disagreeing with a confident prior
+  double prior_margin_mm = 2.0;  ///< the prior's confidence grows over this distance from its
+                                 ///< own boundaries (the reconstruction is least sure there)
+  double model_update = 0.3;     ///< weight of each frame in the running appearance models
+  int cycles = 1;                ///< expansion passes over all labels (a second pass changed no
+                                 ///< pixel of the benchmark sweeps: it is off)
 
   /// Errors name the field as the configuration's "graph_cut" object does.
   Status validate() const;

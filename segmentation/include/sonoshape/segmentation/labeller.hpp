@@ -11,8 +11,8 @@
 
 #include "sonoshape/core/image.hpp"
 #include "sonoshape/core/slice.hpp"
-#include "sonoshape/segmentation/contours.hpp"
 #include "sonoshape/segmentation/config.hpp"
+#include "sonoshape/segmentation/contours.hpp"
 #include "sonoshape/segmentation/segmenter.hpp"
 
 namespace sonoshape::seg {

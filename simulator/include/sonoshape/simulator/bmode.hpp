@@ -44,7 +44,7 @@ struct SimulatedFrame {
   /// `labels` with shadowed pixels also 255 (unknown), except those of an organ that shadows
   /// its own inside (bone): they keep its label.
   LabelImage truth;
-  ImageU8 shadow;     ///< 255 where the pixel is shadowed (whatever its label), else 0
+  ImageU8 shadow;  ///< 255 where the pixel is shadowed (whatever its label), else 0
 
   /// `truth` with every shadowed pixel unknown: what the image shows of each label (the pixels
   /// to learn grey models from).

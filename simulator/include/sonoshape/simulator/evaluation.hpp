@@ -28,9 +28,9 @@ struct LabelScore {
 };
 
 struct EvaluationOptions {
-  int grid_resolution = 200;     ///< IoU samples per axis of the box (fine enough that the
-                                 ///< sampling error stays well below the IoU differences)
-  int surface_samples = 20000;   ///< points sampled per surface for distances
+  int grid_resolution = 200;             ///< IoU samples per axis of the box (fine enough that the
+                                         ///< sampling error stays well below the IoU differences)
+  int surface_samples = 20000;           ///< points sampled per surface for distances
   double contour_step_fraction = 0.002;  ///< contour sampling step, fraction of diagonal
 };
 

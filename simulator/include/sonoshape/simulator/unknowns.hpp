@@ -15,12 +15,12 @@ enum class FovShape { kNone, kSector, kRect };
 FovShape parse_fov_shape(const std::string& name);
 
 struct UnknownOptions {
-  double fraction = 0.0;          ///< share of slices that get an unknown blob over a contour
-  double blob_radius = 0.03;      ///< mean blob radius, fraction of the bounds' diagonal
+  double fraction = 0.0;      ///< share of slices that get an unknown blob over a contour
+  double blob_radius = 0.03;  ///< mean blob radius, fraction of the bounds' diagonal
   FovShape fov = FovShape::kNone;
-  double fov_depth_mm = 80.0;     ///< sector radius / rectangle depth
-  double fan_angle_deg = 60.0;    ///< sector opening
-  double rect_width_mm = 60.0;    ///< rectangle width
+  double fov_depth_mm = 80.0;   ///< sector radius / rectangle depth
+  double fan_angle_deg = 60.0;  ///< sector opening
+  double rect_width_mm = 60.0;  ///< rectangle width
   /// false: the fov's axis passes through the centre of the slice's material, at half depth
   /// (fixed size; parts of large cross-sections fall outside). true: as a sonographer aims the
   /// probe at the organ and sets the depth to see it whole: the fov's size follows the material's
@@ -30,9 +30,10 @@ struct UnknownOptions {
 };
 
 /// Adds a field of view to every slice (material regions are clipped to it; the probe looks at
-/// the slice's material from a random side; see fov_covers_material) and replaces, on `fraction` of the slices, a random
-/// blob over a contour by an unknown region (materials lose the blob). Regions stay a valid
-/// partition: the blob and the materials share their common boundary vertex for vertex.
+/// the slice's material from a random side; see fov_covers_material) and replaces, on `fraction` of
+/// the slices, a random blob over a contour by an unknown region (materials lose the blob). Regions
+/// stay a valid partition: the blob and the materials share their common boundary vertex for
+/// vertex.
 void add_unknowns(SliceSet& set, const UnknownOptions& options);
 
 }  // namespace sonoshape::sim

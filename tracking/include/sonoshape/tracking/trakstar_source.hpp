@@ -138,7 +138,7 @@ class TrakstarPoseSource final : public PoseSource {
   double next_point_s_ = 0.0;  // POINTs are paced at the measurement rate
   bool drain_ = false;         // a POINT timed out: its record may still come
   std::atomic<bool> connected_{false};
-  mutable std::mutex mutex_;       // guards counts_ and status_
+  mutable std::mutex mutex_;  // guards counts_ and status_
   TrakstarCounts counts_;
   std::string status_ = "not started";
 };
