@@ -334,6 +334,27 @@ TEST(CommandOptions, ReconstructAndScanShareTheEngineOptions) {
   EXPECT_TRUE(contains(deep.output, "not in range 1 to 11")) << deep.output;
 }
 
+TEST(CommandOptions, NumbersOutsideTheirRangeAndNotANumberAreRefusedNamingTheOption) {
+  // Each was accepted: NaN passes CLI11's range checks, and "-1" became a huge count.
+  sonoshape::testing::TempDir dir;
+  const std::string spot = std::string(SONOSHAPE_DATA_DIR) + "/models/spot.obj";
+  const std::string slice = "slice --mesh 1:" + spot + " --planes random --count 3 -o " +
+                            (dir.path() / "s.json").string();
+  for (const auto& [arguments, option] : std::vector<std::pair<std::string, std::string>>{
+           {kSmallSim + "--tracker-latency-ms nan", "--tracker-latency-ms"},
+           {kSmallSim + "--max-slices -1", "--max-slices"},
+           {kSmallSim + "--save-every -1", "--save-every"},
+           {kSmallSim + "--slice-budget -1", "--slice-budget"},
+           {slice + " --size-mm nan", "--size-mm"},
+           {slice + " --unknown nan", "--unknown"}}) {
+    SCOPED_TRACE(arguments);
+    const auto result =
+        sonoshape::testing::run_command(SONOSHAPE_BINARY, arguments, dir.path() / "log");
+    EXPECT_EQ(result.exit_code, 105) << result.output;  // CLI11's validation error
+    EXPECT_TRUE(contains(result.output, option + ":")) << result.output;
+  }
+}
+
 TEST(CommandOptions, ScanTakesEverySimulatorOptionOfSimulate) {
   sonoshape::testing::TempDir dir;
   const std::vector<std::string> scan = option_names("scan", dir.path() / "scan_help");

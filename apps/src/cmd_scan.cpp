@@ -19,6 +19,7 @@
 
 #include "commands.hpp"
 #include "engine_options.hpp"
+#include "option_checks.hpp"
 #include "seed_option.hpp"
 #include "sim_options.hpp"
 #include "sonoshape/core/log.hpp"
@@ -746,6 +747,7 @@ void add_scan_options(CLI::App& app, ScanCommandOptions& o) {
                  "keyframes (scan.journal), written as they are accepted: see --resume");
   app.add_option("--save-every", options->save_every,
                  "Also write the meshes to --out every N slices (0: at the end only)")
+      ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   app.add_option("--duration", options->duration_s, "Stop after this many seconds (0: no limit)")
       ->check(CLI::NonNegativeNumber)
@@ -763,6 +765,7 @@ void add_scan_options(CLI::App& app, ScanCommandOptions& o) {
       ->capture_default_str();
   app.add_option("--max-slices", options->max_slices,
                  "Stop once this many keyframes are chosen (0: no limit)")
+      ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   app.add_option("--publish", options->publish,
                  "ZeroMQ PUB endpoint of the live mesh stream (docs/formats/mesh-stream.md), "
@@ -797,7 +800,8 @@ void add_scan_options(CLI::App& app, ScanCommandOptions& o) {
   app.add_option("--tracker-latency-ms", options->tracker_latency_ms,
                  "How late the tracker's timestamps are relative to the frames (ms). Default: "
                  "the source's (sim: the simulated latency; replay: 0; --tracker usb:trakstar: "
-                 "0, as it subtracts its own latency_ms)");
+                 "0, as it subtracts its own latency_ms)")
+      ->check(kFiniteNumber);
   app.add_option("--max-pose-gap-ms", options->max_pose_gap_ms,
                  "Tracker samples further apart than this do not interpolate a pose (ms)")
       ->check(CLI::PositiveNumber)
@@ -822,6 +826,7 @@ void add_scan_options(CLI::App& app, ScanCommandOptions& o) {
                  "Long examinations: past this many slices a frame must differ by twice both "
                  "keyframe thresholds, so that memory stops growing once the anatomy is covered "
                  "(0: no budget)")
+      ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   app.add_option("--segmentation-queue", options->segmentation_queue,
                  "Keyframes waiting for segmentation")

@@ -11,6 +11,7 @@
 
 #include "commands.hpp"
 #include "mesh_spec.hpp"
+#include "option_checks.hpp"
 #include "sonoshape/core/slice_io.hpp"
 #include "sonoshape/publish/mesh_writer.hpp"
 #include "sonoshape/simulator/mesh_reader.hpp"
@@ -206,6 +207,7 @@ CommandRunner add_slice_command(CLI::App& app) {
       ->required();
   app.add_option("--size-mm", options->size_mm,
                  "Scale meshes so their bounding-box diagonal is this many mm, centred at 0")
+      ->check(kFiniteNumber)
       ->check(CLI::PositiveNumber);
   app.add_option("--layout", options->layout,
                  "asis: keep relative positions (nested organs); row: side by side along x "
@@ -218,6 +220,7 @@ CommandRunner add_slice_command(CLI::App& app) {
                "of failing");
   app.add_option("--unknown", options->unknown_fraction,
                  "Share of slices that get a random unknown blob over a contour (0-1)")
+      ->check(kFiniteNumber)
       ->check(CLI::Range(0.0, 1.0))
       ->capture_default_str();
   app.add_option("--unknown-radius", options->unknown_radius,
