@@ -1,8 +1,10 @@
 // sonoshape_render: a quick-look picture of meshes (and the input contours), for docs and for
 // checking a reconstruction by eye. Orthographic z-buffer rendering with Lambert shading.
 //
-//   sonoshape_render -o view.png [--view iso|x|y|z] [--slices S.slices.json] MESH [MESH ...]
+//   sonoshape_render -o view.png [--view iso|x|y|z] [--size PIXELS] [--slices S.slices.json]
+//                    MESH [MESH ...]
 #include <cmath>
+#include <cstdlib>
 #include <iostream>
 #include <limits>
 #include <opencv2/imgcodecs.hpp>
@@ -31,6 +33,7 @@ Eigen::Matrix3d view_rotation(const std::string& view) {
 
 int main(int argc, char** argv) {
   std::string output = "view.png", view = "iso", slices_path;
+  int size = 900;  // pixels, square
   std::vector<std::string> meshes;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -38,13 +41,21 @@ int main(int argc, char** argv) {
       output = argv[++i];
     else if (a == "--view" && i + 1 < argc)
       view = argv[++i];
+    else if (a == "--size" && i + 1 < argc)
+      size = std::atoi(argv[++i]);
     else if (a == "--slices" && i + 1 < argc)
       slices_path = argv[++i];
     else
       meshes.push_back(a);
   }
+  if (size < 16 || size > 8192) {
+    std::cerr << "error: --size takes 16..8192 pixels\n";
+    return 2;
+  }
   if (meshes.empty()) {
-    std::cerr << "usage: sonoshape_render -o view.png [--view iso|x|y|z] [--slices S] MESH...\n";
+    std::cerr
+        << "usage: sonoshape_render -o view.png [--view iso|x|y|z] [--size PIXELS] [--slices S] "
+           "MESH...\n";
     return 2;
   }
   const Eigen::Matrix3d rotation = view_rotation(view);
@@ -63,7 +74,6 @@ int main(int argc, char** argv) {
     }
     loaded.push_back(std::move(*mesh));
   }
-  const int size = 900;
   const double scale = 0.9 * size / std::max(hi.x() - lo.x(), hi.y() - lo.y());
   const Vec3 center = 0.5 * (lo + hi);
   auto to_image = [&](const Vec3& p) {

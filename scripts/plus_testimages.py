@@ -15,6 +15,7 @@ import argparse
 import json
 import os
 import re
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -41,21 +42,45 @@ def git(mirror, *args, **kw):
     return subprocess.run(["git", "-C", mirror, *args], capture_output=True, **kw)
 
 
-def extract(mirror, path, out_dir):
-    blob = git(mirror, "show", "HEAD:" + path)
-    if blob.returncode != 0:
-        return None
-    out = out_dir / Path(path).name
-    out.write_bytes(blob.stdout)
-    return out
+def library(plus_dir):
+    """(fetch, paths) for a PlusLibData checkout or bare git mirror: fetch(path, out_dir) copies
+    one file (a .mhd with its pixel file) into out_dir and returns its copy, or None when absent;
+    paths lists TestImages/."""
+    checkout = Path(plus_dir) / "TestImages"
+    if checkout.is_dir():
+        def copy(path, out_dir):
+            source = Path(plus_dir) / path
+            return Path(shutil.copy(source, out_dir / source.name)) if source.is_file() else None
+        paths = sorted(str(p.relative_to(plus_dir)) for p in checkout.iterdir())
+    else:
+        def copy(path, out_dir):
+            blob = git(plus_dir, "show", "HEAD:" + path)
+            if blob.returncode != 0:
+                return None
+            out = out_dir / Path(path).name
+            out.write_bytes(blob.stdout)
+            return out
+        listing = git(plus_dir, "ls-tree", "-r", "--name-only", "HEAD", "TestImages", text=True)
+        paths = listing.stdout.split()
+
+    def fetch(path, out_dir):
+        local = copy(path, out_dir)
+        if local is None:
+            return None
+        head = local.read_bytes()[:65536].decode("latin-1", "replace")
+        m = re.search(r"ElementDataFile\s*=\s*(\S+)", head)
+        if m and m.group(1) != "LOCAL":  # a .mhd's pixel file, beside it
+            copy(str(Path(path).parent / m.group(1)), out_dir)
+        return local
+    return fetch, paths
 
 
-def calibration_for(name, mirror, work):
+def calibration_for(name, fetch, work):
     for pattern, source in CALIBRATIONS:
         if re.search(pattern, name):
             if source.startswith("data/"):
                 return HERE / source, source
-            got = extract(mirror, source, work)
+            got = fetch(source, work)
             if got:
                 return got, source
     nominal = work / "nominal.calibration.json"
@@ -76,15 +101,15 @@ def main():
     parser.add_argument("--binary", default=str(HERE / "build" / "apps" / "sonoshape"))
     parser.add_argument("--every", type=int, default=0)
     args = parser.parse_args()
-    if not (Path(args.mirror) / "HEAD").exists() and not (Path(args.mirror) / ".git").exists():
+    if not any((Path(args.mirror) / p).exists() for p in ("HEAD", ".git", "TestImages")):
         print(f"skipped: no PlusLibData mirror at {args.mirror} (give --mirror DIR or "
               "SONOSHAPE_PLUSLIBDATA)")
         return 77
     if not Path(args.binary).exists():
         print(f"skipped: no sonoshape binary at {args.binary} (build it first)")
         return 77
-    listing = git(args.mirror, "ls-tree", "-r", "--name-only", "HEAD", "TestImages", text=True)
-    names = [p for p in listing.stdout.split() if re.search(r"\.igs\.(mha|mhd|nrrd)$", p)]
+    fetch, listing = library(args.mirror)
+    names = [p for p in listing if re.search(r"\.igs\.(mha|mhd|nrrd)$", p)]
     rows = []
 
     def report(*row):
@@ -95,20 +120,13 @@ def main():
         work = Path(tmp)
         for path in names:
             name = Path(path).name
-            local = extract(args.mirror, path, work)
+            local = fetch(path, work)
             if local is None:
                 report(name, "absent", "", "", "the mirror lacks this object")
                 continue
-            head = local.read_bytes()[:65536].decode("latin-1", "replace")
-            m = re.search(r"ElementDataFile\s*=\s*(\S+)", head)
-            if m and m.group(1) != "LOCAL":  # a .mhd's pixel file, beside it
-                extract(args.mirror, str(Path(path).parent / m.group(1)), work)
-                stem = Path(m.group(1)).stem
-                for sibling in ("raw", "zraw"):
-                    extract(args.mirror, str(Path(path).parent / f"{stem}.{sibling}"), work)
             frames = header_frames(local) or 0
             every = args.every or max(1, frames // 8)
-            calibration, calibration_from = calibration_for(name, args.mirror, work)
+            calibration, calibration_from = calibration_for(name, fetch, work)
             out = work / "out.slices.json"
             run = subprocess.run([args.binary, "segment", str(local), "--calibration",
                                   str(calibration), "--every", str(every), "-o", str(out)],

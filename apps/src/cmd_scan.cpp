@@ -131,8 +131,8 @@ std::string summary_text(const scan::ScanSummary& s) {
       << ", updates " << c.updates << "\n"
       << "  frame-to-mesh latency p50 " << milliseconds(s.latency.p50_s) << " ms, p95 "
       << milliseconds(s.latency.p95_s) << " ms, max " << milliseconds(s.latency.max_s)
-      << " ms; update median " << std::setprecision(0) << s.update_ms_median << " ms, max "
-      << s.update_ms_max << " ms\n"
+      << " ms; update median " << std::setprecision(0) << s.update_ms_median << " ms, p95 "
+      << s.update_ms_p95 << " ms, max " << s.update_ms_max << " ms\n"
       << "  " << s.frame_source << "\n  " << s.pose_source;
   if (s.repairs.total()) {
     out << "\n  segmentation repairs " << s.repairs.total() << " (";

@@ -683,6 +683,7 @@ ScanSummary ScanPipeline::finish() {
     summary.frame_source_losses = source_.frames->losses();
     summary.latency = latency_stats(latencies_s_);
     summary.update_ms_median = median(update_ms_);
+    summary.update_ms_p95 = latency_stats(update_ms_).p95_s;  // the same nearest rank, in ms
     summary.update_ms_max =
         update_ms_.empty() ? 0.0 : *std::max_element(update_ms_.begin(), update_ms_.end());
     summary.duration_s = end_s_ - start_s_;

@@ -101,6 +101,7 @@ struct ScanSummary {
   std::vector<std::string> errors;  ///< everything reported as kError, in order
   LatencyStats latency;             ///< frame capture (monotonic) -> mesh ready, per slice
   double update_ms_median = 0.0;    ///< wall time of the reconstruction updates
+  double update_ms_p95 = 0.0;       ///< nearest rank, as the latency's
   double update_ms_max = 0.0;
   double duration_s = 0.0;  ///< wall time from start() to the last stage's end
   RepairReport repairs;     ///< what the segmentation repaired
