@@ -4,6 +4,8 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <string>
@@ -28,6 +30,13 @@ inline std::filesystem::path write_scratch_file(std::string_view bytes,
   std::ofstream out(path, std::ios::binary | std::ios::trunc);
   out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
   return path;
+}
+
+/// With SONOSHAPE_FUZZ_EXPLAIN set, a target prints what its reader made of each input (accepted,
+/// or the error), to check that seeds reach the code behind the format checks.
+inline void explain(const std::string& what) {
+  static const bool on = std::getenv("SONOSHAPE_FUZZ_EXPLAIN") != nullptr;
+  if (on) std::fprintf(stderr, "  %s\n", what.c_str());
 }
 
 /// Repairs print warnings on stderr; millions of inputs would drown libFuzzer's own report.

@@ -248,6 +248,57 @@ def stream_seeds():
     yield "end", frames("end", json.dumps({"seq": 6}))
 
 
+def igtl_header(type_name, body, device="Probe"):
+    """A 58-byte OpenIGTLink v1 header for `body` (CRC-64 ECMA-182, as igtl_util's crc64)."""
+    crc = 0
+    for byte in body:
+        crc ^= byte << 56
+        for _ in range(8):
+            crc = ((crc << 1) ^ 0x42F0E1EBA9EA3693) if crc & (1 << 63) else crc << 1
+            crc &= (1 << 64) - 1
+    return (struct.pack(">H", 1) + type_name.encode().ljust(12, b"\0") +
+            device.encode().ljust(20, b"\0") + struct.pack(">QQQ", 0, len(body), crc))
+
+
+def igtl_seeds():
+    """Bodies for igtl_messages (byte 0: 0 IMAGE, 1 TRANSFORM, 2 TDATA; the target makes the
+    header) and client byte streams for igtl_server_requests (byte 0: the piece size)."""
+    matrix = struct.pack(">12f", 0.2, 0, 0, 0, 0.2, 0, 0, 0, 1, 0, 0, 0)
+    image = (struct.pack(">HBBBB3H", 1, 1, 3, 2, 1, 4, 3, 1) + matrix +
+             struct.pack(">3H3H", 0, 0, 0, 4, 3, 1) + bytes(range(12)))
+    transform = struct.pack(">12f", 1, 0, 0, 0, 1, 0, 0, 0, 1, 10, 20, 30)
+    element = b"Probe".ljust(20, b"\0") + struct.pack(">BB", 1, 0) + transform
+    yield "igtl_messages", "image_4x3_uint8", b"\x00" + image
+    yield "igtl_messages", "transform", b"\x01" + transform
+    yield "igtl_messages", "tdata_probe_and_stylus", (
+        b"\x02" + element + b"Stylus".ljust(20, b"\0") + struct.pack(">BB", 1, 0) + transform)
+    yield "igtl_messages", "image_raw_header", b"\x80" + igtl_header("IMAGE", image) + image
+    status = struct.pack(">HQ", 1, 0) + b"OK".ljust(20, b"\0") + b"fine\0"
+    requests = [igtl_header("GET_STATUS", b"", "Scan"), igtl_header("GET_POLYDATA", b"", "organ"),
+                igtl_header("GET_IMAGE", b"", "Image"), igtl_header("STATUS", status) + status]
+    yield "igtl_server_requests", "get_every_kind", b"\x3a" + b"".join(requests)
+    yield "igtl_server_requests", "split_in_threes", b"\x02" + b"".join(requests)
+    yield "igtl_server_requests", "announces_2_mib", b"\x3a" + igtl_header(
+        "IMAGE", b"")[:42] + struct.pack(">QQ", 2 << 20, 0)
+
+
+def journal_seeds():
+    """scan_journal: record payloads separated by 0xFF (the target adds lengths and CRCs)."""
+    args = json.dumps({"type": "scan", "version": 1, "arguments": ["--source", "sim:default"],
+                       "working_directory": "/tmp"})
+    corners = [[0, 0, 0], [40, 0, 0], [40, 0, 30], [0, 0, 30]]
+    slice_ = {"origin": [0, 0, 0], "u": [1, 0, 0], "v": [0, 0, 1],
+              "regions": [{"label": 1, "polygon": [[10, 10], [20, 10], [15, 20]]}]}
+    keyframe = json.dumps({"type": "keyframe", "frame": 3,
+                           "plane": {"corners_mm": corners, "normal": [0, 1, 0]},
+                           "slice": slice_})
+    yield "scan_journal", "scan_keyframe_end", "\xff".join(
+        [args, keyframe, json.dumps({"type": "resume", "after_frame": 3}), keyframe,
+         json.dumps({"type": "end"})]).encode("latin-1")
+    yield "scan_journal", "torn_last_record", ("\xff".join([args, keyframe]) + "\xff\xfe" +
+                                                keyframe).encode("latin-1")
+
+
 def main():
     real = ROOT / "tests" / "data" / "real_input"
     hostile = ROOT / "tests" / "data" / "hostile"
@@ -311,6 +362,8 @@ def main():
 
     for name, data in stream_seeds():
         put("mesh_stream", name + ".frames", data)
+    for target, name, data in [*igtl_seeds(), *journal_seeds()]:
+        put(target, name, data)
 
 
 if __name__ == "__main__":
