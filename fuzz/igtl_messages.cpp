@@ -22,7 +22,8 @@ using sonoshape::acq::IgtlMessage;
 constexpr std::array<const char*, 3> kTypes = {"IMAGE", "TRANSFORM", "TDATA"};
 
 void put_u64(std::vector<std::uint8_t>& out, std::size_t at, std::uint64_t value) {
-  for (int i = 7; i >= 0; --i) out[at + 7 - static_cast<std::size_t>(i)] = (value >> (8 * i)) & 0xFF;
+  for (int i = 7; i >= 0; --i)
+    out[at + 7 - static_cast<std::size_t>(i)] = (value >> (8 * i)) & 0xFF;
 }
 
 // A header as the OpenIGTLink library writes it: version 1, type, device "fuzz", no timestamp,
@@ -33,7 +34,8 @@ std::vector<std::uint8_t> made_message(const char* type, const std::uint8_t* bod
   bytes[1] = 1;
   for (std::size_t i = 0; type[i]; ++i) bytes[2 + i] = static_cast<std::uint8_t>(type[i]);
   const std::string device = "fuzz";
-  for (std::size_t i = 0; i < device.size(); ++i) bytes[14 + i] = static_cast<std::uint8_t>(device[i]);
+  for (std::size_t i = 0; i < device.size(); ++i)
+    bytes[14 + i] = static_cast<std::uint8_t>(device[i]);
   put_u64(bytes, 42, size);
   bytes.insert(bytes.end(), body, body + size);
   put_u64(bytes, 50, ::crc64(bytes.data() + IGTL_HEADER_SIZE, size, 0));
@@ -69,9 +71,9 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     sonoshape::fuzz::explain(matrix ? "TRANSFORM" : matrix.message());
   } else {
     auto matrix = sonoshape::acq::decode_igtl_tracking_data(message, "Probe");
-    sonoshape::fuzz::explain(!matrix ? matrix.message()
-                                     : *matrix ? "TDATA with Probe"
-                                               : "TDATA without Probe");
+    sonoshape::fuzz::explain(!matrix   ? matrix.message()
+                             : *matrix ? "TDATA with Probe"
+                                       : "TDATA without Probe");
   }
   return 0;
 }

@@ -34,8 +34,7 @@ pub::IgtlServer& server() {
     options.linger_ms = 0;
     auto started = pub::IgtlServer::start(options);
     if (!started) {
-      std::fprintf(stderr, "cannot start the OpenIGTLink server: %s\n",
-                   started.message().c_str());
+      std::fprintf(stderr, "cannot start the OpenIGTLink server: %s\n", started.message().c_str());
       std::abort();
     }
     auto s = std::make_unique<pub::IgtlServer>(std::move(*started));
@@ -53,8 +52,7 @@ pub::IgtlServer& server() {
 }
 
 double now_s() {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch())
-      .count();
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
 
 int connect_to(int port) {

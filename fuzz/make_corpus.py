@@ -299,6 +299,23 @@ def journal_seeds():
                                                 keyframe).encode("latin-1")
 
 
+def view_server_seeds():
+    """view_server_requests: byte 0 bit 0 clear: raw HTTP; set: WebSocket frames after the
+    target's upgrade (bits 1-7: the piece size of the sends)."""
+    host = "Host: 127.0.0.1:8080\r\n"
+    yield "page", b"\xfe" + f"GET / HTTP/1.1\r\n{host}\r\n".encode()
+    yield "script_pipelined", b"\x10" + (f"GET /src/main.js HTTP/1.1\r\n{host}\r\n" * 2).encode()
+    yield "dot_dot", b"\xfe" + f"GET /../../etc/passwd HTTP/1.1\r\n{host}\r\n".encode()
+    yield "rebound_host", b"\xfe" + b"GET / HTTP/1.1\r\nHost: attacker.example:8080\r\n\r\n"
+    yield "head_and_post", b"\xfe" + (f"HEAD / HTTP/1.1\r\n{host}\r\n"
+                                       f"POST / HTTP/1.1\r\n{host}Content-Length: 3\r\n\r\nabc").encode()
+    mask = b"\x01\x02\x03\x04"
+    text = bytes(c ^ mask[i % 4] for i, c in enumerate(b"hello"))
+    yield "ws_masked_text_then_close", b"\x01" + b"\x81\x85" + mask + text + b"\x88\x80" + mask
+    yield "ws_announces_16_mib", b"\x01" + b"\x82\xff" + struct.pack(">Q", 16 << 20) + mask
+
+
+
 def main():
     real = ROOT / "tests" / "data" / "real_input"
     hostile = ROOT / "tests" / "data" / "hostile"
@@ -364,6 +381,8 @@ def main():
         put("mesh_stream", name + ".frames", data)
     for target, name, data in [*igtl_seeds(), *journal_seeds()]:
         put(target, name, data)
+    for name, data in view_server_seeds():
+        put("view_server_requests", name, data)
 
 
 if __name__ == "__main__":

@@ -33,8 +33,8 @@ std::string journal_of_records(std::string_view input) {
     const bool corrupt = !payload.empty() && payload.front() == '\xFE';
     if (corrupt) payload.remove_prefix(1);
     put_u32(file, static_cast<std::uint32_t>(payload.size()));
-    const auto crc = static_cast<std::uint32_t>(
-        ::crc32(0L, reinterpret_cast<const Bytef*>(payload.data()), static_cast<uInt>(payload.size())));
+    const auto crc = static_cast<std::uint32_t>(::crc32(
+        0L, reinterpret_cast<const Bytef*>(payload.data()), static_cast<uInt>(payload.size())));
     put_u32(file, corrupt ? crc ^ 1u : crc);
     file += payload;
     at = end + 1;
@@ -52,8 +52,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   auto contents = sonoshape::scan::read_journal(path);
   // What reads is whole: the valid bytes lie within the file.
   if (contents && contents->valid_bytes > file.size()) __builtin_trap();
-  sonoshape::fuzz::explain(contents ? std::to_string(contents->keyframes.size()) +
-                                          " keyframes" +
+  sonoshape::fuzz::explain(contents ? std::to_string(contents->keyframes.size()) + " keyframes" +
                                           (contents->torn_tail ? ", torn tail" : "") +
                                           (contents->finished ? ", finished" : "")
                                     : contents.message());
