@@ -6,25 +6,22 @@
 //
 // The server must answer or close within kStallS of the client's last byte, whatever it was
 // sent; otherwise the target aborts (a stalled server thread is a finding, as a crash is).
-#include <netinet/in.h>
-#include <poll.h>
-#include <sys/socket.h>
-#include <unistd.h>
 
-#include <chrono>
 #include <cstddef>
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <memory>
+#include <string>
 
 #include "fuzz_support.hpp"
+#include "loopback_client.hpp"
 #include "sonoshape/publish/igtl_server.hpp"
 
 namespace {
 
 namespace pub = sonoshape::publish;
-constexpr double kStallS = 5.0;
+using sonoshape::fuzz::kStallS;
 
 pub::IgtlServer& server() {
   static std::unique_ptr<pub::IgtlServer> instance = [] {
@@ -51,48 +48,17 @@ pub::IgtlServer& server() {
   return *instance;
 }
 
-double now_s() {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
-}
-
-int connect_to(int port) {
-  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in address{};
-  address.sin_family = AF_INET;
-  address.sin_port = htons(static_cast<std::uint16_t>(port));
-  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  if (fd >= 0 && ::connect(fd, reinterpret_cast<sockaddr*>(&address), sizeof address) == 0)
-    return fd;
-  if (fd >= 0) ::close(fd);
-  return -1;
-}
-
-// Reads and drops what the server sends until it closes the connection; false after kStallS.
-bool drain_until_closed(int fd) {
-  const double deadline_s = now_s() + kStallS;
-  char buffer[65536];
-  while (now_s() < deadline_s) {
-    pollfd p{fd, POLLIN, 0};
-    if (::poll(&p, 1, 50) <= 0) continue;
-    const ssize_t n = ::recv(fd, buffer, sizeof buffer, 0);
-    if (n <= 0) return true;  // closed (or reset) by the server
-  }
-  return false;
-}
-
 }  // namespace
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   pub::IgtlServer& s = server();
-  const int fd = connect_to(s.port());
+  const int fd = sonoshape::fuzz::connect_loopback(s.port());
   if (fd < 0) return 0;  // refused while earlier clients were still being closed
   const std::size_t piece = size > 0 ? 1 + data[0] % 97 : 1;
-  for (std::size_t at = size > 0 ? 1 : 0; at < size; at += piece) {
-    const std::size_t n = std::min(piece, size - at);
-    if (::send(fd, data + at, n, MSG_NOSIGNAL) != static_cast<ssize_t>(n)) break;
-  }
+  if (size > 1) sonoshape::fuzz::send_in_pieces(fd, data + 1, size - 1, piece);
   ::shutdown(fd, SHUT_WR);
-  const bool closed = drain_until_closed(fd);
+  std::string answer;
+  const bool closed = sonoshape::fuzz::read_until(fd, answer);
   const pub::IgtlServerStats stats = s.stats();
   sonoshape::fuzz::explain(std::to_string(stats.requests_answered) + " requests answered, " +
                            std::to_string(stats.clients_expelled) + " clients expelled so far");

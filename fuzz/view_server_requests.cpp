@@ -8,12 +8,8 @@
 // frames. Bits 1-7 set the piece size of the sends; "127.0.0.1:8080" in the input is replaced by
 // the server's address. The client then closes its sending side and reads until the server
 // closes; the server must close within kStallS, whatever it was sent.
-#include <netinet/in.h>
-#include <poll.h>
-#include <sys/socket.h>
 #include <unistd.h>
 
-#include <chrono>
 #include <cstddef>
 #include <cstdint>
 #include <cstdio>
@@ -24,13 +20,14 @@
 #include <string>
 
 #include "fuzz_support.hpp"
+#include "loopback_client.hpp"
 #include "sonoshape/publish/view_server.hpp"
 
 namespace {
 
 namespace pub = sonoshape::publish;
 namespace fs = std::filesystem;
-constexpr double kStallS = 5.0;
+using sonoshape::fuzz::kStallS;
 
 pub::ViewServer& server() {
   static std::unique_ptr<pub::ViewServer> instance = [] {
@@ -61,54 +58,12 @@ int port_of(const std::string& url) {  // "http://127.0.0.1:PORT/"
   return std::atoi(url.c_str() + colon + 1);
 }
 
-double now_s() {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
-}
-
-int connect_to(int port) {
-  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in address{};
-  address.sin_family = AF_INET;
-  address.sin_port = htons(static_cast<std::uint16_t>(port));
-  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  if (fd >= 0 && ::connect(fd, reinterpret_cast<sockaddr*>(&address), sizeof address) == 0)
-    return fd;
-  if (fd >= 0) ::close(fd);
-  return -1;
-}
-
-void send_in_pieces(int fd, const std::uint8_t* data, std::size_t size, std::size_t piece) {
-  for (std::size_t at = 0; at < size; at += piece) {
-    const std::size_t n = std::min(piece, size - at);
-    if (::send(fd, data + at, n, MSG_NOSIGNAL) != static_cast<ssize_t>(n)) return;
-  }
-}
-
-// Reads until the server closes the connection (true), or until `until` is in what was read
-// (true, the connection left open), or kStallS passes (false). `first_line`: the answer's.
-bool read_until(int fd, std::string& first_line, const std::string& until = {}) {
-  const double deadline_s = now_s() + kStallS;
-  std::string got;
-  char buffer[65536];
-  while (now_s() < deadline_s) {
-    pollfd p{fd, POLLIN, 0};
-    if (::poll(&p, 1, 50) <= 0) continue;
-    const ssize_t n = ::recv(fd, buffer, sizeof buffer, 0);
-    if (n <= 0) return true;
-    if (got.size() < 4096) got.append(buffer, static_cast<std::size_t>(n));
-    if (first_line.empty() && got.find("\r\n") != std::string::npos)
-      first_line = got.substr(0, got.find("\r\n"));
-    if (!until.empty() && got.find(until) != std::string::npos) return true;
-  }
-  return false;
-}
-
 }  // namespace
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   pub::ViewServer& s = server();
   const int port = port_of(s.url());
-  const int fd = connect_to(port);
+  const int fd = sonoshape::fuzz::connect_loopback(port);
   if (fd < 0) return 0;  // refused at the connection cap while earlier ones close
   const std::uint8_t mode = size > 0 ? data[0] : 0;
   const std::size_t piece = 1 + (mode >> 1);
@@ -121,9 +76,9 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
                                 "\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
                                 "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n"
                                 "Sec-WebSocket-Version: 13\r\n\r\n";
-    send_in_pieces(fd, reinterpret_cast<const std::uint8_t*>(upgrade.data()), upgrade.size(),
-                   upgrade.size());
-    answered = read_until(fd, upgrade_answer, "\r\n\r\n");
+    sonoshape::fuzz::send_in_pieces(fd, reinterpret_cast<const std::uint8_t*>(upgrade.data()),
+                                    upgrade.size(), upgrade.size());
+    answered = sonoshape::fuzz::read_until(fd, upgrade_answer, "\r\n\r\n");
   }
   // The seeds name the server 127.0.0.1:8080; it listens on another port.
   std::string rest = size > 1 ? sonoshape::fuzz::as_string(data + 1, size - 1) : std::string();
@@ -131,9 +86,10 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   for (std::size_t at = rest.find(seed_host); at != std::string::npos;
        at = rest.find(seed_host, at + host.size()))
     rest.replace(at, seed_host.size(), host);
-  send_in_pieces(fd, reinterpret_cast<const std::uint8_t*>(rest.data()), rest.size(), piece);
+  sonoshape::fuzz::send_in_pieces(fd, reinterpret_cast<const std::uint8_t*>(rest.data()),
+                                  rest.size(), piece);
   ::shutdown(fd, SHUT_WR);
-  const bool closed = answered && read_until(fd, answer);
+  const bool closed = answered && sonoshape::fuzz::read_until(fd, answer);
   ::close(fd);
   if (!closed) {
     std::fprintf(stderr, "the view server neither answered nor closed within %.0f s\n", kStallS);
