@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "sonoshape/core/mesh.hpp"
+#include "sonoshape/core/mesh_components.hpp"
 #include "sonoshape/core/slice_io.hpp"
 #include "sonoshape/recon/reconstruct.hpp"
 
@@ -61,24 +62,16 @@ struct Topology {
 };
 
 Topology topology(const TriangleMesh& mesh) {
-  std::vector<std::uint32_t> parent(mesh.vertices.size());
-  std::iota(parent.begin(), parent.end(), 0u);
-  auto find = [&](std::uint32_t v) {
-    while (parent[v] != v) v = parent[v] = parent[parent[v]];
-    return v;
-  };
-  for (const auto& t : mesh.triangles) {
-    parent[find(t[1])] = find(t[0]);
-    parent[find(t[2])] = find(t[0]);
-  }
+  const MeshParts parts = mesh_parts(mesh);
   struct Counts {
     std::set<std::uint32_t> vertices;
     std::set<std::pair<std::uint32_t, std::uint32_t>> edges;
     long faces = 0;
   };
-  std::map<std::uint32_t, Counts> components;
-  for (const auto& t : mesh.triangles) {
-    Counts& c = components[find(t[0])];
+  std::vector<Counts> components(parts.count);
+  for (std::size_t n = 0; n < mesh.triangles.size(); ++n) {
+    const auto& t = mesh.triangles[n];
+    Counts& c = components[parts.part_of_triangle[n]];
     ++c.faces;
     for (int k = 0; k < 3; ++k) {
       c.vertices.insert(t[k]);
@@ -87,7 +80,7 @@ Topology topology(const TriangleMesh& mesh) {
     }
   }
   Topology out;
-  for (const auto& [root, c] : components) {
+  for (const Counts& c : components) {
     const long euler =
         static_cast<long>(c.vertices.size()) - static_cast<long>(c.edges.size()) + c.faces;
     out.genus.push_back(static_cast<int>((2 - euler) / 2));

@@ -2,8 +2,11 @@
 
 #include <algorithm>
 #include <limits>
+#include <numeric>
 #include <unordered_map>
 #include <unordered_set>
+
+#include "sonoshape/core/mesh_components.hpp"
 
 namespace sonoshape {
 
@@ -103,6 +106,30 @@ double signed_volume(const TriangleMesh& mesh) {
     six_volume += a.dot(b.cross(c));
   }
   return six_volume / 6.0;
+}
+
+MeshParts mesh_parts(const TriangleMesh& mesh) {
+  // Union-find over the vertices, with path halving.
+  std::vector<std::uint32_t> parent(mesh.vertices.size());
+  std::iota(parent.begin(), parent.end(), 0u);
+  auto find = [&](std::uint32_t v) {
+    while (parent[v] != v) v = parent[v] = parent[parent[v]];
+    return v;
+  };
+  for (const auto& t : mesh.triangles) {
+    parent[find(t[1])] = find(t[0]);
+    parent[find(t[2])] = find(t[0]);
+  }
+  MeshParts parts;
+  constexpr std::uint32_t kNone = ~0u;
+  std::vector<std::uint32_t> number_of_root(mesh.vertices.size(), kNone);
+  parts.part_of_triangle.reserve(mesh.triangles.size());
+  for (const auto& t : mesh.triangles) {
+    std::uint32_t& number = number_of_root[find(t[0])];
+    if (number == kNone) number = static_cast<std::uint32_t>(parts.count++);
+    parts.part_of_triangle.push_back(number);
+  }
+  return parts;
 }
 
 }  // namespace sonoshape

@@ -3,6 +3,8 @@
 
 #include <gtest/gtest.h>
 
+#include "sonoshape/core/mesh_components.hpp"
+
 namespace sonoshape {
 namespace {
 
@@ -88,6 +90,30 @@ TEST(MeshHealth, DegenerateTriangleIsCounted) {
   cube.triangles.push_back({3, 3, 5});
   EXPECT_EQ(check_mesh_health(cube).degenerate_triangles, 1u);
   EXPECT_FALSE(check_mesh_health(cube).closed_manifold_oriented());
+}
+
+TEST(MeshParts, TrianglesJoinThroughSharedVerticesOnly) {
+  TriangleMesh mesh = unit_cube();
+  const std::size_t first_cube_triangles = mesh.triangles.size();
+  // A second cube, 5 units away: its own part.
+  TriangleMesh far = unit_cube();
+  const auto offset = static_cast<std::uint32_t>(mesh.vertices.size());
+  for (const Vec3& v : far.vertices) mesh.vertices.push_back(v + Vec3(5, 0, 0));
+  for (const auto& t : far.triangles)
+    mesh.triangles.push_back({t[0] + offset, t[1] + offset, t[2] + offset});
+  // A triangle touching the first cube at one corner only: joined to it (a bow tie is one part).
+  const auto apex = static_cast<std::uint32_t>(mesh.vertices.size());
+  mesh.vertices.push_back(Vec3(-2, -2, -2));
+  mesh.vertices.push_back(Vec3(-2, -1, -2));
+  mesh.triangles.push_back({0, apex, apex + 1});
+
+  const MeshParts parts = mesh_parts(mesh);
+  EXPECT_EQ(parts.count, 2u);
+  ASSERT_EQ(parts.part_of_triangle.size(), mesh.triangles.size());
+  EXPECT_EQ(parts.part_of_triangle.front(), 0u);
+  EXPECT_EQ(parts.part_of_triangle[first_cube_triangles], 1u);
+  EXPECT_EQ(parts.part_of_triangle.back(), 0u);
+  EXPECT_EQ(mesh_parts(TriangleMesh{}).count, 0u);
 }
 
 }  // namespace

@@ -12,6 +12,7 @@
 
 #include "cell_field.hpp"
 #include "sonoshape/core/errors.hpp"
+#include "sonoshape/core/mesh_components.hpp"
 #include "sonoshape/recon/reconstruct.hpp"
 #include "sonoshape/recon/reconstructor.hpp"
 #include "test_shapes.hpp"
@@ -28,24 +29,7 @@ ReconstructionOptions thin_plate_options() {
 }
 
 // Connected parts of a mesh (triangles sharing a vertex).
-std::size_t component_count(const TriangleMesh& mesh) {
-  std::vector<std::uint32_t> parent(mesh.vertices.size());
-  std::iota(parent.begin(), parent.end(), 0u);
-  auto find = [&](std::uint32_t v) {
-    while (parent[v] != v) v = parent[v] = parent[parent[v]];
-    return v;
-  };
-  for (const auto& t : mesh.triangles) {
-    parent[find(t[1])] = find(t[0]);
-    parent[find(t[2])] = find(t[0]);
-  }
-  std::vector<char> used(mesh.vertices.size(), 0);
-  for (const auto& t : mesh.triangles) used[t[0]] = 1;
-  std::size_t parts = 0;
-  for (std::uint32_t v = 0; v < parent.size(); ++v)
-    if (used[v] && find(v) == v) ++parts;
-  return parts;
-}
+std::size_t component_count(const TriangleMesh& mesh) { return mesh_parts(mesh).count; }
 
 LabeledSlice z_slice(double z) {
   LabeledSlice s;
