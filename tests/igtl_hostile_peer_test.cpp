@@ -22,6 +22,7 @@
 #include "igtlTrackingDataMessage.h"
 #include "igtlTransformMessage.h"
 #include "igtl_header.h"
+#include "igtl_tdata.h"
 #include "igtl_util.h"
 #include "sonoshape/acquisition/igtl_client.hpp"
 #include "sonoshape/acquisition/igtl_frame_source.hpp"
@@ -259,6 +260,44 @@ TEST(IgtlHostileServer, TransformAndTrackingDataBodiesOfTheWrongSizeAreRefusedNa
       acq::decode_igtl_tracking_data(message_of(good_tdata, "TDATA", "Tracker"), "Probe");
   ASSERT_TRUE(fine);
   EXPECT_TRUE(fine->has_value());
+}
+
+// TDATA is read by sonoshape, not by OpenIGTLink 1.11, whose reader takes the strlen of a name
+// that fills its 20 bytes without a NUL (reading past it; found by fuzz_igtl_messages under
+// valgrind). Matrices as the library packs them, and a 20-character name read whole.
+TEST(IgtlHostileServer, TrackingDataElementsReadAsTheLibraryPacksThemAndFullLengthNamesAreWhole) {
+  igtl::TrackingDataMessage::Pointer tdata = igtl::TrackingDataMessage::New();
+  tdata->SetDeviceName("Tracker");
+  igtl::Matrix4x4 probe_matrix = {{0.0f, -1.0f, 0.0f, 10.5f},
+                                  {1.0f, 0.0f, 0.0f, -20.25f},
+                                  {0.0f, 0.0f, 1.0f, 30.0f},
+                                  {0.0f, 0.0f, 0.0f, 1.0f}};
+  igtl::Matrix4x4 stylus_matrix = {{1.0f, 0.0f, 0.0f, 1.0f},
+                                   {0.0f, 1.0f, 0.0f, 2.0f},
+                                   {0.0f, 0.0f, 1.0f, 3.0f},
+                                   {0.0f, 0.0f, 0.0f, 1.0f}};
+  const std::string twenty = "TwentyCharacterName_";  // fills the name field, no NUL
+  ASSERT_EQ(twenty.size(), std::size_t{IGTL_TDATA_LEN_NAME});
+  for (const auto& [name, matrix] :
+       {std::pair{std::string("Stylus"), &stylus_matrix}, std::pair{twenty, &probe_matrix}}) {
+    igtl::TrackingDataElement::Pointer element = igtl::TrackingDataElement::New();
+    element->SetName(name.c_str());
+    element->SetMatrix(*matrix);
+    tdata->AddTrackingDataElement(element);
+  }
+  const acq::IgtlMessage message = message_of(packed(tdata), "TDATA", "Tracker");
+  const auto probe = acq::decode_igtl_tracking_data(message, twenty);
+  ASSERT_TRUE(probe) << probe.message();
+  ASSERT_TRUE(probe->has_value());
+  for (int r = 0; r < 4; ++r)
+    for (int c = 0; c < 4; ++c) EXPECT_EQ((**probe)(r, c), probe_matrix[r][c]) << r << ", " << c;
+  const auto stylus = acq::decode_igtl_tracking_data(message, "Stylus");
+  ASSERT_TRUE(stylus && stylus->has_value());
+  EXPECT_EQ((**stylus)(2, 3), 3.0);
+  // A prefix of the long name is another name.
+  const auto prefix = acq::decode_igtl_tracking_data(message, twenty.substr(0, 19));
+  ASSERT_TRUE(prefix);
+  EXPECT_FALSE(prefix->has_value());
 }
 
 TEST(IgtlHostileServer, ShortTransformsAreCountedAndTheNextGoodOneIsAPose) {

@@ -78,13 +78,10 @@ std::uint64_t header_body_size(const std::uint8_t* header) {
   return header_u64(header, kBodySizeOffset);
 }
 
-// Unpacks `raw` into `message` when its body is `min_body` to `max_body` bytes and its CRC is
-// right. Checked before the library sees the body: 1.11 converts a body's fixed part (the
-// IMAGE's 72-byte image header, a TRANSFORM's 48 bytes) in place without looking at its size,
-// so a short body would be read and written past its end. Errors (all kDamaged) name the field.
-template <typename Message>
-Status unpack(Message& message, const IgtlMessage& raw, const std::string& what,
-              std::uint64_t min_body, std::uint64_t max_body, const std::string& fixed_part) {
+// Checks that `raw` is a header and the body it announces, `min_body` to `max_body` bytes, with
+// the header's CRC. Errors (all kDamaged) name the field.
+Status check_body(const IgtlMessage& raw, const std::string& what, std::uint64_t min_body,
+                  std::uint64_t max_body, const std::string& fixed_part) {
   if (raw.bytes.size() < IGTL_HEADER_SIZE ||
       header_body_size(raw.bytes.data()) != raw.bytes.size() - IGTL_HEADER_SIZE)
     return Status::error(what + ": the header's body size does not match the message");
@@ -94,16 +91,38 @@ Status unpack(Message& message, const IgtlMessage& raw, const std::string& what,
   auto* body_bytes = const_cast<std::uint8_t*>(raw.bytes.data()) + IGTL_HEADER_SIZE;
   if (::crc64(body_bytes, body, 0) != header_u64(raw.bytes.data(), kCrcOffset))
     return Status::error(what + ": the header's CRC does not match the body (damaged in transit)");
+  return Status::ok();
+}
+
+// Unpacks `raw` into `message` when check_body() accepts it. Checked before the library sees the
+// body: 1.11 converts a body's fixed part (the IMAGE's 72-byte image header, a TRANSFORM's 48
+// bytes) in place without looking at its size, so a short body would be read and written past
+// its end.
+template <typename Message>
+Status unpack(Message& message, const IgtlMessage& raw, const std::string& what,
+              std::uint64_t min_body, std::uint64_t max_body, const std::string& fixed_part) {
+  if (Status checked = check_body(raw, what, min_body, max_body, fixed_part); !checked)
+    return checked;
+  const std::uint64_t body = raw.bytes.size() - IGTL_HEADER_SIZE;
   igtl::MessageHeader::Pointer header = igtl::MessageHeader::New();
   header->InitPack();
   std::memcpy(header->GetPackPointer(), raw.bytes.data(), IGTL_HEADER_SIZE);
   header->Unpack();
   message->SetMessageHeader(header);
   message->AllocatePack();
-  std::memcpy(message->GetPackBodyPointer(), body_bytes, body);
+  std::memcpy(message->GetPackBodyPointer(), raw.bytes.data() + IGTL_HEADER_SIZE, body);
   if ((message->Unpack(0) & igtl::MessageHeader::UNPACK_BODY) == 0)
     return Status::error(what + ": the body does not unpack (an unknown content version)");
   return Status::ok();
+}
+
+// A big-endian float32 of a raw body.
+float body_f32(const std::uint8_t* bytes) {
+  std::uint32_t word = 0;
+  for (int i = 0; i < 4; ++i) word = (word << 8) | bytes[i];
+  float value = 0.0f;
+  std::memcpy(&value, &word, sizeof value);
+  return value;
 }
 
 Status refuse(IgtlDrop reason, IgtlDrop* why, const std::string& message) {
@@ -354,25 +373,28 @@ std::map<std::string, std::size_t> IgtlDrops::counts() const {
 
 Result<std::optional<Eigen::Matrix4d>> decode_igtl_tracking_data(const IgtlMessage& message,
                                                                  const std::string& element) {
-  igtl::TrackingDataMessage::Pointer data = igtl::TrackingDataMessage::New();
   const std::string what = "OpenIGTLink TDATA '" + message.device + "'";
   if (message.type != "TDATA") return Status::error(what + ": not a TDATA message");
-  if (Status unpacked = unpack(data, message, what, 0, kMaxBody, "expected 70-byte elements");
-      !unpacked)
-    return unpacked;
+  if (Status checked = check_body(message, what, 0, kMaxBody, "expected 70-byte elements");
+      !checked)
+    return checked;
   const std::size_t body = message.bytes.size() - IGTL_HEADER_SIZE;
   if (body % IGTL_TDATA_ELEMENT_SIZE != 0)
     return Status::error(what + ": a body of " + std::to_string(body) +
                          " bytes is not a whole number of 70-byte elements");
-  for (int k = 0; k < data->GetNumberOfTrackingDataElements(); ++k) {
-    igtl::TrackingDataElement::Pointer e;
-    data->GetTrackingDataElement(k, e);
-    if (element != e->GetName()) continue;
-    igtl::Matrix4x4 m;
-    e->GetMatrix(m);
+  // Read here rather than by igtl::TrackingDataMessage: 1.11's UnpackBody ends a name that fills
+  // its 20 bytes with '\n' instead of a NUL and then takes its strlen, reading past the name
+  // into uninitialised stack (found by fuzzing under valgrind). An element: name (20 bytes,
+  // NUL-padded when shorter), type, reserved, 12 big-endian floats: the rotation's columns, then
+  // the translation (mm).
+  for (std::size_t at = IGTL_HEADER_SIZE; at < message.bytes.size();
+       at += IGTL_TDATA_ELEMENT_SIZE) {
+    const auto* name = reinterpret_cast<const char*>(message.bytes.data() + at);
+    if (element != std::string(name, ::strnlen(name, IGTL_TDATA_LEN_NAME))) continue;
+    const std::uint8_t* floats = message.bytes.data() + at + IGTL_TDATA_LEN_NAME + 2;
     Eigen::Matrix4d T = Eigen::Matrix4d::Identity();
     for (int r = 0; r < 3; ++r)
-      for (int c = 0; c < 4; ++c) T(r, c) = m[r][c];
+      for (int c = 0; c < 4; ++c) T(r, c) = body_f32(floats + 4 * (r + 3 * c));
     return std::optional<Eigen::Matrix4d>(T);
   }
   return std::optional<Eigen::Matrix4d>();
