@@ -15,6 +15,7 @@
 #include <chrono>
 #include <cmath>
 #include <fstream>
+#include <iostream>
 #include <map>
 #include <random>
 #include <regex>
@@ -167,11 +168,14 @@ TEST(IgtlLabels, LabelMapImagesBesideTheBModeGiveEachFramesOwnRectangles) {
   LibraryServer server("LabelMap", kW);
   ScanRun run(server, "--igtl-image Image --labels igtl:LabelMap");
   ASSERT_EQ(run.code, 0) << run.log;
-  EXPECT_TRUE(contains(run.log, "label maps from igtl:127.0.0.1:" + std::to_string(server.port())));
+  EXPECT_TRUE(contains(run.log, "label maps from IMAGE 'LabelMap' of igtl:127.0.0.1:" +
+                                    std::to_string(server.port())));
   const auto slices = read_slice_set(run.out / "slices.json");
   ASSERT_TRUE(slices) << slices.message() << run.log;
   // 30 frames 1 mm apart; the first few may pass while the scan's three connections open.
   EXPECT_GE(slices->slices.size(), 15u) << run.log;
+  std::cout << "scan --labels igtl:LabelMap: " << slices->slices.size() << " slices of " << kFrames
+            << " frames\n";
   const double px2 = kPixelMm * kPixelMm;
   for (const LabeledSlice& slice : slices->slices) {
     // The pose puts frame k at z = k mm: the slice's plane says which frame it is, its

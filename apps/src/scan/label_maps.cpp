@@ -77,9 +77,12 @@ std::optional<double> LabelMapMatcher::nearest(double timestamp_s) const {
   return best;
 }
 
-StreamLabelFeed::StreamLabelFeed(std::unique_ptr<acq::FrameSource> source, int unknown_value,
-                                 double wait_s)
-    : source_(std::move(source)), unknown_value_(unknown_value), wait_s_(wait_s) {}
+StreamLabelFeed::StreamLabelFeed(std::unique_ptr<acq::FrameSource> source, std::string name,
+                                 int unknown_value, double wait_s)
+    : source_(std::move(source)),
+      name_(std::move(name)),
+      unknown_value_(unknown_value),
+      wait_s_(wait_s) {}
 
 StreamLabelFeed::~StreamLabelFeed() {
   if (source_) source_->stop();
@@ -92,7 +95,7 @@ Status StreamLabelFeed::start() {
 }
 
 std::string StreamLabelFeed::describe() const {
-  return "label maps from " + source_->describe() + ", paired with the frames by timestamp";
+  return "label maps from " + name_ + ", paired with the frames by timestamp";
 }
 
 void StreamLabelFeed::take_available(double timeout_s) {
@@ -115,7 +118,7 @@ Result<LabelImage> StreamLabelFeed::label_map(const Frame& frame) {
   }
   if (!labels) {
     std::string why = "no label map stamped within 1 ms of frame " + std::to_string(frame.index) +
-                      " (" + seconds(frame.timestamp_s) + " s) from " + source_->describe();
+                      " (" + seconds(frame.timestamp_s) + " s) from " + name_;
     if (const auto near = matcher_.nearest(frame.timestamp_s))
       why += "; the nearest is stamped " + seconds(*near) + " s";
     else if (!source_->condition().empty() || source_->finished())
@@ -124,8 +127,7 @@ Result<LabelImage> StreamLabelFeed::label_map(const Frame& frame) {
       why += " within " + seconds(wait_s_) + " s";
     return Status::error(why + " (the sender must stamp each label map with its frame's time)");
   }
-  const std::string where =
-      source_->describe() + ", label map of frame " + std::to_string(frame.index);
+  const std::string where = name_ + ", label map of frame " + std::to_string(frame.index);
   if (labels->width != frame.image.width || labels->height != frame.image.height)
     return Status::error(
         where + " is " + std::to_string(labels->width) + "x" + std::to_string(labels->height) +
@@ -152,7 +154,8 @@ Result<std::unique_ptr<LabelMapFeed>> igtl_label_feed(const std::string& spec,
       at == std::string::npos ? frames_endpoint : rest.substr(at + 1), "--labels igtl:" + device);
   if (!endpoint) return endpoint.status();
   return Result<std::unique_ptr<LabelMapFeed>>(std::make_unique<StreamLabelFeed>(
-      std::make_unique<acq::IgtlFrameSource>(*endpoint, device), unknown_value, wait_s));
+      std::make_unique<acq::IgtlFrameSource>(*endpoint, device),
+      "IMAGE '" + device + "' of igtl:" + endpoint->text(), unknown_value, wait_s));
 }
 #endif
 

@@ -70,7 +70,9 @@ class LabelMapMatcher {
 /// label map shows that it will not come. Pixel values as acq::to_label_pixels.
 class StreamLabelFeed final : public LabelMapFeed {
  public:
-  StreamLabelFeed(std::unique_ptr<acq::FrameSource> source, int unknown_value, double wait_s);
+  /// `name` names the label maps in messages, e.g. "IMAGE 'LabelMap' of igtl:127.0.0.1:18944".
+  StreamLabelFeed(std::unique_ptr<acq::FrameSource> source, std::string name, int unknown_value,
+                  double wait_s);
   ~StreamLabelFeed() override;
   Status start() override;
   Result<LabelImage> label_map(const Frame& frame) override;
@@ -79,6 +81,7 @@ class StreamLabelFeed final : public LabelMapFeed {
  private:
   void take_available(double timeout_s);
   std::unique_ptr<acq::FrameSource> source_;
+  std::string name_;
   int unknown_value_;
   double wait_s_;
   LabelMapMatcher matcher_;
