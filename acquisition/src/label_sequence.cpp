@@ -181,14 +181,15 @@ Result<LabelSequence> read_label_sequence(const std::filesystem::path& path,
   if (!read) return Status::error("--labels: " + read.message());
   LabelSequence out;
   out.maps = std::move(*read);
+  // Names first: a segmentation on several layers reads as frames, and says so here.
+  auto names = label_names(out.maps.fields(), path);
+  if (!names) return names.status();
+  out.names = std::move(*names);
   if (const Status shape = check_shape(out.maps, path, recording, recording_path); !shape)
     return shape;
   auto timing = check_times(out.maps, path, recording, recording_path);
   if (!timing) return timing.status();
   out.timing = std::move(*timing);
-  auto names = label_names(out.maps.fields(), path);
-  if (!names) return names.status();
-  out.names = std::move(*names);
   for (std::size_t k = 0; k < out.maps.frame_count(); ++k)
     if (const Status mapped = to_label_pixels(out.maps.image(k), unknown_value,
                                               path.string() + ", frame " + std::to_string(k));
