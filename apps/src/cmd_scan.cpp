@@ -48,6 +48,9 @@ struct ScanCommandOptions {
   std::filesystem::path segmentation;
   std::string method;              // "", "threshold" or "graph-cut": overrides the configuration
   std::vector<std::string> seeds;  // LABEL:X,Y,Z, see seed_option.hpp
+  std::string labels;              ///< --labels FILE | igtl:DEVICE: the site's own label maps
+  int labels_unknown = acq::kDefaultUnknownLabelValue;
+  double labels_wait_ms = 1000.0;  ///< igtl: how long a frame waits for its label map
   std::filesystem::path out;
   std::filesystem::path resume;  ///< --resume DIR: the scan whose journal is in DIR goes on
   std::size_t save_every = 0;
@@ -339,6 +342,8 @@ void resolve_journal_paths(ScanCommandOptions& options, const fs::path& folder) 
     options.source = "sim:" + meshes_from_scan_folder(options.source.substr(4), folder);
   options.calibration = from_scan_folder(options.calibration, folder);
   options.segmentation = from_scan_folder(options.segmentation, folder);
+  if (options.labels.rfind("igtl:", 0) != 0)
+    options.labels = from_scan_folder(options.labels, folder);
   options.curve_secret_key = from_scan_folder(options.curve_secret_key, folder);
   options.source = spec_from_scan_folder(options.source, "replay:", folder);
   options.tracker = spec_from_scan_folder(options.tracker, "replay:", folder);
@@ -518,6 +523,21 @@ int run_scan(const ScanCommandOptions& options, const Resume* resume) {
   request.igtl_image = options.igtl_image;
   request.igtl_transform = options.igtl_transform;
   request.igtl_tracker = options.igtl_tracker;
+  request.labels = options.labels;
+  request.labels_unknown = options.labels_unknown;
+  request.labels_wait_s = 1e-3 * options.labels_wait_ms;
+  if (!options.labels.empty() && (!options.method.empty() || !options.seeds.empty())) {
+    std::cerr << "error: --labels replaces sonoshape's segmenter, so "
+              << (options.method.empty() ? "--organ-seed" : "--method")
+              << " does not apply; leave it out\n";
+    return 1;
+  }
+  if (options.labels.rfind("igtl:", 0) == 0 && options.igtl_image.empty()) {
+    std::cerr << "error: --labels " << options.labels
+              << " needs --igtl-image NAME (the IMAGE device of the B-mode frames): without it "
+                 "every IMAGE, the label maps too, would be taken as a frame\n";
+    return 1;
+  }
   if (resume && !resume->journal.keyframes.empty())
     request.resume_after_frame = resume->journal.keyframes.back().frame_index;
   auto source = scan::open_scan_source(request);
@@ -570,9 +590,19 @@ int run_scan(const ScanCommandOptions& options, const Resume* resume) {
   }
   std::unique_ptr<scan::SegmentationStage> segmentation;
   try {
-    auto segmenter = std::make_unique<scan::SegmenterStage>(source->setup);
-    if (source->truth_of_frame) segmenter->score_against(source->truth_of_frame);
-    segmentation = std::move(segmenter);
+    if (source->labels) {
+      log_info("scan: " + source->labels->describe() + " instead of the segmenter");
+      if (const Status started = source->labels->start(); !started) {
+        std::cerr << "error: --labels " << options.labels << ": " << started.message() << '\n';
+        return 1;
+      }
+      segmentation =
+          std::make_unique<scan::LabelMapStage>(source->setup, std::move(source->labels));
+    } else {
+      auto segmenter = std::make_unique<scan::SegmenterStage>(source->setup);
+      if (source->truth_of_frame) segmenter->score_against(source->truth_of_frame);
+      segmentation = std::move(segmenter);
+    }
   } catch (const std::exception& e) {
     std::cerr << "error: " << e.what() << '\n';
     return 1;
@@ -737,6 +767,23 @@ void add_scan_options(CLI::App& app, ScanCommandOptions& o) {
                  "prior is the surfaces reconstructed so far, cut by each new frame's plane); "
                  "default: the configuration's `method`, else threshold")
       ->check(CLI::IsMember({"threshold", "graph-cut"}));
+  app.add_option("--labels", options->labels,
+                 "The site's own label maps instead of sonoshape's segmenter (0 background, "
+                 "1..254 organs, --labels-unknown for unknown): replay: a label-map sequence "
+                 "with one map per frame of the recording (3D Slicer .seq.nrrd, PLUS .mha; "
+                 "Slicer's Segment<i>_Name keys name the organs); igtl: igtl:DEVICE, IMAGE "
+                 "messages of that device beside the B-mode (--igtl-image), paired by "
+                 "timestamp (docs/segmentation.md, \"Bring your own labels\")");
+  app.add_option("--labels-unknown", options->labels_unknown,
+                 "With --labels: the label value that marks unknown pixels (shadow, not "
+                 "judged); 255 is sonoshape's own")
+      ->check(CLI::Range(1, 255))
+      ->capture_default_str();
+  app.add_option("--labels-wait-ms", options->labels_wait_ms,
+                 "With --labels igtl:DEVICE: how long a frame waits for its label map (a "
+                 "network's inference lags its input)")
+      ->check(kFiniteNumber & CLI::Range(0.0, 60000.0))
+      ->capture_default_str();
   app.add_option("--organ-seed", options->seeds,
                  "LABEL:X,Y,Z (mm, reference frame; repeatable): a point inside that organ; with "
                  "--method graph-cut it tells apart organs whose grey models look alike");

@@ -14,9 +14,11 @@
 
 #include "commands.hpp"
 #include "seed_option.hpp"
+#include "sonoshape/acquisition/label_sequence.hpp"
 #include "sonoshape/acquisition/sequence_file.hpp"
 #include "sonoshape/core/log.hpp"
 #include "sonoshape/core/slice_io.hpp"
+#include "sonoshape/scan/label_maps.hpp"
 #include "sonoshape/scan/label_prior.hpp"
 #include "sonoshape/segmentation/overlay.hpp"
 #include "sonoshape/segmentation/sweep.hpp"
@@ -34,9 +36,11 @@ struct SegmentOptions {
   std::filesystem::path output = "slices.json";
   std::filesystem::path truth_labels;    ///< score against these label frames
   std::filesystem::path perfect_labels;  ///< use these label frames instead of the segmenter
-  std::filesystem::path report;          ///< JSON of the scores
-  std::filesystem::path overlays;        ///< directory for the overlay pictures
-  int overlay_every = 1;                 ///< picture every K-th segmented frame
+  std::filesystem::path labels;          ///< --labels: the site's own label-map sequence
+  int labels_unknown = acq::kDefaultUnknownLabelValue;  ///< its value for unknown pixels
+  std::filesystem::path report;                         ///< JSON of the scores
+  std::filesystem::path overlays;                       ///< directory for the overlay pictures
+  int overlay_every = 1;                                ///< picture every K-th segmented frame
   std::string method;                    ///< "", "threshold" or "graph-cut": overrides the config
   std::string prior = "reconstruction";  ///< graph cut's prior: "reconstruction" or "none"
   int prior_depth = 6;                   ///< octree depth of the prior's reconstruction
@@ -105,6 +109,39 @@ Result<std::optional<acq::SequenceFile>> read_label_frames(const acq::SequenceFi
   return std::optional<acq::SequenceFile>(std::move(*labels));
 }
 
+// --labels replaces the segmenter: the options that tune or replace it do not go with it.
+Status own_labels_usable(const SegmentOptions& options) {
+  if (!options.perfect_labels.empty())
+    return Status::error("--labels and --perfect-labels both replace the segmenter; give one");
+  if (!options.method.empty() || !options.seeds.empty())
+    return Status::error(std::string("--labels replaces sonoshape's segmenter, so ") +
+                         (options.method.empty() ? "--organ-seed" : "--method") +
+                         " does not apply; leave it out");
+  return Status::ok();
+}
+
+// The organs of a site's label maps: as their header names them; without names, the
+// configuration's or the recording header's models, never the k-means classes (which name no
+// organ of the site).
+void declare_own_labels(const acq::LabelSequence& labels, const SegmentOptions& options,
+                        seg::SweepSetup& setup) {
+  std::vector<LabelInfo> fallback;
+  if (!options.config.empty() || setup.models_from.rfind("header", 0) == 0)
+    for (const seg::LabelModel& m : setup.config.materials) fallback.push_back({m.label, m.name});
+  setup.config.materials.clear();
+  for (const LabelInfo& l : scan::declared_labels(labels.names, fallback)) {
+    seg::LabelModel model;
+    model.label = l.id;
+    model.name = l.name;
+    setup.config.materials.push_back(model);
+  }
+  setup.models_from =
+      labels.names.empty()
+          ? "--labels (organs named by " +
+                (fallback.empty() ? std::string("their values") : setup.models_from) + ")"
+          : "--labels (organs named by its header)";
+}
+
 // The table on stderr and the JSON report of --truth-labels.
 int report_comparison(const seg::SweepSegmentation& result, const seg::SweepSetup& setup,
                       const SegmentOptions& options) {
@@ -137,6 +174,23 @@ int run_segment(const SegmentOptions& options) {
       std::cerr << "error: " << tracked.message() << '\n';
       return 1;
     }
+  // A site's label maps are checked against the frames as stored (times before any are filled).
+  std::optional<acq::LabelSequence> own_labels;
+  if (!options.labels.empty()) {
+    if (Status usable = own_labels_usable(options); !usable) {
+      std::cerr << "error: " << usable.message() << '\n';
+      return 1;
+    }
+    auto read =
+        acq::read_label_sequence(options.labels, *file, options.input, options.labels_unknown);
+    if (!read) {
+      std::cerr << "error: " << read.message() << '\n';
+      return 1;
+    }
+    own_labels = std::move(*read);
+    log_info("segment: label maps from " + options.labels.string() + " instead of the " +
+             "segmenter (" + own_labels->timing + ")");
+  }
   if (const Status normal = seg::normalise_recording(*file, options.input); !normal) {
     std::cerr << "error: " << normal.message() << '\n';
     return 1;
@@ -168,6 +222,7 @@ int run_segment(const SegmentOptions& options) {
     std::cerr << "error: " << seeded.message() << '\n';
     return 1;
   }
+  if (own_labels) declare_own_labels(*own_labels, options, *setup);
   if (!options.report.empty() && options.truth_labels.empty()) {
     std::cerr << "error: --report " << options.report.string()
               << " needs --truth-labels DIR/labels.mha (the frames to score against)\n";
@@ -182,17 +237,25 @@ int run_segment(const SegmentOptions& options) {
       return 1;
     }
   std::ostringstream models;
-  models << "background " << setup->config.background.grey_mean;
-  for (const auto& m : setup->config.materials)
-    models << ", " << m.label << ":" << m.name << " " << m.grey_mean;
-  log_info("segment: models from " + setup->models_from + " (grey means: " + models.str() +
+  if (own_labels) {
+    models << "organs";
+    for (const auto& m : setup->config.materials) models << " " << m.label << ":" << m.name;
+  } else {
+    models << "grey means: background " << setup->config.background.grey_mean;
+    for (const auto& m : setup->config.materials)
+      models << ", " << m.label << ":" << m.name << " " << m.grey_mean;
+  }
+  log_info("segment: models from " + setup->models_from + " (" + models.str() +
            "); calibration from " + setup->calibration_from + "; sector from " +
            setup->sector_from);
 
   const std::size_t considered =
       (file->frame_count() + static_cast<std::size_t>(options.every) - 1) /
       static_cast<std::size_t>(options.every);
-  seg::SweepLabels sources{*perfect ? &**perfect : nullptr, *truth ? &**truth : nullptr, {}};
+  const acq::SequenceFile* replacing = own_labels ? &own_labels->maps
+                                       : *perfect ? &**perfect
+                                                  : nullptr;
+  seg::SweepLabels sources{replacing, *truth ? &**truth : nullptr, {}};
   std::optional<OverlayWriter> overlays;
   if (!options.overlays.empty()) {
     std::error_code made;
@@ -208,7 +271,7 @@ int run_segment(const SegmentOptions& options) {
   // The graph cut's prior: an online reconstruction of the slices made so far, in the box
   // that every frame's sector spans (a fixed box: a growing one would rebuild every time).
   std::optional<scan::ReconstructionPrior> prior;
-  if (setup->config.method == seg::LabellingMethod::kGraphCut && !*perfect &&
+  if (setup->config.method == seg::LabellingMethod::kGraphCut && !replacing &&
       options.prior == "reconstruction") {
     recon::ReconstructorOptions recon_options;
     recon_options.engine.max_depth = options.prior_depth;
@@ -275,7 +338,10 @@ int run_segment(const SegmentOptions& options) {
     const auto frames = result.frames_with_label.find(m.label);
     log_warning(
         "segment: label " + std::to_string(m.label) + " (" + m.name + ") is in no slice: " +
-        (frames == result.frames_with_label.end()
+        (frames == result.frames_with_label.end() && own_labels
+             ? "no label map of " + options.labels.string() +
+                   " holds it inside the sector (its header names it)"
+         : frames == result.frames_with_label.end()
              ? "no frame's pixels were given it (its grey model, mean " +
                    std::to_string(static_cast<int>(std::lround(m.grey_mean))) +
                    ", matched nothing that survived the cleaning: check the model, or lower "
@@ -328,6 +394,19 @@ CommandRunner add_segment_command(CLI::App& app) {
   app.add_option("--perfect-labels", options->perfect_labels,
                  "Use these truth label frames instead of the segmenter (same contours and "
                  "placement): the upper bound of the sweep");
+  app.add_option("--labels", options->labels,
+                 "The site's own label maps instead of sonoshape's segmenter: a label-map "
+                 "sequence with one map per frame of the sweep, same size, in order (3D Slicer "
+                 ".seq.nrrd, PLUS .mha); 0 background, 1..254 organs (named by Slicer's "
+                 "Segment<i>_Name / _LabelValue keys), --labels-unknown for unknown; the same "
+                 "outlines and placement as the segmenter's label maps (docs/segmentation.md, "
+                 "\"Bring your own labels\")")
+      ->check(CLI::ExistingFile);
+  app.add_option("--labels-unknown", options->labels_unknown,
+                 "With --labels: the label value that marks unknown pixels (shadow, not "
+                 "judged); 255 is sonoshape's own")
+      ->check(CLI::Range(1, 255))
+      ->capture_default_str();
   app.add_option("--method", options->method,
                  "Labelling: threshold (nearest grey model after smoothing) or graph-cut (that "
                  "refined by a multi-label graph cut with learnt appearance models); default: "

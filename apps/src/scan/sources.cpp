@@ -39,6 +39,13 @@ Result<ScanSource> open_replay(const SourceRequest& request, const std::string& 
   if (!file) return file.status();
   if (file->transform_names().empty())
     if (const Status tracked = acq::require_tracking(*file, path); !tracked) return tracked;
+  // Label maps are checked against the frames as stored (times before any are filled in).
+  std::optional<acq::LabelSequence> labels;
+  if (!request.labels.empty()) {
+    auto read = acq::read_label_sequence(request.labels, *file, path, request.labels_unknown);
+    if (!read) return read.status();
+    labels = std::move(*read);
+  }
   if (const Status normal = seg::normalise_recording(*file, path); !normal) return normal;
   auto shared = std::make_shared<const acq::SequenceFile>(std::move(*file));
   auto prepared = seg::prepare_sweep(*shared, path, request.segmentation, request.calibration,
@@ -69,6 +76,15 @@ Result<ScanSource> open_replay(const SourceRequest& request, const std::string& 
                            std::to_string(*request.resume_after_frame) + " but " + path.string() +
                            " has " + std::to_string(shared->frame_count()) +
                            " frames: is it the file the scan was started with?");
+  }
+  if (labels) {
+    // Models learnt by k-means name no organ of the site's label maps.
+    if (setup.models_from.rfind("two-class", 0) == 0) setup.labels.clear();
+    setup.labels = declared_labels(labels->names, setup.labels);
+    setup.models_from = "none: the label maps of --labels " + request.labels;
+    source.labels =
+        sequence_label_feed(std::make_shared<const acq::SequenceFile>(std::move(labels->maps)),
+                            "label maps of " + request.labels + " (" + labels->timing + ")");
   }
   source.frames = std::make_unique<acq::ReplayFrameSource>(shared, path.string(), first_frame);
   source.poses =
@@ -376,6 +392,7 @@ Result<ScanSource> open_igtl(const SourceRequest& request, const std::string& en
     config = std::move(*read);
     setup.models_from = request.segmentation->string();
   }
+  const bool organs_named = !config.materials.empty();  // by the configuration
   if (config.materials.empty()) config = seg::auto_two_class(image->image.pixels, config);
   if (const Status valid = config.validate(); !valid) return valid;
   setup.segmentation = std::move(config);
@@ -404,6 +421,19 @@ Result<ScanSource> open_igtl(const SourceRequest& request, const std::string& en
   } else {
     source.poses = std::make_unique<tracking::IgtlPoseSource>(tracker, request.igtl_transform,
                                                               tracking::IgtlPoseFrom::kTransform);
+  }
+  if (!request.labels.empty()) {
+    if (request.labels.rfind("igtl:", 0) != 0)
+      return Status::error("--labels " + request.labels +
+                           ": with --source igtl: the label maps come over OpenIGTLink too; give "
+                           "their IMAGE device name, e.g. --labels igtl:LabelMap");
+    auto feed = igtl_label_feed(request.labels, endpoint->text(), request.labels_unknown,
+                                request.labels_wait_s);
+    if (!feed) return feed.status();
+    source.labels = std::move(*feed);
+    setup.models_from = "none: the label maps of --labels " + request.labels;
+    // No header names the organs of a live stream: the configuration's names, if it has any.
+    if (!organs_named) setup.labels.clear();
   }
   source.device_origin_s = 0.0;
   source.tracker_latency_s = 0.0;  // both stamped by the server (PlusServer: one clock)
@@ -444,6 +474,16 @@ Result<ScanSource> open_frames_and_poses(const SourceRequest& request) {
 }  // namespace
 
 Result<ScanSource> open_scan_source(const SourceRequest& request) {
+  const bool recorded = request.spec.rfind("replay:", 0) == 0;
+  if (!request.labels.empty() && !recorded && request.spec.rfind("igtl:", 0) != 0)
+    return Status::error("--labels with --source " + request.spec +
+                         ": label maps come from a file beside a recording (--source "
+                         "replay:FILE --labels LABELS.seq.nrrd) or over OpenIGTLink (--source "
+                         "igtl:HOST:PORT --labels igtl:DEVICE)");
+  if (recorded && request.labels.rfind("igtl:", 0) == 0)
+    return Status::error("--labels " + request.labels +
+                         ": a recording's label maps come from a file (--labels "
+                         "LABELS.seq.nrrd or .mha, one label map per frame)");
   auto source = open_frames_and_poses(request);
   if (!source || request.tracker.empty()) return source;
   if (Status opened = open_tracker(request.tracker, *source); !opened) return opened;

@@ -27,6 +27,7 @@
 #include "sonoshape/acquisition/frame_source.hpp"
 #include "sonoshape/core/bounded_queue.hpp"
 #include "sonoshape/scan/journal.hpp"
+#include "sonoshape/scan/label_maps.hpp"
 #include "sonoshape/scan/report.hpp"
 #include "sonoshape/scan/setup.hpp"
 #include "sonoshape/scan/sink.hpp"
@@ -51,6 +52,8 @@ struct ScanSource {
   /// A simulated source's truth label frame by frame index (none once it is gone), for scoring
   /// the segmentation as the scan goes; empty for real sources.
   std::function<std::optional<LabelImage>(std::int64_t frame_index)> truth_of_frame;
+  /// With SourceRequest::labels: the site's label maps, for a LabelMapStage (not started).
+  std::unique_ptr<LabelMapFeed> labels;
 };
 
 /// How the pipeline runs.

@@ -9,6 +9,7 @@
 #include <optional>
 #include <string>
 
+#include "sonoshape/acquisition/label_sequence.hpp"
 #include "sonoshape/core/status.hpp"
 #include "sonoshape/scan/pipeline.hpp"
 #include "sonoshape/scan/sim_scenario.hpp"
@@ -40,6 +41,12 @@ struct SourceRequest {
   /// replay:) start at the frame after it; live sources (igtl:, v4l2:) have no past to seek and
   /// go on from the frame they deliver now. None: from the start.
   std::optional<std::int64_t> resume_after_frame;
+  /// `--labels`: a site's own label maps instead of the segmenter (label_maps.hpp). replay: a
+  /// label-map sequence FILE, frame k for frame k (acq::read_label_sequence); igtl: `igtl:DEVICE`
+  /// (or `igtl:DEVICE@HOST:PORT`), IMAGE messages paired by timestamp. Empty: the segmenter.
+  std::string labels;
+  int labels_unknown = acq::kDefaultUnknownLabelValue;  ///< the label maps' unknown value
+  double labels_wait_s = 1.0;  ///< igtl: how long a frame waits for its label map
 
   // sim: only.
   SimScenarioOptions sim;
