@@ -32,6 +32,16 @@ constexpr int kMaxRepairPasses = 20;
 constexpr std::uint8_t kUndecided = 1;
 // A reflector band narrower than this (mm) is speckle, not a bone surface.
 constexpr double kMinReflectorWidthMm = 1.0;
+// The median that decides for a reflector's band spans about this much (mm; the 5 px of the
+// default median_px at 512 x 512 of the default scan, 0.31 mm a pixel).
+constexpr double kReflectorMedianMm = 1.5;
+
+// The median window (odd, px) for a reflector's band: kReflectorMedianMm, at least 3 pixels and
+// at most the configured median (which a config may set lower, or to 1 for none).
+int reflector_median_px(double px_mm, int median_px) {
+  const int odd = 2 * static_cast<int>(std::lround(0.5 * (kReflectorMedianMm / px_mm - 1.0))) + 1;
+  return std::min(median_px, std::max(3, odd));
+}
 
 cv::Mat wrap(const ImageU8& image) {
   return cv::Mat(image.height, image.width, CV_8U, const_cast<std::uint8_t*>(image.pixels.data()));
@@ -550,8 +560,18 @@ Segmentation detail::segment_frame(const GreyImage& image, const ImageGeometry& 
   const bool reflector_class =
       by_mean.size() > 1 && by_mean[0].mean - by_mean[1].mean > detail::kReflectorGapGrey;
   const double reflector_grey = reflector_class ? 0.5 * (by_mean[0].mean + by_mean[1].mean) : 1e9;
+  // The band is about as thick as the point-spread function's axial extent, a length in mm: a
+  // median of median_px pixels that keeps it at a fine pixel size wipes it out at a coarse one
+  // (0.63 mm at 256 x 256 of the default scan), so its median has a window in mm.
   cv::Mat median_f;
-  median.convertTo(median_f, CV_32F);
+  const int band_median_px = reflector_class ? reflector_median_px(px_mm, config.median_px) : 0;
+  if (band_median_px > 0 && band_median_px != config.median_px) {
+    cv::Mat band_median;
+    cv::medianBlur(grey, band_median, band_median_px);
+    band_median.convertTo(median_f, CV_32F);
+  } else {
+    median.convertTo(median_f, CV_32F);
+  }
 
   auto classify = [&](double g) {
     std::size_t best = 0;
