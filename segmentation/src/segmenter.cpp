@@ -318,6 +318,17 @@ void remove_small_components(cv::Mat& map, const cv::Mat& sector, double min_px,
 // Removes diagonal-only contacts: where a label holds exactly one diagonal of a 2x2 block, its
 // outline would pass through that corner twice (not a simple polygon) and cross the outline of
 // the label on the other diagonal. The block's other diagonal gets a pixel of the label.
+// A bone's section is drawn whole (its far side from its thickness), so what lies along it in
+// its shadow is not bone: those unknown pixels (4-neighbours of the bone) become background.
+// Where the bone touched its shadow, the reconstruction's completion of unknown regions carried
+// the bone on down the shadow column.
+void separate_bone_from_shadow(cv::Mat& map, const cv::Mat& sector, std::uint8_t bone) {
+  const cv::Mat bone_mask = map == bone;
+  cv::Mat near_bone;
+  cv::dilate(bone_mask, near_bone, cv::getStructuringElement(cv::MORPH_CROSS, cv::Size(3, 3)));
+  map.setTo(kLabelPixelOutside, near_bone & (map == kLabelPixelUnknown) & sector);
+}
+
 void repair_diagonal_contacts(cv::Mat& map, const cv::Mat& sector) {
   constexpr int kOutside = 256;
   for (int pass = 0; pass < kMaxRepairPasses; ++pass) {
@@ -712,6 +723,7 @@ Segmentation detail::segment_frame(const GreyImage& image, const ImageGeometry& 
   open_labels(map, sector, config.opening_mm / px_mm);
   remove_small_components(map, sector, config.min_region_mm2 / (px_mm * px_mm), keep);
   repair_diagonal_contacts(map, sector);
+  if (sections) separate_bone_from_shadow(map, sector, by_mean[0].value);
   map.setTo(kLabelPixelUnknown, ~sector);
 
   // Back into the whole image: outside the work region is outside the sector.
