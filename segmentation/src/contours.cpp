@@ -57,10 +57,32 @@ void remove_pinches(cv::Mat& mask) {
   }
 }
 
-// The outlines of a well-composed mask, in pixel coordinates. cv::findContours runs through
-// the centres of boundary pixels, so a one-pixel neck or line would give a ring of zero width;
-// traced on the mask upsampled by 2 (each pixel a 2x2 block), every part is at least 2 wide and
-// the ring runs a quarter pixel inside the pixel edges, half a pixel from its neighbours'.
+// Drops repeated points and the corners of straight runs: what is left are the ring's turns.
+void keep_turns(Ring2& ring) {
+  Ring2 kept;
+  kept.reserve(ring.size());
+  for (const Vec2& p : ring)
+    if (kept.empty() || p != kept.back()) kept.push_back(p);
+  while (kept.size() > 1 && kept.front() == kept.back()) kept.pop_back();
+  ring.clear();
+  const std::size_t n = kept.size();
+  for (std::size_t k = 0; k < n; ++k) {
+    const Vec2& a = kept[(k + n - 1) % n];
+    const Vec2& b = kept[k];
+    const Vec2& c = kept[(k + 1) % n];
+    const bool straight = (a.x() == b.x() && b.x() == c.x()) || (a.y() == b.y() && b.y() == c.y());
+    if (!straight || n < 4) ring.push_back(b);
+  }
+}
+
+// The outlines of a well-composed mask, in pixel coordinates, on the pixels' edges (pixel (i, j)
+// covers [i - 0.5, i + 0.5] x [j - 0.5, j + 0.5]). cv::findContours runs through the centres of
+// boundary pixels, so a one-pixel neck or line would give a ring of zero width; on the mask
+// upsampled by 2 (each pixel a 2x2 block) every boundary pixel is a quadrant of a pixel, and the
+// quadrant's outer corner is a corner of the pixel's edges that lies on the outline (a concave
+// corner's diagonal step joins two quadrants of that same corner): the rings are the exact
+// outlines of the pixels. Neighbouring labels share their edges; rings of one label touch
+// neither themselves nor each other (the mask is well-composed).
 // `mask` may be a part of the image whose top-left pixel is `origin`, with nothing set outside
 // it: the rings are those of the whole image (findContours meets them in the same order).
 std::vector<PixelRegion> trace_mask(const cv::Mat& mask, int label, cv::Point origin) {
@@ -74,9 +96,12 @@ std::vector<PixelRegion> trace_mask(const cv::Mat& mask, int label, cv::Point or
   auto to_ring = [&](const std::vector<cv::Point>& contour) {
     Ring2 ring;
     ring.reserve(contour.size());
-    // Upsampled pixel centre x (1 of border) -> original (x - 1 + 0.5) / 2 - 0.5.
-    auto original = [](int x) { return (x - 1) / static_cast<double>(kUpsample) - 0.25; };
-    for (const cv::Point& p : contour) ring.emplace_back(original(p.x), original(p.y));
+    // Upsampled column x (1 of border) is quadrant (x - 1) % 2 of pixel (x - 1) / 2: its outer
+    // edge is the pixel's left one, at (x - 1) / 2 - 0.5, for the left quadrant (x odd) and the
+    // right one, at (x - 1) / 2 + 0.5, for the right quadrant: x / 2 - 0.5 in both cases.
+    auto edge = [](int x) { return x / kUpsample - 0.5; };
+    for (const cv::Point& p : contour) ring.emplace_back(edge(p.x), edge(p.y));
+    keep_turns(ring);
     return ring;
   };
   std::vector<PixelRegion> regions;
@@ -94,8 +119,8 @@ std::vector<PixelRegion> trace_mask(const cv::Mat& mask, int label, cv::Point or
 // The squared-distance cost made a total order. Equal costs are common on a pixel grid, and the
 // simplification would take them in the order of the triangulation's constraint set, which
 // follows memory addresses: the same frame (or a .mha and a .nrrd copy of it) could simplify
-// differently from run to run. A tie-breaker from the vertex's own coordinates (quarter pixels,
-// distinct for every vertex since no two rings share a point) makes the result reproducible;
+// differently from run to run. A tie-breaker from the vertex's own coordinates (half pixels,
+// distinct for every vertex of the triangulation) makes the result reproducible;
 // at most 1e-4 px² it does not change what the tolerance allows.
 struct ReproducibleCost {
   template <class Pct>
@@ -113,25 +138,28 @@ struct ReproducibleCost {
 
 // Simplifies every ring in one constrained triangulation (CGAL Polyline_simplification_2): a
 // vertex goes only when the shortcut stays within epsilon_px of the removed points and the
-// triangulation shows it crosses no other ring, so simple, disjoint rings stay simple and
-// disjoint (unlike approxPolyDP ring by ring, which lets neighbours cross).
+// triangulation shows it crosses no other ring, so simple rings stay simple and apart (unlike
+// approxPolyDP ring by ring, which lets neighbours cross). An edge two rings share is one
+// constraint of the triangulation, simplified once for both: neighbours keep sharing it.
 void simplify_together(std::vector<PixelRegion>& regions, double epsilon_px) {
   if (epsilon_px <= 0.0) return;
-  // The simplification needs rings that share no point (it is undefined, and crashes, on
-  // pinched ones). The tracing guarantees that; should it ever fail, keep the exact outlines.
-  std::unordered_set<std::uint64_t> seen;
-  auto fresh = [&](const Ring2& ring) {
-    for (const Vec2& p : ring) {  // coordinates are quarter pixels: exact in 2 x 32 bits
-      const auto x = static_cast<std::uint32_t>(std::lround(4.0 * p.x()) + (1 << 30));
-      const auto y = static_cast<std::uint32_t>(std::lround(4.0 * p.y()) + (1 << 30));
-      if (!seen.insert((std::uint64_t{x} << 32) | y).second) return false;
+  // The simplification takes rings that share edges and corners with other rings (it simplifies
+  // a shared run once, for both), but it is undefined, and crashes, on a ring that passes a
+  // point twice (a pinch). The tracing guarantees none; should it ever fail, keep the exact
+  // outlines.
+  auto pinched = [](const Ring2& ring) {
+    std::unordered_set<std::uint64_t> seen;
+    for (const Vec2& p : ring) {  // coordinates are half pixels: exact in 2 x 32 bits
+      const auto x = static_cast<std::uint32_t>(std::lround(2.0 * p.x()) + (1 << 30));
+      const auto y = static_cast<std::uint32_t>(std::lround(2.0 * p.y()) + (1 << 30));
+      if (!seen.insert((std::uint64_t{x} << 32) | y).second) return true;
     }
-    return true;
+    return false;
   };
   for (const PixelRegion& r : regions) {
-    if (!fresh(r.outer)) return;
+    if (pinched(r.outer)) return;
     for (const Ring2& hole : r.holes)
-      if (!fresh(hole)) return;
+      if (pinched(hole)) return;
   }
   Ct ct;
   std::vector<Ct::Constraint_id> ids;

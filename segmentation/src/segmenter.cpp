@@ -32,6 +32,16 @@ constexpr int kMaxRepairPasses = 20;
 constexpr std::uint8_t kUndecided = 1;
 // A reflector band narrower than this (mm) is speckle, not a bone surface.
 constexpr double kMinReflectorWidthMm = 1.0;
+// The median that decides for a reflector's band spans about this much (mm; the 5 px of the
+// default median_px at 512 x 512 of the default scan, 0.31 mm a pixel).
+constexpr double kReflectorMedianMm = 1.5;
+
+// The median window (odd, px) for a reflector's band: kReflectorMedianMm, at least 3 pixels and
+// at most the configured median (which a config may set lower, or to 1 for none).
+int reflector_median_px(double px_mm, int median_px) {
+  const int odd = 2 * static_cast<int>(std::lround(0.5 * (kReflectorMedianMm / px_mm - 1.0))) + 1;
+  return std::min(median_px, std::max(3, odd));
+}
 
 cv::Mat wrap(const ImageU8& image) {
   return cv::Mat(image.height, image.width, CV_8U, const_cast<std::uint8_t*>(image.pixels.data()));
@@ -308,6 +318,17 @@ void remove_small_components(cv::Mat& map, const cv::Mat& sector, double min_px,
 // Removes diagonal-only contacts: where a label holds exactly one diagonal of a 2x2 block, its
 // outline would pass through that corner twice (not a simple polygon) and cross the outline of
 // the label on the other diagonal. The block's other diagonal gets a pixel of the label.
+// A bone's section is drawn whole (its far side from its thickness), so what lies along it in
+// its shadow is not bone: those unknown pixels (4-neighbours of the bone) become background.
+// Where the bone touched its shadow, the reconstruction's completion of unknown regions carried
+// the bone on down the shadow column.
+void separate_bone_from_shadow(cv::Mat& map, const cv::Mat& sector, std::uint8_t bone) {
+  const cv::Mat bone_mask = map == bone;
+  cv::Mat near_bone;
+  cv::dilate(bone_mask, near_bone, cv::getStructuringElement(cv::MORPH_CROSS, cv::Size(3, 3)));
+  map.setTo(kLabelPixelOutside, near_bone & (map == kLabelPixelUnknown) & sector);
+}
+
 void repair_diagonal_contacts(cv::Mat& map, const cv::Mat& sector) {
   constexpr int kOutside = 256;
   for (int pass = 0; pass < kMaxRepairPasses; ++pass) {
@@ -550,8 +571,18 @@ Segmentation detail::segment_frame(const GreyImage& image, const ImageGeometry& 
   const bool reflector_class =
       by_mean.size() > 1 && by_mean[0].mean - by_mean[1].mean > detail::kReflectorGapGrey;
   const double reflector_grey = reflector_class ? 0.5 * (by_mean[0].mean + by_mean[1].mean) : 1e9;
+  // The band is about as thick as the point-spread function's axial extent, a length in mm: a
+  // median of median_px pixels that keeps it at a fine pixel size wipes it out at a coarse one
+  // (0.63 mm at 256 x 256 of the default scan), so its median has a window in mm.
   cv::Mat median_f;
-  median.convertTo(median_f, CV_32F);
+  const int band_median_px = reflector_class ? reflector_median_px(px_mm, config.median_px) : 0;
+  if (band_median_px > 0 && band_median_px != config.median_px) {
+    cv::Mat band_median;
+    cv::medianBlur(grey, band_median, band_median_px);
+    band_median.convertTo(median_f, CV_32F);
+  } else {
+    median.convertTo(median_f, CV_32F);
+  }
 
   auto classify = [&](double g) {
     std::size_t best = 0;
@@ -692,6 +723,7 @@ Segmentation detail::segment_frame(const GreyImage& image, const ImageGeometry& 
   open_labels(map, sector, config.opening_mm / px_mm);
   remove_small_components(map, sector, config.min_region_mm2 / (px_mm * px_mm), keep);
   repair_diagonal_contacts(map, sector);
+  if (sections) separate_bone_from_shadow(map, sector, by_mean[0].value);
   map.setTo(kLabelPixelUnknown, ~sector);
 
   // Back into the whole image: outside the work region is outside the sector.

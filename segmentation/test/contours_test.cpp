@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <map>
 #include <memory>
 #include <random>
 #include <set>
@@ -32,22 +33,37 @@ Status validate(const LabeledSlice& slice) {
   return validate_slice_set(set, "test slice");
 }
 
-// No point is shared by two rings or twice by one ring: rings neither touch each other nor
-// themselves at a vertex (the pinches the old outlines had).
-void expect_no_shared_points(const LabeledSlice& slice) {
-  std::set<std::pair<double, double>> seen;
-  std::size_t points = 0;
-  auto add = [&](const Ring2& ring) {
-    for (const Vec2& p : ring) {
-      seen.insert({p.x(), p.y()});
-      ++points;
+// No ring passes a point twice (the pinches the old outlines had); rings of neighbouring labels
+// may share points, as they share edges.
+void expect_no_pinches(const LabeledSlice& slice) {
+  auto check = [&](const Ring2& ring) {
+    std::set<std::pair<double, double>> seen;
+    for (const Vec2& p : ring) seen.insert({p.x(), p.y()});
+    EXPECT_EQ(seen.size(), ring.size());
+  };
+  for (const Region& r : slice.regions) {
+    check(r.outer);
+    for (const Ring2& hole : r.holes) check(hole);
+  }
+}
+
+// Every edge of every ring runs along the pixel grid: axis-parallel, its ends on pixel corners
+// (half-integer pixel coordinates) of a plane that maps pixel (i, j) to (s i + 1, s j - 2) mm.
+void expect_on_pixel_edges(const LabeledSlice& slice, double mm_per_px) {
+  auto check = [&](const Ring2& ring) {
+    for (std::size_t k = 0; k < ring.size(); ++k) {
+      const Vec2& a = ring[k];
+      const Vec2& b = ring[(k + 1) % ring.size()];
+      EXPECT_TRUE(a.x() == b.x() || a.y() == b.y()) << a.transpose() << " - " << b.transpose();
+      const double i = (a.x() - 1.0) / mm_per_px, j = (a.y() + 2.0) / mm_per_px;
+      EXPECT_NEAR(i - std::floor(i), 0.5, 1e-9) << a.transpose();
+      EXPECT_NEAR(j - std::floor(j), 0.5, 1e-9) << a.transpose();
     }
   };
   for (const Region& r : slice.regions) {
-    add(r.outer);
-    for (const Ring2& hole : r.holes) add(hole);
+    check(r.outer);
+    for (const Ring2& hole : r.holes) check(hole);
   }
-  EXPECT_EQ(seen.size(), points);
 }
 
 double label_area(const LabeledSlice& slice, int label) {
@@ -96,16 +112,19 @@ TEST(Contours, OnePixelNecksAndDiagonalCornersGiveValidPolygons) {
     const auto slice = make_slice(map, sector, image_box(40, 30), plane, tolerance_mm, &repairs);
     ASSERT_TRUE(slice) << "tolerance " << tolerance_mm << ": " << slice.message();
     EXPECT_TRUE(repairs.empty()) << repairs.front().detail;
-    expect_no_shared_points(*slice);
+    expect_no_pinches(*slice);
     bool unknown = false;
     for (const Region& r : slice->regions) unknown |= r.label == kUnknownLabel;
     EXPECT_TRUE(unknown);
     if (tolerance_mm == 0.0) {
-      // The outlines run a quarter pixel inside the pixel edges: the area is the pixels' less
-      // a quarter-pixel band along the boundary (and the few pixels that broke a pinch).
+      // The outlines run on the pixel edges: the area is a whole number of pixels, the label's
+      // but for the few that broke a pinch (one per diagonal contact).
       const double px = 0.25;  // mm² per pixel
-      EXPECT_LT(label_area(*slice, 1), pixels_1 * px);
-      EXPECT_GT(label_area(*slice, 1), 0.8 * pixels_1 * px);
+      const double pixels = label_area(*slice, 1) / px;
+      EXPECT_NEAR(pixels, std::round(pixels), 1e-9);
+      EXPECT_LE(pixels, pixels_1 + 1e-9);
+      EXPECT_GE(pixels, pixels_1 - 4.0);
+      expect_on_pixel_edges(*slice, 0.5);
     }
   }
 }
@@ -133,7 +152,8 @@ TEST(Contours, RandomLabelMapsGiveValidSlices) {
       const auto slice = make_slice(map, sector, fov, scaled_plane(0.3), tolerance_mm, &repairs);
       ASSERT_TRUE(slice) << "trial " << trial << ": " << slice.message();
       EXPECT_TRUE(repairs.empty()) << "trial " << trial << ": " << repairs.front().detail;
-      expect_no_shared_points(*slice);
+      expect_no_pinches(*slice);
+      if (tolerance_mm == 0.0) expect_on_pixel_edges(*slice, 0.3);
     }
   }
 }
@@ -183,6 +203,105 @@ TEST(Contours, SimplificationIsReproducible) {
       EXPECT_EQ(runs[run][r].outer, runs[0][r].outer) << "run " << run << " region " << r;
       EXPECT_EQ(runs[run][r].holes, runs[0][r].holes) << "run " << run << " region " << r;
     }
+  }
+}
+
+// The area and centroid of a label's regions (outer rings less holes), in mm.
+std::pair<double, Vec2> area_and_centroid(const LabeledSlice& slice, int label) {
+  double area = 0.0;
+  Vec2 moment = Vec2::Zero();
+  auto add = [&](const Ring2& ring, double sign) {
+    const double a = signed_area(ring);
+    Vec2 m = Vec2::Zero();  // first moment of the ring's signed area
+    for (std::size_t k = 0; k < ring.size(); ++k) {
+      const Vec2& p = ring[k];
+      const Vec2& q = ring[(k + 1) % ring.size()];
+      const double cross = p.x() * q.y() - q.x() * p.y();
+      m += (p + q) * cross / 6.0;
+    }
+    const double s = a < 0.0 ? -sign : sign;  // whatever the ring's orientation
+    area += s * a;
+    moment += s * m;
+  };
+  for (const Region& r : slice.regions) {
+    if (r.label != label) continue;
+    add(r.outer, 1.0);
+    for (const Ring2& hole : r.holes) add(hole, -1.0);
+  }
+  return {area, moment / area};
+}
+
+TEST(Contours, OutlinesLieOnThePixelEdges) {
+  // A rectangle of pixels, a disc with a hole, and two labels side by side: each outline runs on
+  // the edges of its label's pixels, so its area is the pixel count and its centroid the mean of
+  // the pixel centres; neighbours share the edge between them. A tracer whose outlines are
+  // inset, grown or moved by a fraction of a pixel (a sub-pixel offset of the wrong sign moves
+  // every outline half a pixel towards +column/+row) fails here.
+  const int w = 64, h = 48;
+  LabelImage map(w, h, 0);
+  std::map<int, std::pair<double, Vec2>> pixels;  // label -> (count, sum of centres)
+  auto set = [&](int i, int j, int label) {
+    map.at(i, j) = static_cast<std::uint8_t>(label);
+    pixels[label].first += 1.0;
+    pixels[label].second += Vec2(i, j);
+  };
+  for (int j = 7; j < 19; ++j)
+    for (int i = 10; i < 25; ++i) set(i, j, 1);  // rectangle: columns 10..24, rows 7..18
+  for (int j = 20; j < 46; ++j)
+    for (int i = 30; i < 62; ++i) {
+      const double r = std::hypot(i - 45.3, j - 32.8);
+      if (r <= 11.7 && r > 3.2) set(i, j, 2);  // disc with a hole
+    }
+  for (int j = 24; j < 40; ++j)
+    for (int i = 2; i < 20; ++i) set(i, j, i < 9 ? 3 : 4);  // two labels sharing an edge
+  const ImageU8 sector(w, h, 255);
+  const double mm_per_px = 0.5;
+  const ImagePlane plane = scaled_plane(mm_per_px);
+  for (const double tolerance_mm : {0.0, 0.2}) {
+    std::vector<Repair> repairs;
+    const auto slice = make_slice(map, sector, image_box(w, h), plane, tolerance_mm, &repairs);
+    ASSERT_TRUE(slice) << slice.message();
+    EXPECT_TRUE(repairs.empty());
+    EXPECT_TRUE(validate(*slice));
+    for (const auto& [label, count_and_sum] : pixels) {
+      const auto [area, centroid] = area_and_centroid(*slice, label);
+      const Vec2 centre_px = count_and_sum.second / count_and_sum.first;
+      const Vec2 expected = plane.to_plane(centre_px.x(), centre_px.y());
+      const double pixel_mm2 = mm_per_px * mm_per_px;
+      if (tolerance_mm == 0.0) {  // exact: to rounding
+        EXPECT_NEAR(area, count_and_sum.first * pixel_mm2, 1e-9) << "label " << label;
+        EXPECT_NEAR((centroid - expected).norm(), 0.0, 1e-9) << "label " << label;
+      } else {  // simplified: within a small part of a pixel on average
+        EXPECT_NEAR(area / (count_and_sum.first * pixel_mm2), 1.0, 0.03) << "label " << label;
+        EXPECT_LT((centroid - expected).norm(), 0.05 * mm_per_px) << "label " << label;
+      }
+    }
+    if (tolerance_mm == 0.0) {
+      expect_on_pixel_edges(*slice, mm_per_px);
+      // The rectangle's outline is its four corners on the pixel edges.
+      const Region* rectangle = nullptr;
+      for (const Region& r : slice->regions)
+        if (r.label == 1) rectangle = &r;
+      ASSERT_NE(rectangle, nullptr);
+      const std::set<std::pair<double, double>> corners(
+          {{1.0 + 9.5 * mm_per_px, -2.0 + 6.5 * mm_per_px},
+           {1.0 + 24.5 * mm_per_px, -2.0 + 6.5 * mm_per_px},
+           {1.0 + 24.5 * mm_per_px, -2.0 + 18.5 * mm_per_px},
+           {1.0 + 9.5 * mm_per_px, -2.0 + 18.5 * mm_per_px}});
+      std::set<std::pair<double, double>> outline;
+      for (const Vec2& p : rectangle->outer) outline.insert({p.x(), p.y()});
+      EXPECT_EQ(outline, corners);
+    }
+    // The two labels side by side share their edge at column 8.5: every corner of label 3's
+    // outline on that line is a corner of label 4's.
+    std::set<std::pair<double, double>> on_line_3, on_line_4;
+    const double line_mm = 1.0 + 8.5 * mm_per_px;
+    for (const Region& r : slice->regions)
+      for (const Vec2& p : r.outer)
+        if (std::abs(p.x() - line_mm) < 1e-9)
+          (r.label == 3 ? on_line_3 : on_line_4).insert({p.x(), p.y()});
+    EXPECT_FALSE(on_line_3.empty());
+    EXPECT_EQ(on_line_3, on_line_4);
   }
 }
 

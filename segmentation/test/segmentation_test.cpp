@@ -248,8 +248,8 @@ TEST(Contours, HolesNestedLabelsAndNoOverlaps) {
   ASSERT_EQ(by_label.at(1)->holes.size(), 1u);
   EXPECT_TRUE(by_label.at(2)->holes.empty());
   EXPECT_TRUE(by_label.count(kUnknownLabel));
-  // 35 x 40 pixels traced a quarter pixel inside their edges: 34.5 x 39.5 pixels of 0.5 mm.
-  EXPECT_NEAR(std::abs(signed_area(by_label.at(1)->outer)), 34.5 * 39.5 * 0.25, 1e-9);
+  // 35 x 40 pixels of 0.5 mm traced on their edges.
+  EXPECT_NEAR(std::abs(signed_area(by_label.at(1)->outer)), 35 * 40 * 0.25, 1e-9);
   const auto slice =
       make_slice(map, sector, {{-0.5, -0.5}, {59.5, -0.5}, {59.5, 49.5}, {-0.5, 49.5}}, plane, 2.0);
   ASSERT_TRUE(slice) << slice.message();

@@ -34,11 +34,13 @@ ImagePlane image_plane(const Eigen::Matrix4d& T_reference_image, const Vec3& pro
 /// The regions of a label map: for every material id and for unknown pixels inside `sector`
 /// (pixels outside it are left to the slice's fov), outer rings and holes mapped into the plane.
 /// Valid by construction (docs/segmentation.md, "Polygons"): each label's mask loses the pixels
-/// that touch only diagonally (a pinch), is traced at twice the resolution (cv::findContours,
-/// RETR_CCOMP) so that one-pixel necks keep a width, and all rings are simplified together by
-/// `tolerance_mm` with CGAL's topology-preserving polyline simplification (0: the exact
-/// outlines, a quarter pixel inside the pixel edges). Rings are simple, holes lie strictly
-/// inside their outer ring, and no two rings touch. A ring that still comes out degenerate is
+/// that touch only diagonally (a pinch), its outlines are traced on the pixels' edges (through
+/// cv::findContours, RETR_CCOMP, at twice the resolution, so that one-pixel necks keep their
+/// width), and all rings are simplified together by `tolerance_mm` with CGAL's
+/// topology-preserving polyline simplification, which simplifies an edge that two labels share
+/// once for both (0: the exact outlines, whose area is the pixels'). Rings are simple, holes lie
+/// inside their outer ring touching it nowhere, rings of one label do not touch, and regions of
+/// neighbouring labels share edges but no area. A ring that still comes out degenerate is
 /// dropped and recorded in `repairs` (kind "degenerate_region"; `where` names the label).
 std::vector<Region> label_map_regions(const LabelImage& labels, const ImageU8& sector,
                                       const ImagePlane& plane, double tolerance_mm,
