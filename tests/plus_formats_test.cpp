@@ -31,24 +31,16 @@ std::string bytes(const fs::path& path) {
 
 TEST(PlusFormats, MhaAndNrrdCopiesSegmentToTheSameSliceSet) {
   sonoshape::testing::TempDir dir;
-  // Models for the N-wire phantom: bright wire echoes in anechoic water. The automatic
-  // two-class split calls the water "no signal" and leaves every slice unknown, which would
-  // compare nothing but the planes; with these the wires are material regions.
-  const fs::path config = dir.path() / "nwire.json";
-  {
-    std::ofstream out(config);
-    out << R"({"format": "sonoshape-segmentation", "version": 1,
-               "background": {"name": "water", "grey_mean": 5, "grey_std": 10},
-               "labels": [{"id": 1, "name": "wire", "grey_mean": 150, "grey_std": 40}],
-               "shadow_fraction": 1.0, "min_region_mm2": 0.5, "opening_mm": 0.2})";
-  }
+  // The N-wire phantom: bright wire echoes in anechoic water. The defaults call the water "no
+  // signal" and leave every slice unknown, which would compare nothing but the planes; with the
+  // wires preset the wires are material regions.
   std::string outputs[2];
   int index = 0;
   for (const char* name : {"NwirePhantomFreehand.igs.mha", "NwirePhantomFreehand.igs.nrrd"}) {
     const fs::path out = dir.path() / (std::string(name) + ".slices.json");
     const auto result =
         run("segment " + (kPlus / name).string() + " --calibration " + kCalibration.string() +
-                " --config " + config.string() + " --every 4 -o " + out.string(),
+                " --preset wires --every 4 -o " + out.string(),
             dir.path() / (std::string(name) + ".log"));
     ASSERT_EQ(result.exit_code, 0) << name << ":\n" << result.output;
     outputs[index++] = out.string();
