@@ -296,15 +296,19 @@ Result<std::string> read_text(const std::filesystem::path& path) {
 
 // The presets' settings. Water (and gel) gives no echo: the water presets call it background
 // (outside every organ) and turn the no-signal rule off (shadow_fraction 1), which would
-// otherwise swallow echoes of a millimetre in the margin of the water around them; their
-// starting models are water near black and a bright echo, refined on the recording.
+// otherwise swallow echoes of a millimetre in the margin of the water around them. Wires and a
+// tank's floor are specular reflectors: their echo varies several-fold with the angle of
+// incidence (16..200 grey within one recording), so the boundary between water and echo stays
+// low, well above the water's noise, instead of midway to a mean learnt from the recording
+// (which lost the weaker echoes: 6-8 of the 9 wires of fCal's validation frames 76-92). A wire is
+// far brighter than the water (more than detail::kReflectorGapGrey), so the median decides for
+// it: a Gaussian of smoothing_mm would spread a wire of a millimetre below the boundary.
 const char* const kWiresJson = R"({
-  "background": {"name": "water", "grey_mean": 5, "grey_std": 10},
-  "labels": [{"id": 1, "name": "wire", "grey_mean": 150, "grey_std": 40}],
-  "learn_models": true, "shadow_fraction": 1.0, "min_region_mm2": 0.5, "opening_mm": 0.2})";
-// A tank's floor is a specular reflector: its echo varies five-fold with the angle of incidence
-// (16..200 grey within one recording), so the boundary stays just above the water's noise
-// instead of midway to a learnt mean floor (which lost the floor in its weaker frames).
+  "background": {"name": "water", "grey_mean": 2, "grey_std": 3},
+  "labels": [{"id": 1, "name": "wire", "grey_mean": 90, "grey_std": 40}],
+  "shadow_fraction": 1.0, "min_region_mm2": 0.5, "opening_mm": 0.2})";
+// The floor is a band of a few pixels: the default opening and smoothing would wipe it out, and
+// the closer classes classify the smoothed grey (30 - 2 is no reflector gap).
 const char* const kWaterTankJson = R"({
   "background": {"name": "water", "grey_mean": 2, "grey_std": 3},
   "labels": [{"id": 1, "name": "floor", "grey_mean": 30, "grey_std": 20}],

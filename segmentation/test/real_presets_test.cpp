@@ -278,7 +278,10 @@ TEST(AutoSector, StaticGraphicsAreNotTheFan) {
 TEST(Presets, AreNamedSetsOfSettingsThatAFileOverrides) {
   const auto wires = load_segmentation_config(std::nullopt, "wires");
   ASSERT_TRUE(wires) << wires.message();
-  EXPECT_TRUE(wires->learn_models);
+  EXPECT_FALSE(wires->learn_models);  // specular echoes: see the presets in config.cpp
+  const auto bone = load_segmentation_config(std::nullopt, "bone");
+  ASSERT_TRUE(bone) << bone.message();
+  EXPECT_TRUE(bone->learn_models);
   EXPECT_EQ(wires->background.name, "water");
   EXPECT_EQ(wires->shadow_fraction, 1.0);
   EXPECT_EQ(wires->min_region_mm2, 0.5);
