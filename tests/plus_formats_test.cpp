@@ -31,24 +31,16 @@ std::string bytes(const fs::path& path) {
 
 TEST(PlusFormats, MhaAndNrrdCopiesSegmentToTheSameSliceSet) {
   sonoshape::testing::TempDir dir;
-  // Models for the N-wire phantom: bright wire echoes in anechoic water. The automatic
-  // two-class split calls the water "no signal" and leaves every slice unknown, which would
-  // compare nothing but the planes; with these the wires are material regions.
-  const fs::path config = dir.path() / "nwire.json";
-  {
-    std::ofstream out(config);
-    out << R"({"format": "sonoshape-segmentation", "version": 1,
-               "background": {"name": "water", "grey_mean": 5, "grey_std": 10},
-               "labels": [{"id": 1, "name": "wire", "grey_mean": 150, "grey_std": 40}],
-               "shadow_fraction": 1.0, "min_region_mm2": 0.5, "opening_mm": 0.2})";
-  }
+  // The N-wire phantom: bright wire echoes in anechoic water. The defaults call the water "no
+  // signal" and leave every slice unknown, which would compare nothing but the planes; with the
+  // wires preset the wires are material regions.
   std::string outputs[2];
   int index = 0;
   for (const char* name : {"NwirePhantomFreehand.igs.mha", "NwirePhantomFreehand.igs.nrrd"}) {
     const fs::path out = dir.path() / (std::string(name) + ".slices.json");
     const auto result =
         run("segment " + (kPlus / name).string() + " --calibration " + kCalibration.string() +
-                " --config " + config.string() + " --every 4 -o " + out.string(),
+                " --preset wires --every 4 -o " + out.string(),
             dir.path() / (std::string(name) + ".log"));
     ASSERT_EQ(result.exit_code, 0) << name << ":\n" << result.output;
     outputs[index++] = out.string();
@@ -224,6 +216,39 @@ TEST(PlusFormats, MnFramesAreFlippedAndProbeToReferenceUsed) {
   EXPECT_NE(result.output.find("pose ProbeToReference = ProbeToReference (per frame)"),
             std::string::npos)
       << result.output;
+}
+
+// Presets through `scan --source replay:` (issue 39): with the defaults the N-wire phantom in
+// water is nothing but unknown, which the scan says once after its first frames, naming the
+// presets; with --preset wires its wires are material regions and nothing is warned.
+TEST(PlusFormats, ScanReplayTakesAPresetAndWarnsWhenOneLabelFillsTheSectors) {
+  sonoshape::testing::TempDir dir;
+  const fs::path sweep = kPlus / "NwirePhantomFreehandCropped.igs.mha";
+  const fs::path calibration = kPlus / "PlusDeviceSet_Server_Sim_NwirePhantom.xml";
+  const std::string common = "scan --source replay:" + sweep.string() + " --calibration " +
+                             calibration.string() +
+                             " --fast --keyframe-angle-deg 0 --keyframe-distance-mm 0 --depth 4";
+  const auto defaults =
+      run(common + " -o " + (dir.path() / "defaults").string(), dir.path() / "defaults.log");
+  ASSERT_EQ(defaults.exit_code, 0) << defaults.output;
+  EXPECT_EQ(count(defaults.output, "scan: unknown (no signal"), 1u) << defaults.output;
+  EXPECT_NE(defaults.output.find("--preset wires"), std::string::npos) << defaults.output;
+  const auto wires =
+      run(common + " --preset wires -o " + (dir.path() / "wires").string(), dir.path() / "w.log");
+  ASSERT_EQ(wires.exit_code, 0) << wires.output;
+  EXPECT_NE(wires.output.find("models from config (preset wires)"), std::string::npos)
+      << wires.output;
+  EXPECT_EQ(count(wires.output, "fills at least"), 0u) << wires.output;
+  const auto slices = sonoshape::read_slice_set(dir.path() / "wires" / "slices.json");
+  ASSERT_TRUE(slices) << slices.message();
+  std::size_t regions = 0;
+  for (const auto& slice : slices->slices)
+    for (const auto& region : slice.regions) regions += region.label == 1 ? 1 : 0;
+  EXPECT_GE(regions, slices->slices.size());
+  const auto unknown =
+      run(common + " --preset wire -o " + (dir.path() / "x").string(), dir.path() / "x.log");
+  EXPECT_NE(unknown.exit_code, 0);
+  EXPECT_NE(unknown.output.find("--preset"), std::string::npos) << unknown.output;
 }
 
 }  // namespace

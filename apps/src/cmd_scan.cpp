@@ -20,6 +20,7 @@
 #include "commands.hpp"
 #include "engine_options.hpp"
 #include "option_checks.hpp"
+#include "preset_option.hpp"
 #include "seed_option.hpp"
 #include "sim_options.hpp"
 #include "sonoshape/core/log.hpp"
@@ -46,6 +47,7 @@ struct ScanCommandOptions {
   std::filesystem::path calibration;
   std::string pose_transform;  ///< --pose-transform (replay): FROMToTO
   std::filesystem::path segmentation;
+  std::string preset;              // --preset NAME: a named set of segmentation settings
   std::string method;              // "", "threshold" or "graph-cut": overrides the configuration
   std::vector<std::string> seeds;  // LABEL:X,Y,Z, see seed_option.hpp
   std::string labels;              ///< --labels FILE | igtl:DEVICE: the site's own label maps
@@ -504,6 +506,7 @@ int run_scan(const ScanCommandOptions& options, const Resume* resume) {
   if (!options.calibration.empty()) request.calibration = options.calibration;
   request.pose_transform = options.pose_transform;
   if (!options.segmentation.empty()) request.segmentation = options.segmentation;
+  request.preset = options.preset;
   if (!options.bounds.empty()) {
     if (options.bounds.size() != 6) {
       std::cerr << "error: --bounds takes 6 numbers: xmin ymin zmin xmax ymax zmax (mm)\n";
@@ -762,6 +765,7 @@ void add_scan_options(CLI::App& app, ScanCommandOptions& o) {
                  "Segmentation config JSON (docs/segmentation.md). Default: sim: models learnt "
                  "from simulated frames; replay: the header's, else a two-class split")
       ->check(CLI::ExistingFile);
+  app.add_option("--preset", options->preset, preset_help())->check(CLI::IsMember(preset_names()));
   app.add_option("--method", options->method,
                  "Labelling: threshold, or graph-cut (refined by a multi-label graph cut whose "
                  "prior is the surfaces reconstructed so far, cut by each new frame's plane); "

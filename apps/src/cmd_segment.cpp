@@ -13,6 +13,7 @@
 #include <sstream>
 
 #include "commands.hpp"
+#include "preset_option.hpp"
 #include "seed_option.hpp"
 #include "sonoshape/acquisition/label_sequence.hpp"
 #include "sonoshape/acquisition/sequence_file.hpp"
@@ -29,6 +30,7 @@ namespace {
 struct SegmentOptions {
   std::filesystem::path input;
   std::filesystem::path config;
+  std::string preset;  ///< --preset NAME: a named set of configuration settings
   std::filesystem::path calibration;
   std::string pose_transform;  ///< --pose-transform FROMToTO; empty: the header's or default
   int every = 1;
@@ -199,7 +201,8 @@ int run_segment(const SegmentOptions& options) {
     return p.empty() ? std::nullopt : std::optional<std::filesystem::path>(p);
   };
   auto setup = seg::prepare_sweep(*file, options.input, optional_path(options.config),
-                                  optional_path(options.calibration), options.pose_transform);
+                                  optional_path(options.calibration), options.pose_transform,
+                                  options.preset);
   if (!setup) {
     std::cerr << "error: " << setup.message() << '\n';
     return 1;
@@ -366,6 +369,7 @@ CommandRunner add_segment_command(CLI::App& app) {
                  "docs/segmentation.md). Default: the models `sonoshape simulate` writes in the "
                  "header, else a two-class split of the data")
       ->check(CLI::ExistingFile);
+  app.add_option("--preset", options->preset, preset_help())->check(CLI::IsMember(preset_names()));
   app.add_option("--calibration", options->calibration,
                  "ImageToProbe calibration: PLUS device-set XML, PLUS calibration result "
                  "(.results.xml) or JSON {\"ImageToProbe\": [16 numbers]}. Default: the "

@@ -14,6 +14,7 @@
 #include <stdexcept>
 #include <string_view>
 #include <utility>
+#include <vector>
 
 namespace sonoshape::seg {
 namespace {
@@ -211,9 +212,10 @@ Result<SegmentationConfig> parse_segmentation_config(const std::string& json_tex
               read_model(value[k], "labels[" + std::to_string(k) + "]", false));
       } else if (key == "median_px") {
         config.median_px = integer_at(value, key);
-      } else if (key == "depth_compensation") {
+      } else if (key == "depth_compensation" || key == "learn_models") {
         if (!value.is_boolean()) throw ConfigProblem{key, "expected true or false"};
-        config.depth_compensation = value.get<bool>();
+        (key == "learn_models" ? config.learn_models : config.depth_compensation) =
+            value.get<bool>();
       } else if (key == "sector") {
         if (value.is_string()) {
           const std::string s = value.get<std::string>();
@@ -280,14 +282,104 @@ Result<SegmentationConfig> parse_segmentation_config(const std::string& json_tex
   return config;
 }
 
-Result<SegmentationConfig> read_segmentation_config(const std::filesystem::path& path) {
+namespace {
+
+Result<std::string> read_text(const std::filesystem::path& path) {
   std::ifstream in(path);
   if (!in)
     return Status::error("cannot read the segmentation config " + path.string() +
                          ": check the path");
   std::ostringstream text;
   text << in.rdbuf();
-  return parse_segmentation_config(text.str(), path.string());
+  return text.str();
+}
+
+// The presets' settings. Water (and gel) gives no echo: the water presets call it background
+// (outside every organ) and turn the no-signal rule off (shadow_fraction 1), which would
+// otherwise swallow echoes of a millimetre in the margin of the water around them. Wires and a
+// tank's floor are specular reflectors: their echo varies several-fold with the angle of
+// incidence (16..200 grey within one recording), so the boundary between water and echo stays
+// low, well above the water's noise, instead of midway to a mean learnt from the recording
+// (which lost the weaker echoes: 6-8 of the 9 wires of fCal's validation frames 76-92). A wire is
+// far brighter than the water (more than detail::kReflectorGapGrey), so the median decides for
+// it: a Gaussian of smoothing_mm would spread a wire of a millimetre below the boundary.
+const char* const kWiresJson = R"({
+  "background": {"name": "water", "grey_mean": 2, "grey_std": 3},
+  "labels": [{"id": 1, "name": "wire", "grey_mean": 90, "grey_std": 40}],
+  "shadow_fraction": 1.0, "min_region_mm2": 0.5, "opening_mm": 0.2})";
+// The floor is a band of a few pixels: the default opening and smoothing would wipe it out, and
+// the closer classes classify the smoothed grey (30 - 2 is no reflector gap).
+const char* const kWaterTankJson = R"({
+  "background": {"name": "water", "grey_mean": 2, "grey_std": 3},
+  "labels": [{"id": 1, "name": "floor", "grey_mean": 30, "grey_std": 20}],
+  "shadow_fraction": 1.0, "min_region_mm2": 4, "opening_mm": 0.1, "smoothing_mm": 0.3})";
+const char* const kBoneJson = R"({
+  "background": {"name": "soft tissue", "grey_mean": 40, "grey_std": 25},
+  "labels": [{"id": 1, "name": "bone", "grey_mean": 200, "grey_std": 40}],
+  "learn_models": true, "min_region_mm2": 3, "opening_mm": 0.3})";
+
+}  // namespace
+
+Result<SegmentationConfig> read_segmentation_config(const std::filesystem::path& path) {
+  auto text = read_text(path);
+  if (!text) return text.status();
+  return parse_segmentation_config(*text, path.string());
+}
+
+const std::vector<SegmentationPreset>& segmentation_presets() {
+  static const std::vector<SegmentationPreset> presets{
+      {"soft-tissue",
+       "the defaults: two classes (background, echogenic) found in the recording; anechoic "
+       "areas (water, gel, shadows) unknown",
+       "{}"},
+      {"wires", "wire phantoms in water (N-wire, fCal): water background, wires of ~1 mm^2",
+       kWiresJson},
+      {"water-tank", "a water tank's floor or another large flat reflector in water",
+       kWaterTankJson},
+      {"bone", "bone surfaces (or a bone enhancer's output) in soft tissue: bright bands",
+       kBoneJson},
+  };
+  return presets;
+}
+
+Result<SegmentationConfig> load_segmentation_config(
+    const std::optional<std::filesystem::path>& path, std::string_view preset) {
+  json doc = json::object();
+  std::string source;
+  if (!preset.empty()) {
+    const auto& presets = segmentation_presets();
+    const auto it = std::find_if(presets.begin(), presets.end(),
+                                 [&](const SegmentationPreset& p) { return p.name == preset; });
+    if (it == presets.end()) {
+      std::string known;
+      for (const SegmentationPreset& p : presets) known += (known.empty() ? "" : ", ") + p.name;
+      return Status::error("unknown segmentation preset '" + std::string(preset) +
+                           "'; the presets are " + known + " (docs/segmentation.md)");
+    }
+    doc = json::parse(it->json);
+    source = "preset " + it->name;
+  }
+  if (path) {
+    auto text = read_text(*path);
+    if (!text) return text.status();
+    json file;
+    try {
+      file = json::parse(*text);
+    } catch (const json::exception& e) {
+      return Status::error(path->string() + ": not valid JSON (" + e.what() + ")");
+    }
+    if (!file.is_object()) return Status::error(path->string() + ": top level: expected an object");
+    for (const auto& [key, value] : file.items())
+      if (key == "graph_cut" && value.is_object() && doc.contains(key))
+        doc[key].update(value);
+      else
+        doc[key] = value;
+    source = source.empty() ? path->string() : path->string() + " over " + source;
+  } else {
+    doc["format"] = kFormat;
+    doc["version"] = kVersion;
+  }
+  return parse_segmentation_config(doc.dump(), source.empty() ? "the defaults" : source);
 }
 
 std::string to_json(const SegmentationConfig& c) {
@@ -305,6 +397,7 @@ std::string to_json(const SegmentationConfig& c) {
   doc["shadow_margin_mm"] = c.shadow_margin_mm;
   doc["max_depth_mm"] = c.max_depth_mm;
   doc["depth_compensation"] = c.depth_compensation;
+  doc["learn_models"] = c.learn_models;
   doc["psf_sigma_mm"] = c.psf_sigma_mm;
   doc["dynamic_range_db"] = c.dynamic_range_db;
   doc["method"] = c.method == LabellingMethod::kGraphCut ? "graph_cut" : "threshold";
@@ -371,6 +464,48 @@ SegmentationConfig learn_label_models(const GreyImage& image, const LabelImage& 
         if (b.label == l && !b.name.empty()) m.name = b.name;
       config.materials.push_back(m);
     }
+  }
+  return config;
+}
+
+SegmentationConfig learn_models_from_samples(const std::vector<std::uint8_t>& samples,
+                                             const SegmentationConfig& base) {
+  std::vector<LabelModel*> models{nullptr};
+  SegmentationConfig config = base;
+  models.front() = &config.background;
+  for (LabelModel& m : config.materials) models.push_back(&m);
+  std::array<double, 256> histogram{};
+  for (const std::uint8_t g : samples) histogram[g] += 1.0;
+  // Lloyd's k-means in one dimension, over the histogram (cv::kmeans moves a class that loses
+  // every sample to a random one: the roles given must stay).
+  std::vector<double> means;
+  for (const LabelModel* m : models) means.push_back(m->grey_mean);
+  std::vector<double> sum(means.size()), sum_sq(means.size()), count(means.size());
+  for (int iteration = 0; iteration < 100; ++iteration) {
+    std::fill(sum.begin(), sum.end(), 0.0);
+    std::fill(sum_sq.begin(), sum_sq.end(), 0.0);
+    std::fill(count.begin(), count.end(), 0.0);
+    for (int g = 0; g < 256; ++g) {
+      std::size_t best = 0;
+      for (std::size_t k = 1; k < means.size(); ++k)
+        if (std::abs(g - means[k]) < std::abs(g - means[best])) best = k;
+      sum[best] += histogram[static_cast<std::size_t>(g)] * g;
+      sum_sq[best] += histogram[static_cast<std::size_t>(g)] * g * g;
+      count[best] += histogram[static_cast<std::size_t>(g)];
+    }
+    bool moved = false;
+    for (std::size_t k = 0; k < means.size(); ++k) {
+      if (count[k] == 0.0) continue;
+      moved |= std::abs(sum[k] / count[k] - means[k]) > 1e-9;
+      means[k] = sum[k] / count[k];
+    }
+    if (!moved) break;
+  }
+  for (std::size_t k = 0; k < models.size(); ++k) {
+    if (count[k] == 0.0) continue;
+    models[k]->grey_mean = means[k];
+    models[k]->grey_std =
+        std::max(1.0, std::sqrt(std::max(0.0, sum_sq[k] / count[k] - means[k] * means[k])));
   }
   return config;
 }

@@ -416,6 +416,68 @@ ImageGeometry polygon_geometry(int width_px, int height_px, double spacing_mm,
   return g;
 }
 
+namespace {
+
+// The scanner's burnt-in graphics (text, scale bars, depth ticks, a logo) are the same in every
+// frame but for the noise of an analogue video capture (up to a tenth of their grey on the VLCUS
+// recording), where the image inside the fan changes with the probe's motion: pixels with signal
+// whose raw grey never varies by more than this over the sampled frames are graphics.
+constexpr double kStaticGraphicsGrey = 2.0;
+constexpr double kStaticGraphicsShare = 0.1;
+// What changes is grouped by this share of the image's diagonal (a fan's speckle is spread over
+// it); groups holding less than kMinFanPartShare of the image's pixels are a clock's digits or
+// a cursor, not the fan.
+constexpr double kGroupShare = 0.01;
+constexpr double kMinFanPartShare = 0.002;
+
+// The pixels that carry signal and change between frames, in groups large enough to be the fan;
+// none (an empty Mat) when the frames hold no graphics, or nothing large changes (one frame, a
+// frozen image, a few frames of echoes in water that barely move: nothing tells graphics from
+// image).
+cv::Mat changing_signal(const std::vector<const GreyImage*>& frames, const cv::Mat& signal,
+                        double signal_grey) {
+  const int w = signal.cols, h = signal.rows;
+  cv::Mat lowest = wrap(*frames.front()).clone(), highest = lowest.clone();
+  for (const GreyImage* frame : frames) {
+    cv::min(lowest, wrap(*frame), lowest);
+    cv::max(highest, wrap(*frame), highest);
+  }
+  cv::Mat range, tolerance;
+  cv::Mat(highest - lowest).convertTo(range, CV_32F);
+  highest.convertTo(tolerance, CV_32F, kStaticGraphicsShare);
+  cv::max(tolerance, kStaticGraphicsGrey, tolerance);
+  cv::Mat graphics = (range <= tolerance) & (highest > signal_grey);
+  // No graphics (a research interface's image, a phantom in water whose echoes all move): the
+  // hull of all signal, small echoes included.
+  if (cv::countNonZero(graphics) < kMinFanPartShare * w * h) return {};
+  // The graphics' anti-aliased rims are dim, so their noise is large beside their grey.
+  cv::dilate(graphics, graphics, disk(1.0));
+  cv::Mat changing = signal & ~graphics;
+  cv::morphologyEx(changing, changing, cv::MORPH_OPEN, disk(1.0));
+  cv::Mat grouped, groups, stats, centroids;
+  cv::dilate(changing, grouped, disk(kGroupShare * std::hypot(w, h)));
+  const int n = cv::connectedComponentsWithStats(grouped, groups, stats, centroids, 8, CV_32S);
+  std::vector<double> changing_px(static_cast<std::size_t>(n), 0.0);
+  for (int j = 0; j < h; ++j) {
+    const int* group = groups.ptr<int>(j);
+    const std::uint8_t* c = changing.ptr<std::uint8_t>(j);
+    for (int i = 0; i < w; ++i) changing_px[static_cast<std::size_t>(group[i])] += c[i] ? 1.0 : 0.0;
+  }
+  bool any = false;
+  for (int g = 1; g < n; ++g)
+    any |= changing_px[static_cast<std::size_t>(g)] >= kMinFanPartShare * w * h;
+  if (!any) return {};
+  for (int j = 0; j < h; ++j) {
+    const int* group = groups.ptr<int>(j);
+    std::uint8_t* c = changing.ptr<std::uint8_t>(j);
+    for (int i = 0; i < w; ++i)
+      if (changing_px[static_cast<std::size_t>(group[i])] < kMinFanPartShare * w * h) c[i] = 0;
+  }
+  return changing;
+}
+
+}  // namespace
+
 ImageGeometry auto_geometry(const std::vector<const GreyImage*>& frames, double spacing_mm,
                             double signal_grey) {
   if (frames.empty() || frames.front()->empty())
@@ -431,6 +493,11 @@ ImageGeometry auto_geometry(const std::vector<const GreyImage*>& frames, double 
   cv::Mat signal = peak > signal_grey;
   // Isolated specks (noise, a cursor) must not widen the sector.
   cv::morphologyEx(signal, signal, cv::MORPH_OPEN, disk(1.0));
+  // A screen capture (a frame grabber on the scanner's video output) holds the scanner's text
+  // and scale bars beside the fan: the sector is the hull of what changes.
+  if (frames.size() > 1)
+    if (cv::Mat changing = changing_signal(frames, signal, signal_grey); !changing.empty())
+      signal = changing;
   std::vector<cv::Point> points;
   cv::findNonZero(signal, points);
   if (points.size() < 3) return full_image_geometry(w, h, spacing_mm);
@@ -605,11 +672,14 @@ Segmentation detail::segment_frame(const GreyImage& image, const ImageGeometry& 
     std::uint8_t* out = map.ptr<std::uint8_t>(j);
     for (int i = first; i < w; i += step) {
       const double offset = trend.a + trend.b * d[i];
-      // A reflector's echo is signal even inside the margin of the shadow it casts.
-      out[i] = !in[i]                            ? kLabelPixelUnknown
-               : m[i] - offset >= reflector_grey ? by_mean[0].value
-               : dark[i]                         ? kLabelPixelUnknown
-                                                 : classify(s[i] - offset);
+      // A reflector's echo is signal even inside the margin of the shadow it casts; but an
+      // anechoic pixel (water, gel: its median at most the shadow grey) is none, whatever the
+      // depth trend says (a trend fitted to such labels fed itself: every pixel of a phantom
+      // in water became the bright class).
+      out[i] = !in[i]                                                  ? kLabelPixelUnknown
+               : m[i] > shadow_grey && m[i] - offset >= reflector_grey ? by_mean[0].value
+               : dark[i]                                               ? kLabelPixelUnknown
+                                                                       : classify(s[i] - offset);
     }
   };
   auto classify_all = [&] {

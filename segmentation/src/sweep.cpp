@@ -164,6 +164,22 @@ std::size_t unknown_in_sector(const LabelImage& labels, const ImageGeometry& geo
   return count;
 }
 
+// Median-filtered grey levels of the sector's pixels (every kSampleStridePx-th row and column)
+// of the sampled frames: what the label models are learnt from.
+std::vector<std::uint8_t> sector_samples(const acq::SequenceFile& file, const SweepSetup& setup) {
+  std::vector<std::uint8_t> samples;
+  cv::Mat filtered;
+  for (const GreyImage* frame : sampled_frames(file)) {
+    const cv::Mat image(frame->height, frame->width, CV_8U,
+                        const_cast<std::uint8_t*>(frame->pixels.data()));
+    cv::medianBlur(image, filtered, setup.config.median_px);
+    for (int j = 0; j < image.rows; j += kSampleStridePx)
+      for (int i = 0; i < image.cols; i += kSampleStridePx)
+        if (setup.geometry.sector.at(i, j)) samples.push_back(filtered.at<std::uint8_t>(j, i));
+  }
+  return samples;
+}
+
 }  // namespace
 
 Result<ImageGeometry> geometry_from_header(const acq::FieldList& fields) {
@@ -207,10 +223,10 @@ Result<SweepSetup> prepare_sweep(const acq::SequenceFile& file,
                                  const std::filesystem::path& sequence_path,
                                  const std::optional<std::filesystem::path>& config_path,
                                  const std::optional<std::filesystem::path>& calibration_path,
-                                 std::string_view pose_transform) {
+                                 std::string_view pose_transform, std::string_view preset) {
   std::optional<SegmentationConfig> config;
-  if (config_path) {
-    auto read = read_segmentation_config(*config_path);
+  if (config_path || !preset.empty()) {
+    auto read = load_segmentation_config(config_path, preset);
     if (!read) return read.status();
     config = std::move(*read);
   }
@@ -224,7 +240,13 @@ Result<SweepSetup> prepare_sweep(const acq::SequenceFile& file,
       if (auto device_set = acq::read_plus_config(*calibration_path)) coordinates = *device_set;
   }
   auto setup = prepare_sweep(file, sequence_path, config, calibration, pose_transform, coordinates);
-  if (setup && config_path) setup->models_from += " (" + config_path->string() + ")";
+  // "config" from the in-memory overload: name the file and the preset.
+  if (setup && (config_path || !preset.empty()) && setup->models_from.starts_with("config"))
+    setup->models_from.insert(
+        6, " (" +
+               (config_path ? config_path->string() + (preset.empty() ? "" : " over ")
+                            : std::string()) +
+               (preset.empty() ? "" : "preset " + std::string(preset)) + ")");
   // "given" (and a crop note) from the in-memory overload: name the file instead.
   if (setup && calibration_path)
     setup->calibration_from = calibration_path->string() + setup->calibration_from.substr(5);
@@ -325,26 +347,20 @@ Result<SweepSetup> prepare_sweep(const acq::SequenceFile& file,
         setup.config.dynamic_range_db = to_number(*range).value_or(setup.config.dynamic_range_db);
     }
 
-  // Label models: the config's, the header's, or two classes found in the data.
+  // Label models: the config's (refined on the frames when it says so), the header's, or two
+  // classes found in the data.
   if (setup.config.materials.empty()) {
     if (const auto models = header_models(file)) {
       setup.config.background = models->first;
       setup.config.materials = models->second;
       setup.models_from = "header (SonoshapeLabelGreyMean/Std)";
     } else {
-      std::vector<std::uint8_t> samples;
-      cv::Mat filtered;
-      for (const GreyImage* frame : sampled_frames(file)) {
-        const cv::Mat image(frame->height, frame->width, CV_8U,
-                            const_cast<std::uint8_t*>(frame->pixels.data()));
-        cv::medianBlur(image, filtered, setup.config.median_px);
-        for (int j = 0; j < h; j += kSampleStridePx)
-          for (int i = 0; i < w; i += kSampleStridePx)
-            if (setup.geometry.sector.at(i, j)) samples.push_back(filtered.at<std::uint8_t>(j, i));
-      }
-      setup.config = auto_two_class(samples, setup.config);
+      setup.config = auto_two_class(sector_samples(file, setup), setup.config);
       setup.models_from = "two-class k-means on the frames";
     }
+  } else if (setup.config.learn_models) {
+    setup.config = learn_models_from_samples(sector_samples(file, setup), setup.config);
+    setup.models_from += ", learnt from the frames (k-means from the given means)";
   }
   if (const Status valid = setup.config.validate(); !valid) return valid;
   return setup;
@@ -413,6 +429,7 @@ SweepSegmentation segment_sweep(const acq::SequenceFile& file, const SweepSetup&
   for (const std::uint8_t v : setup.geometry.sector.pixels) sector_px += v ? 1 : 0;
   double unknown_sum = 0.0;
   std::size_t segmented = 0;
+  SectorShareCheck shares(setup.geometry.sector);
   std::optional<GraphCutLabeller> labeller;
   if (!labels.perfect && setup.config.method == LabellingMethod::kGraphCut)
     labeller.emplace(setup.config, setup.geometry, setup.config.graph_cut);
@@ -432,6 +449,7 @@ SweepSegmentation segment_sweep(const acq::SequenceFile& file, const SweepSetup&
         : labeller     ? labeller->segment(file.image(k), prior ? &*prior : nullptr, &plane).labels
                        : segment_frame(file.image(k), setup.geometry, setup.config).labels;
     if (labels.on_label_map) labels.on_label_map(k, frame_labels);
+    shares.add(frame_labels);
     {
       std::array<bool, 256> present{};
       for (const std::uint8_t v : frame_labels.pixels) present[v] = true;
@@ -490,6 +508,13 @@ SweepSegmentation segment_sweep(const acq::SequenceFile& file, const SweepSetup&
     if (progress) progress(out.considered);
   }
   out.unknown_fraction = segmented ? unknown_sum / static_cast<double>(segmented) : 0.0;
+  out.dominant_label = shares.dominant_label();
+  if (out.dominant_label && !labels.perfect) {
+    std::map<int, std::string> names;
+    for (const LabelModel& m : setup.config.materials) names[m.label] = m.name;
+    out.dominant_warning = shares.warning(names).value_or("");
+    log_warning("segment: " + out.dominant_warning);
+  }
   // Perfect label frames may show a label the models lack (a bone whose every pixel lies in its
   // own shadow has no grey model): declare it, named as the header names it.
   const auto names = parse_items(file.field("SonoshapeLabels").value_or(""));

@@ -49,7 +49,7 @@ Result<ScanSource> open_replay(const SourceRequest& request, const std::string& 
   if (const Status normal = seg::normalise_recording(*file, path); !normal) return normal;
   auto shared = std::make_shared<const acq::SequenceFile>(std::move(*file));
   auto prepared = seg::prepare_sweep(*shared, path, request.segmentation, request.calibration,
-                                     request.pose_transform);
+                                     request.pose_transform, request.preset);
   if (!prepared) return prepared.status();
   if (const Status sound =
           acq::check_tracked_sweep(*shared, path, prepared->pose_chain->per_frame_names());
@@ -180,11 +180,12 @@ Result<ScanSource> open_sim(const SourceRequest& request, const std::string& pha
 
   seg::SegmentationConfig base;
   setup.models_from = "learnt from " + std::to_string(kModelFrames) + " simulated frames";
-  if (request.segmentation) {
-    auto read = seg::read_segmentation_config(*request.segmentation);
+  if (request.segmentation || !request.preset.empty()) {
+    auto read = seg::load_segmentation_config(request.segmentation, request.preset);
     if (!read) return read.status();
     base = std::move(*read);
-    setup.models_from = request.segmentation->string();
+    setup.models_from =
+        request.segmentation ? request.segmentation->string() : "preset " + request.preset;
   }
   if (base.materials.empty()) {
     for (const auto& m : scenario->phantom.meshes)
@@ -294,9 +295,9 @@ Result<ScanSource> open_v4l2(const SourceRequest& request, const std::string& sp
     return Status::error("--source v4l2: needs --calibration (the probe's ImageToProbe for the " +
                          std::to_string(width_px) + "x" + std::to_string(height_px) +
                          " cropped image: PLUS device-set XML or JSON)");
-  if (!request.segmentation)
+  if (!request.segmentation && request.preset.empty())
     return Status::error(
-        "--source v4l2: needs --segmentation (the label models of this probe "
+        "--source v4l2: needs --segmentation or --preset (the label models of this probe "
         "and preset, docs/segmentation.md)");
   ScanSource source;
   ScanSetup& setup = source.setup;
@@ -308,14 +309,15 @@ Result<ScanSource> open_v4l2(const SourceRequest& request, const std::string& sp
                                       setup.T_probe_image.block<3, 1>(0, 1).norm());
   if (!(spacing_mm > 0.0) || !std::isfinite(spacing_mm))
     return Status::error(setup.calibration_from + ": the ImageToProbe calibration is degenerate");
-  auto config = seg::read_segmentation_config(*request.segmentation);
+  auto config = seg::load_segmentation_config(request.segmentation, request.preset);
   if (!config) return config.status();
+  const std::string models_from =
+      request.segmentation ? request.segmentation->string() : "preset " + request.preset;
   if (config->materials.empty())
-    return Status::error(request.segmentation->string() +
-                         ": no materials; a live source needs the label models");
+    return Status::error(models_from + ": no materials; a live source needs the label models");
   if (const Status valid = config->validate(); !valid) return valid;
   setup.segmentation = std::move(*config);
-  setup.models_from = request.segmentation->string();
+  setup.models_from = models_from;
   auto geometry =
       live_geometry(setup.segmentation, width_px, height_px, spacing_mm, setup.sector_from);
   if (!geometry) return geometry.status();
@@ -386,14 +388,18 @@ Result<ScanSource> open_igtl(const SourceRequest& request, const std::string& en
   setup.sector_from = "the whole image";
   seg::SegmentationConfig config;
   setup.models_from = "two-class k-means on the first frame";
-  if (request.segmentation) {
-    auto read = seg::read_segmentation_config(*request.segmentation);
+  if (request.segmentation || !request.preset.empty()) {
+    auto read = seg::load_segmentation_config(request.segmentation, request.preset);
     if (!read) return read.status();
     config = std::move(*read);
-    setup.models_from = request.segmentation->string();
+    setup.models_from =
+        request.segmentation ? request.segmentation->string() : "preset " + request.preset;
   }
   const bool organs_named = !config.materials.empty();  // by the configuration
-  if (config.materials.empty()) config = seg::auto_two_class(image->image.pixels, config);
+  if (config.materials.empty())
+    config = seg::auto_two_class(image->image.pixels, config);
+  else if (config.learn_models)
+    config = seg::learn_models_from_samples(image->image.pixels, config);
   if (const Status valid = config.validate(); !valid) return valid;
   setup.segmentation = std::move(config);
   for (const seg::LabelModel& m : setup.segmentation.materials)

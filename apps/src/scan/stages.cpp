@@ -1,15 +1,24 @@
 #include "sonoshape/scan/stages.hpp"
 
+#include <map>
 #include <optional>
 #include <stdexcept>
+#include <string>
 #include <utility>
 
+#include "sonoshape/core/log.hpp"
 #include "sonoshape/scan/label_prior.hpp"
 #include "sonoshape/segmentation/contours.hpp"
 
 namespace sonoshape::scan {
 
-SegmenterStage::SegmenterStage(ScanSetup setup) : setup_(std::move(setup)) {
+namespace {
+// Frames segmented before the scan judges whether one label fills most sectors.
+constexpr std::size_t kShareCheckFrames = 10;
+}  // namespace
+
+SegmenterStage::SegmenterStage(ScanSetup setup)
+    : setup_(std::move(setup)), shares_(setup_.geometry.sector) {
   setup_.geometry.check();
   if (const Status valid = setup_.segmentation.validate(); !valid)
     throw std::invalid_argument("segmentation configuration: " + valid.message());
@@ -56,6 +65,12 @@ Result<LabeledSlice> SegmenterStage::segment(const TrackedFrame& frame) {
       scores_.add(seg::compare_labels(*truth, segmentation.labels, g.sector));
       ++scored_frames_;
     }
+  shares_.add(segmentation.labels);
+  if (!shares_warned_ && shares_.frames() >= kShareCheckFrames)
+    if (const auto warning = shares_.warning(label_names())) {
+      log_warning("scan: " + *warning);
+      shares_warned_ = true;
+    }
   repairs_.clear();
   auto slice = seg::make_slice(segmentation.labels, g.sector, g.sector_px, plane,
                                setup_.segmentation.simplify_mm, &repairs_);
@@ -72,6 +87,12 @@ void SegmenterStage::score_against(
 std::optional<seg::LabelComparison> SegmenterStage::scores() const {
   if (scored_frames_ == 0) return std::nullopt;
   return scores_;
+}
+
+std::map<int, std::string> SegmenterStage::label_names() const {
+  std::map<int, std::string> names;
+  for (const seg::LabelModel& m : setup_.segmentation.materials) names[m.label] = m.name;
+  return names;
 }
 
 std::vector<Repair> SegmenterStage::take_repairs() { return std::exchange(repairs_, {}); }

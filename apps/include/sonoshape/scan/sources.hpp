@@ -31,6 +31,9 @@ struct SourceRequest {
   /// learnt from a few rendered frames and their ground truth (a preset of the simulated
   /// probe); replay: the file's header models, else a two-class split of its frames.
   std::optional<std::filesystem::path> segmentation;
+  /// A named set of segmentation settings (seg::segmentation_presets) under `segmentation`'s
+  /// keys; empty: the defaults.
+  std::string preset;
   /// The reconstruction box; default: sim: the phantom's box padded by 10 % of its diagonal;
   /// replay: none (grown from the slices).
   std::optional<Box3> bounds;

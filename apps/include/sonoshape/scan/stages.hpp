@@ -3,9 +3,11 @@
 // frame -> slice) and reconstruction (slices -> meshes), so that the pipeline can be tested
 // with fakes and the engines swapped without touching the threads.
 #include <functional>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <optional>
+#include <string>
 #include <vector>
 
 #include "sonoshape/core/frame.hpp"
@@ -17,6 +19,7 @@
 #include "sonoshape/scan/setup.hpp"
 #include "sonoshape/segmentation/labeller.hpp"
 #include "sonoshape/segmentation/scoring.hpp"
+#include "sonoshape/segmentation/sector_share.hpp"
 
 namespace sonoshape::scan {
 
@@ -40,8 +43,9 @@ class SegmentationStage {
 };
 
 /// The segmentation of segmentation/ (seg::segment_frame + seg::make_slice), as
-/// `sonoshape segment` does it frame by frame. With the graph-cut method, the meshes of the
-/// latest reconstruction update, cut by each new frame's plane, are the cut's prior.
+/// `sonoshape segment` does it frame by frame (with its warning, once, when one label fills
+/// nearly all of most sectors after its first 10 frames). With the graph-cut method, the meshes of
+/// the latest reconstruction update, cut by each new frame's plane, are the cut's prior.
 class SegmenterStage final : public SegmentationStage {
  public:
   /// Throws std::invalid_argument for a setup whose configuration or geometry is invalid.
@@ -56,12 +60,16 @@ class SegmenterStage final : public SegmentationStage {
   std::optional<seg::LabelComparison> scores() const override;
 
  private:
+  std::map<int, std::string> label_names() const;
+
   std::function<std::optional<LabelImage>(std::int64_t)> truth_of_frame_;
   seg::LabelComparison scores_;
   std::size_t scored_frames_ = 0;
   ScanSetup setup_;
   std::vector<Repair> repairs_;                      // of the last segment()
   std::unique_ptr<seg::GraphCutLabeller> labeller_;  // with the graph-cut method
+  seg::SectorShareCheck shares_;  // one label filling nearly all of most sectors: warned once
+  bool shares_warned_ = false;
   std::mutex meshes_mutex_;
   std::shared_ptr<const MeshSet> meshes_;  // of the latest update, for the prior
 };

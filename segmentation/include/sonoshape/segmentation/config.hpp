@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "sonoshape/core/geometry.hpp"
@@ -101,6 +102,11 @@ struct SegmentationConfig {
   /// simplified polygons would not be valid.
   double simplify_mm = 0.3;
 
+  /// The label models above are starting points: prepare_sweep refines them on the recording's
+  /// grey levels (learn_models_from_samples), keeping their names and roles. What a preset
+  /// gives: the kinds of echo it expects, not the grey levels of one scanner's settings.
+  bool learn_models = false;
+
   LabellingMethod method = LabellingMethod::kThreshold;
   GraphCutOptions graph_cut;
 
@@ -121,6 +127,22 @@ Result<SegmentationConfig> parse_segmentation_config(const std::string& json_tex
                                                      const std::string& source_name);
 /// Reads a JSON configuration file.
 Result<SegmentationConfig> read_segmentation_config(const std::filesystem::path& path);
+
+/// A named set of configuration settings for what a kind of recording holds (docs/segmentation.md,
+/// "Presets"): `json` holds the keys it sets, in the configuration's JSON form.
+struct SegmentationPreset {
+  std::string name;
+  std::string summary;  ///< one line for --help and messages
+  std::string json;
+};
+/// The presets: soft-tissue (the defaults), wires, water-tank, bone.
+const std::vector<SegmentationPreset>& segmentation_presets();
+/// The configuration of `preset` (empty: the defaults), with the keys of the JSON file at
+/// `path` (when given) over it: a key the file gives replaces the preset's (its "labels" all of
+/// the preset's labels), "graph_cut" key by key. Fails for an unknown preset (naming the known
+/// ones) and as read_segmentation_config does.
+Result<SegmentationConfig> load_segmentation_config(
+    const std::optional<std::filesystem::path>& path, std::string_view preset);
 /// The JSON form of a configuration (round trips through parse_segmentation_config).
 std::string to_json(const SegmentationConfig& config);
 
@@ -129,6 +151,13 @@ std::string to_json(const SegmentationConfig& config);
 /// std::invalid_argument otherwise). Other parameters are copied from `base`.
 SegmentationConfig learn_label_models(const GreyImage& image, const LabelImage& labels,
                                       const SegmentationConfig& base = {});
+
+/// The models of `base` (background and materials) refined on the grey levels of `samples` (any
+/// pixels of the sector) by k-means started from their grey means: each model's mean and spread
+/// become those of the samples nearest it (ids, names and thickness kept; a model no sample is
+/// nearest keeps its own). Used for a configuration with learn_models.
+SegmentationConfig learn_models_from_samples(const std::vector<std::uint8_t>& samples,
+                                             const SegmentationConfig& base);
 
 /// A two-class model for data nobody has labelled: the grey levels of `samples` (any pixels of
 /// the sector) split in two by k-means; the darker class is the background and the brighter

@@ -19,6 +19,7 @@
 #include "sonoshape/segmentation/config.hpp"
 #include "sonoshape/segmentation/labeller.hpp"
 #include "sonoshape/segmentation/scoring.hpp"
+#include "sonoshape/segmentation/sector_share.hpp"
 #include "sonoshape/segmentation/segmenter.hpp"
 
 namespace sonoshape::seg {
@@ -50,8 +51,10 @@ Result<ImageGeometry> geometry_from_header(const acq::FieldList& fields);
 Result<Eigen::Matrix4d> read_calibration(const std::filesystem::path& path);
 
 /// Resolves the setup of a sweep read from `sequence_path`:
-/// - models: `config_path` when given (its materials; when it has none, the header's), else the
-///   header's SonoshapeLabelGreyMean/Std, else auto_two_class on the frames;
+/// - models: `config_path` and `preset` when given (load_segmentation_config: the file's keys
+///   over the preset's; its materials, refined on the frames with learn_models; when it has
+///   none, the header's), else the header's SonoshapeLabelGreyMean/Std, else auto_two_class on
+///   the frames;
 /// - calibration: `calibration_path`, else the header's ImageToProbeTransform, else the
 ///   sidecar `<name>.plus.xml` next to the file; fails saying how to give one;
 /// - sector: the config's choice; by default the header's probe, else found from the frames;
@@ -62,7 +65,8 @@ Result<SweepSetup> prepare_sweep(const acq::SequenceFile& file,
                                  const std::filesystem::path& sequence_path,
                                  const std::optional<std::filesystem::path>& config_path,
                                  const std::optional<std::filesystem::path>& calibration_path,
-                                 std::string_view pose_transform = {});
+                                 std::string_view pose_transform = {},
+                                 std::string_view preset = {});
 /// The same from an in-memory configuration (no file), for tests and tools; `config` replaces
 /// the defaults but its empty materials are still taken from the header. `coordinates`: fixed
 /// transforms for the pose chain (a device set's).
@@ -111,6 +115,11 @@ struct SweepSegmentation {
   /// region of it (a label with frames but no slices lost every region to the repairs).
   std::map<int, std::size_t> frames_with_label;
   std::map<int, std::size_t> slices_with_label;
+  /// SectorShareCheck over the segmented frames: the label (kLabelPixelUnknown for unknown) that
+  /// fills nearly all of most sectors and the warning segment_sweep logged about it; none when
+  /// no label does.
+  std::optional<int> dominant_label;
+  std::string dominant_warning;
   /// With ReadOptions::strict: the first repair as an error ("frame 12, unknown: ..."), after
   /// which the sweep stopped; empty otherwise.
   std::string refused;
@@ -138,7 +147,8 @@ struct SweepLabels {
 using SweepProgress = std::function<void(std::size_t done)>;
 
 /// Segments every `every`-th frame (from frame 0) of `file` into one slice each (in the
-/// reference frame, fov = the sector, timestamp from the file). A frame whose polygons needed a
+/// reference frame, fov = the sector, timestamp from the file). When one label fills nearly all
+/// of most sectors (SectorShareCheck), one warning says so. A frame whose polygons needed a
 /// repair logs one warning naming the frame and what was dropped; with `options.strict` the
 /// first such frame stops the sweep instead (SweepSegmentation::refused). Throws
 /// std::invalid_argument when `every` < 1, the frames do not match the setup's geometry, or a
