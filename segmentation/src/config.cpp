@@ -15,6 +15,8 @@
 #include <string_view>
 #include <utility>
 
+#include "sonoshape/core/input_file.hpp"
+
 namespace sonoshape::seg {
 namespace {
 
@@ -281,13 +283,9 @@ Result<SegmentationConfig> parse_segmentation_config(const std::string& json_tex
 }
 
 Result<SegmentationConfig> read_segmentation_config(const std::filesystem::path& path) {
-  std::ifstream in(path);
-  if (!in)
-    return Status::error("cannot read the segmentation config " + path.string() +
-                         ": check the path");
-  std::ostringstream text;
-  text << in.rdbuf();
-  return parse_segmentation_config(text.str(), path.string());
+  Result<std::string> text = read_input_file(path, "the segmentation config");
+  if (!text) return text.status();
+  return parse_segmentation_config(*text, path.string());
 }
 
 std::string to_json(const SegmentationConfig& c) {
