@@ -42,7 +42,9 @@ Status check_tcp_port(const std::string& endpoint, const std::string& role,
   const std::string scheme = "tcp://";
   if (endpoint.compare(0, scheme.size(), scheme) != 0) return Status::ok();
   const std::size_t colon = endpoint.rfind(':');
-  const std::string port = colon > scheme.size() ? endpoint.substr(colon + 1) : std::string();
+  // No port at all: ZeroMQ refuses it, and endpoint_error says how to write one.
+  if (colon < scheme.size()) return Status::ok();
+  const std::string port = endpoint.substr(colon + 1);
   if (port == "*") return Status::ok();
   int number = -1;
   const auto [end, ec] = std::from_chars(port.data(), port.data() + port.size(), number);
