@@ -319,4 +319,27 @@ TEST_F(HostileInput, SegmentRefusesACalibrationFileWithTwoConflictingTransforms)
                      "delete the other"});
 }
 
+// Issue 40: `scan --source replay:` accepted mirrored, projective and 1e13 mm poses that
+// `segment` refuses. One check serves both: each command refuses each pose, naming the frame.
+TEST_F(HostileInput, ReplayAndSegmentRefuseTheSamePoses) {
+  simulate_sweep();
+  const struct {
+    const char* name;
+    const char* matrix;
+    const char* problem;
+  } poses[] = {{"mirrored", "-1 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1", "not a rotation"},
+               {"projective", "1 0 0 0 0 1 0 0 0 0 1 0 0 0.1 0 1", "last row is not 0 0 0 1"},
+               {"far", "1 0 0 1e13 0 1 0 0 0 0 1 0 0 0 0 1", "translation is 1e+13 mm"}};
+  for (const auto& pose : poses) {
+    const std::string sweep = patched_sweep(
+        std::string(pose.name) + ".igs.mha", "Seq_Frame0002_ProbeToTrackerTransform = [^\n]+",
+        std::string("Seq_Frame0002_ProbeToTrackerTransform = ") + pose.matrix);
+    const Outcome segment = run("segment " + sweep + " -o " + path("s.json"));
+    expect_error(segment, {sweep, "frame 2: ProbeToTrackerTransform", pose.problem});
+    const Outcome scan = run("scan --source replay:" + sweep + " --fast -o " +
+                             path(std::string("scan_") + pose.name));
+    expect_error(scan, {sweep, "frame 2: ProbeToTrackerTransform", pose.problem});
+  }
+}
+
 }  // namespace

@@ -75,16 +75,17 @@ std::vector<PolygonWithHoles> split(std::vector<PolygonWithHoles> pieces,
   return pieces;
 }
 
-double round7(const EK::FT& value) {
+// `value` times `scale`, rounded to `decimals` as a file with that many decimals writes it.
+double rounded(const EK::FT& value, double scale = 1.0, int decimals = 7) {
   char text[64];
-  std::snprintf(text, sizeof text, "%.7f", CGAL::to_double(value));
+  std::snprintf(text, sizeof text, "%.*f", decimals, scale * CGAL::to_double(value));
   return std::strtod(text, nullptr);
 }
 
-Ring2 rounded_ring(const Polygon& polygon) {
+Ring2 rounded_ring(const Polygon& polygon, double scale = 1.0, int decimals = 7) {
   Ring2 ring;
   for (auto p = polygon.vertices_begin(); p != polygon.vertices_end(); ++p)
-    ring.emplace_back(round7(p->x()), round7(p->y()));
+    ring.emplace_back(rounded(p->x(), scale, decimals), rounded(p->y(), scale, decimals));
   return ring;
 }
 
@@ -103,26 +104,27 @@ std::map<int, double> material_areas() {
 // A stack of z-slices through a disc of material 1 above a wavy line and 2 below it; a
 // labelling tool emits each material as tiles cut at vertical lines (their position drifts from
 // slice to slice), which puts tile corners on the other material's wavy edge. Coordinates are
-// rounded to 7 decimals, as a file writes them.
-SliceSet wavy_disc_set() {
+// rounded to 7 decimals, as a file writes them. With `scale`, every length is multiplied by it
+// and rounded to `decimals` (a set in metres: 1e-3 and 10; in micrometres: 1e3 and 4).
+SliceSet wavy_disc_set(double scale = 1.0, int decimals = 7) {
   SliceSet set;
   set.labels = {{1, "upper"}, {2, "lower"}};
-  set.bounds =
-      Box3{Vec3(-12.0, -12.0, -kBoxGap), Vec3(12.0, 12.0, (kSlices - 1) * kSpacing + kBoxGap)};
+  set.bounds = Box3{scale * Vec3(-12.0, -12.0, -kBoxGap),
+                    scale * Vec3(12.0, 12.0, (kSlices - 1) * kSpacing + kBoxGap)};
   for (int i = 0; i < kSlices; ++i) {
     std::vector<PolygonWithHoles> top, bottom;
     CGAL::intersection(disc(), above_wave(), std::back_inserter(top));
     CGAL::difference(disc(), above_wave(), std::back_inserter(bottom));
     LabeledSlice slice;
-    slice.origin_mm = Vec3(0.0, 0.0, i * kSpacing);
+    slice.origin_mm = Vec3(0.0, 0.0, scale * i * kSpacing);
     for (const auto& [label, pieces] : {std::pair{1, split(top, {3.9 + 0.0131 * i})},
                                         {2, split(bottom, {-4.3 + 0.0173 * i, 0.37 + 0.0119 * i})}})
       for (const PolygonWithHoles& piece : pieces) {
         Region region;
         region.label = label;
-        region.outer = rounded_ring(piece.outer_boundary());
+        region.outer = rounded_ring(piece.outer_boundary(), scale, decimals);
         for (auto h = piece.holes_begin(); h != piece.holes_end(); ++h)
-          region.holes.push_back(rounded_ring(*h));
+          region.holes.push_back(rounded_ring(*h, scale, decimals));
         slice.regions.push_back(std::move(region));
       }
     set.slices.push_back(std::move(slice));
@@ -130,21 +132,22 @@ SliceSet wavy_disc_set() {
   return set;
 }
 
-std::string fixed7(double value) {
+std::string fixed7(double value, int decimals = 7) {
   char text[64];
-  std::snprintf(text, sizeof text, "%.7f", value);
+  std::snprintf(text, sizeof text, "%.*f", decimals, value);
   return text;
 }
 
-// The set as a .slices.json file writes it with 7 decimals.
-std::string json_7_decimals(const SliceSet& set) {
-  auto ring_text = [](const Ring2& ring) {
+// The set as a .slices.json file writes it with 7 decimals (or `decimals`).
+std::string json_7_decimals(const SliceSet& set, int decimals = 7) {
+  auto fixed7 = [decimals](double value) { return sonoshape::fixed7(value, decimals); };
+  auto ring_text = [&](const Ring2& ring) {
     std::string out = "[";
     for (std::size_t k = 0; k < ring.size(); ++k)
       out += (k ? ", [" : "[") + fixed7(ring[k].x()) + ", " + fixed7(ring[k].y()) + "]";
     return out + "]";
   };
-  auto vec_text = [](const Vec3& v) {
+  auto vec_text = [&](const Vec3& v) {
     return "[" + fixed7(v.x()) + ", " + fixed7(v.y()) + ", " + fixed7(v.z()) + "]";
   };
   std::string out = R"({"format": "sonoshape-slices", "version": 1, "units": "mm",
@@ -320,6 +323,30 @@ TEST(RoundingOverlap, SnappedSetReconstructsToTheIntendedPrisms) {
                 volume, intended, volume / intended);
     EXPECT_NEAR(volume / intended, 1.0, 0.03);
   }
+}
+
+// The rounding tolerance is relative to the slice's extent, not 1e-6 in the file's units
+// (scripts/mutate: rounding-tolerance-absolute): the same set in micrometres, written with the
+// same relative precision (4 decimals), is snapped as the set in mm is; in metres (10 decimals)
+// too, and an overlap of 8e-6 of the slice's extent stays an error there as it does in mm.
+TEST(RoundingOverlap, TheToleranceScalesWithTheSetInMetresOrMicrometres) {
+  for (const auto& [scale, decimals] : {std::pair{1e3, 4}, std::pair{1e-3, 10}}) {
+    SCOPED_TRACE("scale " + std::to_string(scale));
+    const SliceSet set = wavy_disc_set(scale, decimals);
+    EXPECT_GE(overlapping_pairs(set), 5);
+    const auto read = parse_slice_set_json(json_7_decimals(set, decimals), "wavy.slices.json");
+    ASSERT_TRUE(read) << read.message();
+    EXPECT_GE(read->repairs.size(), 3u);
+    EXPECT_EQ(overlapping_pairs(*read), 0);
+  }
+  // Two squares of 0.01 a side (metres) overlapping by 2e-7: no rounding of 7 or more digits.
+  const std::string text = R"({"format": "sonoshape-slices", "version": 1, "slices": [
+    {"origin": [0, 0, 0], "u": [1, 0, 0], "v": [0, 1, 0], "regions": [
+      {"label": 1, "polygon": [[0, 0], [0.01, 0], [0.01, 0.01], [0, 0.01]]},
+      {"label": 2, "polygon": [[0.0099998, 0], [0.02, 0], [0.02, 0.01], [0.0099998, 0.01]]}]}]})";
+  const auto metres = parse_slice_set_json(text, "metres.slices.json");
+  ASSERT_FALSE(metres);
+  EXPECT_NE(metres.message().find("overlap by"), std::string::npos) << metres.message();
 }
 
 }  // namespace

@@ -107,6 +107,12 @@ Result<NrrdHeader> parse_header(const std::filesystem::path& path, const std::st
     } else if (colon != std::string_view::npos) {
       entry.name = canonical_field_name(trim(line.substr(0, colon)));
       entry.value = std::string(trim(line.substr(colon + 1)));
+      // The NRRD format gives each field once: of two 'sizes:', which one the pixels follow
+      // is anyone's guess.
+      if (const HeaderEntry* first = header.field(entry.name))
+        return fail(
+            path, where(entry) + " repeats the field of header line " + std::to_string(first->line),
+            "a NRRD header gives each field once; remove one of the two lines");
       header.fields.push_back(std::move(entry));
     } else {
       return fail(path,

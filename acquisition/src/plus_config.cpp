@@ -6,6 +6,7 @@
 #include <sstream>
 
 #include "sonoshape/acquisition/sequence_file.hpp"
+#include "sonoshape/core/input_file.hpp"
 
 namespace sonoshape::acq {
 
@@ -65,6 +66,7 @@ Result<Eigen::Matrix4d> PlusConfig::transform(const std::string& from,
 
 Result<PlusConfig> read_plus_config(const std::filesystem::path& path) {
   const std::string where = "PLUS configuration " + path.string();
+  if (Status file = check_input_file(path, "PLUS configuration"); !file) return file;
   pugi::xml_document doc;
   const pugi::xml_parse_result parsed = doc.load_file(path.c_str());
   if (!parsed)

@@ -15,6 +15,7 @@
 #include <stdexcept>
 
 #include "sequence_text.hpp"
+#include "sonoshape/core/input_file.hpp"
 
 namespace sonoshape::acq {
 namespace {
@@ -256,10 +257,9 @@ Result<std::string> read_element_data_file(const std::filesystem::path& header,
 }  // namespace detail
 
 Result<SequenceFile> read_sequence_file(const std::filesystem::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return fail(path, "cannot open it", "check the path and that the file is readable");
-  std::string data((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  if (in.bad()) return fail(path, "read error", "check the disk and the file");
+  Result<std::string> bytes = read_input_file(path, "sequence file");
+  if (!bytes) return bytes.status();
+  const std::string data = std::move(*bytes);
   // The content decides, not the name: PLUS writes both formats as .igs.*, Slicer as .seq.nrrd,
   // and users rename files.
   if (std::string_view(data).substr(0, 7) == "NRRD000")
@@ -536,6 +536,9 @@ bool is_plus_orientation(std::string_view code) {
   return code.size() == 2 || code[2] == 'A' || code[2] == 'D';
 }
 
+// The farthest a pose may place the probe from the tracker's origin: 1 km.
+constexpr double kMaxPoseDistanceMm = 1e6;
+
 // A tracker pose maps rigidly: rotation part orthonormal with determinant +1 (to 1e-3, what
 // six-digit matrices in files keep), last row 0 0 0 1.
 std::optional<std::string> rigid_problem(const Eigen::Matrix4d& m) {
@@ -548,6 +551,14 @@ std::optional<std::string> rigid_problem(const Eigen::Matrix4d& m) {
     std::ostringstream text;
     text << "its rotation part is not a rotation (R^T R differs from the identity by " << off
          << ", determinant " << r.determinant() << ")";
+    return text.str();
+  }
+  // A tracker's volume is metres across: a pose a kilometre away is in other units or damaged,
+  // and would put the slice where no bounds can follow it.
+  if (const double distance_mm = m.block<3, 1>(0, 3).norm(); distance_mm > kMaxPoseDistanceMm) {
+    std::ostringstream text;
+    text << "its translation is " << distance_mm << " mm from the tracker's origin (more than "
+         << kMaxPoseDistanceMm << " mm: not millimetres, or a damaged matrix)";
     return text.str();
   }
   return std::nullopt;

@@ -11,6 +11,7 @@
 #include <charconv>
 #include <chrono>
 #include <cmath>
+#include <cstdint>
 #include <cstring>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -75,6 +76,9 @@ bool parse_ints(std::string_view text, char separator, std::vector<int>& values)
   return true;
 }
 
+// The largest image side a capture card is taken to give (V4L2 drivers stop at 8192).
+constexpr int kMaxSidePx = 16384;
+
 Status spec_error(const std::string& spec, const std::string& what) {
   return Status::error("--source v4l2:" + spec + ": " + what + "; " + kSpecForm);
 }
@@ -91,6 +95,10 @@ Status apply_spec_item(const std::string& spec, std::string_view item, V4l2Optio
     if (!parse_ints(value, 'x', numbers) || numbers.size() != 2 || numbers[0] <= 0 ||
         numbers[1] <= 0)
       return spec_error(spec, "size=" + value + " is not WIDTHxHEIGHT in pixels (e.g. 1280x720)");
+    // Checked before anything is sized from it: 99999999x99999999 ended in a bare bad_alloc.
+    if (numbers[0] > kMaxSidePx || numbers[1] > kMaxSidePx)
+      return spec_error(spec, "size=" + value + " is larger than any capture device gives (" +
+                                  std::to_string(kMaxSidePx) + " pixels a side at most)");
     options.width_px = numbers[0];
     options.height_px = numbers[1];
   } else if (key == "format") {
@@ -117,6 +125,10 @@ Status apply_spec_item(const std::string& spec, std::string_view item, V4l2Optio
         numbers[1] < 0 || numbers[2] <= 0 || numbers[3] <= 0)
       return spec_error(
           spec, "crop=" + value + " is not X,Y,WIDTH,HEIGHT in pixels (a non-empty rectangle)");
+    if (numbers[0] + std::int64_t{numbers[2]} > kMaxSidePx ||
+        numbers[1] + std::int64_t{numbers[3]} > kMaxSidePx)
+      return spec_error(spec, "crop=" + value + " reaches beyond any capture device's image (" +
+                                  std::to_string(kMaxSidePx) + " pixels a side at most)");
     options.crop = PixelRect{numbers[0], numbers[1], numbers[2], numbers[3]};
   } else if (key == "buffers") {
     if (!parse_int(value, options.buffer_count) || options.buffer_count < kMinBuffers)

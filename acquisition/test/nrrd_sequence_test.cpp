@@ -493,3 +493,22 @@ TEST(NrrdSequence, RequireTrackingNamesTheTransformsAFileHas) {
 
 }  // namespace
 }  // namespace sonoshape::acq
+
+namespace sonoshape::acq {
+namespace {
+
+// Issue 40: `sizes:` given twice was accepted (the later one taken); the format gives each field
+// once, and which one the pixels follow cannot be told.
+TEST(NrrdSequence, AFieldGivenTwiceIsRefusedNamingBothLines) {
+  const SyntheticFrames f = make_frames();
+  const auto path = temp_path("twice.seq.nrrd");
+  write_file(path, slicer_header(kListLast + "sizes: 7 5 1 2\nencoding: raw\n", kTimes) + "\n",
+             frames_last(f));
+  const auto file = read_sequence_file(path);
+  ASSERT_FALSE(file);
+  expect_contains(file.message(), path.string());
+  expect_contains(file.message(), "'sizes' repeats the field of header line 7");
+}
+
+}  // namespace
+}  // namespace sonoshape::acq

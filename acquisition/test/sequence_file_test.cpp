@@ -200,7 +200,8 @@ TEST(SequenceFile, MalformedHeadersGiveClearErrors) {
            "ElementDataFile = frames_absent.raw: cannot open");
   const auto missing = read_sequence_file(temp_path("does_not_exist.mha"));
   ASSERT_FALSE(missing);
-  contains(missing.message(), "cannot open");
+  contains(missing.message(), "cannot read sequence file " +
+                                  temp_path("does_not_exist.mha").string() + ": no such file");
 }
 
 // What `segment` checks before using a sweep (issue 27): orientation, timestamps, rigid poses.

@@ -104,6 +104,9 @@ TEST(V4l2Spec, RejectsBadValuesNamingTheKey) {
       {"/dev/video0?buffers=2", "buffers=2"},
       {"/dev/video0?colour=1", "unknown key 'colour'"},
       {"/dev/video0?size", "'size'"},
+      // Issue 40: a bare std::bad_alloc before any device opened.
+      {"/dev/video0?size=99999999x99999999", "size=99999999x99999999 is larger than any capture"},
+      {"/dev/video0?crop=0,0,99999999,5", "crop=0,0,99999999,5 reaches beyond"},
   };
   for (const auto& [spec, expected] : cases) {
     const auto options = parse_v4l2_spec(spec);

@@ -14,6 +14,15 @@ namespace sonoshape::apps {
 namespace {
 
 int run_keys(const std::filesystem::path& base) {
+  // An empty NAME, or one that ends in a folder ("keys/"), would write the hidden files .key and
+  // .pub: a name is needed.
+  const std::string name = base.filename().string();
+  if (name.empty() || name == "." || name == "..") {
+    std::cerr << "error: keys -o '" << base.string()
+              << "' names no file: give NAME (or DIR/NAME) to write NAME.key and NAME.pub, e.g. "
+                 "-o scanner\n";
+    return 1;
+  }
   Result<publish::CurveKeyPair> keys = publish::generate_curve_keypair();
   if (!keys) {
     std::cerr << "error: " << keys.message() << '\n';

@@ -64,6 +64,8 @@ struct Tally {
   std::string scan;
   std::vector<std::string> scans;
   std::map<int, std::uint64_t> meshes;
+  // Mesh messages of labels beyond the first kMaxStreamLabels of the run: not written.
+  std::uint64_t meshes_over_label_limit = 0;
   std::optional<std::string> last_state;
   std::string stopped_by = "signal";
   std::optional<std::string> setup_error;  // why the subscription failed (stopped_by setup_error)
@@ -102,6 +104,7 @@ Status write_summary(const ListenOptions& options, const Tally& tally, double du
   ordered_json meshes = ordered_json::object();
   for (const auto& [label, count] : tally.meshes) meshes[std::to_string(label)] = count;
   summary["meshes"] = meshes;
+  summary["meshes_over_label_limit"] = tally.meshes_over_label_limit;
   summary["slices"] = tally.slices;
   summary["statuses"] = tally.statuses;
   summary["frame_images"] = tally.frame_images;
@@ -116,6 +119,27 @@ Status write_summary(const ListenOptions& options, const Tally& tally, double du
   out.flush();
   if (!out) return Status::error("cannot write " + path.string() + "; check the folder");
   return Status::ok();
+}
+
+// Writes the newest mesh of its label, for the first kMaxStreamLabels labels: a publisher with
+// thousands of labels would otherwise fill the folder with one file each.
+void record_mesh(const ListenOptions& options, const publish::MeshUpdate& mesh, Tally& tally) {
+  if (!tally.meshes.count(mesh.label) &&
+      tally.meshes.size() >= static_cast<std::size_t>(publish::kMaxStreamLabels)) {
+    if (tally.meshes_over_label_limit++ == 0)
+      log_warning("listen: the stream carries more than " +
+                  std::to_string(publish::kMaxStreamLabels) + " mesh labels; label " +
+                  std::to_string(mesh.label) +
+                  " and further ones are not written (counted in summary.json as "
+                  "meshes_over_label_limit; said once)");
+    return;
+  }
+  ++tally.meshes[mesh.label];
+  const auto path = options.output / ("label_" + std::to_string(mesh.label) + ".ply");
+  if (Status written = write_mesh_atomically(mesh.mesh, path); !written) {
+    ++tally.write_errors;
+    std::cerr << "error: " << written.message() << '\n';
+  }
 }
 
 int run_listen(const ListenOptions& options) {
@@ -138,7 +162,12 @@ int run_listen(const ListenOptions& options) {
   publish::SubscriberOptions subscriber_options;
   subscriber_options.endpoint = options.endpoint;
   subscriber_options.snapshot_endpoint = options.snapshot;
-  subscriber_options.snapshot_timeout_ms = kSnapshotTimeoutMs;
+  // --duration counts from here: the wait for the publisher and its snapshot is part of it.
+  const Stopwatch clock;
+  subscriber_options.snapshot_timeout_ms =
+      options.duration_s > 0.0
+          ? static_cast<int>(std::min<double>(kSnapshotTimeoutMs, options.duration_s * 1000.0 + 1))
+          : kSnapshotTimeoutMs;
   subscriber_options.receive_hwm = options.receive_hwm;
   if (!options.server_key.empty()) {
     Result<std::string> key = publish::read_curve_key(options.server_key, "public");
@@ -168,7 +197,6 @@ int run_listen(const ListenOptions& options) {
            (options.snapshot.empty() ? "" : " (snapshot from " + options.snapshot + ")") +
            "; writing to " + options.output.string());
 
-  const Stopwatch clock;
   Tally tally;
   // Messages before the snapshot's `end` are the snapshot: newest state, not a seq run.
   bool in_snapshot = !options.snapshot.empty();
@@ -235,12 +263,7 @@ int run_listen(const ListenOptions& options) {
       }
 
       if (const auto* mesh = std::get_if<publish::MeshUpdate>(&message.body)) {
-        ++tally.meshes[mesh->label];
-        const auto path = options.output / ("label_" + std::to_string(mesh->label) + ".ply");
-        if (Status written = write_mesh_atomically(mesh->mesh, path); !written) {
-          ++tally.write_errors;
-          std::cerr << "error: " << written.message() << '\n';
-        }
+        record_mesh(options, *mesh, tally);
       } else if (std::holds_alternative<publish::SliceUpdate>(message.body)) {
         ++tally.slices;
       } else if (std::holds_alternative<publish::FrameImage>(message.body)) {

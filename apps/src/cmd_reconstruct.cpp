@@ -2,6 +2,8 @@
 // slice by slice through the online engine (recon::Reconstructor).
 #include <CLI/CLI.hpp>
 #include <algorithm>
+#include <cerrno>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
@@ -83,9 +85,13 @@ nlohmann::json meshes_json(const MeshSet& meshes) {
 int write_json(const nlohmann::json& j, const std::string& path) {
   std::ofstream out(path);
   out << j.dump(2) << '\n';
+  // Flushed here, not in the destructor: a full disk (/dev/full) fails the flush, and a stats
+  // file that was not written must not end in exit 0.
+  out.flush();
   if (!out) {
-    std::cerr << "error: cannot write stats to " << path
-              << ": check the directory exists and is writable\n";
+    const int error = errno;
+    std::cerr << "error: cannot write stats to " << path << ": " << std::strerror(error)
+              << "; check the directory exists and is writable, and free disk space\n";
     return 2;
   }
   return 0;

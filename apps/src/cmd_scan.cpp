@@ -716,6 +716,15 @@ int run_scan(const ScanCommandOptions& options, const Resume* resume) {
 #ifdef SONOSHAPE_WITH_OPENIGTLINK
   if (igtl) log_info("scan: " + static_cast<const scan::IgtlSink&>(*igtl).describe());
 #endif
+  // A full disk: the scan went on, but what it says it wrote must be true (issue 40, D1).
+  if (!summary.incomplete_outputs.empty()) {
+    std::cerr << "error: scan: the output in " << options.out.string() << " is incomplete:\n";
+    for (const std::string& missing : summary.incomplete_outputs)
+      std::cerr << "  " << missing << '\n';
+    std::cerr << "free space on the disk of --out, then run `sonoshape scan --resume "
+              << options.out.string() << "`: it rebuilds the scan from the journal's keyframes\n";
+    return 1;
+  }
   if (!options.out.empty())
     log_info("scan: meshes, slices.json and scan.json in " + options.out.string());
 #ifdef SONOSHAPE_WITH_VIEWER

@@ -86,6 +86,18 @@ void place(std::vector<sim::LabeledMesh>& meshes, double size_mm, bool row) {
   for (auto& m : meshes) transform(m.mesh, 1.0, Vec3::Zero(), Vec3(-0.5 * row_length, 0.0, 0.0));
 }
 
+std::string join_specs(const std::vector<std::string>& specs) {
+  std::string out;
+  for (const std::string& spec : specs) out += (out.empty() ? "" : ", ") + spec;
+  return out;
+}
+
+std::string vec_text(const Vec3& v) {
+  std::ostringstream out;
+  out << '(' << v.x() << ", " << v.y() << ", " << v.z() << ')';
+  return out.str();
+}
+
 int run_slice(const SliceOptions& options) {
   std::vector<sim::LabeledMesh> meshes;
   for (const std::string& text : options.meshes) {
@@ -131,6 +143,15 @@ int run_slice(const SliceOptions& options) {
     for (const Region& r : slice.regions) holes += r.holes.size();
     if (slice.regions.empty()) ++empty;
     set.slices.push_back(std::move(slice));
+  }
+  // No region on any plane: the set would say "nothing there" about meshes that are there.
+  if (regions == 0 && !set.slices.empty()) {
+    std::cerr << "error: none of the " << set.slices.size() << " planes cuts a region out of "
+              << join_specs(options.meshes) << " (their box: min " << vec_text(objects.min)
+              << ", max " << vec_text(objects.max)
+              << " mm): a mesh whose triangles all have zero area, or one vertex far from the "
+                 "others, leaves nothing to slice; check the mesh files\n";
+    return 1;
   }
   if (options.unknown_fraction > 0.0 || options.fov != "none") {
     sim::UnknownOptions unknowns;

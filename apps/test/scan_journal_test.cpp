@@ -3,11 +3,14 @@
 // of the keyframes and the held ones are written once it has room, and atomic file writes.
 #include <gtest/gtest.h>
 #include <unistd.h>
+#include <zlib.h>
 
 #include <cerrno>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
+#include <string>
+#include <vector>
 
 #include "sonoshape/scan/journal.hpp"
 #include "sonoshape/testing/temp_dir.hpp"
@@ -167,6 +170,89 @@ TEST(ScanJournal, WriteFileAtomicallyReplacesWholeAndLeavesNoTemporaryFile) {
   const Status missing = write_file_atomically(dir.path() / "no" / "such" / "scan.json", "x");
   ASSERT_FALSE(missing);
   EXPECT_NE(missing.message().find("cannot create"), std::string::npos) << missing.message();
+}
+
+}  // namespace
+}  // namespace sonoshape::scan
+
+namespace sonoshape::scan {
+namespace {
+
+std::uint32_t u32_at(const std::string& bytes, std::size_t at) {
+  std::uint32_t value = 0;
+  for (int k = 3; k >= 0; --k) value = (value << 8) | static_cast<unsigned char>(bytes[at + k]);
+  return value;
+}
+
+// The whole records of a journal (length, CRC and payload each), after its 16-byte header.
+std::vector<std::string> records_of(const std::string& bytes) {
+  std::vector<std::string> records;
+  for (std::size_t at = 16; at + 8 <= bytes.size();) {
+    const std::size_t size = 8 + u32_at(bytes, at);
+    records.push_back(bytes.substr(at, size));
+    at += size;
+  }
+  return records;
+}
+
+// A well-formed record (right length and CRC) around `payload`.
+std::string record_of(const std::string& payload) {
+  std::string out;
+  const auto put = [&](std::uint32_t value) {
+    for (int k = 0; k < 4; ++k) out.push_back(static_cast<char>((value >> (8 * k)) & 0xff));
+  };
+  put(static_cast<std::uint32_t>(payload.size()));
+  put(static_cast<std::uint32_t>(
+      crc32(0, reinterpret_cast<const Bytef*>(payload.data()), static_cast<uInt>(payload.size()))));
+  return out + payload;
+}
+
+// Issue 40: a journal with a repeated keyframe record resumed to 51 slices instead of 50, a
+// keyframe after an `end` record was taken, and a record `[1]` failed with
+// "[json.exception.type_error.306] ...". Each record has its CRC right: only its content lies.
+TEST(ScanJournal, RepeatedKeyframesKeyframesAfterTheEndAndNonObjectRecordsAreRefused) {
+  testing::TempDir dir;
+  const fs::path path = dir.path() / kJournalName;
+  auto journal = KeyframeJournal::create(path, {"--source", "sim:default"});
+  ASSERT_TRUE(journal) << journal.message();
+  for (int k = 0; k < 3; ++k) ASSERT_TRUE((*journal)->append(keyframe(k)));
+  ASSERT_TRUE((*journal)->finish(3));
+  journal->reset();
+  const std::string bytes = bytes_of(path);
+  const std::string header = bytes.substr(0, 16);
+  const std::vector<std::string> r = records_of(bytes);  // scan, 3 keyframes, end
+  ASSERT_EQ(r.size(), 5u);
+  const auto read_of = [&](const std::vector<std::string>& records) {
+    std::string crafted = header;
+    for (const std::string& record : records) crafted += record;
+    std::ofstream(path, std::ios::binary | std::ios::trunc) << crafted;
+    return read_journal(path);
+  };
+  const auto whole = read_of(r);
+  ASSERT_TRUE(whole) << whole.message();
+  EXPECT_EQ(whole->keyframes.size(), 3u);
+
+  const auto repeated = read_of({r[0], r[1], r[2], r[2], r[3], r[4]});
+  ASSERT_FALSE(repeated);
+  EXPECT_NE(repeated.message().find("record 3 at byte"), std::string::npos) << repeated.message();
+  EXPECT_NE(repeated.message().find("keyframe \"n\" is 1 but 2 keyframes come before it"),
+            std::string::npos)
+      << repeated.message();
+
+  const auto after_end = read_of({r[0], r[1], r[2], r[4], r[3]});
+  ASSERT_FALSE(after_end);
+  EXPECT_NE(after_end.message().find("a keyframe after the scan's end record"), std::string::npos)
+      << after_end.message();
+  // After a resume record, keyframes go on.
+  const auto resumed = read_of({r[0], r[1], r[2], r[4], record_of(R"({"type":"resume"})"), r[3]});
+  ASSERT_TRUE(resumed) << resumed.message();
+  EXPECT_EQ(resumed->keyframes.size(), 3u);
+
+  const auto array = read_of({r[0], record_of("[1]")});
+  ASSERT_FALSE(array);
+  EXPECT_NE(array.message().find("record 1 at byte"), std::string::npos) << array.message();
+  EXPECT_NE(array.message().find("not a journal record"), std::string::npos) << array.message();
+  EXPECT_EQ(array.message().find("json.exception"), std::string::npos) << array.message();
 }
 
 }  // namespace

@@ -11,7 +11,9 @@
 #include <cstdio>
 #include <cstring>
 #include <fstream>
+#include <sstream>
 
+#include "sonoshape/core/input_file.hpp"
 #include "sonoshape/core/log.hpp"
 
 namespace sonoshape::publish {
@@ -126,9 +128,12 @@ Result<std::string> read_curve_key(const std::filesystem::path& file, const std:
                                              "wrote"
                                            : "give the scan's NAME.pub file (from `sonoshape keys "
                                              "-o NAME`)";
-  std::ifstream in(file);
-  if (!in)
-    return Status::error("cannot read the CURVE " + what + " key " + file.string() + "; " + fix);
+  Result<std::string> bytes = read_input_file(file, "the CURVE " + what + " key");
+  if (!bytes) return Status::error(bytes.message() + "; " + fix);
+  // Editors on Windows start UTF-8 files with a byte-order mark: not part of the key.
+  constexpr std::string_view kUtf8Bom = "\xEF\xBB\xBF";
+  if (std::string_view(*bytes).starts_with(kUtf8Bom)) bytes->erase(0, kUtf8Bom.size());
+  std::istringstream in(std::move(*bytes));
   std::string line;
   std::string key;
   int number = 0;

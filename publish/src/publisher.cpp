@@ -268,6 +268,14 @@ Result<MeshPublisher> MeshPublisher::bind(const PublisherOptions& options) {
     return Status::error("mesh stream: the send high-water mark must be at least 1 message");
   if (!(options.snapshot_rate_hz >= 0.0) || options.snapshot_burst < 1)
     return Status::error("mesh stream: the snapshot rate must be >= 0 a second and the burst >= 1");
+  if (Status port = detail::check_tcp_port(options.endpoint, "the mesh stream (PUB)",
+                                           options.endpoint_option);
+      !port)
+    return port;
+  if (Status port = detail::check_tcp_port(
+          options.snapshot_endpoint, "mesh-stream snapshots (ROUTER)", options.snapshot_option);
+      !port)
+    return port;
   if (Status reachable = check_reachable(options, options.endpoint, options.endpoint_option);
       !reachable)
     return reachable;

@@ -176,6 +176,12 @@ Result<MeshSubscriber> MeshSubscriber::connect(const SubscriberOptions& options)
       Clock::now() + std::chrono::milliseconds(options.snapshot_timeout_ms);
   const bool snapshot = !options.snapshot_endpoint.empty();
   impl->options = options;
+  if (Status port = detail::check_tcp_port(options.endpoint, "the mesh stream", "the endpoint");
+      !port)
+    return port;
+  if (Status port = detail::check_tcp_port(options.snapshot_endpoint, "snapshots", "--snapshot");
+      !port)
+    return port;
   if (!options.server_public_key.empty()) {
     if (Status valid = check_server_key(options.server_public_key); !valid) return valid;
     Result<CurveKeyPair> keys = generate_curve_keypair();
@@ -248,6 +254,8 @@ Result<std::optional<StreamMessage>> MeshSubscriber::receive(std::chrono::millis
       if (impl.snapshot_seq && message->scan == impl.snapshot_scan &&
           message->seq <= *impl.snapshot_seq) {
         ++impl.covered;
+        // A flood of covered messages must not hold the caller past its timeout.
+        if (Clock::now() >= deadline) return std::optional<StreamMessage>();
         continue;
       }
       // The subscription travels to the publisher on its own: when it arrived after messages

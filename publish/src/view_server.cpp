@@ -10,16 +10,23 @@
 #include <atomic>
 #include <boost/asio/ip/tcp.hpp>
 #include <boost/asio/post.hpp>
+#include <boost/asio/steady_timer.hpp>
 #include <boost/beast/core.hpp>
 #include <boost/beast/http.hpp>
 #include <boost/beast/websocket.hpp>
 #include <cctype>
+#include <deque>
 #include <fstream>
+#include <list>
 #include <mutex>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <sstream>
 #include <thread>
+#include <unordered_map>
+
+#include "sonoshape/core/input_file.hpp"
+#include "sonoshape/core/log.hpp"
 
 namespace sonoshape::publish {
 namespace {
@@ -30,10 +37,25 @@ namespace http = beast::http;
 namespace websocket = beast::websocket;
 using tcp = asio::ip::tcp;
 
-// An idle HTTP connection (no request) is closed after this long.
-constexpr std::chrono::seconds kHttpTimeout{30};
+// The limits below keep the view from taking memory, file descriptors or the page's reach from
+// the scan, whatever a local program sends (issue 40, C1 and C2; docs/security.md).
+//
+// Connections of every kind at once (files and WebSockets). At the limit a new connection closes
+// the oldest one that holds no WebSocket: a flood of half-open requests or of clients that do not
+// read cannot keep the page out, since the page's own request then comes newest.
+constexpr std::size_t kMaxConnections = 32;
+// WebSockets (pages) at once; fewer than kMaxConnections, so that files are always served.
+constexpr std::size_t kMaxPages = 16;
+// The largest WebSocket message a page may send: the page sends none (close frames hold at most
+// 125 bytes); a larger one closes that page's connection with code 1009 (too big).
+constexpr std::size_t kMaxIncomingMessageBytes = 1024;
+// Time to send one whole request, from the connection (or the previous answer) on.
+constexpr std::chrono::seconds kRequestTimeout{10};
+// Time to take one whole answer: three.js (2.4 MB) needs under 1 s on any link a page works over.
+constexpr std::chrono::seconds kResponseTimeout{30};
 // The largest request the server reads: the page only ever asks for files.
 constexpr std::uint64_t kMaxRequestBytes = 16 * 1024;
+constexpr std::uint32_t kMaxHeaderBytes = 8 * 1024;
 
 void append_u32(std::string& out, std::uint32_t value) {
   for (int byte = 0; byte < 4; ++byte)
@@ -54,33 +76,89 @@ struct Item {
   std::string key;
 };
 
-// Adds `item` to `queue`, keeping one item per key: a newer message of a topic replaces the
-// older one in its place; slices accumulate up to kMaxSlicesKept. A message of a new scan drops
-// every item of other scans. Returns how many items it dropped or replaced.
-std::uint64_t conflate(std::vector<Item>& queue, Item item) {
-  std::uint64_t dropped = 0;
-  if (!item.scan.empty()) {
-    const auto old_scan = [&](const Item& queued) {
-      return !queued.scan.empty() && queued.scan != item.scan;
-    };
-    dropped += std::erase_if(queue, old_scan);
+// Messages waiting for the pages, one per key: a newer message of a topic replaces the older one
+// in its place; slices accumulate up to kMaxSlicesKept (the oldest dropped beyond); at most
+// kMaxStreamLabels mesh labels a scan (a publisher with more is hostile or broken: the further
+// labels are dropped and counted); a message of a new scan drops every item of other scans.
+// Lookups by key are constant-time: a publisher's many labels cost the view nothing per message.
+class Conflated {
+ public:
+  // Adds `item`; returns how many items it dropped or replaced. A mesh of a label beyond the
+  // limit is not added: counted in `refused_labels`.
+  std::uint64_t add(Item item, std::uint64_t* refused_labels = nullptr) {
+    std::uint64_t dropped = 0;
+    if (!item.scan.empty() && item.scan != scan_) {
+      if (!scan_.empty()) dropped += drop_other_scans(item.scan);
+      scan_ = item.scan;
+    }
+    if (const auto same = by_key_.find(item.key); same != by_key_.end()) {
+      *same->second = std::move(item);
+      return dropped + 1;
+    }
+    const bool slice = item.topic == kSliceTopic;
+    const bool mesh = item.topic.starts_with(kMeshTopicPrefix);
+    if (mesh && mesh_labels_ >= static_cast<std::size_t>(kMaxStreamLabels)) {
+      if (refused_labels) ++*refused_labels;
+      return dropped;
+    }
+    mesh_labels_ += mesh;
+    const std::string key = item.key;
+    items_.push_back(std::move(item));
+    by_key_.emplace(key, std::prev(items_.end()));
+    if (slice) slices_.push_back(std::prev(items_.end()));
+    if (slices_.size() > kMaxSlicesKept) {
+      erase(slices_.front());
+      ++dropped;
+    }
+    return dropped;
   }
-  const auto same = std::find_if(queue.begin(), queue.end(),
-                                 [&](const Item& queued) { return queued.key == item.key; });
-  if (same != queue.end()) {
-    *same = std::move(item);
-    return dropped + 1;
+
+  bool empty() const { return items_.empty(); }
+  Item pop_front() {
+    forget(items_.begin());  // while the item still has its key and topic
+    Item item = std::move(items_.front());
+    items_.pop_front();
+    return item;
   }
-  const bool slice = item.topic == kSliceTopic;
-  queue.push_back(std::move(item));
-  const auto is_slice = [](const Item& queued) { return queued.topic == kSliceTopic; };
-  if (slice && static_cast<std::size_t>(std::count_if(queue.begin(), queue.end(), is_slice)) >
-                   kMaxSlicesKept) {
-    queue.erase(std::find_if(queue.begin(), queue.end(), is_slice));
-    ++dropped;
+  const std::list<Item>& items() const { return items_; }
+
+ private:
+  using Iterator = std::list<Item>::iterator;
+
+  // Drops the bookkeeping of `it`, the oldest slice if it is a slice (the only ones erased).
+  void forget(Iterator it) {
+    by_key_.erase(it->key);
+    if (it->topic == kSliceTopic && !slices_.empty() && slices_.front() == it) slices_.pop_front();
+    mesh_labels_ -= it->topic.starts_with(kMeshTopicPrefix);
   }
-  return dropped;
-}
+
+  void erase(Iterator it) {
+    forget(it);
+    items_.erase(it);
+  }
+
+  std::uint64_t drop_other_scans(const std::string& scan) {
+    std::uint64_t dropped = 0;
+    for (auto it = items_.begin(); it != items_.end();) {
+      const auto next = std::next(it);
+      if (!it->scan.empty() && it->scan != scan) {
+        if (it->topic == kSliceTopic) std::erase(slices_, it);
+        by_key_.erase(it->key);
+        mesh_labels_ -= it->topic.starts_with(kMeshTopicPrefix);
+        items_.erase(it);
+        ++dropped;
+      }
+      it = next;
+    }
+    return dropped;
+  }
+
+  std::list<Item> items_;  // in the order they are to be sent
+  std::unordered_map<std::string, Iterator> by_key_;
+  std::deque<Iterator> slices_;  // oldest first
+  std::size_t mesh_labels_ = 0;
+  std::string scan_;
+};
 
 // The scan uuid of a message (empty when it has none) and its conflation key.
 std::pair<std::string, std::string> scan_and_key(const Frames& frames) {
@@ -194,32 +272,40 @@ std::string pack_frames(const Frames& frames) {
 namespace view_detail {
 
 class WsSession;
+class HttpSession;
 
 // The server's state, shared by its sessions (ViewServer::Impl is this, under a private name).
 struct ServerCore {
   std::filesystem::path web_root;
   std::string url;
   ServedNames served;
-  std::atomic<std::size_t> open_connections{0};
+  std::atomic<std::size_t> open_connections{0};  // WebSockets
+  std::atomic<std::size_t> open_http{0};         // connections not (yet) a WebSocket
   std::atomic<std::uint64_t> replaced{0};
+  std::atomic<std::uint64_t> evicted{0};
+  std::atomic<std::uint64_t> refused_labels{0};
 
   // Messages posted and not yet handed to the connections; guarded by mutex, so that post()
   // only ever takes a short lock and never waits for the network.
   std::mutex mutex;
-  std::vector<Item> inbox;
+  Conflated inbox;
   bool drain_scheduled = false;
 
   // Only the server thread touches these.
   std::vector<std::weak_ptr<WsSession>> sessions;
-  std::vector<Item> cache;  // the newest message of every topic, for pages that join late
+  Conflated cache;  // the newest message of every topic, for pages that join late
+  std::deque<std::weak_ptr<HttpSession>> http_sessions;  // oldest first
 
   // Declared last: destroyed first, with every connection, while the members above still live.
   asio::io_context ioc{1};
   tcp::acceptor acceptor{ioc};
+  asio::steady_timer accept_pause{ioc};
   std::thread thread;
 
   void accept();
+  void admit(tcp::socket socket);
   void drain();
+  void count_refused_labels(std::uint64_t count);
   void add_session(const std::shared_ptr<WsSession>& session);
 };
 
@@ -243,6 +329,7 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
     auto timeouts = websocket::stream_base::timeout::suggested(beast::role_type::server);
     timeouts.keep_alive_pings = true;
     ws_.set_option(timeouts);
+    ws_.read_message_max(kMaxIncomingMessageBytes);
     ws_.binary(true);
     ws_.async_accept(request, [self = shared_from_this()](beast::error_code ec) {
       if (ec) return;
@@ -252,7 +339,7 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
   }
 
   void enqueue(Item item) {
-    server_.replaced += conflate(pending_, std::move(item));
+    server_.replaced += pending_.add(std::move(item));
     if (!writing_) write_next();
   }
 
@@ -273,8 +360,7 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
       return;
     }
     writing_ = true;
-    current_ = std::move(pending_.front());
-    pending_.erase(pending_.begin());
+    current_ = pending_.pop_front();
     ws_.async_write(asio::buffer(*current_.packed),
                     [self = shared_from_this()](beast::error_code ec, std::size_t) {
                       self->current_ = {};
@@ -286,7 +372,7 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
   websocket::stream<beast::tcp_stream> ws_;
   ServerCore& server_;
   beast::flat_buffer incoming_;
-  std::vector<Item> pending_;
+  Conflated pending_;
   Item current_;
   bool writing_ = false;
 };
@@ -295,12 +381,16 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
 class HttpSession : public std::enable_shared_from_this<HttpSession> {
  public:
   HttpSession(tcp::socket socket, ServerCore& server)
-      : stream_(std::move(socket)), server_(server) {}
+      : stream_(std::move(socket)), server_(server) {
+    ++server_.open_http;
+  }
+  ~HttpSession() { --server_.open_http; }
 
   void read() {
     parser_.emplace();
+    parser_->header_limit(kMaxHeaderBytes);
     parser_->body_limit(kMaxRequestBytes);
-    stream_.expires_after(kHttpTimeout);
+    stream_.expires_after(kRequestTimeout);
     http::async_read(stream_, buffer_, *parser_,
                      [self = shared_from_this()](beast::error_code ec, std::size_t) {
                        if (ec) return;  // closed, timed out or malformed: drop the connection
@@ -308,60 +398,100 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
                      });
   }
 
+  /// Whether the connection is still this session's (not closed, not handed to a WebSocket).
+  bool open() const { return stream_.socket().is_open(); }
+
+  /// Closes the connection: its pending read or write ends, and with it the session.
+  void close() {
+    beast::error_code ignored;
+    stream_.socket().shutdown(tcp::socket::shutdown_both, ignored);
+    stream_.close();
+  }
+
  private:
   void on_request(http::request<http::string_body> request) {
     const std::string host(request[http::field::host]);
     if (!server_.served.allows(host))
-      return respond(request, http::status::misdirected_request, "text/plain",
+      return respond(request, http::status::misdirected_request,
                      "this sonoshape view answers only for its own addresses (" + server_.url +
                          ", or localhost with the same port), not for Host '" +
                          host.substr(0, 100) +
                          "': a page of another site may not read the scan through a name "
                          "rebound to this machine\n");
-    if (websocket::is_upgrade(request)) {
-      // A page of another site open in the same browser must not read the scan: browsers
-      // always send Origin with a WebSocket, and it must be a page this server served.
-      const std::string origin(request[http::field::origin]);
-      if (!server_.served.allows_origin(origin))
-        return respond(request, http::status::forbidden, "text/plain",
-                       "the viewer's WebSocket serves only its own page (Origin " + server_.url +
-                           " or localhost with the same port), not Origin '" +
-                           origin.substr(0, 100) + "'\n");
-      stream_.expires_never();
-      std::make_shared<WsSession>(stream_.release_socket(), server_)->run(std::move(request));
-      return;
-    }
+    if (websocket::is_upgrade(request)) return upgrade(std::move(request));
     if (request.method() != http::verb::get && request.method() != http::verb::head)
-      return respond(request, http::status::method_not_allowed, "text/plain", "GET only\n");
+      return respond(request, http::status::method_not_allowed, "GET only\n");
     const std::string target(request.target());
     const auto path = resolve_target(server_.web_root, target);
-    std::ifstream file;
-    if (path) file.open(*path, std::ios::binary);
-    if (!path || !file.is_open()) {
+    // Only regular files: a folder (e.g. /three/build/) would be answered 200 with no body.
+    beast::error_code ec;
+    http::file_body::value_type body;
+    if (path && check_input_file(*path, "page file"))
+      body.open(path->c_str(), beast::file_mode::scan, ec);
+    if (!path || !body.is_open() || ec) {
       const bool three = target.starts_with("/three/");
-      return respond(request, http::status::not_found, "text/plain",
+      return respond(request, http::status::not_found,
                      three ? "three.js is not installed in viewer/node_modules: run "
                              "scripts/install-deps (it runs npm ci in viewer/)\n"
                            : "not found\n");
     }
-    std::ostringstream body;
-    body << file.rdbuf();
-    respond(request, http::status::ok, content_type(*path), std::move(body).str());
+    // The file is read as the client takes it, a few kilobytes at a time: a client that does not
+    // read holds no copy of it (issue 40, C2).
+    auto response = std::make_shared<http::response<http::file_body>>(
+        std::piecewise_construct, std::make_tuple(std::move(body)),
+        std::make_tuple(http::status::ok, request.version()));
+    decorate(*response, request, content_type(*path));
+    response->prepare_payload();
+    if (request.method() == http::verb::head) {
+      auto head = std::make_shared<http::response<http::empty_body>>(response->base());
+      return send(head);
+    }
+    send(response);
+  }
+
+  void upgrade(http::request<http::string_body> request) {
+    // A page of another site open in the same browser must not read the scan: browsers
+    // always send Origin with a WebSocket, and it must be a page this server served.
+    const std::string origin(request[http::field::origin]);
+    if (!server_.served.allows_origin(origin))
+      return respond(request, http::status::forbidden,
+                     "the viewer's WebSocket serves only its own page (Origin " + server_.url +
+                         " or localhost with the same port), not Origin '" + origin.substr(0, 100) +
+                         "'\n");
+    if (server_.open_connections.load() >= kMaxPages)
+      return respond(request, http::status::service_unavailable,
+                     "this sonoshape view already streams to " + std::to_string(kMaxPages) +
+                         " pages, its limit: close a page and reload this one\n");
+    stream_.expires_never();
+    std::make_shared<WsSession>(stream_.release_socket(), server_)->run(std::move(request));
+  }
+
+  template <class Response>
+  void decorate(Response& response, const http::request<http::string_body>& request,
+                std::string_view type) {
+    response.set(http::field::server, "sonoshape");
+    response.set(http::field::content_type, std::string(type));
+    // The page changes with sonoshape: never run a stale copy.
+    response.set(http::field::cache_control, "no-cache");
+    response.set("X-Content-Type-Options", "nosniff");
+    response.keep_alive(request.keep_alive());
   }
 
   void respond(const http::request<http::string_body>& request, http::status status,
-               std::string_view type, std::string body) {
+               std::string body) {
     auto response = std::make_shared<http::response<http::string_body>>(status, request.version());
-    response->set(http::field::server, "sonoshape");
-    response->set(http::field::content_type, std::string(type));
-    // The page changes with sonoshape: never run a stale copy.
-    response->set(http::field::cache_control, "no-cache");
-    response->set("X-Content-Type-Options", "nosniff");
-    response->keep_alive(request.keep_alive());
+    decorate(*response, request, "text/plain");
     const bool head = request.method() == http::verb::head;
     response->body() = std::move(body);
     response->prepare_payload();
     if (head) response->body().clear();
+    send(response);
+  }
+
+  // Writes `response` within kResponseTimeout, then reads the next request or closes.
+  template <class Response>
+  void send(const std::shared_ptr<Response>& response) {
+    stream_.expires_after(kResponseTimeout);
     http::async_write(stream_, *response,
                       [self = shared_from_this(), response](beast::error_code ec, std::size_t) {
                         if (ec) return;
@@ -373,36 +503,76 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
 
   beast::tcp_stream stream_;
   ServerCore& server_;
-  beast::flat_buffer buffer_;
+  // A request's headers and body at most: a client cannot make the buffer grow beyond.
+  beast::flat_buffer buffer_{kMaxHeaderBytes + kMaxRequestBytes};
   std::optional<http::request_parser<http::string_body>> parser_;
 };
 
 void ServerCore::accept() {
   acceptor.async_accept([this](beast::error_code ec, tcp::socket socket) {
     if (ec == asio::error::operation_aborted) return;
-    if (!ec) std::make_shared<HttpSession>(std::move(socket), *this)->read();
-    accept();
+    if (!ec) {
+      admit(std::move(socket));
+      return accept();
+    }
+    // Out of file descriptors (or another passing trouble): try again shortly instead of
+    // spinning on an accept that fails at once.
+    accept_pause.expires_after(std::chrono::milliseconds(100));
+    accept_pause.async_wait([this](beast::error_code wait_ec) {
+      if (wait_ec != asio::error::operation_aborted) accept();
+    });
   });
+}
+
+// At kMaxConnections, the oldest connection that holds no WebSocket makes room: whoever floods
+// the server with connections that send or read nothing closes its own first.
+void ServerCore::admit(tcp::socket socket) {
+  std::erase_if(http_sessions, [](const std::weak_ptr<HttpSession>& weak) {
+    const auto session = weak.lock();
+    return !session || !session->open();
+  });
+  if (http_sessions.size() + open_connections.load() >= kMaxConnections && !http_sessions.empty()) {
+    if (const auto oldest = http_sessions.front().lock()) oldest->close();
+    http_sessions.pop_front();
+    ++evicted;
+  }
+  auto session = std::make_shared<HttpSession>(std::move(socket), *this);
+  http_sessions.push_back(session);
+  session->read();
 }
 
 void ServerCore::add_session(const std::shared_ptr<WsSession>& session) {
   std::erase_if(sessions, [](const std::weak_ptr<WsSession>& s) { return s.expired(); });
   sessions.push_back(session);
-  for (const Item& item : cache) session->enqueue(item);
+  for (const Item& item : cache.items()) session->enqueue(item);
 }
 
 void ServerCore::drain() {
-  std::vector<Item> items;
+  Conflated items;
   {
     const std::lock_guard lock(mutex);
-    items.swap(inbox);
+    std::swap(items, inbox);
     drain_scheduled = false;
   }
-  for (Item& item : items) {
-    conflate(cache, item);
+  while (!items.empty()) {
+    Item item = items.pop_front();
+    std::uint64_t refused = 0;
+    cache.add(item, &refused);
+    if (refused) {
+      count_refused_labels(refused);
+      continue;
+    }
     for (const std::weak_ptr<WsSession>& weak : sessions)
       if (const auto session = weak.lock()) session->enqueue(item);
   }
+}
+
+void ServerCore::count_refused_labels(std::uint64_t count) {
+  if (refused_labels.fetch_add(count) == 0)
+    log_warning("view: the stream carries more than " + std::to_string(kMaxStreamLabels) +
+                " mesh labels in one scan; the meshes of further labels are not shown (counted; "
+                "said once): a scan has at most " +
+                std::to_string(kMaxStreamLabels) + " labels");
 }
 
 }  // namespace view_detail
@@ -472,12 +642,14 @@ void ViewServer::post(const Frames& frames) {
   Item item{frames[0], std::move(scan), std::make_shared<const std::string>(pack_frames(frames)),
             std::move(key)};
   bool schedule = false;
+  std::uint64_t refused = 0;
   {
     const std::lock_guard lock(impl_->mutex);
-    impl_->replaced += conflate(impl_->inbox, std::move(item));
+    impl_->replaced += impl_->inbox.add(std::move(item), &refused);
     schedule = !impl_->drain_scheduled;
     impl_->drain_scheduled = true;
   }
+  if (refused) impl_->count_refused_labels(refused);
   if (schedule) asio::post(impl_->ioc, [raw = impl_.get()] { raw->drain(); });
 }
 
@@ -495,5 +667,15 @@ std::string ViewServer::url() const { return impl_->url; }
 std::size_t ViewServer::connections() const { return impl_->open_connections.load(); }
 
 std::uint64_t ViewServer::messages_replaced() const { return impl_->replaced.load(); }
+
+std::size_t ViewServer::open_connections() const {
+  return impl_->open_connections.load() + impl_->open_http.load();
+}
+
+std::uint64_t ViewServer::connections_closed_at_limit() const { return impl_->evicted.load(); }
+
+std::uint64_t ViewServer::meshes_refused_over_label_limit() const {
+  return impl_->refused_labels.load();
+}
 
 }  // namespace sonoshape::publish

@@ -37,6 +37,27 @@ std::string endpoint_error(const zmq::error_t& error, const std::string& action,
   }
 }
 
+Status check_tcp_port(const std::string& endpoint, const std::string& role,
+                      const std::string& option) {
+  const std::string scheme = "tcp://";
+  if (endpoint.compare(0, scheme.size(), scheme) != 0) return Status::ok();
+  const std::size_t colon = endpoint.rfind(':');
+  // No port at all: ZeroMQ refuses it, and endpoint_error says how to write one.
+  if (colon < scheme.size()) return Status::ok();
+  const std::string port = endpoint.substr(colon + 1);
+  if (port == "*") return Status::ok();
+  int number = -1;
+  const auto [end, ec] = std::from_chars(port.data(), port.data() + port.size(), number);
+  if (!port.empty() && ec == std::errc() && end == port.data() + port.size() && number >= 0 &&
+      number <= 65535)
+    return Status::ok();
+  // ZeroMQ takes the port modulo 65536: tcp://127.0.0.1:99999 would bind 34463, silently.
+  return Status::error("cannot use " + endpoint + " for " + role + ": '" + port +
+                       "' is not a TCP port (0 to 65535, or * for any free one); write "
+                       "tcp://HOST:PORT, e.g. tcp://127.0.0.1:5556 (" +
+                       option + ")");
+}
+
 std::string bound_endpoint(zmq::socket_t& socket, const std::string& requested) {
   std::string last = socket.get(zmq::sockopt::last_endpoint);
   // ZeroMQ reports tcp://127.0.0.1:* as the resolved port; ipc and inproc come back unchanged.

@@ -16,6 +16,11 @@ std::string endpoint_error(const zmq::error_t& error, const std::string& action,
                            const std::string& role, const std::string& endpoint,
                            const std::string& option);
 
+/// Ok unless `endpoint` is tcp:// with a port that is not 0..65535 or `*` (ZeroMQ would take it
+/// modulo 65536); the error names the endpoint, its `role` and the `option` that set it.
+Status check_tcp_port(const std::string& endpoint, const std::string& role,
+                      const std::string& option);
+
 /// The endpoint a socket actually bound (a wildcard port "tcp://127.0.0.1:*" resolved).
 std::string bound_endpoint(zmq::socket_t& socket, const std::string& requested);
 

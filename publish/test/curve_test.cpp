@@ -417,3 +417,20 @@ TEST(StreamAccess, SnapshotFloodGetsBusyRepliesAndLiveUpdatesGoOnWithoutGaps) {
 
 }  // namespace
 }  // namespace sonoshape::publish
+
+namespace sonoshape::publish {
+namespace {
+
+// Issue 40: a key file saved by an editor that starts UTF-8 files with a byte-order mark was
+// refused as "43 characters"; the mark is not part of the key.
+TEST(CurveKeys, AKeyFileWithAUtf8ByteOrderMarkReadsTheKey) {
+  const testing::TempDir dir;
+  const CurveKeyPair keys = keys_or_fail();
+  std::ofstream(dir.path() / "bom.pub") << "\xEF\xBB\xBF" << keys.public_key << "\r\n";
+  const Result<std::string> key = read_curve_key(dir.path() / "bom.pub", "public");
+  ASSERT_TRUE(key) << key.message();
+  EXPECT_EQ(*key, keys.public_key);
+}
+
+}  // namespace
+}  // namespace sonoshape::publish

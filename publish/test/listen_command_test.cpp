@@ -6,6 +6,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <chrono>
 #include <filesystem>
 #include <fstream>
@@ -290,6 +291,61 @@ TEST(ListenCommand, ALiveEndMessageIsInvalid) {
   EXPECT_EQ(summary["invalid"], 1);
   EXPECT_EQ(summary["stopped_by"], "idle");
   EXPECT_TRUE(summary["snapshot_seq"].is_null());
+}
+
+}  // namespace
+}  // namespace sonoshape::publish
+
+namespace sonoshape::publish {
+namespace {
+
+// Issue 40, C6: a publisher with many labels made `listen` write 53 000 files and overrun
+// --duration by 19 s. At most kMaxStreamLabels labels are written, the others counted; the run
+// ends on time while the flood goes on.
+TEST(ListenCommand, WritesAtMostTheLabelLimitAndStopsOnTimeUnderAFloodOfLabels) {
+  TempDir dir;
+  const auto out = dir.path() / "out";
+  zmq::context_t context;
+  zmq::socket_t pub(context, zmq::socket_type::pub);
+  pub.set(zmq::sockopt::linger, 0);
+  pub.bind("tcp://127.0.0.1:*");
+  const std::string scan = random_uuid();
+  std::uint64_t seq = 0;
+  auto send_mesh = [&](int label) {
+    MeshUpdate update;
+    update.label = label;
+    update.mesh = octahedron(1.0);
+    const Frames frames = *encode_message(StreamMessage{++seq, scan, update});
+    std::vector<zmq::const_buffer> parts;
+    for (const std::string& f : frames) parts.push_back(zmq::buffer(f));
+    (void)zmq::send_multipart(pub, parts, zmq::send_flags::dontwait);
+  };
+  constexpr double kDurationS = 3.0;
+  const auto started = Clock::now();
+  ListenProcess listen({pub.get(zmq::sockopt::last_endpoint), "-o", out.string(), "--duration",
+                        std::to_string(kDurationS)},
+                       dir.path() / "listen.txt");
+  // Labels 1, 2, ... without end until the listener stops (a few hundred thousand messages a
+  // second at most; the listener takes what its queue holds).
+  std::atomic<bool> stop{false};
+  std::thread flood([&] {
+    for (int label = 1; !stop; label = label % 100000 + 1) send_mesh(label);
+  });
+  const int code = listen.wait(30s);
+  const double took_s = std::chrono::duration<double>(Clock::now() - started).count();
+  stop = true;
+  flood.join();
+  ASSERT_EQ(code, 0) << listen.output();
+  EXPECT_LT(took_s, kDurationS + 3.0) << listen.output();
+  const json summary = read_json(out / "summary.json");
+  EXPECT_EQ(summary["stopped_by"], "duration");
+  EXPECT_EQ(summary["meshes"].size(), static_cast<std::size_t>(kMaxStreamLabels));
+  EXPECT_GT(summary["meshes_over_label_limit"].get<std::uint64_t>(), 0u);
+  std::size_t files = 0;
+  for (const auto& entry : std::filesystem::directory_iterator(out))
+    files += entry.path().extension() == ".ply";
+  EXPECT_EQ(files, static_cast<std::size_t>(kMaxStreamLabels));
+  EXPECT_TRUE(contains(listen.output(), "more than 256 mesh labels"));
 }
 
 }  // namespace

@@ -477,3 +477,33 @@ TEST(MeshSubscriber, ReportsAnInvalidMessageAndGoesOn) {
 
 }  // namespace
 }  // namespace sonoshape::publish
+
+namespace sonoshape::publish {
+namespace {
+
+// Issue 40: ZeroMQ takes a TCP port modulo 65536, so --publish tcp://127.0.0.1:99999 bound port
+// 34463 and said nothing. A port out of 0..65535 is refused, naming the option.
+TEST(MeshPublisher, APortBeyond65535IsRefusedNamingTheOption) {
+  PublisherOptions options;
+  options.endpoint = "tcp://127.0.0.1:99999";
+  options.snapshot_endpoint = "tcp://127.0.0.1:*";
+  const Result<MeshPublisher> publisher = MeshPublisher::bind(options);
+  ASSERT_FALSE(publisher);
+  EXPECT_TRUE(contains(publisher.message(), "tcp://127.0.0.1:99999"));
+  EXPECT_TRUE(contains(publisher.message(), "'99999' is not a TCP port"));
+  EXPECT_TRUE(contains(publisher.message(), "--publish"));
+  options.endpoint = "tcp://127.0.0.1:*";
+  options.snapshot_endpoint = "tcp://127.0.0.1:-1";
+  const Result<MeshPublisher> snapshot = MeshPublisher::bind(options);
+  ASSERT_FALSE(snapshot);
+  EXPECT_TRUE(contains(snapshot.message(), "--snapshot"));
+
+  SubscriberOptions subscriber;
+  subscriber.endpoint = "tcp://127.0.0.1:70000";
+  const Result<MeshSubscriber> connected = MeshSubscriber::connect(subscriber);
+  ASSERT_FALSE(connected);
+  EXPECT_TRUE(contains(connected.message(), "'70000' is not a TCP port"));
+}
+
+}  // namespace
+}  // namespace sonoshape::publish

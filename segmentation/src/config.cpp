@@ -16,6 +16,8 @@
 #include <utility>
 #include <vector>
 
+#include "sonoshape/core/input_file.hpp"
+
 namespace sonoshape::seg {
 namespace {
 
@@ -284,16 +286,6 @@ Result<SegmentationConfig> parse_segmentation_config(const std::string& json_tex
 
 namespace {
 
-Result<std::string> read_text(const std::filesystem::path& path) {
-  std::ifstream in(path);
-  if (!in)
-    return Status::error("cannot read the segmentation config " + path.string() +
-                         ": check the path");
-  std::ostringstream text;
-  text << in.rdbuf();
-  return text.str();
-}
-
 // The presets' settings. Water (and gel) gives no echo: the water presets call it background
 // (outside every organ) and turn the no-signal rule off (shadow_fraction 1), which would
 // otherwise swallow echoes of a millimetre in the margin of the water around them. Wires and a
@@ -321,7 +313,7 @@ const char* const kBoneJson = R"({
 }  // namespace
 
 Result<SegmentationConfig> read_segmentation_config(const std::filesystem::path& path) {
-  auto text = read_text(path);
+  Result<std::string> text = read_input_file(path, "the segmentation config");
   if (!text) return text.status();
   return parse_segmentation_config(*text, path.string());
 }
@@ -360,7 +352,7 @@ Result<SegmentationConfig> load_segmentation_config(
     source = "preset " + it->name;
   }
   if (path) {
-    auto text = read_text(*path);
+    Result<std::string> text = read_input_file(*path, "the segmentation config");
     if (!text) return text.status();
     json file;
     try {

@@ -16,6 +16,7 @@
 
 #include "sonoshape/acquisition/plus_config.hpp"
 #include "sonoshape/core/errors.hpp"
+#include "sonoshape/core/input_file.hpp"
 #include "sonoshape/core/log.hpp"
 #include "sonoshape/core/slice_io.hpp"
 #include "sonoshape/segmentation/contours.hpp"
@@ -195,12 +196,11 @@ Result<Eigen::Matrix4d> read_calibration(const std::filesystem::path& path) {
                          ": give a PLUS device-set .xml or calibration result .results.xml "
                          "(Transform From=\"Image\" To=\"Probe\") or a .json {\"ImageToProbe\": "
                          "[16 numbers, row-major]}");
-  std::ifstream in(path);
-  if (!in)
-    return Status::error("cannot read the calibration " + path.string() + ": check the path");
+  Result<std::string> text = read_input_file(path, "the calibration");
+  if (!text) return text.status();
   nlohmann::json doc;
   try {
-    in >> doc;
+    doc = nlohmann::json::parse(*text);
   } catch (const nlohmann::json::exception& e) {
     return Status::error("calibration " + path.string() + ": not valid JSON (" + e.what() + ")");
   }

@@ -14,6 +14,8 @@
 #include <string_view>
 #include <vector>
 
+#include "sonoshape/core/input_file.hpp"
+
 namespace sonoshape::sim {
 namespace {
 
@@ -597,13 +599,9 @@ TriangleMesh parse_stl(std::string_view data) {
 }  // namespace
 
 Result<TriangleMesh> read_mesh(const std::filesystem::path& path, bool allow_empty) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in)
-    return Status::error("cannot open mesh file " + path.string() +
-                         " (check the path and read permission)");
-  std::stringstream buffer;
-  buffer << in.rdbuf();
-  const std::string text = buffer.str();
+  Result<std::string> bytes = read_input_file(path, "mesh file");
+  if (!bytes) return bytes.status();
+  const std::string text = std::move(*bytes);
   const std::string extension = lower(path.extension().string());
   TriangleMesh mesh;
   try {

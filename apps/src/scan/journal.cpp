@@ -13,6 +13,7 @@
 #include <sstream>
 #include <utility>
 
+#include "sonoshape/core/input_file.hpp"
 #include "sonoshape/core/slice_io.hpp"
 
 namespace sonoshape::scan {
@@ -156,7 +157,12 @@ Status apply_record(const std::string& payload, const std::string& where,
   } catch (const std::exception& e) {
     return Status::error(where + ": not JSON (" + e.what() + ")");
   }
-  const std::string type = record.value("type", "");
+  if (!record.is_object() || !record.contains("type") || !record["type"].is_string())
+    return Status::error(where +
+                         ": not a journal record (a JSON object with a \"type\" string), "
+                         "but " +
+                         record.dump().substr(0, 60) + "; the journal was altered");
+  const std::string type = record["type"].get<std::string>();
   if (type == "scan") {
     try {
       contents.arguments = record.at("arguments").get<std::vector<std::string>>();
@@ -170,6 +176,20 @@ Status apply_record(const std::string& payload, const std::string& where,
       contents.working_directory = it->get<std::string>();
     }
   } else if (type == "keyframe") {
+    // After `end` only a `resume` may follow; and keyframe n is the n-th: a repeated or a
+    // missing record would rebuild another scan than the one that ran.
+    if (contents.finished)
+      return Status::error(where +
+                           ": a keyframe after the scan's end record with no resume "
+                           "record between them; the journal was altered");
+    const auto n = record.find("n");
+    if (n == record.end() || !n->is_number_unsigned() ||
+        n->get<std::uint64_t>() != contents.keyframes.size())
+      return Status::error(where + ": keyframe \"n\" is " +
+                           (n == record.end() ? std::string("missing") : n->dump()) + " but " +
+                           std::to_string(contents.keyframes.size()) +
+                           " keyframes come before it (a repeated or missing record); the "
+                           "journal was altered");
     auto keyframe = keyframe_of(record, where);
     if (!keyframe) return keyframe.status();
     contents.keyframes.push_back(std::move(*keyframe));
@@ -189,13 +209,12 @@ Status apply_record(const std::string& payload, const std::string& where,
 }  // namespace
 
 Result<JournalContents> read_journal(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in)
-    return Status::error("cannot read the journal " + path.string() +
-                         ": no such file (was the scan started with this --out?)");
-  std::ostringstream buffer;
-  buffer << in.rdbuf();
-  const std::string bytes = buffer.str();
+  Result<std::string> read = read_input_file(path, "the journal");
+  if (!read)
+    return Status::error(read.message() + (std::filesystem::exists(path)
+                                               ? ""
+                                               : " (was the scan started with this --out?)"));
+  const std::string bytes = std::move(*read);
   const std::string name = path.string();
   if (bytes.size() < kHeaderBytes || bytes.compare(0, sizeof(kMagic), kMagic, sizeof(kMagic)) != 0)
     return Status::error(name + ": not a sonoshape scan journal (no SNSHJRNL header)");

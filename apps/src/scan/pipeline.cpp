@@ -699,12 +699,18 @@ ScanSummary ScanPipeline::finish() {
   const SliceSet slices = reconstruction_->slice_set();
   const MeshSet& meshes = reconstruction_->meshes();
   summary.labels_without_mesh = labels_without_mesh(source_.setup.labels, slices, meshes);
-  each_sink("finish", [&](ScanSink& sink) { return sink.on_finish(meshes, slices, summary); });
-  if (journal_ && !journal_->finish(slices.slices.size()))
-    log_warning("scan: the journal " + journal_->path().string() + " holds " +
-                std::to_string(journal_->written()) + " of the " +
-                std::to_string(slices.slices.size()) +
-                " keyframes (see above): --resume on this directory goes on after them");
+  each_sink("finish", [&](ScanSink& sink) {
+    const Status finished = sink.on_finish(meshes, slices, summary);
+    if (!finished) summary.incomplete_outputs.push_back(finished.message());
+    return finished;
+  });
+  if (journal_ && !journal_->finish(slices.slices.size())) {
+    const std::string held = "the journal " + journal_->path().string() + " holds " +
+                             std::to_string(journal_->written()) + " of the " +
+                             std::to_string(slices.slices.size()) + " keyframes and no end record";
+    log_warning("scan: " + held + " (see above): --resume on this directory goes on after them");
+    summary.incomplete_outputs.push_back(held);
+  }
   std::lock_guard lock(state_mutex_);
   summary_ = summary;
   return summary;

@@ -110,6 +110,10 @@ struct ScanSummary {
   std::map<int, std::string> label_names;  ///< for the scores' table
   /// Every material of the setup without a mesh at the end, with why: "label 3 (rib): ...".
   std::vector<std::string> labels_without_mesh;
+  /// What the end of the scan failed to write, each with where and why (a final save that did
+  /// not fit on the disk, a journal without its last keyframes or its end record): the scan
+  /// then exits non-zero (issue 40, D1). Empty when every output is whole.
+  std::vector<std::string> incomplete_outputs;
 };
 
 }  // namespace sonoshape::scan

@@ -115,6 +115,11 @@ struct StreamMessage {
   std::string topic() const;
 };
 
+/// The most mesh labels of one scan that a subscriber keeps (the view, `listen`): segmentation
+/// labels fit in a byte, so a stream with more is broken or hostile; the meshes of further labels
+/// are dropped and counted, so that many labels cannot stall a subscriber or fill its disk.
+constexpr int kMaxStreamLabels = 256;
+
 /// The largest side (pixels) of a `frame` message's picture: it is a preview, not the data.
 constexpr int kMaxFrameImageSide = 1024;
 

@@ -64,6 +64,15 @@ class ViewServer {
   std::string url() const;
   /// WebSocket connections open now.
   std::size_t connections() const;
+  /// Connections open now, of every kind (file requests and WebSockets): at most 32, of which
+  /// at most 16 WebSockets (docs/security.md).
+  std::size_t open_connections() const;
+  /// Connections closed to make room for a newer one at the limit of 32 (the oldest that held no
+  /// WebSocket: a half-open request, a client that did not read its file, an idle keep-alive).
+  std::uint64_t connections_closed_at_limit() const;
+  /// Mesh messages not shown because their label was beyond the first kMaxStreamLabels of the
+  /// scan (a warning says so once).
+  std::uint64_t meshes_refused_over_label_limit() const;
   /// Messages dropped because a newer one of the same topic (or a new scan) replaced them before
   /// they were sent: in the server's inbox and in each connection's queue, summed.
   std::uint64_t messages_replaced() const;
