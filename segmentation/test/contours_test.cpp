@@ -242,8 +242,10 @@ TEST(Contours, OutlinesLieOnThePixelEdges) {
   std::map<int, std::pair<double, Vec2>> pixels;  // label -> (count, sum of centres)
   auto set = [&](int i, int j, int label) {
     map.at(i, j) = static_cast<std::uint8_t>(label);
-    pixels[label].first += 1.0;
-    pixels[label].second += Vec2(i, j);
+    // try_emplace with an explicit zero: a value-initialised Eigen vector is not zeroed.
+    auto& [count, sum] = pixels.try_emplace(label, 0.0, Vec2::Zero()).first->second;
+    count += 1.0;
+    sum += Vec2(i, j);
   };
   for (int j = 7; j < 19; ++j)
     for (int i = 10; i < 25; ++i) set(i, j, 1);  // rectangle: columns 10..24, rows 7..18
