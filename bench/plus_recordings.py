@@ -97,11 +97,11 @@ def replay(args, recording, calibration, work, image):
 
 
 def one_recording(args, fetch, path, work):
-    name = Path(path).name
+    name = str(Path(path).relative_to("TestImages"))  # e.g. Linux/NrrdSample.igs.nrrd
     local = fetch(path, work)
     if local is None:
         return {"name": name, "absent": True}
-    calibration, calibration_from = calibration_for(name, fetch, work)
+    calibration, calibration_from = calibration_for(Path(path).name, fetch, work)
     row = {"name": name, "calibration": calibration_from}
     row.update(segment(args, local, calibration, work))
     if "refused" not in row:

@@ -12,7 +12,7 @@
 #   --no-build  do not build the steps' targets (use what build/ holds)
 #   --only STEP run only these steps (repeatable); --skip STEP leave these out (repeatable)
 # Data sonoshape does not ship: OREX_DATA (the Data/ folder of github.com/haimsaw/OReX) for
-# public_csl and field_table, PLUS_LIB_DATA (a github.com/PlusToolkit/PlusLibData checkout) for plus_recordings.
+# public_csl and field_table, PLUS_LIB_DATA (a github.com/PlusToolkit/PlusLibData checkout or mirror) for plus_recordings.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
