@@ -25,6 +25,7 @@
 
 #include "sonoshape/core/slice_io.hpp"
 #include "sonoshape/testing/command.hpp"
+#include "sonoshape/testing/free_port.hpp"
 #include "sonoshape/testing/sanitizer_slowdown.hpp"
 #include "sonoshape/testing/slicer_labels.hpp"
 #include "sonoshape/testing/temp_dir.hpp"
@@ -38,18 +39,6 @@ constexpr int kW = 120, kH = 90, kFrames = 30;
 constexpr double kPixelMm = 0.3, kFramePeriodS = 0.05, kStepMm = 1.0;
 constexpr int kLiver = 3, kKidney = 7;
 
-int free_port() {
-  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  ::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a);
-  socklen_t n = sizeof a;
-  ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &n);
-  ::close(fd);
-  return ntohs(a.sin_port);
-}
-
 double wall_clock_s() {
   return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
 }
@@ -60,7 +49,7 @@ class LibraryServer {
   LibraryServer(std::string label_device, int label_width)
       : label_device_(std::move(label_device)),
         label_width_(label_width),
-        port_(free_port()),
+        port_(testing::free_port()),
         t0_s_(std::floor(wall_clock_s())) {
     server_ = igtl::ServerSocket::New();
     EXPECT_GE(server_->CreateServer(port_), 0);

@@ -23,25 +23,12 @@
 
 #include "sonoshape/acquisition/igtl_frame_source.hpp"
 #include "sonoshape/publish/igtl_server.hpp"
+#include "sonoshape/testing/free_port.hpp"
 #include "sonoshape/testing/sanitizer_slowdown.hpp"
 #include "sonoshape/tracking/igtl_pose_source.hpp"
 
 namespace sonoshape {
 namespace {
-
-// A port free now (bound to 0 and released): the example servers take a port number and cannot
-// pick one themselves.
-int free_port() {
-  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  ::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a);
-  socklen_t n = sizeof a;
-  ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &n);
-  ::close(fd);
-  return ntohs(a.sin_port);
-}
 
 // Whether something listens on `port` (from /proc/net/tcp, without connecting: the examples
 // serve one client at a time, so a probing connection would take the test's place).
@@ -62,7 +49,7 @@ bool listening(int port) {
 // An example server as a child process, killed at the end of the test.
 class Peer {
  public:
-  Peer(const std::vector<std::string>& argv) : port_(free_port()) {
+  Peer(const std::vector<std::string>& argv) : port_(testing::free_port()) {
     pid_ = fork();
     if (pid_ == 0) {
       std::vector<std::string> args = argv;
@@ -313,7 +300,7 @@ TEST(IgtlSources, AServerRestartedMidStreamIsReportedAndFramesAndPosesResume) {
 }
 
 TEST(IgtlSources, ANoServerIsAFailedSourceNamingTheAddress) {
-  const int port = free_port();
+  const int port = testing::free_port();
   acq::IgtlFrameSource source({"127.0.0.1", port}, "");
   ASSERT_TRUE(source.start());
   EXPECT_TRUE((take<acq::IgtlFrameSource, Frame>(source, 1, 5.0).empty()));
@@ -364,7 +351,7 @@ TEST(IgtlSources, AScanReconstructsFromImagerServerFramesAndTrackerServerPoses) 
 
 TEST(IgtlSources, AScanWithoutItsServerSaysWhereItLookedAndWhatIsMissing) {
   int code = 0;
-  const int port = free_port();
+  const int port = testing::free_port();
   std::string out =
       run(std::string(SONOSHAPE_BINARY) + " scan --source igtl:127.0.0.1:" + std::to_string(port) +
               " --igtl-transform image",
