@@ -4,6 +4,8 @@
 #include <limits>
 #include <set>
 
+#include "sonoshape/core/slice_compare.hpp"
+
 namespace sonoshape {
 
 std::vector<int> SliceSet::material_ids() const {
@@ -50,6 +52,17 @@ Box3 SliceSet::effective_bounds() const {
     }
   }
   return box.padded(0.1 * box.diagonal());
+}
+
+bool identical_slices(const LabeledSlice& a, const LabeledSlice& b) {
+  if (a.origin_mm != b.origin_mm || a.u != b.u || a.v != b.v || a.fov != b.fov ||
+      a.regions.size() != b.regions.size())
+    return false;
+  for (std::size_t r = 0; r < a.regions.size(); ++r)
+    if (a.regions[r].label != b.regions[r].label || a.regions[r].outer != b.regions[r].outer ||
+        a.regions[r].holes != b.regions[r].holes)
+      return false;
+  return true;
 }
 
 }  // namespace sonoshape

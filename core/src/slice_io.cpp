@@ -30,6 +30,7 @@
 #include "slice_io_internal.hpp"
 #include "sonoshape/core/input_file.hpp"
 #include "sonoshape/core/log.hpp"
+#include "sonoshape/core/slice_compare.hpp"
 
 namespace sonoshape {
 namespace detail {
@@ -385,21 +386,9 @@ bool same_world_points(const LabeledSlice& sa, const Ring2& a, const LabeledSlic
   return true;
 }
 
-// Whether two slices are the same bytes: the same frame and the same rings in the same order.
-bool exact_copy(const LabeledSlice& a, const LabeledSlice& b) {
-  if (a.origin_mm != b.origin_mm || a.u != b.u || a.v != b.v || a.fov != b.fov ||
-      a.regions.size() != b.regions.size())
-    return false;
-  for (std::size_t r = 0; r < a.regions.size(); ++r)
-    if (a.regions[r].label != b.regions[r].label || a.regions[r].outer != b.regions[r].outer ||
-        a.regions[r].holes != b.regions[r].holes)
-      return false;
-  return true;
-}
-
 // Empty when both coincident slices hold the same content; else the difference, in words.
 std::string content_difference(const LabeledSlice& a, const LabeledSlice& b, double tol) {
-  if (exact_copy(a, b)) return {};  // a copy: no need to match points up to `tol`
+  if (identical_slices(a, b)) return {};  // a copy: no need to match points up to `tol`
   if (a.fov.has_value() != b.fov.has_value()) return "only one of them has a fov";
   if (a.fov && !same_world_points(a, *a.fov, b, *b.fov, tol)) return "their fov differ";
   if (a.regions.size() != b.regions.size())

@@ -19,6 +19,7 @@
 #include "octree_field.hpp"
 #include "sonoshape/core/errors.hpp"
 #include "sonoshape/core/log.hpp"
+#include "sonoshape/core/slice_compare.hpp"
 #include "sonoshape/core/slice_io.hpp"
 #include "thin_plate.hpp"
 
@@ -74,17 +75,6 @@ std::vector<std::pair<Vec3, Vec3>> contour_segments(const PreparedSlice& slice) 
                               slice.origin + q.x() * slice.u + q.y() * slice.v);
       }
   return segments;
-}
-
-bool same_slice(const LabeledSlice& a, const LabeledSlice& b) {
-  if (a.origin_mm != b.origin_mm || a.u != b.u || a.v != b.v || a.fov != b.fov ||
-      a.regions.size() != b.regions.size())
-    return false;
-  for (std::size_t r = 0; r < a.regions.size(); ++r)
-    if (a.regions[r].label != b.regions[r].label || a.regions[r].outer != b.regions[r].outer ||
-        a.regions[r].holes != b.regions[r].holes)
-      return false;
-  return true;
 }
 
 bool same_plane(const LabeledSlice& a, const LabeledSlice& b, double scale) {
@@ -362,7 +352,7 @@ int Reconstructor::add_slice(LabeledSlice slice) {
       1.0, s.options.bounds ? s.options.bounds->diagonal() : single.effective_bounds().diagonal());
   auto check = [&](const State::Entry& other) {
     if (other.duplicate || !same_plane(other.slice, entry.slice, scale)) return;
-    if (same_slice(other.slice, entry.slice)) {
+    if (identical_slices(other.slice, entry.slice)) {
       entry.duplicate = true;
       return;
     }
@@ -427,7 +417,7 @@ UpdateStats Reconstructor::update() {
   for (std::size_t i = 0; i < next.size(); ++i) {
     next[i].duplicate = false;
     for (std::size_t j = 0; j < i && !next[i].duplicate; ++j)
-      next[i].duplicate = !next[j].duplicate && same_slice(next[j].slice, next[i].slice);
+      next[i].duplicate = !next[j].duplicate && identical_slices(next[j].slice, next[i].slice);
   }
 
   // Every stage runs in one arena of engine.threads threads: the arrangement, the face images
