@@ -107,8 +107,6 @@ def one_recording(args, fetch, path, work):
     if "refused" not in row:
         image = Path(args.images) / (re.sub(r"\W+", "_", name.split(".igs")[0]) + ".png")
         row.update(replay(args, local, calibration, work, image))
-    if name.startswith("NwirePhantomFreehand.igs"):
-        row["keep_slices"] = True
     return row
 
 
