@@ -897,9 +897,12 @@ void add_scan_options(CLI::App& app, ScanCommandOptions& o) {
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
   add_engine_options(app, {options->depth, options->smoothing, options->field, options->device});
-  app.add_option("--bounds", options->bounds,
-                 "Scan volume xmin ymin zmin xmax ymax zmax (mm, reference frame). Default: "
-                 "sim: the phantom's box + 10%; replay: grown from the slices")
+  app.add_option(
+         "--bounds", options->bounds,
+         "Scan volume xmin ymin zmin xmax ymax zmax (mm, reference frame). Default: "
+         "sim: the phantom's box + 10%; replay: the box of the recording's swept sectors + 10% "
+         "(known before the first frame, so that updates stay incremental); igtl:, "
+         "v4l2:: grown from the slices (each growth rebuilds every cell)")
       ->expected(6);
 
   CLI::Option_group* sim = app.add_option_group("Simulated source (sim:)");

@@ -170,6 +170,60 @@ TEST(ScanSources, RealPlusSweepReconstructs) {
   EXPECT_TRUE(check_mesh_health(*mesh).closed_manifold_oriented());
 }
 
+// The real engine behind a counter of the updates that rebuilt every cell.
+class RebuildCountingStage final : public ReconstructionStage {
+ public:
+  RebuildCountingStage(std::unique_ptr<ReconstructionStage> engine, std::size_t* full_rebuilds)
+      : engine_(std::move(engine)), full_rebuilds_(full_rebuilds) {}
+  int add_slice(LabeledSlice slice) override { return engine_->add_slice(std::move(slice)); }
+  recon::UpdateStats update() override {
+    recon::UpdateStats stats = engine_->update();
+    if (stats.full_rebuild) ++*full_rebuilds_;
+    return stats;
+  }
+  const MeshSet& meshes() const override { return engine_->meshes(); }
+  SliceSet slice_set() const override { return engine_->slice_set(); }
+  std::size_t slice_count() const override { return engine_->slice_count(); }
+
+ private:
+  std::unique_ptr<ReconstructionStage> engine_;
+  std::size_t* full_rebuilds_;
+};
+
+// A replay knows the volume its sectors sweep before the first frame: that box holds every
+// frame's sector, so it never grows and the updates after the first stay incremental. Grown
+// from the slices, it rebuilt every cell at nearly every update of a real recording (each new
+// slice widened it).
+TEST(ScanSources, ReplayBoxHoldsEverySectorSoUpdatesStayIncremental) {
+  ScanSource source = open_plus_sweep();
+  ASSERT_TRUE(source.setup.bounds);
+  const Box3 box = *source.setup.bounds;
+  auto file = acq::read_sequence_file(kPlusSweep);
+  ASSERT_TRUE(file);
+  const Eigen::Matrix4d image_to_probe = *acq::read_image_to_probe(kPlusConfig);
+  for (std::size_t k = 0; k < file->frame_count(); ++k) {
+    const Eigen::Matrix4d image_to_reference = file->transform("ReferenceToTracker", k)->inverse() *
+                                               *file->transform("ProbeToTracker", k) *
+                                               image_to_probe;
+    for (const Vec2& pixel : source.setup.geometry.sector_px)
+      EXPECT_TRUE(box.contains(
+          (image_to_reference * Eigen::Vector4d(pixel.x(), pixel.y(), 0, 1)).head<3>()))
+          << "frame " << k;
+  }
+  recon::ReconstructorOptions engine;
+  engine.engine.max_depth = 5;
+  engine.bounds = source.setup.bounds;
+  engine.labels = source.setup.labels;
+  std::size_t full_rebuilds = 0;
+  testing::TempDir dir;
+  const ScanSummary summary = run_fast(
+      std::move(source), std::make_shared<FileSink>(dir.path()),
+      std::make_unique<RebuildCountingStage>(make_reconstructor_stage(engine), &full_rebuilds));
+  ASSERT_GT(summary.counters.updates, 3u);
+  // The first update builds everything; a material first seen later rebuilds once more.
+  EXPECT_LE(full_rebuilds, 2u) << "of " << summary.counters.updates << " updates";
+}
+
 // The NRRD copy of a PLUS recording replays with the setup of its MetaImage copy; an image-only
 // Slicer sequence has no poses to replay and is refused with the reason.
 TEST(ScanSources, ReplayReadsPlusNrrdAndRefusesImageOnlySlicerSequences) {

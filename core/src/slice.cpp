@@ -4,6 +4,7 @@
 #include <limits>
 #include <set>
 
+#include "sonoshape/core/reconstruction_box.hpp"
 #include "sonoshape/core/slice_compare.hpp"
 
 namespace sonoshape {
@@ -43,15 +44,7 @@ Box3 SliceSet::effective_bounds() const {
     }
   }
   if (!any) return Box3{Vec3::Constant(-1.0), Vec3::Constant(1.0)};
-  // A set of parallel slices has a flat box: give it the thickness of its largest side first.
-  const double largest_side = box.size().maxCoeff();
-  for (int k = 0; k < 3; ++k) {
-    if (box.max[k] - box.min[k] < 1e-9 * std::max(1.0, largest_side)) {
-      box.min[k] -= 0.5 * largest_side;
-      box.max[k] += 0.5 * largest_side;
-    }
-  }
-  return box.padded(0.1 * box.diagonal());
+  return reconstruction_box(box);
 }
 
 bool identical_slices(const LabeledSlice& a, const LabeledSlice& b) {

@@ -3,12 +3,14 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <sstream>
 
 #include "sonoshape/acquisition/frame_source.hpp"
 #include "sonoshape/acquisition/sequence_file.hpp"
 #include "sonoshape/core/errors.hpp"
 #include "sonoshape/core/log.hpp"
+#include "sonoshape/core/reconstruction_box.hpp"
 #include "sonoshape/core/slice_io.hpp"
 #include "sonoshape/segmentation/sweep.hpp"
 #include "sonoshape/simulator/bmode.hpp"
@@ -30,6 +32,30 @@ namespace {
 // Frames rendered (with their ground truth) to learn the simulated probe's grey-level models:
 // spread over the sweep so that every organ is seen.
 constexpr int kModelFrames = 6;
+
+// The box of the volume a recording's sectors sweep (every frame with a pose), made into a
+// reconstruction box as a slice set's default bounds are. A replay knows it before its first
+// frame, so the box never grows during the scan: a box that grows rebuilds every cell at each
+// update (docs/engine.md, "Online engine"). None when no frame has a pose.
+std::optional<Box3> swept_sector_box(const acq::SequenceFile& file, const seg::SweepSetup& setup) {
+  Box3 extent{Vec3::Constant(std::numeric_limits<double>::infinity()),
+              Vec3::Constant(-std::numeric_limits<double>::infinity())};
+  bool any = false;
+  for (std::size_t k = 0; k < file.frame_count(); ++k) {
+    const auto pose = seg::reference_from_probe(file, k, setup);
+    if (!pose) continue;
+    const Eigen::Matrix4d T_reference_image = *pose * setup.T_probe_image;
+    for (const Vec2& pixel : setup.geometry.sector_px) {
+      const Vec3 world =
+          (T_reference_image * Eigen::Vector4d(pixel.x(), pixel.y(), 0.0, 1.0)).head<3>();
+      extent.min = extent.min.cwiseMin(world);
+      extent.max = extent.max.cwiseMax(world);
+      any = true;
+    }
+  }
+  if (!any) return std::nullopt;
+  return reconstruction_box(extent);
+}
 
 Result<ScanSource> open_replay(const SourceRequest& request, const std::string& path_text) {
   if (path_text.empty())
@@ -63,7 +89,7 @@ Result<ScanSource> open_replay(const SourceRequest& request, const std::string& 
   setup.geometry = prepared->geometry;
   for (const seg::LabelModel& m : setup.segmentation.materials)
     setup.labels.push_back({m.label, m.name});
-  setup.bounds = request.bounds;
+  setup.bounds = request.bounds ? request.bounds : swept_sector_box(*shared, *prepared);
   setup.calibration_from = prepared->calibration_from;
   setup.models_from = prepared->models_from;
   setup.sector_from = prepared->sector_from;
