@@ -483,9 +483,12 @@ void v_cycle(std::vector<Level>& levels, std::size_t l) {
   chebyshev(g, kSmoothingSteps, kChebyshevLower);
 }
 
+// Deterministic: the ranges and the order of the joins depend on `count` alone. With
+// parallel_reduce's automatic partitioning they followed the threads' timing, so the rounding
+// of these sums, and through the solve's stopping test the meshes, changed from run to run.
 template <typename A, typename B>
 double dot(const A* a, const B* b, std::size_t count) {
-  return tbb::parallel_reduce(
+  return tbb::parallel_deterministic_reduce(
       tbb::blocked_range<std::size_t>(0, count, 1 << 14), 0.0,
       [&](const tbb::blocked_range<std::size_t>& range, double sum) {
         for (std::size_t n = range.begin(); n < range.end(); ++n)

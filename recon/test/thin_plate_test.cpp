@@ -134,6 +134,31 @@ TEST(ThinPlateField, SolveConvergesInAFewPreconditionedIterations) {
   EXPECT_LT(stats.solve_iterations, 40u);
 }
 
+// The solve's sums are split and joined the same way whatever the threads do: the meshes are the
+// same to the bit from one run to the next and at any thread count. (With parallel_reduce's
+// automatic partitioning they followed the threads' timing and changed from run to run.)
+TEST(ThinPlateField, MeshesAreTheSameToTheBitAtAnyThreadCount) {
+  const SliceSet set = sphere_stack(40.0, {-30, -15, 0, 15, 30});
+  ReconstructionOptions options = thin_plate_options();
+  options.max_depth = 7;
+  std::vector<MeshSet> runs;
+  for (const int threads : {1, 2, 4}) {
+    options.threads = threads;
+    ReconstructionStats stats;
+    runs.push_back(reconstruct(set, options, &stats));
+    // Enough nodes for the sums to be split into many ranges (of 2^14 nodes).
+    ASSERT_GT(stats.solve_nodes, 4u << 14);
+  }
+  for (std::size_t run = 1; run < runs.size(); ++run) {
+    SCOPED_TRACE("run " + std::to_string(run));
+    ASSERT_EQ(runs[run].meshes.size(), runs[0].meshes.size());
+    for (std::size_t m = 0; m < runs[0].meshes.size(); ++m) {
+      EXPECT_EQ(runs[run].meshes[m].mesh.vertices, runs[0].meshes[m].mesh.vertices);
+      EXPECT_EQ(runs[run].meshes[m].mesh.triangles, runs[0].meshes[m].mesh.triangles);
+    }
+  }
+}
+
 TEST(ThinPlateField, SurfacePassesThroughTheInputContours) {
   const double r = 40.0;
   const SliceSet set = sphere_stack(r, {-30, -15, 0, 15, 30});
