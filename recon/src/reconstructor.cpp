@@ -332,6 +332,26 @@ struct Reconstructor::State {
     ++generation;
     cell_generation.assign(arrangement->cell_count(), generation);
   }
+
+  // The steps of Reconstructor::update, in its order (docs/engine.md, "Online engine").
+  UpdateStats unchanged_update() const;
+  std::vector<Entry> next_entries(UpdateStats& out) const;
+  void apply_changes(tbb::task_arena& arena, std::vector<Entry> next, bool use_thin_plate,
+                     UpdateStats& out);
+  void update_thin_plate(const std::vector<Entry>& next, bool full, UpdateStats& out);
+  void update_zone(const std::vector<Entry>& next, UpdateStats& out);
+  void add_new_contours(tbb::task_arena& arena, bool use_thin_plate);
+  void evaluate_points(tbb::task_arena& arena, bool use_thin_plate, const std::vector<Vec3>& points,
+                       double* values, std::uint64_t* tags, ReconstructionStats& stats);
+  void sample(tbb::task_arena& arena, bool use_thin_plate, ReconstructionStats& stats);
+  void extract_meshes(tbb::task_arena& arena, ReconstructionStats& stats);
+  void finish_stats(UpdateStats& out, double total_s);
+
+  // Per update, for the stats: the points evaluated and their seconds, and the cells of the
+  // last batch's points (kept to reuse the buffer).
+  std::size_t evaluations = 0;
+  double evaluation_seconds = 0.0;
+  std::vector<int> point_cells;
 };
 
 Reconstructor::Reconstructor(ReconstructorOptions options) : state_(std::make_unique<State>()) {
@@ -392,132 +412,164 @@ UpdateStats Reconstructor::update() {
   // The field's device first: a device that cannot be used leaves the engine as it was.
   const bool thin_plate = s.thin_plate_field();
   if (!s.evaluator && !thin_plate) s.evaluator = make_field_evaluator(s.options.engine.device);
-  UpdateStats out;
-  if (s.built && s.pending_adds.empty() && s.pending_removes.empty()) {
-    out.step = s.totals;
-    out.step.arrangement_s = out.step.face_images_s = out.step.field_s = out.step.smoothing_s =
-        out.step.mesh_s = out.step.total_s = out.step.completion_s = out.step.evaluation_s =
-            out.step.arrangement_serial_s = out.step.data_s = out.step.solve_s = 0.0;
-    out.step.solve_iterations = 0;
-    out.step.field_evaluations = 0;
-    return out;
-  }
+  if (s.built && s.pending_adds.empty() && s.pending_removes.empty()) return s.unchanged_update();
   Stopwatch total_clock;
-  ReconstructionStats& stats = out.step;
+  UpdateStats out;
+  std::vector<State::Entry> next = s.next_entries(out);
+  // Every stage runs in one arena of engine.threads threads: the arrangement, the face images
+  // and the completion as well as the evaluation, the octree and the mesher.
+  tbb::task_arena arena(s.options.engine.threads > 0 ? s.options.engine.threads
+                                                     : tbb::task_arena::automatic);
+  s.apply_changes(arena, std::move(next), thin_plate, out);
+  s.add_new_contours(arena, thin_plate);
+  s.sample(arena, thin_plate, out.step);
+  s.extract_meshes(arena, out.step);
+  s.finish_stats(out, total_clock.seconds());
+  return out;
+}
 
-  std::vector<State::Entry> next;
-  for (const State::Entry& e : s.entries)
-    if (std::find(s.pending_removes.begin(), s.pending_removes.end(), e.id) ==
-        s.pending_removes.end())
+// Nothing queued: the totals as they are, with no time spent.
+UpdateStats Reconstructor::State::unchanged_update() const {
+  UpdateStats out;
+  out.step = totals;
+  out.step.arrangement_s = out.step.face_images_s = out.step.field_s = out.step.smoothing_s =
+      out.step.mesh_s = out.step.total_s = out.step.completion_s = out.step.evaluation_s =
+          out.step.arrangement_serial_s = out.step.data_s = out.step.solve_s = 0.0;
+  out.step.solve_iterations = 0;
+  out.step.field_evaluations = 0;
+  return out;
+}
+
+// The entries after this update: the kept ones in their order, then the queued additions.
+std::vector<Reconstructor::State::Entry> Reconstructor::State::next_entries(
+    UpdateStats& out) const {
+  std::vector<Entry> next;
+  for (const Entry& e : entries)
+    if (std::find(pending_removes.begin(), pending_removes.end(), e.id) == pending_removes.end())
       next.push_back(e);
-  out.slices_removed = s.entries.size() - next.size();
-  out.slices_added = s.pending_adds.size();
-  for (const State::Entry& e : s.pending_adds) next.push_back(e);
+  out.slices_removed = entries.size() - next.size();
+  out.slices_added = pending_adds.size();
+  for (const Entry& e : pending_adds) next.push_back(e);
   // A removed slice may have hidden a duplicate: the first of identical slices is the one in.
   for (std::size_t i = 0; i < next.size(); ++i) {
     next[i].duplicate = false;
     for (std::size_t j = 0; j < i && !next[i].duplicate; ++j)
       next[i].duplicate = !next[j].duplicate && identical_slices(next[j].slice, next[i].slice);
   }
+  return next;
+}
 
-  // Every stage runs in one arena of engine.threads threads: the arrangement, the face images
-  // and the completion as well as the evaluation, the octree and the mesher.
-  tbb::task_arena arena(s.options.engine.threads > 0 ? s.options.engine.threads
-                                                     : tbb::task_arena::automatic);
-  const std::vector<State::Entry> previous = s.entries;
+// The arrangement and the field's data for `next`: the zone of the new planes, or everything
+// when a slice went, a material came or the box grew. Should that fail, the engine is put back
+// as it was before the update (the queued changes dropped) and the error passed on.
+void Reconstructor::State::apply_changes(tbb::task_arena& arena, std::vector<Entry> next,
+                                         bool use_thin_plate, UpdateStats& out) {
+  ReconstructionStats& stats = out.step;
+  const std::vector<Entry> previous = entries;
   try {
     arena.execute([&] {
-      const Box3 next_box = s.slice_set_of(next).effective_bounds();
-      const bool full = !s.built || out.slices_removed > 0 ||
-                        s.materials_of(next) != s.material_ids || next_box.min != s.box.min ||
-                        next_box.max != s.box.max;
-      if (thin_plate) {
-        // An added slice changes only its data; the solve starts from the last solution.
-        if (full || !s.add_thin_plate_slices(next, s.entries.size(), stats)) {
-          s.rebuild(next, stats);
-          out.full_rebuild = true;
-        }
-        const ThinPlateSolveStats solved = s.thin_plate->solve();
-        stats.solve_s = solved.solve_s;
-        stats.solve_iterations = static_cast<std::size_t>(solved.iterations);
-        stats.solve_nodes = solved.nodes;
+      const Box3 next_box = slice_set_of(next).effective_bounds();
+      const bool full = !built || out.slices_removed > 0 || materials_of(next) != material_ids ||
+                        next_box.min != box.min || next_box.max != box.max;
+      if (use_thin_plate) {
+        update_thin_plate(next, full, out);
         return;
       }
       if (full) {
-        s.rebuild(next, stats);
+        rebuild(next, stats);
         out.full_rebuild = true;
-        out.cells_changed = s.arrangement->cell_count();
+        out.cells_changed = arrangement->cell_count();
       } else {
-        Stopwatch clock;
-        std::vector<int> changed, split_faces;
-        for (std::size_t k = s.entries.size(); k < next.size(); ++k) {
-          if (next[k].duplicate) continue;
-          const std::vector<int> cells = s.insert(
-              prepare_slice(next[k].slice, s.field->slices().size(), s.material_ids, s.box),
-              split_faces);
-          changed.insert(changed.end(), cells.begin(), cells.end());
-        }
-        s.build_unknown_cells();  // around the new unknown sets, and in the reopened cells
-        std::sort(changed.begin(), changed.end());
-        changed.erase(std::unique(changed.begin(), changed.end()), changed.end());
-        stats.arrangement_s = clock.seconds();
-        stats.arrangement_serial_s = s.arrangement->take_serial_seconds();
-        clock.reset();
-        std::sort(split_faces.begin(), split_faces.end());
-        split_faces.erase(std::unique(split_faces.begin(), split_faces.end()), split_faces.end());
-        // On demand: no face was split (crossed cells were reopened, their crossed faces
-        // retired); the images of new faces are built when their cells are.
-        if (s.arrangement->on_demand())
-          s.field->release_images(s.arrangement->take_retired_faces());
-        const std::vector<int> completion_changed = s.field->refresh(split_faces);
-        stats.face_images_s = clock.seconds();
-        ++s.generation;
-        s.cell_generation.resize(s.arrangement->cell_count(), s.generation);
-        std::vector<char> marked(s.arrangement->cell_count(), 0);
-        for (const std::vector<int>* list :
-             std::initializer_list<const std::vector<int>*>{&changed, &completion_changed})
-          for (const int c : *list)
-            if (!marked[static_cast<std::size_t>(c)]) {
-              marked[static_cast<std::size_t>(c)] = 1;
-              s.cell_generation[static_cast<std::size_t>(c)] = s.generation;
-              ++out.cells_changed;
-            }
+        update_zone(next, out);
       }
-      stats.completion_s = s.field->completion_seconds();
-      stats.unknown_triangles = s.field->unknown_triangle_count();
-      stats.cell_groups = s.field->group_count();
-      stats.completed_slices = s.field->recompleted_slice_count();
+      stats.completion_s = field->completion_seconds();
+      stats.unknown_triangles = field->unknown_triangle_count();
+      stats.cell_groups = field->group_count();
+      stats.completed_slices = field->recompleted_slice_count();
     });
-    s.entries = std::move(next);
+    entries = std::move(next);
   } catch (...) {
-    // Back to the state before this update: the queued changes are dropped.
-    s.pending_adds.clear();
-    s.pending_removes.clear();
-    s.built = false;
-    if (!previous.empty() || s.options.bounds) {
+    pending_adds.clear();
+    pending_removes.clear();
+    built = false;
+    if (!previous.empty() || options.bounds) {
       ReconstructionStats ignored;
-      arena.execute([&] { s.rebuild(previous, ignored); });
+      arena.execute([&] { rebuild(previous, ignored); });
     }
-    s.entries = previous;
+    entries = previous;
     throw;
   }
-  s.pending_adds.clear();
-  s.pending_removes.clear();
+  pending_adds.clear();
+  pending_removes.clear();
+}
 
-  // Contour vertices refine the octree; contour segments fix the smoothing next to them. In the
-  // arena too: contour_keys sorts in parallel, and --threads bounds every stage.
+// An added slice changes only its data; the solve starts from the last solution.
+void Reconstructor::State::update_thin_plate(const std::vector<Entry>& next, bool full,
+                                             UpdateStats& out) {
+  ReconstructionStats& stats = out.step;
+  if (full || !add_thin_plate_slices(next, entries.size(), stats)) {
+    rebuild(next, stats);
+    out.full_rebuild = true;
+  }
+  const ThinPlateSolveStats solved = thin_plate->solve();
+  stats.solve_s = solved.solve_s;
+  stats.solve_iterations = static_cast<std::size_t>(solved.iterations);
+  stats.solve_nodes = solved.nodes;
+}
+
+// The zone of the new planes: the cells they split, the faces they cut and the completions
+// those change are marked with a new generation; the rest keeps its sampled values.
+void Reconstructor::State::update_zone(const std::vector<Entry>& next, UpdateStats& out) {
+  ReconstructionStats& stats = out.step;
+  Stopwatch clock;
+  std::vector<int> changed, split_faces;
+  for (std::size_t k = entries.size(); k < next.size(); ++k) {
+    if (next[k].duplicate) continue;
+    const std::vector<int> cells = insert(
+        prepare_slice(next[k].slice, field->slices().size(), material_ids, box), split_faces);
+    changed.insert(changed.end(), cells.begin(), cells.end());
+  }
+  build_unknown_cells();  // around the new unknown sets, and in the reopened cells
+  std::sort(changed.begin(), changed.end());
+  changed.erase(std::unique(changed.begin(), changed.end()), changed.end());
+  stats.arrangement_s = clock.seconds();
+  stats.arrangement_serial_s = arrangement->take_serial_seconds();
+  clock.reset();
+  std::sort(split_faces.begin(), split_faces.end());
+  split_faces.erase(std::unique(split_faces.begin(), split_faces.end()), split_faces.end());
+  // On demand: no face was split (crossed cells were reopened, their crossed faces
+  // retired); the images of new faces are built when their cells are.
+  if (arrangement->on_demand()) field->release_images(arrangement->take_retired_faces());
+  const std::vector<int> completion_changed = field->refresh(split_faces);
+  stats.face_images_s = clock.seconds();
+  ++generation;
+  cell_generation.resize(arrangement->cell_count(), generation);
+  std::vector<char> marked(arrangement->cell_count(), 0);
+  for (const std::vector<int>* list :
+       std::initializer_list<const std::vector<int>*>{&changed, &completion_changed})
+    for (const int c : *list)
+      if (!marked[static_cast<std::size_t>(c)]) {
+        marked[static_cast<std::size_t>(c)] = 1;
+        cell_generation[static_cast<std::size_t>(c)] = generation;
+        ++out.cells_changed;
+      }
+}
+
+// Contour vertices refine the octree; contour segments fix the smoothing next to them. The new
+// slices' keys and samples in parallel (each depends on its slice alone), then merged: the keys
+// pairwise in a tree (a union of sorted sets: the same whatever the order), the samples in
+// slice order. In the arena too: contour_keys sorts in parallel, and --threads bounds every
+// stage.
+void Reconstructor::State::add_new_contours(tbb::task_arena& arena, bool use_thin_plate) {
   const std::vector<PreparedSlice>& slices =
-      thin_plate ? s.thin_plate->slices() : s.field->slices();
-  const Grid grid = make_grid(s.box, s.octree.max_depth);
-  // The new slices' keys and samples in parallel (each depends on its slice alone), then merged:
-  // the keys pairwise in a tree (a union of sorted sets: the same whatever the order), the
-  // samples in slice order.
+      use_thin_plate ? thin_plate->slices() : field->slices();
+  const Grid grid = make_grid(box, octree.max_depth);
   arena.execute([&] {
-    const std::size_t first = s.contour_slices, count = slices.size() - first;
+    const std::size_t first = contour_slices, count = slices.size() - first;
     std::vector<ContourKeys> keys(count);
     std::vector<std::vector<RegionSample>> samples(count);
     tbb::parallel_for(std::size_t{0}, count, [&](std::size_t k) {
-      keys[k] = contour_keys(grid, s.octree, contour_segments(slices[first + k]));
+      keys[k] = contour_keys(grid, octree, contour_segments(slices[first + k]));
       add_thin_region_samples(slices[first + k], grid.cell_size, samples[k]);
     });
     for (std::size_t width = 1; width < count; width *= 2)
@@ -525,110 +577,123 @@ UpdateStats Reconstructor::update() {
         const std::size_t a = 2 * width * i;
         if (a + width < count) merge_contour_keys(keys[a], keys[a + width]);
       });
-    if (count > 0) merge_contour_keys(s.contours, keys[0]);
+    if (count > 0) merge_contour_keys(contours, keys[0]);
     for (const std::vector<RegionSample>& more : samples)
-      s.region_samples.insert(s.region_samples.end(), more.begin(), more.end());
-    s.contour_slices = slices.size();
+      region_samples.insert(region_samples.end(), more.begin(), more.end());
+    contour_slices = slices.size();
   });
+}
 
-  std::size_t evaluations = 0;
-  double evaluation_seconds = 0.0;
-  std::vector<int> point_cells;
-  // The octree asks only for vertices the kept field has no valid value for: all are evaluated
-  // (in parallel) and tagged with their cell and this update.
-  const BatchEvaluator evaluate = [&](const std::vector<Vec3>& points, double* values,
-                                      std::uint64_t* tags) {
-    if (thin_plate) {
-      const Stopwatch evaluation_clock;
-      arena.execute([&] { s.thin_plate->evaluate(points, values); });
-      std::fill(tags, tags + points.size(), std::uint64_t{0});
-      evaluations += points.size();
-      evaluation_seconds += evaluation_clock.seconds();
-      return;
-    }
-    if (s.arrangement->on_demand()) {
-      // The cells of the points are built first (their regions refined in parallel, the cells
-      // made in a fixed order), then evaluated in parallel like those of the whole arrangement.
-      Stopwatch clock;
-      const Box3& box = s.box;
-      std::vector<char> inside(points.size());
-      for (std::size_t n = 0; n < points.size(); ++n)
-        inside[n] = (points[n].array() > box.min.array()).all() &&
-                    (points[n].array() < box.max.array()).all();
-      arena.execute([&] { point_cells = s.arrangement->construct_cells(points, inside); });
-      // Values are tagged with the cells built now and this update (their generation).
-      s.cell_generation.resize(s.arrangement->cell_count(), s.generation);
-      stats.arrangement_s += clock.seconds();
-      stats.arrangement_serial_s += s.arrangement->take_serial_seconds();
-      clock.reset();
-      arena.execute([&] { s.field->refresh({}); });  // the images of the new cells' faces
-      stats.face_images_s += clock.seconds();
-    } else {
-      point_cells.resize(points.size());
-    }
-    // The native CPU or an OpenCL device (options.engine.device; field_evaluator.hpp).
+// The octree asks only for vertices the kept field has no valid value for: all are evaluated
+// (in parallel) and tagged with their cell and this update.
+void Reconstructor::State::evaluate_points(tbb::task_arena& arena, bool use_thin_plate,
+                                           const std::vector<Vec3>& points, double* values,
+                                           std::uint64_t* tags, ReconstructionStats& stats) {
+  if (use_thin_plate) {
     const Stopwatch evaluation_clock;
-    arena.execute([&] {
-      s.evaluator->evaluate(*s.field, points, point_cells.data(), s.arrangement->on_demand(),
-                            values);
-    });
-    for (std::size_t n = 0; n < points.size(); ++n)
-      tags[n] = evaluation_tag(point_cells[n], s.generation);
+    arena.execute([&] { thin_plate->evaluate(points, values); });
+    std::fill(tags, tags + points.size(), std::uint64_t{0});
     evaluations += points.size();
     evaluation_seconds += evaluation_clock.seconds();
+    return;
+  }
+  if (arrangement->on_demand()) {
+    // The cells of the points are built first (their regions refined in parallel, the cells
+    // made in a fixed order), then evaluated in parallel like those of the whole arrangement.
+    Stopwatch clock;
+    std::vector<char> inside(points.size());
+    for (std::size_t n = 0; n < points.size(); ++n)
+      inside[n] = (points[n].array() > box.min.array()).all() &&
+                  (points[n].array() < box.max.array()).all();
+    arena.execute([&] { point_cells = arrangement->construct_cells(points, inside); });
+    // Values are tagged with the cells built now and this update (their generation).
+    cell_generation.resize(arrangement->cell_count(), generation);
+    stats.arrangement_s += clock.seconds();
+    stats.arrangement_serial_s += arrangement->take_serial_seconds();
+    clock.reset();
+    arena.execute([&] { field->refresh({}); });  // the images of the new cells' faces
+    stats.face_images_s += clock.seconds();
+  } else {
+    point_cells.resize(points.size());
+  }
+  // The native CPU or an OpenCL device (options.engine.device; field_evaluator.hpp).
+  const Stopwatch evaluation_clock;
+  arena.execute([&] {
+    evaluator->evaluate(*field, points, point_cells.data(), arrangement->on_demand(), values);
+  });
+  for (std::size_t n = 0; n < points.size(); ++n)
+    tags[n] = evaluation_tag(point_cells[n], generation);
+  evaluations += points.size();
+  evaluation_seconds += evaluation_clock.seconds();
+}
+
+// The octree's samples of the field, smoothed. The last field is kept: its rows whose cells did
+// not change still hold their values. The thin-plate field changes everywhere at every update:
+// every row is evaluated again (an interpolation, not a field evaluation), and only the
+// workspace's tables are kept. In the arena: the octree's parallel loops use the same threads
+// as the evaluation.
+void Reconstructor::State::sample(tbb::task_arena& arena, bool use_thin_plate,
+                                  ReconstructionStats& stats) {
+  evaluations = 0;
+  evaluation_seconds = 0.0;
+  const BatchEvaluator evaluate = [&](const std::vector<Vec3>& points, double* values,
+                                      std::uint64_t* tags) {
+    evaluate_points(arena, use_thin_plate, points, values, tags, stats);
   };
   Stopwatch clock;
-  // In the arena: the octree's parallel loops use the same threads as the evaluation.
-  // The last field is kept: its rows whose cells did not change still hold their values.
-  // The thin-plate field changes everywhere at every update: every row is evaluated again (an
-  // interpolation, not a field evaluation), and only the workspace's tables are kept.
-  if (thin_plate) s.octree_workspace.previous_valid.clear();
-  if (s.sampled_tags_current && !thin_plate) {
-    std::vector<char>& valid = s.octree_workspace.previous_valid;
-    valid.assign(s.sampled.keys.size(), 0);
+  if (use_thin_plate) octree_workspace.previous_valid.clear();
+  if (sampled_tags_current && !use_thin_plate) {
+    std::vector<char>& valid = octree_workspace.previous_valid;
+    valid.assign(sampled.keys.size(), 0);
     arena.execute([&] {
       tbb::parallel_for(tbb::blocked_range<std::size_t>(0, valid.size(), 4096),
                         [&](const tbb::blocked_range<std::size_t>& r) {
                           for (std::size_t n = r.begin(); n < r.end(); ++n)
-                            valid[n] = tag_current(s.sampled.row_tags[n], s.cell_generation);
+                            valid[n] = tag_current(sampled.row_tags[n], cell_generation);
                         });
     });
   }
-  s.octree_workspace.previous = std::move(s.sampled);
+  octree_workspace.previous = std::move(sampled);
   arena.execute([&] {
-    const int function_count = static_cast<int>(s.material_ids.size()) + 1;
-    s.sampled = sample_field(s.box, function_count, evaluate, s.contours, s.region_samples,
-                             s.octree, s.octree_workspace);
+    const int function_count = static_cast<int>(material_ids.size()) + 1;
+    sampled = sample_field(box, function_count, evaluate, contours, region_samples, octree,
+                           octree_workspace);
   });
-  s.sampled_tags_current = true;
-  stats.smoothing_s = s.sampled.smoothing_seconds;
+  sampled_tags_current = true;
+  stats.smoothing_s = sampled.smoothing_seconds;
   stats.field_s = clock.seconds() - stats.smoothing_s;
-
-  clock.reset();
-  std::vector<TriangleMesh> meshes;
-  arena.execute([&] { meshes = extract_label_surfaces(s.sampled); });
-  s.mesh = MeshSet{};
-  for (std::size_t m = 1; m <= s.material_ids.size(); ++m) {
-    const int id = s.material_ids[m - 1];
-    s.mesh.meshes.push_back({id, s.label_name(id), std::move(meshes[m - 1])});
-    stats.triangles[id] = s.mesh.meshes.back().mesh.triangles.size();
-  }
-  stats.mesh_s = clock.seconds();
-
-  stats.slices = s.entries.size();
-  if (s.arrangement) {
-    stats.cells = s.arrangement->on_demand() ? s.arrangement->built_cell_count()
-                                             : s.arrangement->cell_count();
-    if (out.full_rebuild && s.arrangement->on_demand()) out.cells_changed = stats.cells;
-    stats.faces = s.arrangement->face_count();
-  }
   stats.field_evaluations = evaluations;
   stats.evaluation_s = evaluation_seconds;
-  stats.snapped_vertices = s.sampled.snapped_vertices;
-  stats.depth = s.depth;
-  stats.total_s = total_clock.seconds();
+}
 
-  ReconstructionStats& totals = s.totals;
+// One mesh per material: the zero set of its function against the others (mesher.hpp).
+void Reconstructor::State::extract_meshes(tbb::task_arena& arena, ReconstructionStats& stats) {
+  Stopwatch clock;
+  std::vector<TriangleMesh> meshes;
+  arena.execute([&] { meshes = extract_label_surfaces(sampled); });
+  mesh = MeshSet{};
+  for (std::size_t m = 1; m <= material_ids.size(); ++m) {
+    const int id = material_ids[m - 1];
+    mesh.meshes.push_back({id, label_name(id), std::move(meshes[m - 1])});
+    stats.triangles[id] = mesh.meshes.back().mesh.triangles.size();
+  }
+  stats.mesh_s = clock.seconds();
+}
+
+// The update's counts, and the totals over every update.
+void Reconstructor::State::finish_stats(UpdateStats& out, double total_s) {
+  ReconstructionStats& stats = out.step;
+  stats.slices = entries.size();
+  if (arrangement) {
+    stats.cells =
+        arrangement->on_demand() ? arrangement->built_cell_count() : arrangement->cell_count();
+    if (out.full_rebuild && arrangement->on_demand()) out.cells_changed = stats.cells;
+    stats.faces = arrangement->face_count();
+  }
+  stats.snapped_vertices = sampled.snapped_vertices;
+  stats.depth = depth;
+  stats.total_s = total_s;
+
   totals.arrangement_s += stats.arrangement_s;
   totals.arrangement_serial_s += stats.arrangement_serial_s;
   totals.face_images_s += stats.face_images_s;
@@ -652,7 +717,6 @@ UpdateStats Reconstructor::update() {
   totals.completed_slices += stats.completed_slices;
   totals.depth = stats.depth;
   totals.triangles = stats.triangles;
-  return out;
 }
 
 const MeshSet& Reconstructor::mesh() const { return state_->mesh; }
