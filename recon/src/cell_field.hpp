@@ -224,6 +224,8 @@ class CellField {
                            SliceCompletion& out) const;
   // The parts of formula 7 at the corners of one slice (completion.cpp).
   struct CornerCache;
+  // The steps of triangulate_unknown and their working state (completion.cpp).
+  class UnknownTriangulator;
   // Computes the parts of formula 7 that `cache` lists for this refinement round of slice s, in
   // parallel; the j-th 3D part reads the union of the sorted lists of known faces corner_faces[j].
   void complete_round(const PreparedSlice& s,

@@ -305,405 +305,474 @@ struct CellField::CornerCache {
   double* at(std::size_t slot) { return values.data() + slot * stride; }
 };
 
-void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_faces,
-                                    const std::vector<std::vector<int>>& local_faces,
-                                    SliceCompletion& out) const {
-  const PreparedSlice& s = slices_[static_cast<std::size_t>(slice)];
-  const std::size_t fc = static_cast<std::size_t>(function_count());
-  double unknown_area = 0.0;
-  for (const UnknownComponent& component : s.unknown)
-    for (const Ring2& ring : component.rings) unknown_area += signed_area(ring);
-  const double diagonal = arrangement_.box().diagonal();
-  const double triangle_size =
-      std::clamp(kUnknownTriangleFraction * std::sqrt(std::max(unknown_area, 0.0)),
-                 kUnknownTriangleMin * diagonal, kUnknownTriangleMax * diagonal);
+// The triangulation of one slice's unknown set and the completed values at its corners
+// (CellField::triangulate_unknown), step by step: the working state of the steps is its members.
+//
+// Why not CGAL::Delaunay_mesher_2: its refinement is only guaranteed to end for input angles of
+// 60 degrees and more, and with inexact constructions it crashed (Refine_edges_with_clusters) on
+// the real PLUS sweep, whose segmented outlines have near-touching vertices and hairline spikes.
+// The completion needs corners spread over the region, dense where the completed labels change,
+// not well-shaped triangles: the boundary edges are split to triangle_size, a triangular lattice
+// of that spacing fills the inside, and triangles whose corners complete to different labels
+// are split at the midpoints of their longest edges (refine). Plain constrained Delaunay
+// insertions with exact predicates always end.
+class CellField::UnknownTriangulator {
+ public:
+  UnknownTriangulator(const CellField& field, int slice,
+                      const std::vector<std::vector<int>>& local_faces)
+      : field_(field),
+        s_(field.slices_[static_cast<std::size_t>(slice)]),
+        fc_(static_cast<std::size_t>(field.function_count())),
+        diagonal_(field.arrangement_.box().diagonal()),
+        local_faces_(local_faces),
+        cache_(fc_) {}
 
-  // Why not CGAL::Delaunay_mesher_2: its refinement is only guaranteed to end for input angles of
-  // 60 degrees and more, and with inexact constructions it crashed (Refine_edges_with_clusters)
-  // on the real PLUS sweep, whose segmented outlines have near-touching vertices and hairline
-  // spikes. The completion needs corners spread over the region, dense where the completed labels
-  // change, not well-shaped triangles: the boundary edges are split to triangle_size, a
-  // triangular lattice of that spacing fills the inside, and triangles whose corners complete to
-  // different labels are split at the midpoints of their longest edges (below). Plain constrained
-  // Delaunay insertions with exact predicates always end.
-  Cdt cdt;
+  void run(const std::vector<int>& slice_faces, SliceCompletion& out) {
+    if (!insert_boundary()) return;
+    insert_lattice();
+    insert_faces(slice_faces);
+    index_faces();
+    refine();
+    write(out);
+  }
+
+ private:
+  struct SliceFace {
+    int id;
+    Vec2 lo, hi;
+  };
+  // A triangle of the triangulation with its completed corners, refined where they disagree.
+  struct Completed {
+    Cdt::Vertex_handle vertices[3];  // the triangle's (a face that a flip reused has others)
+    bool skipped = false;            // a sliver, or outside the unknown set or the faces
+    UnknownTriangle triangle;
+    int face_index = -1;                   // in `faces_`
+    std::size_t slots_3d[3], slots_2d[3];  // its corners' parts in the cache
+  };
+
   // Constraints are inserted through their end vertices, each new one located from the last
   // vertex (a ring's or a face's next edge starts where the last ended) rather than walked to
   // from an arbitrary face, as Cdt::insert_constraint(point, point) does; a point met again (most
   // are the ends of several edges) takes its vertex from a map, since locating a point that is a
   // vertex already runs into degenerate orientation tests that the exact predicates answer
   // slowly. The triangulation is the same: the points go in, in the same order.
-  Cdt::Vertex_handle last_vertex;
-  std::unordered_map<std::array<double, 2>, Cdt::Vertex_handle, DoublesHash> vertex_at;
-  const auto vertex = [&](const Vec2& p, const Cdt::Vertex_handle& near) {
-    auto [it, is_new] = vertex_at.try_emplace({p.x(), p.y()});
+  Cdt::Vertex_handle vertex(const Vec2& p, const Cdt::Vertex_handle& near) {
+    auto [it, is_new] = vertex_at_.try_emplace({p.x(), p.y()});
     if (is_new)
       it->second = near == Cdt::Vertex_handle()
-                       ? cdt.insert(Kernel::Point_2(p.x(), p.y()))
-                       : cdt.insert(Kernel::Point_2(p.x(), p.y()), near->face());
+                       ? cdt_.insert(Kernel::Point_2(p.x(), p.y()))
+                       : cdt_.insert(Kernel::Point_2(p.x(), p.y()), near->face());
     return it->second;
-  };
-  const auto insert_constraint = [&](const Vec2& a, const Vec2& b) {
-    const Cdt::Vertex_handle va = vertex(a, last_vertex);
-    const Cdt::Vertex_handle vb = vertex(b, va);
-    cdt.insert_constraint(va, vb);
-    last_vertex = vb;
-  };
-  Vec2 lo = Vec2::Constant(std::numeric_limits<double>::infinity());
-  Vec2 hi = -lo;
-  std::vector<std::pair<Vec2, Vec2>> boundary;  // the split boundary edges, for the clearance test
-  for (const UnknownComponent& component : s.unknown)
-    for (const Ring2& ring : component.rings)
-      for (std::size_t i = 0; i < ring.size(); ++i) {
-        const Vec2& a = ring[i];
-        const Vec2& b = ring[(i + 1) % ring.size()];
-        lo = lo.cwiseMin(a);
-        hi = hi.cwiseMax(a);
-        if (a == b) continue;
-        const int pieces = std::max(1, static_cast<int>(std::ceil((b - a).norm() / triangle_size)));
-        Vec2 previous = a;
-        for (int k = 1; k <= pieces; ++k) {
-          const Vec2 next = k == pieces ? b : Vec2(a + (b - a) * (static_cast<double>(k) / pieces));
-          insert_constraint(previous, next);
-          boundary.emplace_back(previous, next);
-          previous = next;
-        }
-      }
-  if (boundary.empty()) return;
-  // Lattice points inside the unknown set, at least kLatticeClearance * triangle_size from its
-  // boundary (closer ones would only make slivers along it). Boundary edges are bucketed by
-  // lattice row so each point tests the few edges near it.
-  const double row_step = triangle_size * std::sqrt(3.0) / 2.0;
-  const double clearance = kLatticeClearance * triangle_size;
-  const int rows = static_cast<int>(std::floor((hi.y() - lo.y()) / row_step)) + 1;
-  std::vector<std::vector<std::size_t>> edges_near_row(static_cast<std::size_t>(rows));
-  for (std::size_t e = 0; e < boundary.size(); ++e) {
-    const double y0 = std::min(boundary[e].first.y(), boundary[e].second.y()) - clearance;
-    const double y1 = std::max(boundary[e].first.y(), boundary[e].second.y()) + clearance;
-    const int r0 = std::max(0, static_cast<int>(std::ceil((y0 - lo.y()) / row_step)));
-    const int r1 = std::min(rows - 1, static_cast<int>(std::floor((y1 - lo.y()) / row_step)));
-    for (int r = r0; r <= r1; ++r) edges_near_row[static_cast<std::size_t>(r)].push_back(e);
   }
-  const auto clear_of_boundary = [&](const Vec2& p, const std::vector<std::size_t>& edges) {
-    for (const std::size_t e : edges) {
-      const Vec2& a = boundary[e].first;
-      const Vec2 ab = boundary[e].second - a;
-      const double t = std::clamp((p - a).dot(ab) / ab.squaredNorm(), 0.0, 1.0);
-      if ((a + t * ab - p).squaredNorm() < clearance * clearance) return false;
-    }
-    return true;
-  };
-  const auto component_of = [&](const Vec2& p) {
-    for (std::size_t c = 0; c < s.unknown.size(); ++c) {
+  void insert_constraint(const Vec2& a, const Vec2& b) {
+    const Cdt::Vertex_handle va = vertex(a, last_vertex_);
+    const Cdt::Vertex_handle vb = vertex(b, va);
+    cdt_.insert_constraint(va, vb);
+    last_vertex_ = vb;
+  }
+
+  // The unknown set's boundary edges, split to the first triangle size; false when it has none.
+  bool insert_boundary() {
+    double unknown_area = 0.0;
+    for (const UnknownComponent& component : s_.unknown)
+      for (const Ring2& ring : component.rings) unknown_area += signed_area(ring);
+    triangle_size_ = std::clamp(kUnknownTriangleFraction * std::sqrt(std::max(unknown_area, 0.0)),
+                                kUnknownTriangleMin * diagonal_, kUnknownTriangleMax * diagonal_);
+    lo_ = Vec2::Constant(std::numeric_limits<double>::infinity());
+    hi_ = -lo_;
+    for (const UnknownComponent& component : s_.unknown)
+      for (const Ring2& ring : component.rings)
+        for (std::size_t i = 0; i < ring.size(); ++i) {
+          const Vec2& a = ring[i];
+          const Vec2& b = ring[(i + 1) % ring.size()];
+          lo_ = lo_.cwiseMin(a);
+          hi_ = hi_.cwiseMax(a);
+          if (a == b) continue;
+          const int pieces =
+              std::max(1, static_cast<int>(std::ceil((b - a).norm() / triangle_size_)));
+          Vec2 previous = a;
+          for (int k = 1; k <= pieces; ++k) {
+            const Vec2 next =
+                k == pieces ? b : Vec2(a + (b - a) * (static_cast<double>(k) / pieces));
+            insert_constraint(previous, next);
+            boundary_.emplace_back(previous, next);
+            previous = next;
+          }
+        }
+    return !boundary_.empty();
+  }
+
+  // The unknown component holding p (-1: none).
+  int component_of(const Vec2& p) const {
+    for (std::size_t c = 0; c < s_.unknown.size(); ++c) {
       int winding = 0;
-      for (const Ring2& ring : s.unknown[c].rings)
+      for (const Ring2& ring : s_.unknown[c].rings)
         winding += winding_number(ring.data(), ring.size(), p);
       if (winding > 0) return static_cast<int>(c);
     }
     return -1;
-  };
-  std::vector<Kernel::Point_2> lattice;
-  for (int r = 0; r < rows; ++r) {
-    const double y = lo.y() + r * row_step;
-    const double x_offset = (r % 2) * 0.5 * triangle_size;
-    for (double x = lo.x() + x_offset; x <= hi.x(); x += triangle_size) {
-      const Vec2 p(x, y);
-      if (component_of(p) >= 0 && clear_of_boundary(p, edges_near_row[static_cast<std::size_t>(r)]))
-        lattice.emplace_back(x, y);
+  }
+
+  // Lattice points inside the unknown set, at least kLatticeClearance * triangle_size from its
+  // boundary (closer ones would only make slivers along it). Boundary edges are bucketed by
+  // lattice row so each point tests the few edges near it.
+  void insert_lattice() {
+    const double row_step = triangle_size_ * std::sqrt(3.0) / 2.0;
+    const double clearance = kLatticeClearance * triangle_size_;
+    const int rows = static_cast<int>(std::floor((hi_.y() - lo_.y()) / row_step)) + 1;
+    std::vector<std::vector<std::size_t>> edges_near_row(static_cast<std::size_t>(rows));
+    for (std::size_t e = 0; e < boundary_.size(); ++e) {
+      const double y0 = std::min(boundary_[e].first.y(), boundary_[e].second.y()) - clearance;
+      const double y1 = std::max(boundary_[e].first.y(), boundary_[e].second.y()) + clearance;
+      const int r0 = std::max(0, static_cast<int>(std::ceil((y0 - lo_.y()) / row_step)));
+      const int r1 = std::min(rows - 1, static_cast<int>(std::floor((y1 - lo_.y()) / row_step)));
+      for (int r = r0; r <= r1; ++r) edges_near_row[static_cast<std::size_t>(r)].push_back(e);
+    }
+    const auto clear_of_boundary = [&](const Vec2& p, const std::vector<std::size_t>& edges) {
+      for (const std::size_t e : edges) {
+        const Vec2& a = boundary_[e].first;
+        const Vec2 ab = boundary_[e].second - a;
+        const double t = std::clamp((p - a).dot(ab) / ab.squaredNorm(), 0.0, 1.0);
+        if ((a + t * ab - p).squaredNorm() < clearance * clearance) return false;
+      }
+      return true;
+    };
+    std::vector<Kernel::Point_2> lattice;
+    for (int r = 0; r < rows; ++r) {
+      const double y = lo_.y() + r * row_step;
+      const double x_offset = (r % 2) * 0.5 * triangle_size_;
+      for (double x = lo_.x() + x_offset; x <= hi_.x(); x += triangle_size_) {
+        const Vec2 p(x, y);
+        if (component_of(p) >= 0 &&
+            clear_of_boundary(p, edges_near_row[static_cast<std::size_t>(r)]))
+          lattice.emplace_back(x, y);
+      }
+    }
+    cdt_.insert(lattice.begin(), lattice.end());
+  }
+
+  // The faces of this slice that reach the unknown set, as constraints too, so that every
+  // triangle lies in one face. In an order of their own, not by id: the whole arrangement and
+  // cells on demand number the same faces differently, and the insertions' order decides the
+  // refinement (which triangles CGAL lists first). By each face's vertex mean, then from its
+  // least vertex, both on a grid of 1e-9 of the box's diagonal: the two arrangements may round a
+  // vertex differently in its last bits (its three planes in another order).
+  void insert_faces(const std::vector<int>& slice_faces) {
+    const std::vector<Vec2>& points = field_.points_;
+    // Neighbouring faces share most edges: each is inserted once (a second insertion of the same
+    // constraint changes nothing but costs its walk through the triangulation).
+    std::unordered_set<std::array<double, 4>, DoublesHash> face_edges;
+    for (const auto& [mean, f, first] : ordered_faces(slice_faces)) {
+      const FaceImage& image = field_.images_[static_cast<std::size_t>(f)];
+      SliceFace face{f, points[image.polygon_begin], points[image.polygon_begin]};
+      for (std::uint32_t k = 0; k < image.polygon_count; ++k) {
+        face.lo = face.lo.cwiseMin(points[image.polygon_begin + k]);
+        face.hi = face.hi.cwiseMax(points[image.polygon_begin + k]);
+      }
+      if ((face.lo.array() > hi_.array()).any() || (face.hi.array() < lo_.array()).any()) continue;
+      faces_.push_back(face);
+      for (std::uint32_t i = 0; i < image.polygon_count; ++i) {
+        const std::uint32_t k = (first + i) % image.polygon_count;
+        const Vec2& a = points[image.polygon_begin + k];
+        const Vec2& b = points[image.polygon_begin + (k + 1) % image.polygon_count];
+        if (a == b) continue;
+        const bool forward = a.x() < b.x() || (a.x() == b.x() && a.y() < b.y());
+        const std::array<double, 4> key = forward
+                                              ? std::array<double, 4>{a.x(), a.y(), b.x(), b.y()}
+                                              : std::array<double, 4>{b.x(), b.y(), a.x(), a.y()};
+        if (face_edges.insert(key).second) insert_constraint(a, b);
+      }
     }
   }
-  cdt.insert(lattice.begin(), lattice.end());
 
-  // The faces of this slice, as constraints too, so that every triangle lies in one face.
-  struct SliceFace {
-    int id;
-    Vec2 lo, hi;
-  };
-  std::vector<SliceFace> faces;
-  // Neighbouring faces share most edges: each is inserted once (a second insertion of the same
-  // constraint changes nothing but costs its walk through the triangulation).
-  std::unordered_set<std::array<double, 4>, DoublesHash> face_edges;
-  // In an order of their own, not by id: the whole arrangement and cells on demand number the
-  // same faces differently, and the insertions' order decides the refinement below (which
-  // triangles CGAL lists first). By each face's vertex mean, then from its least vertex, both
-  // on a grid of 1e-9 of the box's diagonal: the two arrangements may round a vertex
-  // differently in its last bits (its three planes in another order).
-  const double quantum = 1e-9 * diagonal;
-  const auto grid_point = [&](const Vec2& p) {
-    return std::array<std::int64_t, 2>{std::llround(p.x() / quantum),
-                                       std::llround(p.y() / quantum)};
-  };
   struct OrderedFace {
     std::array<std::int64_t, 2> mean;
     int id;
     std::uint32_t first;  // the polygon's least vertex
   };
-  std::vector<OrderedFace> ordered_faces;
-  for (const int f : slice_faces) {
-    const FaceImage& image = images_[static_cast<std::size_t>(f)];
-    if (image.polygon_count == 0) continue;
-    Vec2 sum = Vec2::Zero();
-    std::uint32_t first = 0;
-    for (std::uint32_t k = 0; k < image.polygon_count; ++k) {
-      sum += points_[image.polygon_begin + k];
-      if (grid_point(points_[image.polygon_begin + k]) <
-          grid_point(points_[image.polygon_begin + first]))
-        first = k;
+  std::vector<OrderedFace> ordered_faces(const std::vector<int>& slice_faces) const {
+    const std::vector<Vec2>& points = field_.points_;
+    const double quantum = 1e-9 * diagonal_;
+    const auto grid_point = [&](const Vec2& p) {
+      return std::array<std::int64_t, 2>{std::llround(p.x() / quantum),
+                                         std::llround(p.y() / quantum)};
+    };
+    std::vector<OrderedFace> ordered;
+    for (const int f : slice_faces) {
+      const FaceImage& image = field_.images_[static_cast<std::size_t>(f)];
+      if (image.polygon_count == 0) continue;
+      Vec2 sum = Vec2::Zero();
+      std::uint32_t first = 0;
+      for (std::uint32_t k = 0; k < image.polygon_count; ++k) {
+        sum += points[image.polygon_begin + k];
+        if (grid_point(points[image.polygon_begin + k]) <
+            grid_point(points[image.polygon_begin + first]))
+          first = k;
+      }
+      ordered.push_back({grid_point(sum / image.polygon_count), f, first});
     }
-    ordered_faces.push_back({grid_point(sum / image.polygon_count), f, first});
+    std::sort(ordered.begin(), ordered.end(), [](const OrderedFace& a, const OrderedFace& b) {
+      return a.mean != b.mean ? a.mean < b.mean : a.id < b.id;
+    });
+    return ordered;
   }
-  std::sort(ordered_faces.begin(), ordered_faces.end(),
-            [](const OrderedFace& a, const OrderedFace& b) {
-              return a.mean != b.mean ? a.mean < b.mean : a.id < b.id;
-            });
-  for (const OrderedFace& ordered : ordered_faces) {
-    const int f = ordered.id;
-    const FaceImage& image = images_[static_cast<std::size_t>(f)];
-    SliceFace face{f, points_[image.polygon_begin], points_[image.polygon_begin]};
-    for (std::uint32_t k = 0; k < image.polygon_count; ++k) {
-      face.lo = face.lo.cwiseMin(points_[image.polygon_begin + k]);
-      face.hi = face.hi.cwiseMax(points_[image.polygon_begin + k]);
-    }
-    if ((face.lo.array() > hi.array()).any() || (face.hi.array() < lo.array()).any()) continue;
-    faces.push_back(face);
-    for (std::uint32_t i = 0; i < image.polygon_count; ++i) {
-      const std::uint32_t k = (ordered.first + i) % image.polygon_count;
-      const Vec2& a = points_[image.polygon_begin + k];
-      const Vec2& b = points_[image.polygon_begin + (k + 1) % image.polygon_count];
-      if (a == b) continue;
-      const bool forward = a.x() < b.x() || (a.x() == b.x() && a.y() < b.y());
-      const std::array<double, 4> key = forward ? std::array<double, 4>{a.x(), a.y(), b.x(), b.y()}
-                                                : std::array<double, 4>{b.x(), b.y(), a.x(), a.y()};
-      if (face_edges.insert(key).second) insert_constraint(a, b);
-    }
-  }
+
   // A slice holds hundreds of faces: a uniform grid over the unknown set's box lists the faces
-  // whose boxes reach each cell (in the order of `faces`, so the first face containing a point
+  // whose boxes reach each cell (in the order of `faces_`, so the first face containing a point
   // is the same as by a scan).
-  const int grid_side =
-      std::max(1, static_cast<int>(std::ceil(std::sqrt(static_cast<double>(faces.size())))));
-  const Vec2 grid_cell = ((hi - lo) / grid_side).cwiseMax(Vec2::Constant(1e-300));
-  const auto grid_index = [&](const Vec2& p, int axis) {
-    return std::clamp(static_cast<int>(std::floor((p[axis] - lo[axis]) / grid_cell[axis])), 0,
-                      grid_side - 1);
-  };
-  std::vector<std::vector<int>> faces_in_cell(static_cast<std::size_t>(grid_side * grid_side));
-  for (std::size_t i = 0; i < faces.size(); ++i)
-    for (int gy = grid_index(faces[i].lo, 1); gy <= grid_index(faces[i].hi, 1); ++gy)
-      for (int gx = grid_index(faces[i].lo, 0); gx <= grid_index(faces[i].hi, 0); ++gx)
-        faces_in_cell[static_cast<std::size_t>(gy * grid_side + gx)].push_back(static_cast<int>(i));
-  const auto face_of = [&](const Vec2& p) {
-    for (const int i :
-         faces_in_cell[static_cast<std::size_t>(grid_index(p, 1) * grid_side + grid_index(p, 0))]) {
-      const SliceFace& face = faces[static_cast<std::size_t>(i)];
+  void index_faces() {
+    grid_side_ =
+        std::max(1, static_cast<int>(std::ceil(std::sqrt(static_cast<double>(faces_.size())))));
+    grid_cell_ = ((hi_ - lo_) / grid_side_).cwiseMax(Vec2::Constant(1e-300));
+    faces_in_cell_.assign(static_cast<std::size_t>(grid_side_ * grid_side_), {});
+    for (std::size_t i = 0; i < faces_.size(); ++i)
+      for (int gy = grid_index(faces_[i].lo, 1); gy <= grid_index(faces_[i].hi, 1); ++gy)
+        for (int gx = grid_index(faces_[i].lo, 0); gx <= grid_index(faces_[i].hi, 0); ++gx)
+          faces_in_cell_[static_cast<std::size_t>(gy * grid_side_ + gx)].push_back(
+              static_cast<int>(i));
+  }
+  int grid_index(const Vec2& p, int axis) const {
+    return std::clamp(static_cast<int>(std::floor((p[axis] - lo_[axis]) / grid_cell_[axis])), 0,
+                      grid_side_ - 1);
+  }
+  // The index in `faces_` of the face holding p (-1: none).
+  int face_of(const Vec2& p) const {
+    for (const int i : faces_in_cell_[static_cast<std::size_t>(grid_index(p, 1) * grid_side_ +
+                                                               grid_index(p, 0))]) {
+      const SliceFace& face = faces_[static_cast<std::size_t>(i)];
       if ((p.array() < face.lo.array()).any() || (p.array() > face.hi.array()).any()) continue;
-      const FaceImage& image = images_[static_cast<std::size_t>(face.id)];
-      if (in_convex_ccw(points_.data() + image.polygon_begin, image.polygon_count, p)) return i;
+      const FaceImage& image = field_.images_[static_cast<std::size_t>(face.id)];
+      if (in_convex_ccw(field_.points_.data() + image.polygon_begin, image.polygon_count, p))
+        return i;
     }
     return -1;
-  };
-  // Each face's local faces (sorted): most corners lie inside one face and read these as they are.
-  const auto local_faces_of = [&](int face_index) -> const std::vector<int>& {
-    return local_faces[static_cast<std::size_t>(faces[static_cast<std::size_t>(face_index)].id)];
-  };
+  }
 
-  // Completed values of the corners of every unknown triangle, refined where they disagree.
-  struct Completed {
-    Cdt::Vertex_handle vertices[3];  // the triangle's (a face that a flip reused has others)
-    bool skipped = false;            // a sliver, or outside the unknown set or the faces
-    UnknownTriangle triangle;
-    int face_index = -1;                   // in `faces`
-    std::size_t slots_3d[3], slots_2d[3];  // its corners' parts in the cache
-  };
-  CornerCache cache(fc);
-  std::vector<Completed> entries;
-  // The corner values of entry i (3 corners x fc) at i * 3 * fc: one array rather than one
-  // allocation per triangle.
-  std::vector<double> entry_values;
-  const auto values_of = [&](std::size_t entry) { return entry_values.data() + entry * 3 * fc; };
-  // Room for the refinement rounds too: moving the entries as the vector grows, into fresh pages,
-  // was a tenth of the completion.
-  entries.reserve(2 * cdt.number_of_faces());
-  const double refined_min = kRefinedTriangleMin * diagonal;
-  // The points the last round inserted: every triangle an insertion makes has the new point as a
-  // corner, so the triangles new in a round are among those around these points (walking every
-  // triangle of the slice in every round was a twentieth of the completion on the homer 80 mm
-  // sector set, by timers not committed).
-  std::vector<Cdt::Vertex_handle> inserted;
-  for (int round = 0;; ++round) {
-    // The triangles new in this round (a flip may also have reused a face for new corners); each
-    // holds its entry until the splits below change the triangulation.
-    std::vector<Cdt::Face_handle> fresh_faces;
-    std::vector<Cdt::Vertex_handle> job_vertices;  // of each 3D part listed this round
-    cache.jobs_3d.clear();
-    cache.jobs_2d.clear();
-    const auto list_if_new = [&](const Cdt::Face_handle& it) {
-      int& index = it->info().entry;
-      if (index >= 0) {
-        const Completed& known = entries[static_cast<std::size_t>(index)];
-        for (const Cdt::Vertex_handle& v : known.vertices)
-          if (v != it->vertex(0) && v != it->vertex(1) && v != it->vertex(2)) index = -1;
-      }
-      if (index >= 0) return;
-      index = static_cast<int>(entries.size());
-      Completed& entry = entries.emplace_back();
-      for (int k = 0; k < 3; ++k) entry.vertices[k] = it->vertex(k);
-      UnknownTriangle& triangle = entry.triangle;
-      for (int k = 0; k < 3; ++k)
-        triangle.corners[k] = Vec2(it->vertex(k)->point().x(), it->vertex(k)->point().y());
-      const double area =
-          signed_area(Ring2{triangle.corners[0], triangle.corners[1], triangle.corners[2]});
-      // Slivers from constraint intersections rounded onto each other cover nothing.
-      const double longest_sq =
-          std::max({(triangle.corners[1] - triangle.corners[0]).squaredNorm(),
-                    (triangle.corners[2] - triangle.corners[1]).squaredNorm(),
-                    (triangle.corners[0] - triangle.corners[2]).squaredNorm()});
-      entry.skipped =
-          !(std::abs(area) > 1e-12 * longest_sq) || std::abs(area) < 1e-14 * diagonal * diagonal;
-      if (area < 0.0) {  // counter-clockwise
-        std::swap(triangle.corners[1], triangle.corners[2]);
-        std::swap(entry.vertices[1], entry.vertices[2]);
-      }
-      const Vec2 centroid = (triangle.corners[0] + triangle.corners[1] + triangle.corners[2]) / 3.0;
-      if (!entry.skipped) triangle.component = component_of(centroid);
-      entry.skipped = entry.skipped || triangle.component < 0;
-      if (!entry.skipped) entry.face_index = face_of(centroid);
-      entry.skipped = entry.skipped || entry.face_index < 0;
-      if (entry.skipped) return;
-      for (int k = 0; k < 3; ++k) {
-        VertexInfo& point = entry.vertices[k]->info();
-        if (point.slot_3d < 0) {
-          point.slot_3d =
-              static_cast<std::int64_t>(cache.add(cache.jobs_3d, -1, triangle.corners[k]));
-          job_vertices.push_back(entry.vertices[k]);
-        }
-        entry.slots_3d[k] = static_cast<std::size_t>(point.slot_3d);
-        if (point.component < 0) {
-          point.component = triangle.component;
-          point.slot_2d = static_cast<std::int64_t>(
-              cache.add(cache.jobs_2d, triangle.component, triangle.corners[k]));
-        }
-        entry.slots_2d[k] =
-            point.component == triangle.component
-                ? static_cast<std::size_t>(point.slot_2d)
-                : cache.slot(cache.part_2d, cache.jobs_2d, triangle.component, triangle.corners[k]);
-      }
-      fresh_faces.push_back(it);
-    };
-    if (round == 0) {
-      for (auto it = cdt.finite_faces_begin(); it != cdt.finite_faces_end(); ++it) list_if_new(it);
-    } else {
-      for (const Cdt::Vertex_handle& v : inserted) {
-        Cdt::Face_circulator around = cdt.incident_faces(v), done = around;
-        do {
-          if (!cdt.is_infinite(around)) list_if_new(around);
-        } while (++around != done);
-      }
-      // In the triangulation's own order, which the splits below are inserted in (the order the
-      // walk over every triangle had): the same triangulation.
-      const auto& container = cdt.tds().faces();
-      std::vector<std::pair<std::size_t, Cdt::Face_handle>> ordered;
-      ordered.reserve(fresh_faces.size());
-      for (const Cdt::Face_handle& f : fresh_faces) ordered.emplace_back(container.index(f), f);
-      std::sort(ordered.begin(), ordered.end(),
-                [](const auto& a, const auto& b) { return a.first < b.first; });
-      for (std::size_t i = 0; i < ordered.size(); ++i) fresh_faces[i] = ordered[i].second;
+  double* values_of(std::size_t entry) { return entry_values_.data() + entry * 3 * fc_; }
+
+  // Completed values of the corners of every unknown triangle, refined where they disagree: in
+  // rounds, the new triangles are listed, their new corners completed, and the longest edges of
+  // those whose corners complete to different labels split.
+  void refine() {
+    // Room for the refinement rounds too: moving the entries as the vector grows, into fresh
+    // pages, was a tenth of the completion.
+    entries_.reserve(2 * cdt_.number_of_faces());
+    for (int round = 0;; ++round) {
+      fresh_faces_.clear();
+      job_vertices_.clear();
+      cache_.jobs_3d.clear();
+      cache_.jobs_2d.clear();
+      list_new_triangles(round);
+      complete_new_corners();
+      const auto splits = edges_to_split();
+      if (splits.empty() || round == kMaxRefinementRounds) break;
+      split(splits);
     }
+  }
+
+  // The triangles new in this round (a flip may also have reused a face for new corners); each
+  // holds its entry until the splits change the triangulation. The points the last round
+  // inserted: every triangle an insertion makes has the new point as a corner, so the triangles
+  // new in a round are among those around these points (walking every triangle of the slice in
+  // every round was a twentieth of the completion on the homer 80 mm sector set).
+  void list_new_triangles(int round) {
+    if (round == 0) {
+      for (auto it = cdt_.finite_faces_begin(); it != cdt_.finite_faces_end(); ++it)
+        list_if_new(it);
+      return;
+    }
+    for (const Cdt::Vertex_handle& v : inserted_) {
+      Cdt::Face_circulator around = cdt_.incident_faces(v), done = around;
+      do {
+        if (!cdt_.is_infinite(around)) list_if_new(around);
+      } while (++around != done);
+    }
+    // In the triangulation's own order, which the splits are inserted in (the order the walk
+    // over every triangle had): the same triangulation.
+    const auto& container = cdt_.tds().faces();
+    std::vector<std::pair<std::size_t, Cdt::Face_handle>> ordered;
+    ordered.reserve(fresh_faces_.size());
+    for (const Cdt::Face_handle& f : fresh_faces_) ordered.emplace_back(container.index(f), f);
+    std::sort(ordered.begin(), ordered.end(),
+              [](const auto& a, const auto& b) { return a.first < b.first; });
+    for (std::size_t i = 0; i < ordered.size(); ++i) fresh_faces_[i] = ordered[i].second;
+  }
+
+  void list_if_new(const Cdt::Face_handle& it) {
+    int& index = it->info().entry;
+    if (index >= 0) {
+      const Completed& known = entries_[static_cast<std::size_t>(index)];
+      for (const Cdt::Vertex_handle& v : known.vertices)
+        if (v != it->vertex(0) && v != it->vertex(1) && v != it->vertex(2)) index = -1;
+    }
+    if (index >= 0) return;
+    index = static_cast<int>(entries_.size());
+    Completed& entry = entries_.emplace_back();
+    for (int k = 0; k < 3; ++k) entry.vertices[k] = it->vertex(k);
+    if (!place(entry)) return;
+    list_corner_parts(entry);
+    fresh_faces_.push_back(it);
+  }
+
+  // The triangle's corners (counter-clockwise), component and face; false (skipped) for a
+  // sliver or a triangle outside the unknown set or the faces.
+  bool place(Completed& entry) const {
+    UnknownTriangle& triangle = entry.triangle;
+    for (int k = 0; k < 3; ++k)
+      triangle.corners[k] = Vec2(entry.vertices[k]->point().x(), entry.vertices[k]->point().y());
+    const double area =
+        signed_area(Ring2{triangle.corners[0], triangle.corners[1], triangle.corners[2]});
+    // Slivers from constraint intersections rounded onto each other cover nothing.
+    const double longest_sq = std::max({(triangle.corners[1] - triangle.corners[0]).squaredNorm(),
+                                        (triangle.corners[2] - triangle.corners[1]).squaredNorm(),
+                                        (triangle.corners[0] - triangle.corners[2]).squaredNorm()});
+    entry.skipped =
+        !(std::abs(area) > 1e-12 * longest_sq) || std::abs(area) < 1e-14 * diagonal_ * diagonal_;
+    if (area < 0.0) {  // counter-clockwise
+      std::swap(triangle.corners[1], triangle.corners[2]);
+      std::swap(entry.vertices[1], entry.vertices[2]);
+    }
+    const Vec2 centroid = (triangle.corners[0] + triangle.corners[1] + triangle.corners[2]) / 3.0;
+    if (!entry.skipped) triangle.component = component_of(centroid);
+    entry.skipped = entry.skipped || triangle.component < 0;
+    if (!entry.skipped) entry.face_index = face_of(centroid);
+    entry.skipped = entry.skipped || entry.face_index < 0;
+    return !entry.skipped;
+  }
+
+  // The cache slots of the triangle's corners, listing the parts its new corners need.
+  void list_corner_parts(Completed& entry) {
+    const UnknownTriangle& triangle = entry.triangle;
+    for (int k = 0; k < 3; ++k) {
+      VertexInfo& point = entry.vertices[k]->info();
+      if (point.slot_3d < 0) {
+        point.slot_3d =
+            static_cast<std::int64_t>(cache_.add(cache_.jobs_3d, -1, triangle.corners[k]));
+        job_vertices_.push_back(entry.vertices[k]);
+      }
+      entry.slots_3d[k] = static_cast<std::size_t>(point.slot_3d);
+      if (point.component < 0) {
+        point.component = triangle.component;
+        point.slot_2d = static_cast<std::int64_t>(
+            cache_.add(cache_.jobs_2d, triangle.component, triangle.corners[k]));
+      }
+      entry.slots_2d[k] = point.component == triangle.component
+                              ? static_cast<std::size_t>(point.slot_2d)
+                              : cache_.slot(cache_.part_2d, cache_.jobs_2d, triangle.component,
+                                            triangle.corners[k]);
+    }
+  }
+
+  // The parts this round listed, then formula 7 at the new triangles' corners.
+  void complete_new_corners() {
     // The known faces each new corner reads: those of the faces of all unknown triangles around
     // it (a corner shared by several faces of the slice gets one 3D part, from the cells of all
-    // of them: they are all in one group).
-    // complete_round reads the union of these lists (most corners lie inside one face; those on
-    // face edges read the lists of all the faces around).
-    std::vector<std::vector<std::span<const int>>> corner_faces(job_vertices.size());
-    tbb::parallel_for(std::size_t{0}, job_vertices.size(), [&](std::size_t j) {
-      std::vector<int> faces_around;  // indices in `faces`
-      Cdt::Face_circulator around = cdt.incident_faces(job_vertices[j]), done = around;
+    // of them: they are all in one group). complete_round reads the union of these lists (most
+    // corners lie inside one face; those on face edges read the lists of all the faces around).
+    std::vector<std::vector<std::span<const int>>> corner_faces(job_vertices_.size());
+    tbb::parallel_for(std::size_t{0}, job_vertices_.size(), [&](std::size_t j) {
+      std::vector<int> faces_around;  // indices in `faces_`
+      Cdt::Face_circulator around = cdt_.incident_faces(job_vertices_[j]), done = around;
       do {
-        if (cdt.is_infinite(around)) continue;
-        const Completed& e = entries[static_cast<std::size_t>(around->info().entry)];
+        if (cdt_.is_infinite(around)) continue;
+        const Completed& e = entries_[static_cast<std::size_t>(around->info().entry)];
         if (!e.skipped &&
             std::find(faces_around.begin(), faces_around.end(), e.face_index) == faces_around.end())
           faces_around.push_back(e.face_index);
       } while (++around != done);
+      // Each face's local faces (sorted): most corners lie inside one face and read these.
       for (const int face_index : faces_around)
-        corner_faces[j].push_back(local_faces_of(face_index));
+        corner_faces[j].push_back(local_faces_[static_cast<std::size_t>(
+            faces_[static_cast<std::size_t>(face_index)].id)]);
     });
-    complete_round(s, corner_faces, cache);
-    entry_values.resize(entries.size() * 3 * fc);
-    // Formula 7 at the new triangles' corners: the normalised blend of both parts.
-    tbb::parallel_for(std::size_t{0}, fresh_faces.size(), [&](std::size_t i) {
-      const std::size_t entry_index = static_cast<std::size_t>(fresh_faces[i]->info().entry);
-      Completed& entry = entries[entry_index];
-      double* const entry_corner_values = values_of(entry_index);
-      const Vec2* corners = entry.triangle.corners;
-      const Vec2 centroid = (corners[0] + corners[1] + corners[2]) / 3.0;
-      std::vector<double> inside;
-      for (int k = 0; k < 3; ++k) {
-        const double* n3w = cache.at(entry.slots_3d[k]);
-        const double* n2 = cache.at(entry.slots_2d[k]);
-        if (cache.on_boundary[entry.slots_2d[k]] != 0) {
-          // On the boundary (b) is read just inside the triangle's corner, so that the corner
-          // takes the limit from its own side (Section 5.1).
-          inside.assign(fc + 1, 0.0);
-          add_part_2d(s.unknown[static_cast<std::size_t>(entry.triangle.component)], fc,
-                      corners[k] + 1e-4 * (centroid - corners[k]), false, inside.data());
-          n2 = inside.data();
-        }
-        const double denominator = n3w[fc] + n2[fc];
-        double* value = entry_corner_values + static_cast<std::size_t>(k) * fc;
-        for (std::size_t l = 0; l < fc; ++l)
-          value[l] = denominator > 0.0 ? 2.0 * (n3w[l] + n2[l]) / denominator - 1.0
-                                       : (l == 0 ? 1.0 : -1.0);
+    field_.complete_round(s_, corner_faces, cache_);
+    entry_values_.resize(entries_.size() * 3 * fc_);
+    tbb::parallel_for(std::size_t{0}, fresh_faces_.size(), [&](std::size_t i) {
+      blend_corner_values(static_cast<std::size_t>(fresh_faces_[i]->info().entry));
+    });
+  }
+
+  // Formula 7 at a triangle's corners: the normalised blend of both parts.
+  void blend_corner_values(std::size_t entry_index) {
+    const Completed& entry = entries_[entry_index];
+    double* const entry_corner_values = values_of(entry_index);
+    const Vec2* corners = entry.triangle.corners;
+    const Vec2 centroid = (corners[0] + corners[1] + corners[2]) / 3.0;
+    std::vector<double> inside;
+    for (int k = 0; k < 3; ++k) {
+      const double* n3w = cache_.at(entry.slots_3d[k]);
+      const double* n2 = cache_.at(entry.slots_2d[k]);
+      if (cache_.on_boundary[entry.slots_2d[k]] != 0) {
+        // On the boundary (b) is read just inside the triangle's corner, so that the corner
+        // takes the limit from its own side (Section 5.1).
+        inside.assign(fc_ + 1, 0.0);
+        add_part_2d(s_.unknown[static_cast<std::size_t>(entry.triangle.component)], fc_,
+                    corners[k] + 1e-4 * (centroid - corners[k]), false, inside.data());
+        n2 = inside.data();
       }
-    });
-    // Longest edges of the triangles to split, by their end vertices. Only new triangles can
-    // need a split: a triangle whose corners disagreed had its longest edge split last round,
-    // which removed it.
-    std::vector<std::pair<Cdt::Vertex_handle, Cdt::Vertex_handle>> splits;
-    for (const Cdt::Face_handle& it : fresh_faces) {
+      const double denominator = n3w[fc_] + n2[fc_];
+      double* value = entry_corner_values + static_cast<std::size_t>(k) * fc_;
+      for (std::size_t l = 0; l < fc_; ++l)
+        value[l] =
+            denominator > 0.0 ? 2.0 * (n3w[l] + n2[l]) / denominator - 1.0 : (l == 0 ? 1.0 : -1.0);
+    }
+  }
+
+  using Edge = std::pair<Cdt::Vertex_handle, Cdt::Vertex_handle>;
+  // Longest edges of the triangles to split, by their end vertices. Only new triangles can need
+  // a split: a triangle whose corners disagreed had its longest edge split last round, which
+  // removed it. A triangle whose corners complete to different labels holds part of the
+  // surface: split it until it is as fine as the octree that will sample the field. At the
+  // midpoint of its longest edge, not at its centroid: that edge is often a face edge (a
+  // constraint), which centroid splits never shorten, so they went on adding points beside it
+  // for every round (twice the triangles on the 80 mm sector sets, for no better IoU).
+  std::vector<Edge> edges_to_split() {
+    const double refined_min = kRefinedTriangleMin * diagonal_;
+    std::vector<Edge> splits;
+    for (const Cdt::Face_handle& it : fresh_faces_) {
       const std::size_t entry_index = static_cast<std::size_t>(it->info().entry);
-      const Completed& c = entries[entry_index];
+      const Completed& c = entries_[entry_index];
       if (c.skipped) continue;
       const UnknownTriangle& triangle = c.triangle;
       const double longest_sq =
           std::max({(triangle.corners[1] - triangle.corners[0]).squaredNorm(),
                     (triangle.corners[2] - triangle.corners[1]).squaredNorm(),
                     (triangle.corners[0] - triangle.corners[2]).squaredNorm()});
-      // A triangle whose corners complete to different labels holds part of the surface: split
-      // it until it is as fine as the octree that will sample the field. At the midpoint of its
-      // longest edge, not at its centroid: that edge is often a face edge (a constraint), which
-      // centroid splits never shorten, so they went on adding points beside it for every round
-      // (twice the triangles on the 80 mm sector sets, for no better IoU).
-      if (longest_sq <= refined_min * refined_min) continue;
-      int first_label = -1;
-      bool mixed = false;
-      for (int k = 0; k < 3 && !mixed; ++k) {
-        const double* v = values_of(entry_index) + static_cast<std::size_t>(k) * fc;
-        const int label = static_cast<int>(std::max_element(v, v + fc) - v);
-        if (first_label < 0) first_label = label;
-        mixed = label != first_label;
-      }
-      if (mixed) {
-        int longest = 0;
-        double longest_edge_sq = -1.0;
-        for (int k = 0; k < 3; ++k) {
-          const double length_sq = CGAL::squared_distance(it->vertex(Cdt::cw(k))->point(),
-                                                          it->vertex(Cdt::ccw(k))->point());
-          if (length_sq > longest_edge_sq) {
-            longest_edge_sq = length_sq;
-            longest = k;
-          }
+      if (longest_sq <= refined_min * refined_min || !corners_disagree(entry_index)) continue;
+      int longest = 0;
+      double longest_edge_sq = -1.0;
+      for (int k = 0; k < 3; ++k) {
+        const double length_sq = CGAL::squared_distance(it->vertex(Cdt::cw(k))->point(),
+                                                        it->vertex(Cdt::ccw(k))->point());
+        if (length_sq > longest_edge_sq) {
+          longest_edge_sq = length_sq;
+          longest = k;
         }
-        splits.emplace_back(it->vertex(Cdt::cw(longest)), it->vertex(Cdt::ccw(longest)));
       }
+      splits.emplace_back(it->vertex(Cdt::cw(longest)), it->vertex(Cdt::ccw(longest)));
     }
-    if (splits.empty() || round == kMaxRefinementRounds) break;
+    return splits;
+  }
+
+  // Whether the triangle's corners complete to different labels (argmax of their values).
+  bool corners_disagree(std::size_t entry_index) {
+    int first_label = -1;
+    for (int k = 0; k < 3; ++k) {
+      const double* v = values_of(entry_index) + static_cast<std::size_t>(k) * fc_;
+      const int label = static_cast<int>(std::max_element(v, v + fc_) - v);
+      if (first_label < 0) first_label = label;
+      if (label != first_label) return true;
+    }
+    return false;
+  }
+
+  // Inserts the midpoints of the edges (once each: both triangles along an edge may ask).
+  void split(const std::vector<Edge>& splits) {
     std::set<std::array<double, 4>> split_edges;
-    inserted.clear();
+    inserted_.clear();
     for (const auto& [a, b] : splits) {
       const Kernel::Point_2& pa = a->point();
       const Kernel::Point_2& pb = b->point();
-      // Both triangles along an edge may ask for its split.
       std::array<double, 4> key{pa.x(), pa.y(), pb.x(), pb.y()};
       if (std::make_pair(pb.x(), pb.y()) < std::make_pair(pa.x(), pa.y()))
         key = {pb.x(), pb.y(), pa.x(), pa.y()};
@@ -713,40 +782,74 @@ void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_fac
       int index = 0;
       // On the edge itself (a constraint is split there), even where rounding puts the midpoint
       // a hair off its line.
-      if (cdt.is_edge(a, b, face, index))
-        inserted.push_back(cdt.insert(middle, Cdt::EDGE, face, index));
+      if (cdt_.is_edge(a, b, face, index))
+        inserted_.push_back(cdt_.insert(middle, Cdt::EDGE, face, index));
       else
-        inserted.push_back(cdt.insert(middle));
+        inserted_.push_back(cdt_.insert(middle));
     }
   }
-  // The final triangles, in the order of their corner coordinates (not the triangulation's).
-  using TriangleKey = std::array<double, 6>;
-  std::vector<std::pair<TriangleKey, std::size_t>> ordered;  // (corners, entry)
-  for (auto it = cdt.finite_faces_begin(); it != cdt.finite_faces_end(); ++it) {
-    const std::size_t entry_index = static_cast<std::size_t>(it->info().entry);
-    const Completed& entry = entries[entry_index];
-    if (entry.skipped) continue;
-    const Vec2* corners = entry.triangle.corners;
-    ordered.emplace_back(TriangleKey{corners[0].x(), corners[0].y(), corners[1].x(), corners[1].y(),
-                                     corners[2].x(), corners[2].y()},
-                         entry_index);
-  }
-  std::sort(ordered.begin(), ordered.end(),
-            [](const auto& a, const auto& b) { return a.first < b.first; });
-  std::map<int, std::size_t> entry_of_face;  // face index -> position in out
-  for (const auto& [key, entry_index] : ordered) {
-    const Completed& entry = entries[entry_index];
-    auto [it, inserted] = entry_of_face.try_emplace(entry.face_index, out.faces.size());
-    if (inserted) {
-      out.faces.push_back(faces[static_cast<std::size_t>(entry.face_index)].id);
-      out.triangles.emplace_back();
-      out.values.emplace_back();
+
+  // The final triangles, per face, in the order of their corner coordinates (not the
+  // triangulation's).
+  void write(SliceCompletion& out) {
+    using TriangleKey = std::array<double, 6>;
+    std::vector<std::pair<TriangleKey, std::size_t>> ordered;  // (corners, entry)
+    for (auto it = cdt_.finite_faces_begin(); it != cdt_.finite_faces_end(); ++it) {
+      const std::size_t entry_index = static_cast<std::size_t>(it->info().entry);
+      const Completed& entry = entries_[entry_index];
+      if (entry.skipped) continue;
+      const Vec2* corners = entry.triangle.corners;
+      ordered.emplace_back(TriangleKey{corners[0].x(), corners[0].y(), corners[1].x(),
+                                       corners[1].y(), corners[2].x(), corners[2].y()},
+                           entry_index);
     }
-    out.triangles[it->second].push_back(entry.triangle);
-    const double* corner_values = values_of(entry_index);
-    out.values[it->second].insert(out.values[it->second].end(), corner_values,
-                                  corner_values + 3 * fc);
+    std::sort(ordered.begin(), ordered.end(),
+              [](const auto& a, const auto& b) { return a.first < b.first; });
+    std::map<int, std::size_t> entry_of_face;  // face index -> position in out
+    for (const auto& [key, entry_index] : ordered) {
+      const Completed& entry = entries_[entry_index];
+      auto [it, inserted] = entry_of_face.try_emplace(entry.face_index, out.faces.size());
+      if (inserted) {
+        out.faces.push_back(faces_[static_cast<std::size_t>(entry.face_index)].id);
+        out.triangles.emplace_back();
+        out.values.emplace_back();
+      }
+      out.triangles[it->second].push_back(entry.triangle);
+      const double* corner_values = values_of(entry_index);
+      out.values[it->second].insert(out.values[it->second].end(), corner_values,
+                                    corner_values + 3 * fc_);
+    }
   }
+
+  const CellField& field_;
+  const PreparedSlice& s_;
+  const std::size_t fc_;
+  const double diagonal_;
+  const std::vector<std::vector<int>>& local_faces_;  // of each face of the arrangement
+  double triangle_size_ = 0.0;
+  Cdt cdt_;
+  Cdt::Vertex_handle last_vertex_;
+  std::unordered_map<std::array<double, 2>, Cdt::Vertex_handle, DoublesHash> vertex_at_;
+  Vec2 lo_, hi_;                                 // the unknown set's box
+  std::vector<std::pair<Vec2, Vec2>> boundary_;  // the split boundary edges
+  std::vector<SliceFace> faces_;
+  int grid_side_ = 1;
+  Vec2 grid_cell_;
+  std::vector<std::vector<int>> faces_in_cell_;
+  CornerCache cache_;
+  std::vector<Completed> entries_;
+  // The corner values of entry i (3 corners x fc) at i * 3 * fc: one array rather than one
+  // allocation per triangle.
+  std::vector<double> entry_values_;
+  std::vector<Cdt::Face_handle> fresh_faces_;     // this round's new triangles
+  std::vector<Cdt::Vertex_handle> job_vertices_;  // of each 3D part listed this round
+  std::vector<Cdt::Vertex_handle> inserted_;      // the points the last round inserted
+};
+
+void CellField::triangulate_unknown(int slice, const std::vector<int>& slice_faces,
+                                    const std::vector<std::vector<int>>& local_faces,
+                                    SliceCompletion& out) const {
+  UnknownTriangulator(*this, slice, local_faces).run(slice_faces, out);
 }
 
 void CellField::complete_round(const PreparedSlice& s,
