@@ -394,27 +394,21 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
   return sample_field(box, function_count, evaluate, contours, region_samples, options, workspace);
 }
 
-SampledField sample_field(const Box3& box, int function_count, const BatchEvaluator& evaluate,
-                          const ContourKeys& contours,
-                          const std::vector<RegionSample>& region_samples,
-                          const OctreeOptions& options, OctreeWorkspace& workspace) {
-  if (function_count < 1 || function_count > 65536)
-    throw std::invalid_argument("sample_field: " + std::to_string(function_count) +
-                                " functions; labels are kept in 16 bits (at most 65535 materials)");
-  const int depth = options.max_depth;
-  const int resolution = 1 << depth;
-  const Grid grid = make_grid(box, depth);
-  SampledField field;
+namespace {
+
+// The last pass's field when it can be kept (same functions and grid, and the rows that kept
+// their values are known): its rows go back to their values before the smoothing and the snap
+// (latest change first), and its out-of-date rows are evaluated again when read. Otherwise a
+// fresh field that keeps only the last pass's lookup table. `valid` gets the kept rows' flags.
+bool take_previous_field(SampledField& field, OctreeWorkspace& workspace, const Grid& grid,
+                         int function_count, std::vector<char>& valid) {
   SampledField& previous = workspace.previous;
-  std::vector<char> valid;
   const bool kept = !workspace.previous_valid.empty() &&
                     workspace.previous_valid.size() == previous.keys.size() &&
                     previous.function_count == function_count &&
                     previous.grid.depth == grid.depth && previous.grid.origin == grid.origin &&
                     previous.grid.cell_size == grid.cell_size;
   if (kept) {
-    // Keep it: its rows go back to their values before the smoothing and the snap (latest
-    // change first), and its out-of-date rows are evaluated again when read.
     field = std::move(previous);
     const std::size_t fc = static_cast<std::size_t>(function_count);
     for (std::size_t n = field.changed_rows.size(); n-- > 0;)
@@ -430,124 +424,165 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
     valid = std::move(workspace.previous_valid);
   } else {
     field.index = std::move(previous.index);
-    field.index.reset(resolution);
+    field.index.reset(1 << grid.depth);
     field.function_count = function_count;
     field.grid = grid;
   }
   previous = SampledField{};
   workspace.previous_valid.clear();
-  const std::vector<char> valid_at_start =
-      valid;  // the rows of the kept field that kept their values
-  Sampler sampler(field, evaluate, workspace.pending, std::move(valid));
-  const int start = std::min(options.start_depth, depth);
+  return kept;
+}
 
-  // Coarse-to-fine refinement. Cells are given by their min corner in finest units. With a kept
-  // field, a cell the last pass also had (`before_index`) and whose corner rows all kept their
-  // values keeps its mixed test: the test reads those values only. Validity is taken as it was
-  // at the start of the pass, before this pass evaluated rows again.
-  std::vector<OctreeWorkspace::RefinementLevel> before;
-  if (kept) before = std::move(workspace.refinement);
-  OctreeWorkspace::SmoothingInputs last_smoothing;  // rows of the kept field only
-  if (kept) last_smoothing = std::move(workspace.smoothing);
-  workspace.smoothing = {};
-  workspace.refinement.clear();
-  std::vector<std::array<int, 3>> cells;
-  std::vector<CornerRows> finest_mixed_rows;  // of the finest mixed cells, in order
-  std::vector<std::uint32_t>
-      before_index;  // per cell, its index in the last pass's level, or kNone
-  {
+// Coarse-to-fine refinement from options.start_depth to the finest level: cells whose corners
+// have mixed labels or that hold contour vertices are split. Cells are given by their min corner
+// in finest units. With a kept field, a cell the last pass also had (`before_index_`) and whose
+// corner rows all kept their values keeps its mixed test: the test reads those values only.
+// Validity is taken as it was at the start of the pass, before this pass evaluated rows again.
+class Refinement {
+ public:
+  Refinement(SampledField& field, Sampler& sampler, const ContourKeys& contours,
+             const std::vector<char>& valid_at_start,
+             std::vector<OctreeWorkspace::RefinementLevel> before,
+             std::vector<OctreeWorkspace::RefinementLevel>& levels)
+      : field_(field),
+        sampler_(sampler),
+        contours_(contours),
+        valid_at_start_(valid_at_start),
+        before_(std::move(before)),
+        levels_(levels) {}
+
+  // The finest split cells' corner rows, in the order of field.surface_cells.
+  std::vector<CornerRows> run(int start, int depth) {
+    start_ = start;
+    depth_ = depth;
+    levels_.clear();
+    const int resolution = 1 << depth;
     const int step = 1 << (depth - start);
     for (int i = 0; i < resolution; i += step)
       for (int j = 0; j < resolution; j += step)
-        for (int k = 0; k < resolution; k += step) cells.push_back({i, j, k});
-    const bool same_start = !before.empty() && before.front().cells == cells;
-    before_index.resize(cells.size(), GridIndex::kNone);
+        for (int k = 0; k < resolution; k += step) cells_.push_back({i, j, k});
+    const bool same_start = !before_.empty() && before_.front().cells == cells_;
+    before_index_.resize(cells_.size(), GridIndex::kNone);
     if (same_start)
-      for (std::size_t n = 0; n < cells.size(); ++n)
-        before_index[n] = static_cast<std::uint32_t>(n);
+      for (std::size_t n = 0; n < cells_.size(); ++n)
+        before_index_[n] = static_cast<std::uint32_t>(n);
+    for (int level = start;; ++level)
+      if (!refine_level(level)) break;
+    return std::move(finest_mixed_rows_);
   }
-  for (int level = start;; ++level) {
-    const int step = 1 << (depth - level);
-    const std::size_t level_index = static_cast<std::size_t>(level - start);
+
+ private:
+  // Tests and splits the cells of one level; false at the finest level.
+  bool refine_level(int level) {
+    const int step = 1 << (depth_ - level);
+    const std::size_t level_index = static_cast<std::size_t>(level - start_);
     const OctreeWorkspace::RefinementLevel* last =
-        level_index < before.size() ? &before[level_index] : nullptr;
+        level_index < before_.size() ? &before_[level_index] : nullptr;
     OctreeWorkspace::RefinementLevel now;
-    now.corner_rows.resize(cells.size());
-    now.mixed.resize(cells.size());
-    now.split.resize(cells.size());
-    // Cells kept with their test, in parallel; the others are looked up below.
-    std::vector<char> is_kept(cells.size(), 0);
+    now.corner_rows.resize(cells_.size());
+    now.mixed.resize(cells_.size());
+    now.split.resize(cells_.size());
+    test_cells(last, step, now);
+    const std::vector<char> holds_contours = contour_cells(level, step);
+    for_rows(cells_.size(),
+             [&](std::size_t n) { now.split[n] = now.mixed[n] || holds_contours[n] != 0; });
+    if (level == depth_) {
+      for (std::size_t n = 0; n < cells_.size(); ++n)
+        if (now.split[n]) {
+          field_.surface_cells.push_back(grid_key(cells_[n][0], cells_[n][1], cells_[n][2]));
+          finest_mixed_rows_.push_back(now.corner_rows[n]);
+        }
+      now.cells = std::move(cells_);
+      levels_.push_back(std::move(now));
+      return false;
+    }
+    std::vector<std::array<int, 3>> refined;
+    std::vector<std::uint32_t> refined_before;
+    children(last, now, step, refined, refined_before);
+    now.cells = std::move(cells_);
+    levels_.push_back(std::move(now));
+    cells_ = std::move(refined);
+    before_index_ = std::move(refined_before);
+    return true;
+  }
+
+  // Each cell's corner rows and mixed test: kept from the last pass (in parallel) where its
+  // corners kept their values, else looked up (as the request pass finds them, see
+  // corners_mixed) and tested.
+  void test_cells(const OctreeWorkspace::RefinementLevel* last, int step,
+                  OctreeWorkspace::RefinementLevel& now) {
+    std::vector<char> is_kept(cells_.size(), 0);
     if (last != nullptr)
-      for_rows(cells.size(), [&](std::size_t n) {
-        if (before_index[n] == GridIndex::kNone) return;
-        const std::array<std::uint32_t, 8>& rows = last->corner_rows[before_index[n]];
+      for_rows(cells_.size(), [&](std::size_t n) {
+        if (before_index_[n] == GridIndex::kNone) return;
+        const std::array<std::uint32_t, 8>& rows = last->corner_rows[before_index_[n]];
         for (const std::uint32_t row : rows)
-          if (!valid_at_start[row]) return;
-        for (const std::uint32_t row : rows) sampler.mark_read(row);
+          if (!valid_at_start_[row]) return;
+        for (const std::uint32_t row : rows) sampler_.mark_read(row);
         now.corner_rows[n] = rows;
-        now.mixed[n] = last->mixed[before_index[n]];
+        now.mixed[n] = last->mixed[before_index_[n]];
         is_kept[n] = 1;
       });
-    std::vector<std::uint32_t> tested;  // the cells whose corners are looked up and tested
-    for (std::size_t n = 0; n < cells.size(); ++n)
+    std::vector<std::uint32_t> tested;
+    for (std::size_t n = 0; n < cells_.size(); ++n)
       if (!is_kept[n]) tested.push_back(static_cast<std::uint32_t>(n));
-    // The corners' rows as the request pass finds them (see corners_mixed).
-    sampler.request_each(tested.size(), [&](std::size_t m, const auto& request) {
-      const auto& c = cells[tested[m]];
+    sampler_.request_each(tested.size(), [&](std::size_t m, const auto& request) {
+      const auto& c = cells_[tested[m]];
       std::array<std::uint32_t, 8>& rows = now.corner_rows[tested[m]];
       for (int corner = 0; corner < 8; ++corner)
         rows[static_cast<std::size_t>(corner)] =
             request(c[0] + (corner & 1) * step, c[1] + ((corner >> 1) & 1) * step,
                     c[2] + ((corner >> 2) & 1) * step);
     });
-    sampler.flush();
-    // Mixed cells, and above the finest level cells holding contour vertices: split further.
-    const auto contour_level = static_cast<std::size_t>(level);
-    const bool contours_here = level < depth && contour_level < contours.cells_by_level.size();
+    sampler_.flush();
     for_rows(tested.size(), [&](std::size_t m) {
-      const auto& c = cells[tested[m]];
+      const auto& c = cells_[tested[m]];
       now.mixed[tested[m]] =
-          corners_mixed(field, now.corner_rows[tested[m]], c[0], c[1], c[2], step);
+          corners_mixed(field_, now.corner_rows[tested[m]], c[0], c[1], c[2], step);
     });
-    // Which cells of this level hold contour vertices, as a bit per cell where the level is
-    // coarse enough, instead of a binary search in the level's contour cells for every cell.
+  }
+
+  // Which cells of this level hold contour vertices (above the finest level), from a bit per
+  // cell where the level is coarse enough, instead of a binary search in the level's contour
+  // cells for every cell.
+  std::vector<char> contour_cells(int level, int step) const {
+    std::vector<char> holds(cells_.size(), 0);
+    const auto contour_level = static_cast<std::size_t>(level);
+    if (level >= depth_ || contour_level >= contours_.cells_by_level.size()) return holds;
+    const std::vector<std::uint64_t>& keys = contours_.cells_by_level[contour_level];
     constexpr int kMaxBitLevel = 8;  // 2^24 bits, 2 MiB
-    std::vector<std::uint64_t> contour_bits;
     const auto bit_of = [level](int i, int j, int k) {
       return (static_cast<std::size_t>(i) << (2 * level)) | (static_cast<std::size_t>(j) << level) |
              static_cast<std::size_t>(k);
     };
-    if (contours_here && level <= kMaxBitLevel) {
-      contour_bits.assign(((std::size_t{1} << (3 * level)) + 63) / 64, 0);
-      for (const std::uint64_t key : contours.cells_by_level[contour_level]) {
+    std::vector<std::uint64_t> bits;
+    if (level <= kMaxBitLevel) {
+      bits.assign(((std::size_t{1} << (3 * level)) + 63) / 64, 0);
+      for (const std::uint64_t key : keys) {
         int i, j, k;
         grid_unkey(key, i, j, k);
         const std::size_t bit = bit_of(i, j, k);
-        contour_bits[bit / 64] |= std::uint64_t{1} << (bit % 64);
+        bits[bit / 64] |= std::uint64_t{1} << (bit % 64);
       }
     }
-    const auto contour_cell = [&](const std::array<int, 3>& c) {
-      if (!contours_here) return false;
-      if (contour_bits.empty())
-        return contains(contours.cells_by_level[contour_level],
-                        grid_key(c[0] / step, c[1] / step, c[2] / step));
+    for_rows(cells_.size(), [&](std::size_t n) {
+      const std::array<int, 3>& c = cells_[n];
+      if (bits.empty()) {
+        holds[n] = contains(keys, grid_key(c[0] / step, c[1] / step, c[2] / step));
+        return;
+      }
       const std::size_t bit = bit_of(c[0] / step, c[1] / step, c[2] / step);
-      return ((contour_bits[bit / 64] >> (bit % 64)) & 1u) != 0;
-    };
-    for_rows(cells.size(),
-             [&](std::size_t n) { now.split[n] = now.mixed[n] || contour_cell(cells[n]); });
-    if (level == depth) {
-      for (std::size_t n = 0; n < cells.size(); ++n)
-        if (now.split[n]) {
-          field.surface_cells.push_back(grid_key(cells[n][0], cells[n][1], cells[n][2]));
-          finest_mixed_rows.push_back(now.corner_rows[n]);
-        }
-      now.cells = std::move(cells);
-      workspace.refinement.push_back(std::move(now));
-      break;
-    }
-    // The children of the split cells, in order; a child's index in the last pass is found from
-    // its parent's: children follow their parents' order, eight each.
+      holds[n] = ((bits[bit / 64] >> (bit % 64)) & 1u) != 0;
+    });
+    return holds;
+  }
+
+  // The children of the split cells, in order; a child's index in the last pass is found from
+  // its parent's: children follow their parents' order, eight each.
+  void children(const OctreeWorkspace::RefinementLevel* last,
+                const OctreeWorkspace::RefinementLevel& now, int step,
+                std::vector<std::array<int, 3>>& refined,
+                std::vector<std::uint32_t>& refined_before) const {
     std::vector<std::uint32_t> last_child_start;
     if (last != nullptr) {
       last_child_start.resize(last->split.size());
@@ -557,13 +592,11 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
         if (last->split[q]) children += 8;
       }
     }
-    std::vector<std::array<int, 3>> refined;
-    std::vector<std::uint32_t> refined_before;
     const int half = step / 2;
-    for (std::size_t n = 0; n < cells.size(); ++n) {
+    for (std::size_t n = 0; n < cells_.size(); ++n) {
       if (!now.split[n]) continue;
-      const auto& c = cells[n];
-      const std::uint32_t q = before_index[n];
+      const auto& c = cells_[n];
+      const std::uint32_t q = before_index_[n];
       const bool had_children = q != GridIndex::kNone && last->split[q];
       for (int child = 0; child < 8; ++child) {
         refined.push_back({c[0] + (child & 1) * half, c[1] + ((child >> 1) & 1) * half,
@@ -573,11 +606,47 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
                                      : GridIndex::kNone);
       }
     }
-    now.cells = std::move(cells);
-    workspace.refinement.push_back(std::move(now));
-    cells = std::move(refined);
-    before_index = std::move(refined_before);
   }
+
+  SampledField& field_;
+  Sampler& sampler_;
+  const ContourKeys& contours_;
+  const std::vector<char>& valid_at_start_;
+  const std::vector<OctreeWorkspace::RefinementLevel> before_;  // the last pass's levels
+  std::vector<OctreeWorkspace::RefinementLevel>& levels_;       // this pass's, for the next
+  int start_ = 0, depth_ = 0;
+  std::vector<std::array<int, 3>> cells_;    // of the level being refined
+  std::vector<std::uint32_t> before_index_;  // per cell, its index in the last pass's level
+  std::vector<CornerRows> finest_mixed_rows_;
+};
+
+}  // namespace
+
+SampledField sample_field(const Box3& box, int function_count, const BatchEvaluator& evaluate,
+                          const ContourKeys& contours,
+                          const std::vector<RegionSample>& region_samples,
+                          const OctreeOptions& options, OctreeWorkspace& workspace) {
+  if (function_count < 1 || function_count > 65536)
+    throw std::invalid_argument("sample_field: " + std::to_string(function_count) +
+                                " functions; labels are kept in 16 bits (at most 65535 materials)");
+  const int depth = options.max_depth;
+  const int resolution = 1 << depth;
+  const Grid grid = make_grid(box, depth);
+  SampledField field;
+  std::vector<char> valid;
+  const bool kept = take_previous_field(field, workspace, grid, function_count, valid);
+  const std::vector<char> valid_at_start =
+      valid;  // the rows of the kept field that kept their values
+  Sampler sampler(field, evaluate, workspace.pending, std::move(valid));
+
+  std::vector<OctreeWorkspace::RefinementLevel> before;
+  if (kept) before = std::move(workspace.refinement);
+  OctreeWorkspace::SmoothingInputs last_smoothing;  // rows of the kept field only
+  if (kept) last_smoothing = std::move(workspace.smoothing);
+  workspace.smoothing = {};
+  std::vector<CornerRows> finest_mixed_rows =
+      Refinement(field, sampler, contours, valid_at_start, std::move(before), workspace.refinement)
+          .run(std::min(options.start_depth, depth), depth);
 
   GridIndex& scratch = workspace.scratch;
   scratch.reset(resolution);
