@@ -661,125 +661,159 @@ SampledField sample_field(const Box3& box, int function_count, const BatchEvalua
 
 namespace {
 
-void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64_t>& fixed,
-            int iterations, GridIndex& scratch, const std::vector<char>* valid_at_start,
-            const OctreeWorkspace::SmoothingInputs& last, OctreeWorkspace::SmoothingInputs& next) {
-  const int resolution = 1 << field.grid.depth;
-  const int function_count = field.function_count;
-  Stopwatch smoothing_clock;
+// Bi-Laplacian smoothing of the band (Section 4.6), in steps: the node sets and stencils, the
+// stencil vertices' values, the sweeps, the values written back, and the band closed again
+// around the nodes whose label changed.
+class Smoothing {
+ public:
+  Smoothing(SampledField& field, Sampler& sampler) : field_(field), sampler_(sampler) {}
+
+  void run(const std::vector<std::uint64_t>& fixed, int iterations, GridIndex& scratch,
+           const std::vector<char>* valid_at_start, const OctreeWorkspace::SmoothingInputs& last,
+           OctreeWorkspace::SmoothingInputs& next) {
+    Stopwatch smoothing_clock;
+    build_sets(fixed);
+    read_stencil_values(valid_at_start, last);
+    record_changes();
+    if (fc_ == 2)
+      sweeps(std::integral_constant<std::size_t, 2>{}, iterations);
+    else if (fc_ == 3)
+      sweeps(std::integral_constant<std::size_t, 3>{}, iterations);
+    else
+      sweeps(fc_, iterations);
+    write_back();
+    const std::vector<std::uint64_t> seeds = seeds_where_labels_changed();
+    // This pass's inputs for the next.
+    next.keys = std::move(stencil_vertices_);
+    next.rows = std::move(stencil_rows_);
+    next.values = std::move(smoothed_);
+    close_band(field_, sampler_, seeds, nullptr, scratch, resolution_, field_.surface_cells);
+    field_.smoothing_seconds = smoothing_clock.seconds();
+  }
+
+ private:
   // Smoothing nodes: corners of surface cells (the band is sorted), sorted. Nodes next to a
-  // contour keep their values (Section 4.6); the others move (`moving`, sorted).
-  const std::vector<std::uint64_t> nodes = cube_corner_union(field.surface_cells);
-  std::vector<std::uint64_t> moving;
-  moving.reserve(nodes.size());
-  std::set_difference(nodes.begin(), nodes.end(), fixed.begin(), fixed.end(),
-                      std::back_inserter(moving));
-  // Laplacian domain: the moving nodes and their six neighbours, sorted; moving_stencil: per
-  // moving node, its 7-point stencil's positions in laplacian_nodes (kStencilShifts). Only the
-  // moving nodes' bi-Laplacians are computed, so only their stencils are sampled. On a dense
-  // sweep most nodes lie next to a contour, and the stencils of every node, sampled before
-  // commit 55aff83 for the same smoothed values, were a tenth of a rebuild's evaluations
-  // (80 slices of spot's sweep: 92k, now 83k; `reconstruct --stats`, field_evaluations).
-  std::vector<std::uint32_t> moving_stencil;
-  const std::vector<std::uint64_t> laplacian_nodes = stencil_union(moving, &moving_stencil);
-  // Every vertex the bi-Laplacian of a moving node reads: the Laplacian nodes and their
-  // neighbours, sorted. Each is looked up (or evaluated) once and its values copied into
-  // `smoothed`, where the sweeps run: in key order, a vertex's neighbours along k lie next to it
-  // and those along j and i a row or a slice away, where the field's rows (in the order they were
-  // first evaluated) scattered every stencil over memory. The bit masks that build the sets give
-  // each stencil's positions (key_masks.hpp); looking up the seven vertices of every Laplacian
-  // and bi-Laplacian stencil in the grid index cost more than the sweeps.
-  std::vector<std::uint32_t>
-      lap_stencil;  // per Laplacian node, as moving_stencil in stencil_vertices
-  std::vector<std::uint64_t> stencil_vertices = stencil_union(laplacian_nodes, &lap_stencil);
-  const std::size_t fc = static_cast<std::size_t>(function_count);
-  // Per stencil vertex, its row and its value before the sweeps (in `smoothed`), in one parallel
+  // contour keep their values (Section 4.6); the others move (`moving_`, sorted). Laplacian
+  // domain: the moving nodes and their six neighbours, sorted; moving_stencil_: per moving node,
+  // its 7-point stencil's positions in laplacian_nodes_ (kStencilShifts). Only the moving nodes'
+  // bi-Laplacians are computed, so only their stencils are sampled: on a dense sweep most nodes
+  // lie next to a contour, and the stencils of every node were a tenth of a rebuild's
+  // evaluations (80 slices of spot's sweep: 92k against 83k; `reconstruct --stats`,
+  // field_evaluations). Every vertex the bi-Laplacian of a moving node reads: the Laplacian
+  // nodes and their neighbours, sorted. Each is looked up (or evaluated) once and its values
+  // copied into `smoothed_`, where the sweeps run: in key order, a vertex's neighbours along k
+  // lie next to it and those along j and i a row or a slice away, where the field's rows (in the
+  // order they were first evaluated) scattered every stencil over memory. The bit masks that
+  // build the sets give each stencil's positions (key_masks.hpp); looking up the seven vertices
+  // of every Laplacian and bi-Laplacian stencil in the grid index cost more than the sweeps.
+  void build_sets(const std::vector<std::uint64_t>& fixed) {
+    const std::vector<std::uint64_t> nodes = cube_corner_union(field_.surface_cells);
+    moving_.reserve(nodes.size());
+    std::set_difference(nodes.begin(), nodes.end(), fixed.begin(), fixed.end(),
+                        std::back_inserter(moving_));
+    laplacian_nodes_ = stencil_union(moving_, &moving_stencil_);
+    stencil_vertices_ = stencil_union(laplacian_nodes_, &lap_stencil_);
+    // Per moving node, its position in stencil_vertices_.
+    moving_position_.resize(moving_.size());
+    for_rows(moving_.size(), [&](std::size_t m) {
+      moving_position_[m] = lap_stencil_[static_cast<std::size_t>(moving_stencil_[m * 7]) * 7];
+    });
+  }
+
+  // Per stencil vertex, its row and its value before the sweeps (in `smoothed_`), in one parallel
   // walk per chunk. A vertex whose row kept its value since the last pass (valid at the start of
   // this pass: then nothing has written it) is read from the last pass's inputs, found by
   // walking both sorted lists from a binary search; the others are looked up, and those without
   // a current value are evaluated (queued in key order) and read after.
-  std::vector<std::uint32_t> stencil_rows(stencil_vertices.size());
-  std::vector<double> smoothed(stencil_vertices.size() * fc);
-  const bool from_last = valid_at_start != nullptr && !last.keys.empty();
-  constexpr std::size_t kChunk = 4096;
-  std::vector<std::vector<std::uint32_t>> missing((stencil_vertices.size() + kChunk - 1) / kChunk);
-  tbb::parallel_for(std::size_t{0}, missing.size(), [&](std::size_t chunk) {
-    const std::size_t begin = chunk * kChunk,
-                      end = std::min(stencil_vertices.size(), begin + kChunk);
-    std::size_t m =
-        from_last ? static_cast<std::size_t>(std::lower_bound(last.keys.begin(), last.keys.end(),
-                                                              stencil_vertices[begin]) -
-                                             last.keys.begin())
-                  : 0;
-    for (std::size_t n = begin; n < end; ++n) {
-      if (from_last) {
-        while (m < last.keys.size() && last.keys[m] < stencil_vertices[n]) ++m;
-        if (m < last.keys.size() && last.keys[m] == stencil_vertices[n] &&
-            (*valid_at_start)[last.rows[m]]) {
-          stencil_rows[n] = last.rows[m];
-          sampler.mark_read(stencil_rows[n]);
-          copy_row(&last.values[m * fc], fc, &smoothed[n * fc]);
-          continue;
+  void read_stencil_values(const std::vector<char>* valid_at_start,
+                           const OctreeWorkspace::SmoothingInputs& last) {
+    stencil_rows_.resize(stencil_vertices_.size());
+    smoothed_.resize(stencil_vertices_.size() * fc_);
+    const bool from_last = valid_at_start != nullptr && !last.keys.empty();
+    constexpr std::size_t kChunk = 4096;
+    std::vector<std::vector<std::uint32_t>> missing((stencil_vertices_.size() + kChunk - 1) /
+                                                    kChunk);
+    tbb::parallel_for(std::size_t{0}, missing.size(), [&](std::size_t chunk) {
+      const std::size_t begin = chunk * kChunk,
+                        end = std::min(stencil_vertices_.size(), begin + kChunk);
+      std::size_t m =
+          from_last ? static_cast<std::size_t>(std::lower_bound(last.keys.begin(), last.keys.end(),
+                                                                stencil_vertices_[begin]) -
+                                               last.keys.begin())
+                    : 0;
+      for (std::size_t n = begin; n < end; ++n) {
+        if (from_last) {
+          while (m < last.keys.size() && last.keys[m] < stencil_vertices_[n]) ++m;
+          if (m < last.keys.size() && last.keys[m] == stencil_vertices_[n] &&
+              (*valid_at_start)[last.rows[m]]) {
+            stencil_rows_[n] = last.rows[m];
+            sampler_.mark_read(stencil_rows_[n]);
+            copy_row(&last.values[m * fc_], fc_, &smoothed_[n * fc_]);
+            continue;
+          }
         }
+        stencil_rows_[n] = sampler_.valid_row(stencil_vertices_[n]);
+        if (stencil_rows_[n] == GridIndex::kNone)
+          missing[chunk].push_back(static_cast<std::uint32_t>(n));
+        else
+          copy_row(field_.values.data() + stencil_rows_[n] * fc_, fc_, &smoothed_[n * fc_]);
       }
-      stencil_rows[n] = sampler.valid_row(stencil_vertices[n]);
-      if (stencil_rows[n] == GridIndex::kNone)
-        missing[chunk].push_back(static_cast<std::uint32_t>(n));
-      else
-        copy_row(field.values.data() + stencil_rows[n] * fc, fc, &smoothed[n * fc]);
-    }
-  });
-  std::vector<std::uint32_t> evaluated;  // positions, ascending
-  for (const std::vector<std::uint32_t>& chunk : missing)
-    evaluated.insert(evaluated.end(), chunk.begin(), chunk.end());
-  for (const std::uint32_t n : evaluated) sampler.queue(stencil_vertices[n]);
-  sampler.flush();
-  double* values = field.values.data();  // the flush may have grown the field
-  for_rows(evaluated.size(), [&](std::size_t e) {
-    const std::size_t n = evaluated[e];
-    stencil_rows[n] = field.index.at(stencil_vertices[n]);
-    copy_row(values + stencil_rows[n] * fc, fc, &smoothed[n * fc]);
-  });
-  // Per moving node, its position in stencil_vertices.
-  std::vector<std::uint32_t> moving_position(moving.size());
-  for_rows(moving.size(), [&](std::size_t m) {
-    moving_position[m] = lap_stencil[static_cast<std::size_t>(moving_stencil[m * 7]) * 7];
-  });
-  const auto node_row = [&](std::size_t m) { return stencil_rows[moving_position[m]]; };
-  std::vector<int> label_before(moving.size());
-  for_rows(moving.size(), [&](std::size_t m) { label_before[m] = field.row_label(node_row(m)); });
-  // The rows the sweeps move and their values before, in node order (see changed_rows).
-  const std::size_t first_change = field.changed_rows.size();
-  field.changed_rows.resize(first_change + moving.size());
-  field.changed_values.resize(field.changed_rows.size() * fc);
-  for_rows(moving.size(), [&](std::size_t m) {
-    const std::size_t change = first_change + m;
-    field.changed_rows[change] = node_row(m);
-    copy_row(values + node_row(m) * fc, fc, field.changed_values.data() + change * fc);
-  });
+    });
+    std::vector<std::uint32_t> evaluated;  // positions, ascending
+    for (const std::vector<std::uint32_t>& chunk : missing)
+      evaluated.insert(evaluated.end(), chunk.begin(), chunk.end());
+    for (const std::uint32_t n : evaluated) sampler_.queue(stencil_vertices_[n]);
+    sampler_.flush();
+    const double* values = field_.values.data();  // the flush may have grown the field
+    for_rows(evaluated.size(), [&](std::size_t e) {
+      const std::size_t n = evaluated[e];
+      stencil_rows_[n] = field_.index.at(stencil_vertices_[n]);
+      copy_row(values + stencil_rows_[n] * fc_, fc_, &smoothed_[n * fc_]);
+    });
+  }
+
+  std::uint32_t node_row(std::size_t m) const { return stencil_rows_[moving_position_[m]]; }
+
+  // The labels of the moving nodes before the sweeps, and the rows the sweeps move with their
+  // values before, in node order (see changed_rows).
+  void record_changes() {
+    label_before_.resize(moving_.size());
+    for_rows(moving_.size(),
+             [&](std::size_t m) { label_before_[m] = field_.row_label(node_row(m)); });
+    first_change_ = field_.changed_rows.size();
+    field_.changed_rows.resize(first_change_ + moving_.size());
+    field_.changed_values.resize(field_.changed_rows.size() * fc_);
+    const double* values = field_.values.data();
+    for_rows(moving_.size(), [&](std::size_t m) {
+      const std::size_t change = first_change_ + m;
+      field_.changed_rows[change] = node_row(m);
+      copy_row(values + node_row(m) * fc_, fc_, field_.changed_values.data() + change * fc_);
+    });
+  }
+
   // Damped Jacobi on the bi-Laplacian (7-point Laplacian squared: diagonal 42); the damping
   // keeps the highest grid frequencies stable. Each sweep computes every Laplacian before it
-  // moves a node.
-  constexpr double kDamping = 0.5 / 42.0;
-  std::vector<double> laplacian(laplacian_nodes.size() * fc);
-  // The sweeps, for `width` functions per vertex: a compile-time width for the usual one and two
+  // moves a node. `width` functions per vertex: a compile-time width for the usual one and two
   // labels (two and three functions) lets the compiler unroll the functions' loops.
-  const auto sweeps = [&](auto width) {
+  template <typename Width>
+  void sweeps(Width width, int iterations) {
+    constexpr double kDamping = 0.5 / 42.0;
     const std::size_t w = width;
+    std::vector<double> laplacian(laplacian_nodes_.size() * fc_);
     const auto laplacian_at = [&](std::size_t n) {
-      const std::uint32_t* stencil = &lap_stencil[n * 7];
+      const std::uint32_t* stencil = &lap_stencil_[n * 7];
       double* out = &laplacian[n * w];
       for (std::size_t l = 0; l < w; ++l) {
-        double sum = -6.0 * smoothed[stencil[0] * w + l];
-        for (int d = 1; d <= 6; ++d) sum += smoothed[stencil[d] * w + l];
+        double sum = -6.0 * smoothed_[stencil[0] * w + l];
+        for (int d = 1; d <= 6; ++d) sum += smoothed_[stencil[d] * w + l];
         out[l] = sum;
       }
     };
     for (int iteration = 0; iteration < iterations; ++iteration) {
-      for_rows(laplacian_nodes.size(), laplacian_at);
-      for_rows(moving.size(), [&](std::size_t m) {
-        const std::uint32_t* stencil = &moving_stencil[m * 7];
-        double* value = &smoothed[moving_position[m] * w];
+      for_rows(laplacian_nodes_.size(), laplacian_at);
+      for_rows(moving_.size(), [&](std::size_t m) {
+        const std::uint32_t* stencil = &moving_stencil_[m * 7];
+        double* value = &smoothed_[moving_position_[m] * w];
         for (std::size_t l = 0; l < w; ++l) {
           double sum = -6.0 * laplacian[stencil[0] * w + l];
           for (int d = 1; d <= 6; ++d) sum += laplacian[stencil[d] * w + l];
@@ -787,48 +821,66 @@ void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64
         }
       });
     }
-  };
-  if (fc == 2)
-    sweeps(std::integral_constant<std::size_t, 2>{});
-  else if (fc == 3)
-    sweeps(std::integral_constant<std::size_t, 3>{});
-  else
-    sweeps(fc);
-  // The smoothed values go to the field's rows, and `smoothed` gets the rows' values before the
-  // sweeps back (saved in changed_values; they are what `smoothed` held): this pass's inputs, kept
-  // for the next pass (a copy of all of them before the sweeps cost more).
-  for_rows(moving.size(), [&](std::size_t m) {
-    double* value = &smoothed[moving_position[m] * fc];
-    copy_row(value, fc, values + node_row(m) * fc);
-    field.set_row_label(node_row(m));
-    copy_row(field.changed_values.data() + (first_change + m) * fc, fc, value);
-  });
+  }
+
+  // The smoothed values go to the field's rows, and `smoothed_` gets the rows' values before the
+  // sweeps back (saved in changed_values; they are what `smoothed_` held): this pass's inputs,
+  // kept for the next pass (a copy of all of them before the sweeps cost more).
+  void write_back() {
+    double* values = field_.values.data();
+    for_rows(moving_.size(), [&](std::size_t m) {
+      double* value = &smoothed_[moving_position_[m] * fc_];
+      copy_row(value, fc_, values + node_row(m) * fc_);
+      field_.set_row_label(node_row(m));
+      copy_row(field_.changed_values.data() + (first_change_ + m) * fc_, fc_, value);
+    });
+  }
+
   // Smoothing may move labels at the nodes. The band was closed before, and its cells whose
   // corners kept their labels keep their faces: only the cells around the nodes whose label
   // changed are seeds of the new, again closed, band (the rest of the old band is kept where
-  // still mixed). Seeding every cell around every node, as before, cost more than the sweeps.
-  std::vector<char> label_changed(moving.size());
-  for_rows(moving.size(), [&](std::size_t m) {
-    label_changed[m] = field.row_label(node_row(m)) != label_before[m];
-  });
-  std::vector<std::uint64_t> seeds;
-  for (std::size_t m = 0; m < moving.size(); ++m) {
-    if (!label_changed[m]) continue;
-    int i, j, k;
-    grid_unkey(moving[m], i, j, k);
-    for (int corner = 0; corner < 8; ++corner) {
-      const int ci = i - (corner & 1), cj = j - ((corner >> 1) & 1), ck = k - ((corner >> 2) & 1);
-      if (ci < 0 || cj < 0 || ck < 0 || ci >= resolution || cj >= resolution || ck >= resolution)
-        continue;
-      seeds.push_back(grid_key(ci, cj, ck));
+  // still mixed). Seeding every cell around every node cost more than the sweeps.
+  std::vector<std::uint64_t> seeds_where_labels_changed() const {
+    std::vector<char> label_changed(moving_.size());
+    for_rows(moving_.size(), [&](std::size_t m) {
+      label_changed[m] = field_.row_label(node_row(m)) != label_before_[m];
+    });
+    std::vector<std::uint64_t> seeds;
+    for (std::size_t m = 0; m < moving_.size(); ++m) {
+      if (!label_changed[m]) continue;
+      int i, j, k;
+      grid_unkey(moving_[m], i, j, k);
+      for (int corner = 0; corner < 8; ++corner) {
+        const int ci = i - (corner & 1), cj = j - ((corner >> 1) & 1), ck = k - ((corner >> 2) & 1);
+        if (ci < 0 || cj < 0 || ck < 0 || ci >= resolution_ || cj >= resolution_ ||
+            ck >= resolution_)
+          continue;
+        seeds.push_back(grid_key(ci, cj, ck));
+      }
     }
+    return seeds;
   }
-  // This pass's inputs for the next.
-  next.keys = std::move(stencil_vertices);
-  next.rows = std::move(stencil_rows);
-  next.values = std::move(smoothed);
-  close_band(field, sampler, seeds, nullptr, scratch, resolution, field.surface_cells);
-  field.smoothing_seconds = smoothing_clock.seconds();
+
+  SampledField& field_;
+  Sampler& sampler_;
+  const int resolution_ = 1 << field_.grid.depth;
+  const std::size_t fc_ = static_cast<std::size_t>(field_.function_count);
+  std::vector<std::uint64_t> moving_;            // the nodes that move, sorted
+  std::vector<std::uint64_t> laplacian_nodes_;   // the moving nodes and their neighbours
+  std::vector<std::uint32_t> moving_stencil_;    // per moving node, 7 positions in laplacian_nodes_
+  std::vector<std::uint64_t> stencil_vertices_;  // what the bi-Laplacians read, sorted
+  std::vector<std::uint32_t> lap_stencil_;  // per Laplacian node, 7 positions in stencil_vertices_
+  std::vector<std::uint32_t> moving_position_;  // per moving node, its position there
+  std::vector<std::uint32_t> stencil_rows_;     // per stencil vertex, its row in the field
+  std::vector<double> smoothed_;                // per stencil vertex, fc_ values
+  std::vector<int> label_before_;               // per moving node
+  std::size_t first_change_ = 0;                // its first entry in field_.changed_rows
+};
+
+void smooth(SampledField& field, Sampler& sampler, const std::vector<std::uint64_t>& fixed,
+            int iterations, GridIndex& scratch, const std::vector<char>* valid_at_start,
+            const OctreeWorkspace::SmoothingInputs& last, OctreeWorkspace::SmoothingInputs& next) {
+  Smoothing(field, sampler).run(fixed, iterations, scratch, valid_at_start, last, next);
 }
 
 void snap_thin_regions(SampledField& field, Sampler& sampler,
