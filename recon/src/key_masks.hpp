@@ -3,8 +3,8 @@
 // stencil shifts) built on bit masks: one row of bits along k per (i, j). Dilating a set is then
 // a few word operations per row, and where a key lies in the sorted result is a count of the set
 // bits before it. Same keys in the same order, and the same positions, as union_of_shifts, whose
-// merge of seven or eight shifted copies (a compare and a store per copy and key) was, by per-pass
-// timers (not committed), the largest part of an online update's smoothing set-up. Used where the
+// merge of seven or eight shifted copies (a compare and a store per copy and key) costs more
+// than anything else in an online update's smoothing set-up. Used where the
 // keys' bounding box needs at most kMaxMaskWords words (the whole finest grid up to depth 9; the
 // default depth is 7); union_of_shifts otherwise.
 #include <tbb/parallel_for.h>

@@ -207,6 +207,79 @@ constexpr std::array<std::array<int, 4>, 6> kFaceCorners{
 // the rest of the closure).
 using CornerRows = std::array<std::uint32_t, 8>;
 
+// The mixed cells of `cells` and their corner rows, in their order, their corners evaluated
+// first where they have no value (the tests run in parallel).
+void mixed_cells_of(SampledField& field, Sampler& sampler, const std::vector<std::uint64_t>& cells,
+                    std::vector<std::uint64_t>& kept, std::vector<CornerRows>& kept_rows) {
+  std::vector<CornerRows> corner_rows(cells.size());
+  sampler.request_each(cells.size(), [&](std::size_t n, const auto& request) {
+    int i, j, k;
+    grid_unkey(cells[n], i, j, k);
+    for (int corner = 0; corner < 8; ++corner)
+      corner_rows[n][static_cast<std::size_t>(corner)] =
+          request(i + (corner & 1), j + ((corner >> 1) & 1), k + ((corner >> 2) & 1));
+  });
+  sampler.flush();
+  std::vector<char> is_mixed(cells.size());
+  for_rows(cells.size(), [&](std::size_t n) {
+    int i, j, k;
+    grid_unkey(cells[n], i, j, k);
+    is_mixed[n] = corners_mixed(field, corner_rows[n], i, j, k, 1);
+  });
+  kept.clear();
+  kept_rows.clear();
+  for (std::size_t n = 0; n < cells.size(); ++n)
+    if (is_mixed[n]) {
+      kept.push_back(cells[n]);
+      kept_rows.push_back(corner_rows[n]);
+    }
+}
+
+// The cells across the mixed faces of the frontier's cells that are in neither `in_band` nor
+// `closed`, added to `in_band`: a bit per direction per frontier cell in parallel, then the
+// cells in order.
+std::vector<std::uint64_t> cells_across_mixed_faces(const SampledField& field,
+                                                    const std::vector<std::uint64_t>& frontier,
+                                                    const std::vector<CornerRows>& frontier_rows,
+                                                    const std::vector<std::uint64_t>& closed,
+                                                    GridIndex& in_band, int resolution) {
+  std::vector<std::uint8_t> across(frontier.size());
+  for_rows(frontier.size(), [&](std::size_t n) {
+    int i, j, k;
+    grid_unkey(frontier[n], i, j, k);
+    std::array<int, 8> labels;
+    for (std::size_t c = 0; c < 8; ++c) labels[c] = field.row_label(frontier_rows[n][c]);
+    std::uint8_t bits = 0;
+    for (std::size_t d = 0; d < kFaceNeighbours.size(); ++d) {
+      const int ni = i + kFaceNeighbours[d][0], nj = j + kFaceNeighbours[d][1],
+                nk = k + kFaceNeighbours[d][2];
+      if (ni < 0 || nj < 0 || nk < 0 || ni >= resolution || nj >= resolution || nk >= resolution)
+        continue;
+      const std::array<int, 4>& face = kFaceCorners[d];
+      const int first = labels[static_cast<std::size_t>(face[0])];
+      const bool mixed = labels[static_cast<std::size_t>(face[1])] != first ||
+                         labels[static_cast<std::size_t>(face[2])] != first ||
+                         labels[static_cast<std::size_t>(face[3])] != first;
+      if (mixed && !in_band.count(grid_key(ni, nj, nk)) && !contains(closed, grid_key(ni, nj, nk)))
+        bits = static_cast<std::uint8_t>(bits | (1u << d));
+    }
+    across[n] = bits;
+  });
+  std::vector<std::uint64_t> candidates;
+  for (std::size_t n = 0; n < frontier.size(); ++n) {
+    if (across[n] == 0) continue;
+    int i, j, k;
+    grid_unkey(frontier[n], i, j, k);
+    for (std::size_t d = 0; d < kFaceNeighbours.size(); ++d) {
+      if (!((across[n] >> d) & 1u)) continue;
+      const std::uint64_t nkey =
+          grid_key(i + kFaceNeighbours[d][0], j + kFaceNeighbours[d][1], k + kFaceNeighbours[d][2]);
+      if (in_band.insert(nkey, 0)) candidates.push_back(nkey);
+    }
+  }
+  return candidates;
+}
+
 void close_band(SampledField& field, Sampler& sampler, const std::vector<std::uint64_t>& seeds,
                 const std::vector<CornerRows>* seed_rows, GridIndex& in_band, int resolution,
                 const std::vector<std::uint64_t>& closed = {}) {
@@ -219,85 +292,22 @@ void close_band(SampledField& field, Sampler& sampler, const std::vector<std::ui
       unique_seeds.push_back(seeds[n]);
       if (seed_rows != nullptr) unique_seed_rows.push_back((*seed_rows)[n]);
     }
-  // The mixed cells of `cells` and their corner rows, in their order, their corners evaluated
-  // first where they have no value (the tests run in parallel).
-  const auto requested_mixed_of = [&](const std::vector<std::uint64_t>& cells,
-                                      std::vector<std::uint64_t>& kept,
-                                      std::vector<CornerRows>& kept_rows) {
-    std::vector<CornerRows> corner_rows(cells.size());
-    sampler.request_each(cells.size(), [&](std::size_t n, const auto& request) {
-      int i, j, k;
-      grid_unkey(cells[n], i, j, k);
-      for (int corner = 0; corner < 8; ++corner)
-        corner_rows[n][static_cast<std::size_t>(corner)] =
-            request(i + (corner & 1), j + ((corner >> 1) & 1), k + ((corner >> 2) & 1));
-    });
-    sampler.flush();
-    std::vector<char> is_mixed(cells.size());
-    for_rows(cells.size(), [&](std::size_t n) {
-      int i, j, k;
-      grid_unkey(cells[n], i, j, k);
-      is_mixed[n] = corners_mixed(field, corner_rows[n], i, j, k, 1);
-    });
-    kept.clear();
-    kept_rows.clear();
-    for (std::size_t n = 0; n < cells.size(); ++n)
-      if (is_mixed[n]) {
-        kept.push_back(cells[n]);
-        kept_rows.push_back(corner_rows[n]);
-      }
-  };
   std::vector<std::uint64_t> frontier;
   std::vector<CornerRows> frontier_rows;
   if (seed_rows != nullptr) {
     frontier = std::move(unique_seeds);
     frontier_rows = std::move(unique_seed_rows);
   } else {
-    requested_mixed_of(unique_seeds, frontier, frontier_rows);
+    mixed_cells_of(field, sampler, unique_seeds, frontier, frontier_rows);
   }
   // The new cells: the mixed seeds and what the closure adds. The closed band is not put into
   // `in_band` (tens of thousands of serial inserts for a handful of seeds): its cells are found
   // by a search in it, and it is merged with the new cells at the end.
   std::vector<std::uint64_t> band = frontier;
-  const auto in_closed = [&](std::uint64_t key) { return contains(closed, key); };
   while (!frontier.empty()) {
-    // Per frontier cell, the neighbours across its mixed faces that are not in the band yet (a
-    // bit per direction), in parallel; then added in order.
-    std::vector<std::uint8_t> across(frontier.size());
-    for_rows(frontier.size(), [&](std::size_t n) {
-      int i, j, k;
-      grid_unkey(frontier[n], i, j, k);
-      std::array<int, 8> labels;
-      for (std::size_t c = 0; c < 8; ++c) labels[c] = field.row_label(frontier_rows[n][c]);
-      std::uint8_t bits = 0;
-      for (std::size_t d = 0; d < kFaceNeighbours.size(); ++d) {
-        const int ni = i + kFaceNeighbours[d][0], nj = j + kFaceNeighbours[d][1],
-                  nk = k + kFaceNeighbours[d][2];
-        if (ni < 0 || nj < 0 || nk < 0 || ni >= resolution || nj >= resolution || nk >= resolution)
-          continue;
-        const std::array<int, 4>& face = kFaceCorners[d];
-        const int first = labels[static_cast<std::size_t>(face[0])];
-        const bool mixed = labels[static_cast<std::size_t>(face[1])] != first ||
-                           labels[static_cast<std::size_t>(face[2])] != first ||
-                           labels[static_cast<std::size_t>(face[3])] != first;
-        if (mixed && !in_band.count(grid_key(ni, nj, nk)) && !in_closed(grid_key(ni, nj, nk)))
-          bits = static_cast<std::uint8_t>(bits | (1u << d));
-      }
-      across[n] = bits;
-    });
-    std::vector<std::uint64_t> candidates;
-    for (std::size_t n = 0; n < frontier.size(); ++n) {
-      if (across[n] == 0) continue;
-      int i, j, k;
-      grid_unkey(frontier[n], i, j, k);
-      for (std::size_t d = 0; d < kFaceNeighbours.size(); ++d) {
-        if (!((across[n] >> d) & 1u)) continue;
-        const std::uint64_t nkey = grid_key(i + kFaceNeighbours[d][0], j + kFaceNeighbours[d][1],
-                                            k + kFaceNeighbours[d][2]);
-        if (in_band.insert(nkey, 0)) candidates.push_back(nkey);
-      }
-    }
-    requested_mixed_of(candidates, frontier, frontier_rows);
+    const std::vector<std::uint64_t> candidates =
+        cells_across_mixed_faces(field, frontier, frontier_rows, closed, in_band, resolution);
+    mixed_cells_of(field, sampler, candidates, frontier, frontier_rows);
     band.insert(band.end(), frontier.begin(), frontier.end());
   }
   tbb::parallel_sort(band.begin(), band.end());

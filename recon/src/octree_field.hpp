@@ -154,7 +154,7 @@ struct OctreeWorkspace {
   /// and their values before the sweeps. A vertex of the next pass whose row kept its value is
   /// read from here, in key order, instead of being looked up and read from its row: an online
   /// update's stencils are nearly all the last pass's, and those scattered look-ups and reads
-  /// were, by per-pass timers (not committed), a third of its smoothing set-up.
+  /// would be a third of its smoothing set-up.
   struct SmoothingInputs {
     std::vector<std::uint64_t> keys;
     std::vector<std::uint32_t> rows;

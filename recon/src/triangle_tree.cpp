@@ -120,8 +120,7 @@ constexpr auto kBinomial = make_binomials();
 // the inner sum first (Z_ij for i < j is conj(Z_ji)). The arrays are laid out so that the
 // innermost loops run over contiguous doubles with a broadcast factor (the compiler vectorises
 // them; every element sees the same operations in the same order as a plain double loop).
-// Building the trees is up to a fifth of the completion on the 80 mm sector sets (rocker-arm's,
-// by timers not committed).
+// Building the trees is up to a fifth of the completion on the 80 mm sector sets (rocker-arm's).
 SONOSHAPE_AVX2_CLONES void add_translated(const double* in, std::size_t densities,
                                           const Vec2& shift, double* out) {
   constexpr int kSide = kOrder + 1;
