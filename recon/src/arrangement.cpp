@@ -1255,9 +1255,9 @@ void Arrangement::place(RefineJob& job, std::vector<int>& cells,
   }
 }
 
-void Arrangement::link(std::vector<RefineJob>& jobs) {
-  // The leaves no point reached become regions again, in slots that allocate_region would give
-  // them one after the other (the free ones last freed first, then new ones), moved in parallel.
+// The leaves no point reached become regions again, in slots that allocate_region would give
+// them one after the other (the free ones last freed first, then new ones), moved in parallel.
+void Arrangement::relink_regions(std::vector<RefineJob>& jobs) {
   auto is_region = [](const RefineJob::Node& node) { return node.plane < 0 && !node.cell; };
   std::vector<std::size_t> region_base(jobs.size() + 1, 0);
   for (std::size_t j = 0; j < jobs.size(); ++j)
@@ -1292,147 +1292,193 @@ void Arrangement::link(std::vector<RefineJob>& jobs) {
                         }
                       }
                     });
-  // The cells' faces, numbered g in job order. What adding them one after the other would do
-  // (find a face under the key whose side towards the cell is free and whose vertices have the
-  // same keys, and share it; else add the face and its key), in four steps:
-  std::vector<std::size_t> face_base(jobs.size() + 1, 0);
-  for (std::size_t j = 0; j < jobs.size(); ++j)
-    face_base[j + 1] = face_base[j] + jobs[j].cell_faces.size();
-  const std::size_t count = face_base.back();
-  auto job_face = [&](std::size_t g, std::size_t j) -> RefineJob::CellFace& {
-    return jobs[j].cell_faces[g - face_base[j]];
-  };
-  auto polygon = [](const RefineJob& job, const RefineJob::CellFace& face) {
+}
+
+// The cells' faces, numbered g in job order. What adding them one after the other would do
+// (find a face under the key whose side towards the cell is free and whose vertices have the
+// same keys, and share it; else add the face and its key), in four steps.
+class Arrangement::FaceLinker {
+ public:
+  FaceLinker(Arrangement& arrangement, std::vector<RefineJob>& jobs)
+      : a_(arrangement), jobs_(jobs), face_base_(jobs.size() + 1, 0) {
+    for (std::size_t j = 0; j < jobs.size(); ++j)
+      face_base_[j + 1] = face_base_[j] + jobs[j].cell_faces.size();
+    const std::size_t count = face_base_.back();
+    shares_old_.assign(count, -1);
+    shares_new_.assign(count, -1);
+    face_id_.assign(count, -1);
+  }
+
+  void run() {
+    find_shared_old_faces();
+    const std::size_t keyed = share_new_faces();
+    const int faces = number_added_faces(keyed);
+    place_faces(faces);
+  }
+
+ private:
+  RefineJob::CellFace& job_face(std::size_t g, std::size_t j) {
+    return jobs_[j].cell_faces[g - face_base_[j]];
+  }
+  static RegionFace polygon(const RefineJob& job, const RefineJob::CellFace& face) {
     return region_face(job.regions[static_cast<std::size_t>(face.region)].faces,
                        static_cast<std::size_t>(face.at));
-  };
-  auto keys_of = [&](const RefineJob& job, const RefineJob::CellFace& face) {
-    const auto begin = job.sorted_keys.begin() + static_cast<std::ptrdiff_t>(face.keys_at);
-    return std::pair{begin, begin + polygon(job, face).count};
-  };
+  }
+  static std::pair<std::vector<std::uint64_t>::const_iterator,
+                   std::vector<std::uint64_t>::const_iterator>
+  keys_of(const RefineJob& job, const RefineJob::CellFace& face) {
+    const auto begin = job.sorted_keys.cbegin() + static_cast<std::ptrdiff_t>(face.keys_at);
+    return {begin, begin + polygon(job, face).count};
+  }
+
   // 1. (in parallel; only reads) the faces built before that each face shares: one cell per
   //    side of a face, so no two new faces take the same side.
-  std::vector<int> shares_old(count, -1);
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, jobs.size(), 1),
-                    [&](const tbb::blocked_range<std::size_t>& r) {
-                      for (std::size_t j = r.begin(); j < r.end(); ++j)
-                        for (std::size_t i = 0; i < jobs[j].cell_faces.size(); ++i) {
-                          const RefineJob::CellFace& face = jobs[j].cell_faces[i];
-                          const RegionFace p = polygon(jobs[j], face);
-                          const auto [keys_begin, keys_end] = keys_of(jobs[j], face);
-                          faces_by_key_.find(face.key, [&](int candidate) {
-                            const ArrangementFace& f = faces_[static_cast<std::size_t>(candidate)];
-                            const int side = face.sigma > 0 ? f.cell_positive : f.cell_negative;
-                            if (f.plane != p.plane || side >= 0 ||
-                                f.vertices.size() != static_cast<std::size_t>(p.count))
-                              return false;
-                            if (!std::all_of(f.vertices.begin(), f.vertices.end(), [&](int v) {
-                                  return std::binary_search(
-                                      keys_begin, keys_end,
-                                      vertex_keys_[static_cast<std::size_t>(v)]);
-                                }))
-                              return false;
-                            shares_old[face_base[j] + i] = candidate;
-                            return true;
-                          });
-                        }
-                    });
-  // 2. The others by key (a parallel sort): within a key, in order, a face shares the first
-  //    earlier one that it would have found (added, its side free: the other side of its cell,
-  //    not taken yet; the same plane and vertex keys), which gets the cell on that side.
+  void find_shared_old_faces() {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, jobs_.size(), 1),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t j = r.begin(); j < r.end(); ++j)
+                          for (std::size_t i = 0; i < jobs_[j].cell_faces.size(); ++i)
+                            shares_old_[face_base_[j] + i] =
+                                old_face_shared(jobs_[j], jobs_[j].cell_faces[i]);
+                      });
+  }
+  int old_face_shared(const RefineJob& job, const RefineJob::CellFace& face) const {
+    const RegionFace p = polygon(job, face);
+    const auto [keys_begin, keys_end] = keys_of(job, face);
+    int shared = -1;
+    a_.faces_by_key_.find(face.key, [&](int candidate) {
+      const ArrangementFace& f = a_.faces_[static_cast<std::size_t>(candidate)];
+      const int side = face.sigma > 0 ? f.cell_positive : f.cell_negative;
+      if (f.plane != p.plane || side >= 0 || f.vertices.size() != static_cast<std::size_t>(p.count))
+        return false;
+      if (!std::all_of(f.vertices.begin(), f.vertices.end(), [&](int v) {
+            return std::binary_search(keys_begin, keys_end,
+                                      a_.vertex_keys_[static_cast<std::size_t>(v)]);
+          }))
+        return false;
+      shared = candidate;
+      return true;
+    });
+    return shared;
+  }
+
   struct Keyed {
     std::uint64_t key;
     std::uint32_t job;
     std::uint32_t g;
     bool operator<(const Keyed& o) const { return key != o.key ? key < o.key : g < o.g; }
   };
-  std::vector<Keyed> keyed;
-  for (std::size_t j = 0; j < jobs.size(); ++j)
-    for (std::size_t i = 0; i < jobs[j].cell_faces.size(); ++i)
-      if (shares_old[face_base[j] + i] < 0)
-        keyed.push_back({jobs[j].cell_faces[i].key, static_cast<std::uint32_t>(j),
-                         static_cast<std::uint32_t>(face_base[j] + i)});
-  tbb::parallel_sort(keyed.begin(), keyed.end());
-  std::vector<std::int64_t> shares_new(count, -1);  // g of the face shared
-  for (std::size_t a = 0; a < keyed.size();) {
-    std::size_t b = a + 1;
-    while (b < keyed.size() && keyed[b].key == keyed[a].key) ++b;
-    for (std::size_t later = a + 1; later < b; ++later) {
-      const RefineJob::CellFace& face = job_face(keyed[later].g, keyed[later].job);
-      const RegionFace p = polygon(jobs[keyed[later].job], face);
-      const auto [keys_begin, keys_end] = keys_of(jobs[keyed[later].job], face);
-      for (std::size_t earlier = a; earlier < later; ++earlier) {
-        if (shares_new[keyed[earlier].g] >= 0) continue;  // not added: not found
-        RefineJob::CellFace& other = job_face(keyed[earlier].g, keyed[earlier].job);
-        const RegionFace q = polygon(jobs[keyed[earlier].job], other);
-        if (q.plane != p.plane || other.sigma == face.sigma || other.other_cell >= 0 ||
-            q.count != p.count)
-          continue;
-        const auto [other_begin, other_end] = keys_of(jobs[keyed[earlier].job], other);
-        if (!std::all_of(other_begin, other_end, [&](std::uint64_t k) {
-              return std::binary_search(keys_begin, keys_end, k);
-            }))
-          continue;
-        other.other_cell = face.cell;
-        shares_new[keyed[later].g] = keyed[earlier].g;
-        break;
-      }
+  // 2. The others by key (a parallel sort): within a key, in order, a face shares the first
+  //    earlier one that it would have found (added, its side free: the other side of its cell,
+  //    not taken yet; the same plane and vertex keys), which gets the cell on that side.
+  //    Returns how many faces were keyed.
+  std::size_t share_new_faces() {
+    std::vector<Keyed> keyed;
+    for (std::size_t j = 0; j < jobs_.size(); ++j)
+      for (std::size_t i = 0; i < jobs_[j].cell_faces.size(); ++i)
+        if (shares_old_[face_base_[j] + i] < 0)
+          keyed.push_back({jobs_[j].cell_faces[i].key, static_cast<std::uint32_t>(j),
+                           static_cast<std::uint32_t>(face_base_[j] + i)});
+    tbb::parallel_sort(keyed.begin(), keyed.end());
+    for (std::size_t a = 0; a < keyed.size();) {
+      std::size_t b = a + 1;
+      while (b < keyed.size() && keyed[b].key == keyed[a].key) ++b;
+      for (std::size_t later = a + 1; later < b; ++later) share_earlier(keyed, a, later);
+      a = b;
     }
-    a = b;
+    return keyed.size();
   }
-  // 3. Ids of the added faces in order, and their keys in the table.
-  faces_by_key_.reserve(keyed.size() - static_cast<std::size_t>(
-                                           std::count_if(shares_new.begin(), shares_new.end(),
-                                                         [](std::int64_t g) { return g >= 0; })));
-  std::vector<int> face_id(count, -1);
-  int next = static_cast<int>(faces_.size());
-  for (std::size_t j = 0; j < jobs.size(); ++j)
-    for (std::size_t i = 0; i < jobs[j].cell_faces.size(); ++i) {
-      const std::size_t g = face_base[j] + i;
-      if (shares_old[g] >= 0 || shares_new[g] >= 0) continue;
-      face_id[g] = next++;
-      faces_by_key_.insert(jobs[j].cell_faces[i].key, face_id[g]);
+  void share_earlier(const std::vector<Keyed>& keyed, std::size_t first, std::size_t later) {
+    const RefineJob::CellFace& face = job_face(keyed[later].g, keyed[later].job);
+    const RegionFace p = polygon(jobs_[keyed[later].job], face);
+    const auto [keys_begin, keys_end] = keys_of(jobs_[keyed[later].job], face);
+    for (std::size_t earlier = first; earlier < later; ++earlier) {
+      if (shares_new_[keyed[earlier].g] >= 0) continue;  // not added: not found
+      RefineJob::CellFace& other = job_face(keyed[earlier].g, keyed[earlier].job);
+      const RegionFace q = polygon(jobs_[keyed[earlier].job], other);
+      if (q.plane != p.plane || other.sigma == face.sigma || other.other_cell >= 0 ||
+          q.count != p.count)
+        continue;
+      const auto [other_begin, other_end] = keys_of(jobs_[keyed[earlier].job], other);
+      if (!std::all_of(other_begin, other_end, [&](std::uint64_t k) {
+            return std::binary_search(keys_begin, keys_end, k);
+          }))
+        continue;
+      other.other_cell = face.cell;
+      shares_new_[keyed[later].g] = keyed[earlier].g;
+      return;
     }
+  }
+
+  // 3. Ids of the added faces in order, and their keys in the table; returns the face count.
+  int number_added_faces(std::size_t keyed) {
+    a_.faces_by_key_.reserve(
+        keyed - static_cast<std::size_t>(std::count_if(shares_new_.begin(), shares_new_.end(),
+                                                       [](std::int64_t g) { return g >= 0; })));
+    int next = static_cast<int>(a_.faces_.size());
+    for (std::size_t j = 0; j < jobs_.size(); ++j)
+      for (std::size_t i = 0; i < jobs_[j].cell_faces.size(); ++i) {
+        const std::size_t g = face_base_[j] + i;
+        if (shares_old_[g] >= 0 || shares_new_[g] >= 0) continue;
+        face_id_[g] = next++;
+        a_.faces_by_key_.insert(jobs_[j].cell_faces[i].key, face_id_[g]);
+      }
+    return next;
+  }
+
   // 4. (in parallel, a job's cells and added faces each) the faces into place and into their
   //    cells; a face built before gets the cell on its free side (one new face per side).
-  grow(faces_, static_cast<std::size_t>(next));
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, jobs.size(), 1),
-                    [&](const tbb::blocked_range<std::size_t>& r) {
-                      for (std::size_t j = r.begin(); j < r.end(); ++j) {
-                        RefineJob& job = jobs[j];
-                        for (std::size_t i = 0; i < job.cell_faces.size(); ++i) {
-                          RefineJob::CellFace& face = job.cell_faces[i];
-                          const std::size_t g = face_base[j] + i;
-                          int id = face_id[g];
-                          if (shares_old[g] >= 0) {
-                            id = shares_old[g];
-                            ArrangementFace& f = faces_[static_cast<std::size_t>(id)];
-                            (face.sigma > 0 ? f.cell_positive : f.cell_negative) = face.cell;
-                          } else if (shares_new[g] >= 0) {
-                            id = face_id[static_cast<std::size_t>(shares_new[g])];
-                          } else {
-                            const RegionFace p = polygon(job, face);
-                            ArrangementFace& f = faces_[static_cast<std::size_t>(id)];
-                            f.plane = p.plane;
-                            f.vertices.resize(static_cast<std::size_t>(p.count));
-                            f.edge_planes.resize(static_cast<std::size_t>(p.count));
-                            for (int k = 0; k < p.count; ++k) {
-                              f.vertices[static_cast<std::size_t>(k)] =
-                                  p.vertex((face.start + k) % p.count);
-                              f.edge_planes[static_cast<std::size_t>(k)] =
-                                  p.edge_plane((face.start + k) % p.count);
-                            }
-                            (face.sigma > 0 ? f.cell_positive : f.cell_negative) = face.cell;
-                            (face.sigma > 0 ? f.cell_negative : f.cell_positive) = face.other_cell;
-                          }
-                          cells_[static_cast<std::size_t>(face.cell)].faces.push_back(id);
-                        }
-                        // The job's cells are built: its copies go.
-                        std::vector<Region>().swap(job.regions);
-                        std::vector<RefineJob::CellFace>().swap(job.cell_faces);
-                        std::vector<std::uint64_t>().swap(job.sorted_keys);
-                      }
-                    });
+  void place_faces(int face_count) {
+    grow(a_.faces_, static_cast<std::size_t>(face_count));
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, jobs_.size(), 1),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t j = r.begin(); j < r.end(); ++j) place_job_faces(j);
+                      });
+  }
+  void place_job_faces(std::size_t j) {
+    RefineJob& job = jobs_[j];
+    for (std::size_t i = 0; i < job.cell_faces.size(); ++i) {
+      RefineJob::CellFace& face = job.cell_faces[i];
+      const std::size_t g = face_base_[j] + i;
+      int id = face_id_[g];
+      if (shares_old_[g] >= 0) {
+        id = shares_old_[g];
+        ArrangementFace& f = a_.faces_[static_cast<std::size_t>(id)];
+        (face.sigma > 0 ? f.cell_positive : f.cell_negative) = face.cell;
+      } else if (shares_new_[g] >= 0) {
+        id = face_id_[static_cast<std::size_t>(shares_new_[g])];
+      } else {
+        const RegionFace p = polygon(job, face);
+        ArrangementFace& f = a_.faces_[static_cast<std::size_t>(id)];
+        f.plane = p.plane;
+        f.vertices.resize(static_cast<std::size_t>(p.count));
+        f.edge_planes.resize(static_cast<std::size_t>(p.count));
+        for (int k = 0; k < p.count; ++k) {
+          f.vertices[static_cast<std::size_t>(k)] = p.vertex((face.start + k) % p.count);
+          f.edge_planes[static_cast<std::size_t>(k)] = p.edge_plane((face.start + k) % p.count);
+        }
+        (face.sigma > 0 ? f.cell_positive : f.cell_negative) = face.cell;
+        (face.sigma > 0 ? f.cell_negative : f.cell_positive) = face.other_cell;
+      }
+      a_.cells_[static_cast<std::size_t>(face.cell)].faces.push_back(id);
+    }
+    // The job's cells are built: its copies go.
+    std::vector<Region>().swap(job.regions);
+    std::vector<RefineJob::CellFace>().swap(job.cell_faces);
+    std::vector<std::uint64_t>().swap(job.sorted_keys);
+  }
+
+  Arrangement& a_;
+  std::vector<RefineJob>& jobs_;
+  std::vector<std::size_t> face_base_;    // per job, its first g
+  std::vector<int> shares_old_;           // per g, the face built before that it shares, or -1
+  std::vector<std::int64_t> shares_new_;  // per g, the g of the new face it shares, or -1
+  std::vector<int> face_id_;              // per g, the id of the face it adds, or -1
+};
+
+void Arrangement::link(std::vector<RefineJob>& jobs) {
+  relink_regions(jobs);
+  FaceLinker(*this, jobs).run();
 }
 
 std::vector<int> Arrangement::faces_split_by_last_plane() const {

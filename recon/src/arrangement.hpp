@@ -378,6 +378,10 @@ class Arrangement {
   void number(std::vector<RefineJob>& jobs);
   void place(RefineJob& job, std::vector<int>& cells, std::vector<std::uint64_t>& sorted);
   void link(std::vector<RefineJob>& jobs);
+  // The steps of link (arrangement.cpp): the leaves no point reached become regions again, and
+  // the new cells' faces are shared or added.
+  void relink_regions(std::vector<RefineJob>& jobs);
+  class FaceLinker;
   // On demand: the cross-section's edges chained into the new face, appended to `out` with
   // side `sigma`.
   void close_section(const std::vector<DirectedEdge>& section, int new_plane, int sigma,
