@@ -73,32 +73,44 @@ struct CaseTable {
   }
 };
 
-}  // namespace
+// Marching tetrahedra on the band, one material at a time (extract_label_surfaces). The band's
+// corners (sorted keys), their rows and labels, each looked up once; the merge that lists them
+// gives each cell's corners among them (the look-ups of every cell's eight corners were most of
+// the mesher's time). Corners numbered in key order also keep the edge table small and its
+// accesses near each other, as the cells are in key order too.
+class BandMesher {
+ public:
+  explicit BandMesher(const SampledField& field)
+      : field_(field),
+        fc_(field.function_count),
+        cells_(field.surface_cells),
+        corners_(cube_corner_union(cells_, &cell_corners_)),
+        corner_rows_(corners_.size()),
+        corner_labels_(corners_.size()),
+        chunk_triangles_((cells_.size() + kChunk - 1) / kChunk),
+        vertex_of_edge_(corners_.size() * 8),
+        corner_g_(corners_.size()) {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, corners_.size(), 1024),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                        for (std::size_t n = r.begin(); n < r.end(); ++n) {
+                          corner_rows_[n] = field_.index.at(corners_[n]);
+                          corner_labels_[n] =
+                              static_cast<std::uint16_t>(field_.row_label(corner_rows_[n]));
+                        }
+                      });
+  }
 
-std::vector<TriangleMesh> extract_label_surfaces(const SampledField& field) {
-  static const CaseTable table;
-  static const auto tets = kuhn_tetrahedra();
-  const int fc = field.function_count;
-  const std::size_t stride = static_cast<std::size_t>(fc);
-  std::vector<TriangleMesh> meshes(static_cast<std::size_t>(std::max(0, fc - 1)));
-  // The band's corners (sorted keys), their rows and labels, each looked up once; the merge that
-  // lists them gives each cell's corners among them (the look-ups of every cell's
-  // eight corners were most of the mesher's time). Corners numbered in key order also keep the
-  // edge table below small and its accesses near each other, as the cells are in key order too.
-  const std::vector<std::uint64_t>& cells = field.surface_cells;
-  // Per cell, its cube corner c (offset (c & 1, (c >> 1) & 1, (c >> 2) & 1)) in `corners`.
-  std::vector<std::uint32_t> cell_corners;
-  const std::vector<std::uint64_t> corners = cube_corner_union(cells, &cell_corners);
-  std::vector<std::uint32_t> corner_rows(corners.size());
-  std::vector<std::uint16_t> corner_labels(corners.size());  // labels are function indices
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, corners.size(), 1024),
-                    [&](const tbb::blocked_range<std::size_t>& r) {
-                      for (std::size_t n = r.begin(); n < r.end(); ++n) {
-                        corner_rows[n] = field.index.at(corners[n]);
-                        corner_labels[n] =
-                            static_cast<std::uint16_t>(field.row_label(corner_rows[n]));
-                      }
-                    });
+  TriangleMesh mesh(int material) {
+    TriangleMesh mesh;
+    std::fill(vertex_of_edge_.begin(), vertex_of_edge_.end(), kNoVertex);
+    list_triangles(material);
+    compute_g(material);
+    const std::vector<NewVertex> new_vertices = number_vertices(mesh);
+    place_vertices(new_vertices, mesh);
+    return mesh;
+  }
+
+ private:
   // Per material, the triangles of each cell are listed in parallel, in chunks of cells of a
   // fixed size, and numbered in one serial pass in cell order: the vertex order (and so the
   // mesh) is that of a serial walk over the band, whatever the thread count. A triangle is its
@@ -108,29 +120,27 @@ std::vector<TriangleMesh> extract_label_surfaces(const SampledField& field) {
     std::uint32_t
         edge_corners;  // vertex e: inside corner at bits 6e, outside corner at bits 6e + 3
   };
-  constexpr std::size_t kChunk = 1024;
-  const std::size_t chunk_count = (cells.size() + kChunk - 1) / kChunk;
-  std::vector<std::vector<CellTriangle>> chunk_triangles(chunk_count);
-  // Mesh vertex per tetrahedron edge. The Kuhn tetrahedra are monotone paths through the cube,
-  // so every edge joins a grid vertex to one at an offset in {0,1}^3: (lower corner, offset)
-  // indexes a flat table.
-  constexpr std::uint32_t kNoVertex = 0xffffffffu;
-  std::vector<std::uint32_t> vertex_of_edge(corners.size() * 8);
-  std::vector<double> corner_g(corners.size());
-  for (int material = 1; material < fc; ++material) {
-    TriangleMesh& mesh = meshes[static_cast<std::size_t>(material - 1)];
-    std::fill(vertex_of_edge.begin(), vertex_of_edge.end(), kNoVertex);
+  struct NewVertex {
+    std::uint32_t cell;
+    std::uint32_t edge;  // inside corner | outside corner << 3
+  };
+  static constexpr std::size_t kChunk = 1024;
+  static constexpr std::uint32_t kNoVertex = 0xffffffffu;
+
+  void list_triangles(int material) {
+    static const CaseTable table;
+    static const auto tets = kuhn_tetrahedra();
     tbb::parallel_for(
-        tbb::blocked_range<std::size_t>(0, chunk_count, 1),
+        tbb::blocked_range<std::size_t>(0, chunk_triangles_.size(), 1),
         [&](const tbb::blocked_range<std::size_t>& r) {
           for (std::size_t chunk = r.begin(); chunk < r.end(); ++chunk) {
-            std::vector<CellTriangle>& out = chunk_triangles[chunk];
+            std::vector<CellTriangle>& out = chunk_triangles_[chunk];
             out.clear();
-            for (std::size_t n = chunk * kChunk; n < std::min(cells.size(), (chunk + 1) * kChunk);
+            for (std::size_t n = chunk * kChunk; n < std::min(cells_.size(), (chunk + 1) * kChunk);
                  ++n) {
               int inside = 0;  // bit per cube corner
               for (int c = 0; c < 8; ++c)
-                if (corner_labels[cell_corners[n * 8 + static_cast<std::size_t>(c)]] ==
+                if (corner_labels_[cell_corners_[n * 8 + static_cast<std::size_t>(c)]] ==
                     static_cast<std::uint16_t>(material))
                   inside |= 1 << c;
               if (inside == 0 || inside == 0xff) continue;
@@ -150,41 +160,46 @@ std::vector<TriangleMesh> extract_label_surfaces(const SampledField& field) {
             }
           }
         });
-    // g = f_m - max_{k != m} f_k per corner, positive inside the label's region: computed in
-    // parallel and read in corner order below (reading the field's rows there, scattered over
-    // memory, was most of the serial pass).
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, corners.size(), 4096),
+  }
+
+  // g = f_m - max_{k != m} f_k per corner, positive inside the label's region: computed in
+  // parallel and read in corner order (reading the field's rows in the serial pass, scattered
+  // over memory, was most of it).
+  void compute_g(int material) {
+    const std::size_t stride = static_cast<std::size_t>(fc_);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, corners_.size(), 4096),
                       [&](const tbb::blocked_range<std::size_t>& r) {
                         for (std::size_t n = r.begin(); n < r.end(); ++n) {
-                          const double* row = field.values.data() + corner_rows[n] * stride;
+                          const double* row = field_.values.data() + corner_rows_[n] * stride;
                           double other = -std::numeric_limits<double>::infinity();
-                          for (int l = 0; l < fc; ++l)
+                          for (int l = 0; l < fc_; ++l)
                             if (l != material) other = std::max(other, row[l]);
-                          corner_g[n] = row[material] - other;
+                          corner_g_[n] = row[material] - other;
                         }
                       });
+  }
+
+  // The serial pass only numbers the vertices (first use in cell order) and records each new
+  // vertex's cell and edge; their positions, which the numbering does not need, are computed
+  // after it, in parallel. Mesh vertex per tetrahedron edge: the Kuhn tetrahedra are monotone
+  // paths through the cube, so every edge joins a grid vertex to one at an offset in {0,1}^3:
+  // (lower corner, offset) indexes a flat table.
+  std::vector<NewVertex> number_vertices(TriangleMesh& mesh) {
     std::size_t triangle_count = 0;
-    for (const std::vector<CellTriangle>& triangles : chunk_triangles)
+    for (const std::vector<CellTriangle>& triangles : chunk_triangles_)
       triangle_count += triangles.size();
     mesh.triangles.reserve(triangle_count);
-    // The serial pass only numbers the vertices (first use in cell order) and records each new
-    // vertex's cell and edge; their positions, which the numbering does not need, are computed
-    // after it, in parallel.
-    struct NewVertex {
-      std::uint32_t cell;
-      std::uint32_t edge;  // inside corner | outside corner << 3
-    };
     std::vector<NewVertex> new_vertices;
     new_vertices.reserve(triangle_count / 2 + 2);  // closed surfaces: V = T/2 + 2 - 2 genus (Euler)
-    for (const std::vector<CellTriangle>& triangles : chunk_triangles)
+    for (const std::vector<CellTriangle>& triangles : chunk_triangles_)
       for (const CellTriangle& triangle : triangles) {
-        const std::uint32_t* cube = &cell_corners[static_cast<std::size_t>(triangle.cell) * 8];
+        const std::uint32_t* cube = &cell_corners_[static_cast<std::size_t>(triangle.cell) * 8];
         std::array<std::uint32_t, 3> ids;
         for (std::size_t e = 0; e < 3; ++e) {
           const std::uint32_t edge = (triangle.edge_corners >> (6 * e)) & 63u;
           const std::uint32_t ca = edge & 7u, cb = edge >> 3;  // inside, outside corner
           std::uint32_t& vertex =
-              vertex_of_edge[static_cast<std::size_t>(cube[ca & cb]) * 8 + (ca ^ cb)];
+              vertex_of_edge_[static_cast<std::size_t>(cube[ca & cb]) * 8 + (ca ^ cb)];
           if (vertex == kNoVertex) {
             vertex = static_cast<std::uint32_t>(new_vertices.size());
             new_vertices.push_back({triangle.cell, edge});
@@ -193,27 +208,55 @@ std::vector<TriangleMesh> extract_label_surfaces(const SampledField& field) {
         }
         mesh.triangles.push_back(ids);
       }
+    return new_vertices;
+  }
+
+  // Each vertex where g crosses zero along its edge (linear in g).
+  void place_vertices(const std::vector<NewVertex>& new_vertices, TriangleMesh& mesh) const {
     mesh.vertices.resize(new_vertices.size());
     tbb::parallel_for(
         tbb::blocked_range<std::size_t>(0, new_vertices.size(), 4096),
         [&](const tbb::blocked_range<std::size_t>& r) {
           for (std::size_t v = r.begin(); v < r.end(); ++v) {
             const NewVertex& nv = new_vertices[v];
-            const std::uint32_t* cube = &cell_corners[static_cast<std::size_t>(nv.cell) * 8];
+            const std::uint32_t* cube = &cell_corners_[static_cast<std::size_t>(nv.cell) * 8];
             const int ca = static_cast<int>(nv.edge & 7u), cb = static_cast<int>(nv.edge >> 3);
-            const double ga = std::max(0.0, corner_g[cube[ca]]);
-            const double gb = std::min(0.0, corner_g[cube[cb]]);
+            const double ga = std::max(0.0, corner_g_[cube[ca]]);
+            const double gb = std::min(0.0, corner_g_[cube[cb]]);
             const double t_param = ga - gb > 0.0 ? ga / (ga - gb) : 0.5;
             int i, j, k;
-            grid_unkey(cells[nv.cell], i, j, k);
+            grid_unkey(cells_[nv.cell], i, j, k);
             const Vec3 pa =
-                field.grid.position(i + (ca & 1), j + ((ca >> 1) & 1), k + ((ca >> 2) & 1));
+                field_.grid.position(i + (ca & 1), j + ((ca >> 1) & 1), k + ((ca >> 2) & 1));
             const Vec3 pb =
-                field.grid.position(i + (cb & 1), j + ((cb >> 1) & 1), k + ((cb >> 2) & 1));
+                field_.grid.position(i + (cb & 1), j + ((cb >> 1) & 1), k + ((cb >> 2) & 1));
             mesh.vertices[v] = pa + t_param * (pb - pa);
           }
         });
   }
+
+  const SampledField& field_;
+  const int fc_;
+  const std::vector<std::uint64_t>& cells_;
+  // Per cell, its cube corner c (offset (c & 1, (c >> 1) & 1, (c >> 2) & 1)) in `corners_`.
+  std::vector<std::uint32_t> cell_corners_;
+  const std::vector<std::uint64_t> corners_;
+  std::vector<std::uint32_t> corner_rows_;
+  std::vector<std::uint16_t> corner_labels_;  // labels are function indices
+  std::vector<std::vector<CellTriangle>> chunk_triangles_;
+  std::vector<std::uint32_t> vertex_of_edge_;
+  std::vector<double> corner_g_;
+};
+
+}  // namespace
+
+std::vector<TriangleMesh> extract_label_surfaces(const SampledField& field) {
+  const int fc = field.function_count;
+  std::vector<TriangleMesh> meshes(static_cast<std::size_t>(std::max(0, fc - 1)));
+  if (fc < 2) return meshes;
+  BandMesher mesher(field);
+  for (int material = 1; material < fc; ++material)
+    meshes[static_cast<std::size_t>(material - 1)] = mesher.mesh(material);
   return meshes;
 }
 
