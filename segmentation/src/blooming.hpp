@@ -21,10 +21,13 @@ struct GreyClass {
 double blooming_shift_mm(double dark_grey, double bright_grey, double psf_sigma_mm,
                          double dynamic_range_db);
 
-/// Gives the pixels of each class in `classes` (not `excluded`) that lie within the blooming
-/// shift of a darker class's pixel back to that darker class (the nearest darker class first).
-/// `map` CV_8U; only pixels where `sector` is non-zero change.
-void undo_blooming(cv::Mat& map, const cv::Mat& sector, const std::vector<GreyClass>& classes,
-                   double psf_sigma_mm, double dynamic_range_db, double spacing_mm, int excluded);
+/// Gives the pixels of each class in `classes` (not `excluded`) whose centre lies within the
+/// blooming shift of the grey midpoint to a darker class, next to a pixel of that class, back to
+/// it (the nearest darker class first). The distance to the midpoint is measured on `grey`
+/// (CV_32F, the grey the classes were decided on): the grey's excess over the midpoint over its
+/// slope, to a fraction of a pixel. `map` CV_8U; only pixels where `sector` is non-zero change.
+void undo_blooming(cv::Mat& map, const cv::Mat& sector, const cv::Mat& grey,
+                   const std::vector<GreyClass>& classes, double psf_sigma_mm,
+                   double dynamic_range_db, double spacing_mm, int excluded);
 
 }  // namespace sonoshape::seg::detail

@@ -159,8 +159,9 @@ Status SegmentationConfig::validate() const {
   if (median_px < 1 || median_px % 2 == 0 || median_px > 31)
     return Status::error("segmentation config: median_px must be odd, 1..31 (got " +
                          std::to_string(median_px) + ")");
-  for (const auto& [name, value] : std::array<std::pair<const char*, double>, 9>{
+  for (const auto& [name, value] : std::array<std::pair<const char*, double>, 10>{
            {{"smoothing_mm", smoothing_mm},
+            {"boundary_echo_contrast", boundary_echo_contrast},
             {"dynamic_range_db", dynamic_range_db},
             {"confidence_window_mm", confidence_window_mm},
             {"shadow_fraction", shadow_fraction},
@@ -262,6 +263,7 @@ Result<SegmentationConfig> parse_segmentation_config(const std::string& json_tex
           throw ConfigProblem{key, "expected \"threshold\" or \"graph_cut\""};
       } else {
         set_number_field({{"smoothing_mm", &config.smoothing_mm},
+                          {"boundary_echo_contrast", &config.boundary_echo_contrast},
                           {"confidence_window_mm", &config.confidence_window_mm},
                           {"shadow_grey", &config.shadow_grey},
                           {"shadow_fraction", &config.shadow_fraction},
@@ -294,21 +296,25 @@ namespace {
 // low, well above the water's noise, instead of midway to a mean learnt from the recording
 // (which lost the weaker echoes: 6-8 of the 9 wires of fCal's validation frames 76-92). A wire is
 // far brighter than the water (more than detail::kReflectorGapGrey), so the median decides for
-// it: a Gaussian of smoothing_mm would spread a wire of a millimetre below the boundary.
+// it: a Gaussian of smoothing_mm would spread a wire of a millimetre below the boundary. What
+// these presets look for (a wire, a floor, a bone's surface) is itself a thin line brighter than
+// both its sides, no boundary echo to fill (boundary_echo_contrast 0).
 const char* const kWiresJson = R"({
   "background": {"name": "water", "grey_mean": 2, "grey_std": 3},
   "labels": [{"id": 1, "name": "wire", "grey_mean": 90, "grey_std": 40}],
-  "shadow_fraction": 1.0, "min_region_mm2": 0.5, "opening_mm": 0.2})";
+  "shadow_fraction": 1.0, "min_region_mm2": 0.5, "opening_mm": 0.2,
+  "boundary_echo_contrast": 0})";
 // The floor is a band of a few pixels: the default opening and smoothing would wipe it out, and
 // the closer classes classify the smoothed grey (30 - 2 is no reflector gap).
 const char* const kWaterTankJson = R"({
   "background": {"name": "water", "grey_mean": 2, "grey_std": 3},
   "labels": [{"id": 1, "name": "floor", "grey_mean": 30, "grey_std": 20}],
-  "shadow_fraction": 1.0, "min_region_mm2": 4, "opening_mm": 0.1, "smoothing_mm": 0.3})";
+  "shadow_fraction": 1.0, "min_region_mm2": 4, "opening_mm": 0.1, "smoothing_mm": 0.3,
+  "boundary_echo_contrast": 0})";
 const char* const kBoneJson = R"({
   "background": {"name": "soft tissue", "grey_mean": 40, "grey_std": 25},
   "labels": [{"id": 1, "name": "bone", "grey_mean": 200, "grey_std": 40}],
-  "learn_models": true, "min_region_mm2": 3, "opening_mm": 0.3})";
+  "learn_models": true, "min_region_mm2": 3, "opening_mm": 0.3, "boundary_echo_contrast": 0})";
 
 }  // namespace
 
@@ -383,6 +389,7 @@ std::string to_json(const SegmentationConfig& c) {
   for (const LabelModel& m : c.materials) doc["labels"].push_back(model_json(m, true));
   doc["median_px"] = c.median_px;
   doc["smoothing_mm"] = c.smoothing_mm;
+  doc["boundary_echo_contrast"] = c.boundary_echo_contrast;
   doc["confidence_window_mm"] = c.confidence_window_mm;
   doc["shadow_grey"] = c.shadow_grey;
   doc["shadow_fraction"] = c.shadow_fraction;

@@ -10,6 +10,7 @@
 #include <stdexcept>
 
 #include "blooming.hpp"
+#include "boundary_echo.hpp"
 #include "parallel.hpp"
 #include "raster_ops.hpp"
 #include "reflectors.hpp"
@@ -41,6 +42,14 @@ constexpr double kReflectorMedianMm = 1.5;
 int reflector_median_px(double px_mm, int median_px) {
   const int odd = 2 * static_cast<int>(std::lround(0.5 * (kReflectorMedianMm / px_mm - 1.0))) + 1;
   return std::min(median_px, std::max(3, odd));
+}
+
+// The speckle median's window (odd, px): median_px, but spanning at most kReflectorMedianMm
+// (the 5 px of the default at 0.31 mm a pixel) and at least 3 px. Speckle grains are as large
+// as the point-spread function, a length in mm: 5 pixels of 0.63 mm (the default scan's
+// 256 x 256 frames) spanned 3.1 mm and cut an organ's ears and corners off.
+int speckle_median_px(double px_mm, int median_px) {
+  return median_px > 3 ? reflector_median_px(px_mm, median_px) : median_px;
 }
 
 cv::Mat wrap(const ImageU8& image) {
@@ -565,10 +574,17 @@ Segmentation detail::segment_frame(const GreyImage& image, const ImageGeometry& 
   // Speckle reduction: the median removes speckle's bright and dark outliers without blurring
   // edges; the Gaussian then averages over several speckle cells.
   cv::Mat median, smoothed;
-  if (config.median_px > 1)
-    cv::medianBlur(grey, median, config.median_px);
+  const int median_px = speckle_median_px(px_mm, config.median_px);
+  // A boundary's specular echo, brighter than both tissues, would go to the brighter one.
+  const cv::Mat speckle =
+      config.boundary_echo_contrast > 0.0
+          ? detail::fill_boundary_echoes(grey, sector, px_mm,
+                                         config.boundary_echo_contrast * config.background.grey_std)
+          : grey;
+  if (median_px > 1)
+    cv::medianBlur(speckle, median, median_px);
   else
-    median = grey;
+    median = speckle;
   median.convertTo(smoothed, CV_32F);
   if (config.smoothing_mm > 0.0)
     smoothed = MaskedBlur(mask01, config.smoothing_mm / px_mm, sector_box)(smoothed);
@@ -643,7 +659,8 @@ Segmentation detail::segment_frame(const GreyImage& image, const ImageGeometry& 
   // (0.63 mm at 256 x 256 of the default scan), so its median has a window in mm.
   cv::Mat median_f;
   const int band_median_px = reflector_class ? reflector_median_px(px_mm, config.median_px) : 0;
-  if (band_median_px > 0 && band_median_px != config.median_px) {
+  // (From the grey as recorded: a bone's band is itself a line brighter than both its sides.)
+  if (band_median_px > 0 && (band_median_px != median_px || speckle.data != grey.data)) {
     cv::Mat band_median;
     cv::medianBlur(grey, band_median, band_median_px);
     band_median.convertTo(median_f, CV_32F);
@@ -783,8 +800,9 @@ Segmentation detail::segment_frame(const GreyImage& image, const ImageGeometry& 
   {
     std::vector<detail::GreyClass> grey_classes;
     for (const Class& c : classes) grey_classes.push_back({c.value, c.mean});
-    detail::undo_blooming(whole_map, sector_in_image, grey_classes, config.psf_sigma_mm,
-                          config.dynamic_range_db, px_mm, reflector_class ? by_mean[0].value : -1);
+    detail::undo_blooming(whole_map, sector_in_image, in_image(compensated, 0), grey_classes,
+                          config.psf_sigma_mm, config.dynamic_range_db, px_mm,
+                          reflector_class ? by_mean[0].value : -1);
   }
   if (cropped) whole_map(roi).copyTo(map);
 

@@ -69,6 +69,12 @@ struct SegmentationConfig {
   /// Speckle reduction: median filter (pixels, odd, >= 1) then Gaussian of this sigma (mm).
   int median_px = 5;
   double smoothing_mm = 0.8;
+  /// Boundary echoes (a specular line along a boundary, brighter than the tissues on both sides)
+  /// are filled from both sides before the speckle reduction, so that the boundary lies at the
+  /// line's middle instead of the brighter tissue taking the line: a line counts when it stands
+  /// out by more than this many background grey spreads (grey_std). 0: off (the presets whose
+  /// targets are such lines: wires, water-tank, bone).
+  double boundary_echo_contrast = 1.0;
   /// Window (Gaussian sigma, mm) of the local mean and standard deviation behind confidence.
   double confidence_window_mm = 1.0;
   /// A pixel is dark when its grey is at most shadow_grey; where more than shadow_fraction of
