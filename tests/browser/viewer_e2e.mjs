@@ -298,12 +298,16 @@ async function publisherGoesAfterTheEnd(scan, view, evaluate) {
 // the server went; with --publish-frames 0 it says that no B-mode frames come.
 async function scanViewEndsWithItsScan(send, sessionId, evaluate, sweep) {
   const out = path.join(workDir, 'scan-view');
-  const scan = start(sonoshape, ['scan', '--source', 'sim:default', ...sweep, '--realtime',
+  // Long enough for the page to load (three.js in software WebGL, on a loaded machine) and
+  // connect while the scan runs: its end is what is checked.
+  const longer = sweep.map((arg, i) => (sweep[i - 1] === '--sweep-s' ? '12' : arg));
+  const scan = start(sonoshape, ['scan', '--source', 'sim:default', ...longer, '--realtime',
     '--publish', 'tcp://127.0.0.1:*', '--snapshot', 'tcp://127.0.0.1:*', '--publish-frames', '0',
     '--view', '127.0.0.1:0', '-o', out]);
   const [, url] = await scan.waitFor(/live view at (http:\/\/127\.0\.0\.1:\d+\/)/, 60000);
   await send('Page.navigate', { url }, sessionId);
   await waitForPage(evaluate, (s) => s.messages > 0, 'the page got nothing from scan --view');
+  if (scan.exitCode !== null) fail('the page connected only after scan --view ended (too loaded?)');
   const code = await scan.exited;
   if (code !== 0) fail('scan --view exited ' + code + ':\n' + scan.output());
   if (!/closes with the scan: pages open now keep showing the finished scan/.test(scan.output()))
