@@ -47,7 +47,7 @@ pub::ViewServer& server() {
     }
     auto s = std::make_unique<pub::ViewServer>(std::move(*started));
     s->post({"status", R"({"scan": "fuzz", "state": "scanning"})"});
-    s->post_stream_state(true, "tcp://127.0.0.1:5556", "");
+    s->post_stream_state(sonoshape::publish::StreamState::kConnected, "tcp://127.0.0.1:5556", "");
     return s;
   }();
   return *instance;

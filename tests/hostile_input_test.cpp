@@ -12,6 +12,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <iostream>
 #include <nlohmann/json.hpp>
 #include <regex>
 #include <sstream>
@@ -340,6 +341,49 @@ TEST_F(HostileInput, ReplayAndSegmentRefuseTheSamePoses) {
                              path(std::string("scan_") + pose.name));
     expect_error(scan, {sweep, "frame 2: ProbeToTrackerTransform", pose.problem});
   }
+}
+
+// --- Option values (issue 40, silent wrong output and unclear messages). ---
+
+// Every number option of every command refuses "nan" naming the option, at once: CLI11's range
+// checks let NaN through (every comparison with it is false), so that `slice --unknown-radius
+// nan` died of SIGFPE, `simulate --latency-ms nan` wrote a sweep and exited 0 and `view
+// --duration nan` never stopped. A negative value for a positive option is refused without the
+// 309 digits of CLI11's open bound. The options are read from each command's --help, so that a
+// new one is checked too.
+TEST_F(HostileInput, EveryNumberOptionRefusesNanAndNegativesNamingIt) {
+  const Outcome top = run("--help");
+  const std::string subcommands = top.output.substr(top.output.find("Subcommands:"));
+  const std::regex command_line(R"(\n  ([a-z]+) )");
+  const std::regex number_option(R"((--[a-z0-9-]+) FLOAT([^ \n]*)(?: x ([0-9]+))?)");
+  int checked = 0;
+  for (std::sregex_iterator c(subcommands.begin(), subcommands.end(), command_line), end; c != end;
+       ++c) {
+    const std::string command = (*c)[1];
+    const std::string help = run(command + " --help").output;
+    for (std::sregex_iterator o(help.begin(), help.end(), number_option); o != end; ++o) {
+      const std::string option = (*o)[1];
+      const std::string type = (*o)[2];
+      const int count = (*o)[3].matched ? std::stoi((*o)[3]) : 1;
+      for (const std::string value : {"nan", "-1"}) {
+        if (value == "-1" && type.find("POSITIVE") == std::string::npos &&
+            type.find("NONNEGATIVE") == std::string::npos)
+          continue;
+        std::string arguments = command + " " + option;
+        for (int i = 0; i < count; ++i) arguments += " " + value;
+        SCOPED_TRACE(arguments);
+        const Outcome out = run(arguments, 10.0);
+        EXPECT_NE(out.exit_code, 0) << out.output;
+        EXPECT_NE(out.exit_code, -1) << "killed (a crash or no end): " << out.output;
+        EXPECT_NE(out.output.find(option), std::string::npos) << out.output;
+        EXPECT_NE(out.output.find("'" + value + "' is not a"), std::string::npos) << out.output;
+        EXPECT_EQ(out.output.find("1797693"), std::string::npos) << out.output;
+        ++checked;
+      }
+    }
+  }
+  std::cout << checked << " option values refused\n";
+  EXPECT_GE(checked, 60);  // scan, simulate, slice, listen, view
 }
 
 }  // namespace

@@ -215,6 +215,63 @@ TEST(IgtlHostileServer, LyingImageSizesAreDroppedAsDamagedAndNamedOnceNeverRead)
   EXPECT_EQ(said.find("4000x4000"), std::string::npos) << "a second 'damaged' said again: " << said;
 }
 
+// Issue 40, "messages that name no file or field": every kind of IMAGE sonoshape does not read
+// (16-bit, float, RGB, a volume, 0x0) is refused naming what it is and what is read instead, and
+// a scan's source counts each as "unsupported" beside the "damaged" (bad CRC) ones.
+TEST(IgtlHostileServer, EveryUnreadImageKindIsRefusedNamingWhatItIs) {
+  const auto volume = [] {
+    igtl::ImageMessage::Pointer image = igtl::ImageMessage::New();
+    image->SetDeviceName("Image");
+    image->SetDimensions(8, 8, 3);
+    image->SetScalarType(igtl::ImageMessage::TYPE_UINT8);
+    image->AllocateScalars();
+    return packed(image);
+  };
+  const auto rgb = [] {
+    igtl::ImageMessage::Pointer image = igtl::ImageMessage::New();
+    image->SetDeviceName("Image");
+    image->SetDimensions(8, 8, 1);
+    image->SetScalarType(igtl::ImageMessage::TYPE_UINT8);
+    image->SetNumComponents(3);
+    image->AllocateScalars();
+    return packed(image);
+  };
+  const std::vector<std::pair<Bytes, std::string>> kinds = {
+      {image_message(8, 8, igtl::ImageMessage::TYPE_INT16), "scalar type 4 with 1 components"},
+      {image_message(8, 8, igtl::ImageMessage::TYPE_FLOAT32), "scalar type 10 with 1 components"},
+      {rgb(), "scalar type 3 with 3 components"},
+      {volume(), "8x8x3; a 2D frame (depth 1) is expected"},
+      {image_message(0, 0), "0x0x1; a 2D frame (depth 1) is expected"},
+  };
+  for (const auto& [bytes, named] : kinds) {
+    acq::IgtlDrop why = acq::IgtlDrop::kDamaged;
+    const auto image = acq::decode_igtl_image(message_of(bytes, "IMAGE", "Image"), &why);
+    ASSERT_FALSE(image) << named;
+    EXPECT_EQ(why, acq::IgtlDrop::kUnsupported) << image.message();
+    EXPECT_NE(image.message().find("OpenIGTLink IMAGE 'Image': " + named), std::string::npos)
+        << image.message();
+  }
+  // Through a scan's source: counted by reason, the first of each reason said.
+  Bytes bad_crc = image_message(8, 8);
+  bad_crc.back() ^= 0x5a;
+  std::vector<Bytes> sent;
+  for (const auto& kind : kinds) sent.push_back(kind.first);
+  sent.push_back(bad_crc);
+  sent.push_back(image_message(8, 8));
+  FakeServer server(sent);
+  acq::IgtlFrameSource source(server.endpoint(), "");
+  ::testing::internal::CaptureStderr();
+  ASSERT_TRUE(source.start());
+  const std::vector<Frame> frames = take<acq::IgtlFrameSource, Frame>(source, 1, 10.0);
+  source.stop();
+  const std::string said = ::testing::internal::GetCapturedStderr();
+  ASSERT_EQ(frames.size(), 1u) << source.message() << said;
+  const std::map<std::string, std::size_t> expected = {{"damaged", 1}, {"unsupported", 5}};
+  EXPECT_EQ(source.losses(), expected);
+  EXPECT_NE(said.find("scalar type 4 with 1 components"), std::string::npos) << said;
+  EXPECT_NE(said.find("the header's CRC does not match the body"), std::string::npos) << said;
+}
+
 TEST(IgtlHostileServer, ADecodedImageNeverHoldsBytesFromBeyondItsMessage) {
   // 64x64 declared over 28 pixel bytes: copying 4096 would read the heap past the message.
   const auto image = acq::decode_igtl_image(message_of(lying_image(64, 64, 100), "IMAGE", "Image"));

@@ -329,9 +329,15 @@ TEST(CommandOptions, ReconstructAndScanShareTheEngineOptions) {
   // scan used to take any depth (--depth 100 crashed it).
   const auto deep = sonoshape::testing::run_command(SONOSHAPE_BINARY, kSmallSim + "--depth 100",
                                                     dir.path() / "d");
-  // (the last --depth is checked: "Value 100 not in range 1 to 11")
+  // (the last --depth is checked: "'100' is not a number from 1 to 11")
   EXPECT_NE(deep.exit_code, 0);
-  EXPECT_TRUE(contains(deep.output, "not in range 1 to 11")) << deep.output;
+  EXPECT_TRUE(contains(deep.output, "is not a number from 1 to 11")) << deep.output;
+  // and any smoothing (--smoothing 1000000000 never finished its first update).
+  const auto smooth = sonoshape::testing::run_command(
+      SONOSHAPE_BINARY, kSmallSim + "--smoothing 1000000000", dir.path() / "s");
+  EXPECT_EQ(smooth.exit_code, 105) << smooth.output;
+  EXPECT_TRUE(contains(smooth.output, "'1000000000' is not a number from 0 to 1000"))
+      << smooth.output;
 }
 
 TEST(CommandOptions, NumbersOutsideTheirRangeAndNotANumberAreRefusedNamingTheOption) {

@@ -16,6 +16,7 @@
 
 #include "commands.hpp"
 #include "mesh_spec.hpp"
+#include "option_checks.hpp"
 #include "sonoshape/core/log.hpp"
 #include "sonoshape/core/slice_io.hpp"
 #include "sonoshape/simulator/evaluation.hpp"
@@ -246,10 +247,10 @@ CommandRunner add_evaluate_command(CLI::App& app) {
                  "The slice set that was reconstructed: enables the baseline and contour scores "
                  "and gives the evaluation box");
   app.add_option("--grid", options->grid, "IoU samples per axis")
-      ->check(CLI::Range(1, 1024))
+      ->check(number_in(1, 1024))
       ->capture_default_str();
   app.add_option("--samples", options->samples, "Surface samples per mesh for distances")
-      ->check(CLI::PositiveNumber)
+      ->check(kPositiveNumber)
       ->capture_default_str();
   app.add_option("--json", options->json, "Also write the scores as JSON");
   return [options] { return run_evaluate(*options); };

@@ -15,6 +15,7 @@
 #include <thread>
 
 #include "commands.hpp"
+#include "option_checks.hpp"
 #include "sonoshape/core/log.hpp"
 #include "sonoshape/publish/curve.hpp"
 #include "sonoshape/publish/mesh_writer.hpp"
@@ -330,18 +331,17 @@ CommandRunner add_listen_command(CLI::App& app) {
   app.add_option("--server-key", options->server_key,
                  "The publisher's CURVE public key file (NAME.pub of its --curve-secret-key "
                  "NAME.key): needed to read an encrypted stream");
-  app.add_option("--duration", options->duration_s, "Stop after S seconds")
-      ->check(CLI::PositiveNumber);
+  app.add_option("--duration", options->duration_s, "Stop after S seconds")->check(kPositiveNumber);
   app.add_option("--count", options->count,
                  "Stop after N messages (snapshot and invalid ones included)")
-      ->check(CLI::PositiveNumber);
+      ->check(kPositiveNumber);
   app.add_option("--slow-ms", options->slow_ms,
                  "Sleep MS after every message (emulates a slow subscriber)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(kNonNegativeNumber);
   app.add_option("--receive-hwm", options->receive_hwm,
                  "Messages queued on this side before newer ones are dropped (a viewer that only "
                  "wants the latest state uses a small one)")
-      ->check(CLI::PositiveNumber)
+      ->check(kPositiveNumber)
       ->capture_default_str();
   app.add_flag("--until-idle", options->until_idle,
                "Stop at the first live status whose state is idle or error");

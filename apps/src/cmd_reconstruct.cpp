@@ -15,6 +15,7 @@
 
 #include "commands.hpp"
 #include "engine_options.hpp"
+#include "option_checks.hpp"
 #include "sonoshape/core/log.hpp"
 #include "sonoshape/core/mesh.hpp"
 #include "sonoshape/core/slice_io.hpp"
@@ -187,7 +188,7 @@ CommandRunner add_reconstruct_command(CLI::App& app) {
       app, {opt->engine.max_depth, opt->engine.smoothing_iterations, opt->field, opt->device});
   app.add_option("--threads", opt->engine.threads,
                  "Threads for every stage of the reconstruction (0: all cores)")
-      ->check(CLI::Range(0, 1024))
+      ->check(number_in(0, 1024))
       ->capture_default_str();
   app.add_option("--stats", opt->stats_path,
                  "Write per-stage seconds and counts as JSON (with "
@@ -203,7 +204,7 @@ CommandRunner add_reconstruct_command(CLI::App& app) {
                "Feed the slices one by one to the online engine (an update per slice)");
   app.add_option("--emit-every", opt->emit_every,
                  "With --online: also write the meshes after every K slices to OUT/step_NNNN/")
-      ->check(CLI::Range(1, 1000000));
+      ->check(number_in(1, 1000000));
   app.add_option("--order", opt->order, "With --online: feed in file order or by timestamp")
       ->check(CLI::IsMember({"file", "timestamp"}))
       ->capture_default_str();

@@ -243,6 +243,22 @@ Result<std::unique_ptr<publish::StreamView>> start_view(const std::string& addre
   if (!started) return started.status();
   return std::make_unique<publish::StreamView>(std::move(*started));
 }
+
+// The end of `--view`: the scan's last status ("finished") reaches the pages open now before
+// the server goes (a bounded wait: a page that does not read is not waited for), and the user
+// learns what a page opened later gets.
+void end_view(publish::StreamView& view, const std::string& scan_id, bool hold) {
+  const bool delivered = view.drain(scan_id, std::chrono::seconds(3));
+  if (!delivered)
+    log_warning("scan: the view's pages did not take the scan's last messages within 3 s");
+  if (hold) {
+    log_info("scan: finished; " + view.url() + " shows it until Ctrl-C");
+    return;
+  }
+  log_info("scan: finished; the view at " + view.url() +
+           " closes with the scan: pages open now keep showing the finished scan, a page "
+           "opened later finds no server (--view-hold keeps serving it until Ctrl-C)");
+}
 #endif
 
 namespace fs = std::filesystem;
@@ -643,6 +659,7 @@ int run_scan(const ScanCommandOptions& options, const Resume* resume) {
       options.publish.empty() && options.view ? "tcp://127.0.0.1:5556" : options.publish;
 #ifdef SONOSHAPE_WITH_VIEWER
   std::unique_ptr<publish::StreamView> view;
+  std::string published_scan;
 #endif
   if (!publish_endpoint.empty()) {
     // The browser view shows the current frame on its plane: with --view, previews go out at
@@ -680,6 +697,7 @@ int run_scan(const ScanCommandOptions& options, const Resume* resume) {
         return 1;
       }
       view = std::move(*started);
+      published_scan = (*sink)->scan_id();
       log_info("scan: live view at " + view->url());
     }
 #endif
@@ -713,6 +731,10 @@ int run_scan(const ScanCommandOptions& options, const Resume* resume) {
   if (live_line) std::cerr << '\r' << status_line(pipeline.counters()) << "\033[K\n";
   const scan::ScanSummary summary = pipeline.finish();
   log_info(summary_text(summary));
+#ifdef SONOSHAPE_WITH_VIEWER
+  const bool hold_view = view && options.view_hold && g_interrupts.load() == 0;
+  if (view) end_view(*view, published_scan, hold_view);
+#endif
 #ifdef SONOSHAPE_WITH_OPENIGTLINK
   if (igtl) log_info("scan: " + static_cast<const scan::IgtlSink&>(*igtl).describe());
 #endif
@@ -728,10 +750,8 @@ int run_scan(const ScanCommandOptions& options, const Resume* resume) {
   if (!options.out.empty())
     log_info("scan: meshes, slices.json and scan.json in " + options.out.string());
 #ifdef SONOSHAPE_WITH_VIEWER
-  if (view && options.view_hold && g_interrupts.load() == 0) {
-    log_info("scan: finished; " + view->url() + " shows it until Ctrl-C");
+  if (hold_view)
     while (g_interrupts.load() == 0) std::this_thread::sleep_for(std::chrono::milliseconds(100));
-  }
 #endif
   return 0;
 }
@@ -790,12 +810,12 @@ void add_scan_options(CLI::App& app, ScanCommandOptions& o) {
   app.add_option("--labels-unknown", options->labels_unknown,
                  "With --labels: the label value that marks unknown pixels (shadow, not "
                  "judged); 255 is sonoshape's own")
-      ->check(CLI::Range(1, 255))
+      ->check(number_in(1, 255))
       ->capture_default_str();
   app.add_option("--labels-wait-ms", options->labels_wait_ms,
                  "With --labels igtl:DEVICE: how long a frame waits for its label map (a "
                  "network's inference lags its input)")
-      ->check(kFiniteNumber & CLI::Range(0.0, 60000.0))
+      ->check(kFiniteNumber & number_in(0.0, 60000.0))
       ->capture_default_str();
   app.add_option("--organ-seed", options->seeds,
                  "LABEL:X,Y,Z (mm, reference frame; repeatable): a point inside that organ; with "
@@ -807,10 +827,10 @@ void add_scan_options(CLI::App& app, ScanCommandOptions& o) {
                  "keyframes (scan.journal), written as they are accepted: see --resume");
   app.add_option("--save-every", options->save_every,
                  "Also write the meshes to --out every N slices (0: at the end only)")
-      ->check(CLI::NonNegativeNumber)
+      ->check(kNonNegativeNumber)
       ->capture_default_str();
   app.add_option("--duration", options->duration_s, "Stop after this many seconds (0: no limit)")
-      ->check(CLI::NonNegativeNumber)
+      ->check(kNonNegativeNumber)
       ->capture_default_str();
   auto* realtime = app.add_flag("--realtime", options->real_time,
                                 "Play recorded and simulated sources at their frame rate; frames "
@@ -821,11 +841,11 @@ void add_scan_options(CLI::App& app, ScanCommandOptions& o) {
   realtime->excludes(fast);
   app.add_option("--playback-speed", options->speed,
                  "Real-time factor of --realtime playback (2: twice as fast as recorded)")
-      ->check(CLI::PositiveNumber)
+      ->check(kPositiveNumber)
       ->capture_default_str();
   app.add_option("--max-slices", options->max_slices,
                  "Stop once this many keyframes are chosen (0: no limit)")
-      ->check(CLI::NonNegativeNumber)
+      ->check(kNonNegativeNumber)
       ->capture_default_str();
   app.add_option("--publish", options->publish,
                  "ZeroMQ PUB endpoint of the live mesh stream (docs/formats/mesh-stream.md), "
@@ -851,7 +871,7 @@ void add_scan_options(CLI::App& app, ScanCommandOptions& o) {
                  "Publish at most this many B-mode frames a second on the mesh stream, as grey "
                  "pictures of at most 256 px a side on their planes (`frame` messages; default 5 "
                  "with --view, else 0: none)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(kNonNegativeNumber);
   app.add_option("--igtl-serve", options->igtl_serve,
                  "Serve the scan over OpenIGTLink on [HOST:]PORT (host 127.0.0.1 unless given; "
                  "port 0 picks a free one): surfaces as POLYDATA named after the labels, the frame "
@@ -864,37 +884,37 @@ void add_scan_options(CLI::App& app, ScanCommandOptions& o) {
       ->check(kFiniteNumber);
   app.add_option("--max-pose-gap-ms", options->max_pose_gap_ms,
                  "Tracker samples further apart than this do not interpolate a pose (ms)")
-      ->check(CLI::PositiveNumber)
+      ->check(kPositiveNumber)
       ->capture_default_str();
   app.add_option("--max-extrapolation-ms", options->max_extrapolation_ms,
                  "How far beyond the tracker samples a pose may be extrapolated (ms)")
-      ->check(CLI::NonNegativeNumber)
+      ->check(kNonNegativeNumber)
       ->capture_default_str();
   app.add_option("--pose-wait-ms", options->pose_wait_ms,
                  "How long a frame waits for the tracker sample after it (ms)")
-      ->check(CLI::NonNegativeNumber)
+      ->check(kNonNegativeNumber)
       ->capture_default_str();
   app.add_option("--keyframe-angle-deg", options->keyframe_angle_deg,
                  "A frame is a new slice when its plane turns by at least this much...")
-      ->check(CLI::NonNegativeNumber)
+      ->check(kNonNegativeNumber)
       ->capture_default_str();
   app.add_option("--keyframe-distance-mm", options->keyframe_distance_mm,
                  "...or an image corner moves at least this far out of every slice's plane")
-      ->check(CLI::NonNegativeNumber)
+      ->check(kNonNegativeNumber)
       ->capture_default_str();
   app.add_option("--slice-budget", options->slice_budget,
                  "Long examinations: past this many slices a frame must differ by twice both "
                  "keyframe thresholds, so that memory stops growing once the anatomy is covered "
                  "(0: no budget)")
-      ->check(CLI::NonNegativeNumber)
+      ->check(kNonNegativeNumber)
       ->capture_default_str();
   app.add_option("--segmentation-queue", options->segmentation_queue,
                  "Keyframes waiting for segmentation")
-      ->check(CLI::PositiveNumber)
+      ->check(kPositiveNumber)
       ->capture_default_str();
   app.add_option("--reconstruction-queue", options->reconstruction_queue,
                  "Slices waiting for the reconstruction")
-      ->check(CLI::PositiveNumber)
+      ->check(kPositiveNumber)
       ->capture_default_str();
   add_engine_options(app, {options->depth, options->smoothing, options->field, options->device});
   app.add_option(
@@ -903,15 +923,17 @@ void add_scan_options(CLI::App& app, ScanCommandOptions& o) {
          "sim: the phantom's box + 10%; replay: the box of the recording's swept sectors + 10% "
          "(known before the first frame, so that updates stay incremental); igtl:, "
          "v4l2:: grown from the slices (each growth rebuilds every cell)")
-      ->expected(6);
+      ->expected(6)
+      ->check(kFiniteNumber);
 
   CLI::Option_group* sim = app.add_option_group("Simulated source (sim:)");
   add_sim_scenario_options(*sim, options->sim, SimOptionsFor::scan);
   sim->add_option("--sweep-s", options->sweep_s, "Length of the simulated sweep (s)")
-      ->check(CLI::PositiveNumber)
+      ->check(kPositiveNumber)
       ->capture_default_str();
   sim->add_option("--sim-fail-after-s", options->fail_after_s,
-                  "Fault injection: the simulated probe vanishes after this many seconds");
+                  "Fault injection: the simulated probe vanishes after this many seconds")
+      ->check(kNonNegativeNumber);
   CLI::Option_group* igtl = app.add_option_group("OpenIGTLink source (igtl:)");
   igtl->add_option("--igtl-image", options->igtl_image,
                    "IMAGE device name of the frames (default: any IMAGE)");

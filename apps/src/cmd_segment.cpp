@@ -13,6 +13,7 @@
 #include <sstream>
 
 #include "commands.hpp"
+#include "option_checks.hpp"
 #include "preset_option.hpp"
 #include "seed_option.hpp"
 #include "sonoshape/acquisition/label_sequence.hpp"
@@ -382,7 +383,7 @@ CommandRunner add_segment_command(CLI::App& app) {
                  "Default: the header's DefaultFrameTransformName, else Probe (or Tool) to the "
                  "first of Reference, Tracker, Template, StepperHome that a chain reaches");
   app.add_option("--every", options->every, "Keep every K-th frame (from the first)")
-      ->check(CLI::PositiveNumber)
+      ->check(kPositiveNumber)
       ->capture_default_str();
   app.add_flag("--strict", options->strict,
                "Refuse instead of repairing: the first frame whose polygons could only be made "
@@ -409,7 +410,7 @@ CommandRunner add_segment_command(CLI::App& app) {
   app.add_option("--labels-unknown", options->labels_unknown,
                  "With --labels: the label value that marks unknown pixels (shadow, not "
                  "judged); 255 is sonoshape's own")
-      ->check(CLI::Range(1, 255))
+      ->check(number_in(1, 255))
       ->capture_default_str();
   app.add_option("--method", options->method,
                  "Labelling: threshold (nearest grey model after smoothing) or graph-cut (that "
@@ -423,7 +424,7 @@ CommandRunner add_segment_command(CLI::App& app) {
       ->capture_default_str();
   app.add_option("--prior-depth", options->prior_depth,
                  "Octree depth of the prior's reconstruction (coarser is faster)")
-      ->check(CLI::Range(3, 10))
+      ->check(number_in(3, 10))
       ->capture_default_str();
   // --seed is the old spelling (elsewhere --seed is a random seed); kept for scripts.
   app.add_option("--organ-seed,--seed", options->seeds,
@@ -436,7 +437,7 @@ CommandRunner add_segment_command(CLI::App& app) {
                  "in white with --truth-labels): DIR/frame_NNNN.png");
   app.add_option("--overlay-every", options->overlay_every,
                  "With --overlays: a picture of every K-th segmented frame")
-      ->check(CLI::PositiveNumber)
+      ->check(kPositiveNumber)
       ->capture_default_str();
   app.add_option("--report", options->report,
                  "With --truth-labels: write the scores per frame and in total as JSON");

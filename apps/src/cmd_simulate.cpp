@@ -8,6 +8,7 @@
 #include <sstream>
 
 #include "commands.hpp"
+#include "option_checks.hpp"
 #include "sim_options.hpp"
 #include "sonoshape/acquisition/plus_config.hpp"
 #include "sonoshape/acquisition/sequence_file.hpp"
@@ -129,7 +130,7 @@ CommandRunner add_simulate_command(CLI::App& app) {
   auto options = std::make_shared<SimulateOptions>();
   add_sim_scenario_options(app, options->scenario, SimOptionsFor::simulate);
   app.add_option("--frames", options->frames, "Number of frames")
-      ->check(CLI::PositiveNumber)
+      ->check(kPositiveNumber)
       ->capture_default_str();
   app.add_option("-o,--output", options->output,
                  "Sequence file to write (.igs.mha); the calibration goes next to it as "

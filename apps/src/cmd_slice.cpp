@@ -221,7 +221,7 @@ CommandRunner add_slice_command(CLI::App& app) {
       ->check(CLI::IsMember({"parallel", "orthogonal", "random", "sweep"}))
       ->capture_default_str();
   app.add_option("--count", options->count, "Number of planes")
-      ->check(CLI::PositiveNumber)
+      ->check(kPositiveNumber)
       ->capture_default_str();
   app.add_option("--seed", options->seed, "Seed of the plane generator")->capture_default_str();
   app.add_option("-o,--output", options->output, "Slice set to write (.slices.json or .csl)")
@@ -229,7 +229,7 @@ CommandRunner add_slice_command(CLI::App& app) {
   app.add_option("--size-mm", options->size_mm,
                  "Scale meshes so their bounding-box diagonal is this many mm, centred at 0")
       ->check(kFiniteNumber)
-      ->check(CLI::PositiveNumber);
+      ->check(kPositiveNumber);
   app.add_option("--layout", options->layout,
                  "asis: keep relative positions (nested organs); row: side by side along x "
                  "(default with several meshes and --size-mm)")
@@ -242,11 +242,11 @@ CommandRunner add_slice_command(CLI::App& app) {
   app.add_option("--unknown", options->unknown_fraction,
                  "Share of slices that get a random unknown blob over a contour (0-1)")
       ->check(kFiniteNumber)
-      ->check(CLI::Range(0.0, 1.0))
+      ->check(number_in(0.0, 1.0))
       ->capture_default_str();
   app.add_option("--unknown-radius", options->unknown_radius,
                  "Mean radius of the unknown blobs, as a fraction of the box diagonal")
-      ->check(CLI::Range(0.001, 0.5))
+      ->check(number_in(0.001, 0.5))
       ->capture_default_str();
   app.add_option("--fov", options->fov,
                  "Field of view of every slice: sector (60 deg fan, 80 mm deep) or rect "

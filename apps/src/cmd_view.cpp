@@ -8,6 +8,7 @@
 #include <thread>
 
 #include "commands.hpp"
+#include "option_checks.hpp"
 #include "sonoshape/core/log.hpp"
 #include "sonoshape/publish/curve.hpp"
 #include "view_options.hpp"
@@ -110,7 +111,7 @@ CommandRunner add_view_command(CLI::App& app) {
                  "The page's folder (viewer/ of the sources, with three.js installed by npm ci)")
       ->capture_default_str();
   app.add_option("--duration", options->duration_s, "Stop after S seconds (default: at Ctrl-C)")
-      ->check(CLI::PositiveNumber);
+      ->check(kPositiveNumber);
   return [options] { return run_view(*options); };
 }
 

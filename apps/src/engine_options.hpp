@@ -5,6 +5,7 @@
 #include <string>
 
 #include "commands.hpp"
+#include "option_checks.hpp"
 
 namespace sonoshape::apps {
 
@@ -21,8 +22,8 @@ inline void add_engine_options(CLI::App& app, const EngineOptionTargets& to) {
   app.add_option("--depth", to.depth,
                  "Octree depth, 1 to 11 (finest cells = largest box side / 2^depth); default: "
                  "finest cells about 1/128 of the box diagonal")
-      ->check(CLI::Range(1, 11));
-  app.add_option("--smoothing,--smooth", to.smoothing, kSmoothingHelp)->check(CLI::Range(0, 1000));
+      ->check(number_in(1, 11));
+  app.add_option("--smoothing,--smooth", to.smoothing, kSmoothingHelp)->check(number_in(0, 1000));
   app.add_option("--field", to.field, kFieldHelp)
       ->check(CLI::IsMember({"mean-value", "thin-plate"}))
       ->capture_default_str();

@@ -3,6 +3,7 @@
 // source of `sonoshape scan` (same names, same meaning).
 #include <CLI/CLI.hpp>
 
+#include "option_checks.hpp"
 #include "sonoshape/scan/sim_scenario.hpp"
 
 namespace sonoshape::apps {
@@ -41,7 +42,7 @@ inline void add_sim_scenario_options(CLI::App& app, scan::SimScenarioOptions& op
                    "(organs may nest). Default: spot and cheburashka from data/models with a rib");
   app.add_option("--phantom-size-mm", options.size_mm,
                  "Scale the phantom (one common scale) so its box diagonal is this many mm")
-      ->check(CLI::PositiveNumber)
+      ->check(kPositiveNumber)
       ->capture_default_str();
   app.add_option("--tissue", options.tissues,
                  "Tissue of a label, LABEL:PRESET (hypoechoic, hyperechoic, isoechoic, cyst, "
@@ -59,48 +60,49 @@ inline void add_sim_scenario_options(CLI::App& app, scan::SimScenarioOptions& op
       ->check(CLI::IsMember({"constant", "smooth", "irregular"}))
       ->capture_default_str();
   app.add_option("--frame-rate", options.frame_rate_hz, "Frames per second")
-      ->check(CLI::PositiveNumber)
+      ->check(kPositiveNumber)
       ->capture_default_str();
   app.add_option("--width-px", options.width_px, "Image width")
-      ->check(CLI::Range(16, 4096))
+      ->check(number_in(16, 4096))
       ->capture_default_str();
   app.add_option("--height-px", options.height_px, "Image height")
-      ->check(CLI::Range(16, 4096))
+      ->check(number_in(16, 4096))
       ->capture_default_str();
   app.add_option("--seed", options.seed, "Seed of the hand, tracker and speckle")
       ->check(not_an_organ_seed)
       ->capture_default_str();
   app.add_option("--sweep-length-mm", options.sweep_length_mm,
                  "Travel of a sweep (default: the phantom's length + 20 mm)")
-      ->check(CLI::PositiveNumber);
+      ->check(kPositiveNumber);
   app.add_option("--sweep-angle-deg", options.sweep_angle_deg,
                  "Total angle of fan / rock / rotate (default 60 / 30 / 180)")
-      ->check(CLI::PositiveNumber);
+      ->check(kPositiveNumber);
   app.add_option("--passes", options.passes,
                  "Go over the anatomy this many times, back and forth, within the sweep's "
                  "duration (a long examination revisiting the same planes)")
-      ->check(CLI::PositiveNumber)
+      ->check(kPositiveNumber)
       ->capture_default_str();
   app.add_option("--tracker-rate", options.tracker_rate_hz, "Tracker samples per second")
-      ->check(CLI::PositiveNumber)
+      ->check(kPositiveNumber)
       ->capture_default_str();
   app.add_option("--latency-ms", options.latency_ms,
                  "Simulated tracker latency relative to the frames (ms)")
+      ->check(kFiniteNumber)
       ->capture_default_str();
   app.add_option("--position-noise-mm", options.position_noise_mm,
                  "Tracker position noise, sigma per axis")
-      ->check(CLI::NonNegativeNumber)
+      ->check(kNonNegativeNumber)
       ->capture_default_str();
   app.add_option("--angle-noise-deg", options.angle_noise_deg,
                  "Tracker angle noise, sigma per axis")
-      ->check(CLI::NonNegativeNumber)
+      ->check(kNonNegativeNumber)
       ->capture_default_str();
   app.add_option("--drop", options.drop_probability, "Share of tracker samples lost")
-      ->check(CLI::Range(0.0, 0.9))
+      ->check(number_in(0.0, 0.9))
       ->capture_default_str();
   app.add_option("--invalid", options.invalid_probability,
                  "Chance per tracker sample that an INVALID burst starts")
-      ->check(CLI::Range(0.0, 1.0))
+      ->check(number_in(0.0, 1.0))
       ->capture_default_str();
 }
 

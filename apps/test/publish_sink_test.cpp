@@ -129,5 +129,38 @@ TEST(PublishSinkStatus, UpdateTimeAndLatencyFromTheFirstUpdateOn) {
   EXPECT_EQ(second.update_ms, 40.0);
 }
 
+// Issue 40, "a finished scan reads as finished": after the final (idle) status, the sink's last
+// message is a status with "finished": true and the summary's final counts, so that a view tells
+// a finished scan from a lost one; every status says how many frames a second go out (0: none).
+TEST(PublishSinkStatus, TheLastMessageSaysTheScanFinishedWithTheFinalCounts) {
+  const auto sink = bind_sink(FramePreviewOptions{});
+  publish::MeshSubscriber subscriber = subscribe(*sink);
+  ScanStatus idle;
+  idle.state = ScanState::kIdle;
+  idle.message = "scan finished (source ended): 4 slices";
+  idle.counters.frames_received = 10;
+  idle.counters.slices = 4;
+  ASSERT_TRUE(sink->on_status(idle));
+  ScanSummary summary;
+  summary.counters.frames_received = 12;
+  summary.counters.slices = 5;
+  ASSERT_TRUE(sink->on_finish(MeshSet{}, SliceSet{}, summary));
+
+  auto first = subscriber.receive(2s);
+  ASSERT_TRUE(first && *first);
+  const auto& said = std::get<publish::StatusReport>((*first)->body);
+  EXPECT_FALSE(said.finished);
+  EXPECT_EQ(said.frame_rate_hz, 0.0);  // no previews asked for
+  auto last = subscriber.receive(2s);
+  ASSERT_TRUE(last && *last);
+  const auto& finished = std::get<publish::StatusReport>((*last)->body);
+  EXPECT_TRUE(finished.finished);
+  EXPECT_EQ(finished.state, ScanState::kIdle);
+  EXPECT_EQ(finished.message, idle.message);
+  EXPECT_EQ(finished.frames_received, 12u);
+  EXPECT_EQ(finished.slices, 5u);
+  EXPECT_EQ((*last)->seq, (*first)->seq + 1);
+}
+
 }  // namespace
 }  // namespace sonoshape::scan

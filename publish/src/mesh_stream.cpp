@@ -218,6 +218,11 @@ Result<Frames> encode_status(const StreamMessage& message, const StatusReport& s
       return Status::error("cannot encode status: a stage time is negative or not finite");
   if (status.state == ScanState::kError && status.message.empty())
     return Status::error("cannot encode status: state error needs a message saying what failed");
+  if (status.finished && status.state == ScanState::kScanning)
+    return Status::error("cannot encode status: a finished scan is idle or error, not scanning");
+  if (status.frame_rate_hz &&
+      !(std::isfinite(*status.frame_rate_hz) && *status.frame_rate_hz >= 0.0))
+    return Status::error("cannot encode status: frame_rate_hz is negative or not finite");
   ordered_json header;
   header["v"] = kMeshStreamVersion;
   header["seq"] = message.seq;
@@ -234,6 +239,9 @@ Result<Frames> encode_status(const StreamMessage& message, const StatusReport& s
   if (status.latency_ms) header["latency_ms"] = *status.latency_ms;
   header["state"] = std::string(to_string(status.state));
   if (!status.message.empty()) header["message"] = status.message;
+  // Both optional, so that the headers of older publishers still read (mesh-stream.md).
+  if (status.frame_rate_hz) header["frame_rate_hz"] = *status.frame_rate_hz;
+  if (status.finished) header["finished"] = true;
   return Frames{std::string(kStatusTopic), header.dump()};
 }
 
@@ -525,6 +533,16 @@ StatusReport decode_status(const json& header) {
   if (header.contains("message")) status.message = read_string(header, "message");
   if (status.state == ScanState::kError && status.message.empty())
     invalid("state \"error\" without a \"message\" saying what failed");
+  if (header.contains("frame_rate_hz")) {
+    status.frame_rate_hz = read_finite(header, "frame_rate_hz");
+    if (*status.frame_rate_hz < 0.0) invalid("\"frame_rate_hz\" is negative");
+  }
+  if (header.contains("finished")) {
+    if (!header["finished"].is_boolean()) invalid("\"finished\" is not true or false");
+    status.finished = header["finished"].get<bool>();
+    if (status.finished && status.state == ScanState::kScanning)
+      invalid("\"finished\" with state \"scanning\" (a finished scan is idle or error)");
+  }
   return status;
 }
 

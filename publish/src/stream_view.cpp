@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <mutex>
 #include <thread>
 
 #include "sonoshape/core/log.hpp"
@@ -40,12 +41,52 @@ struct StreamView::Impl {
   std::uint64_t highest_seq = 0;
   std::uint64_t refreshed_up_to = 0;
   std::chrono::steady_clock::time_point last_gap_refresh{};
+  // The scans whose last status ("finished") the relay has passed on, and what it said: a
+  // publisher gone after it ended normally, not lost.
+  mutable std::mutex finished_mutex;
+  std::string finished_scan;
+  std::string finished_summary;
   std::thread thread;  // declared last: started once the members above exist
 
   void sleep_unless_stopped(std::chrono::milliseconds duration) {
     const auto until = std::chrono::steady_clock::now() + duration;
     while (!stop && std::chrono::steady_clock::now() < until)
       std::this_thread::sleep_for(std::min(duration, std::chrono::milliseconds(50)));
+  }
+
+  // A scan's last status: said once per scan.
+  void note_finished(const std::string& scan, const StatusReport& status) {
+    const std::string summary = std::to_string(status.slices) + " slices, " +
+                                std::to_string(status.frames_received) + " frames in (" +
+                                std::to_string(status.frames_dropped) + " dropped)";
+    {
+      const std::lock_guard lock(finished_mutex);
+      if (finished_scan == scan) return;
+      finished_scan = scan;
+      finished_summary = summary;
+    }
+    log_info("view: scan " + scan + " finished: " + summary +
+             "; the page keeps showing its result");
+  }
+
+  // No publisher answers: after the end of the scan followed that is its normal end (the scan
+  // exited), said as such; otherwise a problem, and the view keeps trying.
+  void say_unreachable(const std::string& endpoint, const std::string& problem) {
+    std::string summary;
+    {
+      const std::lock_guard lock(finished_mutex);
+      if (!finished_scan.empty() && finished_scan == followed_scan) summary = finished_summary;
+    }
+    const std::string retry = " (trying again every " + std::to_string(options.retry_ms) + " ms)";
+    if (summary.empty()) {
+      log_warning("view: " + problem + retry);
+      server.post_stream_state(StreamState::kWaiting, endpoint, problem);
+      return;
+    }
+    const std::string ended = "scan " + followed_scan + " finished (" + summary +
+                              ") and its publisher has closed; the page keeps its result";
+    log_info("view: " + ended + "; a new scan at " + endpoint + " will be shown" + retry);
+    server.post_stream_state(StreamState::kFinished, endpoint, ended);
   }
 
   void run() {
@@ -61,9 +102,7 @@ struct StreamView::Impl {
       if (!subscriber) {
         if (subscriber.message() != last_problem) {
           last_problem = subscriber.message();
-          log_warning("view: " + last_problem + " (trying again every " +
-                      std::to_string(options.retry_ms) + " ms)");
-          server.post_stream_state(false, stream.endpoint, last_problem);
+          say_unreachable(stream.endpoint, last_problem);
         }
         sleep_unless_stopped(std::chrono::milliseconds(options.retry_ms));
         continue;
@@ -71,7 +110,7 @@ struct StreamView::Impl {
       // Said once per connection (a refresh after a quiet spell joins again without a word).
       if (!following || !last_problem.empty()) {
         log_info("view: following the mesh stream at " + stream.endpoint);
-        server.post_stream_state(true, stream.endpoint, "");
+        server.post_stream_state(StreamState::kConnected, stream.endpoint, "");
       }
       following = true;
       last_problem.clear();
@@ -95,6 +134,9 @@ struct StreamView::Impl {
       }
       if (!*received) {
         quiet += kPollInterval;
+        // The scan's publisher closed (its process ended): run() says whether that was the end
+        // of a finished scan or a lost one, and waits for the next.
+        if (subscriber.publisher_gone()) return;
         if (can_rejoin && quiet >= kQuietRefresh && highest_seq > refreshed_up_to) {
           refreshed_up_to = highest_seq;
           return;  // run() joins again: the snapshot holds the newest meshes and status
@@ -127,6 +169,8 @@ struct StreamView::Impl {
       }
       ++relayed;  // first: a page that has the message sees it counted
       server.post(subscriber.last_frames());
+      if (const auto* status = std::get_if<StatusReport>(&message.body); status && status->finished)
+        note_finished(message.scan, *status);
       const auto now = std::chrono::steady_clock::now();
       if (gap && can_rejoin && now - last_gap_refresh >= kGapRefreshInterval) {
         last_gap_refresh = now;
@@ -153,10 +197,25 @@ Result<StreamView> StreamView::start(const StreamViewOptions& options) {
   Result<ViewServer> server = ViewServer::start(options.server);
   if (!server) return server.status();
   auto impl = std::make_unique<Impl>(options, std::move(*server));
-  impl->server.post_stream_state(false, options.stream.endpoint, "connecting");
+  impl->server.post_stream_state(StreamState::kWaiting, options.stream.endpoint, "connecting");
   Impl* raw = impl.get();
   impl->thread = std::thread([raw] { raw->run(); });
   return StreamView(std::move(impl));
+}
+
+bool StreamView::drain(const std::string& scan, std::chrono::milliseconds timeout) {
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  while (true) {
+    {
+      const std::lock_guard lock(impl_->finished_mutex);
+      if (impl_->finished_scan == scan) break;
+    }
+    if (std::chrono::steady_clock::now() >= deadline) return false;
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
+      deadline - std::chrono::steady_clock::now());
+  return impl_->server.flush(std::max(left, std::chrono::milliseconds(0)));
 }
 
 std::string StreamView::url() const { return impl_->server.url(); }

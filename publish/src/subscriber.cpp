@@ -70,6 +70,10 @@ constexpr int kMaxResyncs = 3;
 struct MeshSubscriber::Impl {
   zmq::context_t context{1};  // declared first: destroyed after every socket
   zmq::socket_t sub;
+  // Events of the SUB connection after its handshake (with a snapshot endpoint): a publisher
+  // that closes (its scan exited) shows as a disconnection, one that comes back as a handshake.
+  zmq::socket_t monitor;
+  bool publisher_gone = false;
   std::deque<Frames> pending;  // the snapshot, delivered before live messages
   Frames last_frames;
   std::optional<std::uint64_t> snapshot_seq;
@@ -218,8 +222,11 @@ Result<MeshSubscriber> MeshSubscriber::connect(const SubscriberOptions& options)
     if (snapshot) {
       if (monitor) {
         Status ready = impl->wait_for_handshake(monitor, options.endpoint, deadline);
-        zmq_socket_monitor(impl->sub.handle(), nullptr, 0);
-        if (!ready) return ready;
+        if (!ready) {
+          zmq_socket_monitor(impl->sub.handle(), nullptr, 0);
+          return ready;
+        }
+        impl->monitor = std::move(monitor);
       }
       if (Status fetched = impl->fetch_snapshot(options, deadline); !fetched) return fetched;
       impl->awaiting_first_live = true;
@@ -283,6 +290,24 @@ Result<std::optional<StreamMessage>> MeshSubscriber::receive(std::chrono::millis
   } catch (const zmq::error_t& e) {
     return Status::error(std::string("mesh stream: cannot receive: ") + e.what());
   }
+}
+
+bool MeshSubscriber::publisher_gone() {
+  Impl& impl = *impl_;
+  if (!impl.monitor) return false;
+  Frames event;
+  try {
+    while (detail::receive_frames(impl.monitor, event)) {
+      std::uint16_t id = 0;
+      if (!event.empty() && event[0].size() >= sizeof id)
+        std::memcpy(&id, event[0].data(), sizeof id);
+      if (id == ZMQ_EVENT_DISCONNECTED) impl.publisher_gone = true;
+      if (id == ZMQ_EVENT_HANDSHAKE_SUCCEEDED) impl.publisher_gone = false;
+    }
+  } catch (const zmq::error_t&) {
+    return impl.publisher_gone;
+  }
+  return impl.publisher_gone;
 }
 
 const Frames& MeshSubscriber::last_frames() const { return impl_->last_frames; }

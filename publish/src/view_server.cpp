@@ -17,6 +17,7 @@
 #include <cctype>
 #include <deque>
 #include <fstream>
+#include <future>
 #include <list>
 #include <mutex>
 #include <nlohmann/json.hpp>
@@ -114,6 +115,7 @@ class Conflated {
   }
 
   bool empty() const { return items_.empty(); }
+  std::size_t size() const { return items_.size(); }
   Item pop_front() {
     forget(items_.begin());  // while the item still has its key and topic
     Item item = std::move(items_.front());
@@ -307,6 +309,7 @@ struct ServerCore {
   void drain();
   void count_refused_labels(std::uint64_t count);
   void add_session(const std::shared_ptr<WsSession>& session);
+  std::size_t unsent();
 };
 
 }  // namespace view_detail
@@ -342,6 +345,9 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
     server_.replaced += pending_.add(std::move(item));
     if (!writing_) write_next();
   }
+
+  /// Messages queued or being written to this page.
+  std::size_t unsent() const { return pending_.size() + (writing_ ? 1 : 0); }
 
  private:
   // The page sends nothing the server needs; reading keeps pings, pongs and the close
@@ -567,6 +573,17 @@ void ServerCore::drain() {
   }
 }
 
+std::size_t ServerCore::unsent() {
+  std::size_t count = 0;
+  {
+    const std::lock_guard lock(mutex);
+    count += inbox.size() + (drain_scheduled ? 1 : 0);
+  }
+  for (const std::weak_ptr<WsSession>& weak : sessions)
+    if (const auto session = weak.lock()) count += session->unsent();
+  return count;
+}
+
 void ServerCore::count_refused_labels(std::uint64_t count) {
   if (refused_labels.fetch_add(count) == 0)
     log_warning("view: the stream carries more than " + std::to_string(kMaxStreamLabels) +
@@ -653,13 +670,29 @@ void ViewServer::post(const Frames& frames) {
   if (schedule) asio::post(impl_->ioc, [raw = impl_.get()] { raw->drain(); });
 }
 
-void ViewServer::post_stream_state(bool connected, const std::string& endpoint,
+void ViewServer::post_stream_state(StreamState state, const std::string& endpoint,
                                    const std::string& message) {
   nlohmann::json header;
-  header["stream"] = connected ? "connected" : "waiting";
+  header["stream"] = state == StreamState::kConnected  ? "connected"
+                     : state == StreamState::kFinished ? "finished"
+                                                       : "waiting";
   header["endpoint"] = endpoint;
   if (!message.empty()) header["message"] = message;
   post(Frames{std::string(kViewerTopic), header.dump()});
+}
+
+bool ViewServer::flush(std::chrono::milliseconds timeout) {
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  while (true) {
+    // Counted on the server thread, which alone touches the sessions.
+    auto unsent = std::make_shared<std::promise<std::size_t>>();
+    std::future<std::size_t> count = unsent->get_future();
+    asio::post(impl_->ioc, [raw = impl_.get(), unsent] { unsent->set_value(raw->unsent()); });
+    if (count.wait_until(deadline) != std::future_status::ready) return false;
+    if (count.get() == 0) return true;
+    if (std::chrono::steady_clock::now() >= deadline) return false;
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
 }
 
 std::string ViewServer::url() const { return impl_->url; }

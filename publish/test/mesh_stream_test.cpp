@@ -320,6 +320,44 @@ TEST(MeshStreamRoundTrip, StatusKeepsEveryField) {
   }
 }
 
+// Issue 40, "a finished scan reads as finished": the scan's last status says so, with its final
+// counts, and how many frames a second the scan publishes (0: a view says why it shows none).
+// Both fields are optional: an older publisher's status reads as before.
+TEST(MeshStreamRoundTrip, TheLastStatusSaysTheScanFinishedAndTheFrameRate) {
+  StatusReport status = sample_status();
+  const Frames plain = encoded(StreamMessage{3, kScan, status});
+  EXPECT_FALSE(json::parse(plain[1]).contains("finished"));
+  EXPECT_FALSE(json::parse(plain[1]).contains("frame_rate_hz"));
+  Result<StreamMessage> older = decode_message(plain);
+  ASSERT_TRUE(older.is_ok()) << older.message();
+  EXPECT_FALSE(std::get<StatusReport>(older->body).finished);
+  EXPECT_FALSE(std::get<StatusReport>(older->body).frame_rate_hz.has_value());
+
+  status.state = ScanState::kIdle;
+  status.message = "scan finished (source ended)";
+  status.finished = true;
+  status.frame_rate_hz = 0.0;
+  const Frames last = encoded(StreamMessage{9, kScan, status});
+  EXPECT_EQ(json::parse(last[1])["finished"], true);
+  EXPECT_EQ(json::parse(last[1])["frame_rate_hz"], 0.0);
+  Result<StreamMessage> decoded = decode_message(last);
+  ASSERT_TRUE(decoded.is_ok()) << decoded.message();
+  const auto& got = std::get<StatusReport>(decoded->body);
+  EXPECT_TRUE(got.finished);
+  EXPECT_EQ(got.frame_rate_hz, 0.0);
+  EXPECT_EQ(got.slices, 40u);
+  EXPECT_EQ(got.frames_received, 120u);
+
+  expect_rejected(with_header(last, [](json& h) { h["state"] = "scanning"; }),
+                  {"\"finished\" with state \"scanning\""});
+  expect_rejected(with_header(last, [](json& h) { h["finished"] = 1; }),
+                  {"\"finished\" is not true or false"});
+  expect_rejected(with_header(last, [](json& h) { h["frame_rate_hz"] = -5.0; }),
+                  {"\"frame_rate_hz\" is negative"});
+  status.state = ScanState::kScanning;
+  EXPECT_FALSE(encode_message(StreamMessage{10, kScan, status}).is_ok());
+}
+
 TEST(MeshStreamRoundTrip, StatusBeforeTheFirstUpdateHasNoLatency) {
   StatusReport status = sample_status();
   status.update_ms.reset();

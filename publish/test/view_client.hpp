@@ -113,6 +113,34 @@ class Page {
     return unpack(beast::buffers_to_string(buffer.data()));
   }
 
+  /// Every message until the server closes the connection (or `timeout` passes: a failure),
+  /// in order: what a page gets before its server goes.
+  std::vector<Frames> read_until_closed(std::chrono::seconds timeout) {
+    std::vector<Frames> messages;
+    const auto deadline = std::chrono::steady_clock::now() + timeout;
+    while (std::chrono::steady_clock::now() < deadline) {
+      beast::flat_buffer buffer;
+      bool done = false;
+      beast::error_code result;
+      ws_.async_read(buffer, [&](beast::error_code ec, std::size_t) {
+        done = true;
+        result = ec;
+      });
+      ioc_.restart();
+      ioc_.run_until(deadline);
+      if (!done) break;
+      if (result) return messages;  // closed: the server went
+      messages.push_back(unpack(beast::buffers_to_string(buffer.data())));
+    }
+    beast::error_code ignored;
+    ws_.next_layer().close(ignored);
+    ioc_.restart();
+    ioc_.run();
+    ADD_FAILURE() << "the server did not close the page's connection within " << timeout.count()
+                  << " s";
+    return messages;
+  }
+
   // The next message of `topic`, skipping others (the server's `viewer` notices).
   Frames read_topic(const std::string& topic) {
     for (int i = 0; i < 50; ++i) {

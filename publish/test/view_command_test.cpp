@@ -12,6 +12,7 @@
 #include <fstream>
 #include <map>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <regex>
 #include <set>
 #include <sstream>
@@ -190,6 +191,66 @@ TEST(ScanView, ServesTheScanItselfAndHoldsTheFinishedOneUntilInterrupted) {
 
   scan.signal(SIGINT);
   EXPECT_EQ(scan.wait(10s), 0) << scan.output();
+}
+
+// Issue 40, "a finished scan reads as finished": without --view-hold, `scan --view` lets the
+// scan's last status (`"finished": true`, its final counts) reach a page open during the scan
+// before its server goes, and says what a page opened later gets.
+TEST(ScanView, WithoutHoldAnOpenPageGetsTheFinishedStatusBeforeTheServerGoes) {
+  TempDir dir;
+  const std::filesystem::path out = dir.path() / "out";
+  ViewProcess scan({"--source",
+                    "sim:default",
+                    "--width-px",
+                    "160",
+                    "--height-px",
+                    "160",
+                    "--frame-rate",
+                    "5",
+                    "--depth",
+                    "5",
+                    "--sweep-s",
+                    "2",
+                    "--realtime",
+                    "--publish",
+                    "tcp://127.0.0.1:*",
+                    "--snapshot",
+                    "tcp://127.0.0.1:*",
+                    "--publish-frames",
+                    "0",
+                    "--view",
+                    "127.0.0.1:0",
+                    "-o",
+                    out.string()},
+                   dir.path() / "scan.log", "scan");
+  const std::string url = scan.url(60s, "live view at ");
+  ASSERT_FALSE(url.empty()) << scan.output();
+  Page page(url);
+  const std::vector<Frames> messages = page.read_until_closed(120s);
+  EXPECT_EQ(scan.wait(30s), 0) << scan.output();
+  EXPECT_TRUE(
+      scan.shows("closes with the scan: pages open now keep showing the finished scan, "
+                 "a page opened later finds no server (--view-hold keeps serving it",
+                 1s))
+      << scan.output();
+
+  const nlohmann::json summary = nlohmann::json::parse(std::ifstream(out / "scan.json"));
+  std::optional<StatusReport> last_status;
+  bool mesh = false;
+  for (const Frames& frames : messages) {
+    mesh = mesh || frames.at(0) == "mesh.1";
+    if (frames.at(0) != "status") continue;
+    Result<StreamMessage> decoded = decode_message(frames);
+    ASSERT_TRUE(decoded) << decoded.message();
+    last_status = std::get<StatusReport>(decoded->body);
+  }
+  EXPECT_TRUE(mesh);
+  ASSERT_TRUE(last_status.has_value()) << messages.size() << " messages, no status";
+  EXPECT_TRUE(last_status->finished) << scan.output();
+  EXPECT_EQ(last_status->state, ScanState::kIdle);
+  EXPECT_EQ(last_status->frame_rate_hz, 0.0);  // --publish-frames 0: the page says why none
+  EXPECT_EQ(last_status->slices, summary["slices"].get<std::uint64_t>());
+  EXPECT_EQ(last_status->frames_received, summary["frames_received"].get<std::uint64_t>());
 }
 
 }  // namespace

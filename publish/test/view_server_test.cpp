@@ -404,6 +404,63 @@ TEST(StreamView, FollowsAScanRestartedOnTheSameEndpoints) {
   EXPECT_NE(status.at(1).find(second.scan()), std::string::npos);
 }
 
+// Issue 40, "a finished scan reads as finished": a publisher that goes after its scan's last
+// status (`"finished": true`) is a normal end, told to the page as `finished`, never as a
+// missing publisher; one that goes without it is still waited for.
+TEST(StreamView, APublisherGoneAfterItsFinishedStatusIsAFinishedScanNotAMissingOne) {
+  for (const bool finish : {true, false}) {
+    SCOPED_TRACE(finish ? "finished" : "gone without finishing");
+    PublisherOptions publisher_options;
+    publisher_options.endpoint = "tcp://127.0.0.1:*";
+    publisher_options.snapshot_endpoint = "tcp://127.0.0.1:*";
+    publisher_options.linger_ms = 0;
+    auto publisher =
+        std::make_unique<MeshPublisher>(MeshPublisher::bind(publisher_options).value());
+    MeshSet meshes;
+    meshes.meshes = {{1, "liver", tetrahedron(10.0)}};
+    ASSERT_TRUE(publisher->publish_meshes(meshes, 1.0, 3));
+
+    StreamViewOptions options;
+    options.stream.endpoint = publisher->endpoint();
+    options.stream.snapshot_endpoint = publisher->snapshot_endpoint();
+    options.stream.snapshot_timeout_ms = 300;
+    options.retry_ms = 100;
+    options.server.http = "127.0.0.1:0";
+    options.server.web_root = web_root();
+    StreamView view = StreamView::start(options).value();
+    Page page(view.url());
+    page.read_topic("mesh.1");
+    StatusReport last;
+    last.slices = 3;
+    last.frames_received = 30;
+    last.state = ScanState::kIdle;
+    last.finished = finish;
+    ASSERT_TRUE(publisher->publish_status(last));
+    const Result<StreamMessage> status = decode_message(page.read_topic("status"));
+    ASSERT_TRUE(status) << status.message();
+    EXPECT_EQ(std::get<StatusReport>(status->body).finished, finish);
+    // Delivered to the page: drain() returns at once; without the last status it waits its time.
+    const auto before = std::chrono::steady_clock::now();
+    EXPECT_EQ(view.drain(publisher->scan(), std::chrono::milliseconds(500)), finish);
+    EXPECT_LT(std::chrono::steady_clock::now() - before, std::chrono::seconds(2));
+
+    publisher.reset();  // the scan exits
+    std::string said;
+    for (int i = 0; i < 20; ++i) {
+      const nlohmann::json header = nlohmann::json::parse(page.read_topic("viewer").at(1));
+      said = header.at("stream").get<std::string>() + ": " + header.value("message", "");
+      if (header.at("stream") != "connected") break;
+    }
+    if (finish) {
+      EXPECT_TRUE(said.starts_with("finished: scan ")) << said;
+      EXPECT_NE(said.find("3 slices, 30 frames in (0 dropped)"), std::string::npos) << said;
+      EXPECT_EQ(said.find("no mesh-stream publisher answered"), std::string::npos) << said;
+    } else {
+      EXPECT_TRUE(said.starts_with("waiting: ")) << said;
+    }
+  }
+}
+
 TEST(StreamView, TellsThePageWhileNoPublisherAnswers) {
   StreamViewOptions options;
   options.stream.endpoint = "tcp://127.0.0.1:1";  // nothing listens on port 1

@@ -1,7 +1,10 @@
 // The browser view end to end: a short simulated scan, `sonoshape view` following it, and Debian's
 // chromium (headless, software WebGL) showing the page. Checks that every label's colour is in
 // the rendered picture, that the page's status numbers match the scan's scan.json, and that the
-// page's PLY and STL downloads hold the scan's final surfaces (their triangle counts).
+// page's PLY and STL downloads hold the scan's final surfaces (their triangle counts). Then that a
+// finished scan reads as finished (issue 40): the page says "finished" when the scan's publisher
+// goes after its end, and a page open during `scan --view` (no --view-hold) keeps the finished
+// scan, its counts and surfaces when the scan exits, never "lost".
 //
 // node tests/browser/viewer_e2e.mjs SONOSHAPE_BINARY WORK_DIR [SCREENSHOT.png [--full]]
 // --full scans the default simulation (256 x 256 px, 30 fps, 6 s): the README's picture.
@@ -170,21 +173,17 @@ async function main() {
   await scan.waitFor(/scan: finished; \S+ shows it until Ctrl-C/, 60000);
   const summary = JSON.parse(fs.readFileSync(path.join(out, 'scan.json'), 'utf8'));
 
-  // Wait until the page shows the finished scan: idle, every label drawn, a frame rendered.
+  // Wait until the page shows the finished scan: finished, every label drawn, a frame rendered.
   let state;
   for (let i = 0; i < 300; ++i) {
-    state = await evaluate(`({ ...window.sonoshapeViewer,
-      state: document.getElementById('state')?.textContent ?? '',
-      frames: document.getElementById('frames')?.textContent,
-      slices: document.getElementById('slices')?.textContent,
-      latency: document.getElementById('latency-ms')?.textContent,
-      labels: [...document.querySelectorAll('#legend .name')].map((n) => n.textContent) })`);
-    if (state && state.state.startsWith('idle') && state.labelsDrawn >= 2 && state.rendered > 0 &&
+    state = await evaluate(pageState);
+    if (state && state.state.startsWith('finished') && state.labelsDrawn >= 2 && state.rendered > 0 &&
         state.slicesDrawn === summary.slices && state.framesShown > 0) break;
     await sleep(100);
   }
-  if (!state || !state.state.startsWith('idle') || state.slicesDrawn !== summary.slices)
-    fail('the page never showed the idle scan with its ' + summary.slices + ' slices: ' + JSON.stringify(state));
+  if (!state || !state.state.startsWith('finished') || state.slicesDrawn !== summary.slices)
+    fail('the page never showed the finished scan with its ' + summary.slices + ' slices: ' + JSON.stringify(state));
+  if (!state.frameHintHidden) fail('the page says no B-mode frames come from a scan that sends them');
   await sleep(500);  // the last requested frame
   if (String(summary.frames_received) !== state.frames)
     fail(`frames in: page ${state.frames}, scan.json ${summary.frames_received}`);
@@ -249,8 +248,84 @@ async function main() {
   console.log(`page: ${state.labels.join(', ')}; frames ${state.frames}, slices ${state.slices} ` +
               `(${drawn} planes drawn), ${state.framesShown} B-mode frames shown; ` +
               `${((Date.now() - started) / 1000).toFixed(1)} s`);
+
+  await publisherGoesAfterTheEnd(scan, view, evaluate);
+  await scanViewEndsWithItsScan(send, sessionId, evaluate, sweep);
+  console.log(`finished scans read as finished; ${((Date.now() - started) / 1000).toFixed(1)} s`);
   for (const child of children) child.kill('SIGTERM');
   process.exit(0);
+}
+
+// What the page shows: its status table, connection line and counters.
+const pageState = `({ ...window.sonoshapeViewer,
+  state: document.getElementById('state')?.textContent ?? '',
+  frames: document.getElementById('frames')?.textContent,
+  slices: document.getElementById('slices')?.textContent,
+  latency: document.getElementById('latency-ms')?.textContent,
+  connection: document.getElementById('connection')?.textContent ?? '',
+  connectionKind: document.getElementById('connection')?.className ?? '',
+  frameHintHidden: document.getElementById('frame-hint')?.hidden,
+  labels: [...document.querySelectorAll('#legend .name')].map((n) => n.textContent) })`;
+
+// Polls the page until `done(state)`; fails with `what` and the last state otherwise.
+async function waitForPage(evaluate, done, what, timeoutMs = 20000) {
+  let state;
+  for (const deadline = Date.now() + timeoutMs; Date.now() < deadline; await sleep(100)) {
+    state = await evaluate(pageState);
+    if (state && done(state)) return state;
+  }
+  fail(what + ': ' + JSON.stringify({ ...state, labels: undefined, drawLog: undefined }));
+}
+
+// The held scan stops (Ctrl-C): `sonoshape view` reports a normal end, not a missing publisher,
+// and the page says the scan finished, with its surfaces still there.
+async function publisherGoesAfterTheEnd(scan, view, evaluate) {
+  scan.kill('SIGINT');
+  if ((await scan.exited) !== 0) fail('the held scan did not exit 0 at Ctrl-C:\n' + scan.output());
+  await view.waitFor(/view: scan \S+ finished \(\d+ slices.*publisher has closed/, 20000);
+  if (/no mesh-stream publisher answered/.test(view.output()))
+    fail('view reported the normal end of the scan as a missing publisher:\n' + view.output());
+  const state = await waitForPage(evaluate, (s) => s.connection.includes('publisher has closed'),
+                                  'the page did not say the scan finished when its publisher closed');
+  if (state.connectionKind !== 'ok' || /lost/.test(state.connection) ||
+      !state.state.startsWith('finished') || state.labelsDrawn < 2)
+    fail('after the scan ended the page shows: ' + JSON.stringify(state.connection) + ', state ' +
+         state.state + ', ' + state.labelsDrawn + ' labels');
+}
+
+// `scan --view` without --view-hold, as a user runs it: a page open during the scan keeps the
+// finished scan (its counts against scan.json, its surfaces) when the scan exits and says why
+// the server went; with --publish-frames 0 it says that no B-mode frames come.
+async function scanViewEndsWithItsScan(send, sessionId, evaluate, sweep) {
+  const out = path.join(workDir, 'scan-view');
+  // Long enough for the page to load (three.js in software WebGL, on a loaded machine) and
+  // connect while the scan runs: its end is what is checked.
+  const longer = sweep.map((arg, i) => (sweep[i - 1] === '--sweep-s' ? '12' : arg));
+  const scan = start(sonoshape, ['scan', '--source', 'sim:default', ...longer, '--realtime',
+    '--publish', 'tcp://127.0.0.1:*', '--snapshot', 'tcp://127.0.0.1:*', '--publish-frames', '0',
+    '--view', '127.0.0.1:0', '-o', out]);
+  const [, url] = await scan.waitFor(/live view at (http:\/\/127\.0\.0\.1:\d+\/)/, 60000);
+  await send('Page.navigate', { url }, sessionId);
+  await waitForPage(evaluate, (s) => s.messages > 0, 'the page got nothing from scan --view');
+  if (scan.exitCode !== null) fail('the page connected only after scan --view ended (too loaded?)');
+  const code = await scan.exited;
+  if (code !== 0) fail('scan --view exited ' + code + ':\n' + scan.output());
+  if (!/closes with the scan: pages open now keep showing the finished scan/.test(scan.output()))
+    fail('scan --view did not say what its page becomes:\n' + scan.output());
+  const summary = JSON.parse(fs.readFileSync(path.join(out, 'scan.json'), 'utf8'));
+  const state = await waitForPage(evaluate, (s) => s.connection.includes('stopped serving'),
+                                  'the page did not say that the finished scan\'s server went');
+  if (state.connectionKind !== 'ok' || /lost/.test(state.connection))
+    fail('the page reads the end of scan --view as lost: ' + state.connection);
+  if (!state.state.startsWith('finished') || state.slices !== String(summary.slices) ||
+      state.frames !== String(summary.frames_received) || state.slicesDrawn !== summary.slices ||
+      state.labelsDrawn < 2 || !state.finished)
+    fail(`the page after scan --view: state ${state.state}, slices ${state.slices} ` +
+         `(${state.slicesDrawn} drawn), frames ${state.frames}, ${state.labelsDrawn} labels; ` +
+         `scan.json: ${summary.slices} slices, ${summary.frames_received} frames`);
+  if (state.frameHintHidden) fail('the page does not say that the scan sends no B-mode frames');
+  console.log(`scan --view ended: the page shows "${state.state}", ${state.slices} slices; ` +
+              `"${state.connection}"`);
 }
 
 main().catch((e) => fail(e.stack || String(e)));

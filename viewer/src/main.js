@@ -11,10 +11,14 @@ let scan = null;
 let lastMessageAt = 0;
 let retryDelayMs = 500;
 let everConnected = false;
+// The last status of the scan shown (`"finished": true`) and what the page says of it: a server
+// that goes after it has ended normally, not lost.
+let finished = null;
 
 // For tests and scripts: what the page has drawn so far.
 window.sonoshapeViewer = {
   labelsDrawn: 0, messages: 0, rendered: 0, scan: null, slicesDrawn: 0, framesShown: 0,
+  finished: false,
   coverage: null,  // the last distance colouring: vertices and milliseconds
 };
 window.sonoshapeViewer.gpu = { name: view.gpu, antialias: view.antialias };
@@ -118,13 +122,22 @@ function showFrame(message) {
 const ms = (value) => (Number.isFinite(value) ? Number(value).toFixed(0) : '–');
 
 function showStatus(header) {
-  $('state').textContent = header.state + (header.message ? ': ' + header.message : '');
-  $('state').className = header.state;
+  const state = header.finished === true ? 'finished' : header.state;
+  $('state').textContent = state + (header.message ? ': ' + header.message : '');
+  $('state').className = state;
   $('frames').textContent = header.frames_received ?? '–';
   $('dropped').textContent = header.frames_dropped ?? '–';
   $('slices').textContent = header.slices ?? '–';
   $('update-ms').textContent = ms(header.update_ms ?? header.total_ms);
   $('latency-ms').textContent = ms(header.latency_ms);
+  // A scan that publishes no frames says so (frame_rate_hz 0): the box is not a broken view.
+  $('frame-hint').hidden = header.frame_rate_hz !== 0;
+  if (header.finished === true) {
+    finished = 'the scan finished: ' + header.slices + ' slices, ' + header.frames_received +
+      ' frames in (' + header.frames_dropped + ' dropped); the surfaces shown are its result';
+    window.sonoshapeViewer.finished = true;
+    say(finished, 'ok');
+  }
 }
 
 function followScan(header) {
@@ -138,6 +151,8 @@ function followScan(header) {
     window.sonoshapeViewer.slicesDrawn = 0;
   }
   scan = header.scan;
+  finished = null;
+  window.sonoshapeViewer.finished = false;
   window.sonoshapeViewer.scan = scan;
   $('scan').textContent = scan.slice(0, 8);
 }
@@ -156,7 +171,8 @@ function onMessage(event) {
   window.sonoshapeViewer.messages += 1;
   if (message.kind === 'viewer') {
     const h = message.header;
-    if (h.stream === 'connected') say('following the scan at ' + h.endpoint, 'ok');
+    if (h.stream === 'connected') say(finished ?? 'following the scan at ' + h.endpoint, 'ok');
+    else if (h.stream === 'finished') say(h.message, 'ok');  // the scan's end, its counts
     else say('waiting for a scan at ' + h.endpoint + (h.message ? ': ' + h.message : ''), 'warn');
     return;
   }
@@ -178,8 +194,14 @@ function connect() {
   socket.addEventListener('message', onMessage);
   socket.addEventListener('close', () => {
     const seconds = (retryDelayMs / 1000).toFixed(1);
-    say((everConnected ? 'lost sonoshape' : 'cannot reach sonoshape') + ' at ' + location.host +
-        '; trying again in ' + seconds + ' s', 'error');
+    // After the scan's last status the server going is the normal end (scan --view exits with
+    // its scan): the result stays; "lost" is only for a stream that ends without it.
+    if (finished)
+      say(finished + '. sonoshape has stopped serving this page (scan --view ends with its ' +
+          'scan; --view-hold keeps serving it); this page keeps the result', 'ok');
+    else
+      say((everConnected ? 'lost sonoshape' : 'cannot reach sonoshape') + ' at ' + location.host +
+          '; trying again in ' + seconds + ' s', 'error');
     setTimeout(connect, retryDelayMs);
     retryDelayMs = Math.min(retryDelayMs * 2, 5000);
   });

@@ -14,6 +14,7 @@ struct PublishSink::Impl {
   publish::MeshPublisher publisher;
   FramePreviewOptions previews;
   std::optional<std::chrono::steady_clock::time_point> last_preview;
+  publish::StatusReport last_report;  // repeated, finished, as the scan's last message
 };
 
 namespace {
@@ -121,13 +122,24 @@ Status PublishSink::on_meshes(const MeshSet& meshes, const MeshUpdateInfo& info)
 }
 
 Status PublishSink::on_status(const ScanStatus& status) {
-  return impl_->publisher.publish_status(report_of(status));
+  impl_->last_report = report_of(status);
+  impl_->last_report.frame_rate_hz = impl_->previews.rate_hz;
+  return impl_->publisher.publish_status(impl_->last_report);
 }
 
-Status PublishSink::on_finish(const MeshSet&, const SliceSet&, const ScanSummary&) {
-  // The last on_meshes and the final (idle) status already went out; the snapshot server keeps
-  // answering until the sink is destroyed.
-  return Status::ok();
+Status PublishSink::on_finish(const MeshSet&, const SliceSet&, const ScanSummary& summary) {
+  // The last on_meshes went out before: the scan's last message says it is over, with the final
+  // counts, so that a view shows "finished" instead of a lost stream (docs/formats/mesh-stream.md).
+  // The snapshot server keeps answering with it until the sink is destroyed.
+  publish::StatusReport report = impl_->last_report;
+  report.frames_received = summary.counters.frames_received;
+  report.frames_dropped = summary.counters.dropped.total();
+  report.slices = summary.counters.slices;
+  if (report.state == ScanState::kScanning) report.state = ScanState::kIdle;
+  if (report.message.empty())
+    report.message = "scan finished (" + std::string(to_string(summary.stop_reason)) + ")";
+  report.finished = true;
+  return impl_->publisher.publish_status(report);
 }
 
 std::string PublishSink::endpoint() const { return impl_->publisher.endpoint(); }

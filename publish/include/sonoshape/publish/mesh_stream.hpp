@@ -100,6 +100,12 @@ struct StatusReport {
   std::optional<double> latency_ms;
   ScanState state = ScanState::kScanning;
   std::string message;  ///< what went wrong; required (non-empty) when state is kError
+  /// The scan's last status (`"finished": true`): nothing more comes, the counts are final and
+  /// the newest meshes are the result. Only with state idle or error.
+  bool finished = false;
+  /// At most how many `frame` messages a second the scan publishes (`"frame_rate_hz"`; 0: none,
+  /// so that a view says why it shows no B-mode frame); absent from older publishers.
+  std::optional<double> frame_rate_hz;
 };
 
 /// Body of the `end` message that closes a snapshot reply; its seq is the newest seq published.

@@ -1,6 +1,7 @@
 #pragma once
 // `sonoshape view` and `scan --view` as a library: a MeshSubscriber thread that relays the mesh
 // stream to a ViewServer (docs/viewer.md).
+#include <chrono>
 #include <memory>
 #include <string>
 
@@ -35,6 +36,11 @@ class StreamView {
   /// Stops the relay thread (within about 2 s: a snapshot request in flight is waited for), then
   /// the server.
   ~StreamView();
+
+  /// Waits until the relay has passed on the last status of `scan` (`"finished": true`) and
+  /// the server has written everything to the pages open now, at most `timeout`; true when all
+  /// went. The end of `scan --view`: its pages show the finished scan, not a lost one.
+  bool drain(const std::string& scan, std::chrono::milliseconds timeout);
 
   /// The page's address.
   std::string url() const;

@@ -54,6 +54,11 @@ class MeshSubscriber {
   /// seq and what is wrong; the next call goes on with the following message.
   Result<std::optional<StreamMessage>> receive(std::chrono::milliseconds timeout);
 
+  /// Whether the publisher has closed the connection since connect() (its scan exited) and not
+  /// come back; known with a snapshot endpoint over tcp or ipc (the connection is watched from
+  /// its handshake on), always false otherwise.
+  bool publisher_gone();
+
   /// The frames of the message the last receive() returned or rejected (empty after a timeout).
   const Frames& last_frames() const;
   /// The end seq of the snapshot; none without one.

@@ -2,6 +2,7 @@
 // The browser view of a live scan (docs/viewer.md): an HTTP server for the page in viewer/ and a
 // WebSocket that carries the mesh stream's messages to it, their frames byte for byte. No Beast
 // or Asio type here: they stay in view_server.cpp.
+#include <chrono>
 #include <cstdint>
 #include <filesystem>
 #include <memory>
@@ -14,8 +15,16 @@
 namespace sonoshape::publish {
 
 /// Topic of the messages the view server itself sends to the page (never on the ZeroMQ stream):
-/// frame 1 is JSON `{"stream": "connected"|"waiting", "endpoint": "...", "message": "..."}`.
+/// frame 1 is JSON `{"stream": "connected"|"waiting"|"finished", "endpoint": "...",
+/// "message": "..."}`.
 constexpr std::string_view kViewerTopic = "viewer";
+
+/// What the view tells its pages about the stream it follows.
+enum class StreamState {
+  kWaiting,    ///< no publisher answers (yet): `message` says why
+  kConnected,  ///< following a publisher
+  kFinished,   ///< the scan followed finished and its publisher has closed: a normal end
+};
 
 /// Packs one multipart message into one WebSocket binary message (docs/viewer.md): a uint32 frame
 /// count, one uint32 byte length per frame, then the frames, each padded with zeros to a multiple
@@ -56,9 +65,16 @@ class ViewServer {
   /// previous message's (header key "scan") drop the cached meshes of the old scan.
   void post(const Frames& frames);
 
-  /// Tells the pages whether the stream is flowing (`connected`) or being waited for
-  /// (`waiting`, with `message` saying why), as a `viewer` message; late pages get the newest.
-  void post_stream_state(bool connected, const std::string& endpoint, const std::string& message);
+  /// Tells the pages whether the stream is flowing (`connected`), being waited for (`waiting`,
+  /// with `message` saying why) or over (`finished`: the scan ended and its publisher closed), as
+  /// a `viewer` message; late pages get the newest.
+  void post_stream_state(StreamState state, const std::string& endpoint,
+                         const std::string& message);
+
+  /// Waits until every message posted so far has been written to every page open now, at most
+  /// `timeout`; true when all went. `scan --view` calls it at its end, so that the scan's last
+  /// status reaches the pages before the server goes.
+  bool flush(std::chrono::milliseconds timeout);
 
   /// The page's address, e.g. "http://127.0.0.1:8080/" (a port 0 resolved).
   std::string url() const;
