@@ -26,9 +26,9 @@
 #include <vector>
 
 #include "sonoshape/core/log.hpp"
+#include "sonoshape/core/mesh_slicer.hpp"
 #include "sonoshape/recon/reconstruct.hpp"
 #include "sonoshape/simulator/evaluation.hpp"
-#include "sonoshape/simulator/mesh_slicer.hpp"
 #include "sonoshape/simulator/phantom.hpp"
 #include "sonoshape/simulator/probe.hpp"
 #include "sonoshape/simulator/trajectory.hpp"
@@ -167,8 +167,8 @@ int main(int argc, char** argv) {
     set.bounds = box.padded(0.1 * box.diagonal());
     for (const std::size_t k : row.frames) {
       const Eigen::Isometry3d& T = acquisition.true_poses[k];
-      sim::SlicePlane plane{T.translation(), T.linear().col(0), T.linear().col(1)};
-      LabeledSlice slice = sim::slice_meshes(phantom->meshes, plane);
+      SlicePlane plane{T.translation(), T.linear().col(0), T.linear().col(1)};
+      LabeledSlice slice = slice_meshes(phantom->meshes, plane);
       slice.fov = probe.sector_ring_mm();
       set.slices.push_back(std::move(slice));
     }

@@ -4,13 +4,11 @@
 
 namespace sonoshape::acq {
 
-ReplayFrameSource::ReplayFrameSource(std::shared_ptr<const SequenceFile> file, std::string name,
-                                     std::size_t first_frame)
+ReplayFrames::ReplayFrames(std::shared_ptr<const SequenceFile> file, std::string name,
+                           std::size_t first_frame)
     : file_(std::move(file)), name_(std::move(name)), first_frame_(first_frame) {}
 
-ReplayFrameSource::~ReplayFrameSource() { stop(); }
-
-Status ReplayFrameSource::open() {
+Status ReplayFrames::open() {
   if (!file_ || file_->frame_count() == 0)
     return Status::error(describe() +
                          ": the sequence has no frames; record or choose another file");
@@ -18,7 +16,7 @@ Status ReplayFrameSource::open() {
   return Status::ok();
 }
 
-Result<Polled> ReplayFrameSource::poll(Frame& frame) {
+Result<Polled> ReplayFrames::poll(Frame& frame) {
   while (next_ < file_->frame_count()) {
     const std::size_t k = next_++;
     // PLUS marks frames it could not grab with ImageStatus = INVALID: their pixels mean nothing.

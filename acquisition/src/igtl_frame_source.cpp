@@ -4,23 +4,21 @@
 
 namespace sonoshape::acq {
 
-IgtlFrameSource::IgtlFrameSource(IgtlEndpoint endpoint, std::string image_device)
+IgtlFrames::IgtlFrames(IgtlEndpoint endpoint, std::string image_device)
     : link_(std::move(endpoint)),
       image_device_(std::move(image_device)),
       drops_("igtl:" + link_.endpoint().text()) {}
 
-IgtlFrameSource::IgtlFrameSource(IgtlEndpoint endpoint, std::string image_device,
-                                 IgtlConnection connection, std::optional<IgtlMessage> first)
+IgtlFrames::IgtlFrames(IgtlEndpoint endpoint, std::string image_device, IgtlConnection connection,
+                       std::optional<IgtlMessage> first)
     : link_(std::move(endpoint), std::move(connection)),
       image_device_(std::move(image_device)),
       pending_(std::move(first)),
       drops_("igtl:" + link_.endpoint().text()) {}
 
-IgtlFrameSource::~IgtlFrameSource() { stop(); }
+Status IgtlFrames::open() { return link_.open(); }
 
-Status IgtlFrameSource::open() { return link_.open(); }
-
-Result<Polled> IgtlFrameSource::poll(Frame& frame) {
+Result<Polled> IgtlFrames::poll(Frame& frame) {
   std::optional<IgtlMessage> message =
       pending_ ? std::exchange(pending_, std::nullopt) : link_.next(0.1);
   set_condition(link_.trouble());

@@ -239,34 +239,32 @@ Result<GreyImage> v4l2_to_grey(std::uint32_t fourcc, const std::uint8_t* data, s
   return out;
 }
 
-V4l2FrameSource::V4l2FrameSource(V4l2Options options, std::shared_ptr<V4l2Device> device)
+V4l2Frames::V4l2Frames(V4l2Options options, std::shared_ptr<V4l2Device> device)
     : options_(std::move(options)), device_(std::move(device)) {}
 
-V4l2FrameSource::~V4l2FrameSource() { stop(); }
-
-V4l2Counters V4l2FrameSource::counters() const {
+V4l2Counters V4l2Frames::counters() const {
   std::lock_guard lock(mutex_);
   return counters_;
 }
 
-std::map<std::string, std::size_t> V4l2FrameSource::losses() const {
+std::map<std::string, std::size_t> V4l2Frames::losses() const {
   const V4l2Counters c = counters();
   return {{"driver_dropped", c.driver_dropped},
           {"error_frames", c.error_frames},
           {"undecodable", c.undecodable}};
 }
 
-std::optional<V4l2Format> V4l2FrameSource::format() const {
+std::optional<V4l2Format> V4l2Frames::format() const {
   std::lock_guard lock(mutex_);
   return format_;
 }
 
-void V4l2FrameSource::update(const std::function<void(V4l2Counters&)>& change) {
+void V4l2Frames::update(const std::function<void(V4l2Counters&)>& change) {
   std::lock_guard lock(mutex_);
   change(counters_);
 }
 
-int V4l2FrameSource::xioctl(unsigned long request, void* arg) {
+int V4l2Frames::xioctl(unsigned long request, void* arg) {
   int result = 0;
   do {
     result = device_->ioctl(fd_, request, arg);
@@ -274,7 +272,7 @@ int V4l2FrameSource::xioctl(unsigned long request, void* arg) {
   return result;
 }
 
-Status V4l2FrameSource::open() {
+Status V4l2Frames::open() {
   if (!device_) return Status::error(describe() + ": no device interface");
   if (options_.crop)
     if (Status valid = check_crop(*options_.crop, INT32_MAX, INT32_MAX); !valid)
@@ -282,9 +280,9 @@ Status V4l2FrameSource::open() {
   return open_device();
 }
 
-void V4l2FrameSource::close() { release_device(); }
+void V4l2Frames::close() { release_device(); }
 
-Status V4l2FrameSource::open_device() {
+Status V4l2Frames::open_device() {
   fd_ = device_->open(options_.device, O_RDWR | O_NONBLOCK);
   if (fd_ < 0) {
     const int e = errno;
@@ -316,7 +314,7 @@ Status V4l2FrameSource::open_device() {
   return Status::ok();
 }
 
-Status V4l2FrameSource::query_capabilities() {
+Status V4l2Frames::query_capabilities() {
   v4l2_capability cap{};
   if (xioctl(VIDIOC_QUERYCAP, &cap) < 0)
     return Status::error(describe() + ": VIDIOC_QUERYCAP failed (" + errno_text(errno) + "); " +
@@ -342,7 +340,7 @@ Status V4l2FrameSource::query_capabilities() {
   return Status::ok();
 }
 
-Status V4l2FrameSource::choose_format(std::uint32_t& fourcc) {
+Status V4l2Frames::choose_format(std::uint32_t& fourcc) {
   std::vector<std::uint32_t> offered;
   for (std::uint32_t index = 0;; ++index) {
     v4l2_fmtdesc desc{};
@@ -378,7 +376,7 @@ Status V4l2FrameSource::choose_format(std::uint32_t& fourcc) {
                        offered_text);
 }
 
-Status V4l2FrameSource::set_format(std::uint32_t fourcc) {
+Status V4l2Frames::set_format(std::uint32_t fourcc) {
   v4l2_format fmt{};
   fmt.type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
   if (xioctl(VIDIOC_G_FMT, &fmt) < 0)
@@ -421,7 +419,7 @@ Status V4l2FrameSource::set_format(std::uint32_t fourcc) {
   return Status::ok();
 }
 
-void V4l2FrameSource::set_frame_rate() {
+void V4l2Frames::set_frame_rate() {
   v4l2_streamparm parm{};
   parm.type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
   if (xioctl(VIDIOC_G_PARM, &parm) < 0) return;  // the driver does not say: rate unknown
@@ -441,7 +439,7 @@ void V4l2FrameSource::set_frame_rate() {
   if (period.numerator > 0) current_.frame_rate_hz = double(period.denominator) / period.numerator;
 }
 
-Status V4l2FrameSource::start_mmap() {
+Status V4l2Frames::start_mmap() {
   v4l2_requestbuffers request{};
   request.count = static_cast<std::uint32_t>(std::max(kMinBuffers, options_.buffer_count));
   request.type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
@@ -477,7 +475,7 @@ Status V4l2FrameSource::start_mmap() {
 }
 
 // Undoes open_device() in reverse; after an unplug every call may fail, which changes nothing.
-void V4l2FrameSource::release_device() {
+void V4l2Frames::release_device() {
   if (fd_ < 0) return;
   if (streaming_) {
     int type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
@@ -498,20 +496,20 @@ void V4l2FrameSource::release_device() {
   fd_ = -1;
 }
 
-Result<Polled> V4l2FrameSource::poll(Frame& frame) {
+Result<Polled> V4l2Frames::poll(Frame& frame) {
   if (fd_ < 0) return try_reopen();
   const Result<Read> got = current_.io == V4l2Io::kMmap ? dequeue_mmap(frame) : read_frame(frame);
   if (!got) return got.status();
   return *got == Read::kFrame ? Polled::kItem : Polled::kNothing;
 }
 
-Result<V4l2FrameSource::Read> V4l2FrameSource::wait_readable() {
+Result<V4l2Frames::Read> V4l2Frames::wait_readable() {
   if (device_->poll_in(fd_, options_.poll_timeout_ms) < 0 && errno != EINTR)
     return Status::error(describe() + ": poll failed (" + errno_text(errno) + ")");
   return Read::kNothing;  // the next poll() takes the frame, if one came
 }
 
-Result<V4l2FrameSource::Read> V4l2FrameSource::dequeue_mmap(Frame& frame) {
+Result<V4l2Frames::Read> V4l2Frames::dequeue_mmap(Frame& frame) {
   v4l2_buffer buffer{};
   buffer.type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
   buffer.memory = V4L2_MEMORY_MMAP;
@@ -559,7 +557,7 @@ Result<V4l2FrameSource::Read> V4l2FrameSource::dequeue_mmap(Frame& frame) {
 
 // After EIO the driver may have kept a buffer, or stopped capturing: STREAMOFF takes every
 // buffer back, and all of them are queued again.
-Result<V4l2FrameSource::Read> V4l2FrameSource::restart_stream() {
+Result<V4l2Frames::Read> V4l2Frames::restart_stream() {
   int type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
   bool ok = xioctl(VIDIOC_STREAMOFF, &type) == 0;
   for (std::uint32_t index = 0; ok && index < buffers_.size(); ++index) {
@@ -577,7 +575,7 @@ Result<V4l2FrameSource::Read> V4l2FrameSource::restart_stream() {
                        ")");
 }
 
-Result<V4l2FrameSource::Read> V4l2FrameSource::read_frame(Frame& frame) {
+Result<V4l2Frames::Read> V4l2Frames::read_frame(Frame& frame) {
   ssize_t n = 0;
   do {
     n = device_->read(fd_, read_buffer_.data(), read_buffer_.size());
@@ -600,7 +598,7 @@ Result<V4l2FrameSource::Read> V4l2FrameSource::read_frame(Frame& frame) {
   return delivered ? Read::kFrame : Read::kNothing;
 }
 
-void V4l2FrameSource::note_sequence(std::uint32_t sequence) {
+void V4l2Frames::note_sequence(std::uint32_t sequence) {
   if (last_sequence_ && sequence > *last_sequence_ + 1) {
     const std::size_t gap = sequence - *last_sequence_ - 1;
     update([gap](V4l2Counters& c) { c.driver_dropped += gap; });
@@ -609,15 +607,15 @@ void V4l2FrameSource::note_sequence(std::uint32_t sequence) {
   last_sequence_ = sequence;
 }
 
-void V4l2FrameSource::note_timestamps(bool from_driver) {
+void V4l2Frames::note_timestamps(bool from_driver) {
   if (current_.driver_timestamps == from_driver) return;
   current_.driver_timestamps = from_driver;
   std::lock_guard lock(mutex_);
   if (format_) format_->driver_timestamps = from_driver;
 }
 
-bool V4l2FrameSource::deliver(const std::uint8_t* data, std::size_t size, double timestamp_s,
-                              Frame& frame) {
+bool V4l2Frames::deliver(const std::uint8_t* data, std::size_t size, double timestamp_s,
+                         Frame& frame) {
   auto grey = v4l2_to_grey(current_.fourcc, data, size, current_.width_px, current_.height_px,
                            current_.bytes_per_line, options_.crop);
   if (!grey) {
@@ -638,7 +636,7 @@ bool V4l2FrameSource::deliver(const std::uint8_t* data, std::size_t size, double
   return true;
 }
 
-V4l2FrameSource::Read V4l2FrameSource::mark_unplugged(const std::string& where) {
+V4l2Frames::Read V4l2Frames::mark_unplugged(const std::string& where) {
   release_device();
   update([](V4l2Counters& c) { ++c.unplugs; });
   reopen_wait_s_ = options_.reopen_first_s;
@@ -650,7 +648,7 @@ V4l2FrameSource::Read V4l2FrameSource::mark_unplugged(const std::string& where) 
   return Read::kUnplugged;
 }
 
-Result<Polled> V4l2FrameSource::try_reopen() {
+Result<Polled> V4l2Frames::try_reopen() {
   const double wait_s = next_reopen_s_ - clock_monotonic_s();
   if (wait_s > 0.0) {  // short naps: stop() is honoured quickly
     std::this_thread::sleep_for(std::chrono::duration<double>(std::min(wait_s, 0.05)));

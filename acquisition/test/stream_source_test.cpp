@@ -1,9 +1,12 @@
 // StreamSource (through FrameSource): threads, buffers, pacing, failures reported as states,
-// and the replay of the real PLUS sweep.
+// the backend's life (closed after its last poll, destroyed after the thread is joined), and
+// the replay of the real PLUS sweep.
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <chrono>
 #include <filesystem>
+#include <memory>
 #include <stdexcept>
 #include <thread>
 
@@ -17,12 +20,11 @@ const std::filesystem::path kPlusSweep =
 
 // Frames 0..count-1 of 4x4 pixels at `period_s`; optionally fails (error or exception) after
 // `fail_after` frames.
-class FakeFrames final : public FrameSource {
+class FakeFrames final : public FrameBackend {
  public:
   enum class Failure { kNone, kError, kThrow };
   FakeFrames(int count, double period_s, Failure failure = Failure::kNone, int fail_after = 0)
       : count_(count), period_s_(period_s), failure_(failure), fail_after_(fail_after) {}
-  ~FakeFrames() override { stop(); }
   std::string describe() const override { return "fake"; }
 
  protected:
@@ -60,7 +62,7 @@ std::vector<std::int64_t> drain(FrameSource& source) {
 }
 
 TEST(StreamSource, FastPlaybackWaitsForTheConsumerAndLosesNothing) {
-  FakeFrames source(50, 0.1);
+  SourceOf<FakeFrames> source(50, 0.1);
   SourceOptions options;
   options.buffer_capacity = 2;
   options.wait_when_full = true;
@@ -77,7 +79,7 @@ TEST(StreamSource, FastPlaybackWaitsForTheConsumerAndLosesNothing) {
 }
 
 TEST(StreamSource, LiveBufferDropsTheOldestWhenTheConsumerIsLate) {
-  FakeFrames source(20, 0.1);
+  SourceOf<FakeFrames> source(20, 0.1);
   SourceOptions options;
   options.buffer_capacity = 4;
   options.wait_when_full = false;
@@ -90,7 +92,7 @@ TEST(StreamSource, LiveBufferDropsTheOldestWhenTheConsumerIsLate) {
 }
 
 TEST(StreamSource, RealTimePlaybackFollowsTheTimestamps) {
-  FakeFrames source(4, 0.05);
+  SourceOf<FakeFrames> source(4, 0.05);
   SourceOptions options;
   options.playback.real_time = true;
   options.playback.device_origin_s = 10.0;
@@ -108,7 +110,7 @@ TEST(StreamSource, RealTimePlaybackFollowsTheTimestamps) {
 
 TEST(StreamSource, ErrorsAndExceptionsBecomeAFailedStateAfterTheFramesSoFar) {
   for (const auto failure : {FakeFrames::Failure::kError, FakeFrames::Failure::kThrow}) {
-    FakeFrames source(10, 0.1, failure, 3);
+    SourceOf<FakeFrames> source(10, 0.1, failure, 3);
     SourceOptions options;
     options.wait_when_full = true;
     ASSERT_TRUE(source.start(options));
@@ -123,7 +125,7 @@ TEST(StreamSource, ErrorsAndExceptionsBecomeAFailedStateAfterTheFramesSoFar) {
 }
 
 TEST(StreamSource, StopEndsABlockedSource) {
-  FakeFrames source(1000000, 0.1);
+  SourceOf<FakeFrames> source(1000000, 0.1);
   SourceOptions options;
   options.buffer_capacity = 1;
   options.wait_when_full = true;
@@ -132,6 +134,83 @@ TEST(StreamSource, StopEndsABlockedSource) {
   source.stop();  // must not hang on the full buffer
   EXPECT_EQ(source.state(), SourceState::kEnded);
   EXPECT_EQ(source.message(), "stopped");
+}
+
+// What a backend saw of its own life, kept outside it so that it can be read once it is gone.
+struct BackendLife {
+  std::atomic<int> polls_running{0};
+  std::atomic<int> polls{0};
+  std::atomic<int> closes{0};
+  std::atomic<bool> destroyed{false};
+  // Violations of the backend contract (StreamBackend): each must stay 0.
+  std::atomic<int> polls_after_close{0};
+  std::atomic<int> closes_during_poll{0};
+  std::atomic<int> destroyed_during_poll{0};
+  std::atomic<int> calls_after_destruction{0};
+};
+
+// A live device whose every read blocks for a while (a grabber waiting for its next frame),
+// and which logs each call into `life`.
+class BlockingFrames final : public FrameBackend {
+ public:
+  explicit BlockingFrames(std::shared_ptr<BackendLife> life) : life_(std::move(life)) {}
+  ~BlockingFrames() override {
+    if (life_->polls_running.load() > 0) ++life_->destroyed_during_poll;
+    life_->destroyed.store(true);
+  }
+  std::string describe() const override { return "blocking"; }
+
+ protected:
+  Status open() override { return Status::ok(); }
+  Result<Polled> poll(Frame& frame) override {
+    if (life_->destroyed.load()) ++life_->calls_after_destruction;
+    if (life_->closes.load() > 0) ++life_->polls_after_close;
+    ++life_->polls_running;
+    std::this_thread::sleep_for(std::chrono::milliseconds(15));
+    --life_->polls_running;
+    frame.image = GreyImage(2, 2, 0);
+    frame.index = life_->polls++;
+    return Polled::kItem;
+  }
+  void close() override {
+    if (life_->destroyed.load()) ++life_->calls_after_destruction;
+    if (life_->polls_running.load() > 0) ++life_->closes_during_poll;
+    ++life_->closes;
+  }
+
+ private:
+  std::shared_ptr<BackendLife> life_;
+};
+
+TEST(StreamSource, DestroyedWhilePollingClosesTheBackendAfterItsLastPollThenDestroysIt) {
+  for (int round = 0; round < 5; ++round) {
+    auto life = std::make_shared<BackendLife>();
+    auto source = std::make_unique<SourceOf<BlockingFrames>>(life);
+    ASSERT_TRUE(source->start());
+    // Destroy the stream while its thread is inside poll(), after a few rounds of it.
+    while (life->polls.load() < round || life->polls_running.load() == 0)
+      std::this_thread::sleep_for(std::chrono::microseconds(200));
+    source.reset();
+    EXPECT_TRUE(life->destroyed.load());
+    EXPECT_EQ(life->closes.load(), 1);
+    EXPECT_EQ(life->closes_during_poll.load(), 0);
+    EXPECT_EQ(life->polls_after_close.load(), 0);
+    EXPECT_EQ(life->destroyed_during_poll.load(), 0);
+    EXPECT_EQ(life->calls_after_destruction.load(), 0);
+    EXPECT_EQ(life->polls_running.load(), 0);
+  }
+}
+
+TEST(StreamSource, ABackendNeverStartedIsDestroyedWithoutBeingOpened) {
+  auto life = std::make_shared<BackendLife>();
+  { SourceOf<BlockingFrames> source(life); }
+  EXPECT_TRUE(life->destroyed.load());
+  EXPECT_EQ(life->polls.load(), 0);
+  EXPECT_EQ(life->closes.load(), 0);
+}
+
+TEST(StreamSource, RefusesANullBackend) {
+  EXPECT_THROW(FrameSource(std::unique_ptr<FrameBackend>()), std::invalid_argument);
 }
 
 TEST(ReplayFrameSource, ReplaysTheRealPlusSweep) {

@@ -34,7 +34,7 @@ TEST(V4l2Hardware, AnAttachedGrabberDeliversFramesOnTheMonotonicClock) {
       frames.push_back(std::move(got->item));
     }
     const double now_s = clock_monotonic_s();
-    const auto format = source.format();
+    const auto format = source.backend().format();
     ASSERT_TRUE(format);
     std::cout << source.describe() << ": '" << format->card << "' " << fourcc_text(format->fourcc)
               << " " << format->width_px << "x" << format->height_px << " at "

@@ -199,7 +199,7 @@ TEST(V4l2Mmap, FramesCarryTheDriversTimestampsAndPixels) {
     ASSERT_EQ(frames[k].image.width, kWidth);
     EXPECT_EQ(frames[k].image.at(10, 3), static_cast<std::uint8_t>(10 + 6 + k));
   }
-  const auto format = source.format();
+  const auto format = source.backend().format();
   ASSERT_TRUE(format);
   EXPECT_EQ(format->card, "fake grabber");
   EXPECT_EQ(fourcc_text(format->fourcc), "YUYV");
@@ -236,10 +236,10 @@ TEST(V4l2Mmap, SequenceGapsAreCountedAsDriverDrops) {
   for (const std::uint32_t k : {10u, 11u, 14u, 15u, 20u}) driver->push(filled(k, k / 30.0));
   ASSERT_TRUE(source.start());
   ASSERT_EQ(take(source, 5).size(), 5u);
-  EXPECT_EQ(source.counters().driver_dropped, 2u + 4u);
+  EXPECT_EQ(source.backend().counters().driver_dropped, 2u + 4u);
   EXPECT_EQ(source.losses(), (std::map<std::string, std::size_t>{
                                  {"driver_dropped", 6}, {"error_frames", 0}, {"undecodable", 0}}));
-  EXPECT_EQ(source.counters().delivered, 5u);
+  EXPECT_EQ(source.backend().counters().delivered, 5u);
   EXPECT_EQ(source.dropped(), 6u);
 }
 
@@ -258,9 +258,10 @@ TEST(V4l2Mmap, ErrorBuffersAndEioAreDroppedAndCountedEintrAndEagainRetried) {
   EXPECT_DOUBLE_EQ(frames[0].timestamp_s, 1.0);
   EXPECT_DOUBLE_EQ(frames[1].timestamp_s, 3.0);
   EXPECT_EQ(frames[1].index, 1);
-  EXPECT_EQ(source.counters().error_frames, 2u);
-  EXPECT_EQ(source.counters().driver_dropped, 0u);  // the error buffer kept its sequence number
-  EXPECT_EQ(driver->stream_starts(), 2);            // EIO restarted the stream
+  EXPECT_EQ(source.backend().counters().error_frames, 2u);
+  EXPECT_EQ(source.backend().counters().driver_dropped,
+            0u);                          // the error buffer kept its sequence number
+  EXPECT_EQ(driver->stream_starts(), 2);  // EIO restarted the stream
   EXPECT_EQ(source.dropped(), 2u);
   EXPECT_EQ(source.state(), SourceState::kRunning);
 }
@@ -277,7 +278,7 @@ TEST(V4l2Mmap, UnplugIsReportedAndCaptureResumesWhenTheDeviceReturns) {
   ASSERT_TRUE(eventually([&] { return !source.condition().empty(); }));
   EXPECT_NE(source.condition().find("vanished"), std::string::npos) << source.condition();
   EXPECT_EQ(source.state(), SourceState::kRunning);  // the scan goes on
-  EXPECT_EQ(source.counters().unplugs, 1u);
+  EXPECT_EQ(source.backend().counters().unplugs, 1u);
   ASSERT_TRUE(eventually([&] { return driver->open_fds() == 0; }));
   EXPECT_EQ(driver->maps(), 0);                                // the old mappings are gone
   std::this_thread::sleep_for(std::chrono::milliseconds(80));  // several failed reopens
@@ -290,8 +291,8 @@ TEST(V4l2Mmap, UnplugIsReportedAndCaptureResumesWhenTheDeviceReturns) {
   EXPECT_EQ(after[0].index, 2);
   EXPECT_DOUBLE_EQ(after[1].timestamp_s, 2.1);
   EXPECT_EQ(source.condition(), "");
-  EXPECT_EQ(source.counters().reopens, 1u);
-  EXPECT_EQ(source.counters().driver_dropped, 0u);
+  EXPECT_EQ(source.backend().counters().reopens, 1u);
+  EXPECT_EQ(source.backend().counters().driver_dropped, 0u);
   EXPECT_EQ(driver->maps(), 5);
 }
 

@@ -100,14 +100,14 @@ TEST_F(V4l2Umockdev, ReadIoDeliversCroppedFramesStampedOnArrival) {
       EXPECT_GE(frames[k].timestamp_s, frames[k - 1].timestamp_s);
     }
   }
-  const auto format = source.format();
+  const auto format = source.backend().format();
   ASSERT_TRUE(format);
   EXPECT_EQ(format->card, "Fake USB grabber");
   EXPECT_EQ(format->io, V4l2Io::kRead);  // the device cannot stream: auto chose read()
   EXPECT_EQ(fourcc_text(format->fourcc), "GREY");
   EXPECT_FALSE(format->driver_timestamps);
   EXPECT_DOUBLE_EQ(format->frame_rate_hz, 0.0);
-  EXPECT_EQ(source.counters().error_frames, 1u);
+  EXPECT_EQ(source.backend().counters().error_frames, 1u);
   EXPECT_EQ(source.dropped(), 1u);
 }
 
@@ -139,8 +139,8 @@ TEST_F(V4l2Umockdev, UnplugMidStreamIsReportedAndCaptureResumesAfterReplug) {
   EXPECT_EQ(after[0].index, 2);
   EXPECT_EQ(after[1].image.at(0, 0), 6);
   EXPECT_EQ(source.condition(), "");
-  EXPECT_EQ(source.counters().unplugs, 1u);
-  EXPECT_EQ(source.counters().reopens, 1u);
+  EXPECT_EQ(source.backend().counters().unplugs, 1u);
+  EXPECT_EQ(source.backend().counters().reopens, 1u);
 }
 
 TEST_F(V4l2Umockdev, MmapOnAGrabberThatCannotStreamFailsNamingTheFix) {

@@ -12,10 +12,10 @@
 #include "commands.hpp"
 #include "mesh_spec.hpp"
 #include "option_checks.hpp"
+#include "sonoshape/core/mesh_slicer.hpp"
 #include "sonoshape/core/slice_io.hpp"
 #include "sonoshape/publish/mesh_writer.hpp"
 #include "sonoshape/simulator/mesh_reader.hpp"
-#include "sonoshape/simulator/mesh_slicer.hpp"
 #include "sonoshape/simulator/plane_generator.hpp"
 #include "sonoshape/simulator/unknowns.hpp"
 
@@ -59,7 +59,7 @@ void transform(TriangleMesh& mesh, double scale, const Vec3& before, const Vec3&
 Vec3 centre_of(const Box3& box) { return 0.5 * (box.min + box.max); }
 
 // Scales and places the meshes as --size-mm and --layout ask.
-void place(std::vector<sim::LabeledMesh>& meshes, double size_mm, bool row) {
+void place(std::vector<LabeledMesh>& meshes, double size_mm, bool row) {
   if (size_mm > 0.0 && !row) {
     // One common scale keeps nested meshes nested.
     Box3 all = empty_box();
@@ -99,7 +99,7 @@ std::string vec_text(const Vec3& v) {
 }
 
 int run_slice(const SliceOptions& options) {
-  std::vector<sim::LabeledMesh> meshes;
+  std::vector<LabeledMesh> meshes;
   for (const std::string& text : options.meshes) {
     auto mesh = load_mesh_spec(text, "--mesh");
     if (!mesh) {
@@ -125,7 +125,7 @@ int run_slice(const SliceOptions& options) {
   set.bounds = objects.padded(kBoundsPadding * objects.diagonal());
   std::size_t regions = 0, holes = 0, empty = 0, skipped = 0;
   for (std::size_t i = 0; i < planes.size(); ++i) {
-    LabeledSlice slice = sim::slice_meshes(meshes, planes[i]);
+    LabeledSlice slice = slice_meshes(meshes, planes[i]);
     // Meshes that self-intersect (cow.obj does) or intersect each other cut into crossing or
     // overlapping polygons, which no reader accepts: check each slice before it is written.
     SliceSet single{set.units, set.labels, set.bounds, {slice}, {}};

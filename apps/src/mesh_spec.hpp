@@ -4,9 +4,9 @@
 #include <filesystem>
 #include <string>
 
+#include "sonoshape/core/mesh_slicer.hpp"
 #include "sonoshape/core/status.hpp"
 #include "sonoshape/simulator/mesh_reader.hpp"
-#include "sonoshape/simulator/mesh_slicer.hpp"
 
 namespace sonoshape::apps {
 
@@ -42,13 +42,13 @@ inline Result<MeshSpec> parse_mesh_spec(const std::string& text, const std::stri
 }
 
 /// Parses the argument and reads its mesh, oriented outwards.
-inline Result<sim::LabeledMesh> load_mesh_spec(const std::string& text, const std::string& option) {
+inline Result<LabeledMesh> load_mesh_spec(const std::string& text, const std::string& option) {
   const auto spec = parse_mesh_spec(text, option);
   if (!spec) return spec.status();
   auto mesh = sim::read_mesh(spec->path);
   if (!mesh) return mesh.status();
   sim::orient_outward(*mesh);
-  return sim::LabeledMesh{spec->label, spec->name, std::move(*mesh)};
+  return LabeledMesh{spec->label, spec->name, std::move(*mesh)};
 }
 
 }  // namespace sonoshape::apps

@@ -25,12 +25,11 @@ using namespace std::chrono_literals;
 
 // Frames every `period_ms` from t = 0 (timestamps from integer milliseconds, so they equal the
 // pose samples' exactly), failing or throwing after `fail_after` frames when asked.
-class FakeFrames final : public acq::FrameSource {
+class FakeFrames final : public acq::FrameBackend {
  public:
   enum class Failure { kNone, kError, kThrow };
   FakeFrames(int count, int period_ms, Failure failure = Failure::kNone, int fail_after = 0)
       : count_(count), period_ms_(period_ms), failure_(failure), fail_after_(fail_after) {}
-  ~FakeFrames() override { stop(); }
   std::string describe() const override { return "fake probe"; }
 
  protected:
@@ -58,11 +57,10 @@ class FakeFrames final : public acq::FrameSource {
 
 // Frames like FakeFrames, but after `unplug_at` frames the device is gone for `gap_s` of wall
 // time: the source stays running and says so in condition(), as the V4L2 grabber does.
-class UnpluggingFrames final : public acq::FrameSource {
+class UnpluggingFrames final : public acq::FrameBackend {
  public:
   UnpluggingFrames(int count, int period_ms, int unplug_at, double gap_s)
       : count_(count), period_ms_(period_ms), unplug_at_(unplug_at), gap_s_(gap_s) {}
-  ~UnpluggingFrames() override { stop(); }
   std::string describe() const override { return "fake grabber"; }
 
  protected:
@@ -257,7 +255,7 @@ TEST(ScanPipeline, FastPlaybackLosesNothingAndBatchesBehindASlowReconstruction) 
   FakeReconstruction* recon = reconstruction.get();
   ScanOptions options = fast_options();
   options.reconstruction_queue = 3;
-  ScanPipeline pipeline(fake_source(std::make_unique<FakeFrames>(60, 33),
+  ScanPipeline pipeline(fake_source(std::make_unique<acq::SourceOf<FakeFrames>>(60, 33),
                                     sliding_poses(18.0 * 33.0 / 33.333, -100, 2100, 25)),
                         std::make_unique<FakeSegmentation>(), std::move(reconstruction), options);
   auto sink = std::make_shared<RecordingSink>();
@@ -296,8 +294,8 @@ TEST(ScanPipeline, FastPlaybackLosesNothingAndBatchesBehindASlowReconstruction) 
 }
 
 TEST(ScanPipeline, TheSummarySaysWhyAMaterialOfTheSetupHasNoMesh) {
-  ScanSource source =
-      fake_source(std::make_unique<FakeFrames>(20, 33), sliding_poses(18.0, -100, 800, 25));
+  ScanSource source = fake_source(std::make_unique<acq::SourceOf<FakeFrames>>(20, 33),
+                                  sliding_poses(18.0, -100, 800, 25));
   source.setup.labels = {{1, "organ"}, {2, "lesion"}};  // the segmentation only finds the organ
   ScanPipeline pipeline(std::move(source), std::make_unique<FakeSegmentation>(),
                         std::make_unique<FakeReconstruction>(0), fast_options());
@@ -321,9 +319,9 @@ TEST(ScanPipeline, RealTimeDropsAndCountsWhenTheReconstructionFallsBehind) {
   options.keyframes = {3.0, 1.0};
   options.segmentation_queue = 2;
   options.reconstruction_queue = 2;
-  ScanPipeline pipeline(
-      fake_source(std::make_unique<FakeFrames>(150, 5), sliding_poses(1000.0, -100, 1000, 5)),
-      std::make_unique<FakeSegmentation>(), std::move(reconstruction), options);
+  ScanPipeline pipeline(fake_source(std::make_unique<acq::SourceOf<FakeFrames>>(150, 5),
+                                    sliding_poses(1000.0, -100, 1000, 5)),
+                        std::make_unique<FakeSegmentation>(), std::move(reconstruction), options);
   auto sink = std::make_shared<RecordingSink>();
   pipeline.add_sink(sink);
   ASSERT_TRUE(pipeline.start());
@@ -351,7 +349,7 @@ TEST(ScanPipeline, FramesWithoutAPoseAreDroppedByReason) {
     poses.push_back(p);
     if (ms == 500) poses.back().status = TrackingStatus::kInvalid;
   }
-  ScanPipeline pipeline(fake_source(std::make_unique<FakeFrames>(20, 100), poses),
+  ScanPipeline pipeline(fake_source(std::make_unique<acq::SourceOf<FakeFrames>>(20, 100), poses),
                         std::make_unique<FakeSegmentation>(std::set<std::int64_t>{3}),
                         std::make_unique<FakeReconstruction>(), fast_options());
   ASSERT_TRUE(pipeline.start());
@@ -366,7 +364,7 @@ TEST(ScanPipeline, FramesWithoutAPoseAreDroppedByReason) {
   expect_accounted(c);
 
   // No tracker at all: every frame's pose is missing.
-  ScanPipeline blind(fake_source(std::make_unique<FakeFrames>(5, 100), {}),
+  ScanPipeline blind(fake_source(std::make_unique<acq::SourceOf<FakeFrames>>(5, 100), {}),
                      std::make_unique<FakeSegmentation>(), std::make_unique<FakeReconstruction>(),
                      fast_options());
   ASSERT_TRUE(blind.start());
@@ -376,10 +374,11 @@ TEST(ScanPipeline, FramesWithoutAPoseAreDroppedByReason) {
 TEST(ScanPipeline, AVanishingSourceIsReportedAndTheMeshesSoFarAreKept) {
   for (const auto failure : {FakeFrames::Failure::kError, FakeFrames::Failure::kThrow}) {
     testing::TempDir dir;
-    ScanPipeline pipeline(fake_source(std::make_unique<FakeFrames>(100, 33, failure, 20),
-                                      sliding_poses(60.0, -100, 4000, 25)),
-                          std::make_unique<FakeSegmentation>(),
-                          std::make_unique<FakeReconstruction>(), fast_options());
+    ScanPipeline pipeline(
+        fake_source(std::make_unique<acq::SourceOf<FakeFrames>>(100, 33, failure, 20),
+                    sliding_poses(60.0, -100, 4000, 25)),
+        std::make_unique<FakeSegmentation>(), std::make_unique<FakeReconstruction>(),
+        fast_options());
     auto sink = std::make_shared<RecordingSink>();
     pipeline.add_sink(sink);
     pipeline.add_sink(std::make_shared<FileSink>(dir.path() / "out", 5));
@@ -408,10 +407,10 @@ TEST(ScanPipeline, AVanishingSourceIsReportedAndTheMeshesSoFarAreKept) {
 }
 
 TEST(ScanPipeline, AnUnpluggedGrabberIsReportedAndTheScanGoesOnWhenItIsBack) {
-  ScanPipeline pipeline(fake_source(std::make_unique<UnpluggingFrames>(40, 33, 15, 0.3),
-                                    sliding_poses(60.0, -100, 2000, 25)),
-                        std::make_unique<FakeSegmentation>(),
-                        std::make_unique<FakeReconstruction>(), fast_options());
+  ScanPipeline pipeline(
+      fake_source(std::make_unique<acq::SourceOf<UnpluggingFrames>>(40, 33, 15, 0.3),
+                  sliding_poses(60.0, -100, 2000, 25)),
+      std::make_unique<FakeSegmentation>(), std::make_unique<FakeReconstruction>(), fast_options());
   auto sink = std::make_shared<RecordingSink>();
   pipeline.add_sink(sink);
   ASSERT_TRUE(pipeline.start());
@@ -439,9 +438,10 @@ TEST(ScanPipeline, StopRequestFinishesCleanly) {
   ScanOptions options;
   options.real_time = true;
   options.keyframes = {3.0, 1.0};
-  ScanPipeline pipeline(
-      fake_source(std::make_unique<FakeFrames>(1000, 10), sliding_poses(300.0, -100, 11000, 10)),
-      std::make_unique<FakeSegmentation>(), std::make_unique<FakeReconstruction>(5), options);
+  ScanPipeline pipeline(fake_source(std::make_unique<acq::SourceOf<FakeFrames>>(1000, 10),
+                                    sliding_poses(300.0, -100, 11000, 10)),
+                        std::make_unique<FakeSegmentation>(),
+                        std::make_unique<FakeReconstruction>(5), options);
   auto sink = std::make_shared<RecordingSink>();
   pipeline.add_sink(sink);
   ASSERT_TRUE(pipeline.start());
@@ -461,9 +461,10 @@ TEST(ScanPipeline, StopRequestFinishesCleanly) {
 TEST(ScanPipeline, MaxSlicesAndDurationStopTheScan) {
   ScanOptions options = fast_options();
   options.max_slices = 7;
-  ScanPipeline capped(
-      fake_source(std::make_unique<FakeFrames>(100, 33), sliding_poses(60.0, -100, 4000, 25)),
-      std::make_unique<FakeSegmentation>(), std::make_unique<FakeReconstruction>(), options);
+  ScanPipeline capped(fake_source(std::make_unique<acq::SourceOf<FakeFrames>>(100, 33),
+                                  sliding_poses(60.0, -100, 4000, 25)),
+                      std::make_unique<FakeSegmentation>(), std::make_unique<FakeReconstruction>(),
+                      options);
   ASSERT_TRUE(capped.start());
   const ScanSummary summary = capped.finish();
   EXPECT_EQ(summary.stop_reason, StopReason::kMaxSlices);
@@ -472,9 +473,10 @@ TEST(ScanPipeline, MaxSlicesAndDurationStopTheScan) {
   ScanOptions timed;
   timed.real_time = true;
   timed.duration_s = 0.2;
-  ScanPipeline limited(
-      fake_source(std::make_unique<FakeFrames>(1000, 10), sliding_poses(60.0, -100, 11000, 10)),
-      std::make_unique<FakeSegmentation>(), std::make_unique<FakeReconstruction>(), timed);
+  ScanPipeline limited(fake_source(std::make_unique<acq::SourceOf<FakeFrames>>(1000, 10),
+                                   sliding_poses(60.0, -100, 11000, 10)),
+                       std::make_unique<FakeSegmentation>(), std::make_unique<FakeReconstruction>(),
+                       timed);
   ASSERT_TRUE(limited.start());
   const ScanSummary ended = limited.finish();
   EXPECT_EQ(ended.stop_reason, StopReason::kDuration);
@@ -488,9 +490,10 @@ TEST(ScanPipeline, PastTheSliceBudgetKeyframesComeAtHalfTheDensity) {
   auto scan = [&](std::size_t budget) {
     ScanOptions options = fast_options();
     options.keyframes.slice_budget = budget;
-    ScanPipeline pipeline(
-        fake_source(std::make_unique<FakeFrames>(60, 33), sliding_poses(mm_per_s, -100, 2100, 25)),
-        std::make_unique<FakeSegmentation>(), std::make_unique<FakeReconstruction>(), options);
+    ScanPipeline pipeline(fake_source(std::make_unique<acq::SourceOf<FakeFrames>>(60, 33),
+                                      sliding_poses(mm_per_s, -100, 2100, 25)),
+                          std::make_unique<FakeSegmentation>(),
+                          std::make_unique<FakeReconstruction>(), options);
     auto sink = std::make_shared<RecordingSink>();
     pipeline.add_sink(sink);
     EXPECT_TRUE(pipeline.start());
@@ -514,7 +517,7 @@ TEST(ScanPipeline, RejectsMissingParts) {
                std::invalid_argument);
   ScanOptions zero;
   zero.segmentation_queue = 0;
-  EXPECT_THROW(ScanPipeline(fake_source(std::make_unique<FakeFrames>(1, 10), {}),
+  EXPECT_THROW(ScanPipeline(fake_source(std::make_unique<acq::SourceOf<FakeFrames>>(1, 10), {}),
                             std::make_unique<FakeSegmentation>(),
                             std::make_unique<FakeReconstruction>(), zero),
                std::invalid_argument);
@@ -525,7 +528,7 @@ TEST(ScanPipeline, SegmentationRepairsAreCountedAndListedWithTheirFrame) {
   // the first 20 listed with their frame index, and scan.json carries them.
   std::set<std::int64_t> repaired;
   for (std::int64_t k = 4; k < 29; ++k) repaired.insert(k);
-  ScanPipeline pipeline(fake_source(std::make_unique<FakeFrames>(40, 33),
+  ScanPipeline pipeline(fake_source(std::make_unique<acq::SourceOf<FakeFrames>>(40, 33),
                                     sliding_poses(36.0 * 33.0 / 33.333, -100, 1500, 25)),
                         std::make_unique<FakeSegmentation>(std::set<std::int64_t>{}, repaired),
                         std::make_unique<FakeReconstruction>(), fast_options());

@@ -30,10 +30,9 @@ double monotonic_now_s() {
 }
 
 // A live probe: `count` tiny frames every `period_s`, stamped with CLOCK_MONOTONIC.
-class MonotonicFrames final : public acq::FrameSource {
+class MonotonicFrames final : public acq::FrameBackend {
  public:
   MonotonicFrames(int count, double period_s) : count_(count), period_s_(period_s) {}
-  ~MonotonicFrames() override { stop(); }
   std::string describe() const override { return "monotonic probe"; }
 
  protected:
@@ -146,7 +145,7 @@ TEST(ScanWithTrakstar, UnplugAndReplugMidScanKeepTheMeshesAndPosesResume) {
   tracking::TrakstarPoseSource* tracker_view = tracker.get();
 
   ScanSource source;
-  source.frames = std::make_unique<MonotonicFrames>(100, 0.02);  // 2 s at 50 fps
+  source.frames = std::make_unique<acq::SourceOf<MonotonicFrames>>(100, 0.02);  // 2 s at 50 fps
   source.poses = std::move(tracker);
   source.setup.geometry = seg::full_image_geometry(8, 8, 1.0);
   source.setup.T_probe_image = Eigen::Matrix4d::Identity();
@@ -170,7 +169,7 @@ TEST(ScanWithTrakstar, UnplugAndReplugMidScanKeepTheMeshesAndPosesResume) {
   const ScanSummary summary = pipeline.finish();
 
   EXPECT_EQ(summary.stop_reason, StopReason::kSourceEnded);
-  const tracking::TrakstarCounts counts = tracker_view->counts();
+  const tracking::TrakstarCounts counts = tracker_view->backend().counts();
   EXPECT_EQ(counts.unplugged, 1u);
   EXPECT_EQ(counts.reopened, 1u);
   // Reported both ways in the scan's status.

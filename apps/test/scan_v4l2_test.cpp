@@ -363,7 +363,7 @@ TEST(ScanV4l2, SimulatedSweepThroughEmulatedGrabberAndTrackerReconstructsAsThrou
   {
     RealTimeGrabber grabber(driver, std::move(buffers), 0.02);
     summary = run_scan(std::move(*source), emulated, 11, ScanOptions{},  // real time
-                       [&] { counts = tracker_view->counts(); });
+                       [&] { counts = tracker_view->backend().counts(); });
   }
 
   EXPECT_EQ(summary.counters.frames_received, 11u);
@@ -471,8 +471,8 @@ TEST(ScanV4l2, GrabberUnpluggedMidScanIsReportedAndTheScanGoesOnWithItsMeshes) {
   const ScanSummary summary = pipeline.finish();
 
   EXPECT_EQ(summary.counters.dropped.total(), 0u);
-  EXPECT_EQ(watched->counters().unplugs, 1u);
-  EXPECT_EQ(watched->counters().reopens, 1u);
+  EXPECT_EQ(watched->backend().counters().unplugs, 1u);
+  EXPECT_EQ(watched->backend().counters().reopens, 1u);
   ASSERT_EQ(summary.errors.size(), 1u);
   EXPECT_TRUE(testing::contains(summary.errors[0], "vanished")) << summary.errors[0];
   EXPECT_FALSE(during.meshes.empty());

@@ -10,9 +10,13 @@
 #include <string_view>
 #include <utility>
 
-#include "slice_io_internal.hpp"
+#include "repair_log.hpp"
+#include "ring_checks.hpp"
+#include "ring_repair.hpp"
+#include "slice_rules.hpp"
 #include "sonoshape/core/log.hpp"
 #include "sonoshape/core/slice_io.hpp"
+#include "text_io.hpp"
 
 namespace sonoshape {
 namespace {

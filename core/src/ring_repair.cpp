@@ -1,5 +1,7 @@
 // Repair of contours that cross themselves: the simple polygons a contour encloses, by Clipper's
 // union with the non-zero fill rule.
+#include "ring_repair.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -8,7 +10,8 @@
 #include <polyclipping/clipper.hpp>
 #include <utility>
 
-#include "slice_io_internal.hpp"
+#include "ring_checks.hpp"
+#include "text_io.hpp"
 
 namespace sonoshape::detail {
 namespace {

@@ -9,7 +9,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "sonoshape/core/errors.hpp"
-#include "sonoshape/simulator/mesh_slicer.hpp"
+#include "sonoshape/core/mesh_slicer.hpp"
 
 namespace sonoshape::sim {
 namespace {

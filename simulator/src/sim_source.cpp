@@ -28,9 +28,8 @@ std::optional<LabelImage> FrameTruthStore::take(std::int64_t index) {
   return std::nullopt;
 }
 
-SimFrameSource::SimFrameSource(std::shared_ptr<const BModeSimulator> simulator,
-                               Trajectory trajectory, const SimFrameOptions& options,
-                               std::string name)
+SimFrames::SimFrames(std::shared_ptr<const BModeSimulator> simulator, Trajectory trajectory,
+                     const SimFrameOptions& options, std::string name)
     : simulator_(std::move(simulator)),
       trajectory_(std::move(trajectory)),
       options_(options),
@@ -41,15 +40,13 @@ SimFrameSource::SimFrameSource(std::shared_ptr<const BModeSimulator> simulator,
         "SimFrameSource: need a positive frame rate, frames and a first frame >= 0");
 }
 
-SimFrameSource::~SimFrameSource() { stop(); }
-
-Status SimFrameSource::open() {
+Status SimFrames::open() {
   next_ = options_.first_frame;
   delivered_ = 0;
   return Status::ok();
 }
 
-Result<acq::Polled> SimFrameSource::poll(Frame& frame) {
+Result<acq::Polled> SimFrames::poll(Frame& frame) {
   if (options_.fail_after_frames >= 0 && delivered_ >= options_.fail_after_frames)
     return Status::error(name_ + ": probe vanished after " + std::to_string(delivered_) +
                          " frames (simulated fault; check the probe's cable)");

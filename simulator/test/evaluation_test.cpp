@@ -6,7 +6,7 @@
 
 #include "sonoshape/core/errors.hpp"
 #include "sonoshape/core/log.hpp"
-#include "sonoshape/simulator/mesh_slicer.hpp"
+#include "sonoshape/core/mesh_slicer.hpp"
 #include "sonoshape/simulator/plane_generator.hpp"
 #include "test_shapes.hpp"
 

@@ -1,4 +1,4 @@
-#include "sonoshape/simulator/mesh_slicer.hpp"
+#include "sonoshape/core/mesh_slicer.hpp"
 
 #include <gtest/gtest.h>
 

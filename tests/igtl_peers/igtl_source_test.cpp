@@ -93,7 +93,7 @@ std::vector<Item> take(Source& source, std::size_t count, double timeout_s) {
 TEST(IgtlSources, FramesFromDebiansImagerServerArriveWholeAndInOrder) {
   Peer imager({IMAGER_SERVER, "50", IMAGER_IMAGES});  // 50 frames per second
   ASSERT_TRUE(imager.up());
-  acq::IgtlFrameSource source({"127.0.0.1", imager.port()}, "");
+  acq::IgtlFrameSource source(acq::IgtlEndpoint{"127.0.0.1", imager.port()}, "");
   const double before_s = wall_clock_s();
   ASSERT_TRUE(source.start());
   const std::vector<Frame> frames = take<acq::IgtlFrameSource, Frame>(source, 10, 10.0);
@@ -118,7 +118,7 @@ TEST(IgtlSources, FramesFromDebiansImagerServerArriveWholeAndInOrder) {
 TEST(IgtlSources, PosesFromDebiansTrackerServerAreItsMatricesInOrder) {
   Peer tracker({TRACKER_SERVER, "50"});
   ASSERT_TRUE(tracker.up());
-  tracking::IgtlPoseSource source({"127.0.0.1", tracker.port()}, "Tracker",
+  tracking::IgtlPoseSource source(acq::IgtlEndpoint{"127.0.0.1", tracker.port()}, "Tracker",
                                   tracking::IgtlPoseFrom::kTransform);
   ASSERT_TRUE(source.start());
   const std::vector<Pose> poses = take<tracking::IgtlPoseSource, Pose>(source, 5, 10.0);
@@ -150,7 +150,7 @@ TEST(IgtlSources, PosesFromDebiansTrackingDataServerAreOneToolOfItsTdataStream) 
   Peer server({TRACKING_DATA_SERVER});
   ASSERT_TRUE(server.up());
   // It streams only after STT_TDATA, which the source sends on connection.
-  tracking::IgtlPoseSource channel0({"127.0.0.1", server.port()}, "Channel 0",
+  tracking::IgtlPoseSource channel0(acq::IgtlEndpoint{"127.0.0.1", server.port()}, "Channel 0",
                                     tracking::IgtlPoseFrom::kTrackingData);
   ASSERT_TRUE(channel0.start());
   const std::vector<Pose> poses = take<tracking::IgtlPoseSource, Pose>(channel0, 5, 10.0);
@@ -204,7 +204,7 @@ TEST(IgtlSources, AStampFromBeyondTomorrowIsReplacedByTheArrivalTime) {
     ::close(peer);
   });
   const double before_s = wall_clock_s();
-  tracking::IgtlPoseSource source({"127.0.0.1", port}, "Tracker",
+  tracking::IgtlPoseSource source(acq::IgtlEndpoint{"127.0.0.1", port}, "Tracker",
                                   tracking::IgtlPoseFrom::kTransform);
   ASSERT_TRUE(source.start());
   const std::vector<Pose> poses = take<tracking::IgtlPoseSource, Pose>(source, 2, 5.0);
@@ -220,9 +220,9 @@ TEST(IgtlSources, AnImagesOwnPoseAndPixelsSurviveTheRoundTripThroughOurServer) {
   options.port = 0;
   auto server = publish::IgtlServer::start(options);
   ASSERT_TRUE(server) << server.message();
-  tracking::IgtlPoseSource poses({"127.0.0.1", server->port()}, "Image",
+  tracking::IgtlPoseSource poses(acq::IgtlEndpoint{"127.0.0.1", server->port()}, "Image",
                                  tracking::IgtlPoseFrom::kImage);
-  acq::IgtlFrameSource frames({"127.0.0.1", server->port()}, "Image");
+  acq::IgtlFrameSource frames(acq::IgtlEndpoint{"127.0.0.1", server->port()}, "Image");
   ASSERT_TRUE(poses.start());
   ASSERT_TRUE(frames.start());
   for (int k = 0; k < 100 && server->stats().clients < 2; ++k)
@@ -258,9 +258,9 @@ TEST(IgtlSources, AServerRestartedMidStreamIsReportedAndFramesAndPosesResume) {
   auto server = publish::IgtlServer::start(options);
   ASSERT_TRUE(server) << server.message();
   options.port = server->port();  // the restarted server listens where the first did
-  tracking::IgtlPoseSource poses({"127.0.0.1", options.port}, "Image",
+  tracking::IgtlPoseSource poses(acq::IgtlEndpoint{"127.0.0.1", options.port}, "Image",
                                  tracking::IgtlPoseFrom::kImage);
-  acq::IgtlFrameSource frames({"127.0.0.1", options.port}, "Image");
+  acq::IgtlFrameSource frames(acq::IgtlEndpoint{"127.0.0.1", options.port}, "Image");
   ASSERT_TRUE(poses.start());
   ASSERT_TRUE(frames.start());
   auto wait_for_clients = [](const publish::IgtlServer& s, std::size_t n) {
@@ -301,7 +301,7 @@ TEST(IgtlSources, AServerRestartedMidStreamIsReportedAndFramesAndPosesResume) {
 
 TEST(IgtlSources, ANoServerIsAFailedSourceNamingTheAddress) {
   const int port = testing::free_port();
-  acq::IgtlFrameSource source({"127.0.0.1", port}, "");
+  acq::IgtlFrameSource source(acq::IgtlEndpoint{"127.0.0.1", port}, "");
   ASSERT_TRUE(source.start());
   EXPECT_TRUE((take<acq::IgtlFrameSource, Frame>(source, 1, 5.0).empty()));
   EXPECT_EQ(source.state(), acq::SourceState::kFailed);

@@ -2,7 +2,7 @@
 
 namespace sonoshape::tracking {
 
-IgtlPoseSource::IgtlPoseSource(acq::IgtlEndpoint endpoint, std::string device, IgtlPoseFrom from)
+IgtlPoses::IgtlPoses(acq::IgtlEndpoint endpoint, std::string device, IgtlPoseFrom from)
     : device_(std::move(device)),
       from_(from),
       // TDATA streams only on request, on every connection; every 20 ms (50 Hz) is as fast as
@@ -15,14 +15,12 @@ IgtlPoseSource::IgtlPoseSource(acq::IgtlEndpoint endpoint, std::string device, I
                 : acq::IgtlLink::OnConnect()),
       drops_("igtl:" + link_.endpoint().text()) {}
 
-IgtlPoseSource::~IgtlPoseSource() { stop(); }
-
-std::string IgtlPoseSource::describe() const {
+std::string IgtlPoses::describe() const {
   return "igtl:" + link_.endpoint().text() +
          (from_ == IgtlPoseFrom::kTransform ? " (TRANSFORM " + device_ + ")" : " (IMAGE poses)");
 }
 
-Status IgtlPoseSource::open() { return link_.open(); }
+Status IgtlPoses::open() { return link_.open(); }
 
 Pose pose_from_matrix(const Eigen::Matrix4d& T, double timestamp_s) {
   Pose pose;
@@ -39,7 +37,7 @@ Pose pose_from_matrix(const Eigen::Matrix4d& T, double timestamp_s) {
   return pose;
 }
 
-Result<acq::Polled> IgtlPoseSource::poll(Pose& pose) {
+Result<acq::Polled> IgtlPoses::poll(Pose& pose) {
   const std::optional<acq::IgtlMessage> message = link_.next(0.1);
   set_condition(link_.trouble());
   if (!message) return acq::Polled::kNothing;

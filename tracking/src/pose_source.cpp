@@ -6,17 +6,15 @@
 
 namespace sonoshape::tracking {
 
-RecordedPoseSource::RecordedPoseSource(std::vector<Pose> samples, std::string name, long fail_after)
+RecordedPoses::RecordedPoses(std::vector<Pose> samples, std::string name, long fail_after)
     : samples_(std::move(samples)), name_(std::move(name)), fail_after_(fail_after) {}
 
-RecordedPoseSource::~RecordedPoseSource() { stop(); }
-
-Status RecordedPoseSource::open() {
+Status RecordedPoses::open() {
   next_ = 0;
   return Status::ok();
 }
 
-Result<acq::Polled> RecordedPoseSource::poll(Pose& pose) {
+Result<acq::Polled> RecordedPoses::poll(Pose& pose) {
   if (fail_after_ >= 0 && next_ >= static_cast<std::size_t>(fail_after_))
     return Status::error(name_ + ": tracker vanished after " + std::to_string(next_) +
                          " samples (check the tracker's cable and power)");
@@ -78,15 +76,15 @@ Pose replay_pose(const acq::SequenceFile& file, std::size_t k, const std::string
                        has_transform(file, reference_transform));
 }
 
-ReplayPoseSource::ReplayPoseSource(std::shared_ptr<const acq::SequenceFile> file, std::string name,
-                                   std::string probe_transform, std::string reference_transform)
+ReplayPoses::ReplayPoses(std::shared_ptr<const acq::SequenceFile> file, std::string name,
+                         std::string probe_transform, std::string reference_transform)
     : file_(std::move(file)),
       name_(std::move(name)),
       probe_(std::move(probe_transform)),
       reference_(std::move(reference_transform)) {}
 
-ReplayPoseSource::ReplayPoseSource(std::shared_ptr<const acq::SequenceFile> file, std::string name,
-                                   acq::PoseChain chain)
+ReplayPoses::ReplayPoses(std::shared_ptr<const acq::SequenceFile> file, std::string name,
+                         acq::PoseChain chain)
     : file_(std::move(file)), name_(std::move(name)), chain_(std::move(chain)) {}
 
 Pose replay_pose(const acq::SequenceFile& file, std::size_t k, const acq::PoseChain& chain) {
@@ -100,9 +98,7 @@ Pose replay_pose(const acq::SequenceFile& file, std::size_t k, const acq::PoseCh
   return pose;
 }
 
-ReplayPoseSource::~ReplayPoseSource() { stop(); }
-
-Status ReplayPoseSource::open() {
+Status ReplayPoses::open() {
   if (!file_ || file_->frame_count() == 0)
     return Status::error(describe() + ": the sequence has no frames");
   next_ = 0;
@@ -120,7 +116,7 @@ Status ReplayPoseSource::open() {
   return Status::ok();
 }
 
-Result<acq::Polled> ReplayPoseSource::poll(Pose& pose) {
+Result<acq::Polled> ReplayPoses::poll(Pose& pose) {
   if (next_ >= file_->frame_count()) return acq::Polled::kEnd;
   pose = chain_ ? replay_pose(*file_, next_++, *chain_)
                 : pose_of_frame(*file_, next_++, probe_, reference_, has_reference_);

@@ -91,45 +91,43 @@ Result<TrakstarOptions> parse_trakstar_options(std::string_view text) {
   return options;
 }
 
-TrakstarPoseSource::TrakstarPoseSource(TrakstarOptions options, BirdTransportOpener opener)
+TrakstarPoses::TrakstarPoses(TrakstarOptions options, BirdTransportOpener opener)
     : options_(options), opener_(opener ? std::move(opener) : libusb_trakstar_opener(options)) {}
 
-TrakstarPoseSource::~TrakstarPoseSource() { stop(); }
-
-std::string TrakstarPoseSource::describe() const {
+std::string TrakstarPoses::describe() const {
   std::ostringstream text;
   text << "usb:trakstar sensor " << options_.sensor << " at " << options_.rate_hz << " Hz";
   return text.str();
 }
 
-TrakstarCounts TrakstarPoseSource::counts() const {
+TrakstarCounts TrakstarPoses::counts() const {
   std::lock_guard lock(mutex_);
   return counts_;
 }
 
-std::string TrakstarPoseSource::status_line() const {
+std::string TrakstarPoses::status_line() const {
   std::lock_guard lock(mutex_);
   return status_;
 }
 
-void TrakstarPoseSource::count(const std::function<void(TrakstarCounts&)>& change) {
+void TrakstarPoses::count(const std::function<void(TrakstarCounts&)>& change) {
   std::lock_guard lock(mutex_);
   change(counts_);
 }
 
-void TrakstarPoseSource::set_status(std::string line) {
+void TrakstarPoses::set_status(std::string line) {
   std::lock_guard lock(mutex_);
   status_ = std::move(line);
 }
 
-Status TrakstarPoseSource::open() {
+Status TrakstarPoses::open() {
   if (Status connected = connect(); !connected) return connected;
   set_status("connected");
   connected_.store(true);
   return Status::ok();
 }
 
-Status TrakstarPoseSource::connect() {
+Status TrakstarPoses::connect() {
   std::string error;
   transport_ = opener_(error);
   if (!transport_) return Status::error(describe() + ": " + error);
@@ -142,7 +140,7 @@ Status TrakstarPoseSource::connect() {
 
 // Range, rate and record format, then EXAMINE VALUE of the range: an answer proves the device
 // speaks the Bird protocol.
-Status TrakstarPoseSource::configure() {
+Status TrakstarPoses::configure() {
   drain_input();  // what the device sent before (a reopened handle) answers nothing now
   const auto rate = static_cast<std::uint16_t>(std::lround(options_.rate_hz * 256.0));
   const std::uint16_t scaling = options_.long_range ? 1 : 0;
@@ -178,7 +176,7 @@ Status TrakstarPoseSource::configure() {
   return Status::ok();
 }
 
-void TrakstarPoseSource::drain_input() {
+void TrakstarPoses::drain_input() {
   std::array<std::uint8_t, 64> buffer{};
   std::size_t received = 0;
   std::size_t drained = 0;
@@ -189,7 +187,7 @@ void TrakstarPoseSource::drain_input() {
 
 // The status and counts change before connected() does: a thread that sees the tracker gone
 // sees why.
-void TrakstarPoseSource::lost(const std::string& why) {
+void TrakstarPoses::lost(const std::string& why) {
   transport_.reset();
   next_reopen_s_ = clock_monotonic_s();
   const std::string line = why + "; waiting for the tracker to come back";
@@ -200,7 +198,7 @@ void TrakstarPoseSource::lost(const std::string& why) {
   log_warning(describe() + ": " + line);
 }
 
-Result<acq::Polled> TrakstarPoseSource::reopen() {
+Result<acq::Polled> TrakstarPoses::reopen() {
   const double now_s = clock_monotonic_s();
   if (now_s < next_reopen_s_) {
     std::this_thread::sleep_for(
@@ -217,7 +215,7 @@ Result<acq::Polled> TrakstarPoseSource::reopen() {
   return acq::Polled::kNothing;
 }
 
-Result<acq::Polled> TrakstarPoseSource::poll(Pose& pose) {
+Result<acq::Polled> TrakstarPoses::poll(Pose& pose) {
   if (!transport_) return reopen();
   // One POINT per measurement period: the device answers with its latest measurement.
   if (const double early_s = next_point_s_ - clock_monotonic_s(); early_s > 0.0) {
@@ -241,7 +239,7 @@ Result<acq::Polled> TrakstarPoseSource::poll(Pose& pose) {
   return acq::Polled::kItem;
 }
 
-std::optional<std::vector<std::uint8_t>> TrakstarPoseSource::point() {
+std::optional<std::vector<std::uint8_t>> TrakstarPoses::point() {
   const UsbIo wrote =
       transport_->write(bird::addressed(options_.sensor, {bird::kPoint}), options_.reply_timeout_s);
   if (wrote == UsbIo::kGone || wrote == UsbIo::kError) {
@@ -271,7 +269,7 @@ std::optional<std::vector<std::uint8_t>> TrakstarPoseSource::point() {
   return record;
 }
 
-Pose TrakstarPoseSource::to_pose(const std::vector<std::uint8_t>& record, double received_s) {
+Pose TrakstarPoses::to_pose(const std::vector<std::uint8_t>& record, double received_s) {
   const auto words = bird::unpack_words(record);  // the framer checked the phasing
   const bird::Measurement m =
       bird::decode_record(*words, kFormat, bird::full_scale_in(options_.long_range));
@@ -299,7 +297,7 @@ Pose TrakstarPoseSource::to_pose(const std::vector<std::uint8_t>& record, double
   return pose;
 }
 
-void TrakstarPoseSource::close() {
+void TrakstarPoses::close() {
   transport_.reset();
   connected_.store(false);
 }

@@ -32,7 +32,7 @@ TEST(TrakstarHardware, ARealUnitDeliversPosesAtItsRate) {
       break;
   source.stop();
   ASSERT_EQ(poses.size(), 100u) << source.message();
-  const TrakstarCounts c = source.counts();
+  const TrakstarCounts c = source.backend().counts();
   EXPECT_GT(c.valid, 0u) << "every record invalid: is the sensor on port " << options->sensor
                          << " attached and within range?";
   const double span_s = poses.back().timestamp_s - poses.front().timestamp_s;

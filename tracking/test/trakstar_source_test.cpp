@@ -77,8 +77,8 @@ TEST(TrakstarPoseSource, DeliversTheEmulatorsPosesInMillimetresStampedOnReceptio
   }
   // POINTs are paced at the measurement rate: 20 samples at 200 Hz take at least 95 ms.
   EXPECT_GT(poses.back().timestamp_s - poses.front().timestamp_s, 19 / 200.0 - 0.005);
-  within_one(source.counts().valid, poses.size());
-  EXPECT_EQ(source.status_line(), "connected");
+  within_one(source.backend().counts().valid, poses.size());
+  EXPECT_EQ(source.backend().status_line(), "connected");
 }
 
 TEST(TrakstarPoseSource, LongRangeReadsPositionsBeyond36Inches) {
@@ -102,7 +102,7 @@ TEST(TrakstarPoseSource, LongRangeReadsPositionsBeyond36Inches) {
         EXPECT_NEAR(p.T_reference_probe.translation().x(), 1500.0, 0.25);
       }
     }
-    within_one(source.counts().out_of_range, long_range ? 0u : poses.size());
+    within_one(source.backend().counts().out_of_range, long_range ? 0u : poses.size());
   }
 }
 
@@ -127,7 +127,7 @@ TEST(TrakstarPoseSource, FaultScriptGivesInvalidPosesCountedByReasonAndRecovers)
     ASSERT_EQ(poses[k].status, k < expected.size() ? expected[k] : TrackingStatus::kValid) << k;
     if (poses[k].status == TrackingStatus::kValid) expect_near(poses[k], sent[valid++], k);
   }
-  const TrakstarCounts c = source.counts();
+  const TrakstarCounts c = source.backend().counts();
   within_one(c.valid, count_valid(poses));
   EXPECT_EQ(count_valid(poses), poses.size() - 3);
   EXPECT_EQ(c.not_attached, 2u);
@@ -144,12 +144,13 @@ TEST(TrakstarPoseSource, UnplugMidStreamIsReportedAndPosesContinueAfterReplug) {
   ASSERT_EQ(take(source, 5).size(), 5u);
   device.plugged = false;
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(5);
-  while (source.connected() && std::chrono::steady_clock::now() < deadline)
+  while (source.backend().connected() && std::chrono::steady_clock::now() < deadline)
     std::this_thread::sleep_for(std::chrono::milliseconds(1));
-  ASSERT_FALSE(source.connected());
-  EXPECT_NE(source.status_line().find("waiting for the tracker to come back"), std::string::npos)
-      << source.status_line();
-  EXPECT_EQ(source.condition(), source.status_line());
+  ASSERT_FALSE(source.backend().connected());
+  EXPECT_NE(source.backend().status_line().find("waiting for the tracker to come back"),
+            std::string::npos)
+      << source.backend().status_line();
+  EXPECT_EQ(source.condition(), source.backend().status_line());
   // Tries to reopen while unplugged, and the source keeps running.
   const int opens = device.opens;
   std::this_thread::sleep_for(std::chrono::milliseconds(50));
@@ -161,9 +162,9 @@ TEST(TrakstarPoseSource, UnplugMidStreamIsReportedAndPosesContinueAfterReplug) {
   const auto after = take_then_stop(source, 5);
   ASSERT_GE(after.size(), 5u);
   for (const Pose& p : after) EXPECT_EQ(p.status, TrackingStatus::kValid);
-  EXPECT_EQ(source.counts().unplugged, 1u);
-  EXPECT_EQ(source.counts().reopened, 1u);
-  EXPECT_EQ(source.status_line(), "connected (reopened after an unplug)");
+  EXPECT_EQ(source.backend().counts().unplugged, 1u);
+  EXPECT_EQ(source.backend().counts().reopened, 1u);
+  EXPECT_EQ(source.backend().status_line(), "connected (reopened after an unplug)");
   EXPECT_EQ(source.condition(), "");
 }
 

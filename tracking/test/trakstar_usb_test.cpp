@@ -300,7 +300,7 @@ TEST_F(TrakstarUsb, KnownPosesArriveThroughLibusbWithFaultsCountedByReason) {
     EXPECT_LT((poses[k].T_reference_probe.linear() - expected.linear()).cwiseAbs().maxCoeff(),
               1e-3);
   }
-  const TrakstarCounts c = source.counts();
+  const TrakstarCounts c = source.backend().counts();
   within_one(c.valid, count_valid(poses));
   EXPECT_EQ(c.not_attached, 1u);
   EXPECT_EQ(c.out_of_range, 1u);
@@ -332,9 +332,9 @@ TEST_F(TrakstarUsb, AStalledEndpointIsClearedAndPosesContinue) {
   ASSERT_GE(after.size(), 5u) << source.message();
   for (const Pose& p : after) EXPECT_EQ(p.status, TrackingStatus::kValid);
   EXPECT_GE(bed.handler.clear_halts.load(), 1);
-  EXPECT_EQ(source.counts().stalls, 1u);
-  EXPECT_EQ(source.counts().timeouts, 0u);  // the record still came after the clear
-  EXPECT_EQ(source.counts().unplugged, 0u);
+  EXPECT_EQ(source.backend().counts().stalls, 1u);
+  EXPECT_EQ(source.backend().counts().timeouts, 0u);  // the record still came after the clear
+  EXPECT_EQ(source.backend().counts().unplugged, 0u);
 }
 
 TEST_F(TrakstarUsb, UnplugAndReplugMidStreamAreReportedAndRecovered) {
@@ -345,21 +345,21 @@ TEST_F(TrakstarUsb, UnplugAndReplugMidStreamAreReportedAndRecovered) {
   ASSERT_EQ(take(source, 5).size(), 5u) << source.message();
   bed.unplug();
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
-  while (source.connected() && std::chrono::steady_clock::now() < deadline)
+  while (source.backend().connected() && std::chrono::steady_clock::now() < deadline)
     std::this_thread::sleep_for(std::chrono::milliseconds(2));
-  ASSERT_FALSE(source.connected());
+  ASSERT_FALSE(source.backend().connected());
   EXPECT_EQ(source.state(), acq::SourceState::kRunning);
-  EXPECT_NE(source.status_line().find("waiting for the tracker"), std::string::npos);
+  EXPECT_NE(source.backend().status_line().find("waiting for the tracker"), std::string::npos);
   std::this_thread::sleep_for(std::chrono::milliseconds(100));
-  EXPECT_FALSE(source.connected());  // nothing to reopen while unplugged
+  EXPECT_FALSE(source.backend().connected());  // nothing to reopen while unplugged
   while (source.next(0.0)) {
   }
   bed.replug();
   const auto after = take_then_stop(source, 5);
-  ASSERT_GE(after.size(), 5u) << source.status_line();
+  ASSERT_GE(after.size(), 5u) << source.backend().status_line();
   for (const Pose& p : after) EXPECT_EQ(p.status, TrackingStatus::kValid);
-  EXPECT_EQ(source.counts().unplugged, 1u);
-  EXPECT_EQ(source.counts().reopened, 1u);
+  EXPECT_EQ(source.backend().counts().unplugged, 1u);
+  EXPECT_EQ(source.backend().counts().reopened, 1u);
 }
 
 }  // namespace

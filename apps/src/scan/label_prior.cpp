@@ -6,7 +6,7 @@
 #include <stdexcept>
 
 #include "sonoshape/core/log.hpp"
-#include "sonoshape/simulator/mesh_slicer.hpp"
+#include "sonoshape/core/mesh_slicer.hpp"
 
 namespace sonoshape::scan {
 namespace {
@@ -19,11 +19,11 @@ double ring_area(const Ring2& ring) { return std::abs(signed_area(ring)); }
 
 LabelImage predict_label_map(const MeshSet& meshes, const seg::ImagePlane& plane,
                              const seg::ImageGeometry& geometry) {
-  std::vector<sim::LabeledMesh> labelled;
+  std::vector<LabeledMesh> labelled;
   for (const auto& entry : meshes.meshes)
     if (!entry.mesh.triangles.empty()) labelled.push_back({entry.label, entry.name, entry.mesh});
   LabeledSlice cut;
-  if (!labelled.empty()) cut = sim::slice_meshes(labelled, {plane.origin_mm, plane.u, plane.v});
+  if (!labelled.empty()) cut = slice_meshes(labelled, {plane.origin_mm, plane.u, plane.v});
   // Plane mm -> pixel: the inverse of the image plane's affine map.
   const Eigen::Matrix2d to_pixel = plane.pixel_to_plane.leftCols<2>().inverse();
   const Vec2 offset = plane.pixel_to_plane.col(2);

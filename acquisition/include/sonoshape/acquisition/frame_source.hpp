@@ -1,6 +1,7 @@
 #pragma once
-// FrameSource: the interface of every image source (design.md data path), and the replay of a
-// PLUS sequence file. Hardware backends (v4l2, OpenIGTLink) derive from it too.
+// FrameSource: the stream of every image source (design.md data path), FrameBackend: what an
+// image backend implements, and the replay of a PLUS sequence file. Hardware backends (v4l2,
+// OpenIGTLink) are FrameBackends too.
 #include <filesystem>
 #include <memory>
 #include <string>
@@ -13,23 +14,21 @@ namespace sonoshape::acq {
 
 /// A stream of ultrasound frames (timestamps on the frame source's clock, indices from 0).
 /// See StreamSource for the threading and lifetime rules.
-class FrameSource : public StreamSource<Frame> {
- protected:
-  double timestamp_s(const Frame& frame) const override { return frame.timestamp_s; }
-};
+using FrameSource = StreamSource<Frame>;
+/// What an image device, file or simulation implements (open / poll / close).
+using FrameBackend = StreamBackend<Frame>;
 
 /// Replays the frames of a PLUS sequence file in file order: `Frame::timestamp_s` is the
 /// frame's `Timestamp` field (0 when absent), `Frame::index` its position in the file. Frames
 /// whose `ImageStatus` is present and not OK are skipped (counted as lost). Plays in real time
 /// or as fast as possible (SourceOptions::playback).
-class ReplayFrameSource final : public FrameSource {
+class ReplayFrames final : public FrameBackend {
  public:
   /// Replays `file`, shared with the pose replay of the same file, from frame `first_frame` (a
   /// resumed scan goes on after the last frame it journalled); `name` names it in messages
   /// (usually the path).
-  ReplayFrameSource(std::shared_ptr<const SequenceFile> file, std::string name,
-                    std::size_t first_frame = 0);
-  ~ReplayFrameSource() override;
+  ReplayFrames(std::shared_ptr<const SequenceFile> file, std::string name,
+               std::size_t first_frame = 0);
 
   std::string describe() const override { return "replay:" + name_; }
 
@@ -44,6 +43,8 @@ class ReplayFrameSource final : public FrameSource {
   std::size_t first_frame_ = 0;
   std::size_t next_ = 0;
 };
+/// The stream of a ReplayFrames.
+using ReplayFrameSource = SourceOf<ReplayFrames>;
 
 /// The device time of the first frame of a file (its first valid `Timestamp`, else 0): the
 /// device origin for real-time playback of the file.

@@ -18,14 +18,13 @@ namespace sonoshape::acq {
 /// that is not there at start fails the source with its address; one that goes away later is
 /// the source's condition() while it is connected to again (IgtlLink), and frames resume when
 /// it is back.
-class IgtlFrameSource final : public FrameSource {
+class IgtlFrames final : public FrameBackend {
  public:
-  IgtlFrameSource(IgtlEndpoint endpoint, std::string image_device);
+  IgtlFrames(IgtlEndpoint endpoint, std::string image_device);
   /// Reads an open connection, delivering `first` (a message already read from it, e.g. to
   /// learn the image size before the scan starts) before the rest.
-  IgtlFrameSource(IgtlEndpoint endpoint, std::string image_device, IgtlConnection connection,
-                  std::optional<IgtlMessage> first);
-  ~IgtlFrameSource() override;
+  IgtlFrames(IgtlEndpoint endpoint, std::string image_device, IgtlConnection connection,
+             std::optional<IgtlMessage> first);
 
   std::string describe() const override { return "igtl:" + link_.endpoint().text(); }
   std::map<std::string, std::size_t> losses() const override { return drops_.counts(); }
@@ -42,5 +41,7 @@ class IgtlFrameSource final : public FrameSource {
   IgtlDrops drops_;
   std::int64_t next_index_ = 0;
 };
+/// The stream of an IgtlFrames.
+using IgtlFrameSource = SourceOf<IgtlFrames>;
 
 }  // namespace sonoshape::acq

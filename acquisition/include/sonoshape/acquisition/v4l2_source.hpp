@@ -98,18 +98,17 @@ struct V4l2Counters {
   std::size_t reopens = 0;         ///< times it came back and capture resumed
 };
 
-/// A V4L2 capture device as a FrameSource. `Frame::timestamp_s` is the driver's timestamp in
+/// A V4L2 capture device as a FrameBackend. `Frame::timestamp_s` is the driver's timestamp in
 /// CLOCK_MONOTONIC seconds (arrival time when the driver gives none), `Frame::index` counts
 /// delivered frames from 0. Lost frames (driver gaps, error buffers, undecodable frames) are
 /// counted in dropped() and, by reason, in counters(). When the device vanishes (ENODEV) the
 /// source stays running, reports it in condition(), and reopens the device with the same
 /// options, retrying with a doubling wait, until it comes back or stop() is called.
-class V4l2FrameSource final : public FrameSource {
+class V4l2Frames final : public FrameBackend {
  public:
   /// Captures with `options` through `device` (the real system calls unless a test fakes them).
-  explicit V4l2FrameSource(V4l2Options options,
-                           std::shared_ptr<V4l2Device> device = system_v4l2_device());
-  ~V4l2FrameSource() override;
+  explicit V4l2Frames(V4l2Options options,
+                      std::shared_ptr<V4l2Device> device = system_v4l2_device());
 
   /// "v4l2:/dev/videoN".
   std::string describe() const override { return "v4l2:" + options_.device; }
@@ -168,5 +167,7 @@ class V4l2FrameSource final : public FrameSource {
   V4l2Counters counters_;
   std::optional<V4l2Format> format_;
 };
+/// The stream of a V4l2Frames.
+using V4l2FrameSource = SourceOf<V4l2Frames>;
 
 }  // namespace sonoshape::acq

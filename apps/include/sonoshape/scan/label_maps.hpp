@@ -19,8 +19,10 @@
 #include "sonoshape/scan/stages.hpp"
 
 namespace sonoshape::acq {
-class FrameSource;
-}
+template <typename T>
+class StreamSource;
+using FrameSource = StreamSource<Frame>;
+}  // namespace sonoshape::acq
 
 namespace sonoshape::scan {
 

@@ -10,8 +10,8 @@
 
 #include "sonoshape/core/geometry.hpp"
 #include "sonoshape/core/mesh.hpp"
+#include "sonoshape/core/mesh_slicer.hpp"
 #include "sonoshape/core/status.hpp"
-#include "sonoshape/simulator/mesh_slicer.hpp"
 
 namespace sonoshape::sim {
 

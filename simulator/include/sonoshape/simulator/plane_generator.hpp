@@ -4,7 +4,7 @@
 #include <string>
 #include <vector>
 
-#include "sonoshape/simulator/mesh_slicer.hpp"
+#include "sonoshape/core/mesh_slicer.hpp"
 
 namespace sonoshape::sim {
 

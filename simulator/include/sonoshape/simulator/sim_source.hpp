@@ -48,12 +48,11 @@ struct SimFrameOptions {
 
 /// A simulated probe. In real-time playback a frame that could not be rendered in time is
 /// skipped (counted by dropped()), as a real probe's frames are lost when nobody takes them.
-class SimFrameSource final : public acq::FrameSource {
+class SimFrames final : public acq::FrameBackend {
  public:
   /// Throws std::invalid_argument for a null simulator, a non-positive frame rate or no frames.
-  SimFrameSource(std::shared_ptr<const BModeSimulator> simulator, Trajectory trajectory,
-                 const SimFrameOptions& options, std::string name = "sim");
-  ~SimFrameSource() override;
+  SimFrames(std::shared_ptr<const BModeSimulator> simulator, Trajectory trajectory,
+            const SimFrameOptions& options, std::string name = "sim");
 
   std::string describe() const override { return name_; }
   const SimFrameOptions& options() const { return options_; }
@@ -71,6 +70,8 @@ class SimFrameSource final : public acq::FrameSource {
   long next_ = 0;
   long delivered_ = 0;
 };
+/// The stream of a SimFrames.
+using SimFrameSource = acq::SourceOf<SimFrames>;
 
 /// The speckle seed of frame k of a sweep simulated with `seed` (as simulate_sweep uses it).
 std::uint64_t frame_seed(std::uint64_t seed, std::size_t k);

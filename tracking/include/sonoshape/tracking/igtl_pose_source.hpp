@@ -26,10 +26,9 @@ enum class IgtlPoseFrom {
 /// connection is the source's condition() while it is connected to again (acq::IgtlLink).
 /// Messages that cannot be read (a bad CRC, a body of the wrong size) are dropped and counted
 /// in losses() by reason, the first of each logged.
-class IgtlPoseSource final : public PoseSource {
+class IgtlPoses final : public PoseBackend {
  public:
-  IgtlPoseSource(acq::IgtlEndpoint endpoint, std::string device, IgtlPoseFrom from);
-  ~IgtlPoseSource() override;
+  IgtlPoses(acq::IgtlEndpoint endpoint, std::string device, IgtlPoseFrom from);
 
   std::string describe() const override;
   std::map<std::string, std::size_t> losses() const override { return drops_.counts(); }
@@ -45,6 +44,8 @@ class IgtlPoseSource final : public PoseSource {
   acq::IgtlLink link_;
   acq::IgtlDrops drops_;
 };
+/// The stream of an IgtlPoses.
+using IgtlPoseSource = acq::SourceOf<IgtlPoses>;
 
 /// A sample from a matrix: rigid within 1e-3 -> valid, else kInvalid (identity pose).
 Pose pose_from_matrix(const Eigen::Matrix4d& T_reference_probe, double timestamp_s);

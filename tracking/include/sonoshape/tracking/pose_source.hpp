@@ -1,7 +1,8 @@
 #pragma once
-// PoseSource: the interface of every tracker (design.md data path), a player of recorded
-// samples (simulated trackers, tests) and the replay of the poses of a PLUS sequence file.
-// Hardware backends (trakSTAR, OpenIGTLink) derive from PoseSource too.
+// PoseSource: the stream of every tracker (design.md data path), PoseBackend: what a tracker
+// backend implements, a player of recorded samples (simulated trackers, tests) and the replay
+// of the poses of a PLUS sequence file. Hardware backends (trakSTAR, OpenIGTLink) are
+// PoseBackends too.
 #include <memory>
 #include <optional>
 #include <string>
@@ -16,19 +17,17 @@ namespace sonoshape::tracking {
 
 /// A stream of tracker samples, T_reference_probe with status, in time order on the tracker's
 /// clock. See acq::StreamSource for the threading and lifetime rules.
-class PoseSource : public acq::StreamSource<Pose> {
- protected:
-  double timestamp_s(const Pose& pose) const override { return pose.timestamp_s; }
-};
+using PoseSource = acq::StreamSource<Pose>;
+/// What a tracker, a file or a simulation of poses implements (open / poll / close).
+using PoseBackend = acq::StreamBackend<Pose>;
 
 /// Plays a list of samples (time order) as a tracker would: the simulated tracker of a `sim:`
 /// source, and tests. Optionally fails after `fail_after` samples (a tracker unplugged).
-class RecordedPoseSource final : public PoseSource {
+class RecordedPoses final : public PoseBackend {
  public:
   /// `name` names the source in messages; `fail_after` (< 0: never) makes poll() fail with
   /// "tracker vanished" once that many samples were delivered.
-  RecordedPoseSource(std::vector<Pose> samples, std::string name, long fail_after = -1);
-  ~RecordedPoseSource() override;
+  RecordedPoses(std::vector<Pose> samples, std::string name, long fail_after = -1);
 
   std::string describe() const override { return name_; }
 
@@ -43,23 +42,24 @@ class RecordedPoseSource final : public PoseSource {
   long fail_after_;
   std::size_t next_ = 0;
 };
+/// The stream of a RecordedPoses.
+using RecordedPoseSource = acq::SourceOf<RecordedPoses>;
 
 /// The probe poses of a PLUS sequence file, one sample per frame at the frame's `Timestamp`:
 /// T_reference_probe = ReferenceToTracker^-1 * ProbeToTracker (ProbeToTracker alone when the
 /// file has no ReferenceToTracker: the tracker is the reference). A sample is kInvalid when a
 /// transform's status is not OK or a transform is missing or unreadable. PLUS already
 /// interpolated the tracker at each frame's time, so replay with tracker_latency_s = 0.
-class ReplayPoseSource final : public PoseSource {
+class ReplayPoses final : public PoseBackend {
  public:
   /// Replays `file` (shared with the frame replay); `name` names it in messages.
-  ReplayPoseSource(std::shared_ptr<const acq::SequenceFile> file, std::string name,
-                   std::string probe_transform = "ProbeToTracker",
-                   std::string reference_transform = "ReferenceToTracker");
+  ReplayPoses(std::shared_ptr<const acq::SequenceFile> file, std::string name,
+              std::string probe_transform = "ProbeToTracker",
+              std::string reference_transform = "ReferenceToTracker");
   /// Replays the poses `chain` composes (acq::find_pose_chain): T_reference_probe is the
   /// chain's T_to_from, kInvalid when a per-frame transform of it is not OK.
-  ReplayPoseSource(std::shared_ptr<const acq::SequenceFile> file, std::string name,
-                   acq::PoseChain chain);
-  ~ReplayPoseSource() override;
+  ReplayPoses(std::shared_ptr<const acq::SequenceFile> file, std::string name,
+              acq::PoseChain chain);
 
   std::string describe() const override { return "replay:" + name_ + " (poses)"; }
 
@@ -77,6 +77,8 @@ class ReplayPoseSource final : public PoseSource {
   std::optional<acq::PoseChain> chain_;
   std::size_t next_ = 0;
 };
+/// The stream of a ReplayPoses.
+using ReplayPoseSource = acq::SourceOf<ReplayPoses>;
 
 /// The pose sample of frame k along `chain`, as ReplayPoseSource delivers it.
 Pose replay_pose(const acq::SequenceFile& file, std::size_t k, const acq::PoseChain& chain);

@@ -99,11 +99,10 @@ struct TrakstarCounts {
 
 /// A live trakSTAR pose source. Open failures at start fail the source (no tracker, no
 /// permission, the device does not answer the protocol); later unplugs do not.
-class TrakstarPoseSource final : public PoseSource {
+class TrakstarPoses final : public PoseBackend {
  public:
   /// `opener` empty: libusb_trakstar_opener(options).
-  explicit TrakstarPoseSource(TrakstarOptions options, BirdTransportOpener opener = {});
-  ~TrakstarPoseSource() override;
+  explicit TrakstarPoses(TrakstarOptions options, BirdTransportOpener opener = {});
 
   std::string describe() const override;
   /// The counts so far (any thread).
@@ -142,5 +141,7 @@ class TrakstarPoseSource final : public PoseSource {
   TrakstarCounts counts_;
   std::string status_ = "not started";
 };
+/// The stream of a TrakstarPoses.
+using TrakstarPoseSource = acq::SourceOf<TrakstarPoses>;
 
 }  // namespace sonoshape::tracking

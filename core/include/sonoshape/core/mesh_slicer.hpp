@@ -7,7 +7,7 @@
 #include "sonoshape/core/mesh.hpp"
 #include "sonoshape/core/slice.hpp"
 
-namespace sonoshape::sim {
+namespace sonoshape {
 
 /// A closed mesh with its material label.
 struct LabeledMesh {
@@ -28,4 +28,4 @@ struct SlicePlane {
 /// of its own label). Loops of (near) zero area are dropped.
 LabeledSlice slice_meshes(const std::vector<LabeledMesh>& meshes, const SlicePlane& plane);
 
-}  // namespace sonoshape::sim
+}  // namespace sonoshape

@@ -1,4 +1,4 @@
-#include "sonoshape/simulator/mesh_slicer.hpp"
+#include "sonoshape/core/mesh_slicer.hpp"
 
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
 #include <CGAL/Polygon_2_algorithms.h>
@@ -9,7 +9,7 @@
 #include <limits>
 #include <unordered_map>
 
-namespace sonoshape::sim {
+namespace sonoshape {
 namespace {
 
 using Kernel = CGAL::Exact_predicates_inexact_constructions_kernel;
@@ -273,4 +273,4 @@ LabeledSlice slice_meshes(const std::vector<LabeledMesh>& meshes, const SlicePla
   return slice;
 }
 
-}  // namespace sonoshape::sim
+}  // namespace sonoshape
