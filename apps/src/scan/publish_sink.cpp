@@ -93,7 +93,7 @@ Result<std::shared_ptr<PublishSink>> PublishSink::bind(const std::string& endpoi
   options.allow_remote = access.allow_remote;
   Result<publish::MeshPublisher> publisher = publish::MeshPublisher::bind(options);
   if (!publisher) return publisher.status();
-  auto impl = std::make_unique<Impl>(Impl{std::move(*publisher), previews, std::nullopt});
+  auto impl = std::make_unique<Impl>(Impl{std::move(*publisher), previews, std::nullopt, {}});
   return std::shared_ptr<PublishSink>(new PublishSink(std::move(impl)));
 }
 
