@@ -258,22 +258,6 @@ void plane_basis(const Vec3& n, Vec3& u, Vec3& v) {
   v = n.cross(u);
 }
 
-struct Box2 {
-  Vec2 lo, hi;
-  bool contains(const Box2& other) const {
-    return (lo.array() <= other.lo.array()).all() && (hi.array() >= other.hi.array()).all();
-  }
-};
-
-Box2 box_of(const Ring2& ring) {
-  Box2 box{ring.front(), ring.front()};
-  for (const Vec2& p : ring) {
-    box.lo = box.lo.cwiseMin(p);
-    box.hi = box.hi.cwiseMax(p);
-  }
-  return box;
-}
-
 // The plane a plane's vertices lie on: unit normal n and offset d of n.p + d = 0.
 struct PlaneFit {
   Vec3 n = Vec3::UnitZ();
@@ -570,10 +554,10 @@ struct Containers {
 
 Containers find_containers(const std::vector<Piece>& pieces) {
   const std::size_t count = pieces.size();
-  std::vector<Box2> boxes(count);
+  std::vector<detail::Box2> boxes(count);
   std::vector<double> areas(count);
   for (std::size_t c = 0; c < count; ++c) {
-    boxes[c] = box_of(pieces[c].ring);
+    boxes[c] = detail::box_of(pieces[c].ring);
     areas[c] = std::abs(signed_area(pieces[c].ring));
   }
   auto contains = [&](std::size_t outer, std::size_t inner) {

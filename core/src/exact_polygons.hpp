@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "ring_checks.hpp"
 #include "sonoshape/core/slice.hpp"
 
 namespace sonoshape::detail {
@@ -25,25 +26,6 @@ using Points = std::vector<IK::Point_2>;
 
 /// A ring's points for the exact predicates.
 Points to_points(const Ring2& ring);
-
-/// Closed 2D box of one ring, for cheap rejection before the exact tests.
-struct Box2 {
-  Vec2 lo;
-  Vec2 hi;
-  /// Interiors overlap: boxes that merely touch cannot hold overlapping polygons.
-  bool interiors_overlap(const Box2& other) const {
-    return lo.x() < other.hi.x() && other.lo.x() < hi.x() && lo.y() < other.hi.y() &&
-           other.lo.y() < hi.y();
-  }
-  /// Closed boxes meet: boxes that touch can hold polygons that touch.
-  bool meets(const Box2& other) const {
-    return lo.x() <= other.hi.x() && other.lo.x() <= hi.x() && lo.y() <= other.hi.y() &&
-           other.lo.y() <= hi.y();
-  }
-};
-
-/// The box of a ring (at least one point).
-Box2 box_of(const Ring2& ring);
 
 /// A ring as an exact polygon turned to `wanted`.
 ExactPolygon to_exact(const Ring2& ring, CGAL::Orientation wanted);

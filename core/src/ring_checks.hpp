@@ -11,6 +11,29 @@ namespace sonoshape::detail {
 /// Two points of a ring closer than this fraction of the ring's size count as the same point.
 constexpr double kRepeatedPointRelTol = 1e-9;
 
+/// Closed 2D box of one ring, for cheap rejection before the exact tests.
+struct Box2 {
+  Vec2 lo;
+  Vec2 hi;
+  /// `other` lies in this box (closed).
+  bool contains(const Box2& other) const {
+    return (lo.array() <= other.lo.array()).all() && (hi.array() >= other.hi.array()).all();
+  }
+  /// Interiors overlap: boxes that merely touch cannot hold overlapping polygons.
+  bool interiors_overlap(const Box2& other) const {
+    return lo.x() < other.hi.x() && other.lo.x() < hi.x() && lo.y() < other.hi.y() &&
+           other.lo.y() < hi.y();
+  }
+  /// Closed boxes meet: boxes that touch can hold polygons that touch.
+  bool meets(const Box2& other) const {
+    return lo.x() <= other.hi.x() && other.lo.x() <= hi.x() && lo.y() <= other.hi.y() &&
+           other.lo.y() <= hi.y();
+  }
+};
+
+/// The box of a ring (at least one point).
+Box2 box_of(const Ring2& ring);
+
 /// Bounding-box diagonal of a ring (0 for fewer than 2 points).
 double ring_size(const Ring2& ring);
 
