@@ -348,9 +348,6 @@ void Arrangement::split_cell(int cell_id, int new_plane, std::vector<int>& chang
   const int q = new_plane;
 
   std::vector<int> pos_faces, neg_faces;
-  struct DirectedEdge {
-    int from, to, plane;
-  };
   std::vector<DirectedEdge> section;  // boundary of the new face, counter-clockwise about q
   auto move_face = [&](int f, int to_cell) {
     ArrangementFace& face = faces_[static_cast<std::size_t>(f)];
@@ -398,7 +395,20 @@ void Arrangement::split_cell(int cell_id, int new_plane, std::vector<int>& chang
       throw GeometryError("arrangement: a face of a crossed cell lies on the new plane");
     }
   }
-  // Chain the section's edges (each boundary edge may come from two faces) into one cycle.
+  chain_section(section, cell_id, new_face);
+  pos_faces.push_back(new_face);
+  neg_faces.push_back(new_face);
+  cells_[static_cast<std::size_t>(cell_pos)].faces = std::move(pos_faces);
+  cells_[static_cast<std::size_t>(cell_neg)].faces = std::move(neg_faces);
+  locate_split_cells(cell_neg, cell_pos, new_plane);
+  changed.push_back(cell_neg);
+  changed.push_back(cell_pos);
+}
+
+// Chains the section's edges (each boundary edge may come from two faces) into one cycle: the
+// new face's vertices and edge planes.
+void Arrangement::chain_section(const std::vector<DirectedEdge>& section, int cell_id,
+                                int new_face) {
   std::unordered_map<int, std::pair<int, int>> next;  // from -> (to, plane)
   for (const DirectedEdge& e : section) {
     const auto [it, inserted] = next.try_emplace(e.from, e.to, e.plane);
@@ -419,13 +429,11 @@ void Arrangement::split_cell(int cell_id, int new_plane, std::vector<int>& chang
   if (v != section_face.vertices.front() || section_face.vertices.size() < 3)
     throw GeometryError("arrangement: cross-section of cell " + std::to_string(cell_id) +
                         " does not close");
+}
 
-  pos_faces.push_back(new_face);
-  neg_faces.push_back(new_face);
-  cells_[static_cast<std::size_t>(cell_pos)].faces = std::move(pos_faces);
-  cells_[static_cast<std::size_t>(cell_neg)].faces = std::move(neg_faces);
-
-  // Bounds and point location.
+// The boxes of the two halves of a split cell, and their leaves under the split cell's leaf of
+// the point-location tree (the negative half keeps the old cell's id).
+void Arrangement::locate_split_cells(int cell_neg, int cell_pos, int new_plane) {
   cell_bounds_.push_back({});
   for (const int c : {cell_neg, cell_pos}) {
     Box3 b{Vec3::Constant(std::numeric_limits<double>::infinity()),
@@ -437,15 +445,13 @@ void Arrangement::split_cell(int cell_id, int new_plane, std::vector<int>& chang
       }
     cell_bounds_[static_cast<std::size_t>(c)] = b;
   }
-  const int leaf = leaf_of_cell_[static_cast<std::size_t>(cell_id)];
+  const int leaf = leaf_of_cell_[static_cast<std::size_t>(cell_neg)];
   const int neg_leaf = static_cast<int>(bsp_.size());
   bsp_.push_back({-1, -1, -1, cell_neg, -1});
   bsp_.push_back({-1, -1, -1, cell_pos, -1});
   bsp_[static_cast<std::size_t>(leaf)] = {new_plane, neg_leaf, neg_leaf + 1, -1, -1};
   leaf_of_cell_[static_cast<std::size_t>(cell_neg)] = neg_leaf;
   leaf_of_cell_.push_back(neg_leaf + 1);
-  changed.push_back(cell_neg);
-  changed.push_back(cell_pos);
 }
 
 std::vector<int> Arrangement::insert_plane(const Vec3& normal, double offset, int slice) {

@@ -420,6 +420,10 @@ class Arrangement {
   int edge_vertex(int a, int b, int face_plane, int edge_plane, int new_plane);
   FaceSplit split_face(int face_id, int new_plane);
   void split_cell(int cell_id, int new_plane, std::vector<int>& changed);
+  // The steps of split_cell: the new face's boundary chained from the section's edges, and the
+  // two cells' boxes and leaves in the point-location tree.
+  void chain_section(const std::vector<DirectedEdge>& section, int cell_id, int new_face);
+  void locate_split_cells(int cell_neg, int cell_pos, int new_plane);
 
   Box3 box_;
   std::vector<ArrangementPlane> planes_;
