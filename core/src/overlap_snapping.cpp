@@ -42,11 +42,17 @@ bool in_box(const Vec2& p, const Box2& box) {
 
 // Moves every vertex of `moving` in `zone` that lies within `tol` of a vertex of `fixed` onto
 // that vertex. Returns how many moved.
-std::size_t snap_to_vertices(Region& moving, Region& fixed, const Box2& zone, double tol) {
-  std::vector<Vec2> targets;
-  for (Ring2* ring : rings_of(fixed))
+// The vertices of `region`'s rings that lie in `zone`.
+std::vector<Vec2> vertices_in(Region& region, const Box2& zone) {
+  std::vector<Vec2> points;
+  for (Ring2* ring : rings_of(region))
     for (const Vec2& p : *ring)
-      if (in_box(p, zone)) targets.push_back(p);
+      if (in_box(p, zone)) points.push_back(p);
+  return points;
+}
+
+std::size_t snap_to_vertices(Region& moving, Region& fixed, const Box2& zone, double tol) {
+  const std::vector<Vec2> targets = vertices_in(fixed, zone);
   std::size_t moved = 0;
   for (Ring2* ring : rings_of(moving))
     for (Vec2& q : *ring) {
@@ -67,10 +73,7 @@ std::size_t snap_to_vertices(Region& moving, Region& fixed, const Box2& zone, do
 // of an edge's interior (a T-junction that rounding moved off the edge), so both regions
 // share that point exactly. Returns how many were inserted.
 std::size_t insert_near_vertices(Region& target, Region& source, const Box2& zone, double tol) {
-  std::vector<Vec2> points;
-  for (Ring2* ring : rings_of(source))
-    for (const Vec2& q : *ring)
-      if (in_box(q, zone)) points.push_back(q);
+  const std::vector<Vec2> points = vertices_in(source, zone);
   std::size_t inserted = 0;
   for (Ring2* ring : rings_of(target)) {
     const std::set<std::pair<double, double>> own = [&] {

@@ -493,10 +493,8 @@ class Refinement {
     now.mixed.resize(cells_.size());
     now.split.resize(cells_.size());
     test_cells(last, step, now);
-    const std::vector<char> holds_contours = contour_cells(level, step);
-    for_rows(cells_.size(),
-             [&](std::size_t n) { now.split[n] = now.mixed[n] || holds_contours[n] != 0; });
     if (level == depth_) {
+      for_rows(cells_.size(), [&](std::size_t n) { now.split[n] = now.mixed[n]; });
       for (std::size_t n = 0; n < cells_.size(); ++n)
         if (now.split[n]) {
           field_.surface_cells.push_back(grid_key(cells_[n][0], cells_[n][1], cells_[n][2]));
@@ -506,6 +504,10 @@ class Refinement {
       levels_.push_back(std::move(now));
       return false;
     }
+    // Above the finest level, cells holding contour vertices are split too.
+    const std::vector<char> holds_contours = contour_cells(level, step);
+    for_rows(cells_.size(),
+             [&](std::size_t n) { now.split[n] = now.mixed[n] || holds_contours[n] != 0; });
     std::vector<std::array<int, 3>> refined;
     std::vector<std::uint32_t> refined_before;
     children(last, now, step, refined, refined_before);
@@ -552,13 +554,13 @@ class Refinement {
     });
   }
 
-  // Which cells of this level hold contour vertices (above the finest level), from a bit per
-  // cell where the level is coarse enough, instead of a binary search in the level's contour
-  // cells for every cell.
+  // Which cells of this level (above the finest) hold contour vertices, from a bit per cell
+  // where the level is coarse enough, instead of a binary search in the level's contour cells
+  // for every cell.
   std::vector<char> contour_cells(int level, int step) const {
     std::vector<char> holds(cells_.size(), 0);
     const auto contour_level = static_cast<std::size_t>(level);
-    if (level >= depth_ || contour_level >= contours_.cells_by_level.size()) return holds;
+    if (contour_level >= contours_.cells_by_level.size()) return holds;
     const std::vector<std::uint64_t>& keys = contours_.cells_by_level[contour_level];
     constexpr int kMaxBitLevel = 8;  // 2^24 bits, 2 MiB
     const auto bit_of = [level](int i, int j, int k) {
