@@ -187,6 +187,150 @@ void barycentric(const Vec2 (&c)[3], const Vec2& p, double (&out)[3]) {
   }
 }
 
+// The index of the face's vertex of smallest coordinates, where its image starts, as cells on
+// demand store their faces: the order of the edges decides where the clipped rings start, and
+// so their far-field trees, whose approximations differed by 1e-7 between the whole arrangement
+// and cells on demand otherwise.
+std::size_t first_vertex(const Arrangement& arrangement, const ArrangementFace& face) {
+  std::size_t start = 0;
+  for (std::size_t k = 1; k < face.vertices.size(); ++k) {
+    const Vec3& p = arrangement.vertex(face.vertices[k]);
+    const Vec3& q = arrangement.vertex(face.vertices[start]);
+    if (std::lexicographical_compare(p.data(), p.data() + 3, q.data(), q.data() + 3)) start = k;
+  }
+  return start;
+}
+
+// The face's vertices in its plane's (u, v) coordinates, from vertex `start`.
+Ring2 face_polygon(const Arrangement& arrangement, const ArrangementFace& face, std::size_t start,
+                   const PlaneFrame& frame) {
+  const std::size_t n = face.vertices.size();
+  Ring2 polygon;
+  polygon.reserve(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const Vec3 d = arrangement.vertex(face.vertices[(start + i) % n]) - frame.origin;
+    polygon.emplace_back(d.dot(frame.u), d.dot(frame.v));
+  }
+  return polygon;
+}
+
+// The face as half-planes a*x + b*y + c >= 0 in the slice's (u, v) coordinates, one per distinct
+// edge plane. The side is decided by CGAL's exact predicate on a face vertex off the edge plane,
+// so thin faces never get a flipped half-plane.
+std::vector<Eigen::Vector3d> face_half_planes(const Arrangement& arrangement,
+                                              const ArrangementFace& face, std::size_t start,
+                                              const PlaneFrame& frame) {
+  const std::size_t n = face.vertices.size();
+  std::vector<Eigen::Vector3d> half_planes;
+  std::vector<int> seen;
+  for (std::size_t i = 0; i < n; ++i) {
+    const int edge_plane_id = face.edge_planes[(start + i) % n];
+    if (std::find(seen.begin(), seen.end(), edge_plane_id) != seen.end()) continue;
+    seen.push_back(edge_plane_id);
+    // Ask the exact predicate about the vertex farthest from the edge plane: its interval
+    // filter decides at once, where vertices on the plane would need exact arithmetic.
+    const ArrangementPlane& e = arrangement.plane(edge_plane_id);
+    std::size_t farthest = 0;
+    double farthest_distance = -1.0;
+    for (std::size_t k = 0; k < n; ++k) {
+      const double distance =
+          std::abs(e.normal.dot(arrangement.vertex(face.vertices[k])) + e.offset);
+      if (distance > farthest_distance) {
+        farthest_distance = distance;
+        farthest = k;
+      }
+    }
+    int side = arrangement.side(edge_plane_id, face.vertices[farthest]);
+    for (std::size_t k = 0; k < n && side == 0; ++k)
+      side = arrangement.side(edge_plane_id, face.vertices[k]);
+    if (side == 0) continue;  // cannot happen for a face of positive area
+    Eigen::Vector3d h(e.normal.dot(frame.u), e.normal.dot(frame.v),
+                      e.normal.dot(frame.origin) + e.offset);
+    half_planes.push_back(side * h);
+  }
+  return half_planes;
+}
+
+// Clips a slice's rings to one face (its polygon and half-planes) and appends the parts' points
+// to `points`.
+class FaceClipper {
+ public:
+  FaceClipper(const Ring2& polygon, std::vector<Eigen::Vector3d> half_planes,
+              std::vector<Vec2>& points)
+      : polygon_(polygon), half_planes_(std::move(half_planes)), points_(points) {
+    lo_ = hi_ = polygon[0];
+    for (const Vec2& p : polygon) {
+      lo_ = lo_.cwiseMin(p);
+      hi_ = hi_.cwiseMax(p);
+    }
+    margin_ = 1e-9 * (hi_ - lo_).norm();
+    centre_ = Vec2::Zero();
+    for (const Vec2& q : polygon) centre_ += q;
+    centre_ /= static_cast<double>(polygon.size());
+  }
+
+  // Whether the box [lo, hi] meets the face's box (with its margin).
+  bool box_meets(const Vec2& lo, const Vec2& hi) const {
+    return !((lo.array() > hi_.array() + margin_).any() ||
+             (hi.array() < lo_.array() - margin_).any());
+  }
+
+  // The part of one ring inside the face. Most faces lie wholly inside or outside a ring: when
+  // no ring edge comes near the face's box, the part is the face itself (in the ring's
+  // orientation) or nothing, which spares clipping the whole ring (most of the face-image time
+  // at 100 slices). `bands` (null: none) limits both tests to the edges of the bands the face's
+  // box meets.
+  void add_part(const Ring2& ring, const RingBands* bands, int material,
+                std::vector<FaceImage::Part>& parts) const {
+    if (!edge_near(ring, bands)) {
+      const int winding = bands != nullptr ? winding_number_in_bands(ring, *bands, centre_)
+                                           : winding_number(ring.data(), ring.size(), centre_);
+      if (winding == 0) return;
+      parts.push_back({material, static_cast<std::uint32_t>(points_.size()),
+                       static_cast<std::uint32_t>(polygon_.size()), 0, 0, winding < 0 ? -1 : 1});
+      if (winding < 0)
+        points_.insert(points_.end(), polygon_.rbegin(), polygon_.rend());  // a hole
+      else
+        points_.insert(points_.end(), polygon_.begin(), polygon_.end());
+      return;
+    }
+    const Ring2 clipped = clip_ring_to_convex(ring, half_planes_);
+    if (clipped.empty()) return;
+    parts.push_back({material, static_cast<std::uint32_t>(points_.size()),
+                     static_cast<std::uint32_t>(clipped.size())});
+    points_.insert(points_.end(), clipped.begin(), clipped.end());
+  }
+
+ private:
+  // Whether an edge of `ring` comes near the face's box.
+  bool edge_near(const Ring2& ring, const RingBands* bands) const {
+    const auto near = [&](std::size_t i) {
+      const Vec2& a = ring[i];
+      const Vec2& b = ring[i + 1 < ring.size() ? i + 1 : 0];
+      return std::max(a.x(), b.x()) >= lo_.x() - margin_ &&
+             std::min(a.x(), b.x()) <= hi_.x() + margin_ &&
+             std::max(a.y(), b.y()) >= lo_.y() - margin_ &&
+             std::min(a.y(), b.y()) <= hi_.y() + margin_;
+    };
+    if (bands != nullptr) {
+      const std::uint32_t first = bands->offsets[bands->band(lo_.y() - margin_)];
+      const std::uint32_t last = bands->offsets[bands->band(hi_.y() + margin_) + 1];
+      for (std::uint32_t k = first; k < last; ++k)
+        if (near(bands->edges[k])) return true;
+      return false;
+    }
+    for (std::size_t i = 0; i < ring.size(); ++i)
+      if (near(i)) return true;
+    return false;
+  }
+
+  const Ring2& polygon_;
+  std::vector<Eigen::Vector3d> half_planes_;
+  std::vector<Vec2>& points_;
+  Vec2 lo_, hi_, centre_;
+  double margin_ = 0.0;
+};
+
 }  // namespace
 
 CellField::CellField(const Arrangement& arrangement, int material_count)
@@ -442,127 +586,35 @@ void CellField::build_face_image(int face_id, std::vector<Vec2>& points,
   FaceImage& image = images_[static_cast<std::size_t>(face_id)];
   image.frame = face.plane;
   const PlaneFrame& frame = frames_[static_cast<std::size_t>(face.plane)];
-  // From the vertex of smallest coordinates, as cells on demand store their faces: the order of
-  // the edges decides where the clipped rings below start, and so their far-field trees, whose
-  // approximations differed by 1e-7 between the whole arrangement and cells on demand otherwise.
-  const std::size_t n = face.vertices.size();
-  std::size_t start = 0;
-  for (std::size_t k = 1; k < n; ++k) {
-    const Vec3& p = arrangement_.vertex(face.vertices[k]);
-    const Vec3& q = arrangement_.vertex(face.vertices[start]);
-    if (std::lexicographical_compare(p.data(), p.data() + 3, q.data(), q.data() + 3)) start = k;
-  }
-  const auto vertex_at = [&](std::size_t i) { return face.vertices[(start + i) % n]; };
-  Ring2 polygon;
-  polygon.reserve(n);
-  for (std::size_t i = 0; i < n; ++i) {
-    const Vec3 d = arrangement_.vertex(vertex_at(i)) - frame.origin;
-    polygon.emplace_back(d.dot(frame.u), d.dot(frame.v));
-  }
+  const std::size_t start = first_vertex(arrangement_, face);
+  const Ring2 polygon = face_polygon(arrangement_, face, start, frame);
   image.polygon_begin = static_cast<std::uint32_t>(points.size());
   image.polygon_count = static_cast<std::uint32_t>(polygon.size());
   points.insert(points.end(), polygon.begin(), polygon.end());
   if (plane.slice < 0) return;  // box faces are outside
 
-  // The face as half-planes a*x + b*y + c >= 0 in the slice's (u, v) coordinates, one per
-  // distinct edge plane. The side is decided by CGAL's exact predicate on a face vertex off the
-  // edge plane, so thin faces never get a flipped half-plane.
-  std::vector<Eigen::Vector3d> half_planes;
-  std::vector<int> seen;
-  for (std::size_t i = 0; i < n; ++i) {
-    const int edge_plane_id = face.edge_planes[(start + i) % n];
-    if (std::find(seen.begin(), seen.end(), edge_plane_id) != seen.end()) continue;
-    seen.push_back(edge_plane_id);
-    // Ask the exact predicate about the vertex farthest from the edge plane: its interval
-    // filter decides at once, where vertices on the plane would need exact arithmetic.
-    const ArrangementPlane& e = arrangement_.plane(edge_plane_id);
-    std::size_t farthest = 0;
-    double farthest_distance = -1.0;
-    for (std::size_t k = 0; k < face.vertices.size(); ++k) {
-      const double distance =
-          std::abs(e.normal.dot(arrangement_.vertex(face.vertices[k])) + e.offset);
-      if (distance > farthest_distance) {
-        farthest_distance = distance;
-        farthest = k;
-      }
-    }
-    int side = arrangement_.side(edge_plane_id, face.vertices[farthest]);
-    for (std::size_t k = 0; k < face.vertices.size() && side == 0; ++k)
-      side = arrangement_.side(edge_plane_id, face.vertices[k]);
-    if (side == 0) continue;  // cannot happen for a face of positive area
-    Eigen::Vector3d h(e.normal.dot(frame.u), e.normal.dot(frame.v),
-                      e.normal.dot(frame.origin) + e.offset);
-    half_planes.push_back(side * h);
-  }
-  Vec2 lo = polygon[0], hi = polygon[0];
-  for (const Vec2& p : polygon) {
-    lo = lo.cwiseMin(p);
-    hi = hi.cwiseMax(p);
-  }
-  const double margin = 1e-9 * (hi - lo).norm();
-  Vec2 centre = Vec2::Zero();
-  for (const Vec2& q : polygon) centre += q;
-  centre /= static_cast<double>(polygon.size());
-  // The part of one ring inside the face. Most faces lie wholly inside or outside a ring: when no
-  // ring edge comes near the face's box, the part is the face itself (in the ring's orientation)
-  // or nothing, which spares clipping the whole ring (most of the face-image time at 100 slices).
-  // `bands` (null: none) limits both tests to the edges of the bands the face's box meets.
-  auto add_part = [&](const Ring2& ring, const RingBands* bands, int material,
-                      std::vector<FaceImage::Part>& parts) {
-    bool edge_near = false;
-    auto test_edge = [&](std::size_t i) {
-      const Vec2& a = ring[i];
-      const Vec2& b = ring[i + 1 < ring.size() ? i + 1 : 0];
-      edge_near =
-          std::max(a.x(), b.x()) >= lo.x() - margin && std::min(a.x(), b.x()) <= hi.x() + margin &&
-          std::max(a.y(), b.y()) >= lo.y() - margin && std::min(a.y(), b.y()) <= hi.y() + margin;
-    };
-    if (bands != nullptr) {
-      const std::uint32_t first = bands->offsets[bands->band(lo.y() - margin)];
-      const std::uint32_t last = bands->offsets[bands->band(hi.y() + margin) + 1];
-      for (std::uint32_t k = first; k < last && !edge_near; ++k) test_edge(bands->edges[k]);
-    } else {
-      for (std::size_t i = 0; i < ring.size() && !edge_near; ++i) test_edge(i);
-    }
-    if (!edge_near) {
-      const int winding = bands != nullptr ? winding_number_in_bands(ring, *bands, centre)
-                                           : winding_number(ring.data(), ring.size(), centre);
-      if (winding == 0) return;
-      parts.push_back({material, static_cast<std::uint32_t>(points.size()),
-                       static_cast<std::uint32_t>(polygon.size()), 0, 0, winding < 0 ? -1 : 1});
-      if (winding < 0)
-        points.insert(points.end(), polygon.rbegin(), polygon.rend());  // a hole
-      else
-        points.insert(points.end(), polygon.begin(), polygon.end());
-      return;
-    }
-    const Ring2 clipped = clip_ring_to_convex(ring, half_planes);
-    if (clipped.empty()) return;
-    parts.push_back({material, static_cast<std::uint32_t>(points.size()),
-                     static_cast<std::uint32_t>(clipped.size())});
-    points.insert(points.end(), clipped.begin(), clipped.end());
-  };
+  const FaceClipper clipper(polygon, face_half_planes(arrangement_, face, start, frame), points);
   const PreparedSlice& slice = slices_[static_cast<std::size_t>(plane.slice)];
   for (std::size_t m = 1; m < slice.rings_by_material.size(); ++m) {
     for (std::size_t r = 0; r < slice.rings_by_material[m].size(); ++r) {
-      const auto& [rlo, rhi] = slice.ring_bounds[m][r];
-      if ((rlo.array() > hi.array() + margin).any() || (rhi.array() < lo.array() - margin).any())
+      if (!clipper.box_meets(slice.ring_bounds[m][r].first, slice.ring_bounds[m][r].second))
         continue;
       const bool banded = m < slice.ring_bands.size() && r < slice.ring_bands[m].size();
-      add_part(slice.rings_by_material[m][r], banded ? &slice.ring_bands[m][r] : nullptr,
-               static_cast<int>(m), image.parts);
+      clipper.add_part(slice.rings_by_material[m][r], banded ? &slice.ring_bands[m][r] : nullptr,
+                       static_cast<int>(m), image.parts);
     }
   }
   // The unknown set as clipped rings too: the completion needs only its integral (a few edges)
   // where the triangles would cost many.
   for (const UnknownComponent& component : slice.unknown)
-    for (const Ring2& ring : component.rings) add_part(ring, nullptr, 0, image.unknown_parts);
+    for (const Ring2& ring : component.rings)
+      clipper.add_part(ring, nullptr, 0, image.unknown_parts);
   // And the known set: the completion reads the known part of faces crossed by the unknown
   // boundary, which as the face minus its unknown part would cost both their edges (the edges
   // along the face's boundary cancel).
   if (!slice.unknown.empty()) {
     image.known_clipped = true;
-    for (const Ring2& ring : slice.known) add_part(ring, nullptr, 0, image.known_parts);
+    for (const Ring2& ring : slice.known) clipper.add_part(ring, nullptr, 0, image.known_parts);
   }
   for (FaceImage::Part& part : image.parts) add_tree(part, points, trees);
   for (FaceImage::Part& part : image.unknown_parts) add_tree(part, points, trees);
@@ -593,7 +645,6 @@ int CellField::evaluate(const Vec3& p, double* out) const {
 int CellField::evaluate_in(int cell, const Vec3& p, double* out) const {
   if (outside_box(p, out)) return -1;
   const int n = function_count();
-  const std::size_t fc = static_cast<std::size_t>(n);
   // w[l] accumulates the mean-value weight of label l: its known parts of the faces plus its
   // share of the completed unknown triangles; w[0] only the completed share of the outside.
   constexpr int kMaxStack = 16;
@@ -601,7 +652,7 @@ int CellField::evaluate_in(int cell, const Vec3& p, double* out) const {
   std::vector<double> heap_weights;
   double* w = stack_weights;
   if (n > kMaxStack) {
-    heap_weights.resize(2 * fc);
+    heap_weights.resize(2 * static_cast<std::size_t>(n));
     w = heap_weights.data();
   }
   double* face_w = w + n;  // one face's triangle sums
@@ -614,33 +665,7 @@ int CellField::evaluate_in(int cell, const Vec3& p, double* out) const {
     const double height = std::abs(d.dot(frame.unit_normal));
     const Vec2 foot(d.dot(frame.u), d.dot(frame.v));
     if (height <= on_face_height_) {
-      // On the face itself the field is the face's own data: the completed values inside an
-      // unknown triangle, else the slice's label. The slice's whole rings decide, not the
-      // face's clipped parts: a foot on the line between two faces then gets the same label
-      // from both, whatever the rounding of the clip.
-      for (std::uint32_t t = image.triangle_begin; t < image.triangle_begin + image.triangle_count;
-           ++t) {
-        const UnknownTriangle& tri = triangles_[t];
-        if (!in_triangle(tri.corners, foot)) continue;
-        double bary[3];
-        barycentric(tri.corners, foot, bary);
-        for (int l = 0; l < n; ++l)
-          out[l] = bary[0] * corner_value(t, 0, l) + bary[1] * corner_value(t, 1, l) +
-                   bary[2] * corner_value(t, 2, l);
-        return cell;
-      }
-      int label = 0;
-      const int slice = arrangement_.plane(image.frame).slice;
-      if (slice >= 0) {
-        const PreparedSlice& s = slices_[static_cast<std::size_t>(slice)];
-        for (std::size_t m = 1; m < s.rings_by_material.size(); ++m) {
-          int winding = 0;
-          for (const Ring2& ring : s.rings_by_material[m])
-            winding += winding_number(ring.data(), ring.size(), foot);
-          if (winding > 0) label = static_cast<int>(m);
-        }
-      }
-      for (int l = 0; l < n; ++l) out[l] = l == label ? 1.0 : -1.0;
+      value_on_face(image, foot, out);
       return cell;
     }
     const double inv_height = 1.0 / height;
@@ -652,30 +677,7 @@ int CellField::evaluate_in(int cell, const Vec3& p, double* out) const {
       w[part.material] += weight;
       known_materials += weight;
     }
-    if (image.triangle_count == 0) continue;
-    const UnknownTriangle* triangles = triangles_.data() + image.triangle_begin;
-    const double* values = corner_values_.data() + image.triangle_begin * 3 * fc;
-    std::fill(face_w, face_w + n, 0.0);
-    if (image.triangle_tree != nullptr) {
-      add_triangle_weights_tree(triangles, values, n, image.triangle_tree,
-                                image.triangle_tree_moments, 0, foot, height, face_w);
-    } else {
-      add_triangle_weights(triangles, values, image.triangle_count, n, foot, height, face_w);
-    }
-    // The shares' own total (the completed values are a partition of unity, so it equals the
-    // triangles' weight to rounding), the same way whether the tree summed them or not.
-    double face_unknown = 0.0;
-    for (int l = 0; l < n; ++l) face_unknown += face_w[l];
-    if (!(face_unknown > 0.0)) continue;
-    // The unknown part's weight comes from its boundary, exactly like `total`; the triangles only
-    // split it among the functions. The far-field error of the tree then enters through these
-    // shares alone, and a completion that is one label everywhere stays exactly that label.
-    double exact_unknown = 0.0;
-    for (const FaceImage::Part& part : image.unknown_parts)
-      exact_unknown += part_angle(part, foot, height) * inv_height;
-    const double scale = exact_unknown / face_unknown;
-    unknown_total += exact_unknown;
-    for (int l = 0; l < n; ++l) w[l] += scale * face_w[l];
+    unknown_total += add_unknown_shares(image, foot, height, face_w, w);
   }
   for (int l = 1; l < n; ++l) out[l] = 2.0 * w[l] / total - 1.0;
   out[0] = 2.0 * (total - known_materials - unknown_total + w[0]) / total - 1.0;
@@ -684,6 +686,69 @@ int CellField::evaluate_in(int cell, const Vec3& p, double* out) const {
       throw GeometryError("field: non-finite value in cell " + std::to_string(cell) +
                           " (a degenerate face or triangle); please report the input");
   return cell;
+}
+
+void CellField::value_on_face(const FaceImage& image, const Vec2& foot, double* out) const {
+  // On the face itself the field is the face's own data: the completed values inside an unknown
+  // triangle, else the slice's label. The slice's whole rings decide, not the face's clipped
+  // parts: a foot on the line between two faces then gets the same label from both, whatever
+  // the rounding of the clip.
+  const int n = function_count();
+  for (std::uint32_t t = image.triangle_begin; t < image.triangle_begin + image.triangle_count;
+       ++t) {
+    const UnknownTriangle& tri = triangles_[t];
+    if (!in_triangle(tri.corners, foot)) continue;
+    double bary[3];
+    barycentric(tri.corners, foot, bary);
+    for (int l = 0; l < n; ++l)
+      out[l] = bary[0] * corner_value(t, 0, l) + bary[1] * corner_value(t, 1, l) +
+               bary[2] * corner_value(t, 2, l);
+    return;
+  }
+  int label = 0;
+  const int slice = arrangement_.plane(image.frame).slice;
+  if (slice >= 0) {
+    const PreparedSlice& s = slices_[static_cast<std::size_t>(slice)];
+    for (std::size_t m = 1; m < s.rings_by_material.size(); ++m) {
+      int winding = 0;
+      for (const Ring2& ring : s.rings_by_material[m])
+        winding += winding_number(ring.data(), ring.size(), foot);
+      if (winding > 0) label = static_cast<int>(m);
+    }
+  }
+  for (int l = 0; l < n; ++l) out[l] = l == label ? 1.0 : -1.0;
+}
+
+double CellField::add_unknown_shares(const FaceImage& image, const Vec2& foot, double height,
+                                     double* face_w, double* w) const {
+  if (image.triangle_count == 0) return 0.0;
+  const int n = function_count();
+  const UnknownTriangle* triangles = triangles_.data() + image.triangle_begin;
+  const double* values =
+      corner_values_.data() + image.triangle_begin * 3 * static_cast<std::size_t>(n);
+  std::fill(face_w, face_w + n, 0.0);
+  if (image.triangle_tree != nullptr) {
+    add_triangle_weights_tree(triangles, values, n, image.triangle_tree,
+                              image.triangle_tree_moments, 0, foot, height, face_w);
+  } else {
+    add_triangle_weights(triangles, values, image.triangle_count, n, foot, height, face_w);
+  }
+  // The shares' own total (the completed values are a partition of unity, so it equals the
+  // triangles' weight to rounding), the same way whether the tree summed them or not.
+  double face_unknown = 0.0;
+  for (int l = 0; l < n; ++l) face_unknown += face_w[l];
+  if (!(face_unknown > 0.0)) return 0.0;
+  // The unknown part's weight comes from its boundary, exactly like the face's total; the
+  // triangles only split it among the functions. The far-field error of the tree then enters
+  // through these shares alone, and a completion that is one label everywhere stays exactly that
+  // label.
+  const double inv_height = 1.0 / height;
+  double exact_unknown = 0.0;
+  for (const FaceImage::Part& part : image.unknown_parts)
+    exact_unknown += part_angle(part, foot, height) * inv_height;
+  const double scale = exact_unknown / face_unknown;
+  for (int l = 0; l < n; ++l) w[l] += scale * face_w[l];
+  return exact_unknown;
 }
 
 }  // namespace sonoshape::recon

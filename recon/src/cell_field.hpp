@@ -211,11 +211,31 @@ class CellField {
       projected_angle_plain4(points_.data() + part.begin, part.count, foot_x, foot_y, height, out);
     }
   }
+  // The field at a point on face `image` (foot: its position in the face's plane): the face's
+  // own data (evaluate_in's first step for points within on_face_height_).
+  void value_on_face(const FaceImage& image, const Vec2& foot, double* out) const;
+  // Adds the completed unknown triangles' shares of face `image`, seen from (foot, height), to
+  // w[l] (face_w: function_count() doubles of scratch) and returns the unknown part's weight.
+  double add_unknown_shares(const FaceImage& image, const Vec2& foot, double height, double* face_w,
+                            double* w) const;
   void update_frames();
   void compact_points();
   // Completes the stale slices (with their trees and hashes, see SliceCompletion) and gathers
   // every slice's triangles into the face images; face_completion_hashes_ follows.
   void build_unknown_images();
+  // The steps of build_unknown_images (completion.cpp). The slices with unknown regions whose
+  // completion read a face image rebuilt since (`inputs[s]`: the faces slice s reads now, with
+  // their generations).
+  std::vector<int> stale_slices(
+      const std::vector<int>& slices_with_unknown, const std::vector<std::vector<int>>& slice_faces,
+      const std::vector<std::vector<int>>& local_faces,
+      std::vector<std::vector<std::pair<int, std::uint64_t>>>& inputs) const;
+  // Triangulates and completes slice `slice` again, with its trees and hashes.
+  void complete_slice(int slice, const std::vector<int>& slice_faces,
+                      const std::vector<std::vector<int>>& local_faces,
+                      std::vector<std::pair<int, std::uint64_t>> inputs);
+  // Gathers the triangles, values and trees of every slice into the face images.
+  void install_completions(const std::vector<int>& slices_with_unknown);
   // Triangulates the unknown set of a slice, one list per face, and completes the corners of
   // every triangle (values: 3 x function_count() per triangle); `local_faces[f]`: the known
   // faces around face f, sorted (a corner reads those of all the faces it lies on).

@@ -258,6 +258,133 @@ bool add_part_2d(const UnknownComponent& component, std::size_t function_count, 
   return true;
 }
 
+// Cell groups: cells joined through faces that hold unknown regions.
+struct UnknownAdjacency {
+  std::vector<std::vector<int>> unknown_neighbours;  // per cell: cells across its unknown faces
+  std::vector<char> next_to_unknown;                 // per cell: 1 with a face with unknown parts
+  std::size_t group_count = 0;
+};
+
+UnknownAdjacency link_unknown_cells(const Arrangement& arrangement,
+                                    const std::vector<FaceImage>& images) {
+  UnknownAdjacency out;
+  std::vector<int> parent(arrangement.cell_count());
+  std::iota(parent.begin(), parent.end(), 0);
+  out.unknown_neighbours.resize(arrangement.cell_count());
+  out.next_to_unknown.assign(arrangement.cell_count(), 0);
+  for (std::size_t f = 0; f < images.size(); ++f) {
+    if (images[f].unknown_parts.empty()) continue;
+    const ArrangementFace& face = arrangement.face(static_cast<int>(f));
+    for (const int c : {face.cell_positive, face.cell_negative})
+      if (c >= 0) out.next_to_unknown[static_cast<std::size_t>(c)] = 1;
+    if (face.cell_positive < 0 || face.cell_negative < 0) continue;
+    parent[static_cast<std::size_t>(find_root(parent, face.cell_positive))] =
+        find_root(parent, face.cell_negative);
+    out.unknown_neighbours[static_cast<std::size_t>(face.cell_positive)].push_back(
+        face.cell_negative);
+    out.unknown_neighbours[static_cast<std::size_t>(face.cell_negative)].push_back(
+        face.cell_positive);
+  }
+  std::unordered_set<int> roots;
+  for (std::size_t f = 0; f < images.size(); ++f)
+    if (!images[f].unknown_parts.empty())
+      roots.insert(find_root(parent, arrangement.face(static_cast<int>(f)).cell_positive));
+  out.group_count = roots.size();
+  return out;
+}
+
+// The known faces of the cells within kGroupHops steps of each cell next to an unknown part
+// (sorted; `known_plane`: each face's plane, -1 for faces without known data). A face's local
+// faces are then those of its two cells, merged: walking from each cell rather than from each
+// face walks about a fifth as often (a cell has about ten faces).
+std::vector<std::vector<int>> known_faces_near_cells(const Arrangement& arrangement,
+                                                     const UnknownAdjacency& adjacency,
+                                                     const std::vector<int>& known_plane) {
+  std::vector<std::vector<int>> cell_known_faces(arrangement.cell_count());
+  tbb::parallel_for(std::size_t{0}, cell_known_faces.size(), [&](std::size_t start) {
+    if (!adjacency.next_to_unknown[start]) return;
+    std::vector<int> cells{
+        static_cast<int>(start)};  // a few dozen: a linear search is the fastest set
+    std::size_t frontier_begin = 0;
+    for (int hop = 0; hop < kGroupHops; ++hop) {
+      const std::size_t frontier_end = cells.size();
+      for (std::size_t i = frontier_begin; i < frontier_end; ++i)
+        for (const int n : adjacency.unknown_neighbours[static_cast<std::size_t>(cells[i])])
+          if (std::find(cells.begin(), cells.end(), n) == cells.end()) cells.push_back(n);
+      frontier_begin = frontier_end;
+    }
+    std::vector<int>& faces = cell_known_faces[start];
+    FaceMarks& collected = FaceMarks::start(known_plane.size());
+    for (const int c : cells)
+      for (const int g : arrangement.cell(c).faces)
+        if (collected.insert(g) && known_plane[static_cast<std::size_t>(g)] >= 0)
+          faces.push_back(g);
+    std::sort(faces.begin(), faces.end());
+  });
+  return cell_known_faces;
+}
+
+// The sorted union of the sorted lists `a` and `b`, less the faces of `plane`, into `out`.
+void merge_known_faces(const std::vector<int>& a, const std::vector<int>& b,
+                       const std::vector<int>& known_plane, int plane, std::vector<int>& out) {
+  out.reserve(a.size() + b.size());
+  std::size_t i = 0, j = 0;
+  while (i < a.size() || j < b.size()) {
+    int g;
+    if (j == b.size() || (i < a.size() && a[i] < b[j]))
+      g = a[i++];
+    else if (i == a.size() || b[j] < a[i])
+      g = b[j++];
+    else
+      g = (++i, b[j++]);  // in both
+    if (known_plane[static_cast<std::size_t>(g)] != plane) out.push_back(g);
+  }
+}
+
+// The known faces around each face with unknown parts: those of the cells within kGroupHops
+// group steps (a corner reads those of all the faces around it), sorted, less the faces of the
+// face's own plane. In parallel: with fields of view every face has unknown parts, and this walk
+// over the cells around each of them was a serial tenth of the completion.
+std::vector<std::vector<int>> local_known_faces(const Arrangement& arrangement,
+                                                const std::vector<FaceImage>& images,
+                                                const UnknownAdjacency& adjacency) {
+  // Each face's plane, or -1 for faces without known data (they add nothing to the 3D part): the
+  // walk reads it for a hundred faces per face, from this compact array rather than from the
+  // images' and the arrangement's large records.
+  std::vector<int> known_plane(images.size());
+  tbb::parallel_for(std::size_t{0}, images.size(), [&](std::size_t g) {
+    known_plane[g] = images[g].fully_unknown ? -1 : arrangement.face(static_cast<int>(g)).plane;
+  });
+  const std::vector<std::vector<int>> cell_known_faces =
+      known_faces_near_cells(arrangement, adjacency, known_plane);
+  std::vector<std::vector<int>> local_faces(images.size());
+  tbb::parallel_for(std::size_t{0}, images.size(), [&](std::size_t f) {
+    if (images[f].unknown_parts.empty()) return;
+    const ArrangementFace& face = arrangement.face(static_cast<int>(f));
+    static const std::vector<int> kNone;
+    const auto known_faces_of = [&](int c) -> const std::vector<int>& {
+      return c >= 0 ? cell_known_faces[static_cast<std::size_t>(c)] : kNone;
+    };
+    // Sorted: the order of the corners' sums (the same for every thread), and corners on several
+    // faces merge these lists.
+    merge_known_faces(known_faces_of(face.cell_positive), known_faces_of(face.cell_negative),
+                      known_plane, face.plane, local_faces[f]);
+  });
+  return local_faces;
+}
+
+// The faces with unknown parts of each slice.
+std::vector<std::vector<int>> unknown_faces_by_slice(const Arrangement& arrangement,
+                                                     const std::vector<FaceImage>& images,
+                                                     std::size_t slice_count) {
+  std::vector<std::vector<int>> slice_faces(slice_count);
+  for (std::size_t f = 0; f < images.size(); ++f)
+    if (!images[f].unknown_parts.empty())
+      slice_faces[static_cast<std::size_t>(arrangement.plane(images[f].frame).slice)].push_back(
+          static_cast<int>(f));
+  return slice_faces;
+}
+
 }  // namespace
 
 // The parts of formula 7 at the corners of one slice's triangles. A corner keeps its parts across
@@ -1018,101 +1145,35 @@ void CellField::build_unknown_images() {
     if (!slices_[s].unknown.empty()) slices_with_unknown.push_back(static_cast<int>(s));
   face_completion_hashes_.assign(images_.size(), 0);
   if (slices_with_unknown.empty()) return;
-  const std::size_t fc = static_cast<std::size_t>(function_count());
   Stopwatch clock;
-  // Cell groups: cells joined through faces that hold unknown regions.
-  std::vector<int> parent(arrangement_.cell_count());
-  std::iota(parent.begin(), parent.end(), 0);
-  std::vector<std::vector<int>> unknown_neighbours(arrangement_.cell_count());
-  std::vector<char> next_to_unknown(arrangement_.cell_count(),
-                                    0);  // a cell with a face with unknown parts
-  for (std::size_t f = 0; f < images_.size(); ++f) {
-    if (images_[f].unknown_parts.empty()) continue;
-    const ArrangementFace& face = arrangement_.face(static_cast<int>(f));
-    for (const int c : {face.cell_positive, face.cell_negative})
-      if (c >= 0) next_to_unknown[static_cast<std::size_t>(c)] = 1;
-    if (face.cell_positive < 0 || face.cell_negative < 0) continue;
-    parent[static_cast<std::size_t>(find_root(parent, face.cell_positive))] =
-        find_root(parent, face.cell_negative);
-    unknown_neighbours[static_cast<std::size_t>(face.cell_positive)].push_back(face.cell_negative);
-    unknown_neighbours[static_cast<std::size_t>(face.cell_negative)].push_back(face.cell_positive);
-  }
-  std::unordered_set<int> roots;
-  for (std::size_t f = 0; f < images_.size(); ++f)
-    if (!images_[f].unknown_parts.empty())
-      roots.insert(find_root(parent, arrangement_.face(static_cast<int>(f)).cell_positive));
-  group_count_ = roots.size();
-  // The known faces around each face: those of the cells within kGroupHops group steps (a corner
-  // reads those of all the faces around it). In parallel: with fields of view every face has
-  // unknown parts, and this walk over the cells around each of them was a serial tenth of the
-  // completion.
-  std::vector<std::vector<int>> local_faces(images_.size());
-  // Each face's plane, or -1 for faces without known data (they add nothing to the 3D part): the
-  // walk below reads it for a hundred faces per face, from this compact array rather than from
-  // the images' and the arrangement's large records.
-  std::vector<int> known_plane(images_.size());
-  tbb::parallel_for(std::size_t{0}, images_.size(), [&](std::size_t g) {
-    known_plane[g] = images_[g].fully_unknown ? -1 : arrangement_.face(static_cast<int>(g)).plane;
+  const UnknownAdjacency adjacency = link_unknown_cells(arrangement_, images_);
+  group_count_ = adjacency.group_count;
+  const std::vector<std::vector<int>> local_faces =
+      local_known_faces(arrangement_, images_, adjacency);
+  const std::vector<std::vector<int>> slice_faces =
+      unknown_faces_by_slice(arrangement_, images_, slices_.size());
+  slice_completions_.resize(slices_.size());
+  std::vector<std::vector<std::pair<int, std::uint64_t>>> inputs(slices_.size());
+  const std::vector<int> stale =
+      stale_slices(slices_with_unknown, slice_faces, local_faces, inputs);
+  // Slices triangulate and complete independently (each writes only its own entry).
+  tbb::parallel_for(std::size_t{0}, stale.size(), [&](std::size_t index) {
+    const std::size_t slice = static_cast<std::size_t>(stale[index]);
+    complete_slice(static_cast<int>(slice), slice_faces[slice], local_faces,
+                   std::move(inputs[slice]));
   });
-  // The known faces of the cells within kGroupHops steps of each cell next to an unknown part
-  // (sorted); a face's local faces are then those of its two cells, merged. Walking from each
-  // cell rather than from each face walks about a fifth as often (a cell has about ten faces).
-  std::vector<std::vector<int>> cell_known_faces(arrangement_.cell_count());
-  tbb::parallel_for(std::size_t{0}, cell_known_faces.size(), [&](std::size_t start) {
-    if (!next_to_unknown[start]) return;
-    std::vector<int> cells{
-        static_cast<int>(start)};  // a few dozen: a linear search is the fastest set
-    std::size_t frontier_begin = 0;
-    for (int hop = 0; hop < kGroupHops; ++hop) {
-      const std::size_t frontier_end = cells.size();
-      for (std::size_t i = frontier_begin; i < frontier_end; ++i)
-        for (const int n : unknown_neighbours[static_cast<std::size_t>(cells[i])])
-          if (std::find(cells.begin(), cells.end(), n) == cells.end()) cells.push_back(n);
-      frontier_begin = frontier_end;
-    }
-    std::vector<int>& faces = cell_known_faces[start];
-    FaceMarks& collected = FaceMarks::start(images_.size());
-    for (const int c : cells)
-      for (const int g : arrangement_.cell(c).faces)
-        if (collected.insert(g) && known_plane[static_cast<std::size_t>(g)] >= 0)
-          faces.push_back(g);
-    std::sort(faces.begin(), faces.end());
-  });
-  tbb::parallel_for(std::size_t{0}, images_.size(), [&](std::size_t f) {
-    if (images_[f].unknown_parts.empty()) return;
-    const ArrangementFace& face = arrangement_.face(static_cast<int>(f));
-    static const std::vector<int> kNone;
-    const auto known_faces_of = [&](int c) -> const std::vector<int>& {
-      return c >= 0 ? cell_known_faces[static_cast<std::size_t>(c)] : kNone;
-    };
-    const std::vector<int>& a = known_faces_of(face.cell_positive);
-    const std::vector<int>& b = known_faces_of(face.cell_negative);
-    // Sorted: the order of the corners' sums (the same for every thread), and corners on several
-    // faces merge these lists. The faces of the face's own plane are left out.
-    std::vector<int>& faces = local_faces[f];
-    faces.reserve(a.size() + b.size());
-    std::size_t i = 0, j = 0;
-    while (i < a.size() || j < b.size()) {
-      int g;
-      if (j == b.size() || (i < a.size() && a[i] < b[j]))
-        g = a[i++];
-      else if (i == a.size() || b[j] < a[i])
-        g = b[j++];
-      else
-        g = (++i, b[j++]);  // in both
-      if (known_plane[static_cast<std::size_t>(g)] != face.plane) faces.push_back(g);
-    }
-  });
+  install_completions(slices_with_unknown);
+  completion_seconds_ = clock.seconds();
+  recompleted_slices_ = stale.size();
+}
+
+std::vector<int> CellField::stale_slices(
+    const std::vector<int>& slices_with_unknown, const std::vector<std::vector<int>>& slice_faces,
+    const std::vector<std::vector<int>>& local_faces,
+    std::vector<std::vector<std::pair<int, std::uint64_t>>>& inputs) const {
   // A slice's triangles and values depend only on the images of its faces with unknown parts
   // and of their local faces: slices none of whose inputs were rebuilt keep their completion
   // (the online engine's zone rarely reaches most slices).
-  std::vector<std::vector<int>> slice_faces(slices_.size());
-  for (std::size_t f = 0; f < images_.size(); ++f)
-    if (!images_[f].unknown_parts.empty())
-      slice_faces[static_cast<std::size_t>(arrangement_.plane(images_[f].frame).slice)].push_back(
-          static_cast<int>(f));
-  slice_completions_.resize(slices_.size());
-  std::vector<std::vector<std::pair<int, std::uint64_t>>> inputs(slices_.size());
   std::vector<char> is_stale(slices_.size(), 0);
   tbb::parallel_for(std::size_t{0}, slices_with_unknown.size(), [&](std::size_t index) {
     const std::size_t slice = static_cast<std::size_t>(slices_with_unknown[index]);
@@ -1132,27 +1193,32 @@ void CellField::build_unknown_images() {
   std::vector<int> stale;
   for (const int slice : slices_with_unknown)
     if (is_stale[static_cast<std::size_t>(slice)]) stale.push_back(slice);
-  // Slices triangulate and complete independently (each writes only its own entry).
-  tbb::parallel_for(std::size_t{0}, stale.size(), [&](std::size_t index) {
-    const std::size_t slice = static_cast<std::size_t>(stale[index]);
-    SliceCompletion& completion = slice_completions_[slice];
-    completion = SliceCompletion{};
-    completion.inputs = std::move(inputs[slice]);
-    triangulate_unknown(static_cast<int>(slice), slice_faces[slice], local_faces, completion);
-    // Far-field trees (they reorder the triangles) and hashes, kept with the completion: a slice
-    // that is not completed again keeps them too.
-    const std::size_t face_count = completion.faces.size();
-    completion.tree_nodes.resize(face_count);
-    completion.tree_moments.resize(face_count);
-    for (std::size_t i = 0; i < face_count; ++i) {
-      if (completion.triangles[i].size() >= kTriangleTreeMinTriangles)
-        build_triangle_tree(completion.triangles[i].data(), completion.values[i].data(),
-                            completion.triangles[i].size(), function_count(),
-                            completion.tree_nodes[i], completion.tree_moments[i]);
-      completion.hashes.push_back(
-          completion_hash(completion.triangles[i], completion.values[i], fc));
-    }
-  });
+  return stale;
+}
+
+void CellField::complete_slice(int slice, const std::vector<int>& slice_faces,
+                               const std::vector<std::vector<int>>& local_faces,
+                               std::vector<std::pair<int, std::uint64_t>> inputs) {
+  SliceCompletion& completion = slice_completions_[static_cast<std::size_t>(slice)];
+  completion = SliceCompletion{};
+  completion.inputs = std::move(inputs);
+  triangulate_unknown(slice, slice_faces, local_faces, completion);
+  // Far-field trees (they reorder the triangles) and hashes, kept with the completion: a slice
+  // that is not completed again keeps them too.
+  const std::size_t face_count = completion.faces.size();
+  completion.tree_nodes.resize(face_count);
+  completion.tree_moments.resize(face_count);
+  for (std::size_t i = 0; i < face_count; ++i) {
+    if (completion.triangles[i].size() >= kTriangleTreeMinTriangles)
+      build_triangle_tree(completion.triangles[i].data(), completion.values[i].data(),
+                          completion.triangles[i].size(), function_count(),
+                          completion.tree_nodes[i], completion.tree_moments[i]);
+    completion.hashes.push_back(completion_hash(completion.triangles[i], completion.values[i],
+                                                static_cast<std::size_t>(function_count())));
+  }
+}
+
+void CellField::install_completions(const std::vector<int>& slices_with_unknown) {
   for (const int slice : slices_with_unknown) {
     const SliceCompletion& completion = slice_completions_[static_cast<std::size_t>(slice)];
     for (std::size_t i = 0; i < completion.faces.size(); ++i) {
@@ -1170,8 +1236,6 @@ void CellField::build_unknown_images() {
       face_completion_hashes_[static_cast<std::size_t>(completion.faces[i])] = completion.hashes[i];
     }
   }
-  completion_seconds_ = clock.seconds();
-  recompleted_slices_ = stale.size();
 }
 
 }  // namespace sonoshape::recon

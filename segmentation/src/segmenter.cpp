@@ -538,180 +538,217 @@ Segmentation segment_frame(const GreyImage& image, const ImageGeometry& geometry
   return detail::segment_frame(image, geometry, config, {});
 }
 
-Segmentation detail::segment_frame(const GreyImage& image, const ImageGeometry& geometry,
-                                   const SegmentationConfig& config, const RefineStep& refine) {
-  geometry.check();
-  if (image.width != geometry.width_px || image.height != geometry.height_px ||
-      image.pixels.size() != geometry.sector.pixels.size())
-    throw std::invalid_argument("segment_frame: the image is " + std::to_string(image.width) + "x" +
-                                std::to_string(image.height) + ", the geometry " +
-                                std::to_string(geometry.width_px) + "x" +
-                                std::to_string(geometry.height_px));
-  if (const Status valid = config.validate(); !valid) throw std::invalid_argument(valid.message());
-  detail::StageClock clock;
-  const double px_mm = geometry.spacing_mm;
-  const cv::Mat whole_sector = wrap(geometry.sector) > 0;
-  // Everything below works in the sector's bounding box grown by the farthest any filter reads
-  // from a pixel (clipped to the image): only sector pixels are read back, so the labels are
-  // those of the whole image, at a fraction of the cost for a fan or a narrow sector.
-  const cv::Rect roi = grown_box(
-      whole_sector, std::max({config.median_px / 2, gaussian_radius_px(config.smoothing_mm / px_mm),
-                              gaussian_radius_px(config.confidence_window_mm / px_mm),
-                              disk(config.shadow_margin_mm / px_mm).rows / 2,
-                              disk(config.opening_mm / px_mm).rows / 2}) +
-                        1);
-  const int w = roi.width, h = roi.height;
-  const cv::Mat grey = wrap(image)(roi);
-  const cv::Mat sector = whole_sector(roi);
-  const cv::Rect sector_box = cv::boundingRect(sector);
-  cv::Mat mask01;
-  sector.convertTo(mask01, CV_32F, 1.0 / 255.0);
-  const std::vector<float> depth_values =
-      geometry.depth_mm.empty() ? column_depth(geometry.sector, px_mm) : geometry.depth_mm;
-  const cv::Mat depth =
-      cv::Mat(image.height, image.width, CV_32F, const_cast<float*>(depth_values.data()))(roi);
+namespace {
+
+// One class of the nearest-mean classification: its label value and grey mean.
+struct ClassMean {
+  std::uint8_t value;
+  double mean;
+};
+
+// The steps of detail::segment_frame, in the order of docs/segmentation.md's "Method": speckle
+// reduction, confidence, the classes, depth compensation and classification, the steps on the
+// whole frame (bone sections, the graph cut, blooming), cleaning, and the output maps.
+// Everything works in the sector's bounding box grown by the farthest any filter reads from a
+// pixel (clipped to the image): only sector pixels are read back, so the labels are those of
+// the whole image, at a fraction of the cost for a fan or a narrow sector.
+class FrameSegmenter {
+ public:
+  FrameSegmenter(const GreyImage& image, const ImageGeometry& geometry,
+                 const SegmentationConfig& config, const detail::RefineStep& refine)
+      : image_(image), geometry_(geometry), config_(config), refine_(refine) {}
+
+  Segmentation run() {
+    set_work_region();
+    reduce_speckle();
+    clock_.lap(detail::Stage::kFilter);
+    find_low_confidence();
+    clock_.lap(detail::Stage::kConfidence);
+    choose_classes();
+    if (config_.depth_compensation) fit_depth_trend();
+    classify_all();
+    whole_frame_steps();
+    clean();
+    Segmentation result = output();
+    clock_.lap(detail::Stage::kCleaning);
+    return result;
+  }
+
+ private:
+  void set_work_region() {
+    px_mm_ = geometry_.spacing_mm;
+    const cv::Mat whole_sector = wrap(geometry_.sector) > 0;
+    const SegmentationConfig& c = config_;
+    roi_ = grown_box(whole_sector,
+                     std::max({c.median_px / 2, gaussian_radius_px(c.smoothing_mm / px_mm_),
+                               gaussian_radius_px(c.confidence_window_mm / px_mm_),
+                               disk(c.shadow_margin_mm / px_mm_).rows / 2,
+                               disk(c.opening_mm / px_mm_).rows / 2}) +
+                         1);
+    w_ = roi_.width;
+    h_ = roi_.height;
+    grey_ = wrap(image_)(roi_);
+    sector_ = whole_sector(roi_);
+    sector_box_ = cv::boundingRect(sector_);
+    sector_.convertTo(mask01_, CV_32F, 1.0 / 255.0);
+    depth_values_ =
+        geometry_.depth_mm.empty() ? column_depth(geometry_.sector, px_mm_) : geometry_.depth_mm;
+    depth_ = cv::Mat(image_.height, image_.width, CV_32F, depth_values_.data())(roi_);
+  }
 
   // Speckle reduction: the median removes speckle's bright and dark outliers without blurring
   // edges; the Gaussian then averages over several speckle cells.
-  cv::Mat median, smoothed;
-  const int median_px = speckle_median_px(px_mm, config.median_px);
-  // A boundary's specular echo, brighter than both tissues, would go to the brighter one.
-  const cv::Mat speckle =
-      config.boundary_echo_contrast > 0.0
-          ? detail::fill_boundary_echoes(grey, sector, px_mm,
-                                         config.boundary_echo_contrast * config.background.grey_std)
-          : grey;
-  if (median_px > 1)
-    cv::medianBlur(speckle, median, median_px);
-  else
-    median = speckle;
-  median.convertTo(smoothed, CV_32F);
-  if (config.smoothing_mm > 0.0)
-    smoothed = MaskedBlur(mask01, config.smoothing_mm / px_mm, sector_box)(smoothed);
-  clock.lap(detail::Stage::kFilter);
+  void reduce_speckle() {
+    median_px_ = speckle_median_px(px_mm_, config_.median_px);
+    // A boundary's specular echo, brighter than both tissues, would go to the brighter one.
+    speckle_ = config_.boundary_echo_contrast > 0.0
+                   ? detail::fill_boundary_echoes(
+                         grey_, sector_, px_mm_,
+                         config_.boundary_echo_contrast * config_.background.grey_std)
+                   : grey_;
+    if (median_px_ > 1)
+      cv::medianBlur(speckle_, median_, median_px_);
+    else
+      median_ = speckle_;
+    median_.convertTo(smoothed_, CV_32F);
+    if (config_.smoothing_mm > 0.0)
+      smoothed_ = MaskedBlur(mask01_, config_.smoothing_mm / px_mm_, sector_box_)(smoothed_);
+  }
 
   // Confidence from local statistics of the raw grey: where nearly every pixel of the window is
   // dark there is no echo (shadow, lost signal). Speckle of log-compressed tissue keeps a large
   // spread at any echogenicity, so dark tissue leaves bright pixels in the window; a fraction
   // is robust where a local mean or variance is not (a few bright pixels at the window's edge
   // would dominate them).
-  const double shadow_grey = config.effective_shadow_grey();
-  const cv::Mat dark_mask = grey <= shadow_grey;
-  cv::Mat dark;
-  dark_mask.convertTo(dark, CV_32F, 1.0 / 255.0);
-  const cv::Mat dark_fraction =
-      MaskedBlur(mask01, config.confidence_window_mm / px_mm, sector_box)(dark);
-  cv::Mat low = (dark_fraction > config.shadow_fraction) & sector;
-  // With an anechoic material (a cyst reads as black as a shadow) only dark areas that reach
-  // the far end of the sector are shadows: a shadow runs down its beams to the bottom.
-  const bool anechoic_material =
-      std::any_of(config.materials.begin(), config.materials.end(),
-                  [&](const LabelModel& m) { return m.grey_mean < shadow_grey; });
-  if (anechoic_material) {
+  void find_low_confidence() {
+    shadow_grey_ = config_.effective_shadow_grey();
+    const cv::Mat dark_mask = grey_ <= shadow_grey_;
+    cv::Mat dark;
+    dark_mask.convertTo(dark, CV_32F, 1.0 / 255.0);
+    const cv::Mat dark_fraction =
+        MaskedBlur(mask01_, config_.confidence_window_mm / px_mm_, sector_box_)(dark);
+    low_ = (dark_fraction > config_.shadow_fraction) & sector_;
+    // With an anechoic material (a cyst reads as black as a shadow) only dark areas that reach
+    // the far end of the sector are shadows: a shadow runs down its beams to the bottom.
+    const bool anechoic_material =
+        std::any_of(config_.materials.begin(), config_.materials.end(),
+                    [&](const LabelModel& m) { return m.grey_mean < shadow_grey_; });
+    if (anechoic_material) keep_dark_reaching_far_end();
+    if (config_.max_depth_mm > 0.0) low_ |= (depth_ > config_.max_depth_mm) & sector_;
+    if (config_.shadow_margin_mm > 0.0)
+      low_ = detail::dilate_runs(low_, disk(config_.shadow_margin_mm / px_mm_));
+    low_ &= sector_;
+  }
+
+  // Clears the dark components of low_ that do not reach the sector's far end.
+  void keep_dark_reaching_far_end() {
     cv::Mat components;
-    const int n = cv::connectedComponents(low, components, 8, CV_32S);
+    const int n = cv::connectedComponents(low_, components, 8, CV_32S);
     std::vector<bool> reaches_far_end(static_cast<std::size_t>(n), false);
     // (The work region leaves a row below the sector unless the sector reaches the image's end.)
-    for (int j = 0; j < h; ++j) {
-      const std::uint8_t* in = sector.ptr<std::uint8_t>(j);
-      const std::uint8_t* below = j + 1 < h ? sector.ptr<std::uint8_t>(j + 1) : nullptr;
+    for (int j = 0; j < h_; ++j) {
+      const std::uint8_t* in = sector_.ptr<std::uint8_t>(j);
+      const std::uint8_t* below = j + 1 < h_ ? sector_.ptr<std::uint8_t>(j + 1) : nullptr;
       const int* component = components.ptr<int>(j);
-      for (int i = 0; i < w; ++i)
+      for (int i = 0; i < w_; ++i)
         if (in[i] && (!below || !below[i]))
           reaches_far_end[static_cast<std::size_t>(component[i])] = true;
     }
-    for (int j = 0; j < h; ++j) {
+    for (int j = 0; j < h_; ++j) {
       const int* component = components.ptr<int>(j);
-      std::uint8_t* dark = low.ptr<std::uint8_t>(j);
-      for (int i = 0; i < w; ++i)
+      std::uint8_t* dark = low_.ptr<std::uint8_t>(j);
+      for (int i = 0; i < w_; ++i)
         if (component[i] > 0 && !reaches_far_end[static_cast<std::size_t>(component[i])])
           dark[i] = 0;
     }
   }
-  if (config.max_depth_mm > 0.0) low |= (depth > config.max_depth_mm) & sector;
-  if (config.shadow_margin_mm > 0.0)
-    low = detail::dilate_runs(low, disk(config.shadow_margin_mm / px_mm));
-  low &= sector;
-  clock.lap(detail::Stage::kConfidence);
 
-  // Classes: background then materials, each with its grey mean.
-  struct Class {
-    std::uint8_t value;
-    double mean;
-  };
-  std::vector<Class> classes{{kLabelPixelOutside, config.background.grey_mean}};
-  for (const LabelModel& m : config.materials)
-    classes.push_back({static_cast<std::uint8_t>(m.label), m.grey_mean});
-  std::array<double, 256> class_mean{};
-  for (const Class& c : classes) class_mean[c.value] = c.mean;
-
-  // Strong reflectors (bone surfaces) are thin bright bands that the Gaussian smears into the
-  // grey of bright tissue; where the brightest class stands far above the others, the median
-  // (which keeps bands thicker than half its window and removes speckle) decides for it.
-  std::vector<Class> by_mean = classes;
-  std::sort(by_mean.begin(), by_mean.end(),
-            [](const Class& x, const Class& y) { return x.mean > y.mean; });
-  const bool reflector_class =
-      by_mean.size() > 1 && by_mean[0].mean - by_mean[1].mean > detail::kReflectorGapGrey;
-  const double reflector_grey = reflector_class ? 0.5 * (by_mean[0].mean + by_mean[1].mean) : 1e9;
-  // The band is about as thick as the point-spread function's axial extent, a length in mm: a
-  // median of median_px pixels that keeps it at a fine pixel size wipes it out at a coarse one
-  // (0.63 mm at 256 x 256 of the default scan), so its median has a window in mm.
-  cv::Mat median_f;
-  const int band_median_px = reflector_class ? reflector_median_px(px_mm, config.median_px) : 0;
-  // (From the grey as recorded: a bone's band is itself a line brighter than both its sides.)
-  if (band_median_px > 0 && (band_median_px != median_px || speckle.data != grey.data)) {
-    cv::Mat band_median;
-    cv::medianBlur(grey, band_median, band_median_px);
-    band_median.convertTo(median_f, CV_32F);
-  } else {
-    median.convertTo(median_f, CV_32F);
+  // Classes: background then materials, each with its grey mean; and the strong reflector.
+  void choose_classes() {
+    classes_ = {{kLabelPixelOutside, config_.background.grey_mean}};
+    for (const LabelModel& m : config_.materials)
+      classes_.push_back({static_cast<std::uint8_t>(m.label), m.grey_mean});
+    for (const ClassMean& c : classes_) class_mean_[c.value] = c.mean;
+    // Strong reflectors (bone surfaces) are thin bright bands that the Gaussian smears into the
+    // grey of bright tissue; where the brightest class stands far above the others, the median
+    // (which keeps bands thicker than half its window and removes speckle) decides for it.
+    by_mean_ = classes_;
+    std::sort(by_mean_.begin(), by_mean_.end(),
+              [](const ClassMean& x, const ClassMean& y) { return x.mean > y.mean; });
+    reflector_class_ =
+        by_mean_.size() > 1 && by_mean_[0].mean - by_mean_[1].mean > detail::kReflectorGapGrey;
+    reflector_grey_ = reflector_class_ ? 0.5 * (by_mean_[0].mean + by_mean_[1].mean) : 1e9;
+    // The band is about as thick as the point-spread function's axial extent, a length in mm: a
+    // median of median_px pixels that keeps it at a fine pixel size wipes it out at a coarse one
+    // (0.63 mm at 256 x 256 of the default scan), so its median has a window in mm.
+    const int band_median_px =
+        reflector_class_ ? reflector_median_px(px_mm_, config_.median_px) : 0;
+    // (From the grey as recorded: a bone's band is itself a line brighter than both its sides.)
+    if (band_median_px > 0 && (band_median_px != median_px_ || speckle_.data != grey_.data)) {
+      cv::Mat band_median;
+      cv::medianBlur(grey_, band_median, band_median_px);
+      band_median.convertTo(median_f_, CV_32F);
+    } else {
+      median_.convertTo(median_f_, CV_32F);
+    }
+    map_ = cv::Mat(h_, w_, CV_8U, cv::Scalar(kLabelPixelUnknown));
   }
 
-  auto classify = [&](double g) {
+  std::uint8_t nearest_class(double g) const {
     std::size_t best = 0;
-    for (std::size_t k = 1; k < classes.size(); ++k)
-      if (std::abs(g - classes[k].mean) < std::abs(g - classes[best].mean)) best = k;
-    return classes[best].value;
-  };
+    for (std::size_t k = 1; k < classes_.size(); ++k)
+      if (std::abs(g - classes_[k].mean) < std::abs(g - classes_[best].mean)) best = k;
+    return classes_[best].value;
+  }
 
-  // Residual depth trend (grey = class mean + a + b * depth): first from per-depth medians
-  // (mostly background), then refined from all classified pixels against their class means.
-  Line trend;
-  cv::Mat map(h, w, CV_8U, cv::Scalar(kLabelPixelUnknown));
   // Labels of row j's pixels first, first + step, ... under the current trend.
-  auto classify_row = [&](int j, int first, int step) {
-    const float* s = smoothed.ptr<float>(j);
-    const float* d = depth.ptr<float>(j);
-    const std::uint8_t* in = sector.ptr<std::uint8_t>(j);
-    const std::uint8_t* dark = low.ptr<std::uint8_t>(j);
-    const float* m = median_f.ptr<float>(j);
-    std::uint8_t* out = map.ptr<std::uint8_t>(j);
-    for (int i = first; i < w; i += step) {
-      const double offset = trend.a + trend.b * d[i];
+  void classify_row(int j, int first, int step) {
+    const float* s = smoothed_.ptr<float>(j);
+    const float* d = depth_.ptr<float>(j);
+    const std::uint8_t* in = sector_.ptr<std::uint8_t>(j);
+    const std::uint8_t* dark = low_.ptr<std::uint8_t>(j);
+    const float* m = median_f_.ptr<float>(j);
+    std::uint8_t* out = map_.ptr<std::uint8_t>(j);
+    for (int i = first; i < w_; i += step) {
+      const double offset = trend_.a + trend_.b * d[i];
       // A reflector's echo is signal even inside the margin of the shadow it casts; but an
       // anechoic pixel (water, gel: its median at most the shadow grey) is none, whatever the
       // depth trend says (a trend fitted to such labels fed itself: every pixel of a phantom
       // in water became the bright class).
-      out[i] = !in[i]                                                  ? kLabelPixelUnknown
-               : m[i] > shadow_grey && m[i] - offset >= reflector_grey ? by_mean[0].value
-               : dark[i]                                               ? kLabelPixelUnknown
-                                                                       : classify(s[i] - offset);
+      out[i] = !in[i]                                                    ? kLabelPixelUnknown
+               : m[i] > shadow_grey_ && m[i] - offset >= reflector_grey_ ? by_mean_[0].value
+               : dark[i]                                                 ? kLabelPixelUnknown
+                         : nearest_class(s[i] - offset);
     }
-  };
-  auto classify_all = [&] {
-    detail::parallel_for(cv::Range(0, h), [&](const cv::Range& rows) {
+  }
+
+  void classify_all() {
+    detail::parallel_for(cv::Range(0, h_), [&](const cv::Range& rows) {
       for (int j = rows.start; j < rows.end; ++j) classify_row(j, 0, 1);
     });
-  };
-  if (config.depth_compensation) {
+  }
+
+  // Residual depth trend (grey = class mean + a + b * depth): first from per-depth medians
+  // (mostly background), then refined from all classified pixels against their class means.
+  // Two starts: the per-depth medians (right when the background fills most depths) and no
+  // trend (right when one organ fills the image, as under a linear probe inside a large organ,
+  // where the medians are the organ's and would shift every class); the better fit wins.
+  void fit_depth_trend() {
+    const auto from_medians = refine_trend(trend_of_depth_medians());
+    const auto from_none = refine_trend(Line{});
+    trend_ = from_none.second < from_medians.second ? from_none.first : from_medians.first;
+  }
+
+  // The line through the medians of the confident sector pixels' grey per depth bin, less the
+  // background's mean.
+  Line trend_of_depth_medians() const {
     std::vector<std::vector<float>> bins;
-    for (int j = 0; j < h; ++j) {
-      const std::uint8_t* in = sector.ptr<std::uint8_t>(j);
-      const std::uint8_t* dark = low.ptr<std::uint8_t>(j);
-      const float* d = depth.ptr<float>(j);
-      const float* s = smoothed.ptr<float>(j);
-      for (int i = 0; i < w; ++i) {
+    for (int j = 0; j < h_; ++j) {
+      const std::uint8_t* in = sector_.ptr<std::uint8_t>(j);
+      const std::uint8_t* dark = low_.ptr<std::uint8_t>(j);
+      const float* d = depth_.ptr<float>(j);
+      const float* s = smoothed_.ptr<float>(j);
+      for (int i = 0; i < w_; ++i) {
         if (!in[i] || dark[i]) continue;
         const auto bin = static_cast<std::size_t>(std::max(0.0f, d[i]) / kDepthBinMm);
         if (bin >= bins.size()) bins.resize(bin + 1);
@@ -724,118 +761,160 @@ Segmentation detail::segment_frame(const GreyImage& image, const ImageGeometry& 
       if (static_cast<int>(v.size()) < kMinBinPixels) continue;
       std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
       fit.add((static_cast<double>(b) + 0.5) * kDepthBinMm,
-              v[v.size() / 2] - config.background.grey_mean, static_cast<double>(v.size()));
+              v[v.size() / 2] - config_.background.grey_mean, static_cast<double>(v.size()));
     }
-    // The EM-like alternation from a start: label the samples (every other row and column of
-    // the work region: plenty, and only these need a label before the final classification)
-    // with the trend, refit the trend to their residuals; returns the trend and the samples'
-    // mean squared residual under it.
-    auto refine_trend = [&](Line start) {
-      trend = start;
-      double squares = 0.0, samples = 0.0;
-      for (int iteration = 0; iteration <= kTrendIterations; ++iteration) {
-        LineFit residuals;
-        squares = samples = 0.0;
-        for (int j = roi.y % 2; j < h; j += 2) {
-          classify_row(j, roi.x % 2, 2);
-          const std::uint8_t* m = map.ptr<std::uint8_t>(j);
-          const float* d = depth.ptr<float>(j);
-          const float* s = smoothed.ptr<float>(j);
-          for (int i = roi.x % 2; i < w; i += 2) {
-            if (m[i] == kLabelPixelUnknown) continue;
-            const double r = s[i] - class_mean[m[i]];
-            residuals.add(d[i], r);
-            const double e = r - (trend.a + trend.b * d[i]);
-            squares += e * e;
-            samples += 1.0;
-          }
-        }
-        if (iteration < kTrendIterations) trend = residuals.solve();
-      }
-      return std::make_pair(trend, samples > 0.0 ? squares / samples : 0.0);
-    };
-    // Two starts: the per-depth medians (right when the background fills most depths) and no
-    // trend (right when one organ fills the image, as under a linear probe inside a large
-    // organ, where the medians are the organ's and would shift every class); the better fit
-    // wins.
-    const auto from_medians = refine_trend(fit.solve());
-    const auto from_none = refine_trend(Line{});
-    trend = from_none.second < from_medians.second ? from_none.first : from_medians.first;
+    return fit.solve();
   }
-  classify_all();
+
+  // The EM-like alternation from a start: label the samples (every other row and column of the
+  // work region: plenty, and only these need a label before the final classification) with the
+  // trend, refit the trend to their residuals; returns the trend and the samples' mean squared
+  // residual under it.
+  std::pair<Line, double> refine_trend(Line start) {
+    trend_ = start;
+    double squares = 0.0, samples = 0.0;
+    for (int iteration = 0; iteration <= kTrendIterations; ++iteration) {
+      LineFit residuals;
+      squares = samples = 0.0;
+      for (int j = roi_.y % 2; j < h_; j += 2) {
+        classify_row(j, roi_.x % 2, 2);
+        const std::uint8_t* m = map_.ptr<std::uint8_t>(j);
+        const float* d = depth_.ptr<float>(j);
+        const float* s = smoothed_.ptr<float>(j);
+        for (int i = roi_.x % 2; i < w_; i += 2) {
+          if (m[i] == kLabelPixelUnknown) continue;
+          const double r = s[i] - class_mean_[m[i]];
+          residuals.add(d[i], r);
+          const double e = r - (trend_.a + trend_.b * d[i]);
+          squares += e * e;
+          samples += 1.0;
+        }
+      }
+      if (iteration < kTrendIterations) trend_ = residuals.solve();
+    }
+    return std::make_pair(trend_, samples > 0.0 ? squares / samples : 0.0);
+  }
+
+  // `part` (of the work region) inside the whole image, `outside` elsewhere; itself when the
+  // work region is the image or no whole-frame step runs.
+  cv::Mat in_image(const cv::Mat& part, double outside) const {
+    if (!cropped_) return part;
+    cv::Mat out(image_.height, image_.width, part.type(), cv::Scalar(outside));
+    part.copyTo(out(roi_));
+    return out;
+  }
+
   // The steps between classification and cleaning (bone sections, the graph cut, blooming)
   // work on whole frames (the graph cut's cells and prior are in image pixels): they get the
   // work region inside the whole image, with what the image holds outside the sector there
   // (unknown labels; zero grey and masks, which they read only inside the sector).
-  const bool sections =
-      reflector_class && by_mean[0].value != kLabelPixelOutside &&
-      std::any_of(config.materials.begin(), config.materials.end(), [&](const LabelModel& m) {
-        return m.label == by_mean[0].value && m.thickness_mm > 0.0;
-      });
-  const bool cropped = roi.size() != cv::Size(image.width, image.height) &&
-                       (sections || refine || config.psf_sigma_mm > 0.0);
-  auto in_image = [&](const cv::Mat& part, double outside) {
-    if (!cropped) return part;
-    cv::Mat out(image.height, image.width, part.type(), cv::Scalar(outside));
-    part.copyTo(out(roi));
-    return out;
-  };
-  cv::Mat whole_map = in_image(map, kLabelPixelUnknown), keep;
-  const cv::Mat sector_in_image = in_image(sector, 0);
-  if (sections)
-    for (const LabelModel& m : config.materials)
-      if (m.label == by_mean[0].value && m.thickness_mm > 0.0)
-        detail::fill_reflector_sections(
-            whole_map, in_image(median_f, 0), sector_in_image, by_mean[0].value,
-            m.thickness_mm / px_mm,
-            std::max(3, static_cast<int>(std::lround(kMinReflectorWidthMm / px_mm))));
-  cv::Mat compensated = smoothed - (trend.a + trend.b * depth);
-  if (refine) {
-    // The graph cut reads the grey the classification read (median, then Gaussian): on the
-    // median alone, dark speckle inside a bright organ outweighed the smoothness and bit into it.
-    refine(whole_map, in_image(compensated, 0), in_image(low, 0), sector_in_image, keep);
-    if (!keep.empty() && cropped) keep = keep(roi);
-  }
-  clock.lap(detail::Stage::kClassify);
-  {
+  void whole_frame_steps() {
+    const std::uint8_t reflector = by_mean_[0].value;
+    sections_ =
+        reflector_class_ && reflector != kLabelPixelOutside &&
+        std::any_of(config_.materials.begin(), config_.materials.end(), [&](const LabelModel& m) {
+          return m.label == reflector && m.thickness_mm > 0.0;
+        });
+    cropped_ = roi_.size() != cv::Size(image_.width, image_.height) &&
+               (sections_ || refine_ || config_.psf_sigma_mm > 0.0);
+    cv::Mat whole_map = in_image(map_, kLabelPixelUnknown);
+    const cv::Mat sector_in_image = in_image(sector_, 0);
+    if (sections_)
+      for (const LabelModel& m : config_.materials)
+        if (m.label == reflector && m.thickness_mm > 0.0)
+          detail::fill_reflector_sections(
+              whole_map, in_image(median_f_, 0), sector_in_image, reflector,
+              m.thickness_mm / px_mm_,
+              std::max(3, static_cast<int>(std::lround(kMinReflectorWidthMm / px_mm_))));
+    compensated_ = smoothed_ - (trend_.a + trend_.b * depth_);
+    if (refine_) {
+      // The graph cut reads the grey the classification read (median, then Gaussian): on the
+      // median alone, dark speckle inside a bright organ outweighed the smoothness and bit into
+      // it.
+      refine_(whole_map, in_image(compensated_, 0), in_image(low_, 0), sector_in_image, keep_);
+      if (!keep_.empty() && cropped_) keep_ = keep_(roi_);
+    }
+    clock_.lap(detail::Stage::kClassify);
     std::vector<detail::GreyClass> grey_classes;
-    for (const Class& c : classes) grey_classes.push_back({c.value, c.mean});
-    detail::undo_blooming(whole_map, sector_in_image, in_image(compensated, 0), grey_classes,
-                          config.psf_sigma_mm, config.dynamic_range_db, px_mm,
-                          reflector_class ? by_mean[0].value : -1);
+    for (const ClassMean& c : classes_) grey_classes.push_back({c.value, c.mean});
+    detail::undo_blooming(whole_map, sector_in_image, in_image(compensated_, 0), grey_classes,
+                          config_.psf_sigma_mm, config_.dynamic_range_db, px_mm_,
+                          reflector_class_ ? reflector : -1);
+    if (cropped_) whole_map(roi_).copyTo(map_);
   }
-  if (cropped) whole_map(roi).copyTo(map);
 
   // Morphological cleaning on the label map (every label from the same map, so regions cannot
   // overlap), then no diagonal-only contacts so that every outline is a simple polygon.
-  open_labels(map, sector, config.opening_mm / px_mm);
-  remove_small_components(map, sector, config.min_region_mm2 / (px_mm * px_mm), keep);
-  repair_diagonal_contacts(map, sector);
-  if (sections) separate_bone_from_shadow(map, sector, by_mean[0].value);
-  map.setTo(kLabelPixelUnknown, ~sector);
-
-  // Back into the whole image: outside the work region is outside the sector.
-  auto whole = [&](const cv::Mat& part, std::uint8_t outside) {
-    cv::Mat out(image.height, image.width, CV_8U, cv::Scalar(outside));
-    part.copyTo(out(roi));
-    return to_image(out);
-  };
-  Segmentation result;
-  result.labels = whole(map, kLabelPixelUnknown);
-  compensated.setTo(0.0, ~sector);
-  cv::Mat compensated_u8;
-  compensated.convertTo(compensated_u8, CV_8U);  // saturates to 0..255
-  result.smoothed = whole(compensated_u8, 0);
-  result.low_confidence = whole(low, 0);
-  result.depth_slope_grey_per_mm = trend.b;
-  for (int j = 0; j < h; ++j) {
-    const std::uint8_t* in = sector.ptr<std::uint8_t>(j);
-    const std::uint8_t* m = map.ptr<std::uint8_t>(j);
-    for (int i = 0; i < w; ++i)
-      if (in[i] && m[i] == kLabelPixelUnknown) ++result.unknown_in_sector_px;
+  void clean() {
+    open_labels(map_, sector_, config_.opening_mm / px_mm_);
+    remove_small_components(map_, sector_, config_.min_region_mm2 / (px_mm_ * px_mm_), keep_);
+    repair_diagonal_contacts(map_, sector_);
+    if (sections_) separate_bone_from_shadow(map_, sector_, by_mean_[0].value);
+    map_.setTo(kLabelPixelUnknown, ~sector_);
   }
-  clock.lap(detail::Stage::kCleaning);
-  return result;
+
+  // The label, compensated grey and confidence maps in the whole image: outside the work region
+  // is outside the sector.
+  Segmentation output() {
+    auto whole = [&](const cv::Mat& part, std::uint8_t outside) {
+      cv::Mat out(image_.height, image_.width, CV_8U, cv::Scalar(outside));
+      part.copyTo(out(roi_));
+      return to_image(out);
+    };
+    Segmentation result;
+    result.labels = whole(map_, kLabelPixelUnknown);
+    compensated_.setTo(0.0, ~sector_);
+    cv::Mat compensated_u8;
+    compensated_.convertTo(compensated_u8, CV_8U);  // saturates to 0..255
+    result.smoothed = whole(compensated_u8, 0);
+    result.low_confidence = whole(low_, 0);
+    result.depth_slope_grey_per_mm = trend_.b;
+    for (int j = 0; j < h_; ++j) {
+      const std::uint8_t* in = sector_.ptr<std::uint8_t>(j);
+      const std::uint8_t* m = map_.ptr<std::uint8_t>(j);
+      for (int i = 0; i < w_; ++i)
+        if (in[i] && m[i] == kLabelPixelUnknown) ++result.unknown_in_sector_px;
+    }
+    return result;
+  }
+
+  const GreyImage& image_;
+  const ImageGeometry& geometry_;
+  const SegmentationConfig& config_;
+  const detail::RefineStep& refine_;
+  detail::StageClock clock_;
+  double px_mm_ = 0.0;
+  cv::Rect roi_, sector_box_;  // the work region in the image; the sector's box in it
+  int w_ = 0, h_ = 0;          // the work region's size (px)
+  cv::Mat grey_, sector_, mask01_, depth_;
+  std::vector<float> depth_values_;  // depth_'s pixels (mm)
+  int median_px_ = 0;
+  cv::Mat speckle_, median_, smoothed_;  // speckle reduction's input, median, Gaussian
+  double shadow_grey_ = 0.0;
+  cv::Mat low_;  // low confidence: unknown
+  std::vector<ClassMean> classes_, by_mean_;
+  std::array<double, 256> class_mean_{};
+  bool reflector_class_ = false;
+  double reflector_grey_ = 1e9;
+  cv::Mat median_f_;  // the median the reflector test reads
+  Line trend_;
+  cv::Mat map_, keep_, compensated_;
+  bool sections_ = false, cropped_ = false;
+};
+
+}  // namespace
+
+Segmentation detail::segment_frame(const GreyImage& image, const ImageGeometry& geometry,
+                                   const SegmentationConfig& config, const RefineStep& refine) {
+  geometry.check();
+  if (image.width != geometry.width_px || image.height != geometry.height_px ||
+      image.pixels.size() != geometry.sector.pixels.size())
+    throw std::invalid_argument("segment_frame: the image is " + std::to_string(image.width) + "x" +
+                                std::to_string(image.height) + ", the geometry " +
+                                std::to_string(geometry.width_px) + "x" +
+                                std::to_string(geometry.height_px));
+  if (const Status valid = config.validate(); !valid) throw std::invalid_argument(valid.message());
+  return FrameSegmenter(image, geometry, config, refine).run();
 }
 
 }  // namespace sonoshape::seg
