@@ -52,6 +52,16 @@ struct Pair {
 
 }  // namespace
 
+// The terms of one minimise call: per-cell label costs and the Potts weights of the pairs.
+struct Terms {
+  const std::vector<float>& cost;  // cell x label
+  const std::vector<float>& right_weight;
+  const std::vector<float>& down_weight;
+  std::size_t labels;
+  float unary(std::size_t grid, std::size_t label) const { return cost[grid * labels + label]; }
+  float weight(const Pair& p) const { return p.right ? right_weight[p.grid] : down_weight[p.grid]; }
+};
+
 struct GridLabelling::Impl {
   Graph graph;
   Vertex source = 0, sink = 0;
@@ -60,6 +70,79 @@ struct GridLabelling::Impl {
   std::vector<Pair> pairs;
   // The pairs each active cell takes part in (CSR: pair_of[pair_start[v] .. pair_start[v+1])).
   std::vector<std::size_t> pair_start, pair_of;
+
+  // The energy of `labelling`: its unary terms and the Potts terms of the pairs it splits.
+  double energy(const Terms& t, const std::vector<std::uint8_t>& labelling) const {
+    double e = 0.0;
+    for (const std::size_t c : cells) e += t.unary(c, labelling[c]);
+    for (const Pair& p : pairs)
+      if (labelling[p.grid] != labelling[cells[p.second]]) e += t.weight(p);
+    return e;
+  }
+
+  // The capacities of the binary problem of expanding `alpha`: x = 0 keeps the label, x = 1
+  // takes alpha. Unary terms first, then each pair's Potts term split into unary parts and one
+  // edge (Kolmogorov and Zabih 2004). `keep` and `move`: scratch, one per cell.
+  void set_expansion(const Terms& t, const std::vector<std::uint8_t>& labelling, std::size_t alpha,
+                     std::vector<float>& keep, std::vector<float>& move) {
+    for (std::size_t v = 0; v < cells.size(); ++v) {
+      const std::size_t c = cells[v];
+      keep[v] = t.unary(c, labelling[c]);
+      move[v] = labelling[c] == alpha ? kForbidden : t.unary(c, alpha);
+    }
+    for (const Pair& p : pairs) {
+      const std::size_t c = p.grid, d = cells[p.second];
+      const float w = t.weight(p);
+      const bool a_alpha = labelling[c] == alpha, b_alpha = labelling[d] == alpha;
+      const float e00 = labelling[c] != labelling[d] ? w : 0.0f;
+      const float e01 = a_alpha ? 0.0f : w;  // c keeps, d takes alpha
+      const float e10 = b_alpha ? 0.0f : w;  // c takes alpha, d keeps
+      // E = e00 + (e10 - e00) x_c + (0 - e10) x_d + (e01 + e10 - e00) (1 - x_c) x_d
+      move[p.first] += e10 - e00;
+      move[p.second] -= e10;
+      const float edge = e01 + e10 - e00;  // >= 0 for a metric (Potts)
+      graph[p.forward].capacity = edge;
+      graph[p.backward].capacity = 0.0f;
+    }
+    for (std::size_t v = 0; v < cells.size(); ++v) {
+      const float m = std::min(keep[v], move[v]);
+      graph[from_source[v]].capacity = move[v] - m;  // paid when v takes alpha (sink side)
+      graph[to_sink[v]].capacity = keep[v] - m;      // paid when v keeps (source side)
+      graph[graph[from_source[v]].reverse].capacity = 0.0f;
+      graph[graph[to_sink[v]].reverse].capacity = 0.0f;
+    }
+  }
+
+  // The minimum cut of the expansion (Boykov-Kolmogorov), and the cells on its sink side that
+  // do not have alpha yet: those that take it.
+  void cut(const std::vector<std::uint8_t>& labelling, std::size_t alpha,
+           std::vector<std::size_t>& moved) {
+    boost::boykov_kolmogorov_max_flow(
+        graph, boost::get(&EdgeData::capacity, graph), boost::get(&EdgeData::residual, graph),
+        boost::get(&EdgeData::reverse, graph), boost::get(&VertexData::predecessor, graph),
+        boost::get(&VertexData::colour, graph), boost::get(&VertexData::distance, graph),
+        boost::get(boost::vertex_index, graph), source, sink);
+    const boost::default_color_type source_colour = graph[source].colour;
+    moved.clear();
+    for (std::size_t v = 0; v < cells.size(); ++v)
+      if (graph[v].colour != source_colour && labelling[cells[v]] != alpha) moved.push_back(v);
+  }
+
+  // The Potts terms of the pairs of the `moved` cells (each pair once; in_moved marks them).
+  double moved_pair_terms(const Terms& t, const std::vector<std::uint8_t>& labelling,
+                          const std::vector<std::size_t>& moved,
+                          const std::vector<std::uint8_t>& in_moved) const {
+    double e = 0.0;
+    for (const std::size_t v : moved)
+      for (std::size_t k = pair_start[v]; k < pair_start[v + 1]; ++k) {
+        const Pair& p = pairs[pair_of[k]];
+        const std::size_t other = p.first == v ? p.second : p.first;
+        // A pair between two moved cells is counted from its first cell only.
+        if (in_moved[other] && other < v) continue;
+        if (labelling[p.grid] != labelling[cells[p.second]]) e += t.weight(p);
+      }
+    return e;
+  }
 };
 
 GridLabelling::GridLabelling(int width, int height, const std::vector<std::uint8_t>& active,
@@ -157,17 +240,8 @@ double GridLabelling::minimise(const std::vector<float>& cost,
       labelling.size() != n)
     throw std::invalid_argument("GridLabelling::minimise: sizes do not match the grid");
   Impl& g = *impl_;
-  const auto energy = [&] {
-    double e = 0.0;
-    for (const std::size_t c : g.cells) e += cost[c * labels + labelling[c]];
-    for (const Pair& p : g.pairs) {
-      const std::size_t d = g.cells[p.second];
-      if (labelling[p.grid] != labelling[d])
-        e += p.right ? right_weight[p.grid] : down_weight[p.grid];
-    }
-    return e;
-  };
-  double best = energy();
+  const Terms terms{cost, right_weight, down_weight, labels};
+  double best = g.energy(terms, labelling);
   std::vector<float> keep(g.cells.size()), move(g.cells.size());
   std::vector<std::size_t> moved;
   std::vector<std::uint8_t> in_moved(g.cells.size(), 0), old_label(g.cells.size(), 0);
@@ -178,71 +252,20 @@ double GridLabelling::minimise(const std::vector<float>& cost,
         return labelling[c] != alpha && cost[c * labels + alpha] < kExcludedCost;
       });
       if (!takeable) continue;
-      // Binary problem: x = 0 keeps the label, x = 1 takes alpha. Unary terms first, then
-      // each pair's Potts term split into unary parts and one edge (Kolmogorov and Zabih 2004).
-      for (std::size_t v = 0; v < g.cells.size(); ++v) {
-        const std::size_t c = g.cells[v];
-        keep[v] = cost[c * labels + labelling[c]];
-        move[v] = labelling[c] == alpha ? kForbidden : cost[c * labels + alpha];
-      }
-      for (const Pair& p : g.pairs) {
-        const std::size_t c = p.grid, d = g.cells[p.second];
-        const float w = p.right ? right_weight[c] : down_weight[c];
-        const bool a_alpha = labelling[c] == alpha, b_alpha = labelling[d] == alpha;
-        const float e00 = labelling[c] != labelling[d] ? w : 0.0f;
-        const float e01 = a_alpha ? 0.0f : w;  // c keeps, d takes alpha
-        const float e10 = b_alpha ? 0.0f : w;  // c takes alpha, d keeps
-        // E = e00 + (e10 - e00) x_c + (0 - e10) x_d + (e01 + e10 - e00) (1 - x_c) x_d
-        move[p.first] += e10 - e00;
-        move[p.second] -= e10;
-        const float edge = e01 + e10 - e00;  // >= 0 for a metric (Potts)
-        g.graph[p.forward].capacity = edge;
-        g.graph[p.backward].capacity = 0.0f;
-      }
-      for (std::size_t v = 0; v < g.cells.size(); ++v) {
-        const float m = std::min(keep[v], move[v]);
-        g.graph[g.from_source[v]].capacity = move[v] - m;  // paid when v takes alpha (sink side)
-        g.graph[g.to_sink[v]].capacity = keep[v] - m;      // paid when v keeps (source side)
-        g.graph[g.graph[g.from_source[v]].reverse].capacity = 0.0f;
-        g.graph[g.graph[g.to_sink[v]].reverse].capacity = 0.0f;
-      }
-      boost::boykov_kolmogorov_max_flow(
-          g.graph, boost::get(&EdgeData::capacity, g.graph),
-          boost::get(&EdgeData::residual, g.graph), boost::get(&EdgeData::reverse, g.graph),
-          boost::get(&VertexData::predecessor, g.graph), boost::get(&VertexData::colour, g.graph),
-          boost::get(&VertexData::distance, g.graph), boost::get(boost::vertex_index, g.graph),
-          g.source, g.sink);
-      // The cells that take alpha, and the energy change they make: their unary terms and the
-      // Potts terms of their pairs (each pair once), old labels against new.
-      const boost::default_color_type source_colour = g.graph[g.source].colour;
-      moved.clear();
-      for (std::size_t v = 0; v < g.cells.size(); ++v)
-        if (g.graph[v].colour != source_colour && labelling[g.cells[v]] != alpha)
-          moved.push_back(v);
+      g.set_expansion(terms, labelling, alpha, keep, move);
+      g.cut(labelling, alpha, moved);
       if (moved.empty()) continue;
-      double change = 0.0;
-      auto pair_terms = [&] {
-        double e = 0.0;
-        for (const std::size_t v : moved)
-          for (std::size_t k = g.pair_start[v]; k < g.pair_start[v + 1]; ++k) {
-            const Pair& p = g.pairs[g.pair_of[k]];
-            const std::size_t other = p.first == v ? p.second : p.first;
-            // A pair between two moved cells is counted from its first cell only.
-            if (in_moved[other] && other < v) continue;
-            if (labelling[p.grid] != labelling[g.cells[p.second]])
-              e += p.right ? right_weight[p.grid] : down_weight[p.grid];
-          }
-        return e;
-      };
+      // The energy change of the cells that take alpha: their unary terms and the Potts terms
+      // of their pairs (each pair once), old labels against new.
       for (const std::size_t v : moved) in_moved[v] = 1;
-      change -= pair_terms();
+      double change = -g.moved_pair_terms(terms, labelling, moved, in_moved);
       for (const std::size_t v : moved) {
         const std::size_t c = g.cells[v];
         change += cost[c * labels + alpha] - cost[c * labels + labelling[c]];
         old_label[v] = labelling[c];
         labelling[c] = static_cast<std::uint8_t>(alpha);
       }
-      change += pair_terms();
+      change += g.moved_pair_terms(terms, labelling, moved, in_moved);
       if (change < -1e-6 * std::max(1.0, std::abs(best))) {
         best += change;
         improved = true;

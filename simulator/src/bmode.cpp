@@ -121,7 +121,35 @@ struct BModeSimulator::Impl {
         options.psf_lateral_wavelengths * wavelength_mm / probe.lateral_step_mm(0.5 * samples);
   }
 
+  // Per-label acoustic properties (label 0: background) and their per-sample factors.
+  struct Acoustics {
+    std::array<float, 256> echo{}, impedance{}, attenuation{};
+    double frequency_mhz = 0.0, background_db_per_cm = 0.0;
+    // Gains advance by one factor per sample (cheaper than a pow per sample): the tissue's
+    // round-trip attenuation over one step, and time-gain compensation's growth.
+    std::array<double, 256> step_loss_db{}, step_factor{};
+    double tgc_db_per_cm = 0.0, tgc_step_factor = 1.0;
+  };
+  // The echo field along the beams (two components per sample) and where the beams are shadowed.
+  struct BeamField {
+    cv::Mat field;   // samples x beams, CV_32FC2
+    cv::Mat shadow;  // samples x beams, 255 where the loss passed the shadow threshold
+  };
+
   SimulatedFrame render(const Eigen::Isometry3d& T_reference_probe, std::uint64_t seed) const;
+  Acoustics acoustics() const;
+  // The boundary normals' components (along the beams' lateral and axial directions) from the
+  // smoothed impedance map.
+  void boundary_gradients(const cv::Mat& beam_labels, const Acoustics& a, cv::Mat& grad_b,
+                          cv::Mat& grad_s) const;
+  // Walks down every beam: specular echoes at boundaries, cumulative loss, shadows.
+  BeamField walk_beams(const cv::Mat& beam_labels, const Acoustics& a, std::uint64_t seed) const;
+  // Point-spread function, envelope, log compression to grey (samples x beams, CV_32F).
+  cv::Mat envelope_grey(cv::Mat& field) const;
+  // Scan conversion into `frame` (B-mode, labels, truth, shadow); outside the sector is black
+  // (grey) and unknown (labels).
+  void scan_convert(const cv::Mat& grey_beam, const cv::Mat& shadow, const LabelImage& labels,
+                    const Acoustics& a, SimulatedFrame& frame) const;
 };
 
 SimulatedFrame BModeSimulator::Impl::render(const Eigen::Isometry3d& T_reference_probe,
@@ -134,73 +162,83 @@ SimulatedFrame BModeSimulator::Impl::render(const Eigen::Isometry3d& T_reference
   frame.slice = slice_meshes(phantom.meshes, plane);
   frame.slice.fov = probe.sector_ring_mm();
   const LabelImage labels = rasterize_labels(frame.slice, probe);
-
-  const int beams = probe.width_px(), samples = probe.height_px();
   const cv::Mat label_mat(labels.height, labels.width, CV_8U,
                           const_cast<std::uint8_t*>(labels.pixels.data()));
   cv::Mat beam_labels;
   cv::remap(label_mat, beam_labels, beam_to_pixel_x, beam_to_pixel_y, cv::INTER_NEAREST,
             cv::BORDER_REPLICATE);
+  const Acoustics a = acoustics();
+  BeamField beams = walk_beams(beam_labels, a, seed);
+  const cv::Mat grey_beam = envelope_grey(beams.field);
+  scan_convert(grey_beam, beams.shadow, labels, a, frame);
+  return frame;
+}
 
-  // Per-label acoustic properties (label 0: background).
-  std::array<float, 256> echo{}, impedance{}, attenuation{};
+BModeSimulator::Impl::Acoustics BModeSimulator::Impl::acoustics() const {
+  Acoustics a;
   for (int l = 0; l < 256; ++l) {
     const Tissue t = l == 0 ? phantom.background : phantom.tissue(l);
-    echo[l] = static_cast<float>(t.echogenicity);
-    impedance[l] = static_cast<float>(t.impedance_mrayl);
-    attenuation[l] = static_cast<float>(t.attenuation_db_per_cm_mhz);
+    a.echo[l] = static_cast<float>(t.echogenicity);
+    a.impedance[l] = static_cast<float>(t.impedance_mrayl);
+    a.attenuation[l] = static_cast<float>(t.attenuation_db_per_cm_mhz);
   }
-  const double f = probe.geometry().frequency_mhz;
-  const double background_db_per_cm = 2.0 * phantom.background.attenuation_db_per_cm_mhz * f;
+  a.frequency_mhz = probe.geometry().frequency_mhz;
+  a.background_db_per_cm = 2.0 * phantom.background.attenuation_db_per_cm_mhz * a.frequency_mhz;
+  const double step_cm = 0.1 * probe.axial_step_mm();
+  for (int l = 0; l < 256; ++l) {
+    a.step_loss_db[l] = 2.0 * a.attenuation[l] * a.frequency_mhz * step_cm;
+    a.step_factor[l] = std::pow(10.0, -a.step_loss_db[l] / 20.0);
+  }
+  a.tgc_db_per_cm = options.tgc_fraction * a.background_db_per_cm;
+  a.tgc_step_factor = std::pow(10.0, a.tgc_db_per_cm * step_cm / 20.0);
+  return a;
+}
 
-  // Boundary normals from the smoothed impedance map.
+void BModeSimulator::Impl::boundary_gradients(const cv::Mat& beam_labels, const Acoustics& a,
+                                              cv::Mat& grad_b, cv::Mat& grad_s) const {
+  const int beams = probe.width_px(), samples = probe.height_px();
   cv::Mat z_map(samples, beams, CV_32F);
   for (int s = 0; s < samples; ++s) {
     const std::uint8_t* row = beam_labels.ptr<std::uint8_t>(s);
     float* out = z_map.ptr<float>(s);
-    for (int b = 0; b < beams; ++b) out[b] = impedance[row[b]];
+    for (int b = 0; b < beams; ++b) out[b] = a.impedance[row[b]];
   }
   cv::GaussianBlur(z_map, z_map, cv::Size(0, 0), kNormalSmoothingPx);
-  cv::Mat grad_b, grad_s;
   cv::Sobel(z_map, grad_b, CV_32F, 1, 0);
   cv::Sobel(z_map, grad_s, CV_32F, 0, 1);
+}
 
-  // Walk down every beam: specular echoes at boundaries, cumulative loss, shadows.
-  cv::Mat noise(samples, beams, CV_32FC2);
+BModeSimulator::Impl::BeamField BModeSimulator::Impl::walk_beams(const cv::Mat& beam_labels,
+                                                                 const Acoustics& a,
+                                                                 std::uint64_t seed) const {
+  const int beams = probe.width_px(), samples = probe.height_px();
+  cv::Mat grad_b, grad_s;
+  boundary_gradients(beam_labels, a, grad_b, grad_s);
+  BeamField out{cv::Mat(samples, beams, CV_32FC2), cv::Mat(samples, beams, CV_8U, cv::Scalar(0))};
   cv::RNG rng(seed ^ 0x9E3779B97F4A7C15ull);
-  rng.fill(noise, cv::RNG::NORMAL, 0.0, 1.0);
+  rng.fill(out.field, cv::RNG::NORMAL, 0.0, 1.0);
   const float speckle_norm =
       static_cast<float>(std::sqrt(4.0 * std::numbers::pi * sigma_axial_px * sigma_lateral_px));
   const double impulse_norm =
       std::sqrt(2.0 * std::numbers::pi) * sigma_axial_px * kRayleighMean * options.specular_gain;
   const double axial_step = probe.axial_step_mm();
-  const double step_cm = 0.1 * axial_step;
-  // Gains advance by one factor per sample (cheaper than a pow per sample): the tissue's
-  // round-trip attenuation over one step, and time-gain compensation's growth.
-  std::array<double, 256> step_loss_db{}, step_factor{};
-  for (int l = 0; l < 256; ++l) {
-    step_loss_db[l] = 2.0 * attenuation[l] * f * step_cm;
-    step_factor[l] = std::pow(10.0, -step_loss_db[l] / 20.0);
-  }
-  const double tgc_db_per_cm = options.tgc_fraction * background_db_per_cm;
-  const double tgc_step_factor = std::pow(10.0, tgc_db_per_cm * step_cm / 20.0);
-  cv::Mat shadow(samples, beams, CV_8U, cv::Scalar(0));
   std::vector<double> loss_db(static_cast<std::size_t>(beams), 0.0);
-  std::vector<double> gain(static_cast<std::size_t>(beams),
-                           std::pow(10.0, (tgc_db_per_cm * depth_cm[0] + options.gain_db) / 20.0));
+  std::vector<double> gain(
+      static_cast<std::size_t>(beams),
+      std::pow(10.0, (a.tgc_db_per_cm * depth_cm[0] + options.gain_db) / 20.0));
   std::vector<std::uint8_t> previous(static_cast<std::size_t>(beams), 0);
   for (int s = 0; s < samples; ++s) {
     const std::uint8_t* row = beam_labels.ptr<std::uint8_t>(s);
-    cv::Vec2f* field = noise.ptr<cv::Vec2f>(s);
-    std::uint8_t* shadow_row = shadow.ptr<std::uint8_t>(s);
-    const double background_loss_db = background_db_per_cm * depth_cm[s];
+    cv::Vec2f* field = out.field.ptr<cv::Vec2f>(s);
+    std::uint8_t* shadow_row = out.shadow.ptr<std::uint8_t>(s);
+    const double background_loss_db = a.background_db_per_cm * depth_cm[s];
     for (int b = 0; b < beams; ++b) {
       const std::size_t beam = static_cast<std::size_t>(b);
       const std::uint8_t l = row[b];
       double specular = 0.0;
       double transmission = 1.0;
       if (l != previous[beam]) {
-        const double z1 = impedance[previous[beam]], z2 = impedance[l];
+        const double z1 = a.impedance[previous[beam]], z2 = a.impedance[l];
         const double r = (z2 - z1) / (z2 + z1);
         const double gb = grad_b.at<float>(s, b) / lateral_step[static_cast<std::size_t>(s)];
         const double gs = grad_s.at<float>(s, b) / axial_step;
@@ -212,17 +250,20 @@ SimulatedFrame BModeSimulator::Impl::render(const Eigen::Isometry3d& T_reference
         previous[beam] = l;
       }
       const auto g = static_cast<float>(gain[beam]);
-      const float scatter = echo[l] * speckle_norm;
+      const float scatter = a.echo[l] * speckle_norm;
       field[b][0] = g * (scatter * field[b][0] + static_cast<float>(specular));
       field[b][1] = g * scatter * field[b][1];
-      loss_db[beam] += step_loss_db[l];
-      gain[beam] *= transmission * step_factor[l] * tgc_step_factor;
+      loss_db[beam] += a.step_loss_db[l];
+      gain[beam] *= transmission * a.step_factor[l] * a.tgc_step_factor;
       if (loss_db[beam] - background_loss_db > options.shadow_threshold_db) shadow_row[b] = 255;
     }
   }
+  return out;
+}
 
-  // Point-spread function, envelope, log compression to grey.
-  cv::GaussianBlur(noise, noise, cv::Size(0, 0), sigma_lateral_px, sigma_axial_px);
+cv::Mat BModeSimulator::Impl::envelope_grey(cv::Mat& field) const {
+  const int beams = probe.width_px(), samples = probe.height_px();
+  cv::GaussianBlur(field, field, cv::Size(0, 0), sigma_lateral_px, sigma_axial_px);
   cv::Mat grey_beam(samples, beams, CV_32F);
   // grey = (20 log10 |A| + range) * 255 / range, with 20 log10 |A| = 10 log10(2) log2 |A|^2.
   const float db_to_grey = static_cast<float>(255.0 / options.dynamic_range_db);
@@ -230,16 +271,19 @@ SimulatedFrame BModeSimulator::Impl::render(const Eigen::Isometry3d& T_reference
   const float range_db = static_cast<float>(options.dynamic_range_db);
   constexpr float kMinPower = static_cast<float>(kMinAmplitude * kMinAmplitude);
   for (int s = 0; s < samples; ++s) {
-    const cv::Vec2f* field = noise.ptr<cv::Vec2f>(s);
+    const cv::Vec2f* row = field.ptr<cv::Vec2f>(s);
     float* out = grey_beam.ptr<float>(s);
     for (int b = 0; b < beams; ++b) {
-      const float power =
-          std::max(field[b][0] * field[b][0] + field[b][1] * field[b][1], kMinPower);
+      const float power = std::max(row[b][0] * row[b][0] + row[b][1] * row[b][1], kMinPower);
       out[b] = (log2_power_to_db * std::log2(power) + range_db) * db_to_grey;
     }
   }
+  return grey_beam;
+}
 
-  // Scan conversion; outside the sector is black (grey) and unknown (labels).
+void BModeSimulator::Impl::scan_convert(const cv::Mat& grey_beam, const cv::Mat& shadow,
+                                        const LabelImage& labels, const Acoustics& a,
+                                        SimulatedFrame& frame) const {
   cv::Mat grey_image, shadow_image;
   cv::remap(grey_beam, grey_image, pixel_to_beam_x, pixel_to_beam_y, cv::INTER_LINEAR,
             cv::BORDER_REPLICATE);
@@ -256,7 +300,7 @@ SimulatedFrame BModeSimulator::Impl::render(const Eigen::Isometry3d& T_reference
   std::array<bool, 256> casts_shadow{};
   for (int l = 1; l < 255; ++l)
     casts_shadow[static_cast<std::size_t>(l)] =
-        2.0 * attenuation[static_cast<std::size_t>(l)] * f * kShadowCasterPathCm >=
+        2.0 * a.attenuation[static_cast<std::size_t>(l)] * a.frequency_mhz * kShadowCasterPathCm >=
         options.shadow_threshold_db;
   std::size_t shadow_pixels = 0;
   for (int j = 0; j < height; ++j) {
@@ -279,7 +323,6 @@ SimulatedFrame BModeSimulator::Impl::render(const Eigen::Isometry3d& T_reference
   }
   frame.shadow_fraction =
       sector_pixels ? static_cast<double>(shadow_pixels) / static_cast<double>(sector_pixels) : 0;
-  return frame;
 }
 
 LabelImage SimulatedFrame::visible_truth() const {

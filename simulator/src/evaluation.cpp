@@ -53,23 +53,21 @@ struct SampleGrid {
   double z(int iz) const { return first.z() + iz * step.z(); }
 };
 
-// Inside/outside of every grid sample for a closed mesh, by crossing parity along z columns.
-// Each triangle is binned into the columns its xy box covers; the point-in-triangle test uses
-// exact orientations with each edge evaluated in one canonical direction (lower vertex index
-// first, zero counted as positive), so a column through a shared edge hits exactly one of two
-// triangles that the surface crosses there and never falls through a crack.
-std::vector<std::uint8_t> classify(const TriangleMesh& mesh, const SampleGrid& grid) {
+// The triangles whose xy box covers each z column of the grid, as a compact table: column c's
+// are bucket[first[c] .. first[c + 1]). Two passes (count, then fill).
+struct ColumnTable {
+  std::vector<std::uint32_t> first, bucket;
+};
+ColumnTable bin_triangles_by_column(const TriangleMesh& mesh, const SampleGrid& grid) {
   const int n = grid.n;
-  std::vector<std::uint8_t> inside(grid.size(), 0);
-  if (mesh.empty()) return inside;
-
   auto column_range = [&](double lo, double hi, double first, double step, int& i0, int& i1) {
     // Clamped as doubles first: a mesh far outside the box must not overflow the cast.
     i0 = static_cast<int>(std::clamp(std::ceil((lo - first) / step), 0.0, double(n)));
     i1 = static_cast<int>(std::clamp(std::floor((hi - first) / step), -1.0, double(n - 1)));
   };
-  // Two passes (count, then fill) give a compact column -> triangles table.
-  std::vector<std::uint32_t> count(grid.columns() + 1, 0);
+  ColumnTable table;
+  std::vector<std::uint32_t>& count = table.first;
+  count.assign(grid.columns() + 1, 0);
   struct Span {
     int x0, x1, y0, y1;
   };
@@ -88,17 +86,56 @@ std::vector<std::uint8_t> classify(const TriangleMesh& mesh, const SampleGrid& g
       for (int ix = s.x0; ix <= s.x1; ++ix) ++count[static_cast<std::size_t>(iy) * n + ix + 1];
   }
   for (std::size_t c = 0; c < grid.columns(); ++c) count[c + 1] += count[c];
-  std::vector<std::uint32_t> bucket(count.back());
-  {
-    std::vector<std::uint32_t> cursor(count.begin(), count.end() - 1);
-    for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
-      const Span& s = spans[t];
-      for (int iy = s.y0; iy <= s.y1; ++iy)
-        for (int ix = s.x0; ix <= s.x1; ++ix)
-          bucket[cursor[static_cast<std::size_t>(iy) * n + ix]++] = static_cast<std::uint32_t>(t);
-    }
+  table.bucket.resize(count.back());
+  std::vector<std::uint32_t> cursor(count.begin(), count.end() - 1);
+  for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
+    const Span& s = spans[t];
+    for (int iy = s.y0; iy <= s.y1; ++iy)
+      for (int ix = s.x0; ix <= s.x1; ++ix)
+        table.bucket[cursor[static_cast<std::size_t>(iy) * n + ix]++] =
+            static_cast<std::uint32_t>(t);
   }
+  return table;
+}
 
+// Whether the column through q crosses triangle `tri` (winding `turn` in the xy projection),
+// with each edge evaluated in one canonical direction (lower vertex index first, zero counted
+// as positive), so that a column through a shared edge hits exactly one of two triangles.
+bool column_hits(const std::array<std::uint32_t, 3>& tri, CGAL::Orientation turn,
+                 const std::vector<Point2>& projected, const Point2& q) {
+  if (turn == CGAL::COLLINEAR) return false;  // seen edge-on: no area to cross
+  for (int e = 0; e < 3; ++e) {
+    const std::uint32_t a = tri[e];
+    const std::uint32_t b = tri[(e + 1) % 3];
+    CGAL::Orientation side =
+        CGAL::orientation(projected[std::min(a, b)], projected[std::max(a, b)], q);
+    if (side == CGAL::COLLINEAR) side = CGAL::LEFT_TURN;
+    if (a > b) side = -side;
+    if (side != turn) return false;
+  }
+  return true;
+}
+
+// Height of the plane of `tri` above (qx, qy), from barycentric coordinates.
+double height_above(const TriangleMesh& mesh, const std::array<std::uint32_t, 3>& tri, double qx,
+                    double qy) {
+  const Vec3& a = mesh.vertices[tri[0]];
+  const Vec3& b = mesh.vertices[tri[1]];
+  const Vec3& c = mesh.vertices[tri[2]];
+  const double area = (b.x() - a.x()) * (c.y() - a.y()) - (b.y() - a.y()) * (c.x() - a.x());
+  const double wb = ((qx - a.x()) * (c.y() - a.y()) - (qy - a.y()) * (c.x() - a.x())) / area;
+  const double wc = ((b.x() - a.x()) * (qy - a.y()) - (b.y() - a.y()) * (qx - a.x())) / area;
+  return a.z() + wb * (b.z() - a.z()) + wc * (c.z() - a.z());
+}
+
+// Inside/outside of every grid sample for a closed mesh, by crossing parity along z columns.
+// Each triangle is binned into the columns its xy box covers; the point-in-triangle test uses
+// exact orientations (column_hits), so a column never falls through a crack.
+std::vector<std::uint8_t> classify(const TriangleMesh& mesh, const SampleGrid& grid) {
+  const int n = grid.n;
+  std::vector<std::uint8_t> inside(grid.size(), 0);
+  if (mesh.empty()) return inside;
+  const ColumnTable table = bin_triangles_by_column(mesh, grid);
   std::vector<Point2> projected;
   projected.reserve(mesh.vertices.size());
   for (const Vec3& p : mesh.vertices) projected.emplace_back(p.x(), p.y());
@@ -109,7 +146,6 @@ std::vector<std::uint8_t> classify(const TriangleMesh& mesh, const SampleGrid& g
       winding[t] = CGAL::orientation(projected[tri[0]], projected[tri[1]], projected[tri[2]]);
     }
   });
-
   tbb::enumerable_thread_specific<std::vector<double>> hits_per_thread;
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, grid.columns()), [&](const auto& range) {
     std::vector<double>& hits = hits_per_thread.local();
@@ -118,30 +154,10 @@ std::vector<std::uint8_t> classify(const TriangleMesh& mesh, const SampleGrid& g
       const int iy = static_cast<int>(column / n);
       const Point2 q(grid.x(ix), grid.y(iy));
       hits.clear();
-      for (std::uint32_t k = count[column]; k < count[column + 1]; ++k) {
-        const auto& tri = mesh.triangles[bucket[k]];
-        const CGAL::Orientation turn = winding[bucket[k]];
-        if (turn == CGAL::COLLINEAR) continue;  // seen edge-on: no area to cross
-        bool hit = true;
-        for (int e = 0; e < 3 && hit; ++e) {
-          const std::uint32_t a = tri[e];
-          const std::uint32_t b = tri[(e + 1) % 3];
-          CGAL::Orientation side =
-              CGAL::orientation(projected[std::min(a, b)], projected[std::max(a, b)], q);
-          if (side == CGAL::COLLINEAR) side = CGAL::LEFT_TURN;
-          if (a > b) side = -side;
-          hit = side == turn;
-        }
-        if (!hit) continue;
-        // Height of the triangle's plane above q, from barycentric coordinates.
-        const Vec3& a = mesh.vertices[tri[0]];
-        const Vec3& b = mesh.vertices[tri[1]];
-        const Vec3& c = mesh.vertices[tri[2]];
-        const double qx = q.x(), qy = q.y();
-        const double area = (b.x() - a.x()) * (c.y() - a.y()) - (b.y() - a.y()) * (c.x() - a.x());
-        const double wb = ((qx - a.x()) * (c.y() - a.y()) - (qy - a.y()) * (c.x() - a.x())) / area;
-        const double wc = ((b.x() - a.x()) * (qy - a.y()) - (b.y() - a.y()) * (qx - a.x())) / area;
-        hits.push_back(a.z() + wb * (b.z() - a.z()) + wc * (c.z() - a.z()));
+      for (std::uint32_t k = table.first[column]; k < table.first[column + 1]; ++k) {
+        const auto& tri = mesh.triangles[table.bucket[k]];
+        if (column_hits(tri, winding[table.bucket[k]], projected, q))
+          hits.push_back(height_above(mesh, tri, q.x(), q.y()));
       }
       if (hits.empty()) continue;
       std::sort(hits.begin(), hits.end());
@@ -474,6 +490,53 @@ const TriangleMesh* find_mesh(const MeshSet& set, int label) {
 
 }  // namespace
 
+namespace {
+
+// The mean and Hausdorff distances between the two surfaces, from samples of each against the
+// other, and from the slices' contours of `label` to the reconstruction (percent of the box's
+// diagonal: `to_percent` = 100 / diagonal); NaN where there is nothing to sample.
+void score_distances(const TriangleMesh& recon, const TriangleMesh& truth, const SliceSet* slices,
+                     int label, const EvaluationOptions& options, double diagonal,
+                     LabelScore& score) {
+  const double to_percent = 100.0 / diagonal;
+  const SurfaceDistance to_recon(recon);
+  const SurfaceDistance to_truth(truth);
+  const std::uint64_t seed = kSampleSeed + static_cast<std::uint64_t>(label);
+  const std::vector<Vec3> truth_samples = sample_surface(truth, options.surface_samples, seed);
+  const std::vector<Vec3> recon_samples =
+      sample_surface(recon, options.surface_samples, seed + 7919);
+  if (to_recon.empty() || to_truth.empty() || truth_samples.empty() || recon_samples.empty()) {
+    score.mean_surface_distance = score.hausdorff_distance = kNaN;
+  } else {
+    const DistanceStats forward = distances(truth_samples, to_recon);
+    const DistanceStats backward = distances(recon_samples, to_truth);
+    score.mean_surface_distance =
+        0.5 * (forward.sum / forward.count + backward.sum / backward.count) * to_percent;
+    score.hausdorff_distance = std::max(forward.max, backward.max) * to_percent;
+  }
+  score.contour_mean = score.contour_max = kNaN;
+  if (slices == nullptr || to_recon.empty()) return;
+  const std::vector<Vec3> points =
+      contour_points(*slices, label, options.contour_step_fraction * diagonal);
+  if (points.empty()) return;
+  const DistanceStats contour = distances(points, to_recon);
+  score.contour_mean = contour.sum / contour.count * to_percent;
+  score.contour_max = contour.max * to_percent;
+}
+
+// The scores of one label without a reconstructed mesh: IoU 0, distances NaN.
+void score_missing(const TriangleMesh* recon, int label, LabelScore& score) {
+  log_warning("evaluate: the reconstruction has no mesh for label " + std::to_string(label) +
+              "; its IoU is 0");
+  score.reconstructed = false;
+  score.iou = 0.0;
+  score.mean_surface_distance = score.hausdorff_distance = kNaN;
+  score.contour_mean = score.contour_max = kNaN;
+  if (recon != nullptr) score.health = check_mesh_health(*recon);
+}
+
+}  // namespace
+
 std::vector<LabelScore> evaluate(const MeshSet& reconstruction, const MeshSet& truth,
                                  const SliceSet* slices, const Box3& box,
                                  const EvaluationOptions& options) {
@@ -482,12 +545,9 @@ std::vector<LabelScore> evaluate(const MeshSet& reconstruction, const MeshSet& t
   if (!box.size().allFinite() || (box.size().array() <= 0.0).any())
     throw GeometryError("evaluate: the evaluation box must have a positive size on every axis");
   const double diagonal = box.diagonal();
-  const double to_percent = 100.0 / diagonal;
   const SampleGrid grid(box, options.grid_resolution);
-
   std::vector<int> baseline;
   if (slices != nullptr) baseline = baseline_labels(*slices, grid);
-
   for (const auto& e : reconstruction.meshes)
     if (find_mesh(truth, e.label) == nullptr)
       log_warning("evaluate: the reconstruction has label " + std::to_string(e.label) +
@@ -499,25 +559,17 @@ std::vector<LabelScore> evaluate(const MeshSet& reconstruction, const MeshSet& t
     score.label = entry.label;
     const std::vector<std::uint8_t> truth_inside = classify(entry.mesh, grid);
     score.truth_components = component_count(truth_inside, grid.n);
+    score.baseline_iou = kNaN;
     if (slices != nullptr) {
       std::vector<std::uint8_t> baseline_inside(grid.size());
       for (std::size_t i = 0; i < baseline.size(); ++i)
         baseline_inside[i] = baseline[i] == entry.label;
       score.baseline_iou = iou_of(baseline_inside, truth_inside);
       score.baseline_components = component_count(baseline_inside, grid.n);
-    } else {
-      score.baseline_iou = kNaN;
     }
-
     const TriangleMesh* recon = find_mesh(reconstruction, entry.label);
     if (recon == nullptr || recon->empty()) {
-      log_warning("evaluate: the reconstruction has no mesh for label " +
-                  std::to_string(entry.label) + "; its IoU is 0");
-      score.reconstructed = false;
-      score.iou = 0.0;
-      score.mean_surface_distance = score.hausdorff_distance = kNaN;
-      score.contour_mean = score.contour_max = kNaN;
-      if (recon != nullptr) score.health = check_mesh_health(*recon);
+      score_missing(recon, entry.label, score);
       scores.push_back(score);
       continue;
     }
@@ -532,34 +584,7 @@ std::vector<LabelScore> evaluate(const MeshSet& reconstruction, const MeshSet& t
                   ") is too large for these meshes: give --slices for a box around the data, "
                   "or check that the two meshes are in the same place and units");
     score.components = component_count(recon_inside, grid.n);
-
-    const SurfaceDistance to_recon(*recon);
-    const SurfaceDistance to_truth(entry.mesh);
-    const std::uint64_t seed = kSampleSeed + static_cast<std::uint64_t>(entry.label);
-    const std::vector<Vec3> truth_samples =
-        sample_surface(entry.mesh, options.surface_samples, seed);
-    const std::vector<Vec3> recon_samples =
-        sample_surface(*recon, options.surface_samples, seed + 7919);
-    if (to_recon.empty() || to_truth.empty() || truth_samples.empty() || recon_samples.empty()) {
-      score.mean_surface_distance = score.hausdorff_distance = kNaN;
-    } else {
-      const DistanceStats forward = distances(truth_samples, to_recon);
-      const DistanceStats backward = distances(recon_samples, to_truth);
-      score.mean_surface_distance =
-          0.5 * (forward.sum / forward.count + backward.sum / backward.count) * to_percent;
-      score.hausdorff_distance = std::max(forward.max, backward.max) * to_percent;
-    }
-
-    score.contour_mean = score.contour_max = kNaN;
-    if (slices != nullptr && !to_recon.empty()) {
-      const std::vector<Vec3> points =
-          contour_points(*slices, entry.label, options.contour_step_fraction * diagonal);
-      if (!points.empty()) {
-        const DistanceStats contour = distances(points, to_recon);
-        score.contour_mean = contour.sum / contour.count * to_percent;
-        score.contour_max = contour.max * to_percent;
-      }
-    }
+    score_distances(*recon, entry.mesh, slices, entry.label, options, diagonal, score);
     scores.push_back(score);
   }
   return scores;

@@ -113,6 +113,82 @@ FovShape parse_fov_shape(const std::string& name) {
                               "' (expected none, sector or rect)");
 }
 
+namespace {
+
+// The field of view of one slice around `target` (the material's centroid), its axis at
+// `angle`; with fov_covers_material, placed and sized to hold every point of `contour`.
+Ring2 make_fov(const UnknownOptions& options, const Vec2& target, const std::vector<Vec2>& contour,
+               double angle, double diagonal) {
+  const Vec2 axis(std::cos(angle), std::sin(angle));
+  const Vec2 side(-axis.y(), axis.x());
+  const double half = 0.5 * options.fan_angle_deg * std::numbers::pi / 180.0;
+  double depth = options.fov_depth_mm;
+  Vec2 apex = target - 0.5 * depth * axis;
+  double rect_width = options.rect_width_mm;
+  if (options.fov_covers_material) {
+    // The material's bounding box centre and the radius around it that holds every contour
+    // point (a tenth of the box diagonal on slices without material), 10 % margin.
+    Vec2 lo = target, hi = target;
+    for (const Vec2& p : contour) {
+      lo = lo.cwiseMin(p);
+      hi = hi.cwiseMax(p);
+    }
+    const Vec2 centre = 0.5 * (lo + hi);
+    double radius = contour.empty() ? 0.1 * diagonal : 0.0;
+    for (const Vec2& p : contour) radius = std::max(radius, (p - centre).norm());
+    radius *= 1.1;
+    if (options.fov == FovShape::kSector) {
+      const double apex_distance = radius / std::sin(half);  // the fan's sides touch the circle
+      apex = centre - apex_distance * axis;
+      depth = apex_distance + radius;
+    } else {
+      apex = centre - radius * axis;
+      depth = rect_width = 2.0 * radius;
+    }
+  }
+  Ring2 fov;
+  if (options.fov == FovShape::kSector) {
+    fov.push_back(apex);
+    for (int k = 0; k <= 16; ++k) {
+      const double a = -half + 2.0 * half * k / 16.0;
+      fov.push_back(apex + depth * (std::cos(a) * axis + std::sin(a) * side));
+    }
+  } else {
+    const double w = 0.5 * rect_width;
+    fov = {apex - w * side, apex - w * side + depth * axis, apex + w * side + depth * axis,
+           apex + w * side};
+  }
+  if (signed_area(fov) < 0.0) std::reverse(fov.begin(), fov.end());
+  return fov;
+}
+
+// An unknown blob over a random contour vertex of the slice's materials (inside the fov when
+// there is one); false when the slice has no material.
+bool add_blob(LabeledSlice& slice, const UnknownOptions& options, double diagonal,
+              std::mt19937_64& rng) {
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  std::vector<Vec2> candidates;
+  for (const Region& r : slice.regions)
+    if (r.label != kUnknownLabel)
+      candidates.insert(candidates.end(), r.outer.begin(), r.outer.end());
+  if (candidates.empty()) return false;
+  const Vec2 center =
+      candidates[static_cast<std::size_t>(unit(rng) * candidates.size()) % candidates.size()];
+  const double radius = options.blob_radius * (0.67 + 0.66 * unit(rng)) * diagonal;
+  Ring2 blob;
+  for (int k = 0; k < 16; ++k) {
+    const double a = 2.0 * std::numbers::pi * (k + 0.3 * unit(rng)) / 16.0;
+    const double r = radius * (0.7 + 0.6 * unit(rng));
+    blob.push_back(center + r * Vec2(std::cos(a), std::sin(a)));
+  }
+  apply_to_materials(slice, to_polygon(blob, true), false);
+  insert_touching_vertices(blob, slice.regions, 1e-9 * diagonal);
+  slice.regions.push_back({kUnknownLabel, blob, {}});
+  return true;
+}
+
+}  // namespace
+
 void add_unknowns(SliceSet& set, const UnknownOptions& options) {
   std::mt19937_64 rng(options.seed);
   std::uniform_real_distribution<double> unit(0.0, 1.0);
@@ -131,68 +207,12 @@ void add_unknowns(SliceSet& set, const UnknownOptions& options) {
     }
     if (options.fov != FovShape::kNone) {
       const double angle = 2.0 * std::numbers::pi * unit(rng);
-      const Vec2 axis(std::cos(angle), std::sin(angle));
-      const Vec2 side(-axis.y(), axis.x());
-      const double half = 0.5 * options.fan_angle_deg * std::numbers::pi / 180.0;
-      double depth = options.fov_depth_mm;
-      Vec2 apex = target - 0.5 * depth * axis;
-      double rect_width = options.rect_width_mm;
-      if (options.fov_covers_material) {
-        // The material's bounding box centre and the radius around it that holds every contour
-        // point (a tenth of the box diagonal on slices without material), 10 % margin.
-        Vec2 lo = target, hi = target;
-        for (const Vec2& p : contour) {
-          lo = lo.cwiseMin(p);
-          hi = hi.cwiseMax(p);
-        }
-        const Vec2 centre = 0.5 * (lo + hi);
-        double radius = contour.empty() ? 0.1 * diagonal : 0.0;
-        for (const Vec2& p : contour) radius = std::max(radius, (p - centre).norm());
-        radius *= 1.1;
-        if (options.fov == FovShape::kSector) {
-          const double apex_distance = radius / std::sin(half);  // the fan's sides touch the circle
-          apex = centre - apex_distance * axis;
-          depth = apex_distance + radius;
-        } else {
-          apex = centre - radius * axis;
-          depth = rect_width = 2.0 * radius;
-        }
-      }
-      Ring2 fov;
-      if (options.fov == FovShape::kSector) {
-        fov.push_back(apex);
-        for (int k = 0; k <= 16; ++k) {
-          const double a = -half + 2.0 * half * k / 16.0;
-          fov.push_back(apex + depth * (std::cos(a) * axis + std::sin(a) * side));
-        }
-      } else {
-        const double w = 0.5 * rect_width;
-        fov = {apex - w * side, apex - w * side + depth * axis, apex + w * side + depth * axis,
-               apex + w * side};
-      }
-      if (signed_area(fov) < 0.0) std::reverse(fov.begin(), fov.end());
+      const Ring2 fov = make_fov(options, target, contour, angle, diagonal);
       apply_to_materials(slice, to_polygon(fov, true), true);
       slice.fov = fov;
     }
     if (unit(rng) >= options.fraction) continue;
-    // A blob over a random contour vertex (inside the fov when there is one).
-    std::vector<Vec2> candidates;
-    for (const Region& r : slice.regions)
-      if (r.label != kUnknownLabel)
-        candidates.insert(candidates.end(), r.outer.begin(), r.outer.end());
-    if (candidates.empty()) continue;
-    const Vec2 center =
-        candidates[static_cast<std::size_t>(unit(rng) * candidates.size()) % candidates.size()];
-    const double radius = options.blob_radius * (0.67 + 0.66 * unit(rng)) * diagonal;
-    Ring2 blob;
-    for (int k = 0; k < 16; ++k) {
-      const double a = 2.0 * std::numbers::pi * (k + 0.3 * unit(rng)) / 16.0;
-      const double r = radius * (0.7 + 0.6 * unit(rng));
-      blob.push_back(center + r * Vec2(std::cos(a), std::sin(a)));
-    }
-    apply_to_materials(slice, to_polygon(blob, true), false);
-    insert_touching_vertices(blob, slice.regions, 1e-9 * diagonal);
-    slice.regions.push_back({kUnknownLabel, blob, {}});
+    add_blob(slice, options, diagonal, rng);
   }
 }
 
