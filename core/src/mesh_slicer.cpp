@@ -63,6 +63,45 @@ Ring2 clean_ring(const Ring2& ring, double tolerance) {
   return out;
 }
 
+// Chains the segments (index pairs into `points`) through their shared points into closed
+// rings; an open chain (an open mesh) is not a boundary and is dropped.
+std::vector<Ring2> chain_segments(const std::vector<Vec2>& points,
+                                  const std::vector<std::array<int, 2>>& segments) {
+  // Incidence lists; a closed manifold gives every point exactly two segments.
+  std::vector<std::vector<int>> incident(points.size());
+  for (std::size_t s = 0; s < segments.size(); ++s)
+    for (int end : segments[s]) incident[end].push_back(static_cast<int>(s));
+  std::vector<Ring2> rings;
+  std::vector<char> used(segments.size(), 0);
+  for (std::size_t first = 0; first < segments.size(); ++first) {
+    if (used[first]) continue;
+    used[first] = 1;
+    const int start = segments[first][0];
+    int current = segments[first][1];
+    Ring2 ring{points[start]};
+    bool closed = false;
+    while (true) {
+      if (current == start) {
+        closed = true;
+        break;
+      }
+      ring.push_back(points[current]);
+      int next_segment = -1;
+      for (int s : incident[current])
+        if (!used[s]) {
+          next_segment = s;
+          break;
+        }
+      if (next_segment < 0) break;  // an open mesh leaves an open chain: not a boundary
+      used[next_segment] = 1;
+      const auto& seg = segments[next_segment];
+      current = seg[0] == current ? seg[1] : seg[0];
+    }
+    if (closed) rings.push_back(std::move(ring));
+  }
+  return rings;
+}
+
 // Cuts one mesh: every crossing edge gives one point (zero distance counts as positive, a
 // symbolic perturbation that keeps each vertex on one side), every crossing triangle one
 // segment, and segments chain through shared edges into closed loops.
@@ -112,40 +151,7 @@ std::vector<Ring2> cut_mesh(const TriangleMesh& mesh, const SlicePlane& plane) {
     segments.push_back(segment);
   }
 
-  // Incidence lists; a closed manifold gives every point exactly two segments.
-  std::vector<std::vector<int>> incident(points.size());
-  for (std::size_t s = 0; s < segments.size(); ++s)
-    for (int end : segments[s]) incident[end].push_back(static_cast<int>(s));
-
-  std::vector<Ring2> rings;
-  std::vector<char> used(segments.size(), 0);
-  for (std::size_t first = 0; first < segments.size(); ++first) {
-    if (used[first]) continue;
-    used[first] = 1;
-    const int start = segments[first][0];
-    int current = segments[first][1];
-    Ring2 ring{points[start]};
-    bool closed = false;
-    while (true) {
-      if (current == start) {
-        closed = true;
-        break;
-      }
-      ring.push_back(points[current]);
-      int next_segment = -1;
-      for (int s : incident[current])
-        if (!used[s]) {
-          next_segment = s;
-          break;
-        }
-      if (next_segment < 0) break;  // an open mesh leaves an open chain: not a boundary
-      used[next_segment] = 1;
-      const auto& seg = segments[next_segment];
-      current = seg[0] == current ? seg[1] : seg[0];
-    }
-    if (closed) rings.push_back(std::move(ring));
-  }
-  return rings;
+  return chain_segments(points, segments);
 }
 
 bool contains(const Loop& outer, const Loop& inner) {
@@ -189,25 +195,14 @@ Ring2 oriented(const Loop& loop, bool counter_clockwise) {
 
 }  // namespace
 
-LabeledSlice slice_meshes(const std::vector<LabeledMesh>& meshes, const SlicePlane& plane) {
-  LabeledSlice slice;
-  slice.origin_mm = plane.origin_mm;
-  slice.u = plane.u;
-  slice.v = plane.v;
+namespace {
 
-  Box3 all{Vec3::Constant(std::numeric_limits<double>::infinity()),
-           Vec3::Constant(-std::numeric_limits<double>::infinity())};
-  for (const LabeledMesh& m : meshes) {
-    if (m.mesh.vertices.empty()) continue;
-    const Box3 b = m.mesh.bounds();
-    all.min = all.min.cwiseMin(b.min);
-    all.max = all.max.cwiseMax(b.max);
-  }
-  if (!(all.max.array() >= all.min.array()).all()) return slice;
-  const double diagonal = std::max(all.diagonal(), std::numeric_limits<double>::min());
+// The cleaned loops of every mesh in the plane, without the degenerate ones (fewer than three
+// points or no area, relative to `diagonal`).
+std::vector<Loop> mesh_loops(const std::vector<LabeledMesh>& meshes, const SlicePlane& plane,
+                             double diagonal) {
   const double duplicate_tolerance = 1e-9 * diagonal;
   const double min_area = 1e-10 * diagonal * diagonal;
-
   std::vector<Loop> loops;
   for (std::size_t m = 0; m < meshes.size(); ++m) {
     for (const Ring2& raw : cut_mesh(meshes[m].mesh, plane)) {
@@ -225,8 +220,11 @@ LabeledSlice slice_meshes(const std::vector<LabeledMesh>& meshes, const SlicePla
       loops.push_back(std::move(loop));
     }
   }
+  return loops;
+}
 
-  // Parent = the smallest loop (of any mesh) that contains the loop.
+// Each loop's parent: the smallest loop (of any mesh) that contains it, or -1.
+std::vector<int> loop_parents(const std::vector<Loop>& loops) {
   const std::size_t n = loops.size();
   std::vector<int> parent(n, -1);
   for (std::size_t i = 0; i < n; ++i) {
@@ -239,8 +237,16 @@ LabeledSlice slice_meshes(const std::vector<LabeledMesh>& meshes, const SlicePla
       }
     }
   }
-  // A loop bounds material of its own mesh from outside when an even number of loops of the
-  // same mesh surround it; otherwise it bounds a cavity of that mesh.
+  return parent;
+}
+
+// The regions of the loops: a loop bounds material of its own mesh from outside when an even
+// number of loops of the same mesh surround it (otherwise it bounds a cavity of that mesh), and
+// every loop directly inside an outer loop is a hole of its region: a cavity of the same mesh,
+// or another mesh nested inside (which also gets its own region), so regions never overlap.
+std::vector<Region> loop_regions(const std::vector<Loop>& loops, const std::vector<int>& parent,
+                                 double duplicate_tolerance) {
+  const std::size_t n = loops.size();
   std::vector<char> is_outer(n);
   for (std::size_t i = 0; i < n; ++i) {
     int same_mesh_depth = 0;
@@ -248,14 +254,12 @@ LabeledSlice slice_meshes(const std::vector<LabeledMesh>& meshes, const SlicePla
       if (loops[p].mesh == loops[i].mesh) ++same_mesh_depth;
     is_outer[i] = same_mesh_depth % 2 == 0;
   }
-  // Every loop directly inside an outer loop is a hole of its region: a cavity of the same
-  // mesh, or another mesh nested inside (which also gets its own region), so regions never
-  // overlap.
+  std::vector<Region> regions;
   std::vector<int> region_of_loop(n, -1);
   for (std::size_t i = 0; i < n; ++i) {
     if (!is_outer[i]) continue;
-    region_of_loop[i] = static_cast<int>(slice.regions.size());
-    slice.regions.push_back(Region{loops[i].label, oriented(loops[i], true), {}});
+    region_of_loop[i] = static_cast<int>(regions.size());
+    regions.push_back(Region{loops[i].label, oriented(loops[i], true), {}});
   }
   std::vector<std::vector<int>> hole_loops(n);
   for (std::size_t i = 0; i < n; ++i) {
@@ -268,8 +272,30 @@ LabeledSlice slice_meshes(const std::vector<LabeledMesh>& meshes, const SlicePla
     });
     if (duplicate) continue;
     hole_loops[p].push_back(static_cast<int>(i));
-    slice.regions[region_of_loop[p]].holes.push_back(oriented(loops[i], false));
+    regions[region_of_loop[p]].holes.push_back(oriented(loops[i], false));
   }
+  return regions;
+}
+
+}  // namespace
+
+LabeledSlice slice_meshes(const std::vector<LabeledMesh>& meshes, const SlicePlane& plane) {
+  LabeledSlice slice;
+  slice.origin_mm = plane.origin_mm;
+  slice.u = plane.u;
+  slice.v = plane.v;
+  Box3 all{Vec3::Constant(std::numeric_limits<double>::infinity()),
+           Vec3::Constant(-std::numeric_limits<double>::infinity())};
+  for (const LabeledMesh& m : meshes) {
+    if (m.mesh.vertices.empty()) continue;
+    const Box3 b = m.mesh.bounds();
+    all.min = all.min.cwiseMin(b.min);
+    all.max = all.max.cwiseMax(b.max);
+  }
+  if (!(all.max.array() >= all.min.array()).all()) return slice;
+  const double diagonal = std::max(all.diagonal(), std::numeric_limits<double>::min());
+  const std::vector<Loop> loops = mesh_loops(meshes, plane, diagonal);
+  slice.regions = loop_regions(loops, loop_parents(loops), 1e-9 * diagonal);
   return slice;
 }
 
