@@ -7,6 +7,7 @@
 #include <cstring>
 #include <limits>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <type_traits>
 
 #include "sonoshape/core/slice_io.hpp"
@@ -354,6 +355,77 @@ int mesh_topic_label(std::string_view topic) {
   return label;
 }
 
+// Each frame of a mesh message holds exactly what its counts need.
+void check_mesh_frame_sizes(const Frames& frames, std::uint64_t vertex_count,
+                            std::uint64_t triangle_count, bool normals) {
+  auto check_size = [&](std::size_t frame, std::uint64_t count, std::size_t bytes_each,
+                        const char* count_key, const char* what) {
+    const std::size_t size = frames[frame].size();
+    if (size % bytes_each != 0 || size / bytes_each != count)
+      invalid("frame " + std::to_string(frame) + " holds " + std::to_string(size) + " bytes but " +
+              count_key + " " + std::to_string(count) + " needs " +
+              (count <= std::numeric_limits<std::uint64_t>::max() / bytes_each
+                   ? std::to_string(count * bytes_each)
+                   : std::string("more")) +
+              " (" + what + ")");
+  };
+  check_size(2, vertex_count, kVertexBytes, "vertex_count", "3 float32 per vertex");
+  check_size(3, triangle_count, kTriangleBytes, "triangle_count", "3 uint32 per triangle");
+  if (normals) check_size(4, vertex_count, kVertexBytes, "vertex_count", "3 float32 per normal");
+}
+
+// The vertices, triangles and normals of a mesh message whose frame sizes were checked: finite
+// coordinates, vertex indices in range.
+void read_mesh_arrays(const Frames& frames, std::uint64_t vertex_count,
+                      std::uint64_t triangle_count, bool normals, MeshUpdate& update) {
+  update.mesh.vertices = f32_to_vec3s(frames[2]);
+  for (std::size_t k = 0; k < update.mesh.vertices.size(); ++k)
+    if (!update.mesh.vertices[k].allFinite())
+      invalid("vertex " + std::to_string(k) + " is NaN or infinite");
+  update.mesh.triangles.resize(triangle_count);
+  const char* p = frames[3].data();
+  for (std::size_t t = 0; t < update.mesh.triangles.size(); ++t)
+    for (std::uint32_t& index : update.mesh.triangles[t]) {
+      index = get_u32(p);
+      p += 4;
+      if (index >= vertex_count)
+        invalid("triangle " + std::to_string(t) + " uses vertex index " + std::to_string(index) +
+                ", out of range for vertex_count " + std::to_string(vertex_count));
+    }
+  if (normals) {
+    update.normals = f32_to_vec3s(frames[4]);
+    for (std::size_t k = 0; k < update.normals->size(); ++k)
+      if (!(*update.normals)[k].allFinite())
+        invalid("normal " + std::to_string(k) + " is NaN or infinite");
+  }
+}
+
+// The header's "bounds": null exactly for an empty mesh, else a box holding every vertex (to a
+// relative tolerance).
+std::optional<Box3> read_mesh_bounds(const json& header, const TriangleMesh& mesh) {
+  const json& bounds = required(header, "bounds");
+  if (bounds.is_null()) {
+    if (!mesh.vertices.empty()) invalid("\"bounds\" is null but the mesh has vertices");
+    return std::nullopt;
+  }
+  if (mesh.vertices.empty())
+    invalid("\"bounds\" is " + short_dump(bounds) +
+            " but the mesh is empty; an empty mesh has \"bounds\": null");
+  if (!bounds.is_object() || !bounds.contains("min") || !bounds.contains("max"))
+    invalid("\"bounds\" must be {\"min\": [x, y, z], \"max\": [x, y, z]}, got " +
+            short_dump(bounds));
+  Box3 box{read_vec3(bounds["min"], "\"bounds\" min"), read_vec3(bounds["max"], "\"bounds\" max")};
+  if ((box.min.array() > box.max.array()).any())
+    invalid("\"bounds\" min is above max on some axis");
+  const double tol =
+      kBoundsRelTol * std::max({1.0, box.min.cwiseAbs().maxCoeff(), box.max.cwiseAbs().maxCoeff()});
+  const Box3 loose = box.padded(tol);
+  for (std::size_t k = 0; k < mesh.vertices.size(); ++k)
+    if (!loose.contains(mesh.vertices[k]))
+      invalid("vertex " + std::to_string(k) + " lies outside \"bounds\"");
+  return box;
+}
+
 MeshUpdate decode_mesh(const Frames& frames, const json& header, int topic_label) {
   MeshUpdate update;
   const json& label = required(header, "label");
@@ -376,64 +448,10 @@ MeshUpdate decode_mesh(const Frames& frames, const json& header, int topic_label
   check_frame_count(
       frames, normals ? 5 : 4,
       normals ? "a mesh message with \"normals\": true" : "a mesh message without normals");
-
-  auto check_size = [&](std::size_t frame, std::uint64_t count, std::size_t bytes_each,
-                        const char* count_key, const char* what) {
-    const std::size_t size = frames[frame].size();
-    if (size % bytes_each != 0 || size / bytes_each != count)
-      invalid("frame " + std::to_string(frame) + " holds " + std::to_string(size) + " bytes but " +
-              count_key + " " + std::to_string(count) + " needs " +
-              (count <= std::numeric_limits<std::uint64_t>::max() / bytes_each
-                   ? std::to_string(count * bytes_each)
-                   : std::string("more")) +
-              " (" + what + ")");
-  };
-  check_size(2, vertex_count, kVertexBytes, "vertex_count", "3 float32 per vertex");
-  check_size(3, triangle_count, kTriangleBytes, "triangle_count", "3 uint32 per triangle");
-  if (normals) check_size(4, vertex_count, kVertexBytes, "vertex_count", "3 float32 per normal");
-
-  update.mesh.vertices = f32_to_vec3s(frames[2]);
-  for (std::size_t k = 0; k < update.mesh.vertices.size(); ++k)
-    if (!update.mesh.vertices[k].allFinite())
-      invalid("vertex " + std::to_string(k) + " is NaN or infinite");
-  update.mesh.triangles.resize(triangle_count);
-  const char* p = frames[3].data();
-  for (std::size_t t = 0; t < update.mesh.triangles.size(); ++t)
-    for (std::uint32_t& index : update.mesh.triangles[t]) {
-      index = get_u32(p);
-      p += 4;
-      if (index >= vertex_count)
-        invalid("triangle " + std::to_string(t) + " uses vertex index " + std::to_string(index) +
-                ", out of range for vertex_count " + std::to_string(vertex_count));
-    }
-  if (normals) {
-    update.normals = f32_to_vec3s(frames[4]);
-    for (std::size_t k = 0; k < update.normals->size(); ++k)
-      if (!(*update.normals)[k].allFinite())
-        invalid("normal " + std::to_string(k) + " is NaN or infinite");
-  }
-
-  const json& bounds = required(header, "bounds");
-  if (bounds.is_null()) {
-    if (vertex_count > 0) invalid("\"bounds\" is null but the mesh has vertices");
-    return update;
-  }
-  if (vertex_count == 0)
-    invalid("\"bounds\" is " + short_dump(bounds) +
-            " but the mesh is empty; an empty mesh has \"bounds\": null");
-  if (!bounds.is_object() || !bounds.contains("min") || !bounds.contains("max"))
-    invalid("\"bounds\" must be {\"min\": [x, y, z], \"max\": [x, y, z]}, got " +
-            short_dump(bounds));
-  Box3 box{read_vec3(bounds["min"], "\"bounds\" min"), read_vec3(bounds["max"], "\"bounds\" max")};
-  if ((box.min.array() > box.max.array()).any())
-    invalid("\"bounds\" min is above max on some axis");
-  const double tol =
-      kBoundsRelTol * std::max({1.0, box.min.cwiseAbs().maxCoeff(), box.max.cwiseAbs().maxCoeff()});
-  const Box3 loose = box.padded(tol);
-  for (std::size_t k = 0; k < update.mesh.vertices.size(); ++k)
-    if (!loose.contains(update.mesh.vertices[k]))
-      invalid("vertex " + std::to_string(k) + " lies outside \"bounds\"");
-  update.bounds = box;
+  check_mesh_frame_sizes(frames, vertex_count, triangle_count, normals);
+  read_mesh_arrays(frames, vertex_count, triangle_count, normals, update);
+  if (const std::optional<Box3> bounds = read_mesh_bounds(header, update.mesh))
+    update.bounds = *bounds;
   return update;
 }
 
