@@ -256,21 +256,14 @@ Result<std::string> read_element_data_file(const std::filesystem::path& header,
 
 }  // namespace detail
 
-Result<SequenceFile> read_sequence_file(const std::filesystem::path& path) {
-  Result<std::string> bytes = read_input_file(path, "sequence file");
-  if (!bytes) return bytes.status();
-  const std::string data = std::move(*bytes);
-  // The content decides, not the name: PLUS writes both formats as .igs.*, Slicer as .seq.nrrd,
-  // and users rename files.
-  if (std::string_view(data).substr(0, 7) == "NRRD000")
-    return detail::read_nrrd_sequence(path, data);
+namespace {
 
-  // MetaImage.
-  SequenceFile file;
-  std::map<std::size_t, FieldList> frame_fields;
-  std::size_t pos = 0;
+// The 'Key = value' lines of a MetaImage header up to ElementDataFile: the global fields and
+// the per-frame ones (Seq_FrameNNNN_Key). `pos` ends where the pixel data begins.
+Status parse_metaimage_header(const std::filesystem::path& path, const std::string& data,
+                              FieldList& fields, std::map<std::size_t, FieldList>& frame_fields,
+                              std::size_t& pos) {
   std::size_t line_number = 0;
-  bool found_data_file = false;
   while (pos < data.size()) {
     const std::size_t eol = data.find('\n', pos);
     const std::size_t end = eol == std::string::npos ? data.size() : eol;
@@ -292,31 +285,29 @@ Result<SequenceFile> read_sequence_file(const std::filesystem::path& path) {
       set_field(frame_fields[frame_key->first], frame_key->second, std::move(value));
       continue;
     }
-    set_field(file.fields_, key, value);
-    if (key == "ElementDataFile") {
-      found_data_file = true;
-      break;
-    }
+    set_field(fields, key, value);
+    if (key == "ElementDataFile") return Status::ok();
   }
-  if (!found_data_file)
-    return fail(path, "the header has no 'ElementDataFile = LOCAL' line",
-                "the file is truncated or not a MetaImage sequence");
-  // A .mhd names its pixel file (.raw, or .zraw when compressed) beside it.
-  std::string external;
-  const std::string data_file = file.field("ElementDataFile").value_or("LOCAL");
-  if (data_file != "LOCAL") {
-    auto read = detail::read_element_data_file(path, data_file);
-    if (!read) return read.status();
-    external = std::move(*read);
-  }
-  const std::string_view pixel_data =
-      data_file == "LOCAL" ? std::string_view(data).substr(pos) : std::string_view(external);
+  return fail(path, "the header has no 'ElementDataFile = LOCAL' line",
+              "the file is truncated or not a MetaImage sequence");
+}
 
-  const auto ndims = parse_number<int>(file.field("NDims").value_or(""));
+// What a MetaImage header says of its pixels.
+struct MetaImageLayout {
+  std::size_t width = 0, height = 0, frames = 0;
+  std::string dim_text;  // DimSize as written, for messages
+  bool compressed = false;
+};
+
+// NDims, DimSize, ElementType and ElementNumberOfChannels, checked: 8-bit grey frames whose
+// per-frame fields name no frame beyond DimSize.
+Result<MetaImageLayout> read_layout(const std::filesystem::path& path, const FieldList& fields,
+                                    const std::map<std::size_t, FieldList>& frame_fields) {
+  const auto ndims = parse_number<int>(find_field(fields, "NDims").value_or(""));
   if (!ndims || (*ndims != 2 && *ndims != 3))
-    return fail(path, "NDims is '" + file.field("NDims").value_or("missing") + "'",
+    return fail(path, "NDims is '" + find_field(fields, "NDims").value_or("missing") + "'",
                 "a tracked-frame sequence has 'NDims = 3' (or 2 for one frame)");
-  const auto dim_text = file.field("DimSize");
+  const auto dim_text = find_field(fields, "DimSize");
   if (!dim_text) return fail(path, "DimSize is missing", "add 'DimSize = W H N'");
   const auto dim_words = split_words(*dim_text);
   std::array<long long, 3> dims{0, 0, 1};
@@ -331,85 +322,138 @@ Result<SequenceFile> read_sequence_file(const std::filesystem::path& path) {
                 "DimSize = '" + *dim_text + "' is not " + std::to_string(*ndims) +
                     " non-negative integers with W, H > 0",
                 "write it as 'DimSize = W H N' (width, height, frames)");
-  const std::string element_type = file.field("ElementType").value_or("missing");
+  const std::string element_type = find_field(fields, "ElementType").value_or("missing");
   if (element_type != "MET_UCHAR")
     return fail(path, "ElementType = " + element_type + " is not supported",
                 "only 8-bit grey frames (MET_UCHAR) are; convert the sequence with PLUS "
                 "EditSequenceFile or another tool");
-  if (const auto channels = file.field("ElementNumberOfChannels"); channels && *channels != "1")
+  if (const auto channels = find_field(fields, "ElementNumberOfChannels");
+      channels && *channels != "1")
     return fail(path, "ElementNumberOfChannels = " + *channels + " is not supported",
                 "only single-channel (grey) frames are");
-
-  const std::size_t w = static_cast<std::size_t>(dims[0]);
-  const std::size_t h = static_cast<std::size_t>(dims[1]);
-  const std::size_t n = static_cast<std::size_t>(dims[2]);
-  if (!frame_fields.empty() && frame_fields.rbegin()->first >= n)
+  MetaImageLayout layout;
+  layout.width = static_cast<std::size_t>(dims[0]);
+  layout.height = static_cast<std::size_t>(dims[1]);
+  layout.frames = static_cast<std::size_t>(dims[2]);
+  layout.dim_text = *dim_text;
+  layout.compressed = is_true(find_field(fields, "CompressedData").value_or("False"));
+  if (!frame_fields.empty() && frame_fields.rbegin()->first >= layout.frames)
     return fail(path,
                 "per-frame field of frame " + std::to_string(frame_fields.rbegin()->first) +
-                    " but DimSize says " + std::to_string(n) + " frames",
+                    " but DimSize says " + std::to_string(layout.frames) + " frames",
                 "fix DimSize or remove the fields of the missing frames");
+  return layout;
+}
+
+// Whether `available` bytes of pixel data can hold what the layout asks for, checked before
+// anything is allocated: zlib's deflate expands at most 1032 times.
+Status check_pixel_bytes(const std::filesystem::path& path, const MetaImageLayout& layout,
+                         std::size_t available) {
+  const std::size_t w = layout.width, h = layout.height, n = layout.frames;
   const std::size_t frame_bytes = w * h;  // below 2^62: W and H are at most 2^31 - 1
-  const std::size_t available = pixel_data.size();
-  const bool compressed = is_true(file.field("CompressedData").value_or("False"));
-  // The pixels DimSize asks for are checked against the bytes present before anything is
-  // allocated: zlib's deflate expands at most 1032 times.
   constexpr std::size_t kMaxInflateRatio = 1032;
-  if (compressed && n > 0 && frame_bytes > (available * kMaxInflateRatio + 64) / n)
+  const std::string size = std::to_string(w) + "x" + std::to_string(h) + "x" + std::to_string(n);
+  if (layout.compressed && n > 0 && frame_bytes > (available * kMaxInflateRatio + 64) / n)
     return fail(path,
-                "DimSize = '" + *dim_text + "' needs " + std::to_string(w) + "x" +
-                    std::to_string(h) + "x" + std::to_string(n) + " bytes but only " +
+                "DimSize = '" + layout.dim_text + "' needs " + size + " bytes but only " +
                     std::to_string(available) +
                     " compressed bytes follow the header, which cannot hold them",
                 "the file is truncated or DimSize is wrong");
-  if (!compressed && n > 0 && frame_bytes > available / n)  // division: W*H*N may overflow
+  if (!layout.compressed && n > 0 && frame_bytes > available / n)  // W*H*N may overflow
     return fail(path,
                 "the raw pixel data has " + std::to_string(available) + " bytes, DimSize needs " +
-                    std::to_string(w) + "x" + std::to_string(h) + "x" + std::to_string(n) +
-                    " (frame " + std::to_string(available / frame_bytes) + " is incomplete)",
+                    size + " (frame " + std::to_string(available / frame_bytes) + " is incomplete)",
                 "the file is truncated or DimSize is wrong");
-  const std::size_t total = frame_bytes * n;
-  std::vector<std::uint8_t> pixels(total);
-  if (compressed) {
-    std::size_t compressed_size = available;
-    if (const auto text = file.field("CompressedDataSize")) {
-      const auto size = parse_number<std::size_t>(*text);
-      if (!size) return fail(path, "CompressedDataSize = '" + *text + "' is not a byte count", "");
-      if (*size > available)
-        return fail(path,
-                    "CompressedDataSize is " + std::to_string(*size) + " bytes but only " +
-                        std::to_string(available) + " follow the header",
-                    "the file is truncated; copy it again");
-      compressed_size = *size;
-    }
-    // One spare output byte tells "exactly DimSize" from "more than DimSize".
-    pixels.resize(total + 1);
-    const auto [rc, produced] =
-        detail::inflate_buffer(reinterpret_cast<const std::uint8_t*>(pixel_data.data()),
-                               compressed_size, pixels.data(), pixels.size(), MAX_WBITS);
-    pixels.resize(total);
-    if (rc != Z_STREAM_END && rc != Z_BUF_ERROR)
-      return fail(path,
-                  "the compressed pixel data is corrupt (zlib error " + std::to_string(rc) +
-                      " in frame " + std::to_string(produced / frame_bytes) + ")",
-                  "the file is damaged; copy it again");
-    if (produced > total)
-      return fail(path, "the pixel data holds more than DimSize (" + *dim_text + ") describes",
-                  "DimSize is wrong");
-    if (produced < total)
-      return fail(path,
-                  "the pixel data decompresses to " + std::to_string(produced) +
-                      " bytes, DimSize needs " + std::to_string(total) + " (frame " +
-                      std::to_string(produced / frame_bytes) + " is incomplete)",
-                  "the file is truncated or DimSize is wrong");
-  } else {
-    std::copy_n(reinterpret_cast<const std::uint8_t*>(pixel_data.data()), total, pixels.begin());
-  }
+  return Status::ok();
+}
 
-  file.width_ = static_cast<int>(w);
-  file.height_ = static_cast<int>(h);
-  file.images_.reserve(n);
-  file.frame_fields_.resize(n);
-  for (std::size_t k = 0; k < n; ++k) {
+// The compressed pixels, inflated to exactly the layout's W x H x N bytes.
+Result<std::vector<std::uint8_t>> inflate_pixels(const std::filesystem::path& path,
+                                                 const FieldList& fields,
+                                                 const MetaImageLayout& layout,
+                                                 std::string_view pixel_data) {
+  const std::size_t frame_bytes = layout.width * layout.height;
+  const std::size_t total = frame_bytes * layout.frames;
+  std::size_t compressed_size = pixel_data.size();
+  if (const auto text = find_field(fields, "CompressedDataSize")) {
+    const auto size = parse_number<std::size_t>(*text);
+    if (!size) return fail(path, "CompressedDataSize = '" + *text + "' is not a byte count", "");
+    if (*size > pixel_data.size())
+      return fail(path,
+                  "CompressedDataSize is " + std::to_string(*size) + " bytes but only " +
+                      std::to_string(pixel_data.size()) + " follow the header",
+                  "the file is truncated; copy it again");
+    compressed_size = *size;
+  }
+  // One spare output byte tells "exactly DimSize" from "more than DimSize".
+  std::vector<std::uint8_t> pixels(total + 1);
+  const auto [rc, produced] =
+      detail::inflate_buffer(reinterpret_cast<const std::uint8_t*>(pixel_data.data()),
+                             compressed_size, pixels.data(), pixels.size(), MAX_WBITS);
+  pixels.resize(total);
+  if (rc != Z_STREAM_END && rc != Z_BUF_ERROR)
+    return fail(path,
+                "the compressed pixel data is corrupt (zlib error " + std::to_string(rc) +
+                    " in frame " + std::to_string(produced / frame_bytes) + ")",
+                "the file is damaged; copy it again");
+  if (produced > total)
+    return fail(path, "the pixel data holds more than DimSize (" + layout.dim_text + ") describes",
+                "DimSize is wrong");
+  if (produced < total)
+    return fail(path,
+                "the pixel data decompresses to " + std::to_string(produced) +
+                    " bytes, DimSize needs " + std::to_string(total) + " (frame " +
+                    std::to_string(produced / frame_bytes) + " is incomplete)",
+                "the file is truncated or DimSize is wrong");
+  return pixels;
+}
+
+}  // namespace
+
+Result<SequenceFile> read_sequence_file(const std::filesystem::path& path) {
+  Result<std::string> bytes = read_input_file(path, "sequence file");
+  if (!bytes) return bytes.status();
+  const std::string data = std::move(*bytes);
+  // The content decides, not the name: PLUS writes both formats as .igs.*, Slicer as .seq.nrrd,
+  // and users rename files.
+  if (std::string_view(data).substr(0, 7) == "NRRD000")
+    return detail::read_nrrd_sequence(path, data);
+
+  // MetaImage.
+  SequenceFile file;
+  std::map<std::size_t, FieldList> frame_fields;
+  std::size_t pos = 0;
+  if (Status header = parse_metaimage_header(path, data, file.fields_, frame_fields, pos); !header)
+    return header;
+  // A .mhd names its pixel file (.raw, or .zraw when compressed) beside it.
+  std::string external;
+  const std::string data_file = file.field("ElementDataFile").value_or("LOCAL");
+  if (data_file != "LOCAL") {
+    auto read = detail::read_element_data_file(path, data_file);
+    if (!read) return read.status();
+    external = std::move(*read);
+  }
+  const std::string_view pixel_data =
+      data_file == "LOCAL" ? std::string_view(data).substr(pos) : std::string_view(external);
+  const Result<MetaImageLayout> layout = read_layout(path, file.fields_, frame_fields);
+  if (!layout) return layout.status();
+  if (Status fits = check_pixel_bytes(path, *layout, pixel_data.size()); !fits) return fits;
+  const std::size_t frame_bytes = layout->width * layout->height;
+  std::vector<std::uint8_t> pixels;
+  if (layout->compressed) {
+    Result<std::vector<std::uint8_t>> inflated =
+        inflate_pixels(path, file.fields_, *layout, pixel_data);
+    if (!inflated) return inflated.status();
+    pixels = std::move(*inflated);
+  } else {
+    pixels.assign(pixel_data.begin(),
+                  pixel_data.begin() + static_cast<std::ptrdiff_t>(frame_bytes * layout->frames));
+  }
+  file.width_ = static_cast<int>(layout->width);
+  file.height_ = static_cast<int>(layout->height);
+  file.images_.reserve(layout->frames);
+  file.frame_fields_.resize(layout->frames);
+  for (std::size_t k = 0; k < layout->frames; ++k) {
     GreyImage image;
     image.width = file.width_;
     image.height = file.height_;
