@@ -192,7 +192,8 @@ bool is_spatial_kind(std::string_view kind) {
   return kind.empty() || kind == "domain" || kind == "space";
 }
 
-Result<Axes> find_axes(const std::filesystem::path& path, const NrrdHeader& header) {
+// The axes' sizes and kinds ('dimension', 'sizes', 'kinds'), checked against each other.
+Result<Axes> read_sizes_and_kinds(const std::filesystem::path& path, const NrrdHeader& header) {
   const HeaderEntry* dimension_field = header.field("dimension");
   const HeaderEntry* sizes_field = header.field("sizes");
   if (!dimension_field || !sizes_field)
@@ -233,9 +234,14 @@ Result<Axes> find_axes(const std::filesystem::path& path, const NrrdHeader& head
                 "add e.g. 'kinds: domain domain list' (PLUS) or 'kinds: domain domain domain "
                 "list' (Slicer)");
   }
+  return axes;
+}
 
+// The frame axis (kind list or time) into axes.frames, and the spatial axes; other kinds must
+// be one sample (a colour or vector axis is refused).
+Result<std::vector<int>> spatial_axes(const std::filesystem::path& path, Axes& axes) {
   std::vector<int> spatial;
-  for (int a = 0; a < *dimension; ++a) {
+  for (int a = 0; a < static_cast<int>(axes.sizes.size()); ++a) {
     const std::string kind = lower(axes.kinds[static_cast<std::size_t>(a)]);
     const long long size = axes.sizes[static_cast<std::size_t>(a)];
     if (kind == "list" || kind == "time") {
@@ -256,25 +262,34 @@ Result<Axes> find_axes(const std::filesystem::path& path, const NrrdHeader& head
                   "(grey) volumes first, e.g. with Slicer's Vector to Scalar Volume");
     }
   }
+  return spatial;
+}
+
+Result<Axes> find_axes(const std::filesystem::path& path, const NrrdHeader& header) {
+  Result<Axes> read = read_sizes_and_kinds(path, header);
+  if (!read) return read;
+  Axes axes = std::move(*read);
+  const Result<std::vector<int>> spatial = spatial_axes(path, axes);
+  if (!spatial) return spatial.status();
+  const std::string& sizes_text = header.field("sizes")->value;
   // The image plane: the first two spatial axes longer than one sample; a third one must be one
   // sample thick (a 2D ultrasound frame stored as a W x H x 1 volume).
   std::vector<int> plane;
-  for (int a : spatial)
+  for (int a : *spatial)
     if (axes.sizes[static_cast<std::size_t>(a)] > 1) plane.push_back(a);
   if (plane.size() > 2)
-    return fail(path, "each frame is a 3D volume (sizes " + sizes_field->value + ")",
+    return fail(path, "each frame is a 3D volume (sizes " + sizes_text + ")",
                 "only 2D frames (one slice thick) are read, as a tracked ultrasound probe gives");
-  for (int a : spatial)
+  for (int a : *spatial)
     if (plane.size() < 2 && std::find(plane.begin(), plane.end(), a) == plane.end())
       plane.push_back(a);
   if (plane.size() < 2)
-    return fail(path,
-                "fewer than two image axes (kinds: domain/space) in sizes " + sizes_field->value,
+    return fail(path, "fewer than two image axes (kinds: domain/space) in sizes " + sizes_text,
                 "a frame needs width and height");
   std::sort(plane.begin(), plane.end());
   axes.image_i = plane[0];
   axes.image_j = plane[1];
-  for (int a : spatial)
+  for (int a : *spatial)
     if (a != axes.image_i && a != axes.image_j) axes.normal = a;
   return axes;
 }
@@ -398,6 +413,63 @@ Result<std::filesystem::path> detached_data_path(const std::filesystem::path& pa
 // Reads the bytes that hold the samples: after the header, or from `data file`, after the
 // line skip, decoded. Fails naming the field; never quotes a detached file's content (the
 // file may not be the user's to read out).
+// The bytes of a detached data file ('data file'): one regular file, resolved beside the header.
+Result<std::string> read_detached(const std::filesystem::path& path, const HeaderEntry& data_file,
+                                  std::filesystem::path& source_path) {
+  const auto words = split_words(data_file.value);
+  if (words.size() != 1 || data_file.value.find('%') != std::string::npos ||
+      data_file.value.rfind("LIST", 0) == 0)
+    return fail(path, where(data_file) + " '" + data_file.value + "' names several files",
+                "only one detached data file is read; join the parts into one file");
+  auto resolved = detached_data_path(path, data_file, std::string(words[0]));
+  if (!resolved) return resolved.status();
+  source_path = *resolved;
+  // A device or a pipe (/dev/zero, /dev/stdin) would be read without end or block forever.
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(source_path, ec))
+    return fail(path,
+                where(data_file) + ": " + source_path.string() +
+                    " is not a regular file (a device, a pipe or a folder)",
+                "name the file that holds the samples");
+  std::ifstream in(source_path, std::ios::binary);
+  if (!in)
+    return fail(path, where(data_file) + ": cannot open " + source_path.string(),
+                "keep the data file next to the header, or fix the name");
+  return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+}
+
+// Drops the 'line skip' lines from the front of `source`.
+Status skip_lines(const std::filesystem::path& path, const NrrdHeader& header,
+                  const std::filesystem::path& source_path, std::string_view& source) {
+  const HeaderEntry* line_skip = header.field("line skip");
+  if (!line_skip) return Status::ok();
+  const auto lines = parse_number<long long>(line_skip->value);
+  if (!lines || *lines < 0)
+    return fail(path, where(*line_skip) + " is '" + line_skip->value + "'", "give a line count");
+  for (long long k = 0; k < *lines; ++k) {
+    const std::size_t eol = source.find('\n');
+    if (eol == std::string_view::npos)
+      return fail(path, where(*line_skip) + ": " + source_path.string() + " has fewer lines",
+                  "fix 'line skip'");
+    source.remove_prefix(eol + 1);
+  }
+  return Status::ok();
+}
+
+// 'byte skip' (raw encoding only; -1: the samples end the file).
+Result<long long> byte_skip(const std::filesystem::path& path, const NrrdHeader& header,
+                            const std::string& encoding) {
+  const HeaderEntry* field = header.field("byte skip");
+  if (!field) return 0LL;
+  const auto value = parse_number<long long>(field->value);
+  if (!value || *value < -1)
+    return fail(path, where(*field) + " is '" + field->value + "'", "give a byte count or -1");
+  if (*value != 0 && encoding != "raw")
+    return fail(path, where(*field) + " with encoding " + encoding + " is not supported",
+                "byte skip is read with raw encoding only");
+  return *value;
+}
+
 Result<std::vector<std::uint8_t>> read_samples(const std::filesystem::path& path,
                                                const NrrdHeader& header, const std::string& data,
                                                std::size_t sample_count, int sample_bytes,
@@ -408,26 +480,9 @@ Result<std::vector<std::uint8_t>> read_samples(const std::filesystem::path& path
   std::string_view source;
   std::filesystem::path source_path = path;
   if (const HeaderEntry* data_file = header.field("data file")) {
-    const auto words = split_words(data_file->value);
-    if (words.size() != 1 || data_file->value.find('%') != std::string::npos ||
-        data_file->value.rfind("LIST", 0) == 0)
-      return fail(path, where(*data_file) + " '" + data_file->value + "' names several files",
-                  "only one detached data file is read; join the parts into one file");
-    auto resolved = detached_data_path(path, *data_file, std::string(words[0]));
-    if (!resolved) return resolved.status();
-    source_path = *resolved;
-    // A device or a pipe (/dev/zero, /dev/stdin) would be read without end or block forever.
-    std::error_code ec;
-    if (!std::filesystem::is_regular_file(source_path, ec))
-      return fail(path,
-                  where(*data_file) + ": " + source_path.string() +
-                      " is not a regular file (a device, a pipe or a folder)",
-                  "name the file that holds the samples");
-    std::ifstream in(source_path, std::ios::binary);
-    if (!in)
-      return fail(path, where(*data_file) + ": cannot open " + source_path.string(),
-                  "keep the data file next to the header, or fix the name");
-    detached.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+    Result<std::string> read = read_detached(path, *data_file, source_path);
+    if (!read) return read.status();
+    detached = std::move(*read);
     source = detached;
   } else {
     if (!header.has_blank_line)
@@ -436,40 +491,17 @@ Result<std::vector<std::uint8_t>> read_samples(const std::filesystem::path& path
                   "the file is truncated or its header was cut");
     source = std::string_view(data).substr(header.data_offset);
   }
-  if (const HeaderEntry* line_skip = header.field("line skip")) {
-    const auto lines = parse_number<long long>(line_skip->value);
-    if (!lines || *lines < 0)
-      return fail(path, where(*line_skip) + " is '" + line_skip->value + "'", "give a line count");
-    for (long long k = 0; k < *lines; ++k) {
-      const std::size_t eol = source.find('\n');
-      if (eol == std::string_view::npos)
-        return fail(path, where(*line_skip) + ": " + source_path.string() + " has fewer lines",
-                    "fix 'line skip'");
-      source.remove_prefix(eol + 1);
-    }
-  }
+  if (Status skipped = skip_lines(path, header, source_path, source); !skipped) return skipped;
   const HeaderEntry* encoding_field = header.field("encoding");
   if (!encoding_field)
     return fail(path, "the header has no 'encoding' field",
                 "add 'encoding: raw' or 'encoding: gzip'");
   const std::string encoding = lower(encoding_field->value);
-  const HeaderEntry* byte_skip = header.field("byte skip");
-  long long skip = 0;
-  if (byte_skip) {
-    const auto value = parse_number<long long>(byte_skip->value);
-    if (!value || *value < -1)
-      return fail(path, where(*byte_skip) + " is '" + byte_skip->value + "'",
-                  "give a byte count or -1");
-    skip = *value;
-    if (skip != 0 && encoding != "raw")
-      return fail(path, where(*byte_skip) + " with encoding " + encoding + " is not supported",
-                  "byte skip is read with raw encoding only");
-  }
-
-  std::vector<std::uint8_t> samples;
+  const Result<long long> skip = byte_skip(path, header, encoding);
+  if (!skip) return skip.status();
   if (encoding == "raw") {
-    const std::size_t offset = skip == -1 ? (source.size() >= total ? source.size() - total : 0)
-                                          : static_cast<std::size_t>(skip);
+    const std::size_t offset = *skip == -1 ? (source.size() >= total ? source.size() - total : 0)
+                                           : static_cast<std::size_t>(*skip);
     const std::size_t available = source.size() > offset ? source.size() - offset : 0;
     if (available < total)
       return fail(path,
@@ -477,22 +509,15 @@ Result<std::vector<std::uint8_t>> read_samples(const std::filesystem::path& path
                       " bytes, sizes and type need " + std::to_string(total),
                   "the file is truncated or 'sizes' is wrong");
     const auto* first = reinterpret_cast<const std::uint8_t*>(source.data() + offset);
-    samples.assign(first, first + total);
-  } else if (encoding == "gzip" || encoding == "gz") {
-    auto decoded = decode_gzip(path, source, source_path, total);
-    if (!decoded) return decoded.status();
-    samples = std::move(*decoded);
-  } else if (encoding == "text" || encoding == "txt" || encoding == "ascii") {
-    auto decoded = decode_text(path, source, sample_count, sample_bytes, big_endian,
-                               /*quote_samples=*/source_path == path);
-    if (!decoded) return decoded.status();
-    samples = std::move(*decoded);
-  } else {
-    return fail(path, where(*encoding_field) + " '" + encoding_field->value + "' is not supported",
-                "re-save it with encoding raw or gzip (Slicer: Save with compression; unu "
-                "save -e gzip)");
+    return std::vector<std::uint8_t>(first, first + total);
   }
-  return samples;
+  if (encoding == "gzip" || encoding == "gz") return decode_gzip(path, source, source_path, total);
+  if (encoding == "text" || encoding == "txt" || encoding == "ascii")
+    return decode_text(path, source, sample_count, sample_bytes, big_endian,
+                       /*quote_samples=*/source_path == path);
+  return fail(path, where(*encoding_field) + " '" + encoding_field->value + "' is not supported",
+              "re-save it with encoding raw or gzip (Slicer: Save with compression; unu "
+              "save -e gzip)");
 }
 
 // Samples -> 8-bit grey levels. 16-bit samples are accepted when every value fits 0..255 (an
