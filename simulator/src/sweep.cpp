@@ -155,54 +155,52 @@ Result<Probe> probe_from_fields(const acq::FieldList& fields) {
   }
 }
 
-SimulatedSweep simulate_sweep(const BModeSimulator& simulator,
-                              const SimulatedAcquisition& acquisition, std::uint64_t seed,
-                              const SweepProgress& progress) {
+namespace {
+
+// The frames of a sweep, rendered in parallel (chunks of kChunkFrames, `progress` after each),
+// with each frame's grey statistics per label (what the probe sees: not a bone's shadowed
+// inside) and its shadow casters' runs.
+struct RenderedFrames {
+  std::vector<SimulatedFrame> frames;
+  std::vector<GreyStats> stats;
+  std::vector<std::array<int, 256>> caster_runs_px;
+};
+RenderedFrames render_frames(const BModeSimulator& simulator,
+                             const SimulatedAcquisition& acquisition, std::uint64_t seed,
+                             const SweepProgress& progress) {
   const std::size_t n = acquisition.frame_times_s.size();
-  const Probe& probe = simulator.probe();
-  std::vector<SimulatedFrame> frames(n);
-  std::vector<GreyStats> stats(n);
-  std::vector<std::array<int, 256>> caster_runs_px(n);
+  RenderedFrames out{std::vector<SimulatedFrame>(n), std::vector<GreyStats>(n),
+                     std::vector<std::array<int, 256>>(n)};
   for (std::size_t first = 0; first < n; first += kChunkFrames) {
     const std::size_t last = std::min(n, first + kChunkFrames);
     tbb::parallel_for(first, last, [&](std::size_t k) {
       // Seeds independent of the order frames run in (shared with SimFrameSource).
-      frames[k] = simulator.render(acquisition.true_poses[k], frame_seed(seed, k));
-      const SimulatedFrame& f = frames[k];
-      // Grey models from what the probe sees: not a bone's shadowed inside.
+      out.frames[k] = simulator.render(acquisition.true_poses[k], frame_seed(seed, k));
+      const SimulatedFrame& f = out.frames[k];
       for (std::size_t p = 0; p < f.truth.pixels.size(); ++p) {
         const std::uint8_t l = f.truth.pixels[p];
         if (l == kLabelPixelUnknown || f.shadow.pixels[p]) continue;
         const double grey = f.bmode.pixels[p];
-        stats[k].sum[l] += grey;
-        stats[k].sum_sq[l] += grey * grey;
-        stats[k].count[l] += 1.0;
+        out.stats[k].sum[l] += grey;
+        out.stats[k].sum_sq[l] += grey * grey;
+        out.stats[k].count[l] += 1.0;
       }
-      caster_runs_px[k] = shadow_caster_runs_px(f);
+      out.caster_runs_px[k] = shadow_caster_runs_px(f);
     });
     if (progress) progress(last);
   }
+  return out;
+}
 
-  SimulatedSweep sweep;
-  GreyStats total;
-  double shadow_sum = 0.0;
-  for (std::size_t k = 0; k < n; ++k) {
-    total.add(stats[k]);
-    shadow_sum += frames[k].shadow_fraction;
-  }
-  sweep.mean_shadow_fraction = n ? shadow_sum / static_cast<double>(n) : 0.0;
-
+// The header fields of the labels: names, echogenicity, the grey models learnt from the frames
+// (`total`) and the thickness of organs that shadow their own inside.
+void add_label_fields(const BModeSimulator& simulator, const GreyStats& total,
+                      const std::vector<std::array<int, 256>>& caster_runs_px,
+                      acq::FieldList& global) {
   const Phantom& phantom = simulator.phantom();
-  const auto labels = phantom.labels();
-  acq::FieldList global;
-  global.emplace_back("UltrasoundImageOrientation", "MFA");
-  global.emplace_back("UltrasoundImageType", "BRIGHTNESS");
-  global.emplace_back("ElementSpacing", "1 1 1");
-  global.emplace_back("ImageToProbeTransform", acq::format_matrix(probe.T_probe_image().matrix()));
-  for (auto& field : probe_fields(probe)) global.push_back(std::move(field));
   std::string names, echogenicity, means, stds;
   append_item(echogenicity, 0, number(phantom.background.echogenicity));
-  for (const int label : labels) {
+  for (const int label : phantom.labels()) {
     std::string name;
     for (const auto& m : phantom.meshes)
       if (m.label == label) {
@@ -224,13 +222,29 @@ SimulatedSweep simulate_sweep(const BModeSimulator& simulator,
   // A segmenter sees only the surface of an organ that shadows its own inside (bone) and needs
   // its thickness to fill its cross-section.
   std::string thicknesses;
-  for (const auto& [label, mm] : shadow_caster_thickness_mm(caster_runs_px, probe.spacing_mm()))
+  for (const auto& [label, mm] :
+       shadow_caster_thickness_mm(caster_runs_px, simulator.probe().spacing_mm()))
     append_item(thicknesses, label, number(std::round(mm * 100.0) / 100.0));
   global.emplace_back("SonoshapeLabels", names);
   global.emplace_back("SonoshapeLabelEchogenicity", echogenicity);
   global.emplace_back("SonoshapeLabelGreyMean", means);
   global.emplace_back("SonoshapeLabelGreyStd", stds);
   if (!thicknesses.empty()) global.emplace_back("SonoshapeLabelThicknessMm", thicknesses);
+}
+
+// The header fields of a simulated sweep: image, probe, labels, simulator and tracker.
+acq::FieldList sweep_fields(const BModeSimulator& simulator,
+                            const SimulatedAcquisition& acquisition, std::uint64_t seed,
+                            const GreyStats& total,
+                            const std::vector<std::array<int, 256>>& caster_runs_px) {
+  const Probe& probe = simulator.probe();
+  acq::FieldList global;
+  global.emplace_back("UltrasoundImageOrientation", "MFA");
+  global.emplace_back("UltrasoundImageType", "BRIGHTNESS");
+  global.emplace_back("ElementSpacing", "1 1 1");
+  global.emplace_back("ImageToProbeTransform", acq::format_matrix(probe.T_probe_image().matrix()));
+  for (auto& field : probe_fields(probe)) global.push_back(std::move(field));
+  add_label_fields(simulator, total, caster_runs_px, global);
   global.emplace_back("SonoshapeUnknownLabel", std::to_string(kLabelPixelUnknown));
   global.emplace_back("SonoshapePsfSigmaMm",
                       number(std::round(simulator.psf_sigma_mm() * 1000.0) / 1000.0));
@@ -245,20 +259,39 @@ SimulatedSweep simulate_sweep(const BModeSimulator& simulator,
   global.emplace_back("SonoshapeTrackerPositionNoiseMm",
                       number(acquisition.tracker.position_noise_mm));
   global.emplace_back("SonoshapeTrackerAngleNoiseDeg", number(acquisition.tracker.angle_noise_deg));
+  return global;
+}
+
+}  // namespace
+
+SimulatedSweep simulate_sweep(const BModeSimulator& simulator,
+                              const SimulatedAcquisition& acquisition, std::uint64_t seed,
+                              const SweepProgress& progress) {
+  const std::size_t n = acquisition.frame_times_s.size();
+  RenderedFrames rendered = render_frames(simulator, acquisition, seed, progress);
+  SimulatedSweep sweep;
+  GreyStats total;
+  double shadow_sum = 0.0;
+  for (std::size_t k = 0; k < n; ++k) {
+    total.add(rendered.stats[k]);
+    shadow_sum += rendered.frames[k].shadow_fraction;
+  }
+  sweep.mean_shadow_fraction = n ? shadow_sum / static_cast<double>(n) : 0.0;
+  const acq::FieldList global =
+      sweep_fields(simulator, acquisition, seed, total, rendered.caster_runs_px);
   for (auto& [key, value] : global) sweep.bmode.set_field(key, value);
   for (auto& [key, value] : global) sweep.truth.set_field(key, value);
   sweep.truth.set_field("UltrasoundImageType", "LABELS");
   sweep.truth.set_field("SonoshapeContent",
                         "ground-truth labels: 0 background, label ids, 255 "
                         "unknown (outside the sector, shadow)");
-
   const Eigen::Matrix4d identity = Eigen::Matrix4d::Identity();
   sweep.slices.reserve(n);
   for (std::size_t k = 0; k < n; ++k) {
     acq::FieldList fields;
     fields.emplace_back("Timestamp", number(acquisition.frame_times_s[k]));
     fields.emplace_back("ImageStatus", "OK");
-    SimulatedFrame& f = frames[k];
+    SimulatedFrame& f = rendered.frames[k];
     sweep.bmode.add_frame(std::move(f.bmode), fields);
     sweep.truth.add_frame(std::move(f.truth), fields);
     for (acq::SequenceFile* file : {&sweep.bmode, &sweep.truth}) {
