@@ -143,6 +143,172 @@ void record_mesh(const ListenOptions& options, const publish::MeshUpdate& mesh, 
   }
 }
 
+// The subscriber's options: the endpoints, the publisher's key (empty: none) and a snapshot
+// wait that fits in --duration.
+publish::SubscriberOptions subscriber_options(const ListenOptions& options,
+                                              const std::string& server_public_key) {
+  publish::SubscriberOptions out;
+  out.endpoint = options.endpoint;
+  out.snapshot_endpoint = options.snapshot;
+  out.snapshot_timeout_ms =
+      options.duration_s > 0.0
+          ? static_cast<int>(std::min<double>(kSnapshotTimeoutMs, options.duration_s * 1000.0 + 1))
+          : kSnapshotTimeoutMs;
+  out.receive_hwm = options.receive_hwm;
+  out.server_public_key = server_public_key;
+  return out;
+}
+
+// The listen's accounting of the messages it receives: snapshot or live, seq runs and gaps,
+// scans, and what the bodies hold; one log line per header.
+class Listener {
+ public:
+  Listener(const ListenOptions& options, std::ofstream& log_file, const Stopwatch& clock)
+      : options_(options),
+        log_file_(log_file),
+        clock_(clock),
+        in_snapshot_(!options.snapshot.empty()) {}
+
+  Tally& tally() { return tally_; }
+
+  // Counts a message that did not decode.
+  void take_invalid(const std::string& error) {
+    ++tally_.messages;
+    ++tally_.invalid;
+    log_warning("listen: invalid message: " + error);
+  }
+
+  // Counts one received message; true when --until-idle ends the listen here.
+  bool take(const publish::StreamMessage& message, const std::string& header_frame) {
+    ++tally_.messages;
+    const bool is_end = std::holds_alternative<publish::SnapshotEnd>(message.body);
+    if (!tally_.first_seq) tally_.first_seq = message.seq;
+    tally_.last_seq = std::max(tally_.last_seq.value_or(0), message.seq);
+    follow_scan(message);
+    follow_seq(message, is_end);
+    const bool stop = count_body(message);
+    if (!is_end) log_header(message, header_frame);
+    return stop;
+  }
+
+ private:
+  void follow_scan(const publish::StreamMessage& message) {
+    if (message.scan.empty() || message.scan == tally_.scan) return;
+    if (!tally_.scan.empty())
+      log_info("listen: new scan " + message.scan + " (its seq starts afresh)");
+    tally_.scan = message.scan;
+    tally_.scans.push_back(message.scan);
+    expected_seq_ = 0;
+  }
+
+  void follow_seq(const publish::StreamMessage& message, bool is_end) {
+    if (is_end && !in_snapshot_) {
+      // `end` closes a snapshot; on the live stream it is a publisher's error.
+      ++tally_.invalid;
+      log_warning("listen: invalid message: end seq " + std::to_string(message.seq) +
+                  " on the live stream; \"end\" only closes a snapshot (see "
+                  "docs/formats/mesh-stream.md)");
+    } else if (is_end) {
+      in_snapshot_ = false;
+      tally_.snapshot_seq = message.seq;
+      expected_seq_ = message.seq + 1;
+    } else if (!in_snapshot_) {
+      if (expected_seq_ && message.seq > expected_seq_) {
+        ++tally_.seq_gaps;
+        tally_.missed += message.seq - expected_seq_;
+        log_info("listen: seq gap: expected " + std::to_string(expected_seq_) + ", got " +
+                 std::to_string(message.seq) + " (" + std::to_string(message.seq - expected_seq_) +
+                 " messages missed)");
+      } else if (expected_seq_ && message.seq < expected_seq_) {
+        // One PUB socket delivers in order: a seq that does not grow breaks the format.
+        ++tally_.invalid;
+        log_warning("listen: invalid message: " + message.topic() + " seq " +
+                    std::to_string(message.seq) + " after seq " +
+                    std::to_string(expected_seq_ - 1) + "; seq must grow by one per message");
+      }
+      expected_seq_ = std::max(expected_seq_, message.seq + 1);
+    }
+  }
+
+  // Records what the body holds; true when a live status ends an --until-idle listen.
+  bool count_body(const publish::StreamMessage& message) {
+    if (const auto* mesh = std::get_if<publish::MeshUpdate>(&message.body)) {
+      record_mesh(options_, *mesh, tally_);
+    } else if (std::holds_alternative<publish::SliceUpdate>(message.body)) {
+      ++tally_.slices;
+    } else if (std::holds_alternative<publish::FrameImage>(message.body)) {
+      ++tally_.frame_images;
+    } else if (const auto* status = std::get_if<publish::StatusReport>(&message.body)) {
+      ++tally_.statuses;
+      tally_.last_state = std::string(publish::to_string(status->state));
+      if (status->state == publish::ScanState::kError)
+        log_warning("listen: the scan reports an error: " + status->message);
+      // A snapshot's status is the past: only a live one ends the listen.
+      if (options_.until_idle && !in_snapshot_ && status->state != publish::ScanState::kScanning) {
+        tally_.stopped_by = tally_.last_state.value();
+        return true;
+      }
+    }
+    return false;
+  }
+
+  // One line per header (binary frames left out), tagged with its topic and arrival time.
+  void log_header(const publish::StreamMessage& message, const std::string& header_frame) {
+    ordered_json line;
+    line["topic"] = message.topic();
+    line["received_s"] = clock_.seconds();
+    if (in_snapshot_) line["snapshot"] = true;
+    const ordered_json header = ordered_json::parse(header_frame);
+    for (const auto& [key, value] : header.items()) line[key] = value;
+    log_file_ << line.dump(-1, ' ', false, ordered_json::error_handler_t::replace) << '\n';
+    log_file_.flush();
+  }
+
+  const ListenOptions& options_;
+  std::ofstream& log_file_;
+  const Stopwatch& clock_;
+  Tally tally_;
+  // Messages before the snapshot's `end` are the snapshot: newest state, not a seq run.
+  bool in_snapshot_;
+  // The seq the next live message should carry; 0 until known (seqs start at 1).
+  std::uint64_t expected_seq_ = 0;
+};
+
+// Receives until a signal, --duration, --count or --until-idle ends the listen.
+void receive_all(const ListenOptions& options, publish::MeshSubscriber& subscriber,
+                 Listener& listener, const Stopwatch& clock) {
+  Tally& tally = listener.tally();
+  while (true) {
+    if (g_stop_signal) {
+      tally.stopped_by = "signal";
+      return;
+    }
+    auto wait = kPollInterval;
+    if (options.duration_s > 0.0) {
+      const double left_s = options.duration_s - clock.seconds();
+      if (left_s <= 0.0) {
+        tally.stopped_by = "duration";
+        return;
+      }
+      wait = std::min(wait, std::chrono::milliseconds(static_cast<long>(left_s * 1000.0) + 1));
+    }
+    auto received = subscriber.receive(wait);
+    if (received && !*received) continue;  // nothing in this interval
+    bool stop = false;
+    if (received)
+      stop = listener.take(**received, subscriber.last_frames()[1]);
+    else
+      listener.take_invalid(received.message());
+    if (options.slow_ms > 0)
+      std::this_thread::sleep_for(std::chrono::milliseconds(options.slow_ms));
+    if (options.count > 0 && tally.messages >= options.count) {
+      tally.stopped_by = "count";
+      return;
+    }
+    if (stop) return;
+  }
+}
+
 int run_listen(const ListenOptions& options) {
   std::error_code ec;
   std::filesystem::create_directories(options.output, ec);
@@ -159,26 +325,19 @@ int run_listen(const ListenOptions& options) {
   g_stop_signal = 0;
   std::signal(SIGINT, on_stop_signal);
   std::signal(SIGTERM, on_stop_signal);
-
-  publish::SubscriberOptions subscriber_options;
-  subscriber_options.endpoint = options.endpoint;
-  subscriber_options.snapshot_endpoint = options.snapshot;
   // --duration counts from here: the wait for the publisher and its snapshot is part of it.
   const Stopwatch clock;
-  subscriber_options.snapshot_timeout_ms =
-      options.duration_s > 0.0
-          ? static_cast<int>(std::min<double>(kSnapshotTimeoutMs, options.duration_s * 1000.0 + 1))
-          : kSnapshotTimeoutMs;
-  subscriber_options.receive_hwm = options.receive_hwm;
+  std::string server_public_key;
   if (!options.server_key.empty()) {
     Result<std::string> key = publish::read_curve_key(options.server_key, "public");
     if (!key) {
       std::cerr << "error: --server-key: " << key.message() << '\n';
       return 1;
     }
-    subscriber_options.server_public_key = *key;
+    server_public_key = *key;
   }
-  auto subscriber = publish::MeshSubscriber::connect(subscriber_options);
+  auto subscriber =
+      publish::MeshSubscriber::connect(subscriber_options(options, server_public_key));
   if (!subscriber) {
     if (g_stop_signal) {
       // Stopped while waiting for the snapshot: nothing received, an empty summary.
@@ -197,110 +356,9 @@ int run_listen(const ListenOptions& options) {
   log_info("listen: subscribed to " + options.endpoint +
            (options.snapshot.empty() ? "" : " (snapshot from " + options.snapshot + ")") +
            "; writing to " + options.output.string());
-
-  Tally tally;
-  // Messages before the snapshot's `end` are the snapshot: newest state, not a seq run.
-  bool in_snapshot = !options.snapshot.empty();
-  // The seq the next live message should carry; 0 until known (seqs start at 1).
-  std::uint64_t expected_seq = 0;
-  while (true) {
-    if (g_stop_signal) {
-      tally.stopped_by = "signal";
-      break;
-    }
-    auto wait = kPollInterval;
-    if (options.duration_s > 0.0) {
-      const double left_s = options.duration_s - clock.seconds();
-      if (left_s <= 0.0) {
-        tally.stopped_by = "duration";
-        break;
-      }
-      wait = std::min(wait, std::chrono::milliseconds(static_cast<long>(left_s * 1000.0) + 1));
-    }
-    auto received = subscriber->receive(wait);
-    if (received && !*received) continue;  // nothing in this interval
-    ++tally.messages;
-    bool stop = false;
-    if (!received) {
-      ++tally.invalid;
-      log_warning("listen: invalid message: " + received.message());
-    } else {
-      const publish::StreamMessage& message = **received;
-      const bool is_end = std::holds_alternative<publish::SnapshotEnd>(message.body);
-      if (!tally.first_seq) tally.first_seq = message.seq;
-      tally.last_seq = std::max(tally.last_seq.value_or(0), message.seq);
-      if (!message.scan.empty() && message.scan != tally.scan) {
-        if (!tally.scan.empty())
-          log_info("listen: new scan " + message.scan + " (its seq starts afresh)");
-        tally.scan = message.scan;
-        tally.scans.push_back(message.scan);
-        expected_seq = 0;
-      }
-      if (is_end && !in_snapshot) {
-        // `end` closes a snapshot; on the live stream it is a publisher's error.
-        ++tally.invalid;
-        log_warning("listen: invalid message: end seq " + std::to_string(message.seq) +
-                    " on the live stream; \"end\" only closes a snapshot (see "
-                    "docs/formats/mesh-stream.md)");
-      } else if (is_end) {
-        in_snapshot = false;
-        tally.snapshot_seq = message.seq;
-        expected_seq = message.seq + 1;
-      } else if (!in_snapshot) {
-        if (expected_seq && message.seq > expected_seq) {
-          ++tally.seq_gaps;
-          tally.missed += message.seq - expected_seq;
-          log_info("listen: seq gap: expected " + std::to_string(expected_seq) + ", got " +
-                   std::to_string(message.seq) + " (" + std::to_string(message.seq - expected_seq) +
-                   " messages missed)");
-        } else if (expected_seq && message.seq < expected_seq) {
-          // One PUB socket delivers in order: a seq that does not grow breaks the format.
-          ++tally.invalid;
-          log_warning("listen: invalid message: " + message.topic() + " seq " +
-                      std::to_string(message.seq) + " after seq " +
-                      std::to_string(expected_seq - 1) + "; seq must grow by one per message");
-        }
-        expected_seq = std::max(expected_seq, message.seq + 1);
-      }
-
-      if (const auto* mesh = std::get_if<publish::MeshUpdate>(&message.body)) {
-        record_mesh(options, *mesh, tally);
-      } else if (std::holds_alternative<publish::SliceUpdate>(message.body)) {
-        ++tally.slices;
-      } else if (std::holds_alternative<publish::FrameImage>(message.body)) {
-        ++tally.frame_images;
-      } else if (const auto* status = std::get_if<publish::StatusReport>(&message.body)) {
-        ++tally.statuses;
-        tally.last_state = std::string(publish::to_string(status->state));
-        if (status->state == publish::ScanState::kError)
-          log_warning("listen: the scan reports an error: " + status->message);
-        // A snapshot's status is the past: only a live one ends the listen.
-        if (options.until_idle && !in_snapshot && status->state != publish::ScanState::kScanning) {
-          tally.stopped_by = tally.last_state.value();
-          stop = true;
-        }
-      }
-      if (!is_end) {
-        // One line per header (binary frames left out), tagged with its topic and arrival time.
-        ordered_json line;
-        line["topic"] = message.topic();
-        line["received_s"] = clock.seconds();
-        if (in_snapshot) line["snapshot"] = true;
-        const ordered_json header = ordered_json::parse(subscriber->last_frames()[1]);
-        for (const auto& [key, value] : header.items()) line[key] = value;
-        log_file << line.dump(-1, ' ', false, ordered_json::error_handler_t::replace) << '\n';
-        log_file.flush();
-      }
-    }
-    if (options.slow_ms > 0)
-      std::this_thread::sleep_for(std::chrono::milliseconds(options.slow_ms));
-    if (options.count > 0 && tally.messages >= options.count) {
-      tally.stopped_by = "count";
-      break;
-    }
-    if (stop) break;
-  }
-
+  Listener listener(options, log_file, clock);
+  receive_all(options, *subscriber, listener, clock);
+  const Tally& tally = listener.tally();
   const double duration_s = clock.seconds();
   if (Status written = write_summary(options, tally, duration_s); !written) {
     std::cerr << "error: " << written.message() << '\n';
