@@ -164,56 +164,48 @@ int report_comparison(const seg::SweepSegmentation& result, const seg::SweepSetu
   return 0;
 }
 
-int run_segment(const SegmentOptions& options) {
-  Stopwatch clock;
+// The recording, tracked and normalised, with the site's own label maps when --labels gives
+// them (checked against the frames as stored, before any time is filled).
+struct Recording {
+  acq::SequenceFile file;
+  std::optional<acq::LabelSequence> own_labels;
+};
+Result<Recording> read_recording(const SegmentOptions& options) {
   auto file = acq::read_sequence_file(options.input);
-  if (!file) {
-    std::cerr << "error: " << file.message() << '\n';
-    return 1;
-  }
+  if (!file) return file.status();
   // A file without any per-frame transform: the image-only and untracked cases explained.
   if (file->transform_names().empty())
-    if (const Status tracked = acq::require_tracking(*file, options.input); !tracked) {
-      std::cerr << "error: " << tracked.message() << '\n';
-      return 1;
-    }
-  // A site's label maps are checked against the frames as stored (times before any are filled).
-  std::optional<acq::LabelSequence> own_labels;
+    if (const Status tracked = acq::require_tracking(*file, options.input); !tracked)
+      return tracked;
+  Recording recording{std::move(*file), std::nullopt};
   if (!options.labels.empty()) {
-    if (Status usable = own_labels_usable(options); !usable) {
-      std::cerr << "error: " << usable.message() << '\n';
-      return 1;
-    }
-    auto read =
-        acq::read_label_sequence(options.labels, *file, options.input, options.labels_unknown);
-    if (!read) {
-      std::cerr << "error: " << read.message() << '\n';
-      return 1;
-    }
-    own_labels = std::move(*read);
+    if (Status usable = own_labels_usable(options); !usable) return usable;
+    auto read = acq::read_label_sequence(options.labels, recording.file, options.input,
+                                         options.labels_unknown);
+    if (!read) return read.status();
+    recording.own_labels = std::move(*read);
     log_info("segment: label maps from " + options.labels.string() + " instead of the " +
-             "segmenter (" + own_labels->timing + ")");
+             "segmenter (" + recording.own_labels->timing + ")");
   }
-  if (const Status normal = seg::normalise_recording(*file, options.input); !normal) {
-    std::cerr << "error: " << normal.message() << '\n';
-    return 1;
-  }
+  if (const Status normal = seg::normalise_recording(recording.file, options.input); !normal)
+    return normal;
+  return recording;
+}
+
+// The sweep's setup (calibration, pose chain, sector, models) with the options' method and
+// seeds, or the organs of the site's label maps.
+Result<seg::SweepSetup> setup_sweep(const SegmentOptions& options, const Recording& recording) {
   auto optional_path = [](const std::filesystem::path& p) {
     return p.empty() ? std::nullopt : std::optional<std::filesystem::path>(p);
   };
-  auto setup = seg::prepare_sweep(*file, options.input, optional_path(options.config),
+  auto setup = seg::prepare_sweep(recording.file, options.input, optional_path(options.config),
                                   optional_path(options.calibration), options.pose_transform,
                                   options.preset);
-  if (!setup) {
-    std::cerr << "error: " << setup.message() << '\n';
-    return 1;
-  }
-  if (const Status sound =
-          acq::check_tracked_sweep(*file, options.input, setup->pose_chain->per_frame_names());
-      !sound) {
-    std::cerr << "error: " << sound.message() << '\n';
-    return 1;
-  }
+  if (!setup) return setup.status();
+  if (const Status sound = acq::check_tracked_sweep(recording.file, options.input,
+                                                    setup->pose_chain->per_frame_names());
+      !sound)
+    return sound;
   const acq::PoseChain& chain = *setup->pose_chain;
   log_info("segment: pose " + chain.describe() + ", chosen by " + chain.chosen_by +
            (chain.from != "Probe"
@@ -222,107 +214,49 @@ int run_segment(const SegmentOptions& options) {
   if (!options.method.empty())
     setup->config.method = options.method == "graph-cut" ? seg::LabellingMethod::kGraphCut
                                                          : seg::LabellingMethod::kThreshold;
-  if (const Status seeded = apply_seeds(options.seeds, setup->config); !seeded) {
-    std::cerr << "error: " << seeded.message() << '\n';
-    return 1;
-  }
-  if (own_labels) declare_own_labels(*own_labels, options, *setup);
-  if (!options.report.empty() && options.truth_labels.empty()) {
-    std::cerr << "error: --report " << options.report.string()
-              << " needs --truth-labels DIR/labels.mha (the frames to score against)\n";
-    return 1;
-  }
-  const auto truth = read_label_frames(*file, options, options.truth_labels, "--truth-labels");
-  const auto perfect =
-      read_label_frames(*file, options, options.perfect_labels, "--perfect-labels");
-  for (const auto* read : {&truth, &perfect})
-    if (!*read) {
-      std::cerr << "error: " << read->message() << '\n';
-      return 1;
-    }
+  if (const Status seeded = apply_seeds(options.seeds, setup->config); !seeded) return seeded;
+  if (recording.own_labels) declare_own_labels(*recording.own_labels, options, *setup);
+  return setup;
+}
+
+// Says where the models, calibration and sector come from.
+void log_models(const seg::SweepSetup& setup, bool own_labels) {
   std::ostringstream models;
   if (own_labels) {
     models << "organs";
-    for (const auto& m : setup->config.materials) models << " " << m.label << ":" << m.name;
+    for (const auto& m : setup.config.materials) models << " " << m.label << ":" << m.name;
   } else {
-    models << "grey means: background " << setup->config.background.grey_mean;
-    for (const auto& m : setup->config.materials)
+    models << "grey means: background " << setup.config.background.grey_mean;
+    for (const auto& m : setup.config.materials)
       models << ", " << m.label << ":" << m.name << " " << m.grey_mean;
   }
-  log_info("segment: models from " + setup->models_from + " (" + models.str() +
-           "); calibration from " + setup->calibration_from + "; sector from " +
-           setup->sector_from);
+  log_info("segment: models from " + setup.models_from + " (" + models.str() +
+           "); calibration from " + setup.calibration_from + "; sector from " + setup.sector_from);
+}
 
-  const std::size_t considered =
-      (file->frame_count() + static_cast<std::size_t>(options.every) - 1) /
-      static_cast<std::size_t>(options.every);
-  const acq::SequenceFile* replacing = own_labels ? &own_labels->maps
-                                       : *perfect ? &**perfect
-                                                  : nullptr;
-  seg::SweepLabels sources{replacing, *truth ? &**truth : nullptr, {}};
-  std::optional<OverlayWriter> overlays;
-  if (!options.overlays.empty()) {
-    std::error_code made;
-    std::filesystem::create_directories(options.overlays, made);
-    if (made) {
-      std::cerr << "error: cannot create the --overlays directory " << options.overlays.string()
-                << ": " << made.message() << '\n';
-      return 1;
-    }
-    overlays.emplace(options, *file, setup->geometry.sector, *truth ? &**truth : nullptr);
-    sources.on_label_map = [&](std::size_t k, const LabelImage& labels) { (*overlays)(k, labels); };
-  }
-  // The graph cut's prior: an online reconstruction of the slices made so far, in the box
-  // that every frame's sector spans (a fixed box: a growing one would rebuild every time).
-  std::optional<scan::ReconstructionPrior> prior;
-  if (setup->config.method == seg::LabellingMethod::kGraphCut && !replacing &&
-      options.prior == "reconstruction") {
-    recon::ReconstructorOptions recon_options;
-    recon_options.engine.max_depth = options.prior_depth;
-    recon_options.bounds = sweep_box(*file, *setup);
-    prior.emplace(recon_options);
-    sources.predictor = &*prior;
-  }
-  seg::SweepSegmentation result;
-  {
-    Progress progress("segment", considered);
-    result = seg::segment_sweep(
-        *file, *setup, options.every, [&](std::size_t done) { progress.update(done); },
-        ReadOptions{options.strict}, sources);
-  }
-  if (overlays) {
-    if (!overlays->status()) {
-      std::cerr << "error: " << overlays->status().message() << '\n';
-      return 1;
-    }
-    log_info("segment: " + std::to_string(overlays->written()) + " overlay pictures in " +
-             options.overlays.string());
-  }
-  if (!result.refused.empty()) {
-    std::cerr << "error: " << options.input.string() << ", " << result.refused
-              << "\n(--strict refuses frames whose polygons needed a repair; nothing written. "
-                 "Leave out --strict to drop what cannot be made valid and go on)\n";
-    return 1;
-  }
-  if (result.slices.slices.empty()) {
-    std::cerr << "error: no frame of " << options.input.string()
-              << " gave a slice (frames with INVALID pose: " << result.invalid_pose
-              << ", failed: " << result.failed << "); nothing written\n";
-    return 1;
-  }
-  if (const Status valid = validate_slice_set(result.slices, options.output.string()); !valid) {
-    std::cerr << "error: the segmented slices are not a valid slice set (a bug; please report "
-                 "it with the input):\n"
-              << valid.message() << '\n';
-    return 1;
-  }
-  std::error_code ec;
-  if (!options.output.parent_path().empty())
-    std::filesystem::create_directories(options.output.parent_path(), ec);
-  if (const Status written = write_slice_set(result.slices, options.output); !written) {
-    std::cerr << "error: " << written.message() << '\n';
-    return 1;
-  }
+// What segmenting gave, checked: no frame refused under --strict, some slices, a valid set.
+Status check_segmentation(const SegmentOptions& options, const seg::SweepSegmentation& result) {
+  if (!result.refused.empty())
+    return Status::error(
+        options.input.string() + ", " + result.refused +
+        "\n(--strict refuses frames whose polygons needed a repair; nothing written. Leave out "
+        "--strict to drop what cannot be made valid and go on)");
+  if (result.slices.slices.empty())
+    return Status::error(
+        "no frame of " + options.input.string() +
+        " gave a slice (frames with INVALID pose: " + std::to_string(result.invalid_pose) +
+        ", failed: " + std::to_string(result.failed) + "); nothing written");
+  if (const Status valid = validate_slice_set(result.slices, options.output.string()); !valid)
+    return Status::error(
+        "the segmented slices are not a valid slice set (a bug; please report it with the "
+        "input):\n" +
+        valid.message());
+  return Status::ok();
+}
+
+// The summary line of a written slice set.
+void log_summary(const SegmentOptions& options, const seg::SweepSegmentation& result,
+                 double seconds) {
   std::size_t regions = 0, unknown = 0;
   for (const LabeledSlice& s : result.slices.slices)
     for (const Region& r : s.regions) (r.label == kUnknownLabel ? unknown : regions) += 1;
@@ -333,11 +267,15 @@ int run_segment(const SegmentOptions& options) {
           << " coinciding with an earlier plane, " << result.failed << " failed, "
           << result.repairs.size() << " repairs); " << regions << " material regions, " << unknown
           << " unknown regions, " << static_cast<int>(100.0 * result.unknown_fraction + 0.5)
-          << "% of the sector unknown on average; " << clock.seconds() << " s -> "
+          << "% of the sector unknown on average; " << seconds << " s -> "
           << options.output.string();
   log_info(summary.str());
-  // Every organ the models name must be in the output, or the summary says why not.
-  for (const seg::LabelModel& m : setup->config.materials) {
+}
+
+// Every organ the models name must be in the output, or the summary says why not.
+void warn_missing_labels(const SegmentOptions& options, const seg::SweepSetup& setup,
+                         const seg::SweepSegmentation& result, bool own_labels) {
+  for (const seg::LabelModel& m : setup.config.materials) {
     if (result.slices_with_label.count(m.label)) continue;
     const auto frames = result.frames_with_label.find(m.label);
     log_warning(
@@ -353,7 +291,91 @@ int run_segment(const SegmentOptions& options) {
              : "its regions in " + std::to_string(frames->second) +
                    " frames were all dropped as invalid polygons (see the repairs)"));
   }
-  return options.truth_labels.empty() ? 0 : report_comparison(result, *setup, options);
+}
+
+// Segments the sweep with the label sources given (the site's maps, perfect labels, the truth
+// to score against, the overlays, the graph cut's prior).
+Result<seg::SweepSegmentation> segment(const SegmentOptions& options, const Recording& recording,
+                                       const seg::SweepSetup& setup,
+                                       const std::optional<acq::SequenceFile>& truth,
+                                       const std::optional<acq::SequenceFile>& perfect) {
+  const acq::SequenceFile& file = recording.file;
+  const std::size_t considered =
+      (file.frame_count() + static_cast<std::size_t>(options.every) - 1) /
+      static_cast<std::size_t>(options.every);
+  const acq::SequenceFile* replacing = recording.own_labels ? &recording.own_labels->maps
+                                       : perfect            ? &*perfect
+                                                            : nullptr;
+  seg::SweepLabels sources{replacing, truth ? &*truth : nullptr, {}};
+  std::optional<OverlayWriter> overlays;
+  if (!options.overlays.empty()) {
+    std::error_code made;
+    std::filesystem::create_directories(options.overlays, made);
+    if (made)
+      return Status::error("cannot create the --overlays directory " + options.overlays.string() +
+                           ": " + made.message());
+    overlays.emplace(options, file, setup.geometry.sector, truth ? &*truth : nullptr);
+    sources.on_label_map = [&](std::size_t k, const LabelImage& labels) { (*overlays)(k, labels); };
+  }
+  // The graph cut's prior: an online reconstruction of the slices made so far, in the box
+  // that every frame's sector spans (a fixed box: a growing one would rebuild every time).
+  std::optional<scan::ReconstructionPrior> prior;
+  if (setup.config.method == seg::LabellingMethod::kGraphCut && !replacing &&
+      options.prior == "reconstruction") {
+    recon::ReconstructorOptions recon_options;
+    recon_options.engine.max_depth = options.prior_depth;
+    recon_options.bounds = sweep_box(file, setup);
+    prior.emplace(recon_options);
+    sources.predictor = &*prior;
+  }
+  seg::SweepSegmentation result;
+  {
+    Progress progress("segment", considered);
+    result = seg::segment_sweep(
+        file, setup, options.every, [&](std::size_t done) { progress.update(done); },
+        ReadOptions{options.strict}, sources);
+  }
+  if (overlays) {
+    if (!overlays->status()) return overlays->status();
+    log_info("segment: " + std::to_string(overlays->written()) + " overlay pictures in " +
+             options.overlays.string());
+  }
+  return result;
+}
+
+int fail(const Status& status) {
+  std::cerr << "error: " << status.message() << '\n';
+  return 1;
+}
+
+int run_segment(const SegmentOptions& options) {
+  Stopwatch clock;
+  auto recording = read_recording(options);
+  if (!recording) return fail(recording.status());
+  auto setup = setup_sweep(options, *recording);
+  if (!setup) return fail(setup.status());
+  if (!options.report.empty() && options.truth_labels.empty())
+    return fail(
+        Status::error("--report " + options.report.string() +
+                      " needs --truth-labels DIR/labels.mha (the frames to score against)"));
+  const auto truth =
+      read_label_frames(recording->file, options, options.truth_labels, "--truth-labels");
+  const auto perfect =
+      read_label_frames(recording->file, options, options.perfect_labels, "--perfect-labels");
+  for (const auto* read : {&truth, &perfect})
+    if (!*read) return fail(read->status());
+  log_models(*setup, recording->own_labels.has_value());
+  const auto result = segment(options, *recording, *setup, *truth, *perfect);
+  if (!result) return fail(result.status());
+  if (const Status checked = check_segmentation(options, *result); !checked) return fail(checked);
+  std::error_code ec;
+  if (!options.output.parent_path().empty())
+    std::filesystem::create_directories(options.output.parent_path(), ec);
+  if (const Status written = write_slice_set(result->slices, options.output); !written)
+    return fail(written);
+  log_summary(options, *result, clock.seconds());
+  warn_missing_labels(options, *setup, *result, recording->own_labels.has_value());
+  return options.truth_labels.empty() ? 0 : report_comparison(*result, *setup, options);
 }
 
 }  // namespace
