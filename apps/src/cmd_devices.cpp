@@ -7,26 +7,18 @@
 #include <iostream>
 
 #include "commands.hpp"
+#include "sonoshape/apps/scan_sources.hpp"
 #include "sonoshape/core/log.hpp"
 #include "sonoshape/kernels/opencl.hpp"
 #include "sonoshape/tracking/trakstar_source.hpp"
 
-#ifdef SONOSHAPE_WITH_V4L2
-#include "sonoshape/acquisition/v4l2_devices.hpp"
-#endif
-
 namespace sonoshape::apps {
 namespace {
 
+// Each kind of frame source that has devices (V4L2 grabbers), from the source registry.
 void print_frame_grabbers(std::ostream& out) {
-#ifdef SONOSHAPE_WITH_V4L2
-  std::vector<std::string> unreadable;
-  const auto devices =
-      acq::list_v4l2_devices(*acq::system_v4l2_device(), "/sys/class/video4linux", &unreadable);
-  out << acq::v4l2_devices_report(devices, unreadable);
-#else
-  out << "Frame grabbers (V4L2): not built (configure with -DSONOSHAPE_WITH_V4L2=ON on Linux)\n";
-#endif
+  for (const scan::SourceKind& kind : scan_sources().kinds())
+    if (kind.list_devices) kind.list_devices(out);
 }
 
 // Listed from the USB descriptors, without opening the units (a scan may be using one).

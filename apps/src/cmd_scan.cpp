@@ -23,16 +23,17 @@
 #include "preset_option.hpp"
 #include "seed_option.hpp"
 #include "sim_options.hpp"
+#include "sonoshape/apps/file_sink.hpp"
+#include "sonoshape/apps/publish_sink.hpp"
 #include "sonoshape/core/log.hpp"
 #include "sonoshape/publish/curve.hpp"
 #include "sonoshape/scan/journal.hpp"
 #include "sonoshape/scan/pipeline.hpp"
-#include "sonoshape/scan/publish_sink.hpp"
 #ifdef SONOSHAPE_WITH_OPENIGTLINK
-#include "sonoshape/scan/igtl_sink.hpp"
+#include "sonoshape/apps/igtl_sink.hpp"
 #endif
+#include "sonoshape/apps/scan_sources.hpp"
 #include "sonoshape/scan/sink.hpp"
-#include "sonoshape/scan/sources.hpp"
 #include "view_options.hpp"
 #ifdef SONOSHAPE_WITH_VIEWER
 #include "sonoshape/publish/stream_view.hpp"
@@ -84,7 +85,7 @@ struct ScanCommandOptions {
   std::string field = kDefaultField;
   std::vector<double> bounds;
   // sim: only
-  scan::SimScenarioOptions sim;
+  SimScenarioOptions sim;
   double sweep_s = 20.0;
   double fail_after_s = -1.0;
   // igtl: only
@@ -194,7 +195,7 @@ bool add_igtl_sink(const std::string& spec, scan::ScanPipeline& pipeline,
               << ": expected [HOST:]PORT, e.g. 18944 (Slicer's default) or 0.0.0.0:18944\n";
     return false;
   }
-  auto started = scan::IgtlSink::start(host, port);
+  auto started = IgtlSink::start(host, port);
   if (!started) {
     std::cerr << "error: " << started.message() << '\n';
     return false;
@@ -231,7 +232,7 @@ bool igtl_serve_available(const std::string& spec) {
 // snapshot, so that a page opened at any time shows the whole scan so far.
 // `server_key`: the stream's CURVE public key, empty for a plain stream.
 Result<std::unique_ptr<publish::StreamView>> start_view(const std::string& address,
-                                                        const scan::PublishSink& sink,
+                                                        const PublishSink& sink,
                                                         const std::string& server_key) {
   publish::StreamViewOptions view;
   view.stream.endpoint = sink.endpoint();
@@ -535,10 +536,11 @@ int run_scan(const ScanCommandOptions& options, const Resume* resume) {
       return 1;
     }
   }
-  request.sim = options.sim;
-  request.sim_duration_s = options.sweep_s;
-  request.sim_fail_after_s = options.fail_after_s;
-  request.models_dir = std::filesystem::path(SONOSHAPE_DATA_DIR) / "models";
+  SimSourceOptions sim;
+  sim.scenario = options.sim;
+  sim.duration_s = options.sweep_s;
+  sim.fail_after_s = options.fail_after_s;
+  sim.models_dir = std::filesystem::path(SONOSHAPE_DATA_DIR) / "models";
   request.igtl_image = options.igtl_image;
   request.igtl_transform = options.igtl_transform;
   request.igtl_tracker = options.igtl_tracker;
@@ -559,7 +561,8 @@ int run_scan(const ScanCommandOptions& options, const Resume* resume) {
   }
   if (resume && !resume->journal.keyframes.empty())
     request.resume_after_frame = resume->journal.keyframes.back().frame_index;
-  auto source = scan::open_scan_source(request);
+  const scan::SourceRegistry sources = scan_sources(sim);
+  auto source = sources.open(request);
   if (!source) {
     std::cerr << "error: " << source.message() << '\n';
     return 1;
@@ -626,8 +629,7 @@ int run_scan(const ScanCommandOptions& options, const Resume* resume) {
     std::cerr << "error: " << e.what() << '\n';
     return 1;
   }
-  const bool playback =
-      options.source.rfind("sim:", 0) == 0 || options.source.rfind("replay:", 0) == 0;
+  const bool playback = sources.find(options.source)->playback;  // opened: a known kind
   scan::ScanPipeline pipeline(std::move(*source), std::move(segmentation),
                               scan::make_reconstructor_stage(engine), scan_options);
   if (resume) {
@@ -653,7 +655,7 @@ int run_scan(const ScanCommandOptions& options, const Resume* resume) {
   }
   pipeline.set_journal(journal);
   if (!options.out.empty())
-    pipeline.add_sink(std::make_shared<scan::FileSink>(options.out, options.save_every));
+    pipeline.add_sink(std::make_shared<FileSink>(options.out, options.save_every));
   // The view follows the mesh stream: --view publishes it on the default endpoint if need be.
   const std::string publish_endpoint =
       options.publish.empty() && options.view ? "tcp://127.0.0.1:5556" : options.publish;
@@ -664,9 +666,9 @@ int run_scan(const ScanCommandOptions& options, const Resume* resume) {
   if (!publish_endpoint.empty()) {
     // The browser view shows the current frame on its plane: with --view, previews go out at
     // 5 a second unless told otherwise (a 256 px grey picture: about 50 KB each).
-    scan::FramePreviewOptions previews;
+    FramePreviewOptions previews;
     previews.rate_hz = options.publish_frames_hz.value_or(options.view ? 5.0 : 0.0);
-    scan::StreamAccess access;
+    StreamAccess access;
     access.allow_remote = options.allow_remote;
     if (!options.curve_secret_key.empty()) {
       Result<std::string> key = publish::read_curve_key(options.curve_secret_key, "secret");
@@ -676,7 +678,7 @@ int run_scan(const ScanCommandOptions& options, const Resume* resume) {
       }
       access.curve_secret_key = *key;
     }
-    auto sink = scan::PublishSink::bind(publish_endpoint, options.snapshot, previews, access);
+    auto sink = PublishSink::bind(publish_endpoint, options.snapshot, previews, access);
     if (!sink) {
       std::cerr << "error: " << sink.message() << '\n';
       return 1;
@@ -736,7 +738,7 @@ int run_scan(const ScanCommandOptions& options, const Resume* resume) {
   if (view) end_view(*view, published_scan, hold_view);
 #endif
 #ifdef SONOSHAPE_WITH_OPENIGTLINK
-  if (igtl) log_info("scan: " + static_cast<const scan::IgtlSink&>(*igtl).describe());
+  if (igtl) log_info("scan: " + static_cast<const IgtlSink&>(*igtl).describe());
 #endif
   // A full disk: the scan went on, but what it says it wrote must be true (issue 40, D1).
   if (!summary.incomplete_outputs.empty()) {

@@ -12,9 +12,9 @@
 #include "sim_options.hpp"
 #include "sonoshape/acquisition/plus_config.hpp"
 #include "sonoshape/acquisition/sequence_file.hpp"
+#include "sonoshape/apps/sim_scenario.hpp"
 #include "sonoshape/core/log.hpp"
 #include "sonoshape/publish/mesh_writer.hpp"
-#include "sonoshape/scan/sim_scenario.hpp"
 #include "sonoshape/simulator/bmode.hpp"
 #include "sonoshape/simulator/phantom.hpp"
 #include "sonoshape/simulator/sweep.hpp"
@@ -24,7 +24,7 @@ namespace sonoshape::apps {
 namespace {
 
 struct SimulateOptions {
-  scan::SimScenarioOptions scenario;
+  SimScenarioOptions scenario;
   int frames = 200;
   std::filesystem::path output = "sweep.igs.mha";
   std::filesystem::path truth_dir;
@@ -44,10 +44,10 @@ std::filesystem::path sidecar_path(const std::filesystem::path& output) {
 
 int run_simulate(const SimulateOptions& options) {
   Stopwatch clock;
-  const scan::SimScenarioOptions& scenario_options = options.scenario;
+  const SimScenarioOptions& scenario_options = options.scenario;
   const double duration_s = std::max(options.frames - 1, 1) / scenario_options.frame_rate_hz;
-  auto scenario = scan::make_sim_scenario(scenario_options, duration_s,
-                                          std::filesystem::path(SONOSHAPE_DATA_DIR) / "models");
+  auto scenario = make_sim_scenario(scenario_options, duration_s,
+                                    std::filesystem::path(SONOSHAPE_DATA_DIR) / "models");
   if (!scenario) {
     std::cerr << "error: " << scenario.message() << '\n';
     return 1;

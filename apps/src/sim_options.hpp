@@ -4,7 +4,7 @@
 #include <CLI/CLI.hpp>
 
 #include "option_checks.hpp"
-#include "sonoshape/scan/sim_scenario.hpp"
+#include "sonoshape/apps/sim_scenario.hpp"
 
 namespace sonoshape::apps {
 
@@ -14,7 +14,7 @@ namespace sonoshape::apps {
 enum class SimOptionsFor { simulate, scan };
 
 /// Registers the options of `options` on `app` (an app or an option group).
-inline void add_sim_scenario_options(CLI::App& app, scan::SimScenarioOptions& options,
+inline void add_sim_scenario_options(CLI::App& app, SimScenarioOptions& options,
                                      SimOptionsFor command) {
   const bool with_phantom = command == SimOptionsFor::simulate;
   // `scan` once read --seed as an organ point and --speed as the playback factor: a value of

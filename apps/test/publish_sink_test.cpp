@@ -1,6 +1,6 @@
 // PublishSink: B-mode previews (`frame` messages) downsampled on their plane and rate-limited,
 // and the status's update time and frame-to-mesh latency, as a subscriber receives them.
-#include "sonoshape/scan/publish_sink.hpp"
+#include "sonoshape/apps/publish_sink.hpp"
 
 #include <gtest/gtest.h>
 
@@ -12,6 +12,8 @@
 namespace sonoshape::scan {
 namespace {
 
+using apps::FramePreviewOptions;
+using apps::PublishSink;
 using namespace std::chrono_literals;
 
 // A subscriber that has the sink's (empty) snapshot: its subscription has reached the sink.

@@ -1,10 +1,10 @@
 #pragma once
-// Outputs of a scan: a ScanSink receives slices, meshes and status reports (the ZeroMQ
-// publisher, the file writer, tests). Calls into sinks are serialised by the pipeline (never
-// two at once) but may come from different pipeline threads; a sink should return quickly.
+// Outputs of a scan: a ScanSink receives slices, meshes and status reports. The sinks that need
+// other modules implement it outside this one (apps/: the file writer, the ZeroMQ publisher,
+// the OpenIGTLink server); tests add their own. Calls into sinks are serialised by the pipeline
+// (never two at once) but may come from different pipeline threads; a sink should return quickly.
 #include <Eigen/Core>
 #include <cstddef>
-#include <filesystem>
 #include <string>
 
 #include "sonoshape/core/frame.hpp"
@@ -46,35 +46,6 @@ class ScanSink {
   /// once, after everything else, also when the scan was interrupted.
   virtual Status on_finish(const MeshSet& meshes, const SliceSet& slices,
                            const ScanSummary& summary) = 0;
-};
-
-/// Writes the meshes to a directory (`label_<id>.ply`, publish::write_mesh_set) every
-/// `save_every` slices and at the end, with the slices (`slices.json`) and the summary
-/// (`scan.json`) at the end. Files are written under a temporary name and renamed, so a reader
-/// never sees half a mesh.
-class FileSink final : public ScanSink {
- public:
-  /// Writes into `directory` (created when needed); `save_every` = 0: at the end only.
-  FileSink(std::filesystem::path directory, std::size_t save_every = 0);
-
-  Status on_slice(const LabeledSlice& slice, std::size_t index) override;
-  Status on_meshes(const MeshSet& meshes, const MeshUpdateInfo& info) override;
-  Status on_status(const ScanStatus& status) override;
-  Status on_finish(const MeshSet& meshes, const SliceSet& slices,
-                   const ScanSummary& summary) override;
-
-  /// How many times meshes were written (intermediate and final).
-  std::size_t saves() const { return saves_; }
-
- private:
-  Status write_meshes(const MeshSet& meshes);
-  /// `status` the first time saving fails after a success; ok for the repeats.
-  Status reported(Status status);
-  std::filesystem::path directory_;
-  std::size_t save_every_;
-  std::size_t saved_at_slices_ = 0;
-  std::size_t saves_ = 0;
-  std::size_t failures_ = 0;  // saves failed since the last one that worked
 };
 
 /// The JSON form of a summary (what `scan.json` holds), for tools and tests.

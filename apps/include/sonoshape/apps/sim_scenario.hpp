@@ -11,7 +11,7 @@
 #include "sonoshape/simulator/probe.hpp"
 #include "sonoshape/simulator/trajectory.hpp"
 
-namespace sonoshape::scan {
+namespace sonoshape::apps {
 
 /// The options of a simulated scan (the names of `sonoshape simulate`'s options).
 struct SimScenarioOptions {
@@ -55,4 +55,4 @@ Result<SimScenario> make_sim_scenario(const SimScenarioOptions& options, double 
 /// meshes); otherwise comma-separated LABEL:PATH[:NAME] meshes.
 std::vector<std::string> parse_phantom_spec(const std::string& spec);
 
-}  // namespace sonoshape::scan
+}  // namespace sonoshape::apps

@@ -8,13 +8,13 @@
 #include "sonoshape/core/status.hpp"
 #include "sonoshape/scan/sink.hpp"
 
-namespace sonoshape::scan {
+namespace sonoshape::apps {
 
 /// Serves a scan over OpenIGTLink: every mesh update as one POLYDATA per label (named after the
 /// label), every tracked frame as IMAGE with its pose (T_reference_image), every status as
 /// STATUS; GET_POLYDATA answered with the current surfaces. Never blocks the pipeline: a slow
 /// client misses intermediate messages, a vanished one is forgotten.
-class IgtlSink final : public ScanSink {
+class IgtlSink final : public scan::ScanSink {
  public:
   /// Listens on `host`:`port` (port 0: a free one, see port()). Fails with a message naming
   /// --igtl-serve, the address and how to fix it.
@@ -23,10 +23,10 @@ class IgtlSink final : public ScanSink {
 
   Status on_frame(const TrackedFrame& frame, const Eigen::Matrix4d& T_reference_image) override;
   Status on_slice(const LabeledSlice& slice, std::size_t index) override;
-  Status on_meshes(const MeshSet& meshes, const MeshUpdateInfo& info) override;
-  Status on_status(const ScanStatus& status) override;
+  Status on_meshes(const MeshSet& meshes, const scan::MeshUpdateInfo& info) override;
+  Status on_status(const scan::ScanStatus& status) override;
   Status on_finish(const MeshSet& meshes, const SliceSet& slices,
-                   const ScanSummary& summary) override;
+                   const scan::ScanSummary& summary) override;
 
   /// The port listened on.
   int port() const;
@@ -39,4 +39,4 @@ class IgtlSink final : public ScanSink {
   std::unique_ptr<Impl> impl_;
 };
 
-}  // namespace sonoshape::scan
+}  // namespace sonoshape::apps

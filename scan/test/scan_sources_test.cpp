@@ -1,6 +1,8 @@
 // The scan's sources chosen by a string, through the whole pipeline with the real segmenter and
 // reconstruction: the real PLUS spine sweep with its poses and calibration, and a simulated
 // probe that vanishes mid-scan.
+#include "sonoshape/apps/scan_sources.hpp"
+
 #include <gtest/gtest.h>
 
 #include <atomic>
@@ -8,14 +10,17 @@
 #include <fstream>
 
 #include "sonoshape/acquisition/plus_config.hpp"
+#include "sonoshape/apps/file_sink.hpp"
 #include "sonoshape/core/mesh.hpp"
 #include "sonoshape/core/slice_io.hpp"
-#include "sonoshape/scan/sources.hpp"
 #include "sonoshape/simulator/mesh_reader.hpp"
 #include "sonoshape/testing/temp_dir.hpp"
 
 namespace sonoshape::scan {
 namespace {
+
+using apps::FileSink;
+using apps::open_scan_source;
 
 namespace fs = std::filesystem;
 
@@ -74,13 +79,19 @@ ScanSummary run_fast(ScanSource source, const std::shared_ptr<ScanSink>& sink,
 SourceRequest small_sim_request() {
   SourceRequest request;
   request.spec = "sim:default";
-  request.models_dir = kData / "models";
-  // 160 px: the segmenter's smallest comfortable size; 5 fps: few slices, a quick engine.
-  request.sim.width_px = 160;
-  request.sim.height_px = 160;
-  request.sim.frame_rate_hz = 5.0;
-  request.sim_duration_s = 2.0;
   return request;
+}
+
+// The simulated sweep of small_sim_request.
+apps::SimSourceOptions small_sim() {
+  apps::SimSourceOptions sim;
+  sim.models_dir = kData / "models";
+  // 160 px: the segmenter's smallest comfortable size; 5 fps: few slices, a quick engine.
+  sim.scenario.width_px = 160;
+  sim.scenario.height_px = 160;
+  sim.scenario.frame_rate_hz = 5.0;
+  sim.duration_s = 2.0;
+  return sim;
 }
 
 TEST(ScanSources, UnknownPrefixAndMissingFilesSayWhatToDo) {
@@ -93,9 +104,49 @@ TEST(ScanSources, UnknownPrefixAndMissingFilesSayWhatToDo) {
   EXPECT_FALSE(open_scan_source(request));
   request.spec = "replay:";
   EXPECT_FALSE(open_scan_source(request));
-  EXPECT_EQ(parse_phantom_spec("1:a.obj:liver,2:b.obj"),
+  EXPECT_EQ(apps::parse_phantom_spec("1:a.obj:liver,2:b.obj"),
             (std::vector<std::string>{"1:a.obj:liver", "2:b.obj"}));
-  EXPECT_TRUE(parse_phantom_spec("default").empty());
+  EXPECT_TRUE(apps::parse_phantom_spec("default").empty());
+}
+
+// A kind opens by its prefix with the rest of the spec; the program's registry has every kind
+// and says which are playbacks (resumed at the frame after the journal's last).
+TEST(ScanSources, RegistryOpensByPrefixAndKnowsThePlaybacks) {
+  SourceRegistry registry;
+  std::string rest_seen;
+  SourceKind fake;
+  fake.prefix = "fake";
+  fake.usage = "fake:NAME";
+  fake.open = [&](const SourceRequest&, const std::string& rest) -> Result<ScanSource> {
+    rest_seen = rest;
+    return Status::error("fake: opened");
+  };
+  registry.add(fake);
+  SourceRequest request;
+  request.spec = "fake:a:b";
+  EXPECT_EQ(registry.open(request).message(), "fake: opened");
+  EXPECT_EQ(rest_seen, "a:b");
+  request.spec = "fak:a";
+  EXPECT_TRUE(testing::contains(registry.open(request).message(), "unknown source; use fake:NAME"));
+  SourceKind missing;
+  missing.prefix = "fake";
+  missing.not_built = "built without it";
+  registry.add(missing);  // the same prefix: replaces the first
+  EXPECT_EQ(registry.kinds().size(), 1u);
+  request.spec = "fake:a";
+  EXPECT_EQ(registry.open(request).message(), "--source fake: built without it");
+  request.labels = "maps.seq.nrrd";  // a kind without label maps refuses them
+  EXPECT_TRUE(testing::contains(registry.open(request).message(), "--labels with --source"));
+
+  const SourceRegistry program = apps::scan_sources();
+  for (const std::string prefix : {"sim", "replay", "igtl", "v4l2"})
+    ASSERT_NE(program.find(prefix + ":x"), nullptr) << prefix;
+  EXPECT_TRUE(program.find("sim:default")->playback);
+  EXPECT_TRUE(program.find("replay:sweep.igs.mha")->playback);
+  EXPECT_FALSE(program.find("igtl:127.0.0.1:18944")->playback);
+  EXPECT_FALSE(program.find("v4l2:/dev/video0")->playback);
+  EXPECT_TRUE(program.find("v4l2:/dev/video0")->monotonic_clock);
+  EXPECT_EQ(program.find("v4l3:/dev/video0"), nullptr);
 }
 
 // Opens the real PLUS sweep with its calibration and checks the setup.
@@ -280,7 +331,7 @@ TEST(ScanSources, ReplayReadsPlusNrrdAndRefusesImageOnlySlicerSequences) {
 }
 
 TEST(ScanSources, SimulatedScanReconstructsTheTwoOrgans) {
-  auto source = open_scan_source(small_sim_request());
+  auto source = open_scan_source(small_sim_request(), small_sim());
   ASSERT_TRUE(source) << source.message();
   ASSERT_EQ(source->setup.labels.size(), 3u);  // spot, cheburashka, rib
   // Models for the organs (the rib hides in its own shadow: unknown in the ground truth).
@@ -317,7 +368,7 @@ class CountingSegmenter final : public SegmentationStage {
 };
 
 TEST(ScanSources, GraphCutScanTakesTheReconstructionAsItsPrior) {
-  auto source = open_scan_source(small_sim_request());
+  auto source = open_scan_source(small_sim_request(), small_sim());
   ASSERT_TRUE(source) << source.message();
   source->setup.segmentation.method = seg::LabellingMethod::kGraphCut;
   auto segmenter = std::make_unique<CountingSegmenter>(source->setup);
@@ -341,9 +392,9 @@ TEST(ScanSources, GraphCutScanTakesTheReconstructionAsItsPrior) {
 }
 
 TEST(ScanSources, SimulatedProbeVanishingMidScanKeepsTheMeshesSoFar) {
-  SourceRequest request = small_sim_request();
-  request.sim_fail_after_s = 1.0;  // 5 of 11 frames, then the cable is pulled
-  auto source = open_scan_source(request);
+  apps::SimSourceOptions sim = small_sim();
+  sim.fail_after_s = 1.0;  // 5 of 11 frames, then the cable is pulled
+  auto source = open_scan_source(small_sim_request(), sim);
   ASSERT_TRUE(source) << source.message();
   testing::TempDir dir;
   auto files = std::make_shared<FileSink>(dir.path());

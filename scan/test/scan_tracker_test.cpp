@@ -11,6 +11,7 @@
 #include <thread>
 
 #include "bird_emulator.hpp"
+#include "sonoshape/apps/file_sink.hpp"
 #include "sonoshape/core/slice_io.hpp"
 #include "sonoshape/scan/pipeline.hpp"
 #include "sonoshape/scan/sink.hpp"
@@ -157,7 +158,7 @@ TEST(ScanWithTrakstar, UnplugAndReplugMidScanKeepTheMeshesAndPosesResume) {
                         std::make_unique<TriangleReconstruction>(), scan_options);
   auto final_meshes = std::make_shared<FinalMeshes>();
   pipeline.add_sink(final_meshes);
-  pipeline.add_sink(std::make_shared<FileSink>(dir.path() / "out", 5));
+  pipeline.add_sink(std::make_shared<apps::FileSink>(dir.path() / "out", 5));
   ASSERT_TRUE(pipeline.start());
 
   std::this_thread::sleep_for(std::chrono::milliseconds(600));

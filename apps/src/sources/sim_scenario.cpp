@@ -1,4 +1,4 @@
-#include "sonoshape/scan/sim_scenario.hpp"
+#include "sonoshape/apps/sim_scenario.hpp"
 
 #include <map>
 #include <sstream>
@@ -6,7 +6,7 @@
 #include "../mesh_spec.hpp"
 #include "sonoshape/simulator/mesh_reader.hpp"
 
-namespace sonoshape::scan {
+namespace sonoshape::apps {
 namespace {
 
 // Gap between the skin (top of the phantom's box) and the centre of the probe face.
@@ -118,4 +118,4 @@ Result<SimScenario> make_sim_scenario(const SimScenarioOptions& options, double 
   return scenario;
 }
 
-}  // namespace sonoshape::scan
+}  // namespace sonoshape::apps

@@ -13,6 +13,7 @@
 #include <thread>
 #include <utility>
 
+#include "sonoshape/apps/file_sink.hpp"
 #include "sonoshape/core/slice_io.hpp"
 #include "sonoshape/scan/pipeline.hpp"
 #include "sonoshape/scan/sink.hpp"
@@ -381,7 +382,7 @@ TEST(ScanPipeline, AVanishingSourceIsReportedAndTheMeshesSoFarAreKept) {
         fast_options());
     auto sink = std::make_shared<RecordingSink>();
     pipeline.add_sink(sink);
-    pipeline.add_sink(std::make_shared<FileSink>(dir.path() / "out", 5));
+    pipeline.add_sink(std::make_shared<apps::FileSink>(dir.path() / "out", 5));
     ASSERT_TRUE(pipeline.start());
     const ScanSummary summary = pipeline.finish();
     EXPECT_EQ(summary.stop_reason, StopReason::kSourceFailed);

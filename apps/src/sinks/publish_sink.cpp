@@ -1,4 +1,4 @@
-#include "sonoshape/scan/publish_sink.hpp"
+#include "sonoshape/apps/publish_sink.hpp"
 
 #include <chrono>
 #include <cmath>
@@ -8,7 +8,7 @@
 #include "sonoshape/publish/publisher.hpp"
 #include "status_report.hpp"
 
-namespace sonoshape::scan {
+namespace sonoshape::apps {
 
 struct PublishSink::Impl {
   publish::MeshPublisher publisher;
@@ -58,7 +58,7 @@ Result<publish::FrameImage> frame_preview(const TrackedFrame& tracked,
 
 }  // namespace
 
-publish::StatusReport report_of(const ScanStatus& status) {
+publish::StatusReport report_of(const scan::ScanStatus& status) {
   publish::StatusReport report;
   report.frames_received = status.counters.frames_received;
   report.frames_dropped = status.counters.dropped.total();
@@ -117,17 +117,17 @@ Status PublishSink::on_slice(const LabeledSlice& slice, std::size_t index) {
   return impl_->publisher.publish_slice(slice, index);
 }
 
-Status PublishSink::on_meshes(const MeshSet& meshes, const MeshUpdateInfo& info) {
+Status PublishSink::on_meshes(const MeshSet& meshes, const scan::MeshUpdateInfo& info) {
   return impl_->publisher.publish_meshes(meshes, info.timestamp_s, info.slices);
 }
 
-Status PublishSink::on_status(const ScanStatus& status) {
+Status PublishSink::on_status(const scan::ScanStatus& status) {
   impl_->last_report = report_of(status);
   impl_->last_report.frame_rate_hz = impl_->previews.rate_hz;
   return impl_->publisher.publish_status(impl_->last_report);
 }
 
-Status PublishSink::on_finish(const MeshSet&, const SliceSet&, const ScanSummary& summary) {
+Status PublishSink::on_finish(const MeshSet&, const SliceSet&, const scan::ScanSummary& summary) {
   // The last on_meshes went out before: the scan's last message says it is over, with the final
   // counts, so that a view shows "finished" instead of a lost stream (docs/formats/mesh-stream.md).
   // The snapshot server keeps answering with it until the sink is destroyed.
@@ -146,4 +146,4 @@ std::string PublishSink::endpoint() const { return impl_->publisher.endpoint(); 
 std::string PublishSink::snapshot_endpoint() const { return impl_->publisher.snapshot_endpoint(); }
 std::string PublishSink::scan_id() const { return impl_->publisher.scan(); }
 
-}  // namespace sonoshape::scan
+}  // namespace sonoshape::apps

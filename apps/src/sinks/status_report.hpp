@@ -3,9 +3,9 @@
 #include "sonoshape/publish/mesh_stream.hpp"
 #include "sonoshape/scan/report.hpp"
 
-namespace sonoshape::scan {
+namespace sonoshape::apps {
 
 /// The counters, stage times (ms), state and message of `status`.
-publish::StatusReport report_of(const ScanStatus& status);
+publish::StatusReport report_of(const scan::ScanStatus& status);
 
-}  // namespace sonoshape::scan
+}  // namespace sonoshape::apps

@@ -19,7 +19,8 @@
 
 #include "bird_emulator.hpp"
 #include "sonoshape/acquisition/v4l2_source.hpp"
-#include "sonoshape/scan/sources.hpp"
+#include "sonoshape/apps/file_sink.hpp"
+#include "sonoshape/apps/scan_sources.hpp"
 #include "sonoshape/simulator/evaluation.hpp"
 #include "sonoshape/testing/fake_v4l2_driver.hpp"
 #include "sonoshape/testing/temp_dir.hpp"
@@ -28,6 +29,9 @@
 
 namespace sonoshape::scan {
 namespace {
+
+using apps::FileSink;
+using apps::open_scan_source;
 
 namespace fs = std::filesystem;
 
@@ -86,12 +90,18 @@ TEST(ScanV4l2, GrabberSourceSaysWhatItStillNeeds) {
 SourceRequest small_sim_request() {
   SourceRequest request;
   request.spec = "sim:default";
-  request.models_dir = fs::path(SONOSHAPE_DATA_DIR) / "models";
-  request.sim.width_px = 160;
-  request.sim.height_px = 160;
-  request.sim.frame_rate_hz = 5.0;
-  request.sim_duration_s = 2.0;
   return request;
+}
+
+// The simulated sweep of small_sim_request.
+apps::SimSourceOptions small_sim() {
+  apps::SimSourceOptions sim;
+  sim.models_dir = fs::path(SONOSHAPE_DATA_DIR) / "models";
+  sim.scenario.width_px = 160;
+  sim.scenario.height_px = 160;
+  sim.scenario.frame_rate_hz = 5.0;
+  sim.duration_s = 2.0;
+  return sim;
 }
 
 // Keeps the final meshes.
@@ -191,7 +201,7 @@ std::vector<sim::LabelScore> expect_same_meshes(const MeshSet& got, const MeshSe
 
 TEST(ScanV4l2, SimulatedSweepThroughAnEmulatedGrabberReconstructsAsThroughSim) {
   // The reference: the sweep as `sim:` delivers it.
-  auto reference_source = open_scan_source(small_sim_request());
+  auto reference_source = open_scan_source(small_sim_request(), small_sim());
   ASSERT_TRUE(reference_source) << reference_source.message();
   const Box3 box = *reference_source->setup.bounds;
   auto reference = std::make_shared<FinalMeshes>();
@@ -199,7 +209,7 @@ TEST(ScanV4l2, SimulatedSweepThroughAnEmulatedGrabberReconstructsAsThroughSim) {
   ASSERT_EQ(expected.counters.frames_received, 11u);
 
   // The same frames as a grabber delivers them; poses and setup as before.
-  auto source = open_scan_source(small_sim_request());
+  auto source = open_scan_source(small_sim_request(), small_sim());
   ASSERT_TRUE(source) << source.message();
   auto driver = std::make_shared<testing::FakeV4l2Driver>("/dev/video3", 160, 160);
   driver->offered = {V4L2_PIX_FMT_GREY};
@@ -308,7 +318,7 @@ class RealTimeGrabber {
 
 TEST(ScanV4l2, SimulatedSweepThroughEmulatedGrabberAndTrackerReconstructsAsThroughSim) {
   const SourceRequest request = small_sim_request();
-  auto reference_source = open_scan_source(request);
+  auto reference_source = open_scan_source(request, small_sim());
   ASSERT_TRUE(reference_source) << reference_source.message();
   const Box3 box = *reference_source->setup.bounds;
   const double latency_s = reference_source->tracker_latency_s.value_or(0.0);
@@ -317,7 +327,7 @@ TEST(ScanV4l2, SimulatedSweepThroughEmulatedGrabberAndTrackerReconstructsAsThrou
   ASSERT_EQ(expected.counters.frames_received, 11u);
 
   // The sweep's frames and tracker samples, recorded (the simulation is seeded).
-  auto source = open_scan_source(request);
+  auto source = open_scan_source(request, small_sim());
   ASSERT_TRUE(source) << source.message();
   auto buffers = grabbed_frames(*source->frames);
   ASSERT_EQ(buffers.size(), 11u);
@@ -412,13 +422,13 @@ class Recorder final : public ScanSink {
 };
 
 TEST(ScanV4l2, GrabberUnpluggedMidScanIsReportedAndTheScanGoesOnWithItsMeshes) {
-  auto reference_source = open_scan_source(small_sim_request());
+  auto reference_source = open_scan_source(small_sim_request(), small_sim());
   ASSERT_TRUE(reference_source) << reference_source.message();
   const Box3 box = *reference_source->setup.bounds;
   auto reference = std::make_shared<FinalMeshes>();
   run_fast(std::move(*reference_source), reference, 11);
 
-  auto source = open_scan_source(small_sim_request());
+  auto source = open_scan_source(small_sim_request(), small_sim());
   ASSERT_TRUE(source) << source.message();
   auto driver = std::make_shared<testing::FakeV4l2Driver>("/dev/video3", 160, 160);
   driver->offered = {V4L2_PIX_FMT_GREY};

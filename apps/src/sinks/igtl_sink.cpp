@@ -1,9 +1,9 @@
-#include "sonoshape/scan/igtl_sink.hpp"
+#include "sonoshape/apps/igtl_sink.hpp"
 
 #include "sonoshape/publish/igtl_server.hpp"
 #include "status_report.hpp"
 
-namespace sonoshape::scan {
+namespace sonoshape::apps {
 
 struct IgtlSink::Impl {
   publish::IgtlServer server;
@@ -30,15 +30,15 @@ Status IgtlSink::on_slice(const LabeledSlice&, std::size_t) {
   return Status::ok();  // the surfaces show the slices' effect; Slicer has no contour message
 }
 
-Status IgtlSink::on_meshes(const MeshSet& meshes, const MeshUpdateInfo&) {
+Status IgtlSink::on_meshes(const MeshSet& meshes, const scan::MeshUpdateInfo&) {
   return impl_->server.publish_meshes(meshes);
 }
 
-Status IgtlSink::on_status(const ScanStatus& status) {
+Status IgtlSink::on_status(const scan::ScanStatus& status) {
   return impl_->server.publish_status(report_of(status));
 }
 
-Status IgtlSink::on_finish(const MeshSet&, const SliceSet&, const ScanSummary&) {
+Status IgtlSink::on_finish(const MeshSet&, const SliceSet&, const scan::ScanSummary&) {
   // The last meshes and the final status already went out; closing the server delivers what is
   // still queued (up to a second) before it disconnects the clients.
   return Status::ok();
@@ -53,4 +53,4 @@ std::string IgtlSink::describe() const {
          " dropped for slow clients, " + std::to_string(s.requests_answered) + " requests answered";
 }
 
-}  // namespace sonoshape::scan
+}  // namespace sonoshape::apps

@@ -7,7 +7,7 @@
 #include "sonoshape/core/status.hpp"
 #include "sonoshape/scan/sink.hpp"
 
-namespace sonoshape::scan {
+namespace sonoshape::apps {
 
 /// Which B-mode frames go out as `frame` messages (small grey previews for live views).
 struct FramePreviewOptions {
@@ -28,7 +28,7 @@ struct StreamAccess {
 /// Publishes a scan on `endpoint` (PUB) with its snapshot server on `snapshot_endpoint`
 /// (empty: the PUB port + 1). Sending never blocks the pipeline: a slow subscriber only misses
 /// intermediate updates.
-class PublishSink final : public ScanSink {
+class PublishSink final : public scan::ScanSink {
  public:
   /// Binds both sockets; fails with a message naming the endpoint and how to fix it (an
   /// endpoint other machines can reach needs `access` to allow it and hold a CURVE key).
@@ -42,10 +42,10 @@ class PublishSink final : public ScanSink {
   /// Publishes a downsampled copy of the frame on its plane, at most previews.rate_hz a second.
   Status on_frame(const TrackedFrame& frame, const Eigen::Matrix4d& T_reference_image) override;
   Status on_slice(const LabeledSlice& slice, std::size_t index) override;
-  Status on_meshes(const MeshSet& meshes, const MeshUpdateInfo& info) override;
-  Status on_status(const ScanStatus& status) override;
+  Status on_meshes(const MeshSet& meshes, const scan::MeshUpdateInfo& info) override;
+  Status on_status(const scan::ScanStatus& status) override;
   Status on_finish(const MeshSet& meshes, const SliceSet& slices,
-                   const ScanSummary& summary) override;
+                   const scan::ScanSummary& summary) override;
 
   /// The endpoints as bound (a port "*" resolved) and the scan's uuid.
   std::string endpoint() const;
@@ -58,4 +58,4 @@ class PublishSink final : public ScanSink {
   std::unique_ptr<Impl> impl_;
 };
 
-}  // namespace sonoshape::scan
+}  // namespace sonoshape::apps
