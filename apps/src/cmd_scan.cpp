@@ -407,9 +407,9 @@ std::string joined(const std::vector<std::string>& words) {
   return out;
 }
 
-// --resume DIR: the journal's scan again, with its own arguments, going on after its keyframes.
-int resume_scan(const fs::path& directory) {
-  // The command line: --resume and, to expose the resumed scan again, the network options.
+// The options on the command line of --resume DIR: only the network ones may be given (the
+// rest comes from the journal). False after the message.
+bool parse_resume_command_line(ScanCommandOptions& given, CLI::App& given_app) {
   std::vector<std::string> given_arguments = scan_arguments();
   for (const std::string& word : given_arguments) {
     const std::string name = word.substr(0, word.find('='));
@@ -422,18 +422,57 @@ int resume_scan(const fs::path& directory) {
                  "line it takes only the network options "
               << joined({kResumeCommandLineOptions.begin() + 1, kResumeCommandLineOptions.end()})
               << '\n';
-    return 1;
+    return false;
   }
-  ScanCommandOptions given;
-  CLI::App given_app;
   add_scan_options(given_app, given);
   std::reverse(given_arguments.begin(), given_arguments.end());  // CLI11 takes them last first
   try {
     given_app.parse(given_arguments);
   } catch (const CLI::ParseError& e) {
     std::cerr << "error: --resume: " << e.what() << '\n';
-    return 1;
+    return false;
   }
+  return true;
+}
+
+// The journal's options, parsed where the scan was started, where its relative paths mean what
+// they meant (the parser checks that files exist). False after the message.
+bool parse_journal_options(const fs::path& directory, const scan::JournalContents& journal,
+                           ScanCommandOptions& options) {
+  CLI::App app;
+  add_scan_options(app, options);
+  std::vector<std::string> arguments = journal.arguments;
+  std::reverse(arguments.begin(), arguments.end());  // CLI11 takes them last first
+  const fs::path here = fs::current_path();
+  std::error_code ec;
+  if (journal.working_directory) fs::current_path(*journal.working_directory, ec);
+  if (ec) {
+    std::cerr << "error: --resume " << directory.string() << ": the scan was started in "
+              << journal.working_directory->string() << ", which cannot be entered now ("
+              << ec.message() << "); its relative paths are read from there\n";
+    return false;
+  }
+  std::string refused;
+  try {
+    app.parse(arguments);
+  } catch (const CLI::ParseError& e) {
+    refused = e.what();
+  }
+  fs::current_path(here, ec);
+  if (!refused.empty()) {
+    std::cerr << "error: --resume " << directory.string() << ": the journal's options no "
+              << "longer parse (" << refused << "); was it written by another sonoshape?\n";
+    return false;
+  }
+  return true;
+}
+
+// --resume DIR: the journal's scan again, with its own arguments, going on after its keyframes.
+int resume_scan(const fs::path& directory) {
+  // The command line: --resume and, to expose the resumed scan again, the network options.
+  ScanCommandOptions given;
+  CLI::App given_app;
+  if (!parse_resume_command_line(given, given_app)) return 1;
   auto journal = scan::read_journal(directory / scan::kJournalName);
   if (!journal) {
     std::cerr << "error: --resume " << directory.string() << ": " << journal.message() << '\n';
@@ -447,39 +486,12 @@ int resume_scan(const fs::path& directory) {
     return 1;
   }
   ScanCommandOptions options;
-  CLI::App app;
-  add_scan_options(app, options);
-  std::vector<std::string> arguments = journal->arguments;
-  std::reverse(arguments.begin(), arguments.end());  // CLI11 takes them last first
-  {
-    // Parsed where the scan was started, where its relative paths mean what they meant (the
-    // parser checks that files exist), then made absolute (resolve_journal_paths).
-    const fs::path here = fs::current_path();
-    std::error_code ec;
-    if (journal->working_directory) fs::current_path(*journal->working_directory, ec);
-    if (ec) {
-      std::cerr << "error: --resume " << directory.string() << ": the scan was started in "
-                << journal->working_directory->string() << ", which cannot be entered now ("
-                << ec.message() << "); its relative paths are read from there\n";
-      return 1;
-    }
-    std::string refused;
-    try {
-      app.parse(arguments);
-    } catch (const CLI::ParseError& e) {
-      refused = e.what();
-    }
-    fs::current_path(here, ec);
-    if (!refused.empty()) {
-      std::cerr << "error: --resume " << directory.string() << ": the journal's options no "
-                << "longer parse (" << refused << "); was it written by another sonoshape?\n";
-      return 1;
-    }
-  }
+  if (!parse_journal_options(directory, *journal, options)) return 1;
   // Said every time: the options come from a file, and the user should see what it asks for.
   std::cerr << "scan: --resume " << directory.string()
             << ": the scan's options from its journal: " << joined(journal->arguments) << '\n';
   if (journal->working_directory) {
+    // Made absolute: the scan runs from here.
     resolve_journal_paths(options, *journal->working_directory);
     std::cerr << "scan: --resume: their relative paths are read from "
               << journal->working_directory->string() << ", where the scan was started\n";
@@ -504,19 +516,15 @@ int resume_scan(const fs::path& directory) {
   return run_scan(options, &state);
 }
 
-int run_scan(const ScanCommandOptions& options, const Resume* resume) {
-  // From the start: a Ctrl-C while the source opens stops the scan as soon as it starts.
-  const InterruptGuard interrupts;
-  // (SIGXFSZ is ignored by main(): a file-size limit fails writes like a full disk.)
-  if (!igtl_serve_available(options.igtl_serve)) return 1;
-  std::shared_ptr<scan::KeyframeJournal> journal;
-  if (!resume && !options.out.empty() && !create_journal(options.out, journal)) return 1;
-#ifndef SONOSHAPE_WITH_VIEWER
-  if (options.view) {
-    std::cerr << "error: --view: " << kViewerMissing << '\n';
-    return 1;
-  }
-#endif
+int fail(const std::string& message) {
+  std::cerr << "error: " << message << '\n';
+  return 1;
+}
+
+// What to open: the source, tracker, calibration, segmentation, volume and label maps; the
+// checks of the options that go together.
+Result<scan::SourceRequest> source_request(const ScanCommandOptions& options,
+                                           const Resume* resume) {
   scan::SourceRequest request;
   request.spec = options.source;
   request.tracker = options.tracker;
@@ -525,60 +533,49 @@ int run_scan(const ScanCommandOptions& options, const Resume* resume) {
   if (!options.segmentation.empty()) request.segmentation = options.segmentation;
   request.preset = options.preset;
   if (!options.bounds.empty()) {
-    if (options.bounds.size() != 6) {
-      std::cerr << "error: --bounds takes 6 numbers: xmin ymin zmin xmax ymax zmax (mm)\n";
-      return 1;
-    }
+    if (options.bounds.size() != 6)
+      return Status::error("--bounds takes 6 numbers: xmin ymin zmin xmax ymax zmax (mm)");
     request.bounds = Box3{Vec3(options.bounds[0], options.bounds[1], options.bounds[2]),
                           Vec3(options.bounds[3], options.bounds[4], options.bounds[5])};
-    if (!(request.bounds->size().array() > 0.0).all()) {
-      std::cerr << "error: --bounds: every max must exceed its min\n";
-      return 1;
-    }
+    if (!(request.bounds->size().array() > 0.0).all())
+      return Status::error("--bounds: every max must exceed its min");
   }
-  SimSourceOptions sim;
-  sim.scenario = options.sim;
-  sim.duration_s = options.sweep_s;
-  sim.fail_after_s = options.fail_after_s;
-  sim.models_dir = std::filesystem::path(SONOSHAPE_DATA_DIR) / "models";
   request.igtl_image = options.igtl_image;
   request.igtl_transform = options.igtl_transform;
   request.igtl_tracker = options.igtl_tracker;
   request.labels = options.labels;
   request.labels_unknown = options.labels_unknown;
   request.labels_wait_s = 1e-3 * options.labels_wait_ms;
-  if (!options.labels.empty() && (!options.method.empty() || !options.seeds.empty())) {
-    std::cerr << "error: --labels replaces sonoshape's segmenter, so "
-              << (options.method.empty() ? "--organ-seed" : "--method")
-              << " does not apply; leave it out\n";
-    return 1;
-  }
-  if (options.labels.rfind("igtl:", 0) == 0 && options.igtl_image.empty()) {
-    std::cerr << "error: --labels " << options.labels
-              << " needs --igtl-image NAME (the IMAGE device of the B-mode frames): without it "
-                 "every IMAGE, the label maps too, would be taken as a frame\n";
-    return 1;
-  }
+  if (!options.labels.empty() && (!options.method.empty() || !options.seeds.empty()))
+    return Status::error(std::string("--labels replaces sonoshape's segmenter, so ") +
+                         (options.method.empty() ? "--organ-seed" : "--method") +
+                         " does not apply; leave it out");
+  if (options.labels.rfind("igtl:", 0) == 0 && options.igtl_image.empty())
+    return Status::error("--labels " + options.labels +
+                         " needs --igtl-image NAME (the IMAGE device of the B-mode frames): "
+                         "without it every IMAGE, the label maps too, would be taken as a frame");
   if (resume && !resume->journal.keyframes.empty())
     request.resume_after_frame = resume->journal.keyframes.back().frame_index;
-  const scan::SourceRegistry sources = scan_sources(sim);
-  auto source = sources.open(request);
-  if (!source) {
-    std::cerr << "error: " << source.message() << '\n';
-    return 1;
-  }
-  // Hardware frame sources (v4l2:) bring no poses: those come from a tracker.
-  if (!source->poses) {
-    std::cerr << "error: --source " << options.source
-              << ": the frames need probe poses from a tracker (--tracker)\n";
-    return 1;
-  }
-  log_info("scan: " + source->description);
+  return request;
+}
 
+// The simulated source's options (sim:).
+SimSourceOptions sim_source_options(const ScanCommandOptions& options) {
+  SimSourceOptions sim;
+  sim.scenario = options.sim;
+  sim.duration_s = options.sweep_s;
+  sim.fail_after_s = options.fail_after_s;
+  sim.models_dir = std::filesystem::path(SONOSHAPE_DATA_DIR) / "models";
+  return sim;
+}
+
+// How the pipeline runs: sync, keyframes, playback, limits and queues.
+scan::ScanOptions pipeline_options(const ScanCommandOptions& options,
+                                   const scan::ScanSource& source) {
   scan::ScanOptions scan_options;
   scan_options.sync.tracker_latency_s = options.tracker_latency_ms
                                             ? 1e-3 * *options.tracker_latency_ms
-                                            : source->tracker_latency_s.value_or(0.0);
+                                            : source.tracker_latency_s.value_or(0.0);
   scan_options.sync.max_gap_s = 1e-3 * options.max_pose_gap_ms;
   scan_options.sync.max_extrapolation_s = 1e-3 * options.max_extrapolation_ms;
   scan_options.keyframes.min_angle_deg = options.keyframe_angle_deg;
@@ -593,124 +590,120 @@ int run_scan(const ScanCommandOptions& options, const Resume* resume) {
   scan_options.max_slices = options.max_slices;
   scan_options.segmentation_queue = options.segmentation_queue;
   scan_options.reconstruction_queue = options.reconstruction_queue;
+  return scan_options;
+}
 
+recon::ReconstructorOptions engine_options(const ScanCommandOptions& options,
+                                           const scan::ScanSource& source) {
   recon::ReconstructorOptions engine;
   engine.engine.max_depth = options.depth;
   engine.engine.smoothing_iterations = options.smoothing;
   engine.engine.field = *recon::parse_field_name(options.field);
   engine.engine.device = resolve_device(options.device);
-  engine.bounds = source->setup.bounds;
-  engine.labels = source->setup.labels;
+  engine.bounds = source.setup.bounds;
+  engine.labels = source.setup.labels;
+  return engine;
+}
 
+// The segmenter with the options' method and seeds, or the site's label maps (started).
+Result<std::unique_ptr<scan::SegmentationStage>> segmentation_stage(
+    const ScanCommandOptions& options, scan::ScanSource& source) {
   if (!options.method.empty())
-    source->setup.segmentation.method = options.method == "graph-cut"
-                                            ? seg::LabellingMethod::kGraphCut
-                                            : seg::LabellingMethod::kThreshold;
-  if (const Status seeded = apply_seeds(options.seeds, source->setup.segmentation); !seeded) {
-    std::cerr << "error: " << seeded.message() << '\n';
-    return 1;
-  }
-  std::unique_ptr<scan::SegmentationStage> segmentation;
+    source.setup.segmentation.method = options.method == "graph-cut"
+                                           ? seg::LabellingMethod::kGraphCut
+                                           : seg::LabellingMethod::kThreshold;
+  if (const Status seeded = apply_seeds(options.seeds, source.setup.segmentation); !seeded)
+    return seeded;
   try {
-    if (source->labels) {
-      log_info("scan: " + source->labels->describe() + " instead of the segmenter");
-      if (const Status started = source->labels->start(); !started) {
-        std::cerr << "error: --labels " << options.labels << ": " << started.message() << '\n';
-        return 1;
-      }
-      segmentation =
-          std::make_unique<scan::LabelMapStage>(source->setup, std::move(source->labels));
-    } else {
-      auto segmenter = std::make_unique<scan::SegmenterStage>(source->setup);
-      if (source->truth_of_frame) segmenter->score_against(source->truth_of_frame);
-      segmentation = std::move(segmenter);
+    if (source.labels) {
+      log_info("scan: " + source.labels->describe() + " instead of the segmenter");
+      if (const Status started = source.labels->start(); !started)
+        return Status::error("--labels " + options.labels + ": " + started.message());
+      return std::unique_ptr<scan::SegmentationStage>(
+          std::make_unique<scan::LabelMapStage>(source.setup, std::move(source.labels)));
     }
+    auto segmenter = std::make_unique<scan::SegmenterStage>(source.setup);
+    if (source.truth_of_frame) segmenter->score_against(source.truth_of_frame);
+    return std::unique_ptr<scan::SegmentationStage>(std::move(segmenter));
   } catch (const std::exception& e) {
-    std::cerr << "error: " << e.what() << '\n';
-    return 1;
+    return Status::error(e.what());
   }
-  const bool playback = sources.find(options.source)->playback;  // opened: a known kind
-  scan::ScanPipeline pipeline(std::move(*source), std::move(segmentation),
-                              scan::make_reconstructor_stage(engine), scan_options);
-  if (resume) {
-    const scan::JournalContents& contents = resume->journal;
-    remove_partial_files(options.out);
-    if (Status restored = pipeline.restore(contents.keyframes); !restored) {
-      std::cerr << "error: --resume " << options.out.string() << ": " << restored.message() << '\n';
-      return 1;
-    }
-    const std::int64_t after =
-        contents.keyframes.empty() ? -1 : contents.keyframes.back().frame_index;
-    auto reopened =
-        scan::KeyframeJournal::reopen(options.out / scan::kJournalName, contents, after);
-    if (!reopened) {
-      std::cerr << "error: --resume " << options.out.string() << ": " << reopened.message() << '\n';
-      return 1;
-    }
-    journal = std::move(*reopened);
-    log_info("scan: resuming " + options.out.string() + " with " +
-             std::to_string(contents.keyframes.size()) + " journalled keyframes; " +
-             (playback ? "the source goes on at frame " + std::to_string(after + 1)
-                       : "a live source goes on from the frame it delivers now"));
-  }
-  pipeline.set_journal(journal);
-  if (!options.out.empty())
-    pipeline.add_sink(std::make_shared<FileSink>(options.out, options.save_every));
-  // The view follows the mesh stream: --view publishes it on the default endpoint if need be.
-  const std::string publish_endpoint =
-      options.publish.empty() && options.view ? "tcp://127.0.0.1:5556" : options.publish;
+}
+
+// --resume: the journal's keyframes into the pipeline, and the journal reopened after them.
+Status restore_journal(const ScanCommandOptions& options, const Resume& resume, bool playback,
+                       scan::ScanPipeline& pipeline,
+                       std::shared_ptr<scan::KeyframeJournal>& journal) {
+  const scan::JournalContents& contents = resume.journal;
+  remove_partial_files(options.out);
+  if (Status restored = pipeline.restore(contents.keyframes); !restored)
+    return Status::error("--resume " + options.out.string() + ": " + restored.message());
+  const std::int64_t after =
+      contents.keyframes.empty() ? -1 : contents.keyframes.back().frame_index;
+  auto reopened = scan::KeyframeJournal::reopen(options.out / scan::kJournalName, contents, after);
+  if (!reopened)
+    return Status::error("--resume " + options.out.string() + ": " + reopened.message());
+  journal = std::move(*reopened);
+  log_info("scan: resuming " + options.out.string() + " with " +
+           std::to_string(contents.keyframes.size()) + " journalled keyframes; " +
+           (playback ? "the source goes on at frame " + std::to_string(after + 1)
+                     : "a live source goes on from the frame it delivers now"));
+  return Status::ok();
+}
+
+// The live outputs beside the files: the browser view (with the scan it follows) and the
+// OpenIGTLink server.
+struct LiveOutputs {
 #ifdef SONOSHAPE_WITH_VIEWER
   std::unique_ptr<publish::StreamView> view;
   std::string published_scan;
 #endif
-  if (!publish_endpoint.empty()) {
-    // The browser view shows the current frame on its plane: with --view, previews go out at
-    // 5 a second unless told otherwise (a 256 px grey picture: about 50 KB each).
-    FramePreviewOptions previews;
-    previews.rate_hz = options.publish_frames_hz.value_or(options.view ? 5.0 : 0.0);
-    StreamAccess access;
-    access.allow_remote = options.allow_remote;
-    if (!options.curve_secret_key.empty()) {
-      Result<std::string> key = publish::read_curve_key(options.curve_secret_key, "secret");
-      if (!key) {
-        std::cerr << "error: --curve-secret-key: " << key.message() << '\n';
-        return 1;
-      }
-      access.curve_secret_key = *key;
-    }
-    auto sink = PublishSink::bind(publish_endpoint, options.snapshot, previews, access);
-    if (!sink) {
-      std::cerr << "error: " << sink.message() << '\n';
-      return 1;
-    }
-    log_info("scan: publishing scan " + (*sink)->scan_id() + " on " + (*sink)->endpoint() +
-             " (snapshot " + (*sink)->snapshot_endpoint() + ")");
-    pipeline.add_sink(*sink);
-#ifdef SONOSHAPE_WITH_VIEWER
-    if (options.view) {
-      const std::string address = options.view->empty() ? kDefaultViewAddress : *options.view;
-      // The view is a subscriber like any other: a keyed stream needs the key's public half.
-      std::string server_key;
-      if (!access.curve_secret_key.empty())
-        server_key = *publish::curve_public_key_of(access.curve_secret_key);
-      auto started = start_view(address, **sink, server_key);
-      if (!started) {
-        std::cerr << "error: --view: " << started.message() << '\n';
-        return 1;
-      }
-      view = std::move(*started);
-      published_scan = (*sink)->scan_id();
-      log_info("scan: live view at " + view->url());
-    }
-#endif
-  }
   std::shared_ptr<scan::ScanSink> igtl;
-  if (!add_igtl_sink(options.igtl_serve, pipeline, igtl)) return 1;
+};
 
-  if (Status started = pipeline.start(); !started) {
-    std::cerr << "error: " << started.message() << '\n';
-    return 1;
+// The mesh stream (--publish, or the default endpoint for --view) and the view that follows it.
+Status add_stream_sinks(const ScanCommandOptions& options, scan::ScanPipeline& pipeline,
+                        LiveOutputs& live) {
+  const std::string publish_endpoint =
+      options.publish.empty() && options.view ? "tcp://127.0.0.1:5556" : options.publish;
+  if (publish_endpoint.empty()) return Status::ok();
+  // The browser view shows the current frame on its plane: with --view, previews go out at
+  // 5 a second unless told otherwise (a 256 px grey picture: about 50 KB each).
+  FramePreviewOptions previews;
+  previews.rate_hz = options.publish_frames_hz.value_or(options.view ? 5.0 : 0.0);
+  StreamAccess access;
+  access.allow_remote = options.allow_remote;
+  if (!options.curve_secret_key.empty()) {
+    Result<std::string> key = publish::read_curve_key(options.curve_secret_key, "secret");
+    if (!key) return Status::error("--curve-secret-key: " + key.message());
+    access.curve_secret_key = *key;
   }
+  auto sink = PublishSink::bind(publish_endpoint, options.snapshot, previews, access);
+  if (!sink) return sink.status();
+  log_info("scan: publishing scan " + (*sink)->scan_id() + " on " + (*sink)->endpoint() +
+           " (snapshot " + (*sink)->snapshot_endpoint() + ")");
+  pipeline.add_sink(*sink);
+#ifdef SONOSHAPE_WITH_VIEWER
+  if (options.view) {
+    const std::string address = options.view->empty() ? kDefaultViewAddress : *options.view;
+    // The view is a subscriber like any other: a keyed stream needs the key's public half.
+    std::string server_key;
+    if (!access.curve_secret_key.empty())
+      server_key = *publish::curve_public_key_of(access.curve_secret_key);
+    auto started = start_view(address, **sink, server_key);
+    if (!started) return Status::error("--view: " + started.message());
+    live.view = std::move(*started);
+    live.published_scan = (*sink)->scan_id();
+    log_info("scan: live view at " + live.view->url());
+  }
+#else
+  (void)live;
+#endif
+  return Status::ok();
+}
+
+// Runs the scan to its end (a Ctrl-C stops it) with a status line on stderr, and finishes it.
+scan::ScanSummary run_to_end(scan::ScanPipeline& pipeline) {
   const bool live_line = log_level() >= LogLevel::kInfo && ::isatty(STDERR_FILENO);
   const bool periodic_line = log_level() >= LogLevel::kInfo && !live_line;
   bool stop_sent = false;
@@ -733,14 +726,21 @@ int run_scan(const ScanCommandOptions& options, const Resume* resume) {
   if (live_line) std::cerr << '\r' << status_line(pipeline.counters()) << "\033[K\n";
   const scan::ScanSummary summary = pipeline.finish();
   log_info(summary_text(summary));
+  return summary;
+}
+
+// The end: the view's last messages, the OpenIGTLink server's account, and whether what the
+// scan says it wrote is all there (a full disk).
+int end_scan(const ScanCommandOptions& options, const scan::ScanSummary& summary,
+             LiveOutputs& live) {
 #ifdef SONOSHAPE_WITH_VIEWER
-  const bool hold_view = view && options.view_hold && g_interrupts.load() == 0;
-  if (view) end_view(*view, published_scan, hold_view);
+  const bool hold_view = live.view && options.view_hold && g_interrupts.load() == 0;
+  if (live.view) end_view(*live.view, live.published_scan, hold_view);
 #endif
 #ifdef SONOSHAPE_WITH_OPENIGTLINK
-  if (igtl) log_info("scan: " + static_cast<const IgtlSink&>(*igtl).describe());
+  if (live.igtl) log_info("scan: " + static_cast<const IgtlSink&>(*live.igtl).describe());
 #endif
-  // A full disk: the scan went on, but what it says it wrote must be true (issue 40, D1).
+  // A full disk: the scan went on, but what it says it wrote must be true.
   if (!summary.incomplete_outputs.empty()) {
     std::cerr << "error: scan: the output in " << options.out.string() << " is incomplete:\n";
     for (const std::string& missing : summary.incomplete_outputs)
@@ -758,11 +758,50 @@ int run_scan(const ScanCommandOptions& options, const Resume* resume) {
   return 0;
 }
 
-void add_scan_options(CLI::App& app, ScanCommandOptions& o) {
-  ScanCommandOptions* options = &o;
-  options->sim.frame_rate_hz = 30.0;
-  options->sim.width_px = 256;
-  options->sim.height_px = 256;
+int run_scan(const ScanCommandOptions& options, const Resume* resume) {
+  // From the start: a Ctrl-C while the source opens stops the scan as soon as it starts.
+  const InterruptGuard interrupts;
+  // (SIGXFSZ is ignored by main(): a file-size limit fails writes like a full disk.)
+  if (!igtl_serve_available(options.igtl_serve)) return 1;
+  std::shared_ptr<scan::KeyframeJournal> journal;
+  if (!resume && !options.out.empty() && !create_journal(options.out, journal)) return 1;
+#ifndef SONOSHAPE_WITH_VIEWER
+  if (options.view) return fail(std::string("--view: ") + kViewerMissing);
+#endif
+  const auto request = source_request(options, resume);
+  if (!request) return fail(request.message());
+  const scan::SourceRegistry sources = scan_sources(sim_source_options(options));
+  auto source = sources.open(*request);
+  if (!source) return fail(source.message());
+  // Hardware frame sources (v4l2:) bring no poses: those come from a tracker.
+  if (!source->poses)
+    return fail("--source " + options.source +
+                ": the frames need probe poses from a tracker (--tracker)");
+  log_info("scan: " + source->description);
+  const scan::ScanOptions scan_options = pipeline_options(options, *source);
+  const recon::ReconstructorOptions engine = engine_options(options, *source);
+  auto segmentation = segmentation_stage(options, *source);
+  if (!segmentation) return fail(segmentation.message());
+  const bool playback = sources.find(options.source)->playback;  // opened: a known kind
+  scan::ScanPipeline pipeline(std::move(*source), std::move(*segmentation),
+                              scan::make_reconstructor_stage(engine), scan_options);
+  if (resume)
+    if (Status restored = restore_journal(options, *resume, playback, pipeline, journal); !restored)
+      return fail(restored.message());
+  pipeline.set_journal(journal);
+  if (!options.out.empty())
+    pipeline.add_sink(std::make_shared<FileSink>(options.out, options.save_every));
+  LiveOutputs live;
+  if (Status added = add_stream_sinks(options, pipeline, live); !added)
+    return fail(added.message());
+  if (!add_igtl_sink(options.igtl_serve, pipeline, live.igtl)) return 1;
+  if (Status started = pipeline.start(); !started) return fail(started.message());
+  const scan::ScanSummary summary = run_to_end(pipeline);
+  return end_scan(options, summary, live);
+}
+
+// Where frames, poses and the calibration come from, or the scan to resume.
+void add_source_options(CLI::App& app, ScanCommandOptions* options) {
   app.add_option("--resume", options->resume,
                  "Go on with the scan whose --out was DIR, after it was killed or stopped: its "
                  "options and keyframes come from DIR/scan.journal (docs/formats/scan-journal.md); "
@@ -792,6 +831,10 @@ void add_scan_options(CLI::App& app, ScanCommandOptions& o) {
                  "ToolToTracker), composed along any chain of the file's and the calibration "
                  "device set's transforms. Default: the header's DefaultFrameTransformName, "
                  "else Probe (or Tool) to Reference, Tracker, Template or StepperHome");
+}
+
+// How frames are segmented, or the site's own label maps.
+void add_segmentation_options(CLI::App& app, ScanCommandOptions* options) {
   app.add_option("--segmentation", options->segmentation,
                  "Segmentation config JSON (docs/segmentation.md). Default: sim: models learnt "
                  "from simulated frames; replay: the header's, else a two-class split")
@@ -822,6 +865,10 @@ void add_scan_options(CLI::App& app, ScanCommandOptions& o) {
   app.add_option("--organ-seed", options->seeds,
                  "LABEL:X,Y,Z (mm, reference frame; repeatable): a point inside that organ; with "
                  "--method graph-cut it tells apart organs whose grey models look alike");
+}
+
+// Where the results go, how long the scan runs and how recordings play.
+void add_output_options(CLI::App& app, ScanCommandOptions* options) {
   // --out: the old spelling; every other command says -o,--output.
   app.add_option("-o,--output,--out", options->out,
                  "Directory for the meshes (label_<id>.ply), slices.json and scan.json, written "
@@ -849,6 +896,10 @@ void add_scan_options(CLI::App& app, ScanCommandOptions& o) {
                  "Stop once this many keyframes are chosen (0: no limit)")
       ->check(kNonNegativeNumber)
       ->capture_default_str();
+}
+
+// The live outputs: the mesh stream (ZeroMQ), the browser view and OpenIGTLink.
+void add_stream_options(CLI::App& app, ScanCommandOptions* options) {
   app.add_option("--publish", options->publish,
                  "ZeroMQ PUB endpoint of the live mesh stream (docs/formats/mesh-stream.md), "
                  "e.g. tcp://127.0.0.1:5556");
@@ -879,6 +930,10 @@ void add_scan_options(CLI::App& app, ScanCommandOptions& o) {
                  "port 0 picks a free one): surfaces as POLYDATA named after the labels, the frame "
                  "as IMAGE with its pose, STATUS; for 3D Slicer's OpenIGTLinkIF (18944 is its "
                  "default port)");
+}
+
+// Pairing frames with tracker samples.
+void add_sync_options(CLI::App& app, ScanCommandOptions* options) {
   app.add_option("--tracker-latency-ms", options->tracker_latency_ms,
                  "How late the tracker's timestamps are relative to the frames (ms). Default: "
                  "the source's (sim: the simulated latency; replay: 0; --tracker usb:trakstar: "
@@ -896,6 +951,10 @@ void add_scan_options(CLI::App& app, ScanCommandOptions& o) {
                  "How long a frame waits for the tracker sample after it (ms)")
       ->check(kNonNegativeNumber)
       ->capture_default_str();
+}
+
+// Which frames become slices, and the queues between the stages.
+void add_keyframe_options(CLI::App& app, ScanCommandOptions* options) {
   app.add_option("--keyframe-angle-deg", options->keyframe_angle_deg,
                  "A frame is a new slice when its plane turns by at least this much...")
       ->check(kNonNegativeNumber)
@@ -918,6 +977,10 @@ void add_scan_options(CLI::App& app, ScanCommandOptions& o) {
                  "Slices waiting for the reconstruction")
       ->check(kPositiveNumber)
       ->capture_default_str();
+}
+
+// The reconstruction engine (shared with reconstruct) and the scan volume.
+void add_scan_engine_options(CLI::App& app, ScanCommandOptions* options) {
   add_engine_options(app, {options->depth, options->smoothing, options->field, options->device});
   app.add_option(
          "--bounds", options->bounds,
@@ -927,7 +990,10 @@ void add_scan_options(CLI::App& app, ScanCommandOptions& o) {
          "v4l2:: grown from the slices (each growth rebuilds every cell)")
       ->expected(6)
       ->check(kFiniteNumber);
+}
 
+// The options of one kind of source each.
+void add_source_groups(CLI::App& app, ScanCommandOptions* options) {
   CLI::Option_group* sim = app.add_option_group("Simulated source (sim:)");
   add_sim_scenario_options(*sim, options->sim, SimOptionsFor::scan);
   sim->add_option("--sweep-s", options->sweep_s, "Length of the simulated sweep (s)")
@@ -947,6 +1013,21 @@ void add_scan_options(CLI::App& app, ScanCommandOptions& o) {
       ->capture_default_str();
   igtl->add_option("--igtl-tracker", options->igtl_tracker,
                    "HOST:PORT of the server sending the TRANSFORMs (default: the --source one)");
+}
+
+void add_scan_options(CLI::App& app, ScanCommandOptions& o) {
+  ScanCommandOptions* options = &o;
+  options->sim.frame_rate_hz = 30.0;
+  options->sim.width_px = 256;
+  options->sim.height_px = 256;
+  add_source_options(app, options);
+  add_segmentation_options(app, options);
+  add_output_options(app, options);
+  add_stream_options(app, options);
+  add_sync_options(app, options);
+  add_keyframe_options(app, options);
+  add_scan_engine_options(app, options);
+  add_source_groups(app, options);
 }
 
 }  // namespace

@@ -378,10 +378,8 @@ int run_segment(const SegmentOptions& options) {
   return options.truth_labels.empty() ? 0 : report_comparison(*result, *setup, options);
 }
 
-}  // namespace
-
-CommandRunner add_segment_command(CLI::App& app) {
-  auto options = std::make_shared<SegmentOptions>();
+// The recording, its calibration and configuration, and the output.
+void add_input_options(CLI::App& app, SegmentOptions* options) {
   app.add_option("sweep", options->input,
                  "Tracked sweep: PLUS sequence file (.igs.mha, .seq.mha, .igs.nrrd; NRRD is "
                  "recognised by its content)")
@@ -414,6 +412,11 @@ CommandRunner add_segment_command(CLI::App& app) {
                "per frame");
   app.add_option("-o,--output", options->output, "Slice set to write (.slices.json / .json)")
       ->capture_default_str();
+}
+
+// Label maps from elsewhere (the truth to score against, perfect labels, the site's own), the
+// labelling method and the organ seeds.
+void add_labelling_options(CLI::App& app, SegmentOptions* options) {
   app.add_option("--truth-labels", options->truth_labels,
                  "Truth label frames of a simulated sweep (DIR/labels.mha of `simulate --truth "
                  "DIR`): score every frame's label map against them (Dice per label, precision/"
@@ -454,6 +457,10 @@ CommandRunner add_segment_command(CLI::App& app) {
                  "--method graph-cut, organs whose grey models look alike are told apart by "
                  "where they are: a region the reconstruction does not predict takes the label "
                  "of the nearest seed");
+}
+
+// Pictures and the score report.
+void add_report_options(CLI::App& app, SegmentOptions* options) {
   app.add_option("--overlays", options->overlays,
                  "Directory for pictures of the frames with our label outlines (and the truth's "
                  "in white with --truth-labels): DIR/frame_NNNN.png");
@@ -463,6 +470,15 @@ CommandRunner add_segment_command(CLI::App& app) {
       ->capture_default_str();
   app.add_option("--report", options->report,
                  "With --truth-labels: write the scores per frame and in total as JSON");
+}
+
+}  // namespace
+
+CommandRunner add_segment_command(CLI::App& app) {
+  auto options = std::make_shared<SegmentOptions>();
+  add_input_options(app, options.get());
+  add_labelling_options(app, options.get());
+  add_report_options(app, options.get());
   return [options] { return run_segment(*options); };
 }
 

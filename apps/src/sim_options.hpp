@@ -13,12 +13,28 @@ namespace sonoshape::apps {
 /// that command's other seeds and speeds went).
 enum class SimOptionsFor { simulate, scan };
 
-/// Registers the options of `options` on `app` (an app or an option group).
-inline void add_sim_scenario_options(CLI::App& app, SimScenarioOptions& options,
-                                     SimOptionsFor command) {
-  const bool with_phantom = command == SimOptionsFor::simulate;
-  // `scan` once read --seed as an organ point and --speed as the playback factor: a value of
-  // that shape gets the new name instead of a bare conversion error.
+namespace detail {
+
+/// The phantom: its meshes (`simulate` only), size and tissues.
+inline void add_phantom_options(CLI::App& app, SimScenarioOptions& options, bool with_phantom) {
+  if (with_phantom)
+    app.add_option("--phantom", options.phantoms,
+                   "Closed organ mesh, LABEL:PATH[:NAME] (.obj, .ply, .off, .stl); repeat for more "
+                   "(organs may nest). Default: spot and cheburashka from data/models with a rib");
+  app.add_option("--phantom-size-mm", options.size_mm,
+                 "Scale the phantom (one common scale) so its box diagonal is this many mm")
+      ->check(kPositiveNumber)
+      ->capture_default_str();
+  app.add_option("--tissue", options.tissues,
+                 "Tissue of a label, LABEL:PRESET (hypoechoic, hyperechoic, isoechoic, cyst, "
+                 "bone; label 0 = background); default: odd labels dark, even bright");
+}
+
+/// The probe, the hand's motion and the images. `scan` once read --seed as an organ point and
+/// --speed as the playback factor: a value of that shape gets the new name instead of a bare
+/// conversion error.
+inline void add_probe_and_hand_options(CLI::App& app, SimScenarioOptions& options,
+                                       SimOptionsFor command) {
   const CLI::Validator not_an_organ_seed(
       [command](std::string& value) -> std::string {
         if (command == SimOptionsFor::scan && value.find(':') != std::string::npos)
@@ -36,17 +52,6 @@ inline void add_sim_scenario_options(CLI::App& app, SimScenarioOptions& options,
         return {};
       },
       "");
-  if (with_phantom)
-    app.add_option("--phantom", options.phantoms,
-                   "Closed organ mesh, LABEL:PATH[:NAME] (.obj, .ply, .off, .stl); repeat for more "
-                   "(organs may nest). Default: spot and cheburashka from data/models with a rib");
-  app.add_option("--phantom-size-mm", options.size_mm,
-                 "Scale the phantom (one common scale) so its box diagonal is this many mm")
-      ->check(kPositiveNumber)
-      ->capture_default_str();
-  app.add_option("--tissue", options.tissues,
-                 "Tissue of a label, LABEL:PRESET (hypoechoic, hyperechoic, isoechoic, cyst, "
-                 "bone; label 0 = background); default: odd labels dark, even bright");
   app.add_option("--probe", options.probe, "Probe geometry")
       ->check(CLI::IsMember({"linear", "convex"}))
       ->capture_default_str();
@@ -82,6 +87,10 @@ inline void add_sim_scenario_options(CLI::App& app, SimScenarioOptions& options,
                  "duration (a long examination revisiting the same planes)")
       ->check(kPositiveNumber)
       ->capture_default_str();
+}
+
+/// The simulated tracker: rate, latency, noise, losses.
+inline void add_tracker_options(CLI::App& app, SimScenarioOptions& options) {
   app.add_option("--tracker-rate", options.tracker_rate_hz, "Tracker samples per second")
       ->check(kPositiveNumber)
       ->capture_default_str();
@@ -104,6 +113,16 @@ inline void add_sim_scenario_options(CLI::App& app, SimScenarioOptions& options,
                  "Chance per tracker sample that an INVALID burst starts")
       ->check(number_in(0.0, 1.0))
       ->capture_default_str();
+}
+
+}  // namespace detail
+
+/// Registers the options of `options` on `app` (an app or an option group).
+inline void add_sim_scenario_options(CLI::App& app, SimScenarioOptions& options,
+                                     SimOptionsFor command) {
+  detail::add_phantom_options(app, options, command == SimOptionsFor::simulate);
+  detail::add_probe_and_hand_options(app, options, command);
+  detail::add_tracker_options(app, options);
 }
 
 }  // namespace sonoshape::apps

@@ -349,113 +349,127 @@ void ScanPipeline::watch_condition(const std::string& condition, std::string& la
                                   meanwhile + "; the meshes so far are kept");
 }
 
+std::optional<StopReason> ScanPipeline::stop_before_next_frame() {
+  if (stop_requested_.load()) return StopReason::kStopRequested;
+  if (options_.duration_s > 0.0 && acq::monotonic_s() - start_s_ >= options_.duration_s)
+    return StopReason::kDuration;
+  if (options_.max_slices > 0) {
+    std::lock_guard lock(selector_mutex_);
+    if (selector_.accepted() >= options_.max_slices) return StopReason::kMaxSlices;
+  }
+  return std::nullopt;
+}
+
+void ScanPipeline::count_sync_failure(tracking::SyncFailure failure) {
+  std::lock_guard lock(state_mutex_);
+  DropCounts& d = counters_.dropped;
+  switch (failure) {
+    case tracking::SyncFailure::kMissing:
+      ++d.pose_missing;
+      break;
+    case tracking::SyncFailure::kInvalid:
+      ++d.pose_invalid;
+      break;
+    case tracking::SyncFailure::kGap:
+      ++d.pose_gap;
+      break;
+    case tracking::SyncFailure::kExtrapolation:
+    case tracking::SyncFailure::kNone:
+      ++d.pose_extrapolation;
+      break;
+  }
+}
+
+bool ScanPipeline::choose_keyframe(Candidate& candidate, const Eigen::Matrix4d& T_reference_image,
+                                   bool& degenerate_reported) {
+  tracking::FramePlane plane;
+  try {
+    plane = tracking::frame_plane(T_reference_image, corners_px_);
+  } catch (const GeometryError& e) {
+    {
+      std::lock_guard lock(state_mutex_);
+      ++counters_.dropped.segmentation_failed;
+    }
+    if (!degenerate_reported) {
+      degenerate_reported = true;
+      report(ScanState::kError,
+             std::string("degenerate image plane (check the calibration): ") + e.what());
+    }
+    return false;
+  }
+  std::optional<int> key;
+  {
+    std::lock_guard lock(selector_mutex_);
+    key = selector_.offer(plane);
+  }
+  if (!key) {
+    std::lock_guard lock(state_mutex_);
+    ++counters_.keyframes_skipped;
+    return false;
+  }
+  candidate.key = *key;
+  candidate.plane = plane;
+  return true;
+}
+
+void ScanPipeline::queue_for_segmentation(std::unique_ptr<Candidate> candidate) {
+  const int key = candidate->key;
+  if (options_.drop_when_behind) {
+    std::optional<std::unique_ptr<Candidate>> evicted;
+    if (!to_segmentation_->push_drop_oldest(std::move(candidate), &evicted)) {
+      withdraw(key);
+    } else if (evicted) {
+      withdraw((*evicted)->key);
+      std::lock_guard lock(state_mutex_);
+      ++counters_.dropped.segmentation_behind;
+    }
+  } else if (!to_segmentation_->push_wait(std::move(candidate))) {
+    withdraw(key);
+  }
+}
+
+StopReason ScanPipeline::acquire_frames() {
+  bool degenerate_reported = false;
+  while (true) {
+    if (const std::optional<StopReason> stop = stop_before_next_frame()) return *stop;
+    auto received = source_.frames->next(kPollS);
+    watch_condition(source_.frames->condition(), frame_condition_,
+                    "frame source " + source_.frames->describe(), "the scan goes on", "");
+    if (!received) {
+      if (source_.frames->finished())
+        return source_.frames->state() == acq::SourceState::kFailed ? StopReason::kSourceFailed
+                                                                    : StopReason::kSourceEnded;
+      continue;
+    }
+    {
+      std::lock_guard lock(state_mutex_);
+      ++counters_.frames_received;
+      counters_.dropped.source = source_.frames->dropped();
+    }
+    const tracking::SyncedPose synced = synchronise(received->item);
+    if (!synced.ok()) {
+      count_sync_failure(synced.failure);
+      continue;
+    }
+    auto candidate = std::make_unique<Candidate>(
+        Candidate{TrackedFrame{std::move(received->item), synced.pose.T_reference_probe,
+                               TrackingStatus::kValid},
+                  received->received_s,
+                  0,
+                  {}});
+    const Eigen::Matrix4d T_reference_image =
+        candidate->frame.T_reference_probe.matrix() * source_.setup.T_probe_image;
+    offer_frame(candidate->frame, T_reference_image);
+    // Keyframe choice before segmentation: near-duplicates cost nothing downstream.
+    if (!choose_keyframe(*candidate, T_reference_image, degenerate_reported)) continue;
+    queue_for_segmentation(std::move(candidate));
+  }
+}
+
 void ScanPipeline::acquisition_loop() {
   StopReason reason = StopReason::kSourceEnded;
-  bool degenerate_reported = false;
   try {
-    while (true) {
-      if (stop_requested_.load()) {
-        reason = StopReason::kStopRequested;
-        break;
-      }
-      if (options_.duration_s > 0.0 && acq::monotonic_s() - start_s_ >= options_.duration_s) {
-        reason = StopReason::kDuration;
-        break;
-      }
-      if (options_.max_slices > 0) {
-        std::lock_guard lock(selector_mutex_);
-        if (selector_.accepted() >= options_.max_slices) {
-          reason = StopReason::kMaxSlices;
-          break;
-        }
-      }
-      auto received = source_.frames->next(kPollS);
-      watch_condition(source_.frames->condition(), frame_condition_,
-                      "frame source " + source_.frames->describe(), "the scan goes on", "");
-      if (!received) {
-        if (source_.frames->finished()) {
-          reason = source_.frames->state() == acq::SourceState::kFailed ? StopReason::kSourceFailed
-                                                                        : StopReason::kSourceEnded;
-          break;
-        }
-        continue;
-      }
-      {
-        std::lock_guard lock(state_mutex_);
-        ++counters_.frames_received;
-        counters_.dropped.source = source_.frames->dropped();
-      }
-      const tracking::SyncedPose synced = synchronise(received->item);
-      if (!synced.ok()) {
-        std::lock_guard lock(state_mutex_);
-        DropCounts& d = counters_.dropped;
-        switch (synced.failure) {
-          case tracking::SyncFailure::kMissing:
-            ++d.pose_missing;
-            break;
-          case tracking::SyncFailure::kInvalid:
-            ++d.pose_invalid;
-            break;
-          case tracking::SyncFailure::kGap:
-            ++d.pose_gap;
-            break;
-          case tracking::SyncFailure::kExtrapolation:
-          case tracking::SyncFailure::kNone:
-            ++d.pose_extrapolation;
-            break;
-        }
-        continue;
-      }
-      auto candidate = std::make_unique<Candidate>(
-          Candidate{TrackedFrame{std::move(received->item), synced.pose.T_reference_probe,
-                                 TrackingStatus::kValid},
-                    received->received_s,
-                    0,
-                    {}});
-      const Eigen::Matrix4d T_reference_image =
-          candidate->frame.T_reference_probe.matrix() * source_.setup.T_probe_image;
-      offer_frame(candidate->frame, T_reference_image);
-      // Keyframe choice before segmentation: near-duplicates cost nothing downstream.
-      tracking::FramePlane plane;
-      try {
-        plane = tracking::frame_plane(T_reference_image, corners_px_);
-      } catch (const GeometryError& e) {
-        {
-          std::lock_guard lock(state_mutex_);
-          ++counters_.dropped.segmentation_failed;
-        }
-        if (!degenerate_reported) {
-          degenerate_reported = true;
-          report(ScanState::kError,
-                 std::string("degenerate image plane (check the calibration): ") + e.what());
-        }
-        continue;
-      }
-      std::optional<int> key;
-      {
-        std::lock_guard lock(selector_mutex_);
-        key = selector_.offer(plane);
-      }
-      if (!key) {
-        std::lock_guard lock(state_mutex_);
-        ++counters_.keyframes_skipped;
-        continue;
-      }
-      candidate->key = *key;
-      candidate->plane = plane;
-      if (options_.drop_when_behind) {
-        std::optional<std::unique_ptr<Candidate>> evicted;
-        if (!to_segmentation_->push_drop_oldest(std::move(candidate), &evicted)) {
-          withdraw(*key);
-        } else if (evicted) {
-          withdraw((*evicted)->key);
-          std::lock_guard lock(state_mutex_);
-          ++counters_.dropped.segmentation_behind;
-        }
-      } else if (!to_segmentation_->push_wait(std::move(candidate))) {
-        withdraw(*key);
-      }
-    }
+    reason = acquire_frames();
   } catch (const std::exception& e) {
     // Nothing may escape a thread: report, and end acquisition as a failed source would.
     reason = StopReason::kSourceFailed;
@@ -546,6 +560,100 @@ void ScanPipeline::segmentation_loop() {
   stage_done();
 }
 
+std::vector<const ScanPipeline::SliceItem*> ScanPipeline::add_batch(
+    const std::vector<std::unique_ptr<SliceItem>>& batch) {
+  std::vector<const SliceItem*> added;
+  for (const auto& item : batch) {
+    try {
+      reconstruction_->add_slice(item->slice);
+      added.push_back(item.get());
+    } catch (const std::exception& e) {
+      withdraw(item->key);
+      {
+        std::lock_guard lock(state_mutex_);
+        ++counters_.dropped.reconstruction_rejected;
+      }
+      log_warning("scan: the slice of frame " + std::to_string(item->frame_index) +
+                  " was refused by the reconstruction: " + e.what());
+    }
+  }
+  return added;
+}
+
+std::optional<recon::UpdateStats> ScanPipeline::update_with(
+    const std::vector<const SliceItem*>& added) {
+  try {
+    return reconstruction_->update();
+  } catch (const std::exception& e) {
+    for (const SliceItem* item : added) withdraw(item->key);
+    {
+      std::lock_guard lock(state_mutex_);
+      counters_.dropped.reconstruction_rejected += added.size();
+    }
+    report(ScanState::kError, "reconstruction update failed (" + std::string(e.what()) + "); its " +
+                                  std::to_string(added.size()) +
+                                  " new slices were dropped and the meshes so far kept");
+    return std::nullopt;
+  }
+}
+
+void ScanPipeline::log_update(const recon::UpdateStats& stats, std::size_t added,
+                              double seconds) const {
+  if (log_level() < LogLevel::kDebug) return;
+  const recon::ReconstructionStats& st = stats.step;
+  log_debug("scan: update +" + std::to_string(added) + " slices -> " +
+            std::to_string(reconstruction_->slice_count()) + " in " + std::to_string(seconds) +
+            " s" + (stats.full_rebuild ? " (full rebuild)" : "") + ": cells " +
+            std::to_string(st.cells) + ", changed " + std::to_string(stats.cells_changed) +
+            "; arrangement " + std::to_string(st.arrangement_s) + " s, face images " +
+            std::to_string(st.face_images_s) + " s (completion " + std::to_string(st.completion_s) +
+            " s), field " + std::to_string(st.field_s) + " s, smoothing " +
+            std::to_string(st.smoothing_s) + " s, mesh " + std::to_string(st.mesh_s) + " s" +
+            (st.solve_nodes > 0
+                 ? "; thin-plate data " + std::to_string(st.data_s) + " s, solve " +
+                       std::to_string(st.solve_s) + " s (" + std::to_string(st.solve_iterations) +
+                       " iterations, " + std::to_string(st.solve_nodes) + " nodes)"
+                 : std::string()));
+}
+
+void ScanPipeline::publish_update(const std::vector<const SliceItem*>& added,
+                                  const recon::UpdateStats& stats, double update_start_s,
+                                  double ready_s, std::size_t first_slice_index) {
+  MeshUpdateInfo info;
+  ScanStatus status;
+  {
+    std::lock_guard lock(state_mutex_);
+    ScanCounters& c = counters_;
+    c.slices = reconstruction_->slice_count();
+    ++c.updates;
+    c.last_update_ms = 1e3 * (ready_s - update_start_s);
+    for (const SliceItem* item : added) latencies_s_.push_back(ready_s - item->received_s);
+    c.last_latency_s = ready_s - added.back()->received_s;
+    c.last_slice_timestamp_s = added.back()->slice.timestamp_s.value_or(0.0);
+    update_ms_.push_back(c.last_update_ms);
+    last_update_ = stats.step;
+    meshes_ = reconstruction_->meshes();
+    segmentation_->on_meshes(meshes_);  // the next frames' prior (graph-cut method)
+    info.slices = c.slices;
+    info.timestamp_s = c.last_slice_timestamp_s;
+    info.stats = stats.step;
+    info.update_ms = c.last_update_ms;
+    // Idle (final meshes) is reported once, by finish(), after the last update.
+    status.state = ScanState::kScanning;
+    status.counters = c;
+    status.last_update = last_update_;
+  }
+  each_sink("slice", [&](ScanSink& sink) {
+    Status result;
+    for (std::size_t k = 0; k < added.size() && result; ++k)
+      result = sink.on_slice(added[k]->slice, first_slice_index + k);
+    return result;
+  });
+  each_sink("meshes",
+            [&](ScanSink& sink) { return sink.on_meshes(reconstruction_->meshes(), info); });
+  each_sink("status", [&](ScanSink& sink) { return sink.on_status(status); });
+}
+
 void ScanPipeline::reconstruction_loop() {
   std::size_t slice_index = restored_;
   try {
@@ -560,92 +668,17 @@ void ScanPipeline::reconstruction_loop() {
       std::vector<std::unique_ptr<SliceItem>> batch;
       batch.push_back(std::move(*first));
       for (auto& item : to_reconstruction_->pop_all()) batch.push_back(std::move(item));
-      std::vector<const SliceItem*> added;
-      for (const auto& item : batch) {
-        try {
-          reconstruction_->add_slice(item->slice);
-          added.push_back(item.get());
-        } catch (const std::exception& e) {
-          withdraw(item->key);
-          {
-            std::lock_guard lock(state_mutex_);
-            ++counters_.dropped.reconstruction_rejected;
-          }
-          log_warning("scan: the slice of frame " + std::to_string(item->frame_index) +
-                      " was refused by the reconstruction: " + e.what());
-        }
-      }
+      const std::vector<const SliceItem*> added = add_batch(batch);
       if (added.empty()) continue;
       const double update_start_s = acq::monotonic_s();
-      recon::UpdateStats stats;
-      try {
-        stats = reconstruction_->update();
-      } catch (const std::exception& e) {
-        for (const SliceItem* item : added) withdraw(item->key);
-        {
-          std::lock_guard lock(state_mutex_);
-          counters_.dropped.reconstruction_rejected += added.size();
-        }
-        report(ScanState::kError, "reconstruction update failed (" + std::string(e.what()) +
-                                      "); its " + std::to_string(added.size()) +
-                                      " new slices were dropped and the meshes so far kept");
-        continue;
-      }
+      const std::optional<recon::UpdateStats> stats = update_with(added);
+      if (!stats) continue;
       const double ready_s = acq::monotonic_s();
       // On disk before anyone hears of it: what a subscriber saw, a resume restores.
       journal_added(added);
-      if (log_level() >= LogLevel::kDebug) {
-        const recon::ReconstructionStats& st = stats.step;
-        log_debug("scan: update +" + std::to_string(added.size()) + " slices -> " +
-                  std::to_string(reconstruction_->slice_count()) + " in " +
-                  std::to_string(ready_s - update_start_s) + " s" +
-                  (stats.full_rebuild ? " (full rebuild)" : "") + ": cells " +
-                  std::to_string(st.cells) + ", changed " + std::to_string(stats.cells_changed) +
-                  "; arrangement " + std::to_string(st.arrangement_s) + " s, face images " +
-                  std::to_string(st.face_images_s) + " s (completion " +
-                  std::to_string(st.completion_s) + " s), field " + std::to_string(st.field_s) +
-                  " s, smoothing " + std::to_string(st.smoothing_s) + " s, mesh " +
-                  std::to_string(st.mesh_s) + " s" +
-                  (st.solve_nodes > 0 ? "; thin-plate data " + std::to_string(st.data_s) +
-                                            " s, solve " + std::to_string(st.solve_s) + " s (" +
-                                            std::to_string(st.solve_iterations) + " iterations, " +
-                                            std::to_string(st.solve_nodes) + " nodes)"
-                                      : std::string()));
-      }
-      MeshUpdateInfo info;
-      ScanStatus status;
-      {
-        std::lock_guard lock(state_mutex_);
-        ScanCounters& c = counters_;
-        c.slices = reconstruction_->slice_count();
-        ++c.updates;
-        c.last_update_ms = 1e3 * (ready_s - update_start_s);
-        for (const SliceItem* item : added) latencies_s_.push_back(ready_s - item->received_s);
-        c.last_latency_s = ready_s - added.back()->received_s;
-        c.last_slice_timestamp_s = added.back()->slice.timestamp_s.value_or(0.0);
-        update_ms_.push_back(c.last_update_ms);
-        last_update_ = stats.step;
-        meshes_ = reconstruction_->meshes();
-        segmentation_->on_meshes(meshes_);  // the next frames' prior (graph-cut method)
-        info.slices = c.slices;
-        info.timestamp_s = c.last_slice_timestamp_s;
-        info.stats = stats.step;
-        info.update_ms = c.last_update_ms;
-        // Idle (final meshes) is reported once, by finish(), after the last update.
-        status.state = ScanState::kScanning;
-        status.counters = c;
-        status.last_update = last_update_;
-      }
-      each_sink("slice", [&](ScanSink& sink) {
-        Status result;
-        for (std::size_t k = 0; k < added.size() && result; ++k)
-          result = sink.on_slice(added[k]->slice, slice_index + k);
-        return result;
-      });
+      log_update(*stats, added.size(), ready_s - update_start_s);
+      publish_update(added, *stats, update_start_s, ready_s, slice_index);
       slice_index += added.size();
-      each_sink("meshes",
-                [&](ScanSink& sink) { return sink.on_meshes(reconstruction_->meshes(), info); });
-      each_sink("status", [&](ScanSink& sink) { return sink.on_status(status); });
       // An update frees most of what it allocated (the new cells' face images, the octree's
       // levels, the mesher's buffers): without this the scan's RSS followed the largest update
       // so far (the soak's RSS rose in steps at single updates).

@@ -125,12 +125,29 @@ class ScanPipeline {
   struct Candidate;
   struct SliceItem;
   void acquisition_loop();
+  // The steps of acquisition_loop: why to stop before the next frame (none: go on); the frames
+  // until a reason to stop; the drops of a frame without a pose; the keyframe choice (false: not
+  // a keyframe, or a degenerate plane, reported once); the queue to segmentation.
+  std::optional<StopReason> stop_before_next_frame();
+  StopReason acquire_frames();
+  void count_sync_failure(tracking::SyncFailure failure);
+  bool choose_keyframe(Candidate& candidate, const Eigen::Matrix4d& T_reference_image,
+                       bool& degenerate_reported);
+  void queue_for_segmentation(std::unique_ptr<Candidate> candidate);
   /// Reports a live source's condition() when it changes (once into trouble, once back).
   void watch_condition(const std::string& condition, std::string& last_reported,
                        const std::string& name, const std::string& when_back,
                        const std::string& meanwhile);
   void segmentation_loop();
   void reconstruction_loop();
+  // The steps of reconstruction_loop: the batch's slices into the reconstruction (those it
+  // refuses are withdrawn); the update (none when it failed: its slices are withdrawn and the
+  // meshes kept); the update's stages in the debug log; the counters, meshes and sinks.
+  std::vector<const SliceItem*> add_batch(const std::vector<std::unique_ptr<SliceItem>>& batch);
+  std::optional<recon::UpdateStats> update_with(const std::vector<const SliceItem*>& added);
+  void log_update(const recon::UpdateStats& stats, std::size_t added, double seconds) const;
+  void publish_update(const std::vector<const SliceItem*>& added, const recon::UpdateStats& stats,
+                      double update_start_s, double ready_s, std::size_t first_slice_index);
   tracking::SyncedPose synchronise(const Frame& frame);
   void report(ScanState state, const std::string& message);
   void withdraw(int key);
