@@ -1,19 +1,12 @@
 #pragma once
-// Mesh files: binary little-endian PLY, OBJ and OFF.
-#include <filesystem>
-
-#include "sonoshape/core/mesh.hpp"
-#include "sonoshape/core/status.hpp"
+// Mesh files are written in core/ (mesh_io.hpp). These names keep the scan pipeline's sources
+// that still say publish::write_mesh compiling while they move to their own module; new code
+// includes sonoshape/core/mesh_io.hpp.
+#include "sonoshape/core/mesh_io.hpp"
 
 namespace sonoshape::publish {
 
-/// Writes one mesh; the format follows the extension (.ply binary little-endian, .obj, .off).
-Status write_mesh(const TriangleMesh& mesh, const std::filesystem::path& path);
-
-/// Writes a mesh set as slices.md says: with one label and `out` ending in .ply/.obj/.off, that
-/// file; otherwise `out` is a directory (created) holding `label_<id>.ply` for every label.
-/// Returns the paths written.
-Result<std::vector<std::filesystem::path>> write_mesh_set(const MeshSet& meshes,
-                                                          const std::filesystem::path& out);
+using sonoshape::write_mesh;
+using sonoshape::write_mesh_set;
 
 }  // namespace sonoshape::publish

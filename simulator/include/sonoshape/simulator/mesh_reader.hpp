@@ -1,20 +1,12 @@
 #pragma once
-// Loading closed triangle meshes (OBJ, PLY ascii/binary, OFF, STL ascii/binary) as ground truth.
-#include <filesystem>
-
-#include "sonoshape/core/mesh.hpp"
-#include "sonoshape/core/status.hpp"
+// Mesh files are read in core/ (mesh_io.hpp). These names keep the scan pipeline's sources that
+// still say sim::read_mesh compiling while they move to their own module; new code includes
+// sonoshape/core/mesh_io.hpp.
+#include "sonoshape/core/mesh_io.hpp"
 
 namespace sonoshape::sim {
 
-/// Reads a triangle mesh (polygons are fan-triangulated). STL corners with exactly equal
-/// coordinates are welded into one vertex (no tolerance), and facets left without area by that
-/// are dropped, so a closed STL reads as a closed indexed mesh. Fails with file and reason on
-/// unreadable files, unsupported formats and out-of-range indices, and on files without faces
-/// unless `allow_empty` (a reconstruction writes an empty mesh for a material that vanished).
-Result<TriangleMesh> read_mesh(const std::filesystem::path& path, bool allow_empty = false);
-
-/// Makes a closed mesh outward-oriented (reverses every triangle when its volume is negative).
-void orient_outward(TriangleMesh& mesh);
+using sonoshape::orient_outward;
+using sonoshape::read_mesh;
 
 }  // namespace sonoshape::sim
