@@ -25,12 +25,12 @@
 #include <string>
 #include <vector>
 
+#include "sonoshape/acquisition/probe.hpp"
 #include "sonoshape/core/log.hpp"
 #include "sonoshape/core/mesh_slicer.hpp"
 #include "sonoshape/recon/reconstruct.hpp"
 #include "sonoshape/simulator/evaluation.hpp"
 #include "sonoshape/simulator/phantom.hpp"
-#include "sonoshape/simulator/probe.hpp"
 #include "sonoshape/simulator/trajectory.hpp"
 #include "sonoshape/tracking/keyframes.hpp"
 
@@ -93,7 +93,7 @@ int main(int argc, char** argv) {
     std::cerr << phantom.message() << '\n';
     return 1;
   }
-  const sim::Probe probe(sim::convex_probe_geometry());
+  const acq::Probe probe(acq::convex_probe_geometry());
   const Box3 box = phantom->bounds();
   sim::TrajectoryOptions motion;
   motion.motion = sim::parse_sweep_motion(trajectory);

@@ -12,8 +12,8 @@
 #include <string>
 #include <vector>
 
+#include "sonoshape/core/mesh_io.hpp"
 #include "sonoshape/core/slice_io.hpp"
-#include "sonoshape/simulator/mesh_reader.hpp"
 
 namespace {
 
@@ -62,7 +62,7 @@ int main(int argc, char** argv) {
   std::vector<sonoshape::TriangleMesh> loaded;
   Vec3 lo = Vec3::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
   for (const std::string& path : meshes) {
-    auto mesh = sonoshape::sim::read_mesh(path);
+    auto mesh = sonoshape::read_mesh(path);
     if (!mesh) {
       std::cerr << "error: " << mesh.message() << '\n';
       return 1;

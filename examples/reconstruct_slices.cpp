@@ -9,8 +9,8 @@
 #include <filesystem>
 #include <string>
 
+#include "sonoshape/core/mesh_io.hpp"
 #include "sonoshape/core/slice_io.hpp"
-#include "sonoshape/publish/mesh_writer.hpp"
 #include "sonoshape/recon/reconstructor.hpp"
 
 namespace fs = std::filesystem;
@@ -55,7 +55,7 @@ int main(int argc, char** argv) {
   fs::create_directories(argv[2]);
   for (const MeshSet::Entry& entry : engine.mesh().meshes) {
     const fs::path path = fs::path(argv[2]) / ("label_" + std::to_string(entry.label) + ".ply");
-    if (const Status written = publish::write_mesh(entry.mesh, path); !written.is_ok()) {
+    if (const Status written = write_mesh(entry.mesh, path); !written.is_ok()) {
       std::fprintf(stderr, "%s\n", written.message().c_str());
       return 1;
     }

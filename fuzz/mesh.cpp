@@ -7,7 +7,7 @@
 #include <string_view>
 
 #include "fuzz_support.hpp"
-#include "sonoshape/simulator/mesh_reader.hpp"
+#include "sonoshape/core/mesh_io.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   if (size == 0) return 0;
@@ -15,8 +15,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   constexpr std::array<std::string_view, 4> kExtensions = {".ply", ".obj", ".off", ".stl"};
   const auto path = sonoshape::fuzz::write_scratch_file(
       sonoshape::fuzz::as_string(data + 1, size - 1), kExtensions[data[0] % 4]);
-  if (auto mesh = sonoshape::sim::read_mesh(path, /*allow_empty=*/true)) {
-    sonoshape::sim::orient_outward(*mesh);
+  if (auto mesh = sonoshape::read_mesh(path, /*allow_empty=*/true)) {
+    sonoshape::orient_outward(*mesh);
   }
   return 0;
 }

@@ -14,7 +14,7 @@
 #include <string>
 #include <vector>
 
-#include "sonoshape/simulator/mesh_reader.hpp"
+#include "sonoshape/core/mesh_io.hpp"
 #include "sonoshape/testing/command.hpp"
 
 namespace {
@@ -263,8 +263,8 @@ TEST_F(EndToEnd, OnlineReconstructionEmitsStepsAndEqualsOffline) {
   // its cells on demand: the same triangles, and vertices whose fields agree within 1e-9 may
   // round to neighbouring 32-bit floats in the PLY.
   for (const char* label : {"label_1.ply", "label_2.ply"}) {
-    const auto a = sonoshape::sim::read_mesh(path("online/") + label),
-               b = sonoshape::sim::read_mesh(path("offline/") + label);
+    const auto a = sonoshape::read_mesh(path("online/") + label),
+               b = sonoshape::read_mesh(path("offline/") + label);
     ASSERT_TRUE(a) << a.message();
     ASSERT_TRUE(b) << b.message();
     EXPECT_FALSE(a->triangles.empty());
@@ -296,8 +296,8 @@ TEST_F(EndToEnd, ThinPlateFieldOnlineAndOfflineAgree) {
   EXPECT_GT(stats["solve_nodes"].get<int>(), 0);
   EXPECT_EQ(stats["cells"].get<int>(), 0);  // no arrangement
   for (const char* label : {"label_1.ply", "label_2.ply"}) {
-    const auto a = sonoshape::sim::read_mesh(path("online/") + label),
-               b = sonoshape::sim::read_mesh(path("offline/") + label);
+    const auto a = sonoshape::read_mesh(path("online/") + label),
+               b = sonoshape::read_mesh(path("offline/") + label);
     ASSERT_TRUE(a) << a.message();
     ASSERT_TRUE(b) << b.message();
     ASSERT_FALSE(a->triangles.empty());

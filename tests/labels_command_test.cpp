@@ -38,7 +38,7 @@ sim::SimulatedSweep simulated_sweep() {
   Eigen::Affine3d place = Eigen::Affine3d::Identity();
   place.translation() = Vec3(-5, 25, 0);
   phantom.add(1, "organ", sim::make_sphere(12.0), place);
-  const sim::Probe probe(sim::linear_probe_geometry(kPx, kPx));
+  const acq::Probe probe(acq::linear_probe_geometry(kPx, kPx));
   const sim::BModeSimulator simulator(phantom, probe);
   sim::TrajectoryOptions motion;
   motion.duration_s = 0.45;

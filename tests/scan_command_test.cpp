@@ -15,8 +15,8 @@
 #include <thread>
 #include <vector>
 
+#include "sonoshape/core/mesh_io.hpp"
 #include "sonoshape/core/slice_io.hpp"
-#include "sonoshape/simulator/mesh_reader.hpp"
 #include "sonoshape/testing/command.hpp"
 #include "sonoshape/testing/json_file.hpp"
 #include "sonoshape/testing/temp_dir.hpp"
@@ -46,13 +46,13 @@ void expect_meshes_of_offline_reconstruction(const fs::path& dir, const std::str
   ASSERT_EQ(offline.exit_code, 0) << offline.output;
   for (const char* name : {"label_1.ply", "label_2.ply"}) {
     SCOPED_TRACE(name);
-    const auto mesh = sonoshape::sim::read_mesh(dir / "out" / name);
+    const auto mesh = sonoshape::read_mesh(dir / "out" / name);
     ASSERT_TRUE(mesh) << mesh.message();
     ASSERT_FALSE(mesh->triangles.empty());
     EXPECT_TRUE(sonoshape::check_mesh_health(*mesh).closed_manifold_oriented());
     const double volume = sonoshape::signed_volume(*mesh);
     EXPECT_GT(volume, 0.0);
-    const auto again = sonoshape::sim::read_mesh(dir / "offline" / name);
+    const auto again = sonoshape::read_mesh(dir / "offline" / name);
     ASSERT_TRUE(again) << again.message();
     EXPECT_NEAR(sonoshape::signed_volume(*again), volume, relative * volume);
   }
@@ -223,8 +223,8 @@ TEST(ScanCommand, PublishesToListenersThatKeepUpJoinLateAreSlowOrDie) {
         << summary.dump();
     // The meshes received equal those written to --out (float32 on the wire).
     for (const char* label : {"label_1.ply", "label_2.ply"}) {
-      const auto received = sonoshape::sim::read_mesh(dir.path() / name / label);
-      const auto written = sonoshape::sim::read_mesh(out / label);
+      const auto received = sonoshape::read_mesh(dir.path() / name / label);
+      const auto written = sonoshape::read_mesh(out / label);
       ASSERT_TRUE(received && written) << label;
       ASSERT_EQ(received->vertices.size(), written->vertices.size()) << label;
       EXPECT_EQ(received->triangles, written->triangles) << label;

@@ -17,9 +17,9 @@
 #include <thread>
 #include <vector>
 
+#include "sonoshape/core/mesh_io.hpp"
 #include "sonoshape/core/slice_io.hpp"
 #include "sonoshape/scan/journal.hpp"
-#include "sonoshape/simulator/mesh_reader.hpp"
 #include "sonoshape/testing/child_process.hpp"
 #include "sonoshape/testing/command.hpp"
 #include "sonoshape/testing/sanitizer_slowdown.hpp"
@@ -90,7 +90,7 @@ void expect_readable(const fs::path& dir) {
     const std::string name = path.filename().string();
     if (name.rfind(".partial-", 0) == 0) continue;
     if (path.extension() == ".ply") {
-      const auto mesh = sonoshape::sim::read_mesh(path, true);
+      const auto mesh = sonoshape::read_mesh(path, true);
       EXPECT_TRUE(mesh) << name << ": " << mesh.message();
     } else if (name == "slices.json") {
       const auto slices = sonoshape::read_slice_set(path);

@@ -18,9 +18,9 @@
 #include "mesh_spec.hpp"
 #include "option_checks.hpp"
 #include "sonoshape/core/log.hpp"
+#include "sonoshape/core/mesh_io.hpp"
 #include "sonoshape/core/slice_io.hpp"
 #include "sonoshape/simulator/evaluation.hpp"
-#include "sonoshape/simulator/mesh_reader.hpp"
 
 namespace sonoshape::apps {
 namespace {
@@ -73,7 +73,7 @@ Result<MeshSet> read_reconstruction(const fs::path& path) {
                            " holds no label_<id>.ply/.obj/.off/.stl mesh");
     std::sort(files.begin(), files.end());
     for (const auto& [label, file] : files) {
-      auto mesh = sim::read_mesh(file, /*allow_empty=*/true);
+      auto mesh = read_mesh(file, /*allow_empty=*/true);
       if (!mesh) return mesh.status();
       // A material that vanished is written empty; it scores as not reconstructed.
       if (mesh->empty()) continue;
@@ -85,7 +85,7 @@ Result<MeshSet> read_reconstruction(const fs::path& path) {
     return Status::error("--recon " + path.string() +
                          " does not exist (give the output directory "
                          "or mesh file of `sonoshape reconstruct`)");
-  auto mesh = sim::read_mesh(path);
+  auto mesh = read_mesh(path);
   if (!mesh) return mesh.status();
   add_mesh(set, 1, path.stem().string(), std::move(*mesh));
   return set;

@@ -17,8 +17,8 @@
 #include "commands.hpp"
 #include "option_checks.hpp"
 #include "sonoshape/core/log.hpp"
+#include "sonoshape/core/mesh_io.hpp"
 #include "sonoshape/publish/curve.hpp"
-#include "sonoshape/publish/mesh_writer.hpp"
 #include "sonoshape/publish/subscriber.hpp"
 
 namespace sonoshape::apps {
@@ -76,7 +76,7 @@ struct Tally {
 Status write_mesh_atomically(const TriangleMesh& mesh, const std::filesystem::path& path) {
   const std::filesystem::path partial =
       path.parent_path() / (path.stem().string() + ".part" + path.extension().string());
-  if (Status written = publish::write_mesh(mesh, partial); !written) return written;
+  if (Status written = write_mesh(mesh, partial); !written) return written;
   std::error_code ec;
   std::filesystem::rename(partial, path, ec);
   if (ec) return Status::error("cannot replace " + path.string() + ": " + ec.message());

@@ -18,8 +18,8 @@
 #include "option_checks.hpp"
 #include "sonoshape/core/log.hpp"
 #include "sonoshape/core/mesh.hpp"
+#include "sonoshape/core/mesh_io.hpp"
 #include "sonoshape/core/slice_io.hpp"
-#include "sonoshape/publish/mesh_writer.hpp"
 #include "sonoshape/recon/reconstruct.hpp"
 #include "sonoshape/recon/reconstructor.hpp"
 
@@ -138,14 +138,14 @@ int run_online(const SliceSet& set, const std::string& output, const std::string
       std::ostringstream name;
       name << "step_" << std::setw(4) << std::setfill('0') << step + 1;
       const auto written =
-          publish::write_mesh_set(reconstructor.mesh(), std::filesystem::path(output) / name.str());
+          write_mesh_set(reconstructor.mesh(), std::filesystem::path(output) / name.str());
       if (!written) {
         std::cerr << "error: " << written.message() << '\n';
         return 2;
       }
     }
   }
-  const auto written = publish::write_mesh_set(reconstructor.mesh(), output);
+  const auto written = write_mesh_set(reconstructor.mesh(), output);
   if (!written) {
     std::cerr << "error: " << written.message() << '\n';
     return 2;
@@ -240,7 +240,7 @@ CommandRunner add_reconstruct_command(CLI::App& app) {
                         opt->order == "timestamp");
     recon::ReconstructionStats stats;
     const MeshSet meshes = recon::reconstruct(*slices, opt->engine, &stats);
-    const auto written = publish::write_mesh_set(meshes, opt->output);
+    const auto written = write_mesh_set(meshes, opt->output);
     if (!written) {
       std::cerr << "error: " << written.message() << '\n';
       return 2;

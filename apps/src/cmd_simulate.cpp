@@ -14,7 +14,7 @@
 #include "sonoshape/acquisition/sequence_file.hpp"
 #include "sonoshape/apps/sim_scenario.hpp"
 #include "sonoshape/core/log.hpp"
-#include "sonoshape/publish/mesh_writer.hpp"
+#include "sonoshape/core/mesh_io.hpp"
 #include "sonoshape/simulator/bmode.hpp"
 #include "sonoshape/simulator/phantom.hpp"
 #include "sonoshape/simulator/sweep.hpp"
@@ -53,7 +53,7 @@ int run_simulate(const SimulateOptions& options) {
     return 1;
   }
   const sim::Phantom* phantom = &scenario->phantom;
-  const sim::Probe probe(scenario->probe);
+  const acq::Probe probe(scenario->probe);
   const sim::TrackerOptions& tracker = scenario->tracker;
 
   const sim::SimulatedAcquisition acquisition = sim::acquire(
@@ -96,7 +96,7 @@ int run_simulate(const SimulateOptions& options) {
     }
     for (const auto& entry : phantom->mesh_set().meshes) {
       const auto path = options.truth_dir / ("label_" + std::to_string(entry.label) + ".ply");
-      if (const Status written = publish::write_mesh(entry.mesh, path); !written) {
+      if (const Status written = write_mesh(entry.mesh, path); !written) {
         std::cerr << "error: " << written.message() << '\n';
         return 1;
       }
@@ -113,7 +113,7 @@ int run_simulate(const SimulateOptions& options) {
   for (const Pose& pose : acquisition.tracked_poses)
     invalid += pose.status == TrackingStatus::kInvalid ? 1 : 0;
   std::ostringstream summary;
-  summary << "simulate: " << phantom->labels().size() << " labels, " << sim::to_string(probe.type())
+  summary << "simulate: " << phantom->labels().size() << " labels, " << acq::to_string(probe.type())
           << " probe, " << scenario_options.trajectory << ", " << options.frames << " frames of "
           << scenario_options.width_px << "x" << scenario_options.height_px << " (" << invalid
           << " with INVALID pose, " << static_cast<int>(100.0 * sweep.mean_shadow_fraction + 0.5)

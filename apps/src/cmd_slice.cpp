@@ -12,10 +12,9 @@
 #include "commands.hpp"
 #include "mesh_spec.hpp"
 #include "option_checks.hpp"
+#include "sonoshape/core/mesh_io.hpp"
 #include "sonoshape/core/mesh_slicer.hpp"
 #include "sonoshape/core/slice_io.hpp"
-#include "sonoshape/publish/mesh_writer.hpp"
-#include "sonoshape/simulator/mesh_reader.hpp"
 #include "sonoshape/simulator/plane_generator.hpp"
 #include "sonoshape/simulator/unknowns.hpp"
 
@@ -191,7 +190,7 @@ int run_slice(const SliceOptions& options) {
     }
     for (const auto& [label, mesh] : by_label) {
       const auto path = options.truth_dir / ("label_" + std::to_string(label) + ".ply");
-      if (const Status written = publish::write_mesh(mesh, path); !written) {
+      if (const Status written = write_mesh(mesh, path); !written) {
         std::cerr << "error: " << written.message() << '\n';
         return 1;
       }

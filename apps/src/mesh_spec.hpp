@@ -4,9 +4,9 @@
 #include <filesystem>
 #include <string>
 
+#include "sonoshape/core/mesh_io.hpp"
 #include "sonoshape/core/mesh_slicer.hpp"
 #include "sonoshape/core/status.hpp"
-#include "sonoshape/simulator/mesh_reader.hpp"
 
 namespace sonoshape::apps {
 
@@ -45,9 +45,9 @@ inline Result<MeshSpec> parse_mesh_spec(const std::string& text, const std::stri
 inline Result<LabeledMesh> load_mesh_spec(const std::string& text, const std::string& option) {
   const auto spec = parse_mesh_spec(text, option);
   if (!spec) return spec.status();
-  auto mesh = sim::read_mesh(spec->path);
+  auto mesh = read_mesh(spec->path);
   if (!mesh) return mesh.status();
-  sim::orient_outward(*mesh);
+  orient_outward(*mesh);
   return LabeledMesh{spec->label, spec->name, std::move(*mesh)};
 }
 

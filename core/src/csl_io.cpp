@@ -14,6 +14,7 @@
 #include "ring_checks.hpp"
 #include "ring_repair.hpp"
 #include "slice_rules.hpp"
+#include "sonoshape/core/errors.hpp"
 #include "sonoshape/core/log.hpp"
 #include "sonoshape/core/slice_io.hpp"
 #include "text_io.hpp"
@@ -21,13 +22,9 @@
 namespace sonoshape {
 namespace {
 
-// Thrown inside the parser only; parse_csl turns it into a Status.
-struct CslProblem {
-  std::string what;
-};
-
+// Problems are thrown as InputError inside the parser only; parse_csl turns them into a Status.
 [[noreturn]] void fail(std::size_t line, const std::string& what) {
-  throw CslProblem{"line " + std::to_string(line) + ": " + what};
+  throw InputError("line " + std::to_string(line), what);
 }
 
 struct Token {
@@ -813,10 +810,8 @@ Result<SliceSet> parse_csl(const std::string& text, const std::string& source_na
   int n_labels = 0;
   try {
     set = parse_csl_text(text, naming, repairs, n_labels);
-  } catch (const CslProblem& problem) {
-    return Status::error(source_name + ": " + problem.what);
-  } catch (const detail::RepairRefused& refused) {
-    return Status::error(refused.message);
+  } catch (const InputError& problem) {  // a parse problem, or a repair refused under strict
+    return Status::error(problem.message_in(source_name));
   }
   Result<SliceSet> result = detail::finish_parsed_set(std::move(set), source_name, naming, repairs);
   if (result) warn_unused_labels(*result, n_labels, source_name);

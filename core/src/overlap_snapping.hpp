@@ -13,7 +13,7 @@ namespace sonoshape::detail {
 /// earlier one's vertices move onto them, and each region's vertices that near the other's edges
 /// are inserted into those edges, so the two share the edge exactly. A pair is changed only when
 /// the result no longer overlaps under the exact test. Records a "rounding_overlap" repair per
-/// snapped pair (RepairRefused under strict).
+/// snapped pair (InputError under strict).
 void snap_rounding_overlaps(SliceSet& set, const RegionPairs& pairs, const SliceNaming& naming,
                             RepairLog& repairs);
 

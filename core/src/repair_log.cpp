@@ -2,16 +2,17 @@
 
 #include <map>
 
+#include "sonoshape/core/errors.hpp"
 #include "sonoshape/core/log.hpp"
 
 namespace sonoshape::detail {
 
 void RepairLog::add(const std::string& slice_name, Repair repair) {
   if (strict_)
-    throw RepairRefused{source_name_ + ": " + (repair.where.empty() ? "" : repair.where + ": ") +
-                        repair.detail +
-                        " (--strict refuses input that needs repairs; fix the file, or run "
-                        "without --strict to accept the repair)"};
+    throw InputError(source_name_, repair.where,
+                     repair.detail +
+                         " (--strict refuses input that needs repairs; fix the file, or run "
+                         "without --strict to accept the repair)");
   repairs_.emplace_back(slice_name, std::move(repair));
 }
 

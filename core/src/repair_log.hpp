@@ -10,11 +10,6 @@
 
 namespace sonoshape::detail {
 
-/// Thrown by RepairLog::add under ReadOptions::strict; the readers turn it into their Status.
-struct RepairRefused {
-  std::string message;
-};
-
 /// Collects a reader's repairs: the records for SliceSet::repairs, one warning per slice on
 /// stderr when finished, and under ReadOptions::strict an error at the first repair.
 class RepairLog {
@@ -23,7 +18,8 @@ class RepairLog {
       : source_name_(std::move(source_name)), strict_(options.strict) {}
 
   /// Records a repair of the slice named `slice_name` ("" when it concerns the whole file).
-  /// Strict: throws RepairRefused naming the file, the element and the way out.
+  /// Strict: throws InputError naming the file, the element and the way out (the readers turn
+  /// it into their Status).
   void add(const std::string& slice_name, Repair repair);
   /// Prints the warnings (one line per slice, slices in the order first repaired) and hands the
   /// records over.

@@ -13,6 +13,7 @@
 #include "ring_checks.hpp"
 #include "ring_repair.hpp"
 #include "slice_rules.hpp"
+#include "sonoshape/core/errors.hpp"
 #include "sonoshape/core/log.hpp"
 #include "sonoshape/core/slice_io.hpp"
 #include "text_io.hpp"
@@ -26,14 +27,10 @@ namespace {
 
 using nlohmann::json;
 
-// Thrown inside the parser only; parse_slice_set_json turns it into a Status.
-struct JsonProblem {
-  std::string where;
-  std::string what;
-};
-
+// Problems are thrown as InputError inside the parser only; parse_slice_set_json and
+// parse_slice_json turn them into a Status.
 [[noreturn]] void fail_at(const std::string& where, const std::string& what) {
-  throw JsonProblem{where, what};
+  throw InputError(where, what);
 }
 
 std::string short_dump(const json& j) {
@@ -479,10 +476,8 @@ Result<SliceSet> parse_slice_set_json(const std::string& text, const std::string
   detail::RepairLog repairs(source_name, options);
   try {
     set = parse_document(doc, source_name, repairs);
-  } catch (const JsonProblem& p) {
-    return Status::error(source_name + ": " + p.where + ": " + p.what);
-  } catch (const detail::RepairRefused& refused) {
-    return Status::error(refused.message);
+  } catch (const InputError& p) {  // a parse problem, or a repair refused under strict
+    return Status::error(p.message_in(source_name));
   } catch (const json::exception& e) {
     return Status::error(source_name + ": malformed slice set (" + std::string(e.what()) + ")");
   }
@@ -541,8 +536,8 @@ Result<LabeledSlice> parse_slice_json(const std::string& text, const std::string
   try {
     set.slices.push_back(
         parse_slice_object(doc, 0, false, source_name, naming, repairs, also_known));
-  } catch (const JsonProblem& p) {
-    return Status::error(source_name + ": " + p.where + ": " + p.what);
+  } catch (const InputError& p) {
+    return Status::error(p.message_in(source_name));
   } catch (const json::exception& e) {
     return Status::error(source_name + ": malformed slice (" + std::string(e.what()) + ")");
   }

@@ -17,6 +17,7 @@
 #include "overlap_snapping.hpp"
 #include "polygon_validity.hpp"
 #include "ring_checks.hpp"
+#include "sonoshape/core/errors.hpp"
 #include "sonoshape/core/slice_compare.hpp"
 #include "sonoshape/core/slice_io.hpp"
 #include "text_io.hpp"
@@ -585,8 +586,8 @@ Result<SliceSet> finish_parsed_set(SliceSet set, const std::string& source_name,
   for (int round = 0; status && !thin.empty(); ++round) {
     try {
       snap_rounding_overlaps(set, thin, naming, repairs);
-    } catch (const RepairRefused& refused) {
-      return Status::error(refused.message);
+    } catch (const InputError& refused) {  // a repair refused under strict: names its file
+      return Status::error(refused.what());
     }
     identical.clear();
     thin.clear();
@@ -597,8 +598,8 @@ Result<SliceSet> finish_parsed_set(SliceSet set, const std::string& source_name,
   if (Status resolvable = check_bounds_resolvable(set, source_name); !resolvable) return resolvable;
   try {
     merge_identical_slices(set, identical, naming, repairs);
-  } catch (const RepairRefused& refused) {
-    return Status::error(refused.message);
+  } catch (const InputError& refused) {
+    return Status::error(refused.what());
   }
   set.repairs = repairs.finish();
   return set;

@@ -10,6 +10,7 @@
 #include <optional>
 #include <type_traits>
 
+#include "sonoshape/core/errors.hpp"
 #include "sonoshape/core/slice_io.hpp"
 
 namespace sonoshape::publish {
@@ -255,13 +256,9 @@ Frames encode_end(const StreamMessage& message) {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Decoding: every problem is thrown as Invalid inside, returned as a Status outside.
+// Decoding: every problem is thrown as InputError inside, returned as a Status outside.
 
-struct Invalid {
-  std::string what;
-};
-
-[[noreturn]] void invalid(std::string what) { throw Invalid{std::move(what)}; }
+[[noreturn]] void invalid(std::string what) { throw InputError("", std::move(what)); }
 
 // Printable form of received text for messages: at most 40 characters, control bytes escaped.
 std::string printable(std::string_view text) {
@@ -648,8 +645,8 @@ Result<StreamMessage> decode_message(const Frames& frames) {
       check_frame_count(frames, 2, "an end message");
       message.body = SnapshotEnd{};
     }
-  } catch (const Invalid& problem) {
-    return Status::error(where + ": " + problem.what);
+  } catch (const InputError& problem) {
+    return Status::error(problem.message_in(where));
   } catch (const json::exception& e) {
     return Status::error(where + ": malformed header (" + std::string(e.what()) + ")");
   }

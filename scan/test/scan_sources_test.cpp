@@ -12,8 +12,8 @@
 #include "sonoshape/acquisition/plus_config.hpp"
 #include "sonoshape/apps/file_sink.hpp"
 #include "sonoshape/core/mesh.hpp"
+#include "sonoshape/core/mesh_io.hpp"
 #include "sonoshape/core/slice_io.hpp"
-#include "sonoshape/simulator/mesh_reader.hpp"
 #include "sonoshape/testing/temp_dir.hpp"
 
 namespace sonoshape::scan {
@@ -215,7 +215,7 @@ TEST(ScanSources, RealPlusSweepReconstructs) {
   const ScanSummary summary = run_fast(open_plus_sweep(), std::make_shared<FileSink>(dir.path()));
   check_plus_scan(summary, dir.path());
   ASSERT_TRUE(fs::exists(dir.path() / "label_1.ply"));
-  const auto mesh = sim::read_mesh(dir.path() / "label_1.ply");
+  const auto mesh = read_mesh(dir.path() / "label_1.ply");
   ASSERT_TRUE(mesh) << mesh.message();
   EXPECT_GT(mesh->triangles.size(), 100u);
   EXPECT_TRUE(check_mesh_health(*mesh).closed_manifold_oriented());

@@ -16,6 +16,7 @@
 #include <utility>
 #include <vector>
 
+#include "sonoshape/core/errors.hpp"
 #include "sonoshape/core/input_file.hpp"
 
 namespace sonoshape::seg {
@@ -26,16 +27,13 @@ using nlohmann::json;
 constexpr const char* kFormat = "sonoshape-segmentation";
 constexpr int kVersion = 1;
 
-// Thrown inside the parser only; parse_segmentation_config turns it into a Status.
-struct ConfigProblem {
-  std::string where;
-  std::string what;
-};
+// Problems are thrown as InputError (element: the key path) inside the parser only;
+// parse_segmentation_config turns them into a Status.
 
 double number_at(const json& j, const std::string& where) {
-  if (!j.is_number()) throw ConfigProblem{where, "expected a number, got " + j.dump()};
+  if (!j.is_number()) throw InputError(where, "expected a number, got " + j.dump());
   const double value = j.get<double>();
-  if (!std::isfinite(value)) throw ConfigProblem{where, "not a finite number"};
+  if (!std::isfinite(value)) throw InputError(where, "not a finite number");
   return value;
 }
 
@@ -48,28 +46,28 @@ void set_number_field(std::initializer_list<std::pair<std::string_view, double*>
       *target = number_at(value, where);
       return;
     }
-  throw ConfigProblem{where, "unknown key; see docs/segmentation.md for the fields"};
+  throw InputError(where, "unknown key; see docs/segmentation.md for the fields");
 }
 
 // An integer field as int: a value beyond int's range would otherwise wrap into a valid one.
 int integer_at(const json& j, const std::string& where) {
-  if (!j.is_number_integer()) throw ConfigProblem{where, "expected an integer"};
+  if (!j.is_number_integer()) throw InputError(where, "expected an integer");
   const bool in_range = j.is_number_unsigned()
                             ? j.get<std::uint64_t>() <= std::uint64_t{INT_MAX}
                             : j.get<std::int64_t>() >= INT_MIN && j.get<std::int64_t>() <= INT_MAX;
-  if (!in_range) throw ConfigProblem{where, "integer " + j.dump() + " is out of range"};
+  if (!in_range) throw InputError(where, "integer " + j.dump() + " is out of range");
   return j.get<int>();
 }
 
 LabelModel read_model(const json& j, const std::string& where, bool is_background) {
-  if (!j.is_object()) throw ConfigProblem{where, "expected an object"};
+  if (!j.is_object()) throw InputError(where, "expected an object");
   LabelModel model;
   model.label = 0;
   for (const auto& [key, value] : j.items()) {
     if (key == "id" && !is_background) {
       model.label = integer_at(value, where + ".id");
     } else if (key == "name") {
-      if (!value.is_string()) throw ConfigProblem{where + ".name", "expected a string"};
+      if (!value.is_string()) throw InputError(where + ".name", "expected a string");
       model.name = value.get<std::string>();
     } else if (key == "grey_mean") {
       model.grey_mean = number_at(value, where + ".grey_mean");
@@ -79,18 +77,18 @@ LabelModel read_model(const json& j, const std::string& where, bool is_backgroun
       model.thickness_mm = number_at(value, where + ".thickness_mm");
     } else if (key == "seed_mm" && !is_background) {
       if (!value.is_array() || value.size() != 3)
-        throw ConfigProblem{where + ".seed_mm", "expected [x, y, z] in mm, got " + value.dump()};
+        throw InputError(where + ".seed_mm", "expected [x, y, z] in mm, got " + value.dump());
       model.seed_mm = Vec3(number_at(value[0], where + ".seed_mm[0]"),
                            number_at(value[1], where + ".seed_mm[1]"),
                            number_at(value[2], where + ".seed_mm[2]"));
     } else {
-      throw ConfigProblem{where, "unknown key '" + key + "' (known: " +
-                                     (is_background ? "" : "id, ") + "name, grey_mean, grey_std" +
-                                     (is_background ? "" : ", thickness_mm, seed_mm") + ")"};
+      throw InputError(where, "unknown key '" + key + "' (known: " + (is_background ? "" : "id, ") +
+                                  "name, grey_mean, grey_std" +
+                                  (is_background ? "" : ", thickness_mm, seed_mm") + ")");
     }
   }
-  if (!is_background && !j.contains("id")) throw ConfigProblem{where, "missing 'id'"};
-  if (!j.contains("grey_mean")) throw ConfigProblem{where, "missing 'grey_mean'"};
+  if (!is_background && !j.contains("id")) throw InputError(where, "missing 'id'");
+  if (!j.contains("grey_mean")) throw InputError(where, "missing 'grey_mean'");
   if (is_background && model.name.empty()) model.name = "background";
   return model;
 }
@@ -186,6 +184,88 @@ Status SegmentationConfig::validate() const {
   return Status::ok();
 }
 
+namespace {
+
+// "sector": "default", "auto", "full" or a polygon [[column, row], ...].
+void read_sector(const json& value, SegmentationConfig& config) {
+  if (value.is_string()) {
+    const std::string s = value.get<std::string>();
+    if (s == "auto")
+      config.sector = SectorSource::kAuto;
+    else if (s == "full")
+      config.sector = SectorSource::kFull;
+    else if (s == "default")
+      config.sector = SectorSource::kDefault;
+    else
+      throw InputError("sector", "expected \"default\", \"auto\", \"full\" or a polygon");
+  } else if (value.is_array()) {
+    config.sector = SectorSource::kPolygon;
+    for (std::size_t k = 0; k < value.size(); ++k) {
+      const std::string where = "sector[" + std::to_string(k) + "]";
+      if (!value[k].is_array() || value[k].size() != 2)
+        throw InputError(where, "expected [column, row]");
+      config.sector_polygon_px.emplace_back(number_at(value[k][0], where),
+                                            number_at(value[k][1], where));
+    }
+  } else {
+    throw InputError("sector", "expected a string or a polygon [[column, row], ...]");
+  }
+}
+
+// One top-level key of the config (any but format and version).
+void read_config_key(const std::string& key, const json& value, SegmentationConfig& config) {
+  if (key == "background") {
+    config.background = read_model(value, key, true);
+  } else if (key == "labels") {
+    if (!value.is_array()) throw InputError(key, "expected an array of label models");
+    for (std::size_t k = 0; k < value.size(); ++k)
+      config.materials.push_back(read_model(value[k], "labels[" + std::to_string(k) + "]", false));
+  } else if (key == "median_px") {
+    config.median_px = integer_at(value, key);
+  } else if (key == "depth_compensation" || key == "learn_models") {
+    if (!value.is_boolean()) throw InputError(key, "expected true or false");
+    (key == "learn_models" ? config.learn_models : config.depth_compensation) = value.get<bool>();
+  } else if (key == "sector") {
+    read_sector(value, config);
+  } else if (key == "graph_cut") {
+    if (!value.is_object()) throw InputError(key, "expected an object of graph-cut weights");
+    GraphCutOptions& g = config.graph_cut;
+    for (const auto& [name, weight] : value.items()) {
+      set_number_field({{"cell_mm", &g.cell_mm},
+                        {"smoothness", &g.smoothness},
+                        {"prior_weight", &g.prior_weight},
+                        {"prior_margin_mm", &g.prior_margin_mm},
+                        {"model_update", &g.model_update}},
+                       name, weight, key + "." + name);
+    }
+  } else if (key == "method") {
+    const std::string name = value.is_string() ? value.get<std::string>() : "";
+    if (name == "threshold")
+      config.method = LabellingMethod::kThreshold;
+    else if (name == "graph_cut")
+      config.method = LabellingMethod::kGraphCut;
+    else
+      throw InputError(key, "expected \"threshold\" or \"graph_cut\"");
+  } else {
+    set_number_field({{"smoothing_mm", &config.smoothing_mm},
+                      {"boundary_echo_contrast", &config.boundary_echo_contrast},
+                      {"confidence_window_mm", &config.confidence_window_mm},
+                      {"shadow_grey", &config.shadow_grey},
+                      {"shadow_fraction", &config.shadow_fraction},
+                      {"shadow_margin_mm", &config.shadow_margin_mm},
+                      {"max_depth_mm", &config.max_depth_mm},
+                      {"opening_mm", &config.opening_mm},
+                      {"min_region_mm2", &config.min_region_mm2},
+                      {"simplify_mm", &config.simplify_mm},
+                      {"sector_signal_grey", &config.sector_signal_grey},
+                      {"psf_sigma_mm", &config.psf_sigma_mm},
+                      {"dynamic_range_db", &config.dynamic_range_db}},
+                     key, value, key);
+  }
+}
+
+}  // namespace
+
 Result<SegmentationConfig> parse_segmentation_config(const std::string& json_text,
                                                      const std::string& source_name) {
   json doc;
@@ -196,90 +276,18 @@ Result<SegmentationConfig> parse_segmentation_config(const std::string& json_tex
   }
   SegmentationConfig config;
   try {
-    if (!doc.is_object()) throw ConfigProblem{"top level", "expected an object"};
+    if (!doc.is_object()) throw InputError("top level", "expected an object");
     // find, not value(): value() throws when the key holds another type.
     const auto format = doc.find("format");
     if (format == doc.end() || !format->is_string() || *format != kFormat)
-      throw ConfigProblem{"format", std::string("must be \"") + kFormat + "\""};
+      throw InputError("format", std::string("must be \"") + kFormat + "\"");
     const auto version = doc.find("version");
     if (version == doc.end() || !version->is_number_integer() || *version != kVersion)
-      throw ConfigProblem{"version", "must be " + std::to_string(kVersion)};
-    for (const auto& [key, value] : doc.items()) {
-      if (key == "format" || key == "version") continue;
-      if (key == "background") {
-        config.background = read_model(value, key, true);
-      } else if (key == "labels") {
-        if (!value.is_array()) throw ConfigProblem{key, "expected an array of label models"};
-        for (std::size_t k = 0; k < value.size(); ++k)
-          config.materials.push_back(
-              read_model(value[k], "labels[" + std::to_string(k) + "]", false));
-      } else if (key == "median_px") {
-        config.median_px = integer_at(value, key);
-      } else if (key == "depth_compensation" || key == "learn_models") {
-        if (!value.is_boolean()) throw ConfigProblem{key, "expected true or false"};
-        (key == "learn_models" ? config.learn_models : config.depth_compensation) =
-            value.get<bool>();
-      } else if (key == "sector") {
-        if (value.is_string()) {
-          const std::string s = value.get<std::string>();
-          if (s == "auto")
-            config.sector = SectorSource::kAuto;
-          else if (s == "full")
-            config.sector = SectorSource::kFull;
-          else if (s == "default")
-            config.sector = SectorSource::kDefault;
-          else
-            throw ConfigProblem{key, "expected \"default\", \"auto\", \"full\" or a polygon"};
-        } else if (value.is_array()) {
-          config.sector = SectorSource::kPolygon;
-          for (std::size_t k = 0; k < value.size(); ++k) {
-            const std::string where = "sector[" + std::to_string(k) + "]";
-            if (!value[k].is_array() || value[k].size() != 2)
-              throw ConfigProblem{where, "expected [column, row]"};
-            config.sector_polygon_px.emplace_back(number_at(value[k][0], where),
-                                                  number_at(value[k][1], where));
-          }
-        } else {
-          throw ConfigProblem{key, "expected a string or a polygon [[column, row], ...]"};
-        }
-      } else if (key == "graph_cut") {
-        if (!value.is_object()) throw ConfigProblem{key, "expected an object of graph-cut weights"};
-        GraphCutOptions& g = config.graph_cut;
-        for (const auto& [name, weight] : value.items()) {
-          set_number_field({{"cell_mm", &g.cell_mm},
-                            {"smoothness", &g.smoothness},
-                            {"prior_weight", &g.prior_weight},
-                            {"prior_margin_mm", &g.prior_margin_mm},
-                            {"model_update", &g.model_update}},
-                           name, weight, key + "." + name);
-        }
-      } else if (key == "method") {
-        const std::string name = value.is_string() ? value.get<std::string>() : "";
-        if (name == "threshold")
-          config.method = LabellingMethod::kThreshold;
-        else if (name == "graph_cut")
-          config.method = LabellingMethod::kGraphCut;
-        else
-          throw ConfigProblem{key, "expected \"threshold\" or \"graph_cut\""};
-      } else {
-        set_number_field({{"smoothing_mm", &config.smoothing_mm},
-                          {"boundary_echo_contrast", &config.boundary_echo_contrast},
-                          {"confidence_window_mm", &config.confidence_window_mm},
-                          {"shadow_grey", &config.shadow_grey},
-                          {"shadow_fraction", &config.shadow_fraction},
-                          {"shadow_margin_mm", &config.shadow_margin_mm},
-                          {"max_depth_mm", &config.max_depth_mm},
-                          {"opening_mm", &config.opening_mm},
-                          {"min_region_mm2", &config.min_region_mm2},
-                          {"simplify_mm", &config.simplify_mm},
-                          {"sector_signal_grey", &config.sector_signal_grey},
-                          {"psf_sigma_mm", &config.psf_sigma_mm},
-                          {"dynamic_range_db", &config.dynamic_range_db}},
-                         key, value, key);
-      }
-    }
-  } catch (const ConfigProblem& p) {
-    return Status::error(source_name + ": " + p.where + ": " + p.what);
+      throw InputError("version", "must be " + std::to_string(kVersion));
+    for (const auto& [key, value] : doc.items())
+      if (key != "format" && key != "version") read_config_key(key, value, config);
+  } catch (const InputError& p) {
+    return Status::error(p.message_in(source_name));
   }
   if (Status valid = config.validate(); !valid)
     return Status::error(source_name + ": " + valid.message());

@@ -15,13 +15,13 @@
 #include <stdexcept>
 
 #include "sonoshape/acquisition/plus_config.hpp"
+#include "sonoshape/acquisition/probe.hpp"
 #include "sonoshape/core/errors.hpp"
 #include "sonoshape/core/input_file.hpp"
 #include "sonoshape/core/log.hpp"
 #include "sonoshape/core/slice_io.hpp"
 #include "sonoshape/segmentation/contours.hpp"
 #include "sonoshape/segmentation/labeller.hpp"
-#include "sonoshape/simulator/sweep.hpp"
 
 namespace sonoshape::seg {
 namespace {
@@ -121,7 +121,7 @@ double calibration_spacing_mm(const Eigen::Matrix4d& T_probe_image) {
 }
 
 // The sector of a simulated sweep from its probe.
-ImageGeometry probe_geometry(const sim::Probe& probe) {
+ImageGeometry probe_geometry(const acq::Probe& probe) {
   ImageGeometry g;
   g.width_px = probe.width_px();
   g.height_px = probe.height_px();
@@ -184,7 +184,7 @@ std::vector<std::uint8_t> sector_samples(const acq::SequenceFile& file, const Sw
 }  // namespace
 
 Result<ImageGeometry> geometry_from_header(const acq::FieldList& fields) {
-  auto probe = sim::probe_from_fields(fields);
+  auto probe = acq::probe_from_fields(fields);
   if (!probe) return probe.status();
   return probe_geometry(*probe);
 }
@@ -307,7 +307,7 @@ Result<SweepSetup> prepare_sweep(const acq::SequenceFile& file,
   SectorSource source = setup.config.sector;
   if (source == SectorSource::kDefault) {
     if (file.field("SonoshapeProbeType")) {
-      auto probe = sim::probe_from_fields(file.fields());
+      auto probe = acq::probe_from_fields(file.fields());
       if (!probe) return probe.status();
       if (probe->width_px() != w || probe->height_px() != h)
         return Status::error(sequence_path.string() + ": the header's probe image is " +
@@ -315,7 +315,7 @@ Result<SweepSetup> prepare_sweep(const acq::SequenceFile& file,
                              std::to_string(probe->height_px()) + " but the frames are " +
                              std::to_string(w) + "x" + std::to_string(h));
       setup.geometry = probe_geometry(*probe);
-      setup.sector_from = "header probe (" + sim::to_string(probe->type()) + ")";
+      setup.sector_from = "header probe (" + acq::to_string(probe->type()) + ")";
     } else {
       source = SectorSource::kAuto;
     }

@@ -28,14 +28,14 @@ struct Ball {
 // z, which shadows it) and a bright ball, placed in a reference frame turned and moved away
 // from the probe's so that every transform matters.
 struct Scene {
-  sim::ProbeGeometry geometry;
+  acq::ProbeGeometry geometry;
   std::vector<Ball> balls;
   Vec3 rib_centre_probe_mm;
   double rib_radius_mm;
   Eigen::Isometry3d T_reference_probe = Eigen::Isometry3d::Identity();
   sim::Phantom phantom;
 
-  Scene(sim::ProbeGeometry g, std::vector<Ball> b, Vec3 rib, double rib_radius)
+  Scene(acq::ProbeGeometry g, std::vector<Ball> b, Vec3 rib, double rib_radius)
       : geometry(g), balls(std::move(b)), rib_centre_probe_mm(rib), rib_radius_mm(rib_radius) {
     T_reference_probe.linear() =
         Eigen::AngleAxisd(0.6, Vec3(0.2, 0.9, -0.4).normalized()).toRotationMatrix();
@@ -60,19 +60,19 @@ struct Scene {
 };
 
 Scene linear_scene() {
-  return Scene(sim::linear_probe_geometry(256, 256),
+  return Scene(acq::linear_probe_geometry(256, 256),
                {{Vec3(-6.0, 29.0, 0.0), 10.0, 1}, {Vec3(11.0, 17.0, 0.0), 6.0, 2}},
                Vec3(-9.0, 8.0, 0.0), 2.0);
 }
 
 Scene convex_scene() {
-  return Scene(sim::convex_probe_geometry(256, 256),
+  return Scene(acq::convex_probe_geometry(256, 256),
                {{Vec3(-12.0, 75.0, 0.0), 22.0, 1}, {Vec3(28.0, 45.0, 0.0), 13.0, 2}},
                Vec3(-10.0, 25.0, 0.0), 4.0);
 }
 
-ImageGeometry scene_geometry(const sim::Probe& probe) {
-  auto geometry = geometry_from_header(sim::probe_fields(probe));
+ImageGeometry scene_geometry(const acq::Probe& probe) {
+  auto geometry = geometry_from_header(acq::probe_fields(probe));
   EXPECT_TRUE(geometry) << geometry.message();
   return *geometry;
 }
@@ -119,7 +119,7 @@ class SegmentSimulated : public ::testing::TestWithParam<bool> {};
 TEST_P(SegmentSimulated, MatchesGroundTruthAndTheCut) {
   const bool convex = GetParam();
   const Scene scene = convex ? convex_scene() : linear_scene();
-  const sim::Probe probe(scene.geometry);
+  const acq::Probe probe(scene.geometry);
   const sim::BModeSimulator simulator(scene.phantom, probe);
   const ImageGeometry geometry = scene_geometry(probe);
 
@@ -214,7 +214,7 @@ TEST(ImagePlane, ScaledRotationGivesProbeCoordinates) {
   Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
   T.linear() = Eigen::AngleAxisd(0.3, Vec3::UnitY()).toRotationMatrix();
   T.translation() = Vec3(5, 6, 7);
-  const sim::Probe probe(sim::convex_probe_geometry(128, 100));
+  const acq::Probe probe(acq::convex_probe_geometry(128, 100));
   const ImagePlane plane =
       image_plane(T.matrix() * probe.T_probe_image().matrix(), T.translation());
   for (const auto& [i, j] : {std::pair{0.0, 0.0}, std::pair{127.0, 3.0}, std::pair{40.0, 99.0}}) {

@@ -24,7 +24,7 @@ inline SmallSweep organ_and_lesion_sweep(int frames, const sim::TrackerOptions& 
   phantom.add(1, "organ", sim::make_sphere(12.0), place);
   place.translation() = Vec3(12, 15, 0);
   phantom.add(2, "lesion", sim::make_sphere(5.0), place);
-  const sim::Probe probe(sim::linear_probe_geometry(160, 160));
+  const acq::Probe probe(acq::linear_probe_geometry(160, 160));
   const sim::BModeSimulator simulator(phantom, probe);
   sim::TrajectoryOptions motion;
   motion.duration_s = 0.45;

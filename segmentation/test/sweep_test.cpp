@@ -168,8 +168,8 @@ TEST(SegmentSweep, SmallSimulatedFramesGiveSlices) {
   const auto acquisition = sim::acquire(sim::Trajectory(motion), sim::TrackerOptions{}, 10, 20.0);
   for (const int size : {96, 128})
     for (const bool convex : {false, true}) {
-      const sim::Probe probe(convex ? sim::convex_probe_geometry(size, size)
-                                    : sim::linear_probe_geometry(size, size));
+      const acq::Probe probe(convex ? acq::convex_probe_geometry(size, size)
+                                    : acq::linear_probe_geometry(size, size));
       const sim::BModeSimulator simulator(phantom, probe);
       const sim::SimulatedSweep sweep = sim::simulate_sweep(simulator, acquisition, 5);
       const auto setup =
@@ -193,7 +193,7 @@ TEST(SegmentSweep, SmallSimulatedFramesGiveSlices) {
 TEST(SegmentSweep, RibSectionAtACoarsePixelSize) {
   const auto phantom = sim::make_default_phantom(kData / "models");
   ASSERT_TRUE(phantom) << phantom.message();
-  const sim::Probe probe(sim::convex_probe_geometry(256, 256));
+  const acq::Probe probe(acq::convex_probe_geometry(256, 256));
   const sim::BModeSimulator simulator(*phantom, probe);
   // As `simulate` places it: 10 mm above the phantom's box, over its centre; 8 frames along
   // 40 mm of the middle, where the rib runs across every frame.

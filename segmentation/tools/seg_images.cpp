@@ -56,7 +56,7 @@ void draw_labels(const LabelImage& labels, const ImageU8& sector, cv::Mat roi) {
 }
 
 cv::Mat panels(const sim::SimulatedFrame& frame, const seg::Segmentation& segmentation,
-               const ImageU8& sector, const LabeledSlice& slice, const sim::Probe& probe) {
+               const ImageU8& sector, const LabeledSlice& slice, const acq::Probe& probe) {
   const int w = frame.bmode.width, h = frame.bmode.height;
   cv::Mat out(h, 3 * w + 2 * kGapPx, CV_8UC3, cv::Scalar(255, 255, 255));
   for (int j = 0; j < h; ++j)
@@ -96,13 +96,13 @@ int main(int argc, char** argv) {
   std::filesystem::create_directories(out_dir);
   struct Shot {
     const char* file;
-    sim::ProbeGeometry probe;
+    acq::ProbeGeometry probe;
     double size_mm, standoff_mm, z_fraction, x_mm;
   };
   // The pictured planes of docs/simulator.md.
   const Shot shots[] = {
-      {"seg_convex.png", sim::convex_probe_geometry(512, 512), 120.0, 12.0, 0.45, 0.0},
-      {"seg_linear.png", sim::linear_probe_geometry(512, 512), 60.0, 4.0, 0.45, -6.0},
+      {"seg_convex.png", acq::convex_probe_geometry(512, 512), 120.0, 12.0, 0.45, 0.0},
+      {"seg_linear.png", acq::linear_probe_geometry(512, 512), 60.0, 4.0, 0.45, -6.0},
   };
   for (const Shot& shot : shots) {
     auto phantom = sim::make_default_phantom(source / "data" / "models", shot.size_mm);
@@ -111,7 +111,7 @@ int main(int argc, char** argv) {
       return 1;
     }
     const Box3 box = phantom->bounds();
-    const sim::Probe probe(shot.probe);
+    const acq::Probe probe(shot.probe);
     const sim::BModeSimulator simulator(*phantom, probe);
     Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
     pose.translation() = Vec3(shot.x_mm, box.min.y() - shot.standoff_mm,

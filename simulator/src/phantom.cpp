@@ -9,7 +9,7 @@
 
 #include "sonoshape/core/errors.hpp"
 #include "sonoshape/core/image.hpp"
-#include "sonoshape/simulator/mesh_reader.hpp"
+#include "sonoshape/core/mesh_io.hpp"
 
 namespace sonoshape::sim {
 

@@ -6,9 +6,7 @@
 #include <array>
 #include <charconv>
 #include <cmath>
-#include <sstream>
 
-#include "sonoshape/core/errors.hpp"
 #include "sonoshape/simulator/sim_source.hpp"
 
 namespace sonoshape::sim {
@@ -97,62 +95,6 @@ std::map<int, double> shadow_caster_thickness_mm(const std::vector<std::array<in
     thickness[l] = runs[runs.size() / 2] * spacing_mm;
   }
   return thickness;
-}
-
-acq::FieldList probe_fields(const Probe& probe) {
-  const ProbeGeometry& g = probe.geometry();
-  acq::FieldList fields;
-  fields.emplace_back("SonoshapeProbeType", to_string(g.type));
-  fields.emplace_back("SonoshapeProbeDepthMm", number(g.depth_mm));
-  fields.emplace_back("SonoshapeProbeWidthMm", number(g.width_mm));
-  fields.emplace_back("SonoshapeProbeFanAngleDeg", number(g.fan_angle_deg));
-  fields.emplace_back("SonoshapeProbeRadiusMm", number(g.radius_mm));
-  fields.emplace_back("SonoshapeProbeFrequencyMhz", number(g.frequency_mhz));
-  fields.emplace_back("SonoshapeImageSizePx",
-                      std::to_string(g.width_px) + " " + std::to_string(g.height_px));
-  fields.emplace_back("SonoshapePixelSpacingMm", number(probe.spacing_mm()));
-  return fields;
-}
-
-Result<Probe> probe_from_fields(const acq::FieldList& fields) {
-  auto get = [&](const char* key) -> Result<double> {
-    const auto text = acq::find_field(fields, key);
-    if (!text)
-      return Status::error(std::string("sequence header has no ") + key +
-                           " field: it was not written by `sonoshape simulate`; give the probe "
-                           "geometry another way");
-    double value = 0.0;
-    const auto [end, ec] = std::from_chars(text->data(), text->data() + text->size(), value);
-    if (ec != std::errc() || end != text->data() + text->size())
-      return Status::error(std::string("sequence header field ") + key + " = '" + *text +
-                           "' is not a number");
-    return value;
-  };
-  ProbeGeometry g;
-  const auto type = acq::find_field(fields, "SonoshapeProbeType");
-  if (!type || (*type != "linear" && *type != "convex"))
-    return Status::error(
-        "sequence header field SonoshapeProbeType is missing or not "
-        "linear/convex");
-  g.type = parse_probe_type(*type);
-  for (auto [key, target] : {std::pair{"SonoshapeProbeDepthMm", &g.depth_mm},
-                             std::pair{"SonoshapeProbeWidthMm", &g.width_mm},
-                             std::pair{"SonoshapeProbeFanAngleDeg", &g.fan_angle_deg},
-                             std::pair{"SonoshapeProbeRadiusMm", &g.radius_mm},
-                             std::pair{"SonoshapeProbeFrequencyMhz", &g.frequency_mhz}}) {
-    const auto value = get(key);
-    if (!value) return value.status();
-    *target = *value;
-  }
-  const auto size = acq::find_field(fields, "SonoshapeImageSizePx");
-  std::istringstream in(size.value_or(""));
-  if (!(in >> g.width_px >> g.height_px))
-    return Status::error("sequence header field SonoshapeImageSizePx is missing or not 'W H'");
-  try {
-    return Probe(g);
-  } catch (const GeometryError& e) {
-    return Status::error(std::string("sequence header describes an invalid probe: ") + e.what());
-  }
 }
 
 namespace {

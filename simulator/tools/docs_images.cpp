@@ -63,12 +63,12 @@ int main(int argc, char** argv) {
   std::filesystem::create_directories(out_dir);
   struct Shot {
     const char* file;
-    sim::ProbeGeometry probe;
+    acq::ProbeGeometry probe;
     double size_mm, standoff_mm, z_fraction, x_mm;
   };
   const Shot shots[] = {
-      {"sim_convex.png", sim::convex_probe_geometry(512, 512), 120.0, 12.0, 0.45, 0.0},
-      {"sim_linear.png", sim::linear_probe_geometry(512, 512), 60.0, 4.0, 0.45, -6.0},
+      {"sim_convex.png", acq::convex_probe_geometry(512, 512), 120.0, 12.0, 0.45, 0.0},
+      {"sim_linear.png", acq::linear_probe_geometry(512, 512), 60.0, 4.0, 0.45, -6.0},
   };
   for (const Shot& shot : shots) {
     auto phantom = sim::make_default_phantom(source / "data" / "models", shot.size_mm);
@@ -77,7 +77,7 @@ int main(int argc, char** argv) {
       return 1;
     }
     const Box3 box = phantom->bounds();
-    const sim::BModeSimulator simulator(*phantom, sim::Probe(shot.probe));
+    const sim::BModeSimulator simulator(*phantom, acq::Probe(shot.probe));
     const double z = box.min.z() + shot.z_fraction * box.size().z();
     const auto frame = simulator.render(probe_above(box, shot.standoff_mm, z, shot.x_mm), 7);
     const auto path = out_dir / shot.file;

@@ -5,8 +5,8 @@
 #include <utility>
 
 #include "sonoshape/core/log.hpp"
+#include "sonoshape/core/mesh_io.hpp"
 #include "sonoshape/core/slice_io.hpp"
-#include "sonoshape/publish/mesh_writer.hpp"
 #include "sonoshape/scan/journal.hpp"
 
 namespace sonoshape::apps {
@@ -41,7 +41,7 @@ Status FileSink::write_meshes(const MeshSet& meshes) {
   for (const MeshSet::Entry& entry : meshes.meshes) {
     const std::string name = "label_" + std::to_string(entry.label) + ".ply";
     const fs::path partial = directory_ / (".partial-" + name);
-    Status written = publish::write_mesh(entry.mesh, partial);
+    Status written = write_mesh(entry.mesh, partial);
     if (written) written = scan::sync_and_rename(partial, directory_ / name);
     if (!written) {
       std::error_code ignored;

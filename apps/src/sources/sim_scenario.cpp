@@ -4,7 +4,7 @@
 #include <sstream>
 
 #include "../mesh_spec.hpp"
-#include "sonoshape/simulator/mesh_reader.hpp"
+#include "sonoshape/core/mesh_io.hpp"
 
 namespace sonoshape::apps {
 namespace {
@@ -26,9 +26,9 @@ Result<sim::Phantom> build_phantom(const SimScenarioOptions& options,
     if (spec->label > kMaxPixelLabel)
       return Status::error("--phantom '" + text + "': labels go up to " +
                            std::to_string(kMaxPixelLabel) + " (label images are 8-bit)");
-    auto mesh = sim::read_mesh(spec->path);
+    auto mesh = read_mesh(spec->path);
     if (!mesh) return mesh.status();
-    sim::orient_outward(*mesh);
+    orient_outward(*mesh);
     specs.push_back(*spec);
     meshes.push_back(std::move(*mesh));
   }
@@ -95,7 +95,7 @@ Result<SimScenario> make_sim_scenario(const SimScenarioOptions& options, double 
   motion.passes = options.passes;
   motion.seed = options.seed;
   const double standoff =
-      scenario.probe.type == sim::ProbeType::kConvex ? kConvexStandoffMm : kLinearStandoffMm;
+      scenario.probe.type == acq::ProbeType::kConvex ? kConvexStandoffMm : kLinearStandoffMm;
   motion.T_reference_probe_centre.translation() = Vec3(
       0.5 * (box.min.x() + box.max.x()), box.min.y() - standoff, 0.5 * (box.min.z() + box.max.z()));
   motion.sweep_length_mm = options.sweep_length_mm > 0.0 ? options.sweep_length_mm

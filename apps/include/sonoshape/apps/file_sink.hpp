@@ -7,7 +7,7 @@
 
 namespace sonoshape::apps {
 
-/// Writes the meshes to a directory (`label_<id>.ply`, publish::write_mesh_set) every
+/// Writes the meshes to a directory (`label_<id>.ply`, write_mesh_set) every
 /// `save_every` slices and at the end, with the slices (`slices.json`) and the summary
 /// (`scan.json`) at the end. Files are written under a temporary name and renamed, so a reader
 /// never sees half a mesh.

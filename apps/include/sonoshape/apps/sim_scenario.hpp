@@ -6,9 +6,9 @@
 #include <string>
 #include <vector>
 
+#include "sonoshape/acquisition/probe.hpp"
 #include "sonoshape/core/status.hpp"
 #include "sonoshape/simulator/phantom.hpp"
-#include "sonoshape/simulator/probe.hpp"
 #include "sonoshape/simulator/trajectory.hpp"
 
 namespace sonoshape::apps {
@@ -39,7 +39,7 @@ struct SimScenarioOptions {
 /// Everything a simulation needs.
 struct SimScenario {
   sim::Phantom phantom;
-  sim::ProbeGeometry probe;
+  acq::ProbeGeometry probe;
   sim::TrajectoryOptions motion;
   sim::TrackerOptions tracker;
 };

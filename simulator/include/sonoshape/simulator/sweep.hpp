@@ -8,7 +8,7 @@
 //   ImageToProbeTransform = 16 numbers (pixels -> probe mm, PLUS ImageToProbe)
 //   SonoshapeProbeType = linear | convex, SonoshapeProbeDepthMm, SonoshapeProbeWidthMm,
 //   SonoshapeProbeFanAngleDeg, SonoshapeProbeRadiusMm, SonoshapeProbeFrequencyMhz,
-//   SonoshapePixelSpacingMm  (the sector: rebuild it with probe_from_fields)
+//   SonoshapePixelSpacingMm  (the sector: acquisition/probe.hpp's probe_fields)
 //   SonoshapeLabels = 1:name 2:name ...; SonoshapeLabelEchogenicity = 0:e0 1:e1 ...
 //   SonoshapeLabelGreyMean / SonoshapeLabelGreyStd = 0:m0 1:m1 ... (measured on the known
 //   pixels of the whole sweep; 0 is the background)
@@ -57,11 +57,5 @@ std::array<int, 256> shadow_caster_runs_px(const SimulatedFrame& frame);
 /// runs in the frames that show it (runs from shadow_caster_runs_px), times the pixel spacing.
 std::map<int, double> shadow_caster_thickness_mm(const std::vector<std::array<int, 256>>& runs_px,
                                                  double spacing_mm);
-
-/// The probe fields of the header list above.
-acq::FieldList probe_fields(const Probe& probe);
-/// Rebuilds the probe from a header written by simulate_sweep; fails naming the missing or
-/// invalid field.
-Result<Probe> probe_from_fields(const acq::FieldList& fields);
 
 }  // namespace sonoshape::sim

@@ -1,13 +1,12 @@
-#include "sonoshape/simulator/probe.hpp"
+#include "sonoshape/acquisition/probe.hpp"
 
 #include <gtest/gtest.h>
 
 #include <cmath>
 
 #include "sonoshape/core/errors.hpp"
-#include "sonoshape/simulator/sweep.hpp"
 
-namespace sonoshape::sim {
+namespace sonoshape::acq {
 namespace {
 
 TEST(Probe, LinearPixelsMapToMillimetresLikeImageToProbe) {
@@ -70,4 +69,4 @@ TEST(Probe, GeometryRoundTripsThroughHeaderFields) {
 }
 
 }  // namespace
-}  // namespace sonoshape::sim
+}  // namespace sonoshape::acq

@@ -1,13 +1,16 @@
-#include "sonoshape/simulator/probe.hpp"
+#include "sonoshape/acquisition/probe.hpp"
 
 #include <algorithm>
+#include <array>
+#include <charconv>
 #include <cmath>
 #include <numbers>
+#include <sstream>
 #include <stdexcept>
 
 #include "sonoshape/core/errors.hpp"
 
-namespace sonoshape::sim {
+namespace sonoshape::acq {
 
 ProbeType parse_probe_type(const std::string& name) {
   if (name == "linear") return ProbeType::kLinear;
@@ -145,4 +148,70 @@ double Probe::lateral_step_mm(double s) const {
   return (g.radius_mm + sample_depth_mm(s)) * 2.0 * half_angle_rad_ / g.width_px;
 }
 
-}  // namespace sonoshape::sim
+namespace {
+
+std::string number(double value) {
+  std::array<char, 32> buffer{};
+  const auto [end, ec] = std::to_chars(buffer.data(), buffer.data() + buffer.size(), value);
+  return ec == std::errc() ? std::string(buffer.data(), end) : "nan";
+}
+
+}  // namespace
+
+FieldList probe_fields(const Probe& probe) {
+  const ProbeGeometry& g = probe.geometry();
+  FieldList fields;
+  fields.emplace_back("SonoshapeProbeType", to_string(g.type));
+  fields.emplace_back("SonoshapeProbeDepthMm", number(g.depth_mm));
+  fields.emplace_back("SonoshapeProbeWidthMm", number(g.width_mm));
+  fields.emplace_back("SonoshapeProbeFanAngleDeg", number(g.fan_angle_deg));
+  fields.emplace_back("SonoshapeProbeRadiusMm", number(g.radius_mm));
+  fields.emplace_back("SonoshapeProbeFrequencyMhz", number(g.frequency_mhz));
+  fields.emplace_back("SonoshapeImageSizePx",
+                      std::to_string(g.width_px) + " " + std::to_string(g.height_px));
+  fields.emplace_back("SonoshapePixelSpacingMm", number(probe.spacing_mm()));
+  return fields;
+}
+
+Result<Probe> probe_from_fields(const FieldList& fields) {
+  auto get = [&](const char* key) -> Result<double> {
+    const auto text = find_field(fields, key);
+    if (!text)
+      return Status::error(std::string("sequence header has no ") + key +
+                           " field: it was not written by `sonoshape simulate`; give the probe "
+                           "geometry another way");
+    double value = 0.0;
+    const auto [end, ec] = std::from_chars(text->data(), text->data() + text->size(), value);
+    if (ec != std::errc() || end != text->data() + text->size())
+      return Status::error(std::string("sequence header field ") + key + " = '" + *text +
+                           "' is not a number");
+    return value;
+  };
+  ProbeGeometry g;
+  const auto type = find_field(fields, "SonoshapeProbeType");
+  if (!type || (*type != "linear" && *type != "convex"))
+    return Status::error(
+        "sequence header field SonoshapeProbeType is missing or not "
+        "linear/convex");
+  g.type = parse_probe_type(*type);
+  for (auto [key, target] : {std::pair{"SonoshapeProbeDepthMm", &g.depth_mm},
+                             std::pair{"SonoshapeProbeWidthMm", &g.width_mm},
+                             std::pair{"SonoshapeProbeFanAngleDeg", &g.fan_angle_deg},
+                             std::pair{"SonoshapeProbeRadiusMm", &g.radius_mm},
+                             std::pair{"SonoshapeProbeFrequencyMhz", &g.frequency_mhz}}) {
+    const auto value = get(key);
+    if (!value) return value.status();
+    *target = *value;
+  }
+  const auto size = find_field(fields, "SonoshapeImageSizePx");
+  std::istringstream in(size.value_or(""));
+  if (!(in >> g.width_px >> g.height_px))
+    return Status::error("sequence header field SonoshapeImageSizePx is missing or not 'W H'");
+  try {
+    return Probe(g);
+  } catch (const GeometryError& e) {
+    return Status::error(std::string("sequence header describes an invalid probe: ") + e.what());
+  }
+}
+
+}  // namespace sonoshape::acq

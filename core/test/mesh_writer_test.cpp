@@ -1,6 +1,4 @@
 // Mesh files: each format is written and parsed back by the small readers below.
-#include "sonoshape/publish/mesh_writer.hpp"
-
 #include <gtest/gtest.h>
 #include <unistd.h>
 
@@ -11,9 +9,10 @@
 #include <sstream>
 #include <string>
 
+#include "sonoshape/core/mesh_io.hpp"
 #include "sonoshape/testing/temp_dir.hpp"
 
-namespace sonoshape::publish {
+namespace sonoshape {
 namespace {
 
 using sonoshape::testing::TempDir;
@@ -266,4 +265,4 @@ TEST(MeshSetWriter, DirectoryBlockedByAFile) {
 }
 
 }  // namespace
-}  // namespace sonoshape::publish
+}  // namespace sonoshape
