@@ -33,3 +33,14 @@ function(sonoshape_add_umockdev_test name)
   sonoshape_target_defaults(${name})
   add_test(NAME ${name} COMMAND ${SONOSHAPE_UMOCKDEV_WRAPPER} $<TARGET_FILE:${name}>)
 endfunction()
+
+# sonoshape_unity_group(<target> <group> <source>...): compiles the sources as one translation
+# unit (CMake's unity build in GROUP mode; the target's other sources stay one unit each). For
+# sources that instantiate the same heavy templates (CGAL's exact kernel and Boolean operations),
+# each instantiation is then parsed, compiled and optimised once instead of once per file
+# (docs/benchmarks.md, "Build time"). The sources must not define the same name in an anonymous
+# namespace.
+function(sonoshape_unity_group target group)
+  set_target_properties(${target} PROPERTIES UNITY_BUILD ON UNITY_BUILD_MODE GROUP)
+  set_source_files_properties(${ARGN} TARGET_DIRECTORY ${target} PROPERTIES UNITY_GROUP ${group})
+endfunction()
