@@ -6,10 +6,28 @@ function(sonoshape_target_defaults target)
   endif()
 endfunction()
 
+# sonoshape_use_test_pch(<target>): the test program reuses one precompiled header of GoogleTest,
+# Eigen and the standard library, which every test source would otherwise parse again (2-6 s of
+# CPU per source at -O3; docs/benchmarks.md, "Build time"). The header is built once, by the
+# target sonoshape_test_pch, with the flags every test target has.
+function(sonoshape_use_test_pch target)
+  if(NOT TARGET sonoshape_test_pch)
+    add_library(sonoshape_test_pch OBJECT ${PROJECT_SOURCE_DIR}/tests/support/test_pch.cpp)
+    target_link_libraries(sonoshape_test_pch PRIVATE GTest::gtest Eigen3::Eigen)
+    sonoshape_target_defaults(sonoshape_test_pch)
+    target_precompile_headers(sonoshape_test_pch PRIVATE
+      <gtest/gtest.h> <Eigen/Core> <Eigen/Geometry> <algorithm> <chrono> <cmath> <cstdint>
+      <filesystem> <fstream> <functional> <map> <memory> <optional> <set> <sstream> <string>
+      <thread> <utility> <vector>)
+  endif()
+  target_precompile_headers(${target} REUSE_FROM sonoshape_test_pch)
+endfunction()
+
 # sonoshape_add_test(<name> SOURCES ... LIBS ...): one GoogleTest executable registered with ctest.
 function(sonoshape_add_test name)
   cmake_parse_arguments(ARG "" "" "SOURCES;LIBS;LABELS" ${ARGN})
   add_executable(${name} ${ARG_SOURCES})
+  sonoshape_use_test_pch(${name})
   target_link_libraries(${name} PRIVATE ${ARG_LIBS} GTest::gtest GTest::gtest_main)
   target_compile_definitions(${name} PRIVATE SONOSHAPE_DATA_DIR="${SONOSHAPE_DATA_DIR}")
   target_include_directories(${name} PRIVATE ${PROJECT_SOURCE_DIR}/tests/support)
@@ -27,9 +45,21 @@ function(sonoshape_add_umockdev_test name)
     return()
   endif()
   add_executable(${name} ${ARG_SOURCES})
+  sonoshape_use_test_pch(${name})
   target_link_libraries(${name} PRIVATE ${ARG_LIBS} PkgConfig::UMOCKDEV GTest::gtest
                                         GTest::gtest_main)
   target_include_directories(${name} PRIVATE ${PROJECT_SOURCE_DIR}/tests/support)
   sonoshape_target_defaults(${name})
   add_test(NAME ${name} COMMAND ${SONOSHAPE_UMOCKDEV_WRAPPER} $<TARGET_FILE:${name}>)
+endfunction()
+
+# sonoshape_unity_group(<target> <group> <source>...): compiles the sources as one translation
+# unit (CMake's unity build in GROUP mode; the target's other sources stay one unit each). For
+# sources that instantiate the same heavy templates (CGAL's exact kernel and Boolean operations),
+# each instantiation is then parsed, compiled and optimised once instead of once per file
+# (docs/benchmarks.md, "Build time"). The sources must not define the same name in an anonymous
+# namespace.
+function(sonoshape_unity_group target group)
+  set_target_properties(${target} PROPERTIES UNITY_BUILD ON UNITY_BUILD_MODE GROUP)
+  set_source_files_properties(${ARGN} TARGET_DIRECTORY ${target} PROPERTIES UNITY_GROUP ${group})
 endfunction()
