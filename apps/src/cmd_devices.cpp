@@ -17,7 +17,9 @@ namespace {
 
 // Each kind of frame source that has devices (V4L2 grabbers), from the source registry.
 void print_frame_grabbers(std::ostream& out) {
-  for (const scan::SourceKind& kind : scan_sources().kinds())
+  // A named registry: the loop reads its kinds, which a temporary would not outlive.
+  const scan::SourceRegistry registry = scan_sources();
+  for (const scan::SourceKind& kind : registry.kinds())
     if (kind.list_devices) kind.list_devices(out);
 }
 

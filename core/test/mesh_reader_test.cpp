@@ -9,28 +9,12 @@
 #include <string>
 
 #include "sonoshape/core/mesh_io.hpp"
+#include "sonoshape/testing/cube.hpp"
 
 namespace sonoshape {
 namespace {
 
 namespace fs = std::filesystem;
-
-// Outward axis-aligned box from `lo` to `hi`, 12 triangles.
-TriangleMesh test_cube(const Vec3& lo = Vec3::Constant(-1.0),
-                       const Vec3& hi = Vec3::Constant(1.0)) {
-  TriangleMesh mesh;
-  for (int i = 0; i < 8; ++i)
-    mesh.vertices.emplace_back((i & 1) ? hi.x() : lo.x(), (i & 2) ? hi.y() : lo.y(),
-                               (i & 4) ? hi.z() : lo.z());
-  // Faces as quads, counter-clockwise seen from outside.
-  const int quads[6][4] = {{0, 2, 3, 1}, {4, 5, 7, 6}, {0, 1, 5, 4},
-                           {2, 6, 7, 3}, {0, 4, 6, 2}, {1, 3, 7, 5}};
-  for (const auto& q : quads) {
-    mesh.triangles.push_back({std::uint32_t(q[0]), std::uint32_t(q[1]), std::uint32_t(q[2])});
-    mesh.triangles.push_back({std::uint32_t(q[0]), std::uint32_t(q[2]), std::uint32_t(q[3])});
-  }
-  return mesh;
-}
 
 // The same mesh with every triangle reversed (inward-facing).
 TriangleMesh flipped(TriangleMesh mesh) {
@@ -105,7 +89,7 @@ TEST(MeshReader, AsciiPlyWithExtraProperties) {
 }
 
 std::string binary_cube_ply(bool truncate) {
-  const TriangleMesh cube = test_cube();
+  const TriangleMesh cube = testing::cube();
   std::string out =
       "ply\nformat binary_little_endian 1.0\n"
       "element vertex 8\nproperty double x\nproperty double y\nproperty double z\n"
@@ -135,7 +119,7 @@ TEST(MeshReader, BinaryPlyWithDoublesAndOtherElements) {
   EXPECT_EQ(mesh->vertices.size(), 8u);
   EXPECT_EQ(mesh->triangles.size(), 12u);
   EXPECT_NEAR(signed_volume(*mesh), 8.0, 1e-12);
-  EXPECT_EQ(mesh->vertices, test_cube().vertices);
+  EXPECT_EQ(mesh->vertices, testing::cube().vertices);
 }
 
 TEST(MeshReader, TruncatedBinaryPlyNamesTheElement) {
@@ -268,7 +252,7 @@ TEST(MeshReader, AsciiAndBinaryStlWeldToTheObjMesh) {
   tetra.triangles = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};
   for (const auto& [name, shape] :
        {std::pair<std::string, TriangleMesh>{"tetra", tetra},
-        {"cube", test_cube(Vec3(0.5, -1.25, 2.0), Vec3(3.0, 0.75, 4.5))}}) {
+        {"cube", testing::cube(Vec3(0.5, -1.25, 2.0), Vec3(3.0, 0.75, 4.5))}}) {
     SCOPED_TRACE(name);
     const auto obj = read_mesh(write_temp(name + ".obj", obj_text(shape)));
     ASSERT_TRUE(obj) << obj.message();
@@ -285,7 +269,7 @@ TEST(MeshReader, AsciiAndBinaryStlWeldToTheObjMesh) {
 }
 
 TEST(MeshReader, BinaryStlWhoseHeaderStartsWithSolidIsBinary) {
-  const std::string data = binary_stl(test_cube(), "solid cube exported by a CAD tool");
+  const std::string data = binary_stl(testing::cube(), "solid cube exported by a CAD tool");
   ASSERT_EQ(data.substr(0, 5), "solid");
   const auto mesh = read_mesh(write_temp("solid_binary.stl", data));
   ASSERT_TRUE(mesh) << mesh.message();
@@ -297,7 +281,7 @@ TEST(MeshReader, BinaryStlWhoseHeaderStartsWithSolidIsBinary) {
 TEST(MeshReader, StlErrorsNameFileFacetAndFix) {
   // Truncated binary, with and without a "solid" header: the declared count and the cut facet.
   for (const std::string& header : {std::string("binary"), std::string("solid x")}) {
-    std::string data = binary_stl(test_cube(), header);
+    std::string data = binary_stl(testing::cube(), header);
     data.resize(data.size() - 70);
     const auto cut = read_mesh(write_temp("cut.stl", data));
     ASSERT_FALSE(cut);
@@ -310,7 +294,7 @@ TEST(MeshReader, StlErrorsNameFileFacetAndFix) {
   ASSERT_FALSE(tiny);
   EXPECT_NE(tiny.message().find("84-byte header"), std::string::npos) << tiny.message();
 
-  std::string ascii = ascii_stl(test_cube());
+  std::string ascii = ascii_stl(testing::cube());
   ascii.replace(ascii.find("endloop", ascii.find("endloop") + 1), 7, "endlop");
   const auto keyword = read_mesh(write_temp("keyword.stl", ascii));
   ASSERT_FALSE(keyword);
@@ -318,7 +302,7 @@ TEST(MeshReader, StlErrorsNameFileFacetAndFix) {
   EXPECT_NE(keyword.message().find("'endlop'"), std::string::npos) << keyword.message();
   EXPECT_NE(keyword.message().find("line 14"), std::string::npos) << keyword.message();
 
-  std::string nan_text = ascii_stl(test_cube());
+  std::string nan_text = ascii_stl(testing::cube());
   const std::size_t x_at = nan_text.find("vertex ") + 7;
   nan_text.replace(x_at, nan_text.find(' ', x_at) - x_at, "nan");
   const auto nan_ascii = read_mesh(write_temp("nan.stl", nan_text));
@@ -326,7 +310,7 @@ TEST(MeshReader, StlErrorsNameFileFacetAndFix) {
   EXPECT_NE(nan_ascii.message().find("facet 0"), std::string::npos) << nan_ascii.message();
   EXPECT_NE(nan_ascii.message().find("'nan'"), std::string::npos) << nan_ascii.message();
 
-  TriangleMesh with_nan = test_cube();
+  TriangleMesh with_nan = testing::cube();
   with_nan.vertices.push_back(Vec3(0.0, std::numeric_limits<double>::quiet_NaN(), 0.0));
   with_nan.triangles[5][1] = static_cast<std::uint32_t>(with_nan.vertices.size() - 1);
   const auto nan_binary = read_mesh(write_temp("nan_binary.stl", binary_stl(with_nan, "b")));
@@ -343,13 +327,13 @@ TEST(MeshReader, StlErrorsNameFileFacetAndFix) {
 }
 
 TEST(MeshReader, OrientOutwardFlipsInwardMeshesOnly) {
-  TriangleMesh inward = flipped(test_cube());
+  TriangleMesh inward = flipped(testing::cube());
   EXPECT_LT(signed_volume(inward), 0.0);
   orient_outward(inward);
   EXPECT_NEAR(signed_volume(inward), 8.0, 1e-12);
-  TriangleMesh outward = test_cube();
+  TriangleMesh outward = testing::cube();
   orient_outward(outward);
-  EXPECT_EQ(outward.triangles, test_cube().triangles);
+  EXPECT_EQ(outward.triangles, testing::cube().triangles);
 }
 
 }  // namespace

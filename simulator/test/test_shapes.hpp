@@ -1,10 +1,12 @@
 #pragma once
-// Closed test meshes built in code: a UV sphere (vertices exactly on the sphere) and a cube.
+// Closed test meshes built in code: a UV sphere (vertices exactly on the sphere) and a cube
+// (sonoshape/testing/cube.hpp).
 #include <cmath>
 #include <numbers>
 
 #include "sonoshape/core/mesh.hpp"
 #include "sonoshape/simulator/phantom.hpp"
+#include "sonoshape/testing/cube.hpp"
 
 namespace sonoshape::sim::test {
 
@@ -17,22 +19,7 @@ inline TriangleMesh uv_sphere(double radius, const Vec3& centre = Vec3::Zero(), 
   return mesh;
 }
 
-/// Outward axis-aligned box from `lo` to `hi`, 12 triangles.
-inline TriangleMesh cube(const Vec3& lo = Vec3::Constant(-1.0),
-                         const Vec3& hi = Vec3::Constant(1.0)) {
-  TriangleMesh mesh;
-  for (int i = 0; i < 8; ++i)
-    mesh.vertices.emplace_back((i & 1) ? hi.x() : lo.x(), (i & 2) ? hi.y() : lo.y(),
-                               (i & 4) ? hi.z() : lo.z());
-  // Faces as quads, counter-clockwise seen from outside.
-  const int quads[6][4] = {{0, 2, 3, 1}, {4, 5, 7, 6}, {0, 1, 5, 4},
-                           {2, 6, 7, 3}, {0, 4, 6, 2}, {1, 3, 7, 5}};
-  for (const auto& q : quads) {
-    mesh.triangles.push_back({std::uint32_t(q[0]), std::uint32_t(q[1]), std::uint32_t(q[2])});
-    mesh.triangles.push_back({std::uint32_t(q[0]), std::uint32_t(q[2]), std::uint32_t(q[3])});
-  }
-  return mesh;
-}
+using sonoshape::testing::cube;  // an outward axis-aligned box, 12 triangles
 
 /// The same mesh with every triangle reversed (inward-facing).
 inline TriangleMesh flipped(TriangleMesh mesh) {

@@ -78,8 +78,8 @@ Result<SimScenario> make_sim_scenario(const SimScenarioOptions& options, double 
   scenario.phantom = std::move(*phantom);
   if (const Status status = apply_tissues(options, scenario.phantom); !status) return status;
   scenario.probe = options.probe == "linear"
-                       ? sim::linear_probe_geometry(options.width_px, options.height_px)
-                       : sim::convex_probe_geometry(options.width_px, options.height_px);
+                       ? acq::linear_probe_geometry(options.width_px, options.height_px)
+                       : acq::convex_probe_geometry(options.width_px, options.height_px);
   const Box3 box = scenario.phantom.bounds();
 
   sim::TrajectoryOptions& motion = scenario.motion;
