@@ -42,6 +42,22 @@ std::filesystem::path sidecar_path(const std::filesystem::path& output) {
   return output.parent_path() / (name + ".plus.xml");
 }
 
+// The truth of a simulated sweep in `directory`: the phantom's meshes (label_<id>.ply) and the
+// label frames (labels.mha).
+Status write_truth(const std::filesystem::path& directory, const sim::Phantom& phantom,
+                   const sim::SimulatedSweep& sweep, const acq::SequenceWriteOptions& options) {
+  std::error_code ec;
+  std::filesystem::create_directories(directory, ec);
+  if (ec)
+    return Status::error("cannot create the --truth directory " + directory.string() + ": " +
+                         ec.message());
+  for (const auto& entry : phantom.mesh_set().meshes) {
+    const auto path = directory / ("label_" + std::to_string(entry.label) + ".ply");
+    if (const Status written = write_mesh(entry.mesh, path); !written) return written;
+  }
+  return acq::write_sequence_file(sweep.truth, directory / "labels.mha", options);
+}
+
 int run_simulate(const SimulateOptions& options) {
   Stopwatch clock;
   const SimScenarioOptions& scenario_options = options.scenario;
@@ -87,27 +103,12 @@ int run_simulate(const SimulateOptions& options) {
     std::cerr << "error: " << written.message() << '\n';
     return 1;
   }
-  if (!options.truth_dir.empty()) {
-    std::filesystem::create_directories(options.truth_dir, ec);
-    if (ec) {
-      std::cerr << "error: cannot create the --truth directory " << options.truth_dir.string()
-                << ": " << ec.message() << '\n';
-      return 1;
-    }
-    for (const auto& entry : phantom->mesh_set().meshes) {
-      const auto path = options.truth_dir / ("label_" + std::to_string(entry.label) + ".ply");
-      if (const Status written = write_mesh(entry.mesh, path); !written) {
-        std::cerr << "error: " << written.message() << '\n';
-        return 1;
-      }
-    }
-    if (const Status written =
-            acq::write_sequence_file(sweep.truth, options.truth_dir / "labels.mha", write_options);
+  if (!options.truth_dir.empty())
+    if (const Status written = write_truth(options.truth_dir, *phantom, sweep, write_options);
         !written) {
       std::cerr << "error: " << written.message() << '\n';
       return 1;
     }
-  }
 
   std::size_t invalid = 0;
   for (const Pose& pose : acquisition.tracked_poses)
