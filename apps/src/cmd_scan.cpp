@@ -516,11 +516,6 @@ int resume_scan(const fs::path& directory) {
   return run_scan(options, &state);
 }
 
-int fail(const std::string& message) {
-  std::cerr << "error: " << message << '\n';
-  return 1;
-}
-
 // What to open: the source, tracker, calibration, segmentation, volume and label maps; the
 // checks of the options that go together.
 Result<scan::SourceRequest> source_request(const ScanCommandOptions& options,
@@ -766,36 +761,36 @@ int run_scan(const ScanCommandOptions& options, const Resume* resume) {
   std::shared_ptr<scan::KeyframeJournal> journal;
   if (!resume && !options.out.empty() && !create_journal(options.out, journal)) return 1;
 #ifndef SONOSHAPE_WITH_VIEWER
-  if (options.view) return fail(std::string("--view: ") + kViewerMissing);
+  if (options.view) return print_error(std::string("--view: ") + kViewerMissing);
 #endif
   const auto request = source_request(options, resume);
-  if (!request) return fail(request.message());
+  if (!request) return print_error(request.message());
   const scan::SourceRegistry sources = scan_sources(sim_source_options(options));
   auto source = sources.open(*request);
-  if (!source) return fail(source.message());
+  if (!source) return print_error(source.message());
   // Hardware frame sources (v4l2:) bring no poses: those come from a tracker.
   if (!source->poses)
-    return fail("--source " + options.source +
-                ": the frames need probe poses from a tracker (--tracker)");
+    return print_error("--source " + options.source +
+                       ": the frames need probe poses from a tracker (--tracker)");
   log_info("scan: " + source->description);
   const scan::ScanOptions scan_options = pipeline_options(options, *source);
   const recon::ReconstructorOptions engine = engine_options(options, *source);
   auto segmentation = segmentation_stage(options, *source);
-  if (!segmentation) return fail(segmentation.message());
+  if (!segmentation) return print_error(segmentation.message());
   const bool playback = sources.find(options.source)->playback;  // opened: a known kind
   scan::ScanPipeline pipeline(std::move(*source), std::move(*segmentation),
                               scan::make_reconstructor_stage(engine), scan_options);
   if (resume)
     if (Status restored = restore_journal(options, *resume, playback, pipeline, journal); !restored)
-      return fail(restored.message());
+      return print_error(restored.message());
   pipeline.set_journal(journal);
   if (!options.out.empty())
     pipeline.add_sink(std::make_shared<FileSink>(options.out, options.save_every));
   LiveOutputs live;
   if (Status added = add_stream_sinks(options, pipeline, live); !added)
-    return fail(added.message());
+    return print_error(added.message());
   if (!add_igtl_sink(options.igtl_serve, pipeline, live.igtl)) return 1;
-  if (Status started = pipeline.start(); !started) return fail(started.message());
+  if (Status started = pipeline.start(); !started) return print_error(started.message());
   const scan::ScanSummary summary = run_to_end(pipeline);
   return end_scan(options, summary, live);
 }

@@ -343,36 +343,31 @@ Result<seg::SweepSegmentation> segment(const SegmentOptions& options, const Reco
   return result;
 }
 
-int fail(const Status& status) {
-  std::cerr << "error: " << status.message() << '\n';
-  return 1;
-}
-
 int run_segment(const SegmentOptions& options) {
   Stopwatch clock;
   auto recording = read_recording(options);
-  if (!recording) return fail(recording.status());
+  if (!recording) return print_error(recording.message());
   auto setup = setup_sweep(options, *recording);
-  if (!setup) return fail(setup.status());
+  if (!setup) return print_error(setup.message());
   if (!options.report.empty() && options.truth_labels.empty())
-    return fail(
-        Status::error("--report " + options.report.string() +
-                      " needs --truth-labels DIR/labels.mha (the frames to score against)"));
+    return print_error("--report " + options.report.string() +
+                       " needs --truth-labels DIR/labels.mha (the frames to score against)");
   const auto truth =
       read_label_frames(recording->file, options, options.truth_labels, "--truth-labels");
   const auto perfect =
       read_label_frames(recording->file, options, options.perfect_labels, "--perfect-labels");
   for (const auto* read : {&truth, &perfect})
-    if (!*read) return fail(read->status());
+    if (!*read) return print_error(read->message());
   log_models(*setup, recording->own_labels.has_value());
   const auto result = segment(options, *recording, *setup, *truth, *perfect);
-  if (!result) return fail(result.status());
-  if (const Status checked = check_segmentation(options, *result); !checked) return fail(checked);
+  if (!result) return print_error(result.message());
+  if (const Status checked = check_segmentation(options, *result); !checked)
+    return print_error(checked.message());
   std::error_code ec;
   if (!options.output.parent_path().empty())
     std::filesystem::create_directories(options.output.parent_path(), ec);
   if (const Status written = write_slice_set(result->slices, options.output); !written)
-    return fail(written);
+    return print_error(written.message());
   log_summary(options, *result, clock.seconds());
   warn_missing_labels(options, *setup, *result, recording->own_labels.has_value());
   return options.truth_labels.empty() ? 0 : report_comparison(*result, *setup, options);

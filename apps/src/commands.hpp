@@ -2,6 +2,7 @@
 // Subcommands of the `sonoshape` command. Each registers its options on the CLI11 app and
 // returns the callback that runs it (exit code 0 on success).
 #include <functional>
+#include <iostream>
 #include <string>
 #include <vector>
 
@@ -16,6 +17,12 @@ using CommandRunner = std::function<int()>;
 /// The command line as main() received it (argv[0] included), for a command that records how
 /// it was started (`scan` in its journal).
 const std::vector<std::string>& command_line();
+
+/// Prints "error: MESSAGE" on stderr and returns a command's failure exit code (1).
+inline int print_error(const std::string& message) {
+  std::cerr << "error: " << message << '\n';
+  return 1;
+}
 
 CommandRunner add_reconstruct_command(CLI::App& app);
 CommandRunner add_slice_command(CLI::App& app);
