@@ -88,24 +88,24 @@ int main(int argc, char** argv) {
     thresholds = {{1, 0.5}, {2, 1}, {3, 1.5}, {3, 2}, {4, 2.5}, {5, 3}, {8, 5}};
   set_log_level(LogLevel::kWarning);
 
-  auto phantom = sim::make_default_phantom(std::string(SONOSHAPE_DATA_DIR) + "/models");
+  auto phantom = simulator::make_default_phantom(std::string(SONOSHAPE_DATA_DIR) + "/models");
   if (!phantom) {
     std::cerr << phantom.message() << '\n';
     return 1;
   }
-  const acq::Probe probe(acq::convex_probe_geometry());
+  const acquisition::Probe probe(acquisition::convex_probe_geometry());
   const Box3 box = phantom->bounds();
-  sim::TrajectoryOptions motion;
-  motion.motion = sim::parse_sweep_motion(trajectory);
+  simulator::TrajectoryOptions motion;
+  motion.motion = simulator::parse_sweep_motion(trajectory);
   motion.duration_s = duration_s;
   motion.passes = passes;
   motion.T_reference_probe_centre.translation() = Vec3(
       0.5 * (box.min.x() + box.max.x()), box.min.y() - 10.0, 0.5 * (box.min.z() + box.max.z()));
   motion.sweep_length_mm = box.size().z() + 20.0;
-  motion.sweep_angle_deg = motion.motion == sim::SweepMotion::kFan ? 60.0 : 0.0;
+  motion.sweep_angle_deg = motion.motion == simulator::SweepMotion::kFan ? 60.0 : 0.0;
   const int frame_count = static_cast<int>(duration_s * fps) + 1;
-  const sim::SimulatedAcquisition acquisition =
-      sim::acquire(sim::Trajectory(motion), sim::TrackerOptions{}, frame_count, fps);
+  const simulator::SimulatedAcquisition acquisition = simulator::acquire(
+      simulator::Trajectory(motion), simulator::TrackerOptions{}, frame_count, fps);
 
   const Eigen::Matrix4d T_probe_image = probe.T_probe_image().matrix();
   std::vector<Vec2> sector_px;
@@ -184,10 +184,10 @@ int main(int argc, char** argv) {
       continue;
     }
     const double seconds = clock.seconds();
-    sim::EvaluationOptions evaluation;
+    simulator::EvaluationOptions evaluation;
     evaluation.grid_resolution = 100;
     const auto scores =
-        sim::evaluate(meshes, truth, nullptr, box.padded(0.05 * box.diagonal()), evaluation);
+        simulator::evaluate(meshes, truth, nullptr, box.padded(0.05 * box.diagonal()), evaluation);
     double iou[3] = {0, 0, 0};
     for (const auto& s : scores)
       if (s.label >= 1 && s.label <= 2) iou[s.label] = s.iou;

@@ -1,15 +1,16 @@
 // Per-frame time of the segmentation, split by stage: what `sonoshape segment` and the live scan
-// do to every frame (seg::segment_frame, then seg::make_slice: contours, simplification and the
-// validity check). docs/benchmarks.md, "Segmentation speed"; bench/segmentation_speed.py runs it.
+// do to every frame (segmentation::segment_frame, then segmentation::make_slice: contours,
+// simplification and the validity check). docs/benchmarks.md, "Segmentation speed";
+// bench/segmentation_speed.py runs it.
 //
 //   sonoshape_seg_speed SWEEP.igs.mha [--calibration FILE] [--threads N] [--repeat R]
 //                       [--method threshold|graph-cut] [--json OUT.json] [--dump-labels OUT.raw]
 //
-// --method graph-cut segments through seg::GraphCutLabeller (no prior: the image alone) instead
-// of seg::segment_frame. --threads N sets OpenCV's pool (cv::setNumThreads); without it OpenCV's
-// default is kept. Every frame with a valid pose is segmented R times (after one untimed warm-up
-// frame). --dump-labels writes the label maps of the first pass, frame after frame (raw bytes), to
-// compare two builds.
+// --method graph-cut segments through segmentation::GraphCutLabeller (no prior: the image alone)
+// instead of segmentation::segment_frame. --threads N sets OpenCV's pool (cv::setNumThreads);
+// without it OpenCV's default is kept. Every frame with a valid pose is segmented R times (after
+// one untimed warm-up frame). --dump-labels writes the label maps of the first pass, frame after
+// frame (raw bytes), to compare two builds.
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -96,21 +97,21 @@ double percentile(std::vector<double> values, double q) {
 int main(int argc, char** argv) {
   const Options options = parse(argc, argv);
   if (options.threads > 0) cv::setNumThreads(options.threads);
-  auto file = acq::read_sequence_file(options.sweep);
+  auto file = acquisition::read_sequence_file(options.sweep);
   if (!file) {
     std::cerr << file.message() << "\n";
     return 1;
   }
   std::optional<std::filesystem::path> calibration;
   if (options.calibration) calibration = *options.calibration;
-  auto setup = seg::prepare_sweep(*file, options.sweep, std::nullopt, calibration);
+  auto setup = segmentation::prepare_sweep(*file, options.sweep, std::nullopt, calibration);
   if (!setup) {
     std::cerr << setup.message() << "\n";
     return 1;
   }
   std::vector<std::pair<std::size_t, Eigen::Matrix4d>> frames;
   for (std::size_t k = 0; k < file->frame_count(); ++k)
-    if (const auto pose = seg::reference_from_probe(*file, k, *setup))
+    if (const auto pose = segmentation::reference_from_probe(*file, k, *setup))
       frames.emplace_back(k, *pose);
   if (frames.empty()) {
     std::cerr << options.sweep << ": no frame with a valid pose\n";
@@ -124,23 +125,24 @@ int main(int argc, char** argv) {
   std::ofstream dump;
   if (options.dump_labels) dump.open(*options.dump_labels, std::ios::binary);
 
-  std::optional<seg::GraphCutLabeller> labeller;
+  std::optional<segmentation::GraphCutLabeller> labeller;
   if (options.graph_cut) labeller.emplace(setup->config, setup->geometry, setup->config.graph_cut);
   auto one_frame = [&](std::size_t k, const Eigen::Matrix4d& pose) {
-    const seg::Segmentation s =
+    const segmentation::Segmentation s =
         labeller ? labeller->segment(file->image(k))
-                 : seg::segment_frame(file->image(k), setup->geometry, setup->config);
-    const seg::ImagePlane plane =
-        seg::image_plane(pose * setup->T_probe_image, pose.block<3, 1>(0, 3));
+                 : segmentation::segment_frame(file->image(k), setup->geometry, setup->config);
+    const segmentation::ImagePlane plane =
+        segmentation::image_plane(pose * setup->T_probe_image, pose.block<3, 1>(0, 3));
     std::vector<Repair> repairs;
-    const auto slice = seg::make_slice(s.labels, setup->geometry.sector, setup->geometry.sector_px,
-                                       plane, setup->config.simplify_mm, &repairs);
+    const auto slice =
+        segmentation::make_slice(s.labels, setup->geometry.sector, setup->geometry.sector_px, plane,
+                                 setup->config.simplify_mm, &repairs);
     return std::make_pair(s.labels, slice ? slice->regions.size() : std::size_t{0});
   };
   one_frame(frames.front().first, frames.front().second);  // warm-up: pools, first allocations
 
-  seg::detail::StageTimes stages;
-  seg::detail::stage_times_sink = &stages;
+  segmentation::detail::StageTimes stages;
+  segmentation::detail::stage_times_sink = &stages;
   double contours_ms = 0.0;
   std::vector<double> frame_ms;
   const std::clock_t cpu_start = std::clock();
@@ -161,7 +163,7 @@ int main(int argc, char** argv) {
                      static_cast<std::streamsize>(labels.pixels.size()));
       }
     }
-  seg::detail::stage_times_sink = nullptr;
+  segmentation::detail::stage_times_sink = nullptr;
   // Processor time of all threads (OpenCV's pool included): on a machine shared with other
   // work, the wall time includes waiting for a core, this does not.
   const double cpu_ms = 1000.0 * static_cast<double>(std::clock() - cpu_start) / CLOCKS_PER_SEC;

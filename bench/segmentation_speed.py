@@ -19,7 +19,7 @@ sonoshape_seg_speed built from an earlier commit, for a before/after under the s
 and prints Markdown tables: the stages' mean wall time per frame (filter: median and masked
 Gaussian; confidence: dark fraction, shadows, margin; classify: depth trend, nearest mean, bone
 sections, the graph cut; cleaning: blooming correction, opening, small components, diagonal
-repair, output maps; contours: seg::make_slice, i.e. tracing, simplification and the validity
+repair, output maps; contours: segmentation::make_slice, i.e. tracing, simplification and the validity
 check), the whole frame's mean, 90th percentile, best of the repeats (each frame's fastest pass,
 averaged) and processor time (all threads; on a shared machine the wall time includes waiting for
 a core), and the scans' drops by reason. `--write-doc` puts them into docs/benchmarks.md between

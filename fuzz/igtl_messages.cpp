@@ -17,7 +17,7 @@
 
 namespace {
 
-using sonoshape::acq::IgtlMessage;
+using sonoshape::acquisition::IgtlMessage;
 
 constexpr std::array<const char*, 3> kTypes = {"IMAGE", "TRANSFORM", "TDATA"};
 
@@ -56,9 +56,9 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     message.bytes.assign(data + 1, data + size);  // the header as the input has it
   else
     message.bytes = made_message(type, data + 1, size - 1);
-  sonoshape::acq::IgtlDrop why{};
+  sonoshape::acquisition::IgtlDrop why{};
   if (message.type == "IMAGE") {
-    auto image = sonoshape::acq::decode_igtl_image(message, &why);
+    auto image = sonoshape::acquisition::decode_igtl_image(message, &why);
     // A decoded image holds exactly the pixels it declares.
     if (image && image->image.pixels.size() !=
                      static_cast<std::size_t>(image->image.width) * image->image.height)
@@ -67,10 +67,10 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
                                          std::to_string(image->image.height)
                                    : image.message());
   } else if (message.type == "TRANSFORM") {
-    auto matrix = sonoshape::acq::decode_igtl_transform(message);
+    auto matrix = sonoshape::acquisition::decode_igtl_transform(message);
     sonoshape::fuzz::explain(matrix ? "TRANSFORM" : matrix.message());
   } else {
-    auto matrix = sonoshape::acq::decode_igtl_tracking_data(message, "Probe");
+    auto matrix = sonoshape::acquisition::decode_igtl_tracking_data(message, "Probe");
     sonoshape::fuzz::explain(!matrix   ? matrix.message()
                              : *matrix ? "TDATA with Probe"
                                        : "TDATA without Probe");

@@ -13,7 +13,7 @@ namespace sonoshape::fuzz {
 inline void read_sequence(std::string_view bytes, std::string_view extension) {
   quiet_logs();
   const auto path = write_scratch_file(bytes, extension);
-  auto file = acq::read_sequence_file(path);
+  auto file = acquisition::read_sequence_file(path);
   if (!file) return;
   for (std::size_t k = 0; k < file->frame_count(); ++k) {
     (void)file->timestamp_s(k);
@@ -23,16 +23,16 @@ inline void read_sequence(std::string_view bytes, std::string_view extension) {
       (void)file->transform_status(name, k);
     }
   }
-  (void)acq::require_tracking(*file, path);
-  (void)acq::check_tracked_sweep(*file, path);
+  (void)acquisition::require_tracking(*file, path);
+  (void)acquisition::check_tracked_sweep(*file, path);
   // What `segment` and `replay:` do next: the pose chain, the crop, the orientation, the timing.
-  if (const auto chain = acq::find_pose_chain(*file, path); chain) {
+  if (const auto chain = acquisition::find_pose_chain(*file, path); chain) {
     for (std::size_t k = 0; k < file->frame_count(); ++k) (void)chain->pose(*file, k);
-    (void)acq::check_tracked_sweep(*file, path, chain->per_frame_names());
+    (void)acquisition::check_tracked_sweep(*file, path, chain->per_frame_names());
   }
-  (void)acq::image_to_cropped_image(*file, path);
-  (void)acq::reorient_to_mf(*file, path);
-  (void)acq::fill_missing_timestamps(*file);
+  (void)acquisition::image_to_cropped_image(*file, path);
+  (void)acquisition::reorient_to_mf(*file, path);
+  (void)acquisition::fill_missing_timestamps(*file);
 }
 
 }  // namespace sonoshape::fuzz

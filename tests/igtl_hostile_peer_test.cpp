@@ -105,9 +105,9 @@ Bytes transform_message() {
   return packed(transform);
 }
 
-acq::IgtlMessage message_of(const Bytes& bytes, const std::string& type,
-                            const std::string& device) {
-  acq::IgtlMessage message;
+acquisition::IgtlMessage message_of(const Bytes& bytes, const std::string& type,
+                                    const std::string& device) {
+  acquisition::IgtlMessage message;
   message.type = type;
   message.device = device;
   message.bytes = bytes;
@@ -159,7 +159,7 @@ class FakeServer {
     done_ = true;
     thread_.join();
   }
-  acq::IgtlEndpoint endpoint() const { return {"127.0.0.1", listener_.port()}; }
+  acquisition::IgtlEndpoint endpoint() const { return {"127.0.0.1", listener_.port()}; }
 
  private:
   Listener listener_;
@@ -191,10 +191,10 @@ TEST(IgtlHostileServer, LyingImageSizesAreDroppedAsDamagedAndNamedOnceNeverRead)
       image_message(8, 8, igtl::ImageMessage::TYPE_INT16),  // well formed, unsupported
       good,
   });
-  acq::IgtlFrameSource source(server.endpoint(), "");
+  acquisition::IgtlFrameSource source(server.endpoint(), "");
   ::testing::internal::CaptureStderr();
   ASSERT_TRUE(source.start());
-  const std::vector<Frame> frames = take<acq::IgtlFrameSource, Frame>(source, 1, 10.0);
+  const std::vector<Frame> frames = take<acquisition::IgtlFrameSource, Frame>(source, 1, 10.0);
   // The good frame comes after every bad one on the same connection: all were judged by then.
   source.stop();
   const std::string said = ::testing::internal::GetCapturedStderr();
@@ -244,10 +244,10 @@ TEST(IgtlHostileServer, EveryUnreadImageKindIsRefusedNamingWhatItIs) {
       {image_message(0, 0), "0x0x1; a 2D frame (depth 1) is expected"},
   };
   for (const auto& [bytes, named] : kinds) {
-    acq::IgtlDrop why = acq::IgtlDrop::kDamaged;
-    const auto image = acq::decode_igtl_image(message_of(bytes, "IMAGE", "Image"), &why);
+    acquisition::IgtlDrop why = acquisition::IgtlDrop::kDamaged;
+    const auto image = acquisition::decode_igtl_image(message_of(bytes, "IMAGE", "Image"), &why);
     ASSERT_FALSE(image) << named;
-    EXPECT_EQ(why, acq::IgtlDrop::kUnsupported) << image.message();
+    EXPECT_EQ(why, acquisition::IgtlDrop::kUnsupported) << image.message();
     EXPECT_NE(image.message().find("OpenIGTLink IMAGE 'Image': " + named), std::string::npos)
         << image.message();
   }
@@ -259,10 +259,10 @@ TEST(IgtlHostileServer, EveryUnreadImageKindIsRefusedNamingWhatItIs) {
   sent.push_back(bad_crc);
   sent.push_back(image_message(8, 8));
   FakeServer server(sent);
-  acq::IgtlFrameSource source(server.endpoint(), "");
+  acquisition::IgtlFrameSource source(server.endpoint(), "");
   ::testing::internal::CaptureStderr();
   ASSERT_TRUE(source.start());
-  const std::vector<Frame> frames = take<acq::IgtlFrameSource, Frame>(source, 1, 10.0);
+  const std::vector<Frame> frames = take<acquisition::IgtlFrameSource, Frame>(source, 1, 10.0);
   source.stop();
   const std::string said = ::testing::internal::GetCapturedStderr();
   ASSERT_EQ(frames.size(), 1u) << source.message() << said;
@@ -274,30 +274,31 @@ TEST(IgtlHostileServer, EveryUnreadImageKindIsRefusedNamingWhatItIs) {
 
 TEST(IgtlHostileServer, ADecodedImageNeverHoldsBytesFromBeyondItsMessage) {
   // 64x64 declared over 28 pixel bytes: copying 4096 would read the heap past the message.
-  const auto image = acq::decode_igtl_image(message_of(lying_image(64, 64, 100), "IMAGE", "Image"));
+  const auto image =
+      acquisition::decode_igtl_image(message_of(lying_image(64, 64, 100), "IMAGE", "Image"));
   ASSERT_FALSE(image);
   EXPECT_NE(image.message().find("declares 64x64x1 pixels (4096 bytes), the body holds 28"),
             std::string::npos)
       << image.message();
-  acq::IgtlDrop why = acq::IgtlDrop::kUnsupported;
-  EXPECT_FALSE(
-      acq::decode_igtl_image(message_of(lying_image(4000, 4000, 100), "IMAGE", "Image"), &why));
-  EXPECT_EQ(why, acq::IgtlDrop::kDamaged);
+  acquisition::IgtlDrop why = acquisition::IgtlDrop::kUnsupported;
+  EXPECT_FALSE(acquisition::decode_igtl_image(
+      message_of(lying_image(4000, 4000, 100), "IMAGE", "Image"), &why));
+  EXPECT_EQ(why, acquisition::IgtlDrop::kDamaged);
   // A header whose body size disagrees with the bytes (a caller's slip, or a fuzzer's input).
   Bytes cut = image_message(8, 8);
   cut.resize(cut.size() - 1);
-  EXPECT_FALSE(acq::decode_igtl_image(message_of(cut, "IMAGE", "Image")));
+  EXPECT_FALSE(acquisition::decode_igtl_image(message_of(cut, "IMAGE", "Image")));
 }
 
 TEST(IgtlHostileServer, TransformAndTrackingDataBodiesOfTheWrongSizeAreRefusedNamingTheField) {
   const Bytes transform = transform_message();
-  const auto short_transform =
-      acq::decode_igtl_transform(message_of(with_body(transform, {1, 2, 3, 4}), "TRANSFORM", "P"));
+  const auto short_transform = acquisition::decode_igtl_transform(
+      message_of(with_body(transform, {1, 2, 3, 4}), "TRANSFORM", "P"));
   ASSERT_FALSE(short_transform);
   EXPECT_NE(short_transform.message().find("TRANSFORM 'P': a body of 4 bytes; a TRANSFORM has 48"),
             std::string::npos)
       << short_transform.message();
-  ASSERT_TRUE(acq::decode_igtl_transform(message_of(transform, "TRANSFORM", "P")));
+  ASSERT_TRUE(acquisition::decode_igtl_transform(message_of(transform, "TRANSFORM", "P")));
 
   igtl::TrackingDataMessage::Pointer tdata = igtl::TrackingDataMessage::New();
   tdata->SetDeviceName("Tracker");
@@ -307,14 +308,14 @@ TEST(IgtlHostileServer, TransformAndTrackingDataBodiesOfTheWrongSizeAreRefusedNa
   const Bytes good_tdata = packed(tdata);
   Bytes body = body_of(good_tdata);
   body.push_back(0);  // 71 bytes: not a whole element
-  const auto odd = acq::decode_igtl_tracking_data(
+  const auto odd = acquisition::decode_igtl_tracking_data(
       message_of(with_body(good_tdata, body), "TDATA", "Tracker"), "Probe");
   ASSERT_FALSE(odd);
   EXPECT_NE(odd.message().find("a body of 71 bytes is not a whole number of 70-byte elements"),
             std::string::npos)
       << odd.message();
   const auto fine =
-      acq::decode_igtl_tracking_data(message_of(good_tdata, "TDATA", "Tracker"), "Probe");
+      acquisition::decode_igtl_tracking_data(message_of(good_tdata, "TDATA", "Tracker"), "Probe");
   ASSERT_TRUE(fine);
   EXPECT_TRUE(fine->has_value());
 }
@@ -342,17 +343,17 @@ TEST(IgtlHostileServer, TrackingDataElementsReadAsTheLibraryPacksThemAndFullLeng
     element->SetMatrix(*matrix);
     tdata->AddTrackingDataElement(element);
   }
-  const acq::IgtlMessage message = message_of(packed(tdata), "TDATA", "Tracker");
-  const auto probe = acq::decode_igtl_tracking_data(message, twenty);
+  const acquisition::IgtlMessage message = message_of(packed(tdata), "TDATA", "Tracker");
+  const auto probe = acquisition::decode_igtl_tracking_data(message, twenty);
   ASSERT_TRUE(probe) << probe.message();
   ASSERT_TRUE(probe->has_value());
   for (int r = 0; r < 4; ++r)
     for (int c = 0; c < 4; ++c) EXPECT_EQ((**probe)(r, c), probe_matrix[r][c]) << r << ", " << c;
-  const auto stylus = acq::decode_igtl_tracking_data(message, "Stylus");
+  const auto stylus = acquisition::decode_igtl_tracking_data(message, "Stylus");
   ASSERT_TRUE(stylus && stylus->has_value());
   EXPECT_EQ((**stylus)(2, 3), 3.0);
   // A prefix of the long name is another name.
-  const auto prefix = acq::decode_igtl_tracking_data(message, twenty.substr(0, 19));
+  const auto prefix = acquisition::decode_igtl_tracking_data(message, twenty.substr(0, 19));
   ASSERT_TRUE(prefix);
   EXPECT_FALSE(prefix->has_value());
 }
@@ -378,7 +379,7 @@ TEST(IgtlHostileServer, ABodySizeOf2To63IsReadWholeAndRefusedNotTakenAsZero) {
   huge.resize(IGTL_HEADER_SIZE);
   put_u64(huge, kBodySizeOffset, 1ull << 63);
   FakeServer server({huge});
-  auto connection = acq::IgtlConnection::connect(server.endpoint());
+  auto connection = acquisition::IgtlConnection::connect(server.endpoint());
   ASSERT_TRUE(connection) << connection.message();
   auto message = connection->next(5.0);
   ASSERT_FALSE(message) << "a 2^63-byte body taken as a message";

@@ -33,29 +33,30 @@ constexpr int kPx = 160;
 constexpr int kLiver = 3, kKidney = 7;
 
 // A 12 mm sphere seen by a 160 px linear probe sliding 8 mm: frames, poses, truth.
-sim::SimulatedSweep simulated_sweep() {
-  sim::Phantom phantom;
+simulator::SimulatedSweep simulated_sweep() {
+  simulator::Phantom phantom;
   Eigen::Affine3d place = Eigen::Affine3d::Identity();
   place.translation() = Vec3(-5, 25, 0);
-  phantom.add(1, "organ", sim::make_sphere(12.0), place);
-  const acq::Probe probe(acq::linear_probe_geometry(kPx, kPx));
-  const sim::BModeSimulator simulator(phantom, probe);
-  sim::TrajectoryOptions motion;
+  phantom.add(1, "organ", simulator::make_sphere(12.0), place);
+  const acquisition::Probe probe(acquisition::linear_probe_geometry(kPx, kPx));
+  const simulator::BModeSimulator simulator(phantom, probe);
+  simulator::TrajectoryOptions motion;
   motion.duration_s = 0.45;
   motion.sweep_length_mm = 8.0;
-  sim::TrackerOptions tracker;
+  simulator::TrackerOptions tracker;
   tracker.position_noise_mm = 0.0;
   tracker.angle_noise_deg = 0.0;
   tracker.drop_probability = 0.0;
   tracker.invalid_probability = 0.0;
-  const auto acquisition = sim::acquire(sim::Trajectory(motion), tracker, kFrames, 20.0);
-  return sim::simulate_sweep(simulator, acquisition, 3);
+  const auto acquisition =
+      simulator::acquire(simulator::Trajectory(motion), tracker, kFrames, 20.0);
+  return simulator::simulate_sweep(simulator, acquisition, 3);
 }
 
 // The sweep written as a PLUS recording, and the fixture's label maps of its frames.
 struct Fixture {
   TempDir dir;
-  sim::SimulatedSweep sweep = simulated_sweep();
+  simulator::SimulatedSweep sweep = simulated_sweep();
   std::filesystem::path recording = dir.path() / "sweep.igs.mha";
   std::filesystem::path config = dir.path() / "exact.json";
   std::vector<double> times_s;
@@ -63,7 +64,7 @@ struct Fixture {
   double pixel_mm = 0.0;
 
   Fixture() {
-    EXPECT_TRUE(acq::write_sequence_file(sweep.bmode, recording));
+    EXPECT_TRUE(acquisition::write_sequence_file(sweep.bmode, recording));
     // The exact outlines (no simplification) so that areas can be checked to a pixel's edge.
     std::ofstream(config)
         << R"({"format": "sonoshape-segmentation", "version": 1, "simplify_mm": 0})";
@@ -173,7 +174,7 @@ TEST(LabelsCommand, ScanReplayWithTheLabelSequenceGivesTheSameRectangles) {
 TEST(LabelsCommand, TheTruthAsASlicerSequenceGivesTheSlicesOfPerfectLabels) {
   Fixture f;
   const auto truth = f.dir.path() / "labels.mha";
-  ASSERT_TRUE(acq::write_sequence_file(f.sweep.truth, truth));
+  ASSERT_TRUE(acquisition::write_sequence_file(f.sweep.truth, truth));
   std::vector<LabelImage> maps;
   for (std::size_t k = 0; k < f.sweep.truth.frame_count(); ++k)
     maps.push_back(f.sweep.truth.image(k));

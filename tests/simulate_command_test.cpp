@@ -47,7 +47,7 @@ TEST_F(SimulateCommand, DefaultPhantomWritesSweepCalibrationAndTruth) {
       run(common + "-o " + (dir_ / "a.igs.mha").string() + " --truth " + (dir_ / "truth").string(),
           dir_ / "log1");
   ASSERT_EQ(first.exit_code, 0) << first.output;
-  const auto sweep = sonoshape::acq::read_sequence_file(dir_ / "a.igs.mha");
+  const auto sweep = sonoshape::acquisition::read_sequence_file(dir_ / "a.igs.mha");
   ASSERT_TRUE(sweep) << sweep.message();
   EXPECT_EQ(sweep->frame_count(), 12u);
   EXPECT_EQ(sweep->width(), 160);
@@ -55,12 +55,13 @@ TEST_F(SimulateCommand, DefaultPhantomWritesSweepCalibrationAndTruth) {
   EXPECT_EQ(sweep->field("SonoshapeLabels"), "1:spot 2:cheburashka 3:rib");
   ASSERT_TRUE(sweep->transform("ProbeToTracker", 11));
   // The sidecar PLUS configuration holds the same calibration as the header.
-  const auto image_to_probe = sonoshape::acq::read_image_to_probe(dir_ / "a.plus.xml");
+  const auto image_to_probe = sonoshape::acquisition::read_image_to_probe(dir_ / "a.plus.xml");
   ASSERT_TRUE(image_to_probe) << image_to_probe.message();
-  EXPECT_EQ(*image_to_probe, *sonoshape::acq::parse_matrix(*sweep->field("ImageToProbeTransform")));
+  EXPECT_EQ(*image_to_probe,
+            *sonoshape::acquisition::parse_matrix(*sweep->field("ImageToProbeTransform")));
   for (const char* name : {"label_1.ply", "label_2.ply", "label_3.ply"})
     EXPECT_TRUE(fs::exists(dir_ / "truth" / name)) << name;
-  const auto labels = sonoshape::acq::read_sequence_file(dir_ / "truth" / "labels.mha");
+  const auto labels = sonoshape::acquisition::read_sequence_file(dir_ / "truth" / "labels.mha");
   ASSERT_TRUE(labels) << labels.message();
   EXPECT_EQ(labels->frame_count(), 12u);
 
@@ -78,7 +79,7 @@ TEST_F(SimulateCommand, UserPhantomAndBadArguments) {
                           (dir_ / "s.seq.mha").string(),
                       dir_ / "log");
   ASSERT_EQ(ok.exit_code, 0) << ok.output;
-  const auto sweep = sonoshape::acq::read_sequence_file(dir_ / "s.seq.mha");
+  const auto sweep = sonoshape::acquisition::read_sequence_file(dir_ / "s.seq.mha");
   ASSERT_TRUE(sweep) << sweep.message();
   EXPECT_EQ(sweep->field("CompressedData"), "False");
   EXPECT_EQ(sweep->field("SonoshapeProbeType"), "linear");

@@ -2,7 +2,7 @@
 
 #include <utility>
 
-namespace sonoshape::acq {
+namespace sonoshape::acquisition {
 
 ReplayFrames::ReplayFrames(std::shared_ptr<const SequenceFile> file, std::string name,
                            std::size_t first_frame)
@@ -37,4 +37,4 @@ double first_timestamp_s(const SequenceFile& file) {
   return 0.0;
 }
 
-}  // namespace sonoshape::acq
+}  // namespace sonoshape::acquisition

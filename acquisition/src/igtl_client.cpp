@@ -28,7 +28,7 @@
 #include "igtl_util.h"
 #include "sonoshape/core/log.hpp"
 
-namespace sonoshape::acq {
+namespace sonoshape::acquisition {
 namespace {
 
 // IMAGE bodies of a 2D ultrasound frame are well below this; anything larger is a broken stream.
@@ -479,4 +479,4 @@ Result<Eigen::Matrix4d> decode_igtl_transform(const IgtlMessage& message) {
   return T;
 }
 
-}  // namespace sonoshape::acq
+}  // namespace sonoshape::acquisition

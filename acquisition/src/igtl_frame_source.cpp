@@ -2,7 +2,7 @@
 
 #include <utility>
 
-namespace sonoshape::acq {
+namespace sonoshape::acquisition {
 
 IgtlFrames::IgtlFrames(IgtlEndpoint endpoint, std::string image_device)
     : link_(std::move(endpoint)),
@@ -37,4 +37,4 @@ Result<Polled> IgtlFrames::poll(Frame& frame) {
   return Polled::kItem;
 }
 
-}  // namespace sonoshape::acq
+}  // namespace sonoshape::acquisition

@@ -8,7 +8,7 @@
 
 #include "sonoshape/acquisition/pose_chain.hpp"
 
-namespace sonoshape::acq {
+namespace sonoshape::acquisition {
 namespace {
 
 std::optional<int> to_int(const std::string& text) {
@@ -203,4 +203,4 @@ Result<LabelSequence> read_label_sequence(const std::filesystem::path& path,
   return out;
 }
 
-}  // namespace sonoshape::acq
+}  // namespace sonoshape::acquisition

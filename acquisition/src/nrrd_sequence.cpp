@@ -14,7 +14,7 @@
 
 #include "sequence_text.hpp"
 
-namespace sonoshape::acq::detail {
+namespace sonoshape::acquisition::detail {
 namespace {
 
 // NRRD fields that describe how the samples are stored; they are consumed, not kept as fields
@@ -779,4 +779,4 @@ Result<SequenceFile> read_nrrd_sequence(const std::filesystem::path& path,
   return file;
 }
 
-}  // namespace sonoshape::acq::detail
+}  // namespace sonoshape::acquisition::detail

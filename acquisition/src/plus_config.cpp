@@ -8,7 +8,7 @@
 #include "sonoshape/acquisition/sequence_file.hpp"
 #include "sonoshape/core/input_file.hpp"
 
-namespace sonoshape::acq {
+namespace sonoshape::acquisition {
 
 namespace {
 
@@ -141,4 +141,4 @@ Status write_plus_config(const PlusConfig& config, const std::filesystem::path& 
   return Status::ok();
 }
 
-}  // namespace sonoshape::acq
+}  // namespace sonoshape::acquisition

@@ -11,7 +11,7 @@
 
 #include "sequence_text.hpp"
 
-namespace sonoshape::acq {
+namespace sonoshape::acquisition {
 namespace {
 
 using detail::fail;
@@ -323,4 +323,4 @@ std::optional<double> fill_missing_timestamps(SequenceFile& file) {
   return rate_hz;
 }
 
-}  // namespace sonoshape::acq
+}  // namespace sonoshape::acquisition

@@ -10,7 +10,7 @@
 
 #include "sonoshape/core/errors.hpp"
 
-namespace sonoshape::acq {
+namespace sonoshape::acquisition {
 
 ProbeType parse_probe_type(const std::string& name) {
   if (name == "linear") return ProbeType::kLinear;
@@ -214,4 +214,4 @@ Result<Probe> probe_from_fields(const FieldList& fields) {
   }
 }
 
-}  // namespace sonoshape::acq
+}  // namespace sonoshape::acquisition

@@ -17,7 +17,7 @@
 #include "sequence_text.hpp"
 #include "sonoshape/core/input_file.hpp"
 
-namespace sonoshape::acq {
+namespace sonoshape::acquisition {
 namespace {
 
 using detail::fail;
@@ -628,7 +628,7 @@ Status check_tracked_sweep(const SequenceFile& file, const std::filesystem::path
     if (code.substr(0, 2) != "MF")
       return fail(path, "UltrasoundImageOrientation = " + code + " is not supported",
                   "the frames must be flipped to MF first (sonoshape segment and scan do "
-                  "this on reading: acq::reorient_to_mf)");
+                  "this on reading: acquisition::reorient_to_mf)");
   }
   for (std::size_t k = 0; k < file.frame_count(); ++k) {
     const std::string frame = "frame " + std::to_string(k);
@@ -657,4 +657,4 @@ Status check_tracked_sweep(const SequenceFile& file, const std::filesystem::path
   return Status::ok();
 }
 
-}  // namespace sonoshape::acq
+}  // namespace sonoshape::acquisition

@@ -14,7 +14,7 @@
 #include "sonoshape/acquisition/sequence_file.hpp"
 #include "sonoshape/core/status.hpp"
 
-namespace sonoshape::acq::detail {
+namespace sonoshape::acquisition::detail {
 
 inline std::string_view trim(std::string_view s) {
   const auto first = s.find_first_not_of(" \t\r\n");
@@ -92,4 +92,4 @@ Result<std::string> read_element_data_file(const std::filesystem::path& header,
 /// "NRRD000". See sequence_file.hpp for what it reads.
 Result<SequenceFile> read_nrrd_sequence(const std::filesystem::path& path, const std::string& data);
 
-}  // namespace sonoshape::acq::detail
+}  // namespace sonoshape::acquisition::detail

@@ -7,7 +7,7 @@
 #include <thread>
 #include <utility>
 
-namespace sonoshape::acq {
+namespace sonoshape::acquisition {
 
 Status StreamThread::start(const SourceOptions& options) {
   if (state_.load() != SourceState::kIdle || thread_.joinable())
@@ -138,4 +138,4 @@ void StreamThread::close_backend(SourceState& end_state, std::string& end_messag
   }
 }
 
-}  // namespace sonoshape::acq
+}  // namespace sonoshape::acquisition

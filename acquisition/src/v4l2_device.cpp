@@ -6,7 +6,7 @@
 #include <sys/mman.h>
 #include <unistd.h>
 
-namespace sonoshape::acq {
+namespace sonoshape::acquisition {
 namespace {
 
 class SystemV4l2Device final : public V4l2Device {
@@ -29,4 +29,4 @@ class SystemV4l2Device final : public V4l2Device {
 
 std::shared_ptr<V4l2Device> system_v4l2_device() { return std::make_shared<SystemV4l2Device>(); }
 
-}  // namespace sonoshape::acq
+}  // namespace sonoshape::acquisition

@@ -12,7 +12,7 @@
 
 #include "sonoshape/acquisition/v4l2_source.hpp"
 
-namespace sonoshape::acq {
+namespace sonoshape::acquisition {
 namespace {
 
 std::string text_of(const std::uint8_t* bytes, std::size_t capacity) {
@@ -184,4 +184,4 @@ std::string v4l2_devices_report(const std::vector<V4l2DeviceInfo>& devices,
   return out.str();
 }
 
-}  // namespace sonoshape::acq
+}  // namespace sonoshape::acquisition

@@ -21,7 +21,7 @@
 
 #include "sonoshape/core/log.hpp"
 
-namespace sonoshape::acq {
+namespace sonoshape::acquisition {
 namespace {
 
 constexpr int kMinBuffers = 4;
@@ -666,4 +666,4 @@ Result<Polled> V4l2Frames::try_reopen() {
   return Polled::kNothing;
 }
 
-}  // namespace sonoshape::acq
+}  // namespace sonoshape::acquisition

@@ -8,7 +8,7 @@
 #include <fstream>
 #include <string>
 
-namespace sonoshape::acq {
+namespace sonoshape::acquisition {
 namespace {
 
 const std::filesystem::path kRealConfig =
@@ -106,4 +106,4 @@ TEST(PlusConfig, ConflictingDefinitionsOfATransformAreRefused) {
 }
 
 }  // namespace
-}  // namespace sonoshape::acq
+}  // namespace sonoshape::acquisition

@@ -15,7 +15,7 @@
 #include "sonoshape/acquisition/plus_config.hpp"
 #include "sonoshape/acquisition/sequence_file.hpp"
 
-namespace sonoshape::acq {
+namespace sonoshape::acquisition {
 namespace {
 
 namespace fs = std::filesystem;
@@ -279,4 +279,4 @@ TEST(Timestamps, FileWithoutThemGetsOneFrameRate) {
 }
 
 }  // namespace
-}  // namespace sonoshape::acq
+}  // namespace sonoshape::acquisition

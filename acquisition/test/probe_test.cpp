@@ -6,7 +6,7 @@
 
 #include "sonoshape/core/errors.hpp"
 
-namespace sonoshape::acq {
+namespace sonoshape::acquisition {
 namespace {
 
 TEST(Probe, LinearPixelsMapToMillimetresLikeImageToProbe) {
@@ -69,4 +69,4 @@ TEST(Probe, GeometryRoundTripsThroughHeaderFields) {
 }
 
 }  // namespace
-}  // namespace sonoshape::acq
+}  // namespace sonoshape::acquisition

@@ -9,7 +9,7 @@
 #include <random>
 #include <string>
 
-namespace sonoshape::acq {
+namespace sonoshape::acquisition {
 namespace {
 
 const std::filesystem::path kRealFile =
@@ -249,4 +249,4 @@ TEST(CheckTrackedSweep, OrientationTimestampsAndRigidPoses) {
 }
 
 }  // namespace
-}  // namespace sonoshape::acq
+}  // namespace sonoshape::acquisition

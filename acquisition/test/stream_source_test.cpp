@@ -12,7 +12,7 @@
 
 #include "sonoshape/acquisition/frame_source.hpp"
 
-namespace sonoshape::acq {
+namespace sonoshape::acquisition {
 namespace {
 
 const std::filesystem::path kPlusSweep =
@@ -235,4 +235,4 @@ TEST(ReplayFrameSource, ReplaysTheRealPlusSweep) {
 }
 
 }  // namespace
-}  // namespace sonoshape::acq
+}  // namespace sonoshape::acquisition

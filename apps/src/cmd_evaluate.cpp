@@ -98,7 +98,7 @@ std::string number(double value, int precision) {
   return text;
 }
 
-void print_table(const std::vector<sim::LabelScore>& scores,
+void print_table(const std::vector<simulator::LabelScore>& scores,
                  const std::map<int, std::string>& names, const Box3& box, int grid) {
   std::printf("evaluation box [%g %g %g] - [%g %g %g], diagonal %g, grid %d^3\n", box.min.x(),
               box.min.y(), box.min.z(), box.max.x(), box.max.y(), box.max.z(), box.diagonal(),
@@ -135,7 +135,7 @@ void print_table(const std::vector<sim::LabelScore>& scores,
   }
 }
 
-nlohmann::json to_json(const std::vector<sim::LabelScore>& scores,
+nlohmann::json to_json(const std::vector<simulator::LabelScore>& scores,
                        const std::map<int, std::string>& names, const Box3& box, int grid) {
   // NaN (a score that could not be computed) becomes null.
   auto value = [](double x) { return std::isnan(x) ? nlohmann::json(nullptr) : nlohmann::json(x); };
@@ -214,12 +214,12 @@ int run_evaluate(const EvaluateOptions& options) {
     box = box.padded(kBoxPadding * box.diagonal());
   }
 
-  sim::EvaluationOptions evaluation;
+  simulator::EvaluationOptions evaluation;
   evaluation.grid_resolution = options.grid;
   evaluation.surface_samples = options.samples;
   const Stopwatch clock;
   const auto scores =
-      sim::evaluate(*reconstruction, truth, slices ? &*slices : nullptr, box, evaluation);
+      simulator::evaluate(*reconstruction, truth, slices ? &*slices : nullptr, box, evaluation);
   log_debug("evaluate: " + std::to_string(clock.seconds()) + " s");
 
   print_table(scores, names, box, options.grid);

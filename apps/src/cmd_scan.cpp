@@ -52,7 +52,7 @@ struct ScanCommandOptions {
   std::string method;              // "", "threshold" or "graph-cut": overrides the configuration
   std::vector<std::string> seeds;  // LABEL:X,Y,Z, see seed_option.hpp
   std::string labels;              ///< --labels FILE | igtl:DEVICE: the site's own label maps
-  int labels_unknown = acq::kDefaultUnknownLabelValue;
+  int labels_unknown = acquisition::kDefaultUnknownLabelValue;
   double labels_wait_ms = 1000.0;  ///< igtl: how long a frame waits for its label map
   std::filesystem::path out;
   std::filesystem::path resume;  ///< --resume DIR: the scan whose journal is in DIR goes on
@@ -151,7 +151,8 @@ std::string summary_text(const scan::ScanSummary& s) {
   }
   if (s.segmentation_scores) {
     // The keyframes' label maps against the simulator's truth (indented under the summary).
-    std::istringstream table(seg::format_comparison(*s.segmentation_scores, s.label_names));
+    std::istringstream table(
+        segmentation::format_comparison(*s.segmentation_scores, s.label_names));
     for (std::string line; std::getline(table, line);) out << "\n  " << line;
   }
   for (const std::string& missing : s.labels_without_mesh) out << "\n  " << missing;
@@ -605,8 +606,8 @@ Result<std::unique_ptr<scan::SegmentationStage>> segmentation_stage(
     const ScanCommandOptions& options, scan::ScanSource& source) {
   if (!options.method.empty())
     source.setup.segmentation.method = options.method == "graph-cut"
-                                           ? seg::LabellingMethod::kGraphCut
-                                           : seg::LabellingMethod::kThreshold;
+                                           ? segmentation::LabellingMethod::kGraphCut
+                                           : segmentation::LabellingMethod::kThreshold;
   if (const Status seeded = apply_seeds(options.seeds, source.setup.segmentation); !seeded)
     return seeded;
   try {

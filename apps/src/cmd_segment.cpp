@@ -40,10 +40,10 @@ struct SegmentOptions {
   std::filesystem::path truth_labels;    ///< score against these label frames
   std::filesystem::path perfect_labels;  ///< use these label frames instead of the segmenter
   std::filesystem::path labels;          ///< --labels: the site's own label-map sequence
-  int labels_unknown = acq::kDefaultUnknownLabelValue;  ///< its value for unknown pixels
-  std::filesystem::path report;                         ///< JSON of the scores
-  std::filesystem::path overlays;                       ///< directory for the overlay pictures
-  int overlay_every = 1;                                ///< picture every K-th segmented frame
+  int labels_unknown = acquisition::kDefaultUnknownLabelValue;  ///< its value for unknown pixels
+  std::filesystem::path report;                                 ///< JSON of the scores
+  std::filesystem::path overlays;        ///< directory for the overlay pictures
+  int overlay_every = 1;                 ///< picture every K-th segmented frame
   std::string method;                    ///< "", "threshold" or "graph-cut": overrides the config
   std::string prior = "reconstruction";  ///< graph cut's prior: "reconstruction" or "none"
   int prior_depth = 6;                   ///< octree depth of the prior's reconstruction
@@ -52,10 +52,11 @@ struct SegmentOptions {
 
 // The box (mm, reference frame) of the sectors of every frame with a valid pose, padded by a
 // tenth of its diagonal; none when no frame has one.
-std::optional<Box3> sweep_box(const acq::SequenceFile& file, const seg::SweepSetup& setup) {
+std::optional<Box3> sweep_box(const acquisition::SequenceFile& file,
+                              const segmentation::SweepSetup& setup) {
   std::optional<Box3> box;
   for (std::size_t k = 0; k < file.frame_count(); ++k) {
-    const auto pose = seg::reference_from_probe(file, k, setup);
+    const auto pose = segmentation::reference_from_probe(file, k, setup);
     if (!pose) continue;
     const Eigen::Matrix4d T_reference_image = *pose * setup.T_probe_image;
     for (const Vec2& p : setup.geometry.sector_px) {
@@ -71,16 +72,16 @@ std::optional<Box3> sweep_box(const acq::SequenceFile& file, const seg::SweepSet
 // first failure (a full disk must not stop the segmentation, but the run reports it).
 class OverlayWriter {
  public:
-  OverlayWriter(const SegmentOptions& options, const acq::SequenceFile& sweep,
-                const ImageU8& sector, const acq::SequenceFile* truth)
+  OverlayWriter(const SegmentOptions& options, const acquisition::SequenceFile& sweep,
+                const ImageU8& sector, const acquisition::SequenceFile* truth)
       : options_(options), sweep_(sweep), sector_(sector), truth_(truth) {}
   void operator()(std::size_t frame, const LabelImage& labels) {
     if (seen_++ % static_cast<std::size_t>(options_.overlay_every) != 0 || !status_) return;
     char name[32];
     std::snprintf(name, sizeof name, "frame_%04zu.png", frame);
     const LabelImage truth = truth_ ? truth_->image(frame) : LabelImage();
-    status_ = seg::write_overlay(options_.overlays / name, sweep_.image(frame), labels, sector_,
-                                 truth_ ? &truth : nullptr);
+    status_ = segmentation::write_overlay(options_.overlays / name, sweep_.image(frame), labels,
+                                          sector_, truth_ ? &truth : nullptr);
     if (status_) ++written_;
   }
   const Status& status() const { return status_; }
@@ -88,28 +89,28 @@ class OverlayWriter {
 
  private:
   const SegmentOptions& options_;
-  const acq::SequenceFile& sweep_;
+  const acquisition::SequenceFile& sweep_;
   const ImageU8& sector_;
-  const acq::SequenceFile* truth_;
+  const acquisition::SequenceFile* truth_;
   std::size_t seen_ = 0, written_ = 0;
   Status status_ = Status::ok();
 };
 
 // Reads label frames given by `option` and checks them against the sweep; none when not given.
-Result<std::optional<acq::SequenceFile>> read_label_frames(const acq::SequenceFile& sweep,
-                                                           const SegmentOptions& options,
-                                                           const std::filesystem::path& path,
-                                                           const std::string& option) {
-  if (path.empty()) return std::optional<acq::SequenceFile>();
+Result<std::optional<acquisition::SequenceFile>> read_label_frames(
+    const acquisition::SequenceFile& sweep, const SegmentOptions& options,
+    const std::filesystem::path& path, const std::string& option) {
+  if (path.empty()) return std::optional<acquisition::SequenceFile>();
   if (!std::filesystem::is_regular_file(path))
     return Status::error(option + " " + path.string() +
                          ": no such file; give DIR/labels.mha as `sonoshape simulate --truth DIR` "
                          "writes it");
-  auto labels = acq::read_sequence_file(path);
+  auto labels = acquisition::read_sequence_file(path);
   if (!labels) return Status::error(option + ": " + labels.message());
-  if (const Status same = seg::check_truth_labels(sweep, options.input, *labels, path); !same)
+  if (const Status same = segmentation::check_truth_labels(sweep, options.input, *labels, path);
+      !same)
     return Status::error(option + ": " + same.message());
-  return std::optional<acq::SequenceFile>(std::move(*labels));
+  return std::optional<acquisition::SequenceFile>(std::move(*labels));
 }
 
 // --labels replaces the segmenter: the options that tune or replace it do not go with it.
@@ -126,14 +127,15 @@ Status own_labels_usable(const SegmentOptions& options) {
 // The organs of a site's label maps: as their header names them; without names, the
 // configuration's or the recording header's models, never the k-means classes (which name no
 // organ of the site).
-void declare_own_labels(const acq::LabelSequence& labels, const SegmentOptions& options,
-                        seg::SweepSetup& setup) {
+void declare_own_labels(const acquisition::LabelSequence& labels, const SegmentOptions& options,
+                        segmentation::SweepSetup& setup) {
   std::vector<LabelInfo> fallback;
   if (!options.config.empty() || setup.models_from.rfind("header", 0) == 0)
-    for (const seg::LabelModel& m : setup.config.materials) fallback.push_back({m.label, m.name});
+    for (const segmentation::LabelModel& m : setup.config.materials)
+      fallback.push_back({m.label, m.name});
   setup.config.materials.clear();
   for (const LabelInfo& l : scan::declared_labels(labels.names, fallback)) {
-    seg::LabelModel model;
+    segmentation::LabelModel model;
     model.label = l.id;
     model.name = l.name;
     setup.config.materials.push_back(model);
@@ -146,16 +148,16 @@ void declare_own_labels(const acq::LabelSequence& labels, const SegmentOptions& 
 }
 
 // The table on stderr and the JSON report of --truth-labels.
-int report_comparison(const seg::SweepSegmentation& result, const seg::SweepSetup& setup,
-                      const SegmentOptions& options) {
+int report_comparison(const segmentation::SweepSegmentation& result,
+                      const segmentation::SweepSetup& setup, const SegmentOptions& options) {
   std::map<int, std::string> names{{setup.config.background.label, "background"}};
   for (const auto& m : setup.config.materials) names[m.label] = m.name;
-  std::cerr << seg::format_comparison(result.comparison_total, names);
+  std::cerr << segmentation::format_comparison(result.comparison_total, names);
   if (options.report.empty()) return 0;
   std::error_code ec;
   if (!options.report.parent_path().empty())
     std::filesystem::create_directories(options.report.parent_path(), ec);
-  if (const Status written = seg::write_comparison_report(
+  if (const Status written = segmentation::write_comparison_report(
           result.comparisons, result.comparison_total, names, options.report);
       !written) {
     std::cerr << "error: " << written.message() << '\n';
@@ -167,60 +169,63 @@ int report_comparison(const seg::SweepSegmentation& result, const seg::SweepSetu
 // The recording, tracked and normalised, with the site's own label maps when --labels gives
 // them (checked against the frames as stored, before any time is filled).
 struct Recording {
-  acq::SequenceFile file;
-  std::optional<acq::LabelSequence> own_labels;
+  acquisition::SequenceFile file;
+  std::optional<acquisition::LabelSequence> own_labels;
 };
 Result<Recording> read_recording(const SegmentOptions& options) {
-  auto file = acq::read_sequence_file(options.input);
+  auto file = acquisition::read_sequence_file(options.input);
   if (!file) return file.status();
   // A file without any per-frame transform: the image-only and untracked cases explained.
   if (file->transform_names().empty())
-    if (const Status tracked = acq::require_tracking(*file, options.input); !tracked)
+    if (const Status tracked = acquisition::require_tracking(*file, options.input); !tracked)
       return tracked;
   Recording recording{std::move(*file), std::nullopt};
   if (!options.labels.empty()) {
     if (Status usable = own_labels_usable(options); !usable) return usable;
-    auto read = acq::read_label_sequence(options.labels, recording.file, options.input,
-                                         options.labels_unknown);
+    auto read = acquisition::read_label_sequence(options.labels, recording.file, options.input,
+                                                 options.labels_unknown);
     if (!read) return read.status();
     recording.own_labels = std::move(*read);
     log_info("segment: label maps from " + options.labels.string() + " instead of the " +
              "segmenter (" + recording.own_labels->timing + ")");
   }
-  if (const Status normal = seg::normalise_recording(recording.file, options.input); !normal)
+  if (const Status normal = segmentation::normalise_recording(recording.file, options.input);
+      !normal)
     return normal;
   return recording;
 }
 
 // The sweep's setup (calibration, pose chain, sector, models) with the options' method and
 // seeds, or the organs of the site's label maps.
-Result<seg::SweepSetup> setup_sweep(const SegmentOptions& options, const Recording& recording) {
+Result<segmentation::SweepSetup> setup_sweep(const SegmentOptions& options,
+                                             const Recording& recording) {
   auto optional_path = [](const std::filesystem::path& p) {
     return p.empty() ? std::nullopt : std::optional<std::filesystem::path>(p);
   };
-  auto setup = seg::prepare_sweep(recording.file, options.input, optional_path(options.config),
-                                  optional_path(options.calibration), options.pose_transform,
-                                  options.preset);
+  auto setup = segmentation::prepare_sweep(
+      recording.file, options.input, optional_path(options.config),
+      optional_path(options.calibration), options.pose_transform, options.preset);
   if (!setup) return setup.status();
-  if (const Status sound = acq::check_tracked_sweep(recording.file, options.input,
-                                                    setup->pose_chain->per_frame_names());
+  if (const Status sound = acquisition::check_tracked_sweep(recording.file, options.input,
+                                                            setup->pose_chain->per_frame_names());
       !sound)
     return sound;
-  const acq::PoseChain& chain = *setup->pose_chain;
+  const acquisition::PoseChain& chain = *setup->pose_chain;
   log_info("segment: pose " + chain.describe() + ", chosen by " + chain.chosen_by +
            (chain.from != "Probe"
                 ? "; " + chain.from + " is taken as the probe that ImageToProbe maps into"
                 : ""));
   if (!options.method.empty())
-    setup->config.method = options.method == "graph-cut" ? seg::LabellingMethod::kGraphCut
-                                                         : seg::LabellingMethod::kThreshold;
+    setup->config.method = options.method == "graph-cut"
+                               ? segmentation::LabellingMethod::kGraphCut
+                               : segmentation::LabellingMethod::kThreshold;
   if (const Status seeded = apply_seeds(options.seeds, setup->config); !seeded) return seeded;
   if (recording.own_labels) declare_own_labels(*recording.own_labels, options, *setup);
   return setup;
 }
 
 // Says where the models, calibration and sector come from.
-void log_models(const seg::SweepSetup& setup, bool own_labels) {
+void log_models(const segmentation::SweepSetup& setup, bool own_labels) {
   std::ostringstream models;
   if (own_labels) {
     models << "organs";
@@ -235,7 +240,8 @@ void log_models(const seg::SweepSetup& setup, bool own_labels) {
 }
 
 // What segmenting gave, checked: no frame refused under --strict, some slices, a valid set.
-Status check_segmentation(const SegmentOptions& options, const seg::SweepSegmentation& result) {
+Status check_segmentation(const SegmentOptions& options,
+                          const segmentation::SweepSegmentation& result) {
   if (!result.refused.empty())
     return Status::error(
         options.input.string() + ", " + result.refused +
@@ -255,7 +261,7 @@ Status check_segmentation(const SegmentOptions& options, const seg::SweepSegment
 }
 
 // The summary line of a written slice set.
-void log_summary(const SegmentOptions& options, const seg::SweepSegmentation& result,
+void log_summary(const SegmentOptions& options, const segmentation::SweepSegmentation& result,
                  double seconds) {
   std::size_t regions = 0, unknown = 0;
   for (const LabeledSlice& s : result.slices.slices)
@@ -273,9 +279,9 @@ void log_summary(const SegmentOptions& options, const seg::SweepSegmentation& re
 }
 
 // Every organ the models name must be in the output, or the summary says why not.
-void warn_missing_labels(const SegmentOptions& options, const seg::SweepSetup& setup,
-                         const seg::SweepSegmentation& result, bool own_labels) {
-  for (const seg::LabelModel& m : setup.config.materials) {
+void warn_missing_labels(const SegmentOptions& options, const segmentation::SweepSetup& setup,
+                         const segmentation::SweepSegmentation& result, bool own_labels) {
+  for (const segmentation::LabelModel& m : setup.config.materials) {
     if (result.slices_with_label.count(m.label)) continue;
     const auto frames = result.frames_with_label.find(m.label);
     log_warning(
@@ -295,18 +301,18 @@ void warn_missing_labels(const SegmentOptions& options, const seg::SweepSetup& s
 
 // Segments the sweep with the label sources given (the site's maps, perfect labels, the truth
 // to score against, the overlays, the graph cut's prior).
-Result<seg::SweepSegmentation> segment(const SegmentOptions& options, const Recording& recording,
-                                       const seg::SweepSetup& setup,
-                                       const std::optional<acq::SequenceFile>& truth,
-                                       const std::optional<acq::SequenceFile>& perfect) {
-  const acq::SequenceFile& file = recording.file;
+Result<segmentation::SweepSegmentation> segment(
+    const SegmentOptions& options, const Recording& recording,
+    const segmentation::SweepSetup& setup, const std::optional<acquisition::SequenceFile>& truth,
+    const std::optional<acquisition::SequenceFile>& perfect) {
+  const acquisition::SequenceFile& file = recording.file;
   const std::size_t considered =
       (file.frame_count() + static_cast<std::size_t>(options.every) - 1) /
       static_cast<std::size_t>(options.every);
-  const acq::SequenceFile* replacing = recording.own_labels ? &recording.own_labels->maps
-                                       : perfect            ? &*perfect
-                                                            : nullptr;
-  seg::SweepLabels sources{replacing, truth ? &*truth : nullptr, {}};
+  const acquisition::SequenceFile* replacing = recording.own_labels ? &recording.own_labels->maps
+                                               : perfect            ? &*perfect
+                                                                    : nullptr;
+  segmentation::SweepLabels sources{replacing, truth ? &*truth : nullptr, {}};
   std::optional<OverlayWriter> overlays;
   if (!options.overlays.empty()) {
     std::error_code made;
@@ -320,7 +326,7 @@ Result<seg::SweepSegmentation> segment(const SegmentOptions& options, const Reco
   // The graph cut's prior: an online reconstruction of the slices made so far, in the box
   // that every frame's sector spans (a fixed box: a growing one would rebuild every time).
   std::optional<scan::ReconstructionPrior> prior;
-  if (setup.config.method == seg::LabellingMethod::kGraphCut && !replacing &&
+  if (setup.config.method == segmentation::LabellingMethod::kGraphCut && !replacing &&
       options.prior == "reconstruction") {
     recon::ReconstructorOptions recon_options;
     recon_options.engine.max_depth = options.prior_depth;
@@ -328,10 +334,10 @@ Result<seg::SweepSegmentation> segment(const SegmentOptions& options, const Reco
     prior.emplace(recon_options);
     sources.predictor = &*prior;
   }
-  seg::SweepSegmentation result;
+  segmentation::SweepSegmentation result;
   {
     Progress progress("segment", considered);
-    result = seg::segment_sweep(
+    result = segmentation::segment_sweep(
         file, setup, options.every, [&](std::size_t done) { progress.update(done); },
         ReadOptions{options.strict}, sources);
   }

@@ -44,8 +44,9 @@ std::filesystem::path sidecar_path(const std::filesystem::path& output) {
 
 // The truth of a simulated sweep in `directory`: the phantom's meshes (label_<id>.ply) and the
 // label frames (labels.mha).
-Status write_truth(const std::filesystem::path& directory, const sim::Phantom& phantom,
-                   const sim::SimulatedSweep& sweep, const acq::SequenceWriteOptions& options) {
+Status write_truth(const std::filesystem::path& directory, const simulator::Phantom& phantom,
+                   const simulator::SimulatedSweep& sweep,
+                   const acquisition::SequenceWriteOptions& options) {
   std::error_code ec;
   std::filesystem::create_directories(directory, ec);
   if (ec)
@@ -55,7 +56,7 @@ Status write_truth(const std::filesystem::path& directory, const sim::Phantom& p
     const auto path = directory / ("label_" + std::to_string(entry.label) + ".ply");
     if (const Status written = write_mesh(entry.mesh, path); !written) return written;
   }
-  return acq::write_sequence_file(sweep.truth, directory / "labels.mha", options);
+  return acquisition::write_sequence_file(sweep.truth, directory / "labels.mha", options);
 }
 
 int run_simulate(const SimulateOptions& options) {
@@ -68,35 +69,37 @@ int run_simulate(const SimulateOptions& options) {
     std::cerr << "error: " << scenario.message() << '\n';
     return 1;
   }
-  const sim::Phantom* phantom = &scenario->phantom;
-  const acq::Probe probe(scenario->probe);
-  const sim::TrackerOptions& tracker = scenario->tracker;
+  const simulator::Phantom* phantom = &scenario->phantom;
+  const acquisition::Probe probe(scenario->probe);
+  const simulator::TrackerOptions& tracker = scenario->tracker;
 
-  const sim::SimulatedAcquisition acquisition = sim::acquire(
-      sim::Trajectory(scenario->motion), tracker, options.frames, scenario_options.frame_rate_hz);
-  const sim::BModeSimulator simulator(*phantom, probe);
-  sim::SimulatedSweep sweep;
+  const simulator::SimulatedAcquisition acquisition =
+      simulator::acquire(simulator::Trajectory(scenario->motion), tracker, options.frames,
+                         scenario_options.frame_rate_hz);
+  const simulator::BModeSimulator simulator(*phantom, probe);
+  simulator::SimulatedSweep sweep;
   {
     Progress progress("simulate", static_cast<std::size_t>(options.frames));
-    sweep = sim::simulate_sweep(simulator, acquisition, scenario_options.seed,
-                                [&](std::size_t done) { progress.update(done); });
+    sweep = simulator::simulate_sweep(simulator, acquisition, scenario_options.seed,
+                                      [&](std::size_t done) { progress.update(done); });
   }
   const double render_s = clock.seconds();
 
   std::error_code ec;
   if (!options.output.parent_path().empty())
     std::filesystem::create_directories(options.output.parent_path(), ec);
-  const acq::SequenceWriteOptions write_options{!options.raw, 1};
-  if (const Status written = acq::write_sequence_file(sweep.bmode, options.output, write_options);
+  const acquisition::SequenceWriteOptions write_options{!options.raw, 1};
+  if (const Status written =
+          acquisition::write_sequence_file(sweep.bmode, options.output, write_options);
       !written) {
     std::cerr << "error: " << written.message() << '\n';
     return 1;
   }
-  acq::PlusConfig config;
+  acquisition::PlusConfig config;
   config.transforms.push_back(
       {"Image", "Probe", probe.T_probe_image().matrix(), std::nullopt, "simulated"});
   const auto sidecar = sidecar_path(options.output);
-  if (const Status written = acq::write_plus_config(
+  if (const Status written = acquisition::write_plus_config(
           config, sidecar,
           "sonoshape simulate: calibration of " + options.output.filename().string());
       !written) {
@@ -114,10 +117,11 @@ int run_simulate(const SimulateOptions& options) {
   for (const Pose& pose : acquisition.tracked_poses)
     invalid += pose.status == TrackingStatus::kInvalid ? 1 : 0;
   std::ostringstream summary;
-  summary << "simulate: " << phantom->labels().size() << " labels, " << acq::to_string(probe.type())
-          << " probe, " << scenario_options.trajectory << ", " << options.frames << " frames of "
-          << scenario_options.width_px << "x" << scenario_options.height_px << " (" << invalid
-          << " with INVALID pose, " << static_cast<int>(100.0 * sweep.mean_shadow_fraction + 0.5)
+  summary << "simulate: " << phantom->labels().size() << " labels, "
+          << acquisition::to_string(probe.type()) << " probe, " << scenario_options.trajectory
+          << ", " << options.frames << " frames of " << scenario_options.width_px << "x"
+          << scenario_options.height_px << " (" << invalid << " with INVALID pose, "
+          << static_cast<int>(100.0 * sweep.mean_shadow_fraction + 0.5)
           << "% of the sector shadowed) in " << clock.seconds() << " s (render " << render_s
           << " s) -> " << options.output.string() << ", " << sidecar.string();
   if (!options.truth_dir.empty()) summary << ", truth in " << options.truth_dir.string();

@@ -113,8 +113,8 @@ int run_slice(const SliceOptions& options) {
 
   Box3 objects = empty_box();
   for (const auto& m : meshes) objects = united(objects, m.mesh.bounds());
-  const auto planes = sim::generate_planes(sim::parse_plane_family(options.family), options.count,
-                                           objects, options.seed);
+  const auto planes = simulator::generate_planes(simulator::parse_plane_family(options.family),
+                                                 options.count, objects, options.seed);
 
   SliceSet set;
   set.units = "mm";
@@ -153,13 +153,13 @@ int run_slice(const SliceOptions& options) {
     return 1;
   }
   if (options.unknown_fraction > 0.0 || options.fov != "none") {
-    sim::UnknownOptions unknowns;
+    simulator::UnknownOptions unknowns;
     unknowns.fraction = options.unknown_fraction;
     unknowns.blob_radius = options.unknown_radius;
-    unknowns.fov = sim::parse_fov_shape(options.fov);
+    unknowns.fov = simulator::parse_fov_shape(options.fov);
     unknowns.fov_covers_material = options.fov_aim == "cover";
     unknowns.seed = options.seed + 1;
-    sim::add_unknowns(set, unknowns);
+    simulator::add_unknowns(set, unknowns);
     if (const Status valid = validate_slice_set(set, options.output.string()); !valid) {
       std::cerr << "error: the unknown regions made an invalid slice set: " << valid.message()
                 << '\n';

@@ -1,6 +1,6 @@
 #pragma once
 // The --preset NAME option of `segment` and `scan`: a named set of segmentation settings for what
-// a kind of recording holds (seg::segmentation_presets, docs/segmentation.md "Presets").
+// a kind of recording holds (segmentation::segmentation_presets, docs/segmentation.md "Presets").
 #include <string>
 #include <vector>
 
@@ -10,7 +10,8 @@ namespace sonoshape::apps {
 
 inline std::vector<std::string> preset_names() {
   std::vector<std::string> names;
-  for (const seg::SegmentationPreset& p : seg::segmentation_presets()) names.push_back(p.name);
+  for (const segmentation::SegmentationPreset& p : segmentation::segmentation_presets())
+    names.push_back(p.name);
   return names;
 }
 
@@ -19,7 +20,7 @@ inline std::string preset_help() {
       "Segmentation settings for what the recording holds (its models still learnt from the "
       "frames); --config / --segmentation keys and --method override them. Default: "
       "soft-tissue.";
-  for (const seg::SegmentationPreset& p : seg::segmentation_presets())
+  for (const segmentation::SegmentationPreset& p : segmentation::segmentation_presets())
     text += " " + p.name + ": " + p.summary + ".";
   return text;
 }

@@ -56,9 +56,9 @@ scan::SourceKind v4l2_kind() {
   kind.open = scan::open_v4l2_source;
   kind.list_devices = [](std::ostream& out) {
     std::vector<std::string> unreadable;
-    const auto devices =
-        acq::list_v4l2_devices(*acq::system_v4l2_device(), "/sys/class/video4linux", &unreadable);
-    out << acq::v4l2_devices_report(devices, unreadable);
+    const auto devices = acquisition::list_v4l2_devices(*acquisition::system_v4l2_device(),
+                                                        "/sys/class/video4linux", &unreadable);
+    out << acquisition::v4l2_devices_report(devices, unreadable);
   };
 #else
   kind.not_built =

@@ -14,7 +14,7 @@ namespace sonoshape::apps {
 /// Sets LabelModel::seed_mm of the materials the arguments name. Errors name the argument and
 /// the fix: a malformed one, or a label that is not among the configuration's materials.
 inline Status apply_seeds(const std::vector<std::string>& arguments,
-                          seg::SegmentationConfig& config) {
+                          segmentation::SegmentationConfig& config) {
   for (const std::string& text : arguments) {
     const auto fail = [&](const std::string& why) {
       return Status::error("--organ-seed '" + text + "': " + why +
@@ -38,9 +38,9 @@ inline Status apply_seeds(const std::vector<std::string>& arguments,
         return fail("three finite numbers separated by commas are needed");
       p = last ? at : at + 1;
     }
-    seg::LabelModel* model = nullptr;
+    segmentation::LabelModel* model = nullptr;
     std::string known;
-    for (seg::LabelModel& m : config.materials) {
+    for (segmentation::LabelModel& m : config.materials) {
       if (m.label == label) model = &m;
       known += (known.empty() ? "" : ", ") + std::to_string(m.label) + ":" + m.name;
     }

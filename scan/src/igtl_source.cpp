@@ -12,12 +12,12 @@ namespace sonoshape::scan {
 namespace {
 
 // The first IMAGE of the frames' device, waited for at most request.igtl_wait_s.
-Result<acq::IgtlMessage> first_image(acq::IgtlConnection& connection,
-                                     const acq::IgtlEndpoint& endpoint,
-                                     const SourceRequest& request) {
-  const double deadline_s = acq::monotonic_s() + request.igtl_wait_s;
-  while (acq::monotonic_s() < deadline_s) {
-    auto message = connection.next(std::max(0.0, deadline_s - acq::monotonic_s()));
+Result<acquisition::IgtlMessage> first_image(acquisition::IgtlConnection& connection,
+                                             const acquisition::IgtlEndpoint& endpoint,
+                                             const SourceRequest& request) {
+  const double deadline_s = acquisition::monotonic_s() + request.igtl_wait_s;
+  while (acquisition::monotonic_s() < deadline_s) {
+    auto message = connection.next(std::max(0.0, deadline_s - acquisition::monotonic_s()));
     if (!message) return message.status();
     if (*message && (*message)->type == "IMAGE" &&
         (request.igtl_image.empty() || (*message)->device == request.igtl_image))
@@ -34,7 +34,7 @@ Result<acq::IgtlMessage> first_image(acq::IgtlConnection& connection,
 
 // The probe's poses: the IMAGE's own, a TDATA element's or a TRANSFORM's.
 std::unique_ptr<tracking::PoseSource> pose_source(const SourceRequest& request,
-                                                  const acq::IgtlEndpoint& tracker) {
+                                                  const acquisition::IgtlEndpoint& tracker) {
   const std::string tdata = "tdata:";
   if (request.igtl_transform == "image")
     return std::make_unique<tracking::IgtlPoseSource>(tracker, request.igtl_image,
@@ -48,10 +48,10 @@ std::unique_ptr<tracking::PoseSource> pose_source(const SourceRequest& request,
 }
 
 // ImageToProbe: --calibration's, else (poses from the IMAGE) the IMAGE's pixel spacing.
-Status set_calibration(const SourceRequest& request, const acq::IgtlImage& image,
+Status set_calibration(const SourceRequest& request, const acquisition::IgtlImage& image,
                        ScanSetup& setup) {
   if (request.calibration) {
-    auto read = seg::read_calibration(*request.calibration);
+    auto read = segmentation::read_calibration(*request.calibration);
     if (!read) return read.status();
     setup.T_probe_image = *read;
     setup.calibration_from = request.calibration->string();
@@ -69,7 +69,7 @@ Status set_calibration(const SourceRequest& request, const acq::IgtlImage& image
 // the image, its spacing) sets up the segmentation before the scan starts.
 Result<ScanSource> open_igtl_source(const SourceRequest& request,
                                     const std::string& endpoint_text) {
-  auto endpoint = acq::parse_igtl_endpoint(endpoint_text, "--source igtl:");
+  auto endpoint = acquisition::parse_igtl_endpoint(endpoint_text, "--source igtl:");
   if (!endpoint) return endpoint.status();
   const bool pose_from_image = request.igtl_transform == "image";
   if (!pose_from_image && !request.calibration)
@@ -77,11 +77,11 @@ Result<ScanSource> open_igtl_source(const SourceRequest& request,
         "--source igtl: needs --calibration (ImageToProbe) for the poses of "
         "TRANSFORM '" +
         request.igtl_transform + "', or --igtl-transform image to take each IMAGE's own pose");
-  auto connection = acq::IgtlConnection::connect(*endpoint);
+  auto connection = acquisition::IgtlConnection::connect(*endpoint);
   if (!connection) return connection.status();
   auto first = first_image(*connection, *endpoint, request);
   if (!first) return first.status();
-  auto image = acq::decode_igtl_image(*first);
+  auto image = acquisition::decode_igtl_image(*first);
   if (!image) return Status::error("--source igtl:" + endpoint->text() + ": " + image.message());
 
   ScanSource source;
@@ -90,12 +90,13 @@ Result<ScanSource> open_igtl_source(const SourceRequest& request,
     return calibrated;
   const double spacing_mm = std::sqrt(setup.T_probe_image.col(0).head<3>().norm() *
                                       setup.T_probe_image.col(1).head<3>().norm());
-  setup.geometry = seg::full_image_geometry(image->image.width, image->image.height, spacing_mm);
+  setup.geometry =
+      segmentation::full_image_geometry(image->image.width, image->image.height, spacing_mm);
   setup.sector_from = "the whole image";
-  seg::SegmentationConfig config;
+  segmentation::SegmentationConfig config;
   setup.models_from = "two-class k-means on the first frame";
   if (request.segmentation || !request.preset.empty()) {
-    auto read = seg::load_segmentation_config(request.segmentation, request.preset);
+    auto read = segmentation::load_segmentation_config(request.segmentation, request.preset);
     if (!read) return read.status();
     config = std::move(*read);
     setup.models_from =
@@ -103,25 +104,25 @@ Result<ScanSource> open_igtl_source(const SourceRequest& request,
   }
   const bool organs_named = !config.materials.empty();  // by the configuration
   if (config.materials.empty())
-    config = seg::auto_two_class(image->image.pixels, config);
+    config = segmentation::auto_two_class(image->image.pixels, config);
   else if (config.learn_models)
-    config = seg::learn_models_from_samples(image->image.pixels, config);
+    config = segmentation::learn_models_from_samples(image->image.pixels, config);
   if (const Status valid = config.validate(); !valid) return valid;
   setup.segmentation = std::move(config);
-  for (const seg::LabelModel& m : setup.segmentation.materials)
+  for (const segmentation::LabelModel& m : setup.segmentation.materials)
     setup.labels.push_back({m.label, m.name});
   setup.bounds = request.bounds;
 
-  acq::IgtlEndpoint tracker = *endpoint;
+  acquisition::IgtlEndpoint tracker = *endpoint;
   if (!request.igtl_tracker.empty()) {
-    auto parsed = acq::parse_igtl_endpoint(request.igtl_tracker, "--igtl-tracker");
+    auto parsed = acquisition::parse_igtl_endpoint(request.igtl_tracker, "--igtl-tracker");
     if (!parsed) return parsed.status();
     tracker = *parsed;
   }
   const std::string size =
       std::to_string(image->image.width) + "x" + std::to_string(image->image.height);
-  source.frames = std::make_unique<acq::IgtlFrameSource>(*endpoint, request.igtl_image,
-                                                         std::move(*connection), std::move(*first));
+  source.frames = std::make_unique<acquisition::IgtlFrameSource>(
+      *endpoint, request.igtl_image, std::move(*connection), std::move(*first));
   source.poses = pose_source(request, tracker);
   if (!request.labels.empty()) {
     if (request.labels.rfind("igtl:", 0) != 0)

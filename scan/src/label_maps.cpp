@@ -25,7 +25,7 @@ std::string seconds(double s) {
 
 class SequenceLabelFeed final : public LabelMapFeed {
  public:
-  SequenceLabelFeed(std::shared_ptr<const acq::SequenceFile> maps, std::string description)
+  SequenceLabelFeed(std::shared_ptr<const acquisition::SequenceFile> maps, std::string description)
       : maps_(std::move(maps)), description_(std::move(description)) {}
   Result<LabelImage> label_map(const Frame& frame) override {
     if (frame.index < 0 || static_cast<std::size_t>(frame.index) >= maps_->frame_count())
@@ -36,14 +36,14 @@ class SequenceLabelFeed final : public LabelMapFeed {
   std::string describe() const override { return description_; }
 
  private:
-  std::shared_ptr<const acq::SequenceFile> maps_;
+  std::shared_ptr<const acquisition::SequenceFile> maps_;
   std::string description_;
 };
 
 }  // namespace
 
-std::unique_ptr<LabelMapFeed> sequence_label_feed(std::shared_ptr<const acq::SequenceFile> maps,
-                                                  std::string description) {
+std::unique_ptr<LabelMapFeed> sequence_label_feed(
+    std::shared_ptr<const acquisition::SequenceFile> maps, std::string description) {
   return std::make_unique<SequenceLabelFeed>(std::move(maps), std::move(description));
 }
 
@@ -77,7 +77,7 @@ std::optional<double> LabelMapMatcher::nearest(double timestamp_s) const {
   return best;
 }
 
-StreamLabelFeed::StreamLabelFeed(std::unique_ptr<acq::FrameSource> source, std::string name,
+StreamLabelFeed::StreamLabelFeed(std::unique_ptr<acquisition::FrameSource> source, std::string name,
                                  int unknown_value, double wait_s)
     : source_(std::move(source)),
       name_(std::move(name)),
@@ -89,7 +89,7 @@ StreamLabelFeed::~StreamLabelFeed() {
 }
 
 Status StreamLabelFeed::start() {
-  acq::SourceOptions options;
+  acquisition::SourceOptions options;
   options.buffer_capacity = 64;  // a couple of seconds of label maps between two keyframes
   return source_->start(options);
 }
@@ -107,11 +107,11 @@ void StreamLabelFeed::take_available(double timeout_s) {
 }
 
 Result<LabelImage> StreamLabelFeed::label_map(const Frame& frame) {
-  const double deadline_s = acq::monotonic_s() + wait_s_;
+  const double deadline_s = acquisition::monotonic_s() + wait_s_;
   take_available(0.0);
   std::optional<LabelImage> labels = matcher_.take(frame.timestamp_s);
   while (!labels && !matcher_.passed(frame.timestamp_s) && !source_->finished()) {
-    const double left_s = deadline_s - acq::monotonic_s();
+    const double left_s = deadline_s - acquisition::monotonic_s();
     if (left_s <= 0.0) break;
     take_available(std::min(left_s, 0.05));
     labels = matcher_.take(frame.timestamp_s);
@@ -133,7 +133,7 @@ Result<LabelImage> StreamLabelFeed::label_map(const Frame& frame) {
         where + " is " + std::to_string(labels->width) + "x" + std::to_string(labels->height) +
         " pixels but the frame is " + std::to_string(frame.image.width) + "x" +
         std::to_string(frame.image.height) + "; send label maps on the B-mode image's pixel grid");
-  if (const Status mapped = acq::to_label_pixels(*labels, unknown_value_, where); !mapped)
+  if (const Status mapped = acquisition::to_label_pixels(*labels, unknown_value_, where); !mapped)
     return mapped;
   return std::move(*labels);
 }
@@ -150,11 +150,11 @@ Result<std::unique_ptr<LabelMapFeed>> igtl_label_feed(const std::string& spec,
     return Status::error("--labels " + spec +
                          ": no device name; give the IMAGE device of the label maps, e.g. "
                          "--labels igtl:LabelMap (or igtl:LabelMap@HOST:PORT for another server)");
-  auto endpoint = acq::parse_igtl_endpoint(
+  auto endpoint = acquisition::parse_igtl_endpoint(
       at == std::string::npos ? frames_endpoint : rest.substr(at + 1), "--labels igtl:" + device);
   if (!endpoint) return endpoint.status();
   return Result<std::unique_ptr<LabelMapFeed>>(std::make_unique<StreamLabelFeed>(
-      std::make_unique<acq::IgtlFrameSource>(*endpoint, device),
+      std::make_unique<acquisition::IgtlFrameSource>(*endpoint, device),
       "IMAGE '" + device + "' of igtl:" + endpoint->text(), unknown_value, wait_s));
 }
 #endif
@@ -175,17 +175,17 @@ Result<LabeledSlice> LabelMapStage::segment(const TrackedFrame& frame) {
                   "'segmentation failed')");
     return labels.status();
   }
-  const seg::ImageGeometry& g = setup_.geometry;
+  const segmentation::ImageGeometry& g = setup_.geometry;
   if (labels->width != g.width_px || labels->height != g.height_px)
     return Status::error("the label map of frame " + std::to_string(frame.frame.index) + " is " +
                          std::to_string(labels->width) + "x" + std::to_string(labels->height) +
                          " but the frames are " + std::to_string(g.width_px) + "x" +
                          std::to_string(g.height_px));
   const Eigen::Matrix4d T_reference_probe = frame.T_reference_probe.matrix();
-  const seg::ImagePlane plane = seg::image_plane(T_reference_probe * setup_.T_probe_image,
-                                                 T_reference_probe.block<3, 1>(0, 3));
-  auto slice = seg::make_slice(*labels, g.sector, g.sector_px, plane,
-                               setup_.segmentation.simplify_mm, &repairs_);
+  const segmentation::ImagePlane plane = segmentation::image_plane(
+      T_reference_probe * setup_.T_probe_image, T_reference_probe.block<3, 1>(0, 3));
+  auto slice = segmentation::make_slice(*labels, g.sector, g.sector_px, plane,
+                                        setup_.segmentation.simplify_mm, &repairs_);
   if (!slice) return slice.status();
   slice->timestamp_s = frame.frame.timestamp_s;
   return slice;

@@ -17,8 +17,8 @@ double ring_area(const Ring2& ring) { return std::abs(signed_area(ring)); }
 
 }  // namespace
 
-LabelImage predict_label_map(const MeshSet& meshes, const seg::ImagePlane& plane,
-                             const seg::ImageGeometry& geometry) {
+LabelImage predict_label_map(const MeshSet& meshes, const segmentation::ImagePlane& plane,
+                             const segmentation::ImageGeometry& geometry) {
   std::vector<LabeledMesh> labelled;
   for (const auto& entry : meshes.meshes)
     if (!entry.mesh.triangles.empty()) labelled.push_back({entry.label, entry.name, entry.mesh});
@@ -72,8 +72,8 @@ void ReconstructionPrior::add(const LabeledSlice& slice) {
   }
 }
 
-std::optional<LabelImage> ReconstructionPrior::predict(const seg::ImagePlane& plane,
-                                                       const seg::ImageGeometry& geometry) {
+std::optional<LabelImage> ReconstructionPrior::predict(
+    const segmentation::ImagePlane& plane, const segmentation::ImageGeometry& geometry) {
   if (pending_) {
     pending_ = false;
     try {

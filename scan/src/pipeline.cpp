@@ -59,13 +59,13 @@ std::vector<std::string> labels_without_mesh(const std::vector<LabelInfo>& label
 constexpr double kPollS = 0.05;
 
 template <typename T>
-std::string source_state(const acq::StreamSource<T>& s) {
+std::string source_state(const acquisition::StreamSource<T>& s) {
   const std::string message = s.message();
   const std::string condition = s.condition();
   std::string lost;
   for (const auto& [reason, count] : s.losses())
     if (count > 0) lost += (lost.empty() ? "; lost " : ", ") + reason + " " + std::to_string(count);
-  return std::string(acq::to_string(s.state())) + (message.empty() ? "" : ": " + message) +
+  return std::string(acquisition::to_string(s.state())) + (message.empty() ? "" : ": " + message) +
          (condition.empty() ? "" : " (" + condition + ")") + lost;
 }
 
@@ -199,9 +199,9 @@ Status ScanPipeline::start() {
   {
     std::lock_guard lock(state_mutex_);
     if (started_) return Status::error("scan: already started");
-    start_s_ = acq::monotonic_s();
+    start_s_ = acquisition::monotonic_s();
   }
-  acq::SourceOptions frame_options;
+  acquisition::SourceOptions frame_options;
   frame_options.buffer_capacity = options_.frame_buffer;
   frame_options.wait_when_full = !options_.drop_when_behind;
   frame_options.playback.real_time = options_.real_time;
@@ -209,7 +209,7 @@ Status ScanPipeline::start() {
   frame_options.playback.device_origin_s = source_.device_origin_s;
   // One origin for both streams keeps frames and tracker samples aligned in playback.
   frame_options.playback.monotonic_origin_s = start_s_;
-  acq::SourceOptions pose_options = frame_options;
+  acquisition::SourceOptions pose_options = frame_options;
   pose_options.buffer_capacity = options_.pose_buffer;
   if (Status started = source_.frames->start(frame_options); !started) return started;
   if (Status started = source_.poses->start(pose_options); !started) {
@@ -302,7 +302,7 @@ void ScanPipeline::withdraw(int key) {
 void ScanPipeline::stage_done() {
   std::lock_guard lock(state_mutex_);
   if (--stages_running_ == 0) {
-    end_s_ = acq::monotonic_s();
+    end_s_ = acquisition::monotonic_s();
     done_cv_.notify_all();
   }
 }
@@ -312,11 +312,11 @@ tracking::SyncedPose ScanPipeline::synchronise(const Frame& frame) {
                   "pose source " + source_.poses->describe(), "frames get poses again",
                   "frames get no pose meanwhile and are dropped");
   const double t = frame.timestamp_s;
-  const double deadline_s = acq::monotonic_s() + options_.pose_wait_s;
+  const double deadline_s = acquisition::monotonic_s() + options_.pose_wait_s;
   // Interpolation needs the tracker sample after the frame's time: wait for it, a little.
   while (poses_.latest_frame_time_s() < t) {
     if (source_.poses->finished()) {
-      if (!pose_source_reported_ && source_.poses->state() == acq::SourceState::kFailed) {
+      if (!pose_source_reported_ && source_.poses->state() == acquisition::SourceState::kFailed) {
         pose_source_reported_ = true;
         report(ScanState::kError,
                "pose source " + source_.poses->describe() + " failed (" + source_.poses->message() +
@@ -325,7 +325,7 @@ tracking::SyncedPose ScanPipeline::synchronise(const Frame& frame) {
       break;
     }
     if (stop_requested_.load()) break;
-    const double remaining_s = deadline_s - acq::monotonic_s();
+    const double remaining_s = deadline_s - acquisition::monotonic_s();
     if (remaining_s <= 0.0) break;
     if (auto sample = source_.poses->next(std::min(remaining_s, kPollS))) poses_.add(sample->item);
   }
@@ -351,7 +351,7 @@ void ScanPipeline::watch_condition(const std::string& condition, std::string& la
 
 std::optional<StopReason> ScanPipeline::stop_before_next_frame() {
   if (stop_requested_.load()) return StopReason::kStopRequested;
-  if (options_.duration_s > 0.0 && acq::monotonic_s() - start_s_ >= options_.duration_s)
+  if (options_.duration_s > 0.0 && acquisition::monotonic_s() - start_s_ >= options_.duration_s)
     return StopReason::kDuration;
   if (options_.max_slices > 0) {
     std::lock_guard lock(selector_mutex_);
@@ -437,8 +437,9 @@ StopReason ScanPipeline::acquire_frames() {
                     "frame source " + source_.frames->describe(), "the scan goes on", "");
     if (!received) {
       if (source_.frames->finished())
-        return source_.frames->state() == acq::SourceState::kFailed ? StopReason::kSourceFailed
-                                                                    : StopReason::kSourceEnded;
+        return source_.frames->state() == acquisition::SourceState::kFailed
+                   ? StopReason::kSourceFailed
+                   : StopReason::kSourceEnded;
       continue;
     }
     {
@@ -486,7 +487,8 @@ void ScanPipeline::acquisition_loop() {
     slices = counters_.slices;
   }
   to_segmentation_->close();
-  if (reason == StopReason::kSourceFailed && source_.frames->state() == acq::SourceState::kFailed) {
+  if (reason == StopReason::kSourceFailed &&
+      source_.frames->state() == acquisition::SourceState::kFailed) {
     report(ScanState::kError, "frame source " + source_.frames->describe() + " failed (" +
                                   source_.frames->message() + "); the scan goes on with the " +
                                   std::to_string(slices) +
@@ -670,10 +672,10 @@ void ScanPipeline::reconstruction_loop() {
       for (auto& item : to_reconstruction_->pop_all()) batch.push_back(std::move(item));
       const std::vector<const SliceItem*> added = add_batch(batch);
       if (added.empty()) continue;
-      const double update_start_s = acq::monotonic_s();
+      const double update_start_s = acquisition::monotonic_s();
       const std::optional<recon::UpdateStats> stats = update_with(added);
       if (!stats) continue;
-      const double ready_s = acq::monotonic_s();
+      const double ready_s = acquisition::monotonic_s();
       // On disk before anyone hears of it: what a subscriber saw, a resume restores.
       journal_added(added);
       log_update(*stats, added.size(), ready_s - update_start_s);

@@ -17,12 +17,13 @@ namespace {
 // reconstruction box as a slice set's default bounds are. A replay knows it before its first
 // frame, so the box never grows during the scan: a box that grows rebuilds every cell at each
 // update (docs/engine.md, "Online engine"). None when no frame has a pose.
-std::optional<Box3> swept_sector_box(const acq::SequenceFile& file, const seg::SweepSetup& setup) {
+std::optional<Box3> swept_sector_box(const acquisition::SequenceFile& file,
+                                     const segmentation::SweepSetup& setup) {
   Box3 extent{Vec3::Constant(std::numeric_limits<double>::infinity()),
               Vec3::Constant(-std::numeric_limits<double>::infinity())};
   bool any = false;
   for (std::size_t k = 0; k < file.frame_count(); ++k) {
-    const auto pose = seg::reference_from_probe(file, k, setup);
+    const auto pose = segmentation::reference_from_probe(file, k, setup);
     if (!pose) continue;
     const Eigen::Matrix4d T_reference_image = *pose * setup.T_probe_image;
     for (const Vec2& pixel : setup.geometry.sector_px) {
@@ -43,24 +44,26 @@ Result<ScanSource> open_replay_source(const SourceRequest& request, const std::s
   if (path_text.empty())
     return Status::error("--source replay: needs a file, e.g. replay:sweep.igs.mha");
   const std::filesystem::path path(path_text);
-  auto file = acq::read_sequence_file(path);
+  auto file = acquisition::read_sequence_file(path);
   if (!file) return file.status();
   if (file->transform_names().empty())
-    if (const Status tracked = acq::require_tracking(*file, path); !tracked) return tracked;
+    if (const Status tracked = acquisition::require_tracking(*file, path); !tracked) return tracked;
   // Label maps are checked against the frames as stored (times before any are filled in).
-  std::optional<acq::LabelSequence> labels;
+  std::optional<acquisition::LabelSequence> labels;
   if (!request.labels.empty()) {
-    auto read = acq::read_label_sequence(request.labels, *file, path, request.labels_unknown);
+    auto read =
+        acquisition::read_label_sequence(request.labels, *file, path, request.labels_unknown);
     if (!read) return read.status();
     labels = std::move(*read);
   }
-  if (const Status normal = seg::normalise_recording(*file, path); !normal) return normal;
-  auto shared = std::make_shared<const acq::SequenceFile>(std::move(*file));
-  auto prepared = seg::prepare_sweep(*shared, path, request.segmentation, request.calibration,
-                                     request.pose_transform, request.preset);
+  if (const Status normal = segmentation::normalise_recording(*file, path); !normal) return normal;
+  auto shared = std::make_shared<const acquisition::SequenceFile>(std::move(*file));
+  auto prepared =
+      segmentation::prepare_sweep(*shared, path, request.segmentation, request.calibration,
+                                  request.pose_transform, request.preset);
   if (!prepared) return prepared.status();
   if (const Status sound =
-          acq::check_tracked_sweep(*shared, path, prepared->pose_chain->per_frame_names());
+          acquisition::check_tracked_sweep(*shared, path, prepared->pose_chain->per_frame_names());
       !sound)
     return sound;
 
@@ -69,7 +72,7 @@ Result<ScanSource> open_replay_source(const SourceRequest& request, const std::s
   setup.T_probe_image = prepared->T_probe_image;
   setup.segmentation = prepared->config;
   setup.geometry = prepared->geometry;
-  for (const seg::LabelModel& m : setup.segmentation.materials)
+  for (const segmentation::LabelModel& m : setup.segmentation.materials)
     setup.labels.push_back({m.label, m.name});
   setup.bounds = request.bounds ? request.bounds : swept_sector_box(*shared, *prepared);
   setup.calibration_from = prepared->calibration_from;
@@ -90,15 +93,16 @@ Result<ScanSource> open_replay_source(const SourceRequest& request, const std::s
     if (setup.models_from.rfind("two-class", 0) == 0) setup.labels.clear();
     setup.labels = declared_labels(labels->names, setup.labels);
     setup.models_from = "none: the label maps of --labels " + request.labels;
-    source.labels =
-        sequence_label_feed(std::make_shared<const acq::SequenceFile>(std::move(labels->maps)),
-                            "label maps of " + request.labels + " (" + labels->timing + ")");
+    source.labels = sequence_label_feed(
+        std::make_shared<const acquisition::SequenceFile>(std::move(labels->maps)),
+        "label maps of " + request.labels + " (" + labels->timing + ")");
   }
-  source.frames = std::make_unique<acq::ReplayFrameSource>(shared, path.string(), first_frame);
+  source.frames =
+      std::make_unique<acquisition::ReplayFrameSource>(shared, path.string(), first_frame);
   source.poses =
       std::make_unique<tracking::ReplayPoseSource>(shared, path.string(), *prepared->pose_chain);
-  source.device_origin_s =
-      first_frame == 0 ? acq::first_timestamp_s(*shared) : shared->frame(first_frame).timestamp_s;
+  source.device_origin_s = first_frame == 0 ? acquisition::first_timestamp_s(*shared)
+                                            : shared->frame(first_frame).timestamp_s;
   // PLUS stores the tracker already interpolated at each frame's time.
   source.tracker_latency_s = 0.0;
   std::ostringstream text;

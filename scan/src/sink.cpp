@@ -55,7 +55,7 @@ std::string summary_json(const ScanSummary& summary) {
   doc["labels_without_mesh"] = summary.labels_without_mesh;
   if (summary.segmentation_scores)
     doc["segmentation_scores"] = nlohmann::json::parse(
-        seg::comparison_json_text(*summary.segmentation_scores, summary.label_names));
+        segmentation::comparison_json_text(*summary.segmentation_scores, summary.label_names));
   return doc.dump(2);
 }
 

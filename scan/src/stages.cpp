@@ -22,9 +22,9 @@ SegmenterStage::SegmenterStage(ScanSetup setup)
   setup_.geometry.check();
   if (const Status valid = setup_.segmentation.validate(); !valid)
     throw std::invalid_argument("segmentation configuration: " + valid.message());
-  if (setup_.segmentation.method == seg::LabellingMethod::kGraphCut)
-    labeller_ = std::make_unique<seg::GraphCutLabeller>(setup_.segmentation, setup_.geometry,
-                                                        setup_.segmentation.graph_cut);
+  if (setup_.segmentation.method == segmentation::LabellingMethod::kGraphCut)
+    labeller_ = std::make_unique<segmentation::GraphCutLabeller>(
+        setup_.segmentation, setup_.geometry, setup_.segmentation.graph_cut);
 }
 
 SegmenterStage::~SegmenterStage() = default;
@@ -37,7 +37,7 @@ void SegmenterStage::on_meshes(const MeshSet& meshes) {
 }
 
 Result<LabeledSlice> SegmenterStage::segment(const TrackedFrame& frame) {
-  const seg::ImageGeometry& g = setup_.geometry;
+  const segmentation::ImageGeometry& g = setup_.geometry;
   const GreyImage& image = frame.frame.image;
   if (image.width != g.width_px || image.height != g.height_px)
     return Status::error("frame " + std::to_string(frame.frame.index) + " is " +
@@ -45,9 +45,9 @@ Result<LabeledSlice> SegmenterStage::segment(const TrackedFrame& frame) {
                          " but the setup expects " + std::to_string(g.width_px) + "x" +
                          std::to_string(g.height_px) + " (wrong probe preset?)");
   const Eigen::Matrix4d T_reference_probe = frame.T_reference_probe.matrix();
-  const seg::ImagePlane plane = seg::image_plane(T_reference_probe * setup_.T_probe_image,
-                                                 T_reference_probe.block<3, 1>(0, 3));
-  seg::Segmentation segmentation;
+  const segmentation::ImagePlane plane = segmentation::image_plane(
+      T_reference_probe * setup_.T_probe_image, T_reference_probe.block<3, 1>(0, 3));
+  segmentation::Segmentation segmentation;
   if (labeller_) {
     std::shared_ptr<const MeshSet> meshes;
     {
@@ -58,11 +58,11 @@ Result<LabeledSlice> SegmenterStage::segment(const TrackedFrame& frame) {
     if (meshes && !meshes->meshes.empty()) prior = predict_label_map(*meshes, plane, g);
     segmentation = labeller_->segment(image, prior ? &*prior : nullptr, &plane);
   } else {
-    segmentation = seg::segment_frame(image, g, setup_.segmentation);
+    segmentation = segmentation::segment_frame(image, g, setup_.segmentation);
   }
   if (truth_of_frame_)
     if (const auto truth = truth_of_frame_(frame.frame.index)) {
-      scores_.add(seg::compare_labels(*truth, segmentation.labels, g.sector));
+      scores_.add(segmentation::compare_labels(*truth, segmentation.labels, g.sector));
       ++scored_frames_;
     }
   shares_.add(segmentation.labels);
@@ -72,8 +72,8 @@ Result<LabeledSlice> SegmenterStage::segment(const TrackedFrame& frame) {
       shares_warned_ = true;
     }
   repairs_.clear();
-  auto slice = seg::make_slice(segmentation.labels, g.sector, g.sector_px, plane,
-                               setup_.segmentation.simplify_mm, &repairs_);
+  auto slice = segmentation::make_slice(segmentation.labels, g.sector, g.sector_px, plane,
+                                        setup_.segmentation.simplify_mm, &repairs_);
   if (!slice) return slice.status();
   slice->timestamp_s = frame.frame.timestamp_s;
   return slice;
@@ -84,14 +84,14 @@ void SegmenterStage::score_against(
   truth_of_frame_ = std::move(truth_of_frame);
 }
 
-std::optional<seg::LabelComparison> SegmenterStage::scores() const {
+std::optional<segmentation::LabelComparison> SegmenterStage::scores() const {
   if (scored_frames_ == 0) return std::nullopt;
   return scores_;
 }
 
 std::map<int, std::string> SegmenterStage::label_names() const {
   std::map<int, std::string> names;
-  for (const seg::LabelModel& m : setup_.segmentation.materials) names[m.label] = m.name;
+  for (const segmentation::LabelModel& m : setup_.segmentation.materials) names[m.label] = m.name;
   return names;
 }
 

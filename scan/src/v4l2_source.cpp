@@ -13,22 +13,24 @@ namespace {
 
 // The sector of live frames: a live source has no header probe and no recording to find the
 // sector in, so the configuration says it (whole image or polygon).
-Result<seg::ImageGeometry> live_geometry(const seg::SegmentationConfig& config, int width_px,
-                                         int height_px, double spacing_mm, std::string& from) {
-  if (config.sector == seg::SectorSource::kPolygon) {
+Result<segmentation::ImageGeometry> live_geometry(const segmentation::SegmentationConfig& config,
+                                                  int width_px, int height_px, double spacing_mm,
+                                                  std::string& from) {
+  if (config.sector == segmentation::SectorSource::kPolygon) {
     SliceSet check;
     check.slices.emplace_back().fov = config.sector_polygon_px;
     if (const Status valid = validate_slice_set(check, "the config's sector polygon"); !valid)
       return Status::error(valid.message() + " (the \"sector\" of the segmentation config)");
     from = "config polygon";
-    return seg::polygon_geometry(width_px, height_px, spacing_mm, config.sector_polygon_px);
+    return segmentation::polygon_geometry(width_px, height_px, spacing_mm,
+                                          config.sector_polygon_px);
   }
-  if (config.sector == seg::SectorSource::kAuto)
+  if (config.sector == segmentation::SectorSource::kAuto)
     return Status::error(
         "--source v4l2: a live source cannot find the sector from a recording; "
         "set \"sector\" to \"full\" or a polygon in --segmentation");
   from = "full image";
-  return seg::full_image_geometry(width_px, height_px, spacing_mm);
+  return segmentation::full_image_geometry(width_px, height_px, spacing_mm);
 }
 
 // A frame grabber: frames from the device, poses from the tracker (--tracker, which the caller
@@ -37,7 +39,7 @@ Result<seg::ImageGeometry> live_geometry(const seg::SegmentationConfig& config, 
 }  // namespace
 
 Result<ScanSource> open_v4l2_source(const SourceRequest& request, const std::string& spec) {
-  auto options = acq::parse_v4l2_spec(spec);
+  auto options = acquisition::parse_v4l2_spec(spec);
   if (!options) return options.status();
   const int width_px = options->crop ? options->crop->width_px : options->width_px;
   const int height_px = options->crop ? options->crop->height_px : options->height_px;
@@ -55,7 +57,7 @@ Result<ScanSource> open_v4l2_source(const SourceRequest& request, const std::str
         "and preset, docs/segmentation.md)");
   ScanSource source;
   ScanSetup& setup = source.setup;
-  auto calibration = seg::read_calibration(*request.calibration);
+  auto calibration = segmentation::read_calibration(*request.calibration);
   if (!calibration) return calibration.status();
   setup.T_probe_image = *calibration;
   setup.calibration_from = request.calibration->string();
@@ -63,7 +65,7 @@ Result<ScanSource> open_v4l2_source(const SourceRequest& request, const std::str
                                       setup.T_probe_image.block<3, 1>(0, 1).norm());
   if (!(spacing_mm > 0.0) || !std::isfinite(spacing_mm))
     return Status::error(setup.calibration_from + ": the ImageToProbe calibration is degenerate");
-  auto config = seg::load_segmentation_config(request.segmentation, request.preset);
+  auto config = segmentation::load_segmentation_config(request.segmentation, request.preset);
   if (!config) return config.status();
   const std::string models_from =
       request.segmentation ? request.segmentation->string() : "preset " + request.preset;
@@ -76,7 +78,7 @@ Result<ScanSource> open_v4l2_source(const SourceRequest& request, const std::str
       live_geometry(setup.segmentation, width_px, height_px, spacing_mm, setup.sector_from);
   if (!geometry) return geometry.status();
   setup.geometry = std::move(*geometry);
-  for (const seg::LabelModel& m : setup.segmentation.materials)
+  for (const segmentation::LabelModel& m : setup.segmentation.materials)
     setup.labels.push_back({m.label, m.name});
   setup.bounds = request.bounds;
   std::ostringstream text;
@@ -84,7 +86,7 @@ Result<ScanSource> open_v4l2_source(const SourceRequest& request, const std::str
        << " image; calibration from " << setup.calibration_from << "; models from "
        << setup.models_from << "; sector from " << setup.sector_from;
   source.description = text.str();
-  source.frames = std::make_unique<acq::V4l2FrameSource>(std::move(*options));
+  source.frames = std::make_unique<acquisition::V4l2FrameSource>(std::move(*options));
   return source;
 }
 

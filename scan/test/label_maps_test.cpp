@@ -1,5 +1,5 @@
 // `scan --labels`: pairing label maps with frames by timestamp (LabelMapMatcher), and
-// LabelMapStage giving a frame the slice seg::make_slice gives its label map.
+// LabelMapStage giving a frame the slice segmentation::make_slice gives its label map.
 #include "sonoshape/scan/label_maps.hpp"
 
 #include <gtest/gtest.h>
@@ -53,7 +53,7 @@ class FakeFeed final : public LabelMapFeed {
 
 TEST(LabelMapStage, GivesEachFrameTheSliceOfItsLabelMapAndNoneWithoutOne) {
   ScanSetup setup;
-  setup.geometry = seg::full_image_geometry(8, 6, 0.5);
+  setup.geometry = segmentation::full_image_geometry(8, 6, 0.5);
   setup.T_probe_image = Eigen::Vector4d(0.5, 0.5, 1.0, 1.0).asDiagonal();
   setup.segmentation.simplify_mm = 0.0;
   LabelMapStage stage(setup, std::make_unique<FakeFeed>());
@@ -65,10 +65,10 @@ TEST(LabelMapStage, GivesEachFrameTheSliceOfItsLabelMapAndNoneWithoutOne) {
   const auto slice = stage.segment(frame);
   ASSERT_TRUE(slice) << slice.message();
   FakeFeed feed;
-  const auto plane =
-      seg::image_plane(frame.T_reference_probe.matrix() * setup.T_probe_image, Vec3(0, 0, 7));
-  const auto expected = seg::make_slice(*feed.label_map(frame.frame), setup.geometry.sector,
-                                        setup.geometry.sector_px, plane, 0.0);
+  const auto plane = segmentation::image_plane(
+      frame.T_reference_probe.matrix() * setup.T_probe_image, Vec3(0, 0, 7));
+  const auto expected = segmentation::make_slice(
+      *feed.label_map(frame.frame), setup.geometry.sector, setup.geometry.sector_px, plane, 0.0);
   ASSERT_TRUE(expected);
   ASSERT_EQ(slice->regions.size(), expected->regions.size());
   for (std::size_t r = 0; r < slice->regions.size(); ++r) {

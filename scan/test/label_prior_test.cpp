@@ -13,16 +13,16 @@ namespace sonoshape::scan {
 namespace {
 
 // A 100 x 80 image of 0.5 mm pixels whose plane is z = z_mm, pixel (i, j) at (i/2, j/2) mm.
-seg::ImagePlane plane_at(double z_mm) {
+segmentation::ImagePlane plane_at(double z_mm) {
   Eigen::Matrix4d T = Eigen::Matrix4d::Identity();
   T(0, 0) = T(1, 1) = T(2, 2) = 0.5;
   T(2, 3) = z_mm;
-  return seg::image_plane(T, Vec3(0, 0, z_mm));
+  return segmentation::image_plane(T, Vec3(0, 0, z_mm));
 }
 
 MeshSet nested_spheres() {
   MeshSet set;
-  TriangleMesh outer = sim::make_sphere(15.0), inner = sim::make_sphere(5.0);
+  TriangleMesh outer = simulator::make_sphere(15.0), inner = simulator::make_sphere(5.0);
   for (Vec3& p : outer.vertices) p += Vec3(25, 20, 0);
   for (Vec3& p : inner.vertices) p += Vec3(25, 20, 0);
   set.meshes.push_back({1, "organ", outer});
@@ -31,7 +31,7 @@ MeshSet nested_spheres() {
 }
 
 TEST(PredictLabelMap, DrawsNestedSectionsWherePixelsAre) {
-  const seg::ImageGeometry geometry = seg::full_image_geometry(100, 80, 0.5);
+  const segmentation::ImageGeometry geometry = segmentation::full_image_geometry(100, 80, 0.5);
   const LabelImage map = predict_label_map(nested_spheres(), plane_at(0.0), geometry);
   EXPECT_EQ(map.at(50, 40), 2);       // (25, 20) mm: the lesion, drawn over the organ's hole
   EXPECT_EQ(map.at(50 + 20, 40), 1);  // 10 mm off the centre: the organ
@@ -47,7 +47,7 @@ TEST(PredictLabelMap, DrawsNestedSectionsWherePixelsAre) {
   EXPECT_NEAR(lesion * 0.25, std::numbers::pi * 25.0, 0.15 * std::numbers::pi * 25.0);
   EXPECT_NEAR((organ + lesion) * 0.25, std::numbers::pi * 225.0, 0.06 * std::numbers::pi * 225.0);
   // Outside the sector nothing is predicted.
-  seg::ImageGeometry half = geometry;
+  segmentation::ImageGeometry half = geometry;
   for (int j = 0; j < 80; ++j)
     for (int i = 0; i < 50; ++i) half.sector.at(i, j) = 0;
   EXPECT_EQ(predict_label_map(nested_spheres(), plane_at(0.0), half).at(10, 10),
@@ -59,7 +59,7 @@ TEST(ReconstructionPrior, PredictsNothingFirstThenTheOrganBetweenItsSlices) {
   options.engine.max_depth = 5;
   options.bounds = Box3{Vec3(-10, -10, -30), Vec3(60, 50, 30)};
   ReconstructionPrior prior(options);
-  const seg::ImageGeometry geometry = seg::full_image_geometry(100, 80, 0.5);
+  const segmentation::ImageGeometry geometry = segmentation::full_image_geometry(100, 80, 0.5);
   EXPECT_FALSE(prior.predict(plane_at(0.0), geometry));
   // Two slices of a 15 mm disc-section organ at z = -4 and z = 4 mm.
   for (const double z : {-4.0, 4.0}) {

@@ -26,7 +26,7 @@ using namespace std::chrono_literals;
 
 // Frames every `period_ms` from t = 0 (timestamps from integer milliseconds, so they equal the
 // pose samples' exactly), failing or throwing after `fail_after` frames when asked.
-class FakeFrames final : public acq::FrameBackend {
+class FakeFrames final : public acquisition::FrameBackend {
  public:
   enum class Failure { kNone, kError, kThrow };
   FakeFrames(int count, int period_ms, Failure failure = Failure::kNone, int fail_after = 0)
@@ -35,17 +35,17 @@ class FakeFrames final : public acq::FrameBackend {
 
  protected:
   Status open() override { return Status::ok(); }
-  Result<acq::Polled> poll(Frame& frame) override {
+  Result<acquisition::Polled> poll(Frame& frame) override {
     if (failure_ != Failure::kNone && next_ == fail_after_) {
       if (failure_ == Failure::kThrow) throw std::runtime_error("USB device disconnected");
       return Status::error("fake probe: device vanished");
     }
-    if (next_ == count_) return acq::Polled::kEnd;
+    if (next_ == count_) return acquisition::Polled::kEnd;
     frame.image = GreyImage(8, 8, 100);
     frame.index = next_;
     frame.timestamp_s = (next_ * period_ms_) / 1000.0;
     ++next_;
-    return acq::Polled::kItem;
+    return acquisition::Polled::kItem;
   }
   bool is_playback() const override { return true; }
 
@@ -58,7 +58,7 @@ class FakeFrames final : public acq::FrameBackend {
 
 // Frames like FakeFrames, but after `unplug_at` frames the device is gone for `gap_s` of wall
 // time: the source stays running and says so in condition(), as the V4L2 grabber does.
-class UnpluggingFrames final : public acq::FrameBackend {
+class UnpluggingFrames final : public acquisition::FrameBackend {
  public:
   UnpluggingFrames(int count, int period_ms, int unplug_at, double gap_s)
       : count_(count), period_ms_(period_ms), unplug_at_(unplug_at), gap_s_(gap_s) {}
@@ -66,25 +66,25 @@ class UnpluggingFrames final : public acq::FrameBackend {
 
  protected:
   Status open() override { return Status::ok(); }
-  Result<acq::Polled> poll(Frame& frame) override {
+  Result<acquisition::Polled> poll(Frame& frame) override {
     if (next_ == unplug_at_ && !replugged_) {
       if (unplugged_at_s_ < 0.0) {
-        unplugged_at_s_ = acq::monotonic_s();
+        unplugged_at_s_ = acquisition::monotonic_s();
         set_condition("/dev/video0 vanished (ENODEV); reopening it when it comes back");
       }
-      if (acq::monotonic_s() - unplugged_at_s_ < gap_s_) {
+      if (acquisition::monotonic_s() - unplugged_at_s_ < gap_s_) {
         std::this_thread::sleep_for(5ms);
-        return acq::Polled::kNothing;
+        return acquisition::Polled::kNothing;
       }
       replugged_ = true;
       set_condition("");
     }
-    if (next_ == count_) return acq::Polled::kEnd;
+    if (next_ == count_) return acquisition::Polled::kEnd;
     frame.image = GreyImage(8, 8, 100);
     frame.index = next_;
     frame.timestamp_s = (next_ * period_ms_) / 1000.0;
     ++next_;
-    return acq::Polled::kItem;
+    return acquisition::Polled::kItem;
   }
   bool is_playback() const override { return true; }
 
@@ -109,7 +109,7 @@ std::vector<Pose> sliding_poses(double mm_per_s, int first_ms, int last_ms, int 
 }
 
 // The slice of a frame is its image plane (x, y of the probe) with one square region.
-// Frames in `repaired` report one dropped region each (as seg::make_slice would).
+// Frames in `repaired` report one dropped region each (as segmentation::make_slice would).
 class FakeSegmentation final : public SegmentationStage {
  public:
   explicit FakeSegmentation(std::set<std::int64_t> failing = {},
@@ -221,12 +221,12 @@ class RecordingSink final : public ScanSink {
 
 ScanSetup tiny_setup() {
   ScanSetup setup;
-  setup.geometry = seg::full_image_geometry(8, 8, 1.0);
+  setup.geometry = segmentation::full_image_geometry(8, 8, 1.0);
   setup.T_probe_image = Eigen::Matrix4d::Identity();  // 1 mm pixels
   return setup;
 }
 
-ScanSource fake_source(std::unique_ptr<acq::FrameSource> frames, std::vector<Pose> poses) {
+ScanSource fake_source(std::unique_ptr<acquisition::FrameSource> frames, std::vector<Pose> poses) {
   ScanSource source;
   source.frames = std::move(frames);
   source.poses = std::make_unique<tracking::RecordedPoseSource>(std::move(poses), "fake tracker");
@@ -256,7 +256,7 @@ TEST(ScanPipeline, FastPlaybackLosesNothingAndBatchesBehindASlowReconstruction) 
   FakeReconstruction* recon = reconstruction.get();
   ScanOptions options = fast_options();
   options.reconstruction_queue = 3;
-  ScanPipeline pipeline(fake_source(std::make_unique<acq::SourceOf<FakeFrames>>(60, 33),
+  ScanPipeline pipeline(fake_source(std::make_unique<acquisition::SourceOf<FakeFrames>>(60, 33),
                                     sliding_poses(18.0 * 33.0 / 33.333, -100, 2100, 25)),
                         std::make_unique<FakeSegmentation>(), std::move(reconstruction), options);
   auto sink = std::make_shared<RecordingSink>();
@@ -295,7 +295,7 @@ TEST(ScanPipeline, FastPlaybackLosesNothingAndBatchesBehindASlowReconstruction) 
 }
 
 TEST(ScanPipeline, TheSummarySaysWhyAMaterialOfTheSetupHasNoMesh) {
-  ScanSource source = fake_source(std::make_unique<acq::SourceOf<FakeFrames>>(20, 33),
+  ScanSource source = fake_source(std::make_unique<acquisition::SourceOf<FakeFrames>>(20, 33),
                                   sliding_poses(18.0, -100, 800, 25));
   source.setup.labels = {{1, "organ"}, {2, "lesion"}};  // the segmentation only finds the organ
   ScanPipeline pipeline(std::move(source), std::make_unique<FakeSegmentation>(),
@@ -320,7 +320,7 @@ TEST(ScanPipeline, RealTimeDropsAndCountsWhenTheReconstructionFallsBehind) {
   options.keyframes = {3.0, 1.0};
   options.segmentation_queue = 2;
   options.reconstruction_queue = 2;
-  ScanPipeline pipeline(fake_source(std::make_unique<acq::SourceOf<FakeFrames>>(150, 5),
+  ScanPipeline pipeline(fake_source(std::make_unique<acquisition::SourceOf<FakeFrames>>(150, 5),
                                     sliding_poses(1000.0, -100, 1000, 5)),
                         std::make_unique<FakeSegmentation>(), std::move(reconstruction), options);
   auto sink = std::make_shared<RecordingSink>();
@@ -350,9 +350,10 @@ TEST(ScanPipeline, FramesWithoutAPoseAreDroppedByReason) {
     poses.push_back(p);
     if (ms == 500) poses.back().status = TrackingStatus::kInvalid;
   }
-  ScanPipeline pipeline(fake_source(std::make_unique<acq::SourceOf<FakeFrames>>(20, 100), poses),
-                        std::make_unique<FakeSegmentation>(std::set<std::int64_t>{3}),
-                        std::make_unique<FakeReconstruction>(), fast_options());
+  ScanPipeline pipeline(
+      fake_source(std::make_unique<acquisition::SourceOf<FakeFrames>>(20, 100), poses),
+      std::make_unique<FakeSegmentation>(std::set<std::int64_t>{3}),
+      std::make_unique<FakeReconstruction>(), fast_options());
   ASSERT_TRUE(pipeline.start());
   const ScanCounters c = pipeline.finish().counters;
   EXPECT_EQ(c.frames_received, 20u);
@@ -365,7 +366,7 @@ TEST(ScanPipeline, FramesWithoutAPoseAreDroppedByReason) {
   expect_accounted(c);
 
   // No tracker at all: every frame's pose is missing.
-  ScanPipeline blind(fake_source(std::make_unique<acq::SourceOf<FakeFrames>>(5, 100), {}),
+  ScanPipeline blind(fake_source(std::make_unique<acquisition::SourceOf<FakeFrames>>(5, 100), {}),
                      std::make_unique<FakeSegmentation>(), std::make_unique<FakeReconstruction>(),
                      fast_options());
   ASSERT_TRUE(blind.start());
@@ -376,7 +377,7 @@ TEST(ScanPipeline, AVanishingSourceIsReportedAndTheMeshesSoFarAreKept) {
   for (const auto failure : {FakeFrames::Failure::kError, FakeFrames::Failure::kThrow}) {
     testing::TempDir dir;
     ScanPipeline pipeline(
-        fake_source(std::make_unique<acq::SourceOf<FakeFrames>>(100, 33, failure, 20),
+        fake_source(std::make_unique<acquisition::SourceOf<FakeFrames>>(100, 33, failure, 20),
                     sliding_poses(60.0, -100, 4000, 25)),
         std::make_unique<FakeSegmentation>(), std::make_unique<FakeReconstruction>(),
         fast_options());
@@ -409,7 +410,7 @@ TEST(ScanPipeline, AVanishingSourceIsReportedAndTheMeshesSoFarAreKept) {
 
 TEST(ScanPipeline, AnUnpluggedGrabberIsReportedAndTheScanGoesOnWhenItIsBack) {
   ScanPipeline pipeline(
-      fake_source(std::make_unique<acq::SourceOf<UnpluggingFrames>>(40, 33, 15, 0.3),
+      fake_source(std::make_unique<acquisition::SourceOf<UnpluggingFrames>>(40, 33, 15, 0.3),
                   sliding_poses(60.0, -100, 2000, 25)),
       std::make_unique<FakeSegmentation>(), std::make_unique<FakeReconstruction>(), fast_options());
   auto sink = std::make_shared<RecordingSink>();
@@ -439,7 +440,7 @@ TEST(ScanPipeline, StopRequestFinishesCleanly) {
   ScanOptions options;
   options.real_time = true;
   options.keyframes = {3.0, 1.0};
-  ScanPipeline pipeline(fake_source(std::make_unique<acq::SourceOf<FakeFrames>>(1000, 10),
+  ScanPipeline pipeline(fake_source(std::make_unique<acquisition::SourceOf<FakeFrames>>(1000, 10),
                                     sliding_poses(300.0, -100, 11000, 10)),
                         std::make_unique<FakeSegmentation>(),
                         std::make_unique<FakeReconstruction>(5), options);
@@ -462,7 +463,7 @@ TEST(ScanPipeline, StopRequestFinishesCleanly) {
 TEST(ScanPipeline, MaxSlicesAndDurationStopTheScan) {
   ScanOptions options = fast_options();
   options.max_slices = 7;
-  ScanPipeline capped(fake_source(std::make_unique<acq::SourceOf<FakeFrames>>(100, 33),
+  ScanPipeline capped(fake_source(std::make_unique<acquisition::SourceOf<FakeFrames>>(100, 33),
                                   sliding_poses(60.0, -100, 4000, 25)),
                       std::make_unique<FakeSegmentation>(), std::make_unique<FakeReconstruction>(),
                       options);
@@ -474,7 +475,7 @@ TEST(ScanPipeline, MaxSlicesAndDurationStopTheScan) {
   ScanOptions timed;
   timed.real_time = true;
   timed.duration_s = 0.2;
-  ScanPipeline limited(fake_source(std::make_unique<acq::SourceOf<FakeFrames>>(1000, 10),
+  ScanPipeline limited(fake_source(std::make_unique<acquisition::SourceOf<FakeFrames>>(1000, 10),
                                    sliding_poses(60.0, -100, 11000, 10)),
                        std::make_unique<FakeSegmentation>(), std::make_unique<FakeReconstruction>(),
                        timed);
@@ -491,7 +492,7 @@ TEST(ScanPipeline, PastTheSliceBudgetKeyframesComeAtHalfTheDensity) {
   auto scan = [&](std::size_t budget) {
     ScanOptions options = fast_options();
     options.keyframes.slice_budget = budget;
-    ScanPipeline pipeline(fake_source(std::make_unique<acq::SourceOf<FakeFrames>>(60, 33),
+    ScanPipeline pipeline(fake_source(std::make_unique<acquisition::SourceOf<FakeFrames>>(60, 33),
                                       sliding_poses(mm_per_s, -100, 2100, 25)),
                           std::make_unique<FakeSegmentation>(),
                           std::make_unique<FakeReconstruction>(), options);
@@ -518,10 +519,11 @@ TEST(ScanPipeline, RejectsMissingParts) {
                std::invalid_argument);
   ScanOptions zero;
   zero.segmentation_queue = 0;
-  EXPECT_THROW(ScanPipeline(fake_source(std::make_unique<acq::SourceOf<FakeFrames>>(1, 10), {}),
-                            std::make_unique<FakeSegmentation>(),
-                            std::make_unique<FakeReconstruction>(), zero),
-               std::invalid_argument);
+  EXPECT_THROW(
+      ScanPipeline(fake_source(std::make_unique<acquisition::SourceOf<FakeFrames>>(1, 10), {}),
+                   std::make_unique<FakeSegmentation>(), std::make_unique<FakeReconstruction>(),
+                   zero),
+      std::invalid_argument);
 }
 
 TEST(ScanPipeline, SegmentationRepairsAreCountedAndListedWithTheirFrame) {
@@ -529,7 +531,7 @@ TEST(ScanPipeline, SegmentationRepairsAreCountedAndListedWithTheirFrame) {
   // the first 20 listed with their frame index, and scan.json carries them.
   std::set<std::int64_t> repaired;
   for (std::int64_t k = 4; k < 29; ++k) repaired.insert(k);
-  ScanPipeline pipeline(fake_source(std::make_unique<acq::SourceOf<FakeFrames>>(40, 33),
+  ScanPipeline pipeline(fake_source(std::make_unique<acquisition::SourceOf<FakeFrames>>(40, 33),
                                     sliding_poses(36.0 * 33.0 / 33.333, -100, 1500, 25)),
                         std::make_unique<FakeSegmentation>(std::set<std::int64_t>{}, repaired),
                         std::make_unique<FakeReconstruction>(), fast_options());

@@ -181,7 +181,7 @@ void check_plus_scan(const ScanSummary& summary, const fs::path& out) {
   const auto slices = read_slice_set(out / "slices.json");
   ASSERT_TRUE(slices) << slices.message();
   ASSERT_FALSE(slices->slices.empty());
-  auto file = acq::read_sequence_file(kPlusSweep);
+  auto file = acquisition::read_sequence_file(kPlusSweep);
   ASSERT_TRUE(file);
   for (const LabeledSlice& slice : slices->slices) {
     ASSERT_TRUE(slice.timestamp_s);
@@ -190,7 +190,7 @@ void check_plus_scan(const ScanSummary& summary, const fs::path& out) {
     ASSERT_LT(k, file->frame_count());
     const Eigen::Matrix4d image_to_reference = file->transform("ReferenceToTracker", k)->inverse() *
                                                *file->transform("ProbeToTracker", k) *
-                                               *acq::read_image_to_probe(kPlusConfig);
+                                               *acquisition::read_image_to_probe(kPlusConfig);
     for (const Eigen::Vector4d& pixel :
          {Eigen::Vector4d(0, 0, 0, 1), Eigen::Vector4d(819, 615, 0, 1)}) {
       const Vec3 p = (image_to_reference * pixel).head<3>();
@@ -261,9 +261,9 @@ TEST(ScanSources, ReplayBoxHoldsEverySectorSoUpdatesStayIncremental) {
   ScanSource source = open_plus_sweep();
   ASSERT_TRUE(source.setup.bounds);
   const Box3 box = *source.setup.bounds;
-  auto file = acq::read_sequence_file(kPlusSweep);
+  auto file = acquisition::read_sequence_file(kPlusSweep);
   ASSERT_TRUE(file);
-  const Eigen::Matrix4d image_to_probe = *acq::read_image_to_probe(kPlusConfig);
+  const Eigen::Matrix4d image_to_probe = *acquisition::read_image_to_probe(kPlusConfig);
   for (std::size_t k = 0; k < file->frame_count(); ++k) {
     const Eigen::Matrix4d image_to_reference = file->transform("ReferenceToTracker", k)->inverse() *
                                                *file->transform("ProbeToTracker", k) *
@@ -358,7 +358,7 @@ class CountingSegmenter final : public SegmentationStage {
     inner_.on_meshes(meshes);
     if (!meshes.meshes.empty()) ++*meshes_seen;
   }
-  std::optional<seg::LabelComparison> scores() const override { return inner_.scores(); }
+  std::optional<segmentation::LabelComparison> scores() const override { return inner_.scores(); }
   SegmenterStage& inner() { return inner_; }
   // Shared: the pipeline owns (and destroys) the stage.
   std::shared_ptr<std::atomic<int>> meshes_seen = std::make_shared<std::atomic<int>>(0);
@@ -370,7 +370,7 @@ class CountingSegmenter final : public SegmentationStage {
 TEST(ScanSources, GraphCutScanTakesTheReconstructionAsItsPrior) {
   auto source = open_scan_source(small_sim_request(), small_sim());
   ASSERT_TRUE(source) << source.message();
-  source->setup.segmentation.method = seg::LabellingMethod::kGraphCut;
+  source->setup.segmentation.method = segmentation::LabellingMethod::kGraphCut;
   auto segmenter = std::make_unique<CountingSegmenter>(source->setup);
   ASSERT_TRUE(source->truth_of_frame);
   segmenter->inner().score_against(source->truth_of_frame);

@@ -31,7 +31,7 @@ double monotonic_now_s() {
 }
 
 // A live probe: `count` tiny frames every `period_s`, stamped with CLOCK_MONOTONIC.
-class MonotonicFrames final : public acq::FrameBackend {
+class MonotonicFrames final : public acquisition::FrameBackend {
  public:
   MonotonicFrames(int count, double period_s) : count_(count), period_s_(period_s) {}
   std::string describe() const override { return "monotonic probe"; }
@@ -41,18 +41,18 @@ class MonotonicFrames final : public acq::FrameBackend {
     next_due_s_ = monotonic_now_s();
     return Status::ok();
   }
-  Result<acq::Polled> poll(Frame& frame) override {
-    if (next_ == count_) return acq::Polled::kEnd;
+  Result<acquisition::Polled> poll(Frame& frame) override {
+    if (next_ == count_) return acquisition::Polled::kEnd;
     const double wait_s = next_due_s_ - monotonic_now_s();
     if (wait_s > 0.0) {
       std::this_thread::sleep_for(std::chrono::duration<double>(std::min(wait_s, 0.01)));
-      return acq::Polled::kNothing;
+      return acquisition::Polled::kNothing;
     }
     frame.image = GreyImage(8, 8, 100);
     frame.index = next_++;
     frame.timestamp_s = monotonic_now_s();
     next_due_s_ += period_s_;
-    return acq::Polled::kItem;
+    return acquisition::Polled::kItem;
   }
 
  private:
@@ -146,9 +146,10 @@ TEST(ScanWithTrakstar, UnplugAndReplugMidScanKeepTheMeshesAndPosesResume) {
   tracking::TrakstarPoseSource* tracker_view = tracker.get();
 
   ScanSource source;
-  source.frames = std::make_unique<acq::SourceOf<MonotonicFrames>>(100, 0.02);  // 2 s at 50 fps
+  source.frames =
+      std::make_unique<acquisition::SourceOf<MonotonicFrames>>(100, 0.02);  // 2 s at 50 fps
   source.poses = std::move(tracker);
-  source.setup.geometry = seg::full_image_geometry(8, 8, 1.0);
+  source.setup.geometry = segmentation::full_image_geometry(8, 8, 1.0);
   source.setup.T_probe_image = Eigen::Matrix4d::Identity();
   ScanOptions scan_options;
   scan_options.drop_when_behind = false;

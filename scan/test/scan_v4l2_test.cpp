@@ -158,8 +158,8 @@ ScanSummary run_fast(ScanSource source, const std::shared_ptr<ScanSink>& sink, s
 
 // The frames of a simulated source (rendered again: seeded) as a GREY grabber's MMAP buffers,
 // stamped with the frames' times; the fake pads each 160-pixel row to 168 bytes.
-std::vector<testing::FakeV4l2Driver::Filled> grabbed_frames(acq::FrameSource& frames) {
-  acq::SourceOptions drain;
+std::vector<testing::FakeV4l2Driver::Filled> grabbed_frames(acquisition::FrameSource& frames) {
+  acquisition::SourceOptions drain;
   drain.wait_when_full = true;
   EXPECT_TRUE(frames.start(drain));
   std::vector<testing::FakeV4l2Driver::Filled> buffers;
@@ -176,9 +176,9 @@ std::vector<testing::FakeV4l2Driver::Filled> grabbed_frames(acq::FrameSource& fr
 
 // The final meshes of `got` are those of `want`: same labels (and, with `same_triangles`, the
 // same triangle counts), IoU >= `min_iou` for every label with a surface. Returns the scores.
-std::vector<sim::LabelScore> expect_same_meshes(const MeshSet& got, const MeshSet& want,
-                                                const Box3& box, bool same_triangles = true,
-                                                double min_iou = 0.99) {
+std::vector<simulator::LabelScore> expect_same_meshes(const MeshSet& got, const MeshSet& want,
+                                                      const Box3& box, bool same_triangles = true,
+                                                      double min_iou = 0.99) {
   EXPECT_EQ(got.meshes.size(), want.meshes.size());
   if (got.meshes.size() != want.meshes.size()) return {};
   MeshSet seen;
@@ -191,10 +191,10 @@ std::vector<sim::LabelScore> expect_same_meshes(const MeshSet& got, const MeshSe
     if (!want.meshes[k].mesh.triangles.empty()) seen.meshes.push_back(want.meshes[k]);
   }
   EXPECT_GE(seen.meshes.size(), 2u);  // the two organs (the rib hides in its shadow)
-  sim::EvaluationOptions evaluation;
+  simulator::EvaluationOptions evaluation;
   evaluation.grid_resolution = 80;
   evaluation.surface_samples = 2000;
-  auto scores = sim::evaluate(got, seen, nullptr, box, evaluation);
+  auto scores = simulator::evaluate(got, seen, nullptr, box, evaluation);
   for (const auto& score : scores) EXPECT_GE(score.iou, min_iou) << "label " << score.label;
   return scores;
 }
@@ -227,9 +227,9 @@ TEST(ScanV4l2, SimulatedSweepThroughAnEmulatedGrabberReconstructsAsThroughSim) {
     buffers[k].sequence = sequence++;
     driver->push(std::move(buffers[k]));
   }
-  auto options = acq::parse_v4l2_spec("/dev/video3?format=GREY");
+  auto options = acquisition::parse_v4l2_spec("/dev/video3?format=GREY");
   ASSERT_TRUE(options);
-  source->frames = std::make_unique<acq::V4l2FrameSource>(*options, driver);
+  source->frames = std::make_unique<acquisition::V4l2FrameSource>(*options, driver);
   auto grabbed = std::make_shared<FinalMeshes>();
   const ScanSummary summary = run_fast(std::move(*source), grabbed, 11);
 
@@ -285,7 +285,7 @@ double clock_monotonic_s() {
 
 // The tracker samples of a simulated source, in time order.
 std::vector<Pose> recorded_poses(tracking::PoseSource& poses) {
-  acq::SourceOptions drain;
+  acquisition::SourceOptions drain;
   drain.wait_when_full = true;
   EXPECT_TRUE(poses.start(drain));
   std::vector<Pose> samples;
@@ -364,9 +364,9 @@ TEST(ScanV4l2, SimulatedSweepThroughEmulatedGrabberAndTrackerReconstructsAsThrou
   auto driver = std::make_shared<testing::FakeV4l2Driver>("/dev/video3", 160, 160);
   driver->offered = {V4L2_PIX_FMT_GREY};
   for (auto& buffer : buffers) buffer.timestamp_s += t0_s;
-  auto options = acq::parse_v4l2_spec("/dev/video3?format=GREY");
+  auto options = acquisition::parse_v4l2_spec("/dev/video3?format=GREY");
   ASSERT_TRUE(options);
-  source->frames = std::make_unique<acq::V4l2FrameSource>(*options, driver);
+  source->frames = std::make_unique<acquisition::V4l2FrameSource>(*options, driver);
 
   auto emulated = std::make_shared<FinalMeshes>();
   ScanSummary summary;
@@ -435,12 +435,12 @@ TEST(ScanV4l2, GrabberUnpluggedMidScanIsReportedAndTheScanGoesOnWithItsMeshes) {
   auto buffers = grabbed_frames(*source->frames);
   ASSERT_EQ(buffers.size(), 11u);
   for (std::size_t k = 0; k < 6; ++k) driver->push(buffers[k]);
-  auto options = acq::parse_v4l2_spec("/dev/video3?format=GREY");
+  auto options = acquisition::parse_v4l2_spec("/dev/video3?format=GREY");
   ASSERT_TRUE(options);
   options->reopen_first_s = 0.01;
   options->reopen_max_s = 0.05;
-  auto grabber = std::make_unique<acq::V4l2FrameSource>(*options, driver);
-  const acq::V4l2FrameSource* watched = grabber.get();  // owned by the pipeline below
+  auto grabber = std::make_unique<acquisition::V4l2FrameSource>(*options, driver);
+  const acquisition::V4l2FrameSource* watched = grabber.get();  // owned by the pipeline below
   source->frames = std::move(grabber);
 
   recon::ReconstructorOptions engine;

@@ -4,7 +4,7 @@
 #include <cmath>
 #include <opencv2/imgproc.hpp>
 
-namespace sonoshape::seg::detail {
+namespace sonoshape::segmentation::detail {
 namespace {
 
 // Inverse of the standard normal distribution function by bisection (|z| < 8 is plenty).
@@ -94,4 +94,4 @@ void undo_blooming(cv::Mat& map, const cv::Mat& sector, const cv::Mat& grey,
   }
 }
 
-}  // namespace sonoshape::seg::detail
+}  // namespace sonoshape::segmentation::detail

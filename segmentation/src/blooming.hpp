@@ -5,7 +5,7 @@
 #include <opencv2/core.hpp>
 #include <vector>
 
-namespace sonoshape::seg::detail {
+namespace sonoshape::segmentation::detail {
 
 /// A label value and its grey mean.
 struct GreyClass {
@@ -30,4 +30,4 @@ void undo_blooming(cv::Mat& map, const cv::Mat& sector, const cv::Mat& grey,
                    const std::vector<GreyClass>& classes, double psf_sigma_mm,
                    double dynamic_range_db, double spacing_mm, int excluded);
 
-}  // namespace sonoshape::seg::detail
+}  // namespace sonoshape::segmentation::detail

@@ -4,7 +4,7 @@
 #include <cmath>
 #include <opencv2/imgproc.hpp>
 
-namespace sonoshape::seg::detail {
+namespace sonoshape::segmentation::detail {
 namespace {
 
 // Lengths (mm) of the echo test: the average across the beam, and how far above and below the
@@ -54,4 +54,4 @@ cv::Mat fill_boundary_echoes(const cv::Mat& grey, const cv::Mat& sector, double 
   return out;
 }
 
-}  // namespace sonoshape::seg::detail
+}  // namespace sonoshape::segmentation::detail

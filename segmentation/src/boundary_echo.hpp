@@ -6,7 +6,7 @@
 // Internal to the segmentation module.
 #include <opencv2/core.hpp>
 
-namespace sonoshape::seg::detail {
+namespace sonoshape::segmentation::detail {
 
 /// `grey` (CV_8U) with its boundary echoes replaced: a pixel of the sector whose grey, averaged
 /// over about 2 mm across the beam (the image rows), exceeds by more than `contrast_grey` the
@@ -17,4 +17,4 @@ namespace sonoshape::seg::detail {
 cv::Mat fill_boundary_echoes(const cv::Mat& grey, const cv::Mat& sector, double spacing_mm,
                              double contrast_grey);
 
-}  // namespace sonoshape::seg::detail
+}  // namespace sonoshape::segmentation::detail

@@ -19,7 +19,7 @@
 #include "sonoshape/core/errors.hpp"
 #include "sonoshape/core/input_file.hpp"
 
-namespace sonoshape::seg {
+namespace sonoshape::segmentation {
 namespace {
 
 using nlohmann::json;
@@ -553,4 +553,4 @@ SegmentationConfig auto_two_class(const std::vector<std::uint8_t>& samples,
   return config;
 }
 
-}  // namespace sonoshape::seg
+}  // namespace sonoshape::segmentation

@@ -17,7 +17,7 @@
 #include "sonoshape/core/errors.hpp"
 #include "sonoshape/core/slice_io.hpp"
 
-namespace sonoshape::seg {
+namespace sonoshape::segmentation {
 namespace {
 
 // The masks are traced at this many times their resolution (see trace_mask).
@@ -352,4 +352,4 @@ Result<LabeledSlice> make_slice(const LabelImage& labels, const ImageU8& sector,
   return slice;
 }
 
-}  // namespace sonoshape::seg
+}  // namespace sonoshape::segmentation

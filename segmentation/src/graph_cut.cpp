@@ -17,7 +17,7 @@
 #include <stdexcept>
 #include <utility>
 
-namespace sonoshape::seg::detail {
+namespace sonoshape::segmentation::detail {
 namespace {
 
 // The graph is a compressed sparse row graph, built from one sorted edge list: a frame's graph
@@ -280,4 +280,4 @@ double GridLabelling::minimise(const std::vector<float>& cost,
   return best;
 }
 
-}  // namespace sonoshape::seg::detail
+}  // namespace sonoshape::segmentation::detail

@@ -7,7 +7,7 @@
 #include <memory>
 #include <vector>
 
-namespace sonoshape::seg::detail {
+namespace sonoshape::segmentation::detail {
 
 /// A cost at or above this keeps a cell off a label; an expansion that no cell can take (every
 /// cell has the label or this cost for it) is skipped.
@@ -43,4 +43,4 @@ class GridLabelling {
   int width_, height_, labels_;
 };
 
-}  // namespace sonoshape::seg::detail
+}  // namespace sonoshape::segmentation::detail

@@ -13,7 +13,7 @@
 #include "parallel.hpp"
 #include "segmenter_internal.hpp"
 
-namespace sonoshape::seg {
+namespace sonoshape::segmentation {
 namespace {
 
 // Fewer interior pixels than this in a frame leave a label's appearance model as it was.
@@ -650,4 +650,4 @@ Segmentation GraphCutLabeller::segment(const GreyImage& image, const LabelImage*
                                });
 }
 
-}  // namespace sonoshape::seg
+}  // namespace sonoshape::segmentation

@@ -5,7 +5,7 @@
 #include <opencv2/imgproc.hpp>
 #include <string>
 
-namespace sonoshape::seg {
+namespace sonoshape::segmentation {
 namespace {
 
 // Outline colours (BGR) per material; the truth's outline is white.
@@ -80,4 +80,4 @@ Status write_overlay(const std::filesystem::path& path, const GreyImage& frame,
   return Status::ok();
 }
 
-}  // namespace sonoshape::seg
+}  // namespace sonoshape::segmentation

@@ -6,7 +6,7 @@
 #include <opencv2/core/parallel/backend/parallel_for.tbb.hpp>
 #endif
 
-namespace sonoshape::seg::detail {
+namespace sonoshape::segmentation::detail {
 
 void use_instrumented_parallel_backend() {
 #if defined(__SANITIZE_THREAD__)
@@ -24,4 +24,4 @@ const bool kInstrumentedBackend = (use_instrumented_parallel_backend(), true);
 }  // namespace
 #endif
 
-}  // namespace sonoshape::seg::detail
+}  // namespace sonoshape::segmentation::detail

@@ -9,7 +9,7 @@
 #include <opencv2/core.hpp>
 #include <utility>
 
-namespace sonoshape::seg::detail {
+namespace sonoshape::segmentation::detail {
 
 /// TSan builds: sets OpenCV's parallel backend to the instrumented one, once. Otherwise nothing.
 void use_instrumented_parallel_backend();
@@ -22,4 +22,4 @@ void parallel_for(const cv::Range& range, Body&& body) {
   cv::parallel_for_(range, std::forward<Body>(body));
 }
 
-}  // namespace sonoshape::seg::detail
+}  // namespace sonoshape::segmentation::detail

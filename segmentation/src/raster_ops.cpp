@@ -13,7 +13,7 @@
 #include "parallel.hpp"
 #include "sonoshape/core/target_clones.hpp"
 
-namespace sonoshape::seg::detail {
+namespace sonoshape::segmentation::detail {
 namespace {
 
 // Row distances are bytes (twice the SIMD width of 16 bits); a kernel row wider than this falls
@@ -228,4 +228,4 @@ cv::Mat gaussian_blur_rows(const cv::Mat& src, double sigma, cv::Rect region, bo
   return dst;
 }
 
-}  // namespace sonoshape::seg::detail
+}  // namespace sonoshape::segmentation::detail

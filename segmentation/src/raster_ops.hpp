@@ -4,7 +4,7 @@
 // Internal to the segmentation module.
 #include <opencv2/core.hpp>
 
-namespace sonoshape::seg::detail {
+namespace sonoshape::segmentation::detail {
 
 /// cv::dilate(mask, kernel) with OpenCV's default anchor and border (outside the image adds
 /// nothing), for a 0/255 CV_8U mask and a kernel whose rows are runs centred on the anchor
@@ -30,4 +30,4 @@ cv::Mat open_runs(const cv::Mat& mask, const cv::Mat& kernel);
 cv::Mat gaussian_blur_rows(const cv::Mat& src, double sigma, cv::Rect region = {},
                            bool simd = true);
 
-}  // namespace sonoshape::seg::detail
+}  // namespace sonoshape::segmentation::detail

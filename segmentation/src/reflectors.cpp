@@ -8,7 +8,7 @@
 
 #include "sonoshape/core/image.hpp"
 
-namespace sonoshape::seg::detail {
+namespace sonoshape::segmentation::detail {
 namespace {
 
 // The width of the ellipse is fitted within these multiples of the band's half width: a band
@@ -149,4 +149,4 @@ void fill_reflector_sections(cv::Mat& map, const cv::Mat& grey, const cv::Mat& s
   }
 }
 
-}  // namespace sonoshape::seg::detail
+}  // namespace sonoshape::segmentation::detail

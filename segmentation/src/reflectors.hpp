@@ -3,7 +3,7 @@
 // so the label map gets the organ's cross-section from that band and the organ's thickness.
 #include <opencv2/core.hpp>
 
-namespace sonoshape::seg::detail {
+namespace sonoshape::segmentation::detail {
 
 /// Replaces every surface band of `label` in `map` (CV_8U; connected components of that value
 /// at least `min_width_px` columns wide) by the organ's cross-section: an ellipse whose axis
@@ -16,4 +16,4 @@ namespace sonoshape::seg::detail {
 void fill_reflector_sections(cv::Mat& map, const cv::Mat& grey, const cv::Mat& sector,
                              std::uint8_t label, double thickness_px, int min_width_px);
 
-}  // namespace sonoshape::seg::detail
+}  // namespace sonoshape::segmentation::detail

@@ -8,7 +8,7 @@
 #include <sstream>
 #include <stdexcept>
 
-namespace sonoshape::seg {
+namespace sonoshape::segmentation {
 namespace {
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
@@ -96,8 +96,10 @@ LabelComparison compare_labels(const LabelImage& truth, const LabelImage& ours,
   return out;
 }
 
-Status check_truth_labels(const acq::SequenceFile& sweep, const std::filesystem::path& sweep_path,
-                          const acq::SequenceFile& truth, const std::filesystem::path& truth_path) {
+Status check_truth_labels(const acquisition::SequenceFile& sweep,
+                          const std::filesystem::path& sweep_path,
+                          const acquisition::SequenceFile& truth,
+                          const std::filesystem::path& truth_path) {
   const std::string fix =
       "; give the labels.mha that `sonoshape simulate --truth DIR` wrote "
       "together with " +
@@ -158,4 +160,4 @@ Status write_comparison_report(const std::vector<FrameComparison>& frames,
   return Status::ok();
 }
 
-}  // namespace sonoshape::seg
+}  // namespace sonoshape::segmentation

@@ -4,7 +4,7 @@
 #include <cmath>
 #include <stdexcept>
 
-namespace sonoshape::seg {
+namespace sonoshape::segmentation {
 
 SectorShareCheck::SectorShareCheck(const ImageU8& sector) : sector_(sector) {
   for (const std::uint8_t v : sector_.pixels) sector_px_ += v ? 1 : 0;
@@ -50,4 +50,4 @@ std::optional<std::string> SectorShareCheck::warning(
          "bone, soft-tissue) or give models with --config (docs/segmentation.md)";
 }
 
-}  // namespace sonoshape::seg
+}  // namespace sonoshape::segmentation

@@ -17,7 +17,7 @@
 #include "segmenter_internal.hpp"
 #include "stage_times.hpp"
 
-namespace sonoshape::seg {
+namespace sonoshape::segmentation {
 namespace {
 
 // Depth bins (mm) of the initial trend estimate, and the fewest pixels a bin needs to count.
@@ -917,4 +917,4 @@ Segmentation detail::segment_frame(const GreyImage& image, const ImageGeometry& 
   return FrameSegmenter(image, geometry, config, refine).run();
 }
 
-}  // namespace sonoshape::seg
+}  // namespace sonoshape::segmentation

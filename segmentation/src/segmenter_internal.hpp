@@ -5,7 +5,7 @@
 
 #include "sonoshape/segmentation/segmenter.hpp"
 
-namespace sonoshape::seg::detail {
+namespace sonoshape::segmentation::detail {
 
 /// A class (background or material) whose grey mean stands this far above every other's is a
 /// strong reflector (bone): its thin band is found on the median-filtered grey and its
@@ -23,4 +23,4 @@ using RefineStep = std::function<void(cv::Mat& map, const cv::Mat& grey, const c
 Segmentation segment_frame(const GreyImage& image, const ImageGeometry& geometry,
                            const SegmentationConfig& config, const RefineStep& refine);
 
-}  // namespace sonoshape::seg::detail
+}  // namespace sonoshape::segmentation::detail

@@ -6,7 +6,7 @@
 #include <chrono>
 #include <cstddef>
 
-namespace sonoshape::seg::detail {
+namespace sonoshape::segmentation::detail {
 
 /// The stages of segment_frame, in order (docs/segmentation.md, "Method").
 enum class Stage : std::size_t {
@@ -45,4 +45,4 @@ class StageClock {
   Clock::time_point last_{};
 };
 
-}  // namespace sonoshape::seg::detail
+}  // namespace sonoshape::segmentation::detail

@@ -23,7 +23,7 @@
 #include "sonoshape/segmentation/contours.hpp"
 #include "sonoshape/segmentation/labeller.hpp"
 
-namespace sonoshape::seg {
+namespace sonoshape::segmentation {
 namespace {
 
 // Frames sampled for an automatic sector and for the two-class model (every frame would cost
@@ -60,7 +60,7 @@ std::optional<double> to_number(const std::string& text) {
 
 // The label models the simulator writes in the header; none when it has none.
 std::optional<std::pair<LabelModel, std::vector<LabelModel>>> header_models(
-    const acq::SequenceFile& file) {
+    const acquisition::SequenceFile& file) {
   const auto means = file.field("SonoshapeLabelGreyMean");
   const auto stds = file.field("SonoshapeLabelGreyStd");
   if (!means || !stds) return std::nullopt;
@@ -121,7 +121,7 @@ double calibration_spacing_mm(const Eigen::Matrix4d& T_probe_image) {
 }
 
 // The sector of a simulated sweep from its probe.
-ImageGeometry probe_geometry(const acq::Probe& probe) {
+ImageGeometry probe_geometry(const acquisition::Probe& probe) {
   ImageGeometry g;
   g.width_px = probe.width_px();
   g.height_px = probe.height_px();
@@ -138,7 +138,7 @@ ImageGeometry probe_geometry(const acq::Probe& probe) {
   return g;
 }
 
-std::vector<const GreyImage*> sampled_frames(const acq::SequenceFile& file) {
+std::vector<const GreyImage*> sampled_frames(const acquisition::SequenceFile& file) {
   std::vector<const GreyImage*> frames;
   const std::size_t n = file.frame_count();
   const std::size_t step = std::max<std::size_t>(1, n / kMaxSampledFrames);
@@ -167,7 +167,8 @@ std::size_t unknown_in_sector(const LabelImage& labels, const ImageGeometry& geo
 
 // Median-filtered grey levels of the sector's pixels (every kSampleStridePx-th row and column)
 // of the sampled frames: what the label models are learnt from.
-std::vector<std::uint8_t> sector_samples(const acq::SequenceFile& file, const SweepSetup& setup) {
+std::vector<std::uint8_t> sector_samples(const acquisition::SequenceFile& file,
+                                         const SweepSetup& setup) {
   std::vector<std::uint8_t> samples;
   cv::Mat filtered;
   for (const GreyImage* frame : sampled_frames(file)) {
@@ -183,14 +184,14 @@ std::vector<std::uint8_t> sector_samples(const acq::SequenceFile& file, const Sw
 
 }  // namespace
 
-Result<ImageGeometry> geometry_from_header(const acq::FieldList& fields) {
-  auto probe = acq::probe_from_fields(fields);
+Result<ImageGeometry> geometry_from_header(const acquisition::FieldList& fields) {
+  auto probe = acquisition::probe_from_fields(fields);
   if (!probe) return probe.status();
   return probe_geometry(*probe);
 }
 
 Result<Eigen::Matrix4d> read_calibration(const std::filesystem::path& path) {
-  if (is_xml(path)) return acq::read_image_to_probe(path);
+  if (is_xml(path)) return acquisition::read_image_to_probe(path);
   if (!has_extension(path, ".json"))
     return Status::error("calibration " + path.string() +
                          ": give a PLUS device-set .xml or calibration result .results.xml "
@@ -219,7 +220,7 @@ Result<Eigen::Matrix4d> read_calibration(const std::filesystem::path& path) {
   return m;
 }
 
-Result<SweepSetup> prepare_sweep(const acq::SequenceFile& file,
+Result<SweepSetup> prepare_sweep(const acquisition::SequenceFile& file,
                                  const std::filesystem::path& sequence_path,
                                  const std::optional<std::filesystem::path>& config_path,
                                  const std::optional<std::filesystem::path>& calibration_path,
@@ -231,13 +232,14 @@ Result<SweepSetup> prepare_sweep(const acq::SequenceFile& file,
     config = std::move(*read);
   }
   std::optional<Eigen::Matrix4d> calibration;
-  acq::PlusConfig coordinates;
+  acquisition::PlusConfig coordinates;
   if (calibration_path) {
     auto read = read_calibration(*calibration_path);
     if (!read) return read.status();
     calibration = *read;
     if (is_xml(*calibration_path))
-      if (auto device_set = acq::read_plus_config(*calibration_path)) coordinates = *device_set;
+      if (auto device_set = acquisition::read_plus_config(*calibration_path))
+        coordinates = *device_set;
   }
   auto setup = prepare_sweep(file, sequence_path, config, calibration, pose_transform, coordinates);
   // "config" from the in-memory overload: name the file and the preset.
@@ -253,16 +255,16 @@ Result<SweepSetup> prepare_sweep(const acq::SequenceFile& file,
   return setup;
 }
 
-Result<SweepSetup> prepare_sweep(const acq::SequenceFile& file,
+Result<SweepSetup> prepare_sweep(const acquisition::SequenceFile& file,
                                  const std::filesystem::path& sequence_path,
                                  const std::optional<SegmentationConfig>& config,
                                  const std::optional<Eigen::Matrix4d>& T_probe_image,
                                  std::string_view pose_transform,
-                                 const acq::PlusConfig& coordinates) {
+                                 const acquisition::PlusConfig& coordinates) {
   if (file.frame_count() == 0)
     return Status::error(sequence_path.string() + ": the sequence has no frames");
   SweepSetup setup;
-  acq::PlusConfig fixed = coordinates;
+  acquisition::PlusConfig fixed = coordinates;
   setup.config = config.value_or(SegmentationConfig{});
   setup.models_from = config ? "config" : "defaults";
 
@@ -271,15 +273,15 @@ Result<SweepSetup> prepare_sweep(const acq::SequenceFile& file,
     setup.T_probe_image = *T_probe_image;
     setup.calibration_from = "given";
   } else if (const auto text = file.field("ImageToProbeTransform");
-             text && acq::parse_matrix(*text)) {
-    setup.T_probe_image = *acq::parse_matrix(*text);
+             text && acquisition::parse_matrix(*text)) {
+    setup.T_probe_image = *acquisition::parse_matrix(*text);
     setup.calibration_from = "header ImageToProbeTransform";
   } else if (const auto sidecar = sidecar_path(sequence_path); std::filesystem::exists(sidecar)) {
-    auto read = acq::read_image_to_probe(sidecar);
+    auto read = acquisition::read_image_to_probe(sidecar);
     if (!read) return read.status();
     setup.T_probe_image = *read;
     setup.calibration_from = sidecar.string();
-    if (auto device_set = acq::read_plus_config(sidecar)) fixed = *device_set;
+    if (auto device_set = acquisition::read_plus_config(sidecar)) fixed = *device_set;
   } else {
     return Status::error(sequence_path.string() +
                          ": no calibration (no ImageToProbeTransform in the header and no " +
@@ -288,11 +290,11 @@ Result<SweepSetup> prepare_sweep(const acq::SequenceFile& file,
                          "[16 numbers]}");
   }
   // The pose: the chain of transforms from the probe to the reconstruction's frame.
-  auto chain = acq::find_pose_chain(file, sequence_path, pose_transform, fixed);
+  auto chain = acquisition::find_pose_chain(file, sequence_path, pose_transform, fixed);
   if (!chain) return chain.status();
   setup.pose_chain = std::move(*chain);
   // A cropped recording's pixels start at the crop's corner (PLUS ImageToCroppedImage).
-  auto crop = acq::image_to_cropped_image(file, sequence_path);
+  auto crop = acquisition::image_to_cropped_image(file, sequence_path);
   if (!crop) return crop.status();
   if (*crop) {
     setup.T_probe_image = setup.T_probe_image * (*crop)->inverse();
@@ -307,7 +309,7 @@ Result<SweepSetup> prepare_sweep(const acq::SequenceFile& file,
   SectorSource source = setup.config.sector;
   if (source == SectorSource::kDefault) {
     if (file.field("SonoshapeProbeType")) {
-      auto probe = acq::probe_from_fields(file.fields());
+      auto probe = acquisition::probe_from_fields(file.fields());
       if (!probe) return probe.status();
       if (probe->width_px() != w || probe->height_px() != h)
         return Status::error(sequence_path.string() + ": the header's probe image is " +
@@ -315,7 +317,7 @@ Result<SweepSetup> prepare_sweep(const acq::SequenceFile& file,
                              std::to_string(probe->height_px()) + " but the frames are " +
                              std::to_string(w) + "x" + std::to_string(h));
       setup.geometry = probe_geometry(*probe);
-      setup.sector_from = "header probe (" + acq::to_string(probe->type()) + ")";
+      setup.sector_from = "header probe (" + acquisition::to_string(probe->type()) + ")";
     } else {
       source = SectorSource::kAuto;
     }
@@ -366,7 +368,8 @@ Result<SweepSetup> prepare_sweep(const acq::SequenceFile& file,
   return setup;
 }
 
-std::optional<Eigen::Matrix4d> reference_from_probe(const acq::SequenceFile& file, std::size_t k) {
+std::optional<Eigen::Matrix4d> reference_from_probe(const acquisition::SequenceFile& file,
+                                                    std::size_t k) {
   if (file.transform_status("ProbeToTracker", k) != TrackingStatus::kValid) return std::nullopt;
   const auto probe = file.transform("ProbeToTracker", k);
   if (!probe) return std::nullopt;
@@ -378,7 +381,7 @@ std::optional<Eigen::Matrix4d> reference_from_probe(const acq::SequenceFile& fil
   return Eigen::Matrix4d(reference->inverse() * *probe);
 }
 
-Status normalise_recording(acq::SequenceFile& file, const std::filesystem::path& path) {
+Status normalise_recording(acquisition::SequenceFile& file, const std::filesystem::path& path) {
   // PLUS saves a tracker's buffer with 1x1 dummy images: poses, no B-mode.
   if (file.frame_count() && (file.width() < kMinFramePx || file.height() < kMinFramePx))
     return Status::error("sequence file " + path.string() + ": the frames are " +
@@ -386,12 +389,12 @@ Status normalise_recording(acq::SequenceFile& file, const std::filesystem::path&
                          " pixels, no B-mode images (a tracker-only buffer); give the recording "
                          "of the video (PLUS saves tracker and video buffers separately)");
   const std::string orientation = file.field("UltrasoundImageOrientation").value_or("MF");
-  auto flipped = acq::reorient_to_mf(file, path);
+  auto flipped = acquisition::reorient_to_mf(file, path);
   if (!flipped) return flipped.status();
   if (*flipped)
     log_info(path.string() + ": UltrasoundImageOrientation = " + orientation +
              ": frames flipped to MF as PLUS does on reading");
-  if (const auto rate_hz = acq::fill_missing_timestamps(file)) {
+  if (const auto rate_hz = acquisition::fill_missing_timestamps(file)) {
     std::ostringstream text;
     text << path.string() << ": no frame has a Timestamp; frame k is taken at k / " << *rate_hz
          << " s (" << *rate_hz << " Hz, "
@@ -404,20 +407,20 @@ Status normalise_recording(acq::SequenceFile& file, const std::filesystem::path&
   return Status::ok();
 }
 
-std::optional<Eigen::Matrix4d> reference_from_probe(const acq::SequenceFile& file, std::size_t k,
-                                                    const SweepSetup& setup) {
+std::optional<Eigen::Matrix4d> reference_from_probe(const acquisition::SequenceFile& file,
+                                                    std::size_t k, const SweepSetup& setup) {
   if (!setup.pose_chain) return reference_from_probe(file, k);
   return setup.pose_chain->pose(file, k);
 }
 
-SweepSegmentation segment_sweep(const acq::SequenceFile& file, const SweepSetup& setup, int every,
-                                const SweepProgress& progress, const ReadOptions& options,
-                                const SweepLabels& labels) {
+SweepSegmentation segment_sweep(const acquisition::SequenceFile& file, const SweepSetup& setup,
+                                int every, const SweepProgress& progress,
+                                const ReadOptions& options, const SweepLabels& labels) {
   if (every < 1) throw std::invalid_argument("segment_sweep: every must be >= 1");
   if (file.frame_count() &&
       (file.width() != setup.geometry.width_px || file.height() != setup.geometry.height_px))
     throw std::invalid_argument("segment_sweep: the frames do not match the setup's geometry");
-  for (const acq::SequenceFile* other : {labels.perfect, labels.truth})
+  for (const acquisition::SequenceFile* other : {labels.perfect, labels.truth})
     if (other)
       if (const Status same = check_truth_labels(file, "the sweep", *other, "the label frames");
           !same)
@@ -532,4 +535,4 @@ SweepSegmentation segment_sweep(const acq::SequenceFile& file, const SweepSetup&
   return out;
 }
 
-}  // namespace sonoshape::seg
+}  // namespace sonoshape::segmentation

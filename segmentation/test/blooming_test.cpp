@@ -7,7 +7,7 @@
 
 #include <opencv2/core.hpp>
 
-namespace sonoshape::seg::detail {
+namespace sonoshape::segmentation::detail {
 namespace {
 
 constexpr std::uint8_t kDark = 0, kBright = 2;
@@ -66,4 +66,4 @@ TEST(Blooming, MovesTheBoundaryByAFractionOfAPixel) {
 }
 
 }  // namespace
-}  // namespace sonoshape::seg::detail
+}  // namespace sonoshape::segmentation::detail

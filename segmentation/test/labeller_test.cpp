@@ -18,7 +18,7 @@
 #include "sonoshape/segmentation/scoring.hpp"
 #include "sonoshape/segmentation/sweep.hpp"
 
-namespace sonoshape::seg {
+namespace sonoshape::segmentation {
 namespace {
 
 // A square of label 1 in a field of 0, seen through noisy costs: the Potts term must give back
@@ -120,8 +120,8 @@ TEST(ReflectorSections, SpecksAndUnknownThicknessChangeNothing) {
 // threshold labelling it starts from, and a prior equal to the truth brings it closer still.
 TEST(GraphCutLabeller, RefinesTheThresholdLabellingAndFollowsAPrior) {
   const test::SmallSweep small = test::organ_and_lesion_sweep(8);
-  const acq::SequenceFile& bmode = small.sweep.bmode;
-  const acq::SequenceFile& truth_frames = small.sweep.truth;
+  const acquisition::SequenceFile& bmode = small.sweep.bmode;
+  const acquisition::SequenceFile& truth_frames = small.sweep.truth;
   const auto setup =
       prepare_sweep(bmode, "small.igs.mha", std::optional<SegmentationConfig>(), std::nullopt);
   ASSERT_TRUE(setup) << setup.message();
@@ -348,4 +348,4 @@ TEST(SegmentationConfigMethod, GraphCutWeightsParseRoundTripAndAreChecked) {
 }
 
 }  // namespace
-}  // namespace sonoshape::seg
+}  // namespace sonoshape::segmentation

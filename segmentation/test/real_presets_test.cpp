@@ -20,7 +20,7 @@
 #include "sonoshape/segmentation/sector_share.hpp"
 #include "sonoshape/segmentation/sweep.hpp"
 
-namespace sonoshape::seg {
+namespace sonoshape::segmentation {
 namespace {
 
 const std::filesystem::path kData = SONOSHAPE_DATA_DIR;
@@ -28,7 +28,7 @@ const std::filesystem::path kNwireCalibration =
     kData / "plus" / "PlusDeviceSet_Server_Sim_NwirePhantom.xml";
 
 struct Recording {
-  acq::SequenceFile file;
+  acquisition::SequenceFile file;
   SweepSetup setup;
 };
 
@@ -37,7 +37,7 @@ struct Recording {
 Recording open_recording(const std::string& name, const std::string& preset,
                          const std::function<void(SegmentationConfig&)>& adjust = {}) {
   const auto path = kData / "plus" / name;
-  auto file = acq::read_sequence_file(path);
+  auto file = acquisition::read_sequence_file(path);
   if (!file) throw std::runtime_error(file.message());
   if (const Status normal = normalise_recording(*file, path); !normal)
     throw std::runtime_error(normal.message());
@@ -333,4 +333,4 @@ TEST(Presets, ModelsAreLearntFromTheSamplesStartingFromThePresets) {
 }
 
 }  // namespace
-}  // namespace sonoshape::seg
+}  // namespace sonoshape::segmentation

@@ -11,14 +11,14 @@
 #include "sonoshape/core/slice_io.hpp"
 #include "sonoshape/segmentation/sweep.hpp"
 
-namespace sonoshape::seg {
+namespace sonoshape::segmentation {
 namespace {
 
 const std::filesystem::path kData = SONOSHAPE_DATA_DIR;
 
 TEST(RealRecording, FCalEveryFrame) {
   const auto path = kData / "plus" / "fCal_Test_Calibration_3NWires.igs.mha";
-  const auto file = acq::read_sequence_file(path);
+  const auto file = acquisition::read_sequence_file(path);
   ASSERT_TRUE(file) << file.message();
   const auto setup = prepare_sweep(*file, path, std::optional<std::filesystem::path>{},
                                    kData / "plus" / "PlusDeviceSet_Server_Sim_NwirePhantom.xml");
@@ -33,4 +33,4 @@ TEST(RealRecording, FCalEveryFrame) {
 }
 
 }  // namespace
-}  // namespace sonoshape::seg
+}  // namespace sonoshape::segmentation

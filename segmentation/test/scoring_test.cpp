@@ -15,7 +15,7 @@
 #include "sonoshape/simulator/sweep.hpp"
 #include "sonoshape/simulator/trajectory.hpp"
 
-namespace sonoshape::seg {
+namespace sonoshape::segmentation {
 namespace {
 
 void fill(LabelImage& image, int i0, int i1, int j0, int j1, std::uint8_t value) {
@@ -81,7 +81,7 @@ TEST(CompareLabels, SweepTotalsAreRatiosOfSummedCountsNotMeansOfRatios) {
 }
 
 TEST(CheckTruthLabels, MismatchedFrameCountsAndSizesNameTheFileFrameAndFix) {
-  acq::SequenceFile sweep, fewer, smaller;
+  acquisition::SequenceFile sweep, fewer, smaller;
   for (int k = 0; k < 3; ++k) sweep.add_frame(GreyImage(8, 6, 0));
   fewer.add_frame(LabelImage(8, 6, 0));
   for (int k = 0; k < 3; ++k) smaller.add_frame(LabelImage(8, 5, 0));
@@ -101,7 +101,7 @@ TEST(CheckTruthLabels, MismatchedFrameCountsAndSizesNameTheFileFrameAndFix) {
 }
 
 TEST(SegmentSweepLabels, PerfectLabelsScoreOneAndTheSegmenterBelowOne) {
-  const sim::SimulatedSweep sweep = test::organ_and_lesion_sweep(8).sweep;
+  const simulator::SimulatedSweep sweep = test::organ_and_lesion_sweep(8).sweep;
   const auto setup =
       prepare_sweep(sweep.bmode, "memory.igs.mha", std::optional<SegmentationConfig>{},
                     std::optional<Eigen::Matrix4d>{});
@@ -122,7 +122,7 @@ TEST(SegmentSweepLabels, PerfectLabelsScoreOneAndTheSegmenterBelowOne) {
   EXPECT_GT(organ, 0.5);  // the segmenter finds the organ, but not to the pixel
   EXPECT_LT(organ, 1.0);
 
-  acq::SequenceFile short_truth;
+  acquisition::SequenceFile short_truth;
   short_truth.add_frame(sweep.truth.image(0));
   EXPECT_THROW(
       segment_sweep(sweep.bmode, *setup, 1, {}, {}, SweepLabels{&short_truth, nullptr, {}}),
@@ -130,4 +130,4 @@ TEST(SegmentSweepLabels, PerfectLabelsScoreOneAndTheSegmenterBelowOne) {
 }
 
 }  // namespace
-}  // namespace sonoshape::seg
+}  // namespace sonoshape::segmentation

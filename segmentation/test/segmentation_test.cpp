@@ -15,7 +15,7 @@
 #include "sonoshape/simulator/phantom.hpp"
 #include "sonoshape/simulator/sweep.hpp"
 
-namespace sonoshape::seg {
+namespace sonoshape::segmentation {
 namespace {
 
 struct Ball {
@@ -28,14 +28,14 @@ struct Ball {
 // z, which shadows it) and a bright ball, placed in a reference frame turned and moved away
 // from the probe's so that every transform matters.
 struct Scene {
-  acq::ProbeGeometry geometry;
+  acquisition::ProbeGeometry geometry;
   std::vector<Ball> balls;
   Vec3 rib_centre_probe_mm;
   double rib_radius_mm;
   Eigen::Isometry3d T_reference_probe = Eigen::Isometry3d::Identity();
-  sim::Phantom phantom;
+  simulator::Phantom phantom;
 
-  Scene(acq::ProbeGeometry g, std::vector<Ball> b, Vec3 rib, double rib_radius)
+  Scene(acquisition::ProbeGeometry g, std::vector<Ball> b, Vec3 rib, double rib_radius)
       : geometry(g), balls(std::move(b)), rib_centre_probe_mm(rib), rib_radius_mm(rib_radius) {
     T_reference_probe.linear() =
         Eigen::AngleAxisd(0.6, Vec3(0.2, 0.9, -0.4).normalized()).toRotationMatrix();
@@ -44,12 +44,12 @@ struct Scene {
       Eigen::Affine3d place(T_reference_probe);
       place.translate(ball.centre_probe_mm);
       phantom.add(ball.label, ball.label == 1 ? "dark" : "bright",
-                  sim::make_sphere(ball.radius_mm, 96, 48), place);
+                  simulator::make_sphere(ball.radius_mm, 96, 48), place);
     }
     Eigen::Affine3d place(T_reference_probe);
     place.translate(rib_centre_probe_mm);
-    phantom.add(3, "rib", sim::make_cylinder(rib_radius_mm, 200.0), place,
-                sim::tissue_preset("bone"));
+    phantom.add(3, "rib", simulator::make_cylinder(rib_radius_mm, 200.0), place,
+                simulator::tissue_preset("bone"));
   }
   // The probe moved by dz mm along its own z (a neighbouring plane).
   Eigen::Isometry3d pose(double dz_mm) const {
@@ -60,19 +60,19 @@ struct Scene {
 };
 
 Scene linear_scene() {
-  return Scene(acq::linear_probe_geometry(256, 256),
+  return Scene(acquisition::linear_probe_geometry(256, 256),
                {{Vec3(-6.0, 29.0, 0.0), 10.0, 1}, {Vec3(11.0, 17.0, 0.0), 6.0, 2}},
                Vec3(-9.0, 8.0, 0.0), 2.0);
 }
 
 Scene convex_scene() {
-  return Scene(acq::convex_probe_geometry(256, 256),
+  return Scene(acquisition::convex_probe_geometry(256, 256),
                {{Vec3(-12.0, 75.0, 0.0), 22.0, 1}, {Vec3(28.0, 45.0, 0.0), 13.0, 2}},
                Vec3(-10.0, 25.0, 0.0), 4.0);
 }
 
-ImageGeometry scene_geometry(const acq::Probe& probe) {
-  auto geometry = geometry_from_header(acq::probe_fields(probe));
+ImageGeometry scene_geometry(const acquisition::Probe& probe) {
+  auto geometry = geometry_from_header(acquisition::probe_fields(probe));
   EXPECT_TRUE(geometry) << geometry.message();
   return *geometry;
 }
@@ -119,17 +119,17 @@ class SegmentSimulated : public ::testing::TestWithParam<bool> {};
 TEST_P(SegmentSimulated, MatchesGroundTruthAndTheCut) {
   const bool convex = GetParam();
   const Scene scene = convex ? convex_scene() : linear_scene();
-  const acq::Probe probe(scene.geometry);
-  const sim::BModeSimulator simulator(scene.phantom, probe);
+  const acquisition::Probe probe(scene.geometry);
+  const simulator::BModeSimulator simulator(scene.phantom, probe);
   const ImageGeometry geometry = scene_geometry(probe);
 
   // Models learned from a labelled neighbouring frame with other speckle.
-  const sim::SimulatedFrame training = simulator.render(scene.pose(2.0), 11);
+  const simulator::SimulatedFrame training = simulator.render(scene.pose(2.0), 11);
   const SegmentationConfig config = learn_label_models(training.bmode, training.visible_truth());
   ASSERT_EQ(config.materials.size(), 3u);
   ASSERT_TRUE(config.validate());
 
-  const sim::SimulatedFrame frame = simulator.render(scene.pose(0.0), 5);
+  const simulator::SimulatedFrame frame = simulator.render(scene.pose(0.0), 5);
   ASSERT_GT(frame.shadow_fraction, 0.01);  // the rib shadows part of the image
   const Segmentation seg = segment_frame(frame.bmode, geometry, config);
   const Scores s = score(frame.visible_truth(), frame.labels, seg.labels);
@@ -214,7 +214,7 @@ TEST(ImagePlane, ScaledRotationGivesProbeCoordinates) {
   Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
   T.linear() = Eigen::AngleAxisd(0.3, Vec3::UnitY()).toRotationMatrix();
   T.translation() = Vec3(5, 6, 7);
-  const acq::Probe probe(acq::convex_probe_geometry(128, 100));
+  const acquisition::Probe probe(acquisition::convex_probe_geometry(128, 100));
   const ImagePlane plane =
       image_plane(T.matrix() * probe.T_probe_image().matrix(), T.translation());
   for (const auto& [i, j] : {std::pair{0.0, 0.0}, std::pair{127.0, 3.0}, std::pair{40.0, 99.0}}) {
@@ -329,4 +329,4 @@ TEST(Config, OverflowingNumbersAndMistypedHeaderFieldsAreErrors) {
 }
 
 }  // namespace
-}  // namespace sonoshape::seg
+}  // namespace sonoshape::segmentation

@@ -8,31 +8,32 @@
 #include "sonoshape/simulator/sweep.hpp"
 #include "sonoshape/simulator/trajectory.hpp"
 
-namespace sonoshape::seg::test {
+namespace sonoshape::segmentation::test {
 
 /// The probe's motion with its tracked poses, and the frames rendered from it.
 struct SmallSweep {
-  sim::SimulatedAcquisition acquisition;
-  sim::SimulatedSweep sweep;
+  simulator::SimulatedAcquisition acquisition;
+  simulator::SimulatedSweep sweep;
 };
 
 /// `frames` frames at 20 Hz with the tracker `tracker` (speckle seed 3).
-inline SmallSweep organ_and_lesion_sweep(int frames, const sim::TrackerOptions& tracker = {}) {
-  sim::Phantom phantom;
+inline SmallSweep organ_and_lesion_sweep(int frames,
+                                         const simulator::TrackerOptions& tracker = {}) {
+  simulator::Phantom phantom;
   Eigen::Affine3d place = Eigen::Affine3d::Identity();
   place.translation() = Vec3(-5, 25, 0);
-  phantom.add(1, "organ", sim::make_sphere(12.0), place);
+  phantom.add(1, "organ", simulator::make_sphere(12.0), place);
   place.translation() = Vec3(12, 15, 0);
-  phantom.add(2, "lesion", sim::make_sphere(5.0), place);
-  const acq::Probe probe(acq::linear_probe_geometry(160, 160));
-  const sim::BModeSimulator simulator(phantom, probe);
-  sim::TrajectoryOptions motion;
+  phantom.add(2, "lesion", simulator::make_sphere(5.0), place);
+  const acquisition::Probe probe(acquisition::linear_probe_geometry(160, 160));
+  const simulator::BModeSimulator simulator(phantom, probe);
+  simulator::TrajectoryOptions motion;
   motion.duration_s = 0.45;
   motion.sweep_length_mm = 8.0;
   SmallSweep out;
-  out.acquisition = sim::acquire(sim::Trajectory(motion), tracker, frames, 20.0);
-  out.sweep = sim::simulate_sweep(simulator, out.acquisition, 3);
+  out.acquisition = simulator::acquire(simulator::Trajectory(motion), tracker, frames, 20.0);
+  out.sweep = simulator::simulate_sweep(simulator, out.acquisition, 3);
   return out;
 }
 
-}  // namespace sonoshape::seg::test
+}  // namespace sonoshape::segmentation::test

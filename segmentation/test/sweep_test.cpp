@@ -18,13 +18,13 @@
 #include "sonoshape/simulator/sweep.hpp"
 #include "sonoshape/simulator/trajectory.hpp"
 
-namespace sonoshape::seg {
+namespace sonoshape::segmentation {
 namespace {
 
 const std::filesystem::path kData = SONOSHAPE_DATA_DIR;
 
 TEST(SegmentSweep, SimulatedSweepFromItsHeaderAlone) {
-  sim::TrackerOptions tracker;
+  simulator::TrackerOptions tracker;
   tracker.invalid_probability = 0.05;
   tracker.seed = 4;
   const auto [acquisition, sweep] = test::organ_and_lesion_sweep(10, tracker);
@@ -82,11 +82,12 @@ TEST(SegmentSweep, SimulatedSweepFromItsHeaderAlone) {
 }
 
 TEST(SegmentSweep, RealPlusSweepRunsThrough) {
-  const auto file = acq::read_sequence_file(kData / "plus" / "SpinePhantomFreehand.igs.mha");
+  const auto file =
+      acquisition::read_sequence_file(kData / "plus" / "SpinePhantomFreehand.igs.mha");
   ASSERT_TRUE(file) << file.message();
   // A real recording passes the checks `segment` makes first (orientation MF, finite
   // timestamps, rigid poses to 1e-3).
-  const Status sound = acq::check_tracked_sweep(*file, "SpinePhantomFreehand.igs.mha");
+  const Status sound = acquisition::check_tracked_sweep(*file, "SpinePhantomFreehand.igs.mha");
   EXPECT_TRUE(sound) << sound.message();
   const auto xml = kData / "plus" / "PlusDeviceSet_SpinePhantomFreehandReconstructionOnly.xml";
   // Without a calibration it fails with a message that says how to give one.
@@ -113,7 +114,7 @@ TEST(SegmentSweep, RealPlusSweepRunsThrough) {
 // traced sector and the region outlines touched and crossed themselves).
 SweepSegmentation segment_fcal(int every, const std::optional<SegmentationConfig>& config = {}) {
   const auto path = kData / "plus" / "fCal_Test_Calibration_3NWires.igs.mha";
-  const auto file = acq::read_sequence_file(path);
+  const auto file = acquisition::read_sequence_file(path);
   if (!file) throw std::runtime_error(file.message());
   const auto calibration =
       read_calibration(kData / "plus" / "PlusDeviceSet_Server_Sim_NwirePhantom.xml");
@@ -156,22 +157,23 @@ TEST(SegmentSweep, RealFCalSpeckleAsItComesGivesValidSlices) {
 
 // Small frames (96 and 128 px, both probe kinds) used to fail the same way.
 TEST(SegmentSweep, SmallSimulatedFramesGiveSlices) {
-  sim::Phantom phantom;
+  simulator::Phantom phantom;
   Eigen::Affine3d place = Eigen::Affine3d::Identity();
   place.translation() = Vec3(-3, 20, 0);
-  phantom.add(1, "organ", sim::make_sphere(10.0), place);
+  phantom.add(1, "organ", simulator::make_sphere(10.0), place);
   place.translation() = Vec3(8, 12, 0);
-  phantom.add(2, "lesion", sim::make_sphere(4.0), place);
-  sim::TrajectoryOptions motion;
+  phantom.add(2, "lesion", simulator::make_sphere(4.0), place);
+  simulator::TrajectoryOptions motion;
   motion.duration_s = 0.45;
   motion.sweep_length_mm = 8.0;
-  const auto acquisition = sim::acquire(sim::Trajectory(motion), sim::TrackerOptions{}, 10, 20.0);
+  const auto acquisition =
+      simulator::acquire(simulator::Trajectory(motion), simulator::TrackerOptions{}, 10, 20.0);
   for (const int size : {96, 128})
     for (const bool convex : {false, true}) {
-      const acq::Probe probe(convex ? acq::convex_probe_geometry(size, size)
-                                    : acq::linear_probe_geometry(size, size));
-      const sim::BModeSimulator simulator(phantom, probe);
-      const sim::SimulatedSweep sweep = sim::simulate_sweep(simulator, acquisition, 5);
+      const acquisition::Probe probe(convex ? acquisition::convex_probe_geometry(size, size)
+                                            : acquisition::linear_probe_geometry(size, size));
+      const simulator::BModeSimulator simulator(phantom, probe);
+      const simulator::SimulatedSweep sweep = simulator::simulate_sweep(simulator, acquisition, 5);
       const auto setup =
           prepare_sweep(sweep.bmode, "memory.igs.mha", std::optional<SegmentationConfig>{},
                         std::optional<Eigen::Matrix4d>{});
@@ -191,19 +193,19 @@ TEST(SegmentSweep, SmallSimulatedFramesGiveSlices) {
 // sub-pixel, its Dice was 0.62 here against 0.92 at 512), and it touches no unknown pixel (the
 // reconstruction's completion would carry it down its own shadow).
 TEST(SegmentSweep, RibSectionAtACoarsePixelSize) {
-  const auto phantom = sim::make_default_phantom(kData / "models");
+  const auto phantom = simulator::make_default_phantom(kData / "models");
   ASSERT_TRUE(phantom) << phantom.message();
-  const acq::Probe probe(acq::convex_probe_geometry(256, 256));
-  const sim::BModeSimulator simulator(*phantom, probe);
+  const acquisition::Probe probe(acquisition::convex_probe_geometry(256, 256));
+  const simulator::BModeSimulator simulator(*phantom, probe);
   // As `simulate` places it: 10 mm above the phantom's box, over its centre; 8 frames along
   // 40 mm of the middle, where the rib runs across every frame.
   const Box3 box = phantom->bounds();
-  sim::TrajectoryOptions motion;
+  simulator::TrajectoryOptions motion;
   motion.T_reference_probe_centre.translation() = Vec3(
       0.5 * (box.min.x() + box.max.x()), box.min.y() - 10.0, 0.5 * (box.min.z() + box.max.z()));
   motion.sweep_length_mm = 40.0;
-  const auto acquisition = sim::acquire(sim::Trajectory(motion), {}, 8, 0.8);
-  const sim::SimulatedSweep sweep = sim::simulate_sweep(simulator, acquisition, 1);
+  const auto acquisition = simulator::acquire(simulator::Trajectory(motion), {}, 8, 0.8);
+  const simulator::SimulatedSweep sweep = simulator::simulate_sweep(simulator, acquisition, 1);
   const auto setup =
       prepare_sweep(sweep.bmode, "memory.igs.mha", std::optional<SegmentationConfig>{},
                     std::optional<Eigen::Matrix4d>{});
@@ -250,9 +252,9 @@ TEST(SegmentSweep, CalibrationFromJson) {
 TEST(SegmentSweep, CroppedRecordingIsPlacedWhereTheUncroppedOneIs) {
   const auto full_path = kData / "plus" / "NwirePhantomFreehand.igs.mha";
   const auto cropped_path = kData / "plus" / "NwirePhantomFreehandCropped.igs.mha";
-  const auto full = acq::read_sequence_file(full_path);
+  const auto full = acquisition::read_sequence_file(full_path);
   ASSERT_TRUE(full) << full.message();
-  const auto cropped = acq::read_sequence_file(cropped_path);
+  const auto cropped = acquisition::read_sequence_file(cropped_path);
   ASSERT_TRUE(cropped) << cropped.message();
   const auto calibration =
       read_calibration(kData / "plus" / "PlusDeviceSet_Server_Sim_NwirePhantom.xml");
@@ -293,7 +295,7 @@ TEST(SegmentSweep, CroppedRecordingIsPlacedWhereTheUncroppedOneIs) {
 
 // PLUS saves a tracker's buffer with 1x1 dummy frames: refused, not reconstructed from nothing.
 TEST(SegmentSweep, TrackerOnlyBufferIsRefused) {
-  acq::SequenceFile file;
+  acquisition::SequenceFile file;
   for (std::size_t k = 0; k < 3; ++k) {
     file.add_frame(GreyImage(1, 1));
     file.set_transform("ProbeToTracker", k, Eigen::Matrix4d::Identity(), TrackingStatus::kValid);
@@ -305,4 +307,4 @@ TEST(SegmentSweep, TrackerOnlyBufferIsRefused) {
 }
 
 }  // namespace
-}  // namespace sonoshape::seg
+}  // namespace sonoshape::segmentation

@@ -172,14 +172,14 @@ int main(int argc, char** argv) {
                  "[--config JSON] [--preset NAME] [--thin-mm R] [--end-mm2 A]\n";
     return 2;
   }
-  auto file = acq::read_sequence_file(options->sweep);
-  auto truth = acq::read_sequence_file(options->truth);
+  auto file = acquisition::read_sequence_file(options->sweep);
+  auto truth = acquisition::read_sequence_file(options->truth);
   if (!file || !truth) {
     std::cerr << "error: " << (!file ? file.message() : truth.message()) << '\n';
     return 1;
   }
-  auto setup =
-      seg::prepare_sweep(*file, options->sweep, options->config, std::nullopt, {}, options->preset);
+  auto setup = segmentation::prepare_sweep(*file, options->sweep, options->config, std::nullopt, {},
+                                           options->preset);
   if (!setup) {
     std::cerr << "error: " << setup.message() << '\n';
     return 1;
@@ -187,12 +187,12 @@ int main(int argc, char** argv) {
   Tally misses, extras;
   std::map<std::string, double> frames;
   double both = 0.0;
-  seg::SweepLabels labels;
+  segmentation::SweepLabels labels;
   labels.on_label_map = [&](std::size_t k, const LabelImage& ours) {
     count_frame(ours, truth->image(k), setup->geometry.sector, *options, setup->geometry.spacing_mm,
                 misses, extras, both, frames);
   };
-  seg::segment_sweep(*file, *setup, options->every, {}, {}, labels);
+  segmentation::segment_sweep(*file, *setup, options->every, {}, {}, labels);
   const double errors = misses["all"] + extras["all"];
   std::cout << "label " << options->label << ": both " << static_cast<long>(both) << ", misses "
             << static_cast<long>(misses["all"]) << ", extras " << static_cast<long>(extras["all"])

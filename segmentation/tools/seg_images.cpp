@@ -55,8 +55,9 @@ void draw_labels(const LabelImage& labels, const ImageU8& sector, cv::Mat roi) {
     }
 }
 
-cv::Mat panels(const sim::SimulatedFrame& frame, const seg::Segmentation& segmentation,
-               const ImageU8& sector, const LabeledSlice& slice, const acq::Probe& probe) {
+cv::Mat panels(const simulator::SimulatedFrame& frame,
+               const segmentation::Segmentation& segmentation, const ImageU8& sector,
+               const LabeledSlice& slice, const acquisition::Probe& probe) {
   const int w = frame.bmode.width, h = frame.bmode.height;
   cv::Mat out(h, 3 * w + 2 * kGapPx, CV_8UC3, cv::Scalar(255, 255, 255));
   for (int j = 0; j < h; ++j)
@@ -96,49 +97,52 @@ int main(int argc, char** argv) {
   std::filesystem::create_directories(out_dir);
   struct Shot {
     const char* file;
-    acq::ProbeGeometry probe;
+    acquisition::ProbeGeometry probe;
     double size_mm, standoff_mm, z_fraction, x_mm;
   };
   // The pictured planes of docs/simulator.md.
   const Shot shots[] = {
-      {"seg_convex.png", acq::convex_probe_geometry(512, 512), 120.0, 12.0, 0.45, 0.0},
-      {"seg_linear.png", acq::linear_probe_geometry(512, 512), 60.0, 4.0, 0.45, -6.0},
+      {"seg_convex.png", acquisition::convex_probe_geometry(512, 512), 120.0, 12.0, 0.45, 0.0},
+      {"seg_linear.png", acquisition::linear_probe_geometry(512, 512), 60.0, 4.0, 0.45, -6.0},
   };
   for (const Shot& shot : shots) {
-    auto phantom = sim::make_default_phantom(source / "data" / "models", shot.size_mm);
+    auto phantom = simulator::make_default_phantom(source / "data" / "models", shot.size_mm);
     if (!phantom) {
       std::cerr << "error: " << phantom.message() << '\n';
       return 1;
     }
     const Box3 box = phantom->bounds();
-    const acq::Probe probe(shot.probe);
-    const sim::BModeSimulator simulator(*phantom, probe);
+    const acquisition::Probe probe(shot.probe);
+    const simulator::BModeSimulator simulator(*phantom, probe);
     Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
     pose.translation() = Vec3(shot.x_mm, box.min.y() - shot.standoff_mm,
                               box.min.z() + shot.z_fraction * box.size().z());
 
     // A short sweep around the plane gives the header models `segment` would use.
-    sim::TrajectoryOptions motion;
+    simulator::TrajectoryOptions motion;
     motion.T_reference_probe_centre = pose;
     motion.duration_s = 0.75;
     motion.sweep_length_mm = 0.5 * box.size().z();
-    const auto acquisition = sim::acquire(sim::Trajectory(motion), sim::TrackerOptions{}, 16, 20.0);
-    const sim::SimulatedSweep sweep = sim::simulate_sweep(simulator, acquisition, 3);
-    const auto setup =
-        seg::prepare_sweep(sweep.bmode, "docs.igs.mha", std::optional<seg::SegmentationConfig>{},
-                           std::optional<Eigen::Matrix4d>{});
+    const auto acquisition =
+        simulator::acquire(simulator::Trajectory(motion), simulator::TrackerOptions{}, 16, 20.0);
+    const simulator::SimulatedSweep sweep = simulator::simulate_sweep(simulator, acquisition, 3);
+    const auto setup = segmentation::prepare_sweep(
+        sweep.bmode, "docs.igs.mha", std::optional<segmentation::SegmentationConfig>{},
+        std::optional<Eigen::Matrix4d>{});
     if (!setup) {
       std::cerr << "error: " << setup.message() << '\n';
       return 1;
     }
 
-    const sim::SimulatedFrame frame = simulator.render(pose, 7);
-    const seg::Segmentation segmentation =
-        seg::segment_frame(frame.bmode, setup->geometry, setup->config);
+    const simulator::SimulatedFrame frame = simulator.render(pose, 7);
+    const segmentation::Segmentation segmentation =
+        segmentation::segment_frame(frame.bmode, setup->geometry, setup->config);
     // Plane coordinates = probe mm (identity pose), so the polygons map back by the probe.
-    const seg::ImagePlane plane = seg::image_plane(probe.T_probe_image().matrix(), Vec3::Zero());
-    const auto slice = seg::make_slice(segmentation.labels, setup->geometry.sector,
-                                       setup->geometry.sector_px, plane, setup->config.simplify_mm);
+    const segmentation::ImagePlane plane =
+        segmentation::image_plane(probe.T_probe_image().matrix(), Vec3::Zero());
+    const auto slice =
+        segmentation::make_slice(segmentation.labels, setup->geometry.sector,
+                                 setup->geometry.sector_px, plane, setup->config.simplify_mm);
     if (!slice) {
       std::cerr << "error: " << slice.message() << '\n';
       return 1;
@@ -159,12 +163,12 @@ int main(int argc, char** argv) {
   }
   // The real PLUS sweep (spine phantom, no labels known): B-mode and the two-class result.
   const auto plus_dir = source / "data" / "plus";
-  const auto plus = acq::read_sequence_file(plus_dir / "SpinePhantomFreehand.igs.mha");
+  const auto plus = acquisition::read_sequence_file(plus_dir / "SpinePhantomFreehand.igs.mha");
   if (!plus) {
     std::cerr << "error: " << plus.message() << '\n';
     return 1;
   }
-  const auto setup = seg::prepare_sweep(
+  const auto setup = segmentation::prepare_sweep(
       *plus, plus_dir / "SpinePhantomFreehand.igs.mha", std::optional<std::filesystem::path>{},
       plus_dir / "PlusDeviceSet_SpinePhantomFreehandReconstructionOnly.xml");
   if (!setup) {
@@ -172,7 +176,8 @@ int main(int argc, char** argv) {
     return 1;
   }
   const GreyImage& image = plus->image(10);
-  const seg::Segmentation segmentation = seg::segment_frame(image, setup->geometry, setup->config);
+  const segmentation::Segmentation segmentation =
+      segmentation::segment_frame(image, setup->geometry, setup->config);
   const int w = image.width, h = image.height;
   cv::Mat out(h, 2 * w + kGapPx, CV_8UC3, cv::Scalar(255, 255, 255));
   for (int j = 0; j < h; ++j)

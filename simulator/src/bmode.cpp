@@ -11,7 +11,7 @@
 #include "sonoshape/core/errors.hpp"
 #include "sonoshape/core/mesh_slicer.hpp"
 
-namespace sonoshape::sim {
+namespace sonoshape::simulator {
 namespace {
 
 // Smoothing (beam samples) of the impedance map whose gradient gives boundary normals.
@@ -35,7 +35,7 @@ void check_label(int label) {
 
 }  // namespace
 
-LabelImage rasterize_labels(const LabeledSlice& slice, const Probe& probe) {
+LabelImage rasterize_labels(const LabeledSlice& slice, const acquisition::Probe& probe) {
   LabelImage image(probe.width_px(), probe.height_px(), kLabelPixelOutside);
   std::vector<std::array<Vec2, 2>> edges;
   std::vector<double> crossings;
@@ -80,7 +80,7 @@ LabelImage rasterize_labels(const LabeledSlice& slice, const Probe& probe) {
 
 struct BModeSimulator::Impl {
   Phantom phantom;
-  Probe probe;
+  acquisition::Probe probe;
   BModeOptions options;
   cv::Mat beam_to_pixel_x, beam_to_pixel_y;  // rows = samples, cols = beams: pixel coordinates
   cv::Mat pixel_to_beam_x, pixel_to_beam_y;  // rows, cols of the image: beam coordinates
@@ -90,7 +90,7 @@ struct BModeSimulator::Impl {
   std::vector<double> lateral_step;  // per sample (mm)
   double sigma_axial_px = 1.0, sigma_lateral_px = 1.0;
 
-  Impl(Phantom p, const Probe& pr, const BModeOptions& o)
+  Impl(Phantom p, const acquisition::Probe& pr, const BModeOptions& o)
       : phantom(std::move(p)), probe(pr), options(o) {
     const int beams = probe.width_px(), samples = probe.height_px();
     beam_to_pixel_x.create(samples, beams, CV_32F);
@@ -332,7 +332,8 @@ LabelImage SimulatedFrame::visible_truth() const {
   return out;
 }
 
-BModeSimulator::BModeSimulator(Phantom phantom, const Probe& probe, const BModeOptions& options) {
+BModeSimulator::BModeSimulator(Phantom phantom, const acquisition::Probe& probe,
+                               const BModeOptions& options) {
   if (phantom.meshes.empty()) throw GeometryError("B-mode simulator: the phantom has no meshes");
   for (const auto& m : phantom.meshes) check_label(m.label);
   impl_ = std::make_unique<Impl>(std::move(phantom), probe, options);
@@ -343,7 +344,7 @@ BModeSimulator::BModeSimulator(BModeSimulator&&) noexcept = default;
 BModeSimulator& BModeSimulator::operator=(BModeSimulator&&) noexcept = default;
 
 const Phantom& BModeSimulator::phantom() const { return impl_->phantom; }
-const Probe& BModeSimulator::probe() const { return impl_->probe; }
+const acquisition::Probe& BModeSimulator::probe() const { return impl_->probe; }
 const BModeOptions& BModeSimulator::options() const { return impl_->options; }
 
 double BModeSimulator::psf_sigma_mm() const {
@@ -357,4 +358,4 @@ SimulatedFrame BModeSimulator::render(const Eigen::Isometry3d& T_reference_probe
   return impl_->render(T_reference_probe, seed);
 }
 
-}  // namespace sonoshape::sim
+}  // namespace sonoshape::simulator

@@ -20,7 +20,7 @@
 #include "sonoshape/core/errors.hpp"
 #include "sonoshape/core/log.hpp"
 
-namespace sonoshape::sim {
+namespace sonoshape::simulator {
 namespace {
 
 using Epick = CGAL::Exact_predicates_inexact_constructions_kernel;
@@ -590,4 +590,4 @@ std::vector<LabelScore> evaluate(const MeshSet& reconstruction, const MeshSet& t
   return scores;
 }
 
-}  // namespace sonoshape::sim
+}  // namespace sonoshape::simulator

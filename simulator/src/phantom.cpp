@@ -11,7 +11,7 @@
 #include "sonoshape/core/image.hpp"
 #include "sonoshape/core/mesh_io.hpp"
 
-namespace sonoshape::sim {
+namespace sonoshape::simulator {
 
 Tissue tissue_preset(const std::string& name) {
   // Impedances and attenuations: textbook soft-tissue values (Szabo, Diagnostic Ultrasound
@@ -207,4 +207,4 @@ TriangleMesh make_sphere(double radius_mm, int segments, int rings) {
   return mesh;
 }
 
-}  // namespace sonoshape::sim
+}  // namespace sonoshape::simulator

@@ -9,7 +9,7 @@
 
 #include "sonoshape/core/errors.hpp"
 
-namespace sonoshape::sim {
+namespace sonoshape::simulator {
 namespace {
 
 constexpr double kDegree = std::numbers::pi / 180.0;
@@ -172,4 +172,4 @@ std::vector<SlicePlane> generate_planes(PlaneFamily family, int count, const Box
   return {};
 }
 
-}  // namespace sonoshape::sim
+}  // namespace sonoshape::simulator

@@ -4,7 +4,7 @@
 #include <stdexcept>
 #include <utility>
 
-namespace sonoshape::sim {
+namespace sonoshape::simulator {
 
 std::uint64_t frame_seed(std::uint64_t seed, std::size_t k) {
   // Decorrelated per-frame seeds, independent of the order frames are rendered in.
@@ -46,7 +46,7 @@ Status SimFrames::open() {
   return Status::ok();
 }
 
-Result<acq::Polled> SimFrames::poll(Frame& frame) {
+Result<acquisition::Polled> SimFrames::poll(Frame& frame) {
   if (options_.fail_after_frames >= 0 && delivered_ >= options_.fail_after_frames)
     return Status::error(name_ + ": probe vanished after " + std::to_string(delivered_) +
                          " frames (simulated fault; check the probe's cable)");
@@ -62,7 +62,7 @@ Result<acq::Polled> SimFrames::poll(Frame& frame) {
       }
     }
   }
-  if (next_ >= options_.frame_count) return acq::Polled::kEnd;
+  if (next_ >= options_.frame_count) return acquisition::Polled::kEnd;
   const long k = next_++;
   const double t_s = static_cast<double>(k) / options_.frame_rate_hz;
   SimulatedFrame rendered = simulator_->render(
@@ -72,7 +72,7 @@ Result<acq::Polled> SimFrames::poll(Frame& frame) {
   frame.timestamp_s = t_s;
   frame.index = k;
   ++delivered_;
-  return acq::Polled::kItem;
+  return acquisition::Polled::kItem;
 }
 
-}  // namespace sonoshape::sim
+}  // namespace sonoshape::simulator

@@ -9,7 +9,7 @@
 
 #include "sonoshape/simulator/sim_source.hpp"
 
-namespace sonoshape::sim {
+namespace sonoshape::simulator {
 namespace {
 
 // Frames rendered between progress reports (and the unit of parallel work).
@@ -138,7 +138,7 @@ RenderedFrames render_frames(const BModeSimulator& simulator,
 // (`total`) and the thickness of organs that shadow their own inside.
 void add_label_fields(const BModeSimulator& simulator, const GreyStats& total,
                       const std::vector<std::array<int, 256>>& caster_runs_px,
-                      acq::FieldList& global) {
+                      acquisition::FieldList& global) {
   const Phantom& phantom = simulator.phantom();
   std::string names, echogenicity, means, stds;
   append_item(echogenicity, 0, number(phantom.background.echogenicity));
@@ -175,17 +175,18 @@ void add_label_fields(const BModeSimulator& simulator, const GreyStats& total,
 }
 
 // The header fields of a simulated sweep: image, probe, labels, simulator and tracker.
-acq::FieldList sweep_fields(const BModeSimulator& simulator,
-                            const SimulatedAcquisition& acquisition, std::uint64_t seed,
-                            const GreyStats& total,
-                            const std::vector<std::array<int, 256>>& caster_runs_px) {
-  const Probe& probe = simulator.probe();
-  acq::FieldList global;
+acquisition::FieldList sweep_fields(const BModeSimulator& simulator,
+                                    const SimulatedAcquisition& acquisition, std::uint64_t seed,
+                                    const GreyStats& total,
+                                    const std::vector<std::array<int, 256>>& caster_runs_px) {
+  const acquisition::Probe& probe = simulator.probe();
+  acquisition::FieldList global;
   global.emplace_back("UltrasoundImageOrientation", "MFA");
   global.emplace_back("UltrasoundImageType", "BRIGHTNESS");
   global.emplace_back("ElementSpacing", "1 1 1");
-  global.emplace_back("ImageToProbeTransform", acq::format_matrix(probe.T_probe_image().matrix()));
-  for (auto& field : probe_fields(probe)) global.push_back(std::move(field));
+  global.emplace_back("ImageToProbeTransform",
+                      acquisition::format_matrix(probe.T_probe_image().matrix()));
+  for (auto& field : acquisition::probe_fields(probe)) global.push_back(std::move(field));
   add_label_fields(simulator, total, caster_runs_px, global);
   global.emplace_back("SonoshapeUnknownLabel", std::to_string(kLabelPixelUnknown));
   global.emplace_back("SonoshapePsfSigmaMm",
@@ -219,7 +220,7 @@ SimulatedSweep simulate_sweep(const BModeSimulator& simulator,
     shadow_sum += rendered.frames[k].shadow_fraction;
   }
   sweep.mean_shadow_fraction = n ? shadow_sum / static_cast<double>(n) : 0.0;
-  const acq::FieldList global =
+  const acquisition::FieldList global =
       sweep_fields(simulator, acquisition, seed, total, rendered.caster_runs_px);
   for (auto& [key, value] : global) sweep.bmode.set_field(key, value);
   for (auto& [key, value] : global) sweep.truth.set_field(key, value);
@@ -230,13 +231,13 @@ SimulatedSweep simulate_sweep(const BModeSimulator& simulator,
   const Eigen::Matrix4d identity = Eigen::Matrix4d::Identity();
   sweep.slices.reserve(n);
   for (std::size_t k = 0; k < n; ++k) {
-    acq::FieldList fields;
+    acquisition::FieldList fields;
     fields.emplace_back("Timestamp", number(acquisition.frame_times_s[k]));
     fields.emplace_back("ImageStatus", "OK");
     SimulatedFrame& f = rendered.frames[k];
     sweep.bmode.add_frame(std::move(f.bmode), fields);
     sweep.truth.add_frame(std::move(f.truth), fields);
-    for (acq::SequenceFile* file : {&sweep.bmode, &sweep.truth}) {
+    for (acquisition::SequenceFile* file : {&sweep.bmode, &sweep.truth}) {
       const Pose& tracked = acquisition.tracked_poses[k];
       file->set_transform("ProbeToTracker", k, tracked.T_reference_probe.matrix(), tracked.status);
       file->set_transform("ReferenceToTracker", k, identity, TrackingStatus::kValid);
@@ -249,4 +250,4 @@ SimulatedSweep simulate_sweep(const BModeSimulator& simulator,
   return sweep;
 }
 
-}  // namespace sonoshape::sim
+}  // namespace sonoshape::simulator

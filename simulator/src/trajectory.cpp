@@ -7,7 +7,7 @@
 #include <random>
 #include <stdexcept>
 
-namespace sonoshape::sim {
+namespace sonoshape::simulator {
 namespace {
 
 constexpr double kDegToRad = std::numbers::pi / 180.0;
@@ -210,4 +210,4 @@ SimulatedAcquisition acquire(const Trajectory& trajectory, const TrackerOptions&
   return out;
 }
 
-}  // namespace sonoshape::sim
+}  // namespace sonoshape::simulator

@@ -10,7 +10,7 @@
 #include <random>
 #include <stdexcept>
 
-namespace sonoshape::sim {
+namespace sonoshape::simulator {
 namespace {
 
 using Kernel = CGAL::Exact_predicates_exact_constructions_kernel;
@@ -216,4 +216,4 @@ void add_unknowns(SliceSet& set, const UnknownOptions& options) {
   }
 }
 
-}  // namespace sonoshape::sim
+}  // namespace sonoshape::simulator

@@ -4,7 +4,7 @@
 
 #include <cmath>
 
-namespace sonoshape::sim {
+namespace sonoshape::simulator {
 namespace {
 
 // Probe pose that puts the phantom point `centre` at probe coordinates `in_probe`.
@@ -30,7 +30,8 @@ struct Ball {
 
 // Expected label of the pixel centre from the analytic spheres (innermost wins); none when the
 // centre is within `margin` mm of a sphere (the mesh approximates it) or of the sector edge.
-std::optional<std::uint8_t> analytic_label(const Probe& probe, const Eigen::Isometry3d& T,
+std::optional<std::uint8_t> analytic_label(const acquisition::Probe& probe,
+                                           const Eigen::Isometry3d& T,
                                            const std::vector<Ball>& balls, int i, int j,
                                            double margin) {
   const Vec2 xy = probe.pixel_to_mm(i, j);
@@ -49,7 +50,7 @@ std::optional<std::uint8_t> analytic_label(const Probe& probe, const Eigen::Isom
   return label;
 }
 
-void expect_labels_match(const Probe& probe, const std::vector<Ball>& balls,
+void expect_labels_match(const acquisition::Probe& probe, const std::vector<Ball>& balls,
                          const Eigen::Isometry3d& T, std::size_t min_inner_pixels) {
   Phantom phantom;
   for (const Ball& b : balls) {
@@ -83,14 +84,14 @@ void expect_labels_match(const Probe& probe, const std::vector<Ball>& balls,
 }
 
 TEST(BMode, SphereLabelImageMatchesTheAnalyticCutConvex) {
-  const Probe probe(convex_probe_geometry(240, 200));
+  const acquisition::Probe probe(acquisition::convex_probe_geometry(240, 200));
   const std::vector<Ball> balls{{Vec3(10, -20, 5), 25.0, 1}};
   expect_labels_match(probe, balls, pose_seeing(balls[0].centre, Vec3(4, 60, 7), some_rotation()),
                       2000);
 }
 
 TEST(BMode, NestedSpheresLabelImageMatchesTheAnalyticCutLinear) {
-  const Probe probe(linear_probe_geometry(200, 220));
+  const acquisition::Probe probe(acquisition::linear_probe_geometry(200, 220));
   const std::vector<Ball> balls{{Vec3(0, 0, 0), 18.0, 1}, {Vec3(2, 1, -1), 7.0, 2}};
   expect_labels_match(probe, balls, pose_seeing(Vec3(0, 0, 0), Vec3(-3, 25, 2), some_rotation()),
                       1000);
@@ -103,7 +104,7 @@ TEST(BMode, DeterministicForASeedAndGreyFollowsEchogenicity) {
   right.translation() = Vec3(15, 0, 0);
   phantom.add(1, "dark", make_sphere(12.0), left, tissue_preset("hypoechoic"));
   phantom.add(2, "bright", make_sphere(12.0), right, tissue_preset("hyperechoic"));
-  const Probe probe(linear_probe_geometry(160, 160));
+  const acquisition::Probe probe(acquisition::linear_probe_geometry(160, 160));
   const BModeSimulator simulator(phantom, probe);
   const auto T = pose_seeing(Vec3::Zero(), Vec3(0, 25, 0), Eigen::Matrix3d::Identity());
   const SimulatedFrame a = simulator.render(T, 42), b = simulator.render(T, 42);
@@ -135,7 +136,8 @@ TEST(BMode, StrongReflectorCastsAShadowMarkedUnknown) {
   Eigen::Affine3d organ = Eigen::Affine3d::Identity();
   organ.translation() = Vec3(0, 32, 0);
   phantom.add(2, "organ", make_sphere(10.0), organ, tissue_preset("hyperechoic"));
-  const Probe probe(linear_probe_geometry(200, 200));  // 40 mm wide, 50 deep; rib 14 mm long
+  const acquisition::Probe probe(
+      acquisition::linear_probe_geometry(200, 200));  // 40 mm wide, 50 deep; rib 14 mm long
   const BModeSimulator simulator(phantom, probe);
   const SimulatedFrame frame = simulator.render(Eigen::Isometry3d::Identity(), 5);
   EXPECT_GT(frame.shadow_fraction, 0.1);
@@ -177,4 +179,4 @@ TEST(BMode, StrongReflectorCastsAShadowMarkedUnknown) {
 }
 
 }  // namespace
-}  // namespace sonoshape::sim
+}  // namespace sonoshape::simulator

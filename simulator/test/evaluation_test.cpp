@@ -10,7 +10,7 @@
 #include "sonoshape/simulator/plane_generator.hpp"
 #include "test_shapes.hpp"
 
-namespace sonoshape::sim {
+namespace sonoshape::simulator {
 namespace {
 
 MeshSet one_label(const TriangleMesh& mesh, int label = 1) {
@@ -217,4 +217,4 @@ TEST(Evaluation, RejectsEmptyBox) {
 }
 
 }  // namespace
-}  // namespace sonoshape::sim
+}  // namespace sonoshape::simulator

@@ -6,7 +6,7 @@
 
 #include "sonoshape/simulator/sweep.hpp"
 
-namespace sonoshape::sim {
+namespace sonoshape::simulator {
 namespace {
 
 struct SmallProbe {
@@ -20,8 +20,8 @@ SmallProbe small_setup() {
   place.translation() = Vec3(0, 30, 0);
   phantom.add(1, "organ", make_sphere(15.0, 24, 12), place);
   SmallProbe s;
-  s.simulator =
-      std::make_shared<const BModeSimulator>(phantom, Probe(convex_probe_geometry(64, 48)));
+  s.simulator = std::make_shared<const BModeSimulator>(
+      phantom, acquisition::Probe(acquisition::convex_probe_geometry(64, 48)));
   s.motion.duration_s = 0.5;
   s.motion.sweep_length_mm = 20.0;
   return s;
@@ -34,12 +34,12 @@ TEST(SimFrameSource, FastPlaybackGivesTheFramesOfSimulateSweep) {
   options.frame_count = 6;
   options.seed = 5;
   SimFrameSource source(s.simulator, Trajectory(s.motion), options);
-  acq::SourceOptions play;
+  acquisition::SourceOptions play;
   play.wait_when_full = true;
   ASSERT_TRUE(source.start(play));
   std::vector<Frame> frames;
   while (auto f = source.next(10.0)) frames.push_back(f->item);
-  EXPECT_EQ(source.state(), acq::SourceState::kEnded);
+  EXPECT_EQ(source.state(), acquisition::SourceState::kEnded);
   ASSERT_EQ(frames.size(), 6u);
 
   TrackerOptions tracker;
@@ -58,7 +58,7 @@ TEST(SimFrameSource, RealTimeSkipsFramesItCannotRenderInTime) {
   options.frame_rate_hz = 20000.0;  // far faster than any renderer: most frames are lost
   options.frame_count = 2000;       // 0.1 s of sweep
   SimFrameSource source(s.simulator, Trajectory(s.motion), options);
-  acq::SourceOptions play;
+  acquisition::SourceOptions play;
   play.playback.real_time = true;
   ASSERT_TRUE(source.start(play));
   std::size_t delivered = 0;
@@ -68,7 +68,7 @@ TEST(SimFrameSource, RealTimeSkipsFramesItCannotRenderInTime) {
     last_index = f->item.index;
     ++delivered;
   }
-  EXPECT_EQ(source.state(), acq::SourceState::kEnded);
+  EXPECT_EQ(source.state(), acquisition::SourceState::kEnded);
   EXPECT_LT(delivered, 2000u);
   EXPECT_EQ(delivered + source.dropped(), 2000u);  // every frame delivered or counted lost
 }
@@ -83,10 +83,10 @@ TEST(SimFrameSource, VanishingProbeFailsAfterItsFrames) {
   std::size_t delivered = 0;
   while (source.next(10.0)) ++delivered;
   EXPECT_EQ(delivered, 3u);
-  EXPECT_EQ(source.state(), acq::SourceState::kFailed);
+  EXPECT_EQ(source.state(), acquisition::SourceState::kFailed);
   EXPECT_NE(source.message().find("probe vanished"), std::string::npos) << source.message();
   EXPECT_THROW(SimFrameSource(nullptr, Trajectory(s.motion), options), std::invalid_argument);
 }
 
 }  // namespace
-}  // namespace sonoshape::sim
+}  // namespace sonoshape::simulator

@@ -6,7 +6,7 @@
 #include <filesystem>
 #include <string>
 
-namespace sonoshape::sim {
+namespace sonoshape::simulator {
 namespace {
 
 TEST(Sweep, SimulatedSweepRoundTripsThroughSequenceFiles) {
@@ -15,7 +15,7 @@ TEST(Sweep, SimulatedSweepRoundTripsThroughSequenceFiles) {
   place.translation() = Vec3(0, 30, 0);
   phantom.add(1, "liver lobe", make_sphere(15.0), place);
   phantom.add(2, "lesion", make_sphere(5.0), place);
-  const Probe probe(convex_probe_geometry(96, 80));
+  const acquisition::Probe probe(acquisition::convex_probe_geometry(96, 80));
   const BModeSimulator simulator(phantom, probe);
   TrajectoryOptions motion;
   motion.duration_s = 0.45;
@@ -42,8 +42,8 @@ TEST(Sweep, SimulatedSweepRoundTripsThroughSequenceFiles) {
   std::filesystem::create_directories(dir);
   for (const auto& [file, name] :
        {std::pair{&sweep.bmode, "sweep.igs.mha"}, std::pair{&sweep.truth, "labels.mha"}}) {
-    ASSERT_TRUE(acq::write_sequence_file(*file, dir / name));
-    const auto reread = acq::read_sequence_file(dir / name);
+    ASSERT_TRUE(acquisition::write_sequence_file(*file, dir / name));
+    const auto reread = acquisition::read_sequence_file(dir / name);
     ASSERT_TRUE(reread) << reread.message();
     ASSERT_EQ(reread->frame_count(), 10u);
     for (const auto& [key, value] : file->fields()) EXPECT_EQ(reread->field(key), value) << key;
@@ -57,10 +57,10 @@ TEST(Sweep, SimulatedSweepRoundTripsThroughSequenceFiles) {
       EXPECT_DOUBLE_EQ(*reread->timestamp_s(k), acquisition.frame_times_s[k]);
     }
     // The header alone rebuilds the probe: calibration and sector.
-    const auto rebuilt = probe_from_fields(reread->fields());
+    const auto rebuilt = acquisition::probe_from_fields(reread->fields());
     ASSERT_TRUE(rebuilt) << rebuilt.message();
     EXPECT_EQ(rebuilt->sector_mask(), probe.sector_mask());
-    const auto image_to_probe = acq::parse_matrix(*reread->field("ImageToProbeTransform"));
+    const auto image_to_probe = acquisition::parse_matrix(*reread->field("ImageToProbeTransform"));
     ASSERT_TRUE(image_to_probe);
     EXPECT_TRUE(image_to_probe->isApprox(probe.T_probe_image().matrix(), 1e-15));
   }
@@ -72,4 +72,4 @@ TEST(Sweep, SimulatedSweepRoundTripsThroughSequenceFiles) {
 }
 
 }  // namespace
-}  // namespace sonoshape::sim
+}  // namespace sonoshape::simulator

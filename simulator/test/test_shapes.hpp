@@ -8,9 +8,9 @@
 #include "sonoshape/simulator/phantom.hpp"
 #include "sonoshape/testing/cube.hpp"
 
-namespace sonoshape::sim::test {
+namespace sonoshape::simulator::test {
 
-/// Outward UV sphere (sim::make_sphere) moved to `centre`: `segments` around z, `rings` from
+/// Outward UV sphere (simulator::make_sphere) moved to `centre`: `segments` around z, `rings` from
 /// pole to pole (even `rings` puts a vertex ring on the equator z = centre.z).
 inline TriangleMesh uv_sphere(double radius, const Vec3& centre = Vec3::Zero(), int segments = 256,
                               int rings = 128) {
@@ -36,4 +36,4 @@ inline TriangleMesh merged(const TriangleMesh& a, const TriangleMesh& b) {
   return out;
 }
 
-}  // namespace sonoshape::sim::test
+}  // namespace sonoshape::simulator::test

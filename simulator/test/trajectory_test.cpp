@@ -5,7 +5,7 @@
 #include <cmath>
 #include <numbers>
 
-namespace sonoshape::sim {
+namespace sonoshape::simulator {
 namespace {
 
 constexpr double kRadToDeg = 180.0 / std::numbers::pi;
@@ -160,4 +160,4 @@ TEST(Tracker, FramesGetInterpolatedPosesDelayedByTheLatency) {
 }
 
 }  // namespace
-}  // namespace sonoshape::sim
+}  // namespace sonoshape::simulator

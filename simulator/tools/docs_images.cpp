@@ -32,7 +32,7 @@ cv::Vec3b label_colour(std::uint8_t label) {
   }
 }
 
-cv::Mat side_by_side(const sim::SimulatedFrame& frame) {
+cv::Mat side_by_side(const simulator::SimulatedFrame& frame) {
   const int w = frame.bmode.width, h = frame.bmode.height;
   cv::Mat out(h, 2 * w + 8, CV_8UC3, cv::Scalar(255, 255, 255));
   for (int j = 0; j < h; ++j)
@@ -63,21 +63,21 @@ int main(int argc, char** argv) {
   std::filesystem::create_directories(out_dir);
   struct Shot {
     const char* file;
-    acq::ProbeGeometry probe;
+    acquisition::ProbeGeometry probe;
     double size_mm, standoff_mm, z_fraction, x_mm;
   };
   const Shot shots[] = {
-      {"sim_convex.png", acq::convex_probe_geometry(512, 512), 120.0, 12.0, 0.45, 0.0},
-      {"sim_linear.png", acq::linear_probe_geometry(512, 512), 60.0, 4.0, 0.45, -6.0},
+      {"sim_convex.png", acquisition::convex_probe_geometry(512, 512), 120.0, 12.0, 0.45, 0.0},
+      {"sim_linear.png", acquisition::linear_probe_geometry(512, 512), 60.0, 4.0, 0.45, -6.0},
   };
   for (const Shot& shot : shots) {
-    auto phantom = sim::make_default_phantom(source / "data" / "models", shot.size_mm);
+    auto phantom = simulator::make_default_phantom(source / "data" / "models", shot.size_mm);
     if (!phantom) {
       std::cerr << "error: " << phantom.message() << '\n';
       return 1;
     }
     const Box3 box = phantom->bounds();
-    const sim::BModeSimulator simulator(*phantom, acq::Probe(shot.probe));
+    const simulator::BModeSimulator simulator(*phantom, acquisition::Probe(shot.probe));
     const double z = box.min.z() + shot.z_fraction * box.size().z();
     const auto frame = simulator.render(probe_above(box, shot.standoff_mm, z, shot.x_mm), 7);
     const auto path = out_dir / shot.file;

@@ -93,10 +93,10 @@ std::vector<Item> take(Source& source, std::size_t count, double timeout_s) {
 TEST(IgtlSources, FramesFromDebiansImagerServerArriveWholeAndInOrder) {
   Peer imager({IMAGER_SERVER, "50", IMAGER_IMAGES});  // 50 frames per second
   ASSERT_TRUE(imager.up());
-  acq::IgtlFrameSource source(acq::IgtlEndpoint{"127.0.0.1", imager.port()}, "");
+  acquisition::IgtlFrameSource source(acquisition::IgtlEndpoint{"127.0.0.1", imager.port()}, "");
   const double before_s = wall_clock_s();
   ASSERT_TRUE(source.start());
-  const std::vector<Frame> frames = take<acq::IgtlFrameSource, Frame>(source, 10, 10.0);
+  const std::vector<Frame> frames = take<acquisition::IgtlFrameSource, Frame>(source, 10, 10.0);
   const double after_s = wall_clock_s();
   ASSERT_EQ(frames.size(), 10u) << source.message();
   for (std::size_t k = 0; k < frames.size(); ++k) {
@@ -118,7 +118,7 @@ TEST(IgtlSources, FramesFromDebiansImagerServerArriveWholeAndInOrder) {
 TEST(IgtlSources, PosesFromDebiansTrackerServerAreItsMatricesInOrder) {
   Peer tracker({TRACKER_SERVER, "50"});
   ASSERT_TRUE(tracker.up());
-  tracking::IgtlPoseSource source(acq::IgtlEndpoint{"127.0.0.1", tracker.port()}, "Tracker",
+  tracking::IgtlPoseSource source(acquisition::IgtlEndpoint{"127.0.0.1", tracker.port()}, "Tracker",
                                   tracking::IgtlPoseFrom::kTransform);
   ASSERT_TRUE(source.start());
   const std::vector<Pose> poses = take<tracking::IgtlPoseSource, Pose>(source, 5, 10.0);
@@ -150,8 +150,8 @@ TEST(IgtlSources, PosesFromDebiansTrackingDataServerAreOneToolOfItsTdataStream) 
   Peer server({TRACKING_DATA_SERVER});
   ASSERT_TRUE(server.up());
   // It streams only after STT_TDATA, which the source sends on connection.
-  tracking::IgtlPoseSource channel0(acq::IgtlEndpoint{"127.0.0.1", server.port()}, "Channel 0",
-                                    tracking::IgtlPoseFrom::kTrackingData);
+  tracking::IgtlPoseSource channel0(acquisition::IgtlEndpoint{"127.0.0.1", server.port()},
+                                    "Channel 0", tracking::IgtlPoseFrom::kTrackingData);
   ASSERT_TRUE(channel0.start());
   const std::vector<Pose> poses = take<tracking::IgtlPoseSource, Pose>(channel0, 5, 10.0);
   ASSERT_EQ(poses.size(), 5u) << channel0.message();
@@ -204,7 +204,7 @@ TEST(IgtlSources, AStampFromBeyondTomorrowIsReplacedByTheArrivalTime) {
     ::close(peer);
   });
   const double before_s = wall_clock_s();
-  tracking::IgtlPoseSource source(acq::IgtlEndpoint{"127.0.0.1", port}, "Tracker",
+  tracking::IgtlPoseSource source(acquisition::IgtlEndpoint{"127.0.0.1", port}, "Tracker",
                                   tracking::IgtlPoseFrom::kTransform);
   ASSERT_TRUE(source.start());
   const std::vector<Pose> poses = take<tracking::IgtlPoseSource, Pose>(source, 2, 5.0);
@@ -220,9 +220,10 @@ TEST(IgtlSources, AnImagesOwnPoseAndPixelsSurviveTheRoundTripThroughOurServer) {
   options.port = 0;
   auto server = publish::IgtlServer::start(options);
   ASSERT_TRUE(server) << server.message();
-  tracking::IgtlPoseSource poses(acq::IgtlEndpoint{"127.0.0.1", server->port()}, "Image",
+  tracking::IgtlPoseSource poses(acquisition::IgtlEndpoint{"127.0.0.1", server->port()}, "Image",
                                  tracking::IgtlPoseFrom::kImage);
-  acq::IgtlFrameSource frames(acq::IgtlEndpoint{"127.0.0.1", server->port()}, "Image");
+  acquisition::IgtlFrameSource frames(acquisition::IgtlEndpoint{"127.0.0.1", server->port()},
+                                      "Image");
   ASSERT_TRUE(poses.start());
   ASSERT_TRUE(frames.start());
   for (int k = 0; k < 100 && server->stats().clients < 2; ++k)
@@ -240,7 +241,7 @@ TEST(IgtlSources, AnImagesOwnPoseAndPixelsSurviveTheRoundTripThroughOurServer) {
   ASSERT_TRUE(server->publish_image(image, T_reference_probe.matrix() * T_probe_image));
 
   const auto pose = take<tracking::IgtlPoseSource, Pose>(poses, 1, 5.0);
-  const auto frame = take<acq::IgtlFrameSource, Frame>(frames, 1, 5.0);
+  const auto frame = take<acquisition::IgtlFrameSource, Frame>(frames, 1, 5.0);
   ASSERT_EQ(pose.size(), 1u) << poses.message();
   ASSERT_EQ(frame.size(), 1u) << frames.message();
   EXPECT_EQ(pose[0].status, TrackingStatus::kValid);
@@ -258,9 +259,10 @@ TEST(IgtlSources, AServerRestartedMidStreamIsReportedAndFramesAndPosesResume) {
   auto server = publish::IgtlServer::start(options);
   ASSERT_TRUE(server) << server.message();
   options.port = server->port();  // the restarted server listens where the first did
-  tracking::IgtlPoseSource poses(acq::IgtlEndpoint{"127.0.0.1", options.port}, "Image",
+  tracking::IgtlPoseSource poses(acquisition::IgtlEndpoint{"127.0.0.1", options.port}, "Image",
                                  tracking::IgtlPoseFrom::kImage);
-  acq::IgtlFrameSource frames(acq::IgtlEndpoint{"127.0.0.1", options.port}, "Image");
+  acquisition::IgtlFrameSource frames(acquisition::IgtlEndpoint{"127.0.0.1", options.port},
+                                      "Image");
   ASSERT_TRUE(poses.start());
   ASSERT_TRUE(frames.start());
   auto wait_for_clients = [](const publish::IgtlServer& s, std::size_t n) {
@@ -272,7 +274,8 @@ TEST(IgtlSources, AServerRestartedMidStreamIsReportedAndFramesAndPosesResume) {
   const GreyImage image(6, 4, 7);
   const Eigen::Matrix4d T_reference_image = Eigen::Vector4d(0.2, 0.3, 1.0, 1.0).asDiagonal();
   ASSERT_TRUE(server->publish_image(image, T_reference_image));
-  ASSERT_EQ((take<acq::IgtlFrameSource, Frame>(frames, 1, 5.0).size()), 1u) << frames.message();
+  ASSERT_EQ((take<acquisition::IgtlFrameSource, Frame>(frames, 1, 5.0).size()), 1u)
+      << frames.message();
   ASSERT_EQ((take<tracking::IgtlPoseSource, Pose>(poses, 1, 5.0).size()), 1u) << poses.message();
 
   // The server goes away: both sources keep running and say why.
@@ -281,15 +284,15 @@ TEST(IgtlSources, AServerRestartedMidStreamIsReportedAndFramesAndPosesResume) {
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   EXPECT_NE(frames.condition().find("connecting again"), std::string::npos) << frames.condition();
   EXPECT_NE(poses.condition().find("connecting again"), std::string::npos) << poses.condition();
-  EXPECT_EQ(frames.state(), acq::SourceState::kRunning);
-  EXPECT_EQ(poses.state(), acq::SourceState::kRunning);
+  EXPECT_EQ(frames.state(), acquisition::SourceState::kRunning);
+  EXPECT_EQ(poses.state(), acquisition::SourceState::kRunning);
 
   // Back on the same port: the sources connect again and the next image arrives.
   server = publish::IgtlServer::start(options);
   ASSERT_TRUE(server) << server.message();
   ASSERT_EQ(wait_for_clients(*server, 2), 2u);
   ASSERT_TRUE(server->publish_image(image, T_reference_image));
-  const auto frame = take<acq::IgtlFrameSource, Frame>(frames, 1, 5.0);
+  const auto frame = take<acquisition::IgtlFrameSource, Frame>(frames, 1, 5.0);
   const auto pose = take<tracking::IgtlPoseSource, Pose>(poses, 1, 5.0);
   ASSERT_EQ(frame.size(), 1u) << frames.message();
   ASSERT_EQ(pose.size(), 1u) << poses.message();
@@ -301,14 +304,14 @@ TEST(IgtlSources, AServerRestartedMidStreamIsReportedAndFramesAndPosesResume) {
 
 TEST(IgtlSources, ANoServerIsAFailedSourceNamingTheAddress) {
   const int port = testing::free_port();
-  acq::IgtlFrameSource source(acq::IgtlEndpoint{"127.0.0.1", port}, "");
+  acquisition::IgtlFrameSource source(acquisition::IgtlEndpoint{"127.0.0.1", port}, "");
   ASSERT_TRUE(source.start());
-  EXPECT_TRUE((take<acq::IgtlFrameSource, Frame>(source, 1, 5.0).empty()));
-  EXPECT_EQ(source.state(), acq::SourceState::kFailed);
+  EXPECT_TRUE((take<acquisition::IgtlFrameSource, Frame>(source, 1, 5.0).empty()));
+  EXPECT_EQ(source.state(), acquisition::SourceState::kFailed);
   EXPECT_NE(source.message().find("127.0.0.1:" + std::to_string(port)), std::string::npos)
       << source.message();
-  EXPECT_FALSE(acq::parse_igtl_endpoint("host:port", "--source igtl:"));
-  EXPECT_EQ(acq::parse_igtl_endpoint("localhost", "--source igtl:")->port, 18944);
+  EXPECT_FALSE(acquisition::parse_igtl_endpoint("host:port", "--source igtl:"));
+  EXPECT_EQ(acquisition::parse_igtl_endpoint("localhost", "--source igtl:")->port, 18944);
 }
 
 std::string run(const std::string& command, int& exit_code) {

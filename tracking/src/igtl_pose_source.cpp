@@ -2,17 +2,17 @@
 
 namespace sonoshape::tracking {
 
-IgtlPoses::IgtlPoses(acq::IgtlEndpoint endpoint, std::string device, IgtlPoseFrom from)
+IgtlPoses::IgtlPoses(acquisition::IgtlEndpoint endpoint, std::string device, IgtlPoseFrom from)
     : device_(std::move(device)),
       from_(from),
       // TDATA streams only on request, on every connection; every 20 ms (50 Hz) is as fast as
       // trackers usually go.
       link_(std::move(endpoint),
             from == IgtlPoseFrom::kTrackingData
-                ? acq::IgtlLink::OnConnect([](acq::IgtlConnection& connection) {
-                    return connection.send(acq::igtl_start_tracking_data(20));
+                ? acquisition::IgtlLink::OnConnect([](acquisition::IgtlConnection& connection) {
+                    return connection.send(acquisition::igtl_start_tracking_data(20));
                   })
-                : acq::IgtlLink::OnConnect()),
+                : acquisition::IgtlLink::OnConnect()),
       drops_("igtl:" + link_.endpoint().text()) {}
 
 std::string IgtlPoses::describe() const {
@@ -37,49 +37,49 @@ Pose pose_from_matrix(const Eigen::Matrix4d& T, double timestamp_s) {
   return pose;
 }
 
-Result<acq::Polled> IgtlPoses::poll(Pose& pose) {
-  const std::optional<acq::IgtlMessage> message = link_.next(0.1);
+Result<acquisition::Polled> IgtlPoses::poll(Pose& pose) {
+  const std::optional<acquisition::IgtlMessage> message = link_.next(0.1);
   set_condition(link_.trouble());
-  if (!message) return acq::Polled::kNothing;
-  const acq::IgtlMessage& m = *message;
+  if (!message) return acquisition::Polled::kNothing;
+  const acquisition::IgtlMessage& m = *message;
   const bool named = device_.empty() || m.device == device_;
   if (from_ == IgtlPoseFrom::kTransform && m.type == "TRANSFORM" && named) {
-    auto T = acq::decode_igtl_transform(m);
+    auto T = acquisition::decode_igtl_transform(m);
     if (!T) {
-      drops_.count(acq::IgtlDrop::kDamaged, T.message());
+      drops_.count(acquisition::IgtlDrop::kDamaged, T.message());
       count_lost(1);
-      return acq::Polled::kNothing;
+      return acquisition::Polled::kNothing;
     }
     pose = pose_from_matrix(*T, m.timestamp_s);
-    return acq::Polled::kItem;
+    return acquisition::Polled::kItem;
   }
   if (from_ == IgtlPoseFrom::kTrackingData && m.type == "TDATA") {
-    auto T = acq::decode_igtl_tracking_data(m, device_);
+    auto T = acquisition::decode_igtl_tracking_data(m, device_);
     if (!T) {
-      drops_.count(acq::IgtlDrop::kDamaged, T.message());
+      drops_.count(acquisition::IgtlDrop::kDamaged, T.message());
       count_lost(1);
-      return acq::Polled::kNothing;
+      return acquisition::Polled::kNothing;
     }
-    if (!*T) return acq::Polled::kNothing;  // this tool is not in this message
+    if (!*T) return acquisition::Polled::kNothing;  // this tool is not in this message
     pose = pose_from_matrix(**T, m.timestamp_s);
-    return acq::Polled::kItem;
+    return acquisition::Polled::kItem;
   }
   if (from_ == IgtlPoseFrom::kImage && m.type == "IMAGE" && named) {
-    acq::IgtlDrop why = acq::IgtlDrop::kDamaged;
-    auto image = acq::decode_igtl_image(m, &why);
+    acquisition::IgtlDrop why = acquisition::IgtlDrop::kDamaged;
+    auto image = acquisition::decode_igtl_image(m, &why);
     if (!image) {
       drops_.count(why, image.message());
       count_lost(1);
-      return acq::Polled::kNothing;
+      return acquisition::Polled::kNothing;
     }
     // The image frame in mm: the spacing divided out of the pixel axes.
     Eigen::Matrix4d T = image->T_reference_image;
     T.col(0).head<3>() /= image->spacing_mm[0];
     T.col(1).head<3>() /= image->spacing_mm[1];
     pose = pose_from_matrix(T, m.timestamp_s);
-    return acq::Polled::kItem;
+    return acquisition::Polled::kItem;
   }
-  return acq::Polled::kNothing;
+  return acquisition::Polled::kNothing;
 }
 
 }  // namespace sonoshape::tracking

@@ -14,13 +14,13 @@ Status RecordedPoses::open() {
   return Status::ok();
 }
 
-Result<acq::Polled> RecordedPoses::poll(Pose& pose) {
+Result<acquisition::Polled> RecordedPoses::poll(Pose& pose) {
   if (fail_after_ >= 0 && next_ >= static_cast<std::size_t>(fail_after_))
     return Status::error(name_ + ": tracker vanished after " + std::to_string(next_) +
                          " samples (check the tracker's cable and power)");
-  if (next_ >= samples_.size()) return acq::Polled::kEnd;
+  if (next_ >= samples_.size()) return acquisition::Polled::kEnd;
   pose = samples_[next_++];
-  return acq::Polled::kItem;
+  return acquisition::Polled::kItem;
 }
 
 Eigen::Isometry3d nearest_rigid(const Eigen::Matrix4d& matrix) {
@@ -41,14 +41,15 @@ Eigen::Isometry3d nearest_rigid(const Eigen::Matrix4d& matrix) {
 
 namespace {
 
-bool has_transform(const acq::SequenceFile& file, const std::string& name) {
+bool has_transform(const acquisition::SequenceFile& file, const std::string& name) {
   const auto names = file.transform_names();
   return std::find(names.begin(), names.end(), name) != names.end();
 }
 
 // replay_pose with the (whole-file) check for a reference transform done once by the caller.
-Pose pose_of_frame(const acq::SequenceFile& file, std::size_t k, const std::string& probe_transform,
-                   const std::string& reference_transform, bool has_reference) {
+Pose pose_of_frame(const acquisition::SequenceFile& file, std::size_t k,
+                   const std::string& probe_transform, const std::string& reference_transform,
+                   bool has_reference) {
   Pose pose;
   pose.timestamp_s = file.timestamp_s(k).value_or(0.0);
   pose.status = TrackingStatus::kInvalid;
@@ -70,24 +71,25 @@ Pose pose_of_frame(const acq::SequenceFile& file, std::size_t k, const std::stri
 
 }  // namespace
 
-Pose replay_pose(const acq::SequenceFile& file, std::size_t k, const std::string& probe_transform,
-                 const std::string& reference_transform) {
+Pose replay_pose(const acquisition::SequenceFile& file, std::size_t k,
+                 const std::string& probe_transform, const std::string& reference_transform) {
   return pose_of_frame(file, k, probe_transform, reference_transform,
                        has_transform(file, reference_transform));
 }
 
-ReplayPoses::ReplayPoses(std::shared_ptr<const acq::SequenceFile> file, std::string name,
+ReplayPoses::ReplayPoses(std::shared_ptr<const acquisition::SequenceFile> file, std::string name,
                          std::string probe_transform, std::string reference_transform)
     : file_(std::move(file)),
       name_(std::move(name)),
       probe_(std::move(probe_transform)),
       reference_(std::move(reference_transform)) {}
 
-ReplayPoses::ReplayPoses(std::shared_ptr<const acq::SequenceFile> file, std::string name,
-                         acq::PoseChain chain)
+ReplayPoses::ReplayPoses(std::shared_ptr<const acquisition::SequenceFile> file, std::string name,
+                         acquisition::PoseChain chain)
     : file_(std::move(file)), name_(std::move(name)), chain_(std::move(chain)) {}
 
-Pose replay_pose(const acq::SequenceFile& file, std::size_t k, const acq::PoseChain& chain) {
+Pose replay_pose(const acquisition::SequenceFile& file, std::size_t k,
+                 const acquisition::PoseChain& chain) {
   Pose pose;
   pose.timestamp_s = file.timestamp_s(k).value_or(0.0);
   pose.status = TrackingStatus::kInvalid;
@@ -116,11 +118,11 @@ Status ReplayPoses::open() {
   return Status::ok();
 }
 
-Result<acq::Polled> ReplayPoses::poll(Pose& pose) {
-  if (next_ >= file_->frame_count()) return acq::Polled::kEnd;
+Result<acquisition::Polled> ReplayPoses::poll(Pose& pose) {
+  if (next_ >= file_->frame_count()) return acquisition::Polled::kEnd;
   pose = chain_ ? replay_pose(*file_, next_++, *chain_)
                 : pose_of_frame(*file_, next_++, probe_, reference_, has_reference_);
-  return acq::Polled::kItem;
+  return acquisition::Polled::kItem;
 }
 
 }  // namespace sonoshape::tracking

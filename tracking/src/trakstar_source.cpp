@@ -198,29 +198,29 @@ void TrakstarPoses::lost(const std::string& why) {
   log_warning(describe() + ": " + line);
 }
 
-Result<acq::Polled> TrakstarPoses::reopen() {
+Result<acquisition::Polled> TrakstarPoses::reopen() {
   const double now_s = clock_monotonic_s();
   if (now_s < next_reopen_s_) {
     std::this_thread::sleep_for(
         std::chrono::duration<double>(std::min(next_reopen_s_ - now_s, 0.05)));
-    return acq::Polled::kNothing;
+    return acquisition::Polled::kNothing;
   }
   next_reopen_s_ = now_s + options_.reopen_interval_s;
-  if (!connect()) return acq::Polled::kNothing;
+  if (!connect()) return acquisition::Polled::kNothing;
   count([](TrakstarCounts& c) { ++c.reopened; });
   set_status("connected (reopened after an unplug)");
   set_condition("");
   connected_.store(true);
   log_info(describe() + ": the tracker is back; poses continue");
-  return acq::Polled::kNothing;
+  return acquisition::Polled::kNothing;
 }
 
-Result<acq::Polled> TrakstarPoses::poll(Pose& pose) {
+Result<acquisition::Polled> TrakstarPoses::poll(Pose& pose) {
   if (!transport_) return reopen();
   // One POINT per measurement period: the device answers with its latest measurement.
   if (const double early_s = next_point_s_ - clock_monotonic_s(); early_s > 0.0) {
     std::this_thread::sleep_for(std::chrono::duration<double>(std::min(early_s, 0.05)));
-    return acq::Polled::kNothing;
+    return acquisition::Polled::kNothing;
   }
   next_point_s_ = std::max(next_point_s_ + 1.0 / options_.rate_hz, clock_monotonic_s());
   if (drain_) {
@@ -229,14 +229,14 @@ Result<acq::Polled> TrakstarPoses::poll(Pose& pose) {
     drain_ = false;
   }
   const auto record = point();
-  if (!transport_) return acq::Polled::kNothing;  // unplugged during the POINT
+  if (!transport_) return acquisition::Polled::kNothing;  // unplugged during the POINT
   if (!record) {
     count([](TrakstarCounts& c) { ++c.timeouts; });
     drain_ = true;
-    return acq::Polled::kNothing;
+    return acquisition::Polled::kNothing;
   }
   pose = to_pose(*record, clock_monotonic_s());
-  return acq::Polled::kItem;
+  return acquisition::Polled::kItem;
 }
 
 std::optional<std::vector<std::uint8_t>> TrakstarPoses::point() {

@@ -21,16 +21,16 @@ std::vector<Pose> drain(PoseSource& source) {
 }
 
 TEST(ReplayPoseSource, RealSweepGivesReferenceFromProbe) {
-  auto file = acq::read_sequence_file(kPlusSweep);
+  auto file = acquisition::read_sequence_file(kPlusSweep);
   ASSERT_TRUE(file) << file.message();
-  auto shared = std::make_shared<const acq::SequenceFile>(std::move(*file));
+  auto shared = std::make_shared<const acquisition::SequenceFile>(std::move(*file));
   ReplayPoseSource source(shared, "spine");
-  acq::SourceOptions options;
+  acquisition::SourceOptions options;
   options.wait_when_full = true;
   ASSERT_TRUE(source.start(options));
   const auto poses = drain(source);
   ASSERT_EQ(poses.size(), 21u);
-  EXPECT_EQ(source.state(), acq::SourceState::kEnded);
+  EXPECT_EQ(source.state(), acquisition::SourceState::kEnded);
   for (std::size_t k = 0; k < poses.size(); ++k) {
     EXPECT_DOUBLE_EQ(poses[k].timestamp_s, *shared->timestamp_s(k));
     ASSERT_EQ(poses[k].status, TrackingStatus::kValid) << k;
@@ -43,7 +43,7 @@ TEST(ReplayPoseSource, RealSweepGivesReferenceFromProbe) {
 }
 
 TEST(ReplayPoseSource, InvalidStatusesAndMissingTransforms) {
-  acq::SequenceFile file;
+  acquisition::SequenceFile file;
   const Eigen::Matrix4d identity = Eigen::Matrix4d::Identity();
   for (int k = 0; k < 3; ++k) {
     file.add_frame(GreyImage(2, 2), {{"Timestamp", std::to_string(k)}});
@@ -54,10 +54,11 @@ TEST(ReplayPoseSource, InvalidStatusesAndMissingTransforms) {
   EXPECT_EQ(replay_pose(file, 1).status, TrackingStatus::kInvalid);
   EXPECT_DOUBLE_EQ(replay_pose(file, 2).timestamp_s, 2.0);
 
-  ReplayPoseSource wrong(std::make_shared<const acq::SequenceFile>(file), "x", "StylusToTracker");
+  ReplayPoseSource wrong(std::make_shared<const acquisition::SequenceFile>(file), "x",
+                         "StylusToTracker");
   ASSERT_TRUE(wrong.start());
   EXPECT_TRUE(drain(wrong).empty());
-  EXPECT_EQ(wrong.state(), acq::SourceState::kFailed);
+  EXPECT_EQ(wrong.state(), acquisition::SourceState::kFailed);
   EXPECT_NE(wrong.message().find("no StylusToTrackerTransform"), std::string::npos)
       << wrong.message();
 }
@@ -68,12 +69,12 @@ TEST(RecordedPoseSource, PlaysSamplesThenVanishes) {
   RecordedPoseSource ok(samples, "sim tracker");
   ASSERT_TRUE(ok.start());
   EXPECT_EQ(drain(ok).size(), 5u);
-  EXPECT_EQ(ok.state(), acq::SourceState::kEnded);
+  EXPECT_EQ(ok.state(), acquisition::SourceState::kEnded);
 
   RecordedPoseSource vanishing(samples, "sim tracker", 3);
   ASSERT_TRUE(vanishing.start());
   EXPECT_EQ(drain(vanishing).size(), 3u);
-  EXPECT_EQ(vanishing.state(), acq::SourceState::kFailed);
+  EXPECT_EQ(vanishing.state(), acquisition::SourceState::kFailed);
   EXPECT_NE(vanishing.message().find("vanished"), std::string::npos);
 }
 

@@ -155,7 +155,7 @@ TEST(TrakstarPoseSource, UnplugMidStreamIsReportedAndPosesContinueAfterReplug) {
   const int opens = device.opens;
   std::this_thread::sleep_for(std::chrono::milliseconds(50));
   EXPECT_GT(device.opens, opens);
-  EXPECT_EQ(source.state(), acq::SourceState::kRunning);
+  EXPECT_EQ(source.state(), acquisition::SourceState::kRunning);
   while (source.next(0.0)) {
   }  // samples received before the unplug
   device.plugged = true;
@@ -174,7 +174,7 @@ TEST(TrakstarPoseSource, NoTrackerAtStartFailsTheSourceWithTheReason) {
   TrakstarPoseSource source(fast_options(), opener(device));
   ASSERT_TRUE(source.start());
   EXPECT_FALSE(source.next(5.0));
-  EXPECT_EQ(source.state(), acq::SourceState::kFailed);
+  EXPECT_EQ(source.state(), acquisition::SourceState::kFailed);
   EXPECT_NE(source.message().find("no tracker"), std::string::npos) << source.message();
 }
 
@@ -192,7 +192,7 @@ TEST(TrakstarPoseSource, ADeviceThatDoesNotAnswerTheProtocolIsRefused) {
   });
   ASSERT_TRUE(source.start());
   EXPECT_FALSE(source.next(5.0));
-  EXPECT_EQ(source.state(), acq::SourceState::kFailed);
+  EXPECT_EQ(source.state(), acquisition::SourceState::kFailed);
   EXPECT_NE(source.message().find("does not answer the Bird protocol"), std::string::npos)
       << source.message();
 }

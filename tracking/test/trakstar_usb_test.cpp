@@ -348,7 +348,7 @@ TEST_F(TrakstarUsb, UnplugAndReplugMidStreamAreReportedAndRecovered) {
   while (source.backend().connected() && std::chrono::steady_clock::now() < deadline)
     std::this_thread::sleep_for(std::chrono::milliseconds(2));
   ASSERT_FALSE(source.backend().connected());
-  EXPECT_EQ(source.state(), acq::SourceState::kRunning);
+  EXPECT_EQ(source.state(), acquisition::SourceState::kRunning);
   EXPECT_NE(source.backend().status_line().find("waiting for the tracker"), std::string::npos);
   std::this_thread::sleep_for(std::chrono::milliseconds(100));
   EXPECT_FALSE(source.backend().connected());  // nothing to reopen while unplugged

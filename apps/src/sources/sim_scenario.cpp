@@ -15,9 +15,9 @@ constexpr double kLinearStandoffMm = 4.0;
 // A translating sweep runs past the phantom's ends by this much on each side.
 constexpr double kSweepMarginMm = 10.0;
 
-Result<sim::Phantom> build_phantom(const SimScenarioOptions& options,
-                                   const std::filesystem::path& models_dir) {
-  if (options.phantoms.empty()) return sim::make_default_phantom(models_dir, options.size_mm);
+Result<simulator::Phantom> build_phantom(const SimScenarioOptions& options,
+                                         const std::filesystem::path& models_dir) {
+  if (options.phantoms.empty()) return simulator::make_default_phantom(models_dir, options.size_mm);
   std::vector<apps::MeshSpec> specs;
   std::vector<TriangleMesh> meshes;
   for (const std::string& text : options.phantoms) {
@@ -33,21 +33,21 @@ Result<sim::Phantom> build_phantom(const SimScenarioOptions& options,
     meshes.push_back(std::move(*mesh));
   }
   // One common scale keeps nested organs nested.
-  const Eigen::Affine3d fit = sim::fit_to_size(meshes, options.size_mm);
-  sim::Phantom phantom;
+  const Eigen::Affine3d fit = simulator::fit_to_size(meshes, options.size_mm);
+  simulator::Phantom phantom;
   for (std::size_t i = 0; i < specs.size(); ++i)
     phantom.add(specs[i].label, specs[i].name, meshes[i], fit);
   return phantom;
 }
 
-Status apply_tissues(const SimScenarioOptions& options, sim::Phantom& phantom) {
+Status apply_tissues(const SimScenarioOptions& options, simulator::Phantom& phantom) {
   for (const std::string& text : options.tissues) {
     const std::size_t colon = text.find(':');
     int label = 0;
     try {
       label = std::stoi(text.substr(0, colon));
       if (colon == std::string::npos) throw std::invalid_argument("no preset");
-      phantom.tissues[label] = sim::tissue_preset(text.substr(colon + 1));
+      phantom.tissues[label] = simulator::tissue_preset(text.substr(colon + 1));
     } catch (const std::exception& e) {
       return Status::error("--tissue '" + text + "': " + e.what() +
                            " (expected LABEL:PRESET, e.g. 2:bone; presets: hypoechoic, "
@@ -78,36 +78,38 @@ Result<SimScenario> make_sim_scenario(const SimScenarioOptions& options, double 
   scenario.phantom = std::move(*phantom);
   if (const Status status = apply_tissues(options, scenario.phantom); !status) return status;
   scenario.probe = options.probe == "linear"
-                       ? acq::linear_probe_geometry(options.width_px, options.height_px)
-                       : acq::convex_probe_geometry(options.width_px, options.height_px);
+                       ? acquisition::linear_probe_geometry(options.width_px, options.height_px)
+                       : acquisition::convex_probe_geometry(options.width_px, options.height_px);
   const Box3 box = scenario.phantom.bounds();
 
-  sim::TrajectoryOptions& motion = scenario.motion;
+  simulator::TrajectoryOptions& motion = scenario.motion;
   try {
-    motion.motion = sim::parse_sweep_motion(options.trajectory);
+    motion.motion = simulator::parse_sweep_motion(options.trajectory);
   } catch (const std::invalid_argument& e) {
     return Status::error(std::string("--trajectory: ") + e.what());
   }
-  motion.speed = options.speed == "constant"    ? sim::SpeedProfile::kConstant
-                 : options.speed == "irregular" ? sim::SpeedProfile::kIrregular
-                                                : sim::SpeedProfile::kSmooth;
+  motion.speed = options.speed == "constant"    ? simulator::SpeedProfile::kConstant
+                 : options.speed == "irregular" ? simulator::SpeedProfile::kIrregular
+                                                : simulator::SpeedProfile::kSmooth;
   motion.duration_s = duration_s;
   motion.passes = options.passes;
   motion.seed = options.seed;
-  const double standoff =
-      scenario.probe.type == acq::ProbeType::kConvex ? kConvexStandoffMm : kLinearStandoffMm;
+  const double standoff = scenario.probe.type == acquisition::ProbeType::kConvex
+                              ? kConvexStandoffMm
+                              : kLinearStandoffMm;
   motion.T_reference_probe_centre.translation() = Vec3(
       0.5 * (box.min.x() + box.max.x()), box.min.y() - standoff, 0.5 * (box.min.z() + box.max.z()));
   motion.sweep_length_mm = options.sweep_length_mm > 0.0 ? options.sweep_length_mm
                                                          : box.size().z() + 2.0 * kSweepMarginMm;
-  const std::map<sim::SweepMotion, double> default_angle{{sim::SweepMotion::kTranslate, 0.0},
-                                                         {sim::SweepMotion::kFan, 60.0},
-                                                         {sim::SweepMotion::kRock, 30.0},
-                                                         {sim::SweepMotion::kRotate, 180.0}};
+  const std::map<simulator::SweepMotion, double> default_angle{
+      {simulator::SweepMotion::kTranslate, 0.0},
+      {simulator::SweepMotion::kFan, 60.0},
+      {simulator::SweepMotion::kRock, 30.0},
+      {simulator::SweepMotion::kRotate, 180.0}};
   motion.sweep_angle_deg =
       options.sweep_angle_deg > 0.0 ? options.sweep_angle_deg : default_angle.at(motion.motion);
 
-  sim::TrackerOptions& tracker = scenario.tracker;
+  simulator::TrackerOptions& tracker = scenario.tracker;
   tracker.rate_hz = options.tracker_rate_hz;
   tracker.latency_s = 1e-3 * options.latency_ms;
   tracker.position_noise_mm = options.position_noise_mm;

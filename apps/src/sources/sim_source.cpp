@@ -22,10 +22,11 @@ constexpr int kModelFrames = 6;
 
 // Label models of the simulated probe, learnt from a few frames and their ground truth (what a
 // preset of a real probe holds). Names come from the phantom.
-seg::SegmentationConfig learn_sim_models(const sim::BModeSimulator& simulator,
-                                         const sim::Trajectory& trajectory,
-                                         const seg::SegmentationConfig& base, std::uint64_t seed) {
-  const sim::Probe& probe = simulator.probe();
+segmentation::SegmentationConfig learn_sim_models(const simulator::BModeSimulator& simulator,
+                                                  const simulator::Trajectory& trajectory,
+                                                  const segmentation::SegmentationConfig& base,
+                                                  std::uint64_t seed) {
+  const acquisition::Probe& probe = simulator.probe();
   const int w = probe.width_px(), h = probe.height_px();
   GreyImage grey(w, h * kModelFrames);
   LabelImage visible(w, h * kModelFrames);
@@ -33,39 +34,38 @@ seg::SegmentationConfig learn_sim_models(const sim::BModeSimulator& simulator,
   for (int k = 0; k < kModelFrames; ++k) {
     const double t_s = trajectory.duration_s() * (k + 0.5) / kModelFrames;
     // Seeds apart from the scan's frames: the models must not have seen the frames they read.
-    const sim::SimulatedFrame frame =
+    const simulator::SimulatedFrame frame =
         simulator.render(trajectory.T_reference_probe(t_s),
-                         sim::frame_seed(seed ^ 0x5EEDull, static_cast<std::size_t>(k)));
+                         simulator::frame_seed(seed ^ 0x5EEDull, static_cast<std::size_t>(k)));
     std::copy(frame.bmode.pixels.begin(), frame.bmode.pixels.end(),
               grey.pixels.begin() + static_cast<std::ptrdiff_t>(k) * w * h);
     // Grey models from what the probe sees: not a bone's shadowed inside.
     const LabelImage shown = frame.visible_truth();
     std::copy(shown.pixels.begin(), shown.pixels.end(),
               visible.pixels.begin() + static_cast<std::ptrdiff_t>(k) * w * h);
-    caster_runs_px.push_back(sim::shadow_caster_runs_px(frame));
+    caster_runs_px.push_back(simulator::shadow_caster_runs_px(frame));
   }
-  seg::SegmentationConfig config = seg::learn_label_models(grey, visible, base);
+  segmentation::SegmentationConfig config = segmentation::learn_label_models(grey, visible, base);
   if (config.psf_sigma_mm < 0.0) {
     config.psf_sigma_mm = simulator.psf_sigma_mm();
     config.dynamic_range_db = simulator.options().dynamic_range_db;
   }
-  const auto thickness = sim::shadow_caster_thickness_mm(caster_runs_px, probe.spacing_mm());
-  for (seg::LabelModel& m : config.materials)
+  const auto thickness = simulator::shadow_caster_thickness_mm(caster_runs_px, probe.spacing_mm());
+  for (segmentation::LabelModel& m : config.materials)
     if (const auto t = thickness.find(m.label); t != thickness.end()) m.thickness_mm = t->second;
   return config;
 }
 
 // The segmentation of the simulated sweep: the given configuration or preset, with label models
 // learnt from simulated frames where it has none; `models_from` says which.
-Result<seg::SegmentationConfig> sim_segmentation(const scan::SourceRequest& request,
-                                                 const SimScenario& scenario,
-                                                 const sim::BModeSimulator& simulator,
-                                                 const sim::Trajectory& trajectory,
-                                                 std::uint64_t seed, std::string& models_from) {
-  seg::SegmentationConfig base;
+Result<segmentation::SegmentationConfig> sim_segmentation(
+    const scan::SourceRequest& request, const SimScenario& scenario,
+    const simulator::BModeSimulator& simulator, const simulator::Trajectory& trajectory,
+    std::uint64_t seed, std::string& models_from) {
+  segmentation::SegmentationConfig base;
   models_from = "learnt from " + std::to_string(kModelFrames) + " simulated frames";
   if (request.segmentation || !request.preset.empty()) {
-    auto read = seg::load_segmentation_config(request.segmentation, request.preset);
+    auto read = segmentation::load_segmentation_config(request.segmentation, request.preset);
     if (!read) return read.status();
     base = std::move(*read);
     models_from =
@@ -74,7 +74,7 @@ Result<seg::SegmentationConfig> sim_segmentation(const scan::SourceRequest& requ
   if (base.materials.empty()) {
     for (const auto& m : scenario.phantom.meshes)
       if (std::none_of(base.materials.begin(), base.materials.end(),
-                       [&](const seg::LabelModel& b) { return b.label == m.label; }))
+                       [&](const segmentation::LabelModel& b) { return b.label == m.label; }))
         base.materials.push_back({m.label, m.name, 128.0, 25.0});
     base = learn_sim_models(simulator, trajectory, base, seed);
     if (request.segmentation) models_from += " (models learnt from simulated frames)";
@@ -85,10 +85,10 @@ Result<seg::SegmentationConfig> sim_segmentation(const scan::SourceRequest& requ
 
 // The simulated frames: `frame_count` of them, from the frame after `resume_after_frame`, the
 // probe vanishing after `fail_after_s` (< 0: never), each frame's truth kept for scoring.
-sim::SimFrameOptions sim_frame_options(const SimScenarioOptions& options, int frame_count,
-                                       std::optional<std::int64_t> resume_after_frame,
-                                       double fail_after_s) {
-  sim::SimFrameOptions frame_options;
+simulator::SimFrameOptions sim_frame_options(const SimScenarioOptions& options, int frame_count,
+                                             std::optional<std::int64_t> resume_after_frame,
+                                             double fail_after_s) {
+  simulator::SimFrameOptions frame_options;
   frame_options.frame_rate_hz = options.frame_rate_hz;
   frame_options.frame_count = frame_count;
   frame_options.seed = options.seed;
@@ -98,7 +98,7 @@ sim::SimFrameOptions sim_frame_options(const SimScenarioOptions& options, int fr
   if (fail_after_s >= 0.0)
     frame_options.fail_after_frames =
         static_cast<long>(std::floor(fail_after_s * options.frame_rate_hz));
-  frame_options.truth = std::make_shared<sim::FrameTruthStore>();
+  frame_options.truth = std::make_shared<simulator::FrameTruthStore>();
   return frame_options;
 }
 
@@ -118,29 +118,29 @@ Result<scan::ScanSource> open_sim_source(const scan::SourceRequest& request,
 
   scan::ScanSource source;
   scan::ScanSetup& setup = source.setup;
-  std::shared_ptr<const sim::BModeSimulator> simulator;
+  std::shared_ptr<const simulator::BModeSimulator> simulator;
   try {
-    simulator =
-        std::make_shared<const sim::BModeSimulator>(scenario->phantom, sim::Probe(scenario->probe));
+    simulator = std::make_shared<const simulator::BModeSimulator>(
+        scenario->phantom, acquisition::Probe(scenario->probe));
   } catch (const GeometryError& e) {
     return Status::error(std::string("sim: ") + e.what());
   }
-  const sim::Probe& probe = simulator->probe();
-  const sim::Trajectory trajectory(scenario->motion);
+  const acquisition::Probe& probe = simulator->probe();
+  const simulator::Trajectory trajectory(scenario->motion);
 
   // Calibration: the simulated probe's own, unless the user gives one (to study a bad one).
   setup.T_probe_image = probe.T_probe_image().matrix();
   setup.calibration_from = "the simulated probe";
   if (request.calibration) {
-    auto read = seg::read_calibration(*request.calibration);
+    auto read = segmentation::read_calibration(*request.calibration);
     if (!read) return read.status();
     setup.T_probe_image = *read;
     setup.calibration_from = request.calibration->string();
   }
-  auto geometry = seg::geometry_from_header(sim::probe_fields(probe));
+  auto geometry = segmentation::geometry_from_header(acquisition::probe_fields(probe));
   if (!geometry) return geometry.status();
   setup.geometry = std::move(*geometry);
-  setup.sector_from = "the simulated probe (" + sim::to_string(probe.type()) + ")";
+  setup.sector_from = "the simulated probe (" + acquisition::to_string(probe.type()) + ")";
 
   auto config =
       sim_segmentation(request, *scenario, *simulator, trajectory, options.seed, setup.models_from);
@@ -155,24 +155,25 @@ Result<scan::ScanSource> open_sim_source(const scan::SourceRequest& request,
   const Box3 box = scenario->phantom.bounds();
   setup.bounds = request.bounds ? *request.bounds : box.padded(0.1 * box.diagonal());
 
-  const sim::SimFrameOptions frame_options =
+  const simulator::SimFrameOptions frame_options =
       sim_frame_options(options, frame_count, request.resume_after_frame, sim.fail_after_s);
   source.device_origin_s = static_cast<double>(frame_options.first_frame) / options.frame_rate_hz;
   source.truth_of_frame = [truth = frame_options.truth](std::int64_t index) {
     return truth->take(index);
   };
   const std::string name = "sim:" + (phantom_spec.empty() ? std::string("default") : phantom_spec);
-  source.frames = std::make_unique<sim::SimFrameSource>(simulator, trajectory, frame_options, name);
-  // The tracker samples the whole sweep (and a margin for its latency), as sim::acquire does.
+  source.frames =
+      std::make_unique<simulator::SimFrameSource>(simulator, trajectory, frame_options, name);
+  // The tracker samples the whole sweep (and a margin for its latency), as simulator::acquire does.
   const double margin_s = 1.0 + std::abs(scenario->tracker.latency_s);
   source.poses = std::make_unique<tracking::RecordedPoseSource>(
-      sim::track(trajectory, scenario->tracker, -margin_s, duration_s + margin_s),
+      simulator::track(trajectory, scenario->tracker, -margin_s, duration_s + margin_s),
       name + " (tracker)");
   source.tracker_latency_s = scenario->tracker.latency_s;
   std::ostringstream text;
-  text << "simulated " << sim::to_string(probe.type()) << " probe " << probe.width_px() << "x"
-       << probe.height_px() << " at " << options.frame_rate_hz << " fps, " << options.trajectory
-       << " of " << duration_s << " s (" << frame_count << " frames), "
+  text << "simulated " << acquisition::to_string(probe.type()) << " probe " << probe.width_px()
+       << "x" << probe.height_px() << " at " << options.frame_rate_hz << " fps, "
+       << options.trajectory << " of " << duration_s << " s (" << frame_count << " frames), "
        << scenario->phantom.labels().size() << " labels, tracker " << scenario->tracker.rate_hz
        << " Hz; models " << setup.models_from;
   source.description = text.str();

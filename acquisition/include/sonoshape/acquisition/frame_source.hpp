@@ -10,7 +10,7 @@
 #include "sonoshape/acquisition/stream_source.hpp"
 #include "sonoshape/core/frame.hpp"
 
-namespace sonoshape::acq {
+namespace sonoshape::acquisition {
 
 /// A stream of ultrasound frames (timestamps on the frame source's clock, indices from 0).
 /// See StreamSource for the threading and lifetime rules.
@@ -50,4 +50,4 @@ using ReplayFrameSource = SourceOf<ReplayFrames>;
 /// device origin for real-time playback of the file.
 double first_timestamp_s(const SequenceFile& file);
 
-}  // namespace sonoshape::acq
+}  // namespace sonoshape::acquisition

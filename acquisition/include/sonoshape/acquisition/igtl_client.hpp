@@ -15,7 +15,7 @@
 #include "sonoshape/core/image.hpp"
 #include "sonoshape/core/status.hpp"
 
-namespace sonoshape::acq {
+namespace sonoshape::acquisition {
 
 /// Where an OpenIGTLink server listens. 18944 is OpenIGTLink's and PlusServer's default port.
 struct IgtlEndpoint {
@@ -151,4 +151,4 @@ std::vector<std::uint8_t> igtl_start_tracking_data(int interval_ms);
 Result<std::optional<Eigen::Matrix4d>> decode_igtl_tracking_data(const IgtlMessage& message,
                                                                  const std::string& element);
 
-}  // namespace sonoshape::acq
+}  // namespace sonoshape::acquisition

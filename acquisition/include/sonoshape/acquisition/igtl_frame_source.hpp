@@ -7,7 +7,7 @@
 #include "sonoshape/acquisition/frame_source.hpp"
 #include "sonoshape/acquisition/igtl_client.hpp"
 
-namespace sonoshape::acq {
+namespace sonoshape::acquisition {
 
 /// Receives the IMAGE messages named `image_device` ("" : any) from an OpenIGTLink server;
 /// every other message is skipped. Frame::timestamp_s is the message's timestamp (the
@@ -44,4 +44,4 @@ class IgtlFrames final : public FrameBackend {
 /// The stream of an IgtlFrames.
 using IgtlFrameSource = SourceOf<IgtlFrames>;
 
-}  // namespace sonoshape::acq
+}  // namespace sonoshape::acquisition

@@ -16,7 +16,7 @@
 #include "sonoshape/core/image.hpp"
 #include "sonoshape/core/status.hpp"
 
-namespace sonoshape::acq {
+namespace sonoshape::acquisition {
 
 /// The label-map value for unknown pixels unless told otherwise (sonoshape's kLabelPixelUnknown).
 constexpr int kDefaultUnknownLabelValue = 255;
@@ -65,4 +65,4 @@ Result<LabelSequence> read_label_sequence(const std::filesystem::path& path,
                                           const std::filesystem::path& recording_path,
                                           int unknown_value = kDefaultUnknownLabelValue);
 
-}  // namespace sonoshape::acq
+}  // namespace sonoshape::acquisition

@@ -10,7 +10,7 @@
 
 #include "sonoshape/core/status.hpp"
 
-namespace sonoshape::acq {
+namespace sonoshape::acquisition {
 
 /// One <Transform> of <CoordinateDefinitions>: maps `from` coordinates into `to` (PLUS
 /// FromToTo naming; ImageToProbe maps pixels to mm and includes the pixel spacing).
@@ -46,4 +46,4 @@ Result<Eigen::Matrix4d> read_image_to_probe(const std::filesystem::path& path);
 Status write_plus_config(const PlusConfig& config, const std::filesystem::path& path,
                          const std::string& description = "");
 
-}  // namespace sonoshape::acq
+}  // namespace sonoshape::acquisition

@@ -16,7 +16,7 @@
 #include "sonoshape/acquisition/sequence_file.hpp"
 #include "sonoshape/core/status.hpp"
 
-namespace sonoshape::acq {
+namespace sonoshape::acquisition {
 
 /// "ProbeToTracker" (or "ProbeToTrackerTransform") -> {"Probe", "Tracker"}, split as PLUS does:
 /// at a "To" followed by an upper-case letter with a non-empty part before it ("ToolToTracker"
@@ -82,4 +82,4 @@ Result<bool> reorient_to_mf(SequenceFile& file, const std::filesystem::path& pat
 /// instead of all at one instant. Returns the rate used, none when the file has timestamps.
 std::optional<double> fill_missing_timestamps(SequenceFile& file);
 
-}  // namespace sonoshape::acq
+}  // namespace sonoshape::acquisition

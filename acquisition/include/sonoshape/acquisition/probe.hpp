@@ -15,7 +15,7 @@
 #include "sonoshape/core/image.hpp"
 #include "sonoshape/core/status.hpp"
 
-namespace sonoshape::acq {
+namespace sonoshape::acquisition {
 
 enum class ProbeType { kLinear, kConvex };
 
@@ -100,4 +100,4 @@ FieldList probe_fields(const Probe& probe);
 /// simulate`); fails naming the missing or invalid field.
 Result<Probe> probe_from_fields(const FieldList& fields);
 
-}  // namespace sonoshape::acq
+}  // namespace sonoshape::acquisition

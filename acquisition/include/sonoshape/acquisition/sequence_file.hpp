@@ -18,7 +18,7 @@
 #include "sonoshape/core/image.hpp"
 #include "sonoshape/core/status.hpp"
 
-namespace sonoshape::acq {
+namespace sonoshape::acquisition {
 
 /// Ordered `Key = value` fields (values without surrounding spaces).
 using FieldList = std::vector<std::pair<std::string, std::string>>;
@@ -49,7 +49,7 @@ class SequenceFile {
   const FieldList& fields() const { return fields_; }
   std::optional<std::string> field(std::string_view key) const { return find_field(fields_, key); }
   void set_field(std::string_view key, std::string value) {
-    acq::set_field(fields_, key, std::move(value));
+    acquisition::set_field(fields_, key, std::move(value));
   }
 
   /// Appends a frame. The first frame fixes the size; throws std::invalid_argument when a later
@@ -64,7 +64,7 @@ class SequenceFile {
     return find_field(frame_fields_.at(k), name);
   }
   void set_frame_field(std::size_t k, std::string_view name, std::string value) {
-    acq::set_field(frame_fields_.at(k), name, std::move(value));
+    acquisition::set_field(frame_fields_.at(k), name, std::move(value));
   }
 
   /// The frame's `Timestamp` field in seconds, or none when absent or not a number.
@@ -164,4 +164,4 @@ struct SequenceWriteOptions {
 Status write_sequence_file(const SequenceFile& file, const std::filesystem::path& path,
                            const SequenceWriteOptions& options = {});
 
-}  // namespace sonoshape::acq
+}  // namespace sonoshape::acquisition

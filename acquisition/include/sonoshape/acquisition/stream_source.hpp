@@ -21,7 +21,7 @@
 #include "sonoshape/core/bounded_queue.hpp"
 #include "sonoshape/core/status.hpp"
 
-namespace sonoshape::acq {
+namespace sonoshape::acquisition {
 
 /// Seconds on the monotonic clock (std::chrono::steady_clock, arbitrary epoch): the clock of
 /// receive times and of every latency sonoshape measures.
@@ -317,4 +317,4 @@ class SourceOf final : public StreamSource<typename Backend::Item> {
   }
 };
 
-}  // namespace sonoshape::acq
+}  // namespace sonoshape::acquisition

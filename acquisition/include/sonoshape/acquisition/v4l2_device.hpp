@@ -9,7 +9,7 @@
 #include <memory>
 #include <string>
 
-namespace sonoshape::acq {
+namespace sonoshape::acquisition {
 
 /// The POSIX calls of a V4L2 capture, with their POSIX contracts: a failing call returns -1
 /// (mmap: MAP_FAILED) and sets errno. Implementations must be thread-compatible (one source
@@ -36,4 +36,4 @@ class V4l2Device {
 /// The real system calls.
 std::shared_ptr<V4l2Device> system_v4l2_device();
 
-}  // namespace sonoshape::acq
+}  // namespace sonoshape::acquisition

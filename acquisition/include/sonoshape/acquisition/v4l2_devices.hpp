@@ -8,7 +8,7 @@
 
 #include "sonoshape/acquisition/v4l2_device.hpp"
 
-namespace sonoshape::acq {
+namespace sonoshape::acquisition {
 
 /// One capture size of a format and the frame rates the driver lists for it (Hz, highest
 /// first; empty when it lists none).
@@ -59,4 +59,4 @@ std::vector<std::string> v4l2_source_specs(const V4l2DeviceInfo& info);
 std::string v4l2_devices_report(const std::vector<V4l2DeviceInfo>& devices,
                                 const std::vector<std::string>& unreadable);
 
-}  // namespace sonoshape::acq
+}  // namespace sonoshape::acquisition

@@ -19,7 +19,7 @@
 #include "sonoshape/core/image.hpp"
 #include "sonoshape/core/status.hpp"
 
-namespace sonoshape::acq {
+namespace sonoshape::acquisition {
 
 /// How frames leave the driver: MMAP streaming (the driver fills buffers we share with it)
 /// or read(2) (a copy per frame; some grabbers offer only this). kAuto: MMAP when the device
@@ -170,4 +170,4 @@ class V4l2Frames final : public FrameBackend {
 /// The stream of a V4l2Frames.
 using V4l2FrameSource = SourceOf<V4l2Frames>;
 
-}  // namespace sonoshape::acq
+}  // namespace sonoshape::acquisition

@@ -38,10 +38,10 @@ struct SimScenarioOptions {
 
 /// Everything a simulation needs.
 struct SimScenario {
-  sim::Phantom phantom;
-  acq::ProbeGeometry probe;
-  sim::TrajectoryOptions motion;
-  sim::TrackerOptions tracker;
+  simulator::Phantom phantom;
+  acquisition::ProbeGeometry probe;
+  simulator::TrajectoryOptions motion;
+  simulator::TrackerOptions tracker;
 };
 
 /// Builds the scenario of a sweep lasting `duration_s`: the phantom (the options' meshes, one

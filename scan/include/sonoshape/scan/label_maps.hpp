@@ -3,8 +3,8 @@
 // labels", docs/segmentation.md). A feed gives each tracked frame its label map, from a label-map
 // sequence aligned to a replayed recording (frame k for frame k) or from OpenIGTLink IMAGE
 // messages of another device beside the B-mode stream (paired by timestamp); LabelMapStage turns
-// it into a slice exactly as the segmenter's label maps are (seg::make_slice: polygons per label,
-// unknown regions, fov = the sector).
+// it into a slice exactly as the segmenter's label maps are (segmentation::make_slice: polygons per
+// label, unknown regions, fov = the sector).
 #include <cstddef>
 #include <map>
 #include <memory>
@@ -18,11 +18,11 @@
 #include "sonoshape/scan/setup.hpp"
 #include "sonoshape/scan/stages.hpp"
 
-namespace sonoshape::acq {
+namespace sonoshape::acquisition {
 template <typename T>
 class StreamSource;
 using FrameSource = StreamSource<Frame>;
-}  // namespace sonoshape::acq
+}  // namespace sonoshape::acquisition
 
 namespace sonoshape::scan {
 
@@ -40,15 +40,15 @@ class LabelMapFeed {
 };
 
 /// Frame k of `maps` (a LabelSequence checked against the recording) for the frame of index k.
-std::unique_ptr<LabelMapFeed> sequence_label_feed(std::shared_ptr<const acq::SequenceFile> maps,
-                                                  std::string description);
+std::unique_ptr<LabelMapFeed> sequence_label_feed(
+    std::shared_ptr<const acquisition::SequenceFile> maps, std::string description);
 
 /// Pairs label maps with frames by timestamp. Label maps come in time order (a network's outputs
 /// in the order the frames went in), frames are asked for in time order.
 class LabelMapMatcher {
  public:
   /// `capacity`: label maps kept at most (the oldest go first).
-  explicit LabelMapMatcher(double tolerance_s = acq::kLabelTimeToleranceS,
+  explicit LabelMapMatcher(double tolerance_s = acquisition::kLabelTimeToleranceS,
                            std::size_t capacity = 64);
   /// Keeps a label map stamped `timestamp_s`.
   void offer(double timestamp_s, LabelImage labels);
@@ -69,12 +69,12 @@ class LabelMapMatcher {
 
 /// Label maps from a frame source (OpenIGTLink IMAGE messages named for the label maps), each
 /// paired with the frame of the same timestamp: waits up to `wait_s` for it, less when a later
-/// label map shows that it will not come. Pixel values as acq::to_label_pixels.
+/// label map shows that it will not come. Pixel values as acquisition::to_label_pixels.
 class StreamLabelFeed final : public LabelMapFeed {
  public:
   /// `name` names the label maps in messages, e.g. "IMAGE 'LabelMap' of igtl:127.0.0.1:18944".
-  StreamLabelFeed(std::unique_ptr<acq::FrameSource> source, std::string name, int unknown_value,
-                  double wait_s);
+  StreamLabelFeed(std::unique_ptr<acquisition::FrameSource> source, std::string name,
+                  int unknown_value, double wait_s);
   ~StreamLabelFeed() override;
   Status start() override;
   Result<LabelImage> label_map(const Frame& frame) override;
@@ -82,7 +82,7 @@ class StreamLabelFeed final : public LabelMapFeed {
 
  private:
   void take_available(double timeout_s);
-  std::unique_ptr<acq::FrameSource> source_;
+  std::unique_ptr<acquisition::FrameSource> source_;
   std::string name_;
   int unknown_value_;
   double wait_s_;
@@ -98,8 +98,8 @@ Result<std::unique_ptr<LabelMapFeed>> igtl_label_feed(const std::string& spec,
 #endif
 
 /// The segmentation stage of `--labels`: each frame's label map from the feed through
-/// seg::make_slice with the setup's sector and simplification, as SegmenterStage does with its
-/// own. A frame without a label map gives no slice (the first such is logged as a warning, with
+/// segmentation::make_slice with the setup's sector and simplification, as SegmenterStage does with
+/// its own. A frame without a label map gives no slice (the first such is logged as a warning, with
 /// why), and its frame is counted as failed.
 class LabelMapStage final : public SegmentationStage {
  public:

@@ -40,7 +40,7 @@ namespace sonoshape::scan {
 
 /// The sources of a scan and what is known about them (see sources.hpp for the factory).
 struct ScanSource {
-  std::unique_ptr<acq::FrameSource> frames;
+  std::unique_ptr<acquisition::FrameSource> frames;
   std::unique_ptr<tracking::PoseSource> poses;
   ScanSetup setup;
   /// Device time of the first frame: real-time playback of recorded or simulated data starts

@@ -68,8 +68,8 @@ struct LatencyStats {
 /// Nearest-rank percentiles of `samples_s` (copied and sorted).
 LatencyStats latency_stats(std::vector<double> samples_s);
 
-/// What the segmentation repaired to make frames' polygons valid (seg::make_slice): counts by
-/// kind, and the first few repairs with their frame index.
+/// What the segmentation repaired to make frames' polygons valid (segmentation::make_slice): counts
+/// by kind, and the first few repairs with their frame index.
 struct RepairReport {
   /// Repairs listed in `first`; the counts go on beyond it.
   static constexpr std::size_t kMaxListed = 20;
@@ -106,7 +106,7 @@ struct ScanSummary {
   double duration_s = 0.0;  ///< wall time from start() to the last stage's end
   RepairReport repairs;     ///< what the segmentation repaired
   /// Simulated sources: the keyframes' label maps against the simulator's truth, summed.
-  std::optional<seg::LabelComparison> segmentation_scores;
+  std::optional<segmentation::LabelComparison> segmentation_scores;
   std::map<int, std::string> label_names;  ///< for the scores' table
   /// Every material of the setup without a mesh at the end, with why: "label 3 (rib): ...".
   std::vector<std::string> labels_without_mesh;

@@ -18,9 +18,9 @@ namespace sonoshape::scan {
 struct ScanSetup {
   /// Calibration: image pixels -> probe mm (PLUS ImageToProbe, includes the pixel spacing).
   Eigen::Matrix4d T_probe_image = Eigen::Matrix4d::Identity();
-  seg::SegmentationConfig segmentation;  ///< label models, filters
-  seg::ImageGeometry geometry;           ///< image size, sector (the slices' fov), depths
-  std::vector<LabelInfo> labels;         ///< materials, for the reconstruction and the meshes
+  segmentation::SegmentationConfig segmentation;  ///< label models, filters
+  segmentation::ImageGeometry geometry;           ///< image size, sector (the slices' fov), depths
+  std::vector<LabelInfo> labels;  ///< materials, for the reconstruction and the meshes
   /// The scan volume (mm, reference frame) for the reconstruction; none: grown from the slices.
   std::optional<Box3> bounds;
   std::string calibration_from;  ///< where T_probe_image came from (for the log)

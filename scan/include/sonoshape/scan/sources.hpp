@@ -26,19 +26,19 @@ namespace sonoshape::scan {
 struct SourceRequest {
   /// "sim:", "sim:default", "sim:1:liver.obj:liver,2:kidney.obj", "replay:sweep.igs.mha".
   std::string spec;
-  /// ImageToProbe from a PLUS device-set XML or JSON (seg::read_calibration). Default: sim:
-  /// the simulated probe's exact calibration; replay: the file's header, else the sidecar
+  /// ImageToProbe from a PLUS device-set XML or JSON (segmentation::read_calibration). Default:
+  /// sim: the simulated probe's exact calibration; replay: the file's header, else the sidecar
   /// <name>.plus.xml.
   std::optional<std::filesystem::path> calibration;
-  /// replay: the probe's pose as PLUS names it (acq::find_pose_chain); empty: the header's
+  /// replay: the probe's pose as PLUS names it (acquisition::find_pose_chain); empty: the header's
   /// DefaultFrameTransformName, else the default search.
   std::string pose_transform;
   /// Segmentation configuration JSON (docs/segmentation.md). Default: sim: label models
   /// learnt from a few rendered frames and their ground truth (a preset of the simulated
   /// probe); replay: the file's header models, else a two-class split of its frames.
   std::optional<std::filesystem::path> segmentation;
-  /// A named set of segmentation settings (seg::segmentation_presets) under `segmentation`'s
-  /// keys; empty: the defaults.
+  /// A named set of segmentation settings (segmentation::segmentation_presets) under
+  /// `segmentation`'s keys; empty: the defaults.
   std::string preset;
   /// The reconstruction box; default: sim: the phantom's box padded by 10 % of its diagonal;
   /// replay: none (grown from the slices).
@@ -51,10 +51,11 @@ struct SourceRequest {
   /// go on from the frame they deliver now. None: from the start.
   std::optional<std::int64_t> resume_after_frame;
   /// `--labels`: a site's own label maps instead of the segmenter (label_maps.hpp). replay: a
-  /// label-map sequence FILE, frame k for frame k (acq::read_label_sequence); igtl: `igtl:DEVICE`
-  /// (or `igtl:DEVICE@HOST:PORT`), IMAGE messages paired by timestamp. Empty: the segmenter.
+  /// label-map sequence FILE, frame k for frame k (acquisition::read_label_sequence); igtl:
+  /// `igtl:DEVICE` (or `igtl:DEVICE@HOST:PORT`), IMAGE messages paired by timestamp. Empty: the
+  /// segmenter.
   std::string labels;
-  int labels_unknown = acq::kDefaultUnknownLabelValue;  ///< the label maps' unknown value
+  int labels_unknown = acquisition::kDefaultUnknownLabelValue;  ///< the label maps' unknown value
   double labels_wait_s = 1.0;  ///< igtl: how long a frame waits for its label map
 
   // igtl: only (an OpenIGTLink server such as PlusServer; needs SONOSHAPE_WITH_OPENIGTLINK).

@@ -39,10 +39,10 @@ class SegmentationStage {
   virtual void on_meshes(const MeshSet& /*meshes*/) {}
   /// The segmentation's label maps against the truth so far (simulated sources), summed over
   /// the scored frames; none when nothing was scored. Called after the stage has stopped.
-  virtual std::optional<seg::LabelComparison> scores() const { return std::nullopt; }
+  virtual std::optional<segmentation::LabelComparison> scores() const { return std::nullopt; }
 };
 
-/// The segmentation of segmentation/ (seg::segment_frame + seg::make_slice), as
+/// The segmentation of segmentation/ (segmentation::segment_frame + segmentation::make_slice), as
 /// `sonoshape segment` does it frame by frame (with its warning, once, when one label fills
 /// nearly all of most sectors after its first 10 frames). With the graph-cut method, the meshes of
 /// the latest reconstruction update, cut by each new frame's plane, are the cut's prior.
@@ -57,18 +57,19 @@ class SegmenterStage final : public SegmentationStage {
   void on_meshes(const MeshSet& meshes) override;
   /// Scores every label map against the truth this gives for its frame (simulated sources).
   void score_against(std::function<std::optional<LabelImage>(std::int64_t)> truth_of_frame);
-  std::optional<seg::LabelComparison> scores() const override;
+  std::optional<segmentation::LabelComparison> scores() const override;
 
  private:
   std::map<int, std::string> label_names() const;
 
   std::function<std::optional<LabelImage>(std::int64_t)> truth_of_frame_;
-  seg::LabelComparison scores_;
+  segmentation::LabelComparison scores_;
   std::size_t scored_frames_ = 0;
   ScanSetup setup_;
-  std::vector<Repair> repairs_;                      // of the last segment()
-  std::unique_ptr<seg::GraphCutLabeller> labeller_;  // with the graph-cut method
-  seg::SectorShareCheck shares_;  // one label filling nearly all of most sectors: warned once
+  std::vector<Repair> repairs_;                               // of the last segment()
+  std::unique_ptr<segmentation::GraphCutLabeller> labeller_;  // with the graph-cut method
+  segmentation::SectorShareCheck
+      shares_;  // one label filling nearly all of most sectors: warned once
   bool shares_warned_ = false;
   std::mutex meshes_mutex_;
   std::shared_ptr<const MeshSet> meshes_;  // of the latest update, for the prior

@@ -13,7 +13,7 @@
 #include "sonoshape/core/image.hpp"
 #include "sonoshape/core/status.hpp"
 
-namespace sonoshape::seg {
+namespace sonoshape::segmentation {
 
 /// Grey-level model of one label: the mean and spread of its B-mode grey (0..255) over the
 /// known pixels of typical frames (what the simulator writes as SonoshapeLabelGreyMean/Std).
@@ -171,4 +171,4 @@ SegmentationConfig learn_models_from_samples(const std::vector<std::uint8_t>& sa
 SegmentationConfig auto_two_class(const std::vector<std::uint8_t>& samples,
                                   const SegmentationConfig& base = {});
 
-}  // namespace sonoshape::seg
+}  // namespace sonoshape::segmentation

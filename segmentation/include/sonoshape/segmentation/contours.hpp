@@ -8,7 +8,7 @@
 #include "sonoshape/core/slice.hpp"
 #include "sonoshape/core/status.hpp"
 
-namespace sonoshape::seg {
+namespace sonoshape::segmentation {
 
 /// The plane of an image in the reference frame and the map from pixels to its (u, v) mm.
 struct ImagePlane {
@@ -61,4 +61,4 @@ Result<LabeledSlice> make_slice(const LabelImage& labels, const ImageU8& sector,
                                 const Ring2& sector_px, const ImagePlane& plane,
                                 double tolerance_mm, std::vector<Repair>* repairs = nullptr);
 
-}  // namespace sonoshape::seg
+}  // namespace sonoshape::segmentation

@@ -15,7 +15,7 @@
 #include "sonoshape/segmentation/contours.hpp"
 #include "sonoshape/segmentation/segmenter.hpp"
 
-namespace sonoshape::seg {
+namespace sonoshape::segmentation {
 
 /// What the surfaces already reconstructed predict of a new frame: the prior of the graph cut.
 /// Implemented where a reconstruction lives (the scan pipeline, `segment`).
@@ -65,4 +65,4 @@ class GraphCutLabeller {
   std::unique_ptr<Impl> impl_;
 };
 
-}  // namespace sonoshape::seg
+}  // namespace sonoshape::segmentation

@@ -6,7 +6,7 @@
 #include "sonoshape/core/image.hpp"
 #include "sonoshape/core/status.hpp"
 
-namespace sonoshape::seg {
+namespace sonoshape::segmentation {
 
 /// Writes `frame` (grey) as a colour PNG with the outline of every material of `ours` in the
 /// label's colour and the unknown area (shadow, no signal) inside `sector` tinted; with `truth`,
@@ -17,4 +17,4 @@ Status write_overlay(const std::filesystem::path& path, const GreyImage& frame,
                      const LabelImage& ours, const ImageU8& sector,
                      const LabelImage* truth = nullptr);
 
-}  // namespace sonoshape::seg
+}  // namespace sonoshape::segmentation

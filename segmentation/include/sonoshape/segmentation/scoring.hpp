@@ -12,7 +12,7 @@
 #include "sonoshape/core/image.hpp"
 #include "sonoshape/core/status.hpp"
 
-namespace sonoshape::seg {
+namespace sonoshape::segmentation {
 
 /// Pixel counts of one class: in the truth, in ours, in both.
 struct PixelCounts {
@@ -50,8 +50,10 @@ LabelComparison compare_labels(const LabelImage& truth, const LabelImage& ours,
 
 /// Checks that `truth` (read from `truth_path`) holds one label frame per frame of `sweep`
 /// (read from `sweep_path`), of the same size; the error names both files, the frame and the fix.
-Status check_truth_labels(const acq::SequenceFile& sweep, const std::filesystem::path& sweep_path,
-                          const acq::SequenceFile& truth, const std::filesystem::path& truth_path);
+Status check_truth_labels(const acquisition::SequenceFile& sweep,
+                          const std::filesystem::path& sweep_path,
+                          const acquisition::SequenceFile& truth,
+                          const std::filesystem::path& truth_path);
 
 /// The comparison of one frame of a sweep.
 struct FrameComparison {
@@ -77,4 +79,4 @@ Status write_comparison_report(const std::vector<FrameComparison>& frames,
                                const std::map<int, std::string>& names,
                                const std::filesystem::path& path);
 
-}  // namespace sonoshape::seg
+}  // namespace sonoshape::segmentation

@@ -10,7 +10,7 @@
 
 #include "sonoshape/core/image.hpp"
 
-namespace sonoshape::seg {
+namespace sonoshape::segmentation {
 
 class SectorShareCheck {
  public:
@@ -40,4 +40,4 @@ class SectorShareCheck {
   std::map<int, std::size_t> filled_frames_;  // label -> frames it fills nearly all of
 };
 
-}  // namespace sonoshape::seg
+}  // namespace sonoshape::segmentation

@@ -7,7 +7,7 @@
 #include "sonoshape/core/image.hpp"
 #include "sonoshape/segmentation/config.hpp"
 
-namespace sonoshape::seg {
+namespace sonoshape::segmentation {
 
 /// What the segmenter knows about the image geometry (the same for every frame of a sweep).
 struct ImageGeometry {
@@ -54,4 +54,4 @@ struct Segmentation {
 Segmentation segment_frame(const GreyImage& image, const ImageGeometry& geometry,
                            const SegmentationConfig& config);
 
-}  // namespace sonoshape::seg
+}  // namespace sonoshape::segmentation

@@ -22,7 +22,7 @@
 #include "sonoshape/segmentation/sector_share.hpp"
 #include "sonoshape/segmentation/segmenter.hpp"
 
-namespace sonoshape::seg {
+namespace sonoshape::segmentation {
 
 /// Everything segment_sweep needs besides the frames.
 struct SweepSetup {
@@ -34,7 +34,7 @@ struct SweepSetup {
   Eigen::Matrix4d T_probe_image = Eigen::Matrix4d::Identity();
   /// How each frame's pose is found (the probe's frame to the reconstruction's); none: the
   /// classic ReferenceToTracker^-1 * ProbeToTracker (legacy_pose_chain).
-  std::optional<acq::PoseChain> pose_chain;
+  std::optional<acquisition::PoseChain> pose_chain;
   std::string models_from;       ///< "config", "header", "two-class k-means"
   std::string calibration_from;  ///< where T_probe_image came from
   std::string sector_from;       ///< "header probe", "auto", "full", "config polygon"
@@ -43,7 +43,7 @@ struct SweepSetup {
 /// The sector, its outline and the beam depth of a simulated sweep, rebuilt from the probe
 /// fields `sonoshape simulate` writes in the header (SonoshapeProbeType, ...); fails naming the
 /// missing or invalid field.
-Result<ImageGeometry> geometry_from_header(const acq::FieldList& fields);
+Result<ImageGeometry> geometry_from_header(const acquisition::FieldList& fields);
 
 /// Reads the calibration ImageToProbe from a PLUS device-set XML or a PLUS calibration result
 /// (*.results.xml; <Transform From="Image" To="Probe">) or a JSON file ({"ImageToProbe": [16
@@ -58,10 +58,11 @@ Result<Eigen::Matrix4d> read_calibration(const std::filesystem::path& path);
 /// - calibration: `calibration_path`, else the header's ImageToProbeTransform, else the
 ///   sidecar `<name>.plus.xml` next to the file; fails saying how to give one;
 /// - sector: the config's choice; by default the header's probe, else found from the frames;
-/// - pose: acq::find_pose_chain with `pose_transform` (empty: the header's or the default) over
+/// - pose: acquisition::find_pose_chain with `pose_transform` (empty: the header's or the default)
+/// over
 ///   the file's transforms and those of the calibration's device set (or sidecar);
 /// - crop: a per-frame ImageToCroppedImage folded into T_probe_image (fails when it moves).
-Result<SweepSetup> prepare_sweep(const acq::SequenceFile& file,
+Result<SweepSetup> prepare_sweep(const acquisition::SequenceFile& file,
                                  const std::filesystem::path& sequence_path,
                                  const std::optional<std::filesystem::path>& config_path,
                                  const std::optional<std::filesystem::path>& calibration_path,
@@ -70,25 +71,26 @@ Result<SweepSetup> prepare_sweep(const acq::SequenceFile& file,
 /// The same from an in-memory configuration (no file), for tests and tools; `config` replaces
 /// the defaults but its empty materials are still taken from the header. `coordinates`: fixed
 /// transforms for the pose chain (a device set's).
-Result<SweepSetup> prepare_sweep(const acq::SequenceFile& file,
+Result<SweepSetup> prepare_sweep(const acquisition::SequenceFile& file,
                                  const std::filesystem::path& sequence_path,
                                  const std::optional<SegmentationConfig>& config,
                                  const std::optional<Eigen::Matrix4d>& T_probe_image,
                                  std::string_view pose_transform = {},
-                                 const acq::PlusConfig& coordinates = {});
+                                 const acquisition::PlusConfig& coordinates = {});
 
 /// Brings a PLUS recording read from `path` to what a sweep expects, as PLUS does on reading:
-/// frames flipped to MF (acq::reorient_to_mf, logged), and every frame a Timestamp when none
-/// has one (acq::fill_missing_timestamps, one warning), so that `segment` and `scan --source
-/// replay:` get the same frames. Fails as reorient_to_mf does.
-Status normalise_recording(acq::SequenceFile& file, const std::filesystem::path& path);
+/// frames flipped to MF (acquisition::reorient_to_mf, logged), and every frame a Timestamp when
+/// none has one (acquisition::fill_missing_timestamps, one warning), so that `segment` and `scan
+/// --source replay:` get the same frames. Fails as reorient_to_mf does.
+Status normalise_recording(acquisition::SequenceFile& file, const std::filesystem::path& path);
 
 /// The pose of frame k: ReferenceToTracker^-1 * ProbeToTracker (ProbeToTracker alone when the
 /// file has no ReferenceToTracker); none when a status is not OK or a transform is unreadable.
-std::optional<Eigen::Matrix4d> reference_from_probe(const acq::SequenceFile& file, std::size_t k);
+std::optional<Eigen::Matrix4d> reference_from_probe(const acquisition::SequenceFile& file,
+                                                    std::size_t k);
 /// The pose of frame k along `setup`'s pose chain (the legacy one when it has none).
-std::optional<Eigen::Matrix4d> reference_from_probe(const acq::SequenceFile& file, std::size_t k,
-                                                    const SweepSetup& setup);
+std::optional<Eigen::Matrix4d> reference_from_probe(const acquisition::SequenceFile& file,
+                                                    std::size_t k, const SweepSetup& setup);
 
 /// A repair the segmenter made in one frame (see make_slice).
 struct FrameRepair {
@@ -131,10 +133,10 @@ struct SweepSegmentation {
 struct SweepLabels {
   /// When set, frame k's label map is this file's frame k instead of the segmenter's ("perfect
   /// labels"): the same contours and placement, so the run is the upper bound of the sweep.
-  const acq::SequenceFile* perfect = nullptr;
+  const acquisition::SequenceFile* perfect = nullptr;
   /// When set, every segmented frame's label map is compared with this file's frame of the
   /// same index (SweepSegmentation::comparisons).
-  const acq::SequenceFile* truth = nullptr;
+  const acquisition::SequenceFile* truth = nullptr;
   /// When set, called with the index and the label map of every frame that gets one (the
   /// segmenter's or the perfect one), before its contours are traced: pictures, diagnostics.
   std::function<void(std::size_t frame, const LabelImage& labels)> on_label_map;
@@ -153,8 +155,8 @@ using SweepProgress = std::function<void(std::size_t done)>;
 /// first such frame stops the sweep instead (SweepSegmentation::refused). Throws
 /// std::invalid_argument when `every` < 1, the frames do not match the setup's geometry, or a
 /// file of `labels` does not match the frames (check_truth_labels says which).
-SweepSegmentation segment_sweep(const acq::SequenceFile& file, const SweepSetup& setup,
+SweepSegmentation segment_sweep(const acquisition::SequenceFile& file, const SweepSetup& setup,
                                 int every = 1, const SweepProgress& progress = {},
                                 const ReadOptions& options = {}, const SweepLabels& labels = {});
 
-}  // namespace sonoshape::seg
+}  // namespace sonoshape::segmentation

@@ -11,12 +11,12 @@
 #include <cstdint>
 #include <memory>
 
+#include "sonoshape/acquisition/probe.hpp"
 #include "sonoshape/core/image.hpp"
 #include "sonoshape/core/slice.hpp"
 #include "sonoshape/simulator/phantom.hpp"
-#include "sonoshape/simulator/probe.hpp"
 
-namespace sonoshape::sim {
+namespace sonoshape::simulator {
 
 struct BModeOptions {
   double dynamic_range_db = 50.0;  ///< echo range mapped onto grey 0..255 (log compression)
@@ -59,20 +59,21 @@ struct SimulatedFrame {
 /// region's label when its centre (Probe::pixel_to_mm) is inside the region (outer ring minus
 /// holes, even-odd), else kLabelPixelOutside. Pixels outside the sector are not masked here.
 /// Throws GeometryError for region labels outside 1..254.
-LabelImage rasterize_labels(const LabeledSlice& slice, const Probe& probe);
+LabelImage rasterize_labels(const LabeledSlice& slice, const acquisition::Probe& probe);
 
 /// Renders frames of one phantom with one probe. Construction precomputes the scan-conversion
 /// tables; render() is const and may run on several threads at once.
 class BModeSimulator {
  public:
   /// Throws GeometryError for an empty phantom or labels outside 1..254.
-  BModeSimulator(Phantom phantom, const Probe& probe, const BModeOptions& options = {});
+  BModeSimulator(Phantom phantom, const acquisition::Probe& probe,
+                 const BModeOptions& options = {});
   ~BModeSimulator();
   BModeSimulator(BModeSimulator&&) noexcept;
   BModeSimulator& operator=(BModeSimulator&&) noexcept;
 
   const Phantom& phantom() const;
-  const Probe& probe() const;
+  const acquisition::Probe& probe() const;
   const BModeOptions& options() const;
   /// The point-spread function's Gaussian sigma (mm): the mean of its lateral and axial sigmas
   /// at the probe's frequency (what a segmenter's blooming correction needs).
@@ -87,4 +88,4 @@ class BModeSimulator {
   std::unique_ptr<Impl> impl_;
 };
 
-}  // namespace sonoshape::sim
+}  // namespace sonoshape::simulator

@@ -7,7 +7,7 @@
 #include "sonoshape/core/mesh.hpp"
 #include "sonoshape/core/slice.hpp"
 
-namespace sonoshape::sim {
+namespace sonoshape::simulator {
 
 /// Per-label scores. Distances are in % of the evaluation box diagonal. A score that cannot be
 /// computed (no slices given, label missing from the reconstruction, no contour of the label)
@@ -43,4 +43,4 @@ std::vector<LabelScore> evaluate(const MeshSet& reconstruction, const MeshSet& t
                                  const SliceSet* slices, const Box3& box,
                                  const EvaluationOptions& options = {});
 
-}  // namespace sonoshape::sim
+}  // namespace sonoshape::simulator

@@ -13,7 +13,7 @@
 #include "sonoshape/core/mesh_slicer.hpp"
 #include "sonoshape/core/status.hpp"
 
-namespace sonoshape::sim {
+namespace sonoshape::simulator {
 
 /// Acoustic properties of a tissue, as the B-mode synthesis uses them.
 struct Tissue {
@@ -76,4 +76,4 @@ TriangleMesh make_cylinder(double radius_mm, double length_mm, int segments = 48
 /// A closed UV sphere centred at the origin, outward-oriented.
 TriangleMesh make_sphere(double radius_mm, int segments = 64, int rings = 32);
 
-}  // namespace sonoshape::sim
+}  // namespace sonoshape::simulator

@@ -6,7 +6,7 @@
 
 #include "sonoshape/core/mesh_slicer.hpp"
 
-namespace sonoshape::sim {
+namespace sonoshape::simulator {
 
 enum class PlaneFamily { kParallel, kOrthogonal, kRandom, kSweep };
 
@@ -20,4 +20,4 @@ PlaneFamily parse_plane_family(const std::string& name);
 std::vector<SlicePlane> generate_planes(PlaneFamily family, int count, const Box3& object_box,
                                         std::uint64_t seed);
 
-}  // namespace sonoshape::sim
+}  // namespace sonoshape::simulator

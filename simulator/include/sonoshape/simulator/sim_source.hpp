@@ -1,7 +1,7 @@
 #pragma once
 // The simulated probe as a live frame source (`sonoshape scan --source sim:...`): frames are
 // rendered on demand at the trajectory's true pose, at the probe's frame rate in real time or
-// as fast as they render. Its tracker is a tracking::RecordedPoseSource playing sim::track().
+// as fast as they render. Its tracker is a tracking::RecordedPoseSource playing simulator::track().
 #include <cstdint>
 #include <deque>
 #include <memory>
@@ -13,7 +13,7 @@
 #include "sonoshape/simulator/bmode.hpp"
 #include "sonoshape/simulator/trajectory.hpp"
 
-namespace sonoshape::sim {
+namespace sonoshape::simulator {
 
 /// The truth label frames of a simulated source's latest frames, by frame index, for scoring
 /// the segmentation live. Thread-safe; keeps the newest `capacity` frames.
@@ -48,7 +48,7 @@ struct SimFrameOptions {
 
 /// A simulated probe. In real-time playback a frame that could not be rendered in time is
 /// skipped (counted by dropped()), as a real probe's frames are lost when nobody takes them.
-class SimFrames final : public acq::FrameBackend {
+class SimFrames final : public acquisition::FrameBackend {
  public:
   /// Throws std::invalid_argument for a null simulator, a non-positive frame rate or no frames.
   SimFrames(std::shared_ptr<const BModeSimulator> simulator, Trajectory trajectory,
@@ -59,7 +59,7 @@ class SimFrames final : public acq::FrameBackend {
 
  protected:
   Status open() override;
-  Result<acq::Polled> poll(Frame& frame) override;
+  Result<acquisition::Polled> poll(Frame& frame) override;
   bool is_playback() const override { return true; }
 
  private:
@@ -71,9 +71,9 @@ class SimFrames final : public acq::FrameBackend {
   long delivered_ = 0;
 };
 /// The stream of a SimFrames.
-using SimFrameSource = acq::SourceOf<SimFrames>;
+using SimFrameSource = acquisition::SourceOf<SimFrames>;
 
 /// The speckle seed of frame k of a sweep simulated with `seed` (as simulate_sweep uses it).
 std::uint64_t frame_seed(std::uint64_t seed, std::size_t k);
 
-}  // namespace sonoshape::sim
+}  // namespace sonoshape::simulator

@@ -29,12 +29,13 @@
 #include "sonoshape/simulator/bmode.hpp"
 #include "sonoshape/simulator/trajectory.hpp"
 
-namespace sonoshape::sim {
+namespace sonoshape::simulator {
 
 /// The simulated sweep and its ground truth.
 struct SimulatedSweep {
-  acq::SequenceFile bmode;  ///< B-mode frames with the fields above
-  acq::SequenceFile truth;  ///< label frames (0 background, ids, 255 unknown), same frame fields
+  acquisition::SequenceFile bmode;  ///< B-mode frames with the fields above
+  acquisition::SequenceFile
+      truth;  ///< label frames (0 background, ids, 255 unknown), same frame fields
   std::vector<LabeledSlice> slices;  ///< exact cut per frame (true pose), fov = the sector
   double mean_shadow_fraction = 0.0;
 };
@@ -58,4 +59,4 @@ std::array<int, 256> shadow_caster_runs_px(const SimulatedFrame& frame);
 std::map<int, double> shadow_caster_thickness_mm(const std::vector<std::array<int, 256>>& runs_px,
                                                  double spacing_mm);
 
-}  // namespace sonoshape::sim
+}  // namespace sonoshape::simulator

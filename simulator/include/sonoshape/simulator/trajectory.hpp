@@ -11,7 +11,7 @@
 #include "sonoshape/core/frame.hpp"
 #include "sonoshape/core/geometry.hpp"
 
-namespace sonoshape::sim {
+namespace sonoshape::simulator {
 
 /// The sonographer's manoeuvre (probe frame: x along the array, y along the beam, z normal to
 /// the image, see probe.hpp).
@@ -121,4 +121,4 @@ struct SimulatedAcquisition {
 SimulatedAcquisition acquire(const Trajectory& trajectory, const TrackerOptions& tracker,
                              int frame_count, double frame_rate_hz);
 
-}  // namespace sonoshape::sim
+}  // namespace sonoshape::simulator

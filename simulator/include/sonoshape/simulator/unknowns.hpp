@@ -7,7 +7,7 @@
 
 #include "sonoshape/core/slice.hpp"
 
-namespace sonoshape::sim {
+namespace sonoshape::simulator {
 
 enum class FovShape { kNone, kSector, kRect };
 
@@ -36,4 +36,4 @@ struct UnknownOptions {
 /// vertex.
 void add_unknowns(SliceSet& set, const UnknownOptions& options);
 
-}  // namespace sonoshape::sim
+}  // namespace sonoshape::simulator

@@ -24,7 +24,7 @@
 
 namespace sonoshape::testing {
 
-class FakeV4l2Driver final : public acq::V4l2Device {
+class FakeV4l2Driver final : public acquisition::V4l2Device {
  public:
   /// A device at `path` whose largest (and initial) size is width x height.
   explicit FakeV4l2Driver(std::string path = "/dev/video7", std::uint32_t width = 64,

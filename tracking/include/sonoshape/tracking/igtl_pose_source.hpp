@@ -23,29 +23,29 @@ enum class IgtlPoseFrom {
 /// PlusServer serves every client the same stream). Pose::timestamp_s is the message's
 /// timestamp. A matrix that is not finite or not rigid (rotation part off by more than 1e-3)
 /// is an INVALID sample, never used as a pose. A server that goes away after the first
-/// connection is the source's condition() while it is connected to again (acq::IgtlLink).
+/// connection is the source's condition() while it is connected to again (acquisition::IgtlLink).
 /// Messages that cannot be read (a bad CRC, a body of the wrong size) are dropped and counted
 /// in losses() by reason, the first of each logged.
 class IgtlPoses final : public PoseBackend {
  public:
-  IgtlPoses(acq::IgtlEndpoint endpoint, std::string device, IgtlPoseFrom from);
+  IgtlPoses(acquisition::IgtlEndpoint endpoint, std::string device, IgtlPoseFrom from);
 
   std::string describe() const override;
   std::map<std::string, std::size_t> losses() const override { return drops_.counts(); }
 
  protected:
   Status open() override;
-  Result<acq::Polled> poll(Pose& pose) override;
+  Result<acquisition::Polled> poll(Pose& pose) override;
   void close() override { link_.close(); }
 
  private:
   std::string device_;
   IgtlPoseFrom from_;
-  acq::IgtlLink link_;
-  acq::IgtlDrops drops_;
+  acquisition::IgtlLink link_;
+  acquisition::IgtlDrops drops_;
 };
 /// The stream of an IgtlPoses.
-using IgtlPoseSource = acq::SourceOf<IgtlPoses>;
+using IgtlPoseSource = acquisition::SourceOf<IgtlPoses>;
 
 /// A sample from a matrix: rigid within 1e-3 -> valid, else kInvalid (identity pose).
 Pose pose_from_matrix(const Eigen::Matrix4d& T_reference_probe, double timestamp_s);

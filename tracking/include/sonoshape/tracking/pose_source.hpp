@@ -16,10 +16,10 @@
 namespace sonoshape::tracking {
 
 /// A stream of tracker samples, T_reference_probe with status, in time order on the tracker's
-/// clock. See acq::StreamSource for the threading and lifetime rules.
-using PoseSource = acq::StreamSource<Pose>;
+/// clock. See acquisition::StreamSource for the threading and lifetime rules.
+using PoseSource = acquisition::StreamSource<Pose>;
 /// What a tracker, a file or a simulation of poses implements (open / poll / close).
-using PoseBackend = acq::StreamBackend<Pose>;
+using PoseBackend = acquisition::StreamBackend<Pose>;
 
 /// Plays a list of samples (time order) as a tracker would: the simulated tracker of a `sim:`
 /// source, and tests. Optionally fails after `fail_after` samples (a tracker unplugged).
@@ -33,7 +33,7 @@ class RecordedPoses final : public PoseBackend {
 
  protected:
   Status open() override;
-  Result<acq::Polled> poll(Pose& pose) override;
+  Result<acquisition::Polled> poll(Pose& pose) override;
   bool is_playback() const override { return true; }
 
  private:
@@ -43,7 +43,7 @@ class RecordedPoses final : public PoseBackend {
   std::size_t next_ = 0;
 };
 /// The stream of a RecordedPoses.
-using RecordedPoseSource = acq::SourceOf<RecordedPoses>;
+using RecordedPoseSource = acquisition::SourceOf<RecordedPoses>;
 
 /// The probe poses of a PLUS sequence file, one sample per frame at the frame's `Timestamp`:
 /// T_reference_probe = ReferenceToTracker^-1 * ProbeToTracker (ProbeToTracker alone when the
@@ -53,38 +53,39 @@ using RecordedPoseSource = acq::SourceOf<RecordedPoses>;
 class ReplayPoses final : public PoseBackend {
  public:
   /// Replays `file` (shared with the frame replay); `name` names it in messages.
-  ReplayPoses(std::shared_ptr<const acq::SequenceFile> file, std::string name,
+  ReplayPoses(std::shared_ptr<const acquisition::SequenceFile> file, std::string name,
               std::string probe_transform = "ProbeToTracker",
               std::string reference_transform = "ReferenceToTracker");
-  /// Replays the poses `chain` composes (acq::find_pose_chain): T_reference_probe is the
+  /// Replays the poses `chain` composes (acquisition::find_pose_chain): T_reference_probe is the
   /// chain's T_to_from, kInvalid when a per-frame transform of it is not OK.
-  ReplayPoses(std::shared_ptr<const acq::SequenceFile> file, std::string name,
-              acq::PoseChain chain);
+  ReplayPoses(std::shared_ptr<const acquisition::SequenceFile> file, std::string name,
+              acquisition::PoseChain chain);
 
   std::string describe() const override { return "replay:" + name_ + " (poses)"; }
 
  protected:
   Status open() override;
-  Result<acq::Polled> poll(Pose& pose) override;
+  Result<acquisition::Polled> poll(Pose& pose) override;
   bool is_playback() const override { return true; }
 
  private:
-  std::shared_ptr<const acq::SequenceFile> file_;
+  std::shared_ptr<const acquisition::SequenceFile> file_;
   std::string name_;
   std::string probe_;
   std::string reference_;
   bool has_reference_ = false;
-  std::optional<acq::PoseChain> chain_;
+  std::optional<acquisition::PoseChain> chain_;
   std::size_t next_ = 0;
 };
 /// The stream of a ReplayPoses.
-using ReplayPoseSource = acq::SourceOf<ReplayPoses>;
+using ReplayPoseSource = acquisition::SourceOf<ReplayPoses>;
 
 /// The pose sample of frame k along `chain`, as ReplayPoseSource delivers it.
-Pose replay_pose(const acq::SequenceFile& file, std::size_t k, const acq::PoseChain& chain);
+Pose replay_pose(const acquisition::SequenceFile& file, std::size_t k,
+                 const acquisition::PoseChain& chain);
 
 /// The pose sample of frame k of a sequence file as ReplayPoseSource delivers it.
-Pose replay_pose(const acq::SequenceFile& file, std::size_t k,
+Pose replay_pose(const acquisition::SequenceFile& file, std::size_t k,
                  const std::string& probe_transform = "ProbeToTracker",
                  const std::string& reference_transform = "ReferenceToTracker");
 

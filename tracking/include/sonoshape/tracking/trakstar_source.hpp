@@ -114,7 +114,7 @@ class TrakstarPoses final : public PoseBackend {
 
  protected:
   Status open() override;
-  Result<acq::Polled> poll(Pose& pose) override;
+  Result<acquisition::Polled> poll(Pose& pose) override;
   void close() override;
 
  private:
@@ -126,7 +126,7 @@ class TrakstarPoses final : public PoseBackend {
   Pose to_pose(const std::vector<std::uint8_t>& record, double received_s);
   void drain_input();
   void lost(const std::string& why);
-  Result<acq::Polled> reopen();
+  Result<acquisition::Polled> reopen();
   void count(const std::function<void(TrakstarCounts&)>& change);
   void set_status(std::string line);
 
@@ -142,6 +142,6 @@ class TrakstarPoses final : public PoseBackend {
   std::string status_ = "not started";
 };
 /// The stream of a TrakstarPoses.
-using TrakstarPoseSource = acq::SourceOf<TrakstarPoses>;
+using TrakstarPoseSource = acquisition::SourceOf<TrakstarPoses>;
 
 }  // namespace sonoshape::tracking
