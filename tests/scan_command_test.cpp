@@ -340,6 +340,53 @@ TEST(CommandOptions, ReconstructAndScanShareTheEngineOptions) {
       << smooth.output;
 }
 
+TEST(CommandOptions, ListenAndViewShareTheSubscriberOptions) {
+  // listen once had no snapshot by default and view the PUB port + 1, with other help texts: one
+  // group now (apps/src/subscriber_options.hpp), the same help line (names, type, default,
+  // text) in both.
+  sonoshape::testing::TempDir dir;
+  auto subscriber_lines = [&](const std::string& command) {
+    const auto help =
+        sonoshape::testing::run_command(SONOSHAPE_BINARY, command + " --help", dir.path() / "h");
+    // Each option's entry: its line and the description CLI11 puts on the next one when the
+    // names are long (indented further, not starting with a dash).
+    std::vector<std::string> entries;
+    std::istringstream in(help.output);
+    bool in_entry = false;
+    for (std::string line; std::getline(in, line);) {
+      const std::size_t at = line.find_first_not_of(' ');
+      if (at == std::string::npos) {
+        in_entry = false;
+        continue;
+      }
+      if (in_entry && at > 4 && line[at] != '-') {
+        entries.back() += " " + line.substr(at);
+        continue;
+      }
+      in_entry = false;
+      for (const char* name :
+           {"endpoint ", "--snapshot ", "--no-snapshot ", "--server-key ", "--duration "})
+        if (line.compare(at, std::string(name).size(), name) == 0) {
+          entries.push_back(line.substr(at));
+          in_entry = true;
+        }
+    }
+    return entries;
+  };
+  const std::vector<std::string> listen = subscriber_lines("listen");
+  ASSERT_EQ(listen.size(), 5u);
+  EXPECT_EQ(listen, subscriber_lines("view"));
+  EXPECT_TRUE(contains(listen[0], "tcp://127.0.0.1:5556")) << listen[0];         // one default
+  EXPECT_TRUE(contains(listen[1], "(default: the PUB port + 1)")) << listen[1];  // both snapshot
+  // One range: --duration refuses the same values in both.
+  for (const char* command : {"listen -o x --duration 0", "view --duration 0"}) {
+    const auto zero =
+        sonoshape::testing::run_command(SONOSHAPE_BINARY, command, dir.path() / "zero");
+    EXPECT_EQ(zero.exit_code, 105) << command << ": " << zero.output;
+    EXPECT_TRUE(contains(zero.output, "--duration: '0' is not a number > 0")) << zero.output;
+  }
+}
+
 TEST(CommandOptions, NumbersOutsideTheirRangeAndNotANumberAreRefusedNamingTheOption) {
   // Each was accepted: NaN passes CLI11's range checks, and "-1" became a huge count.
   sonoshape::testing::TempDir dir;

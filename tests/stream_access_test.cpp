@@ -99,9 +99,10 @@ TEST(StreamAccessCommand, OnlyTheListenerWithTheServerKeyReadsAnEncryptedScan) {
   };
   const pid_t keyed = listen("keyed", "--snapshot " + snapshot + " --until-idle --duration 60 " +
                                           "--server-key " + (dir.path() / "scanner.pub").string());
-  const pid_t plain = listen("plain", "--duration 60");
-  const pid_t wrong =
-      listen("wrong", "--duration 60 --server-key " + (dir.path() / "other.pub").string());
+  // Live only (no snapshot to be refused): they wait, and get nothing.
+  const pid_t plain = listen("plain", "--no-snapshot --duration 60");
+  const pid_t wrong = listen(
+      "wrong", "--no-snapshot --duration 60 --server-key " + (dir.path() / "other.pub").string());
   const pid_t wrong_snapshot =
       listen("wrong_snapshot", "--snapshot " + snapshot + " --duration 60 --server-key " +
                                    (dir.path() / "other.pub").string());

@@ -18,8 +18,8 @@
 #include "option_checks.hpp"
 #include "sonoshape/core/log.hpp"
 #include "sonoshape/core/mesh_io.hpp"
-#include "sonoshape/publish/curve.hpp"
 #include "sonoshape/publish/subscriber.hpp"
+#include "subscriber_options.hpp"
 
 namespace sonoshape::apps {
 namespace {
@@ -28,7 +28,7 @@ using nlohmann::ordered_json;
 
 // How often the loop looks at the clock and the signal flag while no message comes.
 constexpr std::chrono::milliseconds kPollInterval{100};
-// How long to wait for the publisher and its snapshot with --snapshot.
+// How long to wait for the publisher and its snapshot (unless --no-snapshot).
 constexpr int kSnapshotTimeoutMs = 5000;
 
 volatile std::sig_atomic_t g_stop_signal = 0;
@@ -36,12 +36,9 @@ volatile std::sig_atomic_t g_stop_signal = 0;
 extern "C" void on_stop_signal(int signal) { g_stop_signal = signal; }
 
 struct ListenOptions {
-  std::string endpoint;
+  StreamFollowOptions stream;
   std::filesystem::path output;
-  std::string snapshot;
-  std::filesystem::path server_key;  // --server-key: the publisher's CURVE public key file
-  double duration_s = 0.0;           // 0: no limit
-  std::uint64_t count = 0;           // 0: no limit
+  std::uint64_t count = 0;  // 0: no limit
   int slow_ms = 0;
   bool until_idle = false;
   // A recorder wants every message: a deep receive queue lets ZeroMQ's I/O thread drain the
@@ -88,11 +85,13 @@ ordered_json optional_json(const std::optional<T>& value) {
   return value ? ordered_json(*value) : ordered_json(nullptr);
 }
 
-Status write_summary(const ListenOptions& options, const Tally& tally, double duration_s) {
+// `snapshot_endpoint`: where the snapshot was asked for; empty: nowhere.
+Status write_summary(const ListenOptions& options, const std::string& snapshot_endpoint,
+                     const Tally& tally, double duration_s) {
   ordered_json summary;
-  summary["endpoint"] = options.endpoint;
+  summary["endpoint"] = options.stream.endpoint;
   summary["snapshot_endpoint"] =
-      options.snapshot.empty() ? ordered_json(nullptr) : ordered_json(options.snapshot);
+      snapshot_endpoint.empty() ? ordered_json(nullptr) : ordered_json(snapshot_endpoint);
   summary["scan"] = tally.scan.empty() ? ordered_json(nullptr) : ordered_json(tally.scan);
   summary["scans"] = tally.scans;
   summary["messages"] = tally.messages;
@@ -143,19 +142,17 @@ void record_mesh(const ListenOptions& options, const publish::MeshUpdate& mesh, 
   }
 }
 
-// The subscriber's options: the endpoints, the publisher's key (empty: none) and a snapshot
-// wait that fits in --duration.
-publish::SubscriberOptions subscriber_options(const ListenOptions& options,
-                                              const std::string& server_public_key) {
-  publish::SubscriberOptions out;
-  out.endpoint = options.endpoint;
-  out.snapshot_endpoint = options.snapshot;
-  out.snapshot_timeout_ms =
-      options.duration_s > 0.0
-          ? static_cast<int>(std::min<double>(kSnapshotTimeoutMs, options.duration_s * 1000.0 + 1))
+// The subscription: the shared subscriber options (endpoints, the publisher's key), a snapshot
+// wait that fits in --duration, and --receive-hwm.
+Result<publish::SubscriberOptions> listen_subscription(const ListenOptions& options) {
+  Result<publish::SubscriberOptions> out = subscription_of(options.stream);
+  if (!out) return out;
+  const double duration_s = options.stream.duration_s;
+  out->snapshot_timeout_ms =
+      duration_s > 0.0
+          ? static_cast<int>(std::min<double>(kSnapshotTimeoutMs, duration_s * 1000.0 + 1))
           : kSnapshotTimeoutMs;
-  out.receive_hwm = options.receive_hwm;
-  out.server_public_key = server_public_key;
+  out->receive_hwm = options.receive_hwm;
   return out;
 }
 
@@ -163,11 +160,9 @@ publish::SubscriberOptions subscriber_options(const ListenOptions& options,
 // scans, and what the bodies hold; one log line per header.
 class Listener {
  public:
-  Listener(const ListenOptions& options, std::ofstream& log_file, const Stopwatch& clock)
-      : options_(options),
-        log_file_(log_file),
-        clock_(clock),
-        in_snapshot_(!options.snapshot.empty()) {}
+  Listener(const ListenOptions& options, bool with_snapshot, std::ofstream& log_file,
+           const Stopwatch& clock)
+      : options_(options), log_file_(log_file), clock_(clock), in_snapshot_(with_snapshot) {}
 
   Tally& tally() { return tally_; }
 
@@ -284,8 +279,8 @@ void receive_all(const ListenOptions& options, publish::MeshSubscriber& subscrib
       return;
     }
     auto wait = kPollInterval;
-    if (options.duration_s > 0.0) {
-      const double left_s = options.duration_s - clock.seconds();
+    if (options.stream.duration_s > 0.0) {
+      const double left_s = options.stream.duration_s - clock.seconds();
       if (left_s <= 0.0) {
         tally.stopped_by = "duration";
         return;
@@ -327,21 +322,14 @@ int run_listen(const ListenOptions& options) {
   std::signal(SIGTERM, on_stop_signal);
   // --duration counts from here: the wait for the publisher and its snapshot is part of it.
   const Stopwatch clock;
-  std::string server_public_key;
-  if (!options.server_key.empty()) {
-    Result<std::string> key = publish::read_curve_key(options.server_key, "public");
-    if (!key) {
-      std::cerr << "error: --server-key: " << key.message() << '\n';
-      return 1;
-    }
-    server_public_key = *key;
-  }
-  auto subscriber =
-      publish::MeshSubscriber::connect(subscriber_options(options, server_public_key));
+  const Result<publish::SubscriberOptions> subscription = listen_subscription(options);
+  const std::string snapshot = subscription ? subscription->snapshot_endpoint : std::string();
+  auto subscriber = subscription ? publish::MeshSubscriber::connect(*subscription)
+                                 : Result<publish::MeshSubscriber>(subscription.status());
   if (!subscriber) {
     if (g_stop_signal) {
       // Stopped while waiting for the snapshot: nothing received, an empty summary.
-      const Status written = write_summary(options, Tally{}, 0.0);
+      const Status written = write_summary(options, snapshot, Tally{}, 0.0);
       return written ? 0 : 1;
     }
     std::cerr << "error: " << subscriber.message() << '\n';
@@ -349,18 +337,18 @@ int run_listen(const ListenOptions& options) {
     Tally failed;
     failed.stopped_by = "setup_error";
     failed.setup_error = subscriber.message();
-    if (const Status written = write_summary(options, failed, 0.0); !written)
+    if (const Status written = write_summary(options, snapshot, failed, 0.0); !written)
       std::cerr << "error: " << written.message() << '\n';
     return 1;
   }
-  log_info("listen: subscribed to " + options.endpoint +
-           (options.snapshot.empty() ? "" : " (snapshot from " + options.snapshot + ")") +
-           "; writing to " + options.output.string());
-  Listener listener(options, log_file, clock);
+  log_info("listen: subscribed to " + options.stream.endpoint +
+           (snapshot.empty() ? "" : " (snapshot from " + snapshot + ")") + "; writing to " +
+           options.output.string());
+  Listener listener(options, !snapshot.empty(), log_file, clock);
   receive_all(options, *subscriber, listener, clock);
   const Tally& tally = listener.tally();
   const double duration_s = clock.seconds();
-  if (Status written = write_summary(options, tally, duration_s); !written) {
+  if (Status written = write_summary(options, snapshot, tally, duration_s); !written) {
     std::cerr << "error: " << written.message() << '\n';
     return 1;
   }
@@ -376,20 +364,11 @@ int run_listen(const ListenOptions& options) {
 
 CommandRunner add_listen_command(CLI::App& app) {
   auto options = std::make_shared<ListenOptions>();
-  app.add_option("endpoint", options->endpoint,
-                 "PUB endpoint of the mesh stream, e.g. tcp://127.0.0.1:5556")
-      ->required();
+  add_subscriber_options(app, options->stream);
   app.add_option("-o,--output", options->output,
                  "Folder for label_<id>.ply (newest mesh per label), log.jsonl (every header) "
                  "and summary.json")
       ->required();
-  app.add_option("--snapshot", options->snapshot,
-                 "Snapshot endpoint (usually the PUB port + 1): join a running scan with its "
-                 "current meshes and status");
-  app.add_option("--server-key", options->server_key,
-                 "The publisher's CURVE public key file (NAME.pub of its --curve-secret-key "
-                 "NAME.key): needed to read an encrypted stream");
-  app.add_option("--duration", options->duration_s, "Stop after S seconds")->check(kPositiveNumber);
   app.add_option("--count", options->count,
                  "Stop after N messages (snapshot and invalid ones included)")
       ->check(kPositiveNumber);

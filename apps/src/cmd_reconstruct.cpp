@@ -164,117 +164,150 @@ int run_online(const SliceSet& set, const std::string& output, const std::string
   return write_json(j, stats_path);
 }
 
-}  // namespace
+struct ReconstructCommandOptions {
+  std::string input, output, stats_path;
+  recon::ReconstructionOptions engine;
+  bool online = false;
+  bool strict = false;
+  std::string device;  // empty: SONOSHAPE_DEVICE, else cpu
+  std::string field = kDefaultField;
+  int emit_every = 0;
+  std::string order = "file";
+};
 
-CommandRunner add_reconstruct_command(CLI::App& app) {
-  struct Options {
-    std::string input, output, stats_path;
-    recon::ReconstructionOptions engine;
-    bool online = false;
-    bool strict = false;
-    std::string device;  // empty: SONOSHAPE_DEVICE, else cpu
-    std::string field = kDefaultField;
-    int emit_every = 0;
-    std::string order = "file";
-  };
-  auto opt = std::make_shared<Options>();
-  app.add_option("input", opt->input,
-                 "Slice set: .slices.json (see docs/formats/slices.md) or .csl")
+// The slice set of INPUT, refused when it holds nothing to reconstruct (an error, not exit 0
+// with no mesh written).
+Result<SliceSet> read_slices_to_reconstruct(const ReconstructCommandOptions& opt) {
+  Result<SliceSet> slices = read_slice_set(opt.input, ReadOptions{opt.strict});
+  if (!slices) return slices;
+  if (slices->slices.empty())
+    return Status::error(opt.input +
+                         ": slices: the set holds no slice, so there is nothing to reconstruct; "
+                         "give at least one slice with a labelled region");
+  if (slices->material_ids().empty())
+    return Status::error(opt.input +
+                         ": no slice has a region of a material (every region is \"unknown\" or "
+                         "there are none), so there is no surface to reconstruct; label the "
+                         "organ's regions with a material id");
+  return slices;
+}
+
+// Warns of the labels whose surface came out empty: unused ones, and ones whose regions are
+// too small for the octree.
+void warn_of_empty_meshes(const SliceSet& slices, const MeshSet& meshes) {
+  std::set<int> used;
+  for (const LabeledSlice& slice : slices.slices)
+    for (const Region& region : slice.regions) used.insert(region.label);
+  std::string unused;
+  for (const auto& entry : meshes.meshes) {
+    if (!entry.mesh.empty()) continue;
+    if (!used.count(entry.label))
+      unused += (unused.empty() ? "" : ", ") + std::to_string(entry.label);
+    else
+      log_warning("label " + std::to_string(entry.label) + " (" + entry.name +
+                  ") produced an empty surface: its regions may be smaller than the octree cells"
+                  " (try a larger --depth)");
+  }
+  if (!unused.empty())
+    log_warning("label(s) " + unused +
+                " declared but no region uses them: their meshes "
+                "are empty");
+}
+
+// The one-shot reconstruction of the whole set (recon::reconstruct), its meshes and stats.
+int run_at_once(const SliceSet& slices, const ReconstructCommandOptions& opt) {
+  recon::ReconstructionStats stats;
+  const MeshSet meshes = recon::reconstruct(slices, opt.engine, &stats);
+  const auto written = write_mesh_set(meshes, opt.output);
+  if (!written) {
+    std::cerr << "error: " << written.message() << '\n';
+    return 2;
+  }
+  for (const auto& path : *written) log_info("wrote " + path.string());
+  warn_of_empty_meshes(slices, meshes);
+  log_info("reconstructed " + std::to_string(stats.slices) + " slices, " +
+           std::to_string(stats.cells) + " cells, " + std::to_string(stats.field_evaluations) +
+           " field evaluations in " + std::to_string(stats.total_s) + " s");
+  if (opt.stats_path.empty()) return 0;
+  nlohmann::json j = stats_json(stats);
+  j["peak_rss_mb"] = peak_rss_mb();
+  j["repairs"] = repairs_json(slices.repairs);
+  j["meshes"] = meshes_json(meshes);
+  return write_json(j, opt.stats_path);
+}
+
+int run_reconstruct(ReconstructCommandOptions& opt) {
+  opt.engine.field = *recon::parse_field_name(opt.field);
+  opt.engine.device = resolve_device(opt.device);
+  const Result<SliceSet> slices = read_slices_to_reconstruct(opt);
+  if (!slices) {
+    std::cerr << "error: " << slices.message() << '\n';
+    return 2;
+  }
+  if (opt.emit_every > 0 && !opt.online) {
+    std::cerr << "error: --emit-every needs --online\n";
+    return 2;
+  }
+  if (opt.online)
+    return run_online(*slices, opt.output, opt.stats_path, opt.engine, opt.emit_every,
+                      opt.order == "timestamp");
+  return run_at_once(*slices, opt);
+}
+
+// The slice set read, the meshes and the stats written, and how the input is read.
+void add_file_options(CLI::App& app, ReconstructCommandOptions& opt) {
+  app.add_option("input", opt.input, "Slice set: .slices.json (see docs/formats/slices.md) or .csl")
       ->required();
-  app.add_option("-o,--output", opt->output,
+  app.add_option("-o,--output", opt.output,
                  "Output: a .ply/.obj/.off file (one label) or a directory of label_<id>.ply")
       ->required();
+}
+
+// The engine: the shared group (engine_options.hpp), its threads and its arrangement.
+void add_reconstruct_engine_options(CLI::App& app, ReconstructCommandOptions& opt) {
   add_engine_options(
-      app, {opt->engine.max_depth, opt->engine.smoothing_iterations, opt->field, opt->device});
-  app.add_option("--threads", opt->engine.threads,
+      app, {opt.engine.max_depth, opt.engine.smoothing_iterations, opt.field, opt.device});
+  app.add_option("--threads", opt.engine.threads,
                  "Threads for every stage of the reconstruction (0: all cores)")
       ->check(number_in(0, 1024))
       ->capture_default_str();
-  app.add_option("--stats", opt->stats_path,
+}
+
+// What is reported and how strictly the input is taken.
+void add_report_options(CLI::App& app, ReconstructCommandOptions& opt) {
+  app.add_option("--stats", opt.stats_path,
                  "Write per-stage seconds and counts as JSON (with "
                  "--online: totals and one entry per step)");
-  app.add_flag("--strict", opt->strict,
+  app.add_flag("--strict", opt.strict,
                "Refuse input that needs repairs (pinched contours, a flipped plane equation, "
                "rounding overlaps, ...) instead of repairing it with a warning");
   app.add_flag(
-      "--whole-arrangement", [opt](std::int64_t) { opt->engine.cells_on_demand = false; },
+      "--whole-arrangement", [&opt](std::int64_t) { opt.engine.cells_on_demand = false; },
       "Build every cell of the slices' arrangement instead of those the surface needs (the "
       "same field, at a cost that grows with the cube of the slice count; for comparisons)");
-  app.add_flag("--online", opt->online,
+}
+
+// --online: the slices one by one through the online engine.
+void add_online_options(CLI::App& app, ReconstructCommandOptions& opt) {
+  app.add_flag("--online", opt.online,
                "Feed the slices one by one to the online engine (an update per slice)");
-  app.add_option("--emit-every", opt->emit_every,
+  app.add_option("--emit-every", opt.emit_every,
                  "With --online: also write the meshes after every K slices to OUT/step_NNNN/")
       ->check(number_in(1, 1000000));
-  app.add_option("--order", opt->order, "With --online: feed in file order or by timestamp")
+  app.add_option("--order", opt.order, "With --online: feed in file order or by timestamp")
       ->check(CLI::IsMember({"file", "timestamp"}))
       ->capture_default_str();
+}
 
-  return [opt]() -> int {
-    opt->engine.field = *recon::parse_field_name(opt->field);
-    opt->engine.device = resolve_device(opt->device);
-    const Result<SliceSet> slices = read_slice_set(opt->input, ReadOptions{opt->strict});
-    if (!slices) {
-      std::cerr << "error: " << slices.message() << '\n';
-      return 2;
-    }
-    // Nothing to reconstruct is an error, not exit 0 with no mesh written.
-    if (slices->slices.empty()) {
-      std::cerr << "error: " << opt->input
-                << ": slices: the set holds no slice, so there is nothing to reconstruct; "
-                   "give at least one slice with a labelled region\n";
-      return 2;
-    }
-    if (slices->material_ids().empty()) {
-      std::cerr << "error: " << opt->input
-                << ": no slice has a region of a material (every region is \"unknown\" or "
-                   "there are none), so there is no surface to reconstruct; label the organ's "
-                   "regions with a material id\n";
-      return 2;
-    }
-    if (opt->emit_every > 0 && !opt->online) {
-      std::cerr << "error: --emit-every needs --online\n";
-      return 2;
-    }
-    if (opt->online)
-      return run_online(*slices, opt->output, opt->stats_path, opt->engine, opt->emit_every,
-                        opt->order == "timestamp");
-    recon::ReconstructionStats stats;
-    const MeshSet meshes = recon::reconstruct(*slices, opt->engine, &stats);
-    const auto written = write_mesh_set(meshes, opt->output);
-    if (!written) {
-      std::cerr << "error: " << written.message() << '\n';
-      return 2;
-    }
-    for (const auto& path : *written) log_info("wrote " + path.string());
-    std::set<int> used;
-    for (const LabeledSlice& slice : slices->slices)
-      for (const Region& region : slice.regions) used.insert(region.label);
-    std::string unused;
-    for (const auto& entry : meshes.meshes) {
-      if (!entry.mesh.empty()) continue;
-      if (!used.count(entry.label))
-        unused += (unused.empty() ? "" : ", ") + std::to_string(entry.label);
-      else
-        log_warning("label " + std::to_string(entry.label) + " (" + entry.name +
-                    ") produced an empty surface: its regions may be smaller than the octree cells"
-                    " (try a larger --depth)");
-    }
-    if (!unused.empty())
-      log_warning("label(s) " + unused +
-                  " declared but no region uses them: their meshes "
-                  "are empty");
-    log_info("reconstructed " + std::to_string(stats.slices) + " slices, " +
-             std::to_string(stats.cells) + " cells, " + std::to_string(stats.field_evaluations) +
-             " field evaluations in " + std::to_string(stats.total_s) + " s");
-    if (!opt->stats_path.empty()) {
-      nlohmann::json j = stats_json(stats);
-      j["peak_rss_mb"] = peak_rss_mb();
-      j["repairs"] = repairs_json(slices->repairs);
-      j["meshes"] = meshes_json(meshes);
-      return write_json(j, opt->stats_path);
-    }
-    return 0;
-  };
+}  // namespace
+
+CommandRunner add_reconstruct_command(CLI::App& app) {
+  auto opt = std::make_shared<ReconstructCommandOptions>();
+  add_file_options(app, *opt);
+  add_reconstruct_engine_options(app, *opt);
+  add_report_options(app, *opt);
+  add_online_options(app, *opt);
+  return [opt] { return run_reconstruct(*opt); };
 }
 
 }  // namespace sonoshape::apps

@@ -97,115 +97,144 @@ std::string vec_text(const Vec3& v) {
   return out.str();
 }
 
-int run_slice(const SliceOptions& options) {
+// Reads the --mesh files and places them as --size-mm and --layout ask.
+Result<std::vector<LabeledMesh>> load_placed_meshes(const SliceOptions& options) {
   std::vector<LabeledMesh> meshes;
   for (const std::string& text : options.meshes) {
     auto mesh = load_mesh_spec(text, "--mesh");
-    if (!mesh) {
-      std::cerr << "error: " << mesh.message() << '\n';
-      return 1;
-    }
+    if (!mesh) return mesh.status();
     meshes.push_back(std::move(*mesh));
   }
   const bool row = options.layout.empty() ? (meshes.size() > 1 && options.size_mm > 0.0)
                                           : options.layout == "row";
   place(meshes, options.size_mm, row);
+  return meshes;
+}
 
-  Box3 objects = empty_box();
-  for (const auto& m : meshes) objects = united(objects, m.mesh.bounds());
+// What the cut produced, for the summary line.
+struct CutCounts {
+  std::size_t regions = 0, holes = 0, empty = 0, skipped = 0;
+};
+
+// Cuts the meshes with every plane into `set`, each slice checked before it is kept. Meshes
+// that self-intersect (cow.obj does) or intersect each other cut into crossing or overlapping
+// polygons, which no reader accepts: an error, or (--skip-invalid) a slice dropped.
+Status cut_slices(const std::vector<LabeledMesh>& meshes, const std::vector<SlicePlane>& planes,
+                  bool skip_invalid, SliceSet& set, CutCounts& counts) {
+  for (std::size_t i = 0; i < planes.size(); ++i) {
+    LabeledSlice slice = slice_meshes(meshes, planes[i]);
+    SliceSet single{set.units, set.labels, set.bounds, {slice}, {}};
+    if (const Status valid = validate_slice_set(single, "plane " + std::to_string(i)); !valid) {
+      if (!skip_invalid)
+        return Status::error(valid.message() +
+                             "\nThe input meshes self-intersect or intersect each other there. "
+                             "Repair them, or pass --skip-invalid to drop such slices.");
+      ++counts.skipped;
+      continue;
+    }
+    counts.regions += slice.regions.size();
+    for (const Region& r : slice.regions) counts.holes += r.holes.size();
+    if (slice.regions.empty()) ++counts.empty;
+    set.slices.push_back(std::move(slice));
+  }
+  return Status::ok();
+}
+
+// The slice set of the meshes cut by --count planes of the --planes family, in mm, bounded by
+// the meshes' box padded.
+Result<SliceSet> slice_set_of(const std::vector<LabeledMesh>& meshes, const Box3& objects,
+                              const SliceOptions& options, CutCounts& counts) {
   const auto planes = simulator::generate_planes(simulator::parse_plane_family(options.family),
                                                  options.count, objects, options.seed);
-
   SliceSet set;
   set.units = "mm";
   std::map<int, std::string> names;
   for (const auto& m : meshes) names.try_emplace(m.label, m.name);
   for (const auto& [id, name] : names) set.labels.push_back({id, name});
   set.bounds = objects.padded(kBoundsPadding * objects.diagonal());
-  std::size_t regions = 0, holes = 0, empty = 0, skipped = 0;
-  for (std::size_t i = 0; i < planes.size(); ++i) {
-    LabeledSlice slice = slice_meshes(meshes, planes[i]);
-    // Meshes that self-intersect (cow.obj does) or intersect each other cut into crossing or
-    // overlapping polygons, which no reader accepts: check each slice before it is written.
-    SliceSet single{set.units, set.labels, set.bounds, {slice}, {}};
-    if (const Status valid = validate_slice_set(single, "plane " + std::to_string(i)); !valid) {
-      if (!options.skip_invalid) {
-        std::cerr << "error: " << valid.message()
-                  << "\nThe input meshes self-intersect or intersect each other there. Repair "
-                     "them, or pass --skip-invalid to drop such slices.\n";
-        return 1;
-      }
-      ++skipped;
-      continue;
-    }
-    regions += slice.regions.size();
-    for (const Region& r : slice.regions) holes += r.holes.size();
-    if (slice.regions.empty()) ++empty;
-    set.slices.push_back(std::move(slice));
-  }
+  if (Status cut = cut_slices(meshes, planes, options.skip_invalid, set, counts); !cut) return cut;
   // No region on any plane: the set would say "nothing there" about meshes that are there.
-  if (regions == 0 && !set.slices.empty()) {
-    std::cerr << "error: none of the " << set.slices.size() << " planes cuts a region out of "
-              << join_specs(options.meshes) << " (their box: min " << vec_text(objects.min)
-              << ", max " << vec_text(objects.max)
-              << " mm): a mesh whose triangles all have zero area, or one vertex far from the "
-                 "others, leaves nothing to slice; check the mesh files\n";
-    return 1;
-  }
-  if (options.unknown_fraction > 0.0 || options.fov != "none") {
-    simulator::UnknownOptions unknowns;
-    unknowns.fraction = options.unknown_fraction;
-    unknowns.blob_radius = options.unknown_radius;
-    unknowns.fov = simulator::parse_fov_shape(options.fov);
-    unknowns.fov_covers_material = options.fov_aim == "cover";
-    unknowns.seed = options.seed + 1;
-    simulator::add_unknowns(set, unknowns);
-    if (const Status valid = validate_slice_set(set, options.output.string()); !valid) {
-      std::cerr << "error: the unknown regions made an invalid slice set: " << valid.message()
-                << '\n';
-      return 1;
-    }
-  }
-  if (const Status written = write_slice_set(set, options.output); !written) {
-    std::cerr << "error: " << written.message() << '\n';
-    return 1;
-  }
+  if (counts.regions == 0 && !set.slices.empty())
+    return Status::error("none of the " + std::to_string(set.slices.size()) +
+                         " planes cuts a region out of " + join_specs(options.meshes) +
+                         " (their box: min " + vec_text(objects.min) + ", max " +
+                         vec_text(objects.max) +
+                         " mm): a mesh whose triangles all have zero area, or one vertex far from "
+                         "the others, leaves nothing to slice; check the mesh files");
+  return set;
+}
 
-  if (!options.truth_dir.empty()) {
-    std::error_code ec;
-    std::filesystem::create_directories(options.truth_dir, ec);
-    if (ec) {
-      std::cerr << "error: cannot create the --truth directory " << options.truth_dir.string()
-                << ": " << ec.message() << '\n';
-      return 1;
-    }
-    // Meshes sharing a label are one material: write them as one file.
-    std::map<int, TriangleMesh> by_label;
-    for (const auto& m : meshes) {
-      TriangleMesh& out = by_label[m.label];
-      const auto offset = static_cast<std::uint32_t>(out.vertices.size());
-      out.vertices.insert(out.vertices.end(), m.mesh.vertices.begin(), m.mesh.vertices.end());
-      for (const auto& t : m.mesh.triangles)
-        out.triangles.push_back({t[0] + offset, t[1] + offset, t[2] + offset});
-    }
-    for (const auto& [label, mesh] : by_label) {
-      const auto path = options.truth_dir / ("label_" + std::to_string(label) + ".ply");
-      if (const Status written = write_mesh(mesh, path); !written) {
-        std::cerr << "error: " << written.message() << '\n';
-        return 1;
-      }
-    }
-  }
+// --unknown and --fov: unknown blobs over contours and a field of view on the slices.
+Status add_unknown_regions(const SliceOptions& options, SliceSet& set) {
+  if (options.unknown_fraction <= 0.0 && options.fov == "none") return Status::ok();
+  simulator::UnknownOptions unknowns;
+  unknowns.fraction = options.unknown_fraction;
+  unknowns.blob_radius = options.unknown_radius;
+  unknowns.fov = simulator::parse_fov_shape(options.fov);
+  unknowns.fov_covers_material = options.fov_aim == "cover";
+  unknowns.seed = options.seed + 1;
+  simulator::add_unknowns(set, unknowns);
+  if (const Status valid = validate_slice_set(set, options.output.string()); !valid)
+    return Status::error("the unknown regions made an invalid slice set: " + valid.message());
+  return Status::ok();
+}
 
+// --truth: the placed meshes, one file per label (meshes sharing a label are one material).
+Status write_truth_meshes(const std::vector<LabeledMesh>& meshes,
+                          const std::filesystem::path& truth_dir) {
+  std::error_code ec;
+  std::filesystem::create_directories(truth_dir, ec);
+  if (ec)
+    return Status::error("cannot create the --truth directory " + truth_dir.string() + ": " +
+                         ec.message());
+  std::map<int, TriangleMesh> by_label;
+  for (const auto& m : meshes) {
+    TriangleMesh& out = by_label[m.label];
+    const auto offset = static_cast<std::uint32_t>(out.vertices.size());
+    out.vertices.insert(out.vertices.end(), m.mesh.vertices.begin(), m.mesh.vertices.end());
+    for (const auto& t : m.mesh.triangles)
+      out.triangles.push_back({t[0] + offset, t[1] + offset, t[2] + offset});
+  }
+  for (const auto& [label, mesh] : by_label)
+    if (Status written = write_mesh(mesh, truth_dir / ("label_" + std::to_string(label) + ".ply"));
+        !written)
+      return written;
+  return Status::ok();
+}
+
+std::string summary_line(const SliceOptions& options, std::size_t mesh_count, const SliceSet& set,
+                         const CutCounts& counts, const Box3& objects) {
   std::ostringstream summary;
-  summary << "slice: " << meshes.size() << (meshes.size() == 1 ? " mesh, " : " meshes, ")
-          << set.slices.size() << ' ' << options.family << " planes, " << regions << " regions ("
-          << holes << " holes, " << empty << " empty slices), box diagonal " << objects.diagonal()
-          << " -> " << options.output.string();
+  summary << "slice: " << mesh_count << (mesh_count == 1 ? " mesh, " : " meshes, ")
+          << set.slices.size() << ' ' << options.family << " planes, " << counts.regions
+          << " regions (" << counts.holes << " holes, " << counts.empty
+          << " empty slices), box diagonal " << objects.diagonal() << " -> "
+          << options.output.string();
   if (!options.truth_dir.empty()) summary << ", truth in " << options.truth_dir.string();
-  if (skipped > 0)
-    summary << "; skipped " << skipped << " invalid slices (self-intersecting input meshes)";
-  std::cerr << summary.str() << '\n';
+  if (counts.skipped > 0)
+    summary << "; skipped " << counts.skipped << " invalid slices (self-intersecting input meshes)";
+  return summary.str();
+}
+
+int run_slice(const SliceOptions& options) {
+  const auto fail = [](const std::string& message) {
+    std::cerr << "error: " << message << '\n';
+    return 1;
+  };
+  auto meshes = load_placed_meshes(options);
+  if (!meshes) return fail(meshes.message());
+  Box3 objects = empty_box();
+  for (const auto& m : *meshes) objects = united(objects, m.mesh.bounds());
+  CutCounts counts;
+  auto set = slice_set_of(*meshes, objects, options, counts);
+  if (!set) return fail(set.message());
+  if (Status added = add_unknown_regions(options, *set); !added) return fail(added.message());
+  if (Status written = write_slice_set(*set, options.output); !written)
+    return fail(written.message());
+  if (!options.truth_dir.empty())
+    if (Status written = write_truth_meshes(*meshes, options.truth_dir); !written)
+      return fail(written.message());
+  std::cerr << summary_line(options, meshes->size(), *set, counts, objects) << '\n';
   return 0;
 }
 

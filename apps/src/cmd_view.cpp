@@ -10,7 +10,7 @@
 #include "commands.hpp"
 #include "option_checks.hpp"
 #include "sonoshape/core/log.hpp"
-#include "sonoshape/publish/curve.hpp"
+#include "subscriber_options.hpp"
 #include "view_options.hpp"
 #ifdef SONOSHAPE_WITH_VIEWER
 #include "sonoshape/publish/stream_view.hpp"
@@ -26,36 +26,20 @@ extern "C" void on_view_stop(int signal) { g_view_stop = signal; }
 #endif
 
 struct ViewCommandOptions {
-  std::string endpoint = "tcp://127.0.0.1:5556";
-  std::string snapshot;  // empty: the PUB port + 1
-  bool no_snapshot = false;
-  std::filesystem::path server_key;  // --server-key: the publisher's CURVE public key file
+  StreamFollowOptions stream;
   std::string http = kDefaultViewAddress;
   std::filesystem::path web_root = SONOSHAPE_VIEWER_DIR;
-  double duration_s = 0.0;  // 0: until Ctrl-C
 };
 
 int run_view(const ViewCommandOptions& options) {
 #ifdef SONOSHAPE_WITH_VIEWER
+  Result<publish::SubscriberOptions> subscription = subscription_of(options.stream);
+  if (!subscription) {
+    std::cerr << "error: " << subscription.message() << '\n';
+    return 1;
+  }
   publish::StreamViewOptions view;
-  view.stream.endpoint = options.endpoint;
-  if (!options.server_key.empty()) {
-    Result<std::string> key = publish::read_curve_key(options.server_key, "public");
-    if (!key) {
-      std::cerr << "error: --server-key: " << key.message() << '\n';
-      return 1;
-    }
-    view.stream.server_public_key = *key;
-  }
-  if (!options.no_snapshot) {
-    Result<std::string> snapshot = options.snapshot.empty() ? next_port_endpoint(options.endpoint)
-                                                            : Result<std::string>(options.snapshot);
-    if (!snapshot) {
-      std::cerr << "error: " << snapshot.message() << '\n';
-      return 1;
-    }
-    view.stream.snapshot_endpoint = *snapshot;
-  }
+  view.stream = std::move(*subscription);
   view.server.http = options.http;
   view.server.web_root = options.web_root;
   Result<publish::StreamView> started = publish::StreamView::start(view);
@@ -67,14 +51,14 @@ int run_view(const ViewCommandOptions& options) {
   std::signal(SIGINT, on_view_stop);
   std::signal(SIGTERM, on_view_stop);
   log_info(
-      "view: open " + started->url() + " in a browser (following " + options.endpoint +
+      "view: open " + started->url() + " in a browser (following " + options.stream.endpoint +
       (view.stream.snapshot_endpoint.empty() ? "" : ", snapshot " + view.stream.snapshot_endpoint) +
       "; Ctrl-C stops)");
   const auto start = std::chrono::steady_clock::now();
   while (!g_view_stop) {
-    if (options.duration_s > 0.0 &&
+    if (options.stream.duration_s > 0.0 &&
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count() >=
-            options.duration_s)
+            options.stream.duration_s)
       break;
     std::this_thread::sleep_for(std::chrono::milliseconds(100));
   }
@@ -93,16 +77,7 @@ int run_view(const ViewCommandOptions& options) {
 
 CommandRunner add_view_command(CLI::App& app) {
   auto options = std::make_shared<ViewCommandOptions>();
-  app.add_option("endpoint", options->endpoint, "PUB endpoint of the mesh stream")
-      ->capture_default_str();
-  app.add_option("--snapshot", options->snapshot,
-                 "Snapshot endpoint, to join a running scan with its current surfaces (default: "
-                 "the PUB port + 1)");
-  app.add_flag("--no-snapshot", options->no_snapshot,
-               "Do not ask for a snapshot: show only what is published from now on");
-  app.add_option("--server-key", options->server_key,
-                 "The publisher's CURVE public key file (NAME.pub of its --curve-secret-key "
-                 "NAME.key): needed to show an encrypted stream");
+  add_subscriber_options(app, options->stream);
   app.add_option("--http", options->http,
                  "HOST:PORT the page is served on (loopback unless you name another interface; "
                  "port 0 picks a free one)")
@@ -110,8 +85,6 @@ CommandRunner add_view_command(CLI::App& app) {
   app.add_option("--web-root", options->web_root,
                  "The page's folder (viewer/ of the sources, with three.js installed by npm ci)")
       ->capture_default_str();
-  app.add_option("--duration", options->duration_s, "Stop after S seconds (default: at Ctrl-C)")
-      ->check(kPositiveNumber);
   return [options] { return run_view(*options); };
 }
 

@@ -116,8 +116,8 @@ struct MeshSubscriber::Impl {
           return Status::error(handshake_failure(ZMQ_EVENT_HANDSHAKE_FAILED_PROTOCOL, options));
         return Status::error("no mesh-stream publisher answered at " + endpoint +
                              " in time; check that sonoshape is publishing there (its "
-                             "--publish endpoint), or leave out the snapshot to wait for a scan "
-                             "that has not started");
+                             "--publish endpoint), or follow without a snapshot (--no-snapshot) "
+                             "to wait for a scan that has not started");
       }
     }
   }

@@ -108,9 +108,9 @@ TEST(ListenCommand, RecordsAScanUntilIdle) {
   const auto out = dir.path() / "out";
   Result<MeshPublisher> publisher = MeshPublisher::bind(loopback_options());
   ASSERT_TRUE(publisher.is_ok()) << publisher.message();
-  ListenProcess listen(
-      {publisher->endpoint(), "-o", out.string(), "--until-idle", "--duration", "60"},
-      dir.path() / "listen.txt");
+  ListenProcess listen({publisher->endpoint(), "--no-snapshot", "-o", out.string(), "--until-idle",
+                        "--duration", "60"},
+                       dir.path() / "listen.txt");
   ASSERT_TRUE(listen.started());
   warm_up(out / "log.jsonl",
           [&] { ASSERT_TRUE(publisher->publish_status(status_of(ScanState::kScanning, 0))); });
@@ -192,6 +192,31 @@ TEST(ListenCommand, JoinsARunningScanThroughTheSnapshot) {
   for (const json& line : lines) EXPECT_EQ(line["snapshot"], true);
 }
 
+// As `view`: without --snapshot, the snapshot is asked for at the PUB port + 1 (where `scan
+// --publish` puts it unless told otherwise).
+TEST(ListenCommand, JoinsThroughTheSnapshotAtThePubPortPlusOneByDefault) {
+  TempDir dir;
+  const auto out = dir.path() / "out";
+  PublisherOptions options = loopback_options();
+  options.snapshot_endpoint.clear();  // the publisher's default: its PUB port + 1
+  Result<MeshPublisher> publisher = MeshPublisher::bind(options);
+  for (int retry = 0; retry < 5 && !publisher; ++retry)  // port + 1 taken: another pair
+    publisher = MeshPublisher::bind(options);
+  ASSERT_TRUE(publisher.is_ok()) << publisher.message();
+  ASSERT_TRUE(publisher->publish_meshes(two_organs(1.0), 0.1, 1));
+  ASSERT_TRUE(publisher->publish_status(status_of(ScanState::kScanning, 1)));
+  // The snapshot is the two meshes, the status and the end: 4 messages.
+  ListenProcess listen(
+      {publisher->endpoint(), "-o", out.string(), "--count", "4", "--duration", "60"},
+      dir.path() / "listen.txt");
+  ASSERT_EQ(listen.wait(30s), 0) << listen.output();
+  const json summary = read_json(out / "summary.json");
+  EXPECT_EQ(summary["snapshot_endpoint"], publisher->snapshot_endpoint());
+  EXPECT_EQ(summary["snapshot_seq"], 3);
+  EXPECT_EQ(summary["meshes"], json({{"1", 1}, {"2", 1}}));
+  EXPECT_EQ(summary["stopped_by"], "count");
+}
+
 TEST(ListenCommand, CountsInvalidMessagesAndExitsNonZero) {
   TempDir dir;
   const auto out = dir.path() / "out";
@@ -209,8 +234,8 @@ TEST(ListenCommand, CountsInvalidMessagesAndExitsNonZero) {
   auto status = [&](ScanState state) {
     return *encode_message(StreamMessage{++seq, scan, status_of(state, 0)});
   };
-  ListenProcess listen({pub.get(zmq::sockopt::last_endpoint), "-o", out.string(), "--until-idle",
-                        "--duration", "60"},
+  ListenProcess listen({pub.get(zmq::sockopt::last_endpoint), "--no-snapshot", "-o", out.string(),
+                        "--until-idle", "--duration", "60"},
                        dir.path() / "listen.txt");
   warm_up(out / "log.jsonl", [&] { send(status(ScanState::kScanning)); });
 
@@ -237,7 +262,8 @@ TEST(ListenCommand, SigtermStopsItCleanlyWithASummary) {
   const auto out = dir.path() / "out";
   Result<MeshPublisher> publisher = MeshPublisher::bind(loopback_options());
   ASSERT_TRUE(publisher.is_ok()) << publisher.message();
-  ListenProcess listen({publisher->endpoint(), "-o", out.string()}, dir.path() / "listen.txt");
+  ListenProcess listen({publisher->endpoint(), "--no-snapshot", "-o", out.string()},
+                       dir.path() / "listen.txt");
   warm_up(out / "log.jsonl",
           [&] { ASSERT_TRUE(publisher->publish_status(status_of(ScanState::kScanning, 0))); });
   listen.signal(SIGTERM);
@@ -250,8 +276,9 @@ TEST(ListenCommand, SigtermStopsItCleanlyWithASummary) {
 
 TEST(ListenCommand, BadEndpointIsAnErrorThatSaysHowToFix) {
   TempDir dir;
-  ListenProcess listen({"localhost:5556", "-o", (dir.path() / "out").string(), "--duration", "5"},
-                       dir.path() / "listen.txt");
+  ListenProcess listen(
+      {"localhost:5556", "--no-snapshot", "-o", (dir.path() / "out").string(), "--duration", "5"},
+      dir.path() / "listen.txt");
   EXPECT_EQ(listen.wait(30s), 1);
   EXPECT_TRUE(contains(listen.output(), "not a valid ZeroMQ endpoint")) << listen.output();
   // The summary is promised even after a failed setup (issue 27).
@@ -259,6 +286,14 @@ TEST(ListenCommand, BadEndpointIsAnErrorThatSaysHowToFix) {
   EXPECT_EQ(summary["stopped_by"], "setup_error");
   EXPECT_TRUE(contains(summary["error"].get<std::string>(), "not a valid ZeroMQ endpoint"));
   EXPECT_EQ(summary["messages"], 0);
+  // Without --no-snapshot, the snapshot endpoint (the PUB port + 1) cannot be told either: the
+  // error names the options that fix it, and the summary still comes.
+  ListenProcess guessing({"localhost:5556", "-o", (dir.path() / "guess").string()},
+                         dir.path() / "guess.txt");
+  EXPECT_EQ(guessing.wait(30s), 1);
+  EXPECT_TRUE(contains(guessing.output(), "give it with --snapshot, or --no-snapshot"))
+      << guessing.output();
+  EXPECT_EQ(read_json(dir.path() / "guess" / "summary.json")["stopped_by"], "setup_error");
 }
 
 // `end` closes a snapshot; one on the live stream is a publisher's error (issue 27).
@@ -279,8 +314,8 @@ TEST(ListenCommand, ALiveEndMessageIsInvalid) {
   auto status = [&](ScanState state) {
     return *encode_message(StreamMessage{++seq, scan, status_of(state, 0)});
   };
-  ListenProcess listen({pub.get(zmq::sockopt::last_endpoint), "-o", out.string(), "--until-idle",
-                        "--duration", "60"},
+  ListenProcess listen({pub.get(zmq::sockopt::last_endpoint), "--no-snapshot", "-o", out.string(),
+                        "--until-idle", "--duration", "60"},
                        dir.path() / "listen.txt");
   warm_up(out / "log.jsonl", [&] { send(status(ScanState::kScanning)); });
   send(*encode_message(StreamMessage{++seq, scan, SnapshotEnd{}}));
@@ -322,8 +357,8 @@ TEST(ListenCommand, WritesAtMostTheLabelLimitAndStopsOnTimeUnderAFloodOfLabels) 
   };
   constexpr double kDurationS = 3.0;
   const auto started = Clock::now();
-  ListenProcess listen({pub.get(zmq::sockopt::last_endpoint), "-o", out.string(), "--duration",
-                        std::to_string(kDurationS)},
+  ListenProcess listen({pub.get(zmq::sockopt::last_endpoint), "--no-snapshot", "-o", out.string(),
+                        "--duration", std::to_string(kDurationS)},
                        dir.path() / "listen.txt");
   // Labels 1, 2, ... without end until the listener stops (a few hundred thousand messages a
   // second at most; the listener takes what its queue holds).

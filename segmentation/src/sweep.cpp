@@ -255,20 +255,14 @@ Result<SweepSetup> prepare_sweep(const acquisition::SequenceFile& file,
   return setup;
 }
 
-Result<SweepSetup> prepare_sweep(const acquisition::SequenceFile& file,
-                                 const std::filesystem::path& sequence_path,
-                                 const std::optional<SegmentationConfig>& config,
-                                 const std::optional<Eigen::Matrix4d>& T_probe_image,
-                                 std::string_view pose_transform,
-                                 const acquisition::PlusConfig& coordinates) {
-  if (file.frame_count() == 0)
-    return Status::error(sequence_path.string() + ": the sequence has no frames");
-  SweepSetup setup;
-  acquisition::PlusConfig fixed = coordinates;
-  setup.config = config.value_or(SegmentationConfig{});
-  setup.models_from = config ? "config" : "defaults";
+namespace {
 
-  // Calibration: given, in the header, or in the sidecar PLUS configuration.
+// The calibration: given, in the header, or in the sidecar PLUS configuration (whose
+// coordinate definitions then replace `coordinates`).
+Status find_calibration(const acquisition::SequenceFile& file,
+                        const std::filesystem::path& sequence_path,
+                        const std::optional<Eigen::Matrix4d>& T_probe_image, SweepSetup& setup,
+                        acquisition::PlusConfig& coordinates) {
   if (T_probe_image) {
     setup.T_probe_image = *T_probe_image;
     setup.calibration_from = "given";
@@ -281,7 +275,7 @@ Result<SweepSetup> prepare_sweep(const acquisition::SequenceFile& file,
     if (!read) return read.status();
     setup.T_probe_image = *read;
     setup.calibration_from = sidecar.string();
-    if (auto device_set = acquisition::read_plus_config(sidecar)) fixed = *device_set;
+    if (auto device_set = acquisition::read_plus_config(sidecar)) coordinates = *device_set;
   } else {
     return Status::error(sequence_path.string() +
                          ": no calibration (no ImageToProbeTransform in the header and no " +
@@ -289,38 +283,52 @@ Result<SweepSetup> prepare_sweep(const acquisition::SequenceFile& file,
                          "); give one with --calibration PLUS.xml or a JSON {\"ImageToProbe\": "
                          "[16 numbers]}");
   }
-  // The pose: the chain of transforms from the probe to the reconstruction's frame.
-  auto chain = acquisition::find_pose_chain(file, sequence_path, pose_transform, fixed);
+  return Status::ok();
+}
+
+// The pose (the chain of transforms from the probe to the reconstruction's frame) and the crop:
+// a cropped recording's pixels start at the crop's corner (PLUS ImageToCroppedImage).
+Status find_pose_and_crop(const acquisition::SequenceFile& file,
+                          const std::filesystem::path& sequence_path,
+                          std::string_view pose_transform,
+                          const acquisition::PlusConfig& coordinates, SweepSetup& setup) {
+  auto chain = acquisition::find_pose_chain(file, sequence_path, pose_transform, coordinates);
   if (!chain) return chain.status();
   setup.pose_chain = std::move(*chain);
-  // A cropped recording's pixels start at the crop's corner (PLUS ImageToCroppedImage).
   auto crop = acquisition::image_to_cropped_image(file, sequence_path);
   if (!crop) return crop.status();
   if (*crop) {
     setup.T_probe_image = setup.T_probe_image * (*crop)->inverse();
     setup.calibration_from += " * ImageToCroppedImage^-1 (the crop)";
   }
-  const double spacing_mm = calibration_spacing_mm(setup.T_probe_image);
-  if (!(spacing_mm > 0.0) || !std::isfinite(spacing_mm))
-    return Status::error(setup.calibration_from + ": the ImageToProbe calibration is degenerate");
+  return Status::ok();
+}
 
-  // Sector.
+// The sector of the simulator's probe that the header names (SonoshapeProbeType).
+Status sector_of_header_probe(const acquisition::SequenceFile& file,
+                              const std::filesystem::path& sequence_path, SweepSetup& setup) {
+  auto probe = acquisition::probe_from_fields(file.fields());
+  if (!probe) return probe.status();
+  const int w = file.width(), h = file.height();
+  if (probe->width_px() != w || probe->height_px() != h)
+    return Status::error(sequence_path.string() + ": the header's probe image is " +
+                         std::to_string(probe->width_px()) + "x" +
+                         std::to_string(probe->height_px()) + " but the frames are " +
+                         std::to_string(w) + "x" + std::to_string(h));
+  setup.geometry = probe_geometry(*probe);
+  setup.sector_from = "header probe (" + acquisition::to_string(probe->type()) + ")";
+  return Status::ok();
+}
+
+// The sector: the header's probe, the pixels with signal, the full image or the config's polygon.
+Status choose_sector(const acquisition::SequenceFile& file,
+                     const std::filesystem::path& sequence_path, double spacing_mm,
+                     SweepSetup& setup) {
   const int w = file.width(), h = file.height();
   SectorSource source = setup.config.sector;
   if (source == SectorSource::kDefault) {
-    if (file.field("SonoshapeProbeType")) {
-      auto probe = acquisition::probe_from_fields(file.fields());
-      if (!probe) return probe.status();
-      if (probe->width_px() != w || probe->height_px() != h)
-        return Status::error(sequence_path.string() + ": the header's probe image is " +
-                             std::to_string(probe->width_px()) + "x" +
-                             std::to_string(probe->height_px()) + " but the frames are " +
-                             std::to_string(w) + "x" + std::to_string(h));
-      setup.geometry = probe_geometry(*probe);
-      setup.sector_from = "header probe (" + acquisition::to_string(probe->type()) + ")";
-    } else {
-      source = SectorSource::kAuto;
-    }
+    if (file.field("SonoshapeProbeType")) return sector_of_header_probe(file, sequence_path, setup);
+    source = SectorSource::kAuto;
   }
   if (source == SectorSource::kAuto) {
     setup.geometry =
@@ -340,17 +348,22 @@ Result<SweepSetup> prepare_sweep(const acquisition::SequenceFile& file,
     setup.geometry = polygon_geometry(w, h, spacing_mm, setup.config.sector_polygon_px);
     setup.sector_from = "config polygon";
   }
+  return Status::ok();
+}
 
-  // The imaging system's blur, when the configuration does not give it: the header's.
-  if (setup.config.psf_sigma_mm < 0.0)
-    if (const auto sigma = file.field("SonoshapePsfSigmaMm")) {
-      setup.config.psf_sigma_mm = std::max(0.0, to_number(*sigma).value_or(0.0));
-      if (const auto range = file.field("SonoshapeDynamicRangeDb"))
-        setup.config.dynamic_range_db = to_number(*range).value_or(setup.config.dynamic_range_db);
-    }
+// The imaging system's blur, when the configuration does not give it: the header's.
+void take_header_psf(const acquisition::SequenceFile& file, SegmentationConfig& config) {
+  if (config.psf_sigma_mm >= 0.0) return;
+  if (const auto sigma = file.field("SonoshapePsfSigmaMm")) {
+    config.psf_sigma_mm = std::max(0.0, to_number(*sigma).value_or(0.0));
+    if (const auto range = file.field("SonoshapeDynamicRangeDb"))
+      config.dynamic_range_db = to_number(*range).value_or(config.dynamic_range_db);
+  }
+}
 
-  // Label models: the config's (refined on the frames when it says so), the header's, or two
-  // classes found in the data.
+// Label models: the config's (refined on the frames when it says so), the header's, or two
+// classes found in the data.
+void choose_label_models(const acquisition::SequenceFile& file, SweepSetup& setup) {
   if (setup.config.materials.empty()) {
     if (const auto models = header_models(file)) {
       setup.config.background = models->first;
@@ -364,6 +377,32 @@ Result<SweepSetup> prepare_sweep(const acquisition::SequenceFile& file,
     setup.config = learn_models_from_samples(sector_samples(file, setup), setup.config);
     setup.models_from += ", learnt from the frames (k-means from the given means)";
   }
+}
+
+}  // namespace
+
+Result<SweepSetup> prepare_sweep(const acquisition::SequenceFile& file,
+                                 const std::filesystem::path& sequence_path,
+                                 const std::optional<SegmentationConfig>& config,
+                                 const std::optional<Eigen::Matrix4d>& T_probe_image,
+                                 std::string_view pose_transform,
+                                 const acquisition::PlusConfig& coordinates) {
+  if (file.frame_count() == 0)
+    return Status::error(sequence_path.string() + ": the sequence has no frames");
+  SweepSetup setup;
+  acquisition::PlusConfig fixed = coordinates;
+  setup.config = config.value_or(SegmentationConfig{});
+  setup.models_from = config ? "config" : "defaults";
+  if (Status found = find_calibration(file, sequence_path, T_probe_image, setup, fixed); !found)
+    return found;
+  if (Status found = find_pose_and_crop(file, sequence_path, pose_transform, fixed, setup); !found)
+    return found;
+  const double spacing_mm = calibration_spacing_mm(setup.T_probe_image);
+  if (!(spacing_mm > 0.0) || !std::isfinite(spacing_mm))
+    return Status::error(setup.calibration_from + ": the ImageToProbe calibration is degenerate");
+  if (Status chosen = choose_sector(file, sequence_path, spacing_mm, setup); !chosen) return chosen;
+  take_header_psf(file, setup.config);
+  choose_label_models(file, setup);
   if (const Status valid = setup.config.validate(); !valid) return valid;
   return setup;
 }
@@ -413,9 +452,10 @@ std::optional<Eigen::Matrix4d> reference_from_probe(const acquisition::SequenceF
   return setup.pose_chain->pose(file, k);
 }
 
-SweepSegmentation segment_sweep(const acquisition::SequenceFile& file, const SweepSetup& setup,
-                                int every, const SweepProgress& progress,
-                                const ReadOptions& options, const SweepLabels& labels) {
+namespace {
+
+void check_sweep_inputs(const acquisition::SequenceFile& file, const SweepSetup& setup, int every,
+                        const SweepLabels& labels) {
   if (every < 1) throw std::invalid_argument("segment_sweep: every must be >= 1");
   if (file.frame_count() &&
       (file.width() != setup.geometry.width_px || file.height() != setup.geometry.height_px))
@@ -425,106 +465,26 @@ SweepSegmentation segment_sweep(const acquisition::SequenceFile& file, const Swe
       if (const Status same = check_truth_labels(file, "the sweep", *other, "the label frames");
           !same)
         throw std::invalid_argument("segment_sweep: " + same.message());
-  SweepSegmentation out;
-  out.frames = file.frame_count();
-  for (const LabelModel& m : setup.config.materials) out.slices.labels.push_back({m.label, m.name});
-  std::size_t sector_px = 0;
-  for (const std::uint8_t v : setup.geometry.sector.pixels) sector_px += v ? 1 : 0;
-  double unknown_sum = 0.0;
-  std::size_t segmented = 0;
-  SectorShareCheck shares(setup.geometry.sector);
-  std::optional<GraphCutLabeller> labeller;
-  if (!labels.perfect && setup.config.method == LabellingMethod::kGraphCut)
-    labeller.emplace(setup.config, setup.geometry, setup.config.graph_cut);
-  for (std::size_t k = 0; k < file.frame_count(); k += static_cast<std::size_t>(every)) {
-    ++out.considered;
-    const auto pose = reference_from_probe(file, k, setup);
-    if (!pose) {
-      ++out.invalid_pose;
-      if (progress) progress(out.considered);
-      continue;
-    }
-    const ImagePlane plane = image_plane(*pose * setup.T_probe_image, pose->block<3, 1>(0, 3));
-    std::optional<LabelImage> prior;
-    if (labeller && labels.predictor) prior = labels.predictor->predict(plane, setup.geometry);
-    const LabelImage frame_labels =
-        labels.perfect ? labels.perfect->image(k)
-        : labeller     ? labeller->segment(file.image(k), prior ? &*prior : nullptr, &plane).labels
-                       : segment_frame(file.image(k), setup.geometry, setup.config).labels;
-    if (labels.on_label_map) labels.on_label_map(k, frame_labels);
-    shares.add(frame_labels);
-    {
-      std::array<bool, 256> present{};
-      for (const std::uint8_t v : frame_labels.pixels) present[v] = true;
-      for (const LabelModel& m : setup.config.materials)
-        if (present[static_cast<std::size_t>(m.label)]) ++out.frames_with_label[m.label];
-    }
-    if (labels.truth) {
-      out.comparisons.push_back(
-          {k, compare_labels(labels.truth->image(k), frame_labels, setup.geometry.sector)});
-      out.comparison_total.add(out.comparisons.back().comparison);
-    }
-    unknown_sum += sector_px
-                       ? static_cast<double>(unknown_in_sector(frame_labels, setup.geometry)) /
-                             static_cast<double>(sector_px)
-                       : 0.0;
-    ++segmented;
-    std::vector<Repair> repairs;
-    auto slice = make_slice(frame_labels, setup.geometry.sector, setup.geometry.sector_px, plane,
-                            setup.config.simplify_mm, &repairs);
-    if (!repairs.empty()) {
-      const std::string what = "frame " + std::to_string(k) + ": " + describe(repairs);
-      if (options.strict) {
-        out.refused = what;
-        break;
-      }
-      log_warning("segment: " + what);
-      for (Repair& r : repairs) {
-        r.where = "frame " + std::to_string(k) + ", " + r.where;
-        out.repairs.push_back({k, std::move(r)});
-      }
-    }
-    if (!slice) {
-      ++out.failed;
-      log_warning("segment: frame " + std::to_string(k) + " skipped: " + slice.message());
-      if (progress) progress(out.considered);
-      continue;
-    }
-    slice->timestamp_s = file.timestamp_s(k);
-    // A frozen probe repeats its plane; the slice-set format allows one slice per plane.
-    const Vec3 n = slice->normal();
-    const bool coincident =
-        std::any_of(out.slices.slices.begin(), out.slices.slices.end(), [&](const LabeledSlice& s) {
-          return std::abs(std::abs(s.normal().dot(n)) - 1.0) < 1e-12 &&
-                 std::abs(n.dot(slice->origin_mm - s.origin_mm)) < kCoincidentMm;
-        });
-    if (coincident) {
-      ++out.coincident;
-    } else {
-      if (labeller && labels.predictor) labels.predictor->add(*slice);
-      std::set<int> in_slice;
-      for (const Region& r : slice->regions)
-        if (r.label != kUnknownLabel) in_slice.insert(r.label);
-      for (const int l : in_slice) ++out.slices_with_label[l];
-      out.slices.slices.push_back(std::move(*slice));
-    }
-    if (progress) progress(out.considered);
-  }
-  out.unknown_fraction = segmented ? unknown_sum / static_cast<double>(segmented) : 0.0;
-  out.dominant_label = shares.dominant_label();
-  if (out.dominant_label && !labels.perfect) {
-    std::map<int, std::string> names;
-    for (const LabelModel& m : setup.config.materials) names[m.label] = m.name;
-    out.dominant_warning = shares.warning(names).value_or("");
-    log_warning("segment: " + out.dominant_warning);
-  }
-  // Perfect label frames may show a label the models lack (a bone whose every pixel lies in its
-  // own shadow has no grey model): declare it, named as the header names it.
+}
+
+// A slice in the plane of one already kept (a frozen probe repeats its plane; the slice-set
+// format allows one slice per plane).
+bool coincides_with_one_of(const LabeledSlice& slice, const std::vector<LabeledSlice>& kept) {
+  const Vec3 n = slice.normal();
+  return std::any_of(kept.begin(), kept.end(), [&](const LabeledSlice& s) {
+    return std::abs(std::abs(s.normal().dot(n)) - 1.0) < 1e-12 &&
+           std::abs(n.dot(slice.origin_mm - s.origin_mm)) < kCoincidentMm;
+  });
+}
+
+// Perfect label frames may show a label the models lack (a bone whose every pixel lies in its
+// own shadow has no grey model): declares it, named as the header names it.
+void declare_labels_of_regions(const acquisition::SequenceFile& file, SliceSet& slices) {
   const auto names = parse_items(file.field("SonoshapeLabels").value_or(""));
-  for (const LabeledSlice& slice : out.slices.slices)
+  for (const LabeledSlice& slice : slices.slices)
     for (const Region& r : slice.regions) {
       if (r.label == kUnknownLabel) continue;
-      auto& declared = out.slices.labels;
+      auto& declared = slices.labels;
       if (std::any_of(declared.begin(), declared.end(),
                       [&](const LabelInfo& l) { return l.id == r.label; }))
         continue;
@@ -532,7 +492,157 @@ SweepSegmentation segment_sweep(const acquisition::SequenceFile& file, const Swe
       declared.push_back(
           {r.label, name != names.end() ? name->second : "label_" + std::to_string(r.label)});
     }
-  return out;
+}
+
+// One sweep's segmentation, frame by frame: pose and plane, label map, its tallies, the slice
+// (with its repairs), and the slice kept unless its plane is already there.
+class SweepRun {
+ public:
+  SweepRun(const acquisition::SequenceFile& file, const SweepSetup& setup,
+           const SweepProgress& progress, const ReadOptions& options, const SweepLabels& labels)
+      : file_(file),
+        setup_(setup),
+        progress_(progress),
+        options_(options),
+        labels_(labels),
+        shares_(setup.geometry.sector) {
+    out_.frames = file.frame_count();
+    for (const LabelModel& m : setup.config.materials)
+      out_.slices.labels.push_back({m.label, m.name});
+    for (const std::uint8_t v : setup.geometry.sector.pixels) sector_px_ += v ? 1 : 0;
+    if (!labels.perfect && setup.config.method == LabellingMethod::kGraphCut)
+      labeller_.emplace(setup.config, setup.geometry, setup.config.graph_cut);
+  }
+
+  // Segments frame k; false when --strict refuses its repairs (the sweep stops there).
+  bool segment_frame_at(std::size_t k) {
+    ++out_.considered;
+    const auto pose = reference_from_probe(file_, k, setup_);
+    if (!pose) {
+      ++out_.invalid_pose;
+      report_progress();
+      return true;
+    }
+    const ImagePlane plane = image_plane(*pose * setup_.T_probe_image, pose->block<3, 1>(0, 3));
+    const LabelImage frame_labels = label_frame(k, plane);
+    tally_labels(k, frame_labels);
+    std::vector<Repair> repairs;
+    auto slice = make_slice(frame_labels, setup_.geometry.sector, setup_.geometry.sector_px, plane,
+                            setup_.config.simplify_mm, &repairs);
+    if (!take_repairs(k, repairs)) return false;
+    if (!slice) {
+      ++out_.failed;
+      log_warning("segment: frame " + std::to_string(k) + " skipped: " + slice.message());
+      report_progress();
+      return true;
+    }
+    slice->timestamp_s = file_.timestamp_s(k);
+    keep_slice(std::move(*slice));
+    report_progress();
+    return true;
+  }
+
+  // The sweep's summary figures, its dominant-label warning and the declared labels.
+  SweepSegmentation finish() {
+    out_.unknown_fraction = segmented_ ? unknown_sum_ / static_cast<double>(segmented_) : 0.0;
+    out_.dominant_label = shares_.dominant_label();
+    if (out_.dominant_label && !labels_.perfect) {
+      std::map<int, std::string> names;
+      for (const LabelModel& m : setup_.config.materials) names[m.label] = m.name;
+      out_.dominant_warning = shares_.warning(names).value_or("");
+      log_warning("segment: " + out_.dominant_warning);
+    }
+    declare_labels_of_regions(file_, out_.slices);
+    return std::move(out_);
+  }
+
+ private:
+  void report_progress() const {
+    if (progress_) progress_(out_.considered);
+  }
+
+  // The perfect label frame, or the graph cut's (with the reconstruction's prior), or the
+  // segmenter's.
+  LabelImage label_frame(std::size_t k, const ImagePlane& plane) {
+    if (labels_.perfect) return labels_.perfect->image(k);
+    if (!labeller_) return segment_frame(file_.image(k), setup_.geometry, setup_.config).labels;
+    std::optional<LabelImage> prior;
+    if (labels_.predictor) prior = labels_.predictor->predict(plane, setup_.geometry);
+    return labeller_->segment(file_.image(k), prior ? &*prior : nullptr, &plane).labels;
+  }
+
+  // The label map's share of the sector, its labels, its comparison with the truth.
+  void tally_labels(std::size_t k, const LabelImage& frame_labels) {
+    if (labels_.on_label_map) labels_.on_label_map(k, frame_labels);
+    shares_.add(frame_labels);
+    std::array<bool, 256> present{};
+    for (const std::uint8_t v : frame_labels.pixels) present[v] = true;
+    for (const LabelModel& m : setup_.config.materials)
+      if (present[static_cast<std::size_t>(m.label)]) ++out_.frames_with_label[m.label];
+    if (labels_.truth) {
+      out_.comparisons.push_back(
+          {k, compare_labels(labels_.truth->image(k), frame_labels, setup_.geometry.sector)});
+      out_.comparison_total.add(out_.comparisons.back().comparison);
+    }
+    unknown_sum_ += sector_px_
+                        ? static_cast<double>(unknown_in_sector(frame_labels, setup_.geometry)) /
+                              static_cast<double>(sector_px_)
+                        : 0.0;
+    ++segmented_;
+  }
+
+  // Records the repairs frame k's slice needed; false when --strict refuses them.
+  bool take_repairs(std::size_t k, std::vector<Repair>& repairs) {
+    if (repairs.empty()) return true;
+    const std::string what = "frame " + std::to_string(k) + ": " + describe(repairs);
+    if (options_.strict) {
+      out_.refused = what;
+      return false;
+    }
+    log_warning("segment: " + what);
+    for (Repair& r : repairs) {
+      r.where = "frame " + std::to_string(k) + ", " + r.where;
+      out_.repairs.push_back({k, std::move(r)});
+    }
+    return true;
+  }
+
+  void keep_slice(LabeledSlice slice) {
+    if (coincides_with_one_of(slice, out_.slices.slices)) {
+      ++out_.coincident;
+      return;
+    }
+    if (labeller_ && labels_.predictor) labels_.predictor->add(slice);
+    std::set<int> in_slice;
+    for (const Region& r : slice.regions)
+      if (r.label != kUnknownLabel) in_slice.insert(r.label);
+    for (const int l : in_slice) ++out_.slices_with_label[l];
+    out_.slices.slices.push_back(std::move(slice));
+  }
+
+  const acquisition::SequenceFile& file_;
+  const SweepSetup& setup_;
+  const SweepProgress& progress_;
+  const ReadOptions& options_;
+  const SweepLabels& labels_;
+  SweepSegmentation out_;
+  std::size_t sector_px_ = 0;
+  double unknown_sum_ = 0.0;  // sum over segmented frames of their unknown share of the sector
+  std::size_t segmented_ = 0;
+  SectorShareCheck shares_;
+  std::optional<GraphCutLabeller> labeller_;
+};
+
+}  // namespace
+
+SweepSegmentation segment_sweep(const acquisition::SequenceFile& file, const SweepSetup& setup,
+                                int every, const SweepProgress& progress,
+                                const ReadOptions& options, const SweepLabels& labels) {
+  check_sweep_inputs(file, setup, every, labels);
+  SweepRun run(file, setup, progress, options, labels);
+  for (std::size_t k = 0; k < file.frame_count(); k += static_cast<std::size_t>(every))
+    if (!run.segment_frame_at(k)) break;
+  return run.finish();
 }
 
 }  // namespace sonoshape::segmentation
