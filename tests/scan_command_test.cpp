@@ -307,21 +307,42 @@ TEST(CommandOptions, NoCommandRegistersANameTwice) {
   }
 }
 
-TEST(CommandOptions, ReconstructAndScanShareTheEngineOptions) {
-  // One name, one meaning, one range: the same help line (names, type, range, text) in both.
-  sonoshape::testing::TempDir dir;
-  auto engine_lines = [&](const std::string& command) {
-    const auto help =
-        sonoshape::testing::run_command(SONOSHAPE_BINARY, command + " --help", dir.path() / "h");
-    std::vector<std::string> lines;
-    std::istringstream in(help.output);
-    for (std::string line; std::getline(in, line);) {
-      const std::size_t at = line.find_first_not_of(' ');
-      if (at == std::string::npos) continue;
-      for (const char* name : {"--depth ", "--smoothing,", "--field ", "--device "})
-        if (line.compare(at, std::string(name).size(), name) == 0) lines.push_back(line.substr(at));
+// The `--help` entries of `command` that start with one of `names` (in help order): each entry's
+// line and the description CLI11 puts on the next one when the names are long (indented further,
+// not starting with a dash).
+std::vector<std::string> help_entries(const std::string& command,
+                                      const std::vector<std::string>& names,
+                                      const std::filesystem::path& log) {
+  const auto help = sonoshape::testing::run_command(SONOSHAPE_BINARY, command + " --help", log);
+  std::vector<std::string> entries;
+  std::istringstream in(help.output);
+  bool in_entry = false;
+  for (std::string line; std::getline(in, line);) {
+    const std::size_t at = line.find_first_not_of(' ');
+    if (at == std::string::npos) {
+      in_entry = false;
+      continue;
     }
-    return lines;
+    if (in_entry && at > 4 && line[at] != '-') {
+      entries.back() += " " + line.substr(at);
+      continue;
+    }
+    in_entry = false;
+    for (const std::string& name : names)
+      if (line.compare(at, name.size(), name) == 0) {
+        entries.push_back(line.substr(at));
+        in_entry = true;
+      }
+  }
+  return entries;
+}
+
+TEST(CommandOptions, ReconstructAndScanShareTheEngineOptions) {
+  // One name, one meaning, one range: the same help entry (names, type, range, text) in both.
+  sonoshape::testing::TempDir dir;
+  const std::vector<std::string> names = {"--depth ", "--smoothing,", "--field ", "--device "};
+  auto engine_lines = [&](const std::string& command) {
+    return help_entries(command, names, dir.path() / "h");
   };
   const std::vector<std::string> reconstruct = engine_lines("reconstruct");
   EXPECT_EQ(reconstruct.size(), 4u);
@@ -345,33 +366,10 @@ TEST(CommandOptions, ListenAndViewShareTheSubscriberOptions) {
   // group now (apps/src/subscriber_options.hpp), the same help line (names, type, default,
   // text) in both.
   sonoshape::testing::TempDir dir;
+  const std::vector<std::string> names = {"endpoint ", "--snapshot ", "--no-snapshot ",
+                                          "--server-key ", "--duration "};
   auto subscriber_lines = [&](const std::string& command) {
-    const auto help =
-        sonoshape::testing::run_command(SONOSHAPE_BINARY, command + " --help", dir.path() / "h");
-    // Each option's entry: its line and the description CLI11 puts on the next one when the
-    // names are long (indented further, not starting with a dash).
-    std::vector<std::string> entries;
-    std::istringstream in(help.output);
-    bool in_entry = false;
-    for (std::string line; std::getline(in, line);) {
-      const std::size_t at = line.find_first_not_of(' ');
-      if (at == std::string::npos) {
-        in_entry = false;
-        continue;
-      }
-      if (in_entry && at > 4 && line[at] != '-') {
-        entries.back() += " " + line.substr(at);
-        continue;
-      }
-      in_entry = false;
-      for (const char* name :
-           {"endpoint ", "--snapshot ", "--no-snapshot ", "--server-key ", "--duration "})
-        if (line.compare(at, std::string(name).size(), name) == 0) {
-          entries.push_back(line.substr(at));
-          in_entry = true;
-        }
-    }
-    return entries;
+    return help_entries(command, names, dir.path() / "h");
   };
   const std::vector<std::string> listen = subscriber_lines("listen");
   ASSERT_EQ(listen.size(), 5u);
