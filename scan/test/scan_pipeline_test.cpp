@@ -13,6 +13,7 @@
 #include <thread>
 #include <utility>
 
+#include "fake_reconstruction.hpp"
 #include "sonoshape/apps/file_sink.hpp"
 #include "sonoshape/core/slice_io.hpp"
 #include "sonoshape/scan/pipeline.hpp"
@@ -24,8 +25,18 @@ namespace {
 
 using namespace std::chrono_literals;
 
-// Frames every `period_ms` from t = 0 (timestamps from integer milliseconds, so they equal the
-// pose samples' exactly), failing or throwing after `fail_after` frames when asked.
+// The next of `count` tiny grey frames, one every `period_ms` from t = 0 (timestamps from integer
+// milliseconds, so they equal the pose samples' exactly); `next` counts the frames given.
+acquisition::Polled next_fake_frame(Frame& frame, int& next, int count, int period_ms) {
+  if (next == count) return acquisition::Polled::kEnd;
+  frame.image = GreyImage(8, 8, 100);
+  frame.index = next;
+  frame.timestamp_s = (next * period_ms) / 1000.0;
+  ++next;
+  return acquisition::Polled::kItem;
+}
+
+// Frames as next_fake_frame gives them, failing or throwing after `fail_after` frames when asked.
 class FakeFrames final : public acquisition::FrameBackend {
  public:
   enum class Failure { kNone, kError, kThrow };
@@ -40,12 +51,7 @@ class FakeFrames final : public acquisition::FrameBackend {
       if (failure_ == Failure::kThrow) throw std::runtime_error("USB device disconnected");
       return Status::error("fake probe: device vanished");
     }
-    if (next_ == count_) return acquisition::Polled::kEnd;
-    frame.image = GreyImage(8, 8, 100);
-    frame.index = next_;
-    frame.timestamp_s = (next_ * period_ms_) / 1000.0;
-    ++next_;
-    return acquisition::Polled::kItem;
+    return next_fake_frame(frame, next_, count_, period_ms_);
   }
   bool is_playback() const override { return true; }
 
@@ -79,12 +85,7 @@ class UnpluggingFrames final : public acquisition::FrameBackend {
       replugged_ = true;
       set_condition("");
     }
-    if (next_ == count_) return acquisition::Polled::kEnd;
-    frame.image = GreyImage(8, 8, 100);
-    frame.index = next_;
-    frame.timestamp_s = (next_ * period_ms_) / 1000.0;
-    ++next_;
-    return acquisition::Polled::kItem;
+    return next_fake_frame(frame, next_, count_, period_ms_);
   }
   bool is_playback() const override { return true; }
 
@@ -133,55 +134,6 @@ class FakeSegmentation final : public SegmentationStage {
  private:
   std::set<std::int64_t> failing_, repaired_;
   std::vector<Repair> repairs_;
-};
-
-// Keeps the slices; each update sleeps `update_ms` and makes one triangle per slice.
-class FakeReconstruction final : public ReconstructionStage {
- public:
-  explicit FakeReconstruction(int update_ms = 0) : update_ms_(update_ms) {}
-  int add_slice(LabeledSlice slice) override {
-    pending_.push_back(std::move(slice));
-    return next_id_++;
-  }
-  recon::UpdateStats update() override {
-    std::this_thread::sleep_for(std::chrono::milliseconds(update_ms_));
-    recon::UpdateStats stats;
-    stats.slices_added = pending_.size();
-    {
-      std::lock_guard lock(mutex_);
-      batches_.push_back(pending_.size());
-    }
-    for (LabeledSlice& s : pending_) slices_.slices.push_back(std::move(s));
-    pending_.clear();
-    meshes_.meshes.assign(1, MeshSet::Entry{1, "organ", {}});
-    TriangleMesh& mesh = meshes_.meshes[0].mesh;
-    for (std::size_t k = 0; k < slices_.slices.size(); ++k) {
-      const auto base = static_cast<std::uint32_t>(mesh.vertices.size());
-      mesh.vertices.push_back(slices_.slices[k].origin_mm);
-      mesh.vertices.push_back(slices_.slices[k].origin_mm + Vec3::UnitX());
-      mesh.vertices.push_back(slices_.slices[k].origin_mm + Vec3::UnitY());
-      mesh.triangles.push_back({base, base + 1, base + 2});
-    }
-    stats.step.slices = slices_.slices.size();
-    return stats;
-  }
-  const MeshSet& meshes() const override { return meshes_; }
-  SliceSet slice_set() const override { return slices_; }
-  std::size_t slice_count() const override { return slices_.slices.size(); }
-
-  std::vector<std::size_t> batches() const {
-    std::lock_guard lock(mutex_);
-    return batches_;
-  }
-
- private:
-  int update_ms_;
-  std::vector<LabeledSlice> pending_;
-  SliceSet slices_;
-  MeshSet meshes_;
-  int next_id_ = 0;
-  mutable std::mutex mutex_;
-  std::vector<std::size_t> batches_;
 };
 
 // Records what the pipeline sends.
@@ -252,8 +204,8 @@ void expect_accounted(const ScanCounters& c) {
 TEST(ScanPipeline, FastPlaybackLosesNothingAndBatchesBehindASlowReconstruction) {
   // 60 frames at 30 fps sliding 18 mm/s: 0.6 mm per frame, 1 mm keyframe distance: every
   // other frame is a keyframe.
-  auto reconstruction = std::make_unique<FakeReconstruction>(20);
-  FakeReconstruction* recon = reconstruction.get();
+  auto reconstruction = std::make_unique<test::FakeReconstruction>(20);
+  test::FakeReconstruction* recon = reconstruction.get();
   ScanOptions options = fast_options();
   options.reconstruction_queue = 3;
   ScanPipeline pipeline(fake_source(std::make_unique<acquisition::SourceOf<FakeFrames>>(60, 33),
@@ -299,7 +251,7 @@ TEST(ScanPipeline, TheSummarySaysWhyAMaterialOfTheSetupHasNoMesh) {
                                   sliding_poses(18.0, -100, 800, 25));
   source.setup.labels = {{1, "organ"}, {2, "lesion"}};  // the segmentation only finds the organ
   ScanPipeline pipeline(std::move(source), std::make_unique<FakeSegmentation>(),
-                        std::make_unique<FakeReconstruction>(0), fast_options());
+                        std::make_unique<test::FakeReconstruction>(0), fast_options());
   ASSERT_TRUE(pipeline.start());
   const ScanSummary summary = pipeline.finish();
   ASSERT_GT(summary.counters.slices, 0u);
@@ -312,8 +264,8 @@ TEST(ScanPipeline, TheSummarySaysWhyAMaterialOfTheSetupHasNoMesh) {
 TEST(ScanPipeline, RealTimeDropsAndCountsWhenTheReconstructionFallsBehind) {
   // 150 frames at 200 fps (0.75 s), each a keyframe (5 mm apart), and 80 ms updates: the
   // queues must drop, not grow.
-  auto reconstruction = std::make_unique<FakeReconstruction>(80);
-  FakeReconstruction* recon = reconstruction.get();
+  auto reconstruction = std::make_unique<test::FakeReconstruction>(80);
+  test::FakeReconstruction* recon = reconstruction.get();
   ScanOptions options;
   options.real_time = true;
   options.drop_when_behind = true;
@@ -353,7 +305,7 @@ TEST(ScanPipeline, FramesWithoutAPoseAreDroppedByReason) {
   ScanPipeline pipeline(
       fake_source(std::make_unique<acquisition::SourceOf<FakeFrames>>(20, 100), poses),
       std::make_unique<FakeSegmentation>(std::set<std::int64_t>{3}),
-      std::make_unique<FakeReconstruction>(), fast_options());
+      std::make_unique<test::FakeReconstruction>(), fast_options());
   ASSERT_TRUE(pipeline.start());
   const ScanCounters c = pipeline.finish().counters;
   EXPECT_EQ(c.frames_received, 20u);
@@ -367,8 +319,8 @@ TEST(ScanPipeline, FramesWithoutAPoseAreDroppedByReason) {
 
   // No tracker at all: every frame's pose is missing.
   ScanPipeline blind(fake_source(std::make_unique<acquisition::SourceOf<FakeFrames>>(5, 100), {}),
-                     std::make_unique<FakeSegmentation>(), std::make_unique<FakeReconstruction>(),
-                     fast_options());
+                     std::make_unique<FakeSegmentation>(),
+                     std::make_unique<test::FakeReconstruction>(), fast_options());
   ASSERT_TRUE(blind.start());
   EXPECT_EQ(blind.finish().counters.dropped.pose_missing, 5u);
 }
@@ -379,7 +331,7 @@ TEST(ScanPipeline, AVanishingSourceIsReportedAndTheMeshesSoFarAreKept) {
     ScanPipeline pipeline(
         fake_source(std::make_unique<acquisition::SourceOf<FakeFrames>>(100, 33, failure, 20),
                     sliding_poses(60.0, -100, 4000, 25)),
-        std::make_unique<FakeSegmentation>(), std::make_unique<FakeReconstruction>(),
+        std::make_unique<FakeSegmentation>(), std::make_unique<test::FakeReconstruction>(),
         fast_options());
     auto sink = std::make_shared<RecordingSink>();
     pipeline.add_sink(sink);
@@ -412,7 +364,8 @@ TEST(ScanPipeline, AnUnpluggedGrabberIsReportedAndTheScanGoesOnWhenItIsBack) {
   ScanPipeline pipeline(
       fake_source(std::make_unique<acquisition::SourceOf<UnpluggingFrames>>(40, 33, 15, 0.3),
                   sliding_poses(60.0, -100, 2000, 25)),
-      std::make_unique<FakeSegmentation>(), std::make_unique<FakeReconstruction>(), fast_options());
+      std::make_unique<FakeSegmentation>(), std::make_unique<test::FakeReconstruction>(),
+      fast_options());
   auto sink = std::make_shared<RecordingSink>();
   pipeline.add_sink(sink);
   ASSERT_TRUE(pipeline.start());
@@ -443,7 +396,7 @@ TEST(ScanPipeline, StopRequestFinishesCleanly) {
   ScanPipeline pipeline(fake_source(std::make_unique<acquisition::SourceOf<FakeFrames>>(1000, 10),
                                     sliding_poses(300.0, -100, 11000, 10)),
                         std::make_unique<FakeSegmentation>(),
-                        std::make_unique<FakeReconstruction>(5), options);
+                        std::make_unique<test::FakeReconstruction>(5), options);
   auto sink = std::make_shared<RecordingSink>();
   pipeline.add_sink(sink);
   ASSERT_TRUE(pipeline.start());
@@ -465,8 +418,8 @@ TEST(ScanPipeline, MaxSlicesAndDurationStopTheScan) {
   options.max_slices = 7;
   ScanPipeline capped(fake_source(std::make_unique<acquisition::SourceOf<FakeFrames>>(100, 33),
                                   sliding_poses(60.0, -100, 4000, 25)),
-                      std::make_unique<FakeSegmentation>(), std::make_unique<FakeReconstruction>(),
-                      options);
+                      std::make_unique<FakeSegmentation>(),
+                      std::make_unique<test::FakeReconstruction>(), options);
   ASSERT_TRUE(capped.start());
   const ScanSummary summary = capped.finish();
   EXPECT_EQ(summary.stop_reason, StopReason::kMaxSlices);
@@ -477,8 +430,8 @@ TEST(ScanPipeline, MaxSlicesAndDurationStopTheScan) {
   timed.duration_s = 0.2;
   ScanPipeline limited(fake_source(std::make_unique<acquisition::SourceOf<FakeFrames>>(1000, 10),
                                    sliding_poses(60.0, -100, 11000, 10)),
-                       std::make_unique<FakeSegmentation>(), std::make_unique<FakeReconstruction>(),
-                       timed);
+                       std::make_unique<FakeSegmentation>(),
+                       std::make_unique<test::FakeReconstruction>(), timed);
   ASSERT_TRUE(limited.start());
   const ScanSummary ended = limited.finish();
   EXPECT_EQ(ended.stop_reason, StopReason::kDuration);
@@ -495,7 +448,7 @@ TEST(ScanPipeline, PastTheSliceBudgetKeyframesComeAtHalfTheDensity) {
     ScanPipeline pipeline(fake_source(std::make_unique<acquisition::SourceOf<FakeFrames>>(60, 33),
                                       sliding_poses(mm_per_s, -100, 2100, 25)),
                           std::make_unique<FakeSegmentation>(),
-                          std::make_unique<FakeReconstruction>(), options);
+                          std::make_unique<test::FakeReconstruction>(), options);
     auto sink = std::make_shared<RecordingSink>();
     pipeline.add_sink(sink);
     EXPECT_TRUE(pipeline.start());
@@ -515,14 +468,14 @@ TEST(ScanPipeline, PastTheSliceBudgetKeyframesComeAtHalfTheDensity) {
 
 TEST(ScanPipeline, RejectsMissingParts) {
   EXPECT_THROW(ScanPipeline(ScanSource{}, std::make_unique<FakeSegmentation>(),
-                            std::make_unique<FakeReconstruction>(), ScanOptions{}),
+                            std::make_unique<test::FakeReconstruction>(), ScanOptions{}),
                std::invalid_argument);
   ScanOptions zero;
   zero.segmentation_queue = 0;
   EXPECT_THROW(
       ScanPipeline(fake_source(std::make_unique<acquisition::SourceOf<FakeFrames>>(1, 10), {}),
-                   std::make_unique<FakeSegmentation>(), std::make_unique<FakeReconstruction>(),
-                   zero),
+                   std::make_unique<FakeSegmentation>(),
+                   std::make_unique<test::FakeReconstruction>(), zero),
       std::invalid_argument);
 }
 
@@ -534,7 +487,7 @@ TEST(ScanPipeline, SegmentationRepairsAreCountedAndListedWithTheirFrame) {
   ScanPipeline pipeline(fake_source(std::make_unique<acquisition::SourceOf<FakeFrames>>(40, 33),
                                     sliding_poses(36.0 * 33.0 / 33.333, -100, 1500, 25)),
                         std::make_unique<FakeSegmentation>(std::set<std::int64_t>{}, repaired),
-                        std::make_unique<FakeReconstruction>(), fast_options());
+                        std::make_unique<test::FakeReconstruction>(), fast_options());
   ASSERT_TRUE(pipeline.start());
   const ScanSummary summary = pipeline.finish();
   EXPECT_EQ(summary.counters.slices, 40u);

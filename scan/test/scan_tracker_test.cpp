@@ -11,6 +11,7 @@
 #include <thread>
 
 #include "bird_emulator.hpp"
+#include "fake_reconstruction.hpp"
 #include "sonoshape/apps/file_sink.hpp"
 #include "sonoshape/core/slice_io.hpp"
 #include "sonoshape/scan/pipeline.hpp"
@@ -76,41 +77,6 @@ class SquareSegmentation final : public SegmentationStage {
   }
 };
 
-// Keeps the slices; the mesh is one triangle per slice, so a lost or altered slice shows.
-class TriangleReconstruction final : public ReconstructionStage {
- public:
-  int add_slice(LabeledSlice slice) override {
-    pending_.push_back(std::move(slice));
-    return next_id_++;
-  }
-  recon::UpdateStats update() override {
-    recon::UpdateStats stats;
-    stats.slices_added = pending_.size();
-    for (LabeledSlice& s : pending_) slices_.slices.push_back(std::move(s));
-    pending_.clear();
-    meshes_.meshes.assign(1, MeshSet::Entry{1, "organ", {}});
-    TriangleMesh& mesh = meshes_.meshes[0].mesh;
-    for (const LabeledSlice& s : slices_.slices) {
-      const auto base = static_cast<std::uint32_t>(mesh.vertices.size());
-      mesh.vertices.push_back(s.origin_mm);
-      mesh.vertices.push_back(s.origin_mm + Vec3::UnitX());
-      mesh.vertices.push_back(s.origin_mm + Vec3::UnitY());
-      mesh.triangles.push_back({base, base + 1, base + 2});
-    }
-    stats.step.slices = slices_.slices.size();
-    return stats;
-  }
-  const MeshSet& meshes() const override { return meshes_; }
-  SliceSet slice_set() const override { return slices_; }
-  std::size_t slice_count() const override { return slices_.slices.size(); }
-
- private:
-  std::vector<LabeledSlice> pending_;
-  SliceSet slices_;
-  MeshSet meshes_;
-  int next_id_ = 0;
-};
-
 class FinalMeshes final : public ScanSink {
  public:
   Status on_slice(const LabeledSlice&, std::size_t) override { return Status::ok(); }
@@ -156,7 +122,7 @@ TEST(ScanWithTrakstar, UnplugAndReplugMidScanKeepTheMeshesAndPosesResume) {
   scan_options.keyframes = {3.0, 1.0};
   testing::TempDir dir;
   ScanPipeline pipeline(std::move(source), std::make_unique<SquareSegmentation>(),
-                        std::make_unique<TriangleReconstruction>(), scan_options);
+                        std::make_unique<test::FakeReconstruction>(), scan_options);
   auto final_meshes = std::make_shared<FinalMeshes>();
   pipeline.add_sink(final_meshes);
   pipeline.add_sink(std::make_shared<apps::FileSink>(dir.path() / "out", 5));
