@@ -1,8 +1,24 @@
 # sonoshape_target_defaults(<target>): warnings (errors with SONOSHAPE_WERROR) for our own code.
+# With SONOSHAPE_UNITY_BUILD, the target's sources are compiled in batches of eight, each batch as
+# one translation unit (CMake's unity build): the headers they share (CGAL, CLI11, Boost.Beast,
+# OpenCV, GoogleTest) are parsed and their templates instantiated once per batch instead of once
+# per source, which halves the CPU time of a first build (docs/benchmarks.md, "Build time").
+# Each test source keeps its code in a namespace named after the file, so batches never meet
+# two definitions of one name.
 function(sonoshape_target_defaults target)
   target_compile_options(${target} PRIVATE -Wall -Wextra -Wpedantic)
   if(SONOSHAPE_WERROR)
     target_compile_options(${target} PRIVATE -Werror)
+  endif()
+  if(SONOSHAPE_UNITY_BUILD)
+    set_target_properties(${target} PROPERTIES UNITY_BUILD ON)
+    # GCC warns when a class outside an anonymous namespace holds a type from one, in any file
+    # but the one it compiles, since a header's class would then differ between translation
+    # units. A unity build includes every source in exactly one batch, so the private classes of
+    # a source (pimpl's Impl holding its file's helper types) are false positives there.
+    if(CMAKE_CXX_COMPILER_ID STREQUAL "GNU")
+      target_compile_options(${target} PRIVATE -Wno-subobject-linkage)
+    endif()
   endif()
 endfunction()
 
@@ -46,6 +62,9 @@ function(sonoshape_add_test name)
   target_compile_definitions(${name} PRIVATE SONOSHAPE_DATA_DIR="${SONOSHAPE_DATA_DIR}")
   target_include_directories(${name} PRIVATE ${PROJECT_SOURCE_DIR}/tests/support)
   sonoshape_target_defaults(${name})
+  # A test program's sources as one unit: at -O1 none is large, and GoogleTest's and the module's
+  # headers are then compiled once per program.
+  set_target_properties(${name} PROPERTIES UNITY_BUILD_BATCH_SIZE 0)
   gtest_discover_tests(${name} DISCOVERY_TIMEOUT 60 PROPERTIES LABELS "${ARG_LABELS}")
 endfunction()
 
@@ -75,6 +94,9 @@ endfunction()
 # (docs/benchmarks.md, "Build time"). The sources must not define the same name in an anonymous
 # namespace.
 function(sonoshape_unity_group target group)
+  if(NOT SONOSHAPE_UNITY_BUILD)
+    return()
+  endif()
   set_target_properties(${target} PROPERTIES UNITY_BUILD ON UNITY_BUILD_MODE GROUP)
   set_source_files_properties(${ARGN} TARGET_DIRECTORY ${target} PROPERTIES UNITY_GROUP ${group})
 endfunction()

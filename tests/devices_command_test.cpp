@@ -9,7 +9,7 @@
 #include "sonoshape/testing/temp_dir.hpp"
 #include "sonoshape/testing/trakstar_usb_record.hpp"
 
-namespace sonoshape {
+namespace sonoshape::devices_command_test {
 namespace {
 
 TEST(DevicesCommand, ListsTheCaptureNodeWithAPastableSourceAndSkipsTheMetadataNode) {
@@ -59,4 +59,4 @@ TEST(DevicesCommand, ListsATrakstarOnUsbWithAPastableTracker) {
 }
 
 }  // namespace
-}  // namespace sonoshape
+}  // namespace sonoshape::devices_command_test

@@ -17,6 +17,7 @@
 #include "sonoshape/core/mesh_io.hpp"
 #include "sonoshape/testing/command.hpp"
 
+namespace end_to_end_test {
 namespace {
 
 namespace fs = std::filesystem;
@@ -44,7 +45,7 @@ class EndToEnd : public ::testing::Test {
   void TearDown() override { fs::remove_all(dir_); }
   std::string path(const std::string& name) const { return (dir_ / name).string(); }
   static std::string model(const std::string& name) {
-    return std::string(SONOSHAPE_DATA_DIR) + "/models/" + name;
+    return (fs::path(SONOSHAPE_DATA_DIR) / "models" / name).string();
   }
 
   fs::path dir_;
@@ -350,3 +351,4 @@ TEST_F(EndToEnd, AMalformedOrMissingDeviceIsRefusedWithTheFix) {
 }
 
 }  // namespace
+}  // namespace end_to_end_test

@@ -19,6 +19,7 @@
 #include "sonoshape/testing/command.hpp"
 #include "sonoshape/testing/temp_dir.hpp"
 
+namespace hostile_files_test {
 namespace {
 
 namespace fs = std::filesystem;
@@ -188,3 +189,4 @@ TEST_F(HostileFiles, AHundredCopiesOfASliceReconstructAsOne) {
 }
 
 }  // namespace
+}  // namespace hostile_files_test

@@ -21,6 +21,7 @@
 #include "sonoshape/testing/command.hpp"
 #include "sonoshape/testing/sanitizer_slowdown.hpp"
 
+namespace hostile_input_test {
 namespace {
 
 namespace fs = std::filesystem;
@@ -387,3 +388,4 @@ TEST_F(HostileInput, EveryNumberOptionRefusesNanAndNegativesNamingIt) {
 }
 
 }  // namespace
+}  // namespace hostile_input_test

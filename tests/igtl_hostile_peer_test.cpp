@@ -30,7 +30,7 @@
 #include "sonoshape/testing/igtl_client.hpp"
 #include "sonoshape/tracking/igtl_pose_source.hpp"
 
-namespace sonoshape {
+namespace sonoshape::igtl_hostile_peer_test {
 namespace {
 
 using Bytes = std::vector<std::uint8_t>;
@@ -628,4 +628,4 @@ TEST(IgtlHostileClient, ConnectionsBeyondTheCapAreClosedAndCountedAndTheServedOn
 }
 
 }  // namespace
-}  // namespace sonoshape
+}  // namespace sonoshape::igtl_hostile_peer_test

@@ -30,7 +30,7 @@
 #include "sonoshape/testing/slicer_labels.hpp"
 #include "sonoshape/testing/temp_dir.hpp"
 
-namespace sonoshape {
+namespace sonoshape::igtl_labels_test {
 namespace {
 
 using testing::contains;
@@ -214,4 +214,4 @@ TEST(IgtlLabels, LabelMapsOfAnotherSizeOrAnAbsentDeviceGiveNoSliceAndSayWhy) {
 }
 
 }  // namespace
-}  // namespace sonoshape
+}  // namespace sonoshape::igtl_labels_test

@@ -22,7 +22,7 @@
 #include "sonoshape/testing/slicer_labels.hpp"
 #include "sonoshape/testing/temp_dir.hpp"
 
-namespace sonoshape {
+namespace sonoshape::labels_command_test {
 namespace {
 
 using testing::contains;
@@ -241,4 +241,4 @@ TEST(LabelsCommand, LabelMapsThatDoNotFitTheRecordingAreRefusedNamingFileFrameAn
 }
 
 }  // namespace
-}  // namespace sonoshape
+}  // namespace sonoshape::labels_command_test

@@ -11,6 +11,7 @@
 #include "sonoshape/testing/command.hpp"
 #include "sonoshape/testing/temp_dir.hpp"
 
+namespace plus_formats_test {
 namespace {
 
 namespace fs = std::filesystem;
@@ -252,3 +253,4 @@ TEST(PlusFormats, ScanReplayTakesAPresetAndWarnsWhenOneLabelFillsTheSectors) {
 }
 
 }  // namespace
+}  // namespace plus_formats_test

@@ -20,7 +20,7 @@
 #include "sonoshape/core/slice_io.hpp"
 #include "sonoshape/recon/reconstruct.hpp"
 
-namespace sonoshape {
+namespace sonoshape::real_input_test {
 namespace {
 
 const std::filesystem::path kCorpus =
@@ -310,4 +310,4 @@ TEST(RealInput, OffPlaneNoiseIsProjected) {
 }
 
 }  // namespace
-}  // namespace sonoshape
+}  // namespace sonoshape::real_input_test

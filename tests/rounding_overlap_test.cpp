@@ -23,7 +23,7 @@
 #include "sonoshape/core/slice_io.hpp"
 #include "sonoshape/recon/reconstruct.hpp"
 
-namespace sonoshape {
+namespace sonoshape::rounding_overlap_test {
 namespace {
 
 using EK = CGAL::Exact_predicates_exact_constructions_kernel;
@@ -140,7 +140,7 @@ std::string fixed7(double value, int decimals = 7) {
 
 // The set as a .slices.json file writes it with 7 decimals (or `decimals`).
 std::string json_7_decimals(const SliceSet& set, int decimals = 7) {
-  auto fixed7 = [decimals](double value) { return sonoshape::fixed7(value, decimals); };
+  auto fixed7 = [decimals](double value) { return rounding_overlap_test::fixed7(value, decimals); };
   auto ring_text = [&](const Ring2& ring) {
     std::string out = "[";
     for (std::size_t k = 0; k < ring.size(); ++k)
@@ -350,4 +350,4 @@ TEST(RoundingOverlap, TheToleranceScalesWithTheSetInMetresOrMicrometres) {
 }
 
 }  // namespace
-}  // namespace sonoshape
+}  // namespace sonoshape::rounding_overlap_test

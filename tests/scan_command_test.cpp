@@ -21,6 +21,7 @@
 #include "sonoshape/testing/json_file.hpp"
 #include "sonoshape/testing/temp_dir.hpp"
 
+namespace scan_command_test {
 namespace {
 
 namespace fs = std::filesystem;
@@ -272,7 +273,9 @@ TEST(ScanCommand, PublishesToListenersThatKeepUpJoinLateAreSlowOrDie) {
 }
 
 }  // namespace
+}  // namespace scan_command_test
 
+namespace scan_command_test {
 namespace {
 
 // The option names a command's --help lists: every name on a line that starts with a dash after
@@ -448,3 +451,4 @@ TEST(CommandOptions, ScanTakesEverySimulatorOptionOfSimulate) {
 }
 
 }  // namespace
+}  // namespace scan_command_test

@@ -25,6 +25,7 @@
 #include "sonoshape/testing/sanitizer_slowdown.hpp"
 #include "sonoshape/testing/temp_dir.hpp"
 
+namespace scan_crash_test {
 namespace {
 
 namespace fs = std::filesystem;
@@ -515,3 +516,4 @@ TEST(ScanResume, AJournalsWorkingDirectoryMustBeAnAbsolutePath) {
 }
 
 }  // namespace
+}  // namespace scan_crash_test

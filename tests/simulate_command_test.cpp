@@ -14,6 +14,7 @@
 #include "sonoshape/core/slice_io.hpp"
 #include "sonoshape/testing/command.hpp"
 
+namespace simulate_command_test {
 namespace {
 
 namespace fs = std::filesystem;
@@ -97,7 +98,9 @@ TEST_F(SimulateCommand, UserPhantomAndBadArguments) {
 }
 
 }  // namespace
+}  // namespace simulate_command_test
 
+namespace simulate_command_test {
 namespace {
 
 // simulate -> segment -> reconstruct: the offline path from a virtual patient to meshes.
@@ -258,3 +261,4 @@ TEST_F(SimulateCommand, SegmentScoresAgainstTheTruthAndPerfectLabelsReconstruct)
 }
 
 }  // namespace
+}  // namespace simulate_command_test

@@ -16,6 +16,7 @@
 #include "sonoshape/testing/json_file.hpp"
 #include "sonoshape/testing/temp_dir.hpp"
 
+namespace stream_access_test {
 namespace {
 
 namespace fs = std::filesystem;
@@ -128,3 +129,4 @@ TEST(StreamAccessCommand, OnlyTheListenerWithTheServerKeyReadsAnEncryptedScan) {
 }
 
 }  // namespace
+}  // namespace stream_access_test

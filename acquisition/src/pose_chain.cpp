@@ -15,8 +15,8 @@ namespace sonoshape::acquisition {
 namespace {
 
 using detail::fail;
+using detail::kTransformSuffix;
 
-constexpr std::string_view kTransformSuffix = "Transform";
 // Default reconstruction frames, in order: PLUS's Reference, then the tracker itself, then a
 // TRUS stepper's template (where the phantom or the needle grid is) and its home position.
 constexpr std::string_view kDefaultTargets[] = {"Reference", "Tracker", "Template", "StepperHome"};

@@ -22,12 +22,12 @@ namespace {
 
 using detail::fail;
 using detail::kFramePrefix;
+using detail::kTransformSuffix;
 using detail::parse_number;
 using detail::split_frame_key;
 using detail::split_words;
 using detail::trim;
 
-constexpr std::string_view kTransformSuffix = "Transform";
 constexpr std::string_view kStatusSuffix = "TransformStatus";
 
 // Header fields whose values follow from the pixel data; the writer recomputes them.

@@ -16,6 +16,9 @@
 
 namespace sonoshape::acquisition::detail {
 
+/// The suffix of a frame field that holds a transform ("ProbeToTrackerTransform").
+inline constexpr std::string_view kTransformSuffix = "Transform";
+
 inline std::string_view trim(std::string_view s) {
   const auto first = s.find_first_not_of(" \t\r\n");
   if (first == std::string_view::npos) return {};

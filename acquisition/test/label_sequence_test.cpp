@@ -12,7 +12,7 @@
 
 #include "sonoshape/testing/slicer_labels.hpp"
 
-namespace sonoshape::acquisition {
+namespace sonoshape::acquisition::label_sequence_test {
 namespace {
 
 constexpr int kW = 40, kH = 30, kFrames = 4;
@@ -170,4 +170,4 @@ TEST(LabelSequence, LabelsOfAnMnRecordingAreFlippedWithItsFrames) {
 }
 
 }  // namespace
-}  // namespace sonoshape::acquisition
+}  // namespace sonoshape::acquisition::label_sequence_test

@@ -14,7 +14,7 @@
 
 #include "sonoshape/acquisition/sequence_file.hpp"
 
-namespace sonoshape::acquisition {
+namespace sonoshape::acquisition::nrrd_sequence_test {
 namespace {
 
 const std::filesystem::path kPlusDir = std::filesystem::path(SONOSHAPE_DATA_DIR) / "plus";
@@ -492,9 +492,9 @@ TEST(NrrdSequence, RequireTrackingNamesTheTransformsAFileHas) {
 }
 
 }  // namespace
-}  // namespace sonoshape::acquisition
+}  // namespace sonoshape::acquisition::nrrd_sequence_test
 
-namespace sonoshape::acquisition {
+namespace sonoshape::acquisition::nrrd_sequence_test {
 namespace {
 
 // Issue 40: `sizes:` given twice was accepted (the later one taken); the format gives each field
@@ -511,4 +511,4 @@ TEST(NrrdSequence, AFieldGivenTwiceIsRefusedNamingBothLines) {
 }
 
 }  // namespace
-}  // namespace sonoshape::acquisition
+}  // namespace sonoshape::acquisition::nrrd_sequence_test

@@ -8,7 +8,7 @@
 #include <fstream>
 #include <string>
 
-namespace sonoshape::acquisition {
+namespace sonoshape::acquisition::plus_config_test {
 namespace {
 
 const std::filesystem::path kRealConfig =
@@ -106,4 +106,4 @@ TEST(PlusConfig, ConflictingDefinitionsOfATransformAreRefused) {
 }
 
 }  // namespace
-}  // namespace sonoshape::acquisition
+}  // namespace sonoshape::acquisition::plus_config_test

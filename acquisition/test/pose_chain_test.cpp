@@ -15,7 +15,7 @@
 #include "sonoshape/acquisition/plus_config.hpp"
 #include "sonoshape/acquisition/sequence_file.hpp"
 
-namespace sonoshape::acquisition {
+namespace sonoshape::acquisition::pose_chain_test {
 namespace {
 
 namespace fs = std::filesystem;
@@ -279,4 +279,4 @@ TEST(Timestamps, FileWithoutThemGetsOneFrameRate) {
 }
 
 }  // namespace
-}  // namespace sonoshape::acquisition
+}  // namespace sonoshape::acquisition::pose_chain_test

@@ -6,7 +6,7 @@
 
 #include "sonoshape/core/errors.hpp"
 
-namespace sonoshape::acquisition {
+namespace sonoshape::acquisition::probe_test {
 namespace {
 
 TEST(Probe, LinearPixelsMapToMillimetresLikeImageToProbe) {
@@ -69,4 +69,4 @@ TEST(Probe, GeometryRoundTripsThroughHeaderFields) {
 }
 
 }  // namespace
-}  // namespace sonoshape::acquisition
+}  // namespace sonoshape::acquisition::probe_test

@@ -9,7 +9,7 @@
 #include <random>
 #include <string>
 
-namespace sonoshape::acquisition {
+namespace sonoshape::acquisition::sequence_file_test {
 namespace {
 
 const std::filesystem::path kRealFile =
@@ -249,4 +249,4 @@ TEST(CheckTrackedSweep, OrientationTimestampsAndRigidPoses) {
 }
 
 }  // namespace
-}  // namespace sonoshape::acquisition
+}  // namespace sonoshape::acquisition::sequence_file_test

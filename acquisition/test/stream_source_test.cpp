@@ -12,7 +12,7 @@
 
 #include "sonoshape/acquisition/frame_source.hpp"
 
-namespace sonoshape::acquisition {
+namespace sonoshape::acquisition::stream_source_test {
 namespace {
 
 const std::filesystem::path kPlusSweep =
@@ -235,4 +235,4 @@ TEST(ReplayFrameSource, ReplaysTheRealPlusSweep) {
 }
 
 }  // namespace
-}  // namespace sonoshape::acquisition
+}  // namespace sonoshape::acquisition::stream_source_test

@@ -10,7 +10,7 @@
 
 #include "sonoshape/acquisition/v4l2_source.hpp"
 
-namespace sonoshape::acquisition {
+namespace sonoshape::acquisition::v4l2_hardware_test {
 namespace {
 
 double clock_monotonic_s() {
@@ -57,4 +57,4 @@ TEST(V4l2Hardware, AnAttachedGrabberDeliversFramesOnTheMonotonicClock) {
 }
 
 }  // namespace
-}  // namespace sonoshape::acquisition
+}  // namespace sonoshape::acquisition::v4l2_hardware_test

@@ -20,7 +20,7 @@
 
 #include "sonoshape/testing/fake_v4l2_driver.hpp"
 
-namespace sonoshape::acquisition {
+namespace sonoshape::acquisition::v4l2_source_test {
 namespace {
 
 using FakeDriver = testing::FakeV4l2Driver;
@@ -329,4 +329,4 @@ TEST(V4l2Mmap, ACropOutsideTheGrantedFrameFailsAtOpen) {
 }
 
 }  // namespace
-}  // namespace sonoshape::acquisition
+}  // namespace sonoshape::acquisition::v4l2_source_test

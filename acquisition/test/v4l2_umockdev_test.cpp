@@ -19,7 +19,7 @@
 #include "sonoshape/acquisition/v4l2_source.hpp"
 #include "sonoshape/testing/fake_v4l2_grabber.hpp"
 
-namespace sonoshape::acquisition {
+namespace sonoshape::acquisition::v4l2_umockdev_test {
 namespace {
 
 using testing::fake_v4l2::grey_frame;
@@ -198,4 +198,4 @@ TEST_F(V4l2UmockdevWithMetadataNode, DevicesListsCaptureNodesWithModesAPastableS
 }
 
 }  // namespace
-}  // namespace sonoshape::acquisition
+}  // namespace sonoshape::acquisition::v4l2_umockdev_test

@@ -9,7 +9,7 @@
 
 #include "sonoshape/publish/subscriber.hpp"
 
-namespace sonoshape::scan {
+namespace sonoshape::scan::publish_sink_test {
 namespace {
 
 using apps::FramePreviewOptions;
@@ -165,4 +165,4 @@ TEST(PublishSinkStatus, TheLastMessageSaysTheScanFinishedWithTheFinalCounts) {
 }
 
 }  // namespace
-}  // namespace sonoshape::scan
+}  // namespace sonoshape::scan::publish_sink_test

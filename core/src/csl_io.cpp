@@ -33,9 +33,6 @@ struct Token {
 };
 
 // Whitespace-separated tokens with their line numbers; blank lines are simply skipped.
-// Lengths beyond 1e12 mm (1000 km) are no anatomy; their squares would overflow the geometry.
-constexpr double kMaxCoordinateMm = 1e12;
-
 // A token as a message quotes it: a 100000-digit number is cut to its first 40 characters so
 // that the message stays a line, not 100 KB.
 std::string excerpt(std::string_view text) {
@@ -188,7 +185,7 @@ Plane read_plane(Tokens& tokens, int n_labels) {
     p.x() = tokens.take_double("a vertex x");
     p.y() = tokens.take_double("a vertex y");
     p.z() = tokens.take_double("a vertex z");
-    if (p.cwiseAbs().maxCoeff() > kMaxCoordinateMm)
+    if (p.cwiseAbs().maxCoeff() > detail::kMaxCoordinateMm)
       fail(tokens.line(), "plane " + std::to_string(plane.index) + ", vertex " + std::to_string(k) +
                               ": a coordinate beyond 1e12 mm (" +
                               detail::format_double(p.cwiseAbs().maxCoeff()) +

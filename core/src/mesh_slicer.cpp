@@ -25,7 +25,7 @@ struct Loop {
   std::vector<Point2> points;  // the ring as CGAL points, for exact containment tests
 };
 
-std::uint64_t edge_key(std::uint32_t a, std::uint32_t b) {
+std::uint64_t undirected_edge_key(std::uint32_t a, std::uint32_t b) {
   return (static_cast<std::uint64_t>(std::min(a, b)) << 32) | std::max(a, b);
 }
 
@@ -118,7 +118,7 @@ std::vector<Ring2> cut_mesh(const TriangleMesh& mesh, const SlicePlane& plane) {
   std::unordered_map<std::uint64_t, int> point_of_edge;
   std::vector<Vec2> points;
   auto edge_point = [&](std::uint32_t a, std::uint32_t b) {
-    const auto [it, inserted] = point_of_edge.try_emplace(edge_key(a, b), 0);
+    const auto [it, inserted] = point_of_edge.try_emplace(undirected_edge_key(a, b), 0);
     if (!inserted) return it->second;
     // Interpolate from the lower index so the point does not depend on the triangle.
     const std::uint32_t i = std::min(a, b);

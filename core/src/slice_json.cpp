@@ -51,13 +51,9 @@ double read_number(const json& j, const std::string& where) {
   return value;
 }
 
-// Lengths beyond 1e12 mm (1000 km) are no anatomy: their squares in the geometry overflow and
-// the polygon then reads as "fewer than 3 distinct points", which blames the wrong thing.
-constexpr double kMaxCoordinateMm = 1e12;
-
 double read_coordinate(const json& j, const std::string& where) {
   const double value = read_number(j, where);
-  if (std::abs(value) > kMaxCoordinateMm)
+  if (std::abs(value) > detail::kMaxCoordinateMm)
     fail_at(where, "coordinate " + short_dump(j) +
                        " is beyond 1e12 mm, where lengths lose their precision; check the units");
   return value;
@@ -248,7 +244,7 @@ LabeledSlice parse_slice_object(const json& js, std::size_t i, bool normalize,
     if (!js.contains(key)) fail_at(where, std::string("\"") + key + "\" is missing");
   LabeledSlice s;
   s.origin_mm = read_vec3(js["origin"], where + ", origin");
-  if (s.origin_mm.cwiseAbs().maxCoeff() > kMaxCoordinateMm)
+  if (s.origin_mm.cwiseAbs().maxCoeff() > detail::kMaxCoordinateMm)
     fail_at(where + ", origin",
             "a coordinate beyond 1e12 mm, where lengths lose their precision; check the units");
   s.u = read_vec3(js["u"], where + ", u");

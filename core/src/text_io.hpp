@@ -8,6 +8,11 @@
 
 namespace sonoshape::detail {
 
+/// The largest coordinate a slice file may give, in mm. Lengths beyond 1e12 mm (1000 km) are no
+/// anatomy: their squares in the geometry overflow and the polygon then reads as "fewer than 3
+/// distinct points", which blames the wrong thing.
+inline constexpr double kMaxCoordinateMm = 1e12;
+
 /// "unknown" or the id as text.
 std::string label_text(int label);
 

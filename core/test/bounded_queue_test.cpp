@@ -7,7 +7,7 @@
 #include <chrono>
 #include <thread>
 
-namespace sonoshape {
+namespace sonoshape::bounded_queue_test {
 namespace {
 
 TEST(BoundedQueue, DropOldestKeepsTheNewestAndReportsWhatItDropped) {
@@ -62,4 +62,4 @@ TEST(BoundedQueue, PopTimesOutAndCloseWakesEveryone) {
 }
 
 }  // namespace
-}  // namespace sonoshape
+}  // namespace sonoshape::bounded_queue_test

@@ -11,7 +11,7 @@
 #include "sonoshape/core/slice_io.hpp"
 #include "sonoshape/testing/temp_dir.hpp"
 
-namespace sonoshape {
+namespace sonoshape::csl_io_test {
 namespace {
 
 using sonoshape::testing::contains;
@@ -637,4 +637,4 @@ TEST(CslFiles, WriterRefusesUnknownRegionsAndFov) {
 }
 
 }  // namespace
-}  // namespace sonoshape
+}  // namespace sonoshape::csl_io_test

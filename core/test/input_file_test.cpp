@@ -9,7 +9,7 @@
 
 #include "sonoshape/testing/temp_dir.hpp"
 
-namespace sonoshape {
+namespace sonoshape::input_file_test {
 namespace {
 
 using testing::contains;
@@ -58,4 +58,4 @@ TEST(InputFile, AMissingFileIsNamedWithTheFix) {
 }
 
 }  // namespace
-}  // namespace sonoshape
+}  // namespace sonoshape::input_file_test

@@ -10,7 +10,7 @@
 #include "sonoshape/core/errors.hpp"
 #include "sonoshape/testing/temp_dir.hpp"
 
-namespace sonoshape {
+namespace sonoshape::mesh_io_test {
 namespace {
 
 using testing::contains;
@@ -68,4 +68,4 @@ TEST(InputError, JoinsTheKnownPartsAndAddsTheFileOnce) {
 }
 
 }  // namespace
-}  // namespace sonoshape
+}  // namespace sonoshape::mesh_io_test

@@ -11,7 +11,7 @@
 #include "sonoshape/core/mesh_io.hpp"
 #include "sonoshape/testing/cube.hpp"
 
-namespace sonoshape {
+namespace sonoshape::mesh_reader_test {
 namespace {
 
 namespace fs = std::filesystem;
@@ -337,4 +337,4 @@ TEST(MeshReader, OrientOutwardFlipsInwardMeshesOnly) {
 }
 
 }  // namespace
-}  // namespace sonoshape
+}  // namespace sonoshape::mesh_reader_test

@@ -5,7 +5,7 @@
 
 #include "sonoshape/core/mesh_components.hpp"
 
-namespace sonoshape {
+namespace sonoshape::mesh_test {
 namespace {
 
 // The unit cube [0,1]^3, 12 triangles, counter-clockwise seen from outside.
@@ -117,4 +117,4 @@ TEST(MeshParts, TrianglesJoinThroughSharedVerticesOnly) {
 }
 
 }  // namespace
-}  // namespace sonoshape
+}  // namespace sonoshape::mesh_test

@@ -12,7 +12,7 @@
 #include "sonoshape/core/mesh_io.hpp"
 #include "sonoshape/testing/temp_dir.hpp"
 
-namespace sonoshape {
+namespace sonoshape::mesh_writer_test {
 namespace {
 
 using sonoshape::testing::TempDir;
@@ -265,4 +265,4 @@ TEST(MeshSetWriter, DirectoryBlockedByAFile) {
 }
 
 }  // namespace
-}  // namespace sonoshape
+}  // namespace sonoshape::mesh_writer_test

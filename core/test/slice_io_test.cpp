@@ -14,7 +14,7 @@
 
 #include "sonoshape/testing/temp_dir.hpp"
 
-namespace sonoshape {
+namespace sonoshape::slice_io_test {
 namespace {
 
 using sonoshape::testing::contains;
@@ -653,4 +653,4 @@ TEST(SliceFiles, ReadDispatchesOnExtension) {
 }
 
 }  // namespace
-}  // namespace sonoshape
+}  // namespace sonoshape::slice_io_test

@@ -8,7 +8,7 @@
 #include "sonoshape/core/errors.hpp"
 #include "sonoshape/kernels/opencl.hpp"
 
-namespace sonoshape::kernels {
+namespace sonoshape::kernels::device_spec_test {
 namespace {
 
 TEST(DeviceSpec, ParsesEveryForm) {
@@ -102,4 +102,4 @@ TEST(OpenClDevices, ProgramBinaryIsCachedAndReadBack) {
 }
 
 }  // namespace
-}  // namespace sonoshape::kernels
+}  // namespace sonoshape::kernels::device_spec_test

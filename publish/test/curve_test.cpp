@@ -17,7 +17,7 @@
 #include "sonoshape/publish/subscriber.hpp"
 #include "sonoshape/testing/temp_dir.hpp"
 
-namespace sonoshape::publish {
+namespace sonoshape::publish::curve_test {
 namespace {
 
 using namespace std::chrono_literals;
@@ -416,9 +416,9 @@ TEST(StreamAccess, SnapshotFloodGetsBusyRepliesAndLiveUpdatesGoOnWithoutGaps) {
 }
 
 }  // namespace
-}  // namespace sonoshape::publish
+}  // namespace sonoshape::publish::curve_test
 
-namespace sonoshape::publish {
+namespace sonoshape::publish::curve_test {
 namespace {
 
 // Issue 40: a key file saved by an editor that starts UTF-8 files with a byte-order mark was
@@ -433,4 +433,4 @@ TEST(CurveKeys, AKeyFileWithAUtf8ByteOrderMarkReadsTheKey) {
 }
 
 }  // namespace
-}  // namespace sonoshape::publish
+}  // namespace sonoshape::publish::curve_test

@@ -14,7 +14,7 @@
 
 #include "sonoshape/testing/igtl_client.hpp"
 
-namespace sonoshape::publish {
+namespace sonoshape::publish::igtl_server_test {
 namespace {
 
 TriangleMesh tetrahedron(double size) {
@@ -205,4 +205,4 @@ TEST(IgtlServer, APortInUseIsReportedWithTheOptionAndAFix) {
 }
 
 }  // namespace
-}  // namespace sonoshape::publish
+}  // namespace sonoshape::publish::igtl_server_test

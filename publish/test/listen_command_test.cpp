@@ -21,7 +21,7 @@
 #include "sonoshape/testing/json_file.hpp"
 #include "sonoshape/testing/temp_dir.hpp"
 
-namespace sonoshape::publish {
+namespace sonoshape::publish::listen_command_test {
 namespace {
 
 using namespace std::chrono_literals;
@@ -329,9 +329,9 @@ TEST(ListenCommand, ALiveEndMessageIsInvalid) {
 }
 
 }  // namespace
-}  // namespace sonoshape::publish
+}  // namespace sonoshape::publish::listen_command_test
 
-namespace sonoshape::publish {
+namespace sonoshape::publish::listen_command_test {
 namespace {
 
 // Issue 40, C6: a publisher with many labels made `listen` write 53 000 files and overrun
@@ -384,4 +384,4 @@ TEST(ListenCommand, WritesAtMostTheLabelLimitAndStopsOnTimeUnderAFloodOfLabels) 
 }
 
 }  // namespace
-}  // namespace sonoshape::publish
+}  // namespace sonoshape::publish::listen_command_test

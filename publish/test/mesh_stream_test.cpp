@@ -10,7 +10,7 @@
 
 #include "sonoshape/testing/temp_dir.hpp"
 
-namespace sonoshape::publish {
+namespace sonoshape::publish::mesh_stream_test {
 namespace {
 
 using nlohmann::json;
@@ -586,4 +586,4 @@ TEST(MeshStreamDecode, IgnoresKeysItDoesNotKnow) {
 }
 
 }  // namespace
-}  // namespace sonoshape::publish
+}  // namespace sonoshape::publish::mesh_stream_test

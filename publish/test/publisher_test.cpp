@@ -13,7 +13,7 @@
 #include "sonoshape/publish/subscriber.hpp"
 #include "sonoshape/testing/temp_dir.hpp"
 
-namespace sonoshape::publish {
+namespace sonoshape::publish::publisher_test {
 namespace {
 
 using namespace std::chrono_literals;
@@ -476,9 +476,9 @@ TEST(MeshSubscriber, ReportsAnInvalidMessageAndGoesOn) {
 }
 
 }  // namespace
-}  // namespace sonoshape::publish
+}  // namespace sonoshape::publish::publisher_test
 
-namespace sonoshape::publish {
+namespace sonoshape::publish::publisher_test {
 namespace {
 
 // Issue 40: ZeroMQ takes a TCP port modulo 65536, so --publish tcp://127.0.0.1:99999 bound port
@@ -506,4 +506,4 @@ TEST(MeshPublisher, APortBeyond65535IsRefusedNamingTheOption) {
 }
 
 }  // namespace
-}  // namespace sonoshape::publish
+}  // namespace sonoshape::publish::publisher_test

@@ -23,7 +23,7 @@
 #include "sonoshape/testing/temp_dir.hpp"
 #include "view_client.hpp"
 
-namespace sonoshape::publish {
+namespace sonoshape::publish::view_command_test {
 namespace {
 
 using namespace std::chrono_literals;
@@ -254,4 +254,4 @@ TEST(ScanView, WithoutHoldAnOpenPageGetsTheFinishedStatusBeforeTheServerGoes) {
 }
 
 }  // namespace
-}  // namespace sonoshape::publish
+}  // namespace sonoshape::publish::view_command_test

@@ -17,7 +17,7 @@
 #include "sonoshape/testing/temp_dir.hpp"
 #include "view_client.hpp"
 
-namespace sonoshape::publish {
+namespace sonoshape::publish::view_server_limits_test {
 namespace {
 
 using namespace sonoshape::testing::view;
@@ -249,4 +249,4 @@ TEST(ViewServerLimits, AFolderIsNotFoundNotAnEmptyFile) {
 }
 
 }  // namespace
-}  // namespace sonoshape::publish
+}  // namespace sonoshape::publish::view_server_limits_test

@@ -17,7 +17,7 @@
 #include "sonoshape/testing/temp_dir.hpp"
 #include "view_client.hpp"
 
-namespace sonoshape::publish {
+namespace sonoshape::publish::view_server_test {
 namespace {
 
 using namespace sonoshape::testing::view;
@@ -486,4 +486,4 @@ TEST(StreamView, TellsThePageWhileNoPublisherAnswers) {
 }
 
 }  // namespace
-}  // namespace sonoshape::publish
+}  // namespace sonoshape::publish::view_server_test

@@ -23,7 +23,8 @@
 namespace sonoshape::recon {
 namespace {
 
-using Kernel = CGAL::Exact_predicates_inexact_constructions_kernel;
+// The triangulation's kernel: exact predicates on double coordinates.
+using CdtKernel = CGAL::Exact_predicates_inexact_constructions_kernel;
 // Each point knows its slots in the completion's corner cache (-1: none yet), so that the
 // corners of new triangles find their parts without hashing their coordinates.
 struct VertexInfo {
@@ -31,17 +32,17 @@ struct VertexInfo {
   int component = -1;  // of slot_2d (a point where two unknown components touch has two)
   std::int64_t slot_2d = -1;
 };
-using Vb = CGAL::Triangulation_vertex_base_with_info_2<VertexInfo, Kernel>;
+using Vb = CGAL::Triangulation_vertex_base_with_info_2<VertexInfo, CdtKernel>;
 // Each triangle knows its entry among the completed triangles (-1: not completed yet).
 struct FaceInfo {
   int entry = -1;
 };
 using Fb = CGAL::Constrained_triangulation_face_base_2<
-    Kernel, CGAL::Triangulation_face_base_with_info_2<FaceInfo, Kernel>>;
+    CdtKernel, CGAL::Triangulation_face_base_with_info_2<FaceInfo, CdtKernel>>;
 using Tds = CGAL::Triangulation_data_structure_2<Vb, Fb>;
 // Exact_predicates_tag: constraints that cross (unknown boundaries and face edges) are split at
 // their intersection points.
-using Cdt = CGAL::Constrained_Delaunay_triangulation_2<Kernel, Tds, CGAL::Exact_predicates_tag>;
+using Cdt = CGAL::Constrained_Delaunay_triangulation_2<CdtKernel, Tds, CGAL::Exact_predicates_tag>;
 
 // Spacing of the first triangulation of the unknown set: the completed values live at the
 // corners and are interpolated linearly, so corners must spread across the region, not only
@@ -487,8 +488,8 @@ class CellField::UnknownTriangulator {
     auto [it, is_new] = vertex_at_.try_emplace({p.x(), p.y()});
     if (is_new)
       it->second = near == Cdt::Vertex_handle()
-                       ? cdt_.insert(Kernel::Point_2(p.x(), p.y()))
-                       : cdt_.insert(Kernel::Point_2(p.x(), p.y()), near->face());
+                       ? cdt_.insert(CdtKernel::Point_2(p.x(), p.y()))
+                       : cdt_.insert(CdtKernel::Point_2(p.x(), p.y()), near->face());
     return it->second;
   }
   void insert_constraint(const Vec2& a, const Vec2& b) {
@@ -564,7 +565,7 @@ class CellField::UnknownTriangulator {
       }
       return true;
     };
-    std::vector<Kernel::Point_2> lattice;
+    std::vector<CdtKernel::Point_2> lattice;
     for (int r = 0; r < rows; ++r) {
       const double y = lo_.y() + r * row_step;
       const double x_offset = (r % 2) * 0.5 * triangle_size_;
@@ -898,13 +899,13 @@ class CellField::UnknownTriangulator {
     std::set<std::array<double, 4>> split_edges;
     inserted_.clear();
     for (const auto& [a, b] : splits) {
-      const Kernel::Point_2& pa = a->point();
-      const Kernel::Point_2& pb = b->point();
+      const CdtKernel::Point_2& pa = a->point();
+      const CdtKernel::Point_2& pb = b->point();
       std::array<double, 4> key{pa.x(), pa.y(), pb.x(), pb.y()};
       if (std::make_pair(pb.x(), pb.y()) < std::make_pair(pa.x(), pa.y()))
         key = {pb.x(), pb.y(), pa.x(), pa.y()};
       if (!split_edges.insert(key).second) continue;
-      const Kernel::Point_2 middle(0.5 * (pa.x() + pb.x()), 0.5 * (pa.y() + pb.y()));
+      const CdtKernel::Point_2 middle(0.5 * (pa.x() + pb.x()), 0.5 * (pa.y() + pb.y()));
       Cdt::Face_handle face;
       int index = 0;
       // On the edge itself (a constraint is split there), even where rounding puts the midpoint

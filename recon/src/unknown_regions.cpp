@@ -15,14 +15,13 @@
 namespace sonoshape::recon {
 namespace {
 
-using Kernel = CGAL::Exact_predicates_exact_constructions_kernel;
-using Polygon = CGAL::Polygon_2<Kernel>;
-using PolygonWithHoles = CGAL::Polygon_with_holes_2<Kernel>;
-using PolygonSet = CGAL::Polygon_set_2<Kernel>;
+using Polygon = CGAL::Polygon_2<ExactKernel>;
+using PolygonWithHoles = CGAL::Polygon_with_holes_2<ExactKernel>;
+using PolygonSet = CGAL::Polygon_set_2<ExactKernel>;
 
 Polygon to_polygon(const Ring2& ring) {
   Polygon p;
-  for (const Vec2& q : ring) p.push_back(Kernel::Point_2(q.x(), q.y()));
+  for (const Vec2& q : ring) p.push_back(ExactKernel::Point_2(q.x(), q.y()));
   if (p.is_clockwise_oriented()) p.reverse_orientation();
   return p;
 }

@@ -9,7 +9,7 @@
 
 #include "sonoshape/core/errors.hpp"
 
-namespace sonoshape::recon {
+namespace sonoshape::recon::arrangement_test {
 namespace {
 
 // Volume of a cell from its faces (divergence theorem), oriented outwards from the cell.
@@ -208,4 +208,4 @@ TEST(Arrangement, PlaneMissingTheBoxChangesNothing) {
 }
 
 }  // namespace
-}  // namespace sonoshape::recon
+}  // namespace sonoshape::recon::arrangement_test

@@ -7,7 +7,7 @@
 #include <limits>
 #include <random>
 
-namespace sonoshape::recon {
+namespace sonoshape::recon::atan2_test {
 namespace {
 
 double ulps_apart(double a, double b) {
@@ -47,4 +47,4 @@ TEST(FastAtan2, SignsAndZerosAsTheLibrary) {
 }
 
 }  // namespace
-}  // namespace sonoshape::recon
+}  // namespace sonoshape::recon::atan2_test

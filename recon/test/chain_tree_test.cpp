@@ -9,7 +9,7 @@
 
 #include "mean_value.hpp"
 
-namespace sonoshape::recon {
+namespace sonoshape::recon::chain_tree_test {
 namespace {
 
 // A wobbly organ-like contour of n points (radius 40 mm +- 25%), counter-clockwise.
@@ -97,4 +97,4 @@ TEST(ChainTree, HighMomentsMatchQuadrature) {
 }
 
 }  // namespace
-}  // namespace sonoshape::recon
+}  // namespace sonoshape::recon::chain_tree_test

@@ -19,7 +19,7 @@
 #include "sonoshape/recon/reconstructor.hpp"
 #include "test_shapes.hpp"
 
-namespace sonoshape::recon {
+namespace sonoshape::recon::device_field_test {
 namespace {
 
 using test::circle;
@@ -264,4 +264,4 @@ TEST(DeviceFieldSpec, AMalformedDeviceIsRefusedWithTheAcceptedForms) {
 }
 
 }  // namespace
-}  // namespace sonoshape::recon
+}  // namespace sonoshape::recon::device_field_test

@@ -8,7 +8,7 @@
 
 #include "cell_field.hpp"
 
-namespace sonoshape::recon {
+namespace sonoshape::recon::face_images_test {
 namespace {
 
 double ring_area(const std::vector<Vec2>& points, std::uint32_t begin, std::uint32_t count) {
@@ -120,4 +120,4 @@ TEST(FaceImages, ClippedPartsPartitionTheRegionsAndTheUnknownSet) {
 }
 
 }  // namespace
-}  // namespace sonoshape::recon
+}  // namespace sonoshape::recon::face_images_test

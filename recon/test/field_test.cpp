@@ -13,7 +13,7 @@
 #include "cell_field.hpp"
 #include "sonoshape/core/errors.hpp"
 
-namespace sonoshape::recon {
+namespace sonoshape::recon::field_test {
 namespace {
 
 constexpr double kPi = std::numbers::pi;
@@ -587,4 +587,4 @@ TEST(FieldDegenerate, SliceWithoutRegions) {
 }
 
 }  // namespace
-}  // namespace sonoshape::recon
+}  // namespace sonoshape::recon::field_test

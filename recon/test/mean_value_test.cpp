@@ -16,7 +16,7 @@
 
 #include "cell_field.hpp"
 
-namespace sonoshape::recon {
+namespace sonoshape::recon::mean_value_test {
 namespace {
 
 constexpr double kPi = std::numbers::pi;
@@ -766,4 +766,4 @@ TEST(Clip, RandomRingsPartitionedByConvexPolygonAddUp) {
 }
 
 }  // namespace
-}  // namespace sonoshape::recon
+}  // namespace sonoshape::recon::mean_value_test

@@ -13,7 +13,7 @@
 #include "octree_field.hpp"
 #include "sorted_keys.hpp"
 
-namespace sonoshape::recon {
+namespace sonoshape::recon::octree_test {
 namespace {
 
 TEST(Octree, DirectGridIndexAgreesWithTheHashInsideAndOutsideTheGrid) {
@@ -265,4 +265,4 @@ TEST(Octree, MaskedUnionsEqualTheMerges) {
 }
 
 }  // namespace
-}  // namespace sonoshape::recon
+}  // namespace sonoshape::recon::octree_test

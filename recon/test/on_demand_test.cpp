@@ -23,7 +23,7 @@
 #include "sonoshape/recon/reconstructor.hpp"
 #include "test_shapes.hpp"
 
-namespace sonoshape::recon {
+namespace sonoshape::recon::on_demand_test {
 namespace {
 
 // ---------------------------------------------------------------------------------------------
@@ -736,4 +736,4 @@ TEST(OnDemandEngine, TheOneShotReconstructionBuildsCellsOnDemand) {
 }
 
 }  // namespace
-}  // namespace sonoshape::recon
+}  // namespace sonoshape::recon::on_demand_test

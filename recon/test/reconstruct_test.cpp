@@ -9,7 +9,7 @@
 #include "sonoshape/core/errors.hpp"
 #include "test_shapes.hpp"
 
-namespace sonoshape::recon {
+namespace sonoshape::recon::reconstruct_test {
 namespace {
 
 using test::circle;
@@ -99,4 +99,4 @@ TEST(Reconstruct, UnknownPatchInsideTheSphereCompletesToInside) {
 }
 
 }  // namespace
-}  // namespace sonoshape::recon
+}  // namespace sonoshape::recon::reconstruct_test

@@ -12,7 +12,7 @@
 #include "sonoshape/recon/reconstruct.hpp"
 #include "test_shapes.hpp"
 
-namespace sonoshape::recon {
+namespace sonoshape::recon::reconstructor_test {
 namespace {
 
 constexpr double kRadius = 30.0;
@@ -336,4 +336,4 @@ TEST(Reconstructor, AGrowingBoxRebuildsWhenNoneIsGiven) {
 }
 
 }  // namespace
-}  // namespace sonoshape::recon
+}  // namespace sonoshape::recon::reconstructor_test

@@ -17,7 +17,7 @@
 #include "sonoshape/recon/reconstructor.hpp"
 #include "test_shapes.hpp"
 
-namespace sonoshape::recon {
+namespace sonoshape::recon::thin_plate_test {
 namespace {
 
 using test::circle;
@@ -364,4 +364,4 @@ TEST(ThinPlateOnline, RemovingASliceTakesItsDataAway) {
 }
 
 }  // namespace
-}  // namespace sonoshape::recon
+}  // namespace sonoshape::recon::thin_plate_test

@@ -9,7 +9,7 @@
 #include <random>
 #include <vector>
 
-namespace sonoshape::recon {
+namespace sonoshape::recon::triangle_tree_test {
 namespace {
 
 // Reference moments: the triangle split into n^2 similar pieces, each integrated with the
@@ -242,4 +242,4 @@ TEST(TriangleTree, LayoutDependsOnlyOnTheSetOfTriangles) {
 }
 
 }  // namespace
-}  // namespace sonoshape::recon
+}  // namespace sonoshape::recon::triangle_tree_test

@@ -13,7 +13,7 @@
 #include "mean_value.hpp"
 #include "sonoshape/recon/reconstruct.hpp"
 
-namespace sonoshape::recon {
+namespace sonoshape::recon::unknown_test {
 namespace {
 
 // ---------------------------------------------------------------------------------------------
@@ -402,9 +402,9 @@ TEST(Completion, UnknownPatchInOpenOutsideCompletesToOutside) {
 }
 
 }  // namespace
-}  // namespace sonoshape::recon
+}  // namespace sonoshape::recon::unknown_test
 
-namespace sonoshape::recon {
+namespace sonoshape::recon::unknown_test {
 namespace {
 
 // Found on a segmented sweep: a constraint intersection rounded onto a vertex left a sliver
@@ -526,4 +526,4 @@ TEST(Completion, InnerCornersAgreeAndMixedTrianglesAreFine) {
 }
 
 }  // namespace
-}  // namespace sonoshape::recon
+}  // namespace sonoshape::recon::unknown_test

@@ -6,7 +6,7 @@
 
 #include "sonoshape/segmentation/contours.hpp"
 
-namespace sonoshape::scan {
+namespace sonoshape::scan::label_maps_test {
 namespace {
 
 LabelImage filled(std::uint8_t value) { return LabelImage(8, 6, value); }
@@ -85,4 +85,4 @@ TEST(LabelMapStage, GivesEachFrameTheSliceOfItsLabelMapAndNoneWithoutOne) {
 }
 
 }  // namespace
-}  // namespace sonoshape::scan
+}  // namespace sonoshape::scan::label_maps_test

@@ -9,7 +9,7 @@
 
 #include "sonoshape/simulator/phantom.hpp"
 
-namespace sonoshape::scan {
+namespace sonoshape::scan::label_prior_test {
 namespace {
 
 // A 100 x 80 image of 0.5 mm pixels whose plane is z = z_mm, pixel (i, j) at (i/2, j/2) mm.
@@ -80,4 +80,4 @@ TEST(ReconstructionPrior, PredictsNothingFirstThenTheOrganBetweenItsSlices) {
 }
 
 }  // namespace
-}  // namespace sonoshape::scan
+}  // namespace sonoshape::scan::label_prior_test

@@ -15,7 +15,7 @@
 #include "sonoshape/scan/journal.hpp"
 #include "sonoshape/testing/temp_dir.hpp"
 
-namespace sonoshape::scan {
+namespace sonoshape::scan::scan_journal_test {
 namespace {
 
 namespace fs = std::filesystem;
@@ -173,9 +173,9 @@ TEST(ScanJournal, WriteFileAtomicallyReplacesWholeAndLeavesNoTemporaryFile) {
 }
 
 }  // namespace
-}  // namespace sonoshape::scan
+}  // namespace sonoshape::scan::scan_journal_test
 
-namespace sonoshape::scan {
+namespace sonoshape::scan::scan_journal_test {
 namespace {
 
 std::uint32_t u32_at(const std::string& bytes, std::size_t at) {
@@ -256,4 +256,4 @@ TEST(ScanJournal, RepeatedKeyframesKeyframesAfterTheEndAndNonObjectRecordsAreRef
 }
 
 }  // namespace
-}  // namespace sonoshape::scan
+}  // namespace sonoshape::scan::scan_journal_test

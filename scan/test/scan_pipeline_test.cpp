@@ -20,7 +20,7 @@
 #include "sonoshape/scan/sink.hpp"
 #include "sonoshape/testing/temp_dir.hpp"
 
-namespace sonoshape::scan {
+namespace sonoshape::scan::scan_pipeline_test {
 namespace {
 
 using namespace std::chrono_literals;
@@ -516,4 +516,4 @@ TEST(ScanReport, LatencyPercentilesByNearestRank) {
 }
 
 }  // namespace
-}  // namespace sonoshape::scan
+}  // namespace sonoshape::scan::scan_pipeline_test

@@ -16,7 +16,7 @@
 #include "sonoshape/core/slice_io.hpp"
 #include "sonoshape/testing/temp_dir.hpp"
 
-namespace sonoshape::scan {
+namespace sonoshape::scan::scan_sources_test {
 namespace {
 
 using apps::FileSink;
@@ -411,4 +411,4 @@ TEST(ScanSources, SimulatedProbeVanishingMidScanKeepsTheMeshesSoFar) {
 }
 
 }  // namespace
-}  // namespace sonoshape::scan
+}  // namespace sonoshape::scan::scan_sources_test

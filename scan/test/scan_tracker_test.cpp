@@ -19,7 +19,7 @@
 #include "sonoshape/testing/temp_dir.hpp"
 #include "sonoshape/tracking/trakstar_source.hpp"
 
-namespace sonoshape::scan {
+namespace sonoshape::scan::scan_tracker_test {
 namespace {
 
 constexpr double kMmPerS = 30.0;  // the probe slides along z
@@ -174,4 +174,4 @@ TEST(ScanWithTrakstar, UnplugAndReplugMidScanKeepTheMeshesAndPosesResume) {
 }
 
 }  // namespace
-}  // namespace sonoshape::scan
+}  // namespace sonoshape::scan::scan_tracker_test

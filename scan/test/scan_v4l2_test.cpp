@@ -27,7 +27,7 @@
 #include "sonoshape/tracking/time_sync.hpp"
 #include "sonoshape/tracking/trakstar_source.hpp"
 
-namespace sonoshape::scan {
+namespace sonoshape::scan::scan_v4l2_test {
 namespace {
 
 using apps::FileSink;
@@ -505,4 +505,4 @@ TEST(ScanV4l2, GrabberUnpluggedMidScanIsReportedAndTheScanGoesOnWithItsMeshes) {
 }
 
 }  // namespace
-}  // namespace sonoshape::scan
+}  // namespace sonoshape::scan::scan_v4l2_test

@@ -5,8 +5,12 @@
 #include <opencv2/imgproc.hpp>
 #include <string>
 
+#include "raster_ops.hpp"
+
 namespace sonoshape::segmentation {
 namespace {
+
+using detail::wrap;
 
 // Outline colours (BGR) per material; the truth's outline is white.
 cv::Vec3b label_colour(std::uint8_t label) {
@@ -26,10 +30,6 @@ cv::Vec3b label_colour(std::uint8_t label) {
   }
 }
 const cv::Vec3b kTruthColour(255, 255, 255);
-
-cv::Mat wrap(const ImageU8& image) {
-  return cv::Mat(image.height, image.width, CV_8U, const_cast<std::uint8_t*>(image.pixels.data()));
-}
 
 // Pixels of a material whose 4-neighbour holds another value: its outline, one pixel wide.
 bool on_outline(const cv::Mat& map, int i, int j) {

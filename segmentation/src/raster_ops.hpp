@@ -4,7 +4,14 @@
 // Internal to the segmentation module.
 #include <opencv2/core.hpp>
 
+#include "sonoshape/core/image.hpp"
+
 namespace sonoshape::segmentation::detail {
+
+/// The frame as a CV_8U matrix over its own pixels (no copy): for reading only.
+inline cv::Mat wrap(const ImageU8& image) {
+  return cv::Mat(image.height, image.width, CV_8U, const_cast<std::uint8_t*>(image.pixels.data()));
+}
 
 /// cv::dilate(mask, kernel) with OpenCV's default anchor and border (outside the image adds
 /// nothing), for a 0/255 CV_8U mask and a kernel whose rows are runs centred on the anchor

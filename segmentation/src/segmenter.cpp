@@ -20,6 +20,8 @@
 namespace sonoshape::segmentation {
 namespace {
 
+using detail::wrap;
+
 // Depth bins (mm) of the initial trend estimate, and the fewest pixels a bin needs to count.
 constexpr double kDepthBinMm = 2.0;
 constexpr int kMinBinPixels = 30;
@@ -50,10 +52,6 @@ int reflector_median_px(double px_mm, int median_px) {
 // 256 x 256 frames) spanned 3.1 mm and cut an organ's ears and corners off.
 int speckle_median_px(double px_mm, int median_px) {
   return median_px > 3 ? reflector_median_px(px_mm, median_px) : median_px;
-}
-
-cv::Mat wrap(const ImageU8& image) {
-  return cv::Mat(image.height, image.width, CV_8U, const_cast<std::uint8_t*>(image.pixels.data()));
 }
 
 ImageU8 to_image(const cv::Mat& mat) {

@@ -7,7 +7,7 @@
 
 #include <opencv2/core.hpp>
 
-namespace sonoshape::segmentation::detail {
+namespace sonoshape::segmentation::detail::blooming_test {
 namespace {
 
 constexpr std::uint8_t kDark = 0, kBright = 2;
@@ -66,4 +66,4 @@ TEST(Blooming, MovesTheBoundaryByAFractionOfAPixel) {
 }
 
 }  // namespace
-}  // namespace sonoshape::segmentation::detail
+}  // namespace sonoshape::segmentation::detail::blooming_test

@@ -6,7 +6,7 @@
 
 #include <opencv2/core.hpp>
 
-namespace sonoshape::segmentation::detail {
+namespace sonoshape::segmentation::detail::boundary_echo_test {
 namespace {
 
 constexpr double kPxMm = 0.63;  // the default scan's pixels: lines are read 2 px above and below
@@ -50,4 +50,4 @@ TEST(BoundaryEcho, LeavesABoundaryWithoutAnEchoAndWideBands) {
 }
 
 }  // namespace
-}  // namespace sonoshape::segmentation::detail
+}  // namespace sonoshape::segmentation::detail::boundary_echo_test

@@ -14,7 +14,7 @@
 
 #include "sonoshape/core/slice_io.hpp"
 
-namespace sonoshape::segmentation {
+namespace sonoshape::segmentation::contours_test {
 namespace {
 
 ImagePlane scaled_plane(double mm_per_px) {
@@ -339,4 +339,4 @@ TEST(Contours, InvalidFovIsAnError) {
 }
 
 }  // namespace
-}  // namespace sonoshape::segmentation
+}  // namespace sonoshape::segmentation::contours_test

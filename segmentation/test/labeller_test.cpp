@@ -18,7 +18,7 @@
 #include "sonoshape/segmentation/scoring.hpp"
 #include "sonoshape/segmentation/sweep.hpp"
 
-namespace sonoshape::segmentation {
+namespace sonoshape::segmentation::labeller_test {
 namespace {
 
 // A square of label 1 in a field of 0, seen through noisy costs: the Potts term must give back
@@ -348,4 +348,4 @@ TEST(SegmentationConfigMethod, GraphCutWeightsParseRoundTripAndAreChecked) {
 }
 
 }  // namespace
-}  // namespace sonoshape::segmentation
+}  // namespace sonoshape::segmentation::labeller_test

@@ -9,7 +9,7 @@
 #include <string>
 #include <vector>
 
-namespace sonoshape::segmentation::detail {
+namespace sonoshape::segmentation::detail::raster_ops_test {
 namespace {
 
 // Blobs of several sizes (a thresholded blur of noise), specks, a line and the border rows.
@@ -95,4 +95,4 @@ TEST(RasterOps, GaussianMatchesOpenCvAndItsPlainPathBitForBit) {
 }
 
 }  // namespace
-}  // namespace sonoshape::segmentation::detail
+}  // namespace sonoshape::segmentation::detail::raster_ops_test

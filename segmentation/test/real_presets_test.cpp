@@ -20,7 +20,7 @@
 #include "sonoshape/segmentation/sector_share.hpp"
 #include "sonoshape/segmentation/sweep.hpp"
 
-namespace sonoshape::segmentation {
+namespace sonoshape::segmentation::real_presets_test {
 namespace {
 
 const std::filesystem::path kData = SONOSHAPE_DATA_DIR;
@@ -333,4 +333,4 @@ TEST(Presets, ModelsAreLearntFromTheSamplesStartingFromThePresets) {
 }
 
 }  // namespace
-}  // namespace sonoshape::segmentation
+}  // namespace sonoshape::segmentation::real_presets_test

@@ -11,7 +11,7 @@
 #include "sonoshape/core/slice_io.hpp"
 #include "sonoshape/segmentation/sweep.hpp"
 
-namespace sonoshape::segmentation {
+namespace sonoshape::segmentation::real_recording_long_test {
 namespace {
 
 const std::filesystem::path kData = SONOSHAPE_DATA_DIR;
@@ -33,4 +33,4 @@ TEST(RealRecording, FCalEveryFrame) {
 }
 
 }  // namespace
-}  // namespace sonoshape::segmentation
+}  // namespace sonoshape::segmentation::real_recording_long_test

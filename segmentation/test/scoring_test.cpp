@@ -15,7 +15,7 @@
 #include "sonoshape/simulator/sweep.hpp"
 #include "sonoshape/simulator/trajectory.hpp"
 
-namespace sonoshape::segmentation {
+namespace sonoshape::segmentation::scoring_test {
 namespace {
 
 void fill(LabelImage& image, int i0, int i1, int j0, int j1, std::uint8_t value) {
@@ -130,4 +130,4 @@ TEST(SegmentSweepLabels, PerfectLabelsScoreOneAndTheSegmenterBelowOne) {
 }
 
 }  // namespace
-}  // namespace sonoshape::segmentation
+}  // namespace sonoshape::segmentation::scoring_test

@@ -15,7 +15,7 @@
 #include "sonoshape/simulator/phantom.hpp"
 #include "sonoshape/simulator/sweep.hpp"
 
-namespace sonoshape::segmentation {
+namespace sonoshape::segmentation::segmentation_test {
 namespace {
 
 struct Ball {
@@ -329,4 +329,4 @@ TEST(Config, OverflowingNumbersAndMistypedHeaderFieldsAreErrors) {
 }
 
 }  // namespace
-}  // namespace sonoshape::segmentation
+}  // namespace sonoshape::segmentation::segmentation_test

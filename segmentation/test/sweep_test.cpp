@@ -18,7 +18,7 @@
 #include "sonoshape/simulator/sweep.hpp"
 #include "sonoshape/simulator/trajectory.hpp"
 
-namespace sonoshape::segmentation {
+namespace sonoshape::segmentation::sweep_test {
 namespace {
 
 const std::filesystem::path kData = SONOSHAPE_DATA_DIR;
@@ -307,4 +307,4 @@ TEST(SegmentSweep, TrackerOnlyBufferIsRefused) {
 }
 
 }  // namespace
-}  // namespace sonoshape::segmentation
+}  // namespace sonoshape::segmentation::sweep_test

@@ -4,7 +4,7 @@
 
 #include <cmath>
 
-namespace sonoshape::simulator {
+namespace sonoshape::simulator::bmode_test {
 namespace {
 
 // Probe pose that puts the phantom point `centre` at probe coordinates `in_probe`.
@@ -179,4 +179,4 @@ TEST(BMode, StrongReflectorCastsAShadowMarkedUnknown) {
 }
 
 }  // namespace
-}  // namespace sonoshape::simulator
+}  // namespace sonoshape::simulator::bmode_test

@@ -10,7 +10,7 @@
 #include "sonoshape/simulator/plane_generator.hpp"
 #include "test_shapes.hpp"
 
-namespace sonoshape::simulator {
+namespace sonoshape::simulator::evaluation_test {
 namespace {
 
 MeshSet one_label(const TriangleMesh& mesh, int label = 1) {
@@ -217,4 +217,4 @@ TEST(Evaluation, RejectsEmptyBox) {
 }
 
 }  // namespace
-}  // namespace sonoshape::simulator
+}  // namespace sonoshape::simulator::evaluation_test

@@ -10,7 +10,7 @@
 #include "sonoshape/simulator/plane_generator.hpp"
 #include "test_shapes.hpp"
 
-namespace sonoshape::simulator {
+namespace sonoshape::simulator::mesh_slicer_test {
 namespace {
 
 SlicePlane plane_through(const Vec3& origin, const Vec3& normal) {
@@ -225,4 +225,4 @@ TEST(PlaneGenerator, FamiliesAreDeterministicOrthonormalAndCutTheBox) {
 }
 
 }  // namespace
-}  // namespace sonoshape::simulator
+}  // namespace sonoshape::simulator::mesh_slicer_test

@@ -6,7 +6,7 @@
 
 #include "sonoshape/simulator/sweep.hpp"
 
-namespace sonoshape::simulator {
+namespace sonoshape::simulator::sim_source_test {
 namespace {
 
 struct SmallProbe {
@@ -89,4 +89,4 @@ TEST(SimFrameSource, VanishingProbeFailsAfterItsFrames) {
 }
 
 }  // namespace
-}  // namespace sonoshape::simulator
+}  // namespace sonoshape::simulator::sim_source_test

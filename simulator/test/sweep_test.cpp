@@ -6,7 +6,7 @@
 #include <filesystem>
 #include <string>
 
-namespace sonoshape::simulator {
+namespace sonoshape::simulator::sweep_test {
 namespace {
 
 TEST(Sweep, SimulatedSweepRoundTripsThroughSequenceFiles) {
@@ -72,4 +72,4 @@ TEST(Sweep, SimulatedSweepRoundTripsThroughSequenceFiles) {
 }
 
 }  // namespace
-}  // namespace sonoshape::simulator
+}  // namespace sonoshape::simulator::sweep_test

@@ -5,7 +5,7 @@
 #include <cmath>
 #include <numbers>
 
-namespace sonoshape::simulator {
+namespace sonoshape::simulator::trajectory_test {
 namespace {
 
 constexpr double kRadToDeg = 180.0 / std::numbers::pi;
@@ -160,4 +160,4 @@ TEST(Tracker, FramesGetInterpolatedPosesDelayedByTheLatency) {
 }
 
 }  // namespace
-}  // namespace sonoshape::simulator
+}  // namespace sonoshape::simulator::trajectory_test

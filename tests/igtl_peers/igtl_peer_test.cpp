@@ -23,6 +23,7 @@
 #include "sonoshape/testing/sanitizer_slowdown.hpp"
 #include "sonoshape/testing/temp_dir.hpp"
 
+namespace igtl_peer_test {
 namespace {
 
 namespace fs = std::filesystem;
@@ -196,3 +197,4 @@ TEST(IgtlPeers, DebiansPolyDataClientGetsTheSurfacesItAsksFor) {
 }
 
 }  // namespace
+}  // namespace igtl_peer_test

@@ -27,7 +27,7 @@
 #include "sonoshape/testing/sanitizer_slowdown.hpp"
 #include "sonoshape/tracking/igtl_pose_source.hpp"
 
-namespace sonoshape {
+namespace sonoshape::igtl_source_test {
 namespace {
 
 // Whether something listens on `port` (from /proc/net/tcp, without connecting: the examples
@@ -369,4 +369,4 @@ TEST(IgtlSources, AScanWithoutItsServerSaysWhereItLookedAndWhatIsMissing) {
 }
 
 }  // namespace
-}  // namespace sonoshape
+}  // namespace sonoshape::igtl_source_test

@@ -5,7 +5,7 @@
 
 #include <array>
 
-namespace sonoshape::tracking::bird {
+namespace sonoshape::tracking::bird::bird_codec_test {
 namespace {
 
 // One position step (mm) at 36 in full scale: 4 / 32768 of 36 in (the two lowest bits are not
@@ -162,4 +162,4 @@ TEST(BirdCommands, AddressedChangeAndExamineValue) {
 }
 
 }  // namespace
-}  // namespace sonoshape::tracking::bird
+}  // namespace sonoshape::tracking::bird::bird_codec_test

@@ -7,7 +7,7 @@
 
 #include "sonoshape/core/errors.hpp"
 
-namespace sonoshape::tracking {
+namespace sonoshape::tracking::keyframes_test {
 namespace {
 
 constexpr double kDeg = std::numbers::pi / 180.0;
@@ -121,4 +121,4 @@ TEST(Keyframes, RejectsBadInput) {
 }
 
 }  // namespace
-}  // namespace sonoshape::tracking
+}  // namespace sonoshape::tracking::keyframes_test

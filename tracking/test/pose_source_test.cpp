@@ -8,7 +8,7 @@
 
 #include "sonoshape/core/geometry.hpp"
 
-namespace sonoshape::tracking {
+namespace sonoshape::tracking::pose_source_test {
 namespace {
 
 const std::filesystem::path kPlusSweep =
@@ -91,4 +91,4 @@ TEST(NearestRigid, ProjectsRotationsWithRoundingErrors) {
 }
 
 }  // namespace
-}  // namespace sonoshape::tracking
+}  // namespace sonoshape::tracking::pose_source_test

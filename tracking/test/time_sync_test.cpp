@@ -9,7 +9,7 @@
 
 #include "sonoshape/core/geometry.hpp"
 
-namespace sonoshape::tracking {
+namespace sonoshape::tracking::time_sync_test {
 namespace {
 
 constexpr double kDeg = std::numbers::pi / 180.0;
@@ -150,4 +150,4 @@ TEST(TimeSync, KeepsTimeOrderAndDiscardsWhatNoFrameNeeds) {
 }
 
 }  // namespace
-}  // namespace sonoshape::tracking
+}  // namespace sonoshape::tracking::time_sync_test

@@ -10,7 +10,7 @@
 
 #include "sonoshape/tracking/trakstar_source.hpp"
 
-namespace sonoshape::tracking {
+namespace sonoshape::tracking::trakstar_hardware_test {
 namespace {
 
 TEST(TrakstarHardware, ARealUnitDeliversPosesAtItsRate) {
@@ -48,4 +48,4 @@ TEST(TrakstarHardware, ARealUnitDeliversPosesAtItsRate) {
 }
 
 }  // namespace
-}  // namespace sonoshape::tracking
+}  // namespace sonoshape::tracking::trakstar_hardware_test

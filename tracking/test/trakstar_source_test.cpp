@@ -15,7 +15,7 @@
 #include "bird_emulator.hpp"
 #include "pose_samples.hpp"
 
-namespace sonoshape::tracking {
+namespace sonoshape::tracking::trakstar_source_test {
 namespace {
 
 using test::FakeDevice;
@@ -216,4 +216,4 @@ TEST(TrakstarOptions, ParsesEveryKeyAndRefusesBadValues) {
 }
 
 }  // namespace
-}  // namespace sonoshape::tracking
+}  // namespace sonoshape::tracking::trakstar_source_test

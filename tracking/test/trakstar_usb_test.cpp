@@ -24,7 +24,7 @@
 #include "sonoshape/testing/trakstar_usb_record.hpp"
 #include "sonoshape/tracking/trakstar_source.hpp"
 
-namespace sonoshape::tracking {
+namespace sonoshape::tracking::trakstar_usb_test {
 namespace {
 
 using test::BirdEmulator;
@@ -363,4 +363,4 @@ TEST_F(TrakstarUsb, UnplugAndReplugMidStreamAreReportedAndRecovered) {
 }
 
 }  // namespace
-}  // namespace sonoshape::tracking
+}  // namespace sonoshape::tracking::trakstar_usb_test
