@@ -22,14 +22,15 @@ function(sonoshape_target_defaults target)
   endif()
 endfunction()
 
-# sonoshape_test_optimization(<target>): test programs are compiled at -O1 in optimised builds, the
-# libraries they test keep the build type's -O3. A test's own code is checks and fixtures, and -O1
-# compiles it in about two thirds of the CPU time of -O3 (docs/benchmarks.md, "Build time");
+# sonoshape_light_optimization(<target>): test programs and the `sonoshape` command are compiled at
+# -O1 in optimised builds; the libraries keep the build type's -O3. A test's own code is checks
+# and fixtures, the command's is option parsing and wiring, and -O1 compiles them in about two
+# thirds of the CPU time of -O3 (docs/benchmarks.md, "Build time");
 # without -ffast-math every -O level computes the same results. The test header and every test
 # source must agree on it (GCC takes a precompiled header only with the same -O). At -O1 GCC 12
 # warns that a std::optional member "may be used uninitialized" in destructors it half-inlines
 # (GCC bug 80635, a false positive); the libraries, at -O3, keep the warning.
-function(sonoshape_test_optimization target)
+function(sonoshape_light_optimization target)
   target_compile_options(${target} PRIVATE
     "$<$<CONFIG:Release,RelWithDebInfo,MinSizeRel>:-O1;-Wno-maybe-uninitialized>")
 endfunction()
@@ -43,7 +44,7 @@ function(sonoshape_use_test_pch target)
     add_library(sonoshape_test_pch OBJECT ${PROJECT_SOURCE_DIR}/tests/support/test_pch.cpp)
     target_link_libraries(sonoshape_test_pch PRIVATE GTest::gtest Eigen3::Eigen)
     sonoshape_target_defaults(sonoshape_test_pch)
-    sonoshape_test_optimization(sonoshape_test_pch)
+    sonoshape_light_optimization(sonoshape_test_pch)
     target_precompile_headers(sonoshape_test_pch PRIVATE
       <gtest/gtest.h> <Eigen/Core> <Eigen/Geometry> <algorithm> <chrono> <cmath> <cstdint>
       <filesystem> <fstream> <functional> <map> <memory> <optional> <set> <sstream> <string>
@@ -56,7 +57,7 @@ endfunction()
 function(sonoshape_add_test name)
   cmake_parse_arguments(ARG "" "" "SOURCES;LIBS;LABELS" ${ARGN})
   add_executable(${name} ${ARG_SOURCES})
-  sonoshape_test_optimization(${name})
+  sonoshape_light_optimization(${name})
   sonoshape_use_test_pch(${name})
   target_link_libraries(${name} PRIVATE ${ARG_LIBS} GTest::gtest GTest::gtest_main)
   target_compile_definitions(${name} PRIVATE SONOSHAPE_DATA_DIR="${SONOSHAPE_DATA_DIR}")
@@ -78,7 +79,7 @@ function(sonoshape_add_umockdev_test name)
     return()
   endif()
   add_executable(${name} ${ARG_SOURCES})
-  sonoshape_test_optimization(${name})
+  sonoshape_light_optimization(${name})
   sonoshape_use_test_pch(${name})
   target_link_libraries(${name} PRIVATE ${ARG_LIBS} PkgConfig::UMOCKDEV GTest::gtest
                                         GTest::gtest_main)
