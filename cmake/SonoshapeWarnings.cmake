@@ -2,7 +2,7 @@
 # With SONOSHAPE_UNITY_BUILD, the target's sources are compiled in batches of eight, each batch as
 # one translation unit (CMake's unity build): the headers they share (CGAL, CLI11, Boost.Beast,
 # OpenCV, GoogleTest) are parsed and their templates instantiated once per batch instead of once
-# per source, which halves the CPU time of a first build (docs/benchmarks.md, "Build time").
+# per source, which saves two fifths of a first build's time (docs/benchmarks.md, "Build time").
 # Each test source keeps its code in a namespace named after the file, so batches never meet
 # two definitions of one name.
 function(sonoshape_target_defaults target)
