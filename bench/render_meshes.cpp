@@ -7,12 +7,12 @@
 #include <cstdlib>
 #include <iostream>
 #include <limits>
-#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <string>
 #include <vector>
 
 #include "sonoshape/core/mesh_io.hpp"
+#include "sonoshape/core/png_file.hpp"
 #include "sonoshape/core/slice_io.hpp"
 
 namespace {
@@ -47,6 +47,10 @@ int main(int argc, char** argv) {
       slices_path = argv[++i];
     else
       meshes.push_back(a);
+  }
+  if (output.size() < 4 || output.compare(output.size() - 4, 4, ".png") != 0) {
+    std::cerr << "error: -o " << output << ": the picture is written as PNG; name it *.png\n";
+    return 2;
   }
   if (size < 16 || size > 8192) {
     std::cerr << "error: --size takes 16..8192 pixels\n";
@@ -145,8 +149,11 @@ int main(int argc, char** argv) {
         for (const auto& h : r.holes) draw(h);
       }
   }
-  if (!cv::imwrite(output, image)) {
-    std::cerr << "error: cannot write " << output << '\n';
+  if (const sonoshape::Status written =
+          sonoshape::write_png(output, sonoshape::PngPixels::kBgr, image.cols, image.rows,
+                               image.data, static_cast<std::ptrdiff_t>(image.step));
+      !written) {
+    std::cerr << "error: " << written.message() << '\n';
     return 1;
   }
   std::cerr << "wrote " << output << '\n';

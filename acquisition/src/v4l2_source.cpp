@@ -4,6 +4,7 @@
 #include <linux/videodev2.h>
 #include <sys/mman.h>
 #include <time.h>
+#include <turbojpeg.h>
 
 #include <algorithm>
 #include <cctype>
@@ -13,8 +14,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
-#include <opencv2/core.hpp>
-#include <opencv2/imgcodecs.hpp>
+#include <memory>
 #include <string_view>
 #include <thread>
 #include <utility>
@@ -156,21 +156,29 @@ Status check_crop(const PixelRect& crop, int width_px, int height_px) {
   return Status::ok();
 }
 
+// libjpeg-turbo's TurboJPEG API. Webcam MJPG frames often leave out the Huffman tables; the
+// decoder then takes the standard ones, as a JPEG viewer does.
 Result<GreyImage> decode_mjpeg(const std::uint8_t* data, std::size_t size) {
   if (size == 0) return Status::error("MJPG frame is empty");
-  const cv::Mat encoded(1, static_cast<int>(size), CV_8U, const_cast<std::uint8_t*>(data));
-  cv::Mat grey;
-  try {
-    grey = cv::imdecode(encoded, cv::IMREAD_GRAYSCALE);
-  } catch (const cv::Exception& e) {
-    return Status::error("MJPG frame of " + std::to_string(size) + " bytes: " + e.what());
-  }
-  if (grey.empty() || grey.type() != CV_8UC1)
-    return Status::error("MJPG frame of " + std::to_string(size) + " bytes does not decode");
-  GreyImage image(grey.cols, grey.rows);
-  for (int j = 0; j < grey.rows; ++j)
-    std::copy_n(grey.ptr<std::uint8_t>(j), grey.cols,
-                image.pixels.begin() + std::ptrdiff_t{j} * grey.cols);
+  const std::unique_ptr<void, int (*)(tjhandle)> decoder(tjInitDecompress(), tjDestroy);
+  if (!decoder) return Status::error(std::string("MJPG decoder: ") + tjGetErrorStr2(nullptr));
+  const auto failed = [&](const char* what) {
+    return Status::error("MJPG frame of " + std::to_string(size) + " bytes " + what + ": " +
+                         tjGetErrorStr2(decoder.get()));
+  };
+  int width = 0, height = 0, subsampling = 0, colourspace = 0;
+  if (tjDecompressHeader3(decoder.get(), data, static_cast<unsigned long>(size), &width, &height,
+                          &subsampling, &colourspace) != 0)
+    return failed("has no readable JPEG header");
+  if (width <= 0 || height <= 0 || width > kMaxSidePx || height > kMaxSidePx)
+    return Status::error("MJPG frame of " + std::to_string(size) + " bytes says it is " +
+                         std::to_string(width) + "x" + std::to_string(height) +
+                         " pixels, not a capture device's size");
+  GreyImage image(width, height);
+  if (tjDecompress2(decoder.get(), data, static_cast<unsigned long>(size), image.pixels.data(),
+                    width, width, height, TJPF_GRAY, TJFLAG_ACCURATEDCT) != 0 &&
+      tjGetErrorCode(decoder.get()) == TJERR_FATAL)
+    return failed("does not decode");
   return image;
 }
 

@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 #include <linux/videodev2.h>
 #include <sys/mman.h>
+#include <turbojpeg.h>
 
 #include <cerrno>
 #include <chrono>
@@ -13,8 +14,6 @@
 #include <deque>
 #include <map>
 #include <mutex>
-#include <opencv2/core.hpp>
-#include <opencv2/imgcodecs.hpp>
 #include <thread>
 #include <variant>
 
@@ -26,6 +25,21 @@ namespace {
 using FakeDriver = testing::FakeV4l2Driver;
 
 constexpr int kWidth = 64, kHeight = 48, kStride = 2 * kWidth + 8;
+
+// A grey JPEG at quality 100, as a webcam's MJPG frame would carry it (libjpeg-turbo).
+std::vector<std::uint8_t> encode_jpeg(const std::vector<std::uint8_t>& grey, int width_px,
+                                      int height_px) {
+  tjhandle encoder = tjInitCompress();
+  unsigned char* bytes = nullptr;
+  unsigned long size = 0;
+  std::vector<std::uint8_t> jpeg;
+  if (tjCompress2(encoder, grey.data(), width_px, width_px, height_px, TJPF_GRAY, &bytes, &size,
+                  TJSAMP_GRAY, 100, TJFLAG_ACCURATEDCT) == 0)
+    jpeg.assign(bytes, bytes + size);
+  tjFree(bytes);
+  tjDestroy(encoder);
+  return jpeg;
+}
 
 // A YUYV frame of the fake's granted size whose Y at (i, j) is (i + 2 j + shade) mod 256 and
 // whose chroma is 128 (so a wrong plane shows).
@@ -147,12 +161,11 @@ TEST(V4l2ToGrey, CropKeepsTheRectangleOfTheBModeImage) {
 }
 
 TEST(V4l2ToGrey, MjpegDecodesToGreyAndCrops) {
-  cv::Mat grey(kHeight, kWidth, CV_8UC1);
+  std::vector<std::uint8_t> grey(std::size_t{kWidth} * kHeight);
   for (int j = 0; j < kHeight; ++j)
-    for (int i = 0; i < kWidth; ++i)
-      grey.at<std::uint8_t>(j, i) = static_cast<std::uint8_t>(3 * i + j);
-  std::vector<std::uint8_t> jpeg;
-  ASSERT_TRUE(cv::imencode(".jpg", grey, jpeg, {cv::IMWRITE_JPEG_QUALITY, 100}));
+    for (int i = 0; i < kWidth; ++i) grey[std::size_t(j) * kWidth + i] = std::uint8_t(3 * i + j);
+  const std::vector<std::uint8_t> jpeg = encode_jpeg(grey, kWidth, kHeight);
+  ASSERT_FALSE(jpeg.empty());
   const auto image = v4l2_to_grey(V4L2_PIX_FMT_MJPEG, jpeg.data(), jpeg.size(), kWidth, kHeight, 0,
                                   PixelRect{8, 4, 16, 12});
   ASSERT_TRUE(image) << image.message();
@@ -163,6 +176,36 @@ TEST(V4l2ToGrey, MjpegDecodesToGreyAndCrops) {
     for (int i = 0; i < 16; ++i)
       worst = std::max(worst, std::abs(int(image->at(i, j)) - (3 * (i + 8) + (j + 4))));
   EXPECT_LE(worst, 3);  // JPEG at quality 100 is near-lossless on a smooth ramp
+}
+
+// Webcams send MJPG frames without their Huffman tables (the DHT segment): the decoder takes the
+// standard tables, which the encoder used, so the frame decodes to the same pixels.
+TEST(V4l2ToGrey, MjpegWithoutHuffmanTablesDecodesAsWithThem) {
+  std::vector<std::uint8_t> grey(std::size_t{kWidth} * kHeight);
+  for (int j = 0; j < kHeight; ++j)
+    for (int i = 0; i < kWidth; ++i) grey[std::size_t(j) * kWidth + i] = std::uint8_t(i * j % 251);
+  const std::vector<std::uint8_t> jpeg = encode_jpeg(grey, kWidth, kHeight);
+  ASSERT_FALSE(jpeg.empty());
+  // Drop every DHT marker segment (FF C4, then a big-endian length that counts itself).
+  std::vector<std::uint8_t> stripped(jpeg.begin(), jpeg.begin() + 2);
+  std::size_t at = 2, dropped = 0;
+  while (at + 4 <= jpeg.size() && jpeg[at] == 0xFF && jpeg[at + 1] != 0xDA) {
+    const std::size_t length = 2 + (std::size_t{jpeg[at + 2]} << 8 | jpeg[at + 3]);
+    if (jpeg[at + 1] == 0xC4)
+      ++dropped;
+    else
+      stripped.insert(stripped.end(), jpeg.begin() + at, jpeg.begin() + at + length);
+    at += length;
+  }
+  stripped.insert(stripped.end(), jpeg.begin() + at, jpeg.end());
+  ASSERT_GT(dropped, 0u);
+  const auto with =
+      v4l2_to_grey(V4L2_PIX_FMT_MJPEG, jpeg.data(), jpeg.size(), kWidth, kHeight, 0, {});
+  const auto without =
+      v4l2_to_grey(V4L2_PIX_FMT_MJPEG, stripped.data(), stripped.size(), kWidth, kHeight, 0, {});
+  ASSERT_TRUE(with) << with.message();
+  ASSERT_TRUE(without) << without.message();
+  EXPECT_EQ(without->pixels, with->pixels);
 }
 
 TEST(V4l2ToGrey, RefusesOtherFormatsShortBuffersBadJpegAndCropsOutside) {
@@ -176,6 +219,7 @@ TEST(V4l2ToGrey, RefusesOtherFormatsShortBuffersBadJpegAndCropsOutside) {
   EXPECT_NE(short_buffer.message().find("short"), std::string::npos) << short_buffer.message();
   const auto jpeg = v4l2_to_grey(V4L2_PIX_FMT_MJPEG, bytes.data(), bytes.size(), 10, 10, 0, {});
   ASSERT_FALSE(jpeg);
+  EXPECT_NE(jpeg.message().find("MJPG frame of 100 bytes"), std::string::npos) << jpeg.message();
   const auto outside =
       v4l2_to_grey(V4L2_PIX_FMT_GREY, bytes.data(), bytes.size(), 10, 10, 0, PixelRect{5, 5, 6, 2});
   ASSERT_FALSE(outside);

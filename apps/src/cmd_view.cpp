@@ -83,7 +83,8 @@ CommandRunner add_view_command(CLI::App& app) {
                  "port 0 picks a free one)")
       ->capture_default_str();
   app.add_option("--web-root", options->web_root,
-                 "The page's folder (viewer/ of the sources, with three.js installed by npm ci)")
+                 "The page's folder (viewer/ of the sources, with three.js installed by "
+                 "scripts/install-deps)")
       ->capture_default_str();
   return [options] { return run_view(*options); };
 }

@@ -436,10 +436,11 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
       body.open(path->c_str(), beast::file_mode::scan, ec);
     if (!path || !body.is_open() || ec) {
       const bool three = target.starts_with("/three/");
-      return respond(request, http::status::not_found,
-                     three ? "three.js is not installed in viewer/node_modules: run "
-                             "scripts/install-deps (it runs npm ci in viewer/)\n"
-                           : "not found\n");
+      return respond(
+          request, http::status::not_found,
+          three ? "three.js is not installed in viewer/node_modules: run "
+                  "scripts/install-deps (it fetches the version viewer/package-lock.json pins)\n"
+                : "not found\n");
     }
     // The file is read as the client takes it, a few kilobytes at a time: a client that does not
     // read holds no copy of it (issue 40, C2).

@@ -1,11 +1,11 @@
 #include "sonoshape/segmentation/overlay.hpp"
 
 #include <opencv2/core.hpp>
-#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <string>
 
 #include "raster_ops.hpp"
+#include "sonoshape/core/png_file.hpp"
 
 namespace sonoshape::segmentation {
 namespace {
@@ -70,13 +70,10 @@ Status write_overlay(const std::filesystem::path& path, const GreyImage& frame,
     cv::putText(picture, "white: truth   colour: ours   purple: unknown", cv::Point(6, 18),
                 cv::FONT_HERSHEY_SIMPLEX, scale, cv::Scalar(255, 255, 255), 1, cv::LINE_AA);
   }
-  try {
-    if (!cv::imwrite(path.string(), picture))
-      return Status::error("overlay: cannot write " + path.string() +
-                           " (check that the directory exists and is writable)");
-  } catch (const cv::Exception& e) {
-    return Status::error("overlay: cannot write " + path.string() + ": " + e.what());
-  }
+  const Status written =
+      write_png(path, PngPixels::kBgr, picture.cols, picture.rows, picture.ptr<std::uint8_t>(0),
+                static_cast<std::ptrdiff_t>(picture.step));
+  if (!written) return Status::error("overlay: " + written.message());
   return Status::ok();
 }
 

@@ -7,10 +7,10 @@
 #include <filesystem>
 #include <iostream>
 #include <opencv2/core.hpp>
-#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "sonoshape/acquisition/sequence_file.hpp"
+#include "sonoshape/core/png_file.hpp"
 #include "sonoshape/segmentation/contours.hpp"
 #include "sonoshape/segmentation/segmenter.hpp"
 #include "sonoshape/segmentation/sweep.hpp"
@@ -148,9 +148,11 @@ int main(int argc, char** argv) {
       return 1;
     }
     const auto path = out_dir / shot.file;
-    if (!cv::imwrite(path.string(),
-                     panels(frame, segmentation, setup->geometry.sector, *slice, probe))) {
-      std::cerr << "error: cannot write " << path << '\n';
+    const cv::Mat picture = panels(frame, segmentation, setup->geometry.sector, *slice, probe);
+    if (const Status written = write_png(path, PngPixels::kBgr, picture.cols, picture.rows,
+                                         picture.data, static_cast<std::ptrdiff_t>(picture.step));
+        !written) {
+      std::cerr << "error: " << written.message() << '\n';
       return 1;
     }
     std::size_t vertices = 0;
@@ -184,8 +186,10 @@ int main(int argc, char** argv) {
     for (int i = 0; i < w; ++i) out.at<cv::Vec3b>(j, i) = cv::Vec3b::all(image.at(i, j));
   draw_labels(segmentation.labels, setup->geometry.sector, out(cv::Rect(w + kGapPx, 0, w, h)));
   const auto path = out_dir / "seg_plus.png";
-  if (!cv::imwrite(path.string(), out)) {
-    std::cerr << "error: cannot write " << path << '\n';
+  if (const Status written = write_png(path, PngPixels::kBgr, out.cols, out.rows, out.data,
+                                       static_cast<std::ptrdiff_t>(out.step));
+      !written) {
+    std::cerr << "error: " << written.message() << '\n';
     return 1;
   }
   std::cout << "wrote " << path.string() << '\n';

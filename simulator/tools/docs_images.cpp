@@ -4,9 +4,9 @@
 #include <filesystem>
 #include <iostream>
 #include <opencv2/core.hpp>
-#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "sonoshape/core/png_file.hpp"
 #include "sonoshape/simulator/bmode.hpp"
 #include "sonoshape/simulator/phantom.hpp"
 
@@ -81,8 +81,11 @@ int main(int argc, char** argv) {
     const double z = box.min.z() + shot.z_fraction * box.size().z();
     const auto frame = simulator.render(probe_above(box, shot.standoff_mm, z, shot.x_mm), 7);
     const auto path = out_dir / shot.file;
-    if (!cv::imwrite(path.string(), side_by_side(frame))) {
-      std::cerr << "error: cannot write " << path << '\n';
+    const cv::Mat picture = side_by_side(frame);
+    if (const Status written = write_png(path, PngPixels::kBgr, picture.cols, picture.rows,
+                                         picture.data, static_cast<std::ptrdiff_t>(picture.step));
+        !written) {
+      std::cerr << "error: " << written.message() << '\n';
       return 1;
     }
     std::cout << "wrote " << path.string() << " (shadowed " << 100.0 * frame.shadow_fraction

@@ -146,7 +146,7 @@ async function main() {
   const chromium = findChromium();
   if (!chromium) skip('chromium is not installed (scripts/install-deps installs it)');
   if (!fs.existsSync(path.join(here, '../../viewer/node_modules/three/build/three.module.js')))
-    skip('three.js is not in viewer/node_modules (scripts/install-deps runs npm ci)');
+    skip('three.js is not in viewer/node_modules (scripts/install-deps puts it there)');
   fs.rmSync(workDir, { recursive: true, force: true });
   fs.mkdirSync(workDir, { recursive: true });
   const started = Date.now();
