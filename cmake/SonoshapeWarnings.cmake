@@ -22,14 +22,17 @@ function(sonoshape_target_defaults target)
   endif()
 endfunction()
 
-# sonoshape_light_optimization(<target>): test programs and the `sonoshape` command are compiled at
-# -O1 in optimised builds; the libraries keep the build type's -O3. A test's own code is checks
-# and fixtures, the command's is option parsing and wiring, and -O1 compiles them in about two
-# thirds of the CPU time of -O3 (docs/benchmarks.md, "Build time");
+# sonoshape_light_optimization(<target>): test programs, fuzz replays, the `sonoshape` command and
+# the libraries whose work is I/O and wiring (acquisition, tracking, publish, scan, apps) are
+# compiled at -O1 in optimised builds; the libraries that compute (core, recon, kernels,
+# segmentation, simulator) keep the build type's -O3. A test's own code is checks and fixtures,
+# the command's option parsing, the I/O libraries' parsing of files and messages and the threads
+# that move frames between stages, and -O1 compiles them in about two thirds of the CPU time of
+# -O3 (docs/benchmarks.md, "Build time");
 # without -ffast-math every -O level computes the same results. The test header and every test
 # source must agree on it (GCC takes a precompiled header only with the same -O). At -O1 GCC 12
 # warns that a std::optional member "may be used uninitialized" in destructors it half-inlines
-# (GCC bug 80635, a false positive); the libraries, at -O3, keep the warning.
+# (GCC bug 80635, a false positive); the libraries at -O3 keep the warning.
 function(sonoshape_light_optimization target)
   target_compile_options(${target} PRIVATE
     "$<$<CONFIG:Release,RelWithDebInfo,MinSizeRel>:-O1;-Wno-maybe-uninitialized>")
