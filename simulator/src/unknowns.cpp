@@ -1,73 +1,25 @@
 #include "sonoshape/simulator/unknowns.hpp"
 
-#include <CGAL/Boolean_set_operations_2.h>
-#include <CGAL/Exact_predicates_exact_constructions_kernel.h>
-#include <CGAL/Polygon_set_2.h>
-
 #include <algorithm>
 #include <cmath>
 #include <numbers>
 #include <random>
 #include <stdexcept>
 
+#include "sonoshape/core/region_clipping.hpp"
+
 namespace sonoshape::simulator {
 namespace {
 
-using Kernel = CGAL::Exact_predicates_exact_constructions_kernel;
-using Polygon = CGAL::Polygon_2<Kernel>;
-using PolygonWithHoles = CGAL::Polygon_with_holes_2<Kernel>;
-using PolygonSet = CGAL::Polygon_set_2<Kernel>;
-
-Polygon to_polygon(const Ring2& ring, bool counter_clockwise) {
-  Polygon p;
-  for (const Vec2& q : ring) p.push_back(Kernel::Point_2(q.x(), q.y()));
-  if (p.is_counterclockwise_oriented() != counter_clockwise) p.reverse_orientation();
-  return p;
-}
-
-Ring2 to_ring(const Polygon& polygon) {
-  Ring2 ring;
-  for (auto it = polygon.vertices_begin(); it != polygon.vertices_end(); ++it)
-    ring.emplace_back(CGAL::to_double(it->x()), CGAL::to_double(it->y()));
-  return ring;
-}
-
-PolygonSet to_set(const Region& region) {
-  PolygonWithHoles pwh(to_polygon(region.outer, true));
-  for (const Ring2& h : region.holes) pwh.add_hole(to_polygon(h, false));
-  PolygonSet set;
-  set.insert(pwh);
-  return set;
-}
-
-std::vector<Region> to_regions(const PolygonSet& set, int label) {
-  std::vector<PolygonWithHoles> parts;
-  set.polygons_with_holes(std::back_inserter(parts));
-  std::vector<Region> regions;
-  for (const PolygonWithHoles& part : parts) {
-    Region r;
-    r.label = label;
-    r.outer = to_ring(part.outer_boundary());
-    for (auto h = part.holes_begin(); h != part.holes_end(); ++h) r.holes.push_back(to_ring(*h));
-    regions.push_back(std::move(r));
-  }
-  return regions;
-}
-
 // Clips (or cuts away) `shape` from every material region of the slice.
-void apply_to_materials(LabeledSlice& slice, const Polygon& shape, bool keep_inside) {
+void apply_to_materials(LabeledSlice& slice, const Ring2& shape, bool keep_inside) {
   std::vector<Region> out;
   for (const Region& region : slice.regions) {
     if (region.label == kUnknownLabel) {
       out.push_back(region);
       continue;
     }
-    PolygonSet set = to_set(region);
-    if (keep_inside)
-      set.intersection(shape);
-    else
-      set.difference(shape);
-    for (Region& r : to_regions(set, region.label)) out.push_back(std::move(r));
+    for (Region& r : clip_region(region, shape, keep_inside)) out.push_back(std::move(r));
   }
   slice.regions = std::move(out);
 }
@@ -181,7 +133,7 @@ bool add_blob(LabeledSlice& slice, const UnknownOptions& options, double diagona
     const double r = radius * (0.7 + 0.6 * unit(rng));
     blob.push_back(center + r * Vec2(std::cos(a), std::sin(a)));
   }
-  apply_to_materials(slice, to_polygon(blob, true), false);
+  apply_to_materials(slice, blob, false);
   insert_touching_vertices(blob, slice.regions, 1e-9 * diagonal);
   slice.regions.push_back({kUnknownLabel, blob, {}});
   return true;
@@ -208,7 +160,7 @@ void add_unknowns(SliceSet& set, const UnknownOptions& options) {
     if (options.fov != FovShape::kNone) {
       const double angle = 2.0 * std::numbers::pi * unit(rng);
       const Ring2 fov = make_fov(options, target, contour, angle, diagonal);
-      apply_to_materials(slice, to_polygon(fov, true), true);
+      apply_to_materials(slice, fov, true);
       slice.fov = fov;
     }
     if (unit(rng) >= options.fraction) continue;
