@@ -56,9 +56,12 @@ function(sonoshape_use_test_pch target)
   target_precompile_headers(${target} REUSE_FROM sonoshape_test_pch)
 endfunction()
 
-# sonoshape_add_test(<name> SOURCES ... LIBS ...): one GoogleTest executable registered with ctest.
+# sonoshape_add_test(<name> SOURCES ... LIBS ... [COST SECONDS]): one GoogleTest executable
+# registered with ctest. COST: about how long its longest tests take; ctest starts costlier tests
+# first, and without a record of earlier runs (a fresh build) it knows no other way to avoid
+# ending a parallel run on one long test while the other cores idle.
 function(sonoshape_add_test name)
-  cmake_parse_arguments(ARG "" "" "SOURCES;LIBS;LABELS" ${ARGN})
+  cmake_parse_arguments(ARG "" "COST" "SOURCES;LIBS;LABELS" ${ARGN})
   add_executable(${name} ${ARG_SOURCES})
   sonoshape_light_optimization(${name})
   sonoshape_use_test_pch(${name})
@@ -69,7 +72,11 @@ function(sonoshape_add_test name)
   # A test program's sources as one unit: at -O1 none is large, and GoogleTest's and the module's
   # headers are then compiled once per program.
   set_target_properties(${name} PROPERTIES UNITY_BUILD_BATCH_SIZE 0)
-  gtest_discover_tests(${name} DISCOVERY_TIMEOUT 60 PROPERTIES LABELS "${ARG_LABELS}")
+  if(NOT ARG_COST)
+    set(ARG_COST 0)
+  endif()
+  gtest_discover_tests(${name} DISCOVERY_TIMEOUT 60 PROPERTIES LABELS "${ARG_LABELS}"
+                                                              COST ${ARG_COST})
 endfunction()
 
 # sonoshape_add_umockdev_test(<name> SOURCES ... LIBS ...): a GoogleTest program that emulates
