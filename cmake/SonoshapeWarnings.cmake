@@ -72,11 +72,15 @@ function(sonoshape_add_test name)
   # A test program's sources as one unit: at -O1 none is large, and GoogleTest's and the module's
   # headers are then compiled once per program.
   set_target_properties(${name} PROPERTIES UNITY_BUILD_BATCH_SIZE 0)
-  if(NOT ARG_COST)
-    set(ARG_COST 0)
+  # An empty value would shift the property list (LABELS "" COST 5 labels every test "COST").
+  set(properties)
+  if(ARG_LABELS)
+    list(APPEND properties LABELS "${ARG_LABELS}")
   endif()
-  gtest_discover_tests(${name} DISCOVERY_TIMEOUT 60 PROPERTIES LABELS "${ARG_LABELS}"
-                                                              COST ${ARG_COST})
+  if(ARG_COST)
+    list(APPEND properties COST ${ARG_COST})
+  endif()
+  gtest_discover_tests(${name} DISCOVERY_TIMEOUT 60 PROPERTIES ${properties})
 endfunction()
 
 # sonoshape_add_umockdev_test(<name> SOURCES ... LIBS ...): a GoogleTest program that emulates

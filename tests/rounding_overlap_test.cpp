@@ -2,10 +2,6 @@
 // with 7 decimals, overlaps by ~1e-8 mm² where a corner of one region sits on another region's
 // edge (a T-junction: rounding moves the corner off the edge). The readers snap those slivers,
 // record a "rounding_overlap" repair and reconstruct; --strict and real overlaps stay errors.
-#include <CGAL/Boolean_set_operations_2.h>
-#include <CGAL/Exact_predicates_exact_constructions_kernel.h>
-#include <CGAL/Polygon_2.h>
-#include <CGAL/Polygon_with_holes_2.h>
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -19,85 +15,78 @@
 #include <string>
 #include <vector>
 
+#include "sonoshape/core/geometry.hpp"
 #include "sonoshape/core/mesh.hpp"
+#include "sonoshape/core/region_clipping.hpp"
 #include "sonoshape/core/slice_io.hpp"
 #include "sonoshape/recon/reconstruct.hpp"
 
 namespace sonoshape::rounding_overlap_test {
 namespace {
 
-using EK = CGAL::Exact_predicates_exact_constructions_kernel;
-using Polygon = CGAL::Polygon_2<EK>;
-using PolygonWithHoles = CGAL::Polygon_with_holes_2<EK>;
-
 constexpr double kRadius = 10.0;  // disc, mm
 constexpr int kSlices = 11;       // z = 0, 2, ..., 20 mm: a prism 20 mm tall
 constexpr double kSpacing = 2.0;
 constexpr double kBoxGap = 1.0;  // from the end slices to the faces of the box (mm)
 
-Polygon disc() {
-  Polygon p;
+Ring2 disc() {
+  Ring2 p;
   for (int k = 0; k < 96; ++k) {
     const double angle = 2.0 * std::numbers::pi * k / 96.0;
-    p.push_back(EK::Point_2(kRadius * std::cos(angle), kRadius * std::sin(angle)));
+    p.emplace_back(kRadius * std::cos(angle), kRadius * std::sin(angle));
   }
   return p;
 }
 
 // The part of the plane above the wavy line y = 1.5 sin(0.7 x) + 0.2 x + 2 (material 1's side).
-Polygon above_wave() {
-  Polygon p;
+Ring2 above_wave() {
+  Ring2 p;
   for (double x = -15.0; x <= 15.0; x += 0.5)
-    p.push_back(EK::Point_2(x, 1.5 * std::sin(0.7 * x) + 0.2 * x + 2.0));
-  p.push_back(EK::Point_2(15.0, 30.0));
-  p.push_back(EK::Point_2(-15.0, 30.0));
+    p.emplace_back(x, 1.5 * std::sin(0.7 * x) + 0.2 * x + 2.0);
+  p.emplace_back(15.0, 30.0);
+  p.emplace_back(-15.0, 30.0);
   return p;
 }
 
-Polygon left_of(double x) {
-  Polygon p;
-  for (const auto& [px, py] : {std::pair{-30.0, -30.0}, {x, -30.0}, {x, 30.0}, {-30.0, 30.0}})
-    p.push_back(EK::Point_2(px, py));
-  return p;
+Ring2 left_of(double x) { return {{-30.0, -30.0}, {x, -30.0}, {x, 30.0}, {-30.0, 30.0}}; }
+
+// The disc's part above the wave (material 1) or below it (2): exact Boolean operations
+// (clip_region), rounded to doubles.
+std::vector<Region> disc_part(int label) {
+  return clip_region(Region{label, disc(), {}}, above_wave(), label == 1);
 }
 
-// Splits each piece at the vertical lines x = cuts (exact Boolean operations).
-std::vector<PolygonWithHoles> split(std::vector<PolygonWithHoles> pieces,
-                                    const std::vector<double>& cuts) {
+// Splits each piece at the vertical lines x = cuts.
+std::vector<Region> split(std::vector<Region> pieces, const std::vector<double>& cuts) {
   for (double cut : cuts) {
-    std::vector<PolygonWithHoles> next;
-    for (const PolygonWithHoles& piece : pieces) {
-      CGAL::intersection(piece, left_of(cut), std::back_inserter(next));
-      CGAL::difference(piece, left_of(cut), std::back_inserter(next));
-    }
+    std::vector<Region> next;
+    for (const Region& piece : pieces)
+      for (bool left : {true, false})
+        for (Region& part : clip_region(piece, left_of(cut), left)) next.push_back(std::move(part));
     pieces = std::move(next);
   }
   return pieces;
 }
 
 // `value` times `scale`, rounded to `decimals` as a file with that many decimals writes it.
-double rounded(const EK::FT& value, double scale = 1.0, int decimals = 7) {
+double rounded(double value, double scale = 1.0, int decimals = 7) {
   char text[64];
-  std::snprintf(text, sizeof text, "%.*f", decimals, scale * CGAL::to_double(value));
+  std::snprintf(text, sizeof text, "%.*f", decimals, scale * value);
   return std::strtod(text, nullptr);
 }
 
-Ring2 rounded_ring(const Polygon& polygon, double scale = 1.0, int decimals = 7) {
-  Ring2 ring;
-  for (auto p = polygon.vertices_begin(); p != polygon.vertices_end(); ++p)
-    ring.emplace_back(rounded(p->x(), scale, decimals), rounded(p->y(), scale, decimals));
-  return ring;
+Ring2 rounded_ring(const Ring2& ring, double scale = 1.0, int decimals = 7) {
+  Ring2 out;
+  for (const Vec2& p : ring)
+    out.emplace_back(rounded(p.x(), scale, decimals), rounded(p.y(), scale, decimals));
+  return out;
 }
 
-// Intended areas of the two materials (exact, before rounding), mm².
+// Intended areas of the two materials (before rounding to decimals), mm².
 std::map<int, double> material_areas() {
-  std::vector<PolygonWithHoles> top, bottom;
-  CGAL::intersection(disc(), above_wave(), std::back_inserter(top));
-  CGAL::difference(disc(), above_wave(), std::back_inserter(bottom));
   std::map<int, double> areas;
-  for (const auto& [label, pieces] : {std::pair{1, &top}, {2, &bottom}})
-    for (const PolygonWithHoles& piece : *pieces)
-      areas[label] += CGAL::to_double(piece.outer_boundary().area());
+  for (int label : {1, 2})
+    for (const Region& piece : disc_part(label)) areas[label] += std::abs(signed_area(piece.outer));
   return areas;
 }
 
@@ -112,19 +101,17 @@ SliceSet wavy_disc_set(double scale = 1.0, int decimals = 7) {
   set.bounds = Box3{scale * Vec3(-12.0, -12.0, -kBoxGap),
                     scale * Vec3(12.0, 12.0, (kSlices - 1) * kSpacing + kBoxGap)};
   for (int i = 0; i < kSlices; ++i) {
-    std::vector<PolygonWithHoles> top, bottom;
-    CGAL::intersection(disc(), above_wave(), std::back_inserter(top));
-    CGAL::difference(disc(), above_wave(), std::back_inserter(bottom));
     LabeledSlice slice;
     slice.origin_mm = Vec3(0.0, 0.0, scale * i * kSpacing);
-    for (const auto& [label, pieces] : {std::pair{1, split(top, {3.9 + 0.0131 * i})},
-                                        {2, split(bottom, {-4.3 + 0.0173 * i, 0.37 + 0.0119 * i})}})
-      for (const PolygonWithHoles& piece : pieces) {
+    for (const auto& [label, pieces] :
+         {std::pair{1, split(disc_part(1), {3.9 + 0.0131 * i})},
+          {2, split(disc_part(2), {-4.3 + 0.0173 * i, 0.37 + 0.0119 * i})}})
+      for (const Region& piece : pieces) {
         Region region;
         region.label = label;
-        region.outer = rounded_ring(piece.outer_boundary(), scale, decimals);
-        for (auto h = piece.holes_begin(); h != piece.holes_end(); ++h)
-          region.holes.push_back(rounded_ring(*h, scale, decimals));
+        region.outer = rounded_ring(piece.outer, scale, decimals);
+        for (const Ring2& hole : piece.holes)
+          region.holes.push_back(rounded_ring(hole, scale, decimals));
         slice.regions.push_back(std::move(region));
       }
     set.slices.push_back(std::move(slice));
