@@ -25,8 +25,4 @@ Status write_png(const std::filesystem::path& path, PngPixels pixels, int width_
   return Status::ok();
 }
 
-Status write_png(const std::filesystem::path& path, const ImageU8& grey) {
-  return write_png(path, PngPixels::kGrey, grey.width, grey.height, grey.pixels.data(), grey.width);
-}
-
 }  // namespace sonoshape

@@ -7,21 +7,14 @@
 
 #include "exact_polygons.hpp"
 
+// In core's exact-polygon unit (core/CMakeLists.txt), beside the validation's Boolean operations
+// on the same types, so that CGAL's templates are compiled once for both.
 namespace sonoshape {
 namespace {
 
 using detail::EK;
 using detail::ExactPolygon;
 using detail::ExactPolygonWithHoles;
-
-// In core's exact-polygon unit (core/CMakeLists.txt), beside the validation's Boolean operations
-// on the same types, so that CGAL's templates are compiled once for both.
-ExactPolygon oriented_polygon(const Ring2& ring, bool counter_clockwise) {
-  ExactPolygon p;
-  for (const Vec2& q : ring) p.push_back(EK::Point_2(q.x(), q.y()));
-  if (p.is_counterclockwise_oriented() != counter_clockwise) p.reverse_orientation();
-  return p;
-}
 
 Ring2 rounded_ring(const ExactPolygon& polygon) {
   Ring2 ring;
@@ -33,11 +26,9 @@ Ring2 rounded_ring(const ExactPolygon& polygon) {
 }  // namespace
 
 std::vector<Region> clip_region(const Region& region, const Ring2& shape, bool keep_inside) {
-  ExactPolygonWithHoles outline(oriented_polygon(region.outer, true));
-  for (const Ring2& hole : region.holes) outline.add_hole(oriented_polygon(hole, false));
   CGAL::Polygon_set_2<EK> set;
-  set.insert(outline);
-  const ExactPolygon cut = oriented_polygon(shape, true);
+  set.insert(detail::to_exact(region.outer, region.holes));
+  const ExactPolygon cut = detail::to_exact(shape, CGAL::COUNTERCLOCKWISE);
   if (keep_inside)
     set.intersection(cut);
   else

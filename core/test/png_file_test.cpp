@@ -7,6 +7,7 @@
 
 #include <vector>
 
+#include "sonoshape/core/image.hpp"
 #include "sonoshape/testing/temp_dir.hpp"
 
 namespace sonoshape::png_file_test {
@@ -34,7 +35,7 @@ TEST(PngFile, GreyAndBgrPicturesReadBackExactly) {
   ImageU8 grey(7, 5);
   for (int j = 0; j < 5; ++j)
     for (int i = 0; i < 7; ++i) grey.at(i, j) = static_cast<std::uint8_t>(37 * i + 11 * j);
-  ASSERT_TRUE(write_png(dir.path() / "grey.png", grey));
+  ASSERT_TRUE(write_png(dir.path() / "grey.png", PngPixels::kGrey, 7, 5, grey.pixels.data(), 7));
   int width = 0, height = 0;
   EXPECT_EQ(read_png(dir.path() / "grey.png", PNG_FORMAT_GRAY, width, height), grey.pixels);
   EXPECT_EQ(width, 7);
@@ -58,10 +59,13 @@ TEST(PngFile, GreyAndBgrPicturesReadBackExactly) {
 
 TEST(PngFile, AnUnwritablePathAndAnEmptyPictureAreNamed) {
   const TempDir dir;
-  const Status missing = write_png(dir.path() / "no_such_dir" / "a.png", ImageU8(4, 4));
+  const ImageU8 picture(4, 4);
+  const Status missing = write_png(dir.path() / "no_such_dir" / "a.png", PngPixels::kGrey, 4, 4,
+                                   picture.pixels.data(), 4);
   ASSERT_FALSE(missing);
   EXPECT_TRUE(contains(missing.message(), "no_such_dir/a.png")) << missing.message();
-  const Status empty = write_png(dir.path() / "b.png", ImageU8());
+  const Status empty =
+      write_png(dir.path() / "b.png", PngPixels::kGrey, 0, 4, picture.pixels.data(), 4);
   ASSERT_FALSE(empty);
   EXPECT_TRUE(contains(empty.message(), "empty")) << empty.message();
 }

@@ -4,7 +4,6 @@
 #include <cstdint>
 #include <filesystem>
 
-#include "sonoshape/core/image.hpp"
 #include "sonoshape/core/status.hpp"
 
 namespace sonoshape {
@@ -17,8 +16,5 @@ enum class PngPixels { kGrey, kBgr };
 /// a full disk).
 Status write_png(const std::filesystem::path& path, PngPixels pixels, int width_px, int height_px,
                  const std::uint8_t* first_row, std::ptrdiff_t row_bytes);
-
-/// Writes a grey image as a PNG file (see above).
-Status write_png(const std::filesystem::path& path, const ImageU8& grey);
 
 }  // namespace sonoshape
