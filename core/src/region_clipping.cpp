@@ -8,7 +8,8 @@
 #include "exact_polygons.hpp"
 
 // In core's exact-polygon unit (core/CMakeLists.txt), beside the validation's Boolean operations
-// on the same types, so that CGAL's templates are compiled once for both.
+// on the same types, so that CGAL's templates are compiled once for both (recon's CGAL unit has
+// its own).
 namespace sonoshape {
 namespace {
 
