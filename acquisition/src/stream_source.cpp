@@ -41,9 +41,23 @@ std::string StreamThread::condition() const {
   return condition_;
 }
 
-void StreamThread::set_condition(std::string text) {
+std::vector<std::string> StreamThread::take_condition_changes() {
   std::lock_guard lock(message_mutex_);
+  std::vector<std::string> changes(condition_changes_.begin(), condition_changes_.end());
+  condition_changes_.clear();
+  return changes;
+}
+
+void StreamThread::set_condition(std::string text) {
+  constexpr std::size_t kKeptChanges = 32;  // a consumer that never takes them keeps no more
+  std::lock_guard lock(message_mutex_);
+  // Only going into trouble and coming out of it are changes; new words for the same trouble
+  // (a reopen's latest failure) only update condition().
+  const bool changes = text.empty() != condition_.empty();
   condition_ = std::move(text);
+  if (!changes) return;
+  condition_changes_.push_back(condition_);
+  if (condition_changes_.size() > kKeptChanges) condition_changes_.pop_front();
 }
 
 std::optional<double> StreamThread::playback_now_s() const {

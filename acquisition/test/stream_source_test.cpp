@@ -8,7 +8,9 @@
 #include <filesystem>
 #include <memory>
 #include <stdexcept>
+#include <string>
 #include <thread>
+#include <vector>
 
 #include "sonoshape/acquisition/frame_source.hpp"
 
@@ -207,6 +209,39 @@ TEST(StreamSource, ABackendNeverStartedIsDestroyedWithoutBeingOpened) {
   EXPECT_TRUE(life->destroyed.load());
   EXPECT_EQ(life->polls.load(), 0);
   EXPECT_EQ(life->closes.load(), 0);
+}
+
+// A live device that loses its connection and gets it back between two frames, then ends.
+class FlickeringFrames final : public FrameBackend {
+ public:
+  std::string describe() const override { return "flickering"; }
+
+ protected:
+  Status open() override { return Status::ok(); }
+  Result<Polled> poll(Frame& frame) override {
+    if (next_ == 3) return Polled::kEnd;
+    if (next_ == 1) {
+      set_condition("cable pulled; reconnecting");
+      set_condition("cable pulled; reconnect failed");  // new words for the same trouble
+      set_condition("");
+    }
+    frame.image = GreyImage(2, 2, 0);
+    frame.index = next_++;
+    return Polled::kItem;
+  }
+
+ private:
+  int next_ = 0;
+};
+
+TEST(StreamSource, TroubleShorterThanAPollIsStillSeenOnceEachWay) {
+  SourceOf<FlickeringFrames> source;
+  ASSERT_TRUE(source.start());
+  EXPECT_EQ(drain(source).size(), 3u);
+  EXPECT_EQ(source.condition(), "");  // all well by now: only the changes tell
+  EXPECT_EQ(source.take_condition_changes(),
+            (std::vector<std::string>{"cable pulled; reconnecting", ""}));
+  EXPECT_TRUE(source.take_condition_changes().empty());  // each change is taken once
 }
 
 TEST(StreamSource, RefusesANullBackend) {

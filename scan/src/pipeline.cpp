@@ -308,9 +308,7 @@ void ScanPipeline::stage_done() {
 }
 
 tracking::SyncedPose ScanPipeline::synchronise(const Frame& frame) {
-  watch_condition(source_.poses->condition(), pose_condition_,
-                  "pose source " + source_.poses->describe(), "frames get poses again",
-                  "frames get no pose meanwhile and are dropped");
+  report_pose_source_trouble();
   const double t = frame.timestamp_s;
   const double deadline_s = acquisition::monotonic_s() + options_.pose_wait_s;
   // Interpolation needs the tracker sample after the frame's time: wait for it, a little.
@@ -328,6 +326,7 @@ tracking::SyncedPose ScanPipeline::synchronise(const Frame& frame) {
     const double remaining_s = deadline_s - acquisition::monotonic_s();
     if (remaining_s <= 0.0) break;
     if (auto sample = source_.poses->next(std::min(remaining_s, kPollS))) poses_.add(sample->item);
+    report_pose_source_trouble();
   }
   tracking::SyncedPose synced = poses_.pose_at(t);
   poses_.discard_before(t);
@@ -337,16 +336,27 @@ tracking::SyncedPose ScanPipeline::synchronise(const Frame& frame) {
 // A live source riding out trouble (a grabber or tracker unplugged and being reopened) stays
 // running: the sinks hear once when the trouble starts and once when it is over; the meshes
 // are kept meanwhile.
-void ScanPipeline::watch_condition(const std::string& condition, std::string& last_reported,
-                                   const std::string& name, const std::string& when_back,
-                                   const std::string& meanwhile) {
-  if (condition == last_reported) return;
-  last_reported = condition;
-  if (condition.empty())
-    report(ScanState::kScanning, name + " is back; " + when_back);
-  else
-    report(ScanState::kError, name + ": " + condition + (meanwhile.empty() ? "" : "; ") +
-                                  meanwhile + "; the meshes so far are kept");
+void ScanPipeline::report_frame_source_trouble() {
+  report_condition_changes(source_.frames->take_condition_changes(),
+                           "frame source " + source_.frames->describe(), "the scan goes on", "");
+}
+
+void ScanPipeline::report_pose_source_trouble() {
+  report_condition_changes(source_.poses->take_condition_changes(),
+                           "pose source " + source_.poses->describe(), "frames get poses again",
+                           "frames get no pose meanwhile and are dropped");
+}
+
+void ScanPipeline::report_condition_changes(const std::vector<std::string>& changes,
+                                            const std::string& name, const std::string& when_back,
+                                            const std::string& meanwhile) {
+  for (const std::string& condition : changes) {
+    if (condition.empty())
+      report(ScanState::kScanning, name + " is back; " + when_back);
+    else
+      report(ScanState::kError, name + ": " + condition + (meanwhile.empty() ? "" : "; ") +
+                                    meanwhile + "; the meshes so far are kept");
+  }
 }
 
 std::optional<StopReason> ScanPipeline::stop_before_next_frame() {
@@ -433,8 +443,7 @@ StopReason ScanPipeline::acquire_frames() {
   while (true) {
     if (const std::optional<StopReason> stop = stop_before_next_frame()) return *stop;
     auto received = source_.frames->next(kPollS);
-    watch_condition(source_.frames->condition(), frame_condition_,
-                    "frame source " + source_.frames->describe(), "the scan goes on", "");
+    report_frame_source_trouble();
     if (!received) {
       if (source_.frames->finished())
         return source_.frames->state() == acquisition::SourceState::kFailed
@@ -478,6 +487,9 @@ void ScanPipeline::acquisition_loop() {
   }
   source_.frames->stop();
   source_.poses->stop();
+  // Trouble (or its end) after the last frame is still the scan's to report.
+  report_frame_source_trouble();
+  report_pose_source_trouble();
   std::size_t slices = 0;
   {
     std::lock_guard lock(state_mutex_);

@@ -9,6 +9,7 @@
 #include <atomic>
 #include <chrono>
 #include <cstddef>
+#include <deque>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -17,6 +18,7 @@
 #include <string>
 #include <thread>
 #include <utility>
+#include <vector>
 
 #include "sonoshape/core/bounded_queue.hpp"
 #include "sonoshape/core/status.hpp"
@@ -125,6 +127,7 @@ class StreamThread {
   SourceState state() const { return state_.load(); }
   std::string message() const;
   std::string condition() const;
+  std::vector<std::string> take_condition_changes();
   std::size_t produced() const { return produced_.load(); }
   std::size_t lost() const { return lost_.load(); }
 
@@ -152,6 +155,7 @@ class StreamThread {
   mutable std::mutex message_mutex_;
   std::string message_;
   std::string condition_;
+  std::deque<std::string> condition_changes_;  // not yet taken, oldest first
 };
 
 template <typename T>
@@ -260,6 +264,10 @@ class StreamSource : private StreamThread::Steps {
   /// Trouble a running source is riding out (e.g. "device unplugged; reopening it"); empty
   /// when all is well. Thread-safe.
   std::string condition() const { return thread_.condition(); }
+  /// Each time condition() went into trouble (its first words) or out of it (empty text) since
+  /// the last call, oldest first, so that trouble shorter than the consumer's polling interval
+  /// is still seen. Keeps the last 32 changes. Thread-safe.
+  std::vector<std::string> take_condition_changes() { return thread_.take_condition_changes(); }
   /// Items the backend produced (delivered to the buffer or dropped by it).
   std::size_t produced() const { return thread_.produced(); }
   /// Items dropped because the consumer fell behind (buffer full, live mode), or reported lost

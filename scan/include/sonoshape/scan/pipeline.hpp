@@ -134,10 +134,12 @@ class ScanPipeline {
   bool choose_keyframe(Candidate& candidate, const Eigen::Matrix4d& T_reference_image,
                        bool& degenerate_reported);
   void queue_for_segmentation(std::unique_ptr<Candidate> candidate);
-  /// Reports a live source's condition() when it changes (once into trouble, once back).
-  void watch_condition(const std::string& condition, std::string& last_reported,
-                       const std::string& name, const std::string& when_back,
-                       const std::string& meanwhile);
+  /// Reports each change of a live source's condition() (into trouble, and back), however
+  /// brief: `changes` from its take_condition_changes().
+  void report_condition_changes(const std::vector<std::string>& changes, const std::string& name,
+                                const std::string& when_back, const std::string& meanwhile);
+  void report_frame_source_trouble();
+  void report_pose_source_trouble();
   void segmentation_loop();
   void reconstruction_loop();
   // The steps of reconstruction_loop: the batch's slices into the reconstruction (those it
@@ -168,8 +170,6 @@ class ScanPipeline {
 
   tracking::PoseBuffer poses_;         // acquisition thread only
   bool pose_source_reported_ = false;  // acquisition thread only
-  std::string frame_condition_;        // acquisition thread only: last condition reported
-  std::string pose_condition_;         // acquisition thread only: last condition reported
   std::mutex selector_mutex_;
   tracking::KeyframeSelector selector_;
 
