@@ -27,7 +27,7 @@ struct ThinPlateOptions {
   double truncation = 0.1;
   /// Weight of a data sample (one per grid spacing squared of plane), relative to the
   /// bi-Laplacian's diagonal (42 inside the grid): large, so the field interpolates the data.
-  double data_weight = 100.0;
+  double data_weight = 300.0;
   /// Weight of the closing condition (f = -truncation at and beyond the box's faces): weak, it
   /// only decides where an object ends beyond its last slice.
   double closing_weight = 0.3;
