@@ -22,8 +22,17 @@ class SliceDistances {
  public:
   /// `truncation[m - 1]`: material m's clamp (mm).
   SliceDistances(const PreparedSlice& slice, int materials, const std::vector<double>& truncation)
-      : slice_(slice), materials_(materials), truncation_(truncation) {
+      : slice_(&slice), materials_(materials), truncation_(truncation) {
     for (const Ring2& ring : slice.known) known_bands_.push_back(make_ring_bands(ring));
+    material_boxes_.assign(static_cast<std::size_t>(materials),
+                           {Vec2::Constant(std::numeric_limits<double>::infinity()),
+                            Vec2::Constant(-std::numeric_limits<double>::infinity())});
+    for (std::size_t m = 1; m <= material_boxes_.size() && m < slice.ring_bounds.size(); ++m)
+      for (const auto& [lo, hi] : slice.ring_bounds[m]) {
+        auto& box = material_boxes_[m - 1];
+        box.first = box.first.cwiseMin(lo);
+        box.second = box.second.cwiseMax(hi);
+      }
     // An edge of a material's ring is a true boundary when the point just across it is known
     // and of another material: edges along an unknown region or the field of view's edge are
     // where the slice stops seeing, not a surface (they were cut there by the partition).
@@ -76,25 +85,35 @@ class SliceDistances {
     }
   }
 
+  /// How far p is from the box of material m's rings (infinity where it has none; 0 inside).
+  double gap_to_material(int m, const Vec2& p) const {
+    const auto& [lo, hi] = material_boxes_[static_cast<std::size_t>(m - 1)];
+    if (!(lo.x() <= hi.x())) return std::numeric_limits<double>::infinity();
+    return (lo - p).cwiseMax(p - hi).cwiseMax(0.0).norm();
+  }
+
+  /// The slice moved (the same rings, elsewhere in memory).
+  void rebind(const PreparedSlice& slice) { slice_ = &slice; }
+
   bool known(const Vec2& p) const {
-    if (slice_.unknown.empty()) return true;
+    if (slice_->unknown.empty()) return true;
     int winding = 0;
-    for (std::size_t r = 0; r < slice_.known.size(); ++r)
-      winding += winding_number_in_bands(slice_.known[r], known_bands_[r], p);
+    for (std::size_t r = 0; r < slice_->known.size(); ++r)
+      winding += winding_number_in_bands(slice_->known[r], known_bands_[r], p);
     return winding > 0;
   }
 
   // The material at a known point (0: outside).
   int label(const Vec2& p) const {
     for (int m = 1;
-         m <= materials_ && static_cast<std::size_t>(m) < slice_.rings_by_material.size(); ++m) {
-      const auto& rings = slice_.rings_by_material[static_cast<std::size_t>(m)];
+         m <= materials_ && static_cast<std::size_t>(m) < slice_->rings_by_material.size(); ++m) {
+      const auto& rings = slice_->rings_by_material[static_cast<std::size_t>(m)];
       int winding = 0;
       for (std::size_t r = 0; r < rings.size(); ++r) {
-        const auto& [lo, hi] = slice_.ring_bounds[static_cast<std::size_t>(m)][r];
+        const auto& [lo, hi] = slice_->ring_bounds[static_cast<std::size_t>(m)][r];
         if (p.x() < lo.x() || p.y() < lo.y() || p.x() > hi.x() || p.y() > hi.y()) continue;
-        winding +=
-            winding_number_in_bands(rings[r], slice_.ring_bands[static_cast<std::size_t>(m)][r], p);
+        winding += winding_number_in_bands(rings[r],
+                                           slice_->ring_bands[static_cast<std::size_t>(m)][r], p);
       }
       if (winding > 0) return m;
     }
@@ -144,10 +163,11 @@ class SliceDistances {
     return buckets_[(static_cast<std::size_t>(m) * ny_ + y) * nx_ + x];
   }
 
-  const PreparedSlice& slice_;
+  const PreparedSlice* slice_;
   int materials_;
   std::vector<double> truncation_;
   std::vector<RingBands> known_bands_;
+  std::vector<std::pair<Vec2, Vec2>> material_boxes_;      // per material 1..K: its rings' box
   std::vector<std::vector<std::pair<Vec2, Vec2>>> edges_;  // per material: true boundaries
   Vec2 origin_ = Vec2::Zero();
   double bucket_size_ = 1.0;
@@ -520,6 +540,53 @@ constexpr double kMaxNodes = 32.0 * 1024 * 1024;
 // No truncation below this many solve-grid spacings: the data would not reach a grid node.
 constexpr double kMinimumTruncation = 2.0;
 
+// Each sample's value is an upper bound of its distance to the surface, signed: its slice's
+// true boundaries lie on the surface. So are these, from another slice B at height h above it:
+// h where B is known and on the other side at the sample's foot (the segment between them
+// crosses the surface), and the distance to B's boundary (hypot(h, B's in-plane distance at
+// the foot)). tighten() keeps the least: slices a millimetre apart on either side of an
+// organ's end then disagree by about that millimetre, not by twice the truncation (a fill
+// through such a jump rings: a bulge before the end, the end short of the last slice).
+//
+// Tightens sample `values` (K materials, at point p) by slice `b`; returns whether any changed.
+static bool tighten(const Vec3& p, double* values, const PreparedSlice& b,
+                    const SliceDistances& other, std::vector<double>& scratch) {
+  const std::size_t k = scratch.size();
+  const Vec3 r = p - b.origin;
+  const double h = std::abs(r.dot(b.unit_normal));
+  const Vec2 foot(r.dot(b.u), r.dot(b.v));
+  // Without a query where the foot is far from B's rings: then B is outside them there (the
+  // other side for a sample inside), or too far to bound a sample outside.
+  bool query = false, outside = false;
+  for (std::size_t m = 0; m < k; ++m) {
+    const double limit = std::abs(values[m]);
+    if (!(h < limit)) continue;
+    const double gap = other.gap_to_material(static_cast<int>(m) + 1, foot);
+    if (gap * gap + h * h < limit * limit)
+      query = true;
+    else if (values[m] > 0.0)
+      outside = true;  // gap > 0: B is outside material m at the foot
+  }
+  bool changed = false;
+  if (query) {
+    if (!other.distances(foot, scratch.data())) return false;
+    for (std::size_t m = 0; m < k; ++m) {
+      const double bound = (scratch[m] > 0.0) != (values[m] > 0.0) ? h : std::hypot(h, scratch[m]);
+      if (bound < std::abs(values[m])) {
+        values[m] = values[m] > 0.0 ? bound : -bound;
+        changed = true;
+      }
+    }
+  } else if (outside && other.known(foot)) {
+    for (std::size_t m = 0; m < k; ++m)
+      if (values[m] > h) {
+        values[m] = h;
+        changed = true;
+      }
+  }
+  return changed;
+}
+
 struct ThinPlateField::Impl {
   std::vector<double> extents_mm;  // per material, what the truncations were set from
   Box3 box;
@@ -544,12 +611,54 @@ struct ThinPlateField::Impl {
     std::vector<double> positions;
     double weight = 0.0;
     std::vector<double> targets;  // materials per sample
+    std::vector<Vec3> points;     // per sample, where it is (world mm)
   };
 
-  Contribution slice_data(const PreparedSlice& slice) const {
+  // Per slice, kept: its distances answer later slices' queries, and a later slice can tighten
+  // its samples' values.
+  std::vector<std::unique_ptr<SliceDistances>> distances;
+  std::vector<Contribution> data;
+
+  // Tightens slice a's samples by slices [first, last) other than a (tighten()). Returns the
+  // changes as (sample * K + material, old value).
+  std::vector<std::pair<std::size_t, double>> tighten_slice(std::size_t a, std::size_t first,
+                                                            std::size_t last) {
+    Contribution& c = data[a];
+    const std::size_t k = static_cast<std::size_t>(materials);
+    std::vector<double> scratch(k), before(k);
+    std::vector<std::pair<std::size_t, double>> changes;
+    for (std::size_t e = 0; e < c.points.size(); ++e) {
+      double* values = c.targets.data() + e * k;
+      std::copy(values, values + k, before.begin());
+      bool changed = false;
+      for (std::size_t b = first; b < last; ++b)
+        if (b != a) changed |= tighten(c.points[e], values, slices[b], *distances[b], scratch);
+      if (changed)
+        for (std::size_t m = 0; m < k; ++m)
+          if (values[m] != before[m]) changes.emplace_back(e * k + m, before[m]);
+    }
+    return changes;
+  }
+
+  // The right-hand side follows the changes of slice a's values.
+  void retarget(std::size_t a, const std::vector<std::pair<std::size_t, double>>& changes) {
+    const Contribution& c = data[a];
+    const Level& g = levels[0];
+    const std::size_t k = static_cast<std::size_t>(materials);
+    const std::size_t stride = c.axis == 0   ? 1
+                               : c.axis == 1 ? static_cast<std::size_t>(g.nx)
+                                             : static_cast<std::size_t>(g.nx) * g.ny;
+    for (const auto& [at, old] : changes) {
+      const std::size_t e = at / k, m = at % k;
+      const double delta = c.weight * (c.targets[at] - old), t = c.positions[e];
+      weighted_targets[m * g.size() + c.nodes[e]] += (1.0 - t) * delta;
+      weighted_targets[m * g.size() + c.nodes[e] + stride] += t * delta;
+    }
+  }
+
+  Contribution slice_data(const PreparedSlice& slice, const SliceDistances& distances) const {
     Contribution out;
     const Level& g = levels[0];
-    const SliceDistances distances(slice, materials, truncation_mm);
     const Vec3 n = slice.unit_normal;
     int a = 0;
     for (int axis = 1; axis < 3; ++axis)
@@ -585,6 +694,7 @@ struct ThinPlateField::Impl {
         out.nodes.push_back(static_cast<std::uint32_t>(g.index(idx[0], idx[1], idx[2])));
         out.positions.push_back(t);
         out.targets.insert(out.targets.end(), values.begin(), values.end());
+        out.points.push_back(p);
       }
     return out;
   }
@@ -794,14 +904,30 @@ ThinPlateField& ThinPlateField::operator=(ThinPlateField&&) noexcept = default;
 
 void ThinPlateField::add_slices(std::vector<PreparedSlice> slices) {
   Impl& s = *impl_;
-  // Each slice's data in parallel, added in slice order (the same sums whatever the threads).
-  std::vector<Impl::Contribution> data(slices.size());
-  tbb::parallel_for(std::size_t{0}, slices.size(),
-                    [&](std::size_t k) { data[k] = s.slice_data(slices[k]); });
-  for (std::size_t k = 0; k < slices.size(); ++k) {
-    s.add(data[k]);
-    s.slices.push_back(std::move(slices[k]));
-  }
+  const std::size_t first = s.slices.size();
+  for (PreparedSlice& slice : slices) s.slices.push_back(std::move(slice));
+  const std::size_t count = s.slices.size();
+  for (std::size_t k = 0; k < first; ++k) s.distances[k]->rebind(s.slices[k]);
+  s.distances.resize(count);
+  s.data.resize(count);
+  // Each slice's data in parallel, then tightened by the other slices (the new ones by all, the
+  // earlier ones by the new ones); each slice writes only its own values, and a value's bound
+  // is a minimum (exact in any order), so the data are the same whatever the threads and
+  // whether the slices came one by one or at once.
+  tbb::parallel_for(first, count, [&](std::size_t k) {
+    s.distances[k] = std::make_unique<SliceDistances>(s.slices[k], s.materials, s.truncation_mm);
+    s.data[k] = s.slice_data(s.slices[k], *s.distances[k]);
+  });
+  std::vector<std::vector<std::pair<std::size_t, double>>> changes(first);
+  tbb::parallel_for(std::size_t{0}, count, [&](std::size_t a) {
+    if (a < first)
+      changes[a] = s.tighten_slice(a, first, count);
+    else
+      s.tighten_slice(a, 0, count);
+  });
+  // Added in slice order: the same sums whatever the threads.
+  for (std::size_t a = 0; a < first; ++a) s.retarget(a, changes[a]);
+  for (std::size_t k = first; k < count; ++k) s.add(s.data[k]);
 }
 
 ThinPlateSolveStats ThinPlateField::solve() {

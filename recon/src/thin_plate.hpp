@@ -1,14 +1,15 @@
 #pragma once
 // The thin-plate field (issue 38), beside the paper's mean-value field: per material, the slices'
-// in-plane signed distance to that material's true boundaries (truncated) as data where each
+// in-plane signed distance to that material's true boundaries (truncated, and tightened by the
+// bounds that the other slices give on the distance to the surface) as data where each
 // plane crosses the grid's edges, and a biharmonic fill of the space between planes that
 // minimises sum (L f)^2 + sum w (f(sample) - d)^2 on a regular grid over the box (L: the 7-point
 // graph Laplacian, f(sample) the linear interpolation along the crossed edge).
 // A slice's signed distance is constant along its extrusion, and a biharmonic fill keeps that
 // detail between planes where a harmonic (mean-value) blend of a +-1 indicator sags into beads.
 // Solved by conjugate gradients preconditioned with a geometric multigrid V-cycle (Chebyshev
-// smoothing); an added slice changes only its data, and the next solve starts from the last
-// solution.
+// smoothing); an added slice changes only the data (its own, and those it tightens), and the next
+// solve starts from the last solution.
 #include <array>
 #include <cstdint>
 #include <memory>
@@ -27,7 +28,7 @@ struct ThinPlateOptions {
   double truncation = 0.1;
   /// Weight of a data sample (one per grid spacing squared of plane), relative to the
   /// bi-Laplacian's diagonal (42 inside the grid): large, so the field interpolates the data.
-  double data_weight = 100.0;
+  double data_weight = 300.0;
   /// Weight of the closing condition (f = -truncation at and beyond the box's faces): weak, it
   /// only decides where an object ends beyond its last slice.
   double closing_weight = 0.3;

@@ -223,6 +223,62 @@ TEST(ThinPlateField, ASlantedRodCrossedByFarApartPlanesIsOneTube) {
   EXPECT_GT(component_count(beads.meshes[0].mesh), 1u);
 }
 
+// Two slices a millimetre apart across an organ's end: the one through the organ sees a disc
+// (its in-plane distance at the centre would be the truncation, 10 mm), the other nothing (-10
+// mm). Each value is bounded by the other slice (the surface crosses the millimetre between
+// them), so the field goes from about +1 to -1 across the gap, not from +10 to -10: a fill
+// through data that jump by twice the truncation within a grid cell rings (the bulge before a
+// rib's end in the default scan).
+TEST(ThinPlateData, SlicesAcrossAnOrgansEndBoundEachOthersDistances) {
+  const Box3 box{Vec3::Constant(-20.0), Vec3::Constant(20.0)};
+  LabeledSlice through = z_slice(0.0), beyond = z_slice(1.0);
+  through.regions.push_back({1, circle(Vec2(0, 0), 15.0, 96), {}});
+  std::vector<PreparedSlice> slices;
+  slices.push_back(prepare_slice(through, 0, {1}, box));
+  slices.push_back(prepare_slice(beyond, 1, {1}, box));
+  // Solve grid spacing 2 mm; truncation 0.1 x 100 mm.
+  ThinPlateField field(box, 1.0, 1, ThinPlateOptions{}, {100.0});
+  field.add_slices(std::move(slices));
+  field.solve();
+  std::vector<double> values(2 * 2);
+  field.evaluate({Vec3(0, 0, 0), Vec3(0, 0, 1)}, values.data());
+  EXPECT_GT(values[1], 0.0);
+  EXPECT_LT(values[1], 2.0);
+  EXPECT_LT(values[3], 0.0);
+  EXPECT_GT(values[3], -2.0);
+}
+
+// A square rod (8 mm wide) along z, crossed by planes alternately 2.5 and 1.2 mm apart (the
+// solve grid's spacing is 2.7 mm): it ends 0.05 mm beyond the plane at z = +-36.4, and the next
+// plane, 1.2 mm further, sees nothing. Its ends lie between those planes, and the fill does not
+// bulge before them (without the bounds between neighbouring slices' data: 5.8 mm wide).
+TEST(ThinPlateField, AnOrgansEndNeitherBulgesNorFallsShortOfItsLastSlice) {
+  SliceSet set;
+  set.bounds = Box3{Vec3::Constant(-50.0), Vec3::Constant(50.0)};
+  double z = -47.5;
+  for (int k = 0; z < 47.0; ++k) {
+    LabeledSlice s = z_slice(z);
+    if (std::abs(z) < 36.45)
+      s.regions.push_back({1, Ring2{{-4, -4}, {4, -4}, {4, 4}, {-4, 4}}, {}});
+    set.slices.push_back(s);
+    z += k % 2 == 0 ? 2.5 : 1.2;
+  }
+  ASSERT_NEAR(set.slices[6].origin_mm.z(), -36.4, 1e-9);
+  const MeshSet meshes = reconstruct(set, thin_plate_options());
+  const TriangleMesh& mesh = meshes.meshes[0].mesh;
+  ASSERT_FALSE(mesh.empty());
+  EXPECT_EQ(component_count(mesh), 1u);
+  const Box3 bounds = mesh.bounds();
+  for (const double end : {-bounds.min.z(), bounds.max.z()}) {
+    EXPECT_GT(end, 36.4);
+    EXPECT_LT(end, 37.6);
+  }
+  double widest = 0.0;
+  for (const Vec3& v : mesh.vertices)
+    if (std::abs(v.z()) <= 36.4) widest = std::max({widest, std::abs(v.x()), std::abs(v.y())});
+  EXPECT_LT(widest, 4.75);  // 4.4 measured
+}
+
 TEST(ThinPlateField, AnOrganInsideAnotherStaysInside) {
   // Material 1: a sphere of radius 30 minus a sphere of radius 12 (material 2) at (4, 0, 0).
   SliceSet set;
