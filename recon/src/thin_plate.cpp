@@ -898,7 +898,6 @@ ThinPlateSolveStats ThinPlateField::solve() {
   Impl& s = *impl_;
   ThinPlateSolveStats stats;
   Stopwatch clock;
-  s.refresh_weights();
   const std::size_t count = s.levels[0].size();
   const double fitted_mm = s.options.tolerance * s.spacing;
   for (int m = 0; m < s.materials; ++m) {
@@ -909,6 +908,7 @@ ThinPlateSolveStats ThinPlateField::solve() {
     if (s.solved && misfit <= fitted_mm) {
       ++stats.unchanged_materials;
     } else {
+      s.refresh_weights();  // not when every material is left as it is: the next solve does it
       stats.iterations +=
           s.solve_one(s.solution[static_cast<std::size_t>(m)],
                       s.weighted_targets.data() + static_cast<std::size_t>(m) * count);
@@ -975,6 +975,18 @@ bool ThinPlateField::start_from(const ThinPlateField& other) {
       node_counts() != other.node_counts())
     return false;
   s.solution = o.solution;
+  // A material whose truncation changed: its data and closing values at +-T moved to the new T,
+  // the distances within T did not. The last solution's plateaus are moved with them (linearly
+  // from half the old T outwards), which leaves the solve the local change only.
+  for (std::size_t m = 0; m < s.solution.size(); ++m) {
+    const double before = o.truncation_mm[m], after = s.truncation_mm[m];
+    if (before == after || !(before > 0.0)) continue;
+    for (double& value : s.solution[m]) {
+      const double u = std::clamp(value / before, -1.0, 1.0);
+      const double moved = std::copysign(std::max(0.0, 2.0 * std::abs(u) - 1.0), u);
+      value += (after - before) * moved;
+    }
+  }
   s.sampled = o.sampled;
   s.block_changed_at = o.block_changed_at;
   s.generation = o.generation;
