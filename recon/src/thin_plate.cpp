@@ -548,6 +548,10 @@ struct ThinPlateField::Impl {
   std::vector<std::vector<double>> sampled;
   std::array<int, 3> blocks{};
   std::vector<std::uint32_t> block_changed_at;
+  // Per node (i0, j0, k0): the latest block_changed_at over the blocks that the interpolation
+  // in the cell with that min corner reads (nodes i0 - 1 .. i0 + 2 per axis), so that a look-up
+  // per octree row says whether it is current.
+  std::vector<std::uint32_t> stencil_changed_at;
   std::uint32_t generation = 0;
   // Per material, the largest distance between a sample added since the last solve and that
   // solution (NaN-free; 0 when nothing was added), and whether this field solved before: an
@@ -681,6 +685,7 @@ struct ThinPlateField::Impl {
       sampled = solution;
       block_changed_at.assign(static_cast<std::size_t>(blocks[0]) * blocks[1] * blocks[2],
                               generation);
+      stencil_changed_at.assign(levels[0].size(), generation);
       return;
     }
     const double tolerance_mm = options.resample_tolerance * spacing;
@@ -708,6 +713,39 @@ struct ThinPlateField::Impl {
           });
           block_changed_at[block_index(bi, bj, bk)] = generation;
         }
+    });
+    spread_block_changes();
+  }
+
+  // stencil_changed_at from block_changed_at, one axis after the other: along an axis the
+  // nodes i0 - 1 .. i0 + 2 (clamped) lie in one or two neighbouring blocks.
+  void spread_block_changes() {
+    const Level& g = levels[0];
+    const int dims[3] = {g.nx, g.ny, g.nz};
+    auto first = [](int i) { return std::max(0, i - 1) / kBlock; };
+    auto last = [&](int a, int i) { return std::min(dims[a] - 1, i + 2) / kBlock; };
+    // Along x: blocks[2] x blocks[1] rows of nx; then y: blocks[2] x ny rows; then z: the grid.
+    std::vector<std::uint32_t> along_x(static_cast<std::size_t>(blocks[2]) * blocks[1] * g.nx);
+    for (int bk = 0; bk < blocks[2]; ++bk)
+      for (int bj = 0; bj < blocks[1]; ++bj)
+        for (int i = 0; i < g.nx; ++i)
+          along_x[(static_cast<std::size_t>(bk) * blocks[1] + bj) * g.nx + i] =
+              std::max(block_changed_at[block_index(first(i), bj, bk)],
+                       block_changed_at[block_index(last(0, i), bj, bk)]);
+    std::vector<std::uint32_t> along_y(static_cast<std::size_t>(blocks[2]) * g.ny * g.nx);
+    for (int bk = 0; bk < blocks[2]; ++bk)
+      for (int j = 0; j < g.ny; ++j)
+        for (int i = 0; i < g.nx; ++i) {
+          const std::size_t row = static_cast<std::size_t>(bk) * blocks[1];
+          along_y[(static_cast<std::size_t>(bk) * g.ny + j) * g.nx + i] = std::max(
+              along_x[(row + first(j)) * g.nx + i], along_x[(row + last(1, j)) * g.nx + i]);
+        }
+    stencil_changed_at.resize(g.size());
+    for_planes(g.nz, [&](int k) {
+      const std::size_t below = static_cast<std::size_t>(first(k)) * g.ny * g.nx;
+      const std::size_t above = static_cast<std::size_t>(last(2, k)) * g.ny * g.nx;
+      for (std::size_t n = 0; n < static_cast<std::size_t>(g.ny) * g.nx; ++n)
+        stencil_changed_at[g.index(0, 0, k) + n] = std::max(along_y[below + n], along_y[above + n]);
     });
   }
 
@@ -875,6 +913,7 @@ ThinPlateField::ThinPlateField(const Box3& box, double finest_cell_mm, int mater
   s.sampled = s.solution;
   s.misfit_mm.assign(static_cast<std::size_t>(materials), 0.0);
   s.block_changed_at.assign(static_cast<std::size_t>(s.blocks[0]) * s.blocks[1] * s.blocks[2], 0);
+  s.stencil_changed_at.assign(nodes, 0);
   s.add_closing();
 }
 
@@ -989,6 +1028,7 @@ bool ThinPlateField::start_from(const ThinPlateField& other) {
   }
   s.sampled = o.sampled;
   s.block_changed_at = o.block_changed_at;
+  s.stencil_changed_at = o.stencil_changed_at;
   s.generation = o.generation;
   return true;
 }
@@ -997,23 +1037,10 @@ std::uint32_t ThinPlateField::generation() const { return impl_->generation; }
 
 std::uint32_t ThinPlateField::changed_at(const Vec3& point) const {
   const Impl& s = *impl_;
-  const Level& g = s.levels[0];
-  const int dims[3] = {g.nx, g.ny, g.nz};
   int i0[3];
   double t[3];
   s.locate(point, i0, t);
-  // evaluate() reads the nodes i0 - 1 .. i0 + 2 per axis, clamped to the grid.
-  int lo[3], hi[3];
-  for (int a = 0; a < 3; ++a) {
-    lo[a] = std::max(0, i0[a] - 1) / kBlock;
-    hi[a] = std::min(dims[a] - 1, i0[a] + 2) / kBlock;
-  }
-  std::uint32_t last = 0;
-  for (int bk = lo[2]; bk <= hi[2]; ++bk)
-    for (int bj = lo[1]; bj <= hi[1]; ++bj)
-      for (int bi = lo[0]; bi <= hi[0]; ++bi)
-        last = std::max(last, s.block_changed_at[s.block_index(bi, bj, bk)]);
-  return last;
+  return s.stencil_changed_at[s.levels[0].index(i0[0], i0[1], i0[2])];
 }
 
 int ThinPlateField::function_count() const { return impl_->materials + 1; }
