@@ -504,6 +504,32 @@ TEST(ThinPlateOnline, KeptRowsStayCurrentThroughAdditionsRebuildsAndRemovals) {
   EXPECT_LT(worst, 2.0 * 1e-2 * spacing);
 }
 
+// What an online update keeps (rows, unsolved materials, moved plateaus) depends on the values
+// alone: the meshes after every update are the same to the bit at any thread count.
+TEST(ThinPlateOnline, UpdatesAreTheSameToTheBitAtAnyThreadCount) {
+  const SliceSet set = sphere_stack(40.0, {0, 30, -30, 15, -15});
+  std::vector<std::vector<MeshSet>> runs;
+  for (const int threads : {1, 3}) {
+    ReconstructorOptions setup = thin_plate_setup(set);
+    setup.engine.threads = threads;
+    Reconstructor online(setup);
+    runs.emplace_back();
+    for (const LabeledSlice& slice : set.slices) {
+      online.add_slice(slice);
+      online.update();
+      runs.back().push_back(online.mesh());
+    }
+  }
+  for (std::size_t u = 0; u < runs[0].size(); ++u) {
+    SCOPED_TRACE("update " + std::to_string(u));
+    ASSERT_EQ(runs[1][u].meshes.size(), runs[0][u].meshes.size());
+    for (std::size_t m = 0; m < runs[0][u].meshes.size(); ++m) {
+      EXPECT_EQ(runs[1][u].meshes[m].mesh.vertices, runs[0][u].meshes[m].mesh.vertices);
+      EXPECT_EQ(runs[1][u].meshes[m].mesh.triangles, runs[0][u].meshes[m].mesh.triangles);
+    }
+  }
+}
+
 // A wrong slice (a stray disc below the sphere) removed again: its data must go with it, or the
 // stray blob stays in the mesh as a second part.
 TEST(ThinPlateOnline, RemovingASliceTakesItsDataAway) {
