@@ -10,6 +10,7 @@
 #include <limits>
 #include <set>
 #include <stdexcept>
+#include <unordered_map>
 
 #include "arrangement.hpp"
 #include "cell_field.hpp"
@@ -123,6 +124,11 @@ struct Reconstructor::State {
   std::unique_ptr<ThinPlateField> thin_plate;  // thin-plate field
   std::vector<Box3>
       thin_plate_boxes;  // per material, the box of its contours in the field's slices
+  // The entry ids of the thin-plate field's slices, and the materials and box they were
+  // prepared with (a rebuild copies them instead of preparing them again).
+  std::vector<int> thin_plate_ids;
+  std::vector<int> thin_plate_materials;
+  Box3 thin_plate_box;
   std::unique_ptr<FieldEvaluator> evaluator;   // made at the first update (opens the device)
   std::vector<std::uint32_t> cell_generation;  // update count at which each cell last changed
   std::uint32_t generation = 0;
@@ -134,7 +140,9 @@ struct Reconstructor::State {
   std::size_t contour_slices = 0;
   SampledField sampled;
   bool sampled_tags_current =
-      false;  // `sampled`'s row tags name this arrangement's cells (false after a rebuild)
+      false;  // `sampled`'s row tags name this arrangement's cells (false after a rebuild), or
+              // for the thin-plate field the solves of this field's sampled solution
+  Box3 sampled_box;                  // the box `sampled` was sampled over
   OctreeWorkspace octree_workspace;  // kept across updates (see OctreeWorkspace)
   MeshSet mesh;
   ReconstructionStats totals;
@@ -265,21 +273,66 @@ struct Reconstructor::State {
     built = true;
   }
 
+  // The slices of `list` that are not duplicates, prepared; those the thin-plate field holds
+  // already, prepared with the same materials and box, are copied from it: only the truncations
+  // change when an organ's extent outgrows them, which a live sweep does often.
+  std::vector<PreparedSlice> prepare_for_rebuild(const std::vector<Entry>& list) const {
+    std::unordered_map<int, const PreparedSlice*> held;
+    if (thin_plate && thin_plate_ids.size() == thin_plate->slices().size() &&
+        thin_plate_materials == material_ids && thin_plate_box.min == box.min &&
+        thin_plate_box.max == box.max)
+      for (std::size_t k = 0; k < thin_plate_ids.size(); ++k)
+        held[thin_plate_ids[k]] = &thin_plate->slices()[k];
+    std::vector<const Entry*> kept;
+    for (const Entry& e : list)
+      if (!e.duplicate) kept.push_back(&e);
+    std::vector<PreparedSlice> prepared(kept.size());
+    std::vector<std::exception_ptr> errors(kept.size());
+    tbb::parallel_for(std::size_t{0}, kept.size(), [&](std::size_t k) {
+      try {
+        const auto found = held.find(kept[k]->id);
+        prepared[k] = found != held.end() ? *found->second
+                                          : prepare_slice(kept[k]->slice, k, material_ids, box);
+      } catch (...) {
+        errors[k] = std::current_exception();
+      }
+    });
+    for (const std::exception_ptr& error : errors)
+      if (error) std::rethrow_exception(error);
+    return prepared;
+  }
+
+  // The ids of `list`'s entries that are not duplicates, in order.
+  static std::vector<int> slice_ids(const std::vector<Entry>& list, std::size_t first) {
+    std::vector<int> ids;
+    for (std::size_t k = first; k < list.size(); ++k)
+      if (!list[k].duplicate) ids.push_back(list[k].id);
+    return ids;
+  }
+
   void rebuild_thin_plate(const std::vector<Entry>& list, ReconstructionStats& stats) {
     arrangement.reset();
     field.reset();
     const ThinPlateOptions tp;
     Stopwatch clock;
-    std::vector<PreparedSlice> prepared = prepare(list, 0, 0);
+    std::vector<PreparedSlice> prepared = prepare_for_rebuild(list);
     const int materials = static_cast<int>(material_ids.size());
     thin_plate_boxes = material_boxes(prepared, materials);
     auto rebuilt = std::make_unique<ThinPlateField>(box, make_grid(box, depth).cell_size, materials,
                                                     tp, box_extents(thin_plate_boxes));
     // A rebuild on the same grid (a removal, a material's extent outgrown) starts its solve from
-    // the last field: far fewer iterations than from the closing value.
-    if (thin_plate) rebuilt->start_from(*thin_plate);
+    // the last field: far fewer iterations than from the closing value. It keeps the last
+    // field's sampled solution too, so that the octree's rows stay current where the solve does
+    // not move it (ThinPlateOptions::resample_tolerance) if the octree's grid is the same.
+    const bool started = thin_plate && rebuilt->start_from(*thin_plate);
+    sampled_tags_current = started && sampled_box.min == box.min && sampled_box.max == box.max &&
+                           sampled.grid.depth == depth;
     thin_plate = std::move(rebuilt);
+    thin_plate_ids.clear();
     thin_plate->add_slices(std::move(prepared));
+    thin_plate_ids = slice_ids(list, 0);
+    thin_plate_materials = material_ids;
+    thin_plate_box = box;
     stats.data_s += clock.seconds();
   }
 
@@ -301,6 +354,8 @@ struct Reconstructor::State {
       if (truncation_extent(grown[m]) != truncation_extent(basis[m])) return false;
     thin_plate_boxes = std::move(boxes);
     thin_plate->add_slices(std::move(added));
+    const std::vector<int> ids = slice_ids(list, first);
+    thin_plate_ids.insert(thin_plate_ids.end(), ids.begin(), ids.end());
     stats.data_s += clock.seconds();
     return true;
   }
@@ -346,6 +401,14 @@ struct Reconstructor::State {
   void sample(tbb::task_arena& arena, bool use_thin_plate, ReconstructionStats& stats);
   void extract_meshes(tbb::task_arena& arena, ReconstructionStats& stats);
   void finish_stats(UpdateStats& out, double total_s);
+
+  // Whether row `n` of `field` (a thin-plate sample) still holds what the field evaluates at its
+  // vertex: no solve since its evaluation (its tag) changed a node its interpolation reads.
+  bool thin_plate_row_current(const SampledField& field, std::size_t n) const {
+    int i = 0, j = 0, k = 0;
+    grid_unkey(field.keys[n], i, j, k);
+    return thin_plate->changed_at(field.grid.position(i, j, k)) <= field.row_tags[n];
+  }
 
   // Per update, for the stats: the points evaluated and their seconds, and the cells of the
   // last batch's points (kept to reuse the buffer).
@@ -592,7 +655,7 @@ void Reconstructor::State::evaluate_points(tbb::task_arena& arena, bool use_thin
   if (use_thin_plate) {
     const Stopwatch evaluation_clock;
     arena.execute([&] { thin_plate->evaluate(points, values); });
-    std::fill(tags, tags + points.size(), std::uint64_t{0});
+    std::fill(tags, tags + points.size(), std::uint64_t{thin_plate->generation()});
     evaluations += points.size();
     evaluation_seconds += evaluation_clock.seconds();
     return;
@@ -628,10 +691,9 @@ void Reconstructor::State::evaluate_points(tbb::task_arena& arena, bool use_thin
 }
 
 // The octree's samples of the field, smoothed. The last field is kept: its rows whose cells did
-// not change still hold their values. The thin-plate field changes everywhere at every update:
-// every row is evaluated again (an interpolation, not a field evaluation), and only the
-// workspace's tables are kept. In the arena: the octree's parallel loops use the same threads
-// as the evaluation.
+// not change still hold their values. A thin-plate row is current while no solve since its
+// evaluation changed the sampled solution it interpolates (ThinPlateField::changed_at). In the
+// arena: the octree's parallel loops use the same threads as the evaluation.
 void Reconstructor::State::sample(tbb::task_arena& arena, bool use_thin_plate,
                                   ReconstructionStats& stats) {
   evaluations = 0;
@@ -641,18 +703,21 @@ void Reconstructor::State::sample(tbb::task_arena& arena, bool use_thin_plate,
     evaluate_points(arena, use_thin_plate, points, values, tags, stats);
   };
   Stopwatch clock;
-  if (use_thin_plate) octree_workspace.previous_valid.clear();
-  if (sampled_tags_current && !use_thin_plate) {
+  octree_workspace.previous_valid.clear();
+  if (sampled_tags_current) {
     std::vector<char>& valid = octree_workspace.previous_valid;
     valid.assign(sampled.keys.size(), 0);
     arena.execute([&] {
       tbb::parallel_for(tbb::blocked_range<std::size_t>(0, valid.size(), 4096),
                         [&](const tbb::blocked_range<std::size_t>& r) {
                           for (std::size_t n = r.begin(); n < r.end(); ++n)
-                            valid[n] = tag_current(sampled.row_tags[n], cell_generation);
+                            valid[n] = use_thin_plate
+                                           ? thin_plate_row_current(sampled, n)
+                                           : tag_current(sampled.row_tags[n], cell_generation);
                         });
     });
   }
+  sampled_box = box;
   octree_workspace.previous = std::move(sampled);
   arena.execute([&] {
     const int function_count = static_cast<int>(material_ids.size()) + 1;

@@ -202,6 +202,9 @@ struct Level {
   std::vector<Real> zero_row;                      // finest level only: nx zeros
   // The smoother's diagonal: 1 / (s * l1 bound of L^2's row + row sum of D).
   std::vector<Real> inverse;
+  // Per node, the l1 bound of L^2's row (at most 144): it depends on the grid alone, so it is
+  // computed once, and an online update that changed the data weights only divides again.
+  std::vector<std::uint8_t> square_bound;
   std::vector<Real> x, b, r, d, ad, laplacian;  // V-cycle work
   std::size_t size() const { return static_cast<std::size_t>(nx) * ny * nz; }
   std::size_t index(int i, int j, int k) const {
@@ -348,24 +351,29 @@ void lump_finest_data(Level& g) {
 }
 
 void update_inverse_diagonal(Level& g) {
+  if (g.square_bound.size() != g.size()) {
+    g.square_bound.resize(g.size());
+    for_planes(g.nz, [&](int k) {
+      for (int j = 0; j < g.ny; ++j)
+        for (int i = 0; i < g.nx; ++i) {
+          // Row sum of |L^2| bounded by sum over k in N(n) u {n} of |L_nk| * 2 deg(k): exact
+          // inside the grid (144), an upper bound at its faces, so the smoother's D^-1 A has
+          // spectrum in (0, 1].
+          const int dn = degree(g, i, j, k);
+          int bound = 2 * dn * dn;
+          if (i > 0) bound += 2 * degree(g, i - 1, j, k);
+          if (i < g.nx - 1) bound += 2 * degree(g, i + 1, j, k);
+          if (j > 0) bound += 2 * degree(g, i, j - 1, k);
+          if (j < g.ny - 1) bound += 2 * degree(g, i, j + 1, k);
+          if (k > 0) bound += 2 * degree(g, i, j, k - 1);
+          if (k < g.nz - 1) bound += 2 * degree(g, i, j, k + 1);
+          g.square_bound[g.index(i, j, k)] = static_cast<std::uint8_t>(bound);
+        }
+    });
+  }
   g.inverse.resize(g.size());
-  for_planes(g.nz, [&](int k) {
-    for (int j = 0; j < g.ny; ++j)
-      for (int i = 0; i < g.nx; ++i) {
-        // Row sum of |L^2| bounded by sum over k in N(n) u {n} of |L_nk| * 2 deg(k): exact inside
-        // the grid (144), an upper bound at its faces, so the smoother's D^-1 A has spectrum in (0,
-        // 1].
-        const int dn = degree(g, i, j, k);
-        double bound = 2.0 * dn * dn;
-        if (i > 0) bound += 2.0 * degree(g, i - 1, j, k);
-        if (i < g.nx - 1) bound += 2.0 * degree(g, i + 1, j, k);
-        if (j > 0) bound += 2.0 * degree(g, i, j - 1, k);
-        if (j < g.ny - 1) bound += 2.0 * degree(g, i, j + 1, k);
-        if (k > 0) bound += 2.0 * degree(g, i, j, k - 1);
-        if (k < g.nz - 1) bound += 2.0 * degree(g, i, j, k + 1);
-        const std::size_t n = g.index(i, j, k);
-        g.inverse[n] = static_cast<Real>(1.0 / (g.scale * bound + g.weight[n]));
-      }
+  for_nodes(g.size(), [&](std::size_t n) {
+    g.inverse[n] = static_cast<Real>(1.0 / (g.scale * g.square_bound[n] + g.weight[n]));
   });
 }
 
@@ -587,6 +595,10 @@ static bool tighten(const Vec3& p, double* values, const PreparedSlice& b,
   return changed;
 }
 
+// The blocks of the solve grid whose change is tracked for re-sampling: nodes per axis. A
+// point's interpolation reads 4 nodes per axis, so at most 2 blocks per axis.
+constexpr int kBlock = 4;
+
 struct ThinPlateField::Impl {
   std::vector<double> extents_mm;  // per material, what the truncations were set from
   Box3 box;
@@ -597,6 +609,23 @@ struct ThinPlateField::Impl {
   std::vector<Level> levels;
   std::vector<double> weighted_targets;       // per material, level 0: the data's right-hand side
   std::vector<std::vector<double>> solution;  // per material, level 0
+  // What evaluate() interpolates: per material, the solution as last sampled, taken again per
+  // block of kBlock^3 nodes when a node of the block moved by more than the resample tolerance;
+  // `block_changed_at` holds the solve (`generation`) at which each block last took it.
+  std::vector<std::vector<double>> sampled;
+  std::array<int, 3> blocks{};
+  std::vector<std::uint32_t> block_changed_at;
+  // Per node (i0, j0, k0): the latest block_changed_at over the blocks that the interpolation
+  // in the cell with that min corner reads (nodes i0 - 1 .. i0 + 2 per axis), so that a look-up
+  // per octree row says whether it is current.
+  std::vector<std::uint32_t> stencil_changed_at;
+  std::uint32_t generation = 0;
+  // Per material, the largest distance between a sample added (or tightened) since the last
+  // solve and that solution (NaN-free; 0 when nothing was added), and whether this field solved
+  // before: an online update solves again only the materials whose new data the field does not fit
+  // yet.
+  std::vector<double> misfit_mm;
+  bool solved = false;
   std::vector<PreparedSlice> slices;
   bool weights_dirty = true;
   // solve_one's work vectors.
@@ -650,9 +679,13 @@ struct ThinPlateField::Impl {
                                              : static_cast<std::size_t>(g.nx) * g.ny;
     for (const auto& [at, old] : changes) {
       const std::size_t e = at / k, m = at % k;
+      const std::size_t n0 = c.nodes[e], n1 = n0 + stride;
       const double delta = c.weight * (c.targets[at] - old), t = c.positions[e];
-      weighted_targets[m * g.size() + c.nodes[e]] += (1.0 - t) * delta;
-      weighted_targets[m * g.size() + c.nodes[e] + stride] += t * delta;
+      weighted_targets[m * g.size() + n0] += (1.0 - t) * delta;
+      weighted_targets[m * g.size() + n1] += t * delta;
+      // A tightened value is new data too: solve() must not take the material as fitted.
+      const double fitted = (1.0 - t) * solution[m][n0] + t * solution[m][n1];
+      misfit_mm[m] = std::max(misfit_mm[m], std::abs(c.targets[at] - fitted));
     }
   }
 
@@ -716,6 +749,9 @@ struct ThinPlateField::Impl {
         const double target = data.targets[e * k + m];
         weighted_targets[m * g.size() + n0] += w * (1.0 - t) * target;
         weighted_targets[m * g.size() + n1] += w * t * target;
+        // What this sample asks of the last solution (the edge's linear interpolation).
+        const double fitted = (1.0 - t) * solution[m][n0] + t * solution[m][n1];
+        misfit_mm[m] = std::max(misfit_mm[m], std::abs(target - fitted));
       }
     }
     weights_dirty = true;
@@ -748,6 +784,98 @@ struct ThinPlateField::Impl {
       restrict_to_coarse(levels[l - 1], levels[l - 1].weight, levels[l], levels[l].weight);
     for (Level& level : levels) update_inverse_diagonal(level);
     weights_dirty = false;
+  }
+
+  std::size_t block_index(int bi, int bj, int bk) const {
+    return (static_cast<std::size_t>(bk) * blocks[1] + bj) * blocks[0] + bi;
+  }
+
+  // After a solve: the blocks in which some node of some material moved by more than the
+  // resample tolerance since it was sampled take the solution again (all of them at the first
+  // solve), and are marked as changed by this solve.
+  void resample_changed_blocks() {
+    ++generation;
+    const Level& g = levels[0];
+    if (generation == 1) {
+      sampled = solution;
+      block_changed_at.assign(static_cast<std::size_t>(blocks[0]) * blocks[1] * blocks[2],
+                              generation);
+      stencil_changed_at.assign(levels[0].size(), generation);
+      return;
+    }
+    const double tolerance_mm = options.resample_tolerance * spacing;
+    for_planes(blocks[2], [&](int bk) {
+      const int k0 = bk * kBlock, k1 = std::min(g.nz, k0 + kBlock);
+      for (int bj = 0; bj < blocks[1]; ++bj)
+        for (int bi = 0; bi < blocks[0]; ++bi) {
+          const int j0 = bj * kBlock, j1 = std::min(g.ny, j0 + kBlock);
+          const int i0 = bi * kBlock, i1 = std::min(g.nx, i0 + kBlock);
+          auto for_rows = [&](const auto& body) {
+            for (std::size_t m = 0; m < solution.size(); ++m)
+              for (int k = k0; k < k1; ++k)
+                for (int j = j0; j < j1; ++j) {
+                  const std::size_t row = g.index(0, j, k);
+                  body(solution[m].data() + row, sampled[m].data() + row);
+                }
+          };
+          double moved = 0.0;
+          for_rows([&](const double* now, double* before) {
+            for (int i = i0; i < i1; ++i) moved = std::max(moved, std::abs(now[i] - before[i]));
+          });
+          if (!(moved > tolerance_mm)) continue;
+          for_rows([&](const double* now, double* before) {
+            std::copy(now + i0, now + i1, before + i0);
+          });
+          block_changed_at[block_index(bi, bj, bk)] = generation;
+        }
+    });
+    spread_block_changes();
+  }
+
+  // stencil_changed_at from block_changed_at, one axis after the other: along an axis the
+  // nodes i0 - 1 .. i0 + 2 (clamped) lie in one or two neighbouring blocks.
+  void spread_block_changes() {
+    const Level& g = levels[0];
+    const int dims[3] = {g.nx, g.ny, g.nz};
+    auto first = [](int i) { return std::max(0, i - 1) / kBlock; };
+    auto last = [&](int a, int i) { return std::min(dims[a] - 1, i + 2) / kBlock; };
+    // Along x: blocks[2] x blocks[1] rows of nx; then y: blocks[2] x ny rows; then z: the grid.
+    std::vector<std::uint32_t> along_x(static_cast<std::size_t>(blocks[2]) * blocks[1] * g.nx);
+    for (int bk = 0; bk < blocks[2]; ++bk)
+      for (int bj = 0; bj < blocks[1]; ++bj)
+        for (int i = 0; i < g.nx; ++i)
+          along_x[(static_cast<std::size_t>(bk) * blocks[1] + bj) * g.nx + i] =
+              std::max(block_changed_at[block_index(first(i), bj, bk)],
+                       block_changed_at[block_index(last(0, i), bj, bk)]);
+    std::vector<std::uint32_t> along_y(static_cast<std::size_t>(blocks[2]) * g.ny * g.nx);
+    for (int bk = 0; bk < blocks[2]; ++bk)
+      for (int j = 0; j < g.ny; ++j)
+        for (int i = 0; i < g.nx; ++i) {
+          const std::size_t row = static_cast<std::size_t>(bk) * blocks[1];
+          along_y[(static_cast<std::size_t>(bk) * g.ny + j) * g.nx + i] = std::max(
+              along_x[(row + first(j)) * g.nx + i], along_x[(row + last(1, j)) * g.nx + i]);
+        }
+    stencil_changed_at.resize(g.size());
+    for_planes(g.nz, [&](int k) {
+      const std::size_t below = static_cast<std::size_t>(first(k)) * g.ny * g.nx;
+      const std::size_t above = static_cast<std::size_t>(last(2, k)) * g.ny * g.nx;
+      for (std::size_t n = 0; n < static_cast<std::size_t>(g.ny) * g.nx; ++n)
+        stencil_changed_at[g.index(0, 0, k) + n] = std::max(along_y[below + n], along_y[above + n]);
+    });
+  }
+
+  // The node before `point` (world mm) on each axis, clamped so that [i0, i0 + 1] is a cell of
+  // the grid, and the position in that cell (0 on an axis of one node).
+  void locate(const Vec3& point, int i0[3], double t[3]) const {
+    const Level& g = levels[0];
+    const Vec3 q = (point - box.min) / spacing;
+    const int dims[3] = {g.nx, g.ny, g.nz};
+    for (int a = 0; a < 3; ++a) {
+      const double clamped = std::clamp(q[a], 0.0, static_cast<double>(dims[a] - 1));
+      i0[a] = std::min(static_cast<int>(std::floor(clamped)), dims[a] - 2);
+      i0[a] = std::max(i0[a], 0);
+      t[a] = dims[a] > 1 ? clamped - i0[a] : 0.0;
+    }
   }
 
   // Conjugate gradients on A x = b, preconditioned by one V-cycle, from x. Returns the
@@ -892,9 +1020,15 @@ ThinPlateField::ThinPlateField(const Box3& box, double finest_cell_mm, int mater
     s.levels.push_back(std::move(level));
   }
   const std::size_t nodes = s.levels[0].size();
+  s.blocks = {(s.levels[0].nx + kBlock - 1) / kBlock, (s.levels[0].ny + kBlock - 1) / kBlock,
+              (s.levels[0].nz + kBlock - 1) / kBlock};
   s.weighted_targets.assign(nodes * static_cast<std::size_t>(materials), 0.0);
   for (int m = 0; m < materials; ++m)
     s.solution.emplace_back(nodes, -s.truncation_mm[static_cast<std::size_t>(m)]);
+  s.sampled = s.solution;
+  s.misfit_mm.assign(static_cast<std::size_t>(materials), 0.0);
+  s.block_changed_at.assign(static_cast<std::size_t>(s.blocks[0]) * s.blocks[1] * s.blocks[2], 0);
+  s.stencil_changed_at.assign(nodes, 0);
   s.add_closing();
 }
 
@@ -934,13 +1068,25 @@ ThinPlateSolveStats ThinPlateField::solve() {
   Impl& s = *impl_;
   ThinPlateSolveStats stats;
   Stopwatch clock;
-  s.refresh_weights();
   const std::size_t count = s.levels[0].size();
+  const double fitted_mm = s.options.tolerance * s.spacing;
   for (int m = 0; m < s.materials; ++m) {
-    stats.iterations +=
-        s.solve_one(s.solution[static_cast<std::size_t>(m)],
-                    s.weighted_targets.data() + static_cast<std::size_t>(m) * count);
+    // The field already fits this material's new data to the solver's tolerance, and nothing
+    // else changed since its last solve (no removal: a rebuilt field has not solved yet): a
+    // solve would move it by about as much as its tolerance allows.
+    double& misfit = s.misfit_mm[static_cast<std::size_t>(m)];
+    if (s.solved && misfit <= fitted_mm) {
+      ++stats.unchanged_materials;
+    } else {
+      s.refresh_weights();  // not when every material is left as it is: the next solve does it
+      stats.iterations +=
+          s.solve_one(s.solution[static_cast<std::size_t>(m)],
+                      s.weighted_targets.data() + static_cast<std::size_t>(m) * count);
+    }
+    misfit = 0.0;
   }
+  s.solved = true;
+  s.resample_changed_blocks();
   stats.solve_s = clock.seconds();
   stats.nodes = count;
   return stats;
@@ -950,50 +1096,46 @@ void ThinPlateField::evaluate(const std::vector<Vec3>& points, double* values) c
   const Impl& s = *impl_;
   const Level& g = s.levels[0];
   const std::size_t fc = static_cast<std::size_t>(s.materials) + 1;
-  tbb::parallel_for(
-      tbb::blocked_range<std::size_t>(0, points.size(), 1024),
-      [&](const tbb::blocked_range<std::size_t>& range) {
-        for (std::size_t p = range.begin(); p < range.end(); ++p) {
-          const Vec3 q = (points[p] - s.box.min) / s.spacing;
-          const int dims[3] = {g.nx, g.ny, g.nz};
-          int i0[3];
-          double t[3];
-          for (int a = 0; a < 3; ++a) {
-            const double clamped = std::clamp(q[a], 0.0, static_cast<double>(dims[a] - 1));
-            i0[a] = std::min(static_cast<int>(std::floor(clamped)), dims[a] - 2);
-            i0[a] = std::max(i0[a], 0);
-            t[a] = dims[a] > 1 ? clamped - i0[a] : 0.0;
-          }
-          double* out = values + p * fc;
-          double best = -std::numeric_limits<double>::infinity();
-          // Catmull-Rom weights per axis over nodes i0 - 1 .. i0 + 2 (clamped at the faces):
-          // cubic between the nodes, so the fine vertices see the solution's curvature.
-          double w[3][4];
-          int at[3][4];
-          for (int a = 0; a < 3; ++a) {
-            const double x = t[a], x2 = x * x, x3 = x2 * x;
-            w[a][0] = 0.5 * (-x3 + 2.0 * x2 - x);
-            w[a][1] = 0.5 * (3.0 * x3 - 5.0 * x2 + 2.0);
-            w[a][2] = 0.5 * (-3.0 * x3 + 4.0 * x2 + x);
-            w[a][3] = 0.5 * (x3 - x2);
-            for (int o = 0; o < 4; ++o) at[a][o] = std::clamp(i0[a] - 1 + o, 0, dims[a] - 1);
-          }
-          for (int m = 0; m < s.materials; ++m) {
-            const std::vector<double>& f = s.solution[static_cast<std::size_t>(m)];
-            double value = 0.0;
-            for (int c = 0; c < 4; ++c)
-              for (int b = 0; b < 4; ++b) {
-                const double wcb = w[2][c] * w[1][b];
-                const std::size_t row = g.index(0, at[1][b], at[2][c]);
-                for (int a = 0; a < 4; ++a)
-                  value += wcb * w[0][a] * f[row + static_cast<std::size_t>(at[0][a])];
-              }
-            out[m + 1] = value;
-            best = std::max(best, value);
-          }
-          out[0] = s.materials > 0 ? -best : 0.0;
-        }
-      });
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, points.size(), 1024),
+                    [&](const tbb::blocked_range<std::size_t>& range) {
+                      for (std::size_t p = range.begin(); p < range.end(); ++p) {
+                        const int dims[3] = {g.nx, g.ny, g.nz};
+                        int i0[3];
+                        double t[3];
+                        s.locate(points[p], i0, t);
+                        double* out = values + p * fc;
+                        double best = -std::numeric_limits<double>::infinity();
+                        // Catmull-Rom weights per axis over nodes i0 - 1 .. i0 + 2 (clamped at the
+                        // faces): cubic between the nodes, so the fine vertices see the solution's
+                        // curvature.
+                        double w[3][4];
+                        int at[3][4];
+                        for (int a = 0; a < 3; ++a) {
+                          const double x = t[a], x2 = x * x, x3 = x2 * x;
+                          w[a][0] = 0.5 * (-x3 + 2.0 * x2 - x);
+                          w[a][1] = 0.5 * (3.0 * x3 - 5.0 * x2 + 2.0);
+                          w[a][2] = 0.5 * (-3.0 * x3 + 4.0 * x2 + x);
+                          w[a][3] = 0.5 * (x3 - x2);
+                          for (int o = 0; o < 4; ++o)
+                            at[a][o] = std::clamp(i0[a] - 1 + o, 0, dims[a] - 1);
+                        }
+                        for (int m = 0; m < s.materials; ++m) {
+                          const std::vector<double>& f = s.sampled[static_cast<std::size_t>(m)];
+                          double value = 0.0;
+                          for (int c = 0; c < 4; ++c)
+                            for (int b = 0; b < 4; ++b) {
+                              const double wcb = w[2][c] * w[1][b];
+                              const std::size_t row = g.index(0, at[1][b], at[2][c]);
+                              for (int a = 0; a < 4; ++a)
+                                value +=
+                                    wcb * w[0][a] * f[row + static_cast<std::size_t>(at[0][a])];
+                            }
+                          out[m + 1] = value;
+                          best = std::max(best, value);
+                        }
+                        out[0] = s.materials > 0 ? -best : 0.0;
+                      }
+                    });
 }
 
 bool ThinPlateField::start_from(const ThinPlateField& other) {
@@ -1003,7 +1145,33 @@ bool ThinPlateField::start_from(const ThinPlateField& other) {
       node_counts() != other.node_counts())
     return false;
   s.solution = o.solution;
+  // A material whose truncation changed: its data and closing values at +-T moved to the new T,
+  // the distances within T did not. The last solution's plateaus are moved with them (linearly
+  // from half the old T outwards), which leaves the solve the local change only.
+  for (std::size_t m = 0; m < s.solution.size(); ++m) {
+    const double before = o.truncation_mm[m], after = s.truncation_mm[m];
+    if (before == after || !(before > 0.0)) continue;
+    for (double& value : s.solution[m]) {
+      const double u = std::clamp(value / before, -1.0, 1.0);
+      const double moved = std::copysign(std::max(0.0, 2.0 * std::abs(u) - 1.0), u);
+      value += (after - before) * moved;
+    }
+  }
+  s.sampled = o.sampled;
+  s.block_changed_at = o.block_changed_at;
+  s.stencil_changed_at = o.stencil_changed_at;
+  s.generation = o.generation;
   return true;
+}
+
+std::uint32_t ThinPlateField::generation() const { return impl_->generation; }
+
+std::uint32_t ThinPlateField::changed_at(const Vec3& point) const {
+  const Impl& s = *impl_;
+  int i0[3];
+  double t[3];
+  s.locate(point, i0, t);
+  return s.stencil_changed_at[s.levels[0].index(i0[0], i0[1], i0[2])];
 }
 
 int ThinPlateField::function_count() const { return impl_->materials + 1; }

@@ -39,6 +39,14 @@ struct ThinPlateOptions {
   /// the surface by about that, far below what the grid resolves.
   double tolerance = 1e-2;
   int max_iterations = 200;
+  /// What evaluate() interpolates is the solution as last sampled, per block of 4^3 nodes: a
+  /// block takes the solution again when one of its nodes moved by more than this fraction of
+  /// the grid spacing since, so every node is within that of the solution and the interpolated
+  /// values within 1.25^3 times that (the Catmull-Rom weights' absolute sum). An online engine
+  /// samples again only the points that read a block that changed (changed_at). A quarter of
+  /// the solver's tolerance: the blocks a solve changes are mostly those where the solution
+  /// really moves, which a larger tolerance would not keep.
+  double resample_tolerance = 2.5e-3;
 };
 
 /// What one solve did.
@@ -46,6 +54,9 @@ struct ThinPlateSolveStats {
   double solve_s = 0.0;   ///< conjugate gradients, every material
   int iterations = 0;     ///< summed over materials
   std::size_t nodes = 0;  ///< solve grid nodes
+  /// Materials not solved again: their data added since the last solve lie within the solver's
+  /// tolerance of the field, and nothing else changed.
+  int unchanged_materials = 0;
 };
 
 /// The thin-plate field of K materials over a box. Not thread-safe; evaluate() may be called
@@ -65,13 +76,24 @@ class ThinPlateField {
   /// (slices()).
   void add_slices(std::vector<PreparedSlice> slices);
   /// Starts the next solve from `other`'s solution when both have the same grid and materials
-  /// (a rebuild: the data changed, the field mostly not). Returns whether it did.
+  /// (a rebuild: the data changed, the field mostly not), and keeps `other`'s sampled solution
+  /// and generation, so that what `other` evaluated stays current where the solve moves
+  /// nothing by more than the resample tolerance. Returns whether it did.
   bool start_from(const ThinPlateField& other);
-  /// Solves for every material from the last solution (-truncation at first).
+  /// Solves for every material from the last solution (-truncation at first), except, after
+  /// this field's first solve, the materials whose added data the field fits to the solver's
+  /// tolerance already (ThinPlateSolveStats::unchanged_materials).
   ThinPlateSolveStats solve();
   /// Values of the K + 1 functions at `points` (world mm), function_count() per point, in
-  /// parallel: f_m interpolated from the solve grid (tricubic Catmull-Rom), f_0 = -max_m f_m.
+  /// parallel: f_m interpolated from the solve grid's sampled solution (tricubic Catmull-Rom;
+  /// see ThinPlateOptions::resample_tolerance), f_0 = -max_m f_m.
   void evaluate(const std::vector<Vec3>& points, double* values) const;
+  /// The count of solves so far (1 after the first; start_from carries it on): a value that
+  /// evaluate() gave after solve number `generation()` is still what it gives while
+  /// changed_at(point) <= that number.
+  std::uint32_t generation() const;
+  /// The last solve that changed a node which evaluate(point) reads.
+  std::uint32_t changed_at(const Vec3& point) const;
   int function_count() const;
   /// Per material: the extent the field was set up with (mm).
   const std::vector<double>& extents() const;

@@ -350,6 +350,14 @@ ReconstructorOptions thin_plate_setup(const SliceSet& set) {
   return setup;
 }
 
+// The one-shot field of `set` as the online engine samples it.
+std::vector<std::pair<Vec3, std::vector<double>>> reconstructed_field(const SliceSet& set) {
+  Reconstructor once(thin_plate_setup(set));
+  for (const LabeledSlice& slice : set.slices) once.add_slice(slice);
+  once.update();
+  return once.sampled_field();
+}
+
 // The online engine adds each slice's data and solves from the last solution; the one-shot
 // solve starts from the closing value. Both stop at the same tolerance, so they agree to the
 // solver's tolerance, not to the bit.
@@ -395,6 +403,187 @@ TEST(ThinPlateOnline, UpdatesAgreeWithTheOneShotFieldToTheSolversTolerance) {
   const double va = signed_volume(online.mesh().meshes[0].mesh),
                vb = signed_volume(once.mesh().meshes[0].mesh);
   EXPECT_NEAR(va / vb, 1.0, 1e-3);
+}
+
+// Two fields given the same slices and solves: one samples its solution again per block only
+// where it moved by more than the resample tolerance, the other (tolerance 0) everywhere. Their
+// solutions are the same; their values differ by at most 1.25^3 x the tolerance (the
+// Catmull-Rom weights' absolute sum), and a point whose nodes no solve changed since keeps its
+// value to the bit.
+TEST(ThinPlateOnline, PartialResamplingStaysWithinItsToleranceOfTheSolution) {
+  const SliceSet set = sphere_stack(40.0, {-30, -15, 0, 15, 30});
+  const Box3 box = *set.bounds;
+  const double finest = box.size().maxCoeff() / 128.0;
+  const std::vector<PreparedSlice> prepared = prepare_slices(set, {1}, box);
+  const std::vector<double> extents = box_extents(material_boxes(prepared, 1));
+  ThinPlateOptions partial_options;
+  ThinPlateOptions full_options;
+  full_options.resample_tolerance = 0.0;
+  ThinPlateField partial(box, finest, 1, partial_options, extents);
+  ThinPlateField full(box, finest, 1, full_options, extents);
+  // Points scattered over the box, off the grid's nodes.
+  std::vector<Vec3> points;
+  for (int i = 0; i < 4000; ++i) {
+    const Vec3 t(std::fmod(0.618034 * i, 1.0), std::fmod(0.414214 * i + 0.1, 1.0),
+                 std::fmod(0.732051 * i + 0.2, 1.0));
+    points.push_back(box.min + t.cwiseProduct(box.size()));
+  }
+  const double spacing = 2.0 * finest;
+  const double bound = 1.25 * 1.25 * 1.25 * partial_options.resample_tolerance * spacing;
+  std::vector<double> before(points.size() * 2), a(points.size() * 2), b(points.size() * 2);
+  std::size_t kept = 0, kept_equal = 0;
+  double worst = 0.0, largest = 0.0;
+  for (std::size_t k = 0; k < prepared.size(); ++k) {
+    SCOPED_TRACE("slice " + std::to_string(k));
+    partial.add_slices({prepared[k]});
+    full.add_slices({prepared[k]});
+    const std::uint32_t previous = partial.generation();
+    partial.solve();
+    full.solve();
+    ASSERT_EQ(partial.generation(), previous + 1);
+    partial.evaluate(points, a.data());
+    full.evaluate(points, b.data());
+    for (std::size_t p = 0; p < points.size(); ++p) {
+      for (std::size_t f = 0; f < 2; ++f) {
+        worst = std::max(worst, std::abs(a[2 * p + f] - b[2 * p + f]));
+        largest = std::max(largest, std::abs(b[2 * p + f] - before[2 * p + f]));
+      }
+      if (k == 0 || partial.changed_at(points[p]) > previous) continue;
+      ++kept;
+      kept_equal += a[2 * p] == before[2 * p] && a[2 * p + 1] == before[2 * p + 1];
+    }
+    before = a;
+  }
+  EXPECT_LE(worst, bound);
+  EXPECT_GT(worst, 0.0);  // some values were kept...
+  EXPECT_GT(kept, 0u);
+  EXPECT_EQ(kept_equal, kept);      // ...to the bit where changed_at says so
+  EXPECT_GT(largest, 100 * bound);  // while the solution moved far more than the tolerance
+}
+
+// A material whose added data the field already fits to the solver's tolerance is not solved
+// again (here: a slice given twice), one whose data are new is; either way the field stays
+// within about the solver's tolerance of a one-shot solve of the same data. A coarse tolerance
+// (a quarter of a grid spacing) makes the repeated slice's fit residual fall below it.
+TEST(ThinPlateOnline, AMaterialWhoseNewDataTheFieldFitsIsNotSolvedAgain) {
+  const SliceSet set = sphere_stack(40.0, {-30, -15, 0, 15, 30});
+  const Box3 box = *set.bounds;
+  const double finest = box.size().maxCoeff() / 128.0, spacing = 2.0 * finest;
+  std::vector<PreparedSlice> prepared = prepare_slices(set, {1}, box);
+  LabeledSlice low = z_slice(-36.0);
+  low.regions.push_back({1, sphere_section(Vec3::Zero(), 40.0, -36.0), {}});
+  const PreparedSlice added = prepare_slice(low, prepared.size(), {1}, box);
+  const std::vector<double> extents = box_extents(material_boxes(prepared, 1));
+  ThinPlateOptions options;
+  options.tolerance = 0.25;
+  ThinPlateField online(box, finest, 1, options, extents);
+  online.add_slices(prepared);
+  EXPECT_EQ(online.solve().unchanged_materials, 0);  // a field's first solve always solves
+  online.add_slices({prepared[2]});
+  const ThinPlateSolveStats repeated = online.solve();
+  EXPECT_EQ(repeated.unchanged_materials, 1);
+  EXPECT_EQ(repeated.iterations, 0);
+  online.add_slices({added});
+  const ThinPlateSolveStats fresh = online.solve();
+  EXPECT_EQ(fresh.unchanged_materials, 0);
+  EXPECT_GT(fresh.iterations, 0);
+
+  ThinPlateField once(box, finest, 1, options, extents);
+  std::vector<PreparedSlice> all = prepared;
+  all.push_back(prepared[2]);
+  all.push_back(added);
+  once.add_slices(all);
+  once.solve();
+  std::vector<Vec3> points;
+  for (int i = 0; i < 2000; ++i)
+    points.push_back(box.min + Vec3(std::fmod(0.618034 * i, 1.0), std::fmod(0.414214 * i, 1.0),
+                                    std::fmod(0.732051 * i, 1.0))
+                                   .cwiseProduct(box.size()));
+  std::vector<double> a(points.size() * 2), b(points.size() * 2);
+  online.evaluate(points, a.data());
+  once.evaluate(points, b.data());
+  double worst = 0.0;
+  for (std::size_t n = 0; n < a.size(); ++n) worst = std::max(worst, std::abs(a[n] - b[n]));
+  EXPECT_LT(worst, 2.0 * options.tolerance * spacing);
+}
+
+// The online engine keeps the octree's rows whose interpolation reads no block that a solve
+// changed, through added slices, an organ's growing extent (a rebuild from the last field) and
+// the removal of a stray slice (another rebuild, which moves the field near that slice only and
+// keeps most rows): the result still agrees with the one-shot field.
+TEST(ThinPlateOnline, KeptRowsStayCurrentThroughAdditionsRebuildsAndRemovals) {
+  // The equator first: the vertical slices then grow the organ's extent, which rebuilds.
+  const SliceSet stack = sphere_stack(40.0, {-30, -20, -10, 0, 10, 20, 30});
+  SliceSet set = stack;
+  std::rotate(set.slices.begin(), set.slices.begin() + 3, set.slices.end() - 2);
+  // A stray disc inside the organ's box (so its extent does not change), added and removed.
+  LabeledSlice stray = z_slice(-38.0);
+  stray.regions.push_back({1, circle(Vec2(25, 25), 5.0, 32), {}});
+  Reconstructor online(thin_plate_setup(set));
+  std::size_t rebuilds = 0;
+  for (const LabeledSlice& slice : set.slices) {
+    online.add_slice(slice);
+    rebuilds += online.update().full_rebuild;
+  }
+  EXPECT_GE(rebuilds, 2u);  // the first update and the extent's growth
+  const int stray_id = online.add_slice(stray);
+  EXPECT_FALSE(online.update().full_rebuild);
+  ASSERT_TRUE(online.remove_slice(stray_id));
+  const UpdateStats removal = online.update();
+  EXPECT_TRUE(removal.full_rebuild);
+  EXPECT_LT(removal.step.field_evaluations, online.sampled_field().size());  // rows were kept
+  const auto a = online.sampled_field();
+  const auto b = reconstructed_field(set);
+  // Both lists are sorted by grid key, i.e. lexicographically by position on the same grid.
+  auto less = [](const Vec3& p, const Vec3& q) {
+    return std::lexicographical_compare(p.data(), p.data() + 3, q.data(), q.data() + 3);
+  };
+  std::size_t compared = 0, i = 0, j = 0;
+  double worst = 0.0;
+  while (i < a.size() && j < b.size()) {
+    if (less(a[i].first, b[j].first)) {
+      ++i;
+    } else if (less(b[j].first, a[i].first)) {
+      ++j;
+    } else {
+      for (std::size_t f = 0; f < a[i].second.size(); ++f)
+        worst = std::max(worst, std::abs(a[i].second[f] - b[j].second[f]));
+      ++compared;
+      ++i;
+      ++j;
+    }
+  }
+  EXPECT_GT(compared, a.size() * 9 / 10);
+  // The solver's tolerance (1e-2 of a grid spacing) and the sampled solution's (2.5e-3, times
+  // 1.25^3) of the one-shot field.
+  const double spacing = 2.0 * 120.0 / 128.0;
+  EXPECT_LT(worst, 2.0 * 1e-2 * spacing);
+}
+
+// What an online update keeps (rows, unsolved materials, moved plateaus) depends on the values
+// alone: the meshes after every update are the same to the bit at any thread count.
+TEST(ThinPlateOnline, UpdatesAreTheSameToTheBitAtAnyThreadCount) {
+  const SliceSet set = sphere_stack(40.0, {0, 30, -30, 15, -15});
+  std::vector<std::vector<MeshSet>> runs;
+  for (const int threads : {1, 3}) {
+    ReconstructorOptions setup = thin_plate_setup(set);
+    setup.engine.threads = threads;
+    Reconstructor online(setup);
+    runs.emplace_back();
+    for (const LabeledSlice& slice : set.slices) {
+      online.add_slice(slice);
+      online.update();
+      runs.back().push_back(online.mesh());
+    }
+  }
+  for (std::size_t u = 0; u < runs[0].size(); ++u) {
+    SCOPED_TRACE("update " + std::to_string(u));
+    ASSERT_EQ(runs[1][u].meshes.size(), runs[0][u].meshes.size());
+    for (std::size_t m = 0; m < runs[0][u].meshes.size(); ++m) {
+      EXPECT_EQ(runs[1][u].meshes[m].mesh.vertices, runs[0][u].meshes[m].mesh.vertices);
+      EXPECT_EQ(runs[1][u].meshes[m].mesh.triangles, runs[0][u].meshes[m].mesh.triangles);
+    }
+  }
 }
 
 // A wrong slice (a stray disc below the sphere) removed again: its data must go with it, or the
