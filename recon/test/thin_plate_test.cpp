@@ -350,8 +350,39 @@ ReconstructorOptions thin_plate_setup(const SliceSet& set) {
   return setup;
 }
 
+using SampledField = std::vector<std::pair<Vec3, std::vector<double>>>;
+
+// Two sampled fields where both sampled: how many vertices, and the largest difference of a
+// value. Both lists are sorted by grid key, i.e. lexicographically by position on one grid, so
+// they are walked together.
+struct SampledComparison {
+  std::size_t compared = 0;
+  double worst = 0.0;
+};
+SampledComparison compare_sampled(const SampledField& a, const SampledField& b) {
+  auto less = [](const Vec3& p, const Vec3& q) {
+    return std::lexicographical_compare(p.data(), p.data() + 3, q.data(), q.data() + 3);
+  };
+  SampledComparison out;
+  std::size_t i = 0, j = 0;
+  while (i < a.size() && j < b.size()) {
+    if (less(a[i].first, b[j].first)) {
+      ++i;
+    } else if (less(b[j].first, a[i].first)) {
+      ++j;
+    } else {
+      for (std::size_t f = 0; f < a[i].second.size(); ++f)
+        out.worst = std::max(out.worst, std::abs(a[i].second[f] - b[j].second[f]));
+      ++out.compared;
+      ++i;
+      ++j;
+    }
+  }
+  return out;
+}
+
 // The one-shot field of `set` as the online engine samples it.
-std::vector<std::pair<Vec3, std::vector<double>>> reconstructed_field(const SliceSet& set) {
+SampledField reconstructed_field(const SliceSet& set) {
   Reconstructor once(thin_plate_setup(set));
   for (const LabeledSlice& slice : set.slices) once.add_slice(slice);
   once.update();
@@ -372,29 +403,9 @@ TEST(ThinPlateOnline, UpdatesAgreeWithTheOneShotFieldToTheSolversTolerance) {
   Reconstructor once(thin_plate_setup(set));
   for (const LabeledSlice& slice : set.slices) once.add_slice(slice);
   once.update();
-  // Both lists are sorted by grid key, i.e. lexicographically by position on the same grid:
-  // walk them together and compare the values where both sampled.
   const auto a = online.sampled_field();
-  const auto b = once.sampled_field();
   ASSERT_GT(a.size(), 1000u);
-  auto less = [](const Vec3& p, const Vec3& q) {
-    return std::lexicographical_compare(p.data(), p.data() + 3, q.data(), q.data() + 3);
-  };
-  std::size_t compared = 0, i = 0, j = 0;
-  double worst = 0.0;
-  while (i < a.size() && j < b.size()) {
-    if (less(a[i].first, b[j].first)) {
-      ++i;
-    } else if (less(b[j].first, a[i].first)) {
-      ++j;
-    } else {
-      for (std::size_t f = 0; f < a[i].second.size(); ++f)
-        worst = std::max(worst, std::abs(a[i].second[f] - b[j].second[f]));
-      ++compared;
-      ++i;
-      ++j;
-    }
-  }
+  const auto [compared, worst] = compare_sampled(a, once.sampled_field());
   EXPECT_GT(compared, a.size() * 9 / 10);
   // The solve stops when an iteration moves no value by more than 1e-2 of its grid spacing
   // (2 finest cells of 120 / 2^7 mm): each result is within about that of the exact solution.
@@ -533,26 +544,7 @@ TEST(ThinPlateOnline, KeptRowsStayCurrentThroughAdditionsRebuildsAndRemovals) {
   EXPECT_TRUE(removal.full_rebuild);
   EXPECT_LT(removal.step.field_evaluations, online.sampled_field().size());  // rows were kept
   const auto a = online.sampled_field();
-  const auto b = reconstructed_field(set);
-  // Both lists are sorted by grid key, i.e. lexicographically by position on the same grid.
-  auto less = [](const Vec3& p, const Vec3& q) {
-    return std::lexicographical_compare(p.data(), p.data() + 3, q.data(), q.data() + 3);
-  };
-  std::size_t compared = 0, i = 0, j = 0;
-  double worst = 0.0;
-  while (i < a.size() && j < b.size()) {
-    if (less(a[i].first, b[j].first)) {
-      ++i;
-    } else if (less(b[j].first, a[i].first)) {
-      ++j;
-    } else {
-      for (std::size_t f = 0; f < a[i].second.size(); ++f)
-        worst = std::max(worst, std::abs(a[i].second[f] - b[j].second[f]));
-      ++compared;
-      ++i;
-      ++j;
-    }
-  }
+  const auto [compared, worst] = compare_sampled(a, reconstructed_field(set));
   EXPECT_GT(compared, a.size() * 9 / 10);
   // The solver's tolerance (1e-2 of a grid spacing) and the sampled solution's (2.5e-3, times
   // 1.25^3) of the one-shot field.
