@@ -878,6 +878,43 @@ struct ThinPlateField::Impl {
     }
   }
 
+  // The functions at `point` (world mm) into out[0 .. materials]: each material's sampled
+  // solution by Catmull-Rom weights per axis over nodes i0 - 1 .. i0 + 2 (clamped at the faces):
+  // cubic between the nodes, so the fine vertices see the solution's curvature; out[0], the
+  // outside's, is minus the largest.
+  void interpolate(const Vec3& point, double* out) const {
+    const Level& g = levels[0];
+    const int dims[3] = {g.nx, g.ny, g.nz};
+    int i0[3];
+    double t[3];
+    locate(point, i0, t);
+    double w[3][4];
+    int at[3][4];
+    for (int a = 0; a < 3; ++a) {
+      const double x = t[a], x2 = x * x, x3 = x2 * x;
+      w[a][0] = 0.5 * (-x3 + 2.0 * x2 - x);
+      w[a][1] = 0.5 * (3.0 * x3 - 5.0 * x2 + 2.0);
+      w[a][2] = 0.5 * (-3.0 * x3 + 4.0 * x2 + x);
+      w[a][3] = 0.5 * (x3 - x2);
+      for (int o = 0; o < 4; ++o) at[a][o] = std::clamp(i0[a] - 1 + o, 0, dims[a] - 1);
+    }
+    double best = -std::numeric_limits<double>::infinity();
+    for (int m = 0; m < materials; ++m) {
+      const std::vector<double>& f = sampled[static_cast<std::size_t>(m)];
+      double value = 0.0;
+      for (int c = 0; c < 4; ++c)
+        for (int b = 0; b < 4; ++b) {
+          const double wcb = w[2][c] * w[1][b];
+          const std::size_t row = g.index(0, at[1][b], at[2][c]);
+          for (int a = 0; a < 4; ++a)
+            value += wcb * w[0][a] * f[row + static_cast<std::size_t>(at[0][a])];
+        }
+      out[m + 1] = value;
+      best = std::max(best, value);
+    }
+    out[0] = materials > 0 ? -best : 0.0;
+  }
+
   // Conjugate gradients on A x = b, preconditioned by one V-cycle, from x. Returns the
   // iterations.
   int solve_one(std::vector<double>& x, const double* b) {
@@ -1094,47 +1131,11 @@ ThinPlateSolveStats ThinPlateField::solve() {
 
 void ThinPlateField::evaluate(const std::vector<Vec3>& points, double* values) const {
   const Impl& s = *impl_;
-  const Level& g = s.levels[0];
   const std::size_t fc = static_cast<std::size_t>(s.materials) + 1;
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, points.size(), 1024),
                     [&](const tbb::blocked_range<std::size_t>& range) {
-                      for (std::size_t p = range.begin(); p < range.end(); ++p) {
-                        const int dims[3] = {g.nx, g.ny, g.nz};
-                        int i0[3];
-                        double t[3];
-                        s.locate(points[p], i0, t);
-                        double* out = values + p * fc;
-                        double best = -std::numeric_limits<double>::infinity();
-                        // Catmull-Rom weights per axis over nodes i0 - 1 .. i0 + 2 (clamped at the
-                        // faces): cubic between the nodes, so the fine vertices see the solution's
-                        // curvature.
-                        double w[3][4];
-                        int at[3][4];
-                        for (int a = 0; a < 3; ++a) {
-                          const double x = t[a], x2 = x * x, x3 = x2 * x;
-                          w[a][0] = 0.5 * (-x3 + 2.0 * x2 - x);
-                          w[a][1] = 0.5 * (3.0 * x3 - 5.0 * x2 + 2.0);
-                          w[a][2] = 0.5 * (-3.0 * x3 + 4.0 * x2 + x);
-                          w[a][3] = 0.5 * (x3 - x2);
-                          for (int o = 0; o < 4; ++o)
-                            at[a][o] = std::clamp(i0[a] - 1 + o, 0, dims[a] - 1);
-                        }
-                        for (int m = 0; m < s.materials; ++m) {
-                          const std::vector<double>& f = s.sampled[static_cast<std::size_t>(m)];
-                          double value = 0.0;
-                          for (int c = 0; c < 4; ++c)
-                            for (int b = 0; b < 4; ++b) {
-                              const double wcb = w[2][c] * w[1][b];
-                              const std::size_t row = g.index(0, at[1][b], at[2][c]);
-                              for (int a = 0; a < 4; ++a)
-                                value +=
-                                    wcb * w[0][a] * f[row + static_cast<std::size_t>(at[0][a])];
-                            }
-                          out[m + 1] = value;
-                          best = std::max(best, value);
-                        }
-                        out[0] = s.materials > 0 ? -best : 0.0;
-                      }
+                      for (std::size_t p = range.begin(); p < range.end(); ++p)
+                        s.interpolate(points[p], values + p * fc);
                     });
 }
 
