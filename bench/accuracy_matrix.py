@@ -53,7 +53,7 @@ def one_case(args, root, name, meshes, family, count, extra_recon, extra_slice=(
     run(slice_cmd)
     out = os.path.join(case_dir, "recon")
     stats_path = os.path.join(case_dir, "stats.json")
-    run([args.binary, "reconstruct", slices, "-o", out, "--stats", stats_path, "-q"] + extra_recon)
+    run([args.binary, "reconstruct", "--field", "mean-value", slices, "-o", out, "--stats", stats_path, "-q"] + extra_recon)
     eval_path = os.path.join(case_dir, "eval.json")
     eval_cmd = [args.binary, "evaluate", "--recon", out, "--slices", slices, "--json", eval_path, "-q"]
     for label, model in meshes:

@@ -32,7 +32,7 @@ for i in $(seq "$pairs"); do
   if [ $((i % 2)) = 0 ]; then order="a b"; else order="b a"; fi
   for which in $order; do
     if [ "$which" = a ]; then bin=$bin_a; else bin=$bin_b; fi
-    "$bin" reconstruct "$set_path" $online -o "$work/out_$which" --stats "$work/$which.json" -q --threads "$threads"
+    "$bin" reconstruct --field mean-value "$set_path" $online -o "$work/out_$which" --stats "$work/$which.json" -q --threads "$threads"
   done
   if [ -n "$online" ]; then
     python3 - "$work" <<'EOF' | tee -a "$work/ratios.txt"

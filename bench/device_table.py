@@ -68,7 +68,7 @@ def slice_set(binary, work, name, family, count, meshes):
 
 def reconstruct(binary, slices, out, device, threads):
     stats = out + ".stats.json"
-    run([binary, "reconstruct", slices, "-o", out, "--device", device, "--threads", str(threads),
+    run([binary, "reconstruct", "--field", "mean-value", slices, "-o", out, "--device", device, "--threads", str(threads),
          "--stats", stats, "-q"])
     with open(stats) as f:
         return json.load(f)

@@ -52,7 +52,7 @@ FAMILIES = {"random": ("random", []), "sweep": ("sweep", []), "blobs": ("random"
 def reconstruct(binary, slices, work, threads, extra=()):
     """One `reconstruct --stats` run: (stats dict, peak RSS MB)."""
     stats_path = os.path.join(work, "stats.json")
-    args = [binary, "reconstruct", slices, "-o", os.path.join(work, "mesh.ply"), "--stats", stats_path,
+    args = [binary, "reconstruct", "--field", "mean-value", slices, "-o", os.path.join(work, "mesh.ply"), "--stats", stats_path,
             "--threads", str(threads), "-q"] + list(extra)
     pid = os.fork()
     if pid == 0:  # the child: exec the engine with its output discarded
@@ -73,7 +73,7 @@ def reconstruct(binary, slices, work, threads, extra=()):
 def reconstruct_online(binary, slices, work, threads):
     """One `reconstruct --online --stats` run: (stats dict with "steps", peak RSS MB)."""
     stats_path = os.path.join(work, "online_stats.json")
-    args = [binary, "reconstruct", slices, "-o", os.path.join(work, "online_mesh"), "--online", "--stats",
+    args = [binary, "reconstruct", "--field", "mean-value", slices, "-o", os.path.join(work, "online_mesh"), "--online", "--stats",
             stats_path, "--threads", str(threads), "-q"]
     start = time.monotonic()
     with subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True) as child:

@@ -21,7 +21,7 @@ printf '| seed | cells | evaluations | arrangement s | face images s | field s |
 for seed in 1 2 3 4 5; do
   "$bin" slice --mesh 1:data/models/horse.ply:horse --planes random --count 30 --seed "$seed" \
     --size-mm 150 -o "$work/horse_$seed.slices.json" -q
-  "$bin" reconstruct "$work/horse_$seed.slices.json" -o "$work/horse_$seed.ply" \
+  "$bin" reconstruct --field mean-value "$work/horse_$seed.slices.json" -o "$work/horse_$seed.ply" \
     --stats "$work/stats_$seed.json" -q
   python3 - "$work/stats_$seed.json" "$seed" <<'PY' | tee -a "$table"
 import json, sys

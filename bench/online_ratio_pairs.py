@@ -40,11 +40,11 @@ def main():
         stats = os.path.join(work, "stats.json")
         for repeat in range(options.repeats):
             for b in options.bins if repeat % 2 == 0 else options.bins[::-1]:
-                subprocess.run([b, "reconstruct", options.slices, "--online", "-o", os.path.join(work, "online"),
+                subprocess.run([b, "reconstruct", "--field", "mean-value", options.slices, "--online", "-o", os.path.join(work, "online"),
                                 "--stats", stats, "-q", "--threads", options.threads], check=True)
                 updates[b].append([s["total_s"] for s in json.load(open(stats))["steps"]])
                 for n in counts:
-                    subprocess.run([b, "reconstruct", os.path.join(work, f"first{n}.json"), "-o",
+                    subprocess.run([b, "reconstruct", "--field", "mean-value", os.path.join(work, f"first{n}.json"), "-o",
                                     os.path.join(work, "rebuild"), "--stats", stats, "-q", "--threads", options.threads],
                                    check=True)
                     rebuilds[b][n].append(json.load(open(stats))["total_s"])

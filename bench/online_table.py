@@ -102,12 +102,12 @@ def main():
             online_runs, rebuild_runs = [], {n: [] for n in rebuild_counts}
             for repeat in range(options.repeats):
                 stats_path = os.path.join(options.work, f"{name}.online{repeat}.json")
-                run_for(stats_path, [options.bin, "reconstruct", slices, "-o", os.path.join(options.work, name + "_online"),
+                run_for(stats_path, [options.bin, "reconstruct", "--field", "mean-value", slices, "-o", os.path.join(options.work, name + "_online"),
                                      "--online", "--stats", stats_path, "-q"])
                 online_runs.append(json.load(open(stats_path)))
                 for n in rebuild_counts:
                     offline_path = os.path.join(options.work, f"{name}_first{n}.offline{repeat}.json")
-                    run_for(offline_path, [options.bin, "reconstruct",
+                    run_for(offline_path, [options.bin, "reconstruct", "--field", "mean-value",
                                            os.path.join(options.work, f"{name}_first{n}.slices.json"), "-o",
                                            os.path.join(options.work, f"{name}_first{n}"), "--stats", offline_path, "-q"])
                     rebuild_runs[n].append(json.load(open(offline_path)))

@@ -75,7 +75,7 @@ def segment(args, recording, calibration, work):
 def replay(args, recording, calibration, work, image):
     out = work / (recording.name + ".scan")
     shutil.rmtree(out, ignore_errors=True)
-    run = subprocess.run([args.binary, "scan", "--source", "replay:" + str(recording),
+    run = subprocess.run([args.binary, "scan", "--field", "mean-value", "--source", "replay:" + str(recording),
                           "--calibration", str(calibration), "--realtime", "--out", str(out), "-q",
                           *shlex.split(args.segment_args)],
                          capture_output=True, text=True, timeout=1800)

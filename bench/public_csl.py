@@ -68,7 +68,7 @@ def one_file(args, name, csl_path, reference):
             os.remove(stale)
     row = {"name": name, "reference": reference is not None}
     row["planes"], row["declared_labels"] = header_counts(csl_path)
-    result, seconds = run_timed([args.binary, "reconstruct", csl_path, "-o", out,
+    result, seconds = run_timed([args.binary, "reconstruct", "--field", "mean-value", csl_path, "-o", out,
                                  "--stats", stats_path, "-q"])
     row["exit"] = result.returncode
     row["seconds"] = seconds

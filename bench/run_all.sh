@@ -62,7 +62,7 @@ step unknowns "sonoshape" \
 
 step two_cylinders "sonoshape" \
   "python3 data/examples/make_two_cylinders.py
-for v in unknown noise; do build/apps/sonoshape reconstruct data/examples/two_cylinders_\$v.slices.json -o out/cyl_\$v -q; build/apps/sonoshape evaluate --recon out/cyl_\$v --slices data/examples/two_cylinders_\$v.slices.json --truth 1:data/examples/two_cylinders_truth/label_1.ply; done"
+for v in unknown noise; do build/apps/sonoshape reconstruct --field mean-value data/examples/two_cylinders_\$v.slices.json -o out/cyl_\$v -q; build/apps/sonoshape evaluate --recon out/cyl_\$v --slices data/examples/two_cylinders_\$v.slices.json --truth 1:data/examples/two_cylinders_truth/label_1.ply; done"
 
 step online "sonoshape" \
   "python3 bench/online_table.py --write-doc" \
@@ -73,12 +73,12 @@ step keyframes "sonoshape_keyframe_bench" \
 build/bench/sonoshape_keyframe_bench --trajectory fan --every 24 3:2 4:2.5 5:3 8:5"
 
 step live_scan "sonoshape" \
-  "build/apps/sonoshape scan --source sim:default --sweep-s 10 --realtime --width-px 512 --height-px 512 -o out/scan512 --publish tcp://127.0.0.1:5701
+  "build/apps/sonoshape scan --field mean-value --source sim:default --sweep-s 10 --realtime --width-px 512 --height-px 512 -o out/scan512 --publish tcp://127.0.0.1:5701
 build/apps/sonoshape simulate --frames 2 --truth out/truth -o out/x.igs.mha -q
 build/apps/sonoshape evaluate --recon out/scan512 --truth 1:out/truth/label_1.ply --truth 2:out/truth/label_2.ply"
 
 step plus_spine_replay "sonoshape sonoshape_render" \
-  "build/apps/sonoshape scan --source replay:data/plus/SpinePhantomFreehand.igs.mha --calibration data/plus/PlusDeviceSet_SpinePhantomFreehandReconstructionOnly.xml --fast -o out/plus
+  "build/apps/sonoshape scan --field mean-value --source replay:data/plus/SpinePhantomFreehand.igs.mha --calibration data/plus/PlusDeviceSet_SpinePhantomFreehandReconstructionOnly.xml --fast -o out/plus
 build/bench/sonoshape_render -o docs/images/plus_spine_replay.png --slices out/plus/slices.json out/plus/label_1.ply"
 
 step segmentation "sonoshape" \
@@ -88,7 +88,7 @@ step patient "sonoshape" \
   "mkdir -p out/bench/patient && cd out/bench/patient
 ../../../build/apps/sonoshape simulate -o sweep.igs.mha --truth truth -q
 ../../../build/apps/sonoshape segment sweep.igs.mha --every 4 -o slices.json -q
-../../../build/apps/sonoshape reconstruct slices.json -o recon --stats stats.json -q
+../../../build/apps/sonoshape reconstruct --field mean-value slices.json -o recon --stats stats.json -q
 python3 -c 'import json; s = json.load(open(\"stats.json\")); print({k: round(s[k], 2) for k in (\"total_s\", \"field_s\", \"smoothing_s\", \"face_images_s\", \"completion_s\")})'
 ../../../build/apps/sonoshape evaluate --recon recon --truth 1:truth/label_1.ply --truth 2:truth/label_2.ply --truth 3:truth/label_3.ply --slices slices.json"
 

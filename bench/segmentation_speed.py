@@ -69,7 +69,7 @@ def speed(binary, sweep, calibration, threads, method, repeat, out):
 
 
 def scan(binary, source_args, out):
-    run([binary, "scan", *source_args, "--realtime", "-o", out, "-q"], f"scan {source_args[1]}")
+    run([binary, "scan", "--field", "mean-value", *source_args, "--realtime", "-o", out, "-q"], f"scan {source_args[1]}")
     with open(os.path.join(out, "scan.json")) as f:
         return json.load(f)
 

@@ -160,7 +160,7 @@ def run(cmd, what):
 def scan_scores(args, base, slices, truth_meshes):
     """Reconstructs `slices` into BASE_recon and scores it: {label: eval entry}."""
     recon, eval_path = base + "_recon", base + ".eval.json"
-    cmd = [args.binary, "reconstruct", slices, "-o", recon, "-q"]
+    cmd = [args.binary, "reconstruct", "--field", "mean-value", slices, "-o", recon, "-q"]
     if args.depth:
         cmd += ["--depth", str(args.depth)]
     run(cmd, f"reconstruct {slices}")

@@ -56,7 +56,7 @@ pids=()
 cleanup() { for p in "${pids[@]}"; do kill "$p" 2>/dev/null || true; done; }
 trap cleanup EXIT
 
-"$bin" scan --source sim:default --realtime --sweep-s "$seconds" --passes "$passes" \
+"$bin" scan --field mean-value --source sim:default --realtime --sweep-s "$seconds" --passes "$passes" \
   --slice-budget "$slice_budget" \
   --duration "$seconds" --publish "$endpoint" --snapshot "$snapshot" --publish-frames 5 \
   -o "$out/scan" >"$out/scan.log" 2>&1 &

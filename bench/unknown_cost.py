@@ -21,7 +21,7 @@ HERE = Path(__file__).resolve().parent.parent
 
 def run(binary, slices, threads, work, name):
     stats = work / f"{name}.stats.json"
-    command = [binary, "reconstruct", str(slices), "--online", "--stats", str(stats),
+    command = [binary, "reconstruct", "--field", "mean-value", str(slices), "--online", "--stats", str(stats),
                "-o", str(work / name)]
     if threads:
         command += ["--threads", str(threads)]

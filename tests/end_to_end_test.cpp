@@ -245,10 +245,13 @@ TEST_F(EndToEnd, BundledExampleReconstructs) {
 
 TEST_F(EndToEnd, OnlineReconstructionEmitsStepsAndEqualsOffline) {
   const std::string example = std::string(SONOSHAPE_DATA_DIR) + "/examples/two_labels.slices.json";
-  auto r = run("reconstruct " + example + " -o " + path("online") +
-               " --depth 5 --online --emit-every 3 --stats " + path("online.json"));
+  // The paper's field, whose online updates equal its one-shot reconstruction (the thin-plate
+  // field's agree to the solver's tolerance: the next test).
+  auto r =
+      run("reconstruct " + example + " -o " + path("online") +
+          " --field mean-value --depth 5 --online --emit-every 3 --stats " + path("online.json"));
   ASSERT_EQ(r.exit_code, 0) << r.output;
-  r = run("reconstruct " + example + " -o " + path("offline") + " --depth 5");
+  r = run("reconstruct " + example + " -o " + path("offline") + " --field mean-value --depth 5");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   std::ifstream stats_file(path("online.json"));
   const nlohmann::json stats = nlohmann::json::parse(stats_file);
@@ -323,11 +326,11 @@ TEST_F(EndToEnd, ReconstructOnOpenClWritesTheCpuMesh) {
   r = run("slice --mesh 1:" + model("spot.obj") +
           ":spot --planes random --count 12 --seed 2 --size-mm 150 -o " + path("spot.slices.json"));
   ASSERT_EQ(r.exit_code, 0) << r.output;
-  r = run("reconstruct " + path("spot.slices.json") + " --depth 6 -o " + path("cpu.ply") +
-          " --device cpu");
+  r = run("reconstruct " + path("spot.slices.json") + " --field mean-value --depth 6 -o " +
+          path("cpu.ply") + " --device cpu");
   ASSERT_EQ(r.exit_code, 0) << r.output;
-  r = run("reconstruct " + path("spot.slices.json") + " --depth 6 -o " + path("opencl.ply") +
-          " --device opencl");
+  r = run("reconstruct " + path("spot.slices.json") + " --field mean-value --depth 6 -o " +
+          path("opencl.ply") + " --device opencl");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   std::ifstream a(path("cpu.ply"), std::ios::binary), b(path("opencl.ply"), std::ios::binary);
   const std::string bytes_a((std::istreambuf_iterator<char>(a)), std::istreambuf_iterator<char>());
@@ -337,17 +340,34 @@ TEST_F(EndToEnd, ReconstructOnOpenClWritesTheCpuMesh) {
 }
 
 TEST_F(EndToEnd, AMalformedOrMissingDeviceIsRefusedWithTheFix) {
-  auto r = run("reconstruct " + std::string(SONOSHAPE_DATA_DIR) +
-               "/examples/two_labels.slices.json -o " + path("x.ply") + " --device gpu");
+  const std::string reconstruct = "reconstruct " + std::string(SONOSHAPE_DATA_DIR) +
+                                  "/examples/two_labels.slices.json -o " + path("x.ply") +
+                                  " --field mean-value";
+  auto r = run(reconstruct + " --device gpu");
   EXPECT_NE(r.exit_code, 0);
   EXPECT_NE(r.output.find("opencl:PLATFORM:DEVICE"), std::string::npos) << r.output;
-  r = run("reconstruct " + std::string(SONOSHAPE_DATA_DIR) +
-          "/examples/two_labels.slices.json -o " + path("x.ply") + " --device opencl:9:9");
+  r = run(reconstruct + " --device opencl:9:9");
   EXPECT_NE(r.exit_code, 0);
   EXPECT_TRUE(r.output.find("no such OpenCL device") != std::string::npos ||
               r.output.find("no OpenCL") != std::string::npos)
       << r.output;
   EXPECT_FALSE(fs::exists(path("x.ply")));
+}
+
+// The thin-plate field (the default) has no OpenCL path: an explicit --device is refused with the
+// fix, where running on the CPU instead would quietly not be what was asked for.
+TEST_F(EndToEnd, ADeviceWithTheThinPlateFieldIsRefusedNamingTheMeanValueField) {
+  const std::string example = std::string(SONOSHAPE_DATA_DIR) + "/examples/two_labels.slices.json";
+  for (const std::string field : {"", " --field thin-plate"}) {
+    SCOPED_TRACE(field);
+    const auto r =
+        run("reconstruct " + example + " -o " + path("x.ply") + field + " --device opencl");
+    EXPECT_NE(r.exit_code, 0);
+    EXPECT_NE(r.output.find("--field mean-value"), std::string::npos) << r.output;
+    EXPECT_FALSE(fs::exists(path("x.ply")));
+  }
+  const auto r = run("reconstruct " + example + " -o " + path("cpu") + " --device cpu");
+  EXPECT_EQ(r.exit_code, 0) << r.output;
 }
 
 }  // namespace

@@ -7,6 +7,7 @@
 #include <signal.h>
 #include <sys/resource.h>
 
+#include <algorithm>
 #include <chrono>
 #include <filesystem>
 #include <fstream>
@@ -155,6 +156,13 @@ TEST_F(ScanCrash, AFastSimulatedScanIsDeterministicByteForByte) {
   EXPECT_GT(journal->keyframes.size(), 10u);
   for (std::size_t i = 0; i < slices->slices.size(); ++i)
     EXPECT_EQ(journal->keyframes[i].slice.origin_mm, slices->slices[i].origin_mm) << i;
+  // The scan's command line names no field; the journal names the one the default chose, so that
+  // a resume under another default rebuilds the same meshes.
+  const std::vector<std::string>& recorded = journal->arguments;
+  const auto field = std::find(recorded.begin(), recorded.end(), "--field");
+  ASSERT_NE(field, recorded.end()) << "no --field in the journal's arguments";
+  ASSERT_NE(field + 1, recorded.end());
+  EXPECT_EQ(*(field + 1), "thin-plate");
 }
 
 // Kills the scan at a random moment of its run (seeded), checks --out, resumes, compares.

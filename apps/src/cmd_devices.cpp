@@ -8,6 +8,7 @@
 
 #include "commands.hpp"
 #include "sonoshape/apps/scan_sources.hpp"
+#include "sonoshape/core/errors.hpp"
 #include "sonoshape/core/log.hpp"
 #include "sonoshape/kernels/opencl.hpp"
 #include "sonoshape/tracking/trakstar_source.hpp"
@@ -67,7 +68,7 @@ const char* const kFieldHelp =
     "indicator per arrangement cell) or thin-plate (a biharmonic fill of each label's in-plane "
     "signed distance on a grid; keeps thin structures crossed by far-apart slices whole; see "
     "docs/engine.md)";
-const char* const kDefaultField = "mean-value";
+const char* const kDefaultField = "thin-plate";
 
 const char* const kSmoothingHelp =
     "Bi-Laplacian smoothing iterations of the octree's samples, 0 to 1000 (0: off). Default: 8 "
@@ -75,13 +76,23 @@ const char* const kSmoothingHelp =
     "bi-Laplacian energy)";
 
 const char* const kDeviceHelp =
-    "Where the field is evaluated: cpu (native, the default), opencl (the first OpenCL device with "
+    "Where the mean-value field is evaluated (the thin-plate field solves on the CPU): cpu "
+    "(native, the default), opencl (the first OpenCL device with "
     "fp64, a GPU if any), opencl:PLATFORM:DEVICE (`sonoshape devices` lists them) or auto (an fp64 "
     "GPU if present, else cpu). Default: $SONOSHAPE_DEVICE, else cpu";
 
-std::string resolve_device(const std::string& option) {
+std::string resolve_device(const std::string& option, const std::string& field) {
   const kernels::DeviceSpec spec = kernels::device_spec_from(option);
   if (spec.kind == kernels::DeviceSpec::Kind::cpu) return "cpu";
+  if (field == "thin-plate") {
+    if (!option.empty())
+      throw Error("--device " + option +
+                  ": only the mean-value field runs on an OpenCL device (the thin-plate field, "
+                  "the default, solves on the CPU); add --field mean-value, or leave --device out");
+    log_info("SONOSHAPE_DEVICE=" + spec.text() +
+             " applies to --field mean-value; the thin-plate field solves on the CPU");
+    return "cpu";
+  }
   const auto device = kernels::open_device(spec);
   if (!device) {
     log_info("--device auto: no OpenCL GPU with fp64, the field runs on the CPU");

@@ -238,7 +238,7 @@ int run_at_once(const SliceSet& slices, const ReconstructCommandOptions& opt) {
 
 int run_reconstruct(ReconstructCommandOptions& opt) {
   opt.engine.field = *recon::parse_field_name(opt.field);
-  opt.engine.device = resolve_device(opt.device);
+  opt.engine.device = resolve_device(opt.device, opt.field);
   const Result<SliceSet> slices = read_slices_to_reconstruct(opt);
   if (!slices) {
     std::cerr << "error: " << slices.message() << '\n';

@@ -281,6 +281,17 @@ std::vector<std::string> scan_arguments() {
   return out;
 }
 
+// The arguments the journal records: this command line's, with the field named where the
+// default chose it, so that a resume rebuilds the same meshes whatever the default is then.
+std::vector<std::string> recorded_arguments(const std::string& field) {
+  std::vector<std::string> arguments = scan_arguments();
+  const bool named = std::any_of(arguments.begin(), arguments.end(), [](const std::string& word) {
+    return word == "--field" || word.rfind("--field=", 0) == 0;
+  });
+  if (!named) arguments.insert(arguments.end(), {"--field", field});
+  return arguments;
+}
+
 // Temporary files a killed scan left in `directory` (`.partial-*`): never a result.
 void remove_partial_files(const fs::path& directory) {
   std::error_code ec;
@@ -293,7 +304,8 @@ void remove_partial_files(const fs::path& directory) {
 
 // --out: a new journal there, unless it holds the journal of a scan that did not finish (its
 // keyframes are the patient's: resume it or choose another --out). False after the message.
-bool create_journal(const fs::path& out, std::shared_ptr<scan::KeyframeJournal>& journal) {
+bool create_journal(const fs::path& out, const std::string& field,
+                    std::shared_ptr<scan::KeyframeJournal>& journal) {
   const fs::path path = out / scan::kJournalName;
   if (fs::exists(path)) {
     const auto old = scan::read_journal(path);
@@ -308,7 +320,7 @@ bool create_journal(const fs::path& out, std::shared_ptr<scan::KeyframeJournal>&
   }
   std::error_code ec;
   fs::create_directories(out, ec);
-  auto created = scan::KeyframeJournal::create(path, scan_arguments());
+  auto created = scan::KeyframeJournal::create(path, recorded_arguments(field));
   if (!created) {
     std::cerr << "error: " << created.message() << '\n';
     return false;
@@ -595,7 +607,7 @@ recon::ReconstructorOptions engine_options(const ScanCommandOptions& options,
   engine.engine.max_depth = options.depth;
   engine.engine.smoothing_iterations = options.smoothing;
   engine.engine.field = *recon::parse_field_name(options.field);
-  engine.engine.device = resolve_device(options.device);
+  engine.engine.device = resolve_device(options.device, options.field);
   engine.bounds = source.setup.bounds;
   engine.labels = source.setup.labels;
   return engine;
@@ -760,7 +772,8 @@ int run_scan(const ScanCommandOptions& options, const Resume* resume) {
   // (SIGXFSZ is ignored by main(): a file-size limit fails writes like a full disk.)
   if (!igtl_serve_available(options.igtl_serve)) return 1;
   std::shared_ptr<scan::KeyframeJournal> journal;
-  if (!resume && !options.out.empty() && !create_journal(options.out, journal)) return 1;
+  if (!resume && !options.out.empty() && !create_journal(options.out, options.field, journal))
+    return 1;
 #ifndef SONOSHAPE_WITH_VIEWER
   if (options.view) return print_error(std::string("--view: ") + kViewerMissing);
 #endif

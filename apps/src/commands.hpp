@@ -47,7 +47,9 @@ extern const char* const kDeviceHelp;
 /// The device the engine uses for `option` (--device; empty: SONOSHAPE_DEVICE, else cpu), as
 /// ReconstructionOptions::device spells it: an OpenCL device is opened once here, so that a
 /// missing device or one without fp64 is reported before any work ("auto" without a GPU is
-/// "cpu"). Throws sonoshape::Error with the fix.
-std::string resolve_device(const std::string& option);
+/// "cpu"). Only the mean-value field has a device path: with `field` "thin-plate" an explicit
+/// --device other than cpu is refused, and SONOSHAPE_DEVICE is noted and left aside. Throws
+/// sonoshape::Error with the fix.
+std::string resolve_device(const std::string& option, const std::string& field);
 
 }  // namespace sonoshape::apps

@@ -668,6 +668,35 @@ void ScanPipeline::publish_update(const std::vector<const SliceItem*>& added,
   each_sink("status", [&](ScanSink& sink) { return sink.on_status(status); });
 }
 
+void ScanPipeline::settle_meshes() {
+  const double start_s = acquisition::monotonic_s();
+  std::optional<recon::UpdateStats> stats;
+  try {
+    stats = reconstruction_->settle();
+  } catch (const std::exception& e) {
+    log_warning("scan: solving the final meshes from all the slices at once failed (" +
+                std::string(e.what()) + "); the last update's meshes are kept");
+    return;
+  }
+  if (!stats) return;
+  const double seconds = acquisition::monotonic_s() - start_s;
+  log_info("scan: final meshes solved from all " + std::to_string(reconstruction_->slice_count()) +
+           " slices at once in " + std::to_string(seconds) +
+           " s (the online updates agree with them to the solver's "
+           "tolerance)");
+  MeshUpdateInfo info;
+  {
+    std::lock_guard lock(state_mutex_);
+    meshes_ = reconstruction_->meshes();
+    info.slices = counters_.slices;
+    info.timestamp_s = counters_.last_slice_timestamp_s;
+    info.stats = stats->step;
+    info.update_ms = 1e3 * seconds;
+  }
+  each_sink("meshes",
+            [&](ScanSink& sink) { return sink.on_meshes(reconstruction_->meshes(), info); });
+}
+
 void ScanPipeline::reconstruction_loop() {
   std::size_t slice_index = restored_;
   try {
@@ -698,6 +727,7 @@ void ScanPipeline::reconstruction_loop() {
       // so far (the soak's RSS rose in steps at single updates).
       release_free_heap();
     }
+    settle_meshes();
   } catch (const std::exception& e) {
     report(ScanState::kError, std::string("reconstruction stage failed: ") + e.what());
     // Let the upstream stages finish instead of waiting on a full queue forever.

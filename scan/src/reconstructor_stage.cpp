@@ -10,14 +10,29 @@ namespace {
 class ReconstructorStage final : public ReconstructionStage {
  public:
   explicit ReconstructorStage(const recon::ReconstructorOptions& options)
-      : reconstructor_(options) {}
+      : options_(options), reconstructor_(options) {}
   int add_slice(LabeledSlice slice) override { return reconstructor_.add_slice(std::move(slice)); }
   recon::UpdateStats update() override { return reconstructor_.update(); }
   const MeshSet& meshes() const override { return reconstructor_.mesh(); }
   SliceSet slice_set() const override { return reconstructor_.slice_set(); }
   std::size_t slice_count() const override { return reconstructor_.slice_count(); }
 
+  // The mean-value field's online updates equal its one-shot reconstruction (to the bit);
+  // the thin-plate field's agree with it to the solver's tolerance (docs/engine.md, section 8),
+  // so its final meshes are solved again from all the slices at once.
+  std::optional<recon::UpdateStats> settle() override {
+    if (options_.engine.field != recon::FieldKind::thin_plate || slice_count() == 0)
+      return std::nullopt;
+    recon::Reconstructor one_shot(options_);
+    for (LabeledSlice& slice : reconstructor_.slice_set().slices)
+      one_shot.add_slice(std::move(slice));
+    recon::UpdateStats stats = one_shot.update();
+    reconstructor_ = std::move(one_shot);
+    return stats;
+  }
+
  private:
+  recon::ReconstructorOptions options_;
   recon::Reconstructor reconstructor_;
 };
 

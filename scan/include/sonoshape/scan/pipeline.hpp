@@ -150,6 +150,9 @@ class ScanPipeline {
   void log_update(const recon::UpdateStats& stats, std::size_t added, double seconds) const;
   void publish_update(const std::vector<const SliceItem*>& added, const recon::UpdateStats& stats,
                       double update_start_s, double ready_s, std::size_t first_slice_index);
+  // After the last update: the one-shot meshes of all the slices where the online ones only
+  // approach them (ReconstructionStage::settle), published as the scan's last meshes.
+  void settle_meshes();
   tracking::SyncedPose synchronise(const Frame& frame);
   void report(ScanState state, const std::string& message);
   void withdraw(int key);

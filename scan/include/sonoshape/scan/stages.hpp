@@ -91,6 +91,11 @@ class ReconstructionStage {
   virtual SliceSet slice_set() const = 0;
   /// Slices in the reconstruction after the last update().
   virtual std::size_t slice_count() const = 0;
+  /// At the end of a scan: makes meshes() those of the one-shot reconstruction of slice_set()
+  /// (what `reconstruct slices.json` gives), where the online updates reach it only to a
+  /// tolerance, so that a scan's final meshes depend on its slices alone, not on how its
+  /// updates happened to batch them. None when the meshes already are that (nothing was done).
+  virtual std::optional<recon::UpdateStats> settle() { return std::nullopt; }
 };
 
 /// recon::Reconstructor as a reconstruction stage.
