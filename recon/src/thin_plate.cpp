@@ -757,24 +757,133 @@ struct ThinPlateField::Impl {
     weights_dirty = true;
   }
 
-  // The closing condition: f = -truncation at and beyond the box's faces, weakly.
-  void add_closing() {
-    Level& g = levels[0];
+  // Priors where the slices say nothing, as quadratic terms w (f - target)^2 on nodes: the
+  // closing (-truncation, closing_weight) on and beyond the box's faces across the axes the
+  // slices sample, and beyond the slices along an axis they do not sample, their extrusion
+  // (extrusion_weight). `prior_weight` (per node) and `prior_target` (per node and material)
+  // are what the operator and the right-hand side hold now.
+  std::vector<double> prior_weight, prior_target;
+  bool priors_all_sampled = false;  // the priors applied: every axis sampled (the closing alone)
+  // The box of the data's sample points (world mm).
+  Vec3 data_min = Vec3::Constant(std::numeric_limits<double>::infinity());
+  Vec3 data_max = -data_min;
+
+  // Whether the slices sample each axis: their samples spread along it at least as far as the
+  // box reaches beyond them on the nearer side. Nearly coplanar slices (a probe rocked in its
+  // plane) do not sample their normal's axis: the box's extent there is mostly the padding that
+  // the other axes' extent set, and nothing in the data says where an organ ends along it.
+  std::array<bool, 3> sampled_axes() const {
+    std::array<bool, 3> sampled{true, true, true};
+    for (int a = 0; a < 3; ++a) {
+      if (!(data_min[a] <= data_max[a])) continue;  // no data yet
+      const double beyond = std::min(data_min[a] - box.min[a], box.max[a] - data_max[a]);
+      sampled[static_cast<std::size_t>(a)] = data_max[a] - data_min[a] >= beyond;
+    }
+    return sampled;
+  }
+
+  // Along `axis` (not sampled): every node of a line of nodes along it that lies beyond the
+  // line's outermost sample (past the edge it constrains) takes that sample's values as its
+  // target, so that the field goes on as the slices' extrusion (the nearest-slice baseline's
+  // assumption) instead of closing just beyond them; the thin-plate energy alone would let a
+  // thin section sag away from the slices. Nodes already given a target keep it.
+  void add_extrusion_prior(int axis, std::vector<double>& weight,
+                           std::vector<double>& target) const {
+    const Level& g = levels[0];
+    const std::size_t k = static_cast<std::size_t>(materials);
+    const int layers = axis == 0 ? g.nx : axis == 1 ? g.ny : g.nz;
+    const std::size_t stride = axis == 0   ? 1
+                               : axis == 1 ? static_cast<std::size_t>(g.nx)
+                                           : static_cast<std::size_t>(g.nx) * g.ny;
+    struct End {
+      double at = 0.0;  // in layers along the axis
+      const double* values = nullptr;
+    };
+    std::vector<End> lowest(g.size()), highest(g.size());  // per line: by its first node
+    for (const Contribution& c : data) {
+      if (c.axis != axis) continue;
+      for (std::size_t e = 0; e < c.nodes.size(); ++e) {
+        const std::size_t layer = c.nodes[e] / stride % static_cast<std::size_t>(layers);
+        const std::size_t line = c.nodes[e] - layer * stride;
+        const double at = static_cast<double>(layer) + c.positions[e];
+        const double* values = c.targets.data() + e * k;
+        if (!lowest[line].values || at < lowest[line].at) lowest[line] = {at, values};
+        if (!highest[line].values || at > highest[line].at) highest[line] = {at, values};
+      }
+    }
+    for (std::size_t line = 0; line < g.size(); ++line) {
+      if (!lowest[line].values) continue;
+      for (int layer = 0; layer < layers; ++layer) {
+        const End* end = layer >= std::floor(highest[line].at) + 2 ? &highest[line]
+                         : layer <= std::ceil(lowest[line].at) - 2 ? &lowest[line]
+                                                                   : nullptr;
+        const std::size_t node = line + static_cast<std::size_t>(layer) * stride;
+        if (!end || weight[node] > 0.0) continue;
+        weight[node] = options.extrusion_weight;
+        std::copy(end->values, end->values + k, target.begin() + node * k);
+      }
+    }
+  }
+
+  // The closing on and beyond the box's faces: those across sampled axes, and the others where
+  // no extrusion reaches.
+  void add_closing(const std::array<bool, 3>& sampled, std::vector<double>& weight,
+                   std::vector<double>& target) const {
+    const Level& g = levels[0];
+    const std::size_t k = static_cast<std::size_t>(materials);
     const double margin = 1e-9 * box.diagonal();
-    for (int k = 0; k < g.nz; ++k)
+    for (int kz = 0; kz < g.nz; ++kz)
       for (int j = 0; j < g.ny; ++j)
         for (int i = 0; i < g.nx; ++i) {
-          const Vec3 p = box.min + spacing * Vec3(i, j, k);
-          const bool interior =
-              ((p.array() > box.min.array() + margin) && (p.array() < box.max.array() - margin))
-                  .all();
-          if (interior) continue;
-          const std::size_t node = g.index(i, j, k);
-          g.data_diagonal[node] += options.closing_weight;
-          for (int m = 0; m < materials; ++m)
-            weighted_targets[static_cast<std::size_t>(m) * g.size() + node] -=
-                options.closing_weight * truncation_mm[static_cast<std::size_t>(m)];
+          const Vec3 p = box.min + spacing * Vec3(i, j, kz);
+          bool on_face = false, across_sampled = false;
+          for (int a = 0; a < 3; ++a) {
+            const bool on = p[a] <= box.min[a] + margin || p[a] >= box.max[a] - margin;
+            on_face |= on;
+            across_sampled |= on && sampled[static_cast<std::size_t>(a)];
+          }
+          const std::size_t node = g.index(i, j, kz);
+          if (!on_face || (!across_sampled && weight[node] > 0.0)) continue;
+          weight[node] = options.closing_weight;
+          for (std::size_t m = 0; m < k; ++m) target[node * k + m] = -truncation_mm[m];
         }
+  }
+
+  // Sets the priors for the data so far, adding their change to the operator and the
+  // right-hand side. While every axis is sampled they are the closing alone, set once.
+  void update_priors() {
+    const std::array<bool, 3> sampled = sampled_axes();
+    const bool all_sampled = sampled[0] && sampled[1] && sampled[2];
+    if (all_sampled && priors_all_sampled) return;
+    Level& g = levels[0];
+    const std::size_t k = static_cast<std::size_t>(materials), size = g.size();
+    prior_weight.resize(size, 0.0);
+    prior_target.resize(size * k, 0.0);
+    std::vector<double> weight(size, 0.0), target(size * k, 0.0);
+    for (int a = 0; a < 3; ++a)
+      if (!sampled[static_cast<std::size_t>(a)]) add_extrusion_prior(a, weight, target);
+    add_closing(sampled, weight, target);
+    bool changed = false;
+    for (std::size_t node = 0; node < size; ++node) {
+      if (weight[node] != prior_weight[node]) {
+        g.data_diagonal[node] += weight[node] - prior_weight[node];
+        changed = true;
+      }
+      for (std::size_t m = 0; m < k; ++m) {
+        const double before = prior_weight[node] * prior_target[node * k + m];
+        const double after = weight[node] * target[node * k + m];
+        if (after == before) continue;
+        weighted_targets[m * size + node] += after - before;
+        changed = true;
+      }
+    }
+    prior_weight = std::move(weight);
+    prior_target = std::move(target);
+    priors_all_sampled = all_sampled;
+    if (!changed) return;
+    weights_dirty = true;
+    // New terms: solve() must not take any material as fitted.
+    for (double& misfit : misfit_mm) misfit = std::numeric_limits<double>::infinity();
   }
 
   void refresh_weights() {
@@ -899,6 +1008,12 @@ struct ThinPlateField::Impl {
       for (int o = 0; o < 4; ++o) at[a][o] = std::clamp(i0[a] - 1 + o, 0, dims[a] - 1);
     }
     double best = -std::numeric_limits<double>::infinity();
+    // On and beyond the box's faces, every material is outside: an organ that goes through a
+    // face (extruded along an axis the slices do not sample) is cut there, and its mesh closed.
+    const double margin = 1e-9 * box.diagonal();
+    const bool outside =
+        ((point.array() <= box.min.array() + margin) || (point.array() >= box.max.array() - margin))
+            .any();
     for (int m = 0; m < materials; ++m) {
       const std::vector<double>& f = sampled[static_cast<std::size_t>(m)];
       double value = 0.0;
@@ -909,6 +1024,7 @@ struct ThinPlateField::Impl {
           for (int a = 0; a < 4; ++a)
             value += wcb * w[0][a] * f[row + static_cast<std::size_t>(at[0][a])];
         }
+      if (outside) value = std::min(value, -truncation_mm[static_cast<std::size_t>(m)]);
       out[m + 1] = value;
       best = std::max(best, value);
     }
@@ -1066,7 +1182,7 @@ ThinPlateField::ThinPlateField(const Box3& box, double finest_cell_mm, int mater
   s.misfit_mm.assign(static_cast<std::size_t>(materials), 0.0);
   s.block_changed_at.assign(static_cast<std::size_t>(s.blocks[0]) * s.blocks[1] * s.blocks[2], 0);
   s.stencil_changed_at.assign(nodes, 0);
-  s.add_closing();
+  s.update_priors();
 }
 
 ThinPlateField::~ThinPlateField() = default;
@@ -1099,6 +1215,12 @@ void ThinPlateField::add_slices(std::vector<PreparedSlice> slices) {
   // Added in slice order: the same sums whatever the threads.
   for (std::size_t a = 0; a < first; ++a) s.retarget(a, changes[a]);
   for (std::size_t k = first; k < count; ++k) s.add(s.data[k]);
+  for (std::size_t k = first; k < count; ++k)
+    for (const Vec3& p : s.data[k].points) {
+      s.data_min = s.data_min.cwiseMin(p);
+      s.data_max = s.data_max.cwiseMax(p);
+    }
+  s.update_priors();
 }
 
 ThinPlateSolveStats ThinPlateField::solve() {

@@ -279,6 +279,35 @@ TEST(ThinPlateField, AnOrgansEndNeitherBulgesNorFallsShortOfItsLastSlice) {
   EXPECT_LT(widest, 4.75);  // 4.4 measured
 }
 
+// Three slices within 2 mm of z = 0 through a square rod along z, in a box 100 mm deep: the
+// slices do not sample z (the box reaches 49 mm beyond them on either side, against their 2 mm
+// of spread), so nothing says where the rod ends along z, and the field extrudes their sections
+// through the box (as the nearest-slice baseline does) instead of closing the rod just beyond
+// them (it ended at z = +-12.1 with the closing on every face).
+TEST(ThinPlateField, NearlyCoplanarSlicesAreNotClosedAlongTheirNormal) {
+  SliceSet set;
+  set.bounds = Box3{Vec3(-50, -50, -50), Vec3(50, 50, 50)};
+  for (const double z : {-1.0, 0.0, 1.0}) {
+    LabeledSlice s = z_slice(z);
+    s.regions.push_back({1, Ring2{{-8, -8}, {8, -8}, {8, 8}, {-8, 8}}, {}});
+    set.slices.push_back(s);
+  }
+  const MeshSet meshes = reconstruct(set, thin_plate_options());
+  const TriangleMesh& mesh = meshes.meshes[0].mesh;
+  ASSERT_FALSE(mesh.empty());
+  // Cut by the box's faces, and closed there.
+  EXPECT_TRUE(check_mesh_health(mesh).closed_manifold_oriented());
+  EXPECT_EQ(component_count(mesh), 1u);
+  const Box3 bounds = mesh.bounds();
+  EXPECT_LT(bounds.min.z(), -45.0);
+  EXPECT_GT(bounds.max.z(), 45.0);
+  // Its sections stay the slices' square: no swelling away from them.
+  for (const Vec3& v : mesh.vertices) {
+    EXPECT_LT(std::abs(v.x()), 9.0);
+    EXPECT_LT(std::abs(v.y()), 9.0);
+  }
+}
+
 TEST(ThinPlateField, AnOrganInsideAnotherStaysInside) {
   // Material 1: a sphere of radius 30 minus a sphere of radius 12 (material 2) at (4, 0, 0).
   SliceSet set;
