@@ -148,10 +148,12 @@ class SliceDistances {
     if (list.empty()) return best2;
     const int cx = cell_x(p.x()), cy = cell_y(p.y());
     const int rx = static_cast<int>(std::ceil(std::sqrt(limit2) / bucket_size_));
-    for (int y = std::max(0, cy - rx); y <= std::min(ny_ - 1, cy + rx); ++y) {
+    const std::array<int, 4>& range = bucket_ranges_[static_cast<std::size_t>(m)];
+    const int x0 = std::max(range[0], cx - rx), x1 = std::min(range[1], cx + rx);
+    for (int y = std::max(range[2], cy - rx); y <= std::min(range[3], cy + rx); ++y) {
       const double gy = std::max({0.0, origin_.y() + y * bucket_size_ - p.y(),
                                   p.y() - (origin_.y() + (y + 1) * bucket_size_)});
-      for (int x = std::max(0, cx - rx); x <= std::min(nx_ - 1, cx + rx); ++x) {
+      for (int x = x0; x <= x1; ++x) {
         // An edge's nearest point to p lies in a bucket that lists it, no nearer than that
         // bucket: a bucket farther than the nearest edge so far is skipped (with a margin
         // for the rounding of its bounds).
@@ -209,6 +211,16 @@ class SliceDistances {
         }
       }
     };
+    // Per material, the range of buckets its edges meet: a query reads no bucket outside it.
+    bucket_ranges_.assign(edges_.size(), {nx_, -1, ny_, -1});
+    for (std::size_t m = 1; m < edges_.size(); ++m)
+      for (const auto& [a, b] : edges_[m]) {
+        std::array<int, 4>& range = bucket_ranges_[m];
+        range[0] = std::min(range[0], cell_x(std::min(a.x(), b.x())));
+        range[1] = std::max(range[1], cell_x(std::max(a.x(), b.x())));
+        range[2] = std::min(range[2], cell_y(std::min(a.y(), b.y())));
+        range[3] = std::max(range[3], cell_y(std::max(a.y(), b.y())));
+      }
     for_edge_buckets([&](std::size_t at, std::uint32_t) { ++bucket_begin_[at + 1]; });
     for (std::size_t b = 0; b < buckets; ++b) bucket_begin_[b + 1] += bucket_begin_[b];
     bucket_edges_.resize(bucket_begin_[buckets]);
@@ -227,6 +239,7 @@ class SliceDistances {
   int nx_ = 0, ny_ = 0;
   std::vector<std::uint32_t> bucket_begin_;  // per material, row-major, and one past the last
   std::vector<std::uint32_t> bucket_edges_;
+  std::vector<std::array<int, 4>> bucket_ranges_;  // per material: x0, x1, y0, y1
 };
 
 // ---------------------------------------------------------------------------------------------
