@@ -1389,6 +1389,12 @@ std::vector<double> ThinPlateField::sample_values() const {
   return values;
 }
 
+std::vector<std::vector<Vec3>> ThinPlateField::sample_points() const {
+  std::vector<std::vector<Vec3>> points;
+  for (const Impl::Contribution& c : impl_->data) points.push_back(c.points);
+  return points;
+}
+
 std::uint32_t ThinPlateField::generation() const { return impl_->generation; }
 
 std::uint32_t ThinPlateField::changed_at(const Vec3& point) const {

@@ -103,8 +103,10 @@ class ThinPlateField {
   /// Per material: the extent the field was set up with (mm).
   const std::vector<double>& extents() const;
   const std::vector<PreparedSlice>& slices() const;
-  /// Every slice's samples' values (materials per sample, slices in order): exposed for tests.
+  /// Every slice's samples' values (materials per sample, slices in order) and positions
+  /// (world mm): exposed for tests.
   std::vector<double> sample_values() const;
+  std::vector<std::vector<Vec3>> sample_points() const;
   /// Node counts of the solve grid.
   std::array<int, 3> node_counts() const;
 

@@ -248,6 +248,66 @@ TEST(ThinPlateData, SlicesAcrossAnOrgansEndBoundEachOthersDistances) {
   EXPECT_GT(values[3], -2.0);
 }
 
+// Each sample keeps the least of its own distance and the bounds every other slice gives it
+// (tighten()), however the planes lie: a brute-force reference over every pair of a sample and a
+// plane, on planes through a sphere at assorted tilts. The field visits only the samples near
+// each plane and the buckets within reach; the reference visits everything.
+TEST(ThinPlateData, EachSampleKeepsTheLeastOfItsBoundsByEveryOtherSlice) {
+  const double r = 40.0;
+  SliceSet set;
+  set.bounds = Box3{Vec3::Constant(-60.0), Vec3::Constant(60.0)};
+  const std::vector<std::pair<Vec3, Vec3>> planes = {
+      {Vec3(0, 0, -30), Vec3(0, 0, 1)},     {Vec3(0, 0, 12), Vec3(0.1, 0, 1)},
+      {Vec3(5, 0, 0), Vec3(1, 0.4, 0.2)},   {Vec3(0, -8, 3), Vec3(0.5, 1, 0.3)},
+      {Vec3(0, 0, 33), Vec3(0.3, 0.2, 1)},  {Vec3(-20, 0, 0), Vec3(1, -0.7, 0.5)},
+      {Vec3(0, 25, 0), Vec3(-0.2, 1, 0.9)}, {Vec3(0, 0, 37.5), Vec3(0, 0, 1)}};
+  for (const auto& [origin, normal] : planes) {
+    LabeledSlice s;
+    s.origin_mm = origin;
+    const Vec3 n = normal.normalized();
+    s.u = n.unitOrthogonal();
+    s.v = n.cross(s.u);
+    const double d = origin.dot(n);  // the sphere's centre is at the origin
+    const Vec2 centre(-origin.dot(s.u), -origin.dot(s.v));
+    if (std::abs(d) < r) s.regions.push_back({1, circle(centre, std::sqrt(r * r - d * d), 96), {}});
+    set.slices.push_back(s);
+  }
+  const Box3 box = *set.bounds;
+  const std::vector<PreparedSlice> prepared = prepare_slices(set, {1}, box);
+  ThinPlateField field(box, box.size().maxCoeff() / 128.0, 1, ThinPlateOptions{}, {100.0});
+  field.add_slices(prepared);
+  const double truncation = 0.1 * truncation_extent(100.0);
+  const std::vector<double> values = field.sample_values();
+  const std::vector<std::vector<Vec3>> points = field.sample_points();
+  ASSERT_EQ(points.size(), prepared.size());
+  std::size_t at = 0, tightened = 0, wrong = 0;
+  for (std::size_t a = 0; a < prepared.size(); ++a)
+    for (const Vec3& p : points[a]) {
+      auto in_plane = [&](const PreparedSlice& s) {
+        const Vec3 q = p - s.origin;
+        return Vec2(q.dot(s.u), q.dot(s.v));
+      };
+      const double own =
+          slice_signed_distances(prepared[a], 1, truncation, {in_plane(prepared[a])})[0];
+      double best = std::abs(own);
+      for (std::size_t b = 0; b < prepared.size(); ++b) {
+        if (b == a) continue;
+        const double h = std::abs((p - prepared[b].origin).dot(prepared[b].unit_normal));
+        const double there =
+            slice_signed_distances(prepared[b], 1, truncation, {in_plane(prepared[b])})[0];
+        if (std::isnan(there)) continue;
+        const double bound = (there > 0.0) != (own > 0.0) ? h : std::hypot(h, there);
+        best = std::min(best, bound);
+      }
+      const double expected = own > 0.0 ? best : -best;
+      tightened += best < std::abs(own);
+      wrong += !(std::abs(values[at++] - expected) <= 1e-12 * truncation);
+    }
+  EXPECT_EQ(at, values.size());
+  EXPECT_EQ(wrong, 0u);
+  EXPECT_GT(tightened, values.size() / 20);  // the bounds matter for a good share of samples
+}
+
 // An organ whose extent grows slice by slice: a field whose truncation grows with it
 // (grow_extents: the samples the old truncation clamped take their distance and bounds again)
 // holds, after each slice, the data a field built with the final truncation from the start
