@@ -138,7 +138,11 @@ TEST(ThinPlateField, SolveConvergesInAFewPreconditionedIterations) {
 // same to the bit from one run to the next and at any thread count. (With parallel_reduce's
 // automatic partitioning they followed the threads' timing and changed from run to run.)
 TEST(ThinPlateField, MeshesAreTheSameToTheBitAtAnyThreadCount) {
-  const SliceSet set = sphere_stack(40.0, {-30, -15, 0, 15, 30});
+  SliceSet set = sphere_stack(40.0, {-30, -15, 0, 15, 30});
+  // A second organ beside the sphere: the materials are solved at once, each on its own.
+  for (LabeledSlice& slice : set.slices)
+    if (slice.origin_mm.z() == 0.0 && slice.u == Vec3::UnitX() && slice.v == Vec3::UnitY())
+      slice.regions.push_back({2, circle(Vec2(42, 42), 15.0, 48), {}});
   ReconstructionOptions options = thin_plate_options();
   options.max_depth = 7;
   std::vector<MeshSet> runs;
@@ -148,6 +152,8 @@ TEST(ThinPlateField, MeshesAreTheSameToTheBitAtAnyThreadCount) {
     runs.push_back(reconstruct(set, options, &stats));
     // Enough nodes for the sums to be split into many ranges (of 2^14 nodes).
     ASSERT_GT(stats.solve_nodes, 4u << 14);
+    ASSERT_EQ(runs.back().meshes.size(), 2u);
+    EXPECT_FALSE(runs.back().meshes[1].mesh.triangles.empty());
   }
   for (std::size_t run = 1; run < runs.size(); ++run) {
     SCOPED_TRACE("run " + std::to_string(run));
