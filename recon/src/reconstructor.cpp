@@ -336,9 +336,10 @@ struct Reconstructor::State {
     stats.data_s += clock.seconds();
   }
 
-  // Adds the data of list[first, end) to the thin-plate field, unless they change a material's
-  // truncation (truncation_extent of its extent): false then, and the caller rebuilds, so that
-  // every slice's data have the truncation a one-shot reconstruction gives them.
+  // Adds the data of list[first, end) to the thin-plate field. A material whose extent they
+  // grow (truncation_extent of it) has its truncation grown first (ThinPlateField::
+  // grow_extents), so that every slice's data have the truncation a one-shot reconstruction
+  // gives them; false, and the caller rebuilds, where that is not possible.
   bool add_thin_plate_slices(const std::vector<Entry>& list, std::size_t first,
                              ReconstructionStats& stats) {
     Stopwatch clock;
@@ -350,8 +351,10 @@ struct Reconstructor::State {
     }
     const std::vector<double> grown = box_extents(boxes);
     const std::vector<double>& basis = thin_plate->extents();
+    bool extents_grow = false;
     for (std::size_t m = 0; m < basis.size(); ++m)
-      if (truncation_extent(grown[m]) != truncation_extent(basis[m])) return false;
+      extents_grow |= truncation_extent(grown[m]) != truncation_extent(basis[m]);
+    if (extents_grow && !thin_plate->grow_extents(grown)) return false;
     thin_plate_boxes = std::move(boxes);
     thin_plate->add_slices(std::move(added));
     const std::vector<int> ids = slice_ids(list, first);

@@ -90,6 +90,11 @@ class ThinPlateField {
   /// and generation, so that what `other` evaluated stays current where the solve moves
   /// nothing by more than the resample tolerance. Returns whether it did.
   bool start_from(const ThinPlateField& other);
+  /// The materials' extents grew to `extents_mm` (same count): the data of every slice held
+  /// become those computed with the new truncations (only the samples an old truncation clamped
+  /// change), and the next solve starts from the last solution with its plateaus moved. False,
+  /// and nothing changed, where a truncation would shrink (a rebuild's case).
+  bool grow_extents(const std::vector<double>& extents_mm);
   /// Solves for every material from the last solution (-truncation at first), except, after
   /// this field's first solve, the materials whose added data the field fits to the solver's
   /// tolerance already (ThinPlateSolveStats::unchanged_materials).
@@ -108,6 +113,10 @@ class ThinPlateField {
   /// Per material: the extent the field was set up with (mm).
   const std::vector<double>& extents() const;
   const std::vector<PreparedSlice>& slices() const;
+  /// Every slice's samples' values (materials per sample, slices in order) and positions
+  /// (world mm): exposed for tests.
+  std::vector<double> sample_values() const;
+  std::vector<std::vector<Vec3>> sample_points() const;
   /// Node counts of the solve grid.
   std::array<int, 3> node_counts() const;
 
