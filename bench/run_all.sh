@@ -73,9 +73,11 @@ step keyframes "sonoshape_keyframe_bench" \
 build/bench/sonoshape_keyframe_bench --trajectory fan --every 24 3:2 4:2.5 5:3 8:5"
 
 step live_scan "sonoshape" \
-  "build/apps/sonoshape scan --field mean-value --source sim:default --sweep-s 10 --realtime --width-px 512 --height-px 512 -o out/scan512 --publish tcp://127.0.0.1:5701
-build/apps/sonoshape simulate --frames 2 --truth out/truth -o out/x.igs.mha -q
-build/apps/sonoshape evaluate --recon out/scan512 --truth 1:out/truth/label_1.ply --truth 2:out/truth/label_2.ply"
+  "build/apps/sonoshape simulate --frames 2 --truth out/truth -o out/x.igs.mha -q
+for field in thin-plate mean-value; do for sweep in 10 20; do
+  build/apps/sonoshape scan --field \$field --source sim:default --sweep-s \$sweep --realtime --width-px 512 --height-px 512 -o out/scan512-\$field-\$sweep --publish tcp://127.0.0.1:5701
+  build/apps/sonoshape evaluate --recon out/scan512-\$field-\$sweep --truth 1:out/truth/label_1.ply --truth 2:out/truth/label_2.ply --truth 3:out/truth/label_3.ply
+done; done"
 
 step plus_spine_replay "sonoshape sonoshape_render" \
   "build/apps/sonoshape scan --field mean-value --source replay:data/plus/SpinePhantomFreehand.igs.mha --calibration data/plus/PlusDeviceSet_SpinePhantomFreehandReconstructionOnly.xml --fast -o out/plus
