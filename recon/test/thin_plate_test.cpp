@@ -31,6 +31,24 @@ ReconstructionOptions thin_plate_options() {
 // Connected parts of a mesh (triangles sharing a vertex).
 std::size_t component_count(const TriangleMesh& mesh) { return mesh_parts(mesh).count; }
 
+// The largest difference between two fields' values (every function) at 2000 points spread over
+// the box (a low-discrepancy sequence): how two solves of the same data are compared.
+double worst_difference(const ThinPlateField& a, const ThinPlateField& b, const Box3& box,
+                        int functions) {
+  std::vector<Vec3> points;
+  for (int i = 0; i < 2000; ++i)
+    points.push_back(box.min + Vec3(std::fmod(0.618034 * i, 1.0), std::fmod(0.414214 * i, 1.0),
+                                    std::fmod(0.732051 * i, 1.0))
+                                   .cwiseProduct(box.size()));
+  const std::size_t count = points.size() * static_cast<std::size_t>(functions);
+  std::vector<double> va(count), vb(count);
+  a.evaluate(points, va.data());
+  b.evaluate(points, vb.data());
+  double worst = 0.0;
+  for (std::size_t n = 0; n < count; ++n) worst = std::max(worst, std::abs(va[n] - vb[n]));
+  return worst;
+}
+
 LabeledSlice z_slice(double z) {
   LabeledSlice s;
   s.origin_mm = Vec3(0, 0, z);
@@ -361,17 +379,8 @@ TEST(ThinPlateData, AGrowingTruncationGivesTheDataOfAFieldBuiltWithIt) {
   for (std::size_t n = 0; n < c.size(); ++n) clamped_differently += c[n] != b[n];
   EXPECT_GT(clamped_differently, c.size() / 10);
   // Both solves from their own start agree to the solver's tolerance.
-  std::vector<Vec3> points;
-  for (int i = 0; i < 2000; ++i)
-    points.push_back(box.min + Vec3(std::fmod(0.618034 * i, 1.0), std::fmod(0.414214 * i, 1.0),
-                                    std::fmod(0.732051 * i, 1.0))
-                                   .cwiseProduct(box.size()));
-  std::vector<double> ga(points.size() * 2), fb(points.size() * 2);
-  grown.evaluate(points, ga.data());
-  fresh.evaluate(points, fb.data());
-  double worst = 0.0;
-  for (std::size_t n = 0; n < ga.size(); ++n) worst = std::max(worst, std::abs(ga[n] - fb[n]));
-  EXPECT_LT(worst, 2.0 * 1e-2 * 2.0 * finest + 1.25 * 1.25 * 1.25 * 2.5e-3 * 2.0 * finest);
+  EXPECT_LT(worst_difference(grown, fresh, box, 2),
+            2.0 * 1e-2 * 2.0 * finest + 1.25 * 1.25 * 1.25 * 2.5e-3 * 2.0 * finest);
 }
 
 // A square rod (8 mm wide) along z, crossed by planes alternately 2.5 and 1.2 mm apart (the
@@ -660,17 +669,7 @@ TEST(ThinPlateOnline, AMaterialWhoseNewDataTheFieldFitsIsNotSolvedAgain) {
   all.push_back(added);
   once.add_slices(all);
   once.solve();
-  std::vector<Vec3> points;
-  for (int i = 0; i < 2000; ++i)
-    points.push_back(box.min + Vec3(std::fmod(0.618034 * i, 1.0), std::fmod(0.414214 * i, 1.0),
-                                    std::fmod(0.732051 * i, 1.0))
-                                   .cwiseProduct(box.size()));
-  std::vector<double> a(points.size() * 2), b(points.size() * 2);
-  online.evaluate(points, a.data());
-  once.evaluate(points, b.data());
-  double worst = 0.0;
-  for (std::size_t n = 0; n < a.size(); ++n) worst = std::max(worst, std::abs(a[n] - b[n]));
-  EXPECT_LT(worst, 2.0 * options.tolerance * spacing);
+  EXPECT_LT(worst_difference(online, once, box, 2), 2.0 * options.tolerance * spacing);
 }
 
 // The online engine keeps the octree's rows whose interpolation reads no block that a solve
