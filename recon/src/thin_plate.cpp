@@ -1016,27 +1016,30 @@ struct ThinPlateField::Impl {
     for (int a = 0; a < 3; ++a)
       if (!sampled[static_cast<std::size_t>(a)]) add_extrusion_prior(a, weight, target);
     add_closing(sampled, weight, target);
-    bool changed = false;
+    // A changed weight changes the operator (every material); a changed target, one material.
+    bool weights_changed = false;
+    std::vector<char> targets_changed(k, 0);
     for (std::size_t node = 0; node < size; ++node) {
       if (weight[node] != prior_weight[node]) {
         g.data_diagonal[node] += weight[node] - prior_weight[node];
-        changed = true;
+        weights_changed = true;
       }
       for (std::size_t m = 0; m < k; ++m) {
         const double before = prior_weight[node] * prior_target[node * k + m];
         const double after = weight[node] * target[node * k + m];
         if (after == before) continue;
         weighted_targets[m * size + node] += after - before;
-        changed = true;
+        targets_changed[m] = 1;
       }
     }
     prior_weight = std::move(weight);
     prior_target = std::move(target);
     priors_all_sampled = all_sampled;
-    if (!changed) return;
-    weights_dirty = true;
-    // New terms: solve() must not take any material as fitted.
-    for (double& misfit : misfit_mm) misfit = std::numeric_limits<double>::infinity();
+    if (weights_changed) weights_dirty = true;
+    // New terms: solve() must not take their materials as fitted.
+    for (std::size_t m = 0; m < k; ++m)
+      if (weights_changed || targets_changed[m])
+        misfit_mm[m] = std::numeric_limits<double>::infinity();
   }
 
   // Material m's truncation grows to `after` (mm), as if its data had been computed with it:
