@@ -65,7 +65,7 @@ SliceSet sphere_stack(double r, const std::vector<double>& heights) {
   return set;
 }
 
-TEST(ThinPlateData, SignedDistanceIsPositiveInsideAndIgnoresEdgesAlongUnknownRegions) {
+TEST(ThinPlateData, SignedDistanceInsideLiesBetweenTheBoundsOfTrueAndUnseenEdges) {
   // A square of material 1 on [0, 10]^2 whose right edge borders an unknown region.
   LabeledSlice slice = z_slice(0.0);
   slice.regions.push_back({1, Ring2{{0, 0}, {10, 0}, {10, 10}, {0, 10}}, {}});
@@ -75,9 +75,10 @@ TEST(ThinPlateData, SignedDistanceIsPositiveInsideAndIgnoresEdgesAlongUnknownReg
   const double truncation = 10.0;
   const std::vector<Vec2> points{{8, 5}, {5, 5}, {-3, 5}, {15, 5}, {-50, 5}, {5, 12}};
   const std::vector<double> d = slice_signed_distances(prepared, 1, truncation, points);
-  // (8, 5): 5 mm from the top and bottom edges; the right edge (2 mm away) is where the slice
-  // stops seeing, not a boundary.
-  EXPECT_NEAR(d[0], 5.0, 1e-9);
+  // (8, 5): 5 mm from the top and bottom edges (true boundaries: an upper bound); the right edge
+  // (2 mm away) is where the slice stops seeing, where the surface may lie or lie beyond (a lower
+  // bound): the value is their mean, as at (5, 5), 5 mm from all of them.
+  EXPECT_NEAR(d[0], 3.5, 1e-9);
   EXPECT_NEAR(d[1], 5.0, 1e-9);
   EXPECT_NEAR(d[2], -3.0, 1e-9);
   EXPECT_TRUE(std::isnan(d[3]));         // inside the unknown region: no data
@@ -477,6 +478,34 @@ TEST(ThinPlateField, UnknownPatchesCarryNoDataAndCompleteFromTheNeighbours) {
   EXPECT_TRUE(check_mesh_health(mesh).closed_manifold_oriented());
   EXPECT_EQ(component_count(mesh), 1u);
   for (const Vec3& p : mesh.vertices) EXPECT_GT(p.norm(), 0.8 * r);
+}
+
+TEST(ThinPlateField, AnOrganDoesNotGoOnFarIntoItsOwnShadow) {
+  // A rod of radius 5 mm along z whose far half borders its acoustic shadow in every slice (an
+  // unknown region from its far surface down to y = -40, as the simulator's rib casts): the
+  // surface may lie along the shadow or beyond, and the field must not carry the rod's inside
+  // values far into it: with the edge along the shadow as no boundary at all, the rod went
+  // 2.1 mm deeper than its 5 mm; with that edge's distance as a lower bound, 1.1 mm.
+  const double r = 5.0;
+  const Ring2 disc = circle(Vec2(0, 0), r, 96);
+  Ring2 shadow{{-r, 0}, {-r, -40}, {r, -40}, {r, 0}};
+  for (int i = 95; i >= 48; --i) shadow.push_back(disc[static_cast<std::size_t>(i)]);
+  shadow.pop_back();  // disc[48] is (-r, 0), the first point
+  SliceSet set;
+  set.bounds = Box3{Vec3(-30, -50, -30), Vec3(30, 30, 30)};
+  for (const double z : {-20.0, -10.0, 0.0, 10.0, 20.0}) {
+    LabeledSlice s = z_slice(z);
+    s.regions.push_back({1, disc, {}});
+    s.regions.push_back({kUnknownLabel, shadow, {}});
+    set.slices.push_back(s);
+  }
+  const MeshSet meshes = reconstruct(set, thin_plate_options());
+  const TriangleMesh& mesh = meshes.meshes[0].mesh;
+  EXPECT_TRUE(check_mesh_health(mesh).closed_manifold_oriented());
+  EXPECT_EQ(component_count(mesh), 1u);
+  const Box3 bounds = mesh.bounds();
+  EXPECT_GT(bounds.min.y(), -r - 1.6);
+  EXPECT_LT(bounds.max.y(), r + 1.0);
 }
 
 TEST(ThinPlateField, AFieldOfViewsEdgeIsNoSurface) {
