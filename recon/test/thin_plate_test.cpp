@@ -319,6 +319,39 @@ TEST(ThinPlateData, EachSampleKeepsTheLeastOfItsBoundsByEveryOtherSlice) {
 // (grow_extents: the samples the old truncation clamped take their distance and bounds again)
 // holds, after each slice, the data a field built with the final truncation from the start
 // holds: the same to the bit. A tilted slice crosses the others at an angle.
+TEST(ThinPlateData, AGrowingTruncationKeepsTheBoundsOfEdgesAlongUnknownRegions) {
+  // The discs end at a field of view's edge (x = 10): their inside values near it lie below the
+  // truncation although their true boundaries are beyond it, and must follow a grown truncation
+  // as a field built with it takes them.
+  SliceSet set = sphere_stack(40.0, {30, 20, 10, 0, -10, -20});
+  for (std::size_t k = 0; k < 6; ++k)
+    set.slices[k].fov = Ring2{{-60, -60}, {10, -60}, {10, 60}, {-60, 60}};
+  const Box3 box = *set.bounds;
+  const double finest = box.size().maxCoeff() / 128.0;
+  const std::vector<PreparedSlice> prepared = prepare_slices(set, {1}, box);
+  ThinPlateField grown(box, finest, 1, ThinPlateOptions{},
+                       box_extents(material_boxes({prepared[0]}, 1)));
+  int growths = 0;
+  for (std::size_t k = 0; k < prepared.size(); ++k) {
+    const std::vector<double> extents = box_extents(material_boxes(
+        {prepared.begin(), prepared.begin() + static_cast<std::ptrdiff_t>(k) + 1}, 1));
+    growths += truncation_extent(extents[0]) != truncation_extent(grown.extents()[0]);
+    ASSERT_TRUE(grown.grow_extents(extents));
+    grown.add_slices({prepared[k]});
+    grown.solve();
+  }
+  EXPECT_GE(growths, 2);
+  ThinPlateField fresh(box, finest, 1, ThinPlateOptions{},
+                       box_extents(material_boxes(prepared, 1)));
+  fresh.add_slices(prepared);
+  fresh.solve();
+  const std::vector<double> a = grown.sample_values(), b = fresh.sample_values();
+  ASSERT_EQ(a.size(), b.size());
+  std::size_t differ = 0;
+  for (std::size_t n = 0; n < a.size(); ++n) differ += a[n] != b[n];
+  EXPECT_EQ(differ, 0u);
+}
+
 TEST(ThinPlateData, AGrowingTruncationGivesTheDataOfAFieldBuiltWithIt) {
   SliceSet set = sphere_stack(40.0, {30, 20, 10, 0, -10, -20});
   LabeledSlice tilted;
