@@ -83,7 +83,7 @@ SliceSet sphere_stack(double r, const std::vector<double>& heights) {
   return set;
 }
 
-TEST(ThinPlateData, SignedDistanceIsPositiveInsideAndIgnoresEdgesAlongUnknownRegions) {
+TEST(ThinPlateData, SignedDistanceInsideLiesBetweenTheBoundsOfTrueAndUnseenEdges) {
   // A square of material 1 on [0, 10]^2 whose right edge borders an unknown region.
   LabeledSlice slice = z_slice(0.0);
   slice.regions.push_back({1, Ring2{{0, 0}, {10, 0}, {10, 10}, {0, 10}}, {}});
@@ -93,9 +93,10 @@ TEST(ThinPlateData, SignedDistanceIsPositiveInsideAndIgnoresEdgesAlongUnknownReg
   const double truncation = 10.0;
   const std::vector<Vec2> points{{8, 5}, {5, 5}, {-3, 5}, {15, 5}, {-50, 5}, {5, 12}};
   const std::vector<double> d = slice_signed_distances(prepared, 1, truncation, points);
-  // (8, 5): 5 mm from the top and bottom edges; the right edge (2 mm away) is where the slice
-  // stops seeing, not a boundary.
-  EXPECT_NEAR(d[0], 5.0, 1e-9);
+  // (8, 5): 5 mm from the top and bottom edges (true boundaries: an upper bound); the right edge
+  // (2 mm away) is where the slice stops seeing, where the surface may lie or lie beyond (a lower
+  // bound): the value is their mean, as at (5, 5), 5 mm from all of them.
+  EXPECT_NEAR(d[0], 3.5, 1e-9);
   EXPECT_NEAR(d[1], 5.0, 1e-9);
   EXPECT_NEAR(d[2], -3.0, 1e-9);
   EXPECT_TRUE(std::isnan(d[3]));         // inside the unknown region: no data
@@ -336,6 +337,39 @@ TEST(ThinPlateData, EachSampleKeepsTheLeastOfItsBoundsByEveryOtherSlice) {
 // (grow_extents: the samples the old truncation clamped take their distance and bounds again)
 // holds, after each slice, the data a field built with the final truncation from the start
 // holds: the same to the bit. A tilted slice crosses the others at an angle.
+TEST(ThinPlateData, AGrowingTruncationKeepsTheBoundsOfEdgesAlongUnknownRegions) {
+  // The discs end at a field of view's edge (x = 10): their inside values near it lie below the
+  // truncation although their true boundaries are beyond it, and must follow a grown truncation
+  // as a field built with it takes them.
+  SliceSet set = sphere_stack(40.0, {30, 20, 10, 0, -10, -20});
+  for (std::size_t k = 0; k < 6; ++k)
+    set.slices[k].fov = Ring2{{-60, -60}, {10, -60}, {10, 60}, {-60, 60}};
+  const Box3 box = *set.bounds;
+  const double finest = box.size().maxCoeff() / 128.0;
+  const std::vector<PreparedSlice> prepared = prepare_slices(set, {1}, box);
+  ThinPlateField grown(box, finest, 1, ThinPlateOptions{},
+                       box_extents(material_boxes({prepared[0]}, 1)));
+  int growths = 0;
+  for (std::size_t k = 0; k < prepared.size(); ++k) {
+    const std::vector<double> extents = box_extents(material_boxes(
+        {prepared.begin(), prepared.begin() + static_cast<std::ptrdiff_t>(k) + 1}, 1));
+    growths += truncation_extent(extents[0]) != truncation_extent(grown.extents()[0]);
+    ASSERT_TRUE(grown.grow_extents(extents));
+    grown.add_slices({prepared[k]});
+    grown.solve();
+  }
+  EXPECT_GE(growths, 2);
+  ThinPlateField fresh(box, finest, 1, ThinPlateOptions{},
+                       box_extents(material_boxes(prepared, 1)));
+  fresh.add_slices(prepared);
+  fresh.solve();
+  const std::vector<double> a = grown.sample_values(), b = fresh.sample_values();
+  ASSERT_EQ(a.size(), b.size());
+  std::size_t differ = 0;
+  for (std::size_t n = 0; n < a.size(); ++n) differ += a[n] != b[n];
+  EXPECT_EQ(differ, 0u);
+}
+
 TEST(ThinPlateData, AGrowingTruncationGivesTheDataOfAFieldBuiltWithIt) {
   SliceSet set = sphere_stack(40.0, {30, 20, 10, 0, -10, -20});
   LabeledSlice tilted;
@@ -486,6 +520,34 @@ TEST(ThinPlateField, UnknownPatchesCarryNoDataAndCompleteFromTheNeighbours) {
   EXPECT_TRUE(check_mesh_health(mesh).closed_manifold_oriented());
   EXPECT_EQ(component_count(mesh), 1u);
   for (const Vec3& p : mesh.vertices) EXPECT_GT(p.norm(), 0.8 * r);
+}
+
+TEST(ThinPlateField, AnOrganDoesNotGoOnFarIntoItsOwnShadow) {
+  // A rod of radius 5 mm along z whose far half borders its acoustic shadow in every slice (an
+  // unknown region from its far surface down to y = -40, as the simulator's rib casts): the
+  // surface may lie along the shadow or beyond, and the field must not carry the rod's inside
+  // values far into it: with the edge along the shadow as no boundary at all, the rod went
+  // 2.1 mm deeper than its 5 mm; with that edge's distance as a lower bound, 1.1 mm.
+  const double r = 5.0;
+  const Ring2 disc = circle(Vec2(0, 0), r, 96);
+  Ring2 shadow{{-r, 0}, {-r, -40}, {r, -40}, {r, 0}};
+  for (int i = 95; i >= 48; --i) shadow.push_back(disc[static_cast<std::size_t>(i)]);
+  shadow.pop_back();  // disc[48] is (-r, 0), the first point
+  SliceSet set;
+  set.bounds = Box3{Vec3(-30, -50, -30), Vec3(30, 30, 30)};
+  for (const double z : {-20.0, -10.0, 0.0, 10.0, 20.0}) {
+    LabeledSlice s = z_slice(z);
+    s.regions.push_back({1, disc, {}});
+    s.regions.push_back({kUnknownLabel, shadow, {}});
+    set.slices.push_back(s);
+  }
+  const MeshSet meshes = reconstruct(set, thin_plate_options());
+  const TriangleMesh& mesh = meshes.meshes[0].mesh;
+  EXPECT_TRUE(check_mesh_health(mesh).closed_manifold_oriented());
+  EXPECT_EQ(component_count(mesh), 1u);
+  const Box3 bounds = mesh.bounds();
+  EXPECT_GT(bounds.min.y(), -r - 1.6);
+  EXPECT_LT(bounds.max.y(), r + 1.0);
 }
 
 TEST(ThinPlateField, AFieldOfViewsEdgeIsNoSurface) {
