@@ -333,43 +333,58 @@ TEST(ThinPlateData, EachSampleKeepsTheLeastOfItsBoundsByEveryOtherSlice) {
   EXPECT_GT(tightened, values.size() / 20);  // the bounds matter for a good share of samples
 }
 
-// An organ whose extent grows slice by slice: a field whose truncation grows with it
-// (grow_extents: the samples the old truncation clamped take their distance and bounds again)
-// holds, after each slice, the data a field built with the final truncation from the start
-// holds: the same to the bit. A tilted slice crosses the others at an angle.
+// The slices added one by one to a field set up for the first one's extent, its truncation grown
+// with the organ's extent before each (grow_extents) and the field solved after each; `growths`
+// counts the steps of the rounded extent.
+ThinPlateField grown_slice_by_slice(const Box3& box, double finest,
+                                    const std::vector<PreparedSlice>& prepared, int& growths) {
+  ThinPlateField grown(box, finest, 1, ThinPlateOptions{},
+                       box_extents(material_boxes({prepared[0]}, 1)));
+  growths = 0;
+  for (std::size_t k = 0; k < prepared.size(); ++k) {
+    const std::vector<double> extents = box_extents(material_boxes(
+        {prepared.begin(), prepared.begin() + static_cast<std::ptrdiff_t>(k) + 1}, 1));
+    growths += truncation_extent(extents[0]) != truncation_extent(grown.extents()[0]);
+    EXPECT_TRUE(grown.grow_extents(extents));
+    grown.add_slices({prepared[k]});
+    grown.solve();
+  }
+  return grown;
+}
+
+// How many sample values of two fields differ (their samples in the same order).
+std::size_t differing_samples(const ThinPlateField& a, const ThinPlateField& b) {
+  const std::vector<double> va = a.sample_values(), vb = b.sample_values();
+  EXPECT_EQ(va.size(), vb.size());
+  std::size_t differ = 0;
+  for (std::size_t n = 0; n < std::min(va.size(), vb.size()); ++n) differ += va[n] != vb[n];
+  return differ;
+}
+
+// Discs that end at a field of view's edge (x = 10): their inside values near it lie below the
+// truncation although their true boundaries are beyond it (half boundaries), and must follow a
+// grown truncation as a field built with it takes them.
 TEST(ThinPlateData, AGrowingTruncationKeepsTheBoundsOfEdgesAlongUnknownRegions) {
-  // The discs end at a field of view's edge (x = 10): their inside values near it lie below the
-  // truncation although their true boundaries are beyond it, and must follow a grown truncation
-  // as a field built with it takes them.
   SliceSet set = sphere_stack(40.0, {30, 20, 10, 0, -10, -20});
   for (std::size_t k = 0; k < 6; ++k)
     set.slices[k].fov = Ring2{{-60, -60}, {10, -60}, {10, 60}, {-60, 60}};
   const Box3 box = *set.bounds;
   const double finest = box.size().maxCoeff() / 128.0;
   const std::vector<PreparedSlice> prepared = prepare_slices(set, {1}, box);
-  ThinPlateField grown(box, finest, 1, ThinPlateOptions{},
-                       box_extents(material_boxes({prepared[0]}, 1)));
   int growths = 0;
-  for (std::size_t k = 0; k < prepared.size(); ++k) {
-    const std::vector<double> extents = box_extents(material_boxes(
-        {prepared.begin(), prepared.begin() + static_cast<std::ptrdiff_t>(k) + 1}, 1));
-    growths += truncation_extent(extents[0]) != truncation_extent(grown.extents()[0]);
-    ASSERT_TRUE(grown.grow_extents(extents));
-    grown.add_slices({prepared[k]});
-    grown.solve();
-  }
+  const ThinPlateField grown = grown_slice_by_slice(box, finest, prepared, growths);
   EXPECT_GE(growths, 2);
   ThinPlateField fresh(box, finest, 1, ThinPlateOptions{},
                        box_extents(material_boxes(prepared, 1)));
   fresh.add_slices(prepared);
   fresh.solve();
-  const std::vector<double> a = grown.sample_values(), b = fresh.sample_values();
-  ASSERT_EQ(a.size(), b.size());
-  std::size_t differ = 0;
-  for (std::size_t n = 0; n < a.size(); ++n) differ += a[n] != b[n];
-  EXPECT_EQ(differ, 0u);
+  EXPECT_EQ(differing_samples(grown, fresh), 0u);
 }
 
+// An organ whose extent grows slice by slice: a field whose truncation grows with it
+// (grow_extents: the samples the old truncation clamped take their distance and bounds again)
+// holds, after each slice, the data a field built with the final truncation from the start
+// holds: the same to the bit. A tilted slice crosses the others at an angle.
 TEST(ThinPlateData, AGrowingTruncationGivesTheDataOfAFieldBuiltWithIt) {
   SliceSet set = sphere_stack(40.0, {30, 20, 10, 0, -10, -20});
   LabeledSlice tilted;
@@ -382,36 +397,19 @@ TEST(ThinPlateData, AGrowingTruncationGivesTheDataOfAFieldBuiltWithIt) {
   const double finest = box.size().maxCoeff() / 128.0;
   const std::vector<PreparedSlice> prepared = prepare_slices(set, {1}, box);
   const std::vector<double> final_extents = box_extents(material_boxes(prepared, 1));
-  ThinPlateField grown(box, finest, 1, ThinPlateOptions{},
-                       box_extents(material_boxes({prepared[0]}, 1)));
   int growths = 0;
-  for (std::size_t k = 0; k < prepared.size(); ++k) {
-    const std::vector<double> extents = box_extents(material_boxes(
-        {prepared.begin(), prepared.begin() + static_cast<std::ptrdiff_t>(k) + 1}, 1));
-    growths += truncation_extent(extents[0]) != truncation_extent(grown.extents()[0]);
-    ASSERT_TRUE(grown.grow_extents(extents));
-    grown.add_slices({prepared[k]});
-    grown.solve();
-  }
+  const ThinPlateField grown = grown_slice_by_slice(box, finest, prepared, growths);
   EXPECT_GE(growths, 3);
   ThinPlateField fresh(box, finest, 1, ThinPlateOptions{}, final_extents);
   fresh.add_slices(prepared);
   fresh.solve();
   ASSERT_EQ(truncation_extent(grown.extents()[0]), truncation_extent(final_extents[0]));
-  const std::vector<double> a = grown.sample_values(), b = fresh.sample_values();
-  ASSERT_EQ(a.size(), b.size());
-  std::size_t differ = 0;
-  for (std::size_t n = 0; n < a.size(); ++n) differ += a[n] != b[n];
-  EXPECT_EQ(differ, 0u);
-  // A truncation grown, not a field built with it: the data would differ (the guard above
-  // compares something).
+  EXPECT_EQ(differing_samples(grown, fresh), 0u);
+  // A truncation not grown: the data would differ (the guard above compares something).
   ThinPlateField first_only(box, finest, 1, ThinPlateOptions{},
                             box_extents(material_boxes({prepared[0]}, 1)));
   first_only.add_slices(prepared);
-  const std::vector<double> c = first_only.sample_values();
-  std::size_t clamped_differently = 0;
-  for (std::size_t n = 0; n < c.size(); ++n) clamped_differently += c[n] != b[n];
-  EXPECT_GT(clamped_differently, c.size() / 10);
+  EXPECT_GT(differing_samples(first_only, fresh), fresh.sample_values().size() / 10);
   // Both solves from their own start agree to the solver's tolerance.
   EXPECT_LT(worst_difference(grown, fresh, box, 2),
             2.0 * 1e-2 * 2.0 * finest + 1.25 * 1.25 * 1.25 * 2.5e-3 * 2.0 * finest);
