@@ -11,6 +11,7 @@
 #include <chrono>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <random>
 #include <sstream>
@@ -449,6 +450,41 @@ TEST(ScanResume, AJournalNeverOpensTheScanToOtherMachines) {
         << output;
   EXPECT_EQ(output.find("OpenIGTLink server on"), std::string::npos) << output;
   EXPECT_EQ(output.find("http://0.0.0.0"), std::string::npos) << output;
+}
+
+// A journal that names no field was written while the mean-value field was the default: its
+// resume goes on with that field, whatever the default is now.
+TEST(ScanResume, AJournalThatNamesNoFieldGoesOnWithTheMeanValueField) {
+  TempDir dir;
+  // A 4 s sweep: the 3 s one's last keyframe lies outside the scan volume, which the slice-set
+  // reader refuses (and the scan keeps).
+  std::vector<std::string> arguments = kQuickSim;
+  *(std::find(arguments.begin(), arguments.end(), "--sweep-s") + 1) = "4";
+  write_crafted_journal(dir.path() / "out",
+                        {{"type", "scan"}, {"version", 1}, {"arguments", arguments}});
+  std::string output;
+  ASSERT_EQ(run({SONOSHAPE_BINARY, "scan", "--resume", (dir.path() / "out").string()},
+                dir.path() / "log", output),
+            0)
+      << output;
+  // The resumed scan's meshes are the mean-value field's of its slices, not the thin-plate's.
+  const std::string slices = (dir.path() / "out" / "slices.json").string();
+  std::map<std::string, double> volume;
+  for (const std::string field : {"mean-value", "thin-plate"}) {
+    ASSERT_EQ(run({SONOSHAPE_BINARY, "reconstruct", slices, "--depth", "4", "--field", field, "-o",
+                   (dir.path() / field).string()},
+                  dir.path() / "log", output),
+              0)
+        << output;
+    const auto mesh = sonoshape::read_mesh(dir.path() / field / "label_1.ply");
+    ASSERT_TRUE(mesh) << mesh.message();
+    volume[field] = sonoshape::signed_volume(*mesh);
+  }
+  const auto scanned = sonoshape::read_mesh(dir.path() / "out" / "label_1.ply");
+  ASSERT_TRUE(scanned) << scanned.message();
+  const double scanned_volume = sonoshape::signed_volume(*scanned);
+  EXPECT_NEAR(scanned_volume, volume["mean-value"], 1e-6 * volume["mean-value"]);
+  EXPECT_GT(std::abs(scanned_volume - volume["thin-plate"]), 1e-3 * volume["thin-plate"]);
 }
 
 TEST(ScanResume, NetworkOptionsGivenWithResumeAreTaken) {

@@ -281,14 +281,18 @@ std::vector<std::string> scan_arguments() {
   return out;
 }
 
+// Whether `arguments` name the field (--field F or --field=F).
+bool names_field(const std::vector<std::string>& arguments) {
+  return std::any_of(arguments.begin(), arguments.end(), [](const std::string& word) {
+    return word == "--field" || word.rfind("--field=", 0) == 0;
+  });
+}
+
 // The arguments the journal records: this command line's, with the field named where the
 // default chose it, so that a resume rebuilds the same meshes whatever the default is then.
 std::vector<std::string> recorded_arguments(const std::string& field) {
   std::vector<std::string> arguments = scan_arguments();
-  const bool named = std::any_of(arguments.begin(), arguments.end(), [](const std::string& word) {
-    return word == "--field" || word.rfind("--field=", 0) == 0;
-  });
-  if (!named) arguments.insert(arguments.end(), {"--field", field});
+  if (!names_field(arguments)) arguments.insert(arguments.end(), {"--field", field});
   return arguments;
 }
 
@@ -455,6 +459,9 @@ bool parse_journal_options(const fs::path& directory, const scan::JournalContent
   CLI::App app;
   add_scan_options(app, options);
   std::vector<std::string> arguments = journal.arguments;
+  // A journal that names no field was written while the mean-value field was the default
+  // (every scan since records the field it ran with).
+  if (!names_field(arguments)) arguments.insert(arguments.end(), {"--field", "mean-value"});
   std::reverse(arguments.begin(), arguments.end());  // CLI11 takes them last first
   const fs::path here = fs::current_path();
   std::error_code ec;
