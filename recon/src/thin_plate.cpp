@@ -91,10 +91,7 @@ class SliceDistances {
   }
 
   /// Material m's signed distance at a known point p.
-  double signed_distance(int m, const Vec2& p) const {
-    const double d = unsigned_distance(m, p);
-    return label(p) == m ? inside_distance(m, p, d) : -d;
-  }
+  double signed_distance(int m, const Vec2& p) const { return signed_at(m, p, label(p)); }
 
   /// Inside material m, its distance d to its true boundaries is an upper bound of its
   /// in-plane distance to the surface, and the distance to its edges along unknown regions
@@ -162,14 +159,16 @@ class SliceDistances {
   bool distances(const Vec2& p, double* out) const {
     if (!known(p)) return false;
     const int at = label(p);
-    for (int m = 1; m <= materials_; ++m) {
-      const double d = unsigned_distance(m, p);
-      out[m - 1] = at == m ? inside_distance(m, p, d) : -d;
-    }
+    for (int m = 1; m <= materials_; ++m) out[m - 1] = signed_at(m, p, at);
     return true;
   }
 
  private:
+  // Material m's signed distance at p, whose label is `at`.
+  double signed_at(int m, const Vec2& p, int at) const {
+    const double d = unsigned_distance(m, p);
+    return at == m ? inside_distance(m, p, d) : -d;
+  }
   double unsigned_distance(int m, const Vec2& p) const {
     const double truncation = truncation_[static_cast<std::size_t>(m - 1)];
     if (bucket_begin_.empty()) return truncation;
@@ -1038,11 +1037,12 @@ struct ThinPlateField::Impl {
   }
 
   // Sets the priors for the data so far, adding their change to the operator and the
-  // right-hand side. While every axis is sampled they are the closing alone, set once.
-  void update_priors() {
+  // right-hand side. While every axis is sampled they are the closing alone, set once, unless
+  // `targets_moved` (a truncation changed, and with it the closing's target).
+  void update_priors(bool targets_moved = false) {
     const std::array<bool, 3> sampled = sampled_axes();
     const bool all_sampled = sampled[0] && sampled[1] && sampled[2];
-    if (all_sampled && priors_all_sampled) return;
+    if (all_sampled && priors_all_sampled && !targets_moved) return;
     Level& g = levels[0];
     const std::size_t k = static_cast<std::size_t>(materials), size = g.size();
     prior_weight.resize(size, 0.0);
@@ -1091,8 +1091,7 @@ struct ThinPlateField::Impl {
                       [&](std::size_t a) { changes[a] = reclamp_slice(a, m, before); });
     for (std::size_t a = 0; a < data.size(); ++a) retarget(a, changes[a]);
     // The priors follow: the closing's target is -truncation, an extrusion's the samples'.
-    priors_all_sampled = false;  // set them again even where the closing alone applies
-    update_priors();
+    update_priors(/*targets_moved=*/true);
     move_plateaus(solution[m], before, after);
     misfit_mm[m] = std::numeric_limits<double>::infinity();
   }
