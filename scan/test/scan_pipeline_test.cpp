@@ -246,6 +246,27 @@ TEST(ScanPipeline, FastPlaybackLosesNothingAndBatchesBehindASlowReconstruction) 
   EXPECT_EQ(pipeline.finish().counters.slices, 30u);  // idempotent
 }
 
+// A stage that settles (the thin-plate field's final solve from all the slices): its meshes are
+// published once more after the last update and are the finished scan's, and the settle is not
+// counted as an update.
+TEST(ScanPipeline, SettledMeshesArePublishedLastAndFinishTheScan) {
+  ScanPipeline pipeline(fake_source(std::make_unique<acquisition::SourceOf<FakeFrames>>(20, 33),
+                                    sliding_poses(18.0, -100, 800, 25)),
+                        std::make_unique<FakeSegmentation>(),
+                        std::make_unique<test::FakeReconstruction>(0, /*settles=*/true),
+                        fast_options());
+  auto sink = std::make_shared<RecordingSink>();
+  pipeline.add_sink(sink);
+  ASSERT_TRUE(pipeline.start());
+  const ScanSummary summary = pipeline.finish();
+  const std::size_t slices = summary.counters.slices;
+  ASSERT_GT(slices, 0u);
+  EXPECT_EQ(sink->mesh_updates, summary.counters.updates + 1);
+  EXPECT_EQ(sink->last_triangles, 2 * slices);
+  EXPECT_EQ(sink->last_mesh_slices, slices);
+  EXPECT_EQ(sink->final_triangles, 2 * slices);
+}
+
 TEST(ScanPipeline, TheSummarySaysWhyAMaterialOfTheSetupHasNoMesh) {
   ScanSource source = fake_source(std::make_unique<acquisition::SourceOf<FakeFrames>>(20, 33),
                                   sliding_poses(18.0, -100, 800, 25));
