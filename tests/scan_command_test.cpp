@@ -59,26 +59,6 @@ void expect_meshes_of_offline_reconstruction(const fs::path& dir, const std::str
   }
 }
 
-// The 3 s sweep's last keyframe lies wholly outside the scan volume: the scan drops it, saying
-// why, so that its slices.json (whose bounds are the volume) is one `reconstruct` reads.
-TEST(ScanCommand, AKeyframeWhollyOutsideTheScanVolumeIsDroppedAndSlicesJsonReconstructs) {
-  sonoshape::testing::TempDir dir;
-  const auto result = sonoshape::testing::run_command(
-      SONOSHAPE_BINARY,
-      "scan --source sim:default --width-px 160 --height-px 160 --frame-rate 5 --sweep-s 3 "
-      "--depth 4 --fast -o " +
-          (dir.path() / "out").string(),
-      dir.path() / "log");
-  ASSERT_EQ(result.exit_code, 0) << result.output;
-  EXPECT_TRUE(contains(result.output, "lies wholly outside the scan volume")) << result.output;
-  const auto offline = sonoshape::testing::run_command(
-      SONOSHAPE_BINARY,
-      "reconstruct " + (dir.path() / "out" / "slices.json").string() + " --depth 4 -o " +
-          (dir.path() / "offline").string(),
-      dir.path() / "offline.log");
-  EXPECT_EQ(offline.exit_code, 0) << offline.output;
-}
-
 TEST(ScanCommand, FastSimulatedScanWritesMeshesSlicesAndSummary) {
   sonoshape::testing::TempDir dir;
   const auto result = sonoshape::testing::run_command(

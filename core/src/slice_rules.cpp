@@ -432,7 +432,23 @@ void check_regions_apart(const SliceSet& set, std::size_t i,
 // regions do).
 void check_slice_meets_bounds(const LabeledSlice& s, const Box3& box, const std::string& where,
                               Problems& problems) {
-  if (!slice_meets_box(s, box))
+  const double tol = 1e-9 * box.diagonal();
+  bool outside = !plane_meets_box(s, box, tol);
+  if (!outside && !s.regions.empty()) {
+    // Box of the region vertices in world coordinates: when it misses the bounds, so does
+    // every region (a conservative test: it never rejects a slice that reaches the box).
+    Box3 seen{Vec3::Constant(std::numeric_limits<double>::infinity()),
+              Vec3::Constant(-std::numeric_limits<double>::infinity())};
+    for (const Region& r : s.regions)
+      for (const Vec2& p : r.outer) {
+        const Vec3 w = s.to_world(p);
+        seen.min = seen.min.cwiseMin(w);
+        seen.max = seen.max.cwiseMax(w);
+      }
+    outside = ((seen.max.array() < box.min.array() - tol).any() ||
+               (seen.min.array() > box.max.array() + tol).any());
+  }
+  if (outside)
     problems.add(where, "the slice lies entirely outside bounds (min " + vec_text(box.min) +
                             ", max " + vec_text(box.max) +
                             "); check its origin and the units, or enlarge bounds");
@@ -595,24 +611,6 @@ namespace sonoshape {
 
 Status validate_slice_set(const SliceSet& set, const std::string& source_name) {
   return detail::validate_slice_set_named(set, source_name, detail::SliceNaming(), nullptr);
-}
-
-bool slice_meets_box(const LabeledSlice& slice, const Box3& box) {
-  const double tol = 1e-9 * box.diagonal();
-  if (!detail::plane_meets_box(slice, box, tol)) return false;
-  if (slice.regions.empty()) return true;
-  // Box of the region vertices in world coordinates: when it misses the bounds, so does every
-  // region (a conservative test: it never rejects a slice that reaches the box).
-  Box3 seen{Vec3::Constant(std::numeric_limits<double>::infinity()),
-            Vec3::Constant(-std::numeric_limits<double>::infinity())};
-  for (const Region& r : slice.regions)
-    for (const Vec2& p : r.outer) {
-      const Vec3 w = slice.to_world(p);
-      seen.min = seen.min.cwiseMin(w);
-      seen.max = seen.max.cwiseMax(w);
-    }
-  return !((seen.max.array() < box.min.array() - tol).any() ||
-           (seen.min.array() > box.max.array() + tol).any());
 }
 
 }  // namespace sonoshape

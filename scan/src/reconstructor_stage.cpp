@@ -1,9 +1,7 @@
 // recon::Reconstructor as the pipeline's reconstruction stage (its own file: tests of the
 // pipeline with a fake stage do not link the engine).
-#include <stdexcept>
 #include <utility>
 
-#include "sonoshape/core/slice_io.hpp"
 #include "sonoshape/scan/stages.hpp"
 
 namespace sonoshape::scan {
@@ -13,13 +11,7 @@ class ReconstructorStage final : public ReconstructionStage {
  public:
   explicit ReconstructorStage(const recon::ReconstructorOptions& options)
       : options_(options), reconstructor_(options) {}
-  // A slice wholly outside the scan volume adds nothing, and the scan's slices.json (whose
-  // bounds are that volume) must hold no slice that the slice-set reader refuses.
-  int add_slice(LabeledSlice slice) override {
-    if (options_.bounds && !slice_meets_box(slice, *options_.bounds))
-      throw std::invalid_argument("it lies wholly outside the scan volume, where it adds nothing");
-    return reconstructor_.add_slice(std::move(slice));
-  }
+  int add_slice(LabeledSlice slice) override { return reconstructor_.add_slice(std::move(slice)); }
   recon::UpdateStats update() override { return reconstructor_.update(); }
   const MeshSet& meshes() const override { return reconstructor_.mesh(); }
   SliceSet slice_set() const override { return reconstructor_.slice_set(); }

@@ -45,8 +45,4 @@ Result<LabeledSlice> parse_slice_json(const std::string& text, const std::string
 /// Checks a slice set against every rule of slices.md (geometry, labels, overlaps, bounds).
 Status validate_slice_set(const SliceSet& set, const std::string& source_name);
 
-/// The bounds rule of slices.md for one slice: its plane crosses `box` and, when it has regions,
-/// they reach it (a slice set whose bounds a slice does not meet is refused).
-bool slice_meets_box(const LabeledSlice& slice, const Box3& box);
-
 }  // namespace sonoshape
