@@ -428,23 +428,31 @@ void check_regions_apart(const SliceSet& set, std::size_t i,
     }
 }
 
-// Rule: a slice does not lie entirely outside bounds (its plane misses the box, or all its
-// regions do).
+// Rule: a slice does not lie entirely outside bounds: its plane misses the box, or what it
+// sees does. A slice with a fov sees its fov (outside where no region is), so it lies outside
+// only when its fov does: a frame whose regions lie beyond the box but whose sector crosses it
+// says "outside" there. A slice without a fov is judged by its regions (a misplaced origin or
+// wrong units put them all beyond the box).
 void check_slice_meets_bounds(const LabeledSlice& s, const Box3& box, const std::string& where,
                               Problems& problems) {
   const double tol = 1e-9 * box.diagonal();
   bool outside = !plane_meets_box(s, box, tol);
-  if (!outside && !s.regions.empty()) {
-    // Box of the region vertices in world coordinates: when it misses the bounds, so does
-    // every region (a conservative test: it never rejects a slice that reaches the box).
+  if (!outside && (s.fov || !s.regions.empty())) {
+    // Box of the seen vertices in world coordinates: when it misses the bounds, so does what
+    // they outline (a conservative test: it never rejects a slice that reaches the box).
     Box3 seen{Vec3::Constant(std::numeric_limits<double>::infinity()),
               Vec3::Constant(-std::numeric_limits<double>::infinity())};
-    for (const Region& r : s.regions)
-      for (const Vec2& p : r.outer) {
+    const auto take = [&](const Ring2& ring) {
+      for (const Vec2& p : ring) {
         const Vec3 w = s.to_world(p);
         seen.min = seen.min.cwiseMin(w);
         seen.max = seen.max.cwiseMax(w);
       }
+    };
+    if (s.fov)
+      take(*s.fov);
+    else
+      for (const Region& r : s.regions) take(r.outer);
     outside = ((seen.max.array() < box.min.array() - tol).any() ||
                (seen.min.array() > box.max.array() + tol).any());
   }

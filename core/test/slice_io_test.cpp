@@ -509,6 +509,28 @@ TEST(SliceJsonErrors, SliceOutsideBounds) {
   EXPECT_FALSE(contains(message, "slice 0:"));
 }
 
+// A frame's sector that crosses the box says "outside" there even when the frame's regions
+// (an organ deep in the image) lie beyond it, as a scan's last keyframe past its volume does;
+// a sector wholly beyond the box is still refused.
+TEST(SliceJson, ASliceWhoseFovCrossesTheBoundsIsReadWhereverItsRegionsLie) {
+  const std::string bounds = R"("bounds": {"min": [-10,-10,-10], "max": [10,10,10]}, )";
+  const auto with_fov = [](double z, const std::string& fov, const std::string& regions) {
+    return R"({"origin": [0, 0, )" + std::to_string(z) +
+           R"(], "u": [1, 0, 0], "v": [0, 1, 0], "fov": )" + fov + R"(, "regions": [)" + regions +
+           "]}";
+  };
+  const std::string crossing = "[[-5,-5],[60,-5],[60,60],[-5,60]]";
+  const std::string beyond = "[[40,40],[60,40],[60,60],[40,60]]";
+  EXPECT_TRUE(parse(doc(slice_at(0, square_region(1, 0, 0, 1)) + "," +
+                            with_fov(1, crossing, square_region(1, 50, 50, 5)),
+                        bounds))
+                  .is_ok());
+  const std::string message = parse_error(doc(slice_at(0, square_region(1, 0, 0, 1)) + "," +
+                                                  with_fov(1, beyond, square_region(1, 50, 50, 5)),
+                                              bounds));
+  EXPECT_TRUE(contains(message, "slice 1: the slice lies entirely outside bounds"));
+}
+
 TEST(SliceJson, EmptySliceInsideBoundsIsFine) {
   const std::string bounds = R"("bounds": {"min": [-10,-10,-10], "max": [10,10,10]}, )";
   EXPECT_TRUE(
