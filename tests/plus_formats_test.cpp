@@ -7,6 +7,8 @@
 #include <fstream>
 #include <string>
 
+#include "sonoshape/core/mesh_components.hpp"
+#include "sonoshape/core/mesh_io.hpp"
 #include "sonoshape/core/slice_io.hpp"
 #include "sonoshape/testing/command.hpp"
 #include "sonoshape/testing/temp_dir.hpp"
@@ -74,6 +76,29 @@ TEST(PlusFormats, MhaAndNrrdCopiesSegmentToTheSameSliceSet) {
   }
   // And the files themselves, byte for byte.
   EXPECT_EQ(bytes(outputs[0]), bytes(outputs[1]));
+}
+
+// The water tank's floor (issue 39: "the water tank's floor one sheet") segmented with its preset
+// and reconstructed with the default field is one surface, not one piece per frame: the paper's
+// field breaks these six nearly parallel frames of a thin reflector into 22 parts.
+TEST(PlusFormats, WaterTankFloorReconstructsAsOneSheet) {
+  sonoshape::testing::TempDir dir;
+  const fs::path slices = dir.path() / "slices.json";
+  const auto segmented =
+      run("segment " + (kPlus / "WaterTankBottomTranslationCombined_6frames.igs.mha").string() +
+              " --calibration " + (kPlus / "PlusDeviceSet_Server_Sim_NwirePhantom.xml").string() +
+              " --preset water-tank -o " + slices.string(),
+          dir.path() / "segment.log");
+  ASSERT_EQ(segmented.exit_code, 0) << segmented.output;
+  const auto reconstructed =
+      run("reconstruct " + slices.string() + " -o " + (dir.path() / "recon").string(),
+          dir.path() / "reconstruct.log");
+  ASSERT_EQ(reconstructed.exit_code, 0) << reconstructed.output;
+  const auto floor = sonoshape::read_mesh(dir.path() / "recon" / "label_1.ply");
+  ASSERT_TRUE(floor) << floor.message();
+  EXPECT_EQ(sonoshape::mesh_parts(*floor).count, 1u);
+  // As wide as the frames' floor (about 36 mm across the sweep), not a speck.
+  EXPECT_GT(floor->bounds().diagonal(), 30.0);
 }
 
 // A NRRD sweep finds its calibration in <name>.plus.xml beside it, as a MetaImage one does.
