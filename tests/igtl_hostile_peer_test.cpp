@@ -272,6 +272,66 @@ TEST(IgtlHostileServer, EveryUnreadImageKindIsRefusedNamingWhatItIs) {
   EXPECT_NE(said.find("the header's CRC does not match the body"), std::string::npos) << said;
 }
 
+// A label-map IMAGE of `type` whose pixels are `values`, written in the byte order `endian`
+// declares (OpenIGTLink leaves pixels as the sender wrote them).
+Bytes label_image(int type, int endian, const std::vector<std::int64_t>& values) {
+  igtl::ImageMessage::Pointer image = igtl::ImageMessage::New();
+  image->SetDeviceName("LabelMap");
+  image->SetDimensions(static_cast<int>(values.size()), 1, 1);
+  image->SetScalarType(type);
+  image->SetEndian(endian);
+  image->AllocateScalars();
+  const int bytes = image->GetScalarSize();
+  auto* out = static_cast<std::uint8_t*>(image->GetScalarPointer());
+  for (std::size_t k = 0; k < values.size(); ++k)
+    for (int b = 0; b < bytes; ++b) {
+      const int shift = 8 * (endian == igtl::ImageMessage::ENDIAN_BIG ? bytes - 1 - b : b);
+      out[k * static_cast<std::size_t>(bytes) + static_cast<std::size_t>(b)] =
+          static_cast<std::uint8_t>(static_cast<std::uint64_t>(values[k]) >> shift);
+    }
+  return packed(image);
+}
+
+// Issue 39, point 3: 3D Slicer sends a labelmap volume in its own scalar type (often 16-bit).
+// Label maps of any integer type, in either byte order, are read to their values; a value
+// outside 0..255 is refused naming it and its pixel; B-mode frames stay 8-bit only.
+TEST(IgtlLabelMaps, IntegerLabelValuesOfAnyWidthAreReadInEitherByteOrder) {
+  using M = igtl::ImageMessage;
+  const std::vector<std::int64_t> values = {0, 1, 7, 254, 255, 128};
+  const std::vector<int> types = {M::TYPE_UINT8,  M::TYPE_INT8,  M::TYPE_INT16,
+                                  M::TYPE_UINT16, M::TYPE_INT32, M::TYPE_UINT32};
+  for (const int type : types)
+    for (const int endian : std::vector<int>{M::ENDIAN_BIG, M::ENDIAN_LITTLE}) {
+      std::vector<std::int64_t> sent = values;
+      if (type == M::TYPE_INT8) sent = {0, 1, 7, 127, 3, 100};  // what an int8 holds
+      const auto image =
+          acquisition::decode_igtl_image(message_of(label_image(type, endian, sent), "IMAGE", "L"),
+                                         nullptr, acquisition::IgtlPixels::kLabels);
+      ASSERT_TRUE(image) << "type " << type << ", endian " << endian << ": " << image.message();
+      ASSERT_EQ(image->image.pixels.size(), sent.size());
+      for (std::size_t k = 0; k < sent.size(); ++k)
+        EXPECT_EQ(image->image.pixels[k], sent[k]) << "type " << type << ", endian " << endian;
+    }
+  for (const auto& [value, named] : std::vector<std::pair<std::int64_t, std::string>>{
+           {300, "label value 300 at pixel (2, 0)"}, {-1, "label value -1 at pixel (2, 0)"}}) {
+    acquisition::IgtlDrop why = acquisition::IgtlDrop::kDamaged;
+    const auto image = acquisition::decode_igtl_image(
+        message_of(label_image(M::TYPE_INT16, M::ENDIAN_LITTLE, {0, 1, value}), "IMAGE", "L"), &why,
+        acquisition::IgtlPixels::kLabels);
+    ASSERT_FALSE(image) << named;
+    EXPECT_EQ(why, acquisition::IgtlDrop::kUnsupported);
+    EXPECT_NE(image.message().find(named), std::string::npos) << image.message();
+  }
+  const auto floats =
+      acquisition::decode_igtl_image(message_of(image_message(8, 8, M::TYPE_FLOAT32), "IMAGE", "L"),
+                                     nullptr, acquisition::IgtlPixels::kLabels);
+  ASSERT_FALSE(floats);
+  EXPECT_NE(floats.message().find("label maps are read from integer pixels"), std::string::npos)
+      << floats.message();
+  EXPECT_FALSE(acquisition::decode_igtl_image(
+      message_of(label_image(M::TYPE_INT16, M::ENDIAN_BIG, values), "IMAGE", "L")));
+}
+
 TEST(IgtlHostileServer, ADecodedImageNeverHoldsBytesFromBeyondItsMessage) {
   // 64x64 declared over 28 pixel bytes: copying 4096 would read the heap past the message.
   const auto image =

@@ -7,6 +7,7 @@
 #include <igtlImageMessage.h>
 #include <igtlServerSocket.h>
 #include <igtlTransformMessage.h>
+#include <igtl_util.h>
 #include <netinet/in.h>
 #include <sys/socket.h>
 #include <unistd.h>
@@ -46,9 +47,13 @@ double wall_clock_s() {
 // Every client gets the whole stream from frame 0, paced at 20 frames per second.
 class LibraryServer {
  public:
-  LibraryServer(std::string label_device, int label_width)
+  /// `label_type`: the label maps' scalar type (igtl::ImageMessage::TYPE_*), sent in the
+  /// host's byte order as 3D Slicer does.
+  LibraryServer(std::string label_device, int label_width,
+                int label_type = igtl::ImageMessage::TYPE_UINT8)
       : label_device_(std::move(label_device)),
         label_width_(label_width),
+        label_type_(label_type),
         port_(testing::free_port()),
         t0_s_(std::floor(wall_clock_s())) {
     server_ = igtl::ServerSocket::New();
@@ -76,23 +81,32 @@ class LibraryServer {
     return ts;
   }
   void send_image(const igtl::ClientSocket::Pointer& client, const std::string& device, int k,
-                  const std::vector<std::uint8_t>& pixels, int width) const {
+                  const std::vector<std::uint8_t>& pixels, int width,
+                  int type = igtl::ImageMessage::TYPE_UINT8) const {
     igtl::ImageMessage::Pointer image = igtl::ImageMessage::New();
     image->SetDeviceName(device.c_str());
     image->SetDimensions(width, kH, 1);
     image->SetSpacing(static_cast<float>(kPixelMm), static_cast<float>(kPixelMm), 1.0f);
-    image->SetScalarType(igtl::ImageMessage::TYPE_UINT8);
+    image->SetScalarType(type);
+    image->SetEndian(igtl_is_little_endian() ? igtl::ImageMessage::ENDIAN_LITTLE
+                                             : igtl::ImageMessage::ENDIAN_BIG);
     igtl::TimeStamp::Pointer ts = stamp(k);
     image->SetTimeStamp(ts);
     image->AllocateScalars();
-    std::copy(pixels.begin(), pixels.end(), static_cast<std::uint8_t*>(image->GetScalarPointer()));
+    if (type == igtl::ImageMessage::TYPE_INT16) {
+      auto* values = static_cast<std::int16_t*>(image->GetScalarPointer());
+      std::copy(pixels.begin(), pixels.end(), values);
+    } else {
+      std::copy(pixels.begin(), pixels.end(),
+                static_cast<std::uint8_t*>(image->GetScalarPointer()));
+    }
     image->Pack();
     client->Send(image->GetPackPointer(), image->GetPackSize());
   }
   void send_label_map(const igtl::ClientSocket::Pointer& client, int k) const {
     const LabelImage map = testing::label_rectangles(
         label_width_, kH, testing::fixture_rectangles(k, label_width_, kH, kLiver, kKidney, 255));
-    send_image(client, label_device_, k, map.pixels, label_width_);
+    send_image(client, label_device_, k, map.pixels, label_width_, label_type_);
   }
   void serve(const igtl::ClientSocket::Pointer& client) const {
     std::mt19937 rng(5);
@@ -120,6 +134,7 @@ class LibraryServer {
 
   std::string label_device_;
   int label_width_;
+  int label_type_;
   int port_;
   double t0_s_;
   igtl::ServerSocket::Pointer server_;
@@ -153,9 +168,8 @@ struct ScanRun {
   }
 };
 
-TEST(IgtlLabels, LabelMapImagesBesideTheBModeGiveEachFramesOwnRectangles) {
-  LibraryServer server("LabelMap", kW);
-  ScanRun run(server, "--igtl-image Image --labels igtl:LabelMap");
+// The slices of `run` hold each frame's own label rectangles, where its pose puts them.
+void expect_each_frames_rectangles(const ScanRun& run, const LibraryServer& server) {
   ASSERT_EQ(run.code, 0) << run.log;
   EXPECT_TRUE(contains(run.log, "label maps from IMAGE 'LabelMap' of igtl:127.0.0.1:" +
                                     std::to_string(server.port())));
@@ -192,6 +206,19 @@ TEST(IgtlLabels, LabelMapImagesBesideTheBModeGiveEachFramesOwnRectangles) {
           << centre_mm.transpose();
     }
   }
+}
+
+TEST(IgtlLabels, LabelMapImagesBesideTheBModeGiveEachFramesOwnRectangles) {
+  LibraryServer server("LabelMap", kW);
+  ScanRun run(server, "--igtl-image Image --labels igtl:LabelMap");
+  expect_each_frames_rectangles(run, server);
+}
+
+// 3D Slicer sends a labelmap volume in its own scalar type, often 16-bit.
+TEST(IgtlLabels, SixteenBitLabelMapsAsSlicerSendsThemAreRead) {
+  LibraryServer server("LabelMap", kW, igtl::ImageMessage::TYPE_INT16);
+  ScanRun run(server, "--igtl-image Image --labels igtl:LabelMap");
+  expect_each_frames_rectangles(run, server);
 }
 
 TEST(IgtlLabels, LabelMapsOfAnotherSizeOrAnAbsentDeviceGiveNoSliceAndSayWhy) {

@@ -400,7 +400,51 @@ Result<std::optional<Eigen::Matrix4d>> decode_igtl_tracking_data(const IgtlMessa
   return std::optional<Eigen::Matrix4d>();
 }
 
-Result<IgtlImage> decode_igtl_image(const IgtlMessage& message, IgtlDrop* why) {
+namespace {
+
+bool is_integer_scalar(int type) {
+  using M = igtl::ImageMessage;
+  return type == M::TYPE_INT8 || type == M::TYPE_UINT8 || type == M::TYPE_INT16 ||
+         type == M::TYPE_UINT16 || type == M::TYPE_INT32 || type == M::TYPE_UINT32;
+}
+
+// Pixel k of an integer image of `bytes` bytes a pixel in the sender's byte order (the image
+// header's endian field: OpenIGTLink leaves the pixels as sent), sign-extended where signed.
+std::int64_t integer_pixel(const std::uint8_t* data, std::size_t k, int bytes, bool big_endian,
+                           bool is_signed) {
+  const std::uint8_t* p = data + k * static_cast<std::size_t>(bytes);
+  std::uint64_t value = 0;
+  for (int b = 0; b < bytes; ++b)
+    value |= std::uint64_t(p[big_endian ? b : bytes - 1 - b]) << (8 * (bytes - 1 - b));
+  if (is_signed && (value >> (8 * bytes - 1)) != 0) value |= ~std::uint64_t{0} << (8 * bytes);
+  return static_cast<std::int64_t>(value);
+}
+
+// A label map's values into 8 bits; the first value outside 0..255 refuses it.
+Status copy_label_values(const igtl::ImageMessage::Pointer& image, GreyImage& out,
+                         const std::string& what) {
+  using M = igtl::ImageMessage;
+  const int type = image->GetScalarType();
+  const int bytes = image->GetScalarSize();
+  const bool is_signed = type == M::TYPE_INT8 || type == M::TYPE_INT16 || type == M::TYPE_INT32;
+  const bool big_endian = image->GetEndian() != M::ENDIAN_LITTLE;
+  const auto* data = static_cast<const std::uint8_t*>(image->GetScalarPointer());
+  for (std::size_t k = 0; k < out.pixels.size(); ++k) {
+    const std::int64_t value = integer_pixel(data, k, bytes, big_endian, is_signed);
+    if (value < 0 || value > 255)
+      return Status::error(what + ": label value " + std::to_string(value) + " at pixel (" +
+                           std::to_string(k % static_cast<std::size_t>(out.width)) + ", " +
+                           std::to_string(k / static_cast<std::size_t>(out.width)) +
+                           "); label maps hold 0..255 (0 background, 1..254 organs, 255 or "
+                           "--labels-unknown's value unknown): renumber the segments");
+    out.pixels[k] = static_cast<std::uint8_t>(value);
+  }
+  return Status::ok();
+}
+
+}  // namespace
+
+Result<IgtlImage> decode_igtl_image(const IgtlMessage& message, IgtlDrop* why, IgtlPixels pixels) {
   igtl::ImageMessage::Pointer image = igtl::ImageMessage::New();
   const std::string what = "OpenIGTLink IMAGE '" + message.device + "'";
   if (message.type != "IMAGE")
@@ -410,11 +454,17 @@ Result<IgtlImage> decode_igtl_image(const IgtlMessage& message, IgtlDrop* why) {
       !unpacked)
     return refuse(IgtlDrop::kDamaged, why, unpacked.message());
   // The scalar type first: the library's scalar sizes are a table indexed by it.
-  if (image->GetScalarType() != igtl::ImageMessage::TYPE_UINT8 || image->GetNumComponents() != 1)
+  const bool labels = pixels == IgtlPixels::kLabels;
+  const int type = image->GetScalarType();
+  if ((labels ? !is_integer_scalar(type) : type != igtl::ImageMessage::TYPE_UINT8) ||
+      image->GetNumComponents() != 1)
     return refuse(IgtlDrop::kUnsupported, why,
-                  what + ": scalar type " + std::to_string(image->GetScalarType()) + " with " +
-                      std::to_string(image->GetNumComponents()) +
-                      " components; only 8-bit grey (uint8, 1 component) B-mode frames are read");
+                  what + ": scalar type " + std::to_string(type) + " with " +
+                      std::to_string(image->GetNumComponents()) + " components; " +
+                      (labels ? "label maps are read from integer pixels (8, 16 or 32 bits, "
+                                "1 component)"
+                              : "only 8-bit grey (uint8, 1 component) B-mode frames are read"));
+  const std::uint64_t pixel_bytes = static_cast<std::uint64_t>(image->GetScalarSize());
   int size[3];
   int sub_size[3];
   int sub_offset[3];
@@ -424,8 +474,8 @@ Result<IgtlImage> decode_igtl_image(const IgtlMessage& message, IgtlDrop* why) {
   image->GetSpacing(spacing);
   // The pixels the header declares (each size is 16 bits: no overflow) against those the body
   // holds after the image header: never trusted, never read past.
-  const std::uint64_t declared =
-      std::uint64_t(sub_size[0]) * std::uint64_t(sub_size[1]) * std::uint64_t(sub_size[2]);
+  const std::uint64_t declared = std::uint64_t(sub_size[0]) * std::uint64_t(sub_size[1]) *
+                                 std::uint64_t(sub_size[2]) * pixel_bytes;
   const std::uint64_t held = message.bytes.size() - IGTL_HEADER_SIZE - IGTL_IMAGE_HEADER_SIZE;
   const std::string dimensions =
       std::to_string(size[0]) + "x" + std::to_string(size[1]) + "x" + std::to_string(size[2]);
@@ -444,8 +494,12 @@ Result<IgtlImage> decode_igtl_image(const IgtlMessage& message, IgtlDrop* why) {
                   what + ": " + dimensions + "; a 2D frame (depth 1) is expected");
   IgtlImage out;
   out.image = GreyImage(size[0], size[1]);
-  const auto* pixels = static_cast<const std::uint8_t*>(image->GetScalarPointer());
-  std::copy(pixels, pixels + out.image.pixels.size(), out.image.pixels.begin());
+  if (type == igtl::ImageMessage::TYPE_UINT8) {
+    const auto* grey = static_cast<const std::uint8_t*>(image->GetScalarPointer());
+    std::copy(grey, grey + out.image.pixels.size(), out.image.pixels.begin());
+  } else if (Status copied = copy_label_values(image, out.image, what); !copied) {
+    return refuse(IgtlDrop::kUnsupported, why, copied.message());
+  }
   igtl::Matrix4x4 m;
   image->GetMatrix(m);
   Eigen::Matrix4d T = Eigen::Matrix4d::Identity();

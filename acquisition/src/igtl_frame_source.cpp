@@ -4,9 +4,10 @@
 
 namespace sonoshape::acquisition {
 
-IgtlFrames::IgtlFrames(IgtlEndpoint endpoint, std::string image_device)
+IgtlFrames::IgtlFrames(IgtlEndpoint endpoint, std::string image_device, IgtlPixels pixels)
     : link_(std::move(endpoint)),
       image_device_(std::move(image_device)),
+      pixels_(pixels),
       drops_("igtl:" + link_.endpoint().text()) {}
 
 IgtlFrames::IgtlFrames(IgtlEndpoint endpoint, std::string image_device, IgtlConnection connection,
@@ -25,7 +26,7 @@ Result<Polled> IgtlFrames::poll(Frame& frame) {
   if (!message || message->type != "IMAGE") return Polled::kNothing;
   if (!image_device_.empty() && message->device != image_device_) return Polled::kNothing;
   IgtlDrop why = IgtlDrop::kDamaged;
-  auto image = decode_igtl_image(*message, &why);
+  auto image = decode_igtl_image(*message, &why, pixels_);
   if (!image) {
     drops_.count(why, image.message());
     count_lost(1);

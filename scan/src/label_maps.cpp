@@ -154,7 +154,8 @@ Result<std::unique_ptr<LabelMapFeed>> igtl_label_feed(const std::string& spec,
       at == std::string::npos ? frames_endpoint : rest.substr(at + 1), "--labels igtl:" + device);
   if (!endpoint) return endpoint.status();
   return Result<std::unique_ptr<LabelMapFeed>>(std::make_unique<StreamLabelFeed>(
-      std::make_unique<acquisition::IgtlFrameSource>(*endpoint, device),
+      std::make_unique<acquisition::IgtlFrameSource>(*endpoint, device,
+                                                     acquisition::IgtlPixels::kLabels),
       "IMAGE '" + device + "' of igtl:" + endpoint->text(), unknown_value, wait_s));
 }
 #endif

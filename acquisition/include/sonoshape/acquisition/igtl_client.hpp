@@ -124,7 +124,8 @@ class IgtlDrops {
   std::map<std::string, std::size_t> counts_;
 };
 
-/// An IMAGE message's content: an 8-bit single-channel 2D image and its matrix.
+/// An IMAGE message's content: an 8-bit single-channel 2D image (grey levels or label values)
+/// and its matrix.
 struct IgtlImage {
   GreyImage image;
   /// Pixel (column, row, 0) to the sender's reference frame (mm): the message's unit axes
@@ -133,11 +134,18 @@ struct IgtlImage {
   double spacing_mm[2] = {1.0, 1.0};  ///< column and row spacing
 };
 
+/// What an IMAGE's pixels hold. B-mode frames are read as 8-bit grey only. Label maps may come in
+/// any integer type: 3D Slicer sends a labelmap volume in its own scalar type (often 16-bit),
+/// and each value must lie in 0..255 (0 background, 1..254 organs, 255 or another value unknown).
+enum class IgtlPixels { kGrey, kLabels };
+
 /// Decodes an IMAGE (CRC checked). The body must hold the image header and the W*H*D pixels it
-/// declares (a peer's sizes are never trusted). Refuses other scalar types, several components,
-/// sub-volumes and 3D volumes. Errors name the device and the field; `why`, when given, says
-/// whether the message was damaged or unsupported.
-Result<IgtlImage> decode_igtl_image(const IgtlMessage& message, IgtlDrop* why = nullptr);
+/// declares (a peer's sizes are never trusted). Refuses scalar types `pixels` does not take
+/// (label values outside 0..255 too, naming the pixel), several components, sub-volumes and 3D
+/// volumes. Errors name the device and the field; `why`, when given, says whether the message
+/// was damaged or unsupported.
+Result<IgtlImage> decode_igtl_image(const IgtlMessage& message, IgtlDrop* why = nullptr,
+                                    IgtlPixels pixels = IgtlPixels::kGrey);
 
 /// Decodes a TRANSFORM (CRC checked, a body of exactly 12 floats): the 4x4 matrix, mm.
 Result<Eigen::Matrix4d> decode_igtl_transform(const IgtlMessage& message);

@@ -14,13 +14,15 @@ namespace sonoshape::acquisition {
 /// sender's clock, as PlusServer stamps its frames), Frame::index counts the frames kept.
 /// Images that cannot be read are dropped and counted in losses() as "damaged" (a bad CRC, a
 /// body that does not hold the pixels it declares) or "unsupported" (not 8-bit grey 2D); the
-/// first of each is logged with its reason. A server
+/// first of each is logged with its reason (label maps: integer 2D, values 0..255). A server
 /// that is not there at start fails the source with its address; one that goes away later is
 /// the source's condition() while it is connected to again (IgtlLink), and frames resume when
 /// it is back.
 class IgtlFrames final : public FrameBackend {
  public:
-  IgtlFrames(IgtlEndpoint endpoint, std::string image_device);
+  /// `pixels`: IgtlPixels::kLabels reads label maps (any integer type, values 0..255).
+  IgtlFrames(IgtlEndpoint endpoint, std::string image_device,
+             IgtlPixels pixels = IgtlPixels::kGrey);
   /// Reads an open connection, delivering `first` (a message already read from it, e.g. to
   /// learn the image size before the scan starts) before the rest.
   IgtlFrames(IgtlEndpoint endpoint, std::string image_device, IgtlConnection connection,
@@ -37,6 +39,7 @@ class IgtlFrames final : public FrameBackend {
  private:
   IgtlLink link_;
   std::string image_device_;
+  IgtlPixels pixels_ = IgtlPixels::kGrey;
   std::optional<IgtlMessage> pending_;
   IgtlDrops drops_;
   std::int64_t next_index_ = 0;
