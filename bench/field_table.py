@@ -19,8 +19,9 @@ Rows (each a slice set with truth meshes; fixed counts and seeds):
     slices (DIR/slices.json), and its exact slices: the same planes and fields of view, the truth
     meshes cut exactly by each plane (here, in Python) and clipped to the field of view;
   - optionally (--nwire, on by default when the file is there) the fCal 3-N-wire recording of
-    PlusLibData, segmented with the wire configuration of docs/segmentation.md: no truth, so
-    only the parts of the wire mesh.
+    PlusLibData, every frame segmented with `--preset wires`: no truth mesh, so the wire mesh's
+    connected parts, each given to the phantom's wire it lies along (NWIRE_WIRES, the fCal 1.2
+    phantom definition placed by the recording's PhantomToReference): parts per wire.
 For each row and field this runs
   sonoshape reconstruct SLICES -o WORK/ROW/recon-FIELD --stats ... [--field FIELD] -q
       (wall seconds and peak RSS of that process, from wait4)
@@ -78,14 +79,18 @@ SCAN_ROWS = ["scan-exact", "scan-segmented"]
 NWIRE_ROW = "nwire-fcal"
 NWIRE_RECORDING = "data/plus/fCal_Test_Calibration_3NWires.igs.mha"
 NWIRE_CALIBRATION = "data/plus/PlusDeviceSet_Server_Sim_NwirePhantom.xml"
-# The water/wire models of docs/segmentation.md (the N-wire recording; as tests/plus_formats_test
-# writes them).
-NWIRE_CONFIG = {"format": "sonoshape-segmentation", "version": 1,
-                "background": {"name": "water", "grey_mean": 5, "grey_std": 10},
-                "labels": [{"id": 1, "name": "wire", "grey_mean": 150, "grey_std": 40}],
-                "shadow_fraction": 1.0, "min_region_mm2": 0.5, "opening_mm": 0.2}
-NWIRE_EVERY = 4
-NWIRE_LONG_MM = 10.0  # a part at least this long (box diagonal) counts as a tube, not a bead
+NWIRE_EVERY = 1  # every frame: a wire's sections are a frame's travel apart
+# The wire configuration: the fCal 1.2 phantom's nine wires (PlusLibData ConfigFiles/Testing/
+# PlusDeviceSet_fCal_Sim_SpatialCalibration_1.2.xml, <PhantomDefinition>: EndPointFront,
+# EndPointBack, mm in the Phantom frame; PlusLibData's licence, data/plus/LICENSE), placed by the
+# recording's PhantomToReference (NWIRE_CALIBRATION) and then moved by one translation fitted to
+# the segmented sections (that registration is 2-3 mm off).
+NWIRE_WIRES = [((20, 0, 10), (20, 40, 10)), ((40, 0, 10), (25, 40, 10)),
+               ((45, 0, 10), (45, 40, 10)), ((20, 0, 5), (20, 40, 5)),
+               ((25, 0, 5), (45, 40, 5)), ((50, 0, 5), (50, 40, 5)),
+               ((20, 0, 0), (20, 40, 0)), ((45, 0, 0), (25, 40, 0)),
+               ((50, 0, 0), (50, 40, 0))]
+NWIRE_NEAR_MM = 2.0  # a mesh part whose vertices lie this near a wire (median) is that wire's
 QUICK = ["eight_15", "hand", "nested-sweep-20", "horse-random-30-fov"]
 
 
@@ -514,15 +519,98 @@ def prepare_scan(args, name, folder):
 
 
 def prepare_nwire(args, folder):
-    config = os.path.join(folder, "wires.json")
     slices = os.path.join(folder, "slices.json")
-    with open(config, "w") as f:
-        json.dump(NWIRE_CONFIG, f)
     if fresh(args, slices):
         run([args.binary, "segment", args.nwire, "--calibration", args.nwire_calibration,
-             "--config", config, "--every", str(NWIRE_EVERY), "-o", slices, "-q"],
+             "--preset", "wires", "--every", str(NWIRE_EVERY), "-o", slices, "-q"],
             f"{NWIRE_ROW}: segment")
     return slices, []
+
+
+# ---- The N-wire row: mesh parts per wire of the phantom ------------------------------------
+
+def phantom_to_reference(calibration):
+    """The 3x4 PhantomToReference of a PLUS device set's CoordinateDefinitions."""
+    import xml.etree.ElementTree as ET
+    for t in ET.parse(calibration).iter("Transform"):
+        if t.get("From") == "Phantom" and t.get("To") == "Reference":
+            m = [float(x) for x in t.get("Matrix").split()]
+            return [m[0:4], m[4:8], m[8:12]]
+    raise Failed(f"{calibration}: no Phantom to Reference transform for the wire configuration")
+
+
+def point_to_segment(p, a, b):
+    ab = [b[i] - a[i] for i in range(3)]
+    t = dot([p[i] - a[i] for i in range(3)], ab) / dot(ab, ab)
+    t = min(1.0, max(0.0, t))
+    return math.dist(p, [a[i] + t * ab[i] for i in range(3)])
+
+
+def section_centroids(slices):
+    """World centroids of the slices' wire sections (label 1)."""
+    out = []
+    for s in slices:
+        for r in s.get("regions", []):
+            if r["label"] != 1:
+                continue
+            ring = r.get("outer", r.get("polygon"))
+            x = sum(p[0] for p in ring) / len(ring)
+            y = sum(p[1] for p in ring) / len(ring)
+            out.append([s["origin"][k] + x * s["u"][k] + y * s["v"][k] for k in range(3)])
+    return out
+
+
+def wires_in_reference(calibration, centroids):
+    """NWIRE_WIRES in the reference frame, moved by the mean offset of the sections from their
+    nearest wire (three rounds, sections within 5 mm)."""
+    T = phantom_to_reference(calibration)
+    place = [[sum(T[r][c] * p[c] for c in range(3)) + T[r][3] for r in range(3)]
+             for wire in NWIRE_WIRES for p in wire]
+    wires = [(place[2 * i], place[2 * i + 1]) for i in range(len(NWIRE_WIRES))]
+    for _ in range(3):
+        offsets = []
+        for c in centroids:
+            a, b = min(wires, key=lambda w: point_to_segment(c, *w))
+            if point_to_segment(c, a, b) > 5.0:
+                continue
+            ab = [b[i] - a[i] for i in range(3)]
+            t = min(1.0, max(0.0, dot([c[i] - a[i] for i in range(3)], ab) / dot(ab, ab)))
+            offsets.append([c[i] - a[i] - t * ab[i] for i in range(3)])
+        if not offsets:
+            break
+        shift = [sum(o[i] for o in offsets) / len(offsets) for i in range(3)]
+        wires = [([a[i] + shift[i] for i in range(3)], [b[i] + shift[i] for i in range(3)])
+                 for a, b in wires]
+    return wires
+
+
+def parts_per_wire(mesh, wires):
+    """([parts of wire 1..9], stray parts): each connected part of the wire mesh goes to the
+    wire its vertices lie nearest (median), when within NWIRE_NEAR_MM."""
+    vertices, triangles = welded(*read_ply(mesh))
+    parent = list(range(len(vertices)))
+
+    def find(i):
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+    for a, b, c in triangles:
+        parent[find(b)] = find(a)
+        parent[find(c)] = find(a)
+    members = {}
+    for i in {v for t in triangles for v in t}:
+        members.setdefault(find(i), []).append(vertices[i])
+    counts, stray = [0] * len(wires), 0
+    for points in members.values():
+        points = points[::max(1, len(points) // 200)]
+        median = [statistics.median(point_to_segment(p, *w) for p in points) for w in wires]
+        best = min(range(len(wires)), key=median.__getitem__)
+        if median[best] <= NWIRE_NEAR_MM:
+            counts[best] += 1
+        else:
+            stray += 1
+    return counts, stray
 
 
 def row_list(args, root):
@@ -573,6 +661,7 @@ def one_row(args, root, name, kind, extra):
         if kind == "nwire":
             per_slice = [sum(r["label"] == 1 for r in s.get("regions", [])) for s in read]
             row["wires_per_slice"] = statistics.median(per_slice) if per_slice else 0
+            row["wires"] = wires_in_reference(args.nwire_calibration, section_centroids(read))
     for field in args.fields:
         out = os.path.join(folder, f"recon-{field}")
         stats = out + ".stats.json"
@@ -589,6 +678,8 @@ def one_row(args, root, name, kind, extra):
             if kind == "nwire":
                 mesh = os.path.join(out, "label_1.ply")
                 entry["parts"] = mesh_parts(mesh) if os.path.exists(mesh) else []
+                entry["per_wire"] = (parts_per_wire(mesh, row["wires"]) if os.path.exists(mesh)
+                                     else ([0] * len(NWIRE_WIRES), 0))
                 continue
             evaluation = out + ".eval.json"
             cmd = [args.binary, "evaluate", "--recon", out, "--slices", slices, "--json",
@@ -651,10 +742,10 @@ def table(rows, fields):
                 if e is None or "parts" not in e:
                     parts.append("–" if e is None else "FAILED")
                 else:
-                    long = sum(d >= NWIRE_LONG_MM for _, d in e["parts"])
-                    longest = max((d for _, d in e["parts"]), default=0.0)
-                    parts.append(f"{len(e['parts'])} ({long} ≥ {NWIRE_LONG_MM:g} mm, longest "
-                                 f"{longest:.1f} mm)")
+                    counts, stray = e["per_wire"]
+                    ones = sum(c == 1 for c in counts)
+                    parts.append(f"{len(e['parts'])}: per wire {','.join(map(str, counts))} "
+                                 f"({ones} of {len(counts)} one tube), {stray} elsewhere")
             lines.append(f"| {row['name']} | {row['slices']} | wires (no truth; median "
                          f"{row['wires_per_slice']:g} outlines a slice) | – | – | – | "
                          f"{' | '.join(costs)} | – / {' / '.join(parts)} |")
