@@ -169,8 +169,10 @@ struct LineFit {
 // Re-labels undecided pixels (flag set) from their decided 8-neighbours in the sector, by
 // majority, growing inwards; what stays undecided becomes unknown. A pass looks only at the
 // undecided pixels next to those the previous pass decided (at first, at all): no other can
-// have gained a decided neighbour.
-void fill_undecided(cv::Mat& map, cv::Mat& undecided, const cv::Mat& sector) {
+// have gained a decided neighbour. A label `fixed` (a bone's section, drawn from its model)
+// neither votes nor grows: where the cleaning removed the bright echo tail over a bone, the
+// fill had grown the section by a row into it.
+void fill_undecided(cv::Mat& map, cv::Mat& undecided, const cv::Mat& sector, int fixed = -1) {
   const int w = map.cols, h = map.rows;
   std::vector<int> todo;
   for (int j = 0; j < h; ++j) {
@@ -194,7 +196,7 @@ void fill_undecided(cv::Mat& map, cv::Mat& undecided, const cv::Mat& sector) {
         const std::uint8_t* u = undecided.ptr<std::uint8_t>(y);
         const std::uint8_t* m = map.ptr<std::uint8_t>(y);
         for (int x = std::max(i - 1, 0); x <= std::min(i + 1, w - 1); ++x) {
-          if ((x == i && y == j) || !in[x] || u[x]) continue;
+          if ((x == i && y == j) || !in[x] || u[x] || m[x] == fixed) continue;
           const std::uint8_t v = m[x];
           int k = 0;
           while (k < distinct && values[static_cast<std::size_t>(k)] != v) ++k;
@@ -245,7 +247,7 @@ void fill_undecided(cv::Mat& map, cv::Mat& undecided, const cv::Mat& sector) {
 // disks of two survivors of different labels cannot overlap, so a pixel is in its own label's
 // opening exactly when the disk around it holds a survivor. Four passes instead of two per
 // label.
-void open_labels(cv::Mat& map, const cv::Mat& sector, double radius_px) {
+void open_labels(cv::Mat& map, const cv::Mat& sector, double radius_px, int fixed) {
   if (radius_px < 0.5) return;
   const cv::Mat kernel = disk(radius_px);
   cv::Mat lowest, highest, inside;
@@ -257,7 +259,7 @@ void open_labels(cv::Mat& map, const cv::Mat& sector, double radius_px) {
   cv::dilate(survivors, opened, kernel);
   cv::Mat undecided(map.size(), CV_8U, cv::Scalar(0));
   undecided.setTo(kUndecided, sector & ~opened);
-  fill_undecided(map, undecided, sector);
+  fill_undecided(map, undecided, sector, fixed);
 }
 
 // Components of any label smaller than min_px are re-labelled from their surroundings. The
@@ -267,7 +269,7 @@ void open_labels(cv::Mat& map, const cv::Mat& sector, double radius_px) {
 // small component stays when at least half its pixels are set in `keep` (when not empty): a
 // small part of an organ that the reconstruction predicts there is no speckle.
 void remove_small_components(cv::Mat& map, const cv::Mat& sector, double min_px,
-                             const cv::Mat& keep) {
+                             const cv::Mat& keep, int fixed) {
   if (min_px < 1.0) return;
   struct Run {
     int row, from, to;  // columns from..to, inclusive
@@ -319,7 +321,7 @@ void remove_small_components(cv::Mat& map, const cv::Mat& sector, double min_px,
       std::uint8_t* u = undecided.ptr<std::uint8_t>(runs[r].row);
       std::fill(u + runs[r].from, u + runs[r].to + 1, kUndecided);
     }
-  fill_undecided(map, undecided, sector);
+  fill_undecided(map, undecided, sector, fixed);
 }
 
 // Removes diagonal-only contacts: where a label holds exactly one diagonal of a 2x2 block, its
@@ -844,8 +846,11 @@ class FrameSegmenter {
   // Morphological cleaning on the label map (every label from the same map, so regions cannot
   // overlap), then no diagonal-only contacts so that every outline is a simple polygon.
   void clean() {
-    open_labels(map_, sector_, config_.opening_mm / px_mm_);
-    remove_small_components(map_, sector_, config_.min_region_mm2 / (px_mm_ * px_mm_), keep_);
+    // A bone's section is drawn from its model: the cleaning's re-labelling does not grow it.
+    const int fixed = sections_ ? by_mean_[0].value : -1;
+    open_labels(map_, sector_, config_.opening_mm / px_mm_, fixed);
+    remove_small_components(map_, sector_, config_.min_region_mm2 / (px_mm_ * px_mm_), keep_,
+                            fixed);
     repair_diagonal_contacts(map_, sector_);
     if (sections_) separate_bone_from_shadow(map_, sector_, by_mean_[0].value);
     map_.setTo(kLabelPixelUnknown, ~sector_);
