@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <limits>
 #include <opencv2/core.hpp>
@@ -257,6 +258,7 @@ void open_labels(cv::Mat& map, const cv::Mat& sector, double radius_px, int fixe
   const cv::Mat survivors = (lowest == highest) & inside;
   cv::Mat opened;
   cv::dilate(survivors, opened, kernel);
+  if (std::getenv("NO_BG_OPEN")) opened |= (map == kLabelPixelOutside);
   cv::Mat undecided(map.size(), CV_8U, cv::Scalar(0));
   undecided.setTo(kUndecided, sector & ~opened);
   fill_undecided(map, undecided, sector, fixed);

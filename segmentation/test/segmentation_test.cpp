@@ -114,6 +114,40 @@ Scores score(const LabelImage& truth, const LabelImage& sector_labels, const Lab
   return scores;
 }
 
+// A small bright organ whose boundary pixels the point-spread function blurred towards the
+// background: learnt from its pixels away from the boundary its mean is the tissue's, from all
+// of them over a quarter of the way to the background's (which lowered the grey boundary between
+// them and made the organ come out too large). A sliver with no interior pixel keeps all of its
+// own.
+TEST(LearnLabelModels, LearnsFromThePixelsAwayFromOtherLabels) {
+  GreyImage image(40, 20, 90);
+  LabelImage labels(40, 20, 0);
+  for (int j = 0; j < 20; ++j)
+    for (int i = 0; i < 20; ++i) {
+      const double d = std::hypot(i - 10.0, j - 10.0);
+      if (d <= 6.0) labels.at(i, j) = 2;
+      // The organ's grey 150 inside, ramping down to the background's over its outer 2 px.
+      if (d <= 6.0)
+        image.at(i, j) =
+            static_cast<std::uint8_t>(d <= 4.0 ? 150.0 : 150.0 - 20.0 * (d - 4.0) - 10.0);
+    }
+  for (int j = 5; j < 15; ++j) {  // a one-pixel sliver of organ 3
+    labels.at(30, j) = 3;
+    image.at(30, j) = 120;
+  }
+  const SegmentationConfig all = learn_label_models(image, labels);
+  const SegmentationConfig inside = learn_label_models(image, labels, {}, 2.0);
+  auto mean_of = [](const SegmentationConfig& c, int label) {
+    for (const LabelModel& m : c.materials)
+      if (m.label == label) return m.grey_mean;
+    return -1.0;
+  };
+  EXPECT_NEAR(mean_of(inside, 2), 150.0, 1e-9);
+  EXPECT_LT(mean_of(all, 2), 135.0);
+  EXPECT_NEAR(mean_of(inside, 3), 120.0, 1e-9);
+  EXPECT_NEAR(inside.background.grey_mean, 90.0, 1e-9);
+}
+
 class SegmentSimulated : public ::testing::TestWithParam<bool> {};
 
 TEST_P(SegmentSimulated, MatchesGroundTruthAndTheCut) {
