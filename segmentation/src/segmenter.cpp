@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
-#include <cstdlib>
 #include <cstring>
 #include <limits>
 #include <opencv2/core.hpp>
@@ -23,6 +22,12 @@ namespace {
 
 using detail::wrap;
 
+// One class of the nearest-mean classification: its label value and grey mean.
+struct ClassMean {
+  std::uint8_t value;
+  double mean;
+};
+
 // Depth bins (mm) of the initial trend estimate, and the fewest pixels a bin needs to count.
 constexpr double kDepthBinMm = 2.0;
 constexpr int kMinBinPixels = 30;
@@ -36,6 +41,11 @@ constexpr int kMaxRepairPasses = 20;
 constexpr std::uint8_t kUndecided = 1;
 // A reflector band narrower than this (mm) is speckle, not a bone surface.
 constexpr double kMinReflectorWidthMm = 1.0;
+// A material's component smaller than min_region_mm2 but of at least this share of it stays when
+// its mean grey lies within kConfidentGreyShare of the gap to the next class from its material's
+// mean (see confident_small_parts).
+constexpr double kConfidentPartMinShare = 0.5;
+constexpr double kConfidentGreyShare = 0.3;
 // The median that decides for a reflector's band spans about this much (mm; the 5 px of the
 // default median_px at 512 x 512 of the default scan, 0.31 mm a pixel).
 constexpr double kReflectorMedianMm = 1.5;
@@ -258,7 +268,6 @@ void open_labels(cv::Mat& map, const cv::Mat& sector, double radius_px, int fixe
   const cv::Mat survivors = (lowest == highest) & inside;
   cv::Mat opened;
   cv::dilate(survivors, opened, kernel);
-  if (std::getenv("NO_BG_OPEN")) opened |= (map == kLabelPixelOutside);
   cv::Mat undecided(map.size(), CV_8U, cv::Scalar(0));
   undecided.setTo(kUndecided, sector & ~opened);
   fill_undecided(map, undecided, sector, fixed);
@@ -324,6 +333,57 @@ void remove_small_components(cv::Mat& map, const cv::Mat& sector, double min_px,
       std::fill(u + runs[r].from, u + runs[r].to + 1, kUndecided);
     }
   fill_undecided(map, undecided, sector, fixed);
+}
+
+// The pixels of the materials' components smaller than min_px but of at least floor_px whose
+// mean grey (the classified, compensated grey) lies near their material's mean: within
+// `share` of the gap to every other class on that side. A speckle grain misread as tissue
+// lies just past the grey boundary between the classes; the small end of an organ (an ear, the
+// tip of its body) shows the organ's own grey.
+cv::Mat confident_small_parts(const cv::Mat& map, const cv::Mat& sector, const cv::Mat& grey,
+                              const std::vector<ClassMean>& classes, double min_px, double floor_px,
+                              double share, int fixed) {
+  cv::Mat confident(map.size(), CV_8U, cv::Scalar(0));
+  // A bone's echo spreads beyond its drawn section as bright as bright tissue: what touches the
+  // section is that echo.
+  cv::Mat near_fixed;
+  cv::dilate(map == fixed, near_fixed, cv::Mat());
+  for (const ClassMean& c : classes) {
+    if (c.value == kLabelPixelOutside || c.value == fixed) continue;
+    const cv::Mat mask = (map == c.value) & sector;
+    cv::Mat components, stats, centroids;
+    const int n = cv::connectedComponentsWithStats(mask, components, stats, centroids, 8, CV_32S);
+    std::vector<double> sum(static_cast<std::size_t>(n), 0.0);
+    std::vector<std::uint8_t> touches_fixed(static_cast<std::size_t>(n), 0);
+    for (int j = 0; j < map.rows; ++j) {
+      const int* component = components.ptr<int>(j);
+      const float* g = grey.ptr<float>(j);
+      const std::uint8_t* f = near_fixed.ptr<std::uint8_t>(j);
+      for (int i = 0; i < map.cols; ++i) {
+        sum[static_cast<std::size_t>(component[i])] += g[i];
+        touches_fixed[static_cast<std::size_t>(component[i])] |= f[i];
+      }
+    }
+    std::vector<std::uint8_t> keep(static_cast<std::size_t>(n), 0);
+    for (int k = 1; k < n; ++k) {
+      const double area = stats.at<int>(k, cv::CC_STAT_AREA);
+      if (area >= min_px || area < floor_px || touches_fixed[static_cast<std::size_t>(k)]) continue;
+      const double mean = sum[static_cast<std::size_t>(k)] / area, off = mean - c.mean;
+      bool near = true;
+      for (const ClassMean& other : classes) {
+        const double gap = other.mean - c.mean;
+        if (other.value != c.value && gap * off > 0.0 && std::abs(off) > share * std::abs(gap))
+          near = false;
+      }
+      keep[static_cast<std::size_t>(k)] = near ? 255 : 0;
+    }
+    for (int j = 0; j < map.rows; ++j) {
+      const int* component = components.ptr<int>(j);
+      std::uint8_t* out = confident.ptr<std::uint8_t>(j);
+      for (int i = 0; i < map.cols; ++i) out[i] |= keep[static_cast<std::size_t>(component[i])];
+    }
+  }
+  return confident;
 }
 
 // Removes diagonal-only contacts: where a label holds exactly one diagonal of a 2x2 block, its
@@ -541,12 +601,6 @@ Segmentation segment_frame(const GreyImage& image, const ImageGeometry& geometry
 }
 
 namespace {
-
-// One class of the nearest-mean classification: its label value and grey mean.
-struct ClassMean {
-  std::uint8_t value;
-  double mean;
-};
 
 // The steps of detail::segment_frame, in the order of docs/segmentation.md's "Method": speckle
 // reduction, confidence, the classes, depth compensation and classification, the steps on the
@@ -851,7 +905,12 @@ class FrameSegmenter {
     // A bone's section is drawn from its model: the cleaning's re-labelling does not grow it.
     const int fixed = sections_ ? by_mean_[0].value : -1;
     open_labels(map_, sector_, config_.opening_mm / px_mm_, fixed);
-    remove_small_components(map_, sector_, config_.min_region_mm2 / (px_mm_ * px_mm_), keep_,
+    const double min_px = config_.min_region_mm2 / (px_mm_ * px_mm_);
+    // Small parts of an organ (its ends, an ear) whose grey is the organ's own stay.
+    const cv::Mat confident =
+        confident_small_parts(map_, sector_, compensated_, classes_, min_px,
+                              kConfidentPartMinShare * min_px, kConfidentGreyShare, fixed);
+    remove_small_components(map_, sector_, min_px, keep_.empty() ? confident : (keep_ | confident),
                             fixed);
     repair_diagonal_contacts(map_, sector_);
     if (sections_) separate_bone_from_shadow(map_, sector_, by_mean_[0].value);
