@@ -44,7 +44,7 @@ constexpr double kMinReflectorWidthMm = 1.0;
 // A material's component smaller than min_region_mm2 but of at least this share of it stays when
 // its mean grey lies within kConfidentGreyShare of the gap to the next class from its material's
 // mean (see confident_small_parts).
-constexpr double kConfidentPartMinShare = 0.5;
+constexpr double kConfidentPartMinShare = 0.3;
 constexpr double kConfidentGreyShare = 0.3;
 // The median that decides for a reflector's band spans about this much (mm; the 5 px of the
 // default median_px at 512 x 512 of the default scan, 0.31 mm a pixel).
@@ -335,7 +335,8 @@ void remove_small_components(cv::Mat& map, const cv::Mat& sector, double min_px,
   fill_undecided(map, undecided, sector, fixed);
 }
 
-// The pixels of the materials' components smaller than min_px but of at least floor_px whose
+// The pixels of the components of the materials brighter than the background (not `fixed`)
+// smaller than min_px but of at least floor_px, not touching `fixed`, whose
 // mean grey (the classified, compensated grey) lies near their material's mean: within
 // `share` of the gap to every other class on that side. A speckle grain misread as tissue
 // lies just past the grey boundary between the classes; the small end of an organ (an ear, the
@@ -348,8 +349,11 @@ cv::Mat confident_small_parts(const cv::Mat& map, const cv::Mat& sector, const c
   // section is that echo.
   cv::Mat near_fixed;
   cv::dilate(map == fixed, near_fixed, cv::Mat());
+  const double background_grey = classes.front().mean;
   for (const ClassMean& c : classes) {
-    if (c.value == kLabelPixelOutside || c.value == fixed) continue;
+    // Log-compressed speckle has a long dark tail (its nulls): dark blobs of a few speckle cells
+    // with a hypoechoic organ's grey are common in any tissue, bright ones are not.
+    if (c.value == kLabelPixelOutside || c.value == fixed || c.mean <= background_grey) continue;
     const cv::Mat mask = (map == c.value) & sector;
     cv::Mat components, stats, centroids;
     const int n = cv::connectedComponentsWithStats(mask, components, stats, centroids, 8, CV_32S);
