@@ -336,19 +336,17 @@ void remove_small_components(cv::Mat& map, const cv::Mat& sector, double min_px,
 }
 
 // The pixels of the components of the materials brighter than the background (not `fixed`)
-// smaller than min_px but of at least floor_px, not touching `fixed`, whose
-// mean grey (the classified, compensated grey) lies near their material's mean: within
-// `share` of the gap to every other class on that side. A speckle grain misread as tissue
-// lies just past the grey boundary between the classes; the small end of an organ (an ear, the
-// tip of its body) shows the organ's own grey.
+// smaller than min_px but of at least floor_px, touching no pixel of `excluded`, whose mean grey
+// (the classified, compensated grey) lies near their material's mean: within `share` of the
+// gap to every other class on that side. A speckle grain misread as tissue lies just past the
+// grey boundary between the classes; the small end of an organ (an ear, the tip of its body)
+// shows the organ's own grey.
 cv::Mat confident_small_parts(const cv::Mat& map, const cv::Mat& sector, const cv::Mat& grey,
                               const std::vector<ClassMean>& classes, double min_px, double floor_px,
-                              double share, int fixed) {
+                              double share, int fixed, const cv::Mat& excluded) {
   cv::Mat confident(map.size(), CV_8U, cv::Scalar(0));
-  // A bone's echo spreads beyond its drawn section as bright as bright tissue: what touches the
-  // section is that echo.
   cv::Mat near_fixed;
-  cv::dilate(map == fixed, near_fixed, cv::Mat());
+  cv::dilate(excluded, near_fixed, cv::Mat());
   const double background_grey = classes.front().mean;
   for (const ClassMean& c : classes) {
     // Log-compressed speckle has a long dark tail (its nulls): dark blobs of a few speckle cells
@@ -358,20 +356,21 @@ cv::Mat confident_small_parts(const cv::Mat& map, const cv::Mat& sector, const c
     cv::Mat components, stats, centroids;
     const int n = cv::connectedComponentsWithStats(mask, components, stats, centroids, 8, CV_32S);
     std::vector<double> sum(static_cast<std::size_t>(n), 0.0);
-    std::vector<std::uint8_t> touches_fixed(static_cast<std::size_t>(n), 0);
+    std::vector<std::uint8_t> touches_excluded(static_cast<std::size_t>(n), 0);
     for (int j = 0; j < map.rows; ++j) {
       const int* component = components.ptr<int>(j);
       const float* g = grey.ptr<float>(j);
       const std::uint8_t* f = near_fixed.ptr<std::uint8_t>(j);
       for (int i = 0; i < map.cols; ++i) {
         sum[static_cast<std::size_t>(component[i])] += g[i];
-        touches_fixed[static_cast<std::size_t>(component[i])] |= f[i];
+        touches_excluded[static_cast<std::size_t>(component[i])] |= f[i];
       }
     }
     std::vector<std::uint8_t> keep(static_cast<std::size_t>(n), 0);
     for (int k = 1; k < n; ++k) {
       const double area = stats.at<int>(k, cv::CC_STAT_AREA);
-      if (area >= min_px || area < floor_px || touches_fixed[static_cast<std::size_t>(k)]) continue;
+      if (area >= min_px || area < floor_px || touches_excluded[static_cast<std::size_t>(k)])
+        continue;
       const double mean = sum[static_cast<std::size_t>(k)] / area, off = mean - c.mean;
       bool near = true;
       for (const ClassMean& other : classes) {
@@ -910,10 +909,17 @@ class FrameSegmenter {
     const int fixed = sections_ ? by_mean_[0].value : -1;
     open_labels(map_, sector_, config_.opening_mm / px_mm_, fixed);
     const double min_px = config_.min_region_mm2 / (px_mm_ * px_mm_);
-    // Small parts of an organ (its ends, an ear) whose grey is the organ's own stay.
-    const cv::Mat confident =
-        confident_small_parts(map_, sector_, compensated_, classes_, min_px,
-                              kConfidentPartMinShare * min_px, kConfidentGreyShare, fixed);
+    // Small parts of an organ (its ends, an ear) whose grey is the organ's own stay; but not
+    // what touches a bone's section (its echo spreads beyond the drawn section as bright as
+    // bright tissue) or lies within two smoothing sigmas of the sector's edge (there the
+    // smoothing averages half as many speckle cells: two false pieces at the fan's edge in one
+    // slice of the default 512 px sweep, `segment --every 4`).
+    cv::Mat inner;
+    cv::erode(sector_, inner, disk(2.0 * config_.smoothing_mm / px_mm_));
+    const cv::Mat excluded = (map_ == fixed) | (sector_ & ~inner);
+    const cv::Mat confident = confident_small_parts(map_, sector_, compensated_, classes_, min_px,
+                                                    kConfidentPartMinShare * min_px,
+                                                    kConfidentGreyShare, fixed, excluded);
     remove_small_components(map_, sector_, min_px, keep_.empty() ? confident : (keep_ | confident),
                             fixed);
     repair_diagonal_contacts(map_, sector_);
