@@ -915,7 +915,8 @@ class FrameSegmenter {
     // smoothing averages half as many speckle cells: two false pieces at the fan's edge in one
     // slice of the default 512 px sweep, `segment --every 4`).
     cv::Mat inner;
-    cv::erode(sector_, inner, disk(2.0 * config_.smoothing_mm / px_mm_));
+    cv::erode(sector_, inner, disk(2.0 * config_.smoothing_mm / px_mm_), cv::Point(-1, -1), 1,
+              cv::BORDER_CONSTANT, cv::Scalar(0));  // (the image's edge is the sector's there)
     const cv::Mat excluded = (map_ == fixed) | (sector_ & ~inner);
     const cv::Mat confident = confident_small_parts(map_, sector_, compensated_, classes_, min_px,
                                                     kConfidentPartMinShare * min_px,
