@@ -9,6 +9,7 @@
 #include <initializer_list>
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
 #include <set>
 #include <sstream>
 #include <stdexcept>
@@ -437,15 +438,42 @@ std::string to_json(const SegmentationConfig& c) {
   return doc.dump(2);
 }
 
+namespace {
+
+// For each pixel, whether every pixel within `radius_px` (a disk) holds its label (outside the
+// image counts as another label); all pixels when the radius is under half a pixel.
+std::vector<std::uint8_t> interior_pixels(const LabelImage& labels, double radius_px) {
+  std::vector<std::uint8_t> interior(labels.pixels.size(), 1);
+  const int r = static_cast<int>(std::lround(radius_px));
+  if (r < 1) return interior;
+  const cv::Mat map(labels.height, labels.width, CV_8U,
+                    const_cast<std::uint8_t*>(labels.pixels.data()));
+  const cv::Mat disk = cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * r + 1, 2 * r + 1));
+  cv::Mat lowest, highest;
+  cv::erode(map, lowest, disk, cv::Point(-1, -1), 1, cv::BORDER_CONSTANT, cv::Scalar(0));
+  cv::dilate(map, highest, disk, cv::Point(-1, -1), 1, cv::BORDER_CONSTANT, cv::Scalar(255));
+  const cv::Mat same = (lowest == highest);
+  for (int j = 0; j < labels.height; ++j)
+    std::copy(same.ptr<std::uint8_t>(j), same.ptr<std::uint8_t>(j) + labels.width,
+              interior.begin() + static_cast<std::ptrdiff_t>(j) * labels.width);
+  return interior;
+}
+
+}  // namespace
+
 SegmentationConfig learn_label_models(const GreyImage& image, const LabelImage& labels,
-                                      const SegmentationConfig& base) {
+                                      const SegmentationConfig& base, double interior_px) {
   if (image.width != labels.width || image.height != labels.height ||
       image.pixels.size() != labels.pixels.size())
     throw std::invalid_argument("learn_label_models: image and label map differ in size");
-  std::array<double, 256> sum{}, sum_sq{}, count{};
+  const std::vector<std::uint8_t> interior = interior_pixels(labels, interior_px);
+  std::array<double, 256> sum{}, sum_sq{}, count{}, all{};
+  for (std::size_t p = 0; p < image.pixels.size(); ++p)
+    all[labels.pixels[p]] += interior[p] ? 1.0 : 0.0;
   for (std::size_t p = 0; p < image.pixels.size(); ++p) {
     const std::uint8_t l = labels.pixels[p];
-    if (l == kLabelPixelUnknown) continue;
+    // A label with no interior pixel (a sliver) is learnt from all of its pixels.
+    if (l == kLabelPixelUnknown || (all[l] > 0.0 && !interior[p])) continue;
     const double g = image.pixels[p];
     sum[l] += g;
     sum_sq[l] += g * g;

@@ -22,6 +22,12 @@ namespace {
 
 using detail::wrap;
 
+// One class of the nearest-mean classification: its label value and grey mean.
+struct ClassMean {
+  std::uint8_t value;
+  double mean;
+};
+
 // Depth bins (mm) of the initial trend estimate, and the fewest pixels a bin needs to count.
 constexpr double kDepthBinMm = 2.0;
 constexpr int kMinBinPixels = 30;
@@ -35,6 +41,11 @@ constexpr int kMaxRepairPasses = 20;
 constexpr std::uint8_t kUndecided = 1;
 // A reflector band narrower than this (mm) is speckle, not a bone surface.
 constexpr double kMinReflectorWidthMm = 1.0;
+// A material's component smaller than min_region_mm2 but of at least this share of it stays when
+// its mean grey lies within kConfidentGreyShare of the gap to the next class from its material's
+// mean (see confident_small_parts).
+constexpr double kConfidentPartMinShare = 0.3;
+constexpr double kConfidentGreyShare = 0.3;
 // The median that decides for a reflector's band spans about this much (mm; the 5 px of the
 // default median_px at 512 x 512 of the default scan, 0.31 mm a pixel).
 constexpr double kReflectorMedianMm = 1.5;
@@ -169,8 +180,10 @@ struct LineFit {
 // Re-labels undecided pixels (flag set) from their decided 8-neighbours in the sector, by
 // majority, growing inwards; what stays undecided becomes unknown. A pass looks only at the
 // undecided pixels next to those the previous pass decided (at first, at all): no other can
-// have gained a decided neighbour.
-void fill_undecided(cv::Mat& map, cv::Mat& undecided, const cv::Mat& sector) {
+// have gained a decided neighbour. A label `fixed` (a bone's section, drawn from its model)
+// neither votes nor grows: where the cleaning removed the bright echo tail over a bone, the
+// fill had grown the section by a row into it.
+void fill_undecided(cv::Mat& map, cv::Mat& undecided, const cv::Mat& sector, int fixed = -1) {
   const int w = map.cols, h = map.rows;
   std::vector<int> todo;
   for (int j = 0; j < h; ++j) {
@@ -194,7 +207,7 @@ void fill_undecided(cv::Mat& map, cv::Mat& undecided, const cv::Mat& sector) {
         const std::uint8_t* u = undecided.ptr<std::uint8_t>(y);
         const std::uint8_t* m = map.ptr<std::uint8_t>(y);
         for (int x = std::max(i - 1, 0); x <= std::min(i + 1, w - 1); ++x) {
-          if ((x == i && y == j) || !in[x] || u[x]) continue;
+          if ((x == i && y == j) || !in[x] || u[x] || m[x] == fixed) continue;
           const std::uint8_t v = m[x];
           int k = 0;
           while (k < distinct && values[static_cast<std::size_t>(k)] != v) ++k;
@@ -245,7 +258,7 @@ void fill_undecided(cv::Mat& map, cv::Mat& undecided, const cv::Mat& sector) {
 // disks of two survivors of different labels cannot overlap, so a pixel is in its own label's
 // opening exactly when the disk around it holds a survivor. Four passes instead of two per
 // label.
-void open_labels(cv::Mat& map, const cv::Mat& sector, double radius_px) {
+void open_labels(cv::Mat& map, const cv::Mat& sector, double radius_px, int fixed) {
   if (radius_px < 0.5) return;
   const cv::Mat kernel = disk(radius_px);
   cv::Mat lowest, highest, inside;
@@ -257,7 +270,7 @@ void open_labels(cv::Mat& map, const cv::Mat& sector, double radius_px) {
   cv::dilate(survivors, opened, kernel);
   cv::Mat undecided(map.size(), CV_8U, cv::Scalar(0));
   undecided.setTo(kUndecided, sector & ~opened);
-  fill_undecided(map, undecided, sector);
+  fill_undecided(map, undecided, sector, fixed);
 }
 
 // Components of any label smaller than min_px are re-labelled from their surroundings. The
@@ -267,7 +280,7 @@ void open_labels(cv::Mat& map, const cv::Mat& sector, double radius_px) {
 // small component stays when at least half its pixels are set in `keep` (when not empty): a
 // small part of an organ that the reconstruction predicts there is no speckle.
 void remove_small_components(cv::Mat& map, const cv::Mat& sector, double min_px,
-                             const cv::Mat& keep) {
+                             const cv::Mat& keep, int fixed) {
   if (min_px < 1.0) return;
   struct Run {
     int row, from, to;  // columns from..to, inclusive
@@ -319,7 +332,61 @@ void remove_small_components(cv::Mat& map, const cv::Mat& sector, double min_px,
       std::uint8_t* u = undecided.ptr<std::uint8_t>(runs[r].row);
       std::fill(u + runs[r].from, u + runs[r].to + 1, kUndecided);
     }
-  fill_undecided(map, undecided, sector);
+  fill_undecided(map, undecided, sector, fixed);
+}
+
+// The pixels of the components of the materials brighter than the background (not `fixed`)
+// smaller than min_px but of at least floor_px, touching no pixel of `excluded`, whose mean grey
+// (the classified, compensated grey) lies near their material's mean: within `share` of the
+// gap to every other class on that side. A speckle grain misread as tissue lies just past the
+// grey boundary between the classes; the small end of an organ (an ear, the tip of its body)
+// shows the organ's own grey.
+cv::Mat confident_small_parts(const cv::Mat& map, const cv::Mat& sector, const cv::Mat& grey,
+                              const std::vector<ClassMean>& classes, double min_px, double floor_px,
+                              double share, int fixed, const cv::Mat& excluded) {
+  cv::Mat confident(map.size(), CV_8U, cv::Scalar(0));
+  cv::Mat near_fixed;
+  cv::dilate(excluded, near_fixed, cv::Mat());
+  const double background_grey = classes.front().mean;
+  for (const ClassMean& c : classes) {
+    // Log-compressed speckle has a long dark tail (its nulls): dark blobs of a few speckle cells
+    // with a hypoechoic organ's grey are common in any tissue, bright ones are not.
+    if (c.value == kLabelPixelOutside || c.value == fixed || c.mean <= background_grey) continue;
+    const cv::Mat mask = (map == c.value) & sector;
+    cv::Mat components, stats, centroids;
+    const int n = cv::connectedComponentsWithStats(mask, components, stats, centroids, 8, CV_32S);
+    std::vector<double> sum(static_cast<std::size_t>(n), 0.0);
+    std::vector<std::uint8_t> touches_excluded(static_cast<std::size_t>(n), 0);
+    for (int j = 0; j < map.rows; ++j) {
+      const int* component = components.ptr<int>(j);
+      const float* g = grey.ptr<float>(j);
+      const std::uint8_t* f = near_fixed.ptr<std::uint8_t>(j);
+      for (int i = 0; i < map.cols; ++i) {
+        sum[static_cast<std::size_t>(component[i])] += g[i];
+        touches_excluded[static_cast<std::size_t>(component[i])] |= f[i];
+      }
+    }
+    std::vector<std::uint8_t> keep(static_cast<std::size_t>(n), 0);
+    for (int k = 1; k < n; ++k) {
+      const double area = stats.at<int>(k, cv::CC_STAT_AREA);
+      if (area >= min_px || area < floor_px || touches_excluded[static_cast<std::size_t>(k)])
+        continue;
+      const double mean = sum[static_cast<std::size_t>(k)] / area, off = mean - c.mean;
+      bool near = true;
+      for (const ClassMean& other : classes) {
+        const double gap = other.mean - c.mean;
+        if (other.value != c.value && gap * off > 0.0 && std::abs(off) > share * std::abs(gap))
+          near = false;
+      }
+      keep[static_cast<std::size_t>(k)] = near ? 255 : 0;
+    }
+    for (int j = 0; j < map.rows; ++j) {
+      const int* component = components.ptr<int>(j);
+      std::uint8_t* out = confident.ptr<std::uint8_t>(j);
+      for (int i = 0; i < map.cols; ++i) out[i] |= keep[static_cast<std::size_t>(component[i])];
+    }
+  }
+  return confident;
 }
 
 // Removes diagonal-only contacts: where a label holds exactly one diagonal of a 2x2 block, its
@@ -537,12 +604,6 @@ Segmentation segment_frame(const GreyImage& image, const ImageGeometry& geometry
 }
 
 namespace {
-
-// One class of the nearest-mean classification: its label value and grey mean.
-struct ClassMean {
-  std::uint8_t value;
-  double mean;
-};
 
 // The steps of detail::segment_frame, in the order of docs/segmentation.md's "Method": speckle
 // reduction, confidence, the classes, depth compensation and classification, the steps on the
@@ -844,8 +905,24 @@ class FrameSegmenter {
   // Morphological cleaning on the label map (every label from the same map, so regions cannot
   // overlap), then no diagonal-only contacts so that every outline is a simple polygon.
   void clean() {
-    open_labels(map_, sector_, config_.opening_mm / px_mm_);
-    remove_small_components(map_, sector_, config_.min_region_mm2 / (px_mm_ * px_mm_), keep_);
+    // A bone's section is drawn from its model: the cleaning's re-labelling does not grow it.
+    const int fixed = sections_ ? by_mean_[0].value : -1;
+    open_labels(map_, sector_, config_.opening_mm / px_mm_, fixed);
+    const double min_px = config_.min_region_mm2 / (px_mm_ * px_mm_);
+    // Small parts of an organ (its ends, an ear) whose grey is the organ's own stay; but not
+    // what touches a bone's section (its echo spreads beyond the drawn section as bright as
+    // bright tissue) or lies within two smoothing sigmas of the sector's edge (there the
+    // smoothing averages half as many speckle cells: two false pieces at the fan's edge in one
+    // slice of the default 512 px sweep, `segment --every 4`).
+    cv::Mat inner;
+    cv::erode(sector_, inner, disk(2.0 * config_.smoothing_mm / px_mm_), cv::Point(-1, -1), 1,
+              cv::BORDER_CONSTANT, cv::Scalar(0));  // (the image's edge is the sector's there)
+    const cv::Mat excluded = (map_ == fixed) | (sector_ & ~inner);
+    const cv::Mat confident = confident_small_parts(map_, sector_, compensated_, classes_, min_px,
+                                                    kConfidentPartMinShare * min_px,
+                                                    kConfidentGreyShare, fixed, excluded);
+    remove_small_components(map_, sector_, min_px, keep_.empty() ? confident : (keep_ | confident),
+                            fixed);
     repair_diagonal_contacts(map_, sector_);
     if (sections_) separate_bone_from_shadow(map_, sector_, by_mean_[0].value);
     map_.setTo(kLabelPixelUnknown, ~sector_);

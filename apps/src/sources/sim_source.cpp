@@ -17,8 +17,13 @@ namespace sonoshape::apps {
 namespace {
 
 // Frames rendered (with their ground truth) to learn the simulated probe's grey-level models:
-// spread over the sweep so that every organ is seen.
-constexpr int kModelFrames = 6;
+// spread over the sweep so that every organ is seen, and with enough of each organ's inside (6
+// frames showed cheburashka's only as slivers at 512 x 512, no pixel of them inside it).
+constexpr int kModelFrames = 12;
+// The models are learnt from the pixels at least this many point-spread sigmas from another
+// label: a small organ's boundary pixels (a third of cheburashka's at 256 x 256) are blurred
+// towards its surroundings, and its mean with them lowered the boundary with the background.
+constexpr double kInteriorPsfSigmas = 2.0;
 
 // Label models of the simulated probe, learnt from a few frames and their ground truth (what a
 // preset of a real probe holds). Names come from the phantom.
@@ -45,7 +50,10 @@ segmentation::SegmentationConfig learn_sim_models(const simulator::BModeSimulato
               visible.pixels.begin() + static_cast<std::ptrdiff_t>(k) * w * h);
     caster_runs_px.push_back(simulator::shadow_caster_runs_px(frame));
   }
-  segmentation::SegmentationConfig config = segmentation::learn_label_models(grey, visible, base);
+  // Within two sigmas of the point-spread function of a boundary the grey mixes both sides'.
+  const double interior_px = kInteriorPsfSigmas * simulator.psf_sigma_mm() / probe.spacing_mm();
+  segmentation::SegmentationConfig config =
+      segmentation::learn_label_models(grey, visible, base, interior_px);
   if (config.psf_sigma_mm < 0.0) {
     config.psf_sigma_mm = simulator.psf_sigma_mm();
     config.dynamic_range_db = simulator.options().dynamic_range_db;

@@ -154,9 +154,14 @@ std::string to_json(const SegmentationConfig& config);
 
 /// Learns the grey models of every label of a labelled example: `labels` holds 0 for the
 /// background, material ids, and kLabelPixelUnknown (ignored). Sizes must match (throws
-/// std::invalid_argument otherwise). Other parameters are copied from `base`.
+/// std::invalid_argument otherwise). Other parameters are copied from `base`. With
+/// `interior_px` > 0 each label is learnt from its pixels at least that far (px) from any other
+/// label's (or from all of its pixels when none is that far): the point-spread function mixes
+/// the grey of the pixels near a boundary with the neighbour's, which pulls a small organ's
+/// mean towards its surroundings.
 SegmentationConfig learn_label_models(const GreyImage& image, const LabelImage& labels,
-                                      const SegmentationConfig& base = {});
+                                      const SegmentationConfig& base = {},
+                                      double interior_px = 0.0);
 
 /// The models of `base` (background and materials) refined on the grey levels of `samples` (any
 /// pixels of the sector) by k-means started from their grey means: each model's mean and spread
