@@ -499,10 +499,14 @@ void chebyshev_step(std::size_t begin, std::size_t end, Real keep, Real push,
   }
 }
 
-// Chebyshev smoothing of A x = b from x (r = b - A x on entry, updated), `degree` steps, aimed
-// at the eigenvalues of D^-1 A in [lower, 1]: the bi-Laplacian's modes that the next coarser
-// grid cannot represent have eigenvalues from about 1/36 up (Jacobi damps those barely).
-void chebyshev(const Level& g, Work& w, int steps, double lower) {
+// Chebyshev smoothing of A x = b from x (r = b - A x on entry; with `from_zero`, from x = 0
+// and r = b, neither read), `steps` steps, aimed at the eigenvalues of D^-1 A in [lower, 1]:
+// the bi-Laplacian's modes that the next coarser grid cannot represent have eigenvalues from
+// about 1/36 up (Jacobi damps those barely). With `update_residual`, r = b - A x on return;
+// without, r is left stale, which saves the last step's operator (the V-cycle's last
+// smoothing needs x alone).
+void chebyshev(const Level& g, Work& w, int steps, double lower, bool from_zero,
+               bool update_residual) {
   const double upper = 1.0;
   const double theta = 0.5 * (upper + lower), delta = 0.5 * (upper - lower);
   const double sigma = theta / delta;
@@ -510,12 +514,22 @@ void chebyshev(const Level& g, Work& w, int steps, double lower) {
   const std::size_t count = g.size();
   std::vector<Real>& d = w.d;
   const Real first = static_cast<Real>(1.0 / theta);
-  for_nodes(count, [&](std::size_t n) {
-    d[n] = g.inverse[n] * w.r[n] * first;
-    w.x[n] += d[n];
-  });
+  if (from_zero) {
+    // x = 0 and r = b on entry, set here: one pass instead of three.
+    for_nodes(count, [&](std::size_t n) {
+      d[n] = g.inverse[n] * w.b[n] * first;
+      w.x[n] = Real(0) + d[n];
+      w.r[n] = w.b[n];
+    });
+  } else {
+    for_nodes(count, [&](std::size_t n) {
+      d[n] = g.inverse[n] * w.r[n] * first;
+      w.x[n] += d[n];
+    });
+  }
   std::vector<Real>& ad = w.ad;
   for (int step = 0; step < steps; ++step) {
+    if (step + 1 == steps && !update_residual) break;
     apply_operator(g, d.data(), ad.data(), w.laplacian.data());
     if (step + 1 == steps) {
       for_nodes(count, [&](std::size_t n) { w.r[n] -= ad[n]; });
@@ -605,13 +619,11 @@ void v_cycle(const std::vector<Level>& levels, std::vector<Work>& work, std::siz
   const Level& g = levels[l];
   Work& w = work[l];
   w.fit(g.size());
-  std::fill(w.x.begin(), w.x.end(), Real(0));
-  w.r = w.b;
   if (l + 1 == levels.size()) {
-    chebyshev(g, w, kCoarsestSteps, kCoarsestLower);
+    chebyshev(g, w, kCoarsestSteps, kCoarsestLower, true, false);
     return;
   }
-  chebyshev(g, w, kSmoothingSteps, kChebyshevLower);
+  chebyshev(g, w, kSmoothingSteps, kChebyshevLower, true, true);
   const Level& coarse = levels[l + 1];
   work[l + 1].fit(coarse.size());
   restrict_to_coarse(g, w.r, coarse, work[l + 1].b);
@@ -619,7 +631,7 @@ void v_cycle(const std::vector<Level>& levels, std::vector<Work>& work, std::siz
   prolong_correction(coarse, work[l + 1], g, w);
   apply_operator(g, w.x.data(), w.d.data(), w.laplacian.data());
   for_nodes(g.size(), [&](std::size_t n) { w.r[n] = w.b[n] - w.d[n]; });
-  chebyshev(g, w, kSmoothingSteps, kChebyshevLower);
+  chebyshev(g, w, kSmoothingSteps, kChebyshevLower, false, false);
 }
 
 // Deterministic: the ranges and the order of the joins depend on `count` alone. With
