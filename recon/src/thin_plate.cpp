@@ -315,9 +315,9 @@ struct Level {
 // One V-cycle's vectors on one level: each material solves with its own, so that materials
 // can be solved at once (they share the operator).
 struct Work {
-  std::vector<Real> x, b, r, d, ad, laplacian;
+  std::vector<Real> x, b, r, d, ad;
   void fit(std::size_t count) {
-    for (std::vector<Real>* v : {&x, &b, &r, &d, &ad, &laplacian}) v->resize(count);
+    for (std::vector<Real>* v : {&x, &b, &r, &d, &ad}) v->resize(count);
   }
 };
 
@@ -348,7 +348,7 @@ using baseline::restrict_to_coarse;
 // The kernels the conjugate gradients call: AVX2's where the CPU has it and `simd` asks for it.
 struct SolverKernels {
   void (*v_cycle)(const std::vector<Level>&, std::vector<Work>&, std::size_t);
-  void (*apply_operator)(const Level&, const double*, double*, double*);
+  void (*apply_operator)(const Level&, const double*, double*);
 };
 
 const SolverKernels& solver_kernels(bool simd) {
@@ -553,7 +553,7 @@ struct ThinPlateField::Impl {
   // material again).
   struct SolveWork {
     std::vector<Work> levels;
-    std::vector<double> residual, direction, product, laplacian;
+    std::vector<double> residual, direction, product;
   };
   std::vector<SolveWork> solve_work;
 
@@ -1094,13 +1094,11 @@ struct ThinPlateField::Impl {
     std::vector<double>& r = work.residual;
     std::vector<double>& p = work.direction;
     std::vector<double>& q = work.product;
-    std::vector<double>& laplacian = work.laplacian;
     r.resize(count);
     p.resize(count);
     q.resize(count);
-    laplacian.resize(count);
     const SolverKernels& kernels = solver_kernels(options.simd);
-    kernels.apply_operator(g, x.data(), q.data(), laplacian.data());
+    kernels.apply_operator(g, x.data(), q.data());
     for_nodes(count, [&](std::size_t n) { r[n] = b[n] - q[n]; });
     const double norm_b = std::sqrt(dot(b, b, count));
     if (!(norm_b > 0.0)) {
@@ -1125,7 +1123,7 @@ struct ThinPlateField::Impl {
       const double beta = iteration == 0 ? 0.0 : rz_next / rz;
       for_nodes(count, [&](std::size_t n) { p[n] = z[n] + beta * p[n]; });
       rz = rz_next;
-      kernels.apply_operator(g, p.data(), q.data(), laplacian.data());
+      kernels.apply_operator(g, p.data(), q.data());
       const double alpha = rz / dot(p.data(), q.data(), count);
       step_mm = tbb::parallel_reduce(
           tbb::blocked_range<std::size_t>(0, count, 1 << 14), 0.0,
