@@ -57,6 +57,9 @@ struct ThinPlateOptions {
   /// the solver's tolerance: the blocks a solve changes are mostly those where the solution
   /// really moves, which a larger tolerance would not keep.
   double resample_tolerance = 2.5e-3;
+  /// The solver's grid kernels in AVX2 where the CPU has it; false: the baseline x86-64 ones.
+  /// The same bits either way (for tests that check it).
+  bool simd = true;
 };
 
 /// What one solve did.
