@@ -224,10 +224,9 @@ def welded(vertices, triangles):
     return points, [(remap[a], remap[b], remap[c]) for a, b, c in triangles]
 
 
-def mesh_parts(path):
-    """[(triangles, box diagonal mm)] of the connected parts of a mesh, largest first."""
-    vertices, triangles = welded(*read_ply(path))
-    parent = list(range(len(vertices)))
+def part_roots(vertex_count, triangles):
+    """Per vertex, the root of its connected part (triangles joined through shared vertices)."""
+    parent = list(range(vertex_count))
 
     def find(i):
         while parent[i] != i:
@@ -235,12 +234,19 @@ def mesh_parts(path):
             i = parent[i]
         return i
     for a, b, c in triangles:
-        ra, rb, rc = find(a), find(b), find(c)
-        parent[rb] = ra
-        parent[find(rc)] = ra
+        ra = find(a)
+        parent[find(b)] = ra
+        parent[find(c)] = ra
+    return [find(i) for i in range(vertex_count)]
+
+
+def mesh_parts(path):
+    """[(triangles, box diagonal mm)] of the connected parts of a mesh, largest first."""
+    vertices, triangles = welded(*read_ply(path))
+    roots = part_roots(len(vertices), triangles)
     parts = {}
     for t in triangles:
-        root = find(t[0])
+        root = roots[t[0]]
         count, lo, hi = parts.get(root, (0, [math.inf] * 3, [-math.inf] * 3))
         for i in t:
             p = vertices[i]
@@ -588,19 +594,10 @@ def parts_per_wire(mesh, wires):
     """([parts of wire 1..9], stray parts): each connected part of the wire mesh goes to the
     wire its vertices lie nearest (median), when within NWIRE_NEAR_MM."""
     vertices, triangles = welded(*read_ply(mesh))
-    parent = list(range(len(vertices)))
-
-    def find(i):
-        while parent[i] != i:
-            parent[i] = parent[parent[i]]
-            i = parent[i]
-        return i
-    for a, b, c in triangles:
-        parent[find(b)] = find(a)
-        parent[find(c)] = find(a)
+    roots = part_roots(len(vertices), triangles)
     members = {}
-    for i in {v for t in triangles for v in t}:
-        members.setdefault(find(i), []).append(vertices[i])
+    for i in sorted({v for t in triangles for v in t}):
+        members.setdefault(roots[i], []).append(vertices[i])
     counts, stray = [0] * len(wires), 0
     for points in members.values():
         points = points[::max(1, len(points) // 200)]
