@@ -26,6 +26,7 @@
 #include "igtl_tdata.h"
 #include "igtl_transform.h"
 #include "igtl_util.h"
+#include "integer_samples.hpp"
 #include "sonoshape/core/log.hpp"
 
 namespace sonoshape::acquisition {
@@ -408,38 +409,25 @@ bool is_integer_scalar(int type) {
          type == M::TYPE_UINT16 || type == M::TYPE_INT32 || type == M::TYPE_UINT32;
 }
 
-// Pixel k of an integer image of `bytes` bytes a pixel in the sender's byte order (the image
-// header's endian field: OpenIGTLink leaves the pixels as sent), sign-extended where signed.
-std::int64_t integer_pixel(const std::uint8_t* data, std::size_t k, int bytes, bool big_endian,
-                           bool is_signed) {
-  const std::uint8_t* p = data + k * static_cast<std::size_t>(bytes);
-  std::uint64_t value = 0;
-  for (int b = 0; b < bytes; ++b)
-    value |= std::uint64_t(p[big_endian ? b : bytes - 1 - b]) << (8 * (bytes - 1 - b));
-  if (is_signed && (value >> (8 * bytes - 1)) != 0) value |= ~std::uint64_t{0} << (8 * bytes);
-  return static_cast<std::int64_t>(value);
-}
-
-// A label map's values into 8 bits; the first value outside 0..255 refuses it.
+// A label map's values into 8 bits; the first value outside 0..255 refuses it. The pixels stay
+// in the sender's byte order (the image header's endian field: OpenIGTLink does not swap them).
 Status copy_label_values(const igtl::ImageMessage::Pointer& image, GreyImage& out,
                          const std::string& what) {
   using M = igtl::ImageMessage;
   const int type = image->GetScalarType();
-  const int bytes = image->GetScalarSize();
-  const bool is_signed = type == M::TYPE_INT8 || type == M::TYPE_INT16 || type == M::TYPE_INT32;
-  const bool big_endian = image->GetEndian() != M::ENDIAN_LITTLE;
+  const detail::IntegerSamples samples{
+      image->GetScalarSize(),
+      type == M::TYPE_INT8 || type == M::TYPE_INT16 || type == M::TYPE_INT32,
+      image->GetEndian() != M::ENDIAN_LITTLE};
   const auto* data = static_cast<const std::uint8_t*>(image->GetScalarPointer());
-  for (std::size_t k = 0; k < out.pixels.size(); ++k) {
-    const std::int64_t value = integer_pixel(data, k, bytes, big_endian, is_signed);
-    if (value < 0 || value > 255)
-      return Status::error(what + ": label value " + std::to_string(value) + " at pixel (" +
-                           std::to_string(k % static_cast<std::size_t>(out.width)) + ", " +
-                           std::to_string(k / static_cast<std::size_t>(out.width)) +
-                           "); label maps hold 0..255 (0 background, 1..254 organs, 255 or "
-                           "--labels-unknown's value unknown): renumber the segments");
-    out.pixels[k] = static_cast<std::uint8_t>(value);
-  }
-  return Status::ok();
+  const auto bad = detail::narrow_to_8_bits(data, out.pixels.size(), samples, out.pixels.data());
+  if (!bad) return Status::ok();
+  const auto width = static_cast<std::size_t>(out.width);
+  return Status::error(what + ": label value " +
+                       std::to_string(detail::integer_sample(data, *bad, samples)) + " at pixel (" +
+                       std::to_string(*bad % width) + ", " + std::to_string(*bad / width) +
+                       "); label maps hold 0..255 (0 background, 1..254 organs, 255 or "
+                       "--labels-unknown's value unknown): renumber the segments");
 }
 
 }  // namespace

@@ -12,6 +12,7 @@
 #include <limits>
 #include <map>
 
+#include "integer_samples.hpp"
 #include "sequence_text.hpp"
 
 namespace sonoshape::acquisition::detail {
@@ -526,25 +527,15 @@ Result<std::vector<std::uint8_t>> to_grey(const std::filesystem::path& path,
                                           std::vector<std::uint8_t> samples, SampleType type,
                                           bool big_endian, const HeaderEntry& type_field) {
   if (type.bytes == 1 && !type.is_signed) return samples;
+  const IntegerSamples stored{type.bytes, type.is_signed, big_endian};
   std::vector<std::uint8_t> grey(samples.size() / static_cast<std::size_t>(type.bytes));
-  for (std::size_t s = 0; s < grey.size(); ++s) {
-    long value = 0;
-    if (type.bytes == 1) {
-      value = static_cast<std::int8_t>(samples[s]);
-    } else {
-      const std::uint8_t lo = samples[2 * s + (big_endian ? 1 : 0)];
-      const std::uint8_t hi = samples[2 * s + (big_endian ? 0 : 1)];
-      const auto bits = static_cast<std::uint16_t>(lo | (hi << 8));
-      value = type.is_signed ? static_cast<long>(static_cast<std::int16_t>(bits)) : bits;
-    }
-    if (value < 0 || value > 255)
-      return fail(path,
-                  where(type_field) + " is " + type_field.value + " and sample " +
-                      std::to_string(s) + " is " + std::to_string(value) + ", outside 0..255",
-                  "only 8-bit grey levels are read; rescale the images to unsigned char "
-                  "(e.g. Slicer's Cast Scalar Volume) and save again");
-    grey[s] = static_cast<std::uint8_t>(value);
-  }
+  if (const auto s = narrow_to_8_bits(samples.data(), grey.size(), stored, grey.data()))
+    return fail(path,
+                where(type_field) + " is " + type_field.value + " and sample " +
+                    std::to_string(*s) + " is " +
+                    std::to_string(integer_sample(samples.data(), *s, stored)) + ", outside 0..255",
+                "only 8-bit grey levels are read; rescale the images to unsigned char "
+                "(e.g. Slicer's Cast Scalar Volume) and save again");
   return grey;
 }
 
