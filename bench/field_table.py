@@ -545,11 +545,14 @@ def phantom_to_reference(calibration):
     raise Failed(f"{calibration}: no Phantom to Reference transform for the wire configuration")
 
 
-def point_to_segment(p, a, b):
+def closest_on_segment(p, a, b):
     ab = [b[i] - a[i] for i in range(3)]
-    t = dot([p[i] - a[i] for i in range(3)], ab) / dot(ab, ab)
-    t = min(1.0, max(0.0, t))
-    return math.dist(p, [a[i] + t * ab[i] for i in range(3)])
+    t = min(1.0, max(0.0, dot([p[i] - a[i] for i in range(3)], ab) / dot(ab, ab)))
+    return [a[i] + t * ab[i] for i in range(3)]
+
+
+def point_to_segment(p, a, b):
+    return math.dist(p, closest_on_segment(p, a, b))
 
 
 def section_centroids(slices):
@@ -576,12 +579,9 @@ def wires_in_reference(calibration, centroids):
     for _ in range(3):
         offsets = []
         for c in centroids:
-            a, b = min(wires, key=lambda w: point_to_segment(c, *w))
-            if point_to_segment(c, a, b) > 5.0:
-                continue
-            ab = [b[i] - a[i] for i in range(3)]
-            t = min(1.0, max(0.0, dot([c[i] - a[i] for i in range(3)], ab) / dot(ab, ab)))
-            offsets.append([c[i] - a[i] - t * ab[i] for i in range(3)])
+            foot = min((closest_on_segment(c, *w) for w in wires), key=lambda q: math.dist(c, q))
+            if math.dist(c, foot) <= 5.0:
+                offsets.append([c[i] - foot[i] for i in range(3)])
         if not offsets:
             break
         shift = [sum(o[i] for o in offsets) / len(offsets) for i in range(3)]
