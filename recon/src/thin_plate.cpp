@@ -326,7 +326,7 @@ int degree(const Level& g, int i, int j, int k) {
 }
 
 // The kernels, twice: for the baseline x86-64 and for AVX2 (8 floats per instruction instead
-// of 4: the solve about a tenth faster where the CPU has it), chosen at run time.
+// of 4), chosen at run time.
 namespace baseline {
 #include "thin_plate_kernels.inc"
 }  // namespace baseline
