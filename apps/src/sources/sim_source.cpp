@@ -21,8 +21,8 @@ namespace {
 // frames showed cheburashka's only as slivers at 512 x 512, no pixel of them inside it).
 constexpr int kModelFrames = 12;
 // The models are learnt from the pixels at least this many point-spread sigmas from another
-// label: a small organ's boundary pixels are blurred
-// towards its surroundings, and its mean with them lowered the boundary with the background.
+// label: a small organ's boundary pixels are blurred towards its surroundings, and its mean
+// with them lowered the boundary with the background.
 constexpr double kInteriorPsfSigmas = 2.0;
 
 // Label models of the simulated probe, learnt from a few frames and their ground truth (what a
