@@ -12,6 +12,7 @@
 #include "sonoshape/acquisition/plus_config.hpp"
 #include "sonoshape/acquisition/sequence_file.hpp"
 #include "sonoshape/core/slice_io.hpp"
+#include "sonoshape/segmentation/config.hpp"
 #include "sonoshape/testing/command.hpp"
 
 namespace simulate_command_test {
@@ -129,6 +130,10 @@ TEST_F(SimulateCommand, SegmentTurnsASimulatedSweepIntoAValidSliceSet) {
                                  dir_ / "log_recon");
   ASSERT_EQ(reconstructed.exit_code, 0) << reconstructed.output;
   EXPECT_TRUE(fs::exists(dir_ / "out" / "label_1.ply"));
+  // Perfect labels are taken as drawn (interpolated); the segmenter's outlines carry its error.
+  const auto perfect_slices = sonoshape::read_slice_set(dir_ / "perfect.slices.json");
+  ASSERT_TRUE(perfect_slices) << perfect_slices.message();
+  for (const sonoshape::LabeledSlice& s : perfect_slices->slices) EXPECT_EQ(s.outline_sd_mm, 0.0);
 
   // An organ the models name but the cleaning removes everywhere is reported, with the reason.
   {
@@ -211,6 +216,8 @@ TEST_F(SimulateCommand, SegmentScoresAgainstTheTruthAndPerfectLabelsReconstruct)
   const auto slices = sonoshape::read_slice_set(dir_ / "ours.slices.json");
   ASSERT_TRUE(slices) << slices.message();
   EXPECT_GE(report["frames"].size(), slices->slices.size());  // every segmented frame
+  for (const sonoshape::LabeledSlice& s : slices->slices)
+    EXPECT_EQ(s.outline_sd_mm, sonoshape::segmentation::SegmentationConfig{}.outline_sd_mm);
   const double spot = report["total"]["labels"]["1"]["dice"].get<double>();
   EXPECT_GT(spot, 0.0);
   EXPECT_LT(spot, 1.0);

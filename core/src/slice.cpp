@@ -49,7 +49,7 @@ Box3 SliceSet::effective_bounds() const {
 
 bool identical_slices(const LabeledSlice& a, const LabeledSlice& b) {
   if (a.origin_mm != b.origin_mm || a.u != b.u || a.v != b.v || a.fov != b.fov ||
-      a.regions.size() != b.regions.size())
+      a.outline_sd_mm != b.outline_sd_mm || a.regions.size() != b.regions.size())
     return false;
   for (std::size_t r = 0; r < a.regions.size(); ++r)
     if (a.regions[r].label != b.regions[r].label || a.regions[r].outer != b.regions[r].outer ||

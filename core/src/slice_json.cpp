@@ -238,8 +238,8 @@ LabeledSlice parse_slice_object(const json& js, std::size_t i, bool normalize,
                                 const std::vector<std::string>& also_known = {}) {
   const std::string where = naming.slice(i);
   if (!js.is_object()) fail_at(where, "expected a slice object");
-  warn_unknown_keys(js, {"origin", "u", "v", "timestamp", "fov", "regions"}, source_name, where,
-                    also_known);
+  warn_unknown_keys(js, {"origin", "u", "v", "timestamp", "outline_sd_mm", "fov", "regions"},
+                    source_name, where, also_known);
   for (const char* key : {"origin", "u", "v"})
     if (!js.contains(key)) fail_at(where, std::string("\"") + key + "\" is missing");
   LabeledSlice s;
@@ -262,6 +262,13 @@ LabeledSlice parse_slice_object(const json& js, std::size_t i, bool normalize,
   }
   if (const auto t = js.find("timestamp"); t != js.end() && !t->is_null())
     s.timestamp_s = read_number(*t, where + ", timestamp");
+  if (const auto sd = js.find("outline_sd_mm"); sd != js.end() && !sd->is_null()) {
+    s.outline_sd_mm = read_number(*sd, where + ", outline_sd_mm");
+    if (s.outline_sd_mm < 0.0)
+      fail_at(where + ", outline_sd_mm",
+              "a negative standard deviation; write 0 for exact outlines or the outlines' error "
+              "in mm");
+  }
   if (const auto fov = js.find("fov"); fov != js.end() && !fov->is_null()) {
     Ring2 ring = read_ring(*fov, where + ", fov");
     clean_ring(ring, where, where + ", fov", repairs);
@@ -403,6 +410,8 @@ void append_slice_object(std::string& out, const LabeledSlice& s, bool one_line)
   out += "{\"origin\": " + vec3_json(s.origin_mm) + ", \"u\": " + vec3_json(s.u) +
          ", \"v\": " + vec3_json(s.v);
   if (s.timestamp_s) out += ", \"timestamp\": " + detail::format_double(*s.timestamp_s);
+  if (s.outline_sd_mm > 0.0)
+    out += ", \"outline_sd_mm\": " + detail::format_double(s.outline_sd_mm);
   if (s.fov) {
     out += std::string(field_break) + "\"fov\": ";
     write_point_list(out, *s.fov);
@@ -437,6 +446,7 @@ bool all_finite(const SliceSet& set) {
   for (const LabeledSlice& s : set.slices) {
     if (!s.origin_mm.allFinite() || !s.u.allFinite() || !s.v.allFinite()) return false;
     if (s.timestamp_s && !std::isfinite(*s.timestamp_s)) return false;
+    if (!std::isfinite(s.outline_sd_mm)) return false;
     if (s.fov && !ring_ok(*s.fov)) return false;
     for (const Region& r : s.regions) {
       if (!ring_ok(r.outer)) return false;

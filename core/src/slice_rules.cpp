@@ -76,6 +76,7 @@ bool same_world_points(const LabeledSlice& sa, const Ring2& a, const LabeledSlic
 std::string content_difference(const LabeledSlice& a, const LabeledSlice& b, double tol) {
   if (identical_slices(a, b)) return {};  // a copy: no need to match points up to `tol`
   if (a.fov.has_value() != b.fov.has_value()) return "only one of them has a fov";
+  if (a.outline_sd_mm != b.outline_sd_mm) return "their outline_sd_mm differ";
   if (a.fov && !same_world_points(a, *a.fov, b, *b.fov, tol)) return "their fov differ";
   if (a.regions.size() != b.regions.size())
     return std::to_string(a.regions.size()) + " regions against " +
@@ -207,10 +208,12 @@ bool check_slice_basis(const LabeledSlice& s, const std::string& where, Problems
   return false;
 }
 
-// Rule: a timestamp is a finite number.
+// Rule: a timestamp is a finite number, and so is the outlines' error, at least 0.
 void check_timestamp(const LabeledSlice& s, const std::string& where, Problems& problems) {
   if (s.timestamp_s && !std::isfinite(*s.timestamp_s))
     problems.add(where, "timestamp is not a finite number");
+  if (!(s.outline_sd_mm >= 0.0) || !std::isfinite(s.outline_sd_mm))
+    problems.add(where, "outline_sd_mm is not a finite number of 0 or more");
 }
 
 // Rule: a fov is a usable polygon.

@@ -112,6 +112,24 @@ TEST(SliceJson, OptionalFieldsDefault) {
   EXPECT_FALSE(result->bounds.has_value());
   EXPECT_FALSE(result->slices[0].timestamp_s.has_value());
   EXPECT_FALSE(result->slices[0].fov.has_value());
+  EXPECT_EQ(result->slices[0].outline_sd_mm, 0.0);  // exact outlines
+}
+
+TEST(SliceJson, TheOutlinesErrorIsReadAndANegativeOneRefused) {
+  const std::string with_error = R"({"origin": [0, 0, 0], "u": [1, 0, 0], "v": [0, 1, 0], )"
+                                 R"("outline_sd_mm": 0.6, "regions": [)" +
+                                 square_region(1, 0, 0, 1) + "]}";
+  const Result<SliceSet> result = parse(doc(with_error));
+  ASSERT_TRUE(result.is_ok()) << result.message();
+  EXPECT_EQ(result->slices[0].outline_sd_mm, 0.6);
+  std::string negative = with_error;
+  negative.replace(negative.find("0.6"), 3, "-0.6");
+  const std::string message = parse_error(doc(negative));
+  EXPECT_TRUE(contains(message, "slice 0, outline_sd_mm: a negative standard deviation"))
+      << message;
+  std::string text = with_error;
+  text.replace(text.find("0.6"), 3, "\"big\"");
+  EXPECT_TRUE(contains(parse_error(doc(text)), "slice 0, outline_sd_mm: expected a number"));
 }
 
 TEST(SliceJsonErrors, NotJsonReportsThePosition) {
@@ -632,6 +650,7 @@ TEST(SliceFiles, JsonRoundTripIsExact) {
   // Directions turned by 0.3 rad in their plane: both need all 17 digits too.
   set.slices[0].u = Vec3(std::cos(0.3), std::sin(0.3), 0.0);
   set.slices[0].v = Vec3(-std::sin(0.3), std::cos(0.3), 0.0);
+  set.slices[0].outline_sd_mm = 0.1 + 0.2;
   const auto path = dir.path() / "set.slices.json";
   ASSERT_TRUE(write_slice_set(set, path).is_ok());
   const Result<SliceSet> back = read_slice_set(path);
@@ -650,6 +669,7 @@ TEST(SliceFiles, JsonRoundTripIsExact) {
   EXPECT_EQ(a.u, b.u);
   EXPECT_EQ(a.v, b.v);
   EXPECT_EQ(a.timestamp_s, b.timestamp_s);
+  EXPECT_EQ(a.outline_sd_mm, b.outline_sd_mm);
   EXPECT_EQ(*a.fov, *b.fov);
   ASSERT_EQ(a.regions.size(), b.regions.size());
   for (std::size_t j = 0; j < a.regions.size(); ++j) {

@@ -26,6 +26,7 @@ PreparedSlice prepare_slice(const LabeledSlice& slice, std::size_t s,
     p.u = slice.u;
     p.v = slice.v;
     p.unit_normal = slice.u.cross(slice.v).normalized();
+    p.outline_sd_mm = slice.outline_sd_mm;
     p.rings_by_material.resize(material_ids.size() + 1);
     const bool has_unknown =
         slice.fov || std::any_of(slice.regions.begin(), slice.regions.end(),

@@ -45,6 +45,7 @@ struct PreparedSlice {
   std::vector<std::vector<RingBands>> ring_bands;               ///< the edges of each ring by band
   std::vector<UnknownComponent> unknown;  ///< unknown set (regions and outside the fov)
   std::vector<Ring2> known;  ///< the known set when `unknown` is not empty (SlicePartition::known)
+  double outline_sd_mm = 0.0;  ///< LabeledSlice::outline_sd_mm (the thin-plate field's alone)
 };
 
 /// Converts the slices: material ids -> dense indices 1..K (`material_ids[k-1]` is the id of k).

@@ -653,6 +653,16 @@ struct ThinPlateField::Impl {
     }
   }
 
+  // A sample's weight against the bending energy. Exact outlines are interpolated; outlines
+  // with an error (a segmented frame's) are fitted as a smoothing spline: a sample whose error
+  // is a grid spacing weighs as much as one node's bending, so noise that differs from slice
+  // to slice is averaged over neighbouring slices instead of bending the surface at each.
+  double data_weight(const PreparedSlice& slice) const {
+    if (!(slice.outline_sd_mm > 0.0)) return options.data_weight;
+    const double spacings = spacing / slice.outline_sd_mm;
+    return std::min(options.data_weight, spacings * spacings);
+  }
+
   Contribution slice_data(const PreparedSlice& slice, const SliceDistances& distances) const {
     Contribution out;
     const Level& g = levels[0];
@@ -666,7 +676,7 @@ struct ThinPlateField::Impl {
     out.axis = a;
     // One sample per spacing^2 of the plane's shadow on the other two axes, so per area of the
     // plane the weight is the same whatever its tilt.
-    out.weight = options.data_weight / std::abs(n[a]);
+    out.weight = data_weight(slice) / std::abs(n[a]);
     std::vector<double> values(static_cast<std::size_t>(materials));
     // Where the plane crosses line (jb, jc), as an affine function of (jb, jc).
     out.corner = box.min;

@@ -511,6 +511,43 @@ TEST(ThinPlateField, NearlyCoplanarSlicesAreNotClosedAlongTheirNormal) {
   }
 }
 
+// A cylinder of radius 10 mm along z, cut every 2 mm by planes whose circles alternate
+// between radii 10.8 and 9.2 mm: outlines with an error, as segmented frames give. The mesh's
+// radius at each plane (the mean distance from the axis of the vertices within 0.3 mm of it),
+// averaged over the planes of each kind: how much of the planes' alternation the surface keeps.
+double kept_alternation(double outline_sd_mm) {
+  SliceSet set;
+  set.bounds = Box3{Vec3(-30, -30, -25), Vec3(30, 30, 25)};
+  for (int k = -10; k <= 10; ++k) {
+    LabeledSlice s = z_slice(2.0 * k);
+    s.regions.push_back({1, circle(Vec2(0, 0), k % 2 == 0 ? 10.8 : 9.2, 96), {}});
+    s.outline_sd_mm = outline_sd_mm;
+    set.slices.push_back(s);
+  }
+  const MeshSet meshes = reconstruct(set, thin_plate_options());
+  const TriangleMesh& mesh = meshes.meshes[0].mesh;
+  EXPECT_TRUE(check_mesh_health(mesh).closed_manifold_oriented());
+  double radius[2] = {0.0, 0.0}, count[2] = {0.0, 0.0};
+  for (int k = -8; k <= 8; ++k)  // away from the ends
+    for (const Vec3& v : mesh.vertices)
+      if (std::abs(v.z() - 2.0 * k) < 0.3) {
+        radius[k % 2 == 0] += std::hypot(v.x(), v.y());
+        count[k % 2 == 0] += 1.0;
+      }
+  EXPECT_GT(count[0], 0.0);
+  EXPECT_GT(count[1], 0.0);
+  return radius[1] / count[1] - radius[0] / count[0];
+}
+
+TEST(ThinPlateField, OutlinesWithAnErrorAreFittedNotInterpolated) {
+  // Exact outlines are interpolated: the surface follows the planes' 1.6 mm alternation. With
+  // the outlines' error given, the field is a smoothing spline: it averages neighbouring planes
+  // and runs near the mean radius.
+  const double exact = kept_alternation(0.0), fitted = kept_alternation(0.8);
+  EXPECT_GT(exact, 0.8);
+  EXPECT_LT(fitted, 0.3 * exact);  // 1.68 and 0.37 mm
+}
+
 TEST(ThinPlateField, AnOrganInsideAnotherStaysInside) {
   // Material 1: a sphere of radius 30 minus a sphere of radius 12 (material 2) at (4, 0, 0).
   SliceSet set;

@@ -76,6 +76,7 @@ Result<LabeledSlice> SegmenterStage::segment(const TrackedFrame& frame) {
                                         setup_.segmentation.simplify_mm, &repairs_);
   if (!slice) return slice.status();
   slice->timestamp_s = frame.frame.timestamp_s;
+  slice->outline_sd_mm = setup_.segmentation.outline_sd_mm;
   return slice;
 }
 

@@ -158,7 +158,7 @@ Status SegmentationConfig::validate() const {
   if (median_px < 1 || median_px % 2 == 0 || median_px > 31)
     return Status::error("segmentation config: median_px must be odd, 1..31 (got " +
                          std::to_string(median_px) + ")");
-  for (const auto& [name, value] : std::array<std::pair<const char*, double>, 10>{
+  for (const auto& [name, value] : std::array<std::pair<const char*, double>, 11>{
            {{"smoothing_mm", smoothing_mm},
             {"boundary_echo_contrast", boundary_echo_contrast},
             {"dynamic_range_db", dynamic_range_db},
@@ -168,7 +168,8 @@ Status SegmentationConfig::validate() const {
             {"max_depth_mm", max_depth_mm},
             {"opening_mm", opening_mm},
             {"min_region_mm2", min_region_mm2},
-            {"simplify_mm", simplify_mm}}})
+            {"simplify_mm", simplify_mm},
+            {"outline_sd_mm", outline_sd_mm}}})
     if (!(value >= 0.0) || !std::isfinite(value))
       return Status::error(std::string("segmentation config: ") + name +
                            " must be a finite number >= 0");
@@ -258,6 +259,7 @@ void read_config_key(const std::string& key, const json& value, SegmentationConf
                       {"opening_mm", &config.opening_mm},
                       {"min_region_mm2", &config.min_region_mm2},
                       {"simplify_mm", &config.simplify_mm},
+                      {"outline_sd_mm", &config.outline_sd_mm},
                       {"sector_signal_grey", &config.sector_signal_grey},
                       {"psf_sigma_mm", &config.psf_sigma_mm},
                       {"dynamic_range_db", &config.dynamic_range_db}},
@@ -419,6 +421,7 @@ std::string to_json(const SegmentationConfig& c) {
   doc["opening_mm"] = c.opening_mm;
   doc["min_region_mm2"] = c.min_region_mm2;
   doc["simplify_mm"] = c.simplify_mm;
+  doc["outline_sd_mm"] = c.outline_sd_mm;
   doc["sector_signal_grey"] = c.sector_signal_grey;
   switch (c.sector) {
     case SectorSource::kDefault:

@@ -8,10 +8,13 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstring>
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
+#include <set>
 #include <string>
 #include <unordered_set>
+#include <utility>
 
 #include "parallel.hpp"
 #include "sonoshape/core/errors.hpp"
@@ -116,22 +119,117 @@ std::vector<PixelRegion> trace_mask(const cv::Mat& mask, int label, cv::Point or
   return regions;
 }
 
+// Pixel-edge corners as keys: coordinates are half pixels, exact in 2 x 32 bits.
+using CornerSet = std::unordered_set<std::uint64_t>;
+std::uint64_t corner_key(const Vec2& p) {
+  const auto x = static_cast<std::uint32_t>(std::lround(2.0 * p.x()) + (1 << 30));
+  const auto y = static_cast<std::uint32_t>(std::lround(2.0 * p.y()) + (1 << 30));
+  return (std::uint64_t{x} << 32) | y;
+}
+
+// The pixel corners that smooth_outline must keep: where three values (labels, or outside the
+// sector or the image) meet, and around every 2x2 block that holds one label on a diagonal
+// alone, whose pixel remove_pinches takes from that label's mask only: there the traced rings
+// of two neighbouring labels need not turn alike, so a cut could make them overlap.
+CornerSet junction_corners(const cv::Mat& map, const cv::Mat& in_sector) {
+  auto value = [&](int i, int j) -> int {
+    if (i < 0 || j < 0 || i >= map.cols || j >= map.rows || !in_sector.at<std::uint8_t>(j, i))
+      return -1;
+    return map.at<std::uint8_t>(j, i);
+  };
+  CornerSet junctions;
+  for (int cj = 0; cj <= map.rows; ++cj)
+    for (int ci = 0; ci <= map.cols; ++ci) {
+      // The block whose centre is corner (ci - 0.5, cj - 0.5): a b / c d.
+      const int a = value(ci - 1, cj - 1), b = value(ci, cj - 1);
+      const int c = value(ci - 1, cj), d = value(ci, cj);
+      const int distinct = 1 + (b != a) + (c != a && c != b) + (d != a && d != b && d != c);
+      const bool pinch = (a == d && b != a && c != a) || (b == c && a != b && d != b);
+      if (pinch) {
+        for (int dj = -1; dj <= 1; ++dj)
+          for (int di = -1; di <= 1; ++di)
+            junctions.insert(corner_key(Vec2(ci + di - 0.5, cj + dj - 0.5)));
+      } else if (distinct >= 3) {
+        junctions.insert(corner_key(Vec2(ci - 0.5, cj - 0.5)));
+      }
+    }
+  return junctions;
+}
+
+// OutlineForm::kSmooth on one ring of turns (axis-parallel edges between pixel corners). The
+// ring becomes the midpoints of its unit edges (the marching-squares outline of the mask; the
+// junctions stay as corners), which is then smoothed by a few Taubin steps (a Laplacian step
+// and a negative one, so that a convex outline does not shrink), each point kept within
+// kSmoothReachPx of where it started. Rings that share a chain of edges see the same points
+// on it, whose neighbours are the same or junctions, so they are smoothed alike and keep
+// sharing it.
+constexpr int kSmoothSteps = 4;          // pairs of Taubin steps: about 3 px along the outline
+constexpr double kSmoothReachPx = 0.35;  // two sides of a one-pixel neck stay apart
+void smooth_outline(Ring2& ring, const CornerSet& junctions) {
+  const std::size_t n = ring.size();
+  if (n < 4) return;
+  Ring2 points;
+  std::vector<char> fixed;
+  for (std::size_t k = 0; k < n; ++k) {
+    const Vec2& corner = ring[k];
+    const Vec2& next = ring[(k + 1) % n];
+    const Vec2 step = next - corner;
+    const auto units = static_cast<int>(std::lround(step.norm()));
+    const Vec2 unit = step / units;  // exact: an axis direction
+    for (int m = 0; m < units; ++m) {
+      // A junction on a straight run (a third label meets this ring's edge) stays too: the
+      // neighbouring ring that turns there has it, and both must smooth from the same points.
+      if (const Vec2 c = corner + m * unit; junctions.count(corner_key(c))) {
+        points.push_back(c);
+        fixed.push_back(1);
+      }
+      points.push_back(corner + (m + 0.5) * unit);
+      fixed.push_back(0);
+    }
+  }
+  const Ring2 start = points;
+  const std::size_t count = points.size();
+  Ring2 moved(count);
+  for (int step = 0; step < 2 * kSmoothSteps; ++step) {
+    const double factor = step % 2 == 0 ? 0.5 : -0.53;  // Taubin's lambda and mu
+    for (std::size_t k = 0; k < count; ++k) {
+      if (fixed[k]) {
+        moved[k] = points[k];
+        continue;
+      }
+      const Vec2 mean = 0.5 * (points[(k + count - 1) % count] + points[(k + 1) % count]);
+      Vec2 p = points[k] + factor * (mean - points[k]);
+      const Vec2 shift = p - start[k];
+      if (shift.norm() > kSmoothReachPx) p = start[k] + shift * (kSmoothReachPx / shift.norm());
+      moved[k] = p;
+    }
+    points.swap(moved);
+  }
+  ring = std::move(points);
+}
+
 // The squared-distance cost made a total order. Equal costs are common on a pixel grid, and the
 // simplification would take them in the order of the triangulation's constraint set, which
 // follows memory addresses: the same frame (or a .mha and a .nrrd copy of it) could simplify
-// differently from run to run. A tie-breaker from the vertex's own coordinates (half pixels,
-// distinct for every vertex of the triangulation) makes the result reproducible;
-// at most 1e-4 px² it does not change what the tolerance allows.
+// differently from run to run. A tie-breaker from the vertex's own coordinates (a hash of their
+// bits: distinct vertices get distinct keys but by a 2^-30 chance) makes the result
+// reproducible; at most 1e-4 px² it does not change what the tolerance allows.
 struct ReproducibleCost {
   template <class Pct>
   boost::optional<double> operator()(const Pct& pct,
                                      typename Pct::Vertices_in_constraint_iterator it) const {
     const boost::optional<double> cost = PS::Squared_distance_cost()(pct, it);
     if (!cost) return cost;
-    const auto quarter = [](double x) {  // 15 bits: exact for images up to 8000 px
-      return static_cast<std::uint32_t>(std::clamp<long>(std::lround(4.0 * x) + 4, 0, 32767));
+    const auto bits = [](double x) {
+      std::uint64_t b = 0;
+      std::memcpy(&b, &x, sizeof b);
+      return b;
     };
-    const std::uint32_t key = (quarter((*it)->point().x()) << 15) | quarter((*it)->point().y());
+    std::uint64_t h = bits((*it)->point().x()) * 0x9E3779B97F4A7C15ull ^ bits((*it)->point().y());
+    h ^= h >> 31;  // splitmix64's finaliser
+    h *= 0xBF58476D1CE4E5B9ull;
+    h ^= h >> 29;
+    const auto key = static_cast<std::uint32_t>(h >> 34);  // 30 bits
     return *cost + 1e-4 * std::ldexp(static_cast<double>(key), -30);
   }
 };
@@ -148,12 +246,9 @@ void simplify_together(std::vector<PixelRegion>& regions, double epsilon_px) {
   // point twice (a pinch). The tracing guarantees none; should it ever fail, keep the exact
   // outlines.
   auto pinched = [](const Ring2& ring) {
-    std::unordered_set<std::uint64_t> seen;
-    for (const Vec2& p : ring) {  // coordinates are half pixels: exact in 2 x 32 bits
-      const auto x = static_cast<std::uint32_t>(std::lround(2.0 * p.x()) + (1 << 30));
-      const auto y = static_cast<std::uint32_t>(std::lround(2.0 * p.y()) + (1 << 30));
-      if (!seen.insert((std::uint64_t{x} << 32) | y).second) return true;
-    }
+    std::set<std::pair<double, double>> seen;
+    for (const Vec2& p : ring)
+      if (!seen.insert({p.x(), p.y()}).second) return true;
     return false;
   };
   for (const PixelRegion& r : regions) {
@@ -237,7 +332,7 @@ ImagePlane image_plane(const Eigen::Matrix4d& T_reference_image, const Vec3& pro
 
 std::vector<Region> label_map_regions(const LabelImage& labels, const ImageU8& sector,
                                       const ImagePlane& plane, double tolerance_mm,
-                                      std::vector<Repair>* repairs) {
+                                      std::vector<Repair>* repairs, OutlineForm form) {
   if (labels.width != sector.width || labels.height != sector.height ||
       labels.pixels.size() != sector.pixels.size())
     throw std::invalid_argument("label_map_regions: label map and sector differ in size");
@@ -269,6 +364,13 @@ std::vector<Region> label_map_regions(const LabelImage& labels, const ImageU8& s
   std::vector<PixelRegion> pixel_regions;
   for (std::vector<PixelRegion>& regions : traced)
     for (PixelRegion& r : regions) pixel_regions.push_back(std::move(r));
+  if (form == OutlineForm::kSmooth) {
+    const CornerSet junctions = junction_corners(map, in_sector);
+    for (PixelRegion& r : pixel_regions) {
+      smooth_outline(r.outer, junctions);
+      for (Ring2& hole : r.holes) smooth_outline(hole, junctions);
+    }
+  }
   simplify_together(pixel_regions, tolerance_mm / plane.spacing_mm());
 
   std::vector<Region> regions;
@@ -327,7 +429,8 @@ void drop_invalid_regions(LabeledSlice& slice, std::vector<Repair>* repairs) {
 
 Result<LabeledSlice> make_slice(const LabelImage& labels, const ImageU8& sector,
                                 const Ring2& sector_px, const ImagePlane& plane,
-                                double tolerance_mm, std::vector<Repair>* repairs) {
+                                double tolerance_mm, std::vector<Repair>* repairs,
+                                OutlineForm form) {
   LabeledSlice slice;
   slice.origin_mm = plane.origin_mm;
   slice.u = plane.u;
@@ -335,9 +438,9 @@ Result<LabeledSlice> make_slice(const LabelImage& labels, const ImageU8& sector,
   slice.fov = to_plane(sector_px, plane);
   if (Status fov = validate_one(slice); !fov) return fov;  // no region can mend the fov
   std::vector<Repair> found;
-  slice.regions = label_map_regions(labels, sector, plane, tolerance_mm, &found);
+  slice.regions = label_map_regions(labels, sector, plane, tolerance_mm, &found, form);
   Status valid = validate_one(slice);
-  if (!valid && tolerance_mm > 0.0) {
+  if (!valid && (tolerance_mm > 0.0 || form != OutlineForm::kPixelEdges)) {
     // The construction should make this unreachable; the exact outlines are the safer form.
     found.clear();
     slice.regions = label_map_regions(labels, sector, plane, 0.0, &found);

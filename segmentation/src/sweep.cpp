@@ -537,6 +537,7 @@ class SweepRun {
       return true;
     }
     slice->timestamp_s = file_.timestamp_s(k);
+    if (!labels_.perfect) slice->outline_sd_mm = setup_.config.outline_sd_mm;  // maps: as drawn
     keep_slice(std::move(*slice));
     report_progress();
     return true;

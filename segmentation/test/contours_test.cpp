@@ -66,6 +66,22 @@ void expect_on_pixel_edges(const LabeledSlice& slice, double mm_per_px) {
   }
 }
 
+std::size_t slanted_edges(const LabeledSlice& slice) {
+  std::size_t count = 0;
+  auto add = [&](const Ring2& ring) {
+    for (std::size_t k = 0; k < ring.size(); ++k) {
+      const Vec2& a = ring[k];
+      const Vec2& b = ring[(k + 1) % ring.size()];
+      count += a.x() != b.x() && a.y() != b.y();
+    }
+  };
+  for (const Region& r : slice.regions) {
+    add(r.outer);
+    for (const Ring2& hole : r.holes) add(hole);
+  }
+  return count;
+}
+
 double label_area(const LabeledSlice& slice, int label) {
   double area = 0.0;
   for (const Region& r : slice.regions) {
@@ -107,26 +123,28 @@ TEST(Contours, OnePixelNecksAndDiagonalCornersGiveValidPolygons) {
   const ImagePlane plane = scaled_plane(0.5);
   std::size_t pixels_1 = 0;
   for (const std::uint8_t v : map.pixels) pixels_1 += v == 1;
-  for (const double tolerance_mm : {0.0, 0.3, 2.0}) {
-    std::vector<Repair> repairs;
-    const auto slice = make_slice(map, sector, image_box(40, 30), plane, tolerance_mm, &repairs);
-    ASSERT_TRUE(slice) << "tolerance " << tolerance_mm << ": " << slice.message();
-    EXPECT_TRUE(repairs.empty()) << repairs.front().detail;
-    expect_no_pinches(*slice);
-    bool unknown = false;
-    for (const Region& r : slice->regions) unknown |= r.label == kUnknownLabel;
-    EXPECT_TRUE(unknown);
-    if (tolerance_mm == 0.0) {
-      // The outlines run on the pixel edges: the area is a whole number of pixels, the label's
-      // but for the few that broke a pinch (one per diagonal contact).
-      const double px = 0.25;  // mm² per pixel
-      const double pixels = label_area(*slice, 1) / px;
-      EXPECT_NEAR(pixels, std::round(pixels), 1e-9);
-      EXPECT_LE(pixels, pixels_1 + 1e-9);
-      EXPECT_GE(pixels, pixels_1 - 4.0);
-      expect_on_pixel_edges(*slice, 0.5);
+  for (const OutlineForm form : {OutlineForm::kPixelEdges, OutlineForm::kSmooth})
+    for (const double tolerance_mm : {0.0, 0.3, 2.0}) {
+      std::vector<Repair> repairs;
+      const auto slice =
+          make_slice(map, sector, image_box(40, 30), plane, tolerance_mm, &repairs, form);
+      ASSERT_TRUE(slice) << "tolerance " << tolerance_mm << ": " << slice.message();
+      EXPECT_TRUE(repairs.empty()) << repairs.front().detail;
+      expect_no_pinches(*slice);
+      bool unknown = false;
+      for (const Region& r : slice->regions) unknown |= r.label == kUnknownLabel;
+      EXPECT_TRUE(unknown);
+      if (tolerance_mm == 0.0 && form == OutlineForm::kPixelEdges) {
+        // The outlines run on the pixel edges: the area is a whole number of pixels, the label's
+        // but for the few that broke a pinch (one per diagonal contact).
+        const double px = 0.25;  // mm² per pixel
+        const double pixels = label_area(*slice, 1) / px;
+        EXPECT_NEAR(pixels, std::round(pixels), 1e-9);
+        EXPECT_LE(pixels, pixels_1 + 1e-9);
+        EXPECT_GE(pixels, pixels_1 - 4.0);
+        expect_on_pixel_edges(*slice, 0.5);
+      }
     }
-  }
 }
 
 TEST(Contours, RandomLabelMapsGiveValidSlices) {
@@ -147,14 +165,22 @@ TEST(Contours, RandomLabelMapsGiveValidSlices) {
     for (int j = 0; j < h; ++j)
       for (int i = 0; i < w; ++i) sector.at(i, j) = std::abs(i - w / 2) <= j + 2 ? 255 : 0;
     fov = {{w / 2.0 - 2.5, -0.5}, {w / 2.0 + 2.5, -0.5}, {w + 0.5, h - 0.5}, {-0.5, h - 0.5}};
-    for (const double tolerance_mm : {0.0, 0.7}) {
-      std::vector<Repair> repairs;
-      const auto slice = make_slice(map, sector, fov, scaled_plane(0.3), tolerance_mm, &repairs);
-      ASSERT_TRUE(slice) << "trial " << trial << ": " << slice.message();
-      EXPECT_TRUE(repairs.empty()) << "trial " << trial << ": " << repairs.front().detail;
-      expect_no_pinches(*slice);
-      if (tolerance_mm == 0.0) expect_on_pixel_edges(*slice, 0.3);
-    }
+    for (const OutlineForm form : {OutlineForm::kPixelEdges, OutlineForm::kSmooth})
+      for (const double tolerance_mm : {0.0, 0.7}) {
+        std::vector<Repair> repairs;
+        const auto slice =
+            make_slice(map, sector, fov, scaled_plane(0.3), tolerance_mm, &repairs, form);
+        ASSERT_TRUE(slice) << "trial " << trial << ": " << slice.message();
+        EXPECT_TRUE(repairs.empty()) << "trial " << trial << ": " << repairs.front().detail;
+        // Valid by construction: make_slice did not fall back to the exact (axis-parallel)
+        // outlines.
+        if (form == OutlineForm::kSmooth) {
+          EXPECT_GT(slanted_edges(*slice), 0u);
+        }
+        expect_no_pinches(*slice);
+        if (tolerance_mm == 0.0 && form == OutlineForm::kPixelEdges)
+          expect_on_pixel_edges(*slice, 0.3);
+      }
   }
 }
 
@@ -261,7 +287,8 @@ TEST(Contours, OutlinesLieOnThePixelEdges) {
   const ImagePlane plane = scaled_plane(mm_per_px);
   for (const double tolerance_mm : {0.0, 0.2}) {
     std::vector<Repair> repairs;
-    const auto slice = make_slice(map, sector, image_box(w, h), plane, tolerance_mm, &repairs);
+    const auto slice = make_slice(map, sector, image_box(w, h), plane, tolerance_mm, &repairs,
+                                  OutlineForm::kPixelEdges);
     ASSERT_TRUE(slice) << slice.message();
     EXPECT_TRUE(repairs.empty());
     EXPECT_TRUE(validate(*slice));
@@ -305,6 +332,70 @@ TEST(Contours, OutlinesLieOnThePixelEdges) {
     EXPECT_FALSE(on_line_3.empty());
     EXPECT_EQ(on_line_3, on_line_4);
   }
+}
+
+// Where the ring's edges cross the vertical line at x (mm), strictly between rows y0 and y1.
+std::vector<double> crossings_at(const Region& region, double x, double y0, double y1) {
+  std::vector<double> ys;
+  const Ring2& ring = region.outer;
+  for (std::size_t k = 0; k < ring.size(); ++k) {
+    const Vec2& a = ring[k];
+    const Vec2& b = ring[(k + 1) % ring.size()];
+    if ((a.x() < x) == (b.x() < x)) continue;
+    const double y = a.y() + (x - a.x()) / (b.x() - a.x()) * (b.y() - a.y());
+    if (y > y0 && y < y1) ys.push_back(y);
+  }
+  return ys;
+}
+
+TEST(Contours, SmoothOutlinesFollowASlantedBoundary) {
+  // Two labels split by a line of slope 0.37 (a pixel is label 2 when its centre lies below
+  // it). Along the pixels' edges their shared outline is a staircase that swings a quarter of
+  // a pixel about the line on average; smoothed, it runs far closer to the line, and both
+  // labels still share it exactly.
+  const int w = 60, h = 40;
+  const double slope = 0.37, offset = 8.3;  // row = slope * column + offset, in pixels
+  LabelImage map(w, h, 1);
+  for (int j = 0; j < h; ++j)
+    for (int i = 0; i < w; ++i)
+      if (j > slope * i + offset) map.at(i, j) = 2;
+  const ImageU8 sector(w, h, 255);
+  const double mm_per_px = 0.5;
+  const ImagePlane plane = scaled_plane(mm_per_px);
+  double mean_deviation_px[2] = {0.0, 0.0};
+  for (const OutlineForm form : {OutlineForm::kPixelEdges, OutlineForm::kSmooth}) {
+    std::vector<Repair> repairs;
+    const auto slice = make_slice(map, sector, image_box(w, h), plane, 0.0, &repairs, form);
+    ASSERT_TRUE(slice) << slice.message();
+    EXPECT_TRUE(repairs.empty());
+    ASSERT_EQ(slice->regions.size(), 2u);
+    const Region& above = slice->regions[0].label == 1 ? slice->regions[0] : slice->regions[1];
+    const Region& below = slice->regions[0].label == 1 ? slice->regions[1] : slice->regions[0];
+    // Columns 2..w-3 (away from the image's sides), sampled every 0.01 px.
+    // Rows 1..h-2: the outlines along the image's top and bottom are smoothed too.
+    const double top_mm = plane.to_plane(0.0, 1.0).y(),
+                 bottom_mm = plane.to_plane(0.0, h - 2.0).y();
+    double sum = 0.0;
+    int samples = 0;
+    for (double i = 2.0; i <= w - 3.0; i += 0.01, ++samples) {
+      const double x_mm = plane.to_plane(i, 0.0).x();
+      const std::vector<double> ya = crossings_at(above, x_mm, top_mm, bottom_mm);
+      const std::vector<double> yb = crossings_at(below, x_mm, top_mm, bottom_mm);
+      // One shared outline (which may wind back a little where a step was smoothed).
+      ASSERT_FALSE(ya.empty()) << "column " << i;
+      ASSERT_EQ(ya.size(), yb.size()) << "column " << i;
+      double mean_mm = 0.0;
+      for (std::size_t k = 0; k < ya.size(); ++k) {
+        EXPECT_NEAR(ya[k], yb[ya.size() - 1 - k], 1e-9) << "column " << i;
+        mean_mm += ya[k] / static_cast<double>(ya.size());
+      }
+      const double row = (mean_mm + 2.0) / mm_per_px;  // back to pixel rows
+      sum += std::abs(row - (slope * i + offset));
+    }
+    mean_deviation_px[form == OutlineForm::kSmooth] = sum / samples;
+  }
+  EXPECT_GT(mean_deviation_px[0], 0.2);                         // the staircase
+  EXPECT_LT(mean_deviation_px[1], 0.5 * mean_deviation_px[0]);  // 0.10 against 0.26 px
 }
 
 TEST(Contours, InvalidRegionsAreDroppedAndRecorded) {

@@ -30,6 +30,10 @@ struct LabeledSlice {
   Vec3 u = Vec3::UnitX();
   Vec3 v = Vec3::UnitY();
   std::optional<double> timestamp_s;
+  /// How far the outlines may lie from the true boundaries (standard deviation, mm): a
+  /// segmented frame's outlines carry the segmentation's error. 0: exact outlines, which the
+  /// reconstruction interpolates; above 0 the thin-plate field fits them as a smoothing spline.
+  double outline_sd_mm = 0.0;
   /// Field of view: points of the plane outside it are unknown. None: the whole plane is seen.
   std::optional<Ring2> fov;
   std::vector<Region> regions;
