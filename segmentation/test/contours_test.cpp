@@ -332,6 +332,20 @@ TEST(Contours, OutlinesLieOnThePixelEdges) {
     EXPECT_FALSE(on_line_3.empty());
     EXPECT_EQ(on_line_3, on_line_4);
   }
+  // Smoothed, the outlines keep the pixels' area and centroid: no inset, no shift.
+  std::vector<Repair> repairs;
+  const auto smooth = make_slice(map, sector, image_box(w, h), plane, 0.0, &repairs);
+  ASSERT_TRUE(smooth) << smooth.message();
+  EXPECT_TRUE(repairs.empty());
+  EXPECT_GT(slanted_edges(*smooth), 0u);
+  for (const auto& [label, count_and_sum] : pixels) {
+    const auto [area, centroid] = area_and_centroid(*smooth, label);
+    const Vec2 centre_px = count_and_sum.second / count_and_sum.first;
+    const Vec2 expected = plane.to_plane(centre_px.x(), centre_px.y());
+    EXPECT_NEAR(area / (count_and_sum.first * mm_per_px * mm_per_px), 1.0, 0.005)
+        << "label " << label;
+    EXPECT_LT((centroid - expected).norm(), 0.02 * mm_per_px) << "label " << label;
+  }
 }
 
 // Where the ring's edges cross the vertical line at x (mm), strictly between rows y0 and y1.
