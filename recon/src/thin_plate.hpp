@@ -60,6 +60,11 @@ struct ThinPlateOptions {
   /// The solver's grid kernels in AVX2 where the CPU has it; false: the baseline x86-64 ones.
   /// The same bits either way (for tests that check it).
   bool simd = true;
+  /// Per material 1..K (index m - 1; missing: false): it casts an acoustic shadow
+  /// (LabelInfo::casts_shadow), so its edges along the slices' unknown regions are its true
+  /// boundaries (where its labeller ended it), not bounds from below as for other materials.
+  /// Edges along a field of view's edge stay where the slice stops seeing.
+  std::vector<bool> shadow_casters;
 };
 
 /// What one solve did.
@@ -141,8 +146,10 @@ double truncation_extent(double extent_mm);
 std::vector<double> box_extents(const std::vector<Box3>& boxes);
 
 /// The signed distances of one slice at in-plane points, per material (K per point, clamped to
-/// +-truncation; NaN where the point is unknown): exposed for tests.
+/// +-truncation; NaN where the point is unknown), `shadow_casters` as ThinPlateOptions has them:
+/// exposed for tests.
 std::vector<double> slice_signed_distances(const PreparedSlice& slice, int materials,
-                                           double truncation, const std::vector<Vec2>& points);
+                                           double truncation, const std::vector<Vec2>& points,
+                                           const std::vector<bool>& shadow_casters = {});
 
 }  // namespace sonoshape::recon
