@@ -129,6 +129,15 @@ TEST_F(SimulateCommand, SegmentTurnsASimulatedSweepIntoAValidSliceSet) {
                                  dir_ / "log_recon");
   ASSERT_EQ(reconstructed.exit_code, 0) << reconstructed.output;
   EXPECT_TRUE(fs::exists(dir_ / "out" / "label_1.ply"));
+  // The rib, a bone drawn whole in the truth, is declared to cast a shadow; the others not.
+  const auto perfect_slices = sonoshape::read_slice_set(dir_ / "perfect.slices.json");
+  ASSERT_TRUE(perfect_slices) << perfect_slices.message();
+  bool rib = false;
+  for (const sonoshape::LabelInfo& label : perfect_slices->labels) {
+    EXPECT_EQ(label.casts_shadow, label.name == "rib") << label.name;
+    rib = rib || label.name == "rib";
+  }
+  EXPECT_TRUE(rib);
 
   // An organ the models name but the cleaning removes everywhere is reported, with the reason.
   {
@@ -200,6 +209,15 @@ TEST_F(SimulateCommand, SegmentScoresAgainstTheTruthAndPerfectLabelsReconstruct)
                                  dir_ / "log_recon");
   ASSERT_EQ(reconstructed.exit_code, 0) << reconstructed.output;
   EXPECT_TRUE(fs::exists(dir_ / "out" / "label_1.ply"));
+  // The rib, a bone drawn whole in the truth, is declared to cast a shadow; the others not.
+  const auto perfect_slices = sonoshape::read_slice_set(dir_ / "perfect.slices.json");
+  ASSERT_TRUE(perfect_slices) << perfect_slices.message();
+  bool rib = false;
+  for (const sonoshape::LabelInfo& label : perfect_slices->labels) {
+    EXPECT_EQ(label.casts_shadow, label.name == "rib") << label.name;
+    rib = rib || label.name == "rib";
+  }
+  EXPECT_TRUE(rib);
 
   const auto ours =
       run("segment " + sweep + " --truth-labels " + truth + " --report " +

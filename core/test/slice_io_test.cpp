@@ -26,7 +26,8 @@ const char* kSpecExample = R"({
   "format": "sonoshape-slices",
   "version": 1,
   "units": "mm",
-  "labels": [ {"id": 1, "name": "liver"}, {"id": 2, "name": "kidney"} ],
+  "labels": [ {"id": 1, "name": "liver"}, {"id": 2, "name": "kidney"},
+              {"id": 3, "name": "rib", "casts_shadow": true} ],
   "bounds": { "min": [-90, -80, -70], "max": [90, 80, 70] },
   "slices": [
     {
@@ -81,9 +82,11 @@ TEST(SliceJson, ParsesTheSpecExample) {
   ASSERT_TRUE(result.is_ok()) << result.message();
   const SliceSet& set = *result;
   EXPECT_EQ(set.units, "mm");
-  ASSERT_EQ(set.labels.size(), 2u);
+  ASSERT_EQ(set.labels.size(), 3u);
   EXPECT_EQ(set.labels[1].id, 2);
   EXPECT_EQ(set.labels[1].name, "kidney");
+  EXPECT_FALSE(set.labels[1].casts_shadow);
+  EXPECT_TRUE(set.labels[2].casts_shadow);
   ASSERT_TRUE(set.bounds.has_value());
   EXPECT_EQ(set.bounds->min, Vec3(-90, -80, -70));
   EXPECT_EQ(set.bounds->max, Vec3(90, 80, 70));
