@@ -61,7 +61,8 @@ class SliceDistances {
     for (std::size_t m = 1; m < slice.ring_bounds.size(); ++m)
       for (const auto& [lo, hi] : slice.ring_bounds[m]) extent = std::max(extent, (hi - lo).norm());
     const double probe = 1e-7 * extent;
-    for (const Ring2& ring : slice.view) view_bands_.push_back(make_ring_bands(ring));
+    if (std::find(shadow_casters.begin(), shadow_casters.end(), true) != shadow_casters.end())
+      for (const Ring2& ring : slice.view) view_bands_.push_back(make_ring_bands(ring));
     edges_.resize(static_cast<std::size_t>(materials_) + 1);
     unseen_edges_.resize(static_cast<std::size_t>(materials_) + 1);
     for (int m = 1; m <= materials_ && static_cast<std::size_t>(m) < slice.rings_by_material.size();
