@@ -104,6 +104,20 @@ TEST_F(SimulateCommand, UserPhantomAndBadArguments) {
 namespace simulate_command_test {
 namespace {
 
+// Whether the default phantom's rib is declared in `set` and is its only label that casts a
+// shadow (docs/formats/slices.md, casts_shadow).
+::testing::AssertionResult only_the_rib_casts_a_shadow(const sonoshape::SliceSet& set) {
+  bool rib = false;
+  for (const sonoshape::LabelInfo& label : set.labels) {
+    if (label.casts_shadow != (label.name == "rib"))
+      return ::testing::AssertionFailure()
+             << label.name << (label.casts_shadow ? " casts" : " does not cast") << " a shadow";
+    rib = rib || label.name == "rib";
+  }
+  if (!rib) return ::testing::AssertionFailure() << "no label named rib";
+  return ::testing::AssertionSuccess();
+}
+
 // simulate -> segment -> reconstruct: the offline path from a virtual patient to meshes.
 TEST_F(SimulateCommand, SegmentTurnsASimulatedSweepIntoAValidSliceSet) {
   const auto simulated = run("simulate --frames 16 --width-px 256 --height-px 256 --seed 7 -o " +
@@ -130,10 +144,8 @@ TEST_F(SimulateCommand, SegmentTurnsASimulatedSweepIntoAValidSliceSet) {
                                  dir_ / "log_recon");
   ASSERT_EQ(reconstructed.exit_code, 0) << reconstructed.output;
   EXPECT_TRUE(fs::exists(dir_ / "out" / "label_1.ply"));
-  // Perfect labels are taken as drawn (interpolated); the segmenter's outlines carry its error.
-  const auto perfect_slices = sonoshape::read_slice_set(dir_ / "perfect.slices.json");
-  ASSERT_TRUE(perfect_slices) << perfect_slices.message();
-  for (const sonoshape::LabeledSlice& s : perfect_slices->slices) EXPECT_EQ(s.outline_sd_mm, 0.0);
+  // The rib, a bone the segmenter draws to its thickness, is declared to cast a shadow.
+  EXPECT_TRUE(only_the_rib_casts_a_shadow(*slices));
 
   // An organ the models name but the cleaning removes everywhere is reported, with the reason.
   {
@@ -205,6 +217,12 @@ TEST_F(SimulateCommand, SegmentScoresAgainstTheTruthAndPerfectLabelsReconstruct)
                                  dir_ / "log_recon");
   ASSERT_EQ(reconstructed.exit_code, 0) << reconstructed.output;
   EXPECT_TRUE(fs::exists(dir_ / "out" / "label_1.ply"));
+  // Perfect labels are taken as drawn (interpolated); the segmenter's outlines carry its error.
+  const auto perfect_slices = sonoshape::read_slice_set(dir_ / "perfect.slices.json");
+  ASSERT_TRUE(perfect_slices) << perfect_slices.message();
+  for (const sonoshape::LabeledSlice& s : perfect_slices->slices) EXPECT_EQ(s.outline_sd_mm, 0.0);
+  // The rib, a bone drawn whole in the truth, is declared to cast a shadow.
+  EXPECT_TRUE(only_the_rib_casts_a_shadow(*perfect_slices));
 
   const auto ours =
       run("segment " + sweep + " --truth-labels " + truth + " --report " +

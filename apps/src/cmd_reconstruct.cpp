@@ -119,7 +119,7 @@ int run_online(const SliceSet& set, const std::string& output, const std::string
   setup.engine = engine;
   // The whole file's box from the start: no rebuild when a later slice reaches further.
   setup.bounds = set.effective_bounds();
-  for (const int id : set.material_ids()) setup.labels.push_back({id, set.label_name(id)});
+  for (const int id : set.material_ids()) setup.labels.push_back(set.label_info(id));
   recon::Reconstructor reconstructor(setup);
   nlohmann::json steps = nlohmann::json::array();
   Progress progress("online reconstruction", order.size());

@@ -24,6 +24,13 @@ std::string SliceSet::label_name(int id) const {
   return "label_" + std::to_string(id);
 }
 
+LabelInfo SliceSet::label_info(int id) const {
+  LabelInfo info{id, label_name(id)};
+  for (const LabelInfo& l : labels)
+    if (l.id == id) info.casts_shadow = info.casts_shadow || l.casts_shadow;
+  return info;
+}
+
 Box3 SliceSet::effective_bounds() const {
   if (bounds) return *bounds;
   Box3 box{Vec3::Constant(std::numeric_limits<double>::infinity()),

@@ -361,6 +361,13 @@ SliceSet parse_document(const json& doc, const std::string& source_name,
         if (!name->is_string()) fail_at(where, "\"name\" must be a string");
         info.name = name->get<std::string>();
       }
+      if (const auto shadow = entry.find("casts_shadow"); shadow != entry.end()) {
+        if (!shadow->is_boolean())
+          fail_at(where, "\"casts_shadow\" is " + short_dump(*shadow) +
+                             ", not true or false; write true for a material that shadows what "
+                             "lies beyond it (bone), or leave the key out");
+        info.casts_shadow = shadow->get<bool>();
+      }
       set.labels.push_back(std::move(info));
     }
   }
@@ -501,7 +508,8 @@ Status write_slice_set_json(const SliceSet& set, const std::filesystem::path& pa
     out += "  \"labels\": [";
     for (std::size_t k = 0; k < set.labels.size(); ++k)
       out += std::string(k ? ", " : "") + "{\"id\": " + std::to_string(set.labels[k].id) +
-             ", \"name\": " + json(set.labels[k].name).dump() + "}";
+             ", \"name\": " + json(set.labels[k].name).dump() +
+             (set.labels[k].casts_shadow ? ", \"casts_shadow\": true}" : "}");
     out += "],\n";
   }
   if (set.bounds)

@@ -26,7 +26,8 @@ const char* kSpecExample = R"({
   "format": "sonoshape-slices",
   "version": 1,
   "units": "mm",
-  "labels": [ {"id": 1, "name": "liver"}, {"id": 2, "name": "kidney"} ],
+  "labels": [ {"id": 1, "name": "liver"}, {"id": 2, "name": "kidney"},
+              {"id": 3, "name": "rib", "casts_shadow": true} ],
   "bounds": { "min": [-90, -80, -70], "max": [90, 80, 70] },
   "slices": [
     {
@@ -81,9 +82,11 @@ TEST(SliceJson, ParsesTheSpecExample) {
   ASSERT_TRUE(result.is_ok()) << result.message();
   const SliceSet& set = *result;
   EXPECT_EQ(set.units, "mm");
-  ASSERT_EQ(set.labels.size(), 2u);
+  ASSERT_EQ(set.labels.size(), 3u);
   EXPECT_EQ(set.labels[1].id, 2);
   EXPECT_EQ(set.labels[1].name, "kidney");
+  EXPECT_FALSE(set.labels[1].casts_shadow);
+  EXPECT_TRUE(set.labels[2].casts_shadow);
   ASSERT_TRUE(set.bounds.has_value());
   EXPECT_EQ(set.bounds->min, Vec3(-90, -80, -70));
   EXPECT_EQ(set.bounds->max, Vec3(90, 80, 70));
@@ -488,6 +491,37 @@ TEST(SliceJsonErrors, LabelsThatAreNotIds) {
   }
 }
 
+// A material that casts an acoustic shadow (bone) says so in its label entry; leaving the key
+// out means it does not, as in files written before the key existed.
+TEST(SliceJson, ALabelCastsAShadowOnlyWhereItSaysSo) {
+  const std::string labels =
+      R"("labels": [{"id": 1, "name": "rib", "casts_shadow": true}, {"id": 2, "name": "liver"},)"
+      R"( {"id": 3, "name": "kidney", "casts_shadow": false}], )";
+  const Result<SliceSet> set = parse(doc(slice_at(0, square_region(1, 0, 0, 1)), labels));
+  ASSERT_TRUE(set.is_ok()) << set.message();
+  ASSERT_EQ(set->labels.size(), 3u);
+  EXPECT_TRUE(set->labels[0].casts_shadow);
+  EXPECT_FALSE(set->labels[1].casts_shadow);
+  EXPECT_FALSE(set->labels[2].casts_shadow);
+  EXPECT_TRUE(set->label_info(1).casts_shadow);
+  EXPECT_FALSE(set->label_info(2).casts_shadow);
+  EXPECT_FALSE(set->label_info(7).casts_shadow);  // not declared
+  EXPECT_EQ(set->label_info(7).name, "label_7");
+}
+
+TEST(SliceJsonErrors, CastsShadowThatIsNotABoolean) {
+  for (const char* value : {"1", "\"yes\"", "null", "[true]"}) {
+    std::string labels = R"("labels": [{"id": 1, "name": "a"}, {"id": 2, "name": "rib", )";
+    labels += R"("casts_shadow": )";
+    labels += value;
+    labels += "}], ";
+    const std::string message = parse_error(doc(slice_at(0, square_region(1, 0, 0, 1)), labels));
+    EXPECT_TRUE(contains(message, "labels, entry 1")) << message;
+    EXPECT_TRUE(contains(message, std::string("\"casts_shadow\" is ") + value)) << message;
+    EXPECT_TRUE(contains(message, "not true or false")) << message;
+  }
+}
+
 TEST(SliceJsonErrors, NonNumbersAndNonFiniteNumbers) {
   const std::string nan_region = R"({"label": 1, "polygon": [[0,0],[1,"NaN"],[0,1]]})";
   const std::string message = parse_error(doc(slice_at(0, nan_region)));
@@ -647,6 +681,7 @@ TEST(SliceFiles, JsonRoundTripIsExact) {
   set.slices[0].origin_mm = Vec3(1.0 / 3.0, 0.1 + 0.2, -2.0 / 7.0);
   set.slices[0].regions[0].outer[0] = Vec2(-10.000000000000002, 5.123456789012345);
   set.labels[0].name = "li\"ver";
+  set.labels[1].casts_shadow = true;
   // Directions turned by 0.3 rad in their plane: both need all 17 digits too.
   set.slices[0].u = Vec3(std::cos(0.3), std::sin(0.3), 0.0);
   set.slices[0].v = Vec3(-std::sin(0.3), std::cos(0.3), 0.0);
@@ -660,8 +695,10 @@ TEST(SliceFiles, JsonRoundTripIsExact) {
   EXPECT_EQ(back->bounds->max, set.bounds->max);
   EXPECT_EQ(back->units, set.units);
   ASSERT_EQ(back->labels.size(), set.labels.size());
-  for (std::size_t k = 0; k < set.labels.size(); ++k)
+  for (std::size_t k = 0; k < set.labels.size(); ++k) {
     EXPECT_EQ(back->labels[k].id, set.labels[k].id);
+    EXPECT_EQ(back->labels[k].casts_shadow, set.labels[k].casts_shadow) << k;
+  }
   ASSERT_EQ(back->slices.size(), set.slices.size());
   const LabeledSlice& a = set.slices[0];
   const LabeledSlice& b = back->slices[0];

@@ -33,11 +33,15 @@ PreparedSlice prepare_slice(const LabeledSlice& slice, std::size_t s,
                                  [](const Region& r) { return r.label == kUnknownLabel; });
     if (has_unknown) {
       // Known materials inside the fov and outside unknown regions, and the unknown set.
-      SlicePartition partition =
-          partition_slice(slice, material_ids, plane_box_polygon(p.origin, p.u, p.v, box));
+      Ring2 plane_in_box = plane_box_polygon(p.origin, p.u, p.v, box);
+      SlicePartition partition = partition_slice(slice, material_ids, plane_in_box);
       p.rings_by_material = std::move(partition.materials);
       p.unknown = std::move(partition.unknown);
-      if (!p.unknown.empty()) p.known = std::move(partition.known);
+      if (!p.unknown.empty()) {
+        p.known = std::move(partition.known);
+        if (slice.fov) p.view.push_back(*slice.fov);
+        p.view.push_back(std::move(plane_in_box));
+      }
     }
     for (const Region& region : slice.regions) {
       if (has_unknown) break;

@@ -46,6 +46,10 @@ struct PreparedSlice {
   std::vector<UnknownComponent> unknown;  ///< unknown set (regions and outside the fov)
   std::vector<Ring2> known;  ///< the known set when `unknown` is not empty (SlicePartition::known)
   double outline_sd_mm = 0.0;  ///< LabeledSlice::outline_sd_mm (the thin-plate field's alone)
+  /// When `unknown` is not empty: the field of view (if any) and the plane's polygon in the box,
+  /// any orientation. A point of the unknown set inside every one of them lies in one of the
+  /// slice's unknown regions (a shadow, noise), not beyond where the slice looks.
+  std::vector<Ring2> view;
 };
 
 /// Converts the slices: material ids -> dense indices 1..K (`material_ids[k-1]` is the id of k).

@@ -36,7 +36,7 @@ MeshSet reconstruct(const SliceSet& set, const ReconstructionOptions& options,
   std::vector<MeshSet::Entry> unused;
   for (const int id : set.material_ids()) {
     if (used.count(id))
-      setup.labels.push_back({id, set.label_name(id)});
+      setup.labels.push_back(set.label_info(id));
     else
       unused.push_back({id, set.label_name(id), {}});
   }

@@ -164,6 +164,16 @@ struct Reconstructor::State {
     return {ids.begin(), ids.end()};
   }
 
+  // Per material index (material_ids' order): whether its label casts a shadow.
+  std::vector<bool> shadow_casters() const {
+    std::vector<bool> casters;
+    for (const int id : material_ids)
+      casters.push_back(
+          std::any_of(options.labels.begin(), options.labels.end(),
+                      [&](const LabelInfo& l) { return l.id == id && l.casts_shadow; }));
+    return casters;
+  }
+
   std::string label_name(int id) const {
     for (const LabelInfo& l : options.labels)
       if (l.id == id && !l.name.empty()) return l.name;
@@ -313,7 +323,8 @@ struct Reconstructor::State {
   void rebuild_thin_plate(const std::vector<Entry>& list, ReconstructionStats& stats) {
     arrangement.reset();
     field.reset();
-    const ThinPlateOptions tp;
+    ThinPlateOptions tp;
+    tp.shadow_casters = shadow_casters();
     Stopwatch clock;
     std::vector<PreparedSlice> prepared = prepare_for_rebuild(list);
     const int materials = static_cast<int>(material_ids.size());

@@ -24,8 +24,9 @@ class SliceDistances {
   /// material's edges along unknown regions and its true boundaries give (inside_distance).
   static constexpr double kUnseenShare = 0.5;
 
-  /// `truncation[m - 1]`: material m's clamp (mm).
-  SliceDistances(const PreparedSlice& slice, int materials, const std::vector<double>& truncation)
+  /// `truncation[m - 1]`: material m's clamp (mm); `shadow_casters` as ThinPlateOptions has them.
+  SliceDistances(const PreparedSlice& slice, int materials, const std::vector<double>& truncation,
+                 const std::vector<bool>& shadow_casters)
       : slice_(&slice), materials_(materials), truncation_(truncation) {
     for (const Ring2& ring : slice.known) known_bands_.push_back(make_ring_bands(ring));
     material_boxes_.assign(static_cast<std::size_t>(materials),
@@ -37,17 +38,37 @@ class SliceDistances {
         box.first = box.first.cwiseMin(lo);
         box.second = box.second.cwiseMax(hi);
       }
-    // An edge of a material's ring is a true boundary when the point just across it is known
-    // and of another material: edges along an unknown region or the field of view's edge are
-    // where the slice stops seeing, not a surface (they were cut there by the partition).
+    classify_edges(shadow_casters);
+    // Buckets of the truncation's size: a query reads the 3 x 3 around its own.
+    Vec2 lo = Vec2::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+    for (const auto& list : edges_)
+      for (const auto& [a, b] : list) {
+        lo = lo.cwiseMin(a.cwiseMin(b));
+        hi = hi.cwiseMax(a.cwiseMax(b));
+      }
+    if (!(lo.x() <= hi.x())) return;
+    make_buckets(lo, hi);
+  }
+
+  // An edge of a material's ring is a true boundary when the point just across it is known
+  // and of another material: edges along an unknown region or the field of view's edge are
+  // where the slice stops seeing, not a surface (they were cut there by the partition). But a
+  // material that casts a shadow (bone) ends where its labeller drew its end, also along an
+  // unknown region (its shadow); only the field of view's edge and the box's cut it short.
+  void classify_edges(const std::vector<bool>& shadow_casters) {
+    const PreparedSlice& slice = *slice_;
     double extent = 1.0;
     for (std::size_t m = 1; m < slice.ring_bounds.size(); ++m)
       for (const auto& [lo, hi] : slice.ring_bounds[m]) extent = std::max(extent, (hi - lo).norm());
     const double probe = 1e-7 * extent;
-    edges_.resize(static_cast<std::size_t>(materials) + 1);
-    unseen_edges_.resize(static_cast<std::size_t>(materials) + 1);
-    for (int m = 1; m <= materials && static_cast<std::size_t>(m) < slice.rings_by_material.size();
-         ++m)
+    if (std::find(shadow_casters.begin(), shadow_casters.end(), true) != shadow_casters.end())
+      for (const Ring2& ring : slice.view) view_bands_.push_back(make_ring_bands(ring));
+    edges_.resize(static_cast<std::size_t>(materials_) + 1);
+    unseen_edges_.resize(static_cast<std::size_t>(materials_) + 1);
+    for (int m = 1; m <= materials_ && static_cast<std::size_t>(m) < slice.rings_by_material.size();
+         ++m) {
+      const bool caster = static_cast<std::size_t>(m - 1) < shadow_casters.size() &&
+                          shadow_casters[static_cast<std::size_t>(m - 1)];
       for (const Ring2& ring : slice.rings_by_material[static_cast<std::size_t>(m)])
         for (std::size_t i = 0; i < ring.size(); ++i) {
           const Vec2& a = ring[i];
@@ -58,21 +79,23 @@ class SliceDistances {
           // Outer rings run counter-clockwise and holes clockwise: the material is on the left.
           const Vec2 across = 0.5 * (a + b) + probe / length * Vec2(d.y(), -d.x());
           if (!known(across)) {
-            unseen_edges_[static_cast<std::size_t>(m)].push_back({a, b});
+            if (caster && in_view(across))
+              edges_[static_cast<std::size_t>(m)].push_back({a, b});
+            else
+              unseen_edges_[static_cast<std::size_t>(m)].push_back({a, b});
             continue;
           }
           if (label(across) == m) continue;
           edges_[static_cast<std::size_t>(m)].push_back({a, b});
         }
-    // Buckets of the truncation's size: a query reads the 3 x 3 around its own.
-    Vec2 lo = Vec2::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
-    for (const auto& list : edges_)
-      for (const auto& [a, b] : list) {
-        lo = lo.cwiseMin(a.cwiseMin(b));
-        hi = hi.cwiseMax(a.cwiseMax(b));
-      }
-    if (!(lo.x() <= hi.x())) return;
-    make_buckets(lo, hi);
+    }
+  }
+
+  // Whether p lies within the slice's field of view and the box (PreparedSlice::view).
+  bool in_view(const Vec2& p) const {
+    for (std::size_t r = 0; r < slice_->view.size(); ++r)
+      if (winding_number_in_bands(slice_->view[r], view_bands_[r], p) == 0) return false;
+    return true;
   }
 
   /// How far p is from the box of material m's rings (infinity where it has none; 0 inside).
@@ -265,6 +288,7 @@ class SliceDistances {
   int materials_;
   std::vector<double> truncation_;
   std::vector<RingBands> known_bands_;
+  std::vector<RingBands> view_bands_;                      // of slice_->view
   std::vector<std::pair<Vec2, Vec2>> material_boxes_;      // per material 1..K: its rings' box
   std::vector<std::vector<std::pair<Vec2, Vec2>>> edges_;  // per material: true boundaries
   std::vector<std::vector<std::pair<Vec2, Vec2>>> unseen_edges_;  // per material: along unknown
@@ -431,9 +455,11 @@ double dot(const A* a, const B* b, std::size_t count) {
 }  // namespace
 
 std::vector<double> slice_signed_distances(const PreparedSlice& slice, int materials,
-                                           double truncation, const std::vector<Vec2>& points) {
+                                           double truncation, const std::vector<Vec2>& points,
+                                           const std::vector<bool>& shadow_casters) {
   const SliceDistances distances(
-      slice, materials, std::vector<double>(static_cast<std::size_t>(materials), truncation));
+      slice, materials, std::vector<double>(static_cast<std::size_t>(materials), truncation),
+      shadow_casters);
   std::vector<double> out(points.size() * static_cast<std::size_t>(materials),
                           std::numeric_limits<double>::quiet_NaN());
   for (std::size_t p = 0; p < points.size(); ++p)
@@ -1260,7 +1286,8 @@ void ThinPlateField::add_slices(std::vector<PreparedSlice> slices) {
   // is a minimum (exact in any order), so the data are the same whatever the threads and
   // whether the slices came one by one or at once.
   tbb::parallel_for(first, count, [&](std::size_t k) {
-    s.distances[k] = std::make_unique<SliceDistances>(s.slices[k], s.materials, s.truncation_mm);
+    s.distances[k] = std::make_unique<SliceDistances>(s.slices[k], s.materials, s.truncation_mm,
+                                                      s.options.shadow_casters);
     s.data[k] = s.slice_data(s.slices[k], *s.distances[k]);
   });
   std::vector<std::vector<std::pair<std::size_t, double>>> changes(first);

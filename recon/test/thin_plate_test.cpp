@@ -104,6 +104,34 @@ TEST(ThinPlateData, SignedDistanceInsideLiesBetweenTheBoundsOfTrueAndUnseenEdges
   EXPECT_NEAR(d[5], -2.0, 1e-9);
 }
 
+TEST(ThinPlateData, AShadowCastersEdgeAlongAnUnknownRegionIsATrueBoundary) {
+  // Two squares, materials 1 (a bone: it casts a shadow) and 2, each bordering an unknown region
+  // on its right, both cut on the left by the field of view's edge at x = 2.
+  LabeledSlice slice = z_slice(0.0);
+  slice.fov = Ring2{{2, -60}, {60, -60}, {60, 60}, {2, 60}};
+  slice.regions.push_back({1, Ring2{{0, 0}, {10, 0}, {10, 10}, {0, 10}}, {}});
+  slice.regions.push_back({kUnknownLabel, Ring2{{10, 0}, {20, 0}, {20, 10}, {10, 10}}, {}});
+  slice.regions.push_back({2, Ring2{{0, 20}, {10, 20}, {10, 30}, {0, 30}}, {}});
+  slice.regions.push_back({kUnknownLabel, Ring2{{10, 20}, {20, 20}, {20, 30}, {10, 30}}, {}});
+  const Box3 box{Vec3(-60, -60, -10), Vec3(60, 60, 10)};
+  const PreparedSlice prepared = prepare_slice(slice, 0, {1, 2}, box);
+  const std::vector<Vec2> points{{8, 5}, {3, 5}, {12, 5}, {8, 25}, {3, 25}};
+  const std::vector<double> d = slice_signed_distances(prepared, 2, 10.0, points, {true, false});
+  // Two values per point: materials 1 and 2. (8, 5): 2 mm from the bone's edge along its
+  // shadow, its end as drawn; the mean of the bounds (2 and 5 mm) would give 3.5.
+  EXPECT_NEAR(d[0], 2.0, 1e-9);
+  // (3, 5): 1 mm from the fov's edge, which stays a lower bound only: between 1 and 5 mm.
+  EXPECT_NEAR(d[2], 3.0, 1e-9);
+  EXPECT_TRUE(std::isnan(d[4]));  // inside the unknown region: no data
+  // Material 2 casts no shadow: its edge along the unknown region bounds it from below.
+  EXPECT_NEAR(d[7], 3.5, 1e-9);
+  EXPECT_NEAR(d[9], 3.0, 1e-9);
+  // Without the flag, material 1 is as material 2.
+  const std::vector<double> plain = slice_signed_distances(prepared, 2, 10.0, points);
+  EXPECT_NEAR(plain[0], 3.5, 1e-9);
+  EXPECT_NEAR(plain[2], 3.0, 1e-9);
+}
+
 TEST(ThinPlateData, AMaterialAbsentFromASliceIsFarOutsideEverywhere) {
   LabeledSlice slice = z_slice(0.0);
   slice.regions.push_back({2, circle(Vec2(0, 0), 5.0, 32), {}});
@@ -619,6 +647,32 @@ TEST(ThinPlateField, AnOrganDoesNotGoOnFarIntoItsOwnShadow) {
   const Box3 bounds = mesh.bounds();
   EXPECT_GT(bounds.min.y(), -r - 1.6);
   EXPECT_LT(bounds.max.y(), r + 1.0);
+}
+
+TEST(ThinPlateField, AShadowCasterEndsAtItsDrawnEdgeAlongItsShadow) {
+  // The rod and shadow above, the rod declared a shadow caster (a bone: its drawn section ends
+  // at its surface, also along its shadow): the field ends it there, not deeper.
+  const double r = 5.0;
+  const Ring2 disc = circle(Vec2(0, 0), r, 96);
+  Ring2 shadow{{-r, 0}, {-r, -40}, {r, -40}, {r, 0}};
+  for (int i = 95; i >= 48; --i) shadow.push_back(disc[static_cast<std::size_t>(i)]);
+  shadow.pop_back();
+  SliceSet set;
+  set.bounds = Box3{Vec3(-30, -50, -30), Vec3(30, 30, 30)};
+  set.labels.push_back({1, "rod", true});
+  for (const double z : {-20.0, -10.0, 0.0, 10.0, 20.0}) {
+    LabeledSlice s = z_slice(z);
+    s.regions.push_back({1, disc, {}});
+    s.regions.push_back({kUnknownLabel, shadow, {}});
+    set.slices.push_back(s);
+  }
+  const MeshSet meshes = reconstruct(set, thin_plate_options());
+  const TriangleMesh& mesh = meshes.meshes[0].mesh;
+  EXPECT_TRUE(check_mesh_health(mesh).closed_manifold_oriented());
+  EXPECT_EQ(component_count(mesh), 1u);
+  const Box3 bounds = mesh.bounds();
+  EXPECT_GT(bounds.min.y(), -r - 0.3);
+  EXPECT_LT(bounds.max.y(), r + 0.3);
 }
 
 TEST(ThinPlateField, AFieldOfViewsEdgeIsNoSurface) {

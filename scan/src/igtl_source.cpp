@@ -110,7 +110,7 @@ Result<ScanSource> open_igtl_source(const SourceRequest& request,
   if (const Status valid = config.validate(); !valid) return valid;
   setup.segmentation = std::move(config);
   for (const segmentation::LabelModel& m : setup.segmentation.materials)
-    setup.labels.push_back({m.label, m.name});
+    setup.labels.push_back(segmentation::slice_label(m));
   setup.bounds = request.bounds;
 
   acquisition::IgtlEndpoint tracker = *endpoint;

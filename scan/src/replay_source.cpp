@@ -73,7 +73,7 @@ Result<ScanSource> open_replay_source(const SourceRequest& request, const std::s
   setup.segmentation = prepared->config;
   setup.geometry = prepared->geometry;
   for (const segmentation::LabelModel& m : setup.segmentation.materials)
-    setup.labels.push_back({m.label, m.name});
+    setup.labels.push_back(segmentation::slice_label(m));
   setup.bounds = request.bounds ? request.bounds : swept_sector_box(*shared, *prepared);
   setup.calibration_from = prepared->calibration_from;
   setup.models_from = prepared->models_from;

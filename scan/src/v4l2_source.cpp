@@ -79,7 +79,7 @@ Result<ScanSource> open_v4l2_source(const SourceRequest& request, const std::str
   if (!geometry) return geometry.status();
   setup.geometry = std::move(*geometry);
   for (const segmentation::LabelModel& m : setup.segmentation.materials)
-    setup.labels.push_back({m.label, m.name});
+    setup.labels.push_back(segmentation::slice_label(m));
   setup.bounds = request.bounds;
   std::ostringstream text;
   text << "V4L2 grabber " << options->device << ", " << width_px << "x" << height_px

@@ -334,6 +334,9 @@ TEST(ScanSources, SimulatedScanReconstructsTheTwoOrgans) {
   auto source = open_scan_source(small_sim_request(), small_sim());
   ASSERT_TRUE(source) << source.message();
   ASSERT_EQ(source->setup.labels.size(), 3u);  // spot, cheburashka, rib
+  // The rib, a bone, casts a shadow (its section's edge along it is its surface); the others not.
+  for (const LabelInfo& label : source->setup.labels)
+    EXPECT_EQ(label.casts_shadow, label.name == "rib") << label.name;
   // Models for the organs (the rib hides in its own shadow: unknown in the ground truth).
   EXPECT_GE(source->setup.segmentation.materials.size(), 2u);
   ASSERT_TRUE(source->setup.bounds);
@@ -347,6 +350,12 @@ TEST(ScanSources, SimulatedScanReconstructsTheTwoOrgans) {
   EXPECT_TRUE(summary.errors.empty()) << summary.errors.front();
   EXPECT_TRUE(fs::exists(dir.path() / "label_1.ply"));
   EXPECT_TRUE(fs::exists(dir.path() / "label_2.ply"));
+  // The scan's slice set keeps the labels' shadows for a later reconstruction.
+  const auto slices = read_slice_set(dir.path() / "slices.json");
+  ASSERT_TRUE(slices) << slices.message();
+  ASSERT_EQ(slices->labels.size(), 3u);
+  for (const LabelInfo& label : slices->labels)
+    EXPECT_EQ(label.casts_shadow, label.name == "rib") << label.name;
 }
 
 // Counts the meshes the pipeline hands to the segmentation stage it wraps.

@@ -586,4 +586,8 @@ SegmentationConfig auto_two_class(const std::vector<std::uint8_t>& samples,
   return config;
 }
 
+LabelInfo slice_label(const LabelModel& model) {
+  return {model.label, model.name, model.thickness_mm > 0.0};
+}
+
 }  // namespace sonoshape::segmentation

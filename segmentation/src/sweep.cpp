@@ -478,9 +478,11 @@ bool coincides_with_one_of(const LabeledSlice& slice, const std::vector<LabeledS
 }
 
 // Perfect label frames may show a label the models lack (a bone whose every pixel lies in its
-// own shadow has no grey model): declares it, named as the header names it.
+// own shadow has no grey model): declares it, named as the header names it, casting a shadow
+// where the header gives it a thickness (a bone, drawn whole).
 void declare_labels_of_regions(const acquisition::SequenceFile& file, SliceSet& slices) {
   const auto names = parse_items(file.field("SonoshapeLabels").value_or(""));
+  const auto thicknesses = parse_items(file.field("SonoshapeLabelThicknessMm").value_or(""));
   for (const LabeledSlice& slice : slices.slices)
     for (const Region& r : slice.regions) {
       if (r.label == kUnknownLabel) continue;
@@ -489,8 +491,10 @@ void declare_labels_of_regions(const acquisition::SequenceFile& file, SliceSet& 
                       [&](const LabelInfo& l) { return l.id == r.label; }))
         continue;
       const auto name = names.find(r.label);
+      const auto thickness = thicknesses.find(r.label);
       declared.push_back(
-          {r.label, name != names.end() ? name->second : "label_" + std::to_string(r.label)});
+          {r.label, name != names.end() ? name->second : "label_" + std::to_string(r.label),
+           thickness != thicknesses.end() && to_number(thickness->second).value_or(0.0) > 0.0});
     }
 }
 
@@ -507,8 +511,7 @@ class SweepRun {
         labels_(labels),
         shares_(setup.geometry.sector) {
     out_.frames = file.frame_count();
-    for (const LabelModel& m : setup.config.materials)
-      out_.slices.labels.push_back({m.label, m.name});
+    for (const LabelModel& m : setup.config.materials) out_.slices.labels.push_back(slice_label(m));
     for (const std::uint8_t v : setup.geometry.sector.pixels) sector_px_ += v ? 1 : 0;
     if (!labels.perfect && setup.config.method == LabellingMethod::kGraphCut)
       labeller_.emplace(setup.config, setup.geometry, setup.config.graph_cut);

@@ -138,6 +138,7 @@ struct BModeSimulator::Impl {
 
   SimulatedFrame render(const Eigen::Isometry3d& T_reference_probe, std::uint64_t seed) const;
   Acoustics acoustics() const;
+  bool casts_shadow(int label) const;
   // The boundary normals' components (along the beams' lateral and axial directions) from the
   // smoothed impedance map.
   void boundary_gradients(const cv::Mat& beam_labels, const Acoustics& a, cv::Mat& grad_b,
@@ -149,7 +150,7 @@ struct BModeSimulator::Impl {
   // Scan conversion into `frame` (B-mode, labels, truth, shadow); outside the sector is black
   // (grey) and unknown (labels).
   void scan_convert(const cv::Mat& grey_beam, const cv::Mat& shadow, const LabelImage& labels,
-                    const Acoustics& a, SimulatedFrame& frame) const;
+                    SimulatedFrame& frame) const;
 };
 
 SimulatedFrame BModeSimulator::Impl::render(const Eigen::Isometry3d& T_reference_probe,
@@ -170,7 +171,7 @@ SimulatedFrame BModeSimulator::Impl::render(const Eigen::Isometry3d& T_reference
   const Acoustics a = acoustics();
   BeamField beams = walk_beams(beam_labels, a, seed);
   const cv::Mat grey_beam = envelope_grey(beams.field);
-  scan_convert(grey_beam, beams.shadow, labels, a, frame);
+  scan_convert(grey_beam, beams.shadow, labels, frame);
   return frame;
 }
 
@@ -192,6 +193,13 @@ BModeSimulator::Impl::Acoustics BModeSimulator::Impl::acoustics() const {
   a.tgc_db_per_cm = options.tgc_fraction * a.background_db_per_cm;
   a.tgc_step_factor = std::pow(10.0, a.tgc_db_per_cm * step_cm / 20.0);
   return a;
+}
+
+bool BModeSimulator::Impl::casts_shadow(int label) const {
+  // In single precision, as the beams' attenuation (Acoustics) is.
+  const float attenuation = static_cast<float>(phantom.tissue(label).attenuation_db_per_cm_mhz);
+  return 2.0 * attenuation * probe.geometry().frequency_mhz * kShadowCasterPathCm >=
+         options.shadow_threshold_db;
 }
 
 void BModeSimulator::Impl::boundary_gradients(const cv::Mat& beam_labels, const Acoustics& a,
@@ -282,8 +290,7 @@ cv::Mat BModeSimulator::Impl::envelope_grey(cv::Mat& field) const {
 }
 
 void BModeSimulator::Impl::scan_convert(const cv::Mat& grey_beam, const cv::Mat& shadow,
-                                        const LabelImage& labels, const Acoustics& a,
-                                        SimulatedFrame& frame) const {
+                                        const LabelImage& labels, SimulatedFrame& frame) const {
   cv::Mat grey_image, shadow_image;
   cv::remap(grey_beam, grey_image, pixel_to_beam_x, pixel_to_beam_y, cv::INTER_LINEAR,
             cv::BORDER_REPLICATE);
@@ -298,10 +305,7 @@ void BModeSimulator::Impl::scan_convert(const cv::Mat& grey_beam, const cv::Mat&
   // it stays its label in the truth, since its surface echo shows where it is and its extent
   // below the surface is anatomy (a rib's thickness) that a segmenter is told, not shown.
   std::array<bool, 256> casts_shadow{};
-  for (int l = 1; l < 255; ++l)
-    casts_shadow[static_cast<std::size_t>(l)] =
-        2.0 * a.attenuation[static_cast<std::size_t>(l)] * a.frequency_mhz * kShadowCasterPathCm >=
-        options.shadow_threshold_db;
+  for (int l = 1; l < 255; ++l) casts_shadow[static_cast<std::size_t>(l)] = Impl::casts_shadow(l);
   std::size_t shadow_pixels = 0;
   for (int j = 0; j < height; ++j) {
     const float* grey_row = grey_image.ptr<float>(j);
@@ -346,6 +350,11 @@ BModeSimulator& BModeSimulator::operator=(BModeSimulator&&) noexcept = default;
 const Phantom& BModeSimulator::phantom() const { return impl_->phantom; }
 const acquisition::Probe& BModeSimulator::probe() const { return impl_->probe; }
 const BModeOptions& BModeSimulator::options() const { return impl_->options; }
+
+bool BModeSimulator::casts_shadow(int label) const {
+  check_label(label);
+  return impl_->casts_shadow(label);
+}
 
 double BModeSimulator::psf_sigma_mm() const {
   const double wavelength_mm = kSoundSpeedMmPerUs / impl_->probe.geometry().frequency_mhz;

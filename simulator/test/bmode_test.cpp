@@ -176,6 +176,12 @@ TEST(BMode, StrongReflectorCastsAShadowMarkedUnknown) {
   EXPECT_GT(mean_grey(-4, 4, 6.8, 7.2), 200.0);
   // The organ beside the shadow stays known.
   EXPECT_GT(truth_share(2, 8, 9.5, 30, 34), 0.9);
+  // The bone keeps its whole section in the truth (it casts its shadow); the organ does not.
+  EXPECT_TRUE(simulator.casts_shadow(1));
+  EXPECT_FALSE(simulator.casts_shadow(2));
+  EXPECT_EQ(
+      frame.truth.at(probe.width_px() / 2, static_cast<int>(probe.mm_to_pixel(Vec2(0, 11)).y())),
+      1);
 }
 
 }  // namespace

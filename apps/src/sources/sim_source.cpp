@@ -158,7 +158,7 @@ Result<scan::ScanSource> open_sim_source(const scan::SourceRequest& request,
     std::string name;
     for (const auto& m : scenario->phantom.meshes)
       if (m.label == label) name = m.name;
-    setup.labels.push_back({label, name});
+    setup.labels.push_back({label, name, simulator->casts_shadow(label)});
   }
   const Box3 box = scenario->phantom.bounds();
   setup.bounds = request.bounds ? *request.bounds : box.padded(0.1 * box.diagonal());

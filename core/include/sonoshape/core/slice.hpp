@@ -50,6 +50,11 @@ struct LabeledSlice {
 struct LabelInfo {
   int id = 1;
   std::string name;
+  /// The material casts an acoustic shadow over what lies beyond it (bone: the echo stops at
+  /// its surface), so its drawn section ends where the labeller put its end, even along an
+  /// unknown region (its shadow): those edges are its boundaries, where for other materials
+  /// they are where the slice stops seeing (docs/formats/slices.md, docs/engine.md section 8).
+  bool casts_shadow = false;
 };
 
 /// Everything an offline reconstruction needs.
@@ -65,6 +70,8 @@ struct SliceSet {
   std::vector<int> material_ids() const;
   /// The name of a material id ("label_<id>" when not declared).
   std::string label_name(int id) const;
+  /// The declared entry of a material id, or {id, label_name(id)} when not declared.
+  LabelInfo label_info(int id) const;
   /// `bounds` if given, else the box of all region vertices padded by 10% of its diagonal.
   Box3 effective_bounds() const;
 };

@@ -11,6 +11,7 @@
 
 #include "sonoshape/core/geometry.hpp"
 #include "sonoshape/core/image.hpp"
+#include "sonoshape/core/slice.hpp"
 #include "sonoshape/core/status.hpp"
 
 namespace sonoshape::segmentation {
@@ -132,6 +133,12 @@ struct SegmentationConfig {
   /// Checks ranges and label ids; the message names the field and the fix.
   Status validate() const;
 };
+
+/// The slice set's entry of a material the segmenter labels: a model with a thickness is a bone
+/// whose section is drawn whole (to that thickness below its surface echo), so its section ends
+/// where it ends, also along its shadow (LabelInfo::casts_shadow). Without a thickness only the
+/// visible surface band is labelled, and its edge along the shadow is not the bone's end.
+LabelInfo slice_label(const LabelModel& model);
 
 /// Parses the JSON form (docs/segmentation.md); `source_name` names the input in messages.
 /// Unknown keys are errors (a misspelt key must not be silently ignored).

@@ -78,6 +78,10 @@ class BModeSimulator {
   /// The point-spread function's Gaussian sigma (mm): the mean of its lateral and axial sigmas
   /// at the probe's frequency (what a segmenter's blooming correction needs).
   double psf_sigma_mm() const;
+  /// Whether tissue `label` (1..254) loses the shadow threshold within a millimetre (bone): it
+  /// shadows its own inside and what lies beyond it, and keeps its whole cross-section in the
+  /// truth (SimulatedFrame::truth), so its section's edge along its shadow is its surface.
+  bool casts_shadow(int label) const;
 
   /// The frame seen by the probe at T_reference_probe; the speckle pattern comes from `seed`
   /// (same seed and pose: the same image, bit for bit).
