@@ -75,7 +75,7 @@ struct ScanCommandOptions {
   double max_extrapolation_ms = 0.0;
   double pose_wait_ms = 500.0;
   double keyframe_angle_deg = tracking::KeyframeOptions{}.min_angle_deg;
-  double keyframe_distance_mm = tracking::KeyframeOptions{}.min_distance_mm;
+  std::optional<double> keyframe_distance_mm;  ///< none: the field's (keyframe_distance_for)
   std::size_t slice_budget = tracking::KeyframeOptions{}.slice_budget;
   std::size_t segmentation_queue = scan::ScanOptions{}.segmentation_queue;
   std::size_t reconstruction_queue = scan::ScanOptions{}.reconstruction_queue;
@@ -584,6 +584,20 @@ SimSourceOptions sim_source_options(const ScanCommandOptions& options) {
   return sim;
 }
 
+// The keyframes' distance threshold when --keyframe-distance-mm is not given. The paper's
+// field keeps the keyframes' 2.5 mm (about an abdominal probe's elevational beam thickness;
+// closer near-parallel planes multiply its cells and gain nothing: docs/benchmarks.md,
+// "Keyframes"). The thin-plate field fits segmented outlines as a smoothing spline, which
+// averages their error over the neighbouring slices, and a slice costs it only its samples:
+// 1.5 mm gives it more of them to average (docs/segmentation.md, "The default scan").
+constexpr double kThinPlateKeyframeDistanceMm = 1.5;
+double keyframe_distance_for(const ScanCommandOptions& options) {
+  if (options.keyframe_distance_mm) return *options.keyframe_distance_mm;
+  return recon::parse_field_name(options.field) == recon::FieldKind::thin_plate
+             ? kThinPlateKeyframeDistanceMm
+             : tracking::KeyframeOptions{}.min_distance_mm;
+}
+
 // How the pipeline runs: sync, keyframes, playback, limits and queues.
 scan::ScanOptions pipeline_options(const ScanCommandOptions& options,
                                    const scan::ScanSource& source) {
@@ -594,7 +608,7 @@ scan::ScanOptions pipeline_options(const ScanCommandOptions& options,
   scan_options.sync.max_gap_s = 1e-3 * options.max_pose_gap_ms;
   scan_options.sync.max_extrapolation_s = 1e-3 * options.max_extrapolation_ms;
   scan_options.keyframes.min_angle_deg = options.keyframe_angle_deg;
-  scan_options.keyframes.min_distance_mm = options.keyframe_distance_mm;
+  scan_options.keyframes.min_distance_mm = keyframe_distance_for(options);
   scan_options.keyframes.slice_budget = options.slice_budget;
   scan_options.real_time = !options.fast;
   // Played fast, nothing needs dropping: every stage waits for the next (deterministic).
@@ -976,9 +990,10 @@ void add_keyframe_options(CLI::App& app, ScanCommandOptions* options) {
       ->check(kNonNegativeNumber)
       ->capture_default_str();
   app.add_option("--keyframe-distance-mm", options->keyframe_distance_mm,
-                 "...or an image corner moves at least this far out of every slice's plane")
-      ->check(kNonNegativeNumber)
-      ->capture_default_str();
+                 "...or an image corner moves at least this far out of every slice's plane. "
+                 "Default: 1.5 with the thin-plate field (more slices to average the "
+                 "segmentation's error over), 2.5 with the mean-value field")
+      ->check(kNonNegativeNumber);
   app.add_option("--slice-budget", options->slice_budget,
                  "Long examinations: past this many slices a frame must differ by twice both "
                  "keyframe thresholds, so that memory stops growing once the anatomy is covered "
