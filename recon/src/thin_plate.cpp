@@ -1085,6 +1085,10 @@ struct ThinPlateField::Impl {
     out[0] = materials > 0 ? -best : 0.0;
   }
 
+  struct StepSums {
+    double largest = 0.0;  // mm
+    double squares = 0.0;
+  };
   // When a solve stops: no iteration moved a node whose value (before or after it) lies within
   // `band_mm` of zero by more than `tolerance_mm`.
   struct SolveStop {
@@ -1126,11 +1130,13 @@ struct ThinPlateField::Impl {
     // iterations converge geometrically, so what is left is of that order.
     const double step_tolerance_mm = stop.tolerance_mm;
     double step_mm = std::numeric_limits<double>::infinity();
+    // The V-cycle's right-hand side: the residual in single precision, written by each
+    // iteration's update pass after this.
+    Work& w = work.levels[0];
+    w.fit(count);
+    std::copy(r.begin(), r.end(), w.b.begin());
     while (step_mm > step_tolerance_mm && residual > kSolvedResidual &&
            iteration < options.max_iterations) {
-      Work& w = work.levels[0];
-      w.fit(count);
-      std::copy(r.begin(), r.end(), w.b.begin());
       kernels.v_cycle(levels, work.levels, 0);
       const std::vector<Real>& z = w.x;  // the preconditioned residual
       const double rz_next = dot(r.data(), z.data(), count);
@@ -1139,20 +1145,28 @@ struct ThinPlateField::Impl {
       rz = rz_next;
       kernels.apply_operator(g, p.data(), q.data());
       const double alpha = rz / dot(p.data(), q.data(), count);
-      step_mm = tbb::parallel_reduce(
-          tbb::blocked_range<std::size_t>(0, count, 1 << 14), 0.0,
-          [&](const tbb::blocked_range<std::size_t>& range, double largest) {
+      // One pass: the update, the largest step in the band, the residual's squares (in dot()'s
+      // ranges and order, so the same sum) and the next V-cycle's right-hand side.
+      const StepSums sums = tbb::parallel_deterministic_reduce(
+          tbb::blocked_range<std::size_t>(0, count, 1 << 14), StepSums{},
+          [&](const tbb::blocked_range<std::size_t>& range, StepSums sum) {
+            Real* next_b = w.b.data();
             for (std::size_t n = range.begin(); n < range.end(); ++n) {
               const double before = x[n];
               x[n] += alpha * p[n];
               r[n] -= alpha * q[n];
+              next_b[n] = static_cast<Real>(r[n]);
+              sum.squares += r[n] * r[n];
               if (std::min(std::abs(before), std::abs(x[n])) <= stop.band_mm)
-                largest = std::max(largest, std::abs(alpha * p[n]));
+                sum.largest = std::max(sum.largest, std::abs(alpha * p[n]));
             }
-            return largest;
+            return sum;
           },
-          [](double a, double b) { return std::max(a, b); });
-      residual = std::sqrt(dot(r.data(), r.data(), count)) / norm_b;
+          [](const StepSums& a, const StepSums& b) {
+            return StepSums{std::max(a.largest, b.largest), a.squares + b.squares};
+          });
+      step_mm = sums.largest;
+      residual = std::sqrt(sums.squares) / norm_b;
       ++iteration;
     }
     if (step_mm > step_tolerance_mm && residual > kSolvedResidual)
