@@ -53,7 +53,7 @@ struct ThinPlateOptions {
   /// mesh reads, and a live update is a preview (a scan's final meshes are solved again at
   /// once). Its result agrees with a one-shot solve's to about this fraction of the grid
   /// spacing (docs/engine.md, section 8).
-  double online_tolerance = 3e-2;
+  double online_tolerance = 5e-2;
   /// The nodes an online update's stopping test looks at: those whose value, before or after
   /// an iteration, lies within this fraction of the material's truncation of zero (the field
   /// is a signed distance there). The rest converge more slowly but keep their sign.

@@ -79,6 +79,14 @@ FieldComparison compare_near_zero(const ThinPlateField& online, const ThinPlateF
   return out;
 }
 
+// What an online field's values may differ by from a one-shot solve's near the zero set (mm):
+// the online tolerance (of the grid spacing), and the sampled solution's tolerance times the
+// Catmull-Rom weights' absolute sum.
+double online_bound(double spacing) {
+  const ThinPlateOptions options;
+  return (options.online_tolerance + 1.25 * 1.25 * 1.25 * options.resample_tolerance) * spacing;
+}
+
 LabeledSlice z_slice(double z) {
   LabeledSlice s;
   s.origin_mm = Vec3(0, 0, z);
@@ -482,8 +490,7 @@ TEST(ThinPlateData, AGrowingTruncationGivesTheDataOfAFieldBuiltWithIt) {
   const double band_mm = options.online_band * 0.1 * truncation_extent(final_extents[0]);
   const FieldComparison compared = compare_near_zero(grown, fresh, box, band_mm);
   EXPECT_GT(compared.near_count, 100u);
-  EXPECT_LT(compared.near_zero, 2.0 * options.online_tolerance * spacing +
-                                    1.25 * 1.25 * 1.25 * options.resample_tolerance * spacing);
+  EXPECT_LT(compared.near_zero, online_bound(spacing));
   EXPECT_LT(compared.anywhere, band_mm);
 }
 
@@ -706,7 +713,7 @@ TEST(ThinPlateOnline, UpdatesAgreeWithTheOneShotReconstruction) {
   // An update's solve stops when an iteration moves no value near the zero set by more than
   // the online tolerance (of the grid spacing, 2 finest cells of 120 / 2^7 mm).
   const double spacing = 2.0 * 120.0 / 128.0;
-  EXPECT_LT(worst, 2.0 * ThinPlateOptions{}.online_tolerance * spacing);
+  EXPECT_LT(worst, online_bound(spacing));
   const double va = signed_volume(online.mesh().meshes[0].mesh),
                vb = signed_volume(once.mesh().meshes[0].mesh);
   EXPECT_NEAR(va / vb, 1.0, 1e-3);
@@ -810,10 +817,10 @@ TEST(ThinPlateOnline, AMaterialWhoseNewDataTheFieldFitsIsNotSolvedAgain) {
 
 // Slices added one by one, each update solved from the last solution to the online tolerance,
 // its stopping test on the nodes near the zero set; a one-shot solve of them all to the
-// solver's tolerance at every node. Near the zero set (what the mesh reads) they agree to twice
-// the online tolerance (plus the sampled solution's), and everywhere to less than the band, so
-// that beyond it the signs agree. Updates that stop at ten times the online tolerance drift
-// beyond that: the comparison sees the tolerance.
+// solver's tolerance at every node. Near the zero set (what the mesh reads) they agree to the
+// online tolerance (plus the sampled solution's; 0.060 mm against 0.103), and everywhere to
+// less than the band, so that beyond it the signs agree. Updates that stop at ten times the
+// online tolerance drift beyond that (0.157 mm): the comparison sees the tolerance.
 TEST(ThinPlateOnline, UpdatesAgreeWithTheOneShotFieldToTheOnlineTolerance) {
   const SliceSet set = sphere_stack(40.0, {-30, 30, -20, 20, -10, 10, 0});
   const Box3 box = *set.bounds;
@@ -833,14 +840,13 @@ TEST(ThinPlateOnline, UpdatesAgreeWithTheOneShotFieldToTheOnlineTolerance) {
   once.add_slices(prepared);
   once.solve();
   const double band_mm = options.online_band * 0.1 * truncation_extent(extents[0]);
-  const double bound = 2.0 * options.online_tolerance * spacing +
-                       1.25 * 1.25 * 1.25 * options.resample_tolerance * spacing;
+  const double bound = online_bound(spacing);
   const FieldComparison compared = compare_near_zero(online_field(options), once, box, band_mm);
   EXPECT_GT(compared.near_count, 200u);
   EXPECT_LT(compared.near_zero, bound);
   EXPECT_LT(compared.anywhere, band_mm);
   ThinPlateOptions loose = options;
-  loose.online_tolerance = 30.0 * options.online_tolerance;
+  loose.online_tolerance = 10.0 * options.online_tolerance;
   EXPECT_GT(compare_near_zero(online_field(loose), once, box, band_mm).near_zero, bound);
 }
 
@@ -875,7 +881,7 @@ TEST(ThinPlateOnline, KeptRowsStayCurrentThroughAdditionsRebuildsAndRemovals) {
   // The online tolerance (of a grid spacing) and the sampled solution's (2.5e-3, times 1.25^3)
   // of the one-shot field.
   const double spacing = 2.0 * 120.0 / 128.0;
-  EXPECT_LT(worst, 2.0 * ThinPlateOptions{}.online_tolerance * spacing);
+  EXPECT_LT(worst, online_bound(spacing));
 }
 
 // What an online update keeps (rows, unsolved materials, moved plateaus) depends on the values
