@@ -775,11 +775,11 @@ TEST(ThinPlateOnline, PartialResamplingStaysWithinItsToleranceOfTheSolution) {
   EXPECT_GT(largest, 100 * bound);  // while the solution moved far more than the tolerance
 }
 
-// A material whose added data the field already fits to the solver's tolerance is not solved
+// A material whose added data the field already fits to the online tolerance is not solved
 // again (here: a slice given twice), one whose data are new is; either way the field stays
-// within about the solver's tolerance of a one-shot solve of the same data. A coarse tolerance
-// (a quarter of a grid spacing, online too) makes the repeated slice's fit residual fall below
-// it.
+// within about that tolerance of a one-shot solve of the same data near the zero set. A coarse
+// tolerance (a quarter of a grid spacing, online and one-shot) makes the repeated slice's fit
+// residual fall below it.
 TEST(ThinPlateOnline, AMaterialWhoseNewDataTheFieldFitsIsNotSolvedAgain) {
   const SliceSet set = sphere_stack(40.0, {-30, -15, 0, 15, 30});
   const Box3 box = *set.bounds;
