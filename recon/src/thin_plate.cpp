@@ -1090,7 +1090,7 @@ struct ThinPlateField::Impl {
     double squares = 0.0;
   };
   // When a solve stops: no iteration moved a node whose value (before or after it) lies within
-  // `band_mm` of zero by more than `tolerance_mm`.
+  // `band_mm` of zero, or changed sign, by more than `tolerance_mm`.
   struct SolveStop {
     double tolerance_mm = 0.0;
     double band_mm = std::numeric_limits<double>::infinity();
@@ -1157,7 +1157,9 @@ struct ThinPlateField::Impl {
               r[n] -= alpha * q[n];
               next_b[n] = static_cast<Real>(r[n]);
               sum.squares += r[n] * r[n];
-              if (std::min(std::abs(before), std::abs(x[n])) <= stop.band_mm)
+              // Within the band before or after the step, or across it (its sign changed).
+              if (std::min(std::abs(before), std::abs(x[n])) <= stop.band_mm ||
+                  (before < 0.0) != (x[n] < 0.0))
                 sum.largest = std::max(sum.largest, std::abs(alpha * p[n]));
             }
             return sum;
