@@ -246,7 +246,7 @@ TEST_F(EndToEnd, BundledExampleReconstructs) {
 TEST_F(EndToEnd, OnlineReconstructionEmitsStepsAndEqualsOffline) {
   const std::string example = std::string(SONOSHAPE_DATA_DIR) + "/examples/two_labels.slices.json";
   // The paper's field, whose online updates equal its one-shot reconstruction (the thin-plate
-  // field's agree to the solver's tolerance: the next test).
+  // field's agree to its online tolerance: the next test).
   auto r =
       run("reconstruct " + example + " -o " + path("online") +
           " --field mean-value --depth 5 --online --emit-every 3 --stats " + path("online.json"));
@@ -284,7 +284,7 @@ TEST_F(EndToEnd, OnlineReconstructionEmitsStepsAndEqualsOffline) {
   EXPECT_NE(r.output.find("--online"), std::string::npos) << r.output;
 }
 
-// --field thin-plate through the command: online and offline agree to the solver's tolerance
+// --field thin-plate through the command: online and offline agree to the online tolerance
 // (not to the bit: the online solves start from the last solution); an unknown field is refused.
 TEST_F(EndToEnd, ThinPlateFieldOnlineAndOfflineAgree) {
   const std::string example = std::string(SONOSHAPE_DATA_DIR) + "/examples/two_labels.slices.json";

@@ -94,7 +94,7 @@ TEST(ScanCommand, FastSimulatedScanWritesMeshesSlicesAndSummary) {
 }
 
 // The thin-plate field in the live pipeline: the same scan, closed meshes, and the offline
-// engine's thin-plate meshes of the recorded slices within the solver's tolerance (the online
+// engine's thin-plate meshes of the recorded slices within the online tolerance (the online
 // solves start from the last solution, the offline one from scratch).
 TEST(ScanCommand, ThinPlateFieldScansAndAgreesWithItsOfflineReconstruction) {
   sonoshape::testing::TempDir dir;

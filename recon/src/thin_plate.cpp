@@ -1121,9 +1121,27 @@ struct ThinPlateField::Impl {
     out[0] = materials > 0 ? -best : 0.0;
   }
 
+  struct StepSums {
+    double largest = 0.0;  // mm
+    double squares = 0.0;
+  };
+  // When a solve stops: no iteration moved a node whose value (before or after it) lies within
+  // `band_mm` of zero, or changed sign, by more than `tolerance_mm`.
+  struct SolveStop {
+    double tolerance_mm = 0.0;
+    double band_mm = std::numeric_limits<double>::infinity();
+  };
+  // A field's first solve (a one-shot reconstruction, a rebuild) tests every node at the
+  // solver's tolerance; an update's, which starts from this field's last solution, at the online
+  // tolerance and only the nodes near material m's zero set, those the mesh reads.
+  SolveStop solve_stop(std::size_t m) const {
+    if (!solved) return {options.tolerance * spacing, std::numeric_limits<double>::infinity()};
+    return {options.online_tolerance * spacing, options.online_band * truncation_mm[m]};
+  }
+
   // Conjugate gradients on A x = b, preconditioned by one V-cycle, from x. Returns the
   // iterations.
-  int solve_one(std::vector<double>& x, const double* b, SolveWork& work) {
+  int solve_one(std::vector<double>& x, const double* b, SolveWork& work, const SolveStop& stop) {
     const Level& g = levels[0];
     const std::size_t count = g.size();
     work.levels.resize(levels.size());
@@ -1144,15 +1162,17 @@ struct ThinPlateField::Impl {
     double residual = std::sqrt(dot(r.data(), r.data(), count)) / norm_b;
     int iteration = 0;
     double rz = 0.0;
-    // Converged when an iteration moves no node by more than the tolerance (a fraction of the
-    // grid spacing): the iterations converge geometrically, so what is left is of that order.
-    const double step_tolerance_mm = options.tolerance * spacing;
+    // Converged when an iteration moves no node of the band by more than the tolerance: the
+    // iterations converge geometrically, so what is left is of that order.
+    const double step_tolerance_mm = stop.tolerance_mm;
     double step_mm = std::numeric_limits<double>::infinity();
+    // The V-cycle's right-hand side: the residual in single precision, written by each
+    // iteration's update pass after this.
+    Work& w = work.levels[0];
+    w.fit(count);
+    std::copy(r.begin(), r.end(), w.b.begin());
     while (step_mm > step_tolerance_mm && residual > kSolvedResidual &&
            iteration < options.max_iterations) {
-      Work& w = work.levels[0];
-      w.fit(count);
-      std::copy(r.begin(), r.end(), w.b.begin());
       kernels.v_cycle(levels, work.levels, 0);
       const std::vector<Real>& z = w.x;  // the preconditioned residual
       const double rz_next = dot(r.data(), z.data(), count);
@@ -1161,18 +1181,30 @@ struct ThinPlateField::Impl {
       rz = rz_next;
       kernels.apply_operator(g, p.data(), q.data());
       const double alpha = rz / dot(p.data(), q.data(), count);
-      step_mm = tbb::parallel_reduce(
-          tbb::blocked_range<std::size_t>(0, count, 1 << 14), 0.0,
-          [&](const tbb::blocked_range<std::size_t>& range, double largest) {
+      // One pass: the update, the largest step in the band, the residual's squares (in dot()'s
+      // ranges and order, so the same sum) and the next V-cycle's right-hand side.
+      const StepSums sums = tbb::parallel_deterministic_reduce(
+          tbb::blocked_range<std::size_t>(0, count, 1 << 14), StepSums{},
+          [&](const tbb::blocked_range<std::size_t>& range, StepSums sum) {
+            Real* next_b = w.b.data();
             for (std::size_t n = range.begin(); n < range.end(); ++n) {
+              const double before = x[n];
               x[n] += alpha * p[n];
               r[n] -= alpha * q[n];
-              largest = std::max(largest, std::abs(alpha * p[n]));
+              next_b[n] = static_cast<Real>(r[n]);
+              sum.squares += r[n] * r[n];
+              // Within the band before or after the step, or across it (its sign changed).
+              if (std::min(std::abs(before), std::abs(x[n])) <= stop.band_mm ||
+                  (before < 0.0) != (x[n] < 0.0))
+                sum.largest = std::max(sum.largest, std::abs(alpha * p[n]));
             }
-            return largest;
+            return sum;
           },
-          [](double a, double b) { return std::max(a, b); });
-      residual = std::sqrt(dot(r.data(), r.data(), count)) / norm_b;
+          [](const StepSums& a, const StepSums& b) {
+            return StepSums{std::max(a.largest, b.largest), a.squares + b.squares};
+          });
+      step_mm = sums.largest;
+      residual = std::sqrt(sums.squares) / norm_b;
       ++iteration;
     }
     if (step_mm > step_tolerance_mm && residual > kSolvedResidual)
@@ -1313,10 +1345,10 @@ ThinPlateSolveStats ThinPlateField::solve() {
   ThinPlateSolveStats stats;
   Stopwatch clock;
   const std::size_t count = s.levels[0].size();
-  const double fitted_mm = s.options.tolerance * s.spacing;
+  const double fitted_mm = s.options.online_tolerance * s.spacing;
   std::vector<std::size_t> solved;
   for (std::size_t m = 0; m < s.misfit_mm.size(); ++m) {
-    // The field already fits this material's new data to the solver's tolerance, and nothing
+    // The field already fits this material's new data to the online tolerance, and nothing
     // else changed since its last solve (no removal: a rebuilt field has not solved yet): a
     // solve would move it by about as much as its tolerance allows.
     if (s.solved && s.misfit_mm[m] <= fitted_mm)
@@ -1327,6 +1359,8 @@ ThinPlateSolveStats ThinPlateField::solve() {
   }
   // Not when every material is left as it is: the next solve does it.
   if (!solved.empty()) s.refresh_weights();
+  std::vector<Impl::SolveStop> stops;
+  for (const std::size_t m : solved) stops.push_back(s.solve_stop(m));
   // The materials at once, each with its own work vectors (the operator is shared): one solve's
   // passes over the grid scale poorly across threads (a 207k-node grid: 1.4 times as fast on
   // two), two solves side by side well. Each solve is the same whatever runs beside it.
@@ -1334,8 +1368,8 @@ ThinPlateSolveStats ThinPlateField::solve() {
   std::vector<int> iterations(solved.size(), 0);
   tbb::parallel_for(std::size_t{0}, solved.size(), [&](std::size_t i) {
     const std::size_t m = solved[i];
-    iterations[i] =
-        s.solve_one(s.solution[m], s.weighted_targets.data() + m * count, s.solve_work[m]);
+    iterations[i] = s.solve_one(s.solution[m], s.weighted_targets.data() + m * count,
+                                s.solve_work[m], stops[i]);
   });
   for (const int n : iterations) stats.iterations += n;
   s.solved = true;

@@ -50,6 +50,16 @@ struct ThinPlateOptions {
   /// of the grid spacing (the field is in mm of signed distance): a hundredth of a cell moves
   /// the surface by about that, far below what the grid resolves.
   double tolerance = 1e-2;
+  /// An online update's solve (from the field's last solution) stops at this looser tolerance
+  /// and tests only the nodes near each material's zero set (online_band): those are what the
+  /// mesh reads, and a live update is a preview (a scan's final meshes are solved again at
+  /// once). Its result agrees with a one-shot solve's to about this fraction of the grid
+  /// spacing (docs/engine.md, section 8).
+  double online_tolerance = 5e-2;
+  /// The nodes an online update's stopping test looks at: those whose value, before or after
+  /// an iteration, lies within this fraction of the material's truncation of zero (the field
+  /// is a signed distance there). The rest converge more slowly but keep their sign.
+  double online_band = 0.25;
   int max_iterations = 200;
   /// What evaluate() interpolates is the solution as last sampled, per block of 4^3 nodes: a
   /// block takes the solution again when one of its nodes moved by more than this fraction of
@@ -74,7 +84,7 @@ struct ThinPlateSolveStats {
   double solve_s = 0.0;   ///< conjugate gradients, every material
   int iterations = 0;     ///< summed over materials
   std::size_t nodes = 0;  ///< solve grid nodes
-  /// Materials not solved again: their data added since the last solve lie within the solver's
+  /// Materials not solved again: their data added since the last solve lie within the online
   /// tolerance of the field, and nothing else changed.
   int unchanged_materials = 0;
 };

@@ -18,7 +18,7 @@ class ReconstructorStage final : public ReconstructionStage {
   std::size_t slice_count() const override { return reconstructor_.slice_count(); }
 
   // The mean-value field's online updates equal its one-shot reconstruction (to the bit);
-  // the thin-plate field's agree with it to the solver's tolerance (docs/engine.md, section 8),
+  // the thin-plate field's agree with it to its online tolerance (docs/engine.md, section 8),
   // so its final meshes are solved again from all the slices at once.
   std::optional<recon::UpdateStats> settle() override {
     if (options_.engine.field != recon::FieldKind::thin_plate || slice_count() == 0)
