@@ -205,7 +205,17 @@ void smooth_outline(Ring2& ring, const CornerSet& junctions) {
     }
     points.swap(moved);
   }
-  ring = std::move(points);
+  // Points in line with both neighbours (the runs away from any step stay straight) add
+  // nothing but work for the simplification; a ring that shares them drops them alike.
+  ring.clear();
+  for (std::size_t k = 0; k < count; ++k) {
+    const Vec2& before = points[(k + count - 1) % count];
+    const Vec2& after = points[(k + 1) % count];
+    const Vec2 a = points[k] - before, b = after - points[k];
+    if (fixed[k] || std::abs(a.x() * b.y() - a.y() * b.x()) > 1e-9 * a.norm() * b.norm() ||
+        a.dot(b) <= 0.0)
+      ring.push_back(points[k]);
+  }
 }
 
 // The squared-distance cost made a total order. Equal costs are common on a pixel grid, and the
