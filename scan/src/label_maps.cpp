@@ -185,8 +185,10 @@ Result<LabeledSlice> LabelMapStage::segment(const TrackedFrame& frame) {
   const Eigen::Matrix4d T_reference_probe = frame.T_reference_probe.matrix();
   const segmentation::ImagePlane plane = segmentation::image_plane(
       T_reference_probe * setup_.T_probe_image, T_reference_probe.block<3, 1>(0, 3));
+  // The site's label maps are taken as drawn: their pixels' outlines, exact (no outline_sd_mm).
   auto slice = segmentation::make_slice(*labels, g.sector, g.sector_px, plane,
-                                        setup_.segmentation.simplify_mm, &repairs_);
+                                        setup_.segmentation.simplify_mm, &repairs_,
+                                        segmentation::OutlineForm::kPixelEdges);
   if (!slice) return slice.status();
   slice->timestamp_s = frame.frame.timestamp_s;
   return slice;

@@ -67,8 +67,10 @@ TEST(LabelMapStage, GivesEachFrameTheSliceOfItsLabelMapAndNoneWithoutOne) {
   FakeFeed feed;
   const auto plane = segmentation::image_plane(
       frame.T_reference_probe.matrix() * setup.T_probe_image, Vec3(0, 0, 7));
+  // The site's map as drawn: its pixels' outlines.
   const auto expected = segmentation::make_slice(
-      *feed.label_map(frame.frame), setup.geometry.sector, setup.geometry.sector_px, plane, 0.0);
+      *feed.label_map(frame.frame), setup.geometry.sector, setup.geometry.sector_px, plane, 0.0,
+      nullptr, segmentation::OutlineForm::kPixelEdges);
   ASSERT_TRUE(expected);
   ASSERT_EQ(slice->regions.size(), expected->regions.size());
   for (std::size_t r = 0; r < slice->regions.size(); ++r) {

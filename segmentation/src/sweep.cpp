@@ -530,8 +530,10 @@ class SweepRun {
     const LabelImage frame_labels = label_frame(k, plane);
     tally_labels(k, frame_labels);
     std::vector<Repair> repairs;
+    // Label maps that replace the segmenter are taken as drawn: their pixels' outlines, exact.
+    const OutlineForm form = labels_.perfect ? OutlineForm::kPixelEdges : OutlineForm::kSmooth;
     auto slice = make_slice(frame_labels, setup_.geometry.sector, setup_.geometry.sector_px, plane,
-                            setup_.config.simplify_mm, &repairs);
+                            setup_.config.simplify_mm, &repairs, form);
     if (!take_repairs(k, repairs)) return false;
     if (!slice) {
       ++out_.failed;
