@@ -1,0 +1,178 @@
+#include "zero_set_refinement.hpp"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+
+namespace sonoshape::recon {
+namespace {
+
+constexpr std::uint32_t kNoVertex = 0xffffffffu;
+
+// Area-weighted vertex normals (the sum of the incident triangles' cross products), unit length.
+std::vector<Vec3> vertex_normals(const TriangleMesh& mesh) {
+  std::vector<Vec3> normals(mesh.vertices.size(), Vec3::Zero());
+  for (const auto& t : mesh.triangles) {
+    const Vec3 n =
+        (mesh.vertices[t[1]] - mesh.vertices[t[0]]).cross(mesh.vertices[t[2]] - mesh.vertices[t[0]]);
+    for (const std::uint32_t v : t) normals[v] += n;
+  }
+  for (Vec3& n : normals) {
+    const double length = n.norm();
+    if (length > 0.0) n /= length;
+  }
+  return normals;
+}
+
+// The edges to split, as the sorted (vertex pair, half-edge) list: both half-edges of an edge
+// take the same decision, which depends on its two vertices alone.
+std::vector<std::pair<std::uint64_t, std::uint32_t>> edges_to_split(
+    const TriangleMesh& mesh, const std::vector<Vec3>& normals, double min_sagitta_mm) {
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> split;
+  for (std::size_t t = 0; t < mesh.triangles.size(); ++t)
+    for (std::size_t e = 0; e < 3; ++e) {
+      const std::uint32_t a = mesh.triangles[t][e], b = mesh.triangles[t][(e + 1) % 3];
+      // An arc of angle theta over a chord c lies c * theta / 8 off it; theta^2 ~ 2 (1 - cos).
+      const double chord2 = (mesh.vertices[a] - mesh.vertices[b]).squaredNorm();
+      const double theta2 = 2.0 * (1.0 - normals[a].dot(normals[b]));
+      if (chord2 * theta2 <= 64.0 * min_sagitta_mm * min_sagitta_mm) continue;
+      const std::uint64_t key = (static_cast<std::uint64_t>(std::min(a, b)) << 32) | std::max(a, b);
+      split.push_back({key, static_cast<std::uint32_t>(t * 3 + e)});
+    }
+  std::sort(split.begin(), split.end());
+  return split;
+}
+
+// g = f_m - max_{k != m} f_k at each point.
+std::vector<double> label_margin(const std::vector<Vec3>& points, const ZeroSetRefinement& options,
+                                 const PointFieldEvaluator& evaluate) {
+  const std::size_t fc = static_cast<std::size_t>(options.function_count);
+  std::vector<double> values(points.size() * fc);
+  if (!points.empty()) evaluate(points, values.data());
+  std::vector<double> g(points.size());
+  for (std::size_t p = 0; p < points.size(); ++p) {
+    const double* row = values.data() + p * fc;
+    double other = -std::numeric_limits<double>::infinity();
+    for (std::size_t l = 0; l < fc; ++l)
+      if (static_cast<int>(l) != options.material) other = std::max(other, row[l]);
+    g[p] = row[options.material] - other;
+  }
+  return g;
+}
+
+// Offsets along `directions` from `starts` to the zero of g: a probe a quarter cell towards it
+// (outward where g > 0: the normals point out of the region), a secant step from there (within
+// half a cell), and the zero of the line through the nearest two of those three values that
+// bracket one (none: the start).
+std::vector<Vec3> project_on_zero_set(const std::vector<Vec3>& starts,
+                                      const std::vector<Vec3>& directions,
+                                      const ZeroSetRefinement& options,
+                                      const PointFieldEvaluator& evaluate) {
+  const std::size_t count = starts.size();
+  const double probe = 0.25 * options.cell_size_mm, reach = 0.5 * options.cell_size_mm;
+  const std::vector<double> g0 = label_margin(starts, options, evaluate);
+  std::vector<double> d1(count);
+  std::vector<Vec3> points(count);
+  for (std::size_t n = 0; n < count; ++n) {
+    d1[n] = g0[n] > 0.0 ? probe : -probe;
+    points[n] = starts[n] + d1[n] * directions[n];
+  }
+  const std::vector<double> g1 = label_margin(points, options, evaluate);
+  std::vector<double> d2(count);
+  for (std::size_t n = 0; n < count; ++n) {
+    const double slope = (g1[n] - g0[n]) / d1[n];
+    d2[n] = slope < 0.0 ? std::clamp(-g0[n] / slope, -reach, reach) : d1[n];
+    points[n] = starts[n] + d2[n] * directions[n];
+  }
+  const std::vector<double> g2 = label_margin(points, options, evaluate);
+  std::vector<Vec3> projected(count);
+  for (std::size_t n = 0; n < count; ++n) {
+    std::array<std::pair<double, double>, 3> samples{{{0.0, g0[n]}, {d1[n], g1[n]}, {d2[n], g2[n]}}};
+    std::sort(samples.begin(), samples.end());
+    double offset = 0.0, nearest = std::numeric_limits<double>::infinity();
+    for (std::size_t k = 0; k + 1 < samples.size(); ++k) {
+      const auto [da, ga] = samples[k];
+      const auto [db, gb] = samples[k + 1];
+      if ((ga > 0.0) == (gb > 0.0) || ga == gb) continue;
+      const double zero = da + (db - da) * ga / (ga - gb);
+      if (std::abs(zero) < nearest) nearest = std::abs(zero), offset = zero;
+    }
+    projected[n] = starts[n] + offset * directions[n];
+  }
+  return projected;
+}
+
+// Triangle (a, b, c) with the midpoints m0 of ab, m1 of bc, m2 of ca (kNoVertex: not split),
+// replaced by its parts, oriented as it was.
+void split_triangle(const std::array<std::uint32_t, 3>& v, const std::array<std::uint32_t, 3>& m,
+                    const std::vector<Vec3>& positions,
+                    std::vector<std::array<std::uint32_t, 3>>& out) {
+  const int count = (m[0] != kNoVertex) + (m[1] != kNoVertex) + (m[2] != kNoVertex);
+  if (count == 0) {
+    out.push_back(v);
+  } else if (count == 3) {
+    out.push_back({v[0], m[0], m[2]});
+    out.push_back({m[0], v[1], m[1]});
+    out.push_back({m[2], m[1], v[2]});
+    out.push_back({m[0], m[1], m[2]});
+  } else if (count == 1) {
+    const std::size_t e = m[0] != kNoVertex ? 0 : (m[1] != kNoVertex ? 1 : 2);
+    const std::uint32_t a = v[e], b = v[(e + 1) % 3], c = v[(e + 2) % 3];
+    out.push_back({a, m[e], c});
+    out.push_back({m[e], b, c});
+  } else {
+    // Rotated so that the edge (c, a) is the whole one: (a, m0, b, m1, c) around.
+    const std::size_t whole = m[0] == kNoVertex ? 0 : (m[1] == kNoVertex ? 1 : 2);
+    const std::size_t e = (whole + 1) % 3;
+    const std::uint32_t a = v[e], b = v[(e + 1) % 3], c = v[(e + 2) % 3];
+    const std::uint32_t m0 = m[e], m1 = m[(e + 1) % 3];
+    out.push_back({m0, b, m1});
+    // The quad (a, m0, m1, c) along its shorter diagonal.
+    if ((positions[a] - positions[m1]).squaredNorm() <=
+        (positions[m0] - positions[c]).squaredNorm()) {
+      out.push_back({a, m0, m1});
+      out.push_back({a, m1, c});
+    } else {
+      out.push_back({a, m0, c});
+      out.push_back({m0, m1, c});
+    }
+  }
+}
+
+}  // namespace
+
+std::size_t refine_on_zero_set(TriangleMesh& mesh, const ZeroSetRefinement& options,
+                               const PointFieldEvaluator& evaluate) {
+  const std::vector<Vec3> normals = vertex_normals(mesh);
+  const auto split =
+      edges_to_split(mesh, normals, options.min_sagitta_cells * options.cell_size_mm);
+  // Every vertex and the new ones (in the order of their edges' keys) are moved onto the zero
+  // set in one batch: the mesher's vertices interpolate g linearly along their cell edges, which
+  // leaves them up to a tenth of a cell off the cubic field's zero set where it bends.
+  std::vector<std::uint32_t> midpoint(mesh.triangles.size() * 3, kNoVertex);
+  std::vector<Vec3> starts = mesh.vertices, directions = normals;
+  const std::uint32_t first = static_cast<std::uint32_t>(mesh.vertices.size());
+  for (std::size_t n = 0; n < split.size(); ++n) {
+    if (n == 0 || split[n].first != split[n - 1].first) {
+      const std::uint32_t a = static_cast<std::uint32_t>(split[n].first >> 32);
+      const std::uint32_t b = static_cast<std::uint32_t>(split[n].first & 0xffffffffu);
+      starts.push_back(0.5 * (mesh.vertices[a] + mesh.vertices[b]));
+      const Vec3 direction = normals[a] + normals[b];
+      const double length = direction.norm();
+      directions.push_back(length > 0.0 ? Vec3(direction / length) : Vec3::Zero());
+    }
+    midpoint[split[n].second] = static_cast<std::uint32_t>(starts.size() - 1);
+  }
+  mesh.vertices = project_on_zero_set(starts, directions, options, evaluate);
+  std::vector<std::array<std::uint32_t, 3>> triangles;
+  triangles.reserve(mesh.triangles.size() + 3 * (starts.size() - first));
+  for (std::size_t t = 0; t < mesh.triangles.size(); ++t)
+    split_triangle(mesh.triangles[t], {midpoint[3 * t], midpoint[3 * t + 1], midpoint[3 * t + 2]},
+                   mesh.vertices, triangles);
+  mesh.triangles = std::move(triangles);
+  return starts.size() - first;
+}
+
+}  // namespace sonoshape::recon
