@@ -754,7 +754,7 @@ void Reconstructor::State::extract_meshes(tbb::task_arena& arena, Reconstruction
     meshes = extract_label_surfaces(sampled);
     // The thin-plate field is cubic between the grid's vertices: its meshes' vertices are moved
     // onto its zero set, and their edges split where the surface bends (zero_set_refinement.hpp).
-    if (!thin_plate_field()) return;
+    if (!thin_plate_field() || !options.refine_meshes) return;
     const PointFieldEvaluator evaluate = [&](const std::vector<Vec3>& points, double* values) {
       thin_plate->evaluate(points, values);
     };

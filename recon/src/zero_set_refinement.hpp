@@ -27,7 +27,7 @@ struct ZeroSetRefinement {
 /// Moves every vertex of `mesh` along its normal onto the zero set of g = f_m - max_{k != m} f_k,
 /// and splits each edge along which the surface bends (above) at its midpoint moved likewise
 /// along its endpoints' mean normal, each triangle into 2, 3 or 4 accordingly. A point moves by
-/// secant steps within half a cell, and stays where they bracket no zero. A closed, manifold,
+/// a secant step within a fifth of a cell, and stays where the step is longer. A closed, manifold,
 /// oriented mesh stays so (its connectivity is only refined); the same mesh in gives the same mesh
 /// out. Returns the number of edges split.
 std::size_t refine_on_zero_set(TriangleMesh& mesh, const ZeroSetRefinement& options,
