@@ -26,23 +26,43 @@ std::vector<Vec3> vertex_normals(const TriangleMesh& mesh) {
   return normals;
 }
 
-// The edges to split, as the sorted (vertex pair, half-edge) list: both half-edges of an edge
-// take the same decision, which depends on its two vertices alone.
-std::vector<std::pair<std::uint64_t, std::uint32_t>> edges_to_split(
-    const TriangleMesh& mesh, const std::vector<Vec3>& normals, double min_sagitta_mm) {
-  std::vector<std::pair<std::uint64_t, std::uint32_t>> split;
-  for (std::size_t t = 0; t < mesh.triangles.size(); ++t)
-    for (std::size_t e = 0; e < 3; ++e) {
-      const std::uint32_t a = mesh.triangles[t][e], b = mesh.triangles[t][(e + 1) % 3];
-      // An arc of angle theta over a chord c lies c * theta / 8 off it; theta^2 ~ 2 (1 - cos).
-      const double chord2 = (mesh.vertices[a] - mesh.vertices[b]).squaredNorm();
-      const double theta2 = 2.0 * (1.0 - normals[a].dot(normals[b]));
-      if (chord2 * theta2 <= 64.0 * min_sagitta_mm * min_sagitta_mm) continue;
-      const std::uint64_t key = (static_cast<std::uint64_t>(std::min(a, b)) << 32) | std::max(a, b);
-      split.push_back({key, static_cast<std::uint32_t>(t * 3 + e)});
+// Per half-edge (3 t + e: from triangles[t][e] to the next vertex), the index of its edge's new
+// vertex in `edges`, kNoVertex where the edge is not split. Both half-edges of an edge take the
+// same decision (it depends on the two vertices alone). An edge is numbered at its half-edge
+// from the lower vertex to the higher, in triangle order; the other half-edge finds that
+// number among the lower vertex's numbered half-edges (listed per vertex by a counting sort).
+std::vector<std::uint32_t> number_split_edges(const TriangleMesh& mesh,
+                                              const std::vector<Vec3>& normals,
+                                              double min_sagitta_mm,
+                                              std::vector<std::array<std::uint32_t, 2>>& edges) {
+  const std::size_t half_edges = mesh.triangles.size() * 3;
+  std::vector<std::uint32_t> number(half_edges, kNoVertex);
+  std::vector<char> bent(half_edges, 0);
+  std::vector<std::uint32_t> row_start(mesh.vertices.size() + 1, 0);
+  for (std::size_t h = 0; h < half_edges; ++h) {
+    const std::uint32_t a = mesh.triangles[h / 3][h % 3], b = mesh.triangles[h / 3][(h + 1) % 3];
+    // An arc of angle theta over a chord c lies c * theta / 8 off it; theta^2 ~ 2 (1 - cos).
+    const double chord2 = (mesh.vertices[a] - mesh.vertices[b]).squaredNorm();
+    const double theta2 = 2.0 * (1.0 - normals[a].dot(normals[b]));
+    if (chord2 * theta2 <= 64.0 * min_sagitta_mm * min_sagitta_mm) continue;
+    bent[h] = 1;
+    if (a < b) {
+      number[h] = static_cast<std::uint32_t>(edges.size());
+      edges.push_back({a, b});
+      ++row_start[a + 1];
     }
-  std::sort(split.begin(), split.end());
-  return split;
+  }
+  for (std::size_t v = 0; v < mesh.vertices.size(); ++v) row_start[v + 1] += row_start[v];
+  std::vector<std::uint32_t> row_fill(row_start.begin(), row_start.end() - 1);
+  std::vector<std::uint32_t> row_edges(edges.size());
+  for (std::uint32_t n = 0; n < edges.size(); ++n) row_edges[row_fill[edges[n][0]]++] = n;
+  for (std::size_t h = 0; h < half_edges; ++h) {
+    const std::uint32_t a = mesh.triangles[h / 3][h % 3], b = mesh.triangles[h / 3][(h + 1) % 3];
+    if (!bent[h] || a < b) continue;
+    for (std::uint32_t k = row_start[b]; k < row_start[b + 1]; ++k)
+      if (edges[row_edges[k]][1] == a) number[h] = row_edges[k];
+  }
+  return number;
 }
 
 // g = f_m - max_{k != m} f_k at each point.
@@ -129,33 +149,33 @@ void split_triangle(const std::array<std::uint32_t, 3>& v, const std::array<std:
 std::size_t refine_on_zero_set(TriangleMesh& mesh, const ZeroSetRefinement& options,
                                const PointFieldEvaluator& evaluate) {
   const std::vector<Vec3> normals = vertex_normals(mesh);
-  const auto split =
-      edges_to_split(mesh, normals, options.min_sagitta_cells * options.cell_size_mm);
-  // Every vertex and the new ones (in the order of their edges' keys) are moved onto the zero
-  // set in one batch: the mesher's vertices interpolate g linearly along their cell edges, which
-  // leaves them up to a tenth of a cell off the cubic field's zero set where it bends.
-  std::vector<std::uint32_t> midpoint(mesh.triangles.size() * 3, kNoVertex);
-  std::vector<Vec3> starts = mesh.vertices, directions = normals;
+  std::vector<std::array<std::uint32_t, 2>> edges;
+  std::vector<std::uint32_t> midpoint =
+      number_split_edges(mesh, normals, options.min_sagitta_cells * options.cell_size_mm, edges);
+  // Every vertex and the new ones (numbered after them, in the order of `edges`) are moved onto
+  // the zero set in one batch: the mesher's vertices interpolate g linearly along their cell
+  // edges, which leaves them up to a tenth of a cell off the cubic field's zero set where it
+  // bends.
   const std::uint32_t first = static_cast<std::uint32_t>(mesh.vertices.size());
-  for (std::size_t n = 0; n < split.size(); ++n) {
-    if (n == 0 || split[n].first != split[n - 1].first) {
-      const std::uint32_t a = static_cast<std::uint32_t>(split[n].first >> 32);
-      const std::uint32_t b = static_cast<std::uint32_t>(split[n].first & 0xffffffffu);
-      starts.push_back(0.5 * (mesh.vertices[a] + mesh.vertices[b]));
-      const Vec3 direction = normals[a] + normals[b];
-      const double length = direction.norm();
-      directions.push_back(length > 0.0 ? Vec3(direction / length) : Vec3::Zero());
-    }
-    midpoint[split[n].second] = static_cast<std::uint32_t>(starts.size() - 1);
+  std::vector<Vec3> starts = mesh.vertices, directions = normals;
+  starts.reserve(first + edges.size());
+  directions.reserve(first + edges.size());
+  for (const auto& [a, b] : edges) {
+    starts.push_back(0.5 * (mesh.vertices[a] + mesh.vertices[b]));
+    const Vec3 direction = normals[a] + normals[b];
+    const double length = direction.norm();
+    directions.push_back(length > 0.0 ? Vec3(direction / length) : Vec3::Zero());
   }
+  for (std::uint32_t& m : midpoint)
+    if (m != kNoVertex) m += first;
   mesh.vertices = project_on_zero_set(starts, directions, options, evaluate);
   std::vector<std::array<std::uint32_t, 3>> triangles;
-  triangles.reserve(mesh.triangles.size() + 3 * (starts.size() - first));
+  triangles.reserve(mesh.triangles.size() + 3 * edges.size());
   for (std::size_t t = 0; t < mesh.triangles.size(); ++t)
     split_triangle(mesh.triangles[t], {midpoint[3 * t], midpoint[3 * t + 1], midpoint[3 * t + 2]},
                    mesh.vertices, triangles);
   mesh.triangles = std::move(triangles);
-  return starts.size() - first;
+  return edges.size();
 }
 
 }  // namespace sonoshape::recon
