@@ -23,6 +23,7 @@
 #include "sonoshape/core/slice_compare.hpp"
 #include "sonoshape/core/slice_io.hpp"
 #include "thin_plate.hpp"
+#include "zero_set_refinement.hpp"
 
 namespace sonoshape::recon {
 namespace {
@@ -749,7 +750,22 @@ void Reconstructor::State::sample(tbb::task_arena& arena, bool use_thin_plate,
 void Reconstructor::State::extract_meshes(tbb::task_arena& arena, ReconstructionStats& stats) {
   Stopwatch clock;
   std::vector<TriangleMesh> meshes;
-  arena.execute([&] { meshes = extract_label_surfaces(sampled); });
+  arena.execute([&] {
+    meshes = extract_label_surfaces(sampled);
+    // The thin-plate field is cubic between the grid's vertices: its meshes' vertices are moved
+    // onto its zero set, and their edges split where the surface bends (zero_set_refinement.hpp).
+    if (!thin_plate_field() || !options.refine_meshes) return;
+    const PointFieldEvaluator evaluate = [&](const std::vector<Vec3>& points, double* values) {
+      thin_plate->evaluate(points, values);
+    };
+    for (std::size_t m = 1; m <= meshes.size(); ++m) {
+      ZeroSetRefinement refinement;
+      refinement.material = static_cast<int>(m);
+      refinement.function_count = sampled.function_count;
+      refinement.cell_size_mm = sampled.grid.cell_size;
+      refine_on_zero_set(meshes[m - 1], refinement, evaluate);
+    }
+  });
   mesh = MeshSet{};
   for (std::size_t m = 1; m <= material_ids.size(); ++m) {
     const int id = material_ids[m - 1];

@@ -10,12 +10,19 @@ namespace {
 class ReconstructorStage final : public ReconstructionStage {
  public:
   explicit ReconstructorStage(const recon::ReconstructorOptions& options)
-      : options_(options), reconstructor_(options) {}
+      : options_(options), reconstructor_(live_options(options)) {}
   int add_slice(LabeledSlice slice) override { return reconstructor_.add_slice(std::move(slice)); }
   recon::UpdateStats update() override { return reconstructor_.update(); }
   const MeshSet& meshes() const override { return reconstructor_.mesh(); }
   SliceSet slice_set() const override { return reconstructor_.slice_set(); }
   std::size_t slice_count() const override { return reconstructor_.slice_count(); }
+
+  // The live updates' meshes are previews: the thin-plate meshes' refinement onto the field's
+  // zero set (as much again as the mesher) waits for the settled meshes.
+  static recon::ReconstructorOptions live_options(recon::ReconstructorOptions options) {
+    options.refine_meshes = false;
+    return options;
+  }
 
   // The mean-value field's online updates equal its one-shot reconstruction (to the bit);
   // the thin-plate field's agree with it to its online tolerance (docs/engine.md, section 8),

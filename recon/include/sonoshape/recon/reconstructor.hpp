@@ -26,6 +26,11 @@ struct ReconstructorOptions {
   std::optional<Box3> bounds;
   /// Materials known up front (ids and names); materials first seen in a slice are added.
   std::vector<LabelInfo> labels;
+  /// Thin-plate field: every update moves its meshes' vertices onto the field's zero set and
+  /// splits their edges where the surface bends (docs/engine.md, section 6), which costs about
+  /// as much as the marching tetrahedra and the octree's evaluations together. A live scan's
+  /// updates leave it off (their meshes are previews); its settled meshes have it.
+  bool refine_meshes = true;
 };
 
 /// What one update() did.
