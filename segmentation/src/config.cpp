@@ -309,25 +309,29 @@ namespace {
 // far brighter than the water (more than detail::kReflectorGapGrey), so the median decides for
 // it: a Gaussian of smoothing_mm would spread a wire of a millimetre below the boundary. What
 // these presets look for (a wire, a floor, a bone's surface) is itself a thin line brighter than
-// both its sides, no boundary echo to fill (boundary_echo_contrast 0). A wire struck at a steep
+// both its sides, no boundary echo to fill (boundary_echo_contrast 0), and a section too thin for
+// the thin-plate field's smoothing fit, which would thin it away between sparse keyframes: their
+// outlines are interpolated (outline_sd_mm 0; fCal's calibration recording with --every 4, 202
+// parts of wire with 0.6 against 61). A wire struck at a steep
 // angle echoes in a spot of 0.3-0.5 mm^2, which water's noise never makes: a smallest region of
 // 0.5 mm^2 lost one wire in 25 of the 188 frames of fCal's calibration recording, 0.3 in 4.
 const char* const kWiresJson = R"({
   "background": {"name": "water", "grey_mean": 2, "grey_std": 3},
   "labels": [{"id": 1, "name": "wire", "grey_mean": 90, "grey_std": 40}],
   "shadow_fraction": 1.0, "min_region_mm2": 0.3, "opening_mm": 0.2,
-  "boundary_echo_contrast": 0})";
+  "boundary_echo_contrast": 0, "outline_sd_mm": 0})";
 // The floor is a band of a few pixels: the default opening and smoothing would wipe it out, and
 // the closer classes classify the smoothed grey (30 - 2 is no reflector gap).
 const char* const kWaterTankJson = R"({
   "background": {"name": "water", "grey_mean": 2, "grey_std": 3},
   "labels": [{"id": 1, "name": "floor", "grey_mean": 30, "grey_std": 20}],
   "shadow_fraction": 1.0, "min_region_mm2": 4, "opening_mm": 0.1, "smoothing_mm": 0.3,
-  "boundary_echo_contrast": 0})";
+  "boundary_echo_contrast": 0, "outline_sd_mm": 0})";
 const char* const kBoneJson = R"({
   "background": {"name": "soft tissue", "grey_mean": 40, "grey_std": 25},
   "labels": [{"id": 1, "name": "bone", "grey_mean": 200, "grey_std": 40}],
-  "learn_models": true, "min_region_mm2": 3, "opening_mm": 0.3, "boundary_echo_contrast": 0})";
+  "learn_models": true, "min_region_mm2": 3, "opening_mm": 0.3, "boundary_echo_contrast": 0,
+  "outline_sd_mm": 0})";
 
 }  // namespace
 

@@ -145,9 +145,9 @@ int main(int argc, char** argv) {
       if (!unknown.empty()) paths = difference(paths, unknown);
       add_regions(paths, id, regions);
     }
-    if (!unknown.empty())
-      for (const Region& r : segmented.regions)
-        if (r.label == kUnknownLabel) regions.push_back(r);
+    // Ours' unknown regions on the same 0.1 um grid as the cuts clipped by them, so that the
+    // two share their edges exactly (smoothed outlines do not lie on any grid).
+    if (!unknown.empty()) add_regions(unknown, kUnknownLabel, regions);
     slice.regions = std::move(regions);
   }
   if (const Status written = write_slice_set_json(*exact, out_path); !written) {
