@@ -104,6 +104,20 @@ TEST(ScanCommand, ThinPlateFieldScansAndAgreesWithItsOfflineReconstruction) {
       dir.path() / "log");
   ASSERT_EQ(result.exit_code, 0) << result.output;
   expect_meshes_of_offline_reconstruction(dir.path(), " --field thin-plate", 1e-3);
+  // Its keyframes are 1.5 mm apart, the mean-value field's 2.5 mm: the same sweep gives it more
+  // slices, and the mean-value field as many when told 1.5 mm. A slow sweep (40 frames), so
+  // that its frames lie closer than either distance.
+  auto slice_count = [&](const std::string& options, const std::string& name) {
+    const auto run = sonoshape::testing::run_command(
+        SONOSHAPE_BINARY,
+        kSmallSim + "--sweep-s 8 --fast " + options + " -o " + (dir.path() / name).string(),
+        dir.path() / (name + ".log"));
+    EXPECT_EQ(run.exit_code, 0) << run.output;
+    return read_json(dir.path() / name / "scan.json")["slices"].get<int>();
+  };
+  const int thin_plate = slice_count("", "tp");
+  EXPECT_LT(slice_count("--field mean-value", "mv"), thin_plate);
+  EXPECT_EQ(slice_count("--field mean-value --keyframe-distance-mm 1.5", "mv15"), thin_plate);
 }
 
 TEST(ScanCommand, RealPlusRecordingReplaysIntoValidSlicesWithARepairsList) {
