@@ -8,8 +8,10 @@ slice's regions of that label where the slice does not say unknown (a shadow is 
 error): the outline's mean offset is (area ours - area exact) / perimeter exact, both outside
 the slice's unknown regions (areas by scanlines 0.02 mm apart; the perimeter of the exact
 outline's edges whose midpoint is not unknown). Printed per organ: the slices that hold it in
-both, the median offset over those slices (robust to a missed sliver or a joined gap) and the
-pooled offset (sum of area differences over sum of perimeters).
+both, the median offset over those slices (robust to a missed sliver or a joined gap), the
+pooled offset (sum of area differences over sum of perimeters) and the mean distance of the
+outlines from the exact ones (the area in one but not the other, outside the unknown regions,
+over the exact perimeter, pooled).
 
 Usage: bench/outline_bias.py SLICES TRUTH_DIR [--json FILE]
 """
@@ -65,6 +67,27 @@ def minus_length(intervals, cut):
     return total
 
 
+def union(a, b):
+    """The union of two sets of sorted intervals, sorted and disjoint."""
+    merged = []
+    for lo, hi in sorted(a + b):
+        if merged and lo <= merged[-1][1]:
+            merged[-1] = (merged[-1][0], max(merged[-1][1], hi))
+        else:
+            merged.append((lo, hi))
+    return merged
+
+
+def known_symmetric_difference(a, b, unknown, y0, y1):
+    """Area in one set of rings but not the other, outside the unknown rings."""
+    area, y = 0.0, y0 + 0.5 * ROW_MM
+    while y < y1:
+        ia, ib, iu = crossings(a, y), crossings(b, y), crossings(unknown, y)
+        area += (minus_length(ia, union(ib, iu)) + minus_length(ib, union(ia, iu))) * ROW_MM
+        y += ROW_MM
+    return area
+
+
 def known_area(rings, unknown, y0, y1):
     area, y = 0.0, y0 + 0.5 * ROW_MM
     while y < y1:
@@ -106,7 +129,7 @@ def main():
         meshes[label] = welded(*read_ply(path))
     result = {}
     for label, mesh in meshes.items():
-        offsets, area_diff, length = [], 0.0, 0.0
+        offsets, area_diff, apart, length = [], 0.0, 0.0, 0.0
         for s in slices:
             exact = rings_of(exact_regions(mesh, s))
             ours = rings_of([r for r in s.get("regions", []) if r["label"] == label])
@@ -121,19 +144,22 @@ def main():
                 continue
             offsets.append((a_ours - a_exact) / p_exact)
             area_diff += a_ours - a_exact
+            apart += known_symmetric_difference(ours, exact, unknown, min(ys), max(ys))
             length += p_exact
         result[label] = {
             "slices": len(offsets),
             "median_offset_mm": statistics.median(offsets) if offsets else None,
             "pooled_offset_mm": area_diff / length if length else None,
+            "mean_distance_mm": apart / length if length else None,
         }
-    print("| organ | slices | median offset (mm) | pooled offset (mm) |")
-    print("|---|---|---|---|")
+    print("| organ | slices | median offset (mm) | pooled offset (mm) | mean distance (mm) |")
+    print("|---|---|---|---|---|")
     for label, r in result.items():
         def fmt(x):
             return "-" if x is None else f"{x:+.3f}"
         print(f"| {label} {names.get(label, '')}".rstrip() +
-              f" | {r['slices']} | {fmt(r['median_offset_mm'])} | {fmt(r['pooled_offset_mm'])} |")
+              f" | {r['slices']} | {fmt(r['median_offset_mm'])} | {fmt(r['pooled_offset_mm'])}"
+              f" | {fmt(r['mean_distance_mm']).lstrip('+')} |")
     if args.json:
         with open(args.json, "w") as f:
             json.dump(result, f, indent=1)

@@ -110,8 +110,9 @@ struct SegmentationConfig {
   double simplify_mm = 0.3;
   /// The segmented outlines' error (standard deviation, mm) written with every slice
   /// (LabeledSlice::outline_sd_mm): the thin-plate field fits outlines with an error as a
-  /// smoothing spline. The default scan's outlines lie 0.3-0.5 mm from the truth's on average
-  /// (rib, cheburashka), a standard deviation of about 0.4-0.6 mm. 0: interpolate them. Label
+  /// smoothing spline. The default scan's outlines lie 0.34-0.53 mm from the truth's on average
+  /// (bench/outline_bias.py's mean distance: rib, cheburashka, spot), a standard deviation of
+  /// about 0.4-0.7 mm if the errors were normal. 0: interpolate them. Label
   /// maps that replace the segmenter (--labels, --perfect-labels) are taken as drawn (0).
   double outline_sd_mm = 0.6;
 
