@@ -331,7 +331,7 @@ struct Reconstructor::State {
     const int materials = static_cast<int>(material_ids.size());
     thin_plate_boxes = material_boxes(prepared, materials);
     auto rebuilt = std::make_unique<ThinPlateField>(box, make_grid(box, depth).cell_size, materials,
-                                                    tp, box_extents(thin_plate_boxes));
+                                                    tp, thin_plate_boxes);
     // A rebuild on the same grid (a removal, a material's extent outgrown) starts its solve from
     // the last field: far fewer iterations than from the closing value. It keeps the last
     // field's sampled solution too, so that the octree's rows stay current where the solve does
@@ -350,8 +350,9 @@ struct Reconstructor::State {
 
   // Adds the data of list[first, end) to the thin-plate field. A material whose extent they
   // grow (truncation_extent of it) has its truncation grown first (ThinPlateField::
-  // grow_extents), so that every slice's data have the truncation a one-shot reconstruction
-  // gives them; false, and the caller rebuilds, where that is not possible.
+  // grow_boxes), so that every slice's data have the truncation a one-shot reconstruction
+  // gives them; false, and the caller rebuilds, where that is not possible (or where an organ
+  // outgrew the grid of its own).
   bool add_thin_plate_slices(const std::vector<Entry>& list, std::size_t first,
                              ReconstructionStats& stats) {
     Stopwatch clock;
@@ -361,12 +362,7 @@ struct Reconstructor::State {
       boxes[m].min = boxes[m].min.cwiseMin(thin_plate_boxes[m].min);
       boxes[m].max = boxes[m].max.cwiseMax(thin_plate_boxes[m].max);
     }
-    const std::vector<double> grown = box_extents(boxes);
-    const std::vector<double>& basis = thin_plate->extents();
-    bool extents_grow = false;
-    for (std::size_t m = 0; m < basis.size(); ++m)
-      extents_grow |= truncation_extent(grown[m]) != truncation_extent(basis[m]);
-    if (extents_grow && !thin_plate->grow_extents(grown)) return false;
+    if (!thin_plate->grow_boxes(boxes)) return false;
     thin_plate_boxes = std::move(boxes);
     thin_plate->add_slices(std::move(added));
     const std::vector<int> ids = slice_ids(list, first);

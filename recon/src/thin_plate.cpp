@@ -10,6 +10,7 @@
 
 #include "sonoshape/core/errors.hpp"
 #include "sonoshape/core/log.hpp"
+#include "sonoshape/core/reconstruction_box.hpp"
 
 namespace sonoshape::recon {
 namespace {
@@ -475,6 +476,18 @@ constexpr double kMaxNodes = 32.0 * 1024 * 1024;
 
 // No truncation below this many solve-grid spacings: the data would not reach a grid node.
 constexpr double kMinimumTruncation = 2.0;
+// A grid of its own (own_grid_boxes) is rounded out to multiples of this many finest cells.
+constexpr double kOwnGridStep = 8.0;
+// Only an organ whose extent spans fewer solve cells of the grid over the box than this gets a
+// grid of its own (own_grid_boxes).
+constexpr double kOwnGridCells = 32.0;
+
+Box3 empty_box() {
+  return Box3{Vec3::Constant(std::numeric_limits<double>::infinity()),
+              Vec3::Constant(-std::numeric_limits<double>::infinity())};
+}
+
+bool is_empty(const Box3& box) { return !(box.min.x() <= box.max.x()); }
 
 // Each sample's value is an upper bound of its distance to the surface, signed: its slice's
 // true boundaries lie on the surface. So are these, from another slice B at height h above it:
@@ -541,7 +554,7 @@ static bool tighten(const Vec3& p, double* values, const PreparedSlice& b,
 // point's interpolation reads 4 nodes per axis, so at most 2 blocks per axis.
 constexpr int kBlock = 4;
 
-struct ThinPlateField::Impl {
+struct ThinPlateField::Grid {
   std::vector<double> extents_mm;  // per material, what the truncations were set from
   Box3 box;
   int materials = 0;
@@ -562,6 +575,9 @@ struct ThinPlateField::Impl {
   // per octree row says whether it is current.
   std::vector<std::uint32_t> stencil_changed_at;
   std::uint32_t generation = 0;
+  // Whether `sampled` holds a solution (this grid's first solve, or start_from): until then
+  // every block is new at the next solve.
+  bool sampled_once = false;
   // Per material, the largest distance between a sample added (or tightened) since the last
   // solve and that solution (NaN-free; 0 when nothing was added), and whether this field solved
   // before: an online update solves again only the materials whose new data the field does not fit
@@ -995,7 +1011,8 @@ struct ThinPlateField::Impl {
   void resample_changed_blocks() {
     ++generation;
     const Level& g = levels[0];
-    if (generation == 1) {
+    if (!sampled_once) {
+      sampled_once = true;
       sampled = solution;
       block_changed_at.assign(static_cast<std::size_t>(blocks[0]) * blocks[1] * blocks[2],
                               generation);
@@ -1213,6 +1230,14 @@ struct ThinPlateField::Impl {
                   std::to_string(step_tolerance_mm) + " mm); the surface may be off by about that");
     return iteration;
   }
+
+  Grid(const Box3& grid_box, double spacing_mm, int material_count, ThinPlateOptions grid_options,
+       std::vector<double> extents);
+  void add_slices(std::vector<PreparedSlice> added);
+  ThinPlateSolveStats solve();
+  bool start_from(const Grid& other);
+  bool grow_extents(const std::vector<double>& extents);
+  std::uint32_t changed_at(const Vec3& point) const;
 };
 
 double truncation_extent(double extent_mm) {
@@ -1221,9 +1246,7 @@ double truncation_extent(double extent_mm) {
 }
 
 std::vector<Box3> material_boxes(const std::vector<PreparedSlice>& slices, int materials) {
-  std::vector<Box3> boxes(static_cast<std::size_t>(materials),
-                          Box3{Vec3::Constant(std::numeric_limits<double>::infinity()),
-                               Vec3::Constant(-std::numeric_limits<double>::infinity())});
+  std::vector<Box3> boxes(static_cast<std::size_t>(materials), empty_box());
   for (const PreparedSlice& slice : slices)
     for (int m = 1; m <= materials && static_cast<std::size_t>(m) < slice.rings_by_material.size();
          ++m)
@@ -1244,23 +1267,67 @@ std::vector<double> box_extents(const std::vector<Box3>& boxes) {
   return extents;
 }
 
-ThinPlateField::ThinPlateField(const Box3& box, double finest_cell_mm, int materials,
-                               ThinPlateOptions options, std::vector<double> extents_mm)
-    : impl_(std::make_unique<Impl>()) {
-  Impl& s = *impl_;
-  s.box = box;
-  s.materials = materials;
-  s.options = options;
-  s.spacing = finest_cell_mm * std::ldexp(1.0, std::max(0, options.coarsening));
-  extents_mm.resize(static_cast<std::size_t>(materials), 0.0);
-  for (const double extent : extents_mm) s.truncation_mm.push_back(s.truncation_for(extent));
-  s.extents_mm = std::move(extents_mm);
+std::vector<Box3> own_grid_boxes(const Box3& box, double finest_cell_mm,
+                                 const std::vector<Box3>& material_boxes,
+                                 const ThinPlateOptions& options) {
+  std::vector<Box3> own(material_boxes.size(), empty_box());
+  if (!options.own_grids || options.coarsening < 1) return own;
+  // Together the materials must sample every axis of the box, as the slices must for the
+  // closing (sampled_axes): otherwise the box's padding along an axis is where the extrusion
+  // prior carries the organs on, which a box of their own would cut short.
+  Box3 all = empty_box();
+  for (const Box3& b : material_boxes)
+    if (!is_empty(b)) all = {all.min.cwiseMin(b.min), all.max.cwiseMax(b.max)};
+  if (is_empty(all)) return own;
+  for (int a = 0; a < 3; ++a)
+    if (all.max[a] - all.min[a] < std::min(all.min[a] - box.min[a], box.max[a] - all.max[a]))
+      return own;
+  auto nodes = [](const Box3& b, double spacing) {
+    double count = 1.0;
+    for (int a = 0; a < 3; ++a) count *= std::ceil(b.size()[a] / spacing - 1e-9) + 1.0;
+    return count;
+  };
+  const double shared_spacing = finest_cell_mm * std::ldexp(1.0, options.coarsening);
+  const double shared_nodes = nodes(box, shared_spacing);
+  // Rounded out to a lattice of 8 finest cells, so that an organ that grows online keeps its
+  // grid over several millimetres (a new box rebuilds the field).
+  const double step = kOwnGridStep * finest_cell_mm;
+  for (std::size_t m = 0; m < material_boxes.size(); ++m) {
+    // An organ that spans this many solve cells is resolved about as well as by a field of
+    // its own (whose default depth gives ~53 across its extent): only smaller ones gain.
+    if (is_empty(material_boxes[m]) ||
+        material_boxes[m].diagonal() >= kOwnGridCells * shared_spacing)
+      continue;
+    const Box3 padded = reconstruction_box(material_boxes[m]);
+    Box3 rounded;
+    for (int a = 0; a < 3; ++a) {
+      rounded.min[a] =
+          std::max(box.min[a], box.min[a] + step * std::floor((padded.min[a] - box.min[a]) / step));
+      rounded.max[a] =
+          std::min(box.max[a], box.min[a] + step * std::ceil((padded.max[a] - box.min[a]) / step));
+    }
+    if (nodes(rounded, finest_cell_mm) <= shared_nodes) own[m] = rounded;
+  }
+  return own;
+}
+
+// ---- One grid -------------------------------------------------------------------------------
+
+ThinPlateField::Grid::Grid(const Box3& grid_box, double spacing_mm, int material_count,
+                           ThinPlateOptions grid_options, std::vector<double> extents) {
+  box = grid_box;
+  materials = material_count;
+  options = std::move(grid_options);
+  spacing = spacing_mm;
+  extents.resize(static_cast<std::size_t>(materials), 0.0);
+  for (const double extent : extents) truncation_mm.push_back(truncation_for(extent));
+  extents_mm = std::move(extents);
   // Cells per axis, rounded up to a multiple of 2^coarsenings so that every level's nodes are
   // every other node of the finer one; the coarsest keeps at least 4 cells on its shortest axis.
   std::array<int, 3> cells{};
   for (int a = 0; a < 3; ++a)
     cells[static_cast<std::size_t>(a)] =
-        std::max(1, static_cast<int>(std::ceil(box.size()[a] / s.spacing - 1e-9)));
+        std::max(1, static_cast<int>(std::ceil(box.size()[a] / spacing - 1e-9)));
   const int shortest = *std::min_element(cells.begin(), cells.end());
   int coarsenings = 0;
   while (coarsenings < 8 && (shortest >> (coarsenings + 1)) >= 4) ++coarsenings;
@@ -1286,19 +1353,273 @@ ThinPlateField::ThinPlateField(const Box3& box, double finest_cell_mm, int mater
       for (auto& edges : level.data_edge) edges.assign(size, 0.0);
       level.zero_row.assign(static_cast<std::size_t>(level.nx), 0.0);
     }
-    s.levels.push_back(std::move(level));
+    levels.push_back(std::move(level));
   }
-  const std::size_t nodes = s.levels[0].size();
-  s.blocks = {(s.levels[0].nx + kBlock - 1) / kBlock, (s.levels[0].ny + kBlock - 1) / kBlock,
-              (s.levels[0].nz + kBlock - 1) / kBlock};
-  s.weighted_targets.assign(nodes * static_cast<std::size_t>(materials), 0.0);
+  const std::size_t nodes = levels[0].size();
+  blocks = {(levels[0].nx + kBlock - 1) / kBlock, (levels[0].ny + kBlock - 1) / kBlock,
+            (levels[0].nz + kBlock - 1) / kBlock};
+  weighted_targets.assign(nodes * static_cast<std::size_t>(materials), 0.0);
   for (int m = 0; m < materials; ++m)
-    s.solution.emplace_back(nodes, -s.truncation_mm[static_cast<std::size_t>(m)]);
-  s.sampled = s.solution;
-  s.misfit_mm.assign(static_cast<std::size_t>(materials), 0.0);
-  s.block_changed_at.assign(static_cast<std::size_t>(s.blocks[0]) * s.blocks[1] * s.blocks[2], 0);
-  s.stencil_changed_at.assign(nodes, 0);
-  s.update_priors();
+    solution.emplace_back(nodes, -truncation_mm[static_cast<std::size_t>(m)]);
+  sampled = solution;
+  misfit_mm.assign(static_cast<std::size_t>(materials), 0.0);
+  block_changed_at.assign(static_cast<std::size_t>(blocks[0]) * blocks[1] * blocks[2], 0);
+  stencil_changed_at.assign(nodes, 0);
+  update_priors();
+}
+
+void ThinPlateField::Grid::add_slices(std::vector<PreparedSlice> added) {
+  const std::size_t first = slices.size();
+  for (PreparedSlice& slice : added) slices.push_back(std::move(slice));
+  const std::size_t count = slices.size();
+  for (std::size_t k = 0; k < first; ++k) distances[k]->rebind(slices[k]);
+  distances.resize(count);
+  data.resize(count);
+  // Each slice's data in parallel, then tightened by the other slices (the new ones by all, the
+  // earlier ones by the new ones); each slice writes only its own values, and a value's bound
+  // is a minimum (exact in any order), so the data are the same whatever the threads and
+  // whether the slices came one by one or at once.
+  tbb::parallel_for(first, count, [&](std::size_t k) {
+    distances[k] = std::make_unique<SliceDistances>(slices[k], materials, truncation_mm,
+                                                    options.shadow_casters);
+    data[k] = slice_data(slices[k], *distances[k]);
+  });
+  std::vector<std::vector<std::pair<std::size_t, double>>> changes(first);
+  tbb::parallel_for(std::size_t{0}, count, [&](std::size_t a) {
+    if (a < first)
+      changes[a] = tighten_slice(a, first, count);
+    else
+      tighten_slice(a, 0, count);
+  });
+  // Added in slice order: the same sums whatever the threads.
+  for (std::size_t a = 0; a < first; ++a) retarget(a, changes[a]);
+  for (std::size_t k = first; k < count; ++k) add(data[k]);
+  for (std::size_t k = first; k < count; ++k)
+    for (const Vec3& p : data[k].points) {
+      data_min = data_min.cwiseMin(p);
+      data_max = data_max.cwiseMax(p);
+    }
+  update_priors();
+}
+
+ThinPlateSolveStats ThinPlateField::Grid::solve() {
+  ThinPlateSolveStats stats;
+  Stopwatch clock;
+  const std::size_t count = levels[0].size();
+  const double fitted_mm = options.online_tolerance * spacing;
+  std::vector<std::size_t> solved_materials;
+  for (std::size_t m = 0; m < misfit_mm.size(); ++m) {
+    // The field already fits this material's new data to the online tolerance, and nothing
+    // else changed since its last solve (no removal: a rebuilt field has not solved yet): a
+    // solve would move it by about as much as its tolerance allows.
+    if (solved && misfit_mm[m] <= fitted_mm)
+      ++stats.unchanged_materials;
+    else
+      solved_materials.push_back(m);
+    misfit_mm[m] = 0.0;
+  }
+  // Not when every material is left as it is: the next solve does it.
+  if (!solved_materials.empty()) refresh_weights();
+  std::vector<SolveStop> stops;
+  for (const std::size_t m : solved_materials) stops.push_back(solve_stop(m));
+  // The materials at once, each with its own work vectors (the operator is shared): one solve's
+  // passes over the grid scale poorly across threads (a 207k-node grid: 1.4 times as fast on
+  // two), two solves side by side well. Each solve is the same whatever runs beside it.
+  solve_work.resize(misfit_mm.size());
+  std::vector<int> iterations(solved_materials.size(), 0);
+  tbb::parallel_for(std::size_t{0}, solved_materials.size(), [&](std::size_t i) {
+    const std::size_t m = solved_materials[i];
+    iterations[i] =
+        solve_one(solution[m], weighted_targets.data() + m * count, solve_work[m], stops[i]);
+  });
+  for (const int n : iterations) stats.iterations += n;
+  solved = true;
+  resample_changed_blocks();
+  stats.solve_s = clock.seconds();
+  stats.nodes = count;
+  return stats;
+}
+
+bool ThinPlateField::Grid::start_from(const Grid& other) {
+  if (materials != other.materials || spacing != other.spacing || box.min != other.box.min ||
+      box.max != other.box.max || levels[0].nx != other.levels[0].nx ||
+      levels[0].ny != other.levels[0].ny || levels[0].nz != other.levels[0].nz)
+    return false;
+  solution = other.solution;
+  for (std::size_t m = 0; m < solution.size(); ++m)
+    move_plateaus(solution[m], other.truncation_mm[m], truncation_mm[m]);
+  sampled = other.sampled;
+  sampled_once = other.sampled_once;
+  block_changed_at = other.block_changed_at;
+  stencil_changed_at = other.stencil_changed_at;
+  generation = other.generation;
+  return true;
+}
+
+bool ThinPlateField::Grid::grow_extents(const std::vector<double>& extents) {
+  if (extents.size() != extents_mm.size()) return false;
+  std::vector<double> truncations;
+  for (std::size_t m = 0; m < extents.size(); ++m) {
+    truncations.push_back(truncation_for(extents[m]));
+    if (truncations[m] < truncation_mm[m]) return false;
+  }
+  for (std::size_t m = 0; m < truncations.size(); ++m)
+    if (truncations[m] != truncation_mm[m]) grow_truncation(m, truncations[m]);
+  extents_mm = extents;
+  return true;
+}
+
+std::uint32_t ThinPlateField::Grid::changed_at(const Vec3& point) const {
+  int i0[3];
+  double t[3];
+  locate(point, i0, t);
+  return stencil_changed_at[levels[0].index(i0[0], i0[1], i0[2])];
+}
+
+// ---- The field: a grid over the box, and the grids of small organs --------------------------
+
+struct ThinPlateField::Impl {
+  // One grid and the field's materials that it solves (0-based, ascending).
+  struct Part {
+    std::unique_ptr<Grid> grid;
+    std::vector<std::size_t> materials;
+    bool own = false;  // a material's own grid (else the grid over the box)
+    // An own grid's material is -truncation beyond its box: the solve (generation) after which
+    // that value last changed, for changed_at.
+    std::uint32_t outside_changed_at = 0;
+  };
+  Box3 box;
+  int materials = 0;
+  double finest_cell_mm = 1.0;
+  ThinPlateOptions options;
+  std::vector<Part> parts;
+  std::vector<std::pair<std::size_t, std::size_t>> place;  // per material: (part, index in it)
+  std::vector<Box3> own_boxes;                             // per material (empty: none)
+  std::vector<double> extents_mm;
+  std::vector<PreparedSlice> slices;
+  std::uint32_t generation = 0;
+
+  void build(const std::vector<double>& extents) {
+    extents_mm = extents;
+    extents_mm.resize(static_cast<std::size_t>(materials), 0.0);
+    own_boxes.resize(static_cast<std::size_t>(materials), empty_box());
+    place.assign(static_cast<std::size_t>(materials), {0, 0});
+    Part shared;
+    for (std::size_t m = 0; m < own_boxes.size(); ++m)
+      if (is_empty(own_boxes[m])) shared.materials.push_back(m);
+    // The grid over the box always exists (node_counts, sample_values), even with no material.
+    const double spacing = finest_cell_mm * std::ldexp(1.0, std::max(0, options.coarsening));
+    shared.grid = make_grid(box, spacing, shared.materials);
+    parts.push_back(std::move(shared));
+    for (std::size_t m = 0; m < own_boxes.size(); ++m)
+      if (!is_empty(own_boxes[m])) {
+        Part own{make_grid(own_boxes[m], finest_cell_mm, {m}), {m}, true};
+        parts.push_back(std::move(own));
+      }
+    for (std::size_t p = 0; p < parts.size(); ++p)
+      for (std::size_t i = 0; i < parts[p].materials.size(); ++i)
+        place[parts[p].materials[i]] = {p, i};
+  }
+
+  std::unique_ptr<Grid> make_grid(const Box3& grid_box, double spacing,
+                                  const std::vector<std::size_t>& subset) const {
+    ThinPlateOptions grid_options = options;
+    grid_options.shadow_casters.clear();
+    std::vector<double> extents;
+    for (const std::size_t m : subset) {
+      grid_options.shadow_casters.push_back(m < options.shadow_casters.size() &&
+                                            options.shadow_casters[m]);
+      extents.push_back(extents_mm[m]);
+    }
+    return std::make_unique<Grid>(grid_box, spacing, static_cast<int>(subset.size()),
+                                  std::move(grid_options), std::move(extents));
+  }
+
+  // `slice` with the materials of `subset` alone (renumbered 1..): another material's region
+  // is outside to them, as it is across their true boundaries.
+  static PreparedSlice restricted(const PreparedSlice& slice,
+                                  const std::vector<std::size_t>& subset) {
+    PreparedSlice out;
+    out.origin = slice.origin;
+    out.u = slice.u;
+    out.v = slice.v;
+    out.unit_normal = slice.unit_normal;
+    out.unknown = slice.unknown;
+    out.known = slice.known;
+    out.outline_sd_mm = slice.outline_sd_mm;
+    out.view = slice.view;
+    out.rings_by_material.resize(subset.size() + 1);
+    out.ring_bounds.resize(subset.size() + 1);
+    out.ring_bands.resize(subset.size() + 1);
+    for (std::size_t i = 0; i < subset.size(); ++i) {
+      const std::size_t m = subset[i] + 1;
+      if (m < slice.rings_by_material.size())
+        out.rings_by_material[i + 1] = slice.rings_by_material[m];
+      if (m < slice.ring_bounds.size()) out.ring_bounds[i + 1] = slice.ring_bounds[m];
+      if (m < slice.ring_bands.size()) out.ring_bands[i + 1] = slice.ring_bands[m];
+    }
+    return out;
+  }
+
+  void add_slices(std::vector<PreparedSlice> added) {
+    for (Part& part : parts) {
+      if (part.materials.empty()) continue;  // every material has a grid of its own
+      if (part.materials.size() == static_cast<std::size_t>(materials)) {
+        part.grid->add_slices(added);
+        continue;
+      }
+      std::vector<PreparedSlice> subset(added.size());
+      tbb::parallel_for(std::size_t{0}, added.size(),
+                        [&](std::size_t k) { subset[k] = restricted(added[k], part.materials); });
+      part.grid->add_slices(std::move(subset));
+    }
+    for (PreparedSlice& slice : added) slices.push_back(std::move(slice));
+  }
+
+  // Values of the K + 1 functions at `point`: each material from its grid (outside, at
+  // -truncation, beyond its own grid's box), f_0 = -max.
+  void interpolate(const Vec3& point, double* out, std::vector<double>& scratch) const {
+    double best = -std::numeric_limits<double>::infinity();
+    for (const Part& part : parts) {
+      const Grid& g = *part.grid;
+      if (part.materials.empty()) continue;
+      const bool inside =
+          ((point.array() >= g.box.min.array()) && (point.array() <= g.box.max.array())).all();
+      if (part.own && !inside) {
+        out[part.materials[0] + 1] = -g.truncation_mm[0];
+      } else {
+        scratch.resize(part.materials.size() + 1);
+        g.interpolate(point, scratch.data());
+        for (std::size_t i = 0; i < part.materials.size(); ++i)
+          out[part.materials[i] + 1] = scratch[i + 1];
+      }
+      for (const std::size_t m : part.materials) best = std::max(best, out[m + 1]);
+    }
+    out[0] = materials > 0 ? -best : 0.0;
+  }
+};
+
+ThinPlateField::ThinPlateField(const Box3& box, double finest_cell_mm, int materials,
+                               ThinPlateOptions options, std::vector<double> extents_mm)
+    : impl_(std::make_unique<Impl>()) {
+  Impl& s = *impl_;
+  s.box = box;
+  s.materials = materials;
+  s.finest_cell_mm = finest_cell_mm;
+  s.options = std::move(options);
+  s.build(extents_mm);
+}
+
+ThinPlateField::ThinPlateField(const Box3& box, double finest_cell_mm, int materials,
+                               ThinPlateOptions options, const std::vector<Box3>& material_boxes)
+    : impl_(std::make_unique<Impl>()) {
+  Impl& s = *impl_;
+  s.box = box;
+  s.materials = materials;
+  s.finest_cell_mm = finest_cell_mm;
+  s.options = std::move(options);
+  s.own_boxes = own_grid_boxes(box, finest_cell_mm, material_boxes, s.options);
+  s.build(box_extents(material_boxes));
 }
 
 ThinPlateField::~ThinPlateField() = default;
@@ -1306,76 +1627,26 @@ ThinPlateField::ThinPlateField(ThinPlateField&&) noexcept = default;
 ThinPlateField& ThinPlateField::operator=(ThinPlateField&&) noexcept = default;
 
 void ThinPlateField::add_slices(std::vector<PreparedSlice> slices) {
-  Impl& s = *impl_;
-  const std::size_t first = s.slices.size();
-  for (PreparedSlice& slice : slices) s.slices.push_back(std::move(slice));
-  const std::size_t count = s.slices.size();
-  for (std::size_t k = 0; k < first; ++k) s.distances[k]->rebind(s.slices[k]);
-  s.distances.resize(count);
-  s.data.resize(count);
-  // Each slice's data in parallel, then tightened by the other slices (the new ones by all, the
-  // earlier ones by the new ones); each slice writes only its own values, and a value's bound
-  // is a minimum (exact in any order), so the data are the same whatever the threads and
-  // whether the slices came one by one or at once.
-  tbb::parallel_for(first, count, [&](std::size_t k) {
-    s.distances[k] = std::make_unique<SliceDistances>(s.slices[k], s.materials, s.truncation_mm,
-                                                      s.options.shadow_casters);
-    s.data[k] = s.slice_data(s.slices[k], *s.distances[k]);
-  });
-  std::vector<std::vector<std::pair<std::size_t, double>>> changes(first);
-  tbb::parallel_for(std::size_t{0}, count, [&](std::size_t a) {
-    if (a < first)
-      changes[a] = s.tighten_slice(a, first, count);
-    else
-      s.tighten_slice(a, 0, count);
-  });
-  // Added in slice order: the same sums whatever the threads.
-  for (std::size_t a = 0; a < first; ++a) s.retarget(a, changes[a]);
-  for (std::size_t k = first; k < count; ++k) s.add(s.data[k]);
-  for (std::size_t k = first; k < count; ++k)
-    for (const Vec3& p : s.data[k].points) {
-      s.data_min = s.data_min.cwiseMin(p);
-      s.data_max = s.data_max.cwiseMax(p);
-    }
-  s.update_priors();
+  impl_->add_slices(std::move(slices));
 }
 
 ThinPlateSolveStats ThinPlateField::solve() {
   Impl& s = *impl_;
-  ThinPlateSolveStats stats;
   Stopwatch clock;
-  const std::size_t count = s.levels[0].size();
-  const double fitted_mm = s.options.online_tolerance * s.spacing;
-  std::vector<std::size_t> solved;
-  for (std::size_t m = 0; m < s.misfit_mm.size(); ++m) {
-    // The field already fits this material's new data to the online tolerance, and nothing
-    // else changed since its last solve (no removal: a rebuilt field has not solved yet): a
-    // solve would move it by about as much as its tolerance allows.
-    if (s.solved && s.misfit_mm[m] <= fitted_mm)
-      ++stats.unchanged_materials;
-    else
-      solved.push_back(m);
-    s.misfit_mm[m] = 0.0;
-  }
-  // Not when every material is left as it is: the next solve does it.
-  if (!solved.empty()) s.refresh_weights();
-  std::vector<Impl::SolveStop> stops;
-  for (const std::size_t m : solved) stops.push_back(s.solve_stop(m));
-  // The materials at once, each with its own work vectors (the operator is shared): one solve's
-  // passes over the grid scale poorly across threads (a 207k-node grid: 1.4 times as fast on
-  // two), two solves side by side well. Each solve is the same whatever runs beside it.
-  s.solve_work.resize(s.misfit_mm.size());
-  std::vector<int> iterations(solved.size(), 0);
-  tbb::parallel_for(std::size_t{0}, solved.size(), [&](std::size_t i) {
-    const std::size_t m = solved[i];
-    iterations[i] = s.solve_one(s.solution[m], s.weighted_targets.data() + m * count,
-                                s.solve_work[m], stops[i]);
+  // The grids side by side: a small organ's grid alone scales poorly across threads.
+  std::vector<ThinPlateSolveStats> each(s.parts.size());
+  tbb::parallel_for(std::size_t{0}, s.parts.size(), [&](std::size_t p) {
+    if (!s.parts[p].materials.empty()) each[p] = s.parts[p].grid->solve();
   });
-  for (const int n : iterations) stats.iterations += n;
-  s.solved = true;
-  s.resample_changed_blocks();
+  ++s.generation;
+  ThinPlateSolveStats stats;
+  for (std::size_t p = 0; p < each.size(); ++p) {
+    stats.iterations += each[p].iterations;
+    stats.nodes += each[p].nodes;
+    // A grid without materials counts none unchanged.
+    stats.unchanged_materials += each[p].unchanged_materials;
+  }
   stats.solve_s = clock.seconds();
-  stats.nodes = count;
   return stats;
 }
 
@@ -1384,23 +1655,29 @@ void ThinPlateField::evaluate(const std::vector<Vec3>& points, double* values) c
   const std::size_t fc = static_cast<std::size_t>(s.materials) + 1;
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, points.size(), 1024),
                     [&](const tbb::blocked_range<std::size_t>& range) {
+                      std::vector<double> scratch;
                       for (std::size_t p = range.begin(); p < range.end(); ++p)
-                        s.interpolate(points[p], values + p * fc);
+                        s.interpolate(points[p], values + p * fc, scratch);
                     });
 }
 
 bool ThinPlateField::start_from(const ThinPlateField& other) {
   Impl& s = *impl_;
   const Impl& o = *other.impl_;
-  if (s.materials != o.materials || s.spacing != o.spacing || s.box.min != o.box.min ||
-      node_counts() != other.node_counts())
+  if (s.materials != o.materials || s.finest_cell_mm != o.finest_cell_mm ||
+      s.box.min != o.box.min || s.box.max != o.box.max || s.parts.size() != o.parts.size())
     return false;
-  s.solution = o.solution;
-  for (std::size_t m = 0; m < s.solution.size(); ++m)
-    Impl::move_plateaus(s.solution[m], o.truncation_mm[m], s.truncation_mm[m]);
-  s.sampled = o.sampled;
-  s.block_changed_at = o.block_changed_at;
-  s.stencil_changed_at = o.stencil_changed_at;
+  for (std::size_t p = 0; p < s.parts.size(); ++p)
+    if (s.parts[p].materials != o.parts[p].materials) return false;
+  // A grid whose box changed (an organ outgrew its own) starts afresh, its blocks all new at
+  // the next solve; the others go on from their last solution.
+  for (std::size_t p = 0; p < s.parts.size(); ++p) {
+    Impl::Part& part = s.parts[p];
+    part.outside_changed_at = o.parts[p].outside_changed_at;
+    if (part.grid->start_from(*o.parts[p].grid)) continue;
+    part.grid->generation = o.generation;
+    part.outside_changed_at = o.generation + 1;
+  }
   s.generation = o.generation;
   return true;
 }
@@ -1408,46 +1685,74 @@ bool ThinPlateField::start_from(const ThinPlateField& other) {
 bool ThinPlateField::grow_extents(const std::vector<double>& extents_mm) {
   Impl& s = *impl_;
   if (extents_mm.size() != s.extents_mm.size()) return false;
-  std::vector<double> truncations;
-  for (std::size_t m = 0; m < extents_mm.size(); ++m) {
-    truncations.push_back(s.truncation_for(extents_mm[m]));
-    if (truncations[m] < s.truncation_mm[m]) return false;
+  std::vector<std::vector<double>> per_part(s.parts.size());
+  for (std::size_t p = 0; p < s.parts.size(); ++p) {
+    for (const std::size_t m : s.parts[p].materials) per_part[p].push_back(extents_mm[m]);
+    // Every grid must take its new extents before any changes.
+    for (std::size_t i = 0; i < per_part[p].size(); ++i)
+      if (s.parts[p].grid->truncation_for(per_part[p][i]) < s.parts[p].grid->truncation_mm[i])
+        return false;
   }
-  for (std::size_t m = 0; m < truncations.size(); ++m)
-    if (truncations[m] != s.truncation_mm[m]) s.grow_truncation(m, truncations[m]);
+  for (std::size_t p = 0; p < s.parts.size(); ++p) {
+    const std::vector<double> before = s.parts[p].grid->truncation_mm;
+    if (!s.parts[p].grid->grow_extents(per_part[p])) return false;
+    if (s.parts[p].grid->truncation_mm != before) s.parts[p].outside_changed_at = s.generation + 1;
+  }
   s.extents_mm = extents_mm;
   return true;
 }
 
+bool ThinPlateField::grow_boxes(const std::vector<Box3>& material_boxes) {
+  Impl& s = *impl_;
+  if (material_boxes.size() != s.own_boxes.size()) return false;
+  const std::vector<Box3> own = own_grid_boxes(s.box, s.finest_cell_mm, material_boxes, s.options);
+  for (std::size_t m = 0; m < own.size(); ++m)
+    if (is_empty(own[m]) != is_empty(s.own_boxes[m]) ||
+        (!is_empty(own[m]) &&
+         (own[m].min != s.own_boxes[m].min || own[m].max != s.own_boxes[m].max)))
+      return false;
+  const std::vector<double> extents = box_extents(material_boxes);
+  bool grows = false;
+  for (std::size_t m = 0; m < extents.size(); ++m)
+    grows |= truncation_extent(extents[m]) != truncation_extent(s.extents_mm[m]);
+  return !grows || grow_extents(extents);
+}
+
 std::vector<double> ThinPlateField::sample_values() const {
   std::vector<double> values;
-  for (const Impl::Contribution& c : impl_->data)
+  for (const Grid::Contribution& c : impl_->parts[0].grid->data)
     values.insert(values.end(), c.targets.begin(), c.targets.end());
   return values;
 }
 
 std::vector<std::vector<Vec3>> ThinPlateField::sample_points() const {
   std::vector<std::vector<Vec3>> points;
-  for (const Impl::Contribution& c : impl_->data) points.push_back(c.points);
+  for (const Grid::Contribution& c : impl_->parts[0].grid->data) points.push_back(c.points);
   return points;
 }
 
 std::uint32_t ThinPlateField::generation() const { return impl_->generation; }
 
 std::uint32_t ThinPlateField::changed_at(const Vec3& point) const {
-  const Impl& s = *impl_;
-  int i0[3];
-  double t[3];
-  s.locate(point, i0, t);
-  return s.stencil_changed_at[s.levels[0].index(i0[0], i0[1], i0[2])];
+  std::uint32_t latest = 0;
+  for (const Impl::Part& part : impl_->parts) {
+    const Grid& g = *part.grid;
+    if (part.own &&
+        !((point.array() >= g.box.min.array()) && (point.array() <= g.box.max.array())).all())
+      latest = std::max(latest, part.outside_changed_at);
+    else
+      latest = std::max(latest, g.changed_at(point));
+  }
+  return latest;
 }
 
 int ThinPlateField::function_count() const { return impl_->materials + 1; }
 const std::vector<double>& ThinPlateField::extents() const { return impl_->extents_mm; }
 const std::vector<PreparedSlice>& ThinPlateField::slices() const { return impl_->slices; }
 std::array<int, 3> ThinPlateField::node_counts() const {
-  const Level& g = impl_->levels[0];
+  const Level& g = impl_->parts[0].grid->levels[0];
   return {g.nx, g.ny, g.nz};
 }
+std::vector<Box3> ThinPlateField::own_boxes() const { return impl_->own_boxes; }
 
 }  // namespace sonoshape::recon

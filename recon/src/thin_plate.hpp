@@ -46,6 +46,10 @@ struct ThinPlateOptions {
   double extrusion_weight = 3.0;
   /// The solve grid is the octree's finest grid coarsened this many times (0: the finest).
   int coarsening = 1;
+  /// A small organ in a large volume gets a grid of its own at the octree's finest cell (see
+  /// ThinPlateField's constructor from material boxes): the default scan's cheburashka, whose
+  /// ears are 2 mm shells, is no longer solved on 1.6 mm cells of the whole scan volume.
+  bool own_grids = true;
   /// Conjugate gradients stop when an iteration moves no grid value by more than this fraction
   /// of the grid spacing (the field is in mm of signed distance): a hundredth of a cell moves
   /// the surface by about that, far below what the grid resolves.
@@ -96,8 +100,16 @@ class ThinPlateField {
   /// `finest_cell_mm`: the octree's finest cell size; the solve grid's spacing is that times
   /// 2^options.coarsening. `materials`: K (function 0 is the outside). `extents_mm`: per
   /// material, the extent the truncation is a fraction of (box_extents of material_boxes).
+  /// Every material is solved on the one grid over `box`.
   ThinPlateField(const Box3& box, double finest_cell_mm, int materials, ThinPlateOptions options,
                  std::vector<double> extents_mm);
+  /// The same, from each material's box (material_boxes; extents: their diagonals), with
+  /// options.own_grids: a material whose box, padded as a reconstruction box is and rounded
+  /// out to 8 finest cells, needs no more nodes at the finest cell than the grid over `box`
+  /// has, gets a grid of its own over that box at the finest cell (own_grid_boxes). Beyond it,
+  /// the material is outside (-truncation).
+  ThinPlateField(const Box3& box, double finest_cell_mm, int materials, ThinPlateOptions options,
+                 const std::vector<Box3>& material_boxes);
   ~ThinPlateField();
   ThinPlateField(ThinPlateField&&) noexcept;
   ThinPlateField& operator=(ThinPlateField&&) noexcept;
@@ -115,6 +127,10 @@ class ThinPlateField {
   /// change), and the next solve starts from the last solution with its plateaus moved. False,
   /// and nothing changed, where a truncation would shrink (a rebuild's case).
   bool grow_extents(const std::vector<double>& extents_mm);
+  /// The materials' boxes grew to `material_boxes` (same count; a field built from boxes):
+  /// grow_extents with their diagonals, where every grid of its own keeps its box (and every
+  /// material its grid). False, and nothing changed, otherwise (a rebuild's case).
+  bool grow_boxes(const std::vector<Box3>& material_boxes);
   /// Solves for every material from the last solution (-truncation at first), except, after
   /// this field's first solve, the materials whose added data the field fits to the solver's
   /// tolerance already (ThinPlateSolveStats::unchanged_materials).
@@ -134,16 +150,30 @@ class ThinPlateField {
   const std::vector<double>& extents() const;
   const std::vector<PreparedSlice>& slices() const;
   /// Every slice's samples' values (materials per sample, slices in order) and positions
-  /// (world mm): exposed for tests.
+  /// (world mm) on the grid over the box: exposed for tests.
   std::vector<double> sample_values() const;
   std::vector<std::vector<Vec3>> sample_points() const;
-  /// Node counts of the solve grid.
+  /// Node counts of the grid over the box.
   std::array<int, 3> node_counts() const;
+  /// Per material: the box of its own grid (empty, min > max, where it is solved on the grid
+  /// over the box).
+  std::vector<Box3> own_boxes() const;
 
  private:
+  struct Grid;  // one regular grid and the materials solved on it
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };
+
+/// Per material, the box of the grid of its own that ThinPlateField gives it (empty where it
+/// has none; see its constructor from material boxes): its box made a reconstruction box,
+/// rounded out to multiples of 8 finest cells from `box.min` and cut to `box`, when that needs
+/// no more nodes at `finest_cell_mm` than `box` at its solve spacing, and the boxes together
+/// sample every axis of `box` (ThinPlateOptions::extrusion_weight's test: nearly coplanar
+/// slices keep the one grid, whose padding the extrusion fills).
+std::vector<Box3> own_grid_boxes(const Box3& box, double finest_cell_mm,
+                                 const std::vector<Box3>& material_boxes,
+                                 const ThinPlateOptions& options);
 
 /// Per material 1..K (index m - 1), the box of its contour points in `slices` (world mm; empty,
 /// min > max, where it does not occur).

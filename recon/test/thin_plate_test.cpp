@@ -200,7 +200,8 @@ TEST(ThinPlateData, TruncationExtentsRoundUpToQuarterOctaves) {
 TEST(ThinPlateField, AGridTooLargeForMemoryIsRefusedWithTheFix) {
   const Box3 box{Vec3::Zero(), Vec3::Constant(100.0)};
   try {
-    ThinPlateField field(box, 0.05, 1, ThinPlateOptions{}, {50.0});  // 1000^3 nodes
+    ThinPlateField field(box, 0.05, 1, ThinPlateOptions{},
+                         std::vector<double>{50.0});  // 1000^3 nodes
     FAIL() << "a grid of a billion nodes was allocated";
   } catch (const UnsupportedInput& e) {
     EXPECT_NE(std::string(e.what()).find("--depth"), std::string::npos) << e.what();
@@ -364,7 +365,7 @@ TEST(ThinPlateData, SlicesAcrossAnOrgansEndBoundEachOthersDistances) {
   slices.push_back(prepare_slice(through, 0, {1}, box));
   slices.push_back(prepare_slice(beyond, 1, {1}, box));
   // Solve grid spacing 2 mm; truncation 0.1 x 100 mm.
-  ThinPlateField field(box, 1.0, 1, ThinPlateOptions{}, {100.0});
+  ThinPlateField field(box, 1.0, 1, ThinPlateOptions{}, std::vector<double>{100.0});
   field.add_slices(std::move(slices));
   field.solve();
   std::vector<double> values(2 * 2);
@@ -401,7 +402,8 @@ TEST(ThinPlateData, EachSampleKeepsTheLeastOfItsBoundsByEveryOtherSlice) {
   }
   const Box3 box = *set.bounds;
   const std::vector<PreparedSlice> prepared = prepare_slices(set, {1}, box);
-  ThinPlateField field(box, box.size().maxCoeff() / 128.0, 1, ThinPlateOptions{}, {100.0});
+  ThinPlateField field(box, box.size().maxCoeff() / 128.0, 1, ThinPlateOptions{},
+                       std::vector<double>{100.0});
   field.add_slices(prepared);
   const double truncation = 0.1 * truncation_extent(100.0);
   const std::vector<double> values = field.sample_values();
@@ -666,6 +668,89 @@ TEST(ThinPlateField, OutlinesWithAnErrorAreFittedNotInterpolated) {
   EXPECT_LT(fitted, 0.3 * exact);  // 1.68 and 0.37 mm
 }
 
+// A large organ and a small thin one in a 200 mm box: a sphere of radius 50 (material 1) and a
+// slab 2 mm thick, 30 mm wide and 30 mm tall (material 2), cut by planes z = const 5 mm apart.
+// The box's grid has 3.1 mm cells (2 finest cells of 200 / 2^7 mm), more than the slab's
+// thickness.
+constexpr double kSlabX = 70.0, kSlabHalfThickness = 1.0;
+SliceSet sphere_and_slab() {
+  SliceSet set;
+  set.bounds = Box3{Vec3::Constant(-100), Vec3::Constant(100)};
+  const Vec3 centre(-20, -20, 0);
+  for (double z = -47.5; z <= 47.5; z += 5.0) {
+    LabeledSlice s = z_slice(z);
+    if (Ring2 ring = sphere_section(centre, 50, z); !ring.empty())
+      s.regions.push_back({1, ring, {}});
+    if (std::abs(z) < 15.0)
+      s.regions.push_back(
+          {2,
+           {Vec2(kSlabX - kSlabHalfThickness, 50), Vec2(kSlabX + kSlabHalfThickness, 50),
+            Vec2(kSlabX + kSlabHalfThickness, 80), Vec2(kSlabX - kSlabHalfThickness, 80)},
+           {}});
+    set.slices.push_back(s);
+  }
+  return set;
+}
+
+// Where material 2's function crosses zero along x at (y, z) = (65, 0), midway between two
+// planes: the slab's faces (the first and last crossing within 10 mm of it).
+std::pair<double, double> slab_faces(const ThinPlateField& field) {
+  std::vector<Vec3> points;
+  for (int i = 0; i <= 2000; ++i) points.push_back(Vec3(kSlabX - 10.0 + 0.01 * i, 65.0, 0.0));
+  std::vector<double> values(points.size() * 3);
+  field.evaluate(points, values.data());
+  double first = std::numeric_limits<double>::quiet_NaN(), last = first;
+  for (std::size_t i = 0; i + 1 < points.size(); ++i) {
+    const double a = values[3 * i + 2], b = values[3 * (i + 1) + 2];
+    if ((a > 0.0) == (b > 0.0)) continue;
+    const double x = points[i].x() + 0.01 * a / (a - b);
+    if (std::isnan(first)) first = x;
+    last = x;
+  }
+  return {first, last};
+}
+
+// The slab gets a grid of its own at the finest cell (1.6 mm) over its padded box; the sphere
+// stays on the box's grid. The slab's faces between the planes then lie within 0.2 mm of the
+// truth, where on the box's grid alone the slab is gone there.
+TEST(ThinPlateField, ASmallOrganGetsAGridOfItsOwnThatKeepsItsThinPartsWhole) {
+  const SliceSet set = sphere_and_slab();
+  const Box3 box = *set.bounds;
+  const double finest = box.size().maxCoeff() / 128.0;
+  const std::vector<PreparedSlice> prepared = prepare_slices(set, {1, 2}, box);
+  const std::vector<Box3> boxes = material_boxes(prepared, 2);
+  ThinPlateField own(box, finest, 2, ThinPlateOptions{}, boxes);
+  ThinPlateField shared(box, finest, 2, ThinPlateOptions{}, box_extents(boxes));
+  const std::vector<Box3> own_boxes = own.own_boxes();
+  ASSERT_EQ(own_boxes.size(), 2u);
+  EXPECT_FALSE(own_boxes[0].min.x() <= own_boxes[0].max.x());  // the sphere: the box's grid
+  ASSERT_TRUE(own_boxes[1].min.x() <= own_boxes[1].max.x());
+  // The slab's contours' box, padded by 10 % of its diagonal and rounded out to 8 finest cells.
+  const Box3 padded = boxes[1].padded(0.1 * boxes[1].diagonal());
+  for (int a = 0; a < 3; ++a) {
+    EXPECT_LE(own_boxes[1].min[a], padded.min[a]);
+    EXPECT_GT(own_boxes[1].min[a], padded.min[a] - 8 * finest);
+    EXPECT_GE(own_boxes[1].max[a], padded.max[a]);
+    EXPECT_LT(own_boxes[1].max[a], padded.max[a] + 8 * finest);
+  }
+  for (ThinPlateField* field : {&own, &shared}) {
+    field->add_slices(prepared);
+    field->solve();
+  }
+  const auto [low, high] = slab_faces(own);
+  EXPECT_NEAR(low, kSlabX - kSlabHalfThickness, 0.2);
+  EXPECT_NEAR(high, kSlabX + kSlabHalfThickness, 0.2);
+  // On the box's grid alone the slab is gone midway between the planes (no crossing).
+  EXPECT_TRUE(std::isnan(slab_faces(shared).first));
+  // The sphere is solved as it was on the box's grid alone (the same operator and data).
+  std::vector<Vec3> points;
+  for (int i = 0; i < 500; ++i) points.push_back(Vec3(-80.0 + 0.24 * i, -20.0, 1.0));
+  std::vector<double> a(points.size() * 3), b(points.size() * 3);
+  own.evaluate(points, a.data());
+  shared.evaluate(points, b.data());
+  for (std::size_t i = 0; i < points.size(); ++i) EXPECT_EQ(a[3 * i + 1], b[3 * i + 1]);
+}
+
 TEST(ThinPlateField, AnOrganInsideAnotherStaysInside) {
   // Material 1: a sphere of radius 30 minus a sphere of radius 12 (material 2) at (4, 0, 0).
   SliceSet set;
@@ -803,8 +888,9 @@ SampledComparison compare_sampled(const SampledField& a, const SampledField& b) 
     } else if (less(b[j].first, a[i].first)) {
       ++j;
     } else {
-      for (std::size_t f = 0; f < a[i].second.size(); ++f)
+      for (std::size_t f = 0; f < a[i].second.size(); ++f) {
         out.worst = std::max(out.worst, std::abs(a[i].second[f] - b[j].second[f]));
+      }
       ++out.compared;
       ++i;
       ++j;
@@ -846,6 +932,35 @@ TEST(ThinPlateOnline, UpdatesAgreeWithTheOneShotReconstruction) {
   const double va = signed_volume(online.mesh().meshes[0].mesh),
                vb = signed_volume(once.mesh().meshes[0].mesh);
   EXPECT_NEAR(va / vb, 1.0, 1e-3);
+}
+
+// An organ with a grid of its own that grows as slices come (the slab above, its box rounded
+// out to 8 finest cells) has that grid built again when it outgrows it (the engine rebuilds the
+// field, each other grid going on from its last solution): online and one-shot still agree to
+// the online tolerance.
+TEST(ThinPlateOnline, AnOrganThatOutgrowsItsOwnGridAgreesWithTheOneShotReconstruction) {
+  const SliceSet set = sphere_and_slab();
+  Reconstructor online(thin_plate_setup(set));
+  for (const LabeledSlice& slice : set.slices) {
+    online.add_slice(slice);
+    online.update();
+  }
+  Reconstructor once(thin_plate_setup(set));
+  for (const LabeledSlice& slice : set.slices) once.add_slice(slice);
+  once.update();
+  const auto a = online.sampled_field();
+  ASSERT_GT(a.size(), 1000u);
+  const auto [compared, worst] = compare_sampled(a, once.sampled_field());
+  EXPECT_GT(compared, a.size() * 9 / 10);
+  EXPECT_LT(worst, online_bound(2.0 * 200.0 / 128.0));
+  const MeshSet online_meshes = online.mesh(), once_meshes = once.mesh();
+  ASSERT_EQ(once_meshes.meshes.size(), 2u);
+  for (std::size_t m = 0; m < 2; ++m) {
+    const double va = signed_volume(online_meshes.meshes[m].mesh),
+                 vb = signed_volume(once_meshes.meshes[m].mesh);
+    EXPECT_NEAR(va / vb, 1.0, 1e-2);
+  }
+  EXPECT_EQ(component_count(once_meshes.meshes[1].mesh), 1u);
 }
 
 // Two fields given the same slices and solves: one samples its solution again per block only
