@@ -1576,6 +1576,53 @@ struct ThinPlateField::Impl {
     for (PreparedSlice& slice : added) slices.push_back(std::move(slice));
   }
 
+  // The materials' extents grew to `extents` and their own grids' boxes to `own` (the same
+  // materials own grids): each grid takes its new truncations in place, and an own grid whose
+  // box changed is built again over its new box from every slice held (its material's data
+  // alone, on its small grid: the other grids keep theirs). False, and nothing changed, where a
+  // truncation would shrink.
+  bool grow(const std::vector<double>& extents, const std::vector<Box3>& own) {
+    if (extents.size() != extents_mm.size()) return false;
+    std::vector<std::vector<double>> per_part(parts.size());
+    std::vector<bool> moved(parts.size(), false);
+    for (std::size_t p = 0; p < parts.size(); ++p) {
+      const Part& part = parts[p];
+      for (const std::size_t m : part.materials) per_part[p].push_back(extents[m]);
+      for (std::size_t i = 0; i < per_part[p].size(); ++i)
+        if (part.grid->truncation_for(per_part[p][i]) < part.grid->truncation_mm[i]) return false;
+      if (part.own) {
+        const Box3& next = own[part.materials[0]];
+        moved[p] = next.min != part.grid->box.min || next.max != part.grid->box.max;
+      }
+    }
+    extents_mm = extents;
+    own_boxes = own;
+    for (std::size_t p = 0; p < parts.size(); ++p) {
+      Part& part = parts[p];
+      if (moved[p]) {
+        rebuild_own(part);
+        continue;
+      }
+      const std::vector<double> before = part.grid->truncation_mm;
+      part.grid->grow_extents(per_part[p]);
+      if (part.grid->truncation_mm != before) part.outside_changed_at = generation + 1;
+    }
+    return true;
+  }
+
+  // An own grid over the material's box in own_boxes, from every slice held; its blocks and
+  // the points beyond its box are new at the next solve.
+  void rebuild_own(Part& part) {
+    const std::size_t m = part.materials[0];
+    part.grid = make_grid(own_boxes[m], finest_cell_mm, part.materials);
+    part.grid->generation = generation;
+    part.outside_changed_at = generation + 1;
+    std::vector<PreparedSlice> subset(slices.size());
+    tbb::parallel_for(std::size_t{0}, slices.size(),
+                      [&](std::size_t k) { subset[k] = restricted(slices[k], part.materials); });
+    part.grid->add_slices(std::move(subset));
+  }
+
   // Values of the K + 1 functions at `point`: each material from its grid (outside, at
   // -truncation, beyond its own grid's box), f_0 = -max.
   void interpolate(const Vec3& point, double* out, std::vector<double>& scratch) const {
@@ -1683,39 +1730,17 @@ bool ThinPlateField::start_from(const ThinPlateField& other) {
 }
 
 bool ThinPlateField::grow_extents(const std::vector<double>& extents_mm) {
-  Impl& s = *impl_;
-  if (extents_mm.size() != s.extents_mm.size()) return false;
-  std::vector<std::vector<double>> per_part(s.parts.size());
-  for (std::size_t p = 0; p < s.parts.size(); ++p) {
-    for (const std::size_t m : s.parts[p].materials) per_part[p].push_back(extents_mm[m]);
-    // Every grid must take its new extents before any changes.
-    for (std::size_t i = 0; i < per_part[p].size(); ++i)
-      if (s.parts[p].grid->truncation_for(per_part[p][i]) < s.parts[p].grid->truncation_mm[i])
-        return false;
-  }
-  for (std::size_t p = 0; p < s.parts.size(); ++p) {
-    const std::vector<double> before = s.parts[p].grid->truncation_mm;
-    if (!s.parts[p].grid->grow_extents(per_part[p])) return false;
-    if (s.parts[p].grid->truncation_mm != before) s.parts[p].outside_changed_at = s.generation + 1;
-  }
-  s.extents_mm = extents_mm;
-  return true;
+  return impl_->grow(extents_mm, impl_->own_boxes);
 }
 
 bool ThinPlateField::grow_boxes(const std::vector<Box3>& material_boxes) {
   Impl& s = *impl_;
   if (material_boxes.size() != s.own_boxes.size()) return false;
   const std::vector<Box3> own = own_grid_boxes(s.box, s.finest_cell_mm, material_boxes, s.options);
+  // Another choice of which materials have grids of their own: a rebuild.
   for (std::size_t m = 0; m < own.size(); ++m)
-    if (is_empty(own[m]) != is_empty(s.own_boxes[m]) ||
-        (!is_empty(own[m]) &&
-         (own[m].min != s.own_boxes[m].min || own[m].max != s.own_boxes[m].max)))
-      return false;
-  const std::vector<double> extents = box_extents(material_boxes);
-  bool grows = false;
-  for (std::size_t m = 0; m < extents.size(); ++m)
-    grows |= truncation_extent(extents[m]) != truncation_extent(s.extents_mm[m]);
-  return !grows || grow_extents(extents);
+    if (is_empty(own[m]) != is_empty(s.own_boxes[m])) return false;
+  return s.grow(box_extents(material_boxes), own);
 }
 
 std::vector<double> ThinPlateField::sample_values() const {

@@ -128,8 +128,10 @@ class ThinPlateField {
   /// and nothing changed, where a truncation would shrink (a rebuild's case).
   bool grow_extents(const std::vector<double>& extents_mm);
   /// The materials' boxes grew to `material_boxes` (same count; a field built from boxes):
-  /// grow_extents with their diagonals, where every grid of its own keeps its box (and every
-  /// material its grid). False, and nothing changed, otherwise (a rebuild's case).
+  /// grow_extents with their diagonals, and a grid of its own whose box they change is built
+  /// again over its new box from the slices held (the other grids go on). False, and nothing
+  /// changed, where a truncation would shrink or another choice of own grids follows (a
+  /// rebuild's case).
   bool grow_boxes(const std::vector<Box3>& material_boxes);
   /// Solves for every material from the last solution (-truncation at first), except, after
   /// this field's first solve, the materials whose added data the field fits to the solver's

@@ -18,9 +18,11 @@ class ReconstructorStage final : public ReconstructionStage {
   std::size_t slice_count() const override { return reconstructor_.slice_count(); }
 
   // The live updates' meshes are previews: the thin-plate meshes' refinement onto the field's
-  // zero set (as much again as the mesher) waits for the settled meshes.
+  // zero set (as much again as the mesher) and small organs' grids of their own (rebuilt as an
+  // organ grows in the sweep: spikes of a few hundred milliseconds) wait for the settled meshes.
   static recon::ReconstructorOptions live_options(recon::ReconstructorOptions options) {
     options.refine_meshes = false;
+    options.own_grids = false;
     return options;
   }
 
