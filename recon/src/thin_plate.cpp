@@ -476,6 +476,9 @@ constexpr double kMaxNodes = 32.0 * 1024 * 1024;
 // No truncation below this many solve-grid spacings: the data would not reach a grid node.
 constexpr double kMinimumTruncation = 2.0;
 
+// The least bound a slice puts on another's samples, in solve-grid spacings (tighten()).
+constexpr double kLeastBoundSpacings = 0.25;
+
 // Each sample's value is an upper bound of its distance to the surface, signed: its slice's
 // true boundaries lie on the surface. So are these, from another slice B at height h above it:
 // h where B is known and on the other side at the sample's foot (the segment between them
@@ -484,12 +487,18 @@ constexpr double kMinimumTruncation = 2.0;
 // organ's end then disagree by about that millimetre, not by twice the truncation (a fill
 // through such a jump rings: a bulge before the end, the end short of the last slice).
 //
+// No bound is taken below `least_mm` (kLeastBoundSpacings): slices nearer than that lie on the
+// same grid edges, which cannot place a surface between them, and what they disagree on there
+// is the error of the tracking and the outlines. Bounds by their distance turned that into
+// values near zero over both sections, whose sign the fill then follows: fCal's wire recording,
+// its wires seen on the way out and back a millimetre apart, left blobs beside a wire's tube.
+//
 // Tightens sample `values` (K materials, at point p) by slice `b`; returns whether any changed.
 static bool tighten(const Vec3& p, double* values, const PreparedSlice& b,
-                    const SliceDistances& other, std::vector<double>& scratch) {
+                    const SliceDistances& other, double least_mm, std::vector<double>& scratch) {
   const std::size_t k = scratch.size();
   const Vec3 r = p - b.origin;
-  const double h = std::abs(r.dot(b.unit_normal));
+  const double h = std::max(std::abs(r.dot(b.unit_normal)), least_mm);
   const Vec2 foot(r.dot(b.u), r.dot(b.v));
   // Without a query where the foot is far from B's rings: then B is outside them there (the
   // other side for a sample inside), or too far to bound a sample outside.
@@ -571,6 +580,8 @@ struct ThinPlateField::Impl {
   std::vector<PreparedSlice> slices;
   bool weights_dirty = true;
 
+  // The least bound tighten() takes (mm).
+  double least_bound_mm() const { return kLeastBoundSpacings * spacing; }
   double truncation_for(double extent_mm) const {
     return std::max(options.truncation * truncation_extent(extent_mm),
                     kMinimumTruncation * spacing);
@@ -650,7 +661,8 @@ struct ThinPlateField::Impl {
     for (std::size_t b = first; b < last; ++b) {
       if (b == a) continue;
       for_samples_near(c, slices[b], reach, [&](std::size_t e) {
-        tighten(c.points[e], c.targets.data() + e * k, slices[b], *distances[b], scratch);
+        tighten(c.points[e], c.targets.data() + e * k, slices[b], *distances[b], least_bound_mm(),
+                scratch);
       });
     }
     std::vector<std::pair<std::size_t, double>> changes;
@@ -951,7 +963,8 @@ struct ThinPlateField::Impl {
       if (b == a) continue;
       for_samples_near(c, slices[b], truncation_mm[m], [&](std::size_t e) {
         if (values[e * k + m] != 0.0)
-          tighten(c.points[e], values.data() + e * k, slices[b], *distances[b], scratch);
+          tighten(c.points[e], values.data() + e * k, slices[b], *distances[b], least_bound_mm(),
+                  scratch);
       });
     }
     for (const std::size_t e : clamped) {
