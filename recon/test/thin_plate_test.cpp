@@ -466,6 +466,42 @@ TEST(ThinPlateData, NearSlicesBoundEachOtherNoCloserThanAQuarterSpacing) {
   EXPECT_GE(checked, 4u);
 }
 
+// A rod of 0.6 mm radius along z, crossed by planes 1 mm apart, on a solve grid of 2 mm whose
+// sample lines (along z, at even x and y) it falls between: 0.75 mm from the nearest, so no
+// sample lies inside any of its sections. Its sections are dilated to the thinnest the data keep
+// (0.45 spacings, 0.9 mm) and the field is positive along the rod; the same rod centred on a
+// sample line holds a sample in every section, and keeps its data as drawn.
+ThinPlateField thin_rod_field(const Vec2& centre) {
+  const Box3 box{Vec3::Constant(-20.0), Vec3::Constant(20.0)};
+  std::vector<PreparedSlice> slices;
+  for (int k = -10; k <= 10; ++k) {
+    LabeledSlice s = z_slice(k);
+    s.regions.push_back({1, circle(centre, 0.6, 48), {}});
+    slices.push_back(prepare_slice(s, static_cast<std::size_t>(k + 10), {1}, box));
+  }
+  ThinPlateField field(box, 1.0, 1, ThinPlateOptions{}, {40.0});  // spacing 2 mm
+  field.add_slices(std::move(slices));
+  field.solve();
+  return field;
+}
+
+TEST(ThinPlateField, ASectionBetweenTheSampleLinesIsDilatedToReachThem) {
+  const ThinPlateField between = thin_rod_field(Vec2(0.75, 0.0));
+  std::vector<Vec3> axis;
+  for (int k = -8; k <= 8; ++k) axis.emplace_back(0.75, 0.0, k);
+  std::vector<double> values(2 * axis.size());
+  between.evaluate(axis, values.data());
+  for (std::size_t p = 0; p < axis.size(); ++p)
+    EXPECT_GT(values[2 * p + 1], 0.0) << "at z = " << axis[p].z();
+  // The sample on the line (0, 0) of each section: 0.9 mm dilated radius less 0.75 mm.
+  const std::vector<double> samples = between.sample_values();
+  EXPECT_NEAR(*std::max_element(samples.begin(), samples.end()), 0.15, 0.01);
+
+  const ThinPlateField on_line = thin_rod_field(Vec2(0.0, 0.0));
+  const std::vector<double> drawn = on_line.sample_values();
+  EXPECT_NEAR(*std::max_element(drawn.begin(), drawn.end()), 0.6, 0.01);
+}
+
 // The slices added one by one to a field set up for the first one's extent, its truncation grown
 // with the organ's extent before each (grow_extents) and the field solved after each; `growths`
 // counts the steps of the rounded extent.
