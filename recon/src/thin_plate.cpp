@@ -25,9 +25,10 @@ class SliceDistances {
   /// material's edges along unknown regions and its true boundaries give (inside_distance).
   static constexpr double kUnseenShare = 0.5;
 
-  /// `truncation[m - 1]`: material m's clamp (mm); `shadow_casters` as ThinPlateOptions has them.
+  /// `truncation[m - 1]`: material m's clamp (mm); `shadow_casters` as ThinPlateOptions has them;
+  /// sections thinner than `thinnest_mm` are dilated to it (find_thin_rings).
   SliceDistances(const PreparedSlice& slice, int materials, const std::vector<double>& truncation,
-                 const std::vector<bool>& shadow_casters)
+                 const std::vector<bool>& shadow_casters, double thinnest_mm)
       : slice_(&slice), materials_(materials), truncation_(truncation) {
     for (const Ring2& ring : slice.known) known_bands_.push_back(make_ring_bands(ring));
     material_boxes_.assign(static_cast<std::size_t>(materials),
@@ -40,6 +41,7 @@ class SliceDistances {
         box.second = box.second.cwiseMax(hi);
       }
     classify_edges(shadow_casters);
+    find_thin_rings(thinnest_mm);
     // Buckets of the truncation's size: a query reads the 3 x 3 around its own.
     Vec2 lo = Vec2::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
     for (const auto& list : edges_)
@@ -66,11 +68,14 @@ class SliceDistances {
       for (const Ring2& ring : slice.view) view_bands_.push_back(make_ring_bands(ring));
     edges_.resize(static_cast<std::size_t>(materials_) + 1);
     unseen_edges_.resize(static_cast<std::size_t>(materials_) + 1);
+    whole_rings_.resize(static_cast<std::size_t>(materials_) + 1);
     for (int m = 1; m <= materials_ && static_cast<std::size_t>(m) < slice.rings_by_material.size();
          ++m) {
       const bool caster = static_cast<std::size_t>(m - 1) < shadow_casters.size() &&
                           shadow_casters[static_cast<std::size_t>(m - 1)];
-      for (const Ring2& ring : slice.rings_by_material[static_cast<std::size_t>(m)])
+      auto& whole = whole_rings_[static_cast<std::size_t>(m)];
+      for (const Ring2& ring : slice.rings_by_material[static_cast<std::size_t>(m)]) {
+        whole.push_back(1);
         for (std::size_t i = 0; i < ring.size(); ++i) {
           const Vec2& a = ring[i];
           const Vec2& b = ring[(i + 1) % ring.size()];
@@ -80,17 +85,86 @@ class SliceDistances {
           // Outer rings run counter-clockwise and holes clockwise: the material is on the left.
           const Vec2 across = 0.5 * (a + b) + probe / length * Vec2(d.y(), -d.x());
           if (!known(across)) {
+            whole.back() = 0;
             if (caster && in_view(across))
               edges_[static_cast<std::size_t>(m)].push_back({a, b});
             else
               unseen_edges_[static_cast<std::size_t>(m)].push_back({a, b});
             continue;
           }
-          if (label(across) == m) continue;
+          if (label(across) == m) {
+            whole.back() = 0;
+            continue;
+          }
           edges_[static_cast<std::size_t>(m)].push_back({a, b});
         }
+      }
     }
   }
+
+  // A section thinner than the solve grid resolves can fall between the lines of nodes that a
+  // slice's samples lie on (one per grid spacing squared of plane): a wire's echo of 0.3 mm^2
+  // left no sample inside it on many frames of fCal's recording, and its tube broke where it
+  // moved across those lines. The outer rings seen whole (every edge a true boundary) whose
+  // thickness 2 A / P (a disc's radius, half a strip's width) is below `thinnest_mm` are the
+  // candidates; dilate_unsampled_rings() dilates those that the samples miss. A ring thinner
+  // than kSliverShare of it (a grazing cut's sliver, a label map's speck of a few pixels) is
+  // left as drawn: dilated, it became a section of about a grid cell where the slice saw next
+  // to nothing (`scan-exact`'s rib, a sliver of 0.13 mm, lost 0.0002 IoU).
+  static constexpr double kSliverShare = 1.0 / 3.0;
+  void find_thin_rings(double thinnest_mm) {
+    const PreparedSlice& slice = *slice_;
+    thin_candidates_.resize(static_cast<std::size_t>(materials_) + 1);
+    thin_rings_.resize(static_cast<std::size_t>(materials_) + 1);
+    if (!(thinnest_mm > 0.0)) return;
+    for (int m = 1; m <= materials_ && static_cast<std::size_t>(m) < slice.rings_by_material.size();
+         ++m) {
+      const auto& rings = slice.rings_by_material[static_cast<std::size_t>(m)];
+      for (std::size_t r = 0; r < rings.size(); ++r) {
+        if (!whole_rings_[static_cast<std::size_t>(m)][r]) continue;
+        const Ring2& ring = rings[r];
+        double twice_area = 0.0, perimeter = 0.0;
+        for (std::size_t i = 0; i < ring.size(); ++i) {
+          const Vec2& a = ring[i];
+          const Vec2& b = ring[(i + 1) % ring.size()];
+          twice_area += a.x() * b.y() - b.x() * a.y();
+          perimeter += (b - a).norm();
+        }
+        if (!(twice_area > 0.0) || twice_area >= thinnest_mm * perimeter) continue;
+        const double thickness = twice_area / perimeter;
+        if (thickness < kSliverShare * thinnest_mm) continue;
+        thin_candidates_[static_cast<std::size_t>(m)].push_back(
+            {r, thickness, thinnest_mm - thickness});
+      }
+    }
+  }
+
+  /// Dilates each thin ring (find_thin_rings) in which no point of `samples` (in-plane) lies
+  /// deeper than half the ring's thickness by the difference to the thinnest section: its values
+  /// become its own signed distance plus that offset (exact for the ring dilated by a disc), so
+  /// that it reaches the samples wherever it lies. Sections that hold a sample keep their data as
+  /// drawn. Returns whether any ring was dilated (the slice's data must then be taken again).
+  bool dilate_unsampled_rings(const std::vector<Vec2>& samples) {
+    bool dilated = false;
+    for (int m = 1; m <= materials_; ++m)
+      for (const ThinRing& thin : thin_candidates_[static_cast<std::size_t>(m)]) {
+        const auto& [lo, hi] = slice_->ring_bounds[static_cast<std::size_t>(m)][thin.ring];
+        const bool sampled = std::any_of(samples.begin(), samples.end(), [&](const Vec2& q) {
+          return (q.array() >= lo.array()).all() && (q.array() <= hi.array()).all() &&
+                 ring_signed_distance(m, thin.ring, q) >= 0.5 * thin.thickness;
+        });
+        if (sampled) continue;
+        thin_rings_[static_cast<std::size_t>(m)].push_back(thin);
+        auto& box = material_boxes_[static_cast<std::size_t>(m - 1)];
+        box.first = box.first.cwiseMin(lo - Vec2::Constant(thin.offset));
+        box.second = box.second.cwiseMax(hi + Vec2::Constant(thin.offset));
+        dilated = true;
+      }
+    return dilated;
+  }
+
+  /// Whether material m has rings dilated to the thinnest section in this slice.
+  bool has_thin_rings(int m) const { return !thin_rings_[static_cast<std::size_t>(m)].empty(); }
 
   // Whether p lies within the slice's field of view and the box (PreparedSlice::view).
   bool in_view(const Vec2& p) const {
@@ -114,8 +188,15 @@ class SliceDistances {
     truncation_[static_cast<std::size_t>(m - 1)] = truncation_mm;
   }
 
-  /// Material m's signed distance at a known point p.
+  /// Material m's signed distance at a known point p (its thin rings dilated).
   double signed_distance(int m, const Vec2& p) const { return signed_at(m, p, label(p)); }
+
+  /// What bounds another slice's samples at p (label `at`): material m's signed distance to its
+  /// true boundaries, its thin rings dilated (as distance_below for a material without them).
+  double bounding_distance(int m, const Vec2& p, int at) const {
+    const double d = unsigned_distance(m, p);
+    return with_thin_rings(m, p, at == m ? d : -d);
+  }
 
   /// Inside material m, its distance d to its true boundaries is an upper bound of its
   /// in-plane distance to the surface, and the distance to its edges along unknown regions
@@ -150,7 +231,7 @@ class SliceDistances {
     return winding > 0;
   }
 
-  // The material at a known point (0: outside).
+  // The material drawn at a known point (0: outside; thin rings as drawn).
   int label(const Vec2& p) const {
     for (int m = 1;
          m <= materials_ && static_cast<std::size_t>(m) < slice_->rings_by_material.size(); ++m) {
@@ -191,7 +272,37 @@ class SliceDistances {
   // Material m's signed distance at p, whose label is `at`.
   double signed_at(int m, const Vec2& p, int at) const {
     const double d = unsigned_distance(m, p);
-    return at == m ? inside_distance(m, p, d) : -d;
+    const double drawn = at == m ? inside_distance(m, p, d) : -d;
+    return has_thin_rings(m) ? with_thin_rings(m, p, drawn) : drawn;
+  }
+  // The signed distance to ring r of material m alone (positive inside).
+  double ring_signed_distance(int m, std::size_t r, const Vec2& p) const {
+    const Ring2& ring = slice_->rings_by_material[static_cast<std::size_t>(m)][r];
+    double best2 = std::numeric_limits<double>::infinity();
+    for (std::size_t i = 0; i < ring.size(); ++i) {
+      const Vec2& a = ring[i];
+      const Vec2 e = ring[(i + 1) % ring.size()] - a;
+      const double t =
+          e.squaredNorm() > 0.0 ? std::clamp((p - a).dot(e) / e.squaredNorm(), 0.0, 1.0) : 0.0;
+      best2 = std::min(best2, (a + t * e - p).squaredNorm());
+    }
+    const bool inside =
+        winding_number_in_bands(ring, slice_->ring_bands[static_cast<std::size_t>(m)][r], p) != 0;
+    return inside ? std::sqrt(best2) : -std::sqrt(best2);
+  }
+  // The greatest of `value` (material m's signed distance to its rings as drawn) and each thin
+  // ring's own signed distance plus its offset, clamped to the truncation: outside every ring
+  // the signed distance to the union of the dilated rings.
+  double with_thin_rings(int m, const Vec2& p, double value) const {
+    for (const ThinRing& thin : thin_rings_[static_cast<std::size_t>(m)]) {
+      const auto& [lo, hi] = slice_->ring_bounds[static_cast<std::size_t>(m)][thin.ring];
+      // The ring's value is at most its offset less p's distance to its box.
+      const double gap = (lo - p).cwiseMax(p - hi).cwiseMax(0.0).norm();
+      if (gap > 0.0 && thin.offset - gap <= value) continue;
+      value = std::max(value, thin.offset + ring_signed_distance(m, thin.ring, p));
+    }
+    const double truncation = truncation_[static_cast<std::size_t>(m - 1)];
+    return std::clamp(value, -truncation, truncation);
   }
   double unsigned_distance(int m, const Vec2& p) const {
     const double truncation = truncation_[static_cast<std::size_t>(m - 1)];
@@ -293,6 +404,14 @@ class SliceDistances {
   std::vector<std::pair<Vec2, Vec2>> material_boxes_;      // per material 1..K: its rings' box
   std::vector<std::vector<std::pair<Vec2, Vec2>>> edges_;  // per material: true boundaries
   std::vector<std::vector<std::pair<Vec2, Vec2>>> unseen_edges_;  // per material: along unknown
+  struct ThinRing {
+    std::size_t ring = 0;    // in slice_->rings_by_material[m]
+    double thickness = 0.0;  // 2 A / P (mm)
+    double offset = 0.0;     // mm it is dilated by
+  };
+  std::vector<std::vector<ThinRing>> thin_candidates_;  // per material: thinner than the thinnest
+  std::vector<std::vector<ThinRing>> thin_rings_;       // per material: those dilated
+  std::vector<std::vector<char>> whole_rings_;          // per material and ring: every edge true
   Vec2 origin_ = Vec2::Zero();
   double bucket_size_ = 1.0;
   int nx_ = 0, ny_ = 0;
@@ -460,7 +579,7 @@ std::vector<double> slice_signed_distances(const PreparedSlice& slice, int mater
                                            const std::vector<bool>& shadow_casters) {
   const SliceDistances distances(
       slice, materials, std::vector<double>(static_cast<std::size_t>(materials), truncation),
-      shadow_casters);
+      shadow_casters, /*thinnest_mm=*/0.0);
   std::vector<double> out(points.size() * static_cast<std::size_t>(materials),
                           std::numeric_limits<double>::quiet_NaN());
   for (std::size_t p = 0; p < points.size(); ++p)
@@ -489,6 +608,17 @@ Box3 empty_box() {
 
 bool is_empty(const Box3& box) { return !(box.min.x() <= box.max.x()); }
 
+// The thinnest section the data keep, as a thickness 2 A / P in solve-grid spacings
+// (SliceDistances::dilate_unsampled_rings): a plane's samples lie on lines of nodes a spacing
+// apart, so a strip about a spacing wide (a thickness of half a spacing) holds a row of them
+// whatever its direction. Just under a half: at 0.5 a section at the end of `fan-perfect`'s
+// cheburashka, about a cell across, was dilated by 0.19 mm and the organ lost 0.001 IoU; at 0.4
+// fCal's fifth wire stayed in two pieces.
+constexpr double kThinnestSectionSpacings = 0.45;
+
+// The least bound a slice puts on another's samples, in solve-grid spacings (tighten()).
+constexpr double kLeastBoundSpacings = 0.25;
+
 // Each sample's value is an upper bound of its distance to the surface, signed: its slice's
 // true boundaries lie on the surface. So are these, from another slice B at height h above it:
 // h where B is known and on the other side at the sample's foot (the segment between them
@@ -497,12 +627,18 @@ bool is_empty(const Box3& box) { return !(box.min.x() <= box.max.x()); }
 // organ's end then disagree by about that millimetre, not by twice the truncation (a fill
 // through such a jump rings: a bulge before the end, the end short of the last slice).
 //
+// No bound is taken below `least_mm` (kLeastBoundSpacings): slices nearer than that lie on the
+// same grid edges, which cannot place a surface between them, and what they disagree on there
+// is the error of the tracking and the outlines. Bounds by their distance turned that into
+// values near zero over both sections, whose sign the fill then follows: fCal's wire recording,
+// its wires seen on the way out and back a millimetre apart, left blobs beside a wire's tube.
+//
 // Tightens sample `values` (K materials, at point p) by slice `b`; returns whether any changed.
 static bool tighten(const Vec3& p, double* values, const PreparedSlice& b,
-                    const SliceDistances& other, std::vector<double>& scratch) {
+                    const SliceDistances& other, double least_mm, std::vector<double>& scratch) {
   const std::size_t k = scratch.size();
   const Vec3 r = p - b.origin;
-  const double h = std::abs(r.dot(b.unit_normal));
+  const double h = std::max(std::abs(r.dot(b.unit_normal)), least_mm);
   const Vec2 foot(r.dot(b.u), r.dot(b.v));
   // Without a query where the foot is far from B's rings: then B is outside them there (the
   // other side for a sample inside), or too far to bound a sample outside.
@@ -524,7 +660,11 @@ static bool tighten(const Vec3& p, double* values, const PreparedSlice& b,
       const double limit = std::abs(values[m]);
       if (!(h < limit)) continue;
       double bound = h;  // B on the other side at the foot (or on its boundary)
-      if ((at == static_cast<int>(m) + 1) == (values[m] > 0.0)) {
+      if (other.has_thin_rings(static_cast<int>(m) + 1)) {
+        // B's dilated sections decide the side and the distance.
+        const double at_foot = other.bounding_distance(static_cast<int>(m) + 1, foot, at);
+        if ((at_foot > 0.0) == (values[m] > 0.0)) bound = std::hypot(h, std::abs(at_foot));
+      } else if ((at == static_cast<int>(m) + 1) == (values[m] > 0.0)) {
         // The same side: B's boundary bounds the distance where it is nearer than
         // sqrt(limit^2 - h^2) (with a margin far above rounding, so that no bound below the
         // limit is missed).
@@ -587,6 +727,19 @@ struct ThinPlateField::Grid {
   std::vector<PreparedSlice> slices;
   bool weights_dirty = true;
 
+  static std::vector<Vec2> in_plane(const std::vector<Vec3>& points, const PreparedSlice& slice) {
+    std::vector<Vec2> out;
+    out.reserve(points.size());
+    for (const Vec3& p : points) {
+      const Vec3 r = p - slice.origin;
+      out.emplace_back(r.dot(slice.u), r.dot(slice.v));
+    }
+    return out;
+  }
+  // The thinnest section the data keep (mm; SliceDistances::dilate_unsampled_rings).
+  double thinnest_mm() const { return kThinnestSectionSpacings * spacing; }
+  // The least bound tighten() takes (mm).
+  double least_bound_mm() const { return kLeastBoundSpacings * spacing; }
   double truncation_for(double extent_mm) const {
     return std::max(options.truncation * truncation_extent(extent_mm),
                     kMinimumTruncation * spacing);
@@ -666,7 +819,8 @@ struct ThinPlateField::Grid {
     for (std::size_t b = first; b < last; ++b) {
       if (b == a) continue;
       for_samples_near(c, slices[b], reach, [&](std::size_t e) {
-        tighten(c.points[e], c.targets.data() + e * k, slices[b], *distances[b], scratch);
+        tighten(c.points[e], c.targets.data() + e * k, slices[b], *distances[b], least_bound_mm(),
+                scratch);
       });
     }
     std::vector<std::pair<std::size_t, double>> changes;
@@ -967,7 +1121,8 @@ struct ThinPlateField::Grid {
       if (b == a) continue;
       for_samples_near(c, slices[b], truncation_mm[m], [&](std::size_t e) {
         if (values[e * k + m] != 0.0)
-          tighten(c.points[e], values.data() + e * k, slices[b], *distances[b], scratch);
+          tighten(c.points[e], values.data() + e * k, slices[b], *distances[b], least_bound_mm(),
+                  scratch);
       });
     }
     for (const std::size_t e : clamped) {
@@ -1381,8 +1536,10 @@ void ThinPlateField::Grid::add_slices(std::vector<PreparedSlice> added) {
   // whether the slices came one by one or at once.
   tbb::parallel_for(first, count, [&](std::size_t k) {
     distances[k] = std::make_unique<SliceDistances>(slices[k], materials, truncation_mm,
-                                                    options.shadow_casters);
+                                                    options.shadow_casters, thinnest_mm());
     data[k] = slice_data(slices[k], *distances[k]);
+    if (distances[k]->dilate_unsampled_rings(in_plane(data[k].points, slices[k])))
+      data[k] = slice_data(slices[k], *distances[k]);
   });
   std::vector<std::vector<std::pair<std::size_t, double>>> changes(first);
   tbb::parallel_for(std::size_t{0}, count, [&](std::size_t a) {

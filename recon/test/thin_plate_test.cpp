@@ -402,10 +402,11 @@ TEST(ThinPlateData, EachSampleKeepsTheLeastOfItsBoundsByEveryOtherSlice) {
   }
   const Box3 box = *set.bounds;
   const std::vector<PreparedSlice> prepared = prepare_slices(set, {1}, box);
-  ThinPlateField field(box, box.size().maxCoeff() / 128.0, 1, ThinPlateOptions{},
-                       std::vector<double>{100.0});
+  const double finest = box.size().maxCoeff() / 128.0;
+  ThinPlateField field(box, finest, 1, ThinPlateOptions{}, std::vector<double>{100.0});
   field.add_slices(prepared);
   const double truncation = 0.1 * truncation_extent(100.0);
+  const double least = 0.25 * 2.0 * finest;  // a quarter of the solve grid's spacing
   const std::vector<double> values = field.sample_values();
   const std::vector<std::vector<Vec3>> points = field.sample_points();
   ASSERT_EQ(points.size(), prepared.size());
@@ -421,7 +422,8 @@ TEST(ThinPlateData, EachSampleKeepsTheLeastOfItsBoundsByEveryOtherSlice) {
       double best = std::abs(own);
       for (std::size_t b = 0; b < prepared.size(); ++b) {
         if (b == a) continue;
-        const double h = std::abs((p - prepared[b].origin).dot(prepared[b].unit_normal));
+        const double h =
+            std::max(std::abs((p - prepared[b].origin).dot(prepared[b].unit_normal)), least);
         const double there =
             slice_signed_distances(prepared[b], 1, truncation, {in_plane(prepared[b])})[0];
         if (std::isnan(there)) continue;
@@ -435,6 +437,70 @@ TEST(ThinPlateData, EachSampleKeepsTheLeastOfItsBoundsByEveryOtherSlice) {
   EXPECT_EQ(at, values.size());
   EXPECT_EQ(wrong, 0u);
   EXPECT_GT(tightened, values.size() / 20);  // the bounds matter for a good share of samples
+}
+
+// Two parallel slices 0.1 mm apart whose discs disagree (a tracking error: the same section
+// 6 mm to the side): the first slice's samples inside its disc where the second is outside at
+// their foot are bounded by a quarter of the solve grid's spacing, not by the 0.1 mm between
+// the slices, which would take them to about zero over the whole disagreement.
+TEST(ThinPlateData, NearSlicesBoundEachOtherNoCloserThanAQuarterSpacing) {
+  const Box3 box{Vec3::Constant(-20.0), Vec3::Constant(20.0)};
+  LabeledSlice first = z_slice(0.0), second = z_slice(0.1);
+  first.regions.push_back({1, circle(Vec2(0, 0), 5.0, 96), {}});
+  second.regions.push_back({1, circle(Vec2(6, 0), 5.0, 96), {}});
+  std::vector<PreparedSlice> slices;
+  slices.push_back(prepare_slice(first, 0, {1}, box));
+  slices.push_back(prepare_slice(second, 1, {1}, box));
+  const double spacing = 2.0;  // the finest cell 1 mm, coarsened once
+  ThinPlateField field(box, 1.0, 1, ThinPlateOptions{}, std::vector<double>{100.0});
+  field.add_slices(std::move(slices));
+  const std::vector<double> values = field.sample_values();
+  const std::vector<Vec3> points = field.sample_points()[0];
+  std::size_t checked = 0;
+  for (std::size_t e = 0; e < points.size(); ++e) {
+    const Vec2 q = points[e].head<2>();
+    // Inside the first disc by more than the bound, outside the second by a margin.
+    if (q.norm() > 5.0 - spacing || (q - Vec2(6, 0)).norm() < 5.0 + 0.1 * spacing) continue;
+    EXPECT_NEAR(values[e], 0.25 * spacing, 1e-12) << "at " << q.transpose();
+    ++checked;
+  }
+  EXPECT_GE(checked, 4u);
+}
+
+// A rod of 0.6 mm radius along z, crossed by planes 1 mm apart, on a solve grid of 2 mm whose
+// sample lines (along z, at even x and y) it falls between: 0.75 mm from the nearest, so no
+// sample lies inside any of its sections. Its sections are dilated to the thinnest the data keep
+// (0.45 spacings, 0.9 mm) and the field is positive along the rod; the same rod centred on a
+// sample line holds a sample in every section, and keeps its data as drawn.
+ThinPlateField thin_rod_field(const Vec2& centre) {
+  const Box3 box{Vec3::Constant(-20.0), Vec3::Constant(20.0)};
+  std::vector<PreparedSlice> slices;
+  for (int k = -10; k <= 10; ++k) {
+    LabeledSlice s = z_slice(k);
+    s.regions.push_back({1, circle(centre, 0.6, 48), {}});
+    slices.push_back(prepare_slice(s, static_cast<std::size_t>(k + 10), {1}, box));
+  }
+  ThinPlateField field(box, 1.0, 1, ThinPlateOptions{}, std::vector<double>{40.0});  // spacing 2 mm
+  field.add_slices(std::move(slices));
+  field.solve();
+  return field;
+}
+
+TEST(ThinPlateField, ASectionBetweenTheSampleLinesIsDilatedToReachThem) {
+  const ThinPlateField between = thin_rod_field(Vec2(0.75, 0.0));
+  std::vector<Vec3> axis;
+  for (int k = -8; k <= 8; ++k) axis.emplace_back(0.75, 0.0, k);
+  std::vector<double> values(2 * axis.size());
+  between.evaluate(axis, values.data());
+  for (std::size_t p = 0; p < axis.size(); ++p)
+    EXPECT_GT(values[2 * p + 1], 0.0) << "at z = " << axis[p].z();
+  // The sample on the line (0, 0) of each section: 0.9 mm dilated radius less 0.75 mm.
+  const std::vector<double> samples = between.sample_values();
+  EXPECT_NEAR(*std::max_element(samples.begin(), samples.end()), 0.15, 0.01);
+
+  const ThinPlateField on_line = thin_rod_field(Vec2(0.0, 0.0));
+  const std::vector<double> drawn = on_line.sample_values();
+  EXPECT_NEAR(*std::max_element(drawn.begin(), drawn.end()), 0.6, 0.01);
 }
 
 // The slices added one by one to a field set up for the first one's extent, its truncation grown
