@@ -285,6 +285,10 @@ void add_report_options(CLI::App& app, ReconstructCommandOptions& opt) {
       "--whole-arrangement", [&opt](std::int64_t) { opt.engine.cells_on_demand = false; },
       "Build every cell of the slices' arrangement instead of those the surface needs (the "
       "same field, at a cost that grows with the cube of the slice count; for comparisons)");
+  app.add_flag(
+      "--one-grid", [&opt](std::int64_t) { opt.engine.own_grids = false; },
+      "Thin-plate field: solve every organ on the one grid over the box, without the grids of "
+      "their own that small organs get (for comparisons)");
 }
 
 // --online: the slices one by one through the online engine.

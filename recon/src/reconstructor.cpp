@@ -326,7 +326,7 @@ struct Reconstructor::State {
     field.reset();
     ThinPlateOptions tp;
     tp.shadow_casters = shadow_casters();
-    tp.own_grids = options.own_grids;
+    tp.own_grids = options.engine.own_grids;
     Stopwatch clock;
     std::vector<PreparedSlice> prepared = prepare_for_rebuild(list);
     const int materials = static_cast<int>(material_ids.size());

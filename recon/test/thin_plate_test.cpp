@@ -817,6 +817,26 @@ TEST(ThinPlateField, ASmallOrganGetsAGridOfItsOwnThatKeepsItsThinPartsWhole) {
   for (std::size_t i = 0; i < points.size(); ++i) EXPECT_EQ(a[3 * i + 1], b[3 * i + 1]);
 }
 
+// The engine's option: with own grids (the default) the slab's mesh is one part about its
+// volume; on the one grid over the box (`reconstruct --one-grid`) it breaks up or is gone.
+TEST(ThinPlateField, ReconstructionsGiveSmallOrgansTheirGridsUnlessAskedForOne) {
+  const SliceSet set = sphere_and_slab();
+  ReconstructionOptions options = thin_plate_options();
+  ReconstructionStats own_stats, one_stats;
+  const MeshSet own = reconstruct(set, options, &own_stats);
+  options.own_grids = false;
+  const MeshSet one = reconstruct(set, options, &one_stats);
+  ASSERT_EQ(own.meshes.size(), 2u);
+  const TriangleMesh& slab = own.meshes[1].mesh;
+  EXPECT_EQ(component_count(slab), 1u);
+  // 2 x 30 x 30 mm between its outermost slices, and half a gap beyond them.
+  EXPECT_NEAR(signed_volume(slab) / (2.0 * 30.0 * 30.0), 1.0, 0.25);
+  const bool one_whole = one.meshes.size() == 2 && component_count(one.meshes[1].mesh) == 1 &&
+                         std::abs(signed_volume(one.meshes[1].mesh) / 1800.0 - 1.0) < 0.25;
+  EXPECT_FALSE(one_whole);
+  EXPECT_GT(own_stats.solve_nodes, one_stats.solve_nodes);
+}
+
 TEST(ThinPlateField, AnOrganInsideAnotherStaysInside) {
   // Material 1: a sphere of radius 30 minus a sphere of radius 12 (material 2) at (4, 0, 0).
   SliceSet set;

@@ -22,7 +22,7 @@ class ReconstructorStage final : public ReconstructionStage {
   // organ grows in the sweep: spikes of a few hundred milliseconds) wait for the settled meshes.
   static recon::ReconstructorOptions live_options(recon::ReconstructorOptions options) {
     options.refine_meshes = false;
-    options.own_grids = false;
+    options.engine.own_grids = false;
     return options;
   }
 

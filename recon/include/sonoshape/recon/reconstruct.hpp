@@ -55,6 +55,12 @@ struct ReconstructionOptions {
   /// plane by plane (the reference the invariant tests compare with; `reconstruct
   /// --whole-arrangement`).
   bool cells_on_demand = true;
+  /// Thin-plate field: a small organ in a large volume is solved on a grid of its own at the
+  /// octree's finest cell (docs/engine.md, section 8). An organ that grows in a sweep outgrows
+  /// it every few millimetres (a rebuild of that grid, up to a few hundred milliseconds), so a
+  /// live scan's updates leave it off (their meshes are previews) and its settled meshes have
+  /// it. false: every organ on the one grid over the box (`reconstruct --one-grid`).
+  bool own_grids = true;
 };
 
 /// Per-stage wall time in seconds and counts of one reconstruction.

@@ -31,12 +31,6 @@ struct ReconstructorOptions {
   /// as much as the marching tetrahedra and the octree's evaluations together. A live scan's
   /// updates leave it off (their meshes are previews); its settled meshes have it.
   bool refine_meshes = true;
-  /// Thin-plate field: a small organ in a large volume is solved on a grid of its own at the
-  /// octree's finest cell (docs/engine.md, section 8), which an organ that grows in a sweep
-  /// outgrows every few millimetres (a rebuild of that grid, a few hundred milliseconds at
-  /// worst). A live scan's updates leave it off (their meshes are previews); its settled meshes
-  /// have it.
-  bool own_grids = true;
 };
 
 /// What one update() did.
