@@ -1656,6 +1656,16 @@ struct ThinPlateField::Impl {
   std::vector<PreparedSlice> slices;
   std::uint32_t generation = 0;
 
+  Impl(const Box3& field_box, double finest_cell, int material_count,
+       ThinPlateOptions field_options, std::vector<Box3> own, const std::vector<double>& extents)
+      : box(field_box),
+        materials(material_count),
+        finest_cell_mm(finest_cell),
+        options(std::move(field_options)),
+        own_boxes(std::move(own)) {
+    build(extents);
+  }
+
   void build(const std::vector<double>& extents) {
     extents_mm = extents;
     extents_mm.resize(static_cast<std::size_t>(materials), 0.0);
@@ -1805,26 +1815,14 @@ struct ThinPlateField::Impl {
 
 ThinPlateField::ThinPlateField(const Box3& box, double finest_cell_mm, int materials,
                                ThinPlateOptions options, std::vector<double> extents_mm)
-    : impl_(std::make_unique<Impl>()) {
-  Impl& s = *impl_;
-  s.box = box;
-  s.materials = materials;
-  s.finest_cell_mm = finest_cell_mm;
-  s.options = std::move(options);
-  s.build(extents_mm);
-}
+    : impl_(std::make_unique<Impl>(box, finest_cell_mm, materials, std::move(options),
+                                   std::vector<Box3>{}, extents_mm)) {}
 
 ThinPlateField::ThinPlateField(const Box3& box, double finest_cell_mm, int materials,
                                ThinPlateOptions options, const std::vector<Box3>& material_boxes)
-    : impl_(std::make_unique<Impl>()) {
-  Impl& s = *impl_;
-  s.box = box;
-  s.materials = materials;
-  s.finest_cell_mm = finest_cell_mm;
-  s.options = std::move(options);
-  s.own_boxes = own_grid_boxes(box, finest_cell_mm, material_boxes, s.options);
-  s.build(box_extents(material_boxes));
-}
+    : impl_(std::make_unique<Impl>(box, finest_cell_mm, materials, options,
+                                   own_grid_boxes(box, finest_cell_mm, material_boxes, options),
+                                   box_extents(material_boxes))) {}
 
 ThinPlateField::~ThinPlateField() = default;
 ThinPlateField::ThinPlateField(ThinPlateField&&) noexcept = default;

@@ -996,27 +996,44 @@ SampledField reconstructed_field(const SliceSet& set) {
 // The online engine adds each slice's data and solves from the last solution to the online
 // tolerance; the one-shot solve starts from the closing value. They agree to that tolerance,
 // not to the bit.
-TEST(ThinPlateOnline, UpdatesAgreeWithTheOneShotReconstruction) {
-  const SliceSet set = sphere_stack(40.0, {-30, -15, 0, 15, 30});
+// `set`'s slices given to an online engine one by one (an update after each) and to another at
+// once: the online engine's sampled field against the other's, the solve iterations of its
+// updates, and both engines' meshes.
+struct OnlineAgainstOnce {
+  std::size_t sampled = 0;
+  SampledComparison field;
+  std::vector<std::size_t> iterations;
+  MeshSet online, once;
+};
+OnlineAgainstOnce online_against_once(const SliceSet& set) {
+  OnlineAgainstOnce out;
   Reconstructor online(thin_plate_setup(set));
   for (const LabeledSlice& slice : set.slices) {
     online.add_slice(slice);
-    const UpdateStats update = online.update();
-    EXPECT_GT(update.step.solve_iterations, 0u);
+    out.iterations.push_back(online.update().step.solve_iterations);
   }
   Reconstructor once(thin_plate_setup(set));
   for (const LabeledSlice& slice : set.slices) once.add_slice(slice);
   once.update();
-  const auto a = online.sampled_field();
-  ASSERT_GT(a.size(), 1000u);
-  const auto [compared, worst] = compare_sampled(a, once.sampled_field());
-  EXPECT_GT(compared, a.size() * 9 / 10);
+  const SampledField a = online.sampled_field();
+  out.sampled = a.size();
+  out.field = compare_sampled(a, once.sampled_field());
+  out.online = online.mesh();
+  out.once = once.mesh();
+  return out;
+}
+
+TEST(ThinPlateOnline, UpdatesAgreeWithTheOneShotReconstruction) {
+  const OnlineAgainstOnce r = online_against_once(sphere_stack(40.0, {-30, -15, 0, 15, 30}));
+  for (const std::size_t n : r.iterations) EXPECT_GT(n, 0u);
+  ASSERT_GT(r.sampled, 1000u);
+  EXPECT_GT(r.field.compared, r.sampled * 9 / 10);
   // An update's solve stops when an iteration moves no value near the zero set by more than
   // the online tolerance (of the grid spacing, 2 finest cells of 120 / 2^7 mm).
   const double spacing = 2.0 * 120.0 / 128.0;
-  EXPECT_LT(worst, online_bound(spacing));
-  const double va = signed_volume(online.mesh().meshes[0].mesh),
-               vb = signed_volume(once.mesh().meshes[0].mesh);
+  EXPECT_LT(r.field.worst, online_bound(spacing));
+  const double va = signed_volume(r.online.meshes[0].mesh),
+               vb = signed_volume(r.once.meshes[0].mesh);
   EXPECT_NEAR(va / vb, 1.0, 1e-3);
 }
 
@@ -1025,28 +1042,18 @@ TEST(ThinPlateOnline, UpdatesAgreeWithTheOneShotReconstruction) {
 // field, each other grid going on from its last solution): online and one-shot still agree to
 // the online tolerance.
 TEST(ThinPlateOnline, AnOrganThatOutgrowsItsOwnGridAgreesWithTheOneShotReconstruction) {
-  const SliceSet set = sphere_and_slab();
-  Reconstructor online(thin_plate_setup(set));
-  for (const LabeledSlice& slice : set.slices) {
-    online.add_slice(slice);
-    online.update();
-  }
-  Reconstructor once(thin_plate_setup(set));
-  for (const LabeledSlice& slice : set.slices) once.add_slice(slice);
-  once.update();
-  const auto a = online.sampled_field();
-  ASSERT_GT(a.size(), 1000u);
-  const auto [compared, worst] = compare_sampled(a, once.sampled_field());
-  EXPECT_GT(compared, a.size() * 9 / 10);
-  EXPECT_LT(worst, online_bound(2.0 * 200.0 / 128.0));
-  const MeshSet online_meshes = online.mesh(), once_meshes = once.mesh();
-  ASSERT_EQ(once_meshes.meshes.size(), 2u);
+  const OnlineAgainstOnce r = online_against_once(sphere_and_slab());
+  ASSERT_GT(r.sampled, 1000u);
+  EXPECT_GT(r.field.compared, r.sampled * 9 / 10);
+  EXPECT_LT(r.field.worst, online_bound(2.0 * 200.0 / 128.0));
+  ASSERT_EQ(r.once.meshes.size(), 2u);
+  ASSERT_EQ(r.online.meshes.size(), 2u);
   for (std::size_t m = 0; m < 2; ++m) {
-    const double va = signed_volume(online_meshes.meshes[m].mesh),
-                 vb = signed_volume(once_meshes.meshes[m].mesh);
+    const double va = signed_volume(r.online.meshes[m].mesh),
+                 vb = signed_volume(r.once.meshes[m].mesh);
     EXPECT_NEAR(va / vb, 1.0, 1e-2);
   }
-  EXPECT_EQ(component_count(once_meshes.meshes[1].mesh), 1u);
+  EXPECT_EQ(component_count(r.once.meshes[1].mesh), 1u);
 }
 
 // Two fields given the same slices and solves: one samples its solution again per block only
