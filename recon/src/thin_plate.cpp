@@ -1445,7 +1445,7 @@ std::vector<Box3> own_grid_boxes(const Box3& box, double finest_cell_mm,
   const double shared_spacing = finest_cell_mm * std::ldexp(1.0, options.coarsening);
   const double shared_nodes = nodes(box, shared_spacing);
   // Rounded out to a lattice of 8 finest cells, so that an organ that grows online keeps its
-  // grid over several millimetres (a new box rebuilds the field).
+  // grid over several millimetres (a new box rebuilds that grid).
   const double step = kOwnGridStep * finest_cell_mm;
   for (std::size_t m = 0; m < material_boxes.size(); ++m) {
     // An organ that spans this many solve cells is resolved about as well as by a field of

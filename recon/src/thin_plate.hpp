@@ -104,10 +104,9 @@ class ThinPlateField {
   ThinPlateField(const Box3& box, double finest_cell_mm, int materials, ThinPlateOptions options,
                  std::vector<double> extents_mm);
   /// The same, from each material's box (material_boxes; extents: their diagonals), with
-  /// options.own_grids: a material whose box, padded as a reconstruction box is and rounded
-  /// out to 8 finest cells, needs no more nodes at the finest cell than the grid over `box`
-  /// has, gets a grid of its own over that box at the finest cell (own_grid_boxes). Beyond it,
-  /// the material is outside (-truncation).
+  /// options.own_grids: a small material (own_grid_boxes says which) gets a grid of its own at
+  /// the finest cell over its box, padded as a reconstruction box is and rounded out to 8
+  /// finest cells. Beyond that box the material is outside (-truncation).
   ThinPlateField(const Box3& box, double finest_cell_mm, int materials, ThinPlateOptions options,
                  const std::vector<Box3>& material_boxes);
   ~ThinPlateField();
@@ -169,10 +168,11 @@ class ThinPlateField {
 
 /// Per material, the box of the grid of its own that ThinPlateField gives it (empty where it
 /// has none; see its constructor from material boxes): its box made a reconstruction box,
-/// rounded out to multiples of 8 finest cells from `box.min` and cut to `box`, when that needs
-/// no more nodes at `finest_cell_mm` than `box` at its solve spacing, and the boxes together
-/// sample every axis of `box` (ThinPlateOptions::extrusion_weight's test: nearly coplanar
-/// slices keep the one grid, whose padding the extrusion fills).
+/// rounded out to multiples of 8 finest cells from `box.min` and cut to `box`, when its box's
+/// diagonal spans fewer than 32 cells of the grid over `box`, that needs no more nodes at
+/// `finest_cell_mm` than `box` at its solve spacing, and the boxes together sample every axis
+/// of `box` (ThinPlateOptions::extrusion_weight's test: nearly coplanar slices keep the one
+/// grid, whose padding the extrusion fills).
 std::vector<Box3> own_grid_boxes(const Box3& box, double finest_cell_mm,
                                  const std::vector<Box3>& material_boxes,
                                  const ThinPlateOptions& options);
