@@ -1650,7 +1650,6 @@ struct ThinPlateField::Impl {
   double finest_cell_mm = 1.0;
   ThinPlateOptions options;
   std::vector<Part> parts;
-  std::vector<std::pair<std::size_t, std::size_t>> place;  // per material: (part, index in it)
   std::vector<Box3> own_boxes;                             // per material (empty: none)
   std::vector<double> extents_mm;
   std::vector<PreparedSlice> slices;
@@ -1670,7 +1669,6 @@ struct ThinPlateField::Impl {
     extents_mm = extents;
     extents_mm.resize(static_cast<std::size_t>(materials), 0.0);
     own_boxes.resize(static_cast<std::size_t>(materials), empty_box());
-    place.assign(static_cast<std::size_t>(materials), {0, 0});
     Part shared;
     for (std::size_t m = 0; m < own_boxes.size(); ++m)
       if (is_empty(own_boxes[m])) shared.materials.push_back(m);
@@ -1683,9 +1681,6 @@ struct ThinPlateField::Impl {
         Part own{make_grid(own_boxes[m], finest_cell_mm, {m}), {m}, true};
         parts.push_back(std::move(own));
       }
-    for (std::size_t p = 0; p < parts.size(); ++p)
-      for (std::size_t i = 0; i < parts[p].materials.size(); ++i)
-        place[parts[p].materials[i]] = {p, i};
   }
 
   std::unique_ptr<Grid> make_grid(const Box3& grid_box, double spacing,
