@@ -1650,7 +1650,7 @@ struct ThinPlateField::Impl {
   double finest_cell_mm = 1.0;
   ThinPlateOptions options;
   std::vector<Part> parts;
-  std::vector<Box3> own_boxes;                             // per material (empty: none)
+  std::vector<Box3> own_boxes;  // per material (empty: none)
   std::vector<double> extents_mm;
   std::vector<PreparedSlice> slices;
   std::uint32_t generation = 0;
