@@ -1788,6 +1788,8 @@ struct ThinPlateField::Impl {
   // Values of the K + 1 functions at `point`: each material from its grid (outside, at
   // -truncation, beyond its own grid's box), f_0 = -max.
   void interpolate(const Vec3& point, double* out, std::vector<double>& scratch) const {
+    // One grid for every material (the common case): its values are the field's.
+    if (parts.size() == 1) return parts[0].grid->interpolate(point, out);
     double best = -std::numeric_limits<double>::infinity();
     for (const Part& part : parts) {
       const Grid& g = *part.grid;
