@@ -34,6 +34,9 @@ step field_table "sonoshape" \
   "python3 bench/field_table.py \"\${OREX_DATA:?set OREX_DATA to the Data/ folder of a haimsaw/OReX checkout, or --skip field_table}\" --write-doc" \
   "python3 bench/field_table.py \"\${OREX_DATA:-}\" --quick"
 
+step rib_ends "sonoshape" \
+  "python3 bench/rib_ends.py --write-doc"
+
 step field_speed "sonoshape" \
   "python3 bench/field_speed.py --write-doc" \
   "python3 bench/field_speed.py --repeats 1"
