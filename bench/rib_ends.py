@@ -53,14 +53,19 @@ def write_ply(path, vertices, triangles):
 
 
 def rib_frame(vertices):
-    """(axis index, centre [x, y, z], radius, half length) of an axis-aligned prism's box."""
+    """(axis index, centre [x, y, z], radius, half length) of a round rod along a coordinate
+    axis, from its box; raises Failed for any other shape (a changed phantom)."""
     low = [min(v[a] for v in vertices) for a in range(3)]
     high = [max(v[a] for v in vertices) for a in range(3)]
     size = [high[a] - low[a] for a in range(3)]
     axis = max(range(3), key=lambda a: size[a])
-    across = [a for a in range(3) if a != axis]
+    across = sorted(size[a] for a in range(3) if a != axis)
+    if across[1] - across[0] > 0.01 * across[1] or size[axis] <= across[1]:
+        raise ft.Failed(f"the phantom's rib is no longer a round rod along an axis (its box is "
+                        f"{size[0]:.2f} x {size[1]:.2f} x {size[2]:.2f} mm): this script "
+                        "needs rib_frame() and round_ended() made for its new shape")
     centre = [0.5 * (low[a] + high[a]) for a in range(3)]
-    return axis, centre, 0.5 * max(size[a] for a in across), 0.5 * size[axis]
+    return axis, centre, 0.5 * across[1], 0.5 * size[axis]
 
 
 def round_ended(axis, centre, radius, half_length):
