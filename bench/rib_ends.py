@@ -126,7 +126,7 @@ def moved(vertices, axis, shift_mm):
 
 
 def rib_scores(args, slices, recon, rib_label, rib_mesh):
-    """{method: rib IoU} for one reconstruction, with the baseline's."""
+    """(the reconstruction's rib IoU, the closest-point baseline's rib IoU) from `evaluate`."""
     out = ft.run([args.binary, "evaluate", "--recon", recon, "--slices", slices, "--truth",
                   f"{rib_label}:{rib_mesh}:rib"], "evaluate").stdout
     for line in out.splitlines():
